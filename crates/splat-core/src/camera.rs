@@ -1,0 +1,310 @@
+//! Pinhole camera in the OpenCV convention (x right, y down, z forward), as COLMAP and 3DGS use.
+
+use crate::hit::Ray;
+use crate::particle::Aabb;
+use glam::{Mat3, Vec2, Vec3};
+use thiserror::Error;
+
+/// Why a camera cannot be built.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum CameraError {
+    /// Width or height is zero or too large to address.
+    #[error("image size {width}×{height} is invalid: each side must be in 1..={max}")]
+    Size {
+        /// Requested width.
+        width: u32,
+        /// Requested height.
+        height: u32,
+        /// Largest side accepted.
+        max: u32,
+    },
+    /// A focal length or principal point is not a positive finite number.
+    #[error("intrinsics are invalid: {0}")]
+    Intrinsics(String),
+    /// The pose is not a finite rigid transform.
+    #[error("pose is invalid: {0}")]
+    Pose(String),
+}
+
+/// Largest image side accepted (a 16K image; larger is certainly a mistake).
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+
+/// A pinhole camera: intrinsics in pixels and a world-to-camera rigid pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x, pixels.
+    pub fx: f32,
+    /// Focal length along y, pixels.
+    pub fy: f32,
+    /// Principal point x, pixels (pixel i covers [i, i + 1)).
+    pub cx: f32,
+    /// Principal point y, pixels.
+    pub cy: f32,
+    /// World-to-camera rotation: x_cam = R x_world + t.
+    pub rotation: Mat3,
+    /// World-to-camera translation t.
+    pub translation: Vec3,
+}
+
+impl Camera {
+    /// A camera from intrinsics and a world-to-camera pose, validated.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_intrinsics(
+        width: u32,
+        height: u32,
+        fx: f32,
+        fy: f32,
+        cx: f32,
+        cy: f32,
+        world_to_camera_rotation: Mat3,
+        world_to_camera_translation: Vec3,
+    ) -> Result<Self, CameraError> {
+        let cam = Self {
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+            rotation: world_to_camera_rotation,
+            translation: world_to_camera_translation,
+        };
+        cam.validate()?;
+        Ok(cam)
+    }
+
+    /// A camera at `eye` looking at `target`, with `up` the world's up direction and `fov_y`
+    /// the vertical field of view in degrees; principal point at the image centre.
+    pub fn look_at(
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        fov_y_degrees: f32,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, CameraError> {
+        let forward = (target - eye)
+            .try_normalize()
+            .ok_or_else(|| CameraError::Pose("eye and target coincide".into()))?;
+        let right = forward
+            .cross(up)
+            .try_normalize()
+            .ok_or_else(|| CameraError::Pose("up is parallel to the view direction".into()))?;
+        let down = forward.cross(right);
+        if !(fov_y_degrees > 0.0 && fov_y_degrees < 179.0) {
+            return Err(CameraError::Intrinsics(format!(
+                "field of view {fov_y_degrees}° is outside (0, 179)"
+            )));
+        }
+        let fy = 0.5 * height as f32 / (0.5 * fov_y_degrees.to_radians()).tan();
+        // Rows of the world-to-camera rotation are the camera axes in world space.
+        let rotation = Mat3::from_cols(right, down, forward).transpose();
+        Self::from_intrinsics(
+            width,
+            height,
+            fy,
+            fy,
+            0.5 * width as f32,
+            0.5 * height as f32,
+            rotation,
+            -(rotation * eye),
+        )
+    }
+
+    /// A camera that frames `bounds` from the default direction (from +z, slightly above along
+    /// +y, world up +y) with a 50° vertical field of view.
+    pub fn framing(bounds: &Aabb, width: u32, height: u32) -> Result<Self, CameraError> {
+        if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
+            return Self::look_at(
+                Vec3::new(0.0, 0.0, 5.0),
+                Vec3::ZERO,
+                Vec3::Y,
+                50.0,
+                width,
+                height,
+            );
+        }
+        let fov_y = 50.0f32;
+        let aspect = width as f32 / height.max(1) as f32;
+        let half_fov_y = 0.5 * fov_y.to_radians();
+        let half_fov_x = (half_fov_y.tan() * aspect).atan();
+        let half_fov = half_fov_y.min(half_fov_x);
+        let radius = (0.5 * (bounds.max - bounds.min).length()).max(1e-3);
+        let distance = radius / half_fov.sin();
+        let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
+        let center = bounds.center();
+        Self::look_at(
+            center + distance * dir,
+            center,
+            Vec3::Y,
+            fov_y,
+            width,
+            height,
+        )
+    }
+
+    /// Check sizes, intrinsics and pose.
+    pub fn validate(&self) -> Result<(), CameraError> {
+        if self.width == 0
+            || self.height == 0
+            || self.width > MAX_IMAGE_SIDE
+            || self.height > MAX_IMAGE_SIDE
+        {
+            return Err(CameraError::Size {
+                width: self.width,
+                height: self.height,
+                max: MAX_IMAGE_SIDE,
+            });
+        }
+        for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(CameraError::Intrinsics(format!(
+                    "{name} = {v} must be positive"
+                )));
+            }
+        }
+        for (name, v) in [("cx", self.cx), ("cy", self.cy)] {
+            if !v.is_finite() {
+                return Err(CameraError::Intrinsics(format!(
+                    "{name} = {v} must be finite"
+                )));
+            }
+        }
+        if !self.rotation.is_finite() || !self.translation.is_finite() {
+            return Err(CameraError::Pose(
+                "rotation or translation is not finite".into(),
+            ));
+        }
+        let r = self.rotation;
+        let err = (r * r.transpose() - Mat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .fold(0.0f32, |m, v| m.max(v.abs()));
+        if err > 1e-3 || r.determinant() < 0.0 {
+            return Err(CameraError::Pose(format!(
+                "rotation is not a proper rotation (‖R Rᵀ − I‖∞ = {err:.2e}, det = {:.3})",
+                r.determinant()
+            )));
+        }
+        Ok(())
+    }
+
+    /// The same view at another resolution: focal lengths and principal point scale with the
+    /// image sides.
+    pub fn rescaled(&self, width: u32, height: u32) -> Result<Self, CameraError> {
+        let (sx, sy) = (
+            width as f32 / self.width as f32,
+            height as f32 / self.height as f32,
+        );
+        let cam = Self {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            ..*self
+        };
+        cam.validate()?;
+        Ok(cam)
+    }
+
+    /// Camera centre in world space, −Rᵀ t.
+    pub fn center(&self) -> Vec3 {
+        -(self.rotation.transpose() * self.translation)
+    }
+
+    /// Forward axis (camera +z) in world space.
+    pub fn forward(&self) -> Vec3 {
+        self.rotation.row(2)
+    }
+
+    /// World point to camera space.
+    pub fn to_camera(&self, world: Vec3) -> Vec3 {
+        self.rotation * world + self.translation
+    }
+
+    /// Camera-space point to continuous pixel coordinates (pixel i covers [i, i + 1)).
+    pub fn project_camera(&self, p: Vec3) -> Vec2 {
+        Vec2::new(self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy)
+    }
+
+    /// The ray through pixel (x, y) at sub-pixel position `offset` ∈ [0, 1)²; (0.5, 0.5) is the
+    /// pixel centre. The direction is unit length and the view direction is the camera's forward.
+    pub fn ray(&self, x: u32, y: u32, offset: Vec2) -> Ray {
+        let u = x as f32 + offset.x;
+        let v = y as f32 + offset.y;
+        let d_cam = Vec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0);
+        let dir = (self.rotation.transpose() * d_cam).normalize();
+        Ray {
+            view: self.forward(),
+            ..Ray::new(self.center(), dir)
+        }
+    }
+
+    /// The ray through the centre of pixel (x, y).
+    pub fn pixel_ray(&self, x: u32, y: u32) -> Ray {
+        self.ray(x, y, Vec2::splat(0.5))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn look_at_follows_opencv_axes() {
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
+        assert_relative_eq!(cam.forward().z, -1.0, epsilon = 1e-6);
+        assert_relative_eq!(cam.center().z, 5.0, epsilon = 1e-5);
+        // A point above the target (world +y) appears in the upper half (smaller pixel y).
+        let p = cam.project_camera(cam.to_camera(Vec3::new(0.0, 1.0, 0.0)));
+        assert!(p.y < 24.0);
+        // A point to the right (+x, seen from +z) appears right of centre.
+        let p = cam.project_camera(cam.to_camera(Vec3::new(1.0, 0.0, 0.0)));
+        assert!(p.x > 32.0);
+    }
+
+    #[test]
+    fn centre_ray_projects_back_to_its_pixel() {
+        let cam = Camera::look_at(
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(0.1, 0.0, -0.2),
+            Vec3::Y,
+            45.0,
+            40,
+            30,
+        )
+        .unwrap();
+        let ray = cam.pixel_ray(7, 21);
+        let p = cam.project_camera(cam.to_camera(ray.at(3.0)));
+        assert_relative_eq!(p.x, 7.5, epsilon = 1e-3);
+        assert_relative_eq!(p.y, 21.5, epsilon = 1e-3);
+    }
+
+    #[test]
+    fn rescale_keeps_the_view() {
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
+        let big = cam.rescaled(128, 96).unwrap();
+        let a = cam.pixel_ray(0, 0).dir;
+        let b = big.ray(0, 0, Vec2::ZERO).dir;
+        let c = cam.ray(0, 0, Vec2::ZERO).dir;
+        assert_relative_eq!(b.dot(c), 1.0, epsilon = 1e-6);
+        assert!(a.dot(c) < 1.0);
+    }
+
+    #[test]
+    fn bad_cameras_are_refused() {
+        assert!(Camera::look_at(Vec3::ZERO, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
+        assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Z, 60.0, 4, 4).is_err());
+        assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 0, 4).is_err());
+        assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 100_000, 4).is_err());
+    }
+}

@@ -1,0 +1,247 @@
+//! One ray against one particle: hit distance, maximum response along the ray, and the
+//! negligible test of Eq. 2 (Sun et al. §3.1, Algorithm 1 lines 2–9; seed 003 §1.4.1).
+
+use crate::kernel::KernelParams;
+use crate::particle::Particle;
+use glam::{Mat3, Vec3};
+
+/// Default ray start (vk_gaussian_splatting `tMin`).
+pub const DEFAULT_T_MIN: f32 = 0.001;
+/// Default ray end (vk_gaussian_splatting `tMax`).
+pub const DEFAULT_T_MAX: f32 = 10_000.0;
+
+/// Where along the ray a particle is hit (Sun et al. §4.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum HitDistance {
+    /// The point of maximum density along the ray, the mean of the 1D Gaussian:
+    /// t = −o_c·d_c / d_c·d_c in canonical space (3DGRT, seed 003 §1.4.1).
+    #[default]
+    Mean,
+    /// The particle centre projected on the view direction: the ray point on the plane through
+    /// μ orthogonal to [`Ray::view`], t = (μ − o)·v / (d·v). For camera rays v is the camera's
+    /// forward axis, so this is the rasterizer's billboard depth (seed 003 §1.4.2).
+    Center,
+}
+
+/// A ray o + t d with its valid range (t_min, t_max).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Origin o.
+    pub origin: Vec3,
+    /// Unit direction d.
+    pub dir: Vec3,
+    /// Unit view direction v used by [`HitDistance::Center`]: the camera's forward axis for
+    /// camera rays, the ray direction itself for other rays.
+    pub view: Vec3,
+    /// Hits at t ≤ t_min are ignored.
+    pub t_min: f32,
+    /// Hits at t ≥ t_max are ignored.
+    pub t_max: f32,
+}
+
+impl Ray {
+    /// A ray with the default range whose view direction is its own direction.
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Self {
+            origin,
+            dir,
+            view: dir,
+            t_min: DEFAULT_T_MIN,
+            t_max: DEFAULT_T_MAX,
+        }
+    }
+
+    /// The point o + t d.
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + t * self.dir
+    }
+}
+
+/// A particle prepared for intersection: what the hot path needs, nothing else.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PreparedParticle {
+    /// Mean μ.
+    pub mean: Vec3,
+    /// Canonical transform M = S⁻¹ Rᵀ.
+    pub canonical: Mat3,
+    /// Opacity.
+    pub opacity: f32,
+}
+
+impl PreparedParticle {
+    /// Precompute the canonical transform of a particle.
+    pub fn new(p: &Particle) -> Self {
+        Self {
+            mean: p.mean,
+            canonical: p.canonical_transform(),
+            opacity: p.opacity,
+        }
+    }
+}
+
+/// A ray–particle intersection that passed every test of Algorithm 1 except Russian roulette.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Hit distance t by the chosen [`HitDistance`].
+    pub t: f32,
+    /// alpha = opacity × max response along the ray, clamped and culled.
+    pub alpha: f32,
+    /// Index of the particle in its scene.
+    pub index: u32,
+}
+
+/// The ray in the particle's canonical space: origin o_c = M (o − μ) and direction d_c = M d.
+#[inline]
+pub fn to_canonical(p: &PreparedParticle, ray: &Ray) -> (Vec3, Vec3) {
+    (p.canonical * (ray.origin - p.mean), p.canonical * ray.dir)
+}
+
+/// Intersect one ray with one particle (Algorithm 1 without the roulette): the maximum response
+/// along the ray gives alpha; the hit distance follows `convention`; the hit is dropped when
+/// alpha is culled, t is outside (t_min, t_max), or the hit point lies outside the cutoff
+/// ellipsoid (the negligible test of Eq. 2).
+#[inline]
+pub fn intersect(
+    p: &PreparedParticle,
+    index: u32,
+    ray: &Ray,
+    kernel: &KernelParams,
+    convention: HitDistance,
+) -> Option<Hit> {
+    let (o_c, d_c) = to_canonical(p, ray);
+    let dd = d_c.length_squared();
+    // Squared distance of the line to the canonical origin: ‖o_c × d_c‖² / ‖d_c‖², the
+    // minimum of ‖o_c + t d_c‖² over t, computed without cancellation.
+    let d2_min = o_c.cross(d_c).length_squared() / dd;
+    let alpha = kernel.alpha(p.opacity, kernel.response(d2_min))?;
+    let t_mean = -o_c.dot(d_c) / dd;
+    let t = match convention {
+        HitDistance::Mean => t_mean,
+        HitDistance::Center => {
+            let dv = ray.dir.dot(ray.view);
+            if dv <= 0.0 {
+                return None;
+            }
+            (p.mean - ray.origin).dot(ray.view) / dv
+        }
+    };
+    if !(t > ray.t_min && t < ray.t_max) {
+        return None;
+    }
+    let s2 = kernel.cutoff * kernel.cutoff;
+    let d2_hit = match convention {
+        HitDistance::Mean => d2_min,
+        HitDistance::Center => (o_c + t * d_c).length_squared(),
+    };
+    if d2_hit > s2 {
+        return None;
+    }
+    Some(Hit { t, alpha, index })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use glam::Quat;
+
+    fn particle(scale: Vec3, rotation: Quat, opacity: f32) -> PreparedParticle {
+        PreparedParticle::new(&Particle::with_rgb(
+            Vec3::ZERO,
+            scale,
+            rotation,
+            opacity,
+            Vec3::ONE,
+        ))
+    }
+
+    #[test]
+    fn ray_through_centre_hits_centre_with_unit_response() {
+        let p = particle(Vec3::new(0.3, 2.0, 0.7), Quat::from_rotation_y(0.4), 0.8);
+        let kernel = KernelParams {
+            alpha_clamp: 1.0,
+            ..Default::default()
+        };
+        let ray = Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z);
+        let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Mean).unwrap();
+        assert_relative_eq!(hit.t, 5.0, epsilon = 1e-5);
+        assert_relative_eq!(hit.alpha, 0.8, epsilon = 1e-6);
+        let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Center).unwrap();
+        assert_relative_eq!(hit.t, 5.0, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn offset_ray_response_matches_mahalanobis_distance() {
+        // Axis-aligned, σx = 0.5: a ray along z at x = 0.5 is 1σ away → response e^−½.
+        let p = particle(Vec3::new(0.5, 1.0, 1.0), Quat::IDENTITY, 1.0);
+        let kernel = KernelParams {
+            alpha_clamp: 1.0,
+            ..Default::default()
+        };
+        let ray = Ray::new(Vec3::new(0.5, 0.0, -3.0), Vec3::Z);
+        let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Mean).unwrap();
+        assert_relative_eq!(hit.alpha, (-0.5f32).exp(), epsilon = 1e-6);
+    }
+
+    #[test]
+    fn hit_just_inside_and_outside_the_cutoff() {
+        let p = particle(Vec3::ONE, Quat::IDENTITY, 1.0);
+        let kernel = KernelParams {
+            alpha_cull: 0.0,
+            ..Default::default()
+        };
+        let inside = Ray::new(Vec3::new(2.99, 0.0, -5.0), Vec3::Z);
+        let outside = Ray::new(Vec3::new(3.01, 0.0, -5.0), Vec3::Z);
+        let hit = intersect(&p, 0, &inside, &kernel, HitDistance::Mean).unwrap();
+        assert_relative_eq!(
+            hit.alpha,
+            (-0.5f32 * 2.99 * 2.99).exp(),
+            max_relative = 1e-4
+        );
+        assert!(intersect(&p, 0, &outside, &kernel, HitDistance::Mean).is_none());
+    }
+
+    #[test]
+    fn mean_is_the_max_density_point_for_an_oblique_ray() {
+        // A thin tilted Gaussian: the max-density point is not the centre's projection.
+        let p = particle(Vec3::new(1.0, 0.1, 1.0), Quat::from_rotation_z(0.7), 1.0);
+        let kernel = KernelParams::default();
+        let ray = Ray::new(Vec3::new(-3.0, 0.2, 0.0), Vec3::new(1.0, 0.0, 0.0));
+        let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Mean).unwrap();
+        // Brute-force the density maximum along the ray.
+        let cov_inv = Particle::with_rgb(
+            Vec3::ZERO,
+            Vec3::new(1.0, 0.1, 1.0),
+            Quat::from_rotation_z(0.7),
+            1.0,
+            Vec3::ONE,
+        )
+        .covariance_inverse();
+        let best = (0..60_000)
+            .map(|i| i as f32 * 1e-4)
+            .min_by(|&a, &b| {
+                let q = |t: f32| {
+                    let x = ray.at(t);
+                    x.dot(cov_inv * x)
+                };
+                q(a).total_cmp(&q(b))
+            })
+            .unwrap();
+        assert_relative_eq!(hit.t, best, epsilon = 1e-3);
+        let center = intersect(&p, 0, &ray, &kernel, HitDistance::Center).map(|h| h.t);
+        assert_relative_eq!(center.unwrap(), 3.0, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn range_limits_are_exclusive() {
+        let p = particle(Vec3::ONE, Quat::IDENTITY, 1.0);
+        let mut ray = Ray::new(Vec3::new(0.0, 0.0, -2.0), Vec3::Z);
+        let k = KernelParams::default();
+        ray.t_max = 2.0;
+        assert!(intersect(&p, 0, &ray, &k, HitDistance::Mean).is_none());
+        ray.t_max = 2.001;
+        assert!(intersect(&p, 0, &ray, &k, HitDistance::Mean).is_some());
+        ray.t_min = 2.0;
+        assert!(intersect(&p, 0, &ray, &k, HitDistance::Mean).is_none());
+    }
+}

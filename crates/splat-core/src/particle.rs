@@ -1,0 +1,290 @@
+//! Gaussian particles: mean, scale, rotation, opacity and SH colour (Sun et al. §3.1, Eq. 1).
+//!
+//! The covariance follows 3DGS training, Σ = R S² Rᵀ with R the rotation matrix of the unit
+//! quaternion (w, x, y, z). Eq. 1 of Sun et al. writes Σ = Rᵀ S² R, the transposed convention;
+//! real assets are trained with 3DGS, so that is the one used here.
+
+use glam::{Mat3, Quat, Vec3};
+use thiserror::Error;
+
+/// Largest supported SH degree.
+pub const SH_MAX_DEGREE: u8 = 3;
+/// Number of SH coefficients per colour channel at degree 3.
+pub const SH_MAX_COEFFS: usize = 16;
+
+/// Number of SH coefficients per colour channel for a degree: (degree + 1)².
+pub const fn sh_coeff_count(degree: u8) -> usize {
+    (degree as usize + 1) * (degree as usize + 1)
+}
+
+/// One 3D Gaussian particle, with the activations of 3DGS already applied.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Particle {
+    /// Mean μ in world space.
+    pub mean: Vec3,
+    /// Standard deviations along the particle's local axes (linear, not log), all > 0.
+    pub scale: Vec3,
+    /// Unit quaternion; its rotation matrix is R in Σ = R S² Rᵀ.
+    pub rotation: Quat,
+    /// Opacity in [0, 1] (after the sigmoid).
+    pub opacity: f32,
+    /// SH coefficients, RGB per entry, `sh[0]` is the DC term. Entries past the scene's degree are 0.
+    pub sh: [Vec3; SH_MAX_COEFFS],
+}
+
+/// Why a particle is not a valid Gaussian.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum ParticleError {
+    /// A component is NaN or infinite.
+    #[error("{field} is not finite ({value})")]
+    NonFinite {
+        /// The offending field.
+        field: &'static str,
+        /// Its value.
+        value: f32,
+    },
+    /// A scale is zero, negative, or so small that 1/scale overflows.
+    #[error("scale along axis {axis} is {value}: scales must be positive with a finite inverse")]
+    BadScale {
+        /// Local axis 0, 1 or 2.
+        axis: usize,
+        /// The scale.
+        value: f32,
+    },
+    /// The quaternion has zero length and defines no rotation.
+    #[error("rotation quaternion has zero length")]
+    ZeroQuaternion,
+    /// The quaternion is not of unit length (use [`Particle::new`], which normalises it).
+    #[error("rotation quaternion has length {0}, expected 1")]
+    NotUnitQuaternion(f32),
+    /// Opacity outside [0, 1].
+    #[error("opacity {0} is outside [0, 1]")]
+    Opacity(f32),
+}
+
+impl Particle {
+    /// A particle with colour given as SH degree 0 from a display RGB colour (inverse of Eq. `sh`).
+    pub fn with_rgb(mean: Vec3, scale: Vec3, rotation: Quat, opacity: f32, rgb: Vec3) -> Self {
+        let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
+        sh[0] = crate::sh::rgb_to_dc(rgb);
+        Self {
+            mean,
+            scale,
+            rotation,
+            opacity,
+            sh,
+        }
+    }
+
+    /// Build a particle from raw parts, normalising the quaternion and validating every field.
+    pub fn new(
+        mean: Vec3,
+        scale: Vec3,
+        rotation: Quat,
+        opacity: f32,
+        sh: [Vec3; SH_MAX_COEFFS],
+    ) -> Result<Self, ParticleError> {
+        let p = Self {
+            mean,
+            scale,
+            rotation: normalize_quat(rotation)?,
+            opacity,
+            sh,
+        };
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// Check that the particle is a finite, non-degenerate Gaussian with a unit quaternion.
+    pub fn validate(&self) -> Result<(), ParticleError> {
+        let vectors = [("mean", self.mean), ("scale", self.scale)];
+        for (field, v) in vectors {
+            for value in v.to_array() {
+                if !value.is_finite() {
+                    return Err(ParticleError::NonFinite { field, value });
+                }
+            }
+        }
+        for value in self.sh.iter().flat_map(|c| c.to_array()) {
+            if !value.is_finite() {
+                return Err(ParticleError::NonFinite { field: "sh", value });
+            }
+        }
+        for value in self.rotation.to_array() {
+            if !value.is_finite() {
+                return Err(ParticleError::NonFinite {
+                    field: "rotation",
+                    value,
+                });
+            }
+        }
+        if !self.opacity.is_finite() {
+            return Err(ParticleError::NonFinite {
+                field: "opacity",
+                value: self.opacity,
+            });
+        }
+        for (axis, value) in self.scale.to_array().into_iter().enumerate() {
+            if !(value > 0.0 && (1.0 / (value * value)).is_finite()) {
+                return Err(ParticleError::BadScale { axis, value });
+            }
+        }
+        if !(0.0..=1.0).contains(&self.opacity) {
+            return Err(ParticleError::Opacity(self.opacity));
+        }
+        if (self.rotation.length() - 1.0).abs() > 1e-3 {
+            return Err(ParticleError::NotUnitQuaternion(self.rotation.length()));
+        }
+        Ok(())
+    }
+
+    /// Rotation matrix R of the quaternion (the 3DGS `build_rotation`).
+    pub fn rotation_matrix(&self) -> Mat3 {
+        Mat3::from_quat(self.rotation)
+    }
+
+    /// Covariance Σ = R S² Rᵀ.
+    pub fn covariance(&self) -> Mat3 {
+        let r = self.rotation_matrix();
+        r * Mat3::from_diagonal(self.scale * self.scale) * r.transpose()
+    }
+
+    /// Inverse covariance Σ⁻¹ = R S⁻² Rᵀ (exact, without a general matrix inverse).
+    pub fn covariance_inverse(&self) -> Mat3 {
+        let r = self.rotation_matrix();
+        r * Mat3::from_diagonal((self.scale * self.scale).recip()) * r.transpose()
+    }
+
+    /// Canonical transform M = S⁻¹ Rᵀ: x ↦ M (x − μ) maps the Gaussian to the unit one, so that
+    /// (x − μ)ᵀ Σ⁻¹ (x − μ) = ‖M (x − μ)‖² (Eq. 2).
+    pub fn canonical_transform(&self) -> Mat3 {
+        Mat3::from_diagonal(self.scale.recip()) * self.rotation_matrix().transpose()
+    }
+
+    /// Axis-aligned box of the ellipsoid ‖M (x − μ)‖ ≤ s (Eq. 2): the exact box, half-extent
+    /// s √Σᵢᵢ per axis, which is tighter than the paper's rotate-and-expand box.
+    pub fn aabb(&self, cutoff: f32) -> Aabb {
+        let cov = self.covariance();
+        let diag = Vec3::new(cov.x_axis.x, cov.y_axis.y, cov.z_axis.z).max(Vec3::ZERO);
+        let half = cutoff * Vec3::new(diag.x.sqrt(), diag.y.sqrt(), diag.z.sqrt());
+        Aabb {
+            min: self.mean - half,
+            max: self.mean + half,
+        }
+    }
+}
+
+/// Normalise a quaternion, refusing one of zero (or non-finite) length.
+pub fn normalize_quat(q: Quat) -> Result<Quat, ParticleError> {
+    let v = glam::Vec4::from(q);
+    let len = v.length();
+    if !len.is_finite() {
+        return Err(ParticleError::NonFinite {
+            field: "rotation",
+            value: len,
+        });
+    }
+    if len < 1e-12 {
+        return Err(ParticleError::ZeroQuaternion);
+    }
+    Ok(Quat::from_vec4(v / len))
+}
+
+/// Axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Lower corner.
+    pub min: Vec3,
+    /// Upper corner.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The empty box (min = +∞, max = −∞), the identity of [`Aabb::union`].
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+    };
+
+    /// Smallest box containing both.
+    pub fn union(self, other: Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
+    }
+
+    /// Whether the box contains no point.
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    /// Centre of the box.
+    pub fn center(&self) -> Vec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    /// The eight corners.
+    pub fn corners(&self) -> [Vec3; 8] {
+        let (a, b) = (self.min, self.max);
+        [
+            Vec3::new(a.x, a.y, a.z),
+            Vec3::new(b.x, a.y, a.z),
+            Vec3::new(a.x, b.y, a.z),
+            Vec3::new(b.x, b.y, a.z),
+            Vec3::new(a.x, a.y, b.z),
+            Vec3::new(b.x, a.y, b.z),
+            Vec3::new(a.x, b.y, b.z),
+            Vec3::new(b.x, b.y, b.z),
+        ]
+    }
+}
+
+/// A set of particles sharing one SH degree.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    /// The particles.
+    pub particles: Vec<Particle>,
+    /// SH degree 0..=3 used for every particle's colour.
+    pub sh_degree: u8,
+}
+
+impl Scene {
+    /// Box of all particle means.
+    pub fn mean_bounds(&self) -> Aabb {
+        self.particles.iter().fold(Aabb::EMPTY, |b, p| {
+            b.union(Aabb {
+                min: p.mean,
+                max: p.mean,
+            })
+        })
+    }
+
+    /// Box of the central part of the scene: per axis, the `q` and `1 − q` quantiles of the
+    /// means. Real captures have far floaters; framing a camera on this box ignores them.
+    pub fn robust_bounds(&self, q: f32) -> Aabb {
+        if self.particles.is_empty() {
+            return Aabb::EMPTY;
+        }
+        let mut axes: [Vec<f32>; 3] = Default::default();
+        for p in &self.particles {
+            for (axis, v) in axes.iter_mut().zip(p.mean.to_array()) {
+                axis.push(v);
+            }
+        }
+        let n = self.particles.len();
+        let lo = ((q.clamp(0.0, 0.5) * (n - 1) as f32).round() as usize).min(n - 1);
+        let hi = n - 1 - lo;
+        let mut min = [0.0; 3];
+        let mut max = [0.0; 3];
+        for (k, axis) in axes.iter_mut().enumerate() {
+            axis.sort_by(f32::total_cmp);
+            min[k] = axis[lo];
+            max[k] = axis[hi];
+        }
+        Aabb {
+            min: Vec3::from(min),
+            max: Vec3::from(max),
+        }
+    }
+}

@@ -1,0 +1,109 @@
+//! View-dependent colour from spherical harmonics, degrees 0–3, exactly as 3DGS evaluates it
+//! (`eval_sh` with its constants, then +0.5 and a clamp at 0).
+
+use glam::Vec3;
+
+/// Band 0 constant Y₀⁰ = 1 / (2√π).
+pub const SH_C0: f32 = 0.282_094_8;
+/// Band 1 constant.
+pub const SH_C1: f32 = 0.488_602_52;
+/// Band 2 constants.
+pub const SH_C2: [f32; 5] = [
+    1.092_548_4,
+    -1.092_548_4,
+    0.315_391_57,
+    -1.092_548_4,
+    0.546_274_2,
+];
+/// Band 3 constants.
+pub const SH_C3: [f32; 7] = [
+    -0.590_043_6,
+    2.890_611_4,
+    -0.457_045_8,
+    0.373_176_34,
+    -0.457_045_8,
+    1.445_305_7,
+    -0.590_043_6,
+];
+
+/// Colour of a particle seen along the unit direction `dir` (from the viewer toward the
+/// particle): Σ SH basis × coefficients + 0.5, clamped at 0. Coefficients past `degree` are ignored.
+pub fn eval(sh: &[Vec3; 16], degree: u8, dir: Vec3) -> Vec3 {
+    let mut c = SH_C0 * sh[0];
+    if degree >= 1 {
+        let (x, y, z) = (dir.x, dir.y, dir.z);
+        c += -SH_C1 * y * sh[1] + SH_C1 * z * sh[2] - SH_C1 * x * sh[3];
+        if degree >= 2 {
+            let (xx, yy, zz) = (x * x, y * y, z * z);
+            let (xy, yz, xz) = (x * y, y * z, x * z);
+            c += SH_C2[0] * xy * sh[4]
+                + SH_C2[1] * yz * sh[5]
+                + SH_C2[2] * (2.0 * zz - xx - yy) * sh[6]
+                + SH_C2[3] * xz * sh[7]
+                + SH_C2[4] * (xx - yy) * sh[8];
+            if degree >= 3 {
+                c += SH_C3[0] * y * (3.0 * xx - yy) * sh[9]
+                    + SH_C3[1] * xy * z * sh[10]
+                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * sh[11]
+                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * sh[12]
+                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * sh[13]
+                    + SH_C3[5] * z * (xx - yy) * sh[14]
+                    + SH_C3[6] * x * (xx - 3.0 * yy) * sh[15];
+            }
+        }
+    }
+    (c + Vec3::splat(0.5)).max(Vec3::ZERO)
+}
+
+/// DC coefficient whose degree-0 colour is `rgb`: (rgb − 0.5) / C₀.
+pub fn rgb_to_dc(rgb: Vec3) -> Vec3 {
+    (rgb - Vec3::splat(0.5)) / SH_C0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn degree_zero_is_dc_plus_half() {
+        let mut sh = [Vec3::ZERO; 16];
+        sh[0] = Vec3::new(1.0, -0.5, -10.0);
+        sh[5] = Vec3::ONE; // ignored at degree 0
+        let c = eval(&sh, 0, Vec3::Z);
+        assert_relative_eq!(c.x, 0.5 + SH_C0, epsilon = 1e-6);
+        assert_relative_eq!(c.y, 0.5 - 0.5 * SH_C0, epsilon = 1e-6);
+        assert_eq!(c.z, 0.0, "clamped at 0");
+    }
+
+    #[test]
+    fn rgb_round_trips_through_dc() {
+        let rgb = Vec3::new(0.1, 0.7, 0.95);
+        let mut sh = [Vec3::ZERO; 16];
+        sh[0] = rgb_to_dc(rgb);
+        assert_relative_eq!(eval(&sh, 3, Vec3::X).x, rgb.x, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn band_one_is_odd_in_direction() {
+        let mut sh = [Vec3::ZERO; 16];
+        sh[1] = Vec3::splat(0.3);
+        sh[2] = Vec3::splat(-0.2);
+        sh[3] = Vec3::splat(0.1);
+        let d = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let a = eval(&sh, 1, d) - Vec3::splat(0.5);
+        let b = eval(&sh, 1, -d) - Vec3::splat(0.5);
+        assert_relative_eq!(a.x, -b.x, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn band_three_matches_direct_formula() {
+        // Y_3^{-3} term only: C3[0] y (3x² − y²).
+        let mut sh = [Vec3::ZERO; 16];
+        sh[9] = Vec3::ONE;
+        let d = Vec3::new(0.6, 0.0, 0.8);
+        assert_relative_eq!(eval(&sh, 3, d).x, 0.5, epsilon = 1e-6);
+        let d = Vec3::new(0.0, 1.0, 0.0);
+        assert_relative_eq!(eval(&sh, 3, d).x, 0.5 + SH_C3[0] * -1.0, epsilon = 1e-6);
+    }
+}

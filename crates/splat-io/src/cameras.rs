@@ -1,0 +1,115 @@
+//! INRIA 3DGS `cameras.json`: a list of entries with `position` (camera centre), `rotation`
+//! (camera-to-world rotation, rows as written), `fx`, `fy`, `width`, `height`. The principal
+//! point is the image centre; axes follow OpenCV (x right, y down, z forward).
+
+use crate::{Error, ErrorKind, read_file};
+use glam::{Mat3, Vec3};
+use serde::{Deserialize, Serialize};
+use splat_core::Camera;
+use std::path::Path;
+
+/// One entry of `cameras.json` as 3DGS writes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraEntry {
+    /// Index of the training view.
+    #[serde(default)]
+    pub id: i64,
+    /// Name of the training image.
+    #[serde(default)]
+    pub img_name: String,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Camera centre in world space.
+    pub position: [f64; 3],
+    /// Camera-to-world rotation, rows as written.
+    pub rotation: [[f64; 3]; 3],
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+}
+
+impl CameraEntry {
+    /// The camera this entry describes.
+    pub fn to_camera(&self) -> Result<Camera, String> {
+        let r = &self.rotation;
+        // Rows as written: world_from_camera = [[r00 r01 r02] [r10 ...] ...]; Mat3 takes columns.
+        let c2w = Mat3::from_cols_array_2d(&[
+            [r[0][0] as f32, r[1][0] as f32, r[2][0] as f32],
+            [r[0][1] as f32, r[1][1] as f32, r[2][1] as f32],
+            [r[0][2] as f32, r[1][2] as f32, r[2][2] as f32],
+        ]);
+        let w2c = c2w.transpose();
+        let centre = Vec3::new(
+            self.position[0] as f32,
+            self.position[1] as f32,
+            self.position[2] as f32,
+        );
+        Camera::from_intrinsics(
+            self.width,
+            self.height,
+            self.fx as f32,
+            self.fy as f32,
+            0.5 * self.width as f32,
+            0.5 * self.height as f32,
+            w2c,
+            -(w2c * centre),
+        )
+        .map_err(|e| e.to_string())
+    }
+
+    /// The entry describing `camera` (principal point assumed at the image centre).
+    pub fn from_camera(id: i64, img_name: &str, camera: &Camera) -> Self {
+        let c2w = camera.rotation.transpose();
+        let rotation = [0, 1, 2].map(|i| c2w.row(i).to_array().map(f64::from));
+        Self {
+            id,
+            img_name: img_name.into(),
+            width: camera.width,
+            height: camera.height,
+            position: camera.center().to_array().map(f64::from),
+            rotation,
+            fy: f64::from(camera.fy),
+            fx: f64::from(camera.fx),
+        }
+    }
+}
+
+/// Read every camera of a `cameras.json`.
+pub fn read_cameras(path: &Path) -> Result<Vec<Camera>, Error> {
+    let bytes = read_file(path)?;
+    parse_cameras(&bytes).map_err(|kind| Error::new(path, kind))
+}
+
+/// Parse a `cameras.json`.
+pub fn parse_cameras(bytes: &[u8]) -> Result<Vec<Camera>, ErrorKind> {
+    let entries: Vec<CameraEntry> = serde_json::from_slice(bytes)?;
+    if entries.is_empty() {
+        return Err(ErrorKind::Camera {
+            index: 0,
+            message: "the file lists no camera".into(),
+        });
+    }
+    entries
+        .iter()
+        .enumerate()
+        .map(|(index, e)| {
+            e.to_camera()
+                .map_err(|message| ErrorKind::Camera { index, message })
+        })
+        .collect()
+}
+
+/// Write cameras as a `cameras.json`.
+pub fn write_cameras(path: &Path, cameras: &[Camera]) -> Result<(), Error> {
+    let entries: Vec<CameraEntry> = cameras
+        .iter()
+        .enumerate()
+        .map(|(i, c)| CameraEntry::from_camera(i as i64, &format!("view_{i:04}"), c))
+        .collect();
+    let json =
+        serde_json::to_string_pretty(&entries).map_err(|e| Error::new(path, ErrorKind::Json(e)))?;
+    std::fs::write(path, json + "\n").map_err(|e| Error::new(path, ErrorKind::Io(e)))
+}

@@ -1,0 +1,175 @@
+//! The error type of every reader and writer.
+
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// An I/O error naming the file and the problem.
+#[derive(Debug, Error)]
+#[error("{}: {kind}", path.display())]
+pub struct Error {
+    /// The file (or a stand-in name for in-memory input).
+    pub path: PathBuf,
+    /// What went wrong.
+    pub kind: ErrorKind,
+}
+
+impl Error {
+    /// An error about `path`.
+    pub fn new(path: impl AsRef<Path>, kind: ErrorKind) -> Self {
+        Self {
+            path: path.as_ref().to_path_buf(),
+            kind,
+        }
+    }
+}
+
+/// What went wrong, with the element index or byte offset where it applies.
+#[derive(Debug, Error)]
+pub enum ErrorKind {
+    /// The operating system refused the read or write.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    /// The extension names no supported format.
+    #[error("unsupported file extension (expected {expected})")]
+    UnknownExtension {
+        /// What is supported.
+        expected: &'static str,
+    },
+    /// The PLY header is malformed.
+    #[error("PLY header line {line}: {message}")]
+    Header {
+        /// 1-based header line.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A property of the vertex element is not one this reader knows.
+    #[error(
+        "PLY header line {line}: unknown vertex property '{name}' (pass allow_unknown_properties / --allow-unknown-properties to skip it)"
+    )]
+    UnknownProperty {
+        /// 1-based header line.
+        line: usize,
+        /// Property name.
+        name: String,
+    },
+    /// A required vertex property is absent.
+    #[error("PLY vertex element has no '{0}' property")]
+    MissingProperty(String),
+    /// The vertex count cannot fit in the bytes that follow the header.
+    #[error(
+        "header declares {count} vertices of {stride} bytes ({needed} bytes) but only {available} bytes follow the header at offset {body_offset}: the body is truncated or the count is wrong (vertex {first_incomplete} is the first incomplete one, at byte offset {first_incomplete_offset})"
+    )]
+    CountTooLarge {
+        /// Declared vertex count.
+        count: u64,
+        /// Bytes per vertex.
+        stride: u64,
+        /// Bytes the count needs.
+        needed: u128,
+        /// Bytes present after the header.
+        available: u64,
+        /// Byte offset of the body.
+        body_offset: u64,
+        /// Index of the first vertex that is not complete.
+        first_incomplete: u64,
+        /// Its byte offset in the file.
+        first_incomplete_offset: u64,
+    },
+    /// An ASCII body ends before the declared count.
+    #[error(
+        "body is truncated: vertex {index} (line {line}) is missing; the header declares {count}"
+    )]
+    Truncated {
+        /// Missing vertex.
+        index: u64,
+        /// 1-based line where it should be.
+        line: usize,
+        /// Declared count.
+        count: u64,
+    },
+    /// A value cannot be parsed.
+    #[error("vertex {index}, property '{property}' (line {line}): cannot parse '{token}'")]
+    Parse {
+        /// Vertex index.
+        index: u64,
+        /// Property name.
+        property: String,
+        /// 1-based line.
+        line: usize,
+        /// The text.
+        token: String,
+    },
+    /// A line of an ASCII body has the wrong number of values.
+    #[error("vertex {index} (line {line}) has {found} values, expected {expected}")]
+    ValueCount {
+        /// Vertex index.
+        index: u64,
+        /// 1-based line.
+        line: usize,
+        /// Values found.
+        found: usize,
+        /// Values expected.
+        expected: usize,
+    },
+    /// A value is NaN or infinite.
+    #[error("vertex {index}: property '{property}' is {value}, not a finite number")]
+    NonFinite {
+        /// Vertex index.
+        index: u64,
+        /// Property name.
+        property: String,
+        /// The value.
+        value: f64,
+    },
+    /// All quaternion components are zero.
+    #[error("vertex {index}: rotation quaternion is zero and defines no rotation")]
+    ZeroQuaternion {
+        /// Vertex index.
+        index: u64,
+    },
+    /// A scale is not positive (after exp for .ply) or its inverse overflows.
+    #[error("vertex {index}: {detail}")]
+    BadScale {
+        /// Vertex index.
+        index: u64,
+        /// The field, raw and resulting values.
+        detail: String,
+    },
+    /// Any other invalid particle.
+    #[error("vertex {index}: {error}")]
+    Particle {
+        /// Vertex index.
+        index: u64,
+        /// What is wrong.
+        error: splat_core::ParticleError,
+    },
+    /// A `.splat` file's length is not a multiple of its 32-byte record.
+    #[error(
+        "length {len} is not a multiple of 32 bytes: splat {index} at byte offset {offset} is truncated ({remainder} of 32 bytes)"
+    )]
+    SplatLength {
+        /// File length.
+        len: u64,
+        /// Index of the incomplete splat.
+        index: u64,
+        /// Its byte offset.
+        offset: u64,
+        /// Its bytes present.
+        remainder: u64,
+    },
+    /// The camera file is malformed.
+    #[error("camera {index}: {message}")]
+    Camera {
+        /// Entry index (0-based) in the file.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// The JSON is malformed.
+    #[error("JSON: {0}")]
+    Json(#[from] serde_json::Error),
+    /// An image cannot be written or read.
+    #[error("image: {0}")]
+    Image(String),
+}

@@ -1,0 +1,628 @@
+//! INRIA 3DGS `.ply`: the `point_cloud.ply` written by 3DGS training and most tools after it.
+//!
+//! Vertex properties: `x y z` (mean), optional `nx ny nz` (unused), `f_dc_0..2` (SH DC),
+//! `f_rest_*` (higher SH bands, channel-major: all red coefficients, then green, then blue; 0, 9,
+//! 24 or 45 of them for degree 0–3), `opacity` (logit), `scale_0..2` (log), `rot_0..3`
+//! (quaternion w, x, y, z, not necessarily normalised). Activations are applied on reading:
+//! sigmoid, exp, normalisation.
+
+use crate::{Error, ErrorKind, read_file};
+use glam::{Quat, Vec3};
+use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_core::{Particle, ParticleError, Scene};
+use std::path::Path;
+
+/// Largest header accepted, in bytes; real headers are about 1.5 KiB.
+const MAX_HEADER: usize = 1 << 20;
+
+/// Options of the reader.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PlyOptions {
+    /// Skip vertex properties this reader does not know (e.g. Mip-Splatting's `filter_3D`)
+    /// instead of refusing the file.
+    pub allow_unknown_properties: bool,
+}
+
+/// Encoding of a PLY body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlyFormat {
+    /// Text, one vertex a line.
+    Ascii,
+    /// Little-endian binary (what 3DGS writes).
+    BinaryLittleEndian,
+    /// Big-endian binary.
+    BinaryBigEndian,
+}
+
+/// Read a 3DGS `.ply` with default options.
+pub fn read_ply(path: &Path) -> Result<Scene, Error> {
+    read_ply_with(path, PlyOptions::default())
+}
+
+/// Read a 3DGS `.ply`.
+pub fn read_ply_with(path: &Path, options: PlyOptions) -> Result<Scene, Error> {
+    let bytes = read_file(path)?;
+    parse_ply(&bytes, options).map_err(|kind| Error::new(path, kind))
+}
+
+/// Parse the bytes of a 3DGS `.ply`.
+pub fn parse_ply(bytes: &[u8], options: PlyOptions) -> Result<Scene, ErrorKind> {
+    let header = Header::parse(bytes, options)?;
+    let body = &bytes[header.body_offset..];
+    let count = header.count;
+    let layout = Layout::new(&header.properties)?;
+    let mut particles = Vec::with_capacity(capacity(count, body.len(), header.properties.len()));
+    let mut values = vec![0.0f64; header.properties.len()];
+    let mut emit = |index: u64, values: &[f64]| -> Result<(), ErrorKind> {
+        particles.push(layout.particle(index, values, &header.properties)?);
+        Ok(())
+    };
+    match header.format {
+        PlyFormat::Ascii => {
+            let mut lines = Lines::new(body, header.lines);
+            for index in 0..count {
+                let (line_no, line) = lines.next_nonblank().ok_or(ErrorKind::Truncated {
+                    index,
+                    line: lines.line,
+                    count,
+                })?;
+                parse_ascii_vertex(index, line_no, line, &header.properties, &mut values)?;
+                emit(index, &values)?;
+            }
+        }
+        PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
+            let stride: usize = header.properties.iter().map(|p| p.ty.size()).sum();
+            let needed = u128::from(count) * stride as u128;
+            if needed > body.len() as u128 {
+                let complete = (body.len() / stride.max(1)) as u64;
+                return Err(ErrorKind::CountTooLarge {
+                    count,
+                    stride: stride as u64,
+                    needed,
+                    available: body.len() as u64,
+                    body_offset: header.body_offset as u64,
+                    first_incomplete: complete,
+                    first_incomplete_offset: header.body_offset as u64 + complete * stride as u64,
+                });
+            }
+            let big = header.format == PlyFormat::BinaryBigEndian;
+            for (index, record) in body
+                .chunks_exact(stride.max(1))
+                .take(count as usize)
+                .enumerate()
+            {
+                let mut at = 0;
+                for (v, p) in values.iter_mut().zip(&header.properties) {
+                    *v = p.ty.read(&record[at..at + p.ty.size()], big);
+                    at += p.ty.size();
+                }
+                emit(index as u64, &values)?;
+            }
+        }
+    }
+    Ok(Scene {
+        particles,
+        sh_degree: layout.sh_degree,
+    })
+}
+
+/// Vec capacity for `count` vertices that cannot exceed what the body could hold.
+fn capacity(count: u64, body_len: usize, properties: usize) -> usize {
+    (count as usize).min(body_len / (2 * properties.max(1)) + 1)
+}
+
+fn parse_ascii_vertex(
+    index: u64,
+    line: usize,
+    text: &str,
+    properties: &[Property],
+    values: &mut [f64],
+) -> Result<(), ErrorKind> {
+    let mut tokens = text.split_ascii_whitespace();
+    let found = text.split_ascii_whitespace().count();
+    if found != properties.len() {
+        return Err(ErrorKind::ValueCount {
+            index,
+            line,
+            found,
+            expected: properties.len(),
+        });
+    }
+    for (v, p) in values.iter_mut().zip(properties) {
+        let token = tokens.next().unwrap_or_default();
+        *v = p.ty.parse(token).ok_or_else(|| ErrorKind::Parse {
+            index,
+            property: p.name.clone(),
+            line,
+            token: token.chars().take(40).collect(),
+        })?;
+    }
+    Ok(())
+}
+
+/// Scalar types of the PLY format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "char" | "int8" => Self::I8,
+            "uchar" | "uint8" => Self::U8,
+            "short" | "int16" => Self::I16,
+            "ushort" | "uint16" => Self::U16,
+            "int" | "int32" => Self::I32,
+            "uint" | "uint32" => Self::U32,
+            "float" | "float32" => Self::F32,
+            "double" | "float64" => Self::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Self::I8 | Self::U8 => 1,
+            Self::I16 | Self::U16 => 2,
+            Self::I32 | Self::U32 | Self::F32 => 4,
+            Self::F64 => 8,
+        }
+    }
+
+    /// Decode one value from exactly `size()` bytes.
+    fn read(self, b: &[u8], big: bool) -> f64 {
+        macro_rules! num {
+            ($t:ty, $n:literal) => {{
+                let mut a = [0u8; $n];
+                a.copy_from_slice(b);
+                f64::from(if big {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                })
+            }};
+        }
+        match self {
+            Self::I8 => f64::from(b[0] as i8),
+            Self::U8 => f64::from(b[0]),
+            Self::I16 => num!(i16, 2),
+            Self::U16 => num!(u16, 2),
+            Self::I32 => num!(i32, 4),
+            Self::U32 => num!(u32, 4),
+            Self::F32 => num!(f32, 4),
+            Self::F64 => num!(f64, 8),
+        }
+    }
+
+    fn parse(self, token: &str) -> Option<f64> {
+        match self {
+            Self::F32 | Self::F64 => token.parse::<f64>().ok(),
+            _ => token.parse::<i64>().ok().map(|v| v as f64),
+        }
+    }
+}
+
+/// What a vertex property means to a particle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Slot {
+    Position(usize),
+    Dc(usize),
+    Rest(usize),
+    Opacity,
+    Scale(usize),
+    Rotation(usize),
+    Ignored,
+}
+
+impl Slot {
+    fn from_name(name: &str) -> Option<Self> {
+        let indexed = |prefix: &str, n: usize| {
+            name.strip_prefix(prefix)?
+                .parse::<usize>()
+                .ok()
+                .filter(|&i| i < n)
+        };
+        Some(match name {
+            "x" => Self::Position(0),
+            "y" => Self::Position(1),
+            "z" => Self::Position(2),
+            "nx" | "ny" | "nz" => Self::Ignored,
+            "opacity" => Self::Opacity,
+            _ => {
+                if let Some(i) = indexed("f_dc_", 3) {
+                    Self::Dc(i)
+                } else if let Some(i) = indexed("f_rest_", 45) {
+                    Self::Rest(i)
+                } else if let Some(i) = indexed("scale_", 3) {
+                    Self::Scale(i)
+                } else if let Some(i) = indexed("rot_", 4) {
+                    Self::Rotation(i)
+                } else {
+                    return None;
+                }
+            }
+        })
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Property {
+    name: String,
+    ty: Scalar,
+    slot: Slot,
+}
+
+struct Header {
+    format: PlyFormat,
+    count: u64,
+    properties: Vec<Property>,
+    body_offset: usize,
+    lines: usize,
+}
+
+impl Header {
+    fn parse(bytes: &[u8], options: PlyOptions) -> Result<Self, ErrorKind> {
+        let err = |line: usize, message: String| ErrorKind::Header { line, message };
+        let mut lines = Lines::new(bytes, 0);
+        let mut format = None;
+        let mut count = None;
+        let mut properties: Vec<Property> = Vec::new();
+        let mut in_vertex = false;
+        loop {
+            if lines.offset > MAX_HEADER {
+                return Err(err(
+                    lines.line,
+                    format!("no end_header within the first {MAX_HEADER} bytes"),
+                ));
+            }
+            let (line, text) = lines
+                .next()
+                .ok_or_else(|| err(lines.line + 1, "file ends before end_header".into()))?;
+            let words: Vec<&str> = text.split_ascii_whitespace().collect();
+            if line == 1 {
+                if text.trim() != "ply" {
+                    return Err(err(
+                        1,
+                        "not a PLY file: the first line must be 'ply'".into(),
+                    ));
+                }
+                continue;
+            }
+            match words.as_slice() {
+                [] => {}
+                ["comment" | "obj_info", ..] => {}
+                ["format", f, version] => {
+                    if *version != "1.0" {
+                        return Err(err(line, format!("unsupported PLY version {version}")));
+                    }
+                    format = Some(match *f {
+                        "ascii" => PlyFormat::Ascii,
+                        "binary_little_endian" => PlyFormat::BinaryLittleEndian,
+                        "binary_big_endian" => PlyFormat::BinaryBigEndian,
+                        other => return Err(err(line, format!("unknown format '{other}'"))),
+                    });
+                }
+                ["element", name, n] => {
+                    if count.is_some() {
+                        in_vertex = false; // elements after the vertices are never read
+                        continue;
+                    }
+                    if *name != "vertex" {
+                        return Err(err(
+                            line,
+                            format!("element '{name}' before 'vertex' is not supported"),
+                        ));
+                    }
+                    count =
+                        Some(n.parse::<u64>().map_err(|_| {
+                            err(line, format!("vertex count '{n}' is not a number"))
+                        })?);
+                    in_vertex = true;
+                }
+                ["property", "list", ..] if in_vertex => {
+                    return Err(err(
+                        line,
+                        "list properties in the vertex element are not supported".into(),
+                    ));
+                }
+                ["property", ty, name] if in_vertex => {
+                    let ty = Scalar::from_name(ty)
+                        .ok_or_else(|| err(line, format!("unknown property type '{ty}'")))?;
+                    if properties.iter().any(|p| p.name == *name) {
+                        return Err(err(line, format!("property '{name}' is declared twice")));
+                    }
+                    let slot = match Slot::from_name(name) {
+                        Some(slot) => slot,
+                        None if options.allow_unknown_properties => Slot::Ignored,
+                        None => {
+                            return Err(ErrorKind::UnknownProperty {
+                                line,
+                                name: name.to_string(),
+                            });
+                        }
+                    };
+                    properties.push(Property {
+                        name: name.to_string(),
+                        ty,
+                        slot,
+                    });
+                }
+                ["property", ..] if count.is_none() => {
+                    return Err(err(line, "property before any element".into()));
+                }
+                ["property", ..] => {}
+                ["end_header"] => break,
+                _ => {
+                    return Err(err(
+                        line,
+                        format!(
+                            "cannot parse '{}'",
+                            text.chars().take(60).collect::<String>()
+                        ),
+                    ));
+                }
+            }
+        }
+        let format = format.ok_or_else(|| err(lines.line, "no 'format' line".into()))?;
+        let count = count.ok_or_else(|| err(lines.line, "no 'element vertex' line".into()))?;
+        Ok(Self {
+            format,
+            count,
+            properties,
+            body_offset: lines.offset,
+            lines: lines.line,
+        })
+    }
+}
+
+/// Where each particle field comes from, checked once per file.
+struct Layout {
+    sh_degree: u8,
+}
+
+impl Layout {
+    fn new(properties: &[Property]) -> Result<Self, ErrorKind> {
+        let has = |slot: Slot| properties.iter().any(|p| p.slot == slot);
+        let required = [
+            ("x", Slot::Position(0)),
+            ("y", Slot::Position(1)),
+            ("z", Slot::Position(2)),
+            ("f_dc_0", Slot::Dc(0)),
+            ("f_dc_1", Slot::Dc(1)),
+            ("f_dc_2", Slot::Dc(2)),
+            ("opacity", Slot::Opacity),
+            ("scale_0", Slot::Scale(0)),
+            ("scale_1", Slot::Scale(1)),
+            ("scale_2", Slot::Scale(2)),
+            ("rot_0", Slot::Rotation(0)),
+            ("rot_1", Slot::Rotation(1)),
+            ("rot_2", Slot::Rotation(2)),
+            ("rot_3", Slot::Rotation(3)),
+        ];
+        for (name, slot) in required {
+            if !has(slot) {
+                return Err(ErrorKind::MissingProperty(name.into()));
+            }
+        }
+        let rest = properties
+            .iter()
+            .filter(|p| matches!(p.slot, Slot::Rest(_)))
+            .count();
+        let sh_degree = match rest {
+            0 => 0,
+            9 => 1,
+            24 => 2,
+            45 => 3,
+            n => {
+                return Err(ErrorKind::Header {
+                    line: 0,
+                    message: format!(
+                        "{n} f_rest_* properties: expected 0, 9, 24 or 45 (SH degree 0–3)"
+                    ),
+                });
+            }
+        };
+        if let Some(missing) = (0..rest).find(|&i| !has(Slot::Rest(i))) {
+            return Err(ErrorKind::MissingProperty(format!("f_rest_{missing}")));
+        }
+        Ok(Self { sh_degree })
+    }
+
+    /// Build one particle from its property values, applying the 3DGS activations.
+    fn particle(
+        &self,
+        index: u64,
+        values: &[f64],
+        properties: &[Property],
+    ) -> Result<Particle, ErrorKind> {
+        let mut position = [0.0f64; 3];
+        let mut dc = [0.0f64; 3];
+        let mut rest = [0.0f64; 45];
+        let mut scale = [0.0f64; 3];
+        let mut rotation = [0.0f64; 4];
+        let mut opacity = 0.0f64;
+        for (&v, p) in values.iter().zip(properties) {
+            if p.slot == Slot::Ignored {
+                continue;
+            }
+            if !v.is_finite() {
+                return Err(ErrorKind::NonFinite {
+                    index,
+                    property: p.name.clone(),
+                    value: v,
+                });
+            }
+            match p.slot {
+                Slot::Position(i) => position[i] = v,
+                Slot::Dc(i) => dc[i] = v,
+                Slot::Rest(i) => rest[i] = v,
+                Slot::Opacity => opacity = v,
+                Slot::Scale(i) => scale[i] = v,
+                Slot::Rotation(i) => rotation[i] = v,
+                Slot::Ignored => {}
+            }
+        }
+        let mut linear_scale = [0.0f32; 3];
+        for (axis, (&raw, s)) in scale.iter().zip(&mut linear_scale).enumerate() {
+            *s = raw.exp() as f32;
+            if !(*s > 0.0 && s.is_finite() && (1.0 / (*s * *s)).is_finite()) {
+                let detail = format!(
+                    "scale_{axis} = {raw} gives exp(scale_{axis}) = {s}, which is not a usable positive scale"
+                );
+                return Err(ErrorKind::BadScale { index, detail });
+            }
+        }
+        let [w, x, y, z] = rotation;
+        let norm = (w * w + x * x + y * y + z * z).sqrt();
+        if norm == 0.0 || !norm.is_normal() {
+            return Err(ErrorKind::ZeroQuaternion { index });
+        }
+        let q = Quat::from_xyzw(
+            (x / norm) as f32,
+            (y / norm) as f32,
+            (z / norm) as f32,
+            (w / norm) as f32,
+        );
+        let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
+        sh[0] = vec3(dc);
+        let per_channel = sh_coeff_count(self.sh_degree) - 1;
+        for (k, c) in sh.iter_mut().enumerate().skip(1).take(per_channel) {
+            *c = Vec3::new(
+                rest[k - 1] as f32,
+                rest[per_channel + k - 1] as f32,
+                rest[2 * per_channel + k - 1] as f32,
+            );
+        }
+        let opacity = (1.0 / (1.0 + (-opacity).exp())) as f32;
+        let particle = Particle::new(vec3(position), Vec3::from(linear_scale), q, opacity, sh)
+            .map_err(|error| match error {
+                ParticleError::ZeroQuaternion => ErrorKind::ZeroQuaternion { index },
+                error => ErrorKind::Particle { index, error },
+            })?;
+        Ok(particle)
+    }
+}
+
+fn vec3(v: [f64; 3]) -> Vec3 {
+    Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32)
+}
+
+/// Lines of a byte buffer with their 1-based numbers and the byte offset after each.
+struct Lines<'a> {
+    bytes: &'a [u8],
+    offset: usize,
+    line: usize,
+}
+
+impl<'a> Lines<'a> {
+    fn new(bytes: &'a [u8], line: usize) -> Self {
+        Self {
+            bytes,
+            offset: 0,
+            line,
+        }
+    }
+
+    fn next(&mut self) -> Option<(usize, &'a str)> {
+        if self.offset >= self.bytes.len() {
+            return None;
+        }
+        let rest = &self.bytes[self.offset..];
+        let end = rest
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(rest.len(), |i| i + 1);
+        self.offset += end;
+        self.line += 1;
+        let text = std::str::from_utf8(&rest[..end]).unwrap_or("\u{fffd}");
+        Some((self.line, text.trim_end_matches(['\n', '\r'])))
+    }
+
+    fn next_nonblank(&mut self) -> Option<(usize, &'a str)> {
+        loop {
+            let (line, text) = self.next()?;
+            if !text.trim().is_empty() {
+                return Some((line, text));
+            }
+        }
+    }
+}
+
+/// The PLY property names 3DGS writes, in its order, for an SH degree.
+fn property_names(sh_degree: u8) -> Vec<String> {
+    let mut names: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .map(String::from)
+    .to_vec();
+    names.extend((0..3 * (sh_coeff_count(sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..4).map(|i| format!("rot_{i}")));
+    names
+}
+
+/// Stored (pre-activation) values of a particle, in [`property_names`] order.
+fn stored_values(p: &Particle, sh_degree: u8) -> Vec<f32> {
+    let per_channel = sh_coeff_count(sh_degree) - 1;
+    let mut v = vec![
+        p.mean.x, p.mean.y, p.mean.z, 0.0, 0.0, 0.0, p.sh[0].x, p.sh[0].y, p.sh[0].z,
+    ];
+    for channel in 0..3 {
+        v.extend(p.sh[1..=per_channel].iter().map(|c| c[channel]));
+    }
+    // Opacity 0 and 1 have infinite logits: store the nearest finite ones.
+    let o = f64::from(p.opacity).clamp(1e-7, 1.0 - 1e-7);
+    v.push((o / (1.0 - o)).ln() as f32);
+    v.extend(p.scale.to_array().map(f32::ln));
+    v.extend([p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z]);
+    v
+}
+
+/// Encode a scene as a 3DGS `.ply` (all properties `float`). Opacities of exactly 0 or 1 are
+/// stored as logit(1e-7) and logit(1 − 1e-7), the nearest finite values.
+pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
+    let names = property_names(scene.sh_degree);
+    let format_name = match format {
+        PlyFormat::Ascii => "ascii",
+        PlyFormat::BinaryLittleEndian => "binary_little_endian",
+        PlyFormat::BinaryBigEndian => "binary_big_endian",
+    };
+    let mut out = format!(
+        "ply\nformat {format_name} 1.0\nelement vertex {}\n",
+        scene.particles.len()
+    );
+    for name in &names {
+        out += &format!("property float {name}\n");
+    }
+    out += "end_header\n";
+    let mut bytes = out.into_bytes();
+    for p in &scene.particles {
+        let values = stored_values(p, scene.sh_degree);
+        match format {
+            PlyFormat::Ascii => {
+                let line: Vec<String> = values.iter().map(|v| v.to_string()).collect();
+                bytes.extend(line.join(" ").bytes());
+                bytes.push(b'\n');
+            }
+            PlyFormat::BinaryLittleEndian => {
+                values.iter().for_each(|v| bytes.extend(v.to_le_bytes()))
+            }
+            PlyFormat::BinaryBigEndian => values.iter().for_each(|v| bytes.extend(v.to_be_bytes())),
+        }
+    }
+    bytes
+}
+
+/// Write a scene as a 3DGS `.ply`.
+pub fn write_ply(path: &Path, scene: &Scene, format: PlyFormat) -> Result<(), Error> {
+    std::fs::write(path, encode_ply(scene, format)).map_err(|e| Error::new(path, ErrorKind::Io(e)))
+}

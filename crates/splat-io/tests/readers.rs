@@ -1,0 +1,360 @@
+//! Round trips and every malformed-input error of the readers.
+
+use approx::assert_relative_eq;
+use glam::{Quat, Vec3};
+use proptest::prelude::*;
+use splat_core::{Particle, Scene, scenes};
+use splat_io::ErrorKind;
+use splat_io::cameras::{parse_cameras, write_cameras};
+use splat_io::ply::{PlyFormat, PlyOptions, encode_ply, parse_ply};
+use splat_io::splat::{encode_splat, parse_splat};
+
+fn assert_same_scene(a: &Scene, b: &Scene, eps: f32) {
+    assert_eq!(a.sh_degree, b.sh_degree);
+    assert_eq!(a.particles.len(), b.particles.len());
+    for (p, q) in a.particles.iter().zip(&b.particles) {
+        assert!(p.mean.abs_diff_eq(q.mean, eps), "{} vs {}", p.mean, q.mean);
+        assert!(p.scale.abs_diff_eq(q.scale, eps * p.scale.max_element()));
+        assert!(p.rotation.dot(q.rotation).abs() > 1.0 - eps);
+        assert_relative_eq!(p.opacity, q.opacity, epsilon = eps.max(1e-6));
+        for (c, d) in p.sh.iter().zip(&q.sh) {
+            assert!(c.abs_diff_eq(*d, eps), "{c} vs {d}");
+        }
+    }
+}
+
+#[test]
+fn ply_round_trips_in_every_encoding() {
+    let (scene, _) = scenes::cloud();
+    for format in [
+        PlyFormat::BinaryLittleEndian,
+        PlyFormat::BinaryBigEndian,
+        PlyFormat::Ascii,
+    ] {
+        let back = parse_ply(&encode_ply(&scene, format), PlyOptions::default()).unwrap();
+        assert_same_scene(&scene, &back, 1e-5);
+    }
+}
+
+#[test]
+fn splat_round_trips_within_quantisation() {
+    let (scene, _) = scenes::layers();
+    let back = parse_splat(&encode_splat(&scene)).unwrap();
+    assert_eq!(back.particles.len(), scene.particles.len());
+    for (p, q) in scene.particles.iter().zip(&back.particles) {
+        assert_eq!(p.mean, q.mean);
+        assert_eq!(p.scale, q.scale);
+        assert!(p.rotation.dot(q.rotation).abs() > 0.999);
+        assert!((p.opacity - q.opacity).abs() <= 0.5 / 255.0 + 1e-6);
+        let rgb = |p: &Particle| splat_core::sh::eval(&p.sh, 0, Vec3::Z);
+        assert!(rgb(p).abs_diff_eq(rgb(q), 0.5 / 255.0 + 1e-5));
+    }
+}
+
+#[test]
+fn cameras_round_trip_and_follow_the_inria_convention() {
+    let (_, camera) = scenes::layers();
+    let dir = std::env::temp_dir().join(format!("splat-io-cam-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cameras.json");
+    write_cameras(&path, &[camera]).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let back = parse_cameras(text.as_bytes()).unwrap();
+    assert_relative_eq!(back[0].center().x, camera.center().x, epsilon = 1e-5);
+    assert!(back[0].forward().abs_diff_eq(camera.forward(), 1e-6));
+    // The INRIA entry stores the centre and the camera-to-world rotation: its third row's
+    // transposed column, i.e. rotation[k][2], is the forward axis.
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let fwd = (0..3)
+        .map(|k| json[0]["rotation"][k][2].as_f64().unwrap() as f32)
+        .collect::<Vec<_>>();
+    assert!(Vec3::from_slice(&fwd).abs_diff_eq(camera.forward(), 1e-6));
+}
+
+#[test]
+fn hand_written_inria_camera() {
+    // Identity rotation at (1, 2, 3): looks along +z with y down.
+    let json = br#"[{"id": 0, "img_name": "a", "width": 100, "height": 50,
+        "position": [1, 2, 3], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fy": 80, "fx": 90}]"#;
+    let cam = &parse_cameras(json).unwrap()[0];
+    assert_eq!((cam.cx, cam.cy), (50.0, 25.0));
+    assert!(cam.center().abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-6));
+    let ray = cam.pixel_ray(49, 24);
+    assert!(ray.dir.abs_diff_eq(Vec3::Z, 1e-2));
+}
+
+fn header(props: &[&str], count: usize, format: &str) -> String {
+    let mut h = format!("ply\nformat {format} 1.0\nelement vertex {count}\n");
+    for p in props {
+        h += &format!("property float {p}\n");
+    }
+    h + "end_header\n"
+}
+
+const PROPS: [&str; 14] = [
+    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+    "rot_0", "rot_1", "rot_2", "rot_3",
+];
+
+fn ascii(values: &[&str]) -> Vec<u8> {
+    (header(&PROPS, 1, "ascii") + &values.join(" ") + "\n").into_bytes()
+}
+
+const GOOD: [&str; 14] = [
+    "0", "0", "0", "0", "0", "0", "0", "-1", "-1", "-1", "1", "0", "0", "0",
+];
+
+fn with(i: usize, v: &'static str) -> Vec<u8> {
+    let mut values = GOOD;
+    values[i] = v;
+    ascii(&values)
+}
+
+fn err(bytes: &[u8]) -> ErrorKind {
+    parse_ply(bytes, PlyOptions::default()).expect_err("must be refused")
+}
+
+#[test]
+fn minimal_ascii_ply_applies_the_activations() {
+    let scene = parse_ply(&ascii(&GOOD), PlyOptions::default()).unwrap();
+    let p = &scene.particles[0];
+    assert_relative_eq!(p.opacity, 0.5);
+    assert_relative_eq!(p.scale.x, (-1.0f32).exp());
+    assert_eq!(p.rotation, Quat::IDENTITY);
+}
+
+#[test]
+fn unnormalised_quaternion_is_normalised() {
+    let scene = parse_ply(&with(10, "3"), PlyOptions::default()).unwrap();
+    assert_eq!(scene.particles[0].rotation, Quat::IDENTITY);
+    let mut values = GOOD;
+    values[10] = "0";
+    values[12] = "-7";
+    let q = parse_ply(&ascii(&values), PlyOptions::default())
+        .unwrap()
+        .particles[0]
+        .rotation;
+    assert_relative_eq!(q.length(), 1.0);
+    assert_relative_eq!(q.y, -1.0);
+}
+
+#[test]
+fn malformed_ply_errors_name_the_problem() {
+    let mut zero_q = GOOD;
+    zero_q[10] = "0";
+    assert!(matches!(
+        err(&ascii(&zero_q)),
+        ErrorKind::ZeroQuaternion { index: 0 }
+    ));
+    assert!(
+        matches!(err(&with(1, "nan")), ErrorKind::NonFinite { index: 0, ref property, .. } if property == "y")
+    );
+    assert!(matches!(err(&with(7, "inf")), ErrorKind::NonFinite { .. }));
+    assert!(matches!(
+        err(&with(8, "-1000")),
+        ErrorKind::BadScale { index: 0, .. }
+    ));
+    assert!(matches!(
+        err(&with(9, "1000")),
+        ErrorKind::BadScale { index: 0, .. }
+    ));
+    assert!(
+        matches!(err(&with(3, "abc")), ErrorKind::Parse { index: 0, ref property, .. } if property == "f_dc_0")
+    );
+    // Missing and unknown properties.
+    let missing = header(&PROPS[..13], 0, "ascii");
+    assert!(matches!(err(missing.as_bytes()), ErrorKind::MissingProperty(ref p) if p == "rot_3"));
+    let mut props = PROPS.to_vec();
+    props.push("filter_3D");
+    let unknown = header(&props, 0, "ascii");
+    assert!(
+        matches!(err(unknown.as_bytes()), ErrorKind::UnknownProperty { ref name, .. } if name == "filter_3D")
+    );
+    let lenient = PlyOptions {
+        allow_unknown_properties: true,
+    };
+    assert!(parse_ply(unknown.as_bytes(), lenient).is_ok());
+    // Wrong f_rest count.
+    let mut props = PROPS.to_vec();
+    props.push("f_rest_0");
+    assert!(matches!(
+        err(header(&props, 0, "ascii").as_bytes()),
+        ErrorKind::Header { .. }
+    ));
+    // Not a PLY, big header garbage, missing end_header.
+    assert!(matches!(
+        err(b"PK\x03\x04"),
+        ErrorKind::Header { line: 1, .. }
+    ));
+    assert!(matches!(
+        err(b"ply\nformat ascii 1.0\n"),
+        ErrorKind::Header { .. }
+    ));
+    // ASCII: too few values, missing vertex.
+    assert!(matches!(
+        err(&ascii(&GOOD[..13])),
+        ErrorKind::ValueCount {
+            index: 0,
+            found: 13,
+            expected: 14,
+            ..
+        }
+    ));
+    let short = header(&PROPS, 2, "ascii") + &GOOD.join(" ") + "\n";
+    assert!(matches!(
+        err(short.as_bytes()),
+        ErrorKind::Truncated {
+            index: 1,
+            count: 2,
+            ..
+        }
+    ));
+}
+
+#[test]
+fn truncated_and_absurd_binary_counts_are_refused_before_allocating() {
+    let (scene, _) = scenes::layers();
+    let bytes = encode_ply(&scene, PlyFormat::BinaryLittleEndian);
+    let cut = &bytes[..bytes.len() - 5];
+    match err(cut) {
+        ErrorKind::CountTooLarge {
+            count: 4,
+            first_incomplete: 3,
+            ..
+        } => {}
+        other => panic!("unexpected {other:?}"),
+    }
+    let text = String::from_utf8_lossy(&bytes).replacen(
+        "element vertex 4",
+        "element vertex 18446744073709551615",
+        1,
+    );
+    let absurd = [text.as_bytes()].concat();
+    let e = err(&absurd);
+    assert!(
+        matches!(
+            e,
+            ErrorKind::CountTooLarge {
+                count: u64::MAX,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("truncated"), "{e}");
+    // ASCII with an absurd count: refused as truncated, without allocating the count.
+    let ascii = header(&PROPS, usize::MAX, "ascii") + &GOOD.join(" ") + "\n";
+    assert!(matches!(
+        err(ascii.as_bytes()),
+        ErrorKind::Truncated { index: 1, .. }
+    ));
+}
+
+#[test]
+fn malformed_splat_errors_name_the_problem() {
+    let (scene, _) = scenes::layers();
+    let good = encode_splat(&scene);
+    assert!(matches!(
+        parse_splat(&good[..40]).unwrap_err(),
+        ErrorKind::SplatLength {
+            index: 1,
+            offset: 32,
+            remainder: 8,
+            ..
+        }
+    ));
+    let mut zero_q = good.clone();
+    zero_q[32 + 28..64].fill(128);
+    assert!(matches!(
+        parse_splat(&zero_q).unwrap_err(),
+        ErrorKind::ZeroQuaternion { index: 1 }
+    ));
+    let mut nan = good.clone();
+    nan[64..68].copy_from_slice(&f32::NAN.to_le_bytes());
+    assert!(matches!(
+        parse_splat(&nan).unwrap_err(),
+        ErrorKind::NonFinite { index: 2, .. }
+    ));
+    let mut neg = good.clone();
+    neg[12..16].copy_from_slice(&(-1.0f32).to_le_bytes());
+    assert!(matches!(
+        parse_splat(&neg).unwrap_err(),
+        ErrorKind::BadScale { index: 0, .. }
+    ));
+    assert_eq!(parse_splat(&[]).unwrap().particles.len(), 0);
+}
+
+#[test]
+fn malformed_cameras_are_refused() {
+    assert!(matches!(
+        parse_cameras(b"[]").unwrap_err(),
+        ErrorKind::Camera { .. }
+    ));
+    assert!(matches!(
+        parse_cameras(b"{").unwrap_err(),
+        ErrorKind::Json(_)
+    ));
+    let bad_rot = br#"[{"width": 10, "height": 10, "position": [0,0,0], "rotation": [[2,0,0],[0,1,0],[0,0,1]], "fx": 5, "fy": 5}]"#;
+    assert!(matches!(
+        parse_cameras(bad_rot).unwrap_err(),
+        ErrorKind::Camera { index: 0, .. }
+    ));
+    let zero_f = br#"[{"width": 10, "height": 10, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 0, "fy": 5}]"#;
+    assert!(matches!(
+        parse_cameras(zero_f).unwrap_err(),
+        ErrorKind::Camera { index: 0, .. }
+    ));
+}
+
+#[test]
+fn errors_name_the_file() {
+    let path = std::path::Path::new("/nonexistent/dir/scene.ply");
+    let e = splat_io::read_scene(path).unwrap_err();
+    assert!(
+        e.to_string().starts_with("/nonexistent/dir/scene.ply: "),
+        "{e}"
+    );
+    assert!(
+        splat_io::read_scene("x.obj".as_ref())
+            .unwrap_err()
+            .to_string()
+            .contains(".ply or .splat")
+    );
+}
+
+fn particle() -> impl Strategy<Value = Particle> {
+    (
+        prop::array::uniform3(-100.0f32..100.0),
+        prop::array::uniform3(-8.0f32..2.0),
+        prop::array::uniform4(-1.0f32..1.0),
+        0.001f32..0.999,
+        prop::array::uniform32(-2.0f32..2.0),
+    )
+        .prop_filter_map("zero quaternion", |(m, s, q, o, sh)| {
+            let q = Quat::from_array(q);
+            (q.length() > 1e-3).then(|| {
+                let mut coeffs = [Vec3::ZERO; 16];
+                for (k, c) in coeffs.iter_mut().enumerate().take(10) {
+                    *c = Vec3::new(sh[3 * k % 32], sh[(3 * k + 1) % 32], sh[(3 * k + 2) % 32]);
+                }
+                Particle::new(Vec3::from(m), Vec3::from(s.map(f32::exp)), q, o, coeffs).unwrap()
+            })
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    /// Any valid scene survives write → read in every PLY encoding (SH degree 2 here: the
+    /// coefficients past degree 2 are zeroed by the writer's degree).
+    #[test]
+    fn ply_round_trip_property(ps in prop::collection::vec(particle(), 0..20)) {
+        let mut scene = Scene { particles: ps, sh_degree: 2 };
+        for p in &mut scene.particles {
+            p.sh[9..].fill(Vec3::ZERO);
+        }
+        for format in [PlyFormat::BinaryLittleEndian, PlyFormat::Ascii] {
+            let back = parse_ply(&encode_ply(&scene, format), PlyOptions::default()).unwrap();
+            assert_same_scene(&scene, &back, 1e-4);
+        }
+    }
+}
