@@ -69,7 +69,7 @@ pub fn layers() -> (Scene, Camera) {
         .iter()
         .map(|&(mean, opacity, rgb, tilt)| {
             let rotation = Quat::from_rotation_y(tilt) * Quat::from_rotation_x(0.5 * tilt);
-            Particle::with_rgb(mean, Vec3::new(0.45, 0.32, 0.01), rotation, opacity, rgb)
+            Particle::with_rgb(mean, Vec3::new(0.7, 0.5, 0.01), rotation, opacity, rgb)
         })
         .collect();
     let scene = Scene {

@@ -1,0 +1,53 @@
+//! Golden images: the exact render of every fixture, read through the file formats, against
+//! the committed PNGs in `fixtures/golden/` (`cargo xtask bless` rewrites them).
+
+use splat_core::render::{RenderSettings, render_exact};
+use splat_io::image::to_rgba8;
+use splat_tests::{compare_golden, root};
+
+/// 8-bit units of tolerance: one unit for rounding differences of libm across platforms.
+const TOLERANCE: u8 = 1;
+
+fn render_fixture(name: &str, settings: &RenderSettings) -> image::RgbImage {
+    let dir = root().join("fixtures");
+    let scene = splat_io::ply::read_ply(&dir.join(format!("{name}.ply"))).unwrap();
+    let camera =
+        splat_io::cameras::read_cameras(&dir.join(format!("{name}.cameras.json"))).unwrap()[0];
+    let out = render_exact(&scene, &camera, settings, &|_| {}).unwrap();
+    to_rgba8(&out.radiance).to_rgb8()
+}
+
+#[test]
+fn exact_renders_match_golden_images() {
+    let mut failures = Vec::new();
+    for name in ["layers", "ramp", "cloud"] {
+        let golden = root()
+            .join("fixtures/golden")
+            .join(format!("{name}-exact.png"));
+        if let Err(e) = compare_golden(
+            &golden,
+            &render_fixture(name, &RenderSettings::default()),
+            TOLERANCE,
+        ) {
+            failures.push(e);
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The comparison can fail: a render with another background differs from the golden image.
+#[test]
+fn golden_comparison_rejects_a_different_image() {
+    let settings = RenderSettings {
+        background: glam::Vec3::new(0.0, 0.0, 0.05),
+        ..Default::default()
+    };
+    let dir = std::env::temp_dir().join(format!("splat-golden-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let golden = dir.join("layers-exact.png");
+    std::fs::copy(root().join("fixtures/golden/layers-exact.png"), &golden).unwrap();
+    let err = compare_golden(&golden, &render_fixture("layers", &settings), TOLERANCE).unwrap_err();
+    assert!(err.contains("differ"), "{err}");
+    assert!(dir.join("layers-exact-diff.png").exists());
+    assert!(dir.join("layers-exact-actual.png").exists());
+}
