@@ -17,6 +17,7 @@ pub fn root() -> PathBuf {
 /// It shares no code with `splat-core`'s math: Σ is built from the quaternion with the 3DGS
 /// formula, inverted with the adjugate, and the hit is found by minimising the quadratic
 /// (x − μ)ᵀ Σ⁻¹ (x − μ) along the ray directly in world space.
+#[allow(clippy::needless_range_loop)] // matrix algebra reads best with explicit indices
 pub mod reference {
     type V3 = [f64; 3];
     type M3 = [[f64; 3]; 3];

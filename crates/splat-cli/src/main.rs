@@ -22,7 +22,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene (or the built-in demo scene) to an image.
-    Render(render::RenderArgs),
+    Render(Box<render::RenderArgs>),
     /// Print a scene's particle count, SH degree, bounds and opacity histogram.
     Info(info::InfoArgs),
 }
@@ -30,7 +30,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(args) => render::run(args),
+        Command::Render(args) => render::run(*args),
         Command::Info(args) => info::run(args),
     };
     match result {

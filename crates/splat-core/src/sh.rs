@@ -104,6 +104,6 @@ mod tests {
         let d = Vec3::new(0.6, 0.0, 0.8);
         assert_relative_eq!(eval(&sh, 3, d).x, 0.5, epsilon = 1e-6);
         let d = Vec3::new(0.0, 1.0, 0.0);
-        assert_relative_eq!(eval(&sh, 3, d).x, 0.5 + SH_C3[0] * -1.0, epsilon = 1e-6);
+        assert_relative_eq!(eval(&sh, 3, d).x, 0.5 - SH_C3[0], epsilon = 1e-6);
     }
 }
