@@ -225,52 +225,40 @@ pub fn render_exact(
         pixels
     };
     #[cfg(feature = "rayon")]
-    let results: Vec<Vec<PixelResult>> = {
+    let results: Vec<Vec<PixelValues>> = {
         use rayon::prelude::*;
         tiles.par_iter().map(render_tile).collect()
     };
     #[cfg(not(feature = "rayon"))]
-    let results: Vec<Vec<PixelResult>> = tiles.iter().map(render_tile).collect();
-    Ok(assemble(
-        camera,
-        settings.background,
-        results.into_iter().flatten(),
-    ))
+    let results: Vec<Vec<PixelValues>> = tiles.iter().map(render_tile).collect();
+    Ok(assemble(camera, &bins, &results))
 }
 
-/// What one pixel contributes to the output images.
-struct PixelResult {
-    x: u32,
-    y: u32,
-    composite: Composite,
-    ray_dir: Vec3,
-}
+/// What one pixel writes to the output images: RGB, alpha, depth, normal.
+type PixelValues = [f32; 8];
 
-fn tile_pixels(camera: &Camera, tile: u32, tracer: &Tracer, bins: &TileBins) -> Vec<PixelResult> {
+/// Trace the pixels of one tile, row by row, into their output values.
+fn tile_pixels(camera: &Camera, tile: u32, tracer: &Tracer, bins: &TileBins) -> Vec<PixelValues> {
     let (x0, y0, x1, y1) = bins.tile_rect(tile, camera);
     let candidates = bins.candidates(tile);
+    let background = tracer.settings().background;
     let mut scratch = Vec::new();
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
     for y in y0..y1 {
         for x in x0..x1 {
             let ray = tracer.clip(camera.ray(x, y, Vec2::splat(0.5)));
-            let composite = tracer.trace(&ray, candidates.iter().copied(), &mut scratch);
-            out.push(PixelResult {
-                x,
-                y,
-                composite,
-                ray_dir: ray.dir,
-            });
+            let c = tracer.trace(&ray, candidates.iter().copied(), &mut scratch);
+            let rgb = c.color_over(background).as_vec3();
+            let n = c.unit_normal(ray.dir);
+            let depth = c.depth.unwrap_or(f32::NAN);
+            out.push([rgb.x, rgb.y, rgb.z, c.alpha() as f32, depth, n.x, n.y, n.z]);
         }
     }
     out
 }
 
-fn assemble(
-    camera: &Camera,
-    background: Vec3,
-    pixels: impl Iterator<Item = PixelResult>,
-) -> RenderOutput {
+/// Scatter the tiles' pixel values into the output images.
+fn assemble(camera: &Camera, bins: &TileBins, tiles: &[Vec<PixelValues>]) -> RenderOutput {
     let (w, h) = (camera.width, camera.height);
     let mut out = RenderOutput {
         radiance: Image::filled(w, h, 3, 0.0),
@@ -278,16 +266,15 @@ fn assemble(
         depth: Image::filled(w, h, 1, f32::NAN),
         normal: Image::filled(w, h, 3, 0.0),
     };
-    for p in pixels {
-        let c = &p.composite;
-        out.radiance
-            .pixel_mut(p.x, p.y)
-            .copy_from_slice(&c.color_over(background).as_vec3().to_array());
-        out.alpha.pixel_mut(p.x, p.y)[0] = c.alpha() as f32;
-        out.depth.pixel_mut(p.x, p.y)[0] = c.depth.unwrap_or(f32::NAN);
-        out.normal
-            .pixel_mut(p.x, p.y)
-            .copy_from_slice(&c.unit_normal(p.ray_dir).to_array());
+    for (tile, values) in tiles.iter().enumerate() {
+        let (x0, y0, x1, y1) = bins.tile_rect(tile as u32, camera);
+        let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
+        for ((x, y), v) in pixels.zip(values) {
+            out.radiance.pixel_mut(x, y).copy_from_slice(&v[0..3]);
+            out.alpha.pixel_mut(x, y)[0] = v[3];
+            out.depth.pixel_mut(x, y)[0] = v[4];
+            out.normal.pixel_mut(x, y).copy_from_slice(&v[5..8]);
+        }
     }
     out
 }
