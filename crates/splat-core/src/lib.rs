@@ -14,6 +14,7 @@
 //! assert_eq!(out.radiance.width(), 32);
 //! ```
 
+pub mod bvh;
 pub mod camera;
 pub mod composite;
 pub mod estimator;
@@ -26,6 +27,8 @@ pub mod render;
 pub mod rng;
 pub mod scenes;
 pub mod sh;
+pub mod stats;
+pub mod trace;
 
 pub use camera::Camera;
 pub use hit::{HitDistance, Ray};

@@ -7,7 +7,9 @@ use crate::camera::{Camera, CameraError};
 use crate::composite::{
     Composite, DEFAULT_ISO_THRESHOLD, ShadedHit, composite, sort_front_to_back,
 };
-use crate::hit::{DEFAULT_T_MAX, DEFAULT_T_MIN, HitDistance, PreparedParticle, Ray, intersect};
+use crate::hit::{
+    DEFAULT_T_MAX, DEFAULT_T_MIN, Hit, HitDistance, PreparedParticle, Ray, intersect,
+};
 use crate::image::Image;
 use crate::kernel::KernelParams;
 use crate::normal::{NormalMode, particle_normal};
@@ -123,14 +125,7 @@ pub struct Tracer<'a> {
 impl<'a> Tracer<'a> {
     /// Validate the settings and the scene and prepare every particle.
     pub fn new(scene: &'a Scene, settings: RenderSettings) -> Result<Self, RenderError> {
-        settings.validate()?;
-        if scene.sh_degree > crate::particle::SH_MAX_DEGREE {
-            return Err(RenderError::ShDegree(scene.sh_degree));
-        }
-        for (index, p) in scene.particles.iter().enumerate() {
-            p.validate()
-                .map_err(|error| RenderError::Particle { index, error })?;
-        }
+        validate_scene(scene, &settings)?;
         let prepared = scene.particles.iter().map(PreparedParticle::new).collect();
         Ok(Self {
             scene,
@@ -169,14 +164,7 @@ impl<'a> Tracer<'a> {
         let s = &self.settings;
         let p = &self.prepared[index as usize];
         let hit = intersect(p, index, ray, &s.kernel, s.hit_distance)?;
-        let particle = &self.scene.particles[index as usize];
-        Some(ShadedHit {
-            t: hit.t,
-            alpha: hit.alpha,
-            color: sh::eval(&particle.sh, self.scene.sh_degree, ray.dir),
-            normal: particle_normal(p, ray, s.normal_mode, s.kernel.cutoff),
-            index,
-        })
+        Some(shade_hit(self.scene, p, hit, ray, s))
     }
 
     /// Every hit of `ray` among `candidates`, sorted front to back and composited (Eq. 3).
@@ -191,6 +179,46 @@ impl<'a> Tracer<'a> {
         scratch.extend(candidates.into_iter().filter_map(|i| self.shade(i, ray)));
         sort_front_to_back(scratch);
         composite(scratch, self.settings.iso_threshold)
+    }
+}
+
+/// Check that a scene can be rendered with these settings: valid settings, SH degree ≤ 3,
+/// every particle valid, ids below the ones the RNG reserves.
+pub fn validate_scene(scene: &Scene, settings: &RenderSettings) -> Result<(), RenderError> {
+    settings.validate()?;
+    if scene.sh_degree > crate::particle::SH_MAX_DEGREE {
+        return Err(RenderError::ShDegree(scene.sh_degree));
+    }
+    if scene.particles.len() > crate::rng::MAX_PARTICLES {
+        return Err(RenderError::Settings(format!(
+            "{} particles is more than the {} supported",
+            scene.particles.len(),
+            crate::rng::MAX_PARTICLES
+        )));
+    }
+    for (index, p) in scene.particles.iter().enumerate() {
+        p.validate()
+            .map_err(|error| RenderError::Particle { index, error })?;
+    }
+    Ok(())
+}
+
+/// Shade a hit of particle `hit.index`: colour from its SH along the ray direction, normal by
+/// the settings' mode.
+pub fn shade_hit(
+    scene: &Scene,
+    p: &PreparedParticle,
+    hit: Hit,
+    ray: &Ray,
+    settings: &RenderSettings,
+) -> ShadedHit {
+    let particle = &scene.particles[hit.index as usize];
+    ShadedHit {
+        t: hit.t,
+        alpha: hit.alpha,
+        color: sh::eval(&particle.sh, scene.sh_degree, ray.dir),
+        normal: particle_normal(p, ray, settings.normal_mode, settings.kernel.cutoff),
+        index: hit.index,
     }
 }
 

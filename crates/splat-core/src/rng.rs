@@ -48,3 +48,186 @@ mod tests {
         assert!((mean - 0.5).abs() < 0.01);
     }
 }
+
+/// xxhash32 of three words (Jarzynski & Olano 2020, the hash of vk_gaussian_splatting).
+#[inline]
+pub fn xxhash32(p: [u32; 3]) -> u32 {
+    const P2: u32 = 2_246_822_519;
+    const P3: u32 = 3_266_489_917;
+    const P4: u32 = 668_265_263;
+    const P5: u32 = 374_761_393;
+    let mut h = p[2].wrapping_add(P5).wrapping_add(p[0].wrapping_mul(P3));
+    h = P4.wrapping_mul(h.rotate_left(17));
+    h = h.wrapping_add(p[1].wrapping_mul(P3));
+    h = P4.wrapping_mul(h.rotate_left(17));
+    h = P2.wrapping_mul(h ^ (h >> 15));
+    h = P3.wrapping_mul(h ^ (h >> 13));
+    h ^ (h >> 16)
+}
+
+/// One step of the PCG hash (vk_gaussian_splatting `pcg`).
+#[inline]
+pub fn pcg(v: u32) -> u32 {
+    let s = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let w = ((s >> ((s >> 28) + 4)) ^ s).wrapping_mul(277_803_737);
+    (w >> 22) ^ w
+}
+
+/// Uniform in [0, 1) from the top 24 bits of a word: exact in f32 and never 1.0
+/// (`float(x) / float(0xffffffff)` can round to 1.0).
+#[inline]
+pub fn unit_f32(bits: u32) -> f32 {
+    (bits >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// Fractional part x − ⌊x⌋.
+#[inline]
+fn fract(x: f32) -> f32 {
+    x - x.floor()
+}
+
+/// Sun et al. Eq. 8: r₁(q) = fract(b₁ sin(a₁ q)), a₁ = 91.3458, b₁ = 47453.5453.
+#[inline]
+pub fn trig_r1(q: f32) -> f32 {
+    fract(47_453.547 * (91.3458 * q).sin())
+}
+
+/// Sun et al. Eq. 9: r₂(q) = fract(b₂ sin(a₂ᵀ q)), a₂ = (12.9898, 78.233), b₂ = 43758.5453 in
+/// both components (so both components are equal; one is returned).
+#[inline]
+pub fn trig_r2(qx: f32, qy: f32) -> f32 {
+    fract(43_758.547 * (12.9898 * qx + 78.233 * qy).sin())
+}
+
+/// Sun et al. Eq. 10: ξ(p) = r₂(p_xy + r₁(p_z)).
+#[inline]
+pub fn trig_hash(p: glam::Vec3) -> f32 {
+    let r = trig_r1(p.z);
+    trig_r2(p.x + r, p.y + r)
+}
+
+/// Which stateless generator makes the stochastic decisions.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum RngScheme {
+    /// xxhash32 of (pixel, frame) then of (that, particle id, slot), PCG, top 24 bits
+    /// (vk_gaussian_splatting).
+    #[default]
+    Hash,
+    /// The trigonometric hash of Sun et al. Eqs. 8–10 on the hit position, perturbed per
+    /// (pixel, frame, slot) by a hashed offset in [0, 1)³ (standing in for the paper's
+    /// per-frame Sobol perturbation of the camera ray).
+    Trig,
+}
+
+/// Particle id reserved for per-pass decisions.
+pub const PASS_ID: u32 = u32::MAX;
+/// Particle id reserved for the trig hash's per-slot offsets.
+const OFFSET_ID: u32 = u32::MAX - 1;
+/// Largest particle count: ids up to `MAX_PARTICLES − 1` never collide with the reserved ones.
+pub const MAX_PARTICLES: usize = (u32::MAX - 1) as usize;
+
+/// Key of one frame of one render: the frame index mixed with the run's seed, so that two
+/// seeds give independent streams.
+#[inline]
+pub fn frame_key(seed: u32, frame: u32) -> u32 {
+    xxhash32([frame, seed, 0x5EED_F4A3])
+}
+
+/// The stochastic decisions of one ray: a pure function of (pixel, frame key, particle id,
+/// slot), never of traversal order or thread.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayRng {
+    /// xxhash32(x, y, frame key).
+    pub pixel_seed: u32,
+    /// Generator.
+    pub scheme: RngScheme,
+}
+
+impl RayRng {
+    /// Decisions for pixel (x, y) in the frame with key `frame_key`.
+    pub fn new(x: u32, y: u32, frame_key: u32, scheme: RngScheme) -> Self {
+        Self {
+            pixel_seed: xxhash32([x, y, frame_key]),
+            scheme,
+        }
+    }
+
+    /// Whether decisions depend on the hit position (then they cannot be drawn before the
+    /// kernel is evaluated).
+    pub fn needs_position(&self) -> bool {
+        self.scheme == RngScheme::Trig
+    }
+
+    /// u ∈ [0, 1) deciding whether particle `id` is accepted in sample `slot`; `hit` is the
+    /// hit position (used by [`RngScheme::Trig`] only).
+    #[inline]
+    pub fn particle(&self, id: u32, slot: u32, hit: glam::Vec3) -> f32 {
+        match self.scheme {
+            RngScheme::Hash => unit_f32(pcg(xxhash32([self.pixel_seed, id, slot]))),
+            RngScheme::Trig => {
+                let o =
+                    |k: u32| unit_f32(pcg(xxhash32([self.pixel_seed, OFFSET_ID, 3 * slot + k])));
+                trig_hash(hit + glam::Vec3::new(o(0), o(1), o(2)))
+            }
+        }
+    }
+
+    /// u ∈ [0, 1) deciding whether pass `pass` is accepted (stochastic pass).
+    #[inline]
+    pub fn pass(&self, pass: u32) -> f32 {
+        unit_f32(pcg(xxhash32([self.pixel_seed, PASS_ID, pass])))
+    }
+}
+
+#[cfg(test)]
+mod hash_tests {
+    use super::*;
+
+    #[test]
+    fn xxhash32_and_pcg_reference_values() {
+        // Reference values from an independent Python transcription of the GLSL of
+        // Jarzynski & Olano 2020.
+        assert_eq!(pcg(0), 129_708_002);
+        assert_eq!(xxhash32([1, 2, 3]), 243_197_822);
+        assert_eq!(xxhash32([0, 0, 0]), 2_783_098_233);
+        assert_ne!(xxhash32([0, 0, 0]), xxhash32([0, 0, 1]));
+        assert_ne!(xxhash32([1, 0, 0]), xxhash32([0, 1, 0]));
+    }
+
+    #[test]
+    fn unit_f32_never_reaches_one() {
+        assert_eq!(unit_f32(u32::MAX), 16_777_215.0 / 16_777_216.0);
+        assert_eq!(unit_f32(0), 0.0);
+    }
+
+    /// Both schemes give uniform u: the mean and the mean of u² over many keys match 1/2 and
+    /// 1/3 within 5 standard errors.
+    #[test]
+    fn decisions_are_uniform() {
+        for scheme in [RngScheme::Hash, RngScheme::Trig] {
+            let n = 200_000;
+            let (mut s1, mut s2) = (0.0f64, 0.0f64);
+            for i in 0..n {
+                let rng = RayRng::new(i % 640, i / 640, frame_key(1, i % 7), scheme);
+                let hit = glam::Vec3::new((i % 97) as f32 * 0.01, (i % 89) as f32 * 0.02, 1.5);
+                let u = f64::from(rng.particle(i % 1000, i % 4, hit));
+                assert!((0.0..1.0).contains(&u));
+                s1 += u;
+                s2 += u * u;
+            }
+            let n = f64::from(n);
+            let se1 = (1.0 / 12.0 / n).sqrt();
+            let se2 = (4.0 / 45.0 / n).sqrt();
+            assert!(
+                (s1 / n - 0.5).abs() < 5.0 * se1,
+                "{scheme:?} mean {}",
+                s1 / n
+            );
+            assert!(
+                (s2 / n - 1.0 / 3.0).abs() < 5.0 * se2,
+                "{scheme:?} second moment {}",
+                s2 / n
+            );
+        }
+    }
+}

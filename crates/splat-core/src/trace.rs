@@ -1,0 +1,860 @@
+//! CPU ray tracing through a BVH with every ray-tracing method of the seeds: exact, the k-buffer
+//! multi-pass baseline, stochastic any-hit (Algorithm 1), its N-samples-per-traversal extension
+//! (§3.5), the vk stochastic pass, and 3DGRT's stochastic depth sampling (the biased control).
+//!
+//! Each method is one function of a ray and a source of decisions ([`Decide`]). In rendering,
+//! the decisions are the counter-based hashes of [`crate::rng::RayRng`]; in tests they can be
+//! set outcome by outcome, so that the expectation of the very code that renders is computed
+//! exactly by enumeration.
+
+use crate::bvh::Bvh;
+use crate::composite::{ShadedHit, composite};
+use crate::hit::{Hit, PreparedParticle, Ray, intersect, to_canonical};
+use crate::particle::{Aabb, Scene};
+use crate::render::{RenderError, RenderSettings, shade_hit, validate_scene};
+use crate::rng::RayRng;
+use crate::sh;
+use glam::{DVec3, Vec3};
+
+/// Particles per pass of the k-buffer (vk `PARTICLES_SPP`).
+pub const DEFAULT_K: usize = 18;
+/// Maximum passes of the k-buffer and stochastic pass (vk `maxPasses`).
+pub const DEFAULT_MAX_PASSES: u32 = 200;
+/// The k-buffer stops when transmittance drops to this (vk `minTransmittance`).
+pub const DEFAULT_MIN_TRANSMITTANCE: f32 = 0.01;
+/// Largest k of a k-buffer and largest N of `stochastic-n` (fixed arrays on the stack).
+pub const MAX_SLOTS: usize = 64;
+
+/// A ray-tracing method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Method {
+    /// Every hit through the BVH, sorted, Eq. 3.
+    Exact,
+    /// 3DGRT / vk "all pass": K hits per pass kept sorted and integrated, the next pass
+    /// restarting behind the last hit, until `max_passes` or transmittance ≤ `min_transmittance`.
+    KBuffer {
+        /// Hits per pass.
+        k: usize,
+        /// Pass limit.
+        max_passes: u32,
+        /// Early-out transmittance (0 disables it; above 0 the result is truncated, not exact).
+        min_transmittance: f32,
+    },
+    /// Algorithm 1: one traversal, Russian roulette on alpha, closest accepted hit, t_max
+    /// clipped on accept, one shading per ray.
+    Stochastic,
+    /// §3.5: `m` traversals per frame, each carrying `n` independent instantiations.
+    StochasticN {
+        /// Traversals per frame.
+        m: u32,
+        /// Samples per traversal (≤ 64).
+        n: u32,
+    },
+    /// vk stochastic pass: K sorted hits per pass, the pass accepted with probability
+    /// 1 − T_pass and its radiance divided by it, else discarded.
+    StochasticPass {
+        /// Hits per pass.
+        k: usize,
+        /// Pass limit.
+        max_passes: u32,
+    },
+    /// 3DGRT stochastic depth sampling: the first k accepted hits composited in order with
+    /// their alphas. Biased (Sun et al. §5, Fig. 7): the control the tests must reject.
+    DepthSampling {
+        /// Accepted hits composited.
+        k: usize,
+    },
+    /// Every particle as an opaque ellipsoid at the cutoff: the closest entry is shaded. Not an
+    /// estimator of Eq. 3: the cost of a plain mesh-like ray, for benchmarks.
+    Opaque,
+}
+
+impl Method {
+    /// The k-buffer with the vk defaults.
+    pub const KBUFFER: Method = Method::KBuffer {
+        k: DEFAULT_K,
+        max_passes: DEFAULT_MAX_PASSES,
+        min_transmittance: DEFAULT_MIN_TRANSMITTANCE,
+    };
+    /// The stochastic pass with the vk defaults.
+    pub const STOCHASTIC_PASS: Method = Method::StochasticPass {
+        k: DEFAULT_K,
+        max_passes: DEFAULT_MAX_PASSES,
+    };
+
+    /// Whether frames differ (the method draws random decisions).
+    pub fn is_stochastic(&self) -> bool {
+        matches!(
+            self,
+            Method::Stochastic
+                | Method::StochasticN { .. }
+                | Method::StochasticPass { .. }
+                | Method::DepthSampling { .. }
+        )
+    }
+
+    /// Check the method's parameters.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        let bad = |m: String| Err(RenderError::Settings(m));
+        match *self {
+            Method::KBuffer { k, .. }
+            | Method::StochasticPass { k, .. }
+            | Method::DepthSampling { k }
+                if !(1..=MAX_SLOTS).contains(&k) =>
+            {
+                bad(format!("k = {k} is outside 1..={MAX_SLOTS}"))
+            }
+            Method::StochasticN { n, m } if !(1..=MAX_SLOTS as u32).contains(&n) || m == 0 => bad(
+                format!("stochastic-n needs 1 ≤ n ≤ {MAX_SLOTS} and m ≥ 1 (got m = {m}, n = {n})"),
+            ),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The source of the stochastic decisions of one ray.
+pub trait Decide {
+    /// Whether [`Decide::particle`] reads the hit position.
+    fn needs_position(&self) -> bool;
+    /// u ∈ [0, 1): particle `id` is accepted in sample `slot` when u < α.
+    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32;
+    /// u ∈ [0, 1): pass `pass` is accepted when u < 1 − T_pass.
+    fn pass(&self, pass: u32) -> f32;
+}
+
+impl Decide for RayRng {
+    fn needs_position(&self) -> bool {
+        RayRng::needs_position(self)
+    }
+    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
+        RayRng::particle(self, id, slot, hit)
+    }
+    fn pass(&self, pass: u32) -> f32 {
+        RayRng::pass(self, pass)
+    }
+}
+
+/// What one sample of one ray yields.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Radiance over the background.
+    pub color: DVec3,
+    /// Coverage: 1 − T for deterministic methods, 0 or 1 for a stochastic pick.
+    pub alpha: f64,
+    /// Picked depth (iso-opacity for sorted methods, the accepted hit for stochastic ones).
+    pub depth: Option<f32>,
+    /// Unit normal of the pick (zero when nothing is hit).
+    pub normal: Vec3,
+}
+
+/// A scene ready for ray tracing: BVH, particles in leaf order, settings.
+pub struct TraceScene<'a> {
+    scene: &'a Scene,
+    settings: RenderSettings,
+    bvh: Bvh,
+    /// Prepared particles in BVH leaf order.
+    prims: Vec<PreparedParticle>,
+    /// Scene index of each leaf-order particle.
+    ids: Vec<u32>,
+}
+
+/// A candidate hit in a k-buffer, ordered by (t, id).
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    t: f32,
+    id: u32,
+    leaf: u32,
+    alpha: f32,
+}
+
+impl Slot {
+    const EMPTY: Slot = Slot {
+        t: f32::INFINITY,
+        id: u32::MAX,
+        leaf: 0,
+        alpha: 0.0,
+    };
+
+    /// Strict (t, id) order: distance, ties by particle id, whatever the traversal order.
+    #[inline]
+    fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
+        t < other_t || (t == other_t && id < other_id)
+    }
+}
+
+/// Up to `cap` hits kept sorted by (t, id).
+struct KBuf {
+    slots: [Slot; MAX_SLOTS],
+    len: usize,
+    cap: usize,
+}
+
+impl KBuf {
+    fn new(cap: usize) -> Self {
+        Self {
+            slots: [Slot::EMPTY; MAX_SLOTS],
+            len: 0,
+            cap,
+        }
+    }
+
+    fn is_full(&self) -> bool {
+        self.len == self.cap
+    }
+
+    /// The last kept hit (the farthest).
+    fn last(&self) -> Slot {
+        if self.len == 0 {
+            Slot::EMPTY
+        } else {
+            self.slots[self.len - 1]
+        }
+    }
+
+    /// Whether a hit at (t, id) would be kept.
+    fn admits(&self, t: f32, id: u32) -> bool {
+        !self.is_full() || Slot::before(t, id, self.last().t, self.last().id)
+    }
+
+    /// Insert, dropping the farthest when full (insertion sort, as the vk any-hit shader does).
+    fn insert(&mut self, s: Slot) {
+        let mut i = if self.is_full() {
+            self.len - 1
+        } else {
+            self.len
+        };
+        if !self.is_full() {
+            self.len += 1;
+        }
+        while i > 0 && Slot::before(s.t, s.id, self.slots[i - 1].t, self.slots[i - 1].id) {
+            self.slots[i] = self.slots[i - 1];
+            i -= 1;
+        }
+        self.slots[i] = s;
+    }
+
+    fn as_slice(&self) -> &[Slot] {
+        &self.slots[..self.len]
+    }
+}
+
+/// Front-to-back integration state (Eq. 3), in f64.
+#[derive(Clone, Copy)]
+struct Integrator {
+    radiance: DVec3,
+    normal: DVec3,
+    transmittance: f64,
+    depth: Option<f32>,
+    farthest: Option<f32>,
+}
+
+impl Integrator {
+    const START: Integrator = Integrator {
+        radiance: DVec3::ZERO,
+        normal: DVec3::ZERO,
+        transmittance: 1.0,
+        depth: None,
+        farthest: None,
+    };
+
+    fn add(&mut self, h: &ShadedHit, iso: f32) {
+        let alpha = f64::from(h.alpha);
+        let w = self.transmittance * alpha;
+        self.radiance += w * h.color.as_dvec3();
+        self.normal += w * h.normal.as_dvec3();
+        self.transmittance *= 1.0 - alpha;
+        if self.depth.is_none() && self.transmittance < f64::from(iso) {
+            self.depth = Some(h.t);
+        }
+        self.farthest = Some(h.t);
+    }
+
+    fn unit_normal(&self, dir: Vec3) -> Vec3 {
+        let c = crate::composite::Composite {
+            radiance: self.radiance,
+            transmittance: self.transmittance,
+            depth: self.depth,
+            normal: self.normal,
+            hits: usize::from(self.farthest.is_some()),
+        };
+        c.unit_normal(dir)
+    }
+}
+
+impl<'a> TraceScene<'a> {
+    /// Validate, build the BVH over the particles' cutoff boxes and lay the particles out in
+    /// leaf order.
+    pub fn new(scene: &'a Scene, settings: RenderSettings) -> Result<Self, RenderError> {
+        validate_scene(scene, &settings)?;
+        let cutoff = settings.kernel.cutoff;
+        let boxes: Vec<Aabb> = scene
+            .particles
+            .iter()
+            .map(|p| padded(p.aabb(cutoff)))
+            .collect();
+        let bvh = Bvh::build(&boxes);
+        let prims = bvh
+            .order
+            .iter()
+            .map(|&i| PreparedParticle::new(&scene.particles[i as usize]))
+            .collect();
+        let ids = bvh.order.clone();
+        Ok(Self {
+            scene,
+            settings,
+            bvh,
+            prims,
+            ids,
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// The BVH.
+    pub fn bvh(&self) -> &Bvh {
+        &self.bvh
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        self.scene
+    }
+
+    /// The ray with the settings' range.
+    pub fn clip(&self, ray: Ray) -> Ray {
+        Ray {
+            t_min: self.settings.t_min,
+            t_max: self.settings.t_max,
+            ..ray
+        }
+    }
+
+    #[inline]
+    fn hit(&self, leaf: u32, ray: &Ray) -> Option<Hit> {
+        let s = &self.settings;
+        intersect(
+            &self.prims[leaf as usize],
+            self.ids[leaf as usize],
+            ray,
+            &s.kernel,
+            s.hit_distance,
+        )
+    }
+
+    fn shade(&self, leaf: u32, t: f32, alpha: f32, ray: &Ray) -> ShadedHit {
+        let hit = Hit {
+            t,
+            alpha,
+            index: self.ids[leaf as usize],
+        };
+        shade_hit(
+            self.scene,
+            &self.prims[leaf as usize],
+            hit,
+            ray,
+            &self.settings,
+        )
+    }
+
+    /// A shaded pick seen as an opaque sample.
+    fn opaque_sample(&self, leaf: u32, t: f32, ray: &Ray) -> Sample {
+        let h = self.shade(leaf, t, 1.0, ray);
+        Sample {
+            color: h.color.as_dvec3(),
+            alpha: 1.0,
+            depth: Some(t),
+            normal: h.normal,
+        }
+    }
+
+    fn background_sample(&self) -> Sample {
+        Sample {
+            color: self.settings.background.as_dvec3(),
+            alpha: 0.0,
+            depth: None,
+            normal: Vec3::ZERO,
+        }
+    }
+
+    /// One sample of `method` for `ray` (already clipped to the settings' range).
+    pub fn sample(&self, method: &Method, ray: &Ray, decide: &impl Decide) -> Sample {
+        match *method {
+            Method::Exact => self.exact(ray),
+            Method::KBuffer {
+                k,
+                max_passes,
+                min_transmittance,
+            } => self.kbuffer(ray, k, max_passes, min_transmittance),
+            Method::Stochastic => self.stochastic(ray, decide, 0),
+            Method::StochasticN { m, n } => {
+                let mut sum = Sample {
+                    color: DVec3::ZERO,
+                    alpha: 0.0,
+                    depth: None,
+                    normal: Vec3::ZERO,
+                };
+                for pass in 0..m {
+                    let s = self.stochastic_n(ray, decide, n as usize, pass * n);
+                    sum.color += s.color;
+                    sum.alpha += s.alpha;
+                    if pass == 0 {
+                        (sum.depth, sum.normal) = (s.depth, s.normal);
+                    }
+                }
+                sum.color /= f64::from(m);
+                sum.alpha /= f64::from(m);
+                sum
+            }
+            Method::StochasticPass { k, max_passes } => {
+                self.stochastic_pass(ray, decide, k, max_passes)
+            }
+            Method::DepthSampling { k } => self.depth_sampling(ray, decide, k),
+            Method::Opaque => self.opaque(ray),
+        }
+    }
+
+    /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3.
+    pub fn exact(&self, ray: &Ray) -> Sample {
+        let mut hits = Vec::new();
+        let mut t_max = ray.t_max;
+        self.bvh.traverse(ray, &mut t_max, |leaf, _| {
+            if let Some(h) = self.hit(leaf, ray) {
+                hits.push(self.shade(leaf, h.t, h.alpha, ray));
+            }
+        });
+        crate::composite::sort_front_to_back(&mut hits);
+        let c = composite(&hits, self.settings.iso_threshold);
+        Sample {
+            color: c.color_over(self.settings.background),
+            alpha: c.alpha(),
+            depth: c.depth,
+            normal: c.unit_normal(ray.dir),
+        }
+    }
+
+    /// The k closest hits strictly behind (after_t, after_id), by (t, id); when `decide` is
+    /// given, only hits accepted in slot 0 count (depth sampling).
+    fn next_k(
+        &self,
+        ray: &Ray,
+        k: usize,
+        after: (f32, u32),
+        accepted: Option<&dyn Fn(u32, Vec3, f32) -> bool>,
+    ) -> KBuf {
+        let mut buf = KBuf::new(k);
+        let mut t_max = ray.t_max;
+        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+            let Some(h) = self.hit(leaf, ray) else { return };
+            let id = self.ids[leaf as usize];
+            if !Slot::before(after.0, after.1, h.t, id) || !buf.admits(h.t, id) {
+                return;
+            }
+            if let Some(accept) = accepted
+                && !accept(id, ray.at(h.t), h.alpha)
+            {
+                return;
+            }
+            buf.insert(Slot {
+                t: h.t,
+                id,
+                leaf,
+                alpha: h.alpha,
+            });
+            if buf.is_full() {
+                *t_max = buf.last().t;
+            }
+        });
+        buf
+    }
+
+    /// k-buffer multi-pass (3DGRT / vk baseline).
+    pub fn kbuffer(&self, ray: &Ray, k: usize, max_passes: u32, min_transmittance: f32) -> Sample {
+        let iso = self.settings.iso_threshold;
+        let mut acc = Integrator::START;
+        let mut after = (ray.t_min, u32::MAX);
+        for _ in 0..max_passes {
+            if acc.transmittance <= f64::from(min_transmittance) {
+                break;
+            }
+            let buf = self.next_k(ray, k, after, None);
+            for s in buf.as_slice() {
+                acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), iso);
+            }
+            if !buf.is_full() {
+                break;
+            }
+            after = (buf.last().t, buf.last().id);
+        }
+        Sample {
+            color: acc.radiance + acc.transmittance * self.settings.background.as_dvec3(),
+            alpha: 1.0 - acc.transmittance,
+            depth: acc.depth,
+            normal: acc.unit_normal(ray.dir),
+        }
+    }
+
+    /// Algorithm 1: the closest hit accepted by Russian roulette (u < α), found in one
+    /// traversal that clips t_max at every accept; shaded once (Eq. 6).
+    ///
+    /// With a position-free generator u is drawn before the kernel: α ≤ min(opacity, clamp),
+    /// so u ≥ that bound rejects the hit without evaluating the exponential; the decision is
+    /// the same because u is a hash, not a stream.
+    pub fn stochastic(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> Sample {
+        let early = !decide.needs_position();
+        let clamp = self.settings.kernel.alpha_clamp;
+        let mut best = Slot::EMPTY;
+        let mut t_max = ray.t_max;
+        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+            let id = self.ids[leaf as usize];
+            let u = if early {
+                let u = decide.particle(id, slot, Vec3::ZERO);
+                if u >= self.prims[leaf as usize].opacity.min(clamp) {
+                    return;
+                }
+                u
+            } else {
+                0.0
+            };
+            let Some(h) = self.hit(leaf, ray) else { return };
+            if !Slot::before(h.t, id, best.t, best.id) {
+                return;
+            }
+            let u = if early {
+                u
+            } else {
+                decide.particle(id, slot, ray.at(h.t))
+            };
+            if u < h.alpha {
+                best = Slot {
+                    t: h.t,
+                    id,
+                    leaf,
+                    alpha: h.alpha,
+                };
+                *t_max = h.t;
+            }
+        });
+        if best.id == u32::MAX {
+            self.background_sample()
+        } else {
+            self.opaque_sample(best.leaf, best.t, ray)
+        }
+    }
+
+    /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
+    /// `first_slot..first_slot + n`; the traversal is clipped at the farthest slot's hit.
+    pub fn stochastic_n(
+        &self,
+        ray: &Ray,
+        decide: &impl Decide,
+        n: usize,
+        first_slot: u32,
+    ) -> Sample {
+        let early = !decide.needs_position();
+        let clamp = self.settings.kernel.alpha_clamp;
+        let mut best = [Slot::EMPTY; MAX_SLOTS];
+        let mut u = [0.0f32; MAX_SLOTS];
+        let mut t_max = ray.t_max;
+        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+            let id = self.ids[leaf as usize];
+            if early {
+                let bound = self.prims[leaf as usize].opacity.min(clamp);
+                let mut any = false;
+                for s in 0..n {
+                    u[s] = decide.particle(id, first_slot + s as u32, Vec3::ZERO);
+                    any |= u[s] < bound;
+                }
+                if !any {
+                    return;
+                }
+            }
+            let Some(h) = self.hit(leaf, ray) else { return };
+            let mut farthest = 0.0f32;
+            for s in 0..n {
+                if Slot::before(h.t, id, best[s].t, best[s].id) {
+                    let us = if early {
+                        u[s]
+                    } else {
+                        decide.particle(id, first_slot + s as u32, ray.at(h.t))
+                    };
+                    if us < h.alpha {
+                        best[s] = Slot {
+                            t: h.t,
+                            id,
+                            leaf,
+                            alpha: h.alpha,
+                        };
+                    }
+                }
+                farthest = farthest.max(best[s].t);
+            }
+            *t_max = farthest.min(ray.t_max);
+        });
+        let mut color = DVec3::ZERO;
+        let mut alpha = 0.0;
+        for b in &best[..n] {
+            if b.id == u32::MAX {
+                color += self.settings.background.as_dvec3();
+            } else {
+                color += self.shade(b.leaf, b.t, 1.0, ray).color.as_dvec3();
+                alpha += 1.0;
+            }
+        }
+        let first = if best[0].id == u32::MAX {
+            self.background_sample()
+        } else {
+            self.opaque_sample(best[0].leaf, best[0].t, ray)
+        };
+        Sample {
+            color: color / n as f64,
+            alpha: alpha / n as f64,
+            depth: first.depth,
+            normal: first.normal,
+        }
+    }
+
+    /// vk stochastic pass: each pass integrates its K sorted hits from T = 1; it is accepted
+    /// with probability O = 1 − T_pass and returns L_pass / O, else it is discarded and the
+    /// next pass starts behind it. E = Σⱼ (Πᵢ<ⱼ Tᵢ) Lⱼ + (Π Tⱼ) background: Eq. 3 exactly.
+    pub fn stochastic_pass(
+        &self,
+        ray: &Ray,
+        decide: &impl Decide,
+        k: usize,
+        max_passes: u32,
+    ) -> Sample {
+        let iso = self.settings.iso_threshold;
+        let mut after = (ray.t_min, u32::MAX);
+        for pass in 0..max_passes {
+            let buf = self.next_k(ray, k, after, None);
+            if buf.len == 0 {
+                break;
+            }
+            let mut acc = Integrator::START;
+            for s in buf.as_slice() {
+                acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), iso);
+            }
+            let opacity = 1.0 - acc.transmittance;
+            if f64::from(decide.pass(pass)) < opacity {
+                return Sample {
+                    color: acc.radiance / opacity,
+                    alpha: 1.0,
+                    // seed 003 §1.3: iso-depth within the pass, else its farthest hit.
+                    depth: acc.depth.or(acc.farthest),
+                    normal: acc.unit_normal(ray.dir),
+                };
+            }
+            if !buf.is_full() {
+                break;
+            }
+            after = (buf.last().t, buf.last().id);
+        }
+        self.background_sample()
+    }
+
+    /// 3DGRT stochastic depth sampling: the k closest hits accepted by roulette (slot 0),
+    /// composited in order with their alphas (biased: α counts twice).
+    pub fn depth_sampling(&self, ray: &Ray, decide: &impl Decide, k: usize) -> Sample {
+        let accept = |id: u32, p: Vec3, alpha: f32| decide.particle(id, 0, p) < alpha;
+        let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept));
+        let mut acc = Integrator::START;
+        for s in buf.as_slice() {
+            acc.add(
+                &self.shade(s.leaf, s.t, s.alpha, ray),
+                self.settings.iso_threshold,
+            );
+        }
+        Sample {
+            color: acc.radiance + acc.transmittance * self.settings.background.as_dvec3(),
+            alpha: 1.0 - acc.transmittance,
+            depth: buf.as_slice().first().map(|s| s.t),
+            normal: acc.unit_normal(ray.dir),
+        }
+    }
+
+    /// Closest entry into any particle's cutoff ellipsoid, shaded opaque.
+    pub fn opaque(&self, ray: &Ray) -> Sample {
+        let s2 = self.settings.kernel.cutoff * self.settings.kernel.cutoff;
+        let mut best = Slot::EMPTY;
+        let mut t_max = ray.t_max;
+        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+            let (o, d) = to_canonical(&self.prims[leaf as usize], ray);
+            let (a, b, c) = (d.length_squared(), o.dot(d), o.length_squared() - s2);
+            let disc = b * b - a * c;
+            if disc < 0.0 {
+                return;
+            }
+            let t = (-b - disc.sqrt()) / a;
+            let id = self.ids[leaf as usize];
+            if t > ray.t_min && t < ray.t_max && Slot::before(t, id, best.t, best.id) {
+                best = Slot {
+                    t,
+                    id,
+                    leaf,
+                    alpha: 1.0,
+                };
+                *t_max = t;
+            }
+        });
+        if best.id == u32::MAX {
+            return self.background_sample();
+        }
+        let p = &self.scene.particles[best.id as usize];
+        let color = sh::eval(&p.sh, self.scene.sh_degree, ray.dir).as_dvec3();
+        Sample {
+            color,
+            alpha: 1.0,
+            depth: Some(best.t),
+            normal: Vec3::ZERO,
+        }
+    }
+}
+
+/// Pad a box so that f32 rounding in the hit test cannot place a hit outside it.
+pub fn padded(b: Aabb) -> Aabb {
+    let pad = 1e-4 * (b.max - b.min).max(Vec3::splat(1e-6)) + Vec3::splat(1e-6);
+    Aabb {
+        min: b.min - pad,
+        max: b.max + pad,
+    }
+}
+
+/// How frames are drawn: how many, from which seed, with which generator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frames {
+    /// Frames (samples per pixel) averaged.
+    pub count: u32,
+    /// Seed of the random stream; two seeds give independent runs.
+    pub seed: u32,
+    /// Generator of the decisions.
+    pub rng: crate::rng::RngScheme,
+}
+
+impl Default for Frames {
+    fn default() -> Self {
+        Self {
+            count: 1,
+            seed: 0,
+            rng: crate::rng::RngScheme::Hash,
+        }
+    }
+}
+
+/// Images of a multi-frame render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TraceOutput {
+    /// Mean radiance over the frames (RGB).
+    pub mean: crate::image::Image,
+    /// Per-frame variance of the radiance (RGB, unbiased; 0 with one frame).
+    pub variance: crate::image::Image,
+    /// Mean coverage.
+    pub alpha: crate::image::Image,
+    /// Depth of frame 0 (NaN where none): picks are never averaged (seed 003 §2.3).
+    pub depth: crate::image::Image,
+    /// Normal of frame 0.
+    pub normal: crate::image::Image,
+}
+
+/// Render `frames.count` frames of `method` through pixel centres and accumulate mean and
+/// per-frame variance per pixel in f64 (Welford). Each pixel loops over its frames, so the
+/// result does not depend on the thread count. `progress` receives finished pixel counts.
+pub fn render_frames(
+    trace: &TraceScene,
+    camera: &crate::camera::Camera,
+    method: &Method,
+    frames: &Frames,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput, RenderError> {
+    use crate::render::TILE;
+    use crate::stats::Welford;
+    camera.validate()?;
+    method.validate()?;
+    if frames.count == 0 {
+        return Err(RenderError::Settings("at least one frame is needed".into()));
+    }
+    let (tiles_x, tiles_y) = (camera.width.div_ceil(TILE), camera.height.div_ceil(TILE));
+    let tile_rect = |tile: u32| {
+        let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+        (
+            x0,
+            y0,
+            (x0 + TILE).min(camera.width),
+            (y0 + TILE).min(camera.height),
+        )
+    };
+    let keys: Vec<u32> = (0..frames.count)
+        .map(|f| crate::rng::frame_key(frames.seed, f))
+        .collect();
+    let render_tile = |&tile: &u32| {
+        let (x0, y0, x1, y1) = tile_rect(tile);
+        let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let ray = trace.clip(camera.pixel_ray(x, y));
+                let mut acc = [Welford::default(); 4];
+                let mut first = None;
+                for &key in &keys {
+                    let s = trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng));
+                    for (a, v) in acc
+                        .iter_mut()
+                        .zip([s.color.x, s.color.y, s.color.z, s.alpha])
+                    {
+                        a.push(v);
+                    }
+                    first.get_or_insert(s);
+                }
+                let f = first.expect("at least one frame");
+                let mean = acc.map(|a| a.mean as f32);
+                let var = acc.map(|a| a.variance() as f32);
+                let n = f.normal;
+                out.push([
+                    mean[0],
+                    mean[1],
+                    mean[2],
+                    var[0],
+                    var[1],
+                    var[2],
+                    mean[3],
+                    f.depth.unwrap_or(f32::NAN),
+                    n.x,
+                    n.y,
+                    n.z,
+                ]);
+            }
+        }
+        progress(out.len() as u64);
+        out
+    };
+    let tiles: Vec<u32> = (0..tiles_x * tiles_y).collect();
+    #[cfg(feature = "rayon")]
+    let results: Vec<Vec<[f32; 11]>> = {
+        use rayon::prelude::*;
+        tiles.par_iter().map(render_tile).collect()
+    };
+    #[cfg(not(feature = "rayon"))]
+    let results: Vec<Vec<[f32; 11]>> = tiles.iter().map(render_tile).collect();
+    let (w, h) = (camera.width, camera.height);
+    let image = |c| crate::image::Image::filled(w, h, c, 0.0);
+    let mut out = TraceOutput {
+        mean: image(3),
+        variance: image(3),
+        alpha: image(1),
+        depth: image(1),
+        normal: image(3),
+    };
+    for (tile, values) in results.iter().enumerate() {
+        let (x0, y0, x1, y1) = tile_rect(tile as u32);
+        let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
+        for ((x, y), v) in pixels.zip(values) {
+            out.mean.pixel_mut(x, y).copy_from_slice(&v[0..3]);
+            out.variance.pixel_mut(x, y).copy_from_slice(&v[3..6]);
+            out.alpha.pixel_mut(x, y)[0] = v[6];
+            out.depth.pixel_mut(x, y)[0] = v[7];
+            out.normal.pixel_mut(x, y).copy_from_slice(&v[8..11]);
+        }
+    }
+    Ok(out)
+}
