@@ -178,3 +178,84 @@ pub fn compare_golden(
         diff_path.display()
     ))
 }
+
+/// The statistical method of ARCHITECTURE.md applied to the ray-tracing estimators.
+pub mod stat {
+    use splat_core::Camera;
+    use splat_core::stats::{ZTest, log_log_slope, rmse};
+    use splat_core::trace::{Frames, Method, TraceOutput, TraceScene, render_frames};
+
+    /// Render `frames` frames of `method` with `seed` (hash RNG unless `frames` says otherwise).
+    pub fn run(trace: &TraceScene, camera: &Camera, method: &Method, frames: Frames) -> TraceOutput {
+        render_frames(trace, camera, method, &frames, &|_| {}).expect("render")
+    }
+
+    /// The exact image (RGB), its coverage mask (alpha > 1e-4 per pixel-channel).
+    pub fn exact(trace: &TraceScene, camera: &Camera) -> (Vec<f32>, Vec<bool>) {
+        let out = run(trace, camera, &Method::Exact, Frames::default());
+        let mask = out.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
+        (out.mean.data().to_vec(), mask)
+    }
+
+    fn masked(v: &[f32], mask: &[bool]) -> Vec<f32> {
+        v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
+    }
+
+    /// The z-test of `method` against exact over the covered pixel-channels: mean from
+    /// `frames` frames with seed `base.seed`, per-frame variance from an independent run of
+    /// 4 × `frames` frames with seed `base.seed + 1`.
+    pub fn z_test(trace: &TraceScene, camera: &Camera, method: &Method, base: Frames) -> ZTest {
+        let (exact, mask) = exact(trace, camera);
+        let mean = run(trace, camera, method, base);
+        let var = run(trace, camera, method, Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
+        ZTest::new(&masked(mean.mean.data(), &mask), &masked(&exact, &mask), &masked(var.variance.data(), &mask), base.count, 3)
+    }
+
+    /// RMSE against exact at spp = 1, 2, 4, … `max_spp`, averaged over `seeds` seeds, and the
+    /// least-squares log–log slope.
+    pub fn convergence(trace: &TraceScene, camera: &Camera, method: &Method, max_spp: u32, seeds: u32) -> (f64, Vec<(u32, f64)>) {
+        let (exact, _) = exact(trace, camera);
+        let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
+        let table: Vec<(u32, f64)> = levels
+            .iter()
+            .map(|&spp| {
+                let sum: f64 = (0..seeds)
+                    .map(|s| {
+                        let frames = Frames { count: spp, seed: 1000 * spp + s, ..Frames::default() };
+                        rmse(run(trace, camera, method, frames).mean.data(), &exact)
+                    })
+                    .sum();
+                (spp, sum / f64::from(seeds))
+            })
+            .collect();
+        let (x, y): (Vec<f64>, Vec<f64>) = table.iter().map(|&(s, r)| (f64::from(s), r)).unzip();
+        (log_log_slope(&x, &y), table)
+    }
+}
+
+/// The bonsai capture fetched by `cargo xtask assets`, if present (tests skip without it,
+/// saying why; with `CI=true` they fail instead).
+pub fn bonsai() -> Option<splat_core::Scene> {
+    let path = root().join("target/assets/bonsai-7k-mini.splat");
+    if !path.exists() {
+        let msg = format!("{} is absent: run `cargo xtask assets`", path.display());
+        assert!(std::env::var("CI").is_err(), "{msg} (CI must fetch it)");
+        eprintln!("skipping: {msg}");
+        return None;
+    }
+    Some(splat_io::read_scene(&path).expect("the verified bonsai capture loads"))
+}
+
+/// The standard bonsai view (the capture's world up is −y): 1200 × 800 from (0, −1.5, 4)
+/// looking at (0, 0.5, 0), 50° vertical field of view.
+pub fn bonsai_camera() -> splat_core::Camera {
+    splat_core::Camera::look_at(
+        glam::Vec3::new(0.0, -1.5, 4.0),
+        glam::Vec3::new(0.0, 0.5, 0.0),
+        glam::Vec3::new(0.0, -1.0, 0.0),
+        50.0,
+        1200,
+        800,
+    )
+    .expect("valid camera")
+}

@@ -16,13 +16,15 @@ fn main() -> Result<()> {
         Some("test") => test(&args[1..]),
         Some("fixtures") => fixtures(),
         Some("bless") => bless(),
+        Some("assets") => assets().map(|path| println!("{}", path.display())),
         _ => {
             eprintln!(
                 "usage: cargo xtask <command>\n\n\
                  commands:\n  \
                  test [ARGS]  run every test of the workspace (optimized build); ARGS go to cargo test\n  \
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
-                 bless        re-render the golden images in fixtures/golden/"
+                 bless        re-render the golden images in fixtures/golden/\n  \
+                 assets       fetch and verify the bonsai capture into target/assets/"
             );
             bail!("missing or unknown command");
         }
@@ -81,4 +83,62 @@ fn bless() -> Result<()> {
         println!("blessed {}", path.display());
     }
     Ok(())
+}
+
+/// PyPI source distribution that carries the bonsai capture, pinned by version and hash.
+const ASSET_PACKAGE: &str = "gradio-model3dgs==0.2.5";
+const ASSET_SDIST: &str = "gradio_model3dgs-0.2.5.tar.gz";
+const ASSET_SDIST_SHA256: &str = "2114171f719584852d82cebb19b076c17acf8505058af9be06192a9e69d1f971";
+const ASSET_MEMBER: &str = "gradio_model3dgs-0.2.5/gradio_cached_examples/12/output/eb4085434ede1588884e/bonsai-7k-mini.splat";
+/// The capture: 272,956 splats of the Mip-NeRF 360 bonsai.
+pub const BONSAI: &str = "bonsai-7k-mini.splat";
+const BONSAI_SHA256: &str = "9e67a38943cd02aa0388c5abf3cb0465a330b7b45ad8aa3d3decc82e5cc8fbb1";
+
+fn sha256_hex(path: &Path) -> Result<String> {
+    use sha2::Digest;
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(format!("{:x}", sha2::Sha256::digest(&bytes)))
+}
+
+fn verify(path: &Path, expected: &str) -> Result<()> {
+    let actual = sha256_hex(path)?;
+    if actual != expected {
+        bail!("{}: sha256 {actual} does not match the pinned {expected}", path.display());
+    }
+    Ok(())
+}
+
+/// Fetch the bonsai capture with pip (the pinned PyPI sdist), verify both hashes and cache it
+/// as `target/assets/bonsai-7k-mini.splat`. Does nothing when the verified file is there.
+fn assets() -> Result<PathBuf> {
+    let dir = root().join("target/assets");
+    let bonsai = dir.join(BONSAI);
+    if bonsai.exists() && verify(&bonsai, BONSAI_SHA256).is_ok() {
+        return Ok(bonsai);
+    }
+    std::fs::create_dir_all(&dir)?;
+    let sdist = dir.join(ASSET_SDIST);
+    if !sdist.exists() || verify(&sdist, ASSET_SDIST_SHA256).is_err() {
+        eprintln!("fetching {ASSET_PACKAGE} from PyPI with pip …");
+        let python = if Command::new("python3").arg("--version").output().is_ok() { "python3" } else { "python" };
+        let status = Command::new(python)
+            .args(["-m", "pip", "download", "--no-deps", "--no-binary", ":all:", "--disable-pip-version-check", "-d"])
+            .arg(&dir)
+            .arg(ASSET_PACKAGE)
+            .status()
+            .context("running pip (python3 -m pip): is Python with pip installed?")?;
+        if !status.success() {
+            bail!("pip download {ASSET_PACKAGE} failed ({status})");
+        }
+    }
+    verify(&sdist, ASSET_SDIST_SHA256)?;
+    let status = Command::new("tar").arg("-xzf").arg(&sdist).arg("-C").arg(&dir).arg(ASSET_MEMBER).status().context("running tar")?;
+    if !status.success() {
+        bail!("extracting {ASSET_MEMBER} from {} failed", sdist.display());
+    }
+    let extracted = dir.join(ASSET_MEMBER);
+    verify(&extracted, BONSAI_SHA256)?;
+    std::fs::rename(&extracted, &bonsai)?;
+    let _ = std::fs::remove_dir_all(dir.join("gradio_model3dgs-0.2.5"));
+    Ok(bonsai)
 }

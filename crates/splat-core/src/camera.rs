@@ -213,6 +213,14 @@ impl Camera {
         Ok(cam)
     }
 
+    /// The window [x0, x0 + width) × [y0, y0 + height) of this camera's image as a camera of
+    /// its own: same rays for the same pixels, principal point shifted.
+    pub fn crop(&self, x0: u32, y0: u32, width: u32, height: u32) -> Result<Self, CameraError> {
+        let cam = Self { width, height, cx: self.cx - x0 as f32, cy: self.cy - y0 as f32, ..*self };
+        cam.validate()?;
+        Ok(cam)
+    }
+
     /// Camera centre in world space, −Rᵀ t.
     pub fn center(&self) -> Vec3 {
         -(self.rotation.transpose() * self.translation)
@@ -298,6 +306,13 @@ mod tests {
         let c = cam.ray(0, 0, Vec2::ZERO).dir;
         assert_relative_eq!(b.dot(c), 1.0, epsilon = 1e-6);
         assert!(a.dot(c) < 1.0);
+    }
+
+    #[test]
+    fn crop_keeps_the_rays_of_its_pixels() {
+        let cam = Camera::look_at(Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::Y, 45.0, 40, 30).unwrap();
+        let crop = cam.crop(10, 5, 8, 6).unwrap();
+        assert!(crop.pixel_ray(3, 4).dir.abs_diff_eq(cam.pixel_ray(13, 9).dir, 1e-6));
     }
 
     #[test]

@@ -194,6 +194,22 @@ mod hash_tests {
         assert_ne!(xxhash32([1, 0, 0]), xxhash32([0, 1, 0]));
     }
 
+    /// The trig hash in f32 takes few distinct values: b ≈ 4.4·10⁴ < 2¹⁶ leaves at most 8–10
+    /// fractional bits of fract(b sin(·)), so u lies on a grid of steps up to 1/256 and every
+    /// acceptance probability is rounded to it. The xxhash/PCG scheme has 24 bits.
+    #[test]
+    fn trig_hash_is_quantised_in_f32() {
+        let mut trig = std::collections::HashSet::new();
+        let mut hash = std::collections::HashSet::new();
+        for i in 0..200_000u32 {
+            let p = glam::Vec3::new((i % 631) as f32 * 0.0037, (i / 631) as f32 * 0.0051, 1.0 + (i % 17) as f32 * 0.01);
+            trig.insert(trig_hash(p).to_bits());
+            hash.insert(unit_f32(pcg(xxhash32([i, 7, 0]))).to_bits());
+        }
+        assert!(trig.len() < 20_000, "{} distinct trig values", trig.len());
+        assert!(hash.len() > 190_000, "{} distinct hash values", hash.len());
+    }
+
     #[test]
     fn unit_f32_never_reaches_one() {
         assert_eq!(unit_f32(u32::MAX), 16_777_215.0 / 16_777_216.0);

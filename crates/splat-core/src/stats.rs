@@ -35,11 +35,12 @@ impl Welford {
 /// Outcome of the per-pixel z-test of a mean image against the exact one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ZTest {
-    /// |Σ(mean − exact)| / √(Σ se²): a consistent bias.
+    /// |Σ(mean − exact)| / √(Σ se²) (a consistent bias), the largest over channels.
     pub global: f64,
-    /// (Σ z² − n) / √(2n): a bias whose sign changes from pixel to pixel.
+    /// (Σ z² − n) / √(2n) (a bias whose sign changes from pixel to pixel), the largest over
+    /// channels.
     pub spread: f64,
-    /// Fraction of two-sided p-values below 0.01.
+    /// Fraction of two-sided p-values below 0.01, over all pixel-channels.
     pub outliers: f64,
     /// Pixel-channels tested.
     pub n: usize,
@@ -56,30 +57,35 @@ pub const Z_P01: f64 = 2.575_829_303_549;
 
 impl ZTest {
     /// Compare `mean` (over `frames` frames) with `exact`, using the per-frame `variance` of an
-    /// independent run: se = max(√(var / F), 1 / F) per pixel-channel.
-    pub fn new(mean: &[f32], exact: &[f32], variance: &[f32], frames: u32) -> Self {
-        assert!(
-            mean.len() == exact.len() && mean.len() == variance.len(),
-            "image sizes differ"
-        );
+    /// independent run: se = max(√(var / F), 1 / F) per pixel-channel. Values are interleaved
+    /// with `channels` channels per pixel.
+    ///
+    /// The global and spread statistics sum over pixels, which are independent, but the
+    /// channels of one pixel come from the same random decisions and are correlated (fully,
+    /// for a stochastic pick): summed across channels they would be over-dispersed by up to
+    /// √channels. So both are computed per channel and the largest is reported.
+    pub fn new(mean: &[f32], exact: &[f32], variance: &[f32], frames: u32, channels: usize) -> Self {
+        assert!(mean.len() == exact.len() && mean.len() == variance.len(), "image sizes differ");
+        assert!(channels > 0 && mean.len() % channels == 0, "length is not a multiple of the channels");
         let f = f64::from(frames);
-        let (mut sum_d, mut sum_se2, mut sum_z2, mut outliers) = (0.0, 0.0, 0.0, 0usize);
-        for ((&m, &e), &v) in mean.iter().zip(exact).zip(variance) {
+        let mut sums = vec![(0.0f64, 0.0f64, 0.0f64, 0usize); channels]; // Σd, Σse², Σz², n
+        let mut outliers = 0usize;
+        for (i, ((&m, &e), &v)) in mean.iter().zip(exact).zip(variance).enumerate() {
             let se = (f64::from(v) / f).sqrt().max(1.0 / f);
             let d = f64::from(m) - f64::from(e);
             let z = d / se;
-            sum_d += d;
-            sum_se2 += se * se;
-            sum_z2 += z * z;
+            let s = &mut sums[i % channels];
+            s.0 += d;
+            s.1 += se * se;
+            s.2 += z * z;
+            s.3 += 1;
             outliers += usize::from(z.abs() > Z_P01);
         }
+        let per_channel = sums.iter().filter(|s| s.3 > 0);
+        let global = per_channel.clone().map(|s| s.0.abs() / s.1.sqrt()).fold(0.0, f64::max);
+        let spread = per_channel.map(|s| (s.2 - s.3 as f64) / (2.0 * s.3 as f64).sqrt()).fold(f64::NEG_INFINITY, f64::max);
         let n = mean.len();
-        Self {
-            global: sum_d.abs() / sum_se2.sqrt(),
-            spread: (sum_z2 - n as f64) / (2.0 * n as f64).sqrt(),
-            outliers: outliers as f64 / n as f64,
-            n,
-        }
+        Self { global, spread, outliers: outliers as f64 / n.max(1) as f64, n }
     }
 
     /// Whether all three criteria hold.
@@ -174,7 +180,7 @@ mod tests {
         let test = |bias: &dyn Fn(usize) -> f64, rng: &mut SplitMix64| {
             let (mean, _) = run(bias, frames, rng);
             let (_, var) = run(bias, 4 * frames, rng);
-            ZTest::new(&mean, &exact, &var, frames)
+            ZTest::new(&mean, &exact, &var, frames, 1)
         };
         let unbiased = test(&|_| 1.0, &mut rng);
         assert!(unbiased.passes() && unbiased.global < 3.0, "{unbiased:?}");
