@@ -6,10 +6,7 @@ use std::path::{Path, PathBuf};
 
 /// The workspace root.
 pub fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ is in the workspace")
-        .to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ is in the workspace").to_path_buf()
 }
 
 /// Independent reference of the exact renderer, in f64, for SH degree 0 scenes.
@@ -51,28 +48,14 @@ pub mod reference {
     fn inverse_covariance(g: &Gaussian) -> M3 {
         let [r, x, y, z] = g.q;
         let rot = [
-            [
-                1.0 - 2.0 * (y * y + z * z),
-                2.0 * (x * y - r * z),
-                2.0 * (x * z + r * y),
-            ],
-            [
-                2.0 * (x * y + r * z),
-                1.0 - 2.0 * (x * x + z * z),
-                2.0 * (y * z - r * x),
-            ],
-            [
-                2.0 * (x * z - r * y),
-                2.0 * (y * z + r * x),
-                1.0 - 2.0 * (x * x + y * y),
-            ],
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y)],
+            [2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x)],
+            [2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y)],
         ];
         let mut cov = [[0.0; 3]; 3];
         for i in 0..3 {
             for j in 0..3 {
-                cov[i][j] = (0..3)
-                    .map(|k| rot[i][k] * g.scale[k] * g.scale[k] * rot[j][k])
-                    .sum();
+                cov[i][j] = (0..3).map(|k| rot[i][k] * g.scale[k] * g.scale[k] * rot[j][k]).sum();
             }
         }
         // Adjugate / determinant.
@@ -128,11 +111,7 @@ pub mod reference {
 /// Compare an 8-bit rendering with a committed golden PNG: every channel within `tolerance`
 /// units. On mismatch (or a missing golden) write `NAME-actual.png` and `NAME-diff.png` beside
 /// the golden and return a message naming them.
-pub fn compare_golden(
-    golden: &Path,
-    actual: &image::RgbImage,
-    tolerance: u8,
-) -> Result<(), String> {
+pub fn compare_golden(golden: &Path, actual: &image::RgbImage, tolerance: u8) -> Result<(), String> {
     let stem = golden.with_extension("");
     let actual_path = PathBuf::from(format!("{}-actual.png", stem.display()));
     let diff_path = PathBuf::from(format!("{}-diff.png", stem.display()));
@@ -208,12 +187,24 @@ pub mod stat {
         let (exact, mask) = exact(trace, camera);
         let mean = run(trace, camera, method, base);
         let var = run(trace, camera, method, Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
-        ZTest::new(&masked(mean.mean.data(), &mask), &masked(&exact, &mask), &masked(var.variance.data(), &mask), base.count, 3)
+        ZTest::new(
+            &masked(mean.mean.data(), &mask),
+            &masked(&exact, &mask),
+            &masked(var.variance.data(), &mask),
+            base.count,
+            3,
+        )
     }
 
     /// RMSE against exact at spp = 1, 2, 4, … `max_spp`, averaged over `seeds` seeds, and the
     /// least-squares log–log slope.
-    pub fn convergence(trace: &TraceScene, camera: &Camera, method: &Method, max_spp: u32, seeds: u32) -> (f64, Vec<(u32, f64)>) {
+    pub fn convergence(
+        trace: &TraceScene,
+        camera: &Camera,
+        method: &Method,
+        max_spp: u32,
+        seeds: u32,
+    ) -> (f64, Vec<(u32, f64)>) {
         let (exact, _) = exact(trace, camera);
         let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
         let table: Vec<(u32, f64)> = levels
@@ -258,4 +249,48 @@ pub fn bonsai_camera() -> splat_core::Camera {
         800,
     )
     .expect("valid camera")
+}
+
+/// Golden images: what `cargo xtask bless` renders and the golden test compares.
+pub mod golden {
+    use splat_core::render::{RenderSettings, render_exact};
+    use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+
+    /// Fixtures with golden images.
+    pub const FIXTURES: [&str; 3] = ["layers", "ramp", "cloud"];
+
+    /// The methods rendered for every fixture: (file suffix, method, frames). `exact` is the
+    /// brute-force oracle; the others go through the BVH with seed 1.
+    pub fn cases() -> Vec<(&'static str, Option<Method>, Frames)> {
+        let f = |count| Frames { count, seed: 1, ..Frames::default() };
+        vec![
+            ("exact", None, f(1)),
+            ("kbuffer", Some(Method::KBUFFER), f(1)),
+            ("stochastic", Some(Method::Stochastic), f(4)),
+            ("stochastic-n", Some(Method::StochasticN { m: 1, n: 4 }), f(1)),
+            ("stochastic-pass", Some(Method::STOCHASTIC_PASS), f(4)),
+            ("depth-sampling-k", Some(Method::DepthSampling { k: 2 }), f(4)),
+        ]
+    }
+
+    /// Render one golden case of one fixture, read through the file formats, as 8-bit RGB.
+    pub fn render(fixture: &str, method: Option<&Method>, frames: &Frames) -> image::RgbImage {
+        let dir = super::root().join("fixtures");
+        let scene = splat_io::ply::read_ply(&dir.join(format!("{fixture}.ply"))).expect("fixture");
+        let camera = splat_io::cameras::read_cameras(&dir.join(format!("{fixture}.cameras.json"))).expect("camera")[0];
+        let settings = RenderSettings::default();
+        let rgb = match method {
+            None => render_exact(&scene, &camera, &settings, &|_| {}).expect("render").radiance,
+            Some(m) => {
+                let trace = TraceScene::new(&scene, settings).expect("scene");
+                render_frames(&trace, &camera, m, frames, &|_| {}).expect("render").mean
+            }
+        };
+        splat_io::image::to_rgba8(&rgb).to_rgb8()
+    }
+
+    /// Path of a golden image.
+    pub fn path(fixture: &str, suffix: &str) -> std::path::PathBuf {
+        super::root().join("fixtures/golden").join(format!("{fixture}-{suffix}.png"))
+    }
 }

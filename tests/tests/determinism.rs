@@ -1,32 +1,54 @@
-//! The same scene and settings give the bit-identical image whatever the thread count.
+//! The same scene, settings and seed give the bit-identical image whatever the thread count,
+//! for the exact renderer and for every stochastic method.
 
 use splat_core::render::{RenderSettings, render_exact};
 use splat_core::scenes;
+use splat_core::trace::{Frames, Method, TraceScene, render_frames};
 
-fn render_with_threads(threads: usize) -> Vec<f32> {
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
+}
+
+fn exact_with_threads(threads: usize) -> Vec<f32> {
     let (scene, camera) = scenes::cloud();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    let out = pool
-        .install(|| render_exact(&scene, &camera, &RenderSettings::default(), &|_| {}).unwrap());
-    [out.radiance, out.alpha, out.depth, out.normal]
-        .iter()
-        .flat_map(|i| i.data().to_vec())
-        .collect()
+    let out = pool(threads).install(|| render_exact(&scene, &camera, &RenderSettings::default(), &|_| {}).unwrap());
+    [out.radiance, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
+}
+
+fn method_with_threads(method: &Method, threads: usize, seed: u32) -> Vec<f32> {
+    let (scene, camera) = scenes::cloud();
+    let camera = camera.rescaled(48, 36).unwrap();
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let frames = Frames { count: 3, seed, ..Frames::default() };
+    let out = pool(threads).install(|| render_frames(&trace, &camera, method, &frames, &|_| {}).unwrap());
+    [out.mean, out.variance, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
+}
+
+fn same_bits(a: &[f32], b: &[f32]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 #[test]
-fn image_is_identical_for_one_two_and_three_threads() {
-    let one = render_with_threads(1);
+fn exact_image_is_identical_for_one_two_and_three_threads() {
+    let one = exact_with_threads(1);
     for threads in [2, 3] {
-        let other = render_with_threads(threads);
-        assert!(
-            one.iter()
-                .zip(&other)
-                .all(|(a, b)| a.to_bits() == b.to_bits()),
-            "{threads} threads differ"
-        );
+        assert!(same_bits(&one, &exact_with_threads(threads)), "{threads} threads differ");
+    }
+}
+
+#[test]
+fn stochastic_images_are_identical_across_thread_counts_and_differ_across_seeds() {
+    for method in [
+        Method::Stochastic,
+        Method::StochasticN { m: 2, n: 3 },
+        Method::STOCHASTIC_PASS,
+        Method::DepthSampling { k: 2 },
+        Method::KBUFFER,
+    ] {
+        let one = method_with_threads(&method, 1, 5);
+        assert!(same_bits(&one, &method_with_threads(&method, 2, 5)), "{method:?}: 2 threads differ");
+        if method.is_stochastic() {
+            assert!(!same_bits(&one, &method_with_threads(&method, 1, 6)), "{method:?}: seeds 5 and 6 agree");
+        }
     }
 }

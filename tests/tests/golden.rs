@@ -3,7 +3,7 @@
 
 use splat_core::render::{RenderSettings, render_exact};
 use splat_io::image::to_rgba8;
-use splat_tests::{compare_golden, root};
+use splat_tests::{compare_golden, golden, root};
 
 /// 8-bit units of tolerance: one unit for rounding differences of libm across platforms.
 const TOLERANCE: u8 = 1;
@@ -11,25 +11,20 @@ const TOLERANCE: u8 = 1;
 fn render_fixture(name: &str, settings: &RenderSettings) -> image::RgbImage {
     let dir = root().join("fixtures");
     let scene = splat_io::ply::read_ply(&dir.join(format!("{name}.ply"))).unwrap();
-    let camera =
-        splat_io::cameras::read_cameras(&dir.join(format!("{name}.cameras.json"))).unwrap()[0];
+    let camera = splat_io::cameras::read_cameras(&dir.join(format!("{name}.cameras.json"))).unwrap()[0];
     let out = render_exact(&scene, &camera, settings, &|_| {}).unwrap();
     to_rgba8(&out.radiance).to_rgb8()
 }
 
 #[test]
-fn exact_renders_match_golden_images() {
+fn every_method_matches_its_golden_images() {
     let mut failures = Vec::new();
-    for name in ["layers", "ramp", "cloud"] {
-        let golden = root()
-            .join("fixtures/golden")
-            .join(format!("{name}-exact.png"));
-        if let Err(e) = compare_golden(
-            &golden,
-            &render_fixture(name, &RenderSettings::default()),
-            TOLERANCE,
-        ) {
-            failures.push(e);
+    for fixture in golden::FIXTURES {
+        for (suffix, method, frames) in golden::cases() {
+            let image = golden::render(fixture, method.as_ref(), &frames);
+            if let Err(e) = compare_golden(&golden::path(fixture, suffix), &image, TOLERANCE) {
+                failures.push(e);
+            }
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -38,10 +33,7 @@ fn exact_renders_match_golden_images() {
 /// The comparison can fail: a render with another background differs from the golden image.
 #[test]
 fn golden_comparison_rejects_a_different_image() {
-    let settings = RenderSettings {
-        background: glam::Vec3::new(0.0, 0.0, 0.05),
-        ..Default::default()
-    };
+    let settings = RenderSettings { background: glam::Vec3::new(0.0, 0.0, 0.05), ..Default::default() };
     let dir = std::env::temp_dir().join(format!("splat-golden-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let golden = dir.join("layers-exact.png");

@@ -37,7 +37,8 @@ fn check(scene: &Scene, camera: &Camera) {
         assert!(z.passes(), "{name} fails the z-test: {z:?}\n{}", report.join("\n"));
     }
     for k in [1, 3] {
-        let z = z_test(&trace, camera, &Method::DepthSampling { k }, Frames { count: F, seed: 7, rng: RngScheme::Hash });
+        let z =
+            z_test(&trace, camera, &Method::DepthSampling { k }, Frames { count: F, seed: 7, rng: RngScheme::Hash });
         report.push(format!("depth-sampling-{k}: {z:?}"));
         assert!(!z.passes(), "the biased control depth-sampling-{k} passes: {z:?}");
     }

@@ -1,14 +1,12 @@
 //! Project automation: `cargo xtask test | fixtures | bless`.
 
 use anyhow::{Context, Result, bail};
-use splat_core::render::{RenderSettings, render_exact};
 use splat_core::scenes;
-use splat_io::ply::{PlyFormat, read_ply, write_ply};
+use splat_io::ply::{PlyFormat, write_ply};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The fixtures generated into `fixtures/`, each with a camera.
-const FIXTURES: [&str; 3] = ["layers", "ramp", "cloud"];
+use splat_tests::golden::FIXTURES;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -32,10 +30,7 @@ fn main() -> Result<()> {
 }
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("xtask lives in the workspace")
-        .to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask lives in the workspace").to_path_buf()
 }
 
 fn test(extra: &[String]) -> Result<()> {
@@ -60,27 +55,23 @@ fn fixtures() -> Result<()> {
         let ply = dir.join(format!("{name}.ply"));
         write_ply(&ply, &scene, PlyFormat::BinaryLittleEndian)?;
         splat_io::cameras::write_cameras(&dir.join(format!("{name}.cameras.json")), &[camera])?;
-        println!(
-            "wrote {} ({} particles, SH degree {})",
-            ply.display(),
-            scene.particles.len(),
-            scene.sh_degree
-        );
+        println!("wrote {} ({} particles, SH degree {})", ply.display(), scene.particles.len(), scene.sh_degree);
     }
     Ok(())
 }
 
-/// Render the exact method for each fixture into `fixtures/golden/NAME-exact.png`.
+/// Render every golden case of every fixture into `fixtures/golden/FIXTURE-METHOD.png`.
 fn bless() -> Result<()> {
-    let dir = root().join("fixtures");
-    std::fs::create_dir_all(dir.join("golden"))?;
-    for name in FIXTURES {
-        let scene = read_ply(&dir.join(format!("{name}.ply")))?;
-        let camera = splat_io::cameras::read_cameras(&dir.join(format!("{name}.cameras.json")))?[0];
-        let out = render_exact(&scene, &camera, &RenderSettings::default(), &|_| {})?;
-        let path = dir.join("golden").join(format!("{name}-exact.png"));
-        splat_io::image::write_image(&path, &out.radiance)?;
-        println!("blessed {}", path.display());
+    use splat_tests::golden;
+    std::fs::create_dir_all(root().join("fixtures/golden"))?;
+    for fixture in golden::FIXTURES {
+        for (suffix, method, frames) in golden::cases() {
+            let path = golden::path(fixture, suffix);
+            golden::render(fixture, method.as_ref(), &frames)
+                .save(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+            println!("blessed {}", path.display());
+        }
     }
     Ok(())
 }
@@ -89,7 +80,8 @@ fn bless() -> Result<()> {
 const ASSET_PACKAGE: &str = "gradio-model3dgs==0.2.5";
 const ASSET_SDIST: &str = "gradio_model3dgs-0.2.5.tar.gz";
 const ASSET_SDIST_SHA256: &str = "2114171f719584852d82cebb19b076c17acf8505058af9be06192a9e69d1f971";
-const ASSET_MEMBER: &str = "gradio_model3dgs-0.2.5/gradio_cached_examples/12/output/eb4085434ede1588884e/bonsai-7k-mini.splat";
+const ASSET_MEMBER: &str =
+    "gradio_model3dgs-0.2.5/gradio_cached_examples/12/output/eb4085434ede1588884e/bonsai-7k-mini.splat";
 /// The capture: 272,956 splats of the Mip-NeRF 360 bonsai.
 pub const BONSAI: &str = "bonsai-7k-mini.splat";
 const BONSAI_SHA256: &str = "9e67a38943cd02aa0388c5abf3cb0465a330b7b45ad8aa3d3decc82e5cc8fbb1";
@@ -132,7 +124,14 @@ fn assets() -> Result<PathBuf> {
         }
     }
     verify(&sdist, ASSET_SDIST_SHA256)?;
-    let status = Command::new("tar").arg("-xzf").arg(&sdist).arg("-C").arg(&dir).arg(ASSET_MEMBER).status().context("running tar")?;
+    let status = Command::new("tar")
+        .arg("-xzf")
+        .arg(&sdist)
+        .arg("-C")
+        .arg(&dir)
+        .arg(ASSET_MEMBER)
+        .status()
+        .context("running tar")?;
     if !status.success() {
         bail!("extracting {ASSET_MEMBER} from {} failed", sdist.display());
     }

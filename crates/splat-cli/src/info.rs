@@ -16,23 +16,9 @@ pub struct InfoArgs {
 }
 
 /// Load a scene by extension, honouring the `.ply` leniency option.
-pub fn load_scene(
-    path: &std::path::Path,
-    allow_unknown_properties: bool,
-) -> Result<splat_core::Scene> {
-    let is_ply = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    Ok(if is_ply {
-        read_ply_with(
-            path,
-            PlyOptions {
-                allow_unknown_properties,
-            },
-        )?
-    } else {
-        splat_io::read_scene(path)?
-    })
+pub fn load_scene(path: &std::path::Path, allow_unknown_properties: bool) -> Result<splat_core::Scene> {
+    let is_ply = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    Ok(if is_ply { read_ply_with(path, PlyOptions { allow_unknown_properties })? } else { splat_io::read_scene(path)? })
 }
 
 /// Run `splat info`.
@@ -52,9 +38,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
     let (lo, hi) = scene
         .particles
         .iter()
-        .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| {
-            (lo.min(p.scale.min_element()), hi.max(p.scale.max_element()))
-        });
+        .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| (lo.min(p.scale.min_element()), hi.max(p.scale.max_element())));
     println!("scale      {lo:.2e} … {hi:.2e}");
     println!("opacity histogram:");
     let mut bins = [0usize; 10];

@@ -1,16 +1,22 @@
 //! `splat`: render transparent 3D Gaussian scenes and inspect them.
 
+mod bench;
+mod converge;
 mod info;
 mod render;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-/// Render 3D Gaussian splat scenes with exact (sorted, Eq. 3) transparency and inspect them.
+/// Render 3D Gaussian splat scenes with exact and stochastic transparency, measure convergence
+/// and speed, and inspect scenes.
 ///
 /// Examples:
 ///   splat render -o demo.png                          # the built-in demo scene
 ///   splat render scene.ply --camera cameras.json -o view.png --depth depth.npy
+///   splat render scene.splat --method stochastic --spp 64 --seed 1 -o noisy.exr
+///   splat converge scene.splat --max-spp 256 -o converge   # converge.csv, converge.png
+///   splat bench scene.splat                                 # rays/s per method
 ///   splat info point_cloud.ply
 #[derive(Parser)]
 #[command(name = "splat", version, about, long_about, verbatim_doc_comment)]
@@ -25,6 +31,10 @@ enum Command {
     Render(Box<render::RenderArgs>),
     /// Print a scene's particle count, SH degree, bounds and opacity histogram.
     Info(info::InfoArgs),
+    /// RMSE against exact at spp 1, 2, 4, … for each method: CSV, log–log plot PNG, Markdown table.
+    Converge(Box<converge::ConvergeArgs>),
+    /// Rays per second of each ray-tracing method against an opaque closest-hit baseline.
+    Bench(Box<bench::BenchArgs>),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +42,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => render::run(*args),
         Command::Info(args) => info::run(args),
+        Command::Converge(args) => converge::run(*args),
+        Command::Bench(args) => bench::run(*args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

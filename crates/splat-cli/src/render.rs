@@ -6,17 +6,91 @@ use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::normal::NormalMode;
-use splat_core::render::{RenderOutput, RenderSettings, render_exact};
+use splat_core::render::{RenderSettings, render_exact};
+use splat_core::rng::RngScheme;
+use splat_core::trace::{Frames, Method, TraceOutput, TraceScene, render_frames};
 use splat_core::{Camera, HitDistance, KernelParams, Scene, scenes};
 use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Rendering method.
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum Method {
-    /// Every hit along each ray, sorted front to back, composited by Eq. 3 (the oracle).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// Every hit along each ray through the BVH, sorted, composited by Eq. 3.
     Exact,
+    /// The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3.
+    Oracle,
+    /// 3DGRT / vk multi-pass k-buffer: --k hits per pass, up to --max-passes passes.
+    Kbuffer,
+    /// Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray.
+    Stochastic,
+    /// Sun et al. §3.5: --passes traversals of --samples samples each per frame.
+    StochasticN,
+    /// vk stochastic pass: --k sorted hits a pass, accepted with probability 1 − T_pass.
+    StochasticPass,
+    /// 3DGRT stochastic depth sampling of the first --k accepted hits (biased; a control).
+    DepthSamplingK,
+    /// Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline.
+    Opaque,
+}
+
+/// Random number generator of the stochastic methods.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum RngArg {
+    /// xxhash32 + PCG (vk_gaussian_splatting), 24-bit uniform.
+    Hash,
+    /// Trigonometric hash of Sun et al. Eqs. 8–10 (coarse in f32: u on a grid up to 1/256).
+    Trig,
+}
+
+/// Options of the methods, shared by `render`, `converge` and `bench`.
+#[derive(Args, Clone)]
+pub struct MethodOptions {
+    /// Hits per pass (kbuffer, stochastic-pass) or accepted hits composited (depth-sampling-k).
+    #[arg(long, default_value_t = splat_core::trace::DEFAULT_K)]
+    pub k: usize,
+    /// Pass limit of kbuffer and stochastic-pass.
+    #[arg(long, default_value_t = splat_core::trace::DEFAULT_MAX_PASSES)]
+    pub max_passes: u32,
+    /// kbuffer stops when transmittance falls to this (0: never; exact up to --max-passes).
+    #[arg(long, default_value_t = splat_core::trace::DEFAULT_MIN_TRANSMITTANCE)]
+    pub min_transmittance: f32,
+    /// stochastic-n: samples per traversal (n, up to 64).
+    #[arg(long, default_value_t = 16)]
+    pub samples: u32,
+    /// stochastic-n: traversals per frame (m).
+    #[arg(long, default_value_t = 1)]
+    pub passes: u32,
+    /// Generator of the stochastic decisions.
+    #[arg(long, value_enum, default_value = "hash")]
+    pub rng: RngArg,
+}
+
+impl MethodOptions {
+    /// The library method for a CLI method (`None` for the brute-force oracle).
+    pub fn method(&self, m: MethodArg) -> Option<Method> {
+        Some(match m {
+            MethodArg::Oracle => return None,
+            MethodArg::Exact => Method::Exact,
+            MethodArg::Kbuffer => {
+                Method::KBuffer { k: self.k, max_passes: self.max_passes, min_transmittance: self.min_transmittance }
+            }
+            MethodArg::Stochastic => Method::Stochastic,
+            MethodArg::StochasticN => Method::StochasticN { m: self.passes, n: self.samples },
+            MethodArg::StochasticPass => Method::StochasticPass { k: self.k, max_passes: self.max_passes },
+            MethodArg::DepthSamplingK => Method::DepthSampling { k: self.k },
+            MethodArg::Opaque => Method::Opaque,
+        })
+    }
+
+    /// The generator.
+    pub fn rng(&self) -> RngScheme {
+        match self.rng {
+            RngArg::Hash => RngScheme::Hash,
+            RngArg::Trig => RngScheme::Trig,
+        }
+    }
 }
 
 /// Hit distance convention (Sun et al. §4.1).
@@ -37,17 +111,11 @@ pub enum NormalArg {
     Ellipsoid,
 }
 
-/// Arguments of `splat render`.
-#[derive(Args)]
-pub struct RenderArgs {
-    /// Scene file (.ply or .splat). Without one, the built-in demo scene is rendered.
+/// Scene, camera and shading options shared by `render`, `converge` and `bench`.
+#[derive(Args, Clone)]
+pub struct SceneArgs {
+    /// Scene file (.ply or .splat). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
-    /// Output image; the format follows the extension: .png (8-bit), .exr or .npy (f32).
-    #[arg(short, long, default_value = "render.png")]
-    pub output: PathBuf,
-    /// Rendering method.
-    #[arg(long, value_enum, default_value = "exact")]
-    pub method: Method,
     /// INRIA cameras.json; without it the camera frames the scene (or the demo's own camera).
     #[arg(long)]
     pub camera: Option<PathBuf>,
@@ -66,7 +134,7 @@ pub struct RenderArgs {
     /// Look-at target "x,y,z".
     #[arg(long, value_parser = parse_vec3, requires = "eye")]
     pub target: Option<Vec3>,
-    /// World up for --eye/--target "x,y,z".
+    /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0).
     #[arg(long, value_parser = parse_vec3, default_value = "0,1,0")]
     pub up: Vec3,
     /// Vertical field of view in degrees for --eye/--target.
@@ -75,15 +143,6 @@ pub struct RenderArgs {
     /// Background colour "r,g,b" behind the particles.
     #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
     pub background: Vec3,
-    /// Also write the overall opacity 1 − T (.png, .exr or .npy).
-    #[arg(long)]
-    pub alpha: Option<PathBuf>,
-    /// Also write the iso-opacity depth (NaN where none; PNG is normalised near = bright).
-    #[arg(long)]
-    pub depth: Option<PathBuf>,
-    /// Also write the integrated unit normal (PNG maps n to n/2 + 1/2).
-    #[arg(long)]
-    pub normal: Option<PathBuf>,
     /// Hit distance convention.
     #[arg(long, value_enum, default_value = "mean")]
     pub hit_distance: HitArg,
@@ -107,12 +166,110 @@ pub struct RenderArgs {
     pub allow_unknown_properties: bool,
 }
 
+impl SceneArgs {
+    /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
+    /// a look-at or framing camera when none is given.
+    pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera)> {
+        let (scene, default_camera) = match &self.scene {
+            Some(path) => (load_scene(path, self.allow_unknown_properties)?, None),
+            None => {
+                let (scene, camera) = scenes::demo();
+                (scene, Some(camera))
+            }
+        };
+        let camera = self.choose_camera(&scene, default_camera, width, height)?;
+        Ok((scene, camera))
+    }
+
+    /// The render settings these options describe.
+    pub fn settings(&self) -> RenderSettings {
+        RenderSettings {
+            kernel: KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..KernelParams::default() },
+            hit_distance: match self.hit_distance {
+                HitArg::Mean => HitDistance::Mean,
+                HitArg::Center => HitDistance::Center,
+            },
+            normal_mode: match self.normals {
+                NormalArg::Plane => NormalMode::MaxDensityPlane,
+                NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
+            },
+            background: self.background,
+            iso_threshold: self.iso_threshold,
+            ..RenderSettings::default()
+        }
+    }
+
+    fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
+        let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
+        let camera = if let Some(path) = &self.camera {
+            let cameras = splat_io::cameras::read_cameras(path)?;
+            let n = cameras.len();
+            *cameras.get(self.camera_index).with_context(|| {
+                format!("{}: --camera-index {} but the file has {n} cameras", path.display(), self.camera_index)
+            })?
+        } else if let (Some(eye), Some(target)) = (self.eye, self.target) {
+            Camera::look_at(eye, target, self.up, self.fov, w, h)?
+        } else if let Some(camera) = default_camera {
+            camera
+        } else {
+            Camera::framing(&scene.robust_bounds(0.02), self.up, w, h)?
+        };
+        let (w, h) = (self.width.unwrap_or(camera.width), self.height.unwrap_or(camera.height));
+        if w == 0 || h == 0 {
+            bail!("--width and --height must be positive");
+        }
+        Ok(camera.rescaled(w, h)?)
+    }
+
+    /// A rayon pool with --threads workers.
+    pub fn pool(&self) -> Result<rayon::ThreadPool> {
+        let mut builder = rayon::ThreadPoolBuilder::new();
+        if let Some(n) = self.threads {
+            if n == 0 {
+                bail!("--threads must be at least 1");
+            }
+            builder = builder.num_threads(n);
+        }
+        Ok(builder.build()?)
+    }
+}
+
+/// Arguments of `splat render`.
+#[derive(Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Output image; the format follows the extension: .png (8-bit), .exr or .npy (f32).
+    #[arg(short, long, default_value = "render.png")]
+    pub output: PathBuf,
+    /// Rendering method.
+    #[arg(long, value_enum, default_value = "exact")]
+    pub method: MethodArg,
+    /// Frames (samples per pixel) averaged; stochastic methods converge as 1/√spp.
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Seed of the random stream: the same seed gives the same image, two seeds independent ones.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u32,
+    /// Also write the per-frame variance of the radiance (.exr or .npy recommended).
+    #[arg(long)]
+    pub variance: Option<PathBuf>,
+    /// Also write the overall opacity 1 − T (.png, .exr or .npy).
+    #[arg(long)]
+    pub alpha: Option<PathBuf>,
+    /// Also write the iso-opacity depth (NaN where none; PNG is normalised near = bright).
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+    /// Also write the integrated unit normal (PNG maps n to n/2 + 1/2).
+    #[arg(long)]
+    pub normal: Option<PathBuf>,
+    #[command(flatten)]
+    pub options: MethodOptions,
+}
+
 fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|c| c.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("'{s}': {e}"))?;
+    let v: Vec<f32> =
+        s.split(',').map(|c| c.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("'{s}': {e}"))?;
     match v.as_slice() {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
         _ => Err(format!("'{s}' is not three finite numbers x,y,z")),
@@ -121,120 +278,71 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
 
 /// Run `splat render`.
 pub fn run(args: RenderArgs) -> Result<()> {
-    for path in std::iter::once(&args.output)
-        .chain(&args.alpha)
-        .chain(&args.depth)
-        .chain(&args.normal)
-    {
+    let outputs =
+        [Some(&args.output), args.alpha.as_ref(), args.depth.as_ref(), args.normal.as_ref(), args.variance.as_ref()];
+    for path in outputs.into_iter().flatten() {
         ImageFormat::from_path(path)?;
     }
-    let (scene, default_camera) = match &args.scene {
-        Some(path) => (load_scene(path, args.allow_unknown_properties)?, None),
-        None => {
-            let (scene, camera) = scenes::demo();
-            (scene, Some(camera))
-        }
-    };
-    let camera = choose_camera(&args, &scene, default_camera)?;
-    let settings = RenderSettings {
-        kernel: KernelParams {
-            degree: args.kernel_degree,
-            cutoff: args.cutoff,
-            ..KernelParams::default()
-        },
-        hit_distance: match args.hit_distance {
-            HitArg::Mean => HitDistance::Mean,
-            HitArg::Center => HitDistance::Center,
-        },
-        normal_mode: match args.normals {
-            NormalArg::Plane => NormalMode::MaxDensityPlane,
-            NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
-        },
-        background: args.background,
-        iso_threshold: args.iso_threshold,
-        ..RenderSettings::default()
-    };
-    let Method::Exact = args.method;
-    let pool = rayon_pool(args.threads)?;
+    let (scene, camera) = args.scene.load(640, 480)?;
+    let settings = args.scene.settings();
+    let pool = args.scene.pool()?;
     let pixels = u64::from(camera.width) * u64::from(camera.height);
-    let bar = ProgressBar::new(pixels).with_style(
-        ProgressStyle::with_template(
-            "{spinner} rendering [{bar:40}] {percent:>3}% {elapsed} (eta {eta})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
+    let bar = progress_bar(pixels);
     let start = Instant::now();
-    let out = pool.install(|| render_exact(&scene, &camera, &settings, &|n| bar.inc(n)))?;
+    let out = pool.install(|| render(&args, &scene, &camera, &settings, &|n| bar.inc(n)))?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     write_outputs(&args, &out)?;
     eprintln!(
-        "rendered {} particles at {}×{} in {seconds:.2} s → {}",
+        "rendered {} particles at {}×{}, {:?}, {} spp in {seconds:.2} s → {}",
         scene.particles.len(),
         camera.width,
         camera.height,
+        args.method,
+        args.spp,
         args.output.display()
     );
     Ok(())
 }
 
-fn choose_camera(
+/// A progress bar over `pixels` pixels (hidden when stderr is not a terminal).
+pub fn progress_bar(pixels: u64) -> ProgressBar {
+    ProgressBar::new(pixels).with_style(
+        ProgressStyle::with_template("{spinner} rendering [{bar:40}] {percent:>3}% {elapsed} (eta {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    )
+}
+
+/// Render with the chosen method: the brute-force oracle, or the BVH tracer over frames.
+fn render(
     args: &RenderArgs,
     scene: &Scene,
-    default_camera: Option<Camera>,
-) -> Result<Camera> {
-    let camera = if let Some(path) = &args.camera {
-        let cameras = splat_io::cameras::read_cameras(path)?;
-        let n = cameras.len();
-        *cameras.get(args.camera_index).with_context(|| {
-            format!(
-                "{}: --camera-index {} but the file has {n} cameras",
-                path.display(),
-                args.camera_index
-            )
-        })?
-    } else if let (Some(eye), Some(target)) = (args.eye, args.target) {
-        Camera::look_at(
-            eye,
-            target,
-            args.up,
-            args.fov,
-            args.width.unwrap_or(640),
-            args.height.unwrap_or(480),
-        )?
-    } else if let Some(camera) = default_camera {
-        camera
-    } else {
-        Camera::framing(
-            &scene.robust_bounds(0.02),
-            args.width.unwrap_or(640),
-            args.height.unwrap_or(480),
-        )?
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput> {
+    let Some(method) = args.options.method(args.method) else {
+        let out = render_exact(scene, camera, settings, progress)?;
+        let variance = splat_core::Image::filled(camera.width, camera.height, 3, 0.0);
+        return Ok(TraceOutput {
+            mean: out.radiance,
+            variance,
+            alpha: out.alpha,
+            depth: out.depth,
+            normal: out.normal,
+        });
     };
-    let (w, h) = (
-        args.width.unwrap_or(camera.width),
-        args.height.unwrap_or(camera.height),
-    );
-    if w == 0 || h == 0 {
-        bail!("--width and --height must be positive");
-    }
-    Ok(camera.rescaled(w, h)?)
+    let trace = TraceScene::new(scene, *settings)?;
+    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
+    Ok(render_frames(&trace, camera, &method, &frames, progress)?)
 }
 
-fn rayon_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
-    let mut builder = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = threads {
-        if n == 0 {
-            bail!("--threads must be at least 1");
-        }
-        builder = builder.num_threads(n);
+fn write_outputs(args: &RenderArgs, out: &TraceOutput) -> Result<()> {
+    write_image(&args.output, &out.mean)?;
+    if let Some(path) = &args.variance {
+        write_image(path, &out.variance)?;
     }
-    Ok(builder.build()?)
-}
-
-fn write_outputs(args: &RenderArgs, out: &RenderOutput) -> Result<()> {
-    write_image(&args.output, &out.radiance)?;
     if let Some(path) = &args.alpha {
         write_image(path, &out.alpha)?;
     }

@@ -7,11 +7,7 @@ use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn splat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splat"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("run splat")
+    Command::new(env!("CARGO_BIN_EXE_splat")).args(args).current_dir(root()).output().expect("run splat")
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -53,39 +49,24 @@ fn npy_output_matches_an_independent_eq3() {
             scale: p.scale.as_dvec3().to_array(),
             q: [p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z].map(f64::from),
             opacity: f64::from(p.opacity),
-            rgb: p.sh[0]
-                .to_array()
-                .map(|c| (0.5 + f64::from(SH_C0) * f64::from(c)).max(0.0)),
+            rgb: p.sh[0].to_array().map(|c| (0.5 + f64::from(SH_C0) * f64::from(c)).max(0.0)),
         })
         .collect();
     // The camera straight from the JSON: centre, camera-to-world rotation rows, fx, fy.
-    let json: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(root().join("fixtures/layers.cameras.json")).unwrap(),
-    )
-    .unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(root().join("fixtures/layers.cameras.json")).unwrap()).unwrap();
     let cam = &json[0];
     let num = |v: &serde_json::Value| v.as_f64().unwrap();
     let (w, h) = (num(&cam["width"]), num(&cam["height"]));
     let (fx, fy) = (num(&cam["fx"]), num(&cam["fy"]));
     let origin = [0, 1, 2].map(|k| num(&cam["position"][k]));
     let rot = [0, 1, 2].map(|i| [0, 1, 2].map(|j| num(&cam["rotation"][i][j])));
-    assert_eq!(
-        (
-            image.width() as f64,
-            image.height() as f64,
-            image.channels()
-        ),
-        (w, h, 3)
-    );
+    assert_eq!((image.width() as f64, image.height() as f64, image.channels()), (w, h, 3));
 
     let mut worst = 0.0f64;
     for y in 0..image.height() {
         for x in 0..image.width() {
-            let d_cam = [
-                (x as f64 + 0.5 - w / 2.0) / fx,
-                (y as f64 + 0.5 - h / 2.0) / fy,
-                1.0,
-            ];
+            let d_cam = [(x as f64 + 0.5 - w / 2.0) / fx, (y as f64 + 0.5 - h / 2.0) / fy, 1.0];
             let d = [0, 1, 2].map(|i| (0..3).map(|j| rot[i][j] * d_cam[j]).sum::<f64>());
             let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             let expected = trace(&gaussians, origin, d.map(|c| c / len), [0.1, 0.2, 0.3]);
@@ -101,22 +82,11 @@ fn npy_output_matches_an_independent_eq3() {
 #[test]
 fn render_without_arguments_writes_the_demo_scene() {
     let out = scratch("demo.png");
-    let o = splat(&[
-        "render",
-        "--width",
-        "64",
-        "--height",
-        "48",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = splat(&["render", "--width", "64", "--height", "48", "-o", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let img = image::open(&out).unwrap();
     assert_eq!((img.width(), img.height()), (64, 48));
-    assert!(
-        img.to_rgb8().pixels().any(|p| p.0.iter().any(|&c| c > 100)),
-        "the demo image is blank"
-    );
+    assert!(img.to_rgb8().pixels().any(|p| p.0.iter().any(|&c| c > 100)), "the demo image is blank");
 }
 
 #[test]
@@ -141,18 +111,11 @@ fn render_without_camera_frames_the_scene_and_writes_every_output() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     for p in &paths {
-        assert!(
-            std::fs::metadata(p).unwrap().len() > 0,
-            "{} is empty",
-            p.display()
-        );
+        assert!(std::fs::metadata(p).unwrap().len() > 0, "{} is empty", p.display());
     }
     let alpha = splat_io::image::read_npy(&paths[1]).unwrap();
     let covered = alpha.data().iter().filter(|&&a| a > 0.5).count();
-    assert!(
-        covered > 48 * 32 / 10,
-        "framing missed the scene: {covered} covered pixels"
-    );
+    assert!(covered > 48 * 32 / 10, "framing missed the scene: {covered} covered pixels");
 }
 
 #[test]
@@ -162,31 +125,12 @@ fn bad_input_gives_a_clear_error_and_non_zero_exit() {
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
-            vec![
-                "render".into(),
-                truncated.display().to_string(),
-                "-o".into(),
-                scratch("x.png").display().to_string(),
-            ],
+            vec!["render".into(), truncated.display().to_string(), "-o".into(), scratch("x.png").display().to_string()],
             "truncated",
         ),
-        (
-            vec!["info".into(), truncated.display().to_string()],
-            "truncated.ply",
-        ),
-        (
-            vec!["info".into(), "no/such/file.ply".into()],
-            "no/such/file.ply",
-        ),
-        (
-            vec![
-                "render".into(),
-                "fixtures/layers.ply".into(),
-                "-o".into(),
-                "out.jpg".into(),
-            ],
-            ".png, .exr or .npy",
-        ),
+        (vec!["info".into(), truncated.display().to_string()], "truncated.ply"),
+        (vec!["info".into(), "no/such/file.ply".into()], "no/such/file.ply"),
+        (vec!["render".into(), "fixtures/layers.ply".into(), "-o".into(), "out.jpg".into()], ".png, .exr or .npy"),
         (
             vec![
                 "render".into(),
@@ -214,10 +158,7 @@ fn bad_input_gives_a_clear_error_and_non_zero_exit() {
         let o = splat(&args);
         assert!(!o.status.success(), "{args:?} succeeded");
         let err = stderr(&o);
-        assert!(
-            err.contains(needle),
-            "{args:?}: stderr does not mention '{needle}':\n{err}"
-        );
+        assert!(err.contains(needle), "{args:?}: stderr does not mention '{needle}':\n{err}");
         assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
     }
 }
@@ -230,4 +171,91 @@ fn info_reports_count_degree_and_histogram() {
     assert!(text.contains("particles  3000"), "{text}");
     assert!(text.contains("SH degree  3"), "{text}");
     assert!(text.contains("opacity histogram"), "{text}");
+}
+
+#[test]
+fn every_method_renders_with_variance_and_the_same_seed_repeats() {
+    for method in
+        ["exact", "oracle", "kbuffer", "stochastic", "stochastic-n", "stochastic-pass", "depth-sampling-k", "opaque"]
+    {
+        let out = scratch(&format!("m-{method}.npy"));
+        let var = scratch(&format!("m-{method}-var.npy"));
+        let args = |o: &PathBuf| {
+            vec![
+                "render".to_string(),
+                "fixtures/cloud.ply".into(),
+                "--camera".into(),
+                "fixtures/cloud.cameras.json".into(),
+                "--width".into(),
+                "32".into(),
+                "--height".into(),
+                "24".into(),
+                "--method".into(),
+                method.into(),
+                "--spp".into(),
+                "8".into(),
+                "--seed".into(),
+                "3".into(),
+                "--samples".into(),
+                "4".into(),
+                "-o".into(),
+                o.display().to_string(),
+                "--variance".into(),
+                var.display().to_string(),
+            ]
+        };
+        let a: Vec<String> = args(&out);
+        let o = splat(&a.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(o.status.success(), "{method}: {}", stderr(&o));
+        let again = scratch(&format!("m-{method}-again.npy"));
+        let b: Vec<String> = args(&again);
+        assert!(splat(&b.iter().map(String::as_str).collect::<Vec<_>>()).status.success());
+        assert_eq!(
+            std::fs::read(&out).unwrap(),
+            std::fs::read(&again).unwrap(),
+            "{method}: same seed, different image"
+        );
+        let variance = splat_io::image::read_npy(&var).unwrap();
+        let stochastic = !["exact", "oracle", "kbuffer", "opaque"].contains(&method);
+        assert_eq!(variance.data().iter().any(|&v| v > 0.0), stochastic, "{method}: variance image");
+    }
+}
+
+#[test]
+fn converge_writes_csv_plot_and_table() {
+    let prefix = scratch("conv");
+    let o = splat(&[
+        "converge",
+        "fixtures/layers.ply",
+        "--camera",
+        "fixtures/layers.cameras.json",
+        "--width",
+        "24",
+        "--height",
+        "18",
+        "--max-spp",
+        "16",
+        "--methods",
+        "stochastic,depth-sampling-k",
+        "-o",
+        prefix.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(prefix.with_extension("csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 2 * 5, "{csv}");
+    assert!(image::open(prefix.with_extension("png")).is_ok());
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(table.contains("| slope |"), "{table}");
+    let bad = splat(&["converge", "--max-spp", "100"]);
+    assert!(!bad.status.success() && stderr(&bad).contains("power of two"));
+}
+
+#[test]
+fn bench_reports_every_method_against_opaque() {
+    let o = splat(&["bench", "fixtures/cloud.ply", "--width", "32", "--height", "24", "--repeat", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    for m in ["opaque", "stochastic", "stochastic-n", "stochastic-pass", "kbuffer", "exact"] {
+        assert!(text.contains(&format!("| {m} |")), "{m} missing:\n{text}");
+    }
 }

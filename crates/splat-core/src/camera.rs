@@ -87,18 +87,15 @@ impl Camera {
         width: u32,
         height: u32,
     ) -> Result<Self, CameraError> {
-        let forward = (target - eye)
-            .try_normalize()
-            .ok_or_else(|| CameraError::Pose("eye and target coincide".into()))?;
+        let forward =
+            (target - eye).try_normalize().ok_or_else(|| CameraError::Pose("eye and target coincide".into()))?;
         let right = forward
             .cross(up)
             .try_normalize()
             .ok_or_else(|| CameraError::Pose("up is parallel to the view direction".into()))?;
         let down = forward.cross(right);
         if !(fov_y_degrees > 0.0 && fov_y_degrees < 179.0) {
-            return Err(CameraError::Intrinsics(format!(
-                "field of view {fov_y_degrees}° is outside (0, 179)"
-            )));
+            return Err(CameraError::Intrinsics(format!("field of view {fov_y_degrees}° is outside (0, 179)")));
         }
         let fy = 0.5 * height as f32 / (0.5 * fov_y_degrees.to_radians()).tan();
         // Rows of the world-to-camera rotation are the camera axes in world space.
@@ -115,18 +112,12 @@ impl Camera {
         )
     }
 
-    /// A camera that frames `bounds` from the default direction (from +z, slightly above along
-    /// +y, world up +y) with a 50° vertical field of view.
-    pub fn framing(bounds: &Aabb, width: u32, height: u32) -> Result<Self, CameraError> {
+    /// A camera that frames `bounds` from the default direction (from +z, or +x when `up` is
+    /// along z, lifted 0.35 along `up`) with a 50° vertical field of view.
+    pub fn framing(bounds: &Aabb, up: Vec3, width: u32, height: u32) -> Result<Self, CameraError> {
+        let up = up.try_normalize().ok_or_else(|| CameraError::Pose("up is zero".into()))?;
         if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Self::look_at(
-                Vec3::new(0.0, 0.0, 5.0),
-                Vec3::ZERO,
-                Vec3::Y,
-                50.0,
-                width,
-                height,
-            );
+            return Self::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, up, 50.0, width, height);
         }
         let fov_y = 50.0f32;
         let aspect = width as f32 / height.max(1) as f32;
@@ -135,55 +126,32 @@ impl Camera {
         let half_fov = half_fov_y.min(half_fov_x);
         let radius = (0.5 * (bounds.max - bounds.min).length()).max(1e-3);
         let distance = radius / half_fov.sin();
-        let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
+        let side = if up.z.abs() > 0.9 { Vec3::X } else { Vec3::Z };
+        let dir = (side - side.dot(up) * up + 0.35 * up).normalize();
         let center = bounds.center();
-        Self::look_at(
-            center + distance * dir,
-            center,
-            Vec3::Y,
-            fov_y,
-            width,
-            height,
-        )
+        Self::look_at(center + distance * dir, center, up, fov_y, width, height)
     }
 
     /// Check sizes, intrinsics and pose.
     pub fn validate(&self) -> Result<(), CameraError> {
-        if self.width == 0
-            || self.height == 0
-            || self.width > MAX_IMAGE_SIDE
-            || self.height > MAX_IMAGE_SIDE
-        {
-            return Err(CameraError::Size {
-                width: self.width,
-                height: self.height,
-                max: MAX_IMAGE_SIDE,
-            });
+        if self.width == 0 || self.height == 0 || self.width > MAX_IMAGE_SIDE || self.height > MAX_IMAGE_SIDE {
+            return Err(CameraError::Size { width: self.width, height: self.height, max: MAX_IMAGE_SIDE });
         }
         for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(CameraError::Intrinsics(format!(
-                    "{name} = {v} must be positive"
-                )));
+                return Err(CameraError::Intrinsics(format!("{name} = {v} must be positive")));
             }
         }
         for (name, v) in [("cx", self.cx), ("cy", self.cy)] {
             if !v.is_finite() {
-                return Err(CameraError::Intrinsics(format!(
-                    "{name} = {v} must be finite"
-                )));
+                return Err(CameraError::Intrinsics(format!("{name} = {v} must be finite")));
             }
         }
         if !self.rotation.is_finite() || !self.translation.is_finite() {
-            return Err(CameraError::Pose(
-                "rotation or translation is not finite".into(),
-            ));
+            return Err(CameraError::Pose("rotation or translation is not finite".into()));
         }
         let r = self.rotation;
-        let err = (r * r.transpose() - Mat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .fold(0.0f32, |m, v| m.max(v.abs()));
+        let err = (r * r.transpose() - Mat3::IDENTITY).to_cols_array().iter().fold(0.0f32, |m, v| m.max(v.abs()));
         if err > 1e-3 || r.determinant() < 0.0 {
             return Err(CameraError::Pose(format!(
                 "rotation is not a proper rotation (‖R Rᵀ − I‖∞ = {err:.2e}, det = {:.3})",
@@ -196,19 +164,9 @@ impl Camera {
     /// The same view at another resolution: focal lengths and principal point scale with the
     /// image sides.
     pub fn rescaled(&self, width: u32, height: u32) -> Result<Self, CameraError> {
-        let (sx, sy) = (
-            width as f32 / self.width as f32,
-            height as f32 / self.height as f32,
-        );
-        let cam = Self {
-            width,
-            height,
-            fx: self.fx * sx,
-            fy: self.fy * sy,
-            cx: self.cx * sx,
-            cy: self.cy * sy,
-            ..*self
-        };
+        let (sx, sy) = (width as f32 / self.width as f32, height as f32 / self.height as f32);
+        let cam =
+            Self { width, height, fx: self.fx * sx, fy: self.fy * sy, cx: self.cx * sx, cy: self.cy * sy, ..*self };
         cam.validate()?;
         Ok(cam)
     }
@@ -248,10 +206,7 @@ impl Camera {
         let v = y as f32 + offset.y;
         let d_cam = Vec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0);
         let dir = (self.rotation.transpose() * d_cam).normalize();
-        Ray {
-            view: self.forward(),
-            ..Ray::new(self.center(), dir)
-        }
+        Ray { view: self.forward(), ..Ray::new(self.center(), dir) }
     }
 
     /// The ray through the centre of pixel (x, y).
@@ -267,8 +222,7 @@ mod tests {
 
     #[test]
     fn look_at_follows_opencv_axes() {
-        let cam =
-            Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
         assert_relative_eq!(cam.forward().z, -1.0, epsilon = 1e-6);
         assert_relative_eq!(cam.center().z, 5.0, epsilon = 1e-5);
         // A point above the target (world +y) appears in the upper half (smaller pixel y).
@@ -281,15 +235,7 @@ mod tests {
 
     #[test]
     fn centre_ray_projects_back_to_its_pixel() {
-        let cam = Camera::look_at(
-            Vec3::new(1.0, 2.0, 3.0),
-            Vec3::new(0.1, 0.0, -0.2),
-            Vec3::Y,
-            45.0,
-            40,
-            30,
-        )
-        .unwrap();
+        let cam = Camera::look_at(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.1, 0.0, -0.2), Vec3::Y, 45.0, 40, 30).unwrap();
         let ray = cam.pixel_ray(7, 21);
         let p = cam.project_camera(cam.to_camera(ray.at(3.0)));
         assert_relative_eq!(p.x, 7.5, epsilon = 1e-3);
@@ -298,8 +244,7 @@ mod tests {
 
     #[test]
     fn rescale_keeps_the_view() {
-        let cam =
-            Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
         let big = cam.rescaled(128, 96).unwrap();
         let a = cam.pixel_ray(0, 0).dir;
         let b = big.ray(0, 0, Vec2::ZERO).dir;

@@ -62,11 +62,7 @@ impl Composite {
             return Vec3::ZERO;
         }
         let len = self.normal.length();
-        if len > DEGENERATE_NORMAL {
-            (self.normal / len).as_vec3()
-        } else {
-            -ray_dir
-        }
+        if len > DEGENERATE_NORMAL { (self.normal / len).as_vec3() } else { -ray_dir }
     }
 }
 
@@ -89,13 +85,7 @@ pub fn composite(sorted: &[ShadedHit], iso_threshold: f32) -> Composite {
             depth = Some(hit.t);
         }
     }
-    Composite {
-        radiance,
-        transmittance,
-        depth,
-        normal,
-        hits: sorted.len(),
-    }
+    Composite { radiance, transmittance, depth, normal, hits: sorted.len() }
 }
 
 #[cfg(test)]
@@ -104,13 +94,7 @@ mod tests {
     use approx::assert_relative_eq;
 
     fn hit(t: f32, alpha: f32, color: Vec3) -> ShadedHit {
-        ShadedHit {
-            t,
-            alpha,
-            color,
-            normal: Vec3::Z,
-            index: 0,
-        }
+        ShadedHit { t, alpha, color, normal: Vec3::Z, index: 0 }
     }
 
     #[test]
@@ -127,24 +111,14 @@ mod tests {
         assert_relative_eq!(c.radiance.x, 0.5);
         assert_relative_eq!(c.radiance.y, 0.25);
         assert_relative_eq!(c.transmittance, 0.25);
-        assert_eq!(
-            c.depth,
-            Some(2.0),
-            "T drops to 0.25 < 0.3 at the second hit"
-        );
+        assert_eq!(c.depth, Some(2.0), "T drops to 0.25 < 0.3 at the second hit");
         assert_eq!(composite(&[hit(1.0, 0.5, Vec3::X)], 0.3).depth, None);
     }
 
     #[test]
     fn opposite_normals_fall_back_to_camera_facing() {
-        let a = ShadedHit {
-            normal: Vec3::X,
-            ..hit(1.0, 0.5, Vec3::ONE)
-        };
-        let b = ShadedHit {
-            normal: -Vec3::X,
-            ..hit(2.0, 1.0, Vec3::ONE)
-        };
+        let a = ShadedHit { normal: Vec3::X, ..hit(1.0, 0.5, Vec3::ONE) };
+        let b = ShadedHit { normal: -Vec3::X, ..hit(2.0, 1.0, Vec3::ONE) };
         let c = composite(&[a, b], 0.7);
         assert_eq!(c.unit_normal(Vec3::Z), -Vec3::Z);
         assert_eq!(composite(&[], 0.7).unit_normal(Vec3::Z), Vec3::ZERO);

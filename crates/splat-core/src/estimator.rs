@@ -21,17 +21,12 @@ pub fn closest_accepted(hits: &[ShadedHit], accepted: &[bool]) -> Option<usize> 
 /// The estimate L̂ of one outcome (Eq. 6): the colour of the closest accepted hit, or the
 /// background when none is accepted (the background term T̂_{M+1} × background of Eq. 5).
 pub fn binary_opacity_estimate(hits: &[ShadedHit], accepted: &[bool], background: Vec3) -> DVec3 {
-    closest_accepted(hits, accepted)
-        .map_or(background, |i| hits[i].color)
-        .as_dvec3()
+    closest_accepted(hits, accepted).map_or(background, |i| hits[i].color).as_dvec3()
 }
 
 /// Exact expectation of an estimator over the 2^M outcomes of independent α̂ᵢ ~ Bernoulli(αᵢ)
 /// (Eq. 4): Σ over outcomes of P(outcome) × estimate(outcome). M is limited to 24.
-pub fn expectation_by_enumeration(
-    hits: &[ShadedHit],
-    estimate: impl Fn(&[bool]) -> DVec3,
-) -> DVec3 {
+pub fn expectation_by_enumeration(hits: &[ShadedHit], estimate: impl Fn(&[bool]) -> DVec3) -> DVec3 {
     let m = hits.len();
     assert!(m <= 24, "enumerating 2^{m} outcomes is too many");
     let mut accepted = vec![false; m];
@@ -56,13 +51,7 @@ mod tests {
 
     #[test]
     fn closest_accepted_ignores_list_order() {
-        let h = |t: f32, index: u32| ShadedHit {
-            t,
-            alpha: 0.5,
-            color: Vec3::splat(t),
-            normal: Vec3::Z,
-            index,
-        };
+        let h = |t: f32, index: u32| ShadedHit { t, alpha: 0.5, color: Vec3::splat(t), normal: Vec3::Z, index };
         let hits = [h(3.0, 0), h(1.0, 1), h(2.0, 2)];
         assert_eq!(closest_accepted(&hits, &[true, false, true]), Some(2));
         assert_eq!(closest_accepted(&hits, &[true, true, true]), Some(1));

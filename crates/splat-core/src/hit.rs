@@ -42,13 +42,7 @@ pub struct Ray {
 impl Ray {
     /// A ray with the default range whose view direction is its own direction.
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
-        Self {
-            origin,
-            dir,
-            view: dir,
-            t_min: DEFAULT_T_MIN,
-            t_max: DEFAULT_T_MAX,
-        }
+        Self { origin, dir, view: dir, t_min: DEFAULT_T_MIN, t_max: DEFAULT_T_MAX }
     }
 
     /// The point o + t d.
@@ -71,11 +65,7 @@ pub struct PreparedParticle {
 impl PreparedParticle {
     /// Precompute the canonical transform of a particle.
     pub fn new(p: &Particle) -> Self {
-        Self {
-            mean: p.mean,
-            canonical: p.canonical_transform(),
-            opacity: p.opacity,
-        }
+        Self { mean: p.mean, canonical: p.canonical_transform(), opacity: p.opacity }
     }
 }
 
@@ -146,22 +136,13 @@ mod tests {
     use glam::Quat;
 
     fn particle(scale: Vec3, rotation: Quat, opacity: f32) -> PreparedParticle {
-        PreparedParticle::new(&Particle::with_rgb(
-            Vec3::ZERO,
-            scale,
-            rotation,
-            opacity,
-            Vec3::ONE,
-        ))
+        PreparedParticle::new(&Particle::with_rgb(Vec3::ZERO, scale, rotation, opacity, Vec3::ONE))
     }
 
     #[test]
     fn ray_through_centre_hits_centre_with_unit_response() {
         let p = particle(Vec3::new(0.3, 2.0, 0.7), Quat::from_rotation_y(0.4), 0.8);
-        let kernel = KernelParams {
-            alpha_clamp: 1.0,
-            ..Default::default()
-        };
+        let kernel = KernelParams { alpha_clamp: 1.0, ..Default::default() };
         let ray = Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z);
         let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Mean).unwrap();
         assert_relative_eq!(hit.t, 5.0, epsilon = 1e-5);
@@ -174,10 +155,7 @@ mod tests {
     fn offset_ray_response_matches_mahalanobis_distance() {
         // Axis-aligned, σx = 0.5: a ray along z at x = 0.5 is 1σ away → response e^−½.
         let p = particle(Vec3::new(0.5, 1.0, 1.0), Quat::IDENTITY, 1.0);
-        let kernel = KernelParams {
-            alpha_clamp: 1.0,
-            ..Default::default()
-        };
+        let kernel = KernelParams { alpha_clamp: 1.0, ..Default::default() };
         let ray = Ray::new(Vec3::new(0.5, 0.0, -3.0), Vec3::Z);
         let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Mean).unwrap();
         assert_relative_eq!(hit.alpha, (-0.5f32).exp(), epsilon = 1e-6);
@@ -186,18 +164,11 @@ mod tests {
     #[test]
     fn hit_just_inside_and_outside_the_cutoff() {
         let p = particle(Vec3::ONE, Quat::IDENTITY, 1.0);
-        let kernel = KernelParams {
-            alpha_cull: 0.0,
-            ..Default::default()
-        };
+        let kernel = KernelParams { alpha_cull: 0.0, ..Default::default() };
         let inside = Ray::new(Vec3::new(2.99, 0.0, -5.0), Vec3::Z);
         let outside = Ray::new(Vec3::new(3.01, 0.0, -5.0), Vec3::Z);
         let hit = intersect(&p, 0, &inside, &kernel, HitDistance::Mean).unwrap();
-        assert_relative_eq!(
-            hit.alpha,
-            (-0.5f32 * 2.99 * 2.99).exp(),
-            max_relative = 1e-4
-        );
+        assert_relative_eq!(hit.alpha, (-0.5f32 * 2.99 * 2.99).exp(), max_relative = 1e-4);
         assert!(intersect(&p, 0, &outside, &kernel, HitDistance::Mean).is_none());
     }
 
@@ -209,14 +180,9 @@ mod tests {
         let ray = Ray::new(Vec3::new(-3.0, 0.2, 0.0), Vec3::new(1.0, 0.0, 0.0));
         let hit = intersect(&p, 0, &ray, &kernel, HitDistance::Mean).unwrap();
         // Brute-force the density maximum along the ray.
-        let cov_inv = Particle::with_rgb(
-            Vec3::ZERO,
-            Vec3::new(1.0, 0.1, 1.0),
-            Quat::from_rotation_z(0.7),
-            1.0,
-            Vec3::ONE,
-        )
-        .covariance_inverse();
+        let cov_inv =
+            Particle::with_rgb(Vec3::ZERO, Vec3::new(1.0, 0.1, 1.0), Quat::from_rotation_z(0.7), 1.0, Vec3::ONE)
+                .covariance_inverse();
         let best = (0..60_000)
             .map(|i| i as f32 * 1e-4)
             .min_by(|&a, &b| {

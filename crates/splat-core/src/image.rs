@@ -13,12 +13,7 @@ impl Image {
     /// An image filled with `value`.
     pub fn filled(width: u32, height: u32, channels: u32, value: f32) -> Self {
         let len = width as usize * height as usize * channels as usize;
-        Self {
-            width,
-            height,
-            channels,
-            data: vec![value; len],
-        }
+        Self { width, height, channels, data: vec![value; len] }
     }
 
     /// An image from its data, `None` when the length does not match the size.
@@ -64,12 +59,7 @@ impl Image {
     }
 
     fn index(&self, x: u32, y: u32) -> usize {
-        assert!(
-            x < self.width && y < self.height,
-            "pixel ({x}, {y}) outside {}×{}",
-            self.width,
-            self.height
-        );
+        assert!(x < self.width && y < self.height, "pixel ({x}, {y}) outside {}×{}", self.width, self.height);
         (y as usize * self.width as usize + x as usize) * self.channels as usize
     }
 }

@@ -31,12 +31,7 @@ pub struct KernelParams {
 
 impl Default for KernelParams {
     fn default() -> Self {
-        Self {
-            degree: DEFAULT_DEGREE,
-            cutoff: DEFAULT_CUTOFF,
-            alpha_clamp: ALPHA_CLAMP,
-            alpha_cull: ALPHA_CULL,
-        }
+        Self { degree: DEFAULT_DEGREE, cutoff: DEFAULT_CUTOFF, alpha_clamp: ALPHA_CLAMP, alpha_cull: ALPHA_CULL }
     }
 }
 
@@ -47,15 +42,9 @@ impl KernelParams {
             return Err(format!("kernel degree {} is outside 1..=8", self.degree));
         }
         if !(self.cutoff.is_finite() && self.cutoff > 0.0) {
-            return Err(format!(
-                "cutoff {} must be a positive number of standard deviations",
-                self.cutoff
-            ));
+            return Err(format!("cutoff {} must be a positive number of standard deviations", self.cutoff));
         }
-        if !(self.alpha_cull >= 0.0
-            && self.alpha_cull <= self.alpha_clamp
-            && self.alpha_clamp <= 1.0)
-        {
+        if !(self.alpha_cull >= 0.0 && self.alpha_cull <= self.alpha_clamp && self.alpha_clamp <= 1.0) {
             return Err(format!(
                 "alpha cull {} and clamp {} must satisfy 0 <= cull <= clamp <= 1",
                 self.alpha_cull, self.alpha_clamp
@@ -129,13 +118,6 @@ mod tests {
         assert_eq!(k.alpha(0.5, 1.0), Some(0.5));
         assert_eq!(k.alpha(1.0, 0.5 / 255.0), None);
         assert!(KernelParams { degree: 0, ..k }.validate().is_err());
-        assert!(
-            KernelParams {
-                cutoff: f32::NAN,
-                ..k
-            }
-            .validate()
-            .is_err()
-        );
+        assert!(KernelParams { cutoff: f32::NAN, ..k }.validate().is_err());
     }
 }

@@ -54,13 +54,7 @@ mod tests {
     #[test]
     fn sphere_normal_points_from_centre_to_origin() {
         let centre = Vec3::new(0.3, -0.2, 4.0);
-        let p = PreparedParticle::new(&Particle::with_rgb(
-            centre,
-            Vec3::splat(0.5),
-            Quat::IDENTITY,
-            1.0,
-            Vec3::ONE,
-        ));
+        let p = PreparedParticle::new(&Particle::with_rgb(centre, Vec3::splat(0.5), Quat::IDENTITY, 1.0, Vec3::ONE));
         let origin = Vec3::new(0.1, 0.4, -1.0);
         let ray = Ray::new(origin, (centre - origin).normalize());
         let expected = (origin - centre).normalize();
@@ -73,17 +67,8 @@ mod tests {
     #[test]
     fn flat_particle_normal_is_its_thin_axis() {
         let rot = Quat::from_rotation_x(0.5);
-        let p = PreparedParticle::new(&Particle::with_rgb(
-            Vec3::ZERO,
-            Vec3::new(1.0, 1.0, 0.01),
-            rot,
-            1.0,
-            Vec3::ONE,
-        ));
-        let ray = Ray::new(
-            Vec3::new(0.2, 0.3, -4.0),
-            Vec3::new(0.05, 0.0, 1.0).normalize(),
-        );
+        let p = PreparedParticle::new(&Particle::with_rgb(Vec3::ZERO, Vec3::new(1.0, 1.0, 0.01), rot, 1.0, Vec3::ONE));
+        let ray = Ray::new(Vec3::new(0.2, 0.3, -4.0), Vec3::new(0.05, 0.0, 1.0).normalize());
         let thin_axis = rot * Vec3::Z;
         for mode in [NormalMode::MaxDensityPlane, NormalMode::KernelEllipsoid] {
             let n = particle_normal(&p, &ray, mode, 3.0);

@@ -67,13 +67,7 @@ impl Particle {
     pub fn with_rgb(mean: Vec3, scale: Vec3, rotation: Quat, opacity: f32, rgb: Vec3) -> Self {
         let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
         sh[0] = crate::sh::rgb_to_dc(rgb);
-        Self {
-            mean,
-            scale,
-            rotation,
-            opacity,
-            sh,
-        }
+        Self { mean, scale, rotation, opacity, sh }
     }
 
     /// Build a particle from raw parts, normalising the quaternion and validating every field.
@@ -84,13 +78,7 @@ impl Particle {
         opacity: f32,
         sh: [Vec3; SH_MAX_COEFFS],
     ) -> Result<Self, ParticleError> {
-        let p = Self {
-            mean,
-            scale,
-            rotation: normalize_quat(rotation)?,
-            opacity,
-            sh,
-        };
+        let p = Self { mean, scale, rotation: normalize_quat(rotation)?, opacity, sh };
         p.validate()?;
         Ok(p)
     }
@@ -112,17 +100,11 @@ impl Particle {
         }
         for value in self.rotation.to_array() {
             if !value.is_finite() {
-                return Err(ParticleError::NonFinite {
-                    field: "rotation",
-                    value,
-                });
+                return Err(ParticleError::NonFinite { field: "rotation", value });
             }
         }
         if !self.opacity.is_finite() {
-            return Err(ParticleError::NonFinite {
-                field: "opacity",
-                value: self.opacity,
-            });
+            return Err(ParticleError::NonFinite { field: "opacity", value: self.opacity });
         }
         for (axis, value) in self.scale.to_array().into_iter().enumerate() {
             if !(value > 0.0 && (1.0 / (value * value)).is_finite()) {
@@ -167,10 +149,7 @@ impl Particle {
         let cov = self.covariance();
         let diag = Vec3::new(cov.x_axis.x, cov.y_axis.y, cov.z_axis.z).max(Vec3::ZERO);
         let half = cutoff * Vec3::new(diag.x.sqrt(), diag.y.sqrt(), diag.z.sqrt());
-        Aabb {
-            min: self.mean - half,
-            max: self.mean + half,
-        }
+        Aabb { min: self.mean - half, max: self.mean + half }
     }
 }
 
@@ -179,10 +158,7 @@ pub fn normalize_quat(q: Quat) -> Result<Quat, ParticleError> {
     let v = glam::Vec4::from(q);
     let len = v.length();
     if !len.is_finite() {
-        return Err(ParticleError::NonFinite {
-            field: "rotation",
-            value: len,
-        });
+        return Err(ParticleError::NonFinite { field: "rotation", value: len });
     }
     if len < 1e-12 {
         return Err(ParticleError::ZeroQuaternion);
@@ -201,17 +177,11 @@ pub struct Aabb {
 
 impl Aabb {
     /// The empty box (min = +∞, max = −∞), the identity of [`Aabb::union`].
-    pub const EMPTY: Aabb = Aabb {
-        min: Vec3::INFINITY,
-        max: Vec3::NEG_INFINITY,
-    };
+    pub const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
 
     /// Smallest box containing both.
     pub fn union(self, other: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(other.min),
-            max: self.max.max(other.max),
-        }
+        Aabb { min: self.min.min(other.min), max: self.max.max(other.max) }
     }
 
     /// Whether the box contains no point.
@@ -252,12 +222,7 @@ pub struct Scene {
 impl Scene {
     /// Box of all particle means.
     pub fn mean_bounds(&self) -> Aabb {
-        self.particles.iter().fold(Aabb::EMPTY, |b, p| {
-            b.union(Aabb {
-                min: p.mean,
-                max: p.mean,
-            })
-        })
+        self.particles.iter().fold(Aabb::EMPTY, |b, p| b.union(Aabb { min: p.mean, max: p.mean }))
     }
 
     /// Box of the central part of the scene: per axis, the `q` and `1 − q` quantiles of the
@@ -282,9 +247,6 @@ impl Scene {
             min[k] = axis[lo];
             max[k] = axis[hi];
         }
-        Aabb {
-            min: Vec3::from(min),
-            max: Vec3::from(max),
-        }
+        Aabb { min: Vec3::from(min), max: Vec3::from(max) }
     }
 }

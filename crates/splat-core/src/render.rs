@@ -4,12 +4,8 @@
 //! brute-force [`oracle_ray`]); tiles run in parallel with rayon when the feature is on.
 
 use crate::camera::{Camera, CameraError};
-use crate::composite::{
-    Composite, DEFAULT_ISO_THRESHOLD, ShadedHit, composite, sort_front_to_back,
-};
-use crate::hit::{
-    DEFAULT_T_MAX, DEFAULT_T_MIN, Hit, HitDistance, PreparedParticle, Ray, intersect,
-};
+use crate::composite::{Composite, DEFAULT_ISO_THRESHOLD, ShadedHit, composite, sort_front_to_back};
+use crate::hit::{DEFAULT_T_MAX, DEFAULT_T_MIN, Hit, HitDistance, PreparedParticle, Ray, intersect};
 use crate::image::Image;
 use crate::kernel::KernelParams;
 use crate::normal::{NormalMode, particle_normal};
@@ -81,16 +77,10 @@ impl RenderSettings {
     pub fn validate(&self) -> Result<(), RenderError> {
         self.kernel.validate().map_err(RenderError::Settings)?;
         if !self.background.is_finite() {
-            return Err(RenderError::Settings(format!(
-                "background {} is not finite",
-                self.background
-            )));
+            return Err(RenderError::Settings(format!("background {} is not finite", self.background)));
         }
         if !(0.0..=1.0).contains(&self.iso_threshold) {
-            return Err(RenderError::Settings(format!(
-                "iso threshold {} is outside [0, 1]",
-                self.iso_threshold
-            )));
+            return Err(RenderError::Settings(format!("iso threshold {} is outside [0, 1]", self.iso_threshold)));
         }
         if !(self.t_min.is_finite() && self.t_min >= 0.0 && self.t_max > self.t_min) {
             return Err(RenderError::Settings(format!(
@@ -127,11 +117,7 @@ impl<'a> Tracer<'a> {
     pub fn new(scene: &'a Scene, settings: RenderSettings) -> Result<Self, RenderError> {
         validate_scene(scene, &settings)?;
         let prepared = scene.particles.iter().map(PreparedParticle::new).collect();
-        Ok(Self {
-            scene,
-            prepared,
-            settings,
-        })
+        Ok(Self { scene, prepared, settings })
     }
 
     /// The settings.
@@ -151,11 +137,7 @@ impl<'a> Tracer<'a> {
 
     /// The ray with the settings' range applied.
     pub fn clip(&self, ray: Ray) -> Ray {
-        Ray {
-            t_min: self.settings.t_min,
-            t_max: self.settings.t_max,
-            ..ray
-        }
+        Ray { t_min: self.settings.t_min, t_max: self.settings.t_max, ..ray }
     }
 
     /// Intersect and shade particle `index`: colour from SH along the ray direction, normal by
@@ -197,21 +179,14 @@ pub fn validate_scene(scene: &Scene, settings: &RenderSettings) -> Result<(), Re
         )));
     }
     for (index, p) in scene.particles.iter().enumerate() {
-        p.validate()
-            .map_err(|error| RenderError::Particle { index, error })?;
+        p.validate().map_err(|error| RenderError::Particle { index, error })?;
     }
     Ok(())
 }
 
 /// Shade a hit of particle `hit.index`: colour from its SH along the ray direction, normal by
 /// the settings' mode.
-pub fn shade_hit(
-    scene: &Scene,
-    p: &PreparedParticle,
-    hit: Hit,
-    ray: &Ray,
-    settings: &RenderSettings,
-) -> ShadedHit {
+pub fn shade_hit(scene: &Scene, p: &PreparedParticle, hit: Hit, ray: &Ray, settings: &RenderSettings) -> ShadedHit {
     let particle = &scene.particles[hit.index as usize];
     ShadedHit {
         t: hit.t,
@@ -225,11 +200,7 @@ pub fn shade_hit(
 /// The oracle for one ray: every particle of the scene tested by brute force, hits sorted
 /// front to back and composited by Eq. 3 in f64. The ray's own range is replaced by the
 /// settings' (t_min, t_max).
-pub fn oracle_ray(
-    scene: &Scene,
-    ray: Ray,
-    settings: &RenderSettings,
-) -> Result<Composite, RenderError> {
+pub fn oracle_ray(scene: &Scene, ray: Ray, settings: &RenderSettings) -> Result<Composite, RenderError> {
     let tracer = Tracer::new(scene, *settings)?;
     let n = tracer.len() as u32;
     Ok(tracer.trace(&tracer.clip(ray), 0..n, &mut Vec::new()))
@@ -326,8 +297,7 @@ impl TileBins {
         let tiles_y = camera.height.div_ceil(TILE);
         let mut bins = vec![Vec::new(); (tiles_x * tiles_y) as usize];
         for (index, p) in scene.particles.iter().enumerate() {
-            let Some((tx0, ty0, tx1, ty1)) = tile_range(camera, &p.aabb(cutoff), tiles_x, tiles_y)
-            else {
+            let Some((tx0, ty0, tx1, ty1)) = tile_range(camera, &p.aabb(cutoff), tiles_x, tiles_y) else {
                 continue;
             };
             for ty in ty0..=ty1 {
@@ -336,11 +306,7 @@ impl TileBins {
                 }
             }
         }
-        Self {
-            tiles_x,
-            tiles_y,
-            bins,
-        }
+        Self { tiles_x, tiles_y, bins }
     }
 
     /// Number of tiles.
@@ -357,12 +323,7 @@ impl TileBins {
     pub fn tile_rect(&self, tile: u32, camera: &Camera) -> (u32, u32, u32, u32) {
         let (tx, ty) = (tile % self.tiles_x, tile / self.tiles_x);
         let (x0, y0) = (tx * TILE, ty * TILE);
-        (
-            x0,
-            y0,
-            (x0 + TILE).min(camera.width),
-            (y0 + TILE).min(camera.height),
-        )
+        (x0, y0, (x0 + TILE).min(camera.width), (y0 + TILE).min(camera.height))
     }
 }
 
@@ -375,10 +336,7 @@ fn tile_range(
 ) -> Option<(u32, u32, u32, u32)> {
     // Pad the box a little so that f32 rounding in the hit test cannot escape it.
     let pad = 1e-4 * (aabb.max - aabb.min).max(Vec3::splat(1e-6)) + Vec3::splat(1e-6);
-    let padded = crate::particle::Aabb {
-        min: aabb.min - pad,
-        max: aabb.max + pad,
-    };
+    let padded = crate::particle::Aabb { min: aabb.min - pad, max: aabb.max + pad };
     let mut lo = Vec2::splat(f32::INFINITY);
     let mut hi = Vec2::splat(f32::NEG_INFINITY);
     for corner in padded.corners() {
@@ -392,21 +350,11 @@ fn tile_range(
     }
     // A pixel's samples lie in [x, x + 1): pixels floor(lo) − 1 ..= floor(hi) can see the box.
     let (w, h) = (camera.width as f32, camera.height as f32);
-    if hi.x < -1.0
-        || hi.y < -1.0
-        || lo.x > w + 1.0
-        || lo.y > h + 1.0
-        || !(lo.is_finite() && hi.is_finite())
-    {
+    if hi.x < -1.0 || hi.y < -1.0 || lo.x > w + 1.0 || lo.y > h + 1.0 || !(lo.is_finite() && hi.is_finite()) {
         return None;
     }
     let px = |v: f32, max: f32| v.floor().clamp(0.0, max - 1.0) as u32 / TILE;
-    Some((
-        px(lo.x - 1.0, w),
-        px(lo.y - 1.0, h),
-        px(hi.x + 1.0, w),
-        px(hi.y + 1.0, h),
-    ))
+    Some((px(lo.x - 1.0, w), px(lo.y - 1.0, h), px(hi.x + 1.0, w), px(hi.y + 1.0, h)))
 }
 
 #[cfg(test)]
@@ -420,19 +368,9 @@ mod tests {
     #[test]
     fn tiled_render_equals_brute_force_oracle() {
         let (scene, camera) = scenes::cloud();
-        let inside = Camera::look_at(
-            Vec3::new(0.1, 0.0, 0.3),
-            Vec3::new(0.0, 0.0, -1.0),
-            Vec3::Y,
-            70.0,
-            40,
-            30,
-        )
-        .unwrap();
-        let settings = RenderSettings {
-            background: Vec3::new(0.1, 0.2, 0.3),
-            ..Default::default()
-        };
+        let inside =
+            Camera::look_at(Vec3::new(0.1, 0.0, 0.3), Vec3::new(0.0, 0.0, -1.0), Vec3::Y, 70.0, 40, 30).unwrap();
+        let settings = RenderSettings { background: Vec3::new(0.1, 0.2, 0.3), ..Default::default() };
         let tracer = Tracer::new(&scene, settings).unwrap();
         let all = 0..scene.particles.len() as u32;
         for camera in [camera.rescaled(40, 30).unwrap(), inside] {
@@ -440,15 +378,9 @@ mod tests {
             for y in 0..camera.height {
                 for x in 0..camera.width {
                     let ray = tracer.clip(camera.pixel_ray(x, y));
-                    let rgb = tracer
-                        .trace(&ray, all.clone(), &mut Vec::new())
-                        .color_over(settings.background);
+                    let rgb = tracer.trace(&ray, all.clone(), &mut Vec::new()).color_over(settings.background);
                     for k in 0..3 {
-                        assert_relative_eq!(
-                            out.radiance.pixel(x, y)[k],
-                            rgb[k] as f32,
-                            epsilon = 1e-6
-                        );
+                        assert_relative_eq!(out.radiance.pixel(x, y)[k], rgb[k] as f32, epsilon = 1e-6);
                     }
                 }
             }
@@ -458,14 +390,8 @@ mod tests {
     #[test]
     fn invalid_settings_are_refused() {
         let (scene, camera) = scenes::layers();
-        let bad = RenderSettings {
-            iso_threshold: 2.0,
-            ..Default::default()
-        };
-        assert!(matches!(
-            render_exact(&scene, &camera, &bad, &|_| {}),
-            Err(RenderError::Settings(_))
-        ));
+        let bad = RenderSettings { iso_threshold: 2.0, ..Default::default() };
+        assert!(matches!(render_exact(&scene, &camera, &bad, &|_| {}), Err(RenderError::Settings(_))));
         let mut broken = scene.clone();
         broken.particles[1].scale.y = 0.0;
         assert!(matches!(

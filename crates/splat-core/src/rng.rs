@@ -146,10 +146,7 @@ pub struct RayRng {
 impl RayRng {
     /// Decisions for pixel (x, y) in the frame with key `frame_key`.
     pub fn new(x: u32, y: u32, frame_key: u32, scheme: RngScheme) -> Self {
-        Self {
-            pixel_seed: xxhash32([x, y, frame_key]),
-            scheme,
-        }
+        Self { pixel_seed: xxhash32([x, y, frame_key]), scheme }
     }
 
     /// Whether decisions depend on the hit position (then they cannot be drawn before the
@@ -165,8 +162,7 @@ impl RayRng {
         match self.scheme {
             RngScheme::Hash => unit_f32(pcg(xxhash32([self.pixel_seed, id, slot]))),
             RngScheme::Trig => {
-                let o =
-                    |k: u32| unit_f32(pcg(xxhash32([self.pixel_seed, OFFSET_ID, 3 * slot + k])));
+                let o = |k: u32| unit_f32(pcg(xxhash32([self.pixel_seed, OFFSET_ID, 3 * slot + k])));
                 trig_hash(hit + glam::Vec3::new(o(0), o(1), o(2)))
             }
         }
@@ -234,16 +230,8 @@ mod hash_tests {
             let n = f64::from(n);
             let se1 = (1.0 / 12.0 / n).sqrt();
             let se2 = (4.0 / 45.0 / n).sqrt();
-            assert!(
-                (s1 / n - 0.5).abs() < 5.0 * se1,
-                "{scheme:?} mean {}",
-                s1 / n
-            );
-            assert!(
-                (s2 / n - 1.0 / 3.0).abs() < 5.0 * se2,
-                "{scheme:?} second moment {}",
-                s2 / n
-            );
+            assert!((s1 / n - 0.5).abs() < 5.0 * se1, "{scheme:?} mean {}", s1 / n);
+            assert!((s2 / n - 1.0 / 3.0).abs() < 5.0 * se2, "{scheme:?} second moment {}", s2 / n);
         }
     }
 }

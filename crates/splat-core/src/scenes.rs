@@ -14,12 +14,7 @@ fn camera(eye: Vec3, target: Vec3, fov_y: f32, width: u32, height: u32) -> Camer
 /// A uniformly distributed random rotation (normalised Gaussian-like 4-vector by rejection).
 fn random_rotation(rng: &mut SplitMix64) -> Quat {
     loop {
-        let v = Vec4::new(
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-        );
+        let v = Vec4::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
         let len2 = v.length_squared();
         if len2 > 1e-4 && len2 <= 1.0 {
             return Quat::from_vec4(v / len2.sqrt());
@@ -40,30 +35,10 @@ fn hue(h: f32, v: f32) -> Vec3 {
 /// Laine–Karras cloth: four large flat Gaussians, each tilted, partly covering the others.
 pub fn layers() -> (Scene, Camera) {
     let sheets = [
-        (
-            Vec3::new(-0.25, 0.15, 0.6),
-            0.35,
-            Vec3::new(0.9, 0.15, 0.1),
-            0.25,
-        ),
-        (
-            Vec3::new(0.2, -0.1, 0.2),
-            0.5,
-            Vec3::new(0.1, 0.8, 0.2),
-            -0.2,
-        ),
-        (
-            Vec3::new(-0.1, -0.2, -0.2),
-            0.65,
-            Vec3::new(0.15, 0.3, 0.95),
-            0.15,
-        ),
-        (
-            Vec3::new(0.15, 0.2, -0.6),
-            0.8,
-            Vec3::new(0.95, 0.85, 0.2),
-            -0.1,
-        ),
+        (Vec3::new(-0.25, 0.15, 0.6), 0.35, Vec3::new(0.9, 0.15, 0.1), 0.25),
+        (Vec3::new(0.2, -0.1, 0.2), 0.5, Vec3::new(0.1, 0.8, 0.2), -0.2),
+        (Vec3::new(-0.1, -0.2, -0.2), 0.65, Vec3::new(0.15, 0.3, 0.95), 0.15),
+        (Vec3::new(0.15, 0.2, -0.6), 0.8, Vec3::new(0.95, 0.85, 0.2), -0.1),
     ];
     let particles = sheets
         .iter()
@@ -72,14 +47,8 @@ pub fn layers() -> (Scene, Camera) {
             Particle::with_rgb(mean, Vec3::new(0.7, 0.5, 0.01), rotation, opacity, rgb)
         })
         .collect();
-    let scene = Scene {
-        particles,
-        sh_degree: 0,
-    };
-    (
-        scene,
-        camera(Vec3::new(0.5, 0.35, 3.2), Vec3::ZERO, 40.0, 160, 120),
-    )
+    let scene = Scene { particles, sh_degree: 0 };
+    (scene, camera(Vec3::new(0.5, 0.35, 3.2), Vec3::ZERO, 40.0, 160, 120))
 }
 
 /// One row of flat, quad-like Gaussians with opacity rising linearly from 0 to 1.
@@ -89,23 +58,11 @@ pub fn ramp() -> (Scene, Camera) {
         .map(|i| {
             let f = i as f32 / (n - 1) as f32;
             let mean = Vec3::new(-1.65 + 0.3 * i as f32, 0.0, 0.0);
-            Particle::with_rgb(
-                mean,
-                Vec3::new(0.1, 0.25, 0.01),
-                Quat::IDENTITY,
-                f,
-                Vec3::new(0.95, 0.9, 0.8),
-            )
+            Particle::with_rgb(mean, Vec3::new(0.1, 0.25, 0.01), Quat::IDENTITY, f, Vec3::new(0.95, 0.9, 0.8))
         })
         .collect();
-    let scene = Scene {
-        particles,
-        sh_degree: 0,
-    };
-    (
-        scene,
-        camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 30.0, 192, 64),
-    )
+    let scene = Scene { particles, sh_degree: 0 };
+    (scene, camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 30.0, 192, 64))
 }
 
 /// A few thousand random particles in the unit ball with SH degree 3 colours.
@@ -114,11 +71,7 @@ pub fn cloud() -> (Scene, Camera) {
     let particles = (0..3000)
         .map(|_| {
             let mean = loop {
-                let p = Vec3::new(
-                    rng.range(-1.0, 1.0),
-                    rng.range(-1.0, 1.0),
-                    rng.range(-1.0, 1.0),
-                );
+                let p = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
                 if p.length_squared() <= 1.0 {
                     break p;
                 }
@@ -130,29 +83,13 @@ pub fn cloud() -> (Scene, Camera) {
             let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
             sh[0] = rgb_to_dc(hue(rng.next_f32(), rng.range(0.5, 1.0)));
             for c in &mut sh[1..] {
-                *c = Vec3::new(
-                    rng.range(-0.15, 0.15),
-                    rng.range(-0.15, 0.15),
-                    rng.range(-0.15, 0.15),
-                );
+                *c = Vec3::new(rng.range(-0.15, 0.15), rng.range(-0.15, 0.15), rng.range(-0.15, 0.15));
             }
-            Particle {
-                mean,
-                scale,
-                rotation,
-                opacity,
-                sh,
-            }
+            Particle { mean, scale, rotation, opacity, sh }
         })
         .collect();
-    let scene = Scene {
-        particles,
-        sh_degree: 3,
-    };
-    (
-        scene,
-        camera(Vec3::new(0.0, 0.6, 3.4), Vec3::ZERO, 40.0, 128, 96),
-    )
+    let scene = Scene { particles, sh_degree: 3 };
+    (scene, camera(Vec3::new(0.0, 0.6, 3.4), Vec3::ZERO, 40.0, 128, 96))
 }
 
 /// The built-in demo scene: a rainbow trefoil knot of soft Gaussians floating over a
@@ -164,49 +101,21 @@ pub fn demo() -> (Scene, Camera) {
     let knot = 1600;
     for i in 0..knot {
         let s = i as f32 / knot as f32 * std::f32::consts::TAU;
-        let p = Vec3::new(
-            s.sin() + 2.0 * (2.0 * s).sin(),
-            s.cos() - 2.0 * (2.0 * s).cos(),
-            -(3.0 * s).sin(),
-        );
-        let jitter = Vec3::new(
-            rng.range(-0.08, 0.08),
-            rng.range(-0.08, 0.08),
-            rng.range(-0.08, 0.08),
-        );
+        let p = Vec3::new(s.sin() + 2.0 * (2.0 * s).sin(), s.cos() - 2.0 * (2.0 * s).cos(), -(3.0 * s).sin());
+        let jitter = Vec3::new(rng.range(-0.08, 0.08), rng.range(-0.08, 0.08), rng.range(-0.08, 0.08));
         let mean = 0.35 * p + jitter + Vec3::new(0.0, 1.05, 0.0);
-        let scale = Vec3::new(
-            rng.range(0.03, 0.07),
-            rng.range(0.03, 0.07),
-            rng.range(0.03, 0.07),
-        );
+        let scale = Vec3::new(rng.range(0.03, 0.07), rng.range(0.03, 0.07), rng.range(0.03, 0.07));
         let rgb = hue((i as f32 / knot as f32 + 0.05 * rng.next_f32()) % 1.0, 0.95);
-        particles.push(Particle::with_rgb(
-            mean,
-            scale,
-            random_rotation(&mut rng),
-            rng.range(0.35, 0.9),
-            rgb,
-        ));
+        particles.push(Particle::with_rgb(mean, scale, random_rotation(&mut rng), rng.range(0.35, 0.9), rgb));
     }
     // Checkered floor of flat tiles.
     for iz in -7..=7 {
         for ix in -7..=7 {
             let dark = (ix + iz) % 2 == 0;
-            let rgb = if dark {
-                Vec3::new(0.25, 0.27, 0.32)
-            } else {
-                Vec3::splat(0.85)
-            };
+            let rgb = if dark { Vec3::new(0.25, 0.27, 0.32) } else { Vec3::splat(0.85) };
             let mean = Vec3::new(0.22 * ix as f32, 0.0, 0.22 * iz as f32);
             let flat = Quat::from_rotation_x(std::f32::consts::FRAC_PI_2);
-            particles.push(Particle::with_rgb(
-                mean,
-                Vec3::new(0.11, 0.11, 0.006),
-                flat,
-                0.8,
-                rgb,
-            ));
+            particles.push(Particle::with_rgb(mean, Vec3::new(0.11, 0.11, 0.006), flat, 0.8, rgb));
         }
     }
     // Glassy bubbles.
@@ -215,28 +124,10 @@ pub fn demo() -> (Scene, Camera) {
         (Vec3::new(1.15, 0.3, 0.45), Vec3::new(1.0, 0.7, 0.5)),
         (Vec3::new(0.0, 0.45, -1.0), Vec3::new(0.7, 1.0, 0.7)),
     ] {
-        particles.push(Particle::with_rgb(
-            center,
-            Vec3::splat(0.14),
-            Quat::IDENTITY,
-            0.3,
-            rgb,
-        ));
+        particles.push(Particle::with_rgb(center, Vec3::splat(0.14), Quat::IDENTITY, 0.3, rgb));
     }
-    let scene = Scene {
-        particles,
-        sh_degree: 0,
-    };
-    (
-        scene,
-        camera(
-            Vec3::new(0.0, 1.9, 3.6),
-            Vec3::new(0.0, 0.75, 0.0),
-            45.0,
-            640,
-            480,
-        ),
-    )
+    let scene = Scene { particles, sh_degree: 0 };
+    (scene, camera(Vec3::new(0.0, 1.9, 3.6), Vec3::new(0.0, 0.75, 0.0), 45.0, 640, 480))
 }
 
 /// A named scene generator, for the CLI and xtask.

@@ -8,23 +8,10 @@ pub const SH_C0: f32 = 0.282_094_8;
 /// Band 1 constant.
 pub const SH_C1: f32 = 0.488_602_52;
 /// Band 2 constants.
-pub const SH_C2: [f32; 5] = [
-    1.092_548_4,
-    -1.092_548_4,
-    0.315_391_57,
-    -1.092_548_4,
-    0.546_274_2,
-];
+pub const SH_C2: [f32; 5] = [1.092_548_4, -1.092_548_4, 0.315_391_57, -1.092_548_4, 0.546_274_2];
 /// Band 3 constants.
-pub const SH_C3: [f32; 7] = [
-    -0.590_043_6,
-    2.890_611_4,
-    -0.457_045_8,
-    0.373_176_34,
-    -0.457_045_8,
-    1.445_305_7,
-    -0.590_043_6,
-];
+pub const SH_C3: [f32; 7] =
+    [-0.590_043_6, 2.890_611_4, -0.457_045_8, 0.373_176_34, -0.457_045_8, 1.445_305_7, -0.590_043_6];
 
 /// Colour of a particle seen along the unit direction `dir` (from the viewer toward the
 /// particle): Σ SH basis × coefficients + 0.5, clamped at 0. Coefficients past `degree` are ignored.

@@ -24,11 +24,7 @@ impl Welford {
 
     /// Unbiased sample variance (0 with fewer than two samples).
     pub fn variance(&self) -> f64 {
-        if self.n < 2 {
-            0.0
-        } else {
-            self.m2 / (self.n - 1) as f64
-        }
+        if self.n < 2 { 0.0 } else { self.m2 / (self.n - 1) as f64 }
     }
 }
 
@@ -66,7 +62,7 @@ impl ZTest {
     /// √channels. So both are computed per channel and the largest is reported.
     pub fn new(mean: &[f32], exact: &[f32], variance: &[f32], frames: u32, channels: usize) -> Self {
         assert!(mean.len() == exact.len() && mean.len() == variance.len(), "image sizes differ");
-        assert!(channels > 0 && mean.len() % channels == 0, "length is not a multiple of the channels");
+        assert!(channels > 0 && mean.len().is_multiple_of(channels), "length is not a multiple of the channels");
         let f = f64::from(frames);
         let mut sums = vec![(0.0f64, 0.0f64, 0.0f64, 0usize); channels]; // Σd, Σse², Σz², n
         let mut outliers = 0usize;
@@ -83,7 +79,8 @@ impl ZTest {
         }
         let per_channel = sums.iter().filter(|s| s.3 > 0);
         let global = per_channel.clone().map(|s| s.0.abs() / s.1.sqrt()).fold(0.0, f64::max);
-        let spread = per_channel.map(|s| (s.2 - s.3 as f64) / (2.0 * s.3 as f64).sqrt()).fold(f64::NEG_INFINITY, f64::max);
+        let spread =
+            per_channel.map(|s| (s.2 - s.3 as f64) / (2.0 * s.3 as f64).sqrt()).fold(f64::NEG_INFINITY, f64::max);
         let n = mean.len();
         Self { global, spread, outliers: outliers as f64 / n.max(1) as f64, n }
     }
@@ -97,21 +94,13 @@ impl ZTest {
 /// Welch's t statistic of two means with their variances and sample counts.
 pub fn welch_t(mean_a: f64, var_a: f64, n_a: u64, mean_b: f64, var_b: f64, n_b: u64) -> f64 {
     let se2 = var_a / n_a as f64 + var_b / n_b as f64;
-    if se2 <= 0.0 {
-        if mean_a == mean_b { 0.0 } else { f64::INFINITY }
-    } else {
-        (mean_a - mean_b) / se2.sqrt()
-    }
+    if se2 <= 0.0 { if mean_a == mean_b { 0.0 } else { f64::INFINITY } } else { (mean_a - mean_b) / se2.sqrt() }
 }
 
 /// Root mean square difference of two equally sized images.
 pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
     assert_eq!(a.len(), b.len(), "image sizes differ");
-    let sum: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
-        .sum();
+    let sum: f64 = a.iter().zip(b).map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2)).sum();
     (sum / a.len().max(1) as f64).sqrt()
 }
 
@@ -153,28 +142,16 @@ mod tests {
     fn z_test_accepts_unbiased_and_rejects_biased_bernoulli() {
         let (w, h, frames) = (40usize, 30usize, 256u32);
         let mut rng = SplitMix64::new(42);
-        let p: Vec<f64> = (0..w * h)
-            .map(|_| 0.2 + 0.6 * f64::from(rng.next_f32()))
-            .collect();
-        let run = |bias: &dyn Fn(usize) -> f64,
-                   frames: u32,
-                   rng: &mut SplitMix64|
-         -> (Vec<f32>, Vec<f32>) {
+        let p: Vec<f64> = (0..w * h).map(|_| 0.2 + 0.6 * f64::from(rng.next_f32())).collect();
+        let run = |bias: &dyn Fn(usize) -> f64, frames: u32, rng: &mut SplitMix64| -> (Vec<f32>, Vec<f32>) {
             let mut acc = vec![Welford::default(); w * h];
             for (i, a) in acc.iter_mut().enumerate() {
                 let q = (p[i] * bias(i)).clamp(0.0, 1.0);
                 for _ in 0..frames {
-                    a.push(if f64::from(unit_f32(rng.next_u64() as u32)) < q {
-                        1.0
-                    } else {
-                        0.0
-                    });
+                    a.push(if f64::from(unit_f32(rng.next_u64() as u32)) < q { 1.0 } else { 0.0 });
                 }
             }
-            (
-                acc.iter().map(|a| a.mean as f32).collect(),
-                acc.iter().map(|a| a.variance() as f32).collect(),
-            )
+            (acc.iter().map(|a| a.mean as f32).collect(), acc.iter().map(|a| a.variance() as f32).collect())
         };
         let exact: Vec<f32> = p.iter().map(|&v| v as f32).collect();
         let test = |bias: &dyn Fn(usize) -> f64, rng: &mut SplitMix64| {
@@ -186,10 +163,7 @@ mod tests {
         assert!(unbiased.passes() && unbiased.global < 3.0, "{unbiased:?}");
         let low = test(&|_| 0.99, &mut rng);
         assert!(!low.passes() && low.global > 4.0, "{low:?}");
-        let checker = test(
-            &|i| if (i % w + i / w) % 2 == 0 { 1.05 } else { 0.95 },
-            &mut rng,
-        );
+        let checker = test(&|i| if (i % w + i / w) % 2 == 0 { 1.05 } else { 0.95 }, &mut rng);
         assert!(!checker.passes() && checker.spread > 4.0, "{checker:?}");
     }
 }

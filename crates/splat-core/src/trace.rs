@@ -71,16 +71,10 @@ pub enum Method {
 
 impl Method {
     /// The k-buffer with the vk defaults.
-    pub const KBUFFER: Method = Method::KBuffer {
-        k: DEFAULT_K,
-        max_passes: DEFAULT_MAX_PASSES,
-        min_transmittance: DEFAULT_MIN_TRANSMITTANCE,
-    };
+    pub const KBUFFER: Method =
+        Method::KBuffer { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES, min_transmittance: DEFAULT_MIN_TRANSMITTANCE };
     /// The stochastic pass with the vk defaults.
-    pub const STOCHASTIC_PASS: Method = Method::StochasticPass {
-        k: DEFAULT_K,
-        max_passes: DEFAULT_MAX_PASSES,
-    };
+    pub const STOCHASTIC_PASS: Method = Method::StochasticPass { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES };
 
     /// Whether frames differ (the method draws random decisions).
     pub fn is_stochastic(&self) -> bool {
@@ -97,16 +91,14 @@ impl Method {
     pub fn validate(&self) -> Result<(), RenderError> {
         let bad = |m: String| Err(RenderError::Settings(m));
         match *self {
-            Method::KBuffer { k, .. }
-            | Method::StochasticPass { k, .. }
-            | Method::DepthSampling { k }
+            Method::KBuffer { k, .. } | Method::StochasticPass { k, .. } | Method::DepthSampling { k }
                 if !(1..=MAX_SLOTS).contains(&k) =>
             {
                 bad(format!("k = {k} is outside 1..={MAX_SLOTS}"))
             }
-            Method::StochasticN { n, m } if !(1..=MAX_SLOTS as u32).contains(&n) || m == 0 => bad(
-                format!("stochastic-n needs 1 ≤ n ≤ {MAX_SLOTS} and m ≥ 1 (got m = {m}, n = {n})"),
-            ),
+            Method::StochasticN { n, m } if !(1..=MAX_SLOTS as u32).contains(&n) || m == 0 => {
+                bad(format!("stochastic-n needs 1 ≤ n ≤ {MAX_SLOTS} and m ≥ 1 (got m = {m}, n = {n})"))
+            }
             _ => Ok(()),
         }
     }
@@ -168,12 +160,7 @@ struct Slot {
 }
 
 impl Slot {
-    const EMPTY: Slot = Slot {
-        t: f32::INFINITY,
-        id: u32::MAX,
-        leaf: 0,
-        alpha: 0.0,
-    };
+    const EMPTY: Slot = Slot { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
 
     /// Strict (t, id) order: distance, ties by particle id, whatever the traversal order.
     #[inline]
@@ -191,11 +178,7 @@ struct KBuf {
 
 impl KBuf {
     fn new(cap: usize) -> Self {
-        Self {
-            slots: [Slot::EMPTY; MAX_SLOTS],
-            len: 0,
-            cap,
-        }
+        Self { slots: [Slot::EMPTY; MAX_SLOTS], len: 0, cap }
     }
 
     fn is_full(&self) -> bool {
@@ -204,11 +187,7 @@ impl KBuf {
 
     /// The last kept hit (the farthest).
     fn last(&self) -> Slot {
-        if self.len == 0 {
-            Slot::EMPTY
-        } else {
-            self.slots[self.len - 1]
-        }
+        if self.len == 0 { Slot::EMPTY } else { self.slots[self.len - 1] }
     }
 
     /// Whether a hit at (t, id) would be kept.
@@ -218,11 +197,7 @@ impl KBuf {
 
     /// Insert, dropping the farthest when full (insertion sort, as the vk any-hit shader does).
     fn insert(&mut self, s: Slot) {
-        let mut i = if self.is_full() {
-            self.len - 1
-        } else {
-            self.len
-        };
+        let mut i = if self.is_full() { self.len - 1 } else { self.len };
         if !self.is_full() {
             self.len += 1;
         }
@@ -249,13 +224,8 @@ struct Integrator {
 }
 
 impl Integrator {
-    const START: Integrator = Integrator {
-        radiance: DVec3::ZERO,
-        normal: DVec3::ZERO,
-        transmittance: 1.0,
-        depth: None,
-        farthest: None,
-    };
+    const START: Integrator =
+        Integrator { radiance: DVec3::ZERO, normal: DVec3::ZERO, transmittance: 1.0, depth: None, farthest: None };
 
     fn add(&mut self, h: &ShadedHit, iso: f32) {
         let alpha = f64::from(h.alpha);
@@ -287,25 +257,11 @@ impl<'a> TraceScene<'a> {
     pub fn new(scene: &'a Scene, settings: RenderSettings) -> Result<Self, RenderError> {
         validate_scene(scene, &settings)?;
         let cutoff = settings.kernel.cutoff;
-        let boxes: Vec<Aabb> = scene
-            .particles
-            .iter()
-            .map(|p| padded(p.aabb(cutoff)))
-            .collect();
+        let boxes: Vec<Aabb> = scene.particles.iter().map(|p| padded(p.aabb(cutoff))).collect();
         let bvh = Bvh::build(&boxes);
-        let prims = bvh
-            .order
-            .iter()
-            .map(|&i| PreparedParticle::new(&scene.particles[i as usize]))
-            .collect();
+        let prims = bvh.order.iter().map(|&i| PreparedParticle::new(&scene.particles[i as usize])).collect();
         let ids = bvh.order.clone();
-        Ok(Self {
-            scene,
-            settings,
-            bvh,
-            prims,
-            ids,
-        })
+        Ok(Self { scene, settings, bvh, prims, ids })
     }
 
     /// The settings.
@@ -325,77 +281,38 @@ impl<'a> TraceScene<'a> {
 
     /// The ray with the settings' range.
     pub fn clip(&self, ray: Ray) -> Ray {
-        Ray {
-            t_min: self.settings.t_min,
-            t_max: self.settings.t_max,
-            ..ray
-        }
+        Ray { t_min: self.settings.t_min, t_max: self.settings.t_max, ..ray }
     }
 
     #[inline]
     fn hit(&self, leaf: u32, ray: &Ray) -> Option<Hit> {
         let s = &self.settings;
-        intersect(
-            &self.prims[leaf as usize],
-            self.ids[leaf as usize],
-            ray,
-            &s.kernel,
-            s.hit_distance,
-        )
+        intersect(&self.prims[leaf as usize], self.ids[leaf as usize], ray, &s.kernel, s.hit_distance)
     }
 
     fn shade(&self, leaf: u32, t: f32, alpha: f32, ray: &Ray) -> ShadedHit {
-        let hit = Hit {
-            t,
-            alpha,
-            index: self.ids[leaf as usize],
-        };
-        shade_hit(
-            self.scene,
-            &self.prims[leaf as usize],
-            hit,
-            ray,
-            &self.settings,
-        )
+        let hit = Hit { t, alpha, index: self.ids[leaf as usize] };
+        shade_hit(self.scene, &self.prims[leaf as usize], hit, ray, &self.settings)
     }
 
     /// A shaded pick seen as an opaque sample.
     fn opaque_sample(&self, leaf: u32, t: f32, ray: &Ray) -> Sample {
         let h = self.shade(leaf, t, 1.0, ray);
-        Sample {
-            color: h.color.as_dvec3(),
-            alpha: 1.0,
-            depth: Some(t),
-            normal: h.normal,
-        }
+        Sample { color: h.color.as_dvec3(), alpha: 1.0, depth: Some(t), normal: h.normal }
     }
 
     fn background_sample(&self) -> Sample {
-        Sample {
-            color: self.settings.background.as_dvec3(),
-            alpha: 0.0,
-            depth: None,
-            normal: Vec3::ZERO,
-        }
+        Sample { color: self.settings.background.as_dvec3(), alpha: 0.0, depth: None, normal: Vec3::ZERO }
     }
 
     /// One sample of `method` for `ray` (already clipped to the settings' range).
     pub fn sample(&self, method: &Method, ray: &Ray, decide: &impl Decide) -> Sample {
         match *method {
             Method::Exact => self.exact(ray),
-            Method::KBuffer {
-                k,
-                max_passes,
-                min_transmittance,
-            } => self.kbuffer(ray, k, max_passes, min_transmittance),
+            Method::KBuffer { k, max_passes, min_transmittance } => self.kbuffer(ray, k, max_passes, min_transmittance),
             Method::Stochastic => self.stochastic(ray, decide, 0),
             Method::StochasticN { m, n } => {
-                let mut sum = Sample {
-                    color: DVec3::ZERO,
-                    alpha: 0.0,
-                    depth: None,
-                    normal: Vec3::ZERO,
-                };
+                let mut sum = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO };
                 for pass in 0..m {
                     let s = self.stochastic_n(ray, decide, n as usize, pass * n);
                     sum.color += s.color;
@@ -408,9 +325,7 @@ impl<'a> TraceScene<'a> {
                 sum.alpha /= f64::from(m);
                 sum
             }
-            Method::StochasticPass { k, max_passes } => {
-                self.stochastic_pass(ray, decide, k, max_passes)
-            }
+            Method::StochasticPass { k, max_passes } => self.stochastic_pass(ray, decide, k, max_passes),
             Method::DepthSampling { k } => self.depth_sampling(ray, decide, k),
             Method::Opaque => self.opaque(ray),
         }
@@ -457,12 +372,7 @@ impl<'a> TraceScene<'a> {
             {
                 return;
             }
-            buf.insert(Slot {
-                t: h.t,
-                id,
-                leaf,
-                alpha: h.alpha,
-            });
+            buf.insert(Slot { t: h.t, id, leaf, alpha: h.alpha });
             if buf.is_full() {
                 *t_max = buf.last().t;
             }
@@ -522,37 +432,18 @@ impl<'a> TraceScene<'a> {
             if !Slot::before(h.t, id, best.t, best.id) {
                 return;
             }
-            let u = if early {
-                u
-            } else {
-                decide.particle(id, slot, ray.at(h.t))
-            };
+            let u = if early { u } else { decide.particle(id, slot, ray.at(h.t)) };
             if u < h.alpha {
-                best = Slot {
-                    t: h.t,
-                    id,
-                    leaf,
-                    alpha: h.alpha,
-                };
+                best = Slot { t: h.t, id, leaf, alpha: h.alpha };
                 *t_max = h.t;
             }
         });
-        if best.id == u32::MAX {
-            self.background_sample()
-        } else {
-            self.opaque_sample(best.leaf, best.t, ray)
-        }
+        if best.id == u32::MAX { self.background_sample() } else { self.opaque_sample(best.leaf, best.t, ray) }
     }
 
     /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
     /// `first_slot..first_slot + n`; the traversal is clipped at the farthest slot's hit.
-    pub fn stochastic_n(
-        &self,
-        ray: &Ray,
-        decide: &impl Decide,
-        n: usize,
-        first_slot: u32,
-    ) -> Sample {
+    pub fn stochastic_n(&self, ray: &Ray, decide: &impl Decide, n: usize, first_slot: u32) -> Sample {
         let early = !decide.needs_position();
         let clamp = self.settings.kernel.alpha_clamp;
         let mut best = [Slot::EMPTY; MAX_SLOTS];
@@ -563,9 +454,9 @@ impl<'a> TraceScene<'a> {
             if early {
                 let bound = self.prims[leaf as usize].opacity.min(clamp);
                 let mut any = false;
-                for s in 0..n {
-                    u[s] = decide.particle(id, first_slot + s as u32, Vec3::ZERO);
-                    any |= u[s] < bound;
+                for (s, us) in u[..n].iter_mut().enumerate() {
+                    *us = decide.particle(id, first_slot + s as u32, Vec3::ZERO);
+                    any |= *us < bound;
                 }
                 if !any {
                     return;
@@ -573,23 +464,14 @@ impl<'a> TraceScene<'a> {
             }
             let Some(h) = self.hit(leaf, ray) else { return };
             let mut farthest = 0.0f32;
-            for s in 0..n {
-                if Slot::before(h.t, id, best[s].t, best[s].id) {
-                    let us = if early {
-                        u[s]
-                    } else {
-                        decide.particle(id, first_slot + s as u32, ray.at(h.t))
-                    };
+            for (s, (b, &us)) in best[..n].iter_mut().zip(&u[..n]).enumerate() {
+                if Slot::before(h.t, id, b.t, b.id) {
+                    let us = if early { us } else { decide.particle(id, first_slot + s as u32, ray.at(h.t)) };
                     if us < h.alpha {
-                        best[s] = Slot {
-                            t: h.t,
-                            id,
-                            leaf,
-                            alpha: h.alpha,
-                        };
+                        *b = Slot { t: h.t, id, leaf, alpha: h.alpha };
                     }
                 }
-                farthest = farthest.max(best[s].t);
+                farthest = farthest.max(b.t);
             }
             *t_max = farthest.min(ray.t_max);
         });
@@ -608,24 +490,13 @@ impl<'a> TraceScene<'a> {
         } else {
             self.opaque_sample(best[0].leaf, best[0].t, ray)
         };
-        Sample {
-            color: color / n as f64,
-            alpha: alpha / n as f64,
-            depth: first.depth,
-            normal: first.normal,
-        }
+        Sample { color: color / n as f64, alpha: alpha / n as f64, depth: first.depth, normal: first.normal }
     }
 
     /// vk stochastic pass: each pass integrates its K sorted hits from T = 1; it is accepted
     /// with probability O = 1 − T_pass and returns L_pass / O, else it is discarded and the
     /// next pass starts behind it. E = Σⱼ (Πᵢ<ⱼ Tᵢ) Lⱼ + (Π Tⱼ) background: Eq. 3 exactly.
-    pub fn stochastic_pass(
-        &self,
-        ray: &Ray,
-        decide: &impl Decide,
-        k: usize,
-        max_passes: u32,
-    ) -> Sample {
+    pub fn stochastic_pass(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> Sample {
         let iso = self.settings.iso_threshold;
         let mut after = (ray.t_min, u32::MAX);
         for pass in 0..max_passes {
@@ -662,10 +533,7 @@ impl<'a> TraceScene<'a> {
         let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept));
         let mut acc = Integrator::START;
         for s in buf.as_slice() {
-            acc.add(
-                &self.shade(s.leaf, s.t, s.alpha, ray),
-                self.settings.iso_threshold,
-            );
+            acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), self.settings.iso_threshold);
         }
         Sample {
             color: acc.radiance + acc.transmittance * self.settings.background.as_dvec3(),
@@ -690,12 +558,7 @@ impl<'a> TraceScene<'a> {
             let t = (-b - disc.sqrt()) / a;
             let id = self.ids[leaf as usize];
             if t > ray.t_min && t < ray.t_max && Slot::before(t, id, best.t, best.id) {
-                best = Slot {
-                    t,
-                    id,
-                    leaf,
-                    alpha: 1.0,
-                };
+                best = Slot { t, id, leaf, alpha: 1.0 };
                 *t_max = t;
             }
         });
@@ -704,22 +567,14 @@ impl<'a> TraceScene<'a> {
         }
         let p = &self.scene.particles[best.id as usize];
         let color = sh::eval(&p.sh, self.scene.sh_degree, ray.dir).as_dvec3();
-        Sample {
-            color,
-            alpha: 1.0,
-            depth: Some(best.t),
-            normal: Vec3::ZERO,
-        }
+        Sample { color, alpha: 1.0, depth: Some(best.t), normal: Vec3::ZERO }
     }
 }
 
 /// Pad a box so that f32 rounding in the hit test cannot place a hit outside it.
 pub fn padded(b: Aabb) -> Aabb {
     let pad = 1e-4 * (b.max - b.min).max(Vec3::splat(1e-6)) + Vec3::splat(1e-6);
-    Aabb {
-        min: b.min - pad,
-        max: b.max + pad,
-    }
+    Aabb { min: b.min - pad, max: b.max + pad }
 }
 
 /// How frames are drawn: how many, from which seed, with which generator.
@@ -735,11 +590,7 @@ pub struct Frames {
 
 impl Default for Frames {
     fn default() -> Self {
-        Self {
-            count: 1,
-            seed: 0,
-            rng: crate::rng::RngScheme::Hash,
-        }
+        Self { count: 1, seed: 0, rng: crate::rng::RngScheme::Hash }
     }
 }
 
@@ -758,7 +609,7 @@ pub struct TraceOutput {
     pub normal: crate::image::Image,
 }
 
-/// Render `frames.count` frames of `method` through pixel centres and accumulate mean and
+/// Render `frames.count` frames of `method` (one for a deterministic method) through pixel centres and accumulate mean and
 /// per-frame variance per pixel in f64 (Welford). Each pixel loops over its frames, so the
 /// result does not depend on the thread count. `progress` receives finished pixel counts.
 pub fn render_frames(
@@ -778,16 +629,11 @@ pub fn render_frames(
     let (tiles_x, tiles_y) = (camera.width.div_ceil(TILE), camera.height.div_ceil(TILE));
     let tile_rect = |tile: u32| {
         let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-        (
-            x0,
-            y0,
-            (x0 + TILE).min(camera.width),
-            (y0 + TILE).min(camera.height),
-        )
+        (x0, y0, (x0 + TILE).min(camera.width), (y0 + TILE).min(camera.height))
     };
-    let keys: Vec<u32> = (0..frames.count)
-        .map(|f| crate::rng::frame_key(frames.seed, f))
-        .collect();
+    // A deterministic method gives the same sample every frame: one frame is the answer.
+    let count = if method.is_stochastic() { frames.count } else { 1 };
+    let keys: Vec<u32> = (0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect();
     let render_tile = |&tile: &u32| {
         let (x0, y0, x1, y1) = tile_rect(tile);
         let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
@@ -798,10 +644,7 @@ pub fn render_frames(
                 let mut first = None;
                 for &key in &keys {
                     let s = trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng));
-                    for (a, v) in acc
-                        .iter_mut()
-                        .zip([s.color.x, s.color.y, s.color.z, s.alpha])
-                    {
+                    for (a, v) in acc.iter_mut().zip([s.color.x, s.color.y, s.color.z, s.alpha]) {
                         a.push(v);
                     }
                     first.get_or_insert(s);
@@ -838,13 +681,8 @@ pub fn render_frames(
     let results: Vec<Vec<[f32; 11]>> = tiles.iter().map(render_tile).collect();
     let (w, h) = (camera.width, camera.height);
     let image = |c| crate::image::Image::filled(w, h, c, 0.0);
-    let mut out = TraceOutput {
-        mean: image(3),
-        variance: image(3),
-        alpha: image(1),
-        depth: image(1),
-        normal: image(3),
-    };
+    let mut out =
+        TraceOutput { mean: image(3), variance: image(3), alpha: image(1), depth: image(1), normal: image(3) };
     for (tile, values) in results.iter().enumerate() {
         let (x0, y0, x1, y1) = tile_rect(tile as u32);
         let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));

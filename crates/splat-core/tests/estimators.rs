@@ -22,18 +22,10 @@ impl Decide for Outcomes {
         false
     }
     fn particle(&self, id: u32, slot: u32, _: Vec3) -> f32 {
-        if self.accept.get(&(id, slot)).copied().unwrap_or(false) {
-            0.0
-        } else {
-            0.995
-        }
+        if self.accept.get(&(id, slot)).copied().unwrap_or(false) { 0.0 } else { 0.995 }
     }
     fn pass(&self, pass: u32) -> f32 {
-        if self.accept_pass == Some(pass) {
-            0.0
-        } else {
-            1.0
-        }
+        if self.accept_pass == Some(pass) { 0.0 } else { 1.0 }
     }
 }
 
@@ -45,47 +37,24 @@ fn stack(opacities: &[f32], offsets: &[(f32, f32)], colors: &[[f32; 3]]) -> (Sce
             let z = 1.0 + ((i * 7) % n) as f32 * 0.5; // BVH order differs from depth order
             let mean = Vec3::new(offsets[i].0, offsets[i].1, z);
             let tilt = Quat::from_rotation_x(0.3 * offsets[i].0);
-            Particle::with_rgb(
-                mean,
-                Vec3::new(0.6, 0.6, 0.02),
-                tilt,
-                opacities[i],
-                Vec3::from(colors[i]),
-            )
+            Particle::with_rgb(mean, Vec3::new(0.6, 0.6, 0.02), tilt, opacities[i], Vec3::from(colors[i]))
         })
         .collect();
-    (
-        Scene {
-            particles,
-            sh_degree: 0,
-        },
-        Ray::new(Vec3::new(0.0, 0.0, -1.0), Vec3::Z),
-    )
+    (Scene { particles, sh_degree: 0 }, Ray::new(Vec3::new(0.0, 0.0, -1.0), Vec3::Z))
 }
 
 fn settings() -> RenderSettings {
-    RenderSettings {
-        background: Vec3::new(0.2, 0.3, 0.9),
-        ..Default::default()
-    }
+    RenderSettings { background: Vec3::new(0.2, 0.3, 0.9), ..Default::default() }
 }
 
 /// The particles the ray hits, with their alphas.
 fn hits(scene: &Scene, ray: &Ray) -> Vec<(u32, f64)> {
     let tracer = Tracer::new(scene, settings()).unwrap();
-    (0..scene.particles.len() as u32)
-        .filter_map(|i| tracer.shade(i, ray).map(|h| (i, f64::from(h.alpha))))
-        .collect()
+    (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray).map(|h| (i, f64::from(h.alpha)))).collect()
 }
 
 /// E[sample] over independent Bernoulli(α) decisions of every hit particle in `slots` slots.
-fn expectation(
-    trace: &TraceScene,
-    method: &Method,
-    ray: &Ray,
-    hits: &[(u32, f64)],
-    slots: u32,
-) -> DVec3 {
+fn expectation(trace: &TraceScene, method: &Method, ray: &Ray, hits: &[(u32, f64)], slots: u32) -> DVec3 {
     let bits = hits.len() * slots as usize;
     assert!(bits <= 16);
     let mut sum = DVec3::ZERO;
@@ -94,9 +63,7 @@ fn expectation(
         let mut p = 1.0;
         for (b, &(id, alpha)) in hits.iter().cycle().take(bits).enumerate() {
             let accepted = mask >> b & 1 == 1;
-            outcomes
-                .accept
-                .insert((id, b as u32 / hits.len() as u32), accepted);
+            outcomes.accept.insert((id, b as u32 / hits.len() as u32), accepted);
             p *= if accepted { alpha } else { 1.0 - alpha };
         }
         sum += p * trace.sample(method, ray, &outcomes).color;
@@ -104,7 +71,10 @@ fn expectation(
     sum
 }
 
-fn stacks(max: usize) -> impl Strategy<Value = (Vec<f32>, Vec<(f32, f32)>, Vec<[f32; 3]>)> {
+/// Opacities, (x, y) offsets and colours of a stack of discs.
+type Stack = (Vec<f32>, Vec<(f32, f32)>, Vec<[f32; 3]>);
+
+fn stacks(max: usize) -> impl Strategy<Value = Stack> {
     (2..=max).prop_flat_map(|n| {
         (
             prop::collection::vec(0.05f32..1.0, n),
@@ -202,12 +172,7 @@ fn depth_sampling_is_rejected_by_the_same_enumeration() {
     let (scene, ray) = stack(
         &[0.6, 0.5, 0.7, 0.4],
         &[(0.0, 0.0); 4],
-        &[
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [1.0, 1.0, 0.0],
-        ],
+        &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]],
     );
     let trace = TraceScene::new(&scene, settings()).unwrap();
     let exact = trace.exact(&ray).color;

@@ -5,26 +5,12 @@ use approx::assert_relative_eq;
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 use splat_core::composite::{ShadedHit, composite, sort_front_to_back};
-use splat_core::estimator::{
-    binary_opacity_estimate, closest_accepted, expectation_by_enumeration,
-};
+use splat_core::estimator::{binary_opacity_estimate, closest_accepted, expectation_by_enumeration};
 
 /// A hit with bounded, finite fields (no default float strategies: they produce NaN and Inf).
 fn hit(index: u32) -> impl Strategy<Value = ShadedHit> {
-    (
-        0.01f32..100.0,
-        0.0f32..=0.99,
-        0.0f32..1.0,
-        0.0f32..1.0,
-        0.0f32..1.0,
-    )
-        .prop_map(move |(t, alpha, r, g, b)| ShadedHit {
-            t,
-            alpha,
-            color: Vec3::new(r, g, b),
-            normal: Vec3::Z,
-            index,
-        })
+    (0.01f32..100.0, 0.0f32..=0.99, 0.0f32..1.0, 0.0f32..1.0, 0.0f32..1.0)
+        .prop_map(move |(t, alpha, r, g, b)| ShadedHit { t, alpha, color: Vec3::new(r, g, b), normal: Vec3::Z, index })
 }
 
 /// 1..=max hits with distinct indices, in random (unsorted, "BVH") order.
@@ -98,32 +84,16 @@ proptest! {
 /// that BVH order is not depth order) is biased, and the same comparison rejects it.
 #[test]
 fn enumeration_rejects_first_accepted_in_list_order() {
-    let h = |t: f32, alpha: f32, c: f32, index: u32| ShadedHit {
-        t,
-        alpha,
-        color: Vec3::splat(c),
-        normal: Vec3::Z,
-        index,
-    };
-    let hs = [
-        h(3.0, 0.6, 0.9, 0),
-        h(1.0, 0.5, 0.1, 1),
-        h(2.0, 0.4, 0.5, 2),
-    ];
+    let h =
+        |t: f32, alpha: f32, c: f32, index: u32| ShadedHit { t, alpha, color: Vec3::splat(c), normal: Vec3::Z, index };
+    let hs = [h(3.0, 0.6, 0.9, 0), h(1.0, 0.5, 0.1, 1), h(2.0, 0.4, 0.5, 2)];
     let bg = Vec3::ZERO;
-    let biased = expectation_by_enumeration(&hs, |acc| {
-        acc.iter()
-            .position(|&a| a)
-            .map_or(bg, |i| hs[i].color)
-            .as_dvec3()
-    });
+    let biased =
+        expectation_by_enumeration(&hs, |acc| acc.iter().position(|&a| a).map_or(bg, |i| hs[i].color).as_dvec3());
     let unbiased = expectation_by_enumeration(&hs, |acc| binary_opacity_estimate(&hs, acc, bg));
     let exact = eq3(&hs, bg);
     assert!((unbiased - exact).abs().max_element() < 1e-12);
-    assert!(
-        (biased - exact).abs().max_element() > 0.05,
-        "biased {biased} vs exact {exact}"
-    );
+    assert!((biased - exact).abs().max_element() > 0.05, "biased {biased} vs exact {exact}");
     // And the closest accepted hit is the one at t = 1 whenever it is accepted.
     assert_eq!(closest_accepted(&hs, &[true, true, true]), Some(1));
 }

@@ -42,11 +42,7 @@ impl CameraEntry {
             [r[0][2] as f32, r[1][2] as f32, r[2][2] as f32],
         ]);
         let w2c = c2w.transpose();
-        let centre = Vec3::new(
-            self.position[0] as f32,
-            self.position[1] as f32,
-            self.position[2] as f32,
-        );
+        let centre = Vec3::new(self.position[0] as f32, self.position[1] as f32, self.position[2] as f32);
         Camera::from_intrinsics(
             self.width,
             self.height,
@@ -87,18 +83,12 @@ pub fn read_cameras(path: &Path) -> Result<Vec<Camera>, Error> {
 pub fn parse_cameras(bytes: &[u8]) -> Result<Vec<Camera>, ErrorKind> {
     let entries: Vec<CameraEntry> = serde_json::from_slice(bytes)?;
     if entries.is_empty() {
-        return Err(ErrorKind::Camera {
-            index: 0,
-            message: "the file lists no camera".into(),
-        });
+        return Err(ErrorKind::Camera { index: 0, message: "the file lists no camera".into() });
     }
     entries
         .iter()
         .enumerate()
-        .map(|(index, e)| {
-            e.to_camera()
-                .map_err(|message| ErrorKind::Camera { index, message })
-        })
+        .map(|(index, e)| e.to_camera().map_err(|message| ErrorKind::Camera { index, message }))
         .collect()
 }
 
@@ -109,7 +99,6 @@ pub fn write_cameras(path: &Path, cameras: &[Camera]) -> Result<(), Error> {
         .enumerate()
         .map(|(i, c)| CameraEntry::from_camera(i as i64, &format!("view_{i:04}"), c))
         .collect();
-    let json =
-        serde_json::to_string_pretty(&entries).map_err(|e| Error::new(path, ErrorKind::Json(e)))?;
+    let json = serde_json::to_string_pretty(&entries).map_err(|e| Error::new(path, ErrorKind::Json(e)))?;
     std::fs::write(path, json + "\n").map_err(|e| Error::new(path, ErrorKind::Io(e)))
 }

@@ -16,10 +16,7 @@ pub struct Error {
 impl Error {
     /// An error about `path`.
     pub fn new(path: impl AsRef<Path>, kind: ErrorKind) -> Self {
-        Self {
-            path: path.as_ref().to_path_buf(),
-            kind,
-        }
+        Self { path: path.as_ref().to_path_buf(), kind }
     }
 }
 
@@ -77,9 +74,7 @@ pub enum ErrorKind {
         first_incomplete_offset: u64,
     },
     /// An ASCII body ends before the declared count.
-    #[error(
-        "body is truncated: vertex {index} (line {line}) is missing; the header declares {count}"
-    )]
+    #[error("body is truncated: vertex {index} (line {line}) is missing; the header declares {count}")]
     Truncated {
         /// Missing vertex.
         index: u64,

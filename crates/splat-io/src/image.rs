@@ -21,20 +21,12 @@ pub enum ImageFormat {
 impl ImageFormat {
     /// The format named by a path's extension.
     pub fn from_path(path: &Path) -> Result<Self, Error> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
         match ext.as_deref() {
             Some("png") => Ok(Self::Png),
             Some("exr") => Ok(Self::Exr),
             Some("npy") => Ok(Self::Npy),
-            _ => Err(Error::new(
-                path,
-                ErrorKind::UnknownExtension {
-                    expected: ".png, .exr or .npy",
-                },
-            )),
+            _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".png, .exr or .npy" })),
         }
     }
 }
@@ -45,19 +37,13 @@ pub fn write_image(path: &Path, image: &Image) -> Result<(), Error> {
     match ImageFormat::from_path(path)? {
         ImageFormat::Png => write_png(path, image),
         ImageFormat::Exr => write_exr(path, image).map_err(|e| err(e.to_string())),
-        ImageFormat::Npy => {
-            std::fs::write(path, encode_npy(image)).map_err(|e| Error::new(path, ErrorKind::Io(e)))
-        }
+        ImageFormat::Npy => std::fs::write(path, encode_npy(image)).map_err(|e| Error::new(path, ErrorKind::Io(e))),
     }
 }
 
 /// 8-bit value of a display-referred float: round(clamp(v, 0, 1) × 255), NaN → 0.
 pub fn to_u8(v: f32) -> u8 {
-    if v.is_nan() {
-        0
-    } else {
-        (v.clamp(0.0, 1.0) * 255.0).round() as u8
-    }
+    if v.is_nan() { 0 } else { (v.clamp(0.0, 1.0) * 255.0).round() as u8 }
 }
 
 /// The 8-bit pixels of an image with 1, 3 or 4 channels.
@@ -65,15 +51,9 @@ pub fn to_rgba8(image: &Image) -> image::DynamicImage {
     let (w, h) = (image.width(), image.height());
     let bytes: Vec<u8> = image.data().iter().map(|&v| to_u8(v)).collect();
     match image.channels() {
-        1 => image::DynamicImage::ImageLuma8(
-            image::GrayImage::from_raw(w, h, bytes).expect("size checked by Image"),
-        ),
-        3 => image::DynamicImage::ImageRgb8(
-            image::RgbImage::from_raw(w, h, bytes).expect("size checked by Image"),
-        ),
-        _ => image::DynamicImage::ImageRgba8(
-            image::RgbaImage::from_raw(w, h, bytes).expect("size checked by Image"),
-        ),
+        1 => image::DynamicImage::ImageLuma8(image::GrayImage::from_raw(w, h, bytes).expect("size checked by Image")),
+        3 => image::DynamicImage::ImageRgb8(image::RgbImage::from_raw(w, h, bytes).expect("size checked by Image")),
+        _ => image::DynamicImage::ImageRgba8(image::RgbaImage::from_raw(w, h, bytes).expect("size checked by Image")),
     }
 }
 
@@ -81,10 +61,7 @@ fn write_png(path: &Path, image: &Image) -> Result<(), Error> {
     if ![1, 3, 4].contains(&image.channels()) {
         return Err(Error::new(
             path,
-            ErrorKind::Image(format!(
-                "PNG needs 1, 3 or 4 channels, not {}",
-                image.channels()
-            )),
+            ErrorKind::Image(format!("PNG needs 1, 3 or 4 channels, not {}", image.channels())),
         ));
     }
     to_rgba8(image)
@@ -97,14 +74,9 @@ fn write_exr(path: &Path, image: &Image) -> exr::error::Result<()> {
     let size = (image.width() as usize, image.height() as usize);
     let at = |p: Vec2<usize>, c: usize| image.pixel(p.0 as u32, p.1 as u32)[c];
     match image.channels() {
-        1 => Image::from_channels(
-            size,
-            SpecificChannels::build()
-                .with_channel("Y")
-                .with_pixel_fn(|p| (at(p, 0),)),
-        )
-        .write()
-        .to_file(path),
+        1 => Image::from_channels(size, SpecificChannels::build().with_channel("Y").with_pixel_fn(|p| (at(p, 0),)))
+            .write()
+            .to_file(path),
         3 => write_rgb_file(path, size.0, size.1, |x, y| {
             let p = image.pixel(x as u32, y as u32);
             (p[0], p[1], p[2])
@@ -113,9 +85,7 @@ fn write_exr(path: &Path, image: &Image) -> exr::error::Result<()> {
             let p = image.pixel(x as u32, y as u32);
             (p[0], p[1], p[2], p[3])
         }),
-        n => Err(exr::error::Error::Invalid(
-            format!("{n} channels (expected 1, 3 or 4)").into(),
-        )),
+        n => Err(exr::error::Error::Invalid(format!("{n} channels (expected 1, 3 or 4)").into())),
     }
 }
 
@@ -130,10 +100,7 @@ pub fn encode_npy(image: &Image) -> Vec<u8> {
     // Magic (6) + version (2) + header length (2) + dict, padded with spaces to a multiple of 64
     // and ended by a newline.
     let unpadded = 10 + dict.len() + 1;
-    let header = format!(
-        "{dict}{}\n",
-        " ".repeat(unpadded.next_multiple_of(64) - unpadded)
-    );
+    let header = format!("{dict}{}\n", " ".repeat(unpadded.next_multiple_of(64) - unpadded));
     let mut out = Vec::with_capacity(10 + header.len() + 4 * image.data().len());
     out.extend(b"\x93NUMPY\x01\x00");
     out.extend((header.len() as u16).to_le_bytes());
@@ -157,27 +124,15 @@ pub fn decode_npy(bytes: &[u8]) -> Result<Image, String> {
     }
     let (len, start) = match bytes[6] {
         1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
+        2 | 3 if bytes.len() >= 12 => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
         v => return Err(format!("unsupported .npy version {v}")),
     };
-    let header = bytes
-        .get(start..start + len)
-        .ok_or("truncated .npy header")?;
+    let header = bytes.get(start..start + len).ok_or("truncated .npy header")?;
     let header = std::str::from_utf8(header).map_err(|_| "non-text .npy header")?;
     if !header.contains("'descr': '<f4'") || !header.contains("'fortran_order': False") {
-        return Err(format!(
-            "only little-endian f32 in C order is supported, header: {}",
-            header.trim()
-        ));
+        return Err(format!("only little-endian f32 in C order is supported, header: {}", header.trim()));
     }
-    let shape = header
-        .split("'shape': (")
-        .nth(1)
-        .and_then(|s| s.split(')').next())
-        .ok_or("no shape in .npy header")?;
+    let shape = header.split("'shape': (").nth(1).and_then(|s| s.split(')').next()).ok_or("no shape in .npy header")?;
     let dims: Vec<usize> = shape
         .split(',')
         .map(str::trim)
@@ -191,26 +146,14 @@ pub fn decode_npy(bytes: &[u8]) -> Result<Image, String> {
         _ => return Err(format!("expected 2 or 3 dimensions, found {}", dims.len())),
     };
     let body = &bytes[start + len..];
-    let n = h
-        .checked_mul(w)
-        .and_then(|v| v.checked_mul(c))
-        .ok_or("shape overflows")?;
+    let n = h.checked_mul(w).and_then(|v| v.checked_mul(c)).ok_or("shape overflows")?;
     if body.len() != n.checked_mul(4).ok_or("shape overflows")? {
-        return Err(format!(
-            "body has {} bytes, shape ({h}, {w}, {c}) needs {}",
-            body.len(),
-            4 * n
-        ));
+        return Err(format!("body has {} bytes, shape ({h}, {w}, {c}) needs {}", body.len(), 4 * n));
     }
-    let data = body
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
+    let data = body.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     let (w, h, c) = (u32::try_from(w), u32::try_from(h), u32::try_from(c));
     match (w, h, c) {
-        (Ok(w), Ok(h), Ok(c)) => {
-            Image::from_data(w, h, c, data).ok_or_else(|| "size mismatch".into())
-        }
+        (Ok(w), Ok(h), Ok(c)) => Image::from_data(w, h, c, data).ok_or_else(|| "size mismatch".into()),
         _ => Err("shape too large".into()),
     }
 }
@@ -219,21 +162,9 @@ pub fn decode_npy(bytes: &[u8]) -> Result<Image, String> {
 /// pixels with no depth (NaN) are black.
 pub fn depth_for_display(depth: &Image) -> Image {
     let finite = depth.data().iter().copied().filter(|v| v.is_finite());
-    let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
-        (lo.min(v), hi.max(v))
-    });
+    let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let range = (hi - lo).max(1e-12);
-    let data = depth
-        .data()
-        .iter()
-        .map(|&v| {
-            if v.is_finite() {
-                1.0 - 0.8 * (v - lo) / range
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let data = depth.data().iter().map(|&v| if v.is_finite() { 1.0 - 0.8 * (v - lo) / range } else { 0.0 }).collect();
     Image::from_data(depth.width(), depth.height(), depth.channels(), data).expect("same size")
 }
 

@@ -26,19 +26,11 @@ use std::path::Path;
 
 /// Read a scene, choosing the format by extension (`.ply` or `.splat`).
 pub fn read_scene(path: &Path) -> Result<Scene, Error> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("ply") => ply::read_ply(path),
         Some("splat") => splat::read_splat(path),
-        _ => Err(Error::new(
-            path,
-            ErrorKind::UnknownExtension {
-                expected: ".ply or .splat",
-            },
-        )),
+        _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply or .splat" })),
     }
 }
 

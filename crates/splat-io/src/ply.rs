@@ -61,11 +61,8 @@ pub fn parse_ply(bytes: &[u8], options: PlyOptions) -> Result<Scene, ErrorKind> 
         PlyFormat::Ascii => {
             let mut lines = Lines::new(body, header.lines);
             for index in 0..count {
-                let (line_no, line) = lines.next_nonblank().ok_or(ErrorKind::Truncated {
-                    index,
-                    line: lines.line,
-                    count,
-                })?;
+                let (line_no, line) =
+                    lines.next_nonblank().ok_or(ErrorKind::Truncated { index, line: lines.line, count })?;
                 parse_ascii_vertex(index, line_no, line, &header.properties, &mut values)?;
                 emit(index, &values)?;
             }
@@ -86,11 +83,7 @@ pub fn parse_ply(bytes: &[u8], options: PlyOptions) -> Result<Scene, ErrorKind> 
                 });
             }
             let big = header.format == PlyFormat::BinaryBigEndian;
-            for (index, record) in body
-                .chunks_exact(stride.max(1))
-                .take(count as usize)
-                .enumerate()
-            {
+            for (index, record) in body.chunks_exact(stride.max(1)).take(count as usize).enumerate() {
                 let mut at = 0;
                 for (v, p) in values.iter_mut().zip(&header.properties) {
                     *v = p.ty.read(&record[at..at + p.ty.size()], big);
@@ -100,10 +93,7 @@ pub fn parse_ply(bytes: &[u8], options: PlyOptions) -> Result<Scene, ErrorKind> 
             }
         }
     }
-    Ok(Scene {
-        particles,
-        sh_degree: layout.sh_degree,
-    })
+    Ok(Scene { particles, sh_degree: layout.sh_degree })
 }
 
 /// Vec capacity for `count` vertices that cannot exceed what the body could hold.
@@ -121,12 +111,7 @@ fn parse_ascii_vertex(
     let mut tokens = text.split_ascii_whitespace();
     let found = text.split_ascii_whitespace().count();
     if found != properties.len() {
-        return Err(ErrorKind::ValueCount {
-            index,
-            line,
-            found,
-            expected: properties.len(),
-        });
+        return Err(ErrorKind::ValueCount { index, line, found, expected: properties.len() });
     }
     for (v, p) in values.iter_mut().zip(properties) {
         let token = tokens.next().unwrap_or_default();
@@ -183,11 +168,7 @@ impl Scalar {
             ($t:ty, $n:literal) => {{
                 let mut a = [0u8; $n];
                 a.copy_from_slice(b);
-                f64::from(if big {
-                    <$t>::from_be_bytes(a)
-                } else {
-                    <$t>::from_le_bytes(a)
-                })
+                f64::from(if big { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) })
             }};
         }
         match self {
@@ -224,12 +205,7 @@ enum Slot {
 
 impl Slot {
     fn from_name(name: &str) -> Option<Self> {
-        let indexed = |prefix: &str, n: usize| {
-            name.strip_prefix(prefix)?
-                .parse::<usize>()
-                .ok()
-                .filter(|&i| i < n)
-        };
+        let indexed = |prefix: &str, n: usize| name.strip_prefix(prefix)?.parse::<usize>().ok().filter(|&i| i < n);
         Some(match name {
             "x" => Self::Position(0),
             "y" => Self::Position(1),
@@ -278,21 +254,13 @@ impl Header {
         let mut in_vertex = false;
         loop {
             if lines.offset > MAX_HEADER {
-                return Err(err(
-                    lines.line,
-                    format!("no end_header within the first {MAX_HEADER} bytes"),
-                ));
+                return Err(err(lines.line, format!("no end_header within the first {MAX_HEADER} bytes")));
             }
-            let (line, text) = lines
-                .next()
-                .ok_or_else(|| err(lines.line + 1, "file ends before end_header".into()))?;
+            let (line, text) = lines.next().ok_or_else(|| err(lines.line + 1, "file ends before end_header".into()))?;
             let words: Vec<&str> = text.split_ascii_whitespace().collect();
             if line == 1 {
                 if text.trim() != "ply" {
-                    return Err(err(
-                        1,
-                        "not a PLY file: the first line must be 'ply'".into(),
-                    ));
+                    return Err(err(1, "not a PLY file: the first line must be 'ply'".into()));
                 }
                 continue;
             }
@@ -316,26 +284,17 @@ impl Header {
                         continue;
                     }
                     if *name != "vertex" {
-                        return Err(err(
-                            line,
-                            format!("element '{name}' before 'vertex' is not supported"),
-                        ));
+                        return Err(err(line, format!("element '{name}' before 'vertex' is not supported")));
                     }
                     count =
-                        Some(n.parse::<u64>().map_err(|_| {
-                            err(line, format!("vertex count '{n}' is not a number"))
-                        })?);
+                        Some(n.parse::<u64>().map_err(|_| err(line, format!("vertex count '{n}' is not a number")))?);
                     in_vertex = true;
                 }
                 ["property", "list", ..] if in_vertex => {
-                    return Err(err(
-                        line,
-                        "list properties in the vertex element are not supported".into(),
-                    ));
+                    return Err(err(line, "list properties in the vertex element are not supported".into()));
                 }
                 ["property", ty, name] if in_vertex => {
-                    let ty = Scalar::from_name(ty)
-                        .ok_or_else(|| err(line, format!("unknown property type '{ty}'")))?;
+                    let ty = Scalar::from_name(ty).ok_or_else(|| err(line, format!("unknown property type '{ty}'")))?;
                     if properties.iter().any(|p| p.name == *name) {
                         return Err(err(line, format!("property '{name}' is declared twice")));
                     }
@@ -343,17 +302,10 @@ impl Header {
                         Some(slot) => slot,
                         None if options.allow_unknown_properties => Slot::Ignored,
                         None => {
-                            return Err(ErrorKind::UnknownProperty {
-                                line,
-                                name: name.to_string(),
-                            });
+                            return Err(ErrorKind::UnknownProperty { line, name: name.to_string() });
                         }
                     };
-                    properties.push(Property {
-                        name: name.to_string(),
-                        ty,
-                        slot,
-                    });
+                    properties.push(Property { name: name.to_string(), ty, slot });
                 }
                 ["property", ..] if count.is_none() => {
                     return Err(err(line, "property before any element".into()));
@@ -361,25 +313,13 @@ impl Header {
                 ["property", ..] => {}
                 ["end_header"] => break,
                 _ => {
-                    return Err(err(
-                        line,
-                        format!(
-                            "cannot parse '{}'",
-                            text.chars().take(60).collect::<String>()
-                        ),
-                    ));
+                    return Err(err(line, format!("cannot parse '{}'", text.chars().take(60).collect::<String>())));
                 }
             }
         }
         let format = format.ok_or_else(|| err(lines.line, "no 'format' line".into()))?;
         let count = count.ok_or_else(|| err(lines.line, "no 'element vertex' line".into()))?;
-        Ok(Self {
-            format,
-            count,
-            properties,
-            body_offset: lines.offset,
-            lines: lines.line,
-        })
+        Ok(Self { format, count, properties, body_offset: lines.offset, lines: lines.line })
     }
 }
 
@@ -412,10 +352,7 @@ impl Layout {
                 return Err(ErrorKind::MissingProperty(name.into()));
             }
         }
-        let rest = properties
-            .iter()
-            .filter(|p| matches!(p.slot, Slot::Rest(_)))
-            .count();
+        let rest = properties.iter().filter(|p| matches!(p.slot, Slot::Rest(_))).count();
         let sh_degree = match rest {
             0 => 0,
             9 => 1,
@@ -424,9 +361,7 @@ impl Layout {
             n => {
                 return Err(ErrorKind::Header {
                     line: 0,
-                    message: format!(
-                        "{n} f_rest_* properties: expected 0, 9, 24 or 45 (SH degree 0–3)"
-                    ),
+                    message: format!("{n} f_rest_* properties: expected 0, 9, 24 or 45 (SH degree 0–3)"),
                 });
             }
         };
@@ -437,12 +372,7 @@ impl Layout {
     }
 
     /// Build one particle from its property values, applying the 3DGS activations.
-    fn particle(
-        &self,
-        index: u64,
-        values: &[f64],
-        properties: &[Property],
-    ) -> Result<Particle, ErrorKind> {
+    fn particle(&self, index: u64, values: &[f64], properties: &[Property]) -> Result<Particle, ErrorKind> {
         let mut position = [0.0f64; 3];
         let mut dc = [0.0f64; 3];
         let mut rest = [0.0f64; 45];
@@ -454,11 +384,7 @@ impl Layout {
                 continue;
             }
             if !v.is_finite() {
-                return Err(ErrorKind::NonFinite {
-                    index,
-                    property: p.name.clone(),
-                    value: v,
-                });
+                return Err(ErrorKind::NonFinite { index, property: p.name.clone(), value: v });
             }
             match p.slot {
                 Slot::Position(i) => position[i] = v,
@@ -474,9 +400,8 @@ impl Layout {
         for (axis, (&raw, s)) in scale.iter().zip(&mut linear_scale).enumerate() {
             *s = raw.exp() as f32;
             if !(*s > 0.0 && s.is_finite() && (1.0 / (*s * *s)).is_finite()) {
-                let detail = format!(
-                    "scale_{axis} = {raw} gives exp(scale_{axis}) = {s}, which is not a usable positive scale"
-                );
+                let detail =
+                    format!("scale_{axis} = {raw} gives exp(scale_{axis}) = {s}, which is not a usable positive scale");
                 return Err(ErrorKind::BadScale { index, detail });
             }
         }
@@ -485,25 +410,16 @@ impl Layout {
         if norm == 0.0 || !norm.is_normal() {
             return Err(ErrorKind::ZeroQuaternion { index });
         }
-        let q = Quat::from_xyzw(
-            (x / norm) as f32,
-            (y / norm) as f32,
-            (z / norm) as f32,
-            (w / norm) as f32,
-        );
+        let q = Quat::from_xyzw((x / norm) as f32, (y / norm) as f32, (z / norm) as f32, (w / norm) as f32);
         let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
         sh[0] = vec3(dc);
         let per_channel = sh_coeff_count(self.sh_degree) - 1;
         for (k, c) in sh.iter_mut().enumerate().skip(1).take(per_channel) {
-            *c = Vec3::new(
-                rest[k - 1] as f32,
-                rest[per_channel + k - 1] as f32,
-                rest[2 * per_channel + k - 1] as f32,
-            );
+            *c = Vec3::new(rest[k - 1] as f32, rest[per_channel + k - 1] as f32, rest[2 * per_channel + k - 1] as f32);
         }
         let opacity = (1.0 / (1.0 + (-opacity).exp())) as f32;
-        let particle = Particle::new(vec3(position), Vec3::from(linear_scale), q, opacity, sh)
-            .map_err(|error| match error {
+        let particle =
+            Particle::new(vec3(position), Vec3::from(linear_scale), q, opacity, sh).map_err(|error| match error {
                 ParticleError::ZeroQuaternion => ErrorKind::ZeroQuaternion { index },
                 error => ErrorKind::Particle { index, error },
             })?;
@@ -524,11 +440,7 @@ struct Lines<'a> {
 
 impl<'a> Lines<'a> {
     fn new(bytes: &'a [u8], line: usize) -> Self {
-        Self {
-            bytes,
-            offset: 0,
-            line,
-        }
+        Self { bytes, offset: 0, line }
     }
 
     fn next(&mut self) -> Option<(usize, &'a str)> {
@@ -536,10 +448,7 @@ impl<'a> Lines<'a> {
             return None;
         }
         let rest = &self.bytes[self.offset..];
-        let end = rest
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(rest.len(), |i| i + 1);
+        let end = rest.iter().position(|&b| b == b'\n').map_or(rest.len(), |i| i + 1);
         self.offset += end;
         self.line += 1;
         let text = std::str::from_utf8(&rest[..end]).unwrap_or("\u{fffd}");
@@ -558,11 +467,8 @@ impl<'a> Lines<'a> {
 
 /// The PLY property names 3DGS writes, in its order, for an SH degree.
 fn property_names(sh_degree: u8) -> Vec<String> {
-    let mut names: Vec<String> = [
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ]
-    .map(String::from)
-    .to_vec();
+    let mut names: Vec<String> =
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].map(String::from).to_vec();
     names.extend((0..3 * (sh_coeff_count(sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
     names.push("opacity".into());
     names.extend((0..3).map(|i| format!("scale_{i}")));
@@ -573,9 +479,7 @@ fn property_names(sh_degree: u8) -> Vec<String> {
 /// Stored (pre-activation) values of a particle, in [`property_names`] order.
 fn stored_values(p: &Particle, sh_degree: u8) -> Vec<f32> {
     let per_channel = sh_coeff_count(sh_degree) - 1;
-    let mut v = vec![
-        p.mean.x, p.mean.y, p.mean.z, 0.0, 0.0, 0.0, p.sh[0].x, p.sh[0].y, p.sh[0].z,
-    ];
+    let mut v = vec![p.mean.x, p.mean.y, p.mean.z, 0.0, 0.0, 0.0, p.sh[0].x, p.sh[0].y, p.sh[0].z];
     for channel in 0..3 {
         v.extend(p.sh[1..=per_channel].iter().map(|c| c[channel]));
     }
@@ -596,10 +500,7 @@ pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
         PlyFormat::BinaryLittleEndian => "binary_little_endian",
         PlyFormat::BinaryBigEndian => "binary_big_endian",
     };
-    let mut out = format!(
-        "ply\nformat {format_name} 1.0\nelement vertex {}\n",
-        scene.particles.len()
-    );
+    let mut out = format!("ply\nformat {format_name} 1.0\nelement vertex {}\n", scene.particles.len());
     for name in &names {
         out += &format!("property float {name}\n");
     }
@@ -613,9 +514,7 @@ pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
                 bytes.extend(line.join(" ").bytes());
                 bytes.push(b'\n');
             }
-            PlyFormat::BinaryLittleEndian => {
-                values.iter().for_each(|v| bytes.extend(v.to_le_bytes()))
-            }
+            PlyFormat::BinaryLittleEndian => values.iter().for_each(|v| bytes.extend(v.to_le_bytes())),
             PlyFormat::BinaryBigEndian => values.iter().for_each(|v| bytes.extend(v.to_be_bytes())),
         }
     }

@@ -27,7 +27,7 @@ pub fn read_splat(path: &Path) -> Result<Scene, Error> {
 
 /// Parse the bytes of an antimatter15 `.splat` file.
 pub fn parse_splat(bytes: &[u8]) -> Result<Scene, ErrorKind> {
-    if bytes.len() % RECORD != 0 {
+    if !bytes.len().is_multiple_of(RECORD) {
         let index = (bytes.len() / RECORD) as u64;
         return Err(ErrorKind::SplatLength {
             len: bytes.len() as u64,
@@ -41,19 +41,11 @@ pub fn parse_splat(bytes: &[u8]) -> Result<Scene, ErrorKind> {
         .enumerate()
         .map(|(i, record)| decode(i as u64, record))
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(Scene {
-        particles,
-        sh_degree: 0,
-    })
+    Ok(Scene { particles, sh_degree: 0 })
 }
 
 fn f32_at(record: &[u8], i: usize) -> f32 {
-    f32::from_le_bytes([
-        record[4 * i],
-        record[4 * i + 1],
-        record[4 * i + 2],
-        record[4 * i + 3],
-    ])
+    f32::from_le_bytes([record[4 * i], record[4 * i + 1], record[4 * i + 2], record[4 * i + 3]])
 }
 
 fn decode(index: u64, record: &[u8]) -> Result<Particle, ErrorKind> {
@@ -62,11 +54,7 @@ fn decode(index: u64, record: &[u8]) -> Result<Particle, ErrorKind> {
     for (k, (value, name)) in v.iter_mut().zip(names).enumerate() {
         *value = f32_at(record, k);
         if !value.is_finite() {
-            return Err(ErrorKind::NonFinite {
-                index,
-                property: name.into(),
-                value: f64::from(*value),
-            });
+            return Err(ErrorKind::NonFinite { index, property: name.into(), value: f64::from(*value) });
         }
     }
     let scale = Vec3::new(v[3], v[4], v[5]);
@@ -78,19 +66,12 @@ fn decode(index: u64, record: &[u8]) -> Result<Particle, ErrorKind> {
             });
         }
     }
-    let q = record[28..32]
-        .iter()
-        .map(|&b| (f32::from(b) - 128.0) / 128.0)
-        .collect::<Vec<_>>();
+    let q = record[28..32].iter().map(|&b| (f32::from(b) - 128.0) / 128.0).collect::<Vec<_>>();
     if q.iter().all(|&c| c == 0.0) {
         return Err(ErrorKind::ZeroQuaternion { index });
     }
     let rotation = Quat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
-    let rgb = Vec3::new(
-        f32::from(record[24]),
-        f32::from(record[25]),
-        f32::from(record[26]),
-    ) / 255.0;
+    let rgb = Vec3::new(f32::from(record[24]), f32::from(record[25]), f32::from(record[26])) / 255.0;
     let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
     sh[0] = rgb_to_dc(rgb);
     let opacity = f32::from(record[27]) / 255.0;

@@ -26,11 +26,7 @@ fn assert_same_scene(a: &Scene, b: &Scene, eps: f32) {
 #[test]
 fn ply_round_trips_in_every_encoding() {
     let (scene, _) = scenes::cloud();
-    for format in [
-        PlyFormat::BinaryLittleEndian,
-        PlyFormat::BinaryBigEndian,
-        PlyFormat::Ascii,
-    ] {
+    for format in [PlyFormat::BinaryLittleEndian, PlyFormat::BinaryBigEndian, PlyFormat::Ascii] {
         let back = parse_ply(&encode_ply(&scene, format), PlyOptions::default()).unwrap();
         assert_same_scene(&scene, &back, 1e-5);
     }
@@ -65,9 +61,7 @@ fn cameras_round_trip_and_follow_the_inria_convention() {
     // The INRIA entry stores the centre and the camera-to-world rotation: its third row's
     // transposed column, i.e. rotation[k][2], is the forward axis.
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let fwd = (0..3)
-        .map(|k| json[0]["rotation"][k][2].as_f64().unwrap() as f32)
-        .collect::<Vec<_>>();
+    let fwd = (0..3).map(|k| json[0]["rotation"][k][2].as_f64().unwrap() as f32).collect::<Vec<_>>();
     assert!(Vec3::from_slice(&fwd).abs_diff_eq(camera.forward(), 1e-6));
 }
 
@@ -92,17 +86,15 @@ fn header(props: &[&str], count: usize, format: &str) -> String {
 }
 
 const PROPS: [&str; 14] = [
-    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-    "rot_0", "rot_1", "rot_2", "rot_3",
+    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2",
+    "rot_3",
 ];
 
 fn ascii(values: &[&str]) -> Vec<u8> {
     (header(&PROPS, 1, "ascii") + &values.join(" ") + "\n").into_bytes()
 }
 
-const GOOD: [&str; 14] = [
-    "0", "0", "0", "0", "0", "0", "0", "-1", "-1", "-1", "1", "0", "0", "0",
-];
+const GOOD: [&str; 14] = ["0", "0", "0", "0", "0", "0", "0", "-1", "-1", "-1", "1", "0", "0", "0"];
 
 fn with(i: usize, v: &'static str) -> Vec<u8> {
     let mut values = GOOD;
@@ -130,10 +122,7 @@ fn unnormalised_quaternion_is_normalised() {
     let mut values = GOOD;
     values[10] = "0";
     values[12] = "-7";
-    let q = parse_ply(&ascii(&values), PlyOptions::default())
-        .unwrap()
-        .particles[0]
-        .rotation;
+    let q = parse_ply(&ascii(&values), PlyOptions::default()).unwrap().particles[0].rotation;
     assert_relative_eq!(q.length(), 1.0);
     assert_relative_eq!(q.y, -1.0);
 }
@@ -142,73 +131,32 @@ fn unnormalised_quaternion_is_normalised() {
 fn malformed_ply_errors_name_the_problem() {
     let mut zero_q = GOOD;
     zero_q[10] = "0";
-    assert!(matches!(
-        err(&ascii(&zero_q)),
-        ErrorKind::ZeroQuaternion { index: 0 }
-    ));
-    assert!(
-        matches!(err(&with(1, "nan")), ErrorKind::NonFinite { index: 0, ref property, .. } if property == "y")
-    );
+    assert!(matches!(err(&ascii(&zero_q)), ErrorKind::ZeroQuaternion { index: 0 }));
+    assert!(matches!(err(&with(1, "nan")), ErrorKind::NonFinite { index: 0, ref property, .. } if property == "y"));
     assert!(matches!(err(&with(7, "inf")), ErrorKind::NonFinite { .. }));
-    assert!(matches!(
-        err(&with(8, "-1000")),
-        ErrorKind::BadScale { index: 0, .. }
-    ));
-    assert!(matches!(
-        err(&with(9, "1000")),
-        ErrorKind::BadScale { index: 0, .. }
-    ));
-    assert!(
-        matches!(err(&with(3, "abc")), ErrorKind::Parse { index: 0, ref property, .. } if property == "f_dc_0")
-    );
+    assert!(matches!(err(&with(8, "-1000")), ErrorKind::BadScale { index: 0, .. }));
+    assert!(matches!(err(&with(9, "1000")), ErrorKind::BadScale { index: 0, .. }));
+    assert!(matches!(err(&with(3, "abc")), ErrorKind::Parse { index: 0, ref property, .. } if property == "f_dc_0"));
     // Missing and unknown properties.
     let missing = header(&PROPS[..13], 0, "ascii");
     assert!(matches!(err(missing.as_bytes()), ErrorKind::MissingProperty(ref p) if p == "rot_3"));
     let mut props = PROPS.to_vec();
     props.push("filter_3D");
     let unknown = header(&props, 0, "ascii");
-    assert!(
-        matches!(err(unknown.as_bytes()), ErrorKind::UnknownProperty { ref name, .. } if name == "filter_3D")
-    );
-    let lenient = PlyOptions {
-        allow_unknown_properties: true,
-    };
+    assert!(matches!(err(unknown.as_bytes()), ErrorKind::UnknownProperty { ref name, .. } if name == "filter_3D"));
+    let lenient = PlyOptions { allow_unknown_properties: true };
     assert!(parse_ply(unknown.as_bytes(), lenient).is_ok());
     // Wrong f_rest count.
     let mut props = PROPS.to_vec();
     props.push("f_rest_0");
-    assert!(matches!(
-        err(header(&props, 0, "ascii").as_bytes()),
-        ErrorKind::Header { .. }
-    ));
+    assert!(matches!(err(header(&props, 0, "ascii").as_bytes()), ErrorKind::Header { .. }));
     // Not a PLY, big header garbage, missing end_header.
-    assert!(matches!(
-        err(b"PK\x03\x04"),
-        ErrorKind::Header { line: 1, .. }
-    ));
-    assert!(matches!(
-        err(b"ply\nformat ascii 1.0\n"),
-        ErrorKind::Header { .. }
-    ));
+    assert!(matches!(err(b"PK\x03\x04"), ErrorKind::Header { line: 1, .. }));
+    assert!(matches!(err(b"ply\nformat ascii 1.0\n"), ErrorKind::Header { .. }));
     // ASCII: too few values, missing vertex.
-    assert!(matches!(
-        err(&ascii(&GOOD[..13])),
-        ErrorKind::ValueCount {
-            index: 0,
-            found: 13,
-            expected: 14,
-            ..
-        }
-    ));
+    assert!(matches!(err(&ascii(&GOOD[..13])), ErrorKind::ValueCount { index: 0, found: 13, expected: 14, .. }));
     let short = header(&PROPS, 2, "ascii") + &GOOD.join(" ") + "\n";
-    assert!(matches!(
-        err(short.as_bytes()),
-        ErrorKind::Truncated {
-            index: 1,
-            count: 2,
-            ..
-        }
-    ));
+    assert!(matches!(err(short.as_bytes()), ErrorKind::Truncated { index: 1, count: 2, .. }));
 }
 
 #[test]
@@ -217,37 +165,17 @@ fn truncated_and_absurd_binary_counts_are_refused_before_allocating() {
     let bytes = encode_ply(&scene, PlyFormat::BinaryLittleEndian);
     let cut = &bytes[..bytes.len() - 5];
     match err(cut) {
-        ErrorKind::CountTooLarge {
-            count: 4,
-            first_incomplete: 3,
-            ..
-        } => {}
+        ErrorKind::CountTooLarge { count: 4, first_incomplete: 3, .. } => {}
         other => panic!("unexpected {other:?}"),
     }
-    let text = String::from_utf8_lossy(&bytes).replacen(
-        "element vertex 4",
-        "element vertex 18446744073709551615",
-        1,
-    );
+    let text = String::from_utf8_lossy(&bytes).replacen("element vertex 4", "element vertex 18446744073709551615", 1);
     let absurd = [text.as_bytes()].concat();
     let e = err(&absurd);
-    assert!(
-        matches!(
-            e,
-            ErrorKind::CountTooLarge {
-                count: u64::MAX,
-                ..
-            }
-        ),
-        "{e:?}"
-    );
+    assert!(matches!(e, ErrorKind::CountTooLarge { count: u64::MAX, .. }), "{e:?}");
     assert!(e.to_string().contains("truncated"), "{e}");
     // ASCII with an absurd count: refused as truncated, without allocating the count.
     let ascii = header(&PROPS, usize::MAX, "ascii") + &GOOD.join(" ") + "\n";
-    assert!(matches!(
-        err(ascii.as_bytes()),
-        ErrorKind::Truncated { index: 1, .. }
-    ));
+    assert!(matches!(err(ascii.as_bytes()), ErrorKind::Truncated { index: 1, .. }));
 }
 
 #[test]
@@ -256,70 +184,36 @@ fn malformed_splat_errors_name_the_problem() {
     let good = encode_splat(&scene);
     assert!(matches!(
         parse_splat(&good[..40]).unwrap_err(),
-        ErrorKind::SplatLength {
-            index: 1,
-            offset: 32,
-            remainder: 8,
-            ..
-        }
+        ErrorKind::SplatLength { index: 1, offset: 32, remainder: 8, .. }
     ));
     let mut zero_q = good.clone();
     zero_q[32 + 28..64].fill(128);
-    assert!(matches!(
-        parse_splat(&zero_q).unwrap_err(),
-        ErrorKind::ZeroQuaternion { index: 1 }
-    ));
+    assert!(matches!(parse_splat(&zero_q).unwrap_err(), ErrorKind::ZeroQuaternion { index: 1 }));
     let mut nan = good.clone();
     nan[64..68].copy_from_slice(&f32::NAN.to_le_bytes());
-    assert!(matches!(
-        parse_splat(&nan).unwrap_err(),
-        ErrorKind::NonFinite { index: 2, .. }
-    ));
+    assert!(matches!(parse_splat(&nan).unwrap_err(), ErrorKind::NonFinite { index: 2, .. }));
     let mut neg = good.clone();
     neg[12..16].copy_from_slice(&(-1.0f32).to_le_bytes());
-    assert!(matches!(
-        parse_splat(&neg).unwrap_err(),
-        ErrorKind::BadScale { index: 0, .. }
-    ));
+    assert!(matches!(parse_splat(&neg).unwrap_err(), ErrorKind::BadScale { index: 0, .. }));
     assert_eq!(parse_splat(&[]).unwrap().particles.len(), 0);
 }
 
 #[test]
 fn malformed_cameras_are_refused() {
-    assert!(matches!(
-        parse_cameras(b"[]").unwrap_err(),
-        ErrorKind::Camera { .. }
-    ));
-    assert!(matches!(
-        parse_cameras(b"{").unwrap_err(),
-        ErrorKind::Json(_)
-    ));
+    assert!(matches!(parse_cameras(b"[]").unwrap_err(), ErrorKind::Camera { .. }));
+    assert!(matches!(parse_cameras(b"{").unwrap_err(), ErrorKind::Json(_)));
     let bad_rot = br#"[{"width": 10, "height": 10, "position": [0,0,0], "rotation": [[2,0,0],[0,1,0],[0,0,1]], "fx": 5, "fy": 5}]"#;
-    assert!(matches!(
-        parse_cameras(bad_rot).unwrap_err(),
-        ErrorKind::Camera { index: 0, .. }
-    ));
+    assert!(matches!(parse_cameras(bad_rot).unwrap_err(), ErrorKind::Camera { index: 0, .. }));
     let zero_f = br#"[{"width": 10, "height": 10, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 0, "fy": 5}]"#;
-    assert!(matches!(
-        parse_cameras(zero_f).unwrap_err(),
-        ErrorKind::Camera { index: 0, .. }
-    ));
+    assert!(matches!(parse_cameras(zero_f).unwrap_err(), ErrorKind::Camera { index: 0, .. }));
 }
 
 #[test]
 fn errors_name_the_file() {
     let path = std::path::Path::new("/nonexistent/dir/scene.ply");
     let e = splat_io::read_scene(path).unwrap_err();
-    assert!(
-        e.to_string().starts_with("/nonexistent/dir/scene.ply: "),
-        "{e}"
-    );
-    assert!(
-        splat_io::read_scene("x.obj".as_ref())
-            .unwrap_err()
-            .to_string()
-            .contains(".ply or .splat")
-    );
+    assert!(e.to_string().starts_with("/nonexistent/dir/scene.ply: "), "{e}");
+    assert!(splat_io::read_scene("x.obj".as_ref()).unwrap_err().to_string().contains(".ply or .splat"));
 }
 
 fn particle() -> impl Strategy<Value = Particle> {

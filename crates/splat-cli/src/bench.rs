@@ -1,0 +1,75 @@
+//! `splat bench`: rays per second of every ray-tracing method through the same BVH, measured
+//! in one run, as ratios against the `opaque` closest-hit baseline.
+
+use crate::render::{MethodArg, MethodOptions, SceneArgs};
+use anyhow::{Context, Result};
+use clap::Args;
+use splat_core::trace::{Frames, TraceScene, render_frames};
+use std::time::Instant;
+
+/// Arguments of `splat bench`.
+#[derive(Args)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Methods to time, comma separated; `opaque` is always measured first as the baseline.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "stochastic,stochastic-n,stochastic-pass,kbuffer,exact"
+    )]
+    pub methods: Vec<MethodArg>,
+    /// Frames per method (each frame is one sample per pixel).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Timed repetitions per method; the fastest is reported.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: u32,
+    #[command(flatten)]
+    pub options: MethodOptions,
+}
+
+/// Run `splat bench`.
+pub fn run(args: BenchArgs) -> Result<()> {
+    let (scene, camera) = args.scene.load(1200, 800)?;
+    let pool = args.scene.pool()?;
+    let threads = pool.current_num_threads();
+    let build = Instant::now();
+    let trace = TraceScene::new(&scene, args.scene.settings())?;
+    let build_s = build.elapsed().as_secs_f64();
+    let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
+    println!(
+        "{} particles, BVH built in {build_s:.2} s ({} nodes), {}×{} at {} spp, {threads} threads\n",
+        scene.particles.len(),
+        trace.bvh().nodes.len(),
+        camera.width,
+        camera.height,
+        args.spp
+    );
+    println!("| method | frame (ms) | Mrays/s | Mrays/s per core | cost vs opaque |");
+    println!("|---|---:|---:|---:|---:|");
+    let mut methods = vec![MethodArg::Opaque];
+    methods.extend(args.methods.iter().copied().filter(|&m| m != MethodArg::Opaque));
+    let mut baseline = None;
+    for m in methods {
+        let method = args.options.method(m).context("the brute-force oracle is not benchmarked (it has no BVH)")?;
+        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
+        let mut best = f64::INFINITY;
+        for _ in 0..args.repeat.max(1) {
+            let start = Instant::now();
+            pool.install(|| render_frames(&trace, &camera, &method, &frames, &|_| {}))?;
+            best = best.min(start.elapsed().as_secs_f64());
+        }
+        let base = *baseline.get_or_insert(best);
+        let name = clap::ValueEnum::to_possible_value(&m).map(|v| v.get_name().to_string()).unwrap_or_default();
+        let mrays = rays / best / 1e6;
+        println!(
+            "| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |",
+            1e3 * best / f64::from(args.spp),
+            mrays / threads as f64,
+            best / base
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,174 @@
+//! `splat converge`: RMSE against exact for each method at spp 1, 2, 4, … (CSV, PNG plot,
+//! Markdown table).
+
+use crate::render::{MethodArg, MethodOptions, SceneArgs, progress_bar};
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use splat_core::render::RenderSettings;
+use splat_core::stats::{log_log_slope, rmse};
+use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `splat converge`.
+#[derive(Args)]
+pub struct ConvergeArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Methods to measure, comma separated.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "stochastic,stochastic-n,stochastic-pass,depth-sampling-k"
+    )]
+    pub methods: Vec<MethodArg>,
+    /// Largest spp (a power of two).
+    #[arg(long, default_value_t = 1024)]
+    pub max_spp: u32,
+    /// Output prefix: writes PREFIX.csv and PREFIX.png.
+    #[arg(short, long, default_value = "converge")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub options: MethodOptions,
+}
+
+/// One measurement.
+struct Row {
+    method: String,
+    spp: u32,
+    rmse: f64,
+    seconds: f64,
+}
+
+/// Run `splat converge`.
+pub fn run(args: ConvergeArgs) -> Result<()> {
+    if !args.max_spp.is_power_of_two() {
+        bail!("--max-spp must be a power of two, not {}", args.max_spp);
+    }
+    let (scene, camera) = args.scene.load(160, 120)?;
+    let trace = TraceScene::new(&scene, RenderSettings { background: args.scene.background, ..Default::default() })?;
+    let exact = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {})?;
+    let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= args.max_spp).collect();
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    let total: u64 = levels.iter().map(|&s| u64::from(s)).sum::<u64>() * args.methods.len() as u64;
+    let bar = progress_bar(pixels * total);
+    let mut rows = Vec::new();
+    for &m in &args.methods {
+        let method = args.options.method(m).context("the oracle is the reference, not a method to converge")?;
+        for &spp in &levels {
+            let frames = Frames { count: spp, seed: spp, rng: args.options.rng() };
+            let start = Instant::now();
+            let out = render_frames(&trace, &camera, &method, &frames, &|n| bar.inc(n * u64::from(spp)))?;
+            let seconds = start.elapsed().as_secs_f64();
+            rows.push(Row { method: name(m), spp, rmse: rmse(out.mean.data(), exact.mean.data()), seconds });
+        }
+    }
+    bar.finish_and_clear();
+    let csv = args.output.with_extension("csv");
+    std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
+    let png = args.output.with_extension("png");
+    plot(&png, &rows, &args.methods.iter().map(|&m| name(m)).collect::<Vec<_>>())?;
+    print!("{}", to_markdown(&rows, &args.methods.iter().map(|&m| name(m)).collect::<Vec<_>>()));
+    eprintln!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
+}
+
+fn name(m: MethodArg) -> String {
+    clap::ValueEnum::to_possible_value(&m).map(|v| v.get_name().to_string()).unwrap_or_default()
+}
+
+fn to_csv(rows: &[Row]) -> String {
+    let mut s = String::from("method,spp,rmse,seconds,seconds_per_spp\n");
+    for r in rows {
+        let _ =
+            writeln!(s, "{},{},{:.6e},{:.4},{:.6}", r.method, r.spp, r.rmse, r.seconds, r.seconds / f64::from(r.spp));
+    }
+    s
+}
+
+/// A table: one row per spp, RMSE and time per spp for each method, and the log–log slopes.
+fn to_markdown(rows: &[Row], methods: &[String]) -> String {
+    let mut s = String::from("| spp |");
+    for m in methods {
+        let _ = write!(s, " {m} RMSE | {m} ms/spp |");
+    }
+    s += "\n|---:|";
+    s += &"---:|---:|".repeat(methods.len());
+    s += "\n";
+    let mut spps: Vec<u32> = rows.iter().map(|r| r.spp).collect();
+    spps.sort_unstable();
+    spps.dedup();
+    for spp in spps {
+        let _ = write!(s, "| {spp} |");
+        for m in methods {
+            if let Some(r) = rows.iter().find(|r| &r.method == m && r.spp == spp) {
+                let _ = write!(s, " {:.5} | {:.1} |", r.rmse, 1e3 * r.seconds / f64::from(spp));
+            }
+        }
+        s += "\n";
+    }
+    s += "| slope |";
+    for m in methods {
+        let (x, y): (Vec<f64>, Vec<f64>) =
+            rows.iter().filter(|r| &r.method == m).map(|r| (f64::from(r.spp), r.rmse.max(1e-12))).unzip();
+        let _ = write!(s, " {:.3} | |", log_log_slope(&x, &y));
+    }
+    s + "\n"
+}
+
+/// Log–log plot of RMSE against spp, one line per method, with the 1/√spp reference.
+fn plot(path: &std::path::Path, rows: &[Row], methods: &[String]) -> Result<()> {
+    use plotters::prelude::*;
+    let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    let max_spp = rows.iter().map(|r| r.spp).max().unwrap_or(1).max(2);
+    let lo = rows.iter().map(|r| r.rmse).filter(|&v| v > 0.0).fold(f64::INFINITY, f64::min).min(1.0);
+    let hi = rows.iter().map(|r| r.rmse).fold(0.0f64, f64::max).max(lo * 10.0);
+    let root = BitMapBackend::new(path, (900, 620)).into_drawing_area();
+    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("plotting {}: {e}", path.display());
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("RMSE against exact (Eq. 3)", ("sans-serif", 24))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d((1f64..f64::from(max_spp)).log_scale(), (lo * 0.5..hi * 2.0).log_scale())
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .x_desc("samples per pixel")
+        .y_desc("RMSE")
+        .label_style(("sans-serif", 15))
+        .draw()
+        .map_err(|e| err(&e))?;
+    for (i, m) in methods.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let points: Vec<(f64, f64)> =
+            rows.iter().filter(|r| &r.method == m && r.rmse > 0.0).map(|r| (f64::from(r.spp), r.rmse)).collect();
+        chart
+            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+            .map_err(|e| err(&e))?
+            .label(m.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|e| err(&e))?;
+    }
+    if let Some(first) = rows.iter().find(|r| r.spp == 1 && r.rmse > 0.0) {
+        let reference: Vec<(f64, f64)> =
+            (0..=max_spp.ilog2()).map(|i| (f64::from(1u32 << i), first.rmse / f64::from(1u32 << i).sqrt())).collect();
+        chart
+            .draw_series(LineSeries::new(reference, BLACK.mix(0.4).stroke_width(1)))
+            .map_err(|e| err(&e))?
+            .label("1/√spp")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.4)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 15))
+        .draw()
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}

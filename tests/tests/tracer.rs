@@ -1,0 +1,41 @@
+//! The BVH tracer's `exact` equals the brute-force oracle, and the k-buffer with enough passes
+//! equals both, on a fixture and on a crop of the bonsai capture.
+
+use splat_core::render::{RenderSettings, oracle_ray, render_exact};
+use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+use splat_core::{Camera, Scene};
+
+fn compare(scene: &Scene, camera: &Camera) {
+    let settings = RenderSettings { background: glam::Vec3::new(0.05, 0.1, 0.2), ..Default::default() };
+    let oracle = render_exact(scene, camera, &settings, &|_| {}).unwrap();
+    let trace = TraceScene::new(scene, settings).unwrap();
+    let exact = render_frames(&trace, camera, &Method::Exact, &Frames::default(), &|_| {}).unwrap();
+    let kbuffer = Method::KBuffer { k: 7, max_passes: 100_000, min_transmittance: 0.0 };
+    let kbuf = render_frames(&trace, camera, &kbuffer, &Frames::default(), &|_| {}).unwrap();
+    let worst = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    assert!(worst(oracle.radiance.data(), exact.mean.data()) < 1e-6, "exact vs oracle");
+    assert!(worst(oracle.alpha.data(), exact.alpha.data()) < 1e-6, "alpha");
+    assert!(worst(exact.mean.data(), kbuf.mean.data()) < 1e-6, "kbuffer vs exact");
+    // The iso depth is the same hit: equal bits or both absent.
+    for (a, b) in oracle.depth.data().iter().zip(exact.depth.data()) {
+        assert!(a == b || (a.is_nan() && b.is_nan()), "depth {a} vs {b}");
+    }
+    // And a few pixels against the plain brute force over every particle.
+    for (x, y) in [(0, 0), (camera.width / 2, camera.height / 2), (camera.width - 1, camera.height - 1)] {
+        let c = oracle_ray(scene, camera.pixel_ray(x, y), &settings).unwrap().color_over(settings.background);
+        let px = exact.mean.pixel(x, y);
+        assert!((0..3).all(|k| (px[k] - c[k] as f32).abs() < 1e-6), "pixel ({x}, {y})");
+    }
+}
+
+#[test]
+fn exact_through_the_bvh_equals_the_oracle_on_the_cloud() {
+    let (scene, camera) = splat_core::scenes::cloud();
+    compare(&scene, &camera.rescaled(64, 48).unwrap());
+}
+
+#[test]
+fn exact_through_the_bvh_equals_the_oracle_on_a_bonsai_crop() {
+    let Some(scene) = splat_tests::bonsai() else { return };
+    compare(&scene, &splat_tests::bonsai_camera().crop(540, 160, 48, 36).unwrap());
+}
