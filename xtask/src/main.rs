@@ -15,6 +15,7 @@ fn main() -> Result<()> {
         Some("fixtures") => fixtures(),
         Some("bless") => bless(),
         Some("assets") => assets().map(|path| println!("{}", path.display())),
+        Some("bench") => bench(),
         _ => {
             eprintln!(
                 "usage: cargo xtask <command>\n\n\
@@ -22,7 +23,8 @@ fn main() -> Result<()> {
                  test [ARGS]  run every test of the workspace (optimized build); ARGS go to cargo test\n  \
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
-                 assets       fetch and verify the bonsai capture into target/assets/"
+                 assets       fetch and verify the bonsai capture into target/assets/\n  \
+                 bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
             );
             bail!("missing or unknown command");
         }
@@ -74,6 +76,36 @@ fn bless() -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The benchmarks: divan (`cargo bench -p splat-tests`) and `splat bench` on the bonsai
+/// capture at 1200 × 800 (the standard view of `splat_tests::bonsai_camera`).
+fn bench() -> Result<()> {
+    let bonsai = assets()?;
+    let cargo = |args: &[&str]| -> Result<()> {
+        let status = Command::new(env!("CARGO")).current_dir(root()).args(args).status()?;
+        if !status.success() {
+            bail!("cargo {} failed ({status})", args.join(" "));
+        }
+        Ok(())
+    };
+    cargo(&["bench", "-p", "splat-tests", "--bench", "trace"])?;
+    let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
+    cargo(&[
+        "run",
+        "--release",
+        "-p",
+        "splat-cli",
+        "--",
+        "bench",
+        bonsai,
+        "--eye",
+        "0,-1.5,4",
+        "--target",
+        "0,0.5,0",
+        "--up",
+        "0,-1,0",
+    ])
 }
 
 /// PyPI source distribution that carries the bonsai capture, pinned by version and hash.
