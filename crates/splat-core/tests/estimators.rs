@@ -6,7 +6,7 @@ use glam::{DVec3, Quat, Vec3};
 use proptest::prelude::*;
 use splat_core::render::{RenderSettings, Tracer};
 use splat_core::trace::{Decide, Method, TraceScene};
-use splat_core::{Particle, Ray, Scene};
+use splat_core::{HitDistance, Particle, Ray, Scene};
 use std::collections::HashMap;
 
 /// Scripted decisions: `accept[(id, slot)]` accepts a particle (u = 0), anything else rejects
@@ -47,9 +47,14 @@ fn settings() -> RenderSettings {
     RenderSettings { background: Vec3::new(0.2, 0.3, 0.9), ..Default::default() }
 }
 
+fn settings_with(center: bool) -> RenderSettings {
+    let hit_distance = if center { HitDistance::Center } else { HitDistance::Mean };
+    RenderSettings { hit_distance, ..settings() }
+}
+
 /// The particles the ray hits, with their alphas.
-fn hits(scene: &Scene, ray: &Ray) -> Vec<(u32, f64)> {
-    let tracer = Tracer::new(scene, settings()).unwrap();
+fn hits(scene: &Scene, ray: &Ray, settings: &RenderSettings) -> Vec<(u32, f64)> {
+    let tracer = Tracer::new(scene, *settings).unwrap();
     (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray).map(|h| (i, f64::from(h.alpha)))).collect()
 }
 
@@ -91,13 +96,14 @@ fn close(a: DVec3, b: DVec3, tol: f64) -> bool {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
-    /// Algorithm 1 through the BVH: E[L̂] = Eq. 3 (with background) to 1e-9.
+    /// Algorithm 1 through the BVH: E[L̂] = Eq. 3 (with background) to 1e-9, with either hit
+    /// distance convention.
     #[test]
-    fn stochastic_is_unbiased((o, off, c) in stacks(12)) {
+    fn stochastic_is_unbiased((o, off, c) in stacks(12), center in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
-        let trace = TraceScene::new(&scene, settings()).unwrap();
+        let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
         let exact = trace.exact(&ray).color;
-        let e = expectation(&trace, &Method::Stochastic, &ray, &hits(&scene, &ray), 1);
+        let e = expectation(&trace, &Method::Stochastic, &ray, &hits(&scene, &ray, trace.settings()), 1);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
 
@@ -107,18 +113,18 @@ proptest! {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
         let exact = trace.exact(&ray).color;
-        let e = expectation(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &hits(&scene, &ray), 2);
+        let e = expectation(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &hits(&scene, &ray, trace.settings()), 2);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
 
     /// vk stochastic pass with 3 hits a pass: enumerate the pass at which it stops.
     #[test]
-    fn stochastic_pass_is_unbiased((o, off, c) in stacks(12)) {
+    fn stochastic_pass_is_unbiased((o, off, c) in stacks(12), center in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
-        let trace = TraceScene::new(&scene, settings()).unwrap();
+        let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
         let exact = trace.exact(&ray).color;
         // Pass opacities from the sorted alphas, independently of the integrator.
-        let tracer = Tracer::new(&scene, settings()).unwrap();
+        let tracer = Tracer::new(&scene, settings_with(center)).unwrap();
         let mut sorted: Vec<_> = (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, &ray)).collect();
         splat_core::composite::sort_front_to_back(&mut sorted);
         let k = 3;
@@ -176,7 +182,7 @@ fn depth_sampling_is_rejected_by_the_same_enumeration() {
     );
     let trace = TraceScene::new(&scene, settings()).unwrap();
     let exact = trace.exact(&ray).color;
-    let h = hits(&scene, &ray);
+    let h = hits(&scene, &ray, trace.settings());
     assert_eq!(h.len(), 4);
     for k in [1, 2] {
         let e = expectation(&trace, &Method::DepthSampling { k }, &ray, &h, 1);
