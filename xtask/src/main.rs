@@ -36,14 +36,54 @@ fn root() -> PathBuf {
 }
 
 fn test(extra: &[String]) -> Result<()> {
-    let status = Command::new(env!("CARGO"))
-        .current_dir(root())
-        .args(["test", "--workspace", "--release"])
-        .args(extra)
-        .status()
-        .context("running cargo test")?;
+    ensure_vulkan_driver()?;
+    let mut cmd = Command::new(env!("CARGO"));
+    cmd.current_dir(root()).args(["test", "--workspace", "--release"]).args(extra);
+    if std::env::var_os("WGPU_BACKEND").is_none() {
+        cmd.env("WGPU_BACKEND", "vulkan");
+    }
+    let status = cmd.status().context("running cargo test")?;
     if !status.success() {
         bail!("tests failed ({status})");
+    }
+    Ok(())
+}
+
+/// Vulkan ICD manifests: a driver is installed when one exists.
+fn vulkan_icds() -> Vec<PathBuf> {
+    ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d"]
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect()
+}
+
+/// Install Mesa's Vulkan drivers (lavapipe, a CPU Vulkan implementation) when no Vulkan driver
+/// is present and we run as root, so the GPU tests have an adapter on any machine.
+fn ensure_vulkan_driver() -> Result<()> {
+    if !vulkan_icds().is_empty() {
+        return Ok(());
+    }
+    let uid = Command::new("id").arg("-u").output().map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    if uid.ok().as_deref() != Some("0") {
+        eprintln!("no Vulkan driver found and not root: GPU tests will skip (install mesa-vulkan-drivers)");
+        return Ok(());
+    }
+    eprintln!("no Vulkan driver found: installing mesa-vulkan-drivers (lavapipe) with apt-get …");
+    let apt = |args: &[&str]| -> Result<()> {
+        let status = Command::new("apt-get").args(args).env("DEBIAN_FRONTEND", "noninteractive").status()?;
+        if !status.success() {
+            bail!("apt-get {} failed ({status})", args.join(" "));
+        }
+        Ok(())
+    };
+    apt(&["update", "-qq"])?;
+    apt(&["install", "-y", "-qq", "mesa-vulkan-drivers", "libvulkan1"])?;
+    if vulkan_icds().is_empty() {
+        bail!("mesa-vulkan-drivers is installed but no Vulkan ICD manifest was found");
     }
     Ok(())
 }

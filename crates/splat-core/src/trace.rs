@@ -279,6 +279,16 @@ impl<'a> TraceScene<'a> {
         self.scene
     }
 
+    /// Prepared particles in BVH leaf order (what a GPU uploads beside [`TraceScene::bvh`]).
+    pub fn leaf_particles(&self) -> &[PreparedParticle] {
+        &self.prims
+    }
+
+    /// Scene index of each leaf-order particle.
+    pub fn leaf_ids(&self) -> &[u32] {
+        &self.ids
+    }
+
     /// The ray with the settings' range.
     pub fn clip(&self, ray: Ray) -> Ray {
         Ray { t_min: self.settings.t_min, t_max: self.settings.t_max, ..ray }

@@ -1,0 +1,271 @@
+//! Buffer layouts shared with `shaders/trace.wgsl`: `#[repr(C)]` + `bytemuck::Pod` structs
+//! whose sizes and field offsets a test checks against the WGSL structs reflected by naga.
+
+use bytemuck::{Pod, Zeroable};
+use splat_core::Camera;
+use splat_core::bvh::BvhNode;
+use splat_core::particle::sh_coeff_count;
+use splat_core::rng::RngScheme;
+use splat_core::trace::{Frames, TraceScene};
+
+/// One particle in BVH leaf order (WGSL `Particle`, 64 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuParticle {
+    /// Mean μ.
+    pub mean: [f32; 3],
+    /// Opacity.
+    pub opacity: f32,
+    /// Row 0 of the canonical transform M = S⁻¹ Rᵀ.
+    pub row0: [f32; 3],
+    /// Scene index (the id of the random decisions).
+    pub id: u32,
+    /// Row 1 of M.
+    pub row1: [f32; 3],
+    /// Padding.
+    pub pad1: f32,
+    /// Row 2 of M.
+    pub row2: [f32; 3],
+    /// Padding.
+    pub pad2: f32,
+}
+
+/// BVH node as the kernel reads it (WGSL `Node`, 32 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuNode {
+    /// Lower corner.
+    pub min: [f32; 3],
+    /// First primitive or left child.
+    pub first: u32,
+    /// Upper corner.
+    pub max: [f32; 3],
+    /// Primitive count, 0 for interior nodes.
+    pub count: u32,
+}
+
+/// Everything one dispatch needs (WGSL `Params`, 176 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Params {
+    /// World-to-camera rotation, row 0 (w unused).
+    pub cam_row0: [f32; 4],
+    /// Row 1.
+    pub cam_row1: [f32; 4],
+    /// Row 2 (the view direction).
+    pub cam_row2: [f32; 4],
+    /// Camera centre (w unused).
+    pub cam_center: [f32; 4],
+    /// fx, fy, cx, cy.
+    pub intrinsics: [f32; 4],
+    /// Background RGB (w unused).
+    pub background: [f32; 4],
+    /// Image width and height.
+    pub size: [u32; 2],
+    /// SH degree of the scene.
+    pub sh_degree: u32,
+    /// Method code (1 k-buffer, 2 stochastic, 3 stochastic-n, 4 stochastic pass, 5 depth sampling).
+    pub method: u32,
+    /// Hits per pass.
+    pub k: u32,
+    /// Pass limit.
+    pub max_passes: u32,
+    /// Samples per traversal.
+    pub n: u32,
+    /// Traversals per frame.
+    pub m: u32,
+    /// Seed of the random stream.
+    pub seed: u32,
+    /// Frames in this dispatch.
+    pub frames: u32,
+    /// 0 hash, 1 trig.
+    pub rng_scheme: u32,
+    /// 0 mean, 1 center.
+    pub hit_distance: u32,
+    /// Kernel degree.
+    pub kernel_degree: u32,
+    /// Cutoff in standard deviations.
+    pub cutoff: f32,
+    /// Alpha clamp.
+    pub alpha_clamp: f32,
+    /// Alpha cull.
+    pub alpha_cull: f32,
+    /// Ray start.
+    pub t_min: f32,
+    /// Ray end.
+    pub t_max: f32,
+    /// k-buffer early-out transmittance.
+    pub min_transmittance: f32,
+    /// Index of this dispatch's first frame.
+    pub first_frame: u32,
+}
+
+/// The leaf-order particles of a scene.
+pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
+    trace
+        .leaf_particles()
+        .iter()
+        .zip(trace.leaf_ids())
+        .map(|(p, &id)| {
+            let rows = [p.canonical.row(0), p.canonical.row(1), p.canonical.row(2)];
+            GpuParticle {
+                mean: p.mean.to_array(),
+                opacity: p.opacity,
+                row0: rows[0].to_array(),
+                id,
+                row1: rows[1].to_array(),
+                pad1: 0.0,
+                row2: rows[2].to_array(),
+                pad2: 0.0,
+            }
+        })
+        .collect()
+}
+
+/// The BVH nodes of a scene.
+pub fn nodes(trace: &TraceScene) -> Vec<GpuNode> {
+    trace
+        .bvh()
+        .nodes
+        .iter()
+        .map(|n: &BvhNode| GpuNode { min: n.min, first: n.first, max: n.max, count: n.count })
+        .collect()
+}
+
+/// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle.
+pub fn sh(trace: &TraceScene) -> Vec<[f32; 4]> {
+    let scene = trace.scene();
+    let per = sh_coeff_count(scene.sh_degree);
+    let mut v: Vec<[f32; 4]> =
+        scene.particles.iter().flat_map(|p| p.sh[..per].iter().map(|c| [c.x, c.y, c.z, 0.0])).collect();
+    if v.is_empty() {
+        v.push([0.0; 4]); // a binding cannot be empty
+    }
+    v
+}
+
+/// The uniforms of one dispatch: `chunk` frames starting at `first_frame`.
+pub fn params(
+    trace: &TraceScene,
+    camera: &Camera,
+    code: (u32, u32, u32, f32, u32, u32),
+    frames: &Frames,
+    first_frame: u32,
+    chunk: u32,
+) -> Params {
+    let s = trace.settings();
+    let r = camera.rotation;
+    let row = |i: usize| {
+        let v = r.row(i);
+        [v.x, v.y, v.z, 0.0]
+    };
+    let c = camera.center();
+    let (method, k, max_passes, min_transmittance, n, m) = code;
+    Params {
+        cam_row0: row(0),
+        cam_row1: row(1),
+        cam_row2: row(2),
+        cam_center: [c.x, c.y, c.z, 0.0],
+        intrinsics: [camera.fx, camera.fy, camera.cx, camera.cy],
+        background: [s.background.x, s.background.y, s.background.z, 0.0],
+        size: [camera.width, camera.height],
+        sh_degree: u32::from(trace.scene().sh_degree),
+        method,
+        k,
+        max_passes,
+        n,
+        m,
+        seed: frames.seed,
+        frames: chunk,
+        rng_scheme: match frames.rng {
+            RngScheme::Hash => 0,
+            RngScheme::Trig => 1,
+        },
+        hit_distance: match s.hit_distance {
+            splat_core::HitDistance::Mean => 0,
+            splat_core::HitDistance::Center => 1,
+        },
+        kernel_degree: s.kernel.degree,
+        cutoff: s.kernel.cutoff,
+        alpha_clamp: s.kernel.alpha_clamp,
+        alpha_cull: s.kernel.alpha_cull,
+        t_min: s.t_min,
+        t_max: s.t_max,
+        min_transmittance,
+        first_frame,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
+    /// struct of the same role, so the two cannot drift apart.
+    #[test]
+    fn rust_structs_mirror_the_wgsl_structs() {
+        let module = naga::front::wgsl::parse_str(crate::TRACE_WGSL).expect("trace.wgsl parses");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let wgsl = |name: &str| {
+            let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name);
+            let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+            let _ = handle;
+            (
+                *span as usize,
+                members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect::<Vec<_>>(),
+            )
+        };
+        macro_rules! check {
+            ($rust:ty, $wgsl:literal, [$($field:ident),*]) => {{
+                let (size, members) = wgsl($wgsl);
+                assert_eq!(std::mem::size_of::<$rust>(), size, "size of {}", $wgsl);
+                let rust = vec![$((stringify!($field).to_string(), std::mem::offset_of!($rust, $field))),*];
+                assert_eq!(rust, members, "fields of {}", $wgsl);
+            }};
+        }
+        check!(GpuParticle, "Particle", [mean, opacity, row0, id, row1, pad1, row2, pad2]);
+        check!(GpuNode, "Node", [min, first, max, count]);
+        check!(
+            Params,
+            "Params",
+            [
+                cam_row0,
+                cam_row1,
+                cam_row2,
+                cam_center,
+                intrinsics,
+                background,
+                size,
+                sh_degree,
+                method,
+                k,
+                max_passes,
+                n,
+                m,
+                seed,
+                frames,
+                rng_scheme,
+                hit_distance,
+                kernel_degree,
+                cutoff,
+                alpha_clamp,
+                alpha_cull,
+                t_min,
+                t_max,
+                min_transmittance,
+                first_frame
+            ]
+        );
+        assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
+    }
+
+    /// The kernel is valid WGSL for naga's validator (a shader error fails `cargo test`).
+    #[test]
+    fn trace_wgsl_validates() {
+        let module = naga::front::wgsl::parse_str(crate::TRACE_WGSL).expect("parses");
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+            .validate(&module)
+            .expect("validates");
+    }
+}

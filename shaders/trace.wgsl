@@ -1,0 +1,585 @@
+// Ray tracing of transparent 3D Gaussians through a BVH, every method of splat_core::trace.
+// Each function mirrors its CPU twin in crates/splat-core/src/{hit,rng,bvh,trace}.rs; the
+// decisions use the same counter-based hashes, so a GPU frame makes the CPU frame's choices.
+
+// One particle in BVH leaf order (64 bytes), mirrored by splat_gpu::GpuParticle.
+struct Particle {
+    mean: vec3<f32>,
+    opacity: f32,
+    // Rows of the canonical transform M = S⁻¹ Rᵀ.
+    row0: vec3<f32>,
+    id: u32,
+    row1: vec3<f32>,
+    pad1: f32,
+    row2: vec3<f32>,
+    pad2: f32,
+}
+
+// One BVH node (32 bytes), mirrored by splat_core::bvh::BvhNode.
+struct Node {
+    min: vec3<f32>,
+    first: u32,
+    max: vec3<f32>,
+    count: u32,
+}
+
+// Everything a dispatch needs (176 bytes), mirrored by splat_gpu::Params.
+struct Params {
+    cam_row0: vec4<f32>,
+    cam_row1: vec4<f32>,
+    cam_row2: vec4<f32>,
+    cam_center: vec4<f32>,
+    intrinsics: vec4<f32>, // fx, fy, cx, cy
+    background: vec4<f32>,
+    size: vec2<u32>,
+    sh_degree: u32,
+    method: u32,
+    k: u32,
+    max_passes: u32,
+    n: u32,
+    m: u32,
+    seed: u32,
+    frames: u32,
+    rng_scheme: u32,
+    hit_distance: u32,
+    kernel_degree: u32,
+    cutoff: f32,
+    alpha_clamp: f32,
+    alpha_cull: f32,
+    t_min: f32,
+    t_max: f32,
+    min_transmittance: f32,
+    first_frame: u32,
+}
+
+const METHOD_KBUFFER: u32 = 1u;
+const METHOD_STOCHASTIC: u32 = 2u;
+const METHOD_STOCHASTIC_N: u32 = 3u;
+const METHOD_STOCHASTIC_PASS: u32 = 4u;
+const METHOD_DEPTH_SAMPLING: u32 = 5u;
+const MAX_SLOTS: u32 = 64u;
+const STACK_DEPTH: u32 = 64u;
+const NONE: u32 = 0xffffffffu;
+const PASS_ID: u32 = 0xffffffffu;
+const OFFSET_ID: u32 = 0xfffffffeu;
+const FAR: f32 = 3.0e38;
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> particles: array<Particle>;
+@group(0) @binding(2) var<storage, read> nodes: array<Node>;
+@group(0) @binding(3) var<storage, read> sh: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> out_mean: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> out_var: array<vec4<f32>>;
+
+// ---- rng.rs ---------------------------------------------------------------------------------
+
+fn xxhash32(p: vec3<u32>) -> u32 {
+    let P2 = 2246822519u;
+    let P3 = 3266489917u;
+    let P4 = 668265263u;
+    let P5 = 374761393u;
+    var h = p.z + P5 + p.x * P3;
+    h = P4 * ((h << 17u) | (h >> 15u));
+    h = h + p.y * P3;
+    h = P4 * ((h << 17u) | (h >> 15u));
+    h = P2 * (h ^ (h >> 15u));
+    h = P3 * (h ^ (h >> 13u));
+    return h ^ (h >> 16u);
+}
+
+fn pcg(v: u32) -> u32 {
+    let s = v * 747796405u + 2891336453u;
+    let w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
+    return (w >> 22u) ^ w;
+}
+
+fn unit_f32(bits: u32) -> f32 {
+    return f32(bits >> 8u) * (1.0 / 16777216.0);
+}
+
+fn frame_key(seed: u32, frame: u32) -> u32 {
+    return xxhash32(vec3<u32>(frame, seed, 0x5EEDF4A3u));
+}
+
+fn fract_(x: f32) -> f32 {
+    return x - floor(x);
+}
+
+fn trig_hash(p: vec3<f32>) -> f32 {
+    let r = fract_(47453.547 * sin(91.3458 * p.z));
+    return fract_(43758.547 * sin(12.9898 * (p.x + r) + 78.233 * (p.y + r)));
+}
+
+fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
+    if (params.rng_scheme == 0u) {
+        return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, id, slot))));
+    }
+    let o = vec3<f32>(
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, OFFSET_ID, 3u * slot)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, OFFSET_ID, 3u * slot + 1u)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, OFFSET_ID, 3u * slot + 2u)))),
+    );
+    return trig_hash(hit + o);
+}
+
+fn pass_u(pixel_seed: u32, pass_index: u32) -> f32 {
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, PASS_ID, pass_index))));
+}
+
+// ---- kernel.rs, hit.rs ----------------------------------------------------------------------
+
+fn response(d2: f32) -> f32 {
+    let u = d2 * (1.0 / 9.0);
+    var un = u;
+    if (params.kernel_degree == 4u) {
+        un = u * u;
+    } else if (params.kernel_degree == 8u) {
+        un = (u * u) * (u * u);
+    } else if (params.kernel_degree != 2u) {
+        un = pow(u, f32(params.kernel_degree) * 0.5);
+    }
+    return exp(-4.5 * un);
+}
+
+struct Ray {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    view: vec3<f32>,
+}
+
+struct Hit {
+    t: f32,
+    alpha: f32,
+    ok: bool,
+}
+
+// Algorithm 1 without the roulette: alpha from the maximum response along the ray, hit
+// distance by convention, range and Eq. 2 tests.
+fn intersect(p: Particle, ray: Ray) -> Hit {
+    let miss = Hit(0.0, 0.0, false);
+    let rel = ray.origin - p.mean;
+    let oc = vec3<f32>(dot(p.row0, rel), dot(p.row1, rel), dot(p.row2, rel));
+    let dc = vec3<f32>(dot(p.row0, ray.dir), dot(p.row1, ray.dir), dot(p.row2, ray.dir));
+    let dd = dot(dc, dc);
+    let cr = cross(oc, dc);
+    let d2_min = dot(cr, cr) / dd;
+    var alpha = p.opacity * response(d2_min);
+    if (!(alpha >= params.alpha_cull && alpha > 0.0)) {
+        return miss;
+    }
+    alpha = min(alpha, params.alpha_clamp);
+    var t = -dot(oc, dc) / dd;
+    var d2_hit = d2_min;
+    if (params.hit_distance == 1u) {
+        let dv = dot(ray.dir, ray.view);
+        if (dv <= 0.0) {
+            return miss;
+        }
+        t = dot(p.mean - ray.origin, ray.view) / dv;
+        let q = oc + t * dc;
+        d2_hit = dot(q, q);
+    }
+    if (!(t > params.t_min && t < params.t_max)) {
+        return miss;
+    }
+    if (d2_hit > params.cutoff * params.cutoff) {
+        return miss;
+    }
+    return Hit(t, alpha, true);
+}
+
+// ---- sh.rs ------------------------------------------------------------------------------------
+
+fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
+    let deg = params.sh_degree;
+    let base = id * (deg + 1u) * (deg + 1u);
+    var c = 0.2820948 * sh[base].xyz;
+    if (deg >= 1u) {
+        let x = dir.x;
+        let y = dir.y;
+        let z = dir.z;
+        c += -0.48860252 * y * sh[base + 1u].xyz + 0.48860252 * z * sh[base + 2u].xyz - 0.48860252 * x * sh[base + 3u].xyz;
+        if (deg >= 2u) {
+            let xx = x * x;
+            let yy = y * y;
+            let zz = z * z;
+            c += 1.0925484 * x * y * sh[base + 4u].xyz
+                + -1.0925484 * y * z * sh[base + 5u].xyz
+                + 0.31539157 * (2.0 * zz - xx - yy) * sh[base + 6u].xyz
+                + -1.0925484 * x * z * sh[base + 7u].xyz
+                + 0.5462742 * (xx - yy) * sh[base + 8u].xyz;
+            if (deg >= 3u) {
+                c += -0.5900436 * y * (3.0 * xx - yy) * sh[base + 9u].xyz
+                    + 2.8906114 * x * y * z * sh[base + 10u].xyz
+                    + -0.4570458 * y * (4.0 * zz - xx - yy) * sh[base + 11u].xyz
+                    + 0.37317634 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * sh[base + 12u].xyz
+                    + -0.4570458 * x * (4.0 * zz - xx - yy) * sh[base + 13u].xyz
+                    + 1.4453057 * z * (xx - yy) * sh[base + 14u].xyz
+                    + -0.5900436 * x * (xx - 3.0 * yy) * sh[base + 15u].xyz;
+            }
+        }
+    }
+    return max(c + vec3<f32>(0.5), vec3<f32>(0.0));
+}
+
+// ---- bvh.rs -----------------------------------------------------------------------------------
+
+// Entry distance into the node's box within (t_min, t_max], FAR when the ray misses it.
+fn enter(n: Node, origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> f32 {
+    let t0 = (n.min - origin) * inv;
+    let t1 = (n.max - origin) * inv;
+    let near = min(t0, t1);
+    let far = max(t0, t1);
+    let e = max(max(max(near.x, near.y), near.z), params.t_min);
+    let x = min(min(min(far.x, far.y), far.z), t_max);
+    return select(FAR, e, e <= x);
+}
+
+fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
+    let tiny = select(vec3<f32>(1e-30), vec3<f32>(-1e-30), d < vec3<f32>(0.0));
+    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(1e-30));
+}
+
+fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
+    return t < other_t || (t == other_t && id < other_id);
+}
+
+// ---- trace.rs: stochastic (Algorithm 1) and its N-sample extension (§3.5) ---------------------
+
+var<private> best_t: array<f32, 64>;
+var<private> best_id: array<u32, 64>;
+var<private> best_leaf: array<u32, 64>;
+var<private> slot_u: array<f32, 64>;
+
+fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
+    for (var s = 0u; s < n; s++) {
+        best_t[s] = FAR;
+        best_id[s] = NONE;
+    }
+    let early = params.rng_scheme == 0u;
+    let inv = safe_inverse(ray.dir);
+    var t_max = params.t_max;
+    var stack: array<u32, 64>;
+    var top = 0u;
+    if (enter(nodes[0], ray.origin, inv, t_max) >= FAR) {
+        return;
+    }
+    var node = 0u;
+    loop {
+        let nd = nodes[node];
+        var descend = false;
+        if (nd.count > 0u) {
+            for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+                let p = particles[leaf];
+                if (early) {
+                    let bound = min(p.opacity, params.alpha_clamp);
+                    var any = false;
+                    for (var s = 0u; s < n; s++) {
+                        slot_u[s] = particle_u(pixel_seed, p.id, first_slot + s, vec3<f32>(0.0));
+                        any = any || slot_u[s] < bound;
+                    }
+                    if (!any) {
+                        continue;
+                    }
+                }
+                let h = intersect(p, ray);
+                if (!h.ok) {
+                    continue;
+                }
+                var farthest = 0.0;
+                for (var s = 0u; s < n; s++) {
+                    if (before(h.t, p.id, best_t[s], best_id[s])) {
+                        var u = slot_u[s];
+                        if (!early) {
+                            u = particle_u(pixel_seed, p.id, first_slot + s, ray.origin + h.t * ray.dir);
+                        }
+                        if (u < h.alpha) {
+                            best_t[s] = h.t;
+                            best_id[s] = p.id;
+                            best_leaf[s] = leaf;
+                        }
+                    }
+                    farthest = max(farthest, best_t[s]);
+                }
+                t_max = min(farthest, params.t_max);
+            }
+        } else {
+            let a = nd.first;
+            let b = nd.first + 1u;
+            let ta = enter(nodes[a], ray.origin, inv, t_max);
+            let tb = enter(nodes[b], ray.origin, inv, t_max);
+            if (ta < FAR && tb < FAR) {
+                if (ta <= tb) {
+                    stack[top] = b;
+                    node = a;
+                } else {
+                    stack[top] = a;
+                    node = b;
+                }
+                top += 1u;
+                descend = true;
+            } else if (ta < FAR) {
+                node = a;
+                descend = true;
+            } else if (tb < FAR) {
+                node = b;
+                descend = true;
+            }
+        }
+        if (descend) {
+            continue;
+        }
+        var found = false;
+        loop {
+            if (top == 0u) {
+                break;
+            }
+            top -= 1u;
+            let c = stack[top];
+            if (enter(nodes[c], ray.origin, inv, t_max) < FAR) {
+                node = c;
+                found = true;
+                break;
+            }
+        }
+        if (!found) {
+            break;
+        }
+    }
+}
+
+// ---- trace.rs: the k closest hits behind (after_t, after_id) ---------------------------------
+
+var<private> kb_t: array<f32, 64>;
+var<private> kb_id: array<u32, 64>;
+var<private> kb_alpha: array<f32, 64>;
+var<private> kb_len: u32;
+
+// Collect the k closest hits strictly behind (after_t, after_id) into kb_*; with `accepted`,
+// only hits accepted by roulette in slot 0 count (depth sampling).
+fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_seed: u32) {
+    kb_len = 0u;
+    let inv = safe_inverse(ray.dir);
+    var t_max = params.t_max;
+    var stack: array<u32, 64>;
+    var top = 0u;
+    if (enter(nodes[0], ray.origin, inv, t_max) >= FAR) {
+        return;
+    }
+    var node = 0u;
+    loop {
+        let nd = nodes[node];
+        var descend = false;
+        if (nd.count > 0u) {
+            for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+                let p = particles[leaf];
+                let h = intersect(p, ray);
+                if (!h.ok || !before(after_t, after_id, h.t, p.id)) {
+                    continue;
+                }
+                if (kb_len == k && !before(h.t, p.id, kb_t[k - 1u], kb_id[k - 1u])) {
+                    continue;
+                }
+                if (accepted && !(particle_u(pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
+                    continue;
+                }
+                // Insertion sort, dropping the farthest when full.
+                var i = select(kb_len, k - 1u, kb_len == k);
+                if (kb_len < k) {
+                    kb_len += 1u;
+                }
+                loop {
+                    if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
+                        break;
+                    }
+                    kb_t[i] = kb_t[i - 1u];
+                    kb_id[i] = kb_id[i - 1u];
+                    kb_alpha[i] = kb_alpha[i - 1u];
+                    i -= 1u;
+                }
+                kb_t[i] = h.t;
+                kb_id[i] = p.id;
+                kb_alpha[i] = h.alpha;
+                if (kb_len == k) {
+                    t_max = kb_t[k - 1u];
+                }
+            }
+        } else {
+            let a = nd.first;
+            let b = nd.first + 1u;
+            let ta = enter(nodes[a], ray.origin, inv, t_max);
+            let tb = enter(nodes[b], ray.origin, inv, t_max);
+            if (ta < FAR && tb < FAR) {
+                if (ta <= tb) {
+                    stack[top] = b;
+                    node = a;
+                } else {
+                    stack[top] = a;
+                    node = b;
+                }
+                top += 1u;
+                descend = true;
+            } else if (ta < FAR) {
+                node = a;
+                descend = true;
+            } else if (tb < FAR) {
+                node = b;
+                descend = true;
+            }
+        }
+        if (descend) {
+            continue;
+        }
+        var found = false;
+        loop {
+            if (top == 0u) {
+                break;
+            }
+            top -= 1u;
+            let c = stack[top];
+            if (enter(nodes[c], ray.origin, inv, t_max) < FAR) {
+                node = c;
+                found = true;
+                break;
+            }
+        }
+        if (!found) {
+            break;
+        }
+    }
+}
+
+// ---- trace.rs: the methods -------------------------------------------------------------------
+
+// A sample: rgb radiance over the background, a = coverage.
+fn kbuffer(ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    var radiance = vec3<f32>(0.0);
+    var transmittance = 1.0;
+    var after_t = params.t_min;
+    var after_id = NONE;
+    for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
+        if (transmittance <= params.min_transmittance) {
+            break;
+        }
+        next_k(ray, params.k, after_t, after_id, false, pixel_seed);
+        for (var i = 0u; i < kb_len; i++) {
+            radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
+            transmittance *= 1.0 - kb_alpha[i];
+        }
+        if (kb_len < params.k) {
+            break;
+        }
+        after_t = kb_t[kb_len - 1u];
+        after_id = kb_id[kb_len - 1u];
+    }
+    return vec4<f32>(radiance + transmittance * params.background.xyz, 1.0 - transmittance);
+}
+
+fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
+    stochastic_traverse(ray, pixel_seed, n, first_slot);
+    var sum = vec4<f32>(0.0);
+    for (var s = 0u; s < n; s++) {
+        if (best_id[s] == NONE) {
+            sum += vec4<f32>(params.background.xyz, 0.0);
+        } else {
+            sum += vec4<f32>(sh_color(best_id[s], ray.dir), 1.0);
+        }
+    }
+    return sum / f32(n);
+}
+
+fn stochastic_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    var after_t = params.t_min;
+    var after_id = NONE;
+    for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
+        next_k(ray, params.k, after_t, after_id, false, pixel_seed);
+        if (kb_len == 0u) {
+            break;
+        }
+        var radiance = vec3<f32>(0.0);
+        var transmittance = 1.0;
+        for (var i = 0u; i < kb_len; i++) {
+            radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
+            transmittance *= 1.0 - kb_alpha[i];
+        }
+        let opacity = 1.0 - transmittance;
+        if (pass_u(pixel_seed, pass_index) < opacity) {
+            return vec4<f32>(radiance / opacity, 1.0);
+        }
+        if (kb_len < params.k) {
+            break;
+        }
+        after_t = kb_t[kb_len - 1u];
+        after_id = kb_id[kb_len - 1u];
+    }
+    return vec4<f32>(params.background.xyz, 0.0);
+}
+
+fn depth_sampling(ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    next_k(ray, params.k, params.t_min, NONE, true, pixel_seed);
+    var radiance = vec3<f32>(0.0);
+    var transmittance = 1.0;
+    for (var i = 0u; i < kb_len; i++) {
+        radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
+        transmittance *= 1.0 - kb_alpha[i];
+    }
+    return vec4<f32>(radiance + transmittance * params.background.xyz, 1.0 - transmittance);
+}
+
+fn sample(ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    switch params.method {
+        case 2u: {
+            return stochastic_n(ray, pixel_seed, 1u, 0u);
+        }
+        case 3u: {
+            var sum = vec4<f32>(0.0);
+            for (var pass_index = 0u; pass_index < params.m; pass_index++) {
+                sum += stochastic_n(ray, pixel_seed, params.n, pass_index * params.n);
+            }
+            return sum / f32(params.m);
+        }
+        case 4u: {
+            return stochastic_pass(ray, pixel_seed);
+        }
+        case 5u: {
+            return depth_sampling(ray, pixel_seed);
+        }
+        default: {
+            return kbuffer(ray, pixel_seed);
+        }
+    }
+}
+
+// ---- camera.rs and frame accumulation (render_frames) ----------------------------------------
+
+fn pixel_ray(x: u32, y: u32) -> Ray {
+    let d_cam = vec3<f32>(
+        (f32(x) + 0.5 - params.intrinsics.z) / params.intrinsics.x,
+        (f32(y) + 0.5 - params.intrinsics.w) / params.intrinsics.y,
+        1.0,
+    );
+    let d = params.cam_row0.xyz * d_cam.x + params.cam_row1.xyz * d_cam.y + params.cam_row2.xyz * d_cam.z;
+    return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz);
+}
+
+// One invocation per pixel: `frames` frames (Welford mean and per-frame variance, as the CPU).
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) {
+        return;
+    }
+    let ray = pixel_ray(gid.x, gid.y);
+    var mean = vec4<f32>(0.0);
+    var m2 = vec4<f32>(0.0);
+    for (var f = 0u; f < params.frames; f++) {
+        let key = frame_key(params.seed, params.first_frame + f);
+        let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, key));
+        let s = sample(ray, pixel_seed);
+        let delta = s - mean;
+        mean += delta / f32(f + 1u);
+        m2 += delta * (s - mean);
+    }
+    let index = gid.y * params.size.x + gid.x;
+    out_mean[index] = mean;
+    out_var[index] = select(vec4<f32>(0.0), m2 / f32(params.frames - 1u), params.frames > 1u);
+}
