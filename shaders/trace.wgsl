@@ -23,7 +23,7 @@ struct Node {
     count: u32,
 }
 
-// Everything a dispatch needs (176 bytes), mirrored by splat_gpu::Params.
+// Everything a dispatch needs (192 bytes), mirrored by splat_gpu::Params.
 struct Params {
     cam_row0: vec4<f32>,
     cam_row1: vec4<f32>,
@@ -50,6 +50,11 @@ struct Params {
     t_max: f32,
     min_transmittance: f32,
     first_frame: u32,
+    // Unused (keeps the struct a multiple of 16 bytes).
+    canary: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 const METHOD_KBUFFER: u32 = 1u;
@@ -63,6 +68,11 @@ const NONE: u32 = 0xffffffffu;
 const PASS_ID: u32 = 0xffffffffu;
 const OFFSET_ID: u32 = 0xfffffffeu;
 const FAR: f32 = 3.0e38;
+// lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
+// invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
+// Every loop body below starts with `iterations += 1u`; a loop statement cannot iterate more
+// often than lanes × the busiest lane's total, which the host checks against the budget.
+const LOOP_BUDGET: u32 = 65535u;
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> particles: array<Particle>;
@@ -246,6 +256,8 @@ fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
 
 // ---- trace.rs: stochastic (Algorithm 1) and its N-sample extension (§3.5) ---------------------
 
+var<private> iterations: u32;
+
 var<private> best_t: array<f32, 64>;
 var<private> best_id: array<u32, 64>;
 var<private> best_leaf: array<u32, 64>;
@@ -253,6 +265,7 @@ var<private> slot_u: array<f32, 64>;
 
 fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
     for (var s = 0u; s < n; s++) {
+        iterations += 1u;
         best_t[s] = FAR;
         best_id[s] = NONE;
     }
@@ -266,15 +279,18 @@ fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
     }
     var node = 0u;
     loop {
+        iterations += 1u;
         let nd = nodes[node];
         var descend = false;
         if (nd.count > 0u) {
             for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+                iterations += 1u;
                 let p = particles[leaf];
                 if (early) {
                     let bound = min(p.opacity, params.alpha_clamp);
                     var any = false;
                     for (var s = 0u; s < n; s++) {
+                        iterations += 1u;
                         slot_u[s] = particle_u(pixel_seed, p.id, first_slot + s, vec3<f32>(0.0));
                         any = any || slot_u[s] < bound;
                     }
@@ -288,6 +304,7 @@ fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
                 }
                 var farthest = 0.0;
                 for (var s = 0u; s < n; s++) {
+                    iterations += 1u;
                     if (before(h.t, p.id, best_t[s], best_id[s])) {
                         var u = slot_u[s];
                         if (!early) {
@@ -331,6 +348,7 @@ fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
         }
         var found = false;
         loop {
+            iterations += 1u;
             if (top == 0u) {
                 break;
             }
@@ -368,10 +386,12 @@ fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_s
     }
     var node = 0u;
     loop {
+        iterations += 1u;
         let nd = nodes[node];
         var descend = false;
         if (nd.count > 0u) {
             for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+                iterations += 1u;
                 let p = particles[leaf];
                 let h = intersect(p, ray);
                 if (!h.ok || !before(after_t, after_id, h.t, p.id)) {
@@ -389,6 +409,7 @@ fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_s
                     kb_len += 1u;
                 }
                 loop {
+                    iterations += 1u;
                     if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
                         break;
                     }
@@ -432,6 +453,7 @@ fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_s
         }
         var found = false;
         loop {
+            iterations += 1u;
             if (top == 0u) {
                 break;
             }
@@ -458,11 +480,13 @@ fn kbuffer(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     var after_t = params.t_min;
     var after_id = NONE;
     for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
+        iterations += 1u;
         if (transmittance <= params.min_transmittance) {
             break;
         }
         next_k(ray, params.k, after_t, after_id, false, pixel_seed);
         for (var i = 0u; i < kb_len; i++) {
+            iterations += 1u;
             radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
             transmittance *= 1.0 - kb_alpha[i];
         }
@@ -479,6 +503,7 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
     stochastic_traverse(ray, pixel_seed, n, first_slot);
     var sum = vec4<f32>(0.0);
     for (var s = 0u; s < n; s++) {
+        iterations += 1u;
         if (best_id[s] == NONE) {
             sum += vec4<f32>(params.background.xyz, 0.0);
         } else {
@@ -492,6 +517,7 @@ fn stochastic_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     var after_t = params.t_min;
     var after_id = NONE;
     for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
+        iterations += 1u;
         next_k(ray, params.k, after_t, after_id, false, pixel_seed);
         if (kb_len == 0u) {
             break;
@@ -499,6 +525,7 @@ fn stochastic_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
         var radiance = vec3<f32>(0.0);
         var transmittance = 1.0;
         for (var i = 0u; i < kb_len; i++) {
+            iterations += 1u;
             radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
             transmittance *= 1.0 - kb_alpha[i];
         }
@@ -520,6 +547,7 @@ fn depth_sampling(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     var radiance = vec3<f32>(0.0);
     var transmittance = 1.0;
     for (var i = 0u; i < kb_len; i++) {
+        iterations += 1u;
         radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
         transmittance *= 1.0 - kb_alpha[i];
     }
@@ -534,6 +562,7 @@ fn sample(ray: Ray, pixel_seed: u32) -> vec4<f32> {
         case 3u: {
             var sum = vec4<f32>(0.0);
             for (var pass_index = 0u; pass_index < params.m; pass_index++) {
+                iterations += 1u;
                 sum += stochastic_n(ray, pixel_seed, params.n, pass_index * params.n);
             }
             return sum / f32(params.m);
@@ -562,24 +591,34 @@ fn pixel_ray(x: u32, y: u32) -> Ray {
     return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz);
 }
 
-// One invocation per pixel: `frames` frames (Welford mean and per-frame variance, as the CPU).
+// One invocation per pixel: frames first_frame .. first_frame + frames of the render, folded
+// into the running Welford state of the pixel (mean in out_mean, M2 in out_var.xyz, the most
+// loop iterations any of its dispatches spent in out_var.w). Long renders are many dispatches.
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {
         return;
     }
+    let index = gid.y * params.size.x + gid.x;
     let ray = pixel_ray(gid.x, gid.y);
+    iterations = 0u;
     var mean = vec4<f32>(0.0);
     var m2 = vec4<f32>(0.0);
+    var most = 0.0;
+    if (params.first_frame > 0u) {
+        mean = out_mean[index];
+        m2 = vec4<f32>(out_var[index].xyz, 0.0);
+        most = out_var[index].w;
+    }
     for (var f = 0u; f < params.frames; f++) {
-        let key = frame_key(params.seed, params.first_frame + f);
-        let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, key));
+        iterations += 1u;
+        let frame = params.first_frame + f;
+        let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
         let s = sample(ray, pixel_seed);
         let delta = s - mean;
-        mean += delta / f32(f + 1u);
+        mean += delta / f32(frame + 1u);
         m2 += delta * (s - mean);
     }
-    let index = gid.y * params.size.x + gid.x;
     out_mean[index] = mean;
-    out_var[index] = select(vec4<f32>(0.0), m2 / f32(params.frames - 1u), params.frames > 1u);
+    out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
 }

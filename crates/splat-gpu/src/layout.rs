@@ -44,7 +44,7 @@ pub struct GpuNode {
     pub count: u32,
 }
 
-/// Everything one dispatch needs (WGSL `Params`, 176 bytes).
+/// Everything one dispatch needs (WGSL `Params`, 192 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Params {
@@ -98,6 +98,14 @@ pub struct Params {
     pub min_transmittance: f32,
     /// Index of this dispatch's first frame.
     pub first_frame: u32,
+    /// Unused (padding to a multiple of 16 bytes).
+    pub canary: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
 }
 
 /// The leaf-order particles of a scene.
@@ -193,6 +201,10 @@ pub fn params(
         t_max: s.t_max,
         min_transmittance,
         first_frame,
+        canary: 1,
+        pad0: 0,
+        pad1: 0,
+        pad2: 0,
     }
 }
 
@@ -254,7 +266,11 @@ mod tests {
                 t_min,
                 t_max,
                 min_transmittance,
-                first_frame
+                first_frame,
+                canary,
+                pad0,
+                pad1,
+                pad2
             ]
         );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());

@@ -30,8 +30,16 @@ use wgpu::util::DeviceExt;
 
 /// WGSL of the ray-tracing kernel.
 pub const TRACE_WGSL: &str = include_str!("../../../shaders/trace.wgsl");
-/// Frames rendered per dispatch; longer runs are split so that no dispatch runs for long.
+/// Dispatches encoded into one submission.
+pub const DISPATCHES_PER_SUBMIT: u32 = 64;
+/// Frames rendered per dispatch on a real GPU; longer runs are split so that no dispatch runs
+/// for long. CPU adapters (lavapipe) render one frame per dispatch (see [`LOOP_BUDGET`]).
 pub const FRAMES_PER_DISPATCH: u32 = 32;
+/// lavapipe ends a loop after 65535 iterations of its SIMD loop per invocation (gallivm's loop
+/// limiter), silently. A loop statement runs at most lanes × the busiest lane's total loop
+/// iterations, which the kernel counts: on a CPU adapter [`render`] renders one frame per
+/// dispatch and refuses a result where that bound reaches the budget.
+pub const LOOP_BUDGET: u32 = 65_535;
 
 /// Why the GPU path cannot run.
 #[derive(Debug, Error)]
@@ -75,6 +83,20 @@ pub enum GpuError {
     /// Reading results back failed.
     #[error("GPU readback failed: {0}")]
     Readback(String),
+    /// A ray may need more loop iterations than lavapipe allows one invocation.
+    #[error(
+        "pixel ({x}, {y}) ran {iterations} loop iterations in one frame; with {lanes} lanes in lockstep a loop of it may have reached lavapipe's limit of {LOOP_BUDGET} iterations, which silently cuts rays short. Use --backend cpu, a larger k (fewer passes), a smaller n, or a hardware GPU"
+    )]
+    LoopBudget {
+        /// Pixel column.
+        x: u32,
+        /// Pixel row.
+        y: u32,
+        /// Loop iterations of the busiest lane.
+        iterations: u32,
+        /// Lanes in lockstep.
+        lanes: u32,
+    },
 }
 
 /// A headless wgpu device.
@@ -90,6 +112,10 @@ pub struct GpuContext {
     /// Whether timestamp queries are available.
     pub timestamps: bool,
     pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    uniform_alignment: u64,
+    /// Most frames one dispatch renders ([`FRAMES_PER_DISPATCH`] by default).
+    pub frames_per_dispatch: u32,
 }
 
 impl GpuContext {
@@ -140,22 +166,73 @@ impl GpuContext {
             label: Some("trace.wgsl"),
             source: wgpu::ShaderSource::Wgsl(TRACE_WGSL.into()),
         });
+        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("trace"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
+                    },
+                    count: None,
+                },
+                storage(1, true),
+                storage(2, true),
+                storage(3, true),
+                storage(4, false),
+                storage(5, false),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("trace"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("trace"),
-            layout: None,
+            layout: Some(&pipeline_layout),
             module: &module,
             entry_point: Some("main"),
             compilation_options: Default::default(),
             cache: None,
         });
-        let max_binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
-        Ok(Self { device, queue, info, max_binding, timestamps, pipeline })
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let uniform_alignment = u64::from(limits.min_uniform_buffer_offset_alignment);
+        Ok(Self {
+            device,
+            queue,
+            info,
+            max_binding,
+            timestamps,
+            pipeline,
+            layout,
+            uniform_alignment,
+            frames_per_dispatch: FRAMES_PER_DISPATCH,
+        })
     }
 
     /// Lower the storage binding limit scenes are checked against (to test the refusal).
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.max_binding = self.max_binding.min(bytes);
         self
+    }
+
+    /// Invocations a CPU adapter runs in lockstep (its largest subgroup size, at most 128).
+    pub fn lanes(&self) -> u32 {
+        self.info.subgroup_max_size.clamp(1, 128)
     }
 
     /// One line naming the adapter.
@@ -228,6 +305,10 @@ pub struct GpuOutput {
     pub variance: Image,
     /// Mean coverage.
     pub alpha: Image,
+    /// Most loop iterations one invocation ran in one dispatch (lavapipe's budget is 65535).
+    pub loop_iterations: u32,
+    /// Frames per dispatch the render settled on.
+    pub frames_per_dispatch: u32,
     /// GPU time of the dispatches (timestamp queries when available, else wall time around
     /// submit and poll).
     pub gpu_time: Duration,
@@ -249,8 +330,12 @@ fn method_code(method: &Method) -> Result<(u32, u32, u32, f32, u32, u32), GpuErr
 }
 
 /// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
-/// centres, as [`splat_core::trace::render_frames`] does, on the GPU. Frames are dispatched in
-/// chunks of [`FRAMES_PER_DISPATCH`]; each chunk's mean and variance are merged in f64.
+/// centres, as [`splat_core::trace::render_frames`] does, on the GPU: per pixel a running
+/// Welford mean and M2 in f32, frames in dispatches of up to [`FRAMES_PER_DISPATCH`].
+///
+/// On a CPU adapter (lavapipe) every dispatch renders one frame, since its loop limiter counts
+/// per invocation, and the render fails with [`GpuError::LoopBudget`] rather than return an
+/// image whose rays may have been cut short (see [`LOOP_BUDGET`]).
 pub fn render(
     ctx: &GpuContext,
     scene: &GpuScene,
@@ -265,113 +350,135 @@ pub fn render(
     }
     let code = method_code(method)?;
     let count = if method.is_stochastic() { frames.count } else { 1 };
-    let pixels = camera.width as usize * camera.height as usize;
-    let out_bytes = (pixels * 16) as u64;
-    let storage_out = |label| {
-        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
+    let per_dispatch = if cpu_adapter { 1 } else { ctx.frames_per_dispatch };
+    let run = Run { ctx, scene, trace, camera, code, frames, count };
+    let out = run.execute(per_dispatch)?;
+    let lanes = ctx.lanes();
+    if cpu_adapter && u64::from(out.loop_iterations.0) * u64::from(lanes) >= u64::from(LOOP_BUDGET) {
+        let (iterations, pixel) = out.loop_iterations;
+        return Err(GpuError::LoopBudget { x: pixel % camera.width, y: pixel / camera.width, iterations, lanes });
+    }
+    Ok(out.output)
+}
+
+/// A finished render with the busiest pixel's loop count (count, pixel index).
+struct Finished {
+    output: GpuOutput,
+    loop_iterations: (u32, u32),
+}
+
+/// One attempt at a render.
+struct Run<'a> {
+    ctx: &'a GpuContext,
+    scene: &'a GpuScene,
+    trace: &'a TraceScene<'a>,
+    camera: &'a Camera,
+    code: (u32, u32, u32, f32, u32, u32),
+    frames: &'a Frames,
+    count: u32,
+}
+
+impl Run<'_> {
+    fn storage(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
-            size: out_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            size: bytes,
+            usage,
             mapped_at_creation: false,
         })
-    };
-    let (out_mean, out_var) = (storage_out("mean"), storage_out("variance"));
-    let readback = |label| {
-        ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: out_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    };
-    let (read_mean, read_var) = (readback("read mean"), readback("read variance"));
-    let mut merged = vec![[(0u64, 0.0f64, 0.0f64); 4]; pixels];
-    let mut gpu_time = Duration::ZERO;
-    let mut first = 0u32;
-    while first < count {
-        let chunk = FRAMES_PER_DISPATCH.min(count - first);
-        let params = layout::params(trace, camera, code, frames, first, chunk);
-        let uniform = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+    }
+
+    /// Render with `per_dispatch` frames a dispatch.
+    fn execute(&self, per_dispatch: u32) -> Result<Finished, GpuError> {
+        let (ctx, camera) = (self.ctx, self.camera);
+        let pixels = camera.width as usize * camera.height as usize;
+        let out_bytes = (pixels * 16) as u64;
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let (out_mean, out_var) = (self.storage("mean", out_bytes, rw), self.storage("m2", out_bytes, rw));
+        let (read_mean, read_var) =
+            (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
+        let stride = (std::mem::size_of::<Params>() as u64).next_multiple_of(ctx.uniform_alignment);
+        let uniform = self.storage(
+            "params",
+            stride * u64::from(DISPATCHES_PER_SUBMIT),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("trace"),
-            layout: &ctx.pipeline.get_bind_group_layout(0),
+            layout: &ctx.layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: scene.particles.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: scene.nodes.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: scene.sh.as_entire_binding() },
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &uniform,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
+                    }),
+                },
+                wgpu::BindGroupEntry { binding: 1, resource: self.scene.particles.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: self.scene.nodes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: self.scene.sh.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: out_mean.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: out_var.as_entire_binding() },
             ],
         });
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
-        {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes: None });
-            pass.set_pipeline(&ctx.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
-        }
-        encoder.copy_buffer_to_buffer(&out_mean, 0, &read_mean, 0, out_bytes);
-        encoder.copy_buffer_to_buffer(&out_var, 0, &read_var, 0, out_bytes);
-        let start = Instant::now();
-        ctx.queue.submit([encoder.finish()]);
-        ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-        gpu_time += start.elapsed();
-        let (mean, var) = (ctx.read_buffer(&read_mean)?, ctx.read_buffer(&read_var)?);
-        for (i, m) in merged.iter_mut().enumerate() {
-            for (c, slot) in m.iter_mut().enumerate() {
-                *slot = merge(*slot, (u64::from(chunk), f64::from(mean[4 * i + c]), f64::from(var[4 * i + c])));
+        let mut gpu_time = Duration::ZERO;
+        let mut first = 0u32;
+        while first < self.count {
+            let batch = DISPATCHES_PER_SUBMIT;
+            let mut params_bytes = vec![0u8; (stride * u64::from(batch)) as usize];
+            let mut offsets = Vec::new();
+            while offsets.len() < batch as usize && first < self.count {
+                let chunk = per_dispatch.min(self.count - first);
+                let params = layout::params(self.trace, camera, self.code, self.frames, first, chunk);
+                let at = offsets.len() * stride as usize;
+                params_bytes[at..at + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(&params));
+                offsets.push(at as u32);
+                first += chunk;
             }
+            ctx.queue.write_buffer(&uniform, 0, &params_bytes);
+            let mut encoder =
+                ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+            {
+                let mut pass = encoder
+                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes: None });
+                pass.set_pipeline(&ctx.pipeline);
+                for &offset in &offsets {
+                    pass.set_bind_group(0, &bind_group, &[offset]);
+                    pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
+                }
+            }
+            let start = Instant::now();
+            ctx.queue.submit([encoder.finish()]);
+            ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+            gpu_time += start.elapsed();
         }
-        first += chunk;
-    }
-    let image = |c: usize, f: &dyn Fn(&(u64, f64, f64)) -> f64, offset: usize| {
-        let data = merged.iter().flat_map(|m| m[offset..offset + c].iter().map(|v| f(v) as f32)).collect();
-        Image::from_data(camera.width, camera.height, c as u32, data).expect("size")
-    };
-    Ok(GpuOutput {
-        mean: image(3, &|v| v.1, 0),
-        variance: image(3, &|v| v.2, 0),
-        alpha: image(1, &|v| v.1, 3),
-        gpu_time,
-    })
-}
-
-/// Merge two (count, mean, unbiased variance) summaries (Chan et al.).
-fn merge(a: (u64, f64, f64), b: (u64, f64, f64)) -> (u64, f64, f64) {
-    if a.0 == 0 {
-        return b;
-    }
-    let n = a.0 + b.0;
-    let (na, nb) = (a.0 as f64, b.0 as f64);
-    let delta = b.1 - a.1;
-    let mean = a.1 + delta * nb / n as f64;
-    let m2 = a.2 * (na - 1.0) + b.2 * (nb - 1.0) + delta * delta * na * nb / n as f64;
-    (n, mean, if n > 1 { m2 / (n - 1) as f64 } else { 0.0 })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    use splat_core::stats::Welford;
-
-    #[test]
-    fn merging_chunks_equals_one_pass() {
-        let xs: Vec<f64> = (0..37).map(|i| ((i * 7919) % 101) as f64 / 10.0).collect();
-        let summary = |v: &[f64]| {
-            let mut w = Welford::default();
-            v.iter().for_each(|&x| w.push(x));
-            (w.n, w.mean, w.variance())
+        let mean = self.read(&out_mean, &read_mean, out_bytes)?;
+        let m2 = self.read(&out_var, &read_var, out_bytes)?;
+        let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
+        let n = f64::from(self.count);
+        let image = |channels: usize, value: &dyn Fn(usize) -> f32| {
+            let data = (0..pixels).flat_map(|p| (0..channels).map(move |c| value(4 * p + c))).collect();
+            Image::from_data(camera.width, camera.height, channels as u32, data).expect("size")
         };
-        let merged = merge(merge(summary(&xs[..5]), summary(&xs[5..6])), summary(&xs[6..]));
-        let whole = summary(&xs);
-        assert_eq!(merged.0, whole.0);
-        assert!((merged.1 - whole.1).abs() < 1e-12 && (merged.2 - whole.2).abs() < 1e-10);
+        let output = GpuOutput {
+            mean: image(3, &|i| mean[i]),
+            variance: image(3, &|i| if self.count > 1 { (f64::from(m2[i]) / (n - 1.0)) as f32 } else { 0.0 }),
+            alpha: image(1, &|i| mean[i - i % 4 + 3]),
+            loop_iterations: busiest.0,
+            frames_per_dispatch: per_dispatch,
+            gpu_time,
+        };
+        Ok(Finished { output, loop_iterations: busiest })
+    }
+
+    fn read(&self, source: &wgpu::Buffer, staging: &wgpu::Buffer, bytes: u64) -> Result<Vec<f32>, GpuError> {
+        let mut encoder =
+            self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        encoder.copy_buffer_to_buffer(source, 0, staging, 0, bytes);
+        self.ctx.queue.submit([encoder.finish()]);
+        self.ctx.read_buffer(staging)
     }
 }
