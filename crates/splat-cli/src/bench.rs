@@ -32,6 +32,9 @@ pub struct BenchArgs {
 
 /// Run `splat bench`.
 pub fn run(args: BenchArgs) -> Result<()> {
+    if let Some(ctx) = crate::render::gpu_context(args.scene.backend)? {
+        return run_gpu(&args, &ctx);
+    }
     let (scene, camera) = args.scene.load(1200, 800)?;
     let pool = args.scene.pool()?;
     let threads = pool.current_num_threads();
@@ -70,6 +73,53 @@ pub fn run(args: BenchArgs) -> Result<()> {
             mrays / threads as f64,
             best / base
         );
+    }
+    Ok(())
+}
+
+/// Frame times of every method on the GPU, as ratios against `stochastic` measured in the same
+/// run (wall time around submit and poll; the opaque baseline exists on the CPU only).
+fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
+    let (scene, camera) = args.scene.load(1200, 800)?;
+    let trace = TraceScene::new(&scene, args.scene.settings())?;
+    let gpu_scene = splat_gpu::GpuScene::new(ctx, &trace)?;
+    println!(
+        "{} particles on {}, {}×{} at {} spp, wall time around submit + poll\n",
+        scene.particles.len(),
+        ctx.describe(),
+        camera.width,
+        camera.height,
+        args.spp
+    );
+    println!("| method | frame (ms) | Mrays/s | cost vs stochastic |");
+    println!("|---|---:|---:|---:|");
+    let mut methods = vec![MethodArg::Stochastic];
+    methods.extend(args.methods.iter().copied().filter(|&m| m != MethodArg::Stochastic && m != MethodArg::Opaque));
+    let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
+    let mut baseline = None;
+    for m in methods {
+        let method = args.options.method(m).context("the brute-force oracle is not benchmarked (it has no BVH)")?;
+        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
+        let name = clap::ValueEnum::to_possible_value(&m).map(|v| v.get_name().to_string()).unwrap_or_default();
+        let mut best = f64::INFINITY;
+        for _ in 0..args.repeat.max(1) {
+            match splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &method, &frames) {
+                Ok(out) => best = best.min(out.gpu_time.as_secs_f64()),
+                Err(e) => {
+                    println!("| {name} | refused: {e} | | |");
+                    break;
+                }
+            }
+        }
+        if best.is_finite() {
+            let base = *baseline.get_or_insert(best);
+            println!(
+                "| {name} | {:.1} | {:.3} | {:.2}× |",
+                1e3 * best / f64::from(args.spp),
+                rays / best / 1e6,
+                best / base
+            );
+        }
     }
     Ok(())
 }

@@ -35,6 +35,18 @@ pub enum MethodArg {
     Opaque,
 }
 
+/// Where rays are traced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// A hardware GPU when wgpu finds one, else the CPU (lavapipe, a CPU Vulkan driver, is
+    /// slower than the CPU tracer and is used only when asked for with --backend gpu).
+    Auto,
+    /// The CPU tracer of splat-core (rayon over tiles).
+    Cpu,
+    /// The wgpu compute kernels (WGPU_BACKEND / WGPU_ADAPTER_NAME choose the adapter).
+    Gpu,
+}
+
 /// Random number generator of the stochastic methods.
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum RngArg {
@@ -161,6 +173,9 @@ pub struct SceneArgs {
     /// Worker threads (default: all cores). The image does not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Where rays are traced.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
     /// Skip unknown `.ply` vertex properties instead of refusing the file.
     #[arg(long)]
     pub allow_unknown_properties: bool,
@@ -314,7 +329,8 @@ pub fn progress_bar(pixels: u64) -> ProgressBar {
     )
 }
 
-/// Render with the chosen method: the brute-force oracle, or the BVH tracer over frames.
+/// Render with the chosen method: the brute-force oracle, the BVH tracer over frames, or the
+/// GPU kernels.
 fn render(
     args: &RenderArgs,
     scene: &Scene,
@@ -335,7 +351,30 @@ fn render(
     };
     let trace = TraceScene::new(scene, *settings)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
+    if let Some(ctx) = gpu_context(args.scene.backend)? {
+        if args.depth.is_some() || args.normal.is_some() {
+            bail!("--depth and --normal are produced by the CPU backend only: add --backend cpu");
+        }
+        eprintln!("tracing on {}", ctx.describe());
+        let gpu_scene = splat_gpu::GpuScene::new(&ctx, &trace)?;
+        let out = splat_gpu::render(&ctx, &gpu_scene, &trace, camera, &method, &frames)?;
+        progress(u64::from(camera.width) * u64::from(camera.height));
+        let nan = splat_core::Image::filled(camera.width, camera.height, 1, f32::NAN);
+        let zero = splat_core::Image::filled(camera.width, camera.height, 3, 0.0);
+        return Ok(TraceOutput { mean: out.mean, variance: out.variance, alpha: out.alpha, depth: nan, normal: zero });
+    }
     Ok(render_frames(&trace, camera, &method, &frames, progress)?)
+}
+
+/// The GPU context the backend choice asks for: `None` for the CPU.
+pub fn gpu_context(backend: BackendArg) -> Result<Option<splat_gpu::GpuContext>> {
+    match backend {
+        BackendArg::Cpu => Ok(None),
+        BackendArg::Gpu => Ok(Some(splat_gpu::GpuContext::new()?)),
+        BackendArg::Auto => {
+            Ok(splat_gpu::GpuContext::new().ok().filter(|c| c.info.device_type != splat_gpu::wgpu::DeviceType::Cpu))
+        }
+    }
 }
 
 fn write_outputs(args: &RenderArgs, out: &TraceOutput) -> Result<()> {

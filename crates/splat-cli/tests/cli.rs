@@ -259,3 +259,45 @@ fn bench_reports_every_method_against_opaque() {
         assert!(text.contains(&format!("| {m} |")), "{m} missing:\n{text}");
     }
 }
+
+/// `--backend gpu` renders the same image as `--backend cpu` for the same seed (the kernels
+/// make the same decisions); without an adapter it fails with a message naming the driver to
+/// install, unless CI requires one.
+#[test]
+fn gpu_backend_matches_cpu_backend() {
+    let render = |backend: &str, out: &PathBuf| {
+        splat(&[
+            "render",
+            "fixtures/cloud.ply",
+            "--camera",
+            "fixtures/cloud.cameras.json",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--method",
+            "stochastic",
+            "--spp",
+            "4",
+            "--seed",
+            "9",
+            "--backend",
+            backend,
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
+    let (cpu_out, gpu_out) = (scratch("backend-cpu.npy"), scratch("backend-gpu.npy"));
+    assert!(render("cpu", &cpu_out).status.success());
+    let o = render("gpu", &gpu_out);
+    if !o.status.success() {
+        let err = stderr(&o);
+        assert!(std::env::var("CI").is_err(), "CI=true and the GPU backend failed: {err}");
+        assert!(err.contains("mesa-vulkan-drivers"), "{err}");
+        eprintln!("skipping: {err}");
+        return;
+    }
+    let (a, b) = (splat_io::image::read_npy(&cpu_out).unwrap(), splat_io::image::read_npy(&gpu_out).unwrap());
+    let worst = a.data().iter().zip(b.data()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "GPU and CPU backends differ by {worst}");
+}

@@ -18,6 +18,8 @@
 mod accumulate;
 mod layout;
 
+pub use wgpu;
+
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use layout::{GpuParticle, Params};
 
