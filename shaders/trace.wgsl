@@ -254,6 +254,58 @@ fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
     return t < other_t || (t == other_t && id < other_id);
 }
 
+// Stack traversal state of the current ray (bvh.rs `Bvh::traverse`).
+var<private> trav_stack: array<u32, 64>;
+var<private> trav_top: u32;
+var<private> trav_next: u32;
+
+fn traversal_begin(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) {
+    trav_top = 0u;
+    trav_next = select(NONE, 0u, enter(nodes[0], origin, inv, t_max) < FAR);
+}
+
+// The next leaf whose box the ray overlaps before t_max, nearer child first; NONE when the
+// traversal is over. Nodes are re-tested against the current t_max when popped, so a caller
+// that lowers t_max between leaves clips the rest of the traversal.
+fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
+    loop {
+        iterations += 1u;
+        if (trav_next == NONE) {
+            if (trav_top == 0u) {
+                return NONE;
+            }
+            trav_top -= 1u;
+            let c = trav_stack[trav_top];
+            if (enter(nodes[c], origin, inv, t_max) < FAR) {
+                trav_next = c;
+            }
+            continue;
+        }
+        let node = trav_next;
+        let nd = nodes[node];
+        if (nd.count > 0u) {
+            trav_next = NONE;
+            return node;
+        }
+        let a = nd.first;
+        let b = nd.first + 1u;
+        let ta = enter(nodes[a], origin, inv, t_max);
+        let tb = enter(nodes[b], origin, inv, t_max);
+        if (ta < FAR && tb < FAR) {
+            trav_stack[trav_top] = select(a, b, ta <= tb);
+            trav_next = select(b, a, ta <= tb);
+            trav_top += 1u;
+        } else if (ta < FAR) {
+            trav_next = a;
+        } else if (tb < FAR) {
+            trav_next = b;
+        } else {
+            trav_next = NONE;
+        }
+    }
+    return NONE; // unreachable: the loop only ends by returning
+}
+
 // ---- trace.rs: stochastic (Algorithm 1) and its N-sample extension (§3.5) ---------------------
 
 var<private> iterations: u32;
@@ -272,96 +324,50 @@ fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
     let early = params.rng_scheme == 0u;
     let inv = safe_inverse(ray.dir);
     var t_max = params.t_max;
-    var stack: array<u32, 64>;
-    var top = 0u;
-    if (enter(nodes[0], ray.origin, inv, t_max) >= FAR) {
-        return;
-    }
-    var node = 0u;
+    traversal_begin(ray.origin, inv, t_max);
     loop {
         iterations += 1u;
+        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        if (node == NONE) {
+            break;
+        }
         let nd = nodes[node];
-        var descend = false;
-        if (nd.count > 0u) {
-            for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
-                iterations += 1u;
-                let p = particles[leaf];
-                if (early) {
-                    let bound = min(p.opacity, params.alpha_clamp);
-                    var any = false;
-                    for (var s = 0u; s < n; s++) {
-                        iterations += 1u;
-                        slot_u[s] = particle_u(pixel_seed, p.id, first_slot + s, vec3<f32>(0.0));
-                        any = any || slot_u[s] < bound;
-                    }
-                    if (!any) {
-                        continue;
-                    }
-                }
-                let h = intersect(p, ray);
-                if (!h.ok) {
-                    continue;
-                }
-                var farthest = 0.0;
+        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+            iterations += 1u;
+            let p = particles[leaf];
+            if (early) {
+                let bound = min(p.opacity, params.alpha_clamp);
+                var any = false;
                 for (var s = 0u; s < n; s++) {
                     iterations += 1u;
-                    if (before(h.t, p.id, best_t[s], best_id[s])) {
-                        var u = slot_u[s];
-                        if (!early) {
-                            u = particle_u(pixel_seed, p.id, first_slot + s, ray.origin + h.t * ray.dir);
-                        }
-                        if (u < h.alpha) {
-                            best_t[s] = h.t;
-                            best_id[s] = p.id;
-                            best_leaf[s] = leaf;
-                        }
+                    slot_u[s] = particle_u(pixel_seed, p.id, first_slot + s, vec3<f32>(0.0));
+                    any = any || slot_u[s] < bound;
+                }
+                if (!any) {
+                    continue;
+                }
+            }
+            let h = intersect(p, ray);
+            if (!h.ok) {
+                continue;
+            }
+            var farthest = 0.0;
+            for (var s = 0u; s < n; s++) {
+                iterations += 1u;
+                if (before(h.t, p.id, best_t[s], best_id[s])) {
+                    var u = slot_u[s];
+                    if (!early) {
+                        u = particle_u(pixel_seed, p.id, first_slot + s, ray.origin + h.t * ray.dir);
                     }
-                    farthest = max(farthest, best_t[s]);
+                    if (u < h.alpha) {
+                        best_t[s] = h.t;
+                        best_id[s] = p.id;
+                        best_leaf[s] = leaf;
+                    }
                 }
-                t_max = min(farthest, params.t_max);
+                farthest = max(farthest, best_t[s]);
             }
-        } else {
-            let a = nd.first;
-            let b = nd.first + 1u;
-            let ta = enter(nodes[a], ray.origin, inv, t_max);
-            let tb = enter(nodes[b], ray.origin, inv, t_max);
-            if (ta < FAR && tb < FAR) {
-                if (ta <= tb) {
-                    stack[top] = b;
-                    node = a;
-                } else {
-                    stack[top] = a;
-                    node = b;
-                }
-                top += 1u;
-                descend = true;
-            } else if (ta < FAR) {
-                node = a;
-                descend = true;
-            } else if (tb < FAR) {
-                node = b;
-                descend = true;
-            }
-        }
-        if (descend) {
-            continue;
-        }
-        var found = false;
-        loop {
-            iterations += 1u;
-            if (top == 0u) {
-                break;
-            }
-            top -= 1u;
-            let c = stack[top];
-            if (enter(nodes[c], ray.origin, inv, t_max) < FAR) {
-                node = c;
-                found = true;
-                break;
-            }
-        }
-        if (!found) {
-            break;
+            t_max = min(farthest, params.t_max);
         }
     }
 }
@@ -379,94 +385,48 @@ fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_s
     kb_len = 0u;
     let inv = safe_inverse(ray.dir);
     var t_max = params.t_max;
-    var stack: array<u32, 64>;
-    var top = 0u;
-    if (enter(nodes[0], ray.origin, inv, t_max) >= FAR) {
-        return;
-    }
-    var node = 0u;
+    traversal_begin(ray.origin, inv, t_max);
     loop {
         iterations += 1u;
-        let nd = nodes[node];
-        var descend = false;
-        if (nd.count > 0u) {
-            for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
-                iterations += 1u;
-                let p = particles[leaf];
-                let h = intersect(p, ray);
-                if (!h.ok || !before(after_t, after_id, h.t, p.id)) {
-                    continue;
-                }
-                if (kb_len == k && !before(h.t, p.id, kb_t[k - 1u], kb_id[k - 1u])) {
-                    continue;
-                }
-                if (accepted && !(particle_u(pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
-                    continue;
-                }
-                // Insertion sort, dropping the farthest when full.
-                var i = select(kb_len, k - 1u, kb_len == k);
-                if (kb_len < k) {
-                    kb_len += 1u;
-                }
-                loop {
-                    iterations += 1u;
-                    if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
-                        break;
-                    }
-                    kb_t[i] = kb_t[i - 1u];
-                    kb_id[i] = kb_id[i - 1u];
-                    kb_alpha[i] = kb_alpha[i - 1u];
-                    i -= 1u;
-                }
-                kb_t[i] = h.t;
-                kb_id[i] = p.id;
-                kb_alpha[i] = h.alpha;
-                if (kb_len == k) {
-                    t_max = kb_t[k - 1u];
-                }
-            }
-        } else {
-            let a = nd.first;
-            let b = nd.first + 1u;
-            let ta = enter(nodes[a], ray.origin, inv, t_max);
-            let tb = enter(nodes[b], ray.origin, inv, t_max);
-            if (ta < FAR && tb < FAR) {
-                if (ta <= tb) {
-                    stack[top] = b;
-                    node = a;
-                } else {
-                    stack[top] = a;
-                    node = b;
-                }
-                top += 1u;
-                descend = true;
-            } else if (ta < FAR) {
-                node = a;
-                descend = true;
-            } else if (tb < FAR) {
-                node = b;
-                descend = true;
-            }
-        }
-        if (descend) {
-            continue;
-        }
-        var found = false;
-        loop {
-            iterations += 1u;
-            if (top == 0u) {
-                break;
-            }
-            top -= 1u;
-            let c = stack[top];
-            if (enter(nodes[c], ray.origin, inv, t_max) < FAR) {
-                node = c;
-                found = true;
-                break;
-            }
-        }
-        if (!found) {
+        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        if (node == NONE) {
             break;
+        }
+        let nd = nodes[node];
+        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+            iterations += 1u;
+            let p = particles[leaf];
+            let h = intersect(p, ray);
+            if (!h.ok || !before(after_t, after_id, h.t, p.id)) {
+                continue;
+            }
+            if (kb_len == k && !before(h.t, p.id, kb_t[k - 1u], kb_id[k - 1u])) {
+                continue;
+            }
+            if (accepted && !(particle_u(pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
+                continue;
+            }
+            // Insertion sort, dropping the farthest when full.
+            var i = select(kb_len, k - 1u, kb_len == k);
+            if (kb_len < k) {
+                kb_len += 1u;
+            }
+            loop {
+                iterations += 1u;
+                if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
+                    break;
+                }
+                kb_t[i] = kb_t[i - 1u];
+                kb_id[i] = kb_id[i - 1u];
+                kb_alpha[i] = kb_alpha[i - 1u];
+                i -= 1u;
+            }
+            kb_t[i] = h.t;
+            kb_id[i] = p.id;
+            kb_alpha[i] = h.alpha;
+            if (kb_len == k) {
+                t_max = kb_t[k - 1u];
+            }
         }
     }
 }

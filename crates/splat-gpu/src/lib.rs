@@ -62,6 +62,9 @@ pub enum GpuError {
         /// Its reason.
         message: String,
     },
+    /// The kernel failed validation or pipeline creation on this device.
+    #[error("the GPU kernel was rejected by the device: {0}")]
+    Shader(String),
     /// A buffer exceeds the adapter's storage binding limit.
     #[error(
         "the scene's {buffer} buffer needs {bytes} bytes but the adapter binds at most {limit} bytes per storage buffer ({count} particles); render it with --backend cpu or on an adapter with larger limits"
@@ -164,6 +167,8 @@ impl GpuContext {
             })
             .await
             .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
+        // Shader and pipeline errors come back as a typed error, not wgpu's panicking handler.
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("trace.wgsl"),
             source: wgpu::ShaderSource::Wgsl(TRACE_WGSL.into()),
@@ -211,6 +216,9 @@ impl GpuContext {
             compilation_options: Default::default(),
             cache: None,
         });
+        if let Some(e) = scope.pop().await {
+            return Err(GpuError::Shader(e.to_string()));
+        }
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let uniform_alignment = u64::from(limits.min_uniform_buffer_offset_alignment);
         Ok(Self {

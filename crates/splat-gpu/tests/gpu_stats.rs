@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{context, fixture, splat_io_free_load};
+use common::{context, fixture};
 use splat_core::render::RenderSettings;
 use splat_core::stats::{ZTest, log_log_slope, rmse, welch_t};
 use splat_core::trace::{Frames, Method, TraceScene, render_frames};
@@ -78,24 +78,8 @@ fn gpu_methods_pass_the_z_test_on_cloud() {
 #[test]
 fn gpu_methods_pass_the_z_test_on_a_bonsai_crop() {
     let Some(ctx) = context() else { return };
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/assets/bonsai-7k-mini.splat");
-    if !path.exists() {
-        assert!(std::env::var("CI").is_err(), "{} is absent under CI=true", path.display());
-        eprintln!("skipping: {} is absent: run `cargo xtask assets`", path.display());
-        return;
-    }
-    let scene = splat_io_free_load(&path);
-    let camera = Camera::look_at(
-        glam::Vec3::new(0.0, -1.5, 4.0),
-        glam::Vec3::new(0.0, 0.5, 0.0),
-        glam::Vec3::new(0.0, -1.0, 0.0),
-        50.0,
-        1200,
-        800,
-    )
-    .unwrap()
-    .crop(560, 180, 24, 16)
-    .unwrap();
+    let Some(scene) = splat_tests::bonsai() else { return };
+    let camera = splat_tests::bonsai_camera().crop(560, 180, 24, 16).unwrap();
     check_z(ctx, &scene, &camera);
 }
 
