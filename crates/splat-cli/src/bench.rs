@@ -84,12 +84,13 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let trace = TraceScene::new(&scene, args.scene.settings())?;
     let gpu_scene = splat_gpu::GpuScene::new(ctx, &trace)?;
     println!(
-        "{} particles on {}, {}×{} at {} spp, wall time around submit + poll\n",
+        "{} particles on {}, {}×{} at {} spp, {}\n",
         scene.particles.len(),
         ctx.describe(),
         camera.width,
         camera.height,
-        args.spp
+        args.spp,
+        if ctx.timestamps { "timestamp queries" } else { "wall time around submit + poll" }
     );
     println!("| method | frame (ms) | Mrays/s | cost vs stochastic |");
     println!("|---|---:|---:|---:|");

@@ -322,6 +322,8 @@ pub struct GpuOutput {
     /// GPU time of the dispatches (timestamp queries when available, else wall time around
     /// submit and poll).
     pub gpu_time: Duration,
+    /// Whether `gpu_time` comes from timestamp queries.
+    pub timestamps: bool,
 }
 
 /// The kernel's method code and parameters for a method; `exact` is the k-buffer with the
@@ -435,6 +437,7 @@ impl Run<'_> {
             ],
         });
         let mut gpu_time = Duration::ZERO;
+        let timer = ctx.timestamps.then(|| Timer::new(ctx));
         let mut first = 0u32;
         while first < self.count {
             let batch = DISPATCHES_PER_SUBMIT;
@@ -452,18 +455,29 @@ impl Run<'_> {
             let mut encoder =
                 ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
             {
-                let mut pass = encoder
-                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes: None });
+                let timestamp_writes = timer.as_ref().map(|t| wgpu::ComputePassTimestampWrites {
+                    query_set: &t.queries,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                });
+                let mut pass =
+                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
                 pass.set_pipeline(&ctx.pipeline);
                 for &offset in &offsets {
                     pass.set_bind_group(0, &bind_group, &[offset]);
                     pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
                 }
             }
+            if let Some(t) = &timer {
+                t.resolve(&mut encoder);
+            }
             let start = Instant::now();
             ctx.queue.submit([encoder.finish()]);
             ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-            gpu_time += start.elapsed();
+            gpu_time += match &timer {
+                Some(t) => t.elapsed(ctx)?,
+                None => start.elapsed(),
+            };
         }
         let mean = self.read(&out_mean, &read_mean, out_bytes)?;
         let m2 = self.read(&out_var, &read_var, out_bytes)?;
@@ -480,6 +494,7 @@ impl Run<'_> {
             loop_iterations: busiest.0,
             frames_per_dispatch: per_dispatch,
             gpu_time,
+            timestamps: timer.is_some(),
         };
         Ok(Finished { output, loop_iterations: busiest })
     }
@@ -490,5 +505,48 @@ impl Run<'_> {
         encoder.copy_buffer_to_buffer(source, 0, staging, 0, bytes);
         self.ctx.queue.submit([encoder.finish()]);
         self.ctx.read_buffer(staging)
+    }
+}
+
+/// Timestamp queries at the start and end of each compute pass.
+struct Timer {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    staging: wgpu::Buffer,
+}
+
+impl Timer {
+    fn new(ctx: &GpuContext) -> Self {
+        let queries = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("pass time"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let buffer = |label, usage| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 16,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Self {
+            queries,
+            resolved: buffer("timestamps", wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC),
+            staging: buffer("read timestamps", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
+        }
+    }
+
+    fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
+        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
+    }
+
+    /// Time between the two timestamps of the last submitted pass.
+    fn elapsed(&self, ctx: &GpuContext) -> Result<Duration, GpuError> {
+        let words = ctx.read_buffer(&self.staging)?;
+        let ticks = |i: usize| u64::from(words[2 * i].to_bits()) | (u64::from(words[2 * i + 1].to_bits()) << 32);
+        let nanos = ticks(1).saturating_sub(ticks(0)) as f64 * f64::from(ctx.queue.get_timestamp_period());
+        Ok(Duration::from_nanos(nanos as u64))
     }
 }

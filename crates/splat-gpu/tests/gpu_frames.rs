@@ -138,3 +138,16 @@ fn rays_over_the_loop_budget_are_refused_on_lavapipe() {
     let light = splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &Method::Stochastic, &Frames::default()).unwrap();
     assert!(u64::from(light.loop_iterations) * u64::from(ctx.lanes()) < u64::from(splat_gpu::LOOP_BUDGET));
 }
+
+/// GPU time is measured by timestamp queries when the adapter has them, else wall time (speed
+/// itself is measured by `splat bench --backend gpu`, not asserted here).
+#[test]
+fn frame_times_come_from_timestamp_queries_when_available() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("cloud", 48, 36);
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let gpu_scene = GpuScene::new(ctx, &trace).unwrap();
+    let out = splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &Method::Stochastic, &Frames::default()).unwrap();
+    assert_eq!(out.timestamps, ctx.timestamps);
+    assert!(out.gpu_time > std::time::Duration::ZERO);
+}
