@@ -44,6 +44,9 @@ struct Row {
 
 /// Run `splat converge`.
 pub fn run(args: ConvergeArgs) -> Result<()> {
+    if args.scene.backend == crate::render::BackendArg::Gpu {
+        bail!("splat converge runs on the CPU tracer; the GPU kernels are compared with it by the test suite");
+    }
     if !args.max_spp.is_power_of_two() {
         bail!("--max-spp must be a power of two, not {}", args.max_spp);
     }

@@ -339,6 +339,9 @@ fn render(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<TraceOutput> {
     let Some(method) = args.options.method(args.method) else {
+        if args.scene.backend == BackendArg::Gpu {
+            bail!("the brute-force oracle runs on the CPU only: use --method exact on the GPU");
+        }
         let out = render_exact(scene, camera, settings, progress)?;
         let variance = splat_core::Image::filled(camera.width, camera.height, 3, 0.0);
         return Ok(TraceOutput {
