@@ -50,13 +50,25 @@ struct Params {
     t_max: f32,
     min_transmittance: f32,
     first_frame: u32,
-    // Unused (keeps the struct a multiple of 16 bytes).
-    canary: u32,
-    pad0: u32,
+    // 0: whole frames per invocation; 1: one pass of frame first_frame (pass-per-dispatch).
+    mode: u32,
+    pass_index: u32,
     pad1: u32,
     pad2: u32,
 }
 
+// The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState.
+struct PassState {
+    radiance: vec3<f32>,
+    transmittance: f32,
+    after_t: f32,
+    after_id: u32,
+    flags: u32,
+    pad: u32,
+}
+
+const DONE: u32 = 1u;
+const ACCEPTED: u32 = 2u;
 const METHOD_KBUFFER: u32 = 1u;
 const METHOD_STOCHASTIC: u32 = 2u;
 const METHOD_STOCHASTIC_N: u32 = 3u;
@@ -80,6 +92,7 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(3) var<storage, read> sh: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> out_mean: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> out_var: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> pass_state: array<PassState>;
 
 // ---- rng.rs ---------------------------------------------------------------------------------
 
@@ -434,29 +447,43 @@ fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_s
 // ---- trace.rs: the methods -------------------------------------------------------------------
 
 // A sample: rgb radiance over the background, a = coverage.
+fn start_state() -> PassState {
+    return PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, 0u);
+}
+
+// One pass of the k-buffer: the next K hits behind the last one, integrated front to back
+// (Eq. 3). true when the ray is finished.
+fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool {
+    if ((*st).transmittance <= params.min_transmittance) {
+        return true;
+    }
+    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
+    for (var i = 0u; i < kb_len; i++) {
+        iterations += 1u;
+        (*st).radiance += (*st).transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
+        (*st).transmittance *= 1.0 - kb_alpha[i];
+    }
+    if (kb_len < params.k) {
+        return true;
+    }
+    (*st).after_t = kb_t[kb_len - 1u];
+    (*st).after_id = kb_id[kb_len - 1u];
+    return false;
+}
+
+fn kbuffer_sample(st: PassState) -> vec4<f32> {
+    return vec4<f32>(st.radiance + st.transmittance * params.background.xyz, 1.0 - st.transmittance);
+}
+
 fn kbuffer(ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    var radiance = vec3<f32>(0.0);
-    var transmittance = 1.0;
-    var after_t = params.t_min;
-    var after_id = NONE;
+    var st = start_state();
     for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
         iterations += 1u;
-        if (transmittance <= params.min_transmittance) {
+        if (kbuffer_step(ray, pixel_seed, &st)) {
             break;
         }
-        next_k(ray, params.k, after_t, after_id, false, pixel_seed);
-        for (var i = 0u; i < kb_len; i++) {
-            iterations += 1u;
-            radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
-            transmittance *= 1.0 - kb_alpha[i];
-        }
-        if (kb_len < params.k) {
-            break;
-        }
-        after_t = kb_t[kb_len - 1u];
-        after_id = kb_id[kb_len - 1u];
     }
-    return vec4<f32>(radiance + transmittance * params.background.xyz, 1.0 - transmittance);
+    return kbuffer_sample(st);
 }
 
 fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
@@ -473,33 +500,50 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
     return sum / f32(n);
 }
 
-fn stochastic_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    var after_t = params.t_min;
-    var after_id = NONE;
-    for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
+// One pass of the vk stochastic pass: its K sorted hits integrated from T = 1, accepted with
+// probability 1 − T_pass (radiance divided by it). true when the ray is finished.
+fn stochastic_pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
+    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
+    if (kb_len == 0u) {
+        return true;
+    }
+    var radiance = vec3<f32>(0.0);
+    var transmittance = 1.0;
+    for (var i = 0u; i < kb_len; i++) {
         iterations += 1u;
-        next_k(ray, params.k, after_t, after_id, false, pixel_seed);
-        if (kb_len == 0u) {
-            break;
-        }
-        var radiance = vec3<f32>(0.0);
-        var transmittance = 1.0;
-        for (var i = 0u; i < kb_len; i++) {
-            iterations += 1u;
-            radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
-            transmittance *= 1.0 - kb_alpha[i];
-        }
-        let opacity = 1.0 - transmittance;
-        if (pass_u(pixel_seed, pass_index) < opacity) {
-            return vec4<f32>(radiance / opacity, 1.0);
-        }
-        if (kb_len < params.k) {
-            break;
-        }
-        after_t = kb_t[kb_len - 1u];
-        after_id = kb_id[kb_len - 1u];
+        radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
+        transmittance *= 1.0 - kb_alpha[i];
+    }
+    let opacity = 1.0 - transmittance;
+    if (pass_u(pixel_seed, pass_index) < opacity) {
+        (*st).radiance = radiance / opacity;
+        (*st).flags |= ACCEPTED;
+        return true;
+    }
+    if (kb_len < params.k) {
+        return true;
+    }
+    (*st).after_t = kb_t[kb_len - 1u];
+    (*st).after_id = kb_id[kb_len - 1u];
+    return false;
+}
+
+fn stochastic_pass_sample(st: PassState) -> vec4<f32> {
+    if ((st.flags & ACCEPTED) != 0u) {
+        return vec4<f32>(st.radiance, 1.0);
     }
     return vec4<f32>(params.background.xyz, 0.0);
+}
+
+fn stochastic_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    var st = start_state();
+    for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
+        iterations += 1u;
+        if (stochastic_pass_step(ray, pixel_seed, pass_index, &st)) {
+            break;
+        }
+    }
+    return stochastic_pass_sample(st);
 }
 
 fn depth_sampling(ray: Ray, pixel_seed: u32) -> vec4<f32> {
@@ -562,6 +606,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let index = gid.y * params.size.x + gid.x;
     let ray = pixel_ray(gid.x, gid.y);
     iterations = 0u;
+    if (params.mode == 1u) {
+        one_pass(index, gid.xy, ray);
+        return;
+    }
     var mean = vec4<f32>(0.0);
     var m2 = vec4<f32>(0.0);
     var most = 0.0;
@@ -581,4 +629,68 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     out_mean[index] = mean;
     out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
+}
+
+// Fold one frame's sample into the pixel's running Welford state.
+fn fold(index: u32, s: vec4<f32>, frame: u32) {
+    var mean = vec4<f32>(0.0);
+    var m2 = vec4<f32>(0.0);
+    var most = 0.0;
+    if (frame > 0u) {
+        mean = out_mean[index];
+        m2 = vec4<f32>(out_var[index].xyz, 0.0);
+    }
+    if (frame > 0u || params.pass_index > 0u) {
+        most = out_var[index].w;
+    }
+    let delta = s - mean;
+    mean += delta / f32(frame + 1u);
+    m2 += delta * (s - mean);
+    out_mean[index] = mean;
+    out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
+}
+
+// Pass-per-dispatch mode: pass `params.pass_index` of frame `params.first_frame` (a k-buffer or
+// stochastic pass, or a chunk of params.n of the params.m slots of stochastic-n), continuing the
+// ray's state; the sample is folded in when it finishes. Each dispatch then runs one traversal
+// per ray, within lavapipe's loop budget.
+fn one_pass(index: u32, pixel: vec2<u32>, ray: Ray) {
+    var st = pass_state[index];
+    if (params.pass_index == 0u) {
+        st = start_state();
+        if (params.method == METHOD_STOCHASTIC_N) {
+            st.transmittance = 0.0; // the stochastic-n state sums colour and coverage instead
+        }
+    }
+    if ((st.flags & DONE) == 0u) {
+        let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame_key(params.seed, params.first_frame)));
+        var finished = false;
+        if (params.method == METHOD_STOCHASTIC_PASS) {
+            finished = stochastic_pass_step(ray, pixel_seed, params.pass_index, &st);
+        } else if (params.method == METHOD_STOCHASTIC_N) {
+            // Slots pass_index·n … of the frame's params.m slots: the same decisions as one
+            // traversal of all of them, since each slot's pick ignores the others.
+            let s = stochastic_n(ray, pixel_seed, params.n, params.pass_index * params.n);
+            st.radiance += s.xyz * f32(params.n);
+            st.transmittance += s.w * f32(params.n);
+            finished = (params.pass_index + 1u) * params.n >= params.m;
+        } else {
+            finished = kbuffer_step(ray, pixel_seed, &st);
+        }
+        if (finished || params.pass_index + 1u >= params.max_passes) {
+            st.flags |= DONE;
+            var s = kbuffer_sample(st);
+            if (params.method == METHOD_STOCHASTIC_PASS) {
+                s = stochastic_pass_sample(st);
+            } else if (params.method == METHOD_STOCHASTIC_N) {
+                s = vec4<f32>(st.radiance, st.transmittance) / f32(params.m);
+            }
+            fold(index, s, params.first_frame);
+        } else if (params.first_frame > 0u || params.pass_index > 0u) {
+            out_var[index].w = max(out_var[index].w, f32(iterations));
+        } else {
+            out_var[index] = vec4<f32>(0.0, 0.0, 0.0, f32(iterations));
+        }
+    }
+    pass_state[index] = st;
 }

@@ -44,6 +44,24 @@ pub struct GpuNode {
     pub count: u32,
 }
 
+/// The state of one ray between the passes of pass-per-dispatch mode (WGSL `PassState`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PassState {
+    /// Radiance integrated so far.
+    pub radiance: [f32; 3],
+    /// Transmittance so far.
+    pub transmittance: f32,
+    /// Distance of the last hit of the previous pass.
+    pub after_t: f32,
+    /// Particle id of that hit.
+    pub after_id: u32,
+    /// 1 done, 2 accepted (stochastic pass).
+    pub flags: u32,
+    /// Padding.
+    pub pad: u32,
+}
+
 /// Everything one dispatch needs (WGSL `Params`, 192 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -98,10 +116,10 @@ pub struct Params {
     pub min_transmittance: f32,
     /// Index of this dispatch's first frame.
     pub first_frame: u32,
-    /// Unused (padding to a multiple of 16 bytes).
-    pub canary: u32,
-    /// Padding.
-    pub pad0: u32,
+    /// 0: whole frames per invocation; 1: one pass of frame `first_frame` per dispatch.
+    pub mode: u32,
+    /// The pass of pass-per-dispatch mode.
+    pub pass_index: u32,
     /// Padding.
     pub pad1: u32,
     /// Padding.
@@ -201,8 +219,8 @@ pub fn params(
         t_max: s.t_max,
         min_transmittance,
         first_frame,
-        canary: 1,
-        pad0: 0,
+        mode: 0,
+        pass_index: 0,
         pad1: 0,
         pad2: 0,
     }
@@ -238,6 +256,7 @@ mod tests {
         }
         check!(GpuParticle, "Particle", [mean, opacity, row0, id, row1, pad1, row2, pad2]);
         check!(GpuNode, "Node", [min, first, max, count]);
+        check!(PassState, "PassState", [radiance, transmittance, after_t, after_id, flags, pad]);
         check!(
             Params,
             "Params",
@@ -267,8 +286,8 @@ mod tests {
                 t_max,
                 min_transmittance,
                 first_frame,
-                canary,
-                pad0,
+                mode,
+                pass_index,
                 pad1,
                 pad2
             ]

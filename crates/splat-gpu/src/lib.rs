@@ -21,11 +21,11 @@ mod layout;
 pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
-pub use layout::{GpuParticle, Params};
+pub use layout::{GpuParticle, Params, PassState};
 
 use splat_core::Camera;
 use splat_core::image::Image;
-use splat_core::trace::{Frames, MAX_SLOTS, Method, TraceScene};
+use splat_core::trace::{Frames, Method, TraceScene};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 use wgpu::util::DeviceExt;
@@ -201,6 +201,7 @@ impl GpuContext {
                 storage(3, true),
                 storage(4, false),
                 storage(5, false),
+                storage(6, false),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -319,6 +320,8 @@ pub struct GpuOutput {
     pub loop_iterations: u32,
     /// Frames per dispatch the render settled on.
     pub frames_per_dispatch: u32,
+    /// Whether rays ran one pass per dispatch (multi-pass methods over lavapipe's loop budget).
+    pub pass_per_dispatch: bool,
     /// GPU time of the dispatches (timestamp queries when available, else wall time around
     /// submit and poll).
     pub gpu_time: Duration,
@@ -326,12 +329,13 @@ pub struct GpuOutput {
     pub timestamps: bool,
 }
 
-/// The kernel's method code and parameters for a method; `exact` is the k-buffer with the
-/// largest k, no early-out and no pass limit.
+/// The kernel's method code and parameters for a method; `exact` is the k-buffer with no
+/// early-out and no pass limit.
 fn method_code(method: &Method) -> Result<(u32, u32, u32, f32, u32, u32), GpuError> {
     method.validate()?;
     Ok(match *method {
-        Method::Exact => (1, MAX_SLOTS as u32, u32::MAX, 0.0, 1, 1),
+        // Any k gives Eq. 3 without the early-out; 18 keeps each pass short.
+        Method::Exact => (1, splat_core::trace::DEFAULT_K as u32, u32::MAX, 0.0, 1, 1),
         Method::KBuffer { k, max_passes, min_transmittance } => (1, k as u32, max_passes, min_transmittance, 1, 1),
         Method::Stochastic => (2, 1, 1, 0.0, 1, 1),
         Method::StochasticN { m, n } => (3, 1, 1, 0.0, n, m),
@@ -365,10 +369,18 @@ pub fn render(
     let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
     let per_dispatch = if cpu_adapter { 1 } else { ctx.frames_per_dispatch };
     let run = Run { ctx, scene, trace, camera, code, frames, count };
-    let out = run.execute(per_dispatch)?;
-    let lanes = ctx.lanes();
-    if cpu_adapter && u64::from(out.loop_iterations.0) * u64::from(lanes) >= u64::from(LOOP_BUDGET) {
+    let lanes = u64::from(ctx.lanes());
+    let over = |f: &Finished| cpu_adapter && u64::from(f.loop_iterations.0) * lanes >= u64::from(LOOP_BUDGET);
+    let mut out = run.execute(per_dispatch, false)?;
+    // Multi-pass methods (and stochastic-n, slot by slot) that do not fit run again with one
+    // pass per dispatch.
+    let multi_pass = matches!(code.0, 1 | 3 | 4);
+    if over(&out) && multi_pass {
+        out = run.execute(1, true)?;
+    }
+    if over(&out) {
         let (iterations, pixel) = out.loop_iterations;
+        let lanes = lanes as u32;
         return Err(GpuError::LoopBudget { x: pixel % camera.width, y: pixel / camera.width, iterations, lanes });
     }
     Ok(out.output)
@@ -401,8 +413,9 @@ impl Run<'_> {
         })
     }
 
-    /// Render with `per_dispatch` frames a dispatch.
-    fn execute(&self, per_dispatch: u32) -> Result<Finished, GpuError> {
+    /// Render with `per_dispatch` frames a dispatch, or, with `by_pass`, one pass of one frame
+    /// per dispatch (k-buffer and stochastic pass), the rays' state kept between dispatches.
+    fn execute(&self, per_dispatch: u32, by_pass: bool) -> Result<Finished, GpuError> {
         let (ctx, camera) = (self.ctx, self.camera);
         let pixels = camera.width as usize * camera.height as usize;
         let out_bytes = (pixels * 16) as u64;
@@ -411,6 +424,9 @@ impl Run<'_> {
         let (out_mean, out_var) = (self.storage("mean", out_bytes, rw), self.storage("m2", out_bytes, rw));
         let (read_mean, read_var) =
             (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
+        let state_bytes = (pixels * std::mem::size_of::<PassState>()) as u64;
+        let pass_state = self.storage("pass state", state_bytes, rw);
+        let read_state = self.storage("read pass state", state_bytes, read);
         let stride = (std::mem::size_of::<Params>() as u64).next_multiple_of(ctx.uniform_alignment);
         let uniform = self.storage(
             "params",
@@ -434,50 +450,83 @@ impl Run<'_> {
                 wgpu::BindGroupEntry { binding: 3, resource: self.scene.sh.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: out_mean.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: out_var.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: pass_state.as_entire_binding() },
             ],
         });
         let mut gpu_time = Duration::ZERO;
         let timer = ctx.timestamps.then(|| Timer::new(ctx));
-        let mut first = 0u32;
-        while first < self.count {
-            let batch = DISPATCHES_PER_SUBMIT;
-            let mut params_bytes = vec![0u8; (stride * u64::from(batch)) as usize];
-            let mut offsets = Vec::new();
-            while offsets.len() < batch as usize && first < self.count {
-                let chunk = per_dispatch.min(self.count - first);
-                let params = layout::params(self.trace, camera, self.code, self.frames, first, chunk);
-                let at = offsets.len() * stride as usize;
-                params_bytes[at..at + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(&params));
-                offsets.push(at as u32);
-                first += chunk;
+        // Submit the dispatches of `params`, one batch per submission.
+        let mut submit = |params: &[Params]| -> Result<(), GpuError> {
+            for batch in params.chunks(DISPATCHES_PER_SUBMIT as usize) {
+                let mut params_bytes = vec![0u8; stride as usize * batch.len()];
+                for (slot, p) in batch.iter().enumerate() {
+                    let at = slot * stride as usize;
+                    params_bytes[at..at + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
+                }
+                ctx.queue.write_buffer(&uniform, 0, &params_bytes);
+                let mut encoder =
+                    ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+                {
+                    let timestamp_writes = timer.as_ref().map(|t| wgpu::ComputePassTimestampWrites {
+                        query_set: &t.queries,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    });
+                    let mut pass = encoder
+                        .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
+                    pass.set_pipeline(&ctx.pipeline);
+                    for slot in 0..batch.len() {
+                        pass.set_bind_group(0, &bind_group, &[(slot as u64 * stride) as u32]);
+                        pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
+                    }
+                }
+                if let Some(t) = &timer {
+                    t.resolve(&mut encoder);
+                }
+                let start = Instant::now();
+                ctx.queue.submit([encoder.finish()]);
+                ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+                gpu_time += match &timer {
+                    Some(t) => t.elapsed(ctx)?,
+                    None => start.elapsed(),
+                };
             }
-            ctx.queue.write_buffer(&uniform, 0, &params_bytes);
-            let mut encoder =
-                ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
-            {
-                let timestamp_writes = timer.as_ref().map(|t| wgpu::ComputePassTimestampWrites {
-                    query_set: &t.queries,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                });
-                let mut pass =
-                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
-                pass.set_pipeline(&ctx.pipeline);
-                for &offset in &offsets {
-                    pass.set_bind_group(0, &bind_group, &[offset]);
-                    pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
+            Ok(())
+        };
+        if by_pass {
+            // stochastic-n runs one slot per dispatch: m × n "passes" of n = 1 slot.
+            let (method, _, passes, _, n, m) = self.code;
+            let (max_passes, slots, chunk) = if method == 3 { (n * m, n * m, 1) } else { (passes, m, n) };
+            for frame in 0..self.count {
+                let mut pass_index = 0u32;
+                while pass_index < max_passes {
+                    let batch: Vec<Params> = (pass_index..max_passes.min(pass_index.saturating_add(8)))
+                        .map(|p| Params {
+                            mode: 1,
+                            pass_index: p,
+                            max_passes,
+                            m: slots,
+                            n: chunk,
+                            ..layout::params(self.trace, camera, self.code, self.frames, frame, 1)
+                        })
+                        .collect();
+                    pass_index += batch.len() as u32;
+                    submit(&batch)?;
+                    let states = self.read(&pass_state, &read_state, state_bytes)?;
+                    if states.chunks(8).all(|s| s[6].to_bits() & 1 == 1) {
+                        break;
+                    }
                 }
             }
-            if let Some(t) = &timer {
-                t.resolve(&mut encoder);
+        } else {
+            let mut params = Vec::new();
+            let mut first = 0u32;
+            while first < self.count {
+                let chunk = per_dispatch.min(self.count - first);
+                params.push(layout::params(self.trace, camera, self.code, self.frames, first, chunk));
+                first += chunk;
             }
-            let start = Instant::now();
-            ctx.queue.submit([encoder.finish()]);
-            ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-            gpu_time += match &timer {
-                Some(t) => t.elapsed(ctx)?,
-                None => start.elapsed(),
-            };
+            submit(&params)?;
         }
         let mean = self.read(&out_mean, &read_mean, out_bytes)?;
         let m2 = self.read(&out_var, &read_var, out_bytes)?;
@@ -493,6 +542,7 @@ impl Run<'_> {
             alpha: image(1, &|i| mean[i - i % 4 + 3]),
             loop_iterations: busiest.0,
             frames_per_dispatch: per_dispatch,
+            pass_per_dispatch: by_pass,
             gpu_time,
             timestamps: timer.is_some(),
         };
