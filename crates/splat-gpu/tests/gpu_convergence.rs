@@ -4,34 +4,11 @@
 
 mod common;
 
-use common::{context, fixture};
-use splat_core::Camera;
+use common::{context, fixture, gpu_run, unbiased};
 use splat_core::render::RenderSettings;
 use splat_core::stats::{log_log_slope, rmse, welch_t};
 use splat_core::trace::{Frames, Method, TraceScene, render_frames};
-use splat_gpu::{GpuContext, GpuScene};
-
-/// GPU mean image (seed `seed`, `frames` frames).
-fn gpu_run(
-    ctx: &GpuContext,
-    scene: &GpuScene,
-    trace: &TraceScene,
-    camera: &Camera,
-    method: &Method,
-    frames: Frames,
-) -> splat_gpu::GpuOutput {
-    splat_gpu::render(ctx, scene, trace, camera, method, &frames).unwrap()
-}
-
-/// The unbiased methods, with parameters whose rays stay within lavapipe's loop budget on the
-/// test scenes (more hits per pass means fewer passes, hence fewer traversals per ray).
-fn unbiased() -> Vec<(&'static str, Method)> {
-    vec![
-        ("stochastic", Method::Stochastic),
-        ("stochastic-n 2×4", Method::StochasticN { m: 2, n: 4 }),
-        ("stochastic-pass", Method::StochasticPass { k: 16, max_passes: 200 }),
-    ]
-}
+use splat_gpu::GpuScene;
 
 /// RMSE of GPU means against exact at spp 1 … 64 (three seeds each) falls as a power law
 /// with slope in [−0.58, −0.42].

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{context, fixture};
+use common::{context, fixture, gpu_run, unbiased};
 use splat_core::render::RenderSettings;
 use splat_core::stats::ZTest;
 use splat_core::trace::{Frames, Method, TraceScene, render_frames};
@@ -15,18 +15,6 @@ use splat_gpu::{GpuContext, GpuScene};
 
 /// Frames of the mean run.
 const F: u32 = 64;
-
-/// GPU mean image (seed `seed`, `frames` frames).
-fn gpu_run(
-    ctx: &GpuContext,
-    scene: &GpuScene,
-    trace: &TraceScene,
-    camera: &Camera,
-    method: &Method,
-    frames: Frames,
-) -> splat_gpu::GpuOutput {
-    splat_gpu::render(ctx, scene, trace, camera, method, &frames).unwrap()
-}
 
 /// The z-test of a GPU method against the core's exact image over covered pixel-channels.
 fn gpu_z_test(ctx: &GpuContext, scene: &Scene, camera: &Camera, method: &Method, f: u32) -> ZTest {
@@ -38,16 +26,6 @@ fn gpu_z_test(ctx: &GpuContext, scene: &Scene, camera: &Camera, method: &Method,
     let mean = gpu_run(ctx, &gpu_scene, &trace, camera, method, Frames { count: f, seed: 21, ..Frames::default() });
     let var = gpu_run(ctx, &gpu_scene, &trace, camera, method, Frames { count: 4 * f, seed: 22, ..Frames::default() });
     ZTest::new(&keep(mean.mean.data()), &keep(exact.mean.data()), &keep(var.variance.data()), f, 3)
-}
-
-/// The unbiased methods, with parameters whose rays stay within lavapipe's loop budget on the
-/// test scenes (more hits per pass means fewer passes, hence fewer traversals per ray).
-fn unbiased() -> Vec<(&'static str, Method)> {
-    vec![
-        ("stochastic", Method::Stochastic),
-        ("stochastic-n 2×4", Method::StochasticN { m: 2, n: 4 }),
-        ("stochastic-pass", Method::StochasticPass { k: 16, max_passes: 200 }),
-    ]
 }
 
 fn check_z(ctx: &GpuContext, scene: &Scene, camera: &Camera) {
