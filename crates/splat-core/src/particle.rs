@@ -189,6 +189,13 @@ impl Aabb {
         self.min.cmpgt(self.max).any()
     }
 
+    /// The box grown by 10⁻⁴ of its size plus 10⁻⁶, so that the f32 rounding of a hit test
+    /// cannot place a hit just outside it (BVH boxes and the renderer's tile cull).
+    pub fn padded(&self) -> Aabb {
+        let pad = 1e-4 * (self.max - self.min).max(Vec3::splat(1e-6)) + Vec3::splat(1e-6);
+        Aabb { min: self.min - pad, max: self.max + pad }
+    }
+
     /// Centre of the box.
     pub fn center(&self) -> Vec3 {
         0.5 * (self.min + self.max)

@@ -217,20 +217,39 @@ pub fn render_exact(
     camera.validate()?;
     let tracer = Tracer::new(scene, *settings)?;
     let bins = TileBins::new(scene, camera, settings.kernel.cutoff);
-    let tiles: Vec<u32> = (0..bins.tile_count()).collect();
-    let render_tile = |&tile: &u32| {
+    let results = map_tiles(camera, |tile| {
         let pixels = tile_pixels(camera, tile, &tracer, &bins);
         progress(pixels.len() as u64);
         pixels
-    };
+    });
+    Ok(assemble(camera, &results))
+}
+
+/// Number of [`TILE`] × [`TILE`] tiles covering a camera's image.
+pub fn tile_count(camera: &Camera) -> u32 {
+    camera.width.div_ceil(TILE) * camera.height.div_ceil(TILE)
+}
+
+/// Pixel range [x0, x1) × [y0, y1) of tile `tile` (row-major) of a camera's image.
+pub fn tile_rect(camera: &Camera, tile: u32) -> (u32, u32, u32, u32) {
+    let tiles_x = camera.width.div_ceil(TILE);
+    let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+    (x0, y0, (x0 + TILE).min(camera.width), (y0 + TILE).min(camera.height))
+}
+
+/// `f` of every tile, in tile order; tiles run in parallel with the `rayon` feature. Each
+/// tile's result depends only on the tile, so the output does not depend on the thread count.
+pub fn map_tiles<T: Send>(camera: &Camera, f: impl Fn(u32) -> T + Sync + Send) -> Vec<T> {
+    let tiles = 0..tile_count(camera);
     #[cfg(feature = "rayon")]
-    let results: Vec<Vec<PixelValues>> = {
+    {
         use rayon::prelude::*;
-        tiles.par_iter().map(render_tile).collect()
-    };
+        tiles.into_par_iter().map(f).collect()
+    }
     #[cfg(not(feature = "rayon"))]
-    let results: Vec<Vec<PixelValues>> = tiles.iter().map(render_tile).collect();
-    Ok(assemble(camera, &bins, &results))
+    {
+        tiles.map(f).collect()
+    }
 }
 
 /// What one pixel writes to the output images: RGB, alpha, depth, normal.
@@ -238,7 +257,7 @@ type PixelValues = [f32; 8];
 
 /// Trace the pixels of one tile, row by row, into their output values.
 fn tile_pixels(camera: &Camera, tile: u32, tracer: &Tracer, bins: &TileBins) -> Vec<PixelValues> {
-    let (x0, y0, x1, y1) = bins.tile_rect(tile, camera);
+    let (x0, y0, x1, y1) = tile_rect(camera, tile);
     let candidates = bins.candidates(tile);
     let background = tracer.settings().background;
     let mut scratch = Vec::new();
@@ -257,7 +276,7 @@ fn tile_pixels(camera: &Camera, tile: u32, tracer: &Tracer, bins: &TileBins) -> 
 }
 
 /// Scatter the tiles' pixel values into the output images.
-fn assemble(camera: &Camera, bins: &TileBins, tiles: &[Vec<PixelValues>]) -> RenderOutput {
+fn assemble(camera: &Camera, tiles: &[Vec<PixelValues>]) -> RenderOutput {
     let (w, h) = (camera.width, camera.height);
     let mut out = RenderOutput {
         radiance: Image::filled(w, h, 3, 0.0),
@@ -266,7 +285,7 @@ fn assemble(camera: &Camera, bins: &TileBins, tiles: &[Vec<PixelValues>]) -> Ren
         normal: Image::filled(w, h, 3, 0.0),
     };
     for (tile, values) in tiles.iter().enumerate() {
-        let (x0, y0, x1, y1) = bins.tile_rect(tile as u32, camera);
+        let (x0, y0, x1, y1) = tile_rect(camera, tile as u32);
         let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
         for ((x, y), v) in pixels.zip(values) {
             out.radiance.pixel_mut(x, y).copy_from_slice(&v[0..3]);
@@ -285,8 +304,6 @@ fn assemble(camera: &Camera, bins: &TileBins, tiles: &[Vec<PixelValues>]) -> Ren
 /// projects inside the convex hull of the projected corners. Boxes that reach behind the
 /// camera are put in every tile. The cull is therefore exact, not an approximation.
 pub struct TileBins {
-    tiles_x: u32,
-    tiles_y: u32,
     bins: Vec<Vec<u32>>,
 }
 
@@ -306,24 +323,12 @@ impl TileBins {
                 }
             }
         }
-        Self { tiles_x, tiles_y, bins }
-    }
-
-    /// Number of tiles.
-    pub fn tile_count(&self) -> u32 {
-        self.tiles_x * self.tiles_y
+        Self { bins }
     }
 
     /// Particles that may be hit by a ray of this tile.
     pub fn candidates(&self, tile: u32) -> &[u32] {
         &self.bins[tile as usize]
-    }
-
-    /// Pixel range [x0, x1) × [y0, y1) of a tile.
-    pub fn tile_rect(&self, tile: u32, camera: &Camera) -> (u32, u32, u32, u32) {
-        let (tx, ty) = (tile % self.tiles_x, tile / self.tiles_x);
-        let (x0, y0) = (tx * TILE, ty * TILE);
-        (x0, y0, (x0 + TILE).min(camera.width), (y0 + TILE).min(camera.height))
     }
 }
 
@@ -334,9 +339,7 @@ fn tile_range(
     tiles_x: u32,
     tiles_y: u32,
 ) -> Option<(u32, u32, u32, u32)> {
-    // Pad the box a little so that f32 rounding in the hit test cannot escape it.
-    let pad = 1e-4 * (aabb.max - aabb.min).max(Vec3::splat(1e-6)) + Vec3::splat(1e-6);
-    let padded = crate::particle::Aabb { min: aabb.min - pad, max: aabb.max + pad };
+    let padded = aabb.padded();
     let mut lo = Vec2::splat(f32::INFINITY);
     let mut hi = Vec2::splat(f32::NEG_INFINITY);
     for corner in padded.corners() {

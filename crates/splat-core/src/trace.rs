@@ -257,7 +257,7 @@ impl<'a> TraceScene<'a> {
     pub fn new(scene: &'a Scene, settings: RenderSettings) -> Result<Self, RenderError> {
         validate_scene(scene, &settings)?;
         let cutoff = settings.kernel.cutoff;
-        let boxes: Vec<Aabb> = scene.particles.iter().map(|p| padded(p.aabb(cutoff))).collect();
+        let boxes: Vec<Aabb> = scene.particles.iter().map(|p| p.aabb(cutoff).padded()).collect();
         let bvh = Bvh::build(&boxes);
         let prims = bvh.order.iter().map(|&i| PreparedParticle::new(&scene.particles[i as usize])).collect();
         let ids = bvh.order.clone();
@@ -581,12 +581,6 @@ impl<'a> TraceScene<'a> {
     }
 }
 
-/// Pad a box so that f32 rounding in the hit test cannot place a hit outside it.
-pub fn padded(b: Aabb) -> Aabb {
-    let pad = 1e-4 * (b.max - b.min).max(Vec3::splat(1e-6)) + Vec3::splat(1e-6);
-    Aabb { min: b.min - pad, max: b.max + pad }
-}
-
 /// How frames are drawn: how many, from which seed, with which generator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frames {
@@ -629,23 +623,18 @@ pub fn render_frames(
     frames: &Frames,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<TraceOutput, RenderError> {
-    use crate::render::TILE;
+    use crate::render::{map_tiles, tile_rect};
     use crate::stats::Welford;
     camera.validate()?;
     method.validate()?;
     if frames.count == 0 {
         return Err(RenderError::Settings("at least one frame is needed".into()));
     }
-    let (tiles_x, tiles_y) = (camera.width.div_ceil(TILE), camera.height.div_ceil(TILE));
-    let tile_rect = |tile: u32| {
-        let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-        (x0, y0, (x0 + TILE).min(camera.width), (y0 + TILE).min(camera.height))
-    };
     // A deterministic method gives the same sample every frame: one frame is the answer.
     let count = if method.is_stochastic() { frames.count } else { 1 };
     let keys: Vec<u32> = (0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect();
-    let render_tile = |&tile: &u32| {
-        let (x0, y0, x1, y1) = tile_rect(tile);
+    let results = map_tiles(camera, |tile| {
+        let (x0, y0, x1, y1) = tile_rect(camera, tile);
         let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
         for y in y0..y1 {
             for x in x0..x1 {
@@ -680,21 +669,13 @@ pub fn render_frames(
         }
         progress(out.len() as u64);
         out
-    };
-    let tiles: Vec<u32> = (0..tiles_x * tiles_y).collect();
-    #[cfg(feature = "rayon")]
-    let results: Vec<Vec<[f32; 11]>> = {
-        use rayon::prelude::*;
-        tiles.par_iter().map(render_tile).collect()
-    };
-    #[cfg(not(feature = "rayon"))]
-    let results: Vec<Vec<[f32; 11]>> = tiles.iter().map(render_tile).collect();
+    });
     let (w, h) = (camera.width, camera.height);
     let image = |c| crate::image::Image::filled(w, h, c, 0.0);
     let mut out =
         TraceOutput { mean: image(3), variance: image(3), alpha: image(1), depth: image(1), normal: image(3) };
     for (tile, values) in results.iter().enumerate() {
-        let (x0, y0, x1, y1) = tile_rect(tile as u32);
+        let (x0, y0, x1, y1) = tile_rect(camera, tile as u32);
         let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
         for ((x, y), v) in pixels.zip(values) {
             out.mean.pixel_mut(x, y).copy_from_slice(&v[0..3]);
