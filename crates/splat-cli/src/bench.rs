@@ -65,7 +65,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             best = best.min(start.elapsed().as_secs_f64());
         }
         let base = *baseline.get_or_insert(best);
-        let name = clap::ValueEnum::to_possible_value(&m).map(|v| v.get_name().to_string()).unwrap_or_default();
+        let name = m.name();
         let mrays = rays / best / 1e6;
         println!(
             "| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |",
@@ -101,7 +101,7 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     for m in methods {
         let method = args.options.method(m).context("the brute-force oracle is not benchmarked (it has no BVH)")?;
         let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
-        let name = clap::ValueEnum::to_possible_value(&m).map(|v| v.get_name().to_string()).unwrap_or_default();
+        let name = m.name();
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             match splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &method, &frames) {

@@ -65,21 +65,18 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
             let start = Instant::now();
             let out = render_frames(&trace, &camera, &method, &frames, &|n| bar.inc(n * u64::from(spp)))?;
             let seconds = start.elapsed().as_secs_f64();
-            rows.push(Row { method: name(m), spp, rmse: rmse(out.mean.data(), exact.mean.data()), seconds });
+            rows.push(Row { method: m.name(), spp, rmse: rmse(out.mean.data(), exact.mean.data()), seconds });
         }
     }
     bar.finish_and_clear();
     let csv = args.output.with_extension("csv");
     std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
     let png = args.output.with_extension("png");
-    plot(&png, &rows, &args.methods.iter().map(|&m| name(m)).collect::<Vec<_>>())?;
-    print!("{}", to_markdown(&rows, &args.methods.iter().map(|&m| name(m)).collect::<Vec<_>>()));
+    let names: Vec<String> = args.methods.iter().map(|&m| m.name()).collect();
+    plot(&png, &rows, &names)?;
+    print!("{}", to_markdown(&rows, &names));
     eprintln!("wrote {} and {}", csv.display(), png.display());
     Ok(())
-}
-
-fn name(m: MethodArg) -> String {
-    clap::ValueEnum::to_possible_value(&m).map(|v| v.get_name().to_string()).unwrap_or_default()
 }
 
 fn to_csv(rows: &[Row]) -> String {

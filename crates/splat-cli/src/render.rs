@@ -79,6 +79,13 @@ pub struct MethodOptions {
     pub rng: RngArg,
 }
 
+impl MethodArg {
+    /// The method's name on the command line (`stochastic-n`, …).
+    pub fn name(self) -> String {
+        clap::ValueEnum::to_possible_value(&self).map(|v| v.get_name().to_string()).unwrap_or_default()
+    }
+}
+
 impl MethodOptions {
     /// The library method for a CLI method (`None` for the brute-force oracle).
     pub fn method(&self, m: MethodArg) -> Option<Method> {
