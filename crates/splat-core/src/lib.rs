@@ -23,6 +23,7 @@ pub mod image;
 pub mod kernel;
 pub mod normal;
 pub mod particle;
+pub mod raster;
 pub mod render;
 pub mod rng;
 pub mod scenes;

@@ -175,6 +175,127 @@ impl RayRng {
     }
 }
 
+/// The four multiply–XOR constants of Laine & Karras 2011, Figure 4.
+pub const LK_SCRAMBLE: [u32; 4] = [0x6C50_B47C, 0xB82F_1E52, 0xC7AF_E638, 0x8D22_F6E6];
+
+/// Laine & Karras 2011, Figure 4 (CalcAlphaRef): the opacity reference value of sample
+/// `sample_id` of pixel `pixel_id` for surface `surface_id`, in [0, 1).
+///
+/// x = sampleId + pixelId · samplesPerPixel; x = reverseBits(x) + surfaceId; then four rounds
+/// x ^= x · C. Each C is even, so bit i of x · C depends only on bits below i: every round flips
+/// each bit by a hash of the bits below it, an Owen scramble that keeps every aligned
+/// power-of-two span of indices stratified while making disjoint spans uncorrelated (§3).
+/// `scramble = false` skips the rounds: the plain radical inverse, whose spans are shifted
+/// copies of each other, the correlated sequence §3 warns about (a negative control).
+#[inline]
+pub fn calc_alpha_ref(sample_id: u32, pixel_id: u32, surface_id: u32, samples_per_pixel: u32, scramble: bool) -> f32 {
+    let mut x = sample_id.wrapping_add(pixel_id.wrapping_mul(samples_per_pixel));
+    x = x.reverse_bits().wrapping_add(surface_id);
+    if scramble {
+        for c in LK_SCRAMBLE {
+            x ^= x.wrapping_mul(c);
+        }
+    }
+    unit_f32(x)
+}
+
+/// Index of cell (x, y) along the Hilbert curve filling the 2^order × 2^order grid: cells with
+/// consecutive indices are edge neighbours (Laine & Karras §3.1: a Morton curve gives every
+/// aligned block the same structure; the Hilbert curve does not).
+pub fn hilbert_index(order: u32, x: u32, y: u32) -> u32 {
+    let n = 1u32 << order;
+    let (mut x, mut y) = (x, y);
+    let mut d = 0u32;
+    let mut s = n >> 1;
+    while s > 0 {
+        let rx = u32::from(x & s != 0);
+        let ry = u32::from(y & s != 0);
+        d = d.wrapping_add(s.wrapping_mul(s).wrapping_mul((3 * rx) ^ ry));
+        // Rotate the quadrant so that the sub-curve starts and ends where the parent needs.
+        if ry == 0 {
+            if rx == 1 {
+                x = n - 1 - x;
+                y = n - 1 - y;
+            }
+            std::mem::swap(&mut x, &mut y);
+        }
+        s >>= 1;
+    }
+    d
+}
+
+/// Order of the smallest Hilbert grid 2^order × 2^order holding a `width` × `height` image.
+pub fn hilbert_order(width: u32, height: u32) -> u32 {
+    width.max(height).max(1).next_power_of_two().trailing_zeros()
+}
+
+#[cfg(test)]
+mod lk_tests {
+    use super::*;
+
+    /// Consecutive Hilbert indices are edge neighbours and the map is a bijection of the grid.
+    #[test]
+    fn hilbert_curve_is_a_continuous_bijection() {
+        for order in 0..=5 {
+            let n = 1u32 << order;
+            let mut cell = vec![(0u32, 0u32); (n * n) as usize];
+            let mut seen = vec![false; (n * n) as usize];
+            for y in 0..n {
+                for x in 0..n {
+                    let d = hilbert_index(order, x, y) as usize;
+                    assert!(!seen[d], "index {d} twice");
+                    seen[d] = true;
+                    cell[d] = (x, y);
+                }
+            }
+            for w in cell.windows(2) {
+                let dist = w[0].0.abs_diff(w[1].0) + w[0].1.abs_diff(w[1].1);
+                assert_eq!(dist, 1, "order {order}: {:?} → {:?}", w[0], w[1]);
+            }
+        }
+        assert_eq!(hilbert_order(1200, 800), 11);
+        assert_eq!(hilbert_order(1, 1), 0);
+    }
+
+    /// §3: every aligned power-of-two span of a surface's sequence is stratified (one value in
+    /// each of its 2^k strata), with or without the scramble.
+    #[test]
+    fn aligned_spans_are_stratified() {
+        for scramble in [true, false] {
+            for span in [2u32, 4, 8, 16, 64] {
+                for start in (0..1024).step_by(span as usize) {
+                    let mut strata = vec![false; span as usize];
+                    for i in start..start + span {
+                        let u = calc_alpha_ref(i, 0, 17, 64, scramble);
+                        let k = (u * span as f32) as usize;
+                        assert!(!strata[k], "span {span} at {start}: stratum {k} twice");
+                        strata[k] = true;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Without the scramble, consecutive surfaces give nearly the same value to a sample (the
+    /// correlation of §3); with it, their values are uncorrelated.
+    #[test]
+    fn scramble_decorrelates_surfaces() {
+        let corr = |scramble: bool| {
+            let n = 20_000u32;
+            let (mut sxy, mut sx, mut sy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+            for i in 0..n {
+                let x = f64::from(calc_alpha_ref(i % 16, i / 16, 5, 16, scramble));
+                let y = f64::from(calc_alpha_ref(i % 16, i / 16, 6, 16, scramble));
+                (sxy, sx, sy, sxx, syy) = (sxy + x * y, sx + x, sy + y, sxx + x * x, syy + y * y);
+            }
+            let n = f64::from(n);
+            (sxy / n - sx * sy / n / n) / ((sxx / n - (sx / n).powi(2)) * (syy / n - (sy / n).powi(2))).sqrt()
+        };
+        assert!(corr(false) > 0.99, "plain radical inverse: {}", corr(false));
+        assert!(corr(true).abs() < 0.05, "scrambled: {}", corr(true));
+    }
+}
+
 #[cfg(test)]
 mod hash_tests {
     use super::*;

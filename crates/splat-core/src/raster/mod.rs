@@ -1,0 +1,615 @@
+//! The CPU reference of the splatting path: EWA projection ([`project`]), the global depth
+//! sort, per-pixel blending over S sub-pixel samples, and the sorting-free stochastic
+//! rasterizers (seed 002 §1; Laine & Karras 2011).
+//!
+//! A pixel is processed like a multisampled render target. Every splat that reaches the pixel
+//! makes one *fragment*: its alpha is evaluated once, at the pixel centre (the shading rate of
+//! MSAA), and its coverage is a bit per sample, set where the sample lies inside the splat's
+//! √8σ ellipse. Each covered sample has its own fragment depth along the sample's ray: the
+//! billboard through the centre ([`FragmentDepth::Center`], what 3DGS and vk use) or the point of
+//! maximum density ([`FragmentDepth::MaxDensityPlane`], StochasticSplats' pop-free variant).
+//! With one sample (the centre) this is exactly the 3DGS rasterizer.
+//!
+//! Methods ([`RasterMethod`]): sorted splatting (the raster oracle, back-to-front *over* or
+//! front-to-back *under*), StochasticSplats, Enderton et al.'s stochastic transparency and
+//! Laine–Karras stratified stochastic transparency. The expectation of each stochastic method
+//! is the sorted image with the same samples; depth ties are broken by splat id everywhere, so
+//! the order is total and no result depends on the draw order or the thread count.
+
+pub mod project;
+pub mod samples;
+#[cfg(test)]
+mod tests;
+
+use crate::camera::Camera;
+use crate::hit::{PreparedParticle, Ray, to_canonical};
+use crate::normal::particle_normal;
+use crate::particle::Scene;
+use crate::render::{RenderError, RenderSettings, map_tiles, tile_count, tile_rect, validate_scene};
+use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
+use crate::stats::Welford;
+use crate::trace::{Decide, Frames, TraceOutput};
+use glam::{DVec3, Vec2, Vec3};
+pub use project::{Splat, project};
+pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, sample_positions};
+
+/// Blend order of sorted splatting (seed 003 §1.5).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Blend {
+    /// Back to front, C ← α c + (1 − α) C (§1.5.1, the 3DGS default).
+    #[default]
+    Over,
+    /// Front to back with premultiplied alpha, C ← C + (1 − A) α c, A ← A + (1 − A) α (§1.5.2);
+    /// also picks the iso-opacity depth and integrates normals.
+    Under,
+}
+
+/// Depth of a fragment along its sample's ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum FragmentDepth {
+    /// The camera-facing billboard through the splat centre (seed 003 §1.4.2): every sample
+    /// sees the splats in the order of the global sort of centre depths.
+    #[default]
+    Center,
+    /// The point of maximum density along the sample's ray (StochasticSplats' pop-free
+    /// billboards): the order can differ from sample to sample, so sorted splatting sorts
+    /// each sample's fragments.
+    MaxDensityPlane,
+}
+
+/// A rasterization method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RasterMethod {
+    /// Global depth sort, then per-pixel blending: the raster oracle.
+    Sorted {
+        /// Over (back to front) or under (front to back).
+        blend: Blend,
+    },
+    /// StochasticSplats / vk: no sort; a fragment is accepted when u < α (u hashed from pixel,
+    /// frame, splat id and sample), written opaque under a depth test, else discarded.
+    StochasticSplat,
+    /// Enderton et al. 2010 as Laine & Karras compare against: depth test first, then
+    /// R = ⌊α m + ξ⌋ of the m surviving covered samples, chosen at random, are written.
+    Enderton,
+    /// Laine & Karras 2011, Figure 7: per-sample opacity references from CalcAlphaRef, surface
+    /// tracking by coverage bitmask, early depth test and sorting by stored depth.
+    Stratified {
+        /// The multiply–XOR scramble of Figure 4 (`false`: the biased negative control).
+        scramble: bool,
+    },
+}
+
+impl RasterMethod {
+    /// Whether frames differ (the method draws random decisions).
+    pub fn is_stochastic(&self) -> bool {
+        !matches!(self, RasterMethod::Sorted { .. })
+    }
+}
+
+/// Raster-specific settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct RasterSettings {
+    /// Samples per pixel S, one of [`SAMPLE_COUNTS`].
+    pub samples: u32,
+    /// Fragment depth of each sample.
+    pub fragment_depth: FragmentDepth,
+}
+
+impl Default for RasterSettings {
+    fn default() -> Self {
+        Self { samples: 1, fragment_depth: FragmentDepth::Center }
+    }
+}
+
+impl RasterSettings {
+    /// Check the settings.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        if !SAMPLE_COUNTS.contains(&self.samples) {
+            return Err(RenderError::Settings(format!(
+                "{} samples per pixel is not one of {SAMPLE_COUNTS:?}",
+                self.samples
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// One splat's fragment in one pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fragment {
+    /// Index of the splat in [`Rasterizer::splats`] (global depth order).
+    pub splat: u32,
+    /// Alpha at the pixel centre.
+    pub alpha: f32,
+    /// Bit s set when sample s is inside the splat's √8σ ellipse.
+    pub covered: u64,
+}
+
+/// What one frame of one pixel yields.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelSample {
+    /// Mean colour over the pixel's samples, background included.
+    pub color: DVec3,
+    /// Mean coverage over the samples.
+    pub alpha: f64,
+    /// Sample 0: iso-opacity depth (sorted under) or depth of the written fragment (stochastic),
+    /// as a distance along the sample's ray.
+    pub depth: Option<f32>,
+    /// Sample 0: integrated (sorted under) or written fragment's unit normal; zero if none.
+    pub normal: Vec3,
+    /// Sample 0: the splat that set the depth (scene index).
+    pub picked: Option<u32>,
+}
+
+/// The geometry of one pixel's samples.
+pub struct PixelSamples {
+    /// Pixel column.
+    pub x: u32,
+    /// Pixel row.
+    pub y: u32,
+    rays: Vec<Ray>,
+    /// |d_cam| of each sample's ray: a point at view depth z is at t = z |d_cam|.
+    stretch: Vec<f32>,
+    positions: Vec<Vec2>,
+}
+
+/// A scene projected for one camera and binned into tiles, ready to rasterize.
+pub struct Rasterizer<'a> {
+    scene: &'a Scene,
+    camera: Camera,
+    settings: RenderSettings,
+    raster: RasterSettings,
+    splats: Vec<Splat>,
+    prepared: Vec<PreparedParticle>,
+    bins: Vec<Vec<u32>>,
+    offsets: Vec<Vec2>,
+    hilbert_order: u32,
+}
+
+/// Reserved splat ids of the hashes (scene ids stay below [`crate::rng::MAX_PARTICLES`]).
+const ORDER_ID: u32 = u32::MAX - 2;
+const SURFACE_ID: u32 = u32::MAX - 3;
+/// Slot of Enderton's ξ; the random choice of samples uses the slots after it.
+const ENDERTON_XI_SLOT: u32 = MAX_SAMPLES;
+
+impl<'a> Rasterizer<'a> {
+    /// Validate, project every particle (EWA), sort the splats by (centre depth, id) and bin
+    /// them into tiles in that order.
+    pub fn new(
+        scene: &'a Scene,
+        camera: &Camera,
+        settings: RenderSettings,
+        raster: RasterSettings,
+    ) -> Result<Self, RenderError> {
+        validate_scene(scene, &settings)?;
+        camera.validate()?;
+        raster.validate()?;
+        let mut splats: Vec<Splat> =
+            (0..scene.particles.len() as u32).filter_map(|i| project(scene, i, camera, &settings.kernel)).collect();
+        splats.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.id.cmp(&b.id)));
+        let prepared = splats.iter().map(|s| PreparedParticle::new(&scene.particles[s.id as usize])).collect();
+        let bins = bin_tiles(camera, &splats);
+        Ok(Self {
+            scene,
+            camera: *camera,
+            settings,
+            raster,
+            splats,
+            prepared,
+            bins,
+            offsets: sample_positions(raster.samples),
+            hilbert_order: hilbert_order(camera.width, camera.height),
+        })
+    }
+
+    /// The projected splats in global depth order.
+    pub fn splats(&self) -> &[Splat] {
+        &self.splats
+    }
+
+    /// The raster settings.
+    pub fn raster_settings(&self) -> &RasterSettings {
+        &self.raster
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        self.scene
+    }
+
+    /// The geometry of pixel (x, y)'s samples.
+    pub fn pixel(&self, x: u32, y: u32) -> PixelSamples {
+        let c = &self.camera;
+        let positions: Vec<Vec2> = self.offsets.iter().map(|&o| Vec2::new(x as f32, y as f32) + o).collect();
+        let rays = self.offsets.iter().map(|&o| self.clip(c.ray(x, y, o))).collect();
+        let stretch =
+            positions.iter().map(|p| Vec3::new((p.x - c.cx) / c.fx, (p.y - c.cy) / c.fy, 1.0).length()).collect();
+        PixelSamples { x, y, rays, stretch, positions }
+    }
+
+    fn clip(&self, ray: Ray) -> Ray {
+        Ray { t_min: self.settings.t_min, t_max: self.settings.t_max, ..ray }
+    }
+
+    /// The fragments of pixel `px`, in global depth order.
+    pub fn fragments(&self, px: &PixelSamples) -> Vec<Fragment> {
+        let tiles_x = self.camera.width.div_ceil(crate::render::TILE);
+        let tile = (px.y / crate::render::TILE) * tiles_x + px.x / crate::render::TILE;
+        let centre = Vec2::new(px.x as f32 + 0.5, px.y as f32 + 0.5);
+        let kernel = &self.settings.kernel;
+        self.bins[tile as usize]
+            .iter()
+            .filter_map(|&k| {
+                let s = &self.splats[k as usize];
+                let [x0, y0, x1, y1] = s.rect;
+                if px.x < x0 || px.x >= x1 || px.y < y0 || px.y >= y1 {
+                    return None;
+                }
+                let alpha = kernel.alpha(s.opacity, kernel.response(s.mahalanobis(centre)))?;
+                let covered = px
+                    .positions
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| s.mahalanobis(**p) <= project::EXTENT_SQ)
+                    .fold(0u64, |m, (i, _)| m | 1 << i);
+                (covered != 0).then_some(Fragment { splat: k, alpha, covered })
+            })
+            .collect()
+    }
+
+    /// Depth of fragment `f` at sample `s`: distance along the sample's ray.
+    #[inline]
+    fn depth(&self, px: &PixelSamples, f: &Fragment, s: usize) -> f32 {
+        match self.raster.fragment_depth {
+            FragmentDepth::Center => self.splats[f.splat as usize].depth * px.stretch[s],
+            FragmentDepth::MaxDensityPlane => {
+                let (o, d) = to_canonical(&self.prepared[f.splat as usize], &px.rays[s]);
+                -o.dot(d) / d.length_squared()
+            }
+        }
+    }
+
+    fn id(&self, f: &Fragment) -> u32 {
+        self.splats[f.splat as usize].id
+    }
+
+    fn color(&self, f: &Fragment) -> DVec3 {
+        self.splats[f.splat as usize].color.as_dvec3()
+    }
+
+    fn normal(&self, px: &PixelSamples, f: &Fragment) -> Vec3 {
+        let s = &self.settings;
+        particle_normal(&self.prepared[f.splat as usize], &px.rays[0], s.normal_mode, s.kernel.cutoff)
+    }
+
+    /// The draw order of a stochastic frame: the fragments ordered by a hash of (splat id,
+    /// frame), one random permutation of the splats shared by every pixel of the frame.
+    pub fn shuffle(&self, fragments: &mut [Fragment], frame_key: u32) {
+        let seed = xxhash32([frame_key, ORDER_ID, 0]);
+        fragments.sort_by_cached_key(|f| (xxhash32([self.id(f), seed, 0]), self.id(f)));
+    }
+
+    /// One frame of `method` at pixel `px` from its fragments (in draw order: the global sort
+    /// for [`RasterMethod::Sorted`], any order for the others). Stochastic decisions come from
+    /// `decide` (slot = sample index); the stratified method uses `frame_key` for its sequence.
+    pub fn draw(
+        &self,
+        method: &RasterMethod,
+        px: &PixelSamples,
+        fragments: &[Fragment],
+        decide: &impl Decide,
+        frame_key: u32,
+    ) -> PixelSample {
+        match *method {
+            RasterMethod::Sorted { blend } => self.sorted(px, fragments, blend),
+            RasterMethod::StochasticSplat => self.resolve(px, &self.stochastic_splat(px, fragments, decide)),
+            RasterMethod::Enderton => self.resolve(px, &self.enderton(px, fragments, decide)),
+            RasterMethod::Stratified { scramble } => {
+                self.resolve(px, &self.stratified(px, fragments, frame_key, scramble))
+            }
+        }
+    }
+
+    /// Sorted splatting of every sample (Eq. 3 over the fragments in depth order).
+    fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend) -> PixelSample {
+        let bg = self.settings.background.as_dvec3();
+        let iso = f64::from(self.settings.iso_threshold);
+        let mut out = PixelSample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
+        let mut order: Vec<(f32, u32, usize)> = Vec::with_capacity(fragments.len());
+        let mut normal = DVec3::ZERO;
+        for s in 0..self.offsets.len() {
+            order.clear();
+            order.extend(
+                fragments
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, f)| f.covered >> s & 1 == 1)
+                    .map(|(i, f)| (self.depth(px, f, s), self.id(f), i)),
+            );
+            if self.raster.fragment_depth == FragmentDepth::MaxDensityPlane {
+                order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            }
+            let mut transmittance = 1.0f64;
+            let color = match blend {
+                Blend::Over => {
+                    let mut c = bg;
+                    for &(_, _, i) in order.iter().rev() {
+                        let a = f64::from(fragments[i].alpha);
+                        c = a * self.color(&fragments[i]) + (1.0 - a) * c;
+                        transmittance *= 1.0 - a;
+                    }
+                    c
+                }
+                Blend::Under => {
+                    let mut c = DVec3::ZERO;
+                    for &(t, id, i) in &order {
+                        let f = &fragments[i];
+                        let w = transmittance * f64::from(f.alpha);
+                        c += w * self.color(f);
+                        transmittance *= 1.0 - f64::from(f.alpha);
+                        if s == 0 {
+                            normal += w * self.normal(px, f).as_dvec3();
+                            if out.depth.is_none() && transmittance < iso {
+                                (out.depth, out.picked) = (Some(t), Some(id));
+                            }
+                        }
+                    }
+                    c + transmittance * bg
+                }
+            };
+            out.color += color;
+            out.alpha += 1.0 - transmittance;
+        }
+        let n = self.offsets.len() as f64;
+        out.color /= n;
+        out.alpha /= n;
+        if normal != DVec3::ZERO {
+            out.normal = normal.as_vec3().try_normalize().unwrap_or(-px.rays[0].dir);
+        }
+        out
+    }
+
+    /// StochasticSplats: each covered sample that passes the depth test draws u = hash(pixel,
+    /// frame, splat id, sample) and is written opaque when u < α, else discarded.
+    fn stochastic_splat(&self, px: &PixelSamples, fragments: &[Fragment], decide: &impl Decide) -> SampleBuffer {
+        let mut buf = SampleBuffer::new(self.offsets.len());
+        for f in fragments {
+            let id = self.id(f);
+            for s in bits(f.covered) {
+                let t = self.depth(px, f, s);
+                if buf.passes(s, t, id) && decide.particle(id, s as u32, Vec3::ZERO) < f.alpha {
+                    buf.write(s, t, id, f.splat);
+                }
+            }
+        }
+        buf
+    }
+
+    /// Enderton et al.: the m covered samples that pass the depth test get R = ⌊α m + ξ⌋
+    /// writes, on a uniformly random subset (partial Fisher–Yates); each is written with
+    /// probability E[R]/m = α.
+    fn enderton(&self, px: &PixelSamples, fragments: &[Fragment], decide: &impl Decide) -> SampleBuffer {
+        let mut buf = SampleBuffer::new(self.offsets.len());
+        let mut alive: Vec<(usize, f32)> = Vec::with_capacity(self.offsets.len());
+        for f in fragments {
+            let id = self.id(f);
+            alive.clear();
+            alive.extend(bits(f.covered).map(|s| (s, self.depth(px, f, s))).filter(|&(s, t)| buf.passes(s, t, id)));
+            let m = alive.len();
+            let xi = decide.particle(id, ENDERTON_XI_SLOT, Vec3::ZERO);
+            let r = ((f.alpha * m as f32 + xi).floor() as usize).min(m);
+            for j in 0..r {
+                let u = decide.particle(id, ENDERTON_XI_SLOT + 1 + j as u32, Vec3::ZERO);
+                let pick = j + ((u * (m - j) as f32) as usize).min(m - j - 1);
+                alive.swap(j, pick);
+                let (s, t) = alive[j];
+                buf.write(s, t, id, f.splat);
+            }
+        }
+        buf
+    }
+
+    /// Laine & Karras 2011, Figure 7 (DrawFragment), line by line. The surface id of every
+    /// pixel starts at a per-frame hash so that frames are independent.
+    fn stratified(&self, px: &PixelSamples, fragments: &[Fragment], frame_key: u32, scramble: bool) -> SampleBuffer {
+        let spp = self.offsets.len() as u32;
+        let pixel_id = hilbert_index(self.hilbert_order, px.x, px.y);
+        let mut buf = SampleBuffer::new(self.offsets.len());
+        let mut covered = 0u64;
+        let mut surface_id = xxhash32([frame_key, SURFACE_ID, 0]);
+        let mut alive: Vec<(usize, f32)> = Vec::with_capacity(self.offsets.len());
+        for f in fragments {
+            let id = self.id(f);
+            // Lines 1–3: early per-sample depth test.
+            alive.clear();
+            alive.extend(bits(f.covered).map(|s| (s, self.depth(px, f, s))).filter(|&(s, t)| buf.passes(s, t, id)));
+            // Lines 4–7: a conflict with the current surface's coverage starts a new surface.
+            let mask = alive.iter().fold(0u64, |m, &(s, _)| m | 1 << s);
+            if mask & covered != 0 {
+                surface_id = surface_id.wrapping_add(1);
+                covered = 0;
+            }
+            // Line 8: continue the surface's sequence where it stopped.
+            let mut n = covered.count_ones();
+            // Line 9: order by the depth previously stored at each sample (ties by sample).
+            alive.sort_by(|a, b| buf.cmp_stored(a.0, b.0));
+            // Lines 10–17: opacity test against the reference values, in that order.
+            for &(s, t) in &alive {
+                if f.alpha > calc_alpha_ref(n, pixel_id, surface_id, spp, scramble) {
+                    buf.write(s, t, id, f.splat);
+                }
+                n += 1;
+            }
+            // Line 18.
+            covered |= mask;
+        }
+        buf
+    }
+
+    /// Average the samples of a stochastic frame; sample 0 gives depth, normal and pick.
+    fn resolve(&self, px: &PixelSamples, buf: &SampleBuffer) -> PixelSample {
+        let bg = self.settings.background.as_dvec3();
+        let mut color = DVec3::ZERO;
+        let mut written = 0usize;
+        for s in 0..buf.len {
+            match buf.splat[s] {
+                u32::MAX => color += bg,
+                k => {
+                    color += self.splats[k as usize].color.as_dvec3();
+                    written += 1;
+                }
+            }
+        }
+        let n = buf.len as f64;
+        let first = (buf.splat[0] != u32::MAX).then_some(buf.splat[0]);
+        PixelSample {
+            color: color / n,
+            alpha: written as f64 / n,
+            depth: first.map(|_| buf.t[0]),
+            normal: first.map_or(Vec3::ZERO, |k| self.normal(px, &Fragment { splat: k, alpha: 1.0, covered: 1 })),
+            picked: first.map(|k| self.splats[k as usize].id),
+        }
+    }
+}
+
+/// Per-sample depth and colour buffer of one pixel: the nearest written fragment of each
+/// sample, by (depth, splat id).
+struct SampleBuffer {
+    len: usize,
+    t: [f32; MAX_SAMPLES as usize],
+    id: [u32; MAX_SAMPLES as usize],
+    splat: [u32; MAX_SAMPLES as usize],
+}
+
+impl SampleBuffer {
+    fn new(len: usize) -> Self {
+        const N: usize = MAX_SAMPLES as usize;
+        Self { len, t: [f32::INFINITY; N], id: [u32::MAX; N], splat: [u32::MAX; N] }
+    }
+
+    /// The depth test: (t, id) strictly in front of what sample `s` holds.
+    #[inline]
+    fn passes(&self, s: usize, t: f32, id: u32) -> bool {
+        t < self.t[s] || (t == self.t[s] && id < self.id[s])
+    }
+
+    /// Order of two samples by what they hold, (depth, id), then by sample index.
+    fn cmp_stored(&self, a: usize, b: usize) -> std::cmp::Ordering {
+        self.t[a].total_cmp(&self.t[b]).then(self.id[a].cmp(&self.id[b])).then(a.cmp(&b))
+    }
+
+    fn write(&mut self, s: usize, t: f32, id: u32, splat: u32) {
+        (self.t[s], self.id[s], self.splat[s]) = (t, id, splat);
+    }
+}
+
+/// Indices of the set bits of a coverage mask.
+fn bits(mask: u64) -> impl Iterator<Item = usize> {
+    let mut m = mask;
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let s = m.trailing_zeros() as usize;
+            m &= m - 1;
+            s
+        })
+    })
+}
+
+/// Splat indices per tile, in global depth order.
+fn bin_tiles(camera: &Camera, splats: &[Splat]) -> Vec<Vec<u32>> {
+    let t = crate::render::TILE;
+    let tiles_x = camera.width.div_ceil(t);
+    let mut bins = vec![Vec::new(); tile_count(camera) as usize];
+    for (k, s) in splats.iter().enumerate() {
+        let [x0, y0, x1, y1] = s.rect;
+        for ty in y0 / t..=(y1 - 1) / t {
+            for tx in x0 / t..=(x1 - 1) / t {
+                bins[(ty * tiles_x + tx) as usize].push(k as u32);
+            }
+        }
+    }
+    bins
+}
+
+/// Images of a raster render, as for ray tracing, plus the picked splat of sample 0.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RasterOutput {
+    /// Mean, variance, alpha, depth (frame 0) and normal (frame 0).
+    pub frames: TraceOutput,
+    /// Scene index of the splat that set the depth in frame 0, per pixel (row-major).
+    pub picked: Vec<Option<u32>>,
+}
+
+/// Render `frames.count` frames of `method` (one for sorted splatting) and accumulate the mean
+/// and per-frame variance per pixel in f64. Each pixel loops over its frames and every decision
+/// is a hash, so the result does not depend on the thread count. `progress` receives finished
+/// pixel counts.
+pub fn render_raster(
+    raster: &Rasterizer,
+    method: &RasterMethod,
+    frames: &Frames,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<RasterOutput, RenderError> {
+    if frames.count == 0 {
+        return Err(RenderError::Settings("at least one frame is needed".into()));
+    }
+    if frames.rng != RngScheme::Hash {
+        return Err(RenderError::Settings("the raster methods draw their decisions with the hash generator".into()));
+    }
+    let camera = &raster.camera;
+    let count = if method.is_stochastic() { frames.count } else { 1 };
+    let keys: Vec<u32> = (0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect();
+    let results = map_tiles(camera, |tile| {
+        let (x0, y0, x1, y1) = tile_rect(camera, tile);
+        let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                out.push(render_pixel(raster, method, x, y, &keys));
+            }
+        }
+        progress(out.len() as u64);
+        out
+    });
+    let (w, h) = (camera.width, camera.height);
+    let image = |c| crate::image::Image::filled(w, h, c, 0.0);
+    let mut out =
+        TraceOutput { mean: image(3), variance: image(3), alpha: image(1), depth: image(1), normal: image(3) };
+    let mut picked = vec![None; (w * h) as usize];
+    for (tile, values) in results.iter().enumerate() {
+        let (x0, y0, x1, y1) = tile_rect(camera, tile as u32);
+        let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
+        for ((x, y), (v, pick)) in pixels.zip(values) {
+            out.mean.pixel_mut(x, y).copy_from_slice(&v[0..3]);
+            out.variance.pixel_mut(x, y).copy_from_slice(&v[3..6]);
+            out.alpha.pixel_mut(x, y)[0] = v[6];
+            out.depth.pixel_mut(x, y)[0] = v[7];
+            out.normal.pixel_mut(x, y).copy_from_slice(&v[8..11]);
+            picked[(y * w + x) as usize] = *pick;
+        }
+    }
+    Ok(RasterOutput { frames: out, picked })
+}
+
+/// Every frame of one pixel: mean and variance of colour and coverage, and frame 0's picks.
+fn render_pixel(raster: &Rasterizer, method: &RasterMethod, x: u32, y: u32, keys: &[u32]) -> ([f32; 11], Option<u32>) {
+    let px = raster.pixel(x, y);
+    let mut fragments = raster.fragments(&px);
+    let mut acc = [Welford::default(); 4];
+    let mut first = None;
+    for &key in keys {
+        if method.is_stochastic() {
+            raster.shuffle(&mut fragments, key);
+        }
+        let s = raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash), key);
+        for (a, v) in acc.iter_mut().zip([s.color.x, s.color.y, s.color.z, s.alpha]) {
+            a.push(v);
+        }
+        first.get_or_insert(s);
+    }
+    let f = first.expect("at least one frame");
+    let mean = acc.map(|a| a.mean as f32);
+    let var = acc.map(|a| a.variance() as f32);
+    let n = f.normal;
+    let depth = f.depth.unwrap_or(f32::NAN);
+    ([mean[0], mean[1], mean[2], var[0], var[1], var[2], mean[3], depth, n.x, n.y, n.z], f.picked)
+}

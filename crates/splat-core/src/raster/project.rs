@@ -1,0 +1,175 @@
+//! EWA splatting: each particle projected to a 2D Gaussian on the image (Zwicker et al. 2002,
+//! as the 3DGS rasterizer does it), with view-dependent colour and frustum and alpha culling.
+
+use crate::camera::Camera;
+use crate::kernel::KernelParams;
+use crate::particle::Scene;
+use crate::sh;
+use glam::{Mat3, Vec2, Vec3};
+
+/// Low-pass dilation added to the projected covariance, in px² (3DGS).
+pub const DILATION: f32 = 0.3;
+/// A splat's quad reaches √8 σ: fragments whose Mahalanobis term A exceeds 8 are discarded.
+pub const EXTENT_SQ: f32 = 8.0;
+/// Particles whose centre is nearer than this along the view axis are culled (3DGS).
+pub const NEAR: f32 = 0.2;
+/// 3DGS clamps x/z and y/z of a centre to 1.3 × the image's half-extent before the Jacobian,
+/// so that splats far outside the frustum do not get absurd footprints.
+pub const FRUSTUM_GUARD: f32 = 1.3;
+
+/// A particle projected to the image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Splat {
+    /// Scene index of the particle (the splat id of the hashes).
+    pub id: u32,
+    /// Projected centre, pixels (pixel i covers [i, i + 1)).
+    pub mean: Vec2,
+    /// Inverse of the dilated 2D covariance Σ′ as (a, b, c): A = a dx² + 2 b dx dy + c dy².
+    pub conic: Vec3,
+    /// View-space depth z of the centre: the billboard depth and the global sort key.
+    pub depth: f32,
+    /// Particle opacity.
+    pub opacity: f32,
+    /// SH colour seen along the direction from the camera centre to the particle centre.
+    pub color: Vec3,
+    /// Pixel range [x0, x1) × [y0, y1) of the √8σ ellipse, clipped to the image.
+    pub rect: [u32; 4],
+}
+
+impl Splat {
+    /// The Mahalanobis term A = dᵀ Σ′⁻¹ d at continuous pixel position `p`.
+    #[inline]
+    pub fn mahalanobis(&self, p: Vec2) -> f32 {
+        let d = p - self.mean;
+        self.conic.x * d.x * d.x + 2.0 * self.conic.y * d.x * d.y + self.conic.z * d.y * d.y
+    }
+
+    /// alpha = opacity × response(A) at `p` (exp(−½A) for the degree-2 kernel), `None` outside
+    /// the √8σ quad or below the alpha cull; clamped like every particle alpha.
+    #[inline]
+    pub fn alpha(&self, p: Vec2, kernel: &KernelParams) -> Option<f32> {
+        let a = self.mahalanobis(p);
+        if a > EXTENT_SQ {
+            return None;
+        }
+        kernel.alpha(self.opacity, kernel.response(a))
+    }
+}
+
+/// Project particle `index` of `scene` for `camera`; `None` when it is culled (behind the near
+/// plane, outside the image, or unable to reach the alpha cull anywhere).
+///
+/// Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, with W the world-to-camera rotation and J the Jacobian of the
+/// perspective projection at the centre t = (x, y, z): J = [[f_x/z, 0, −f_x x/z²],
+/// [0, f_y/z, −f_y y/z²]].
+pub fn project(scene: &Scene, index: u32, camera: &Camera, kernel: &KernelParams) -> Option<Splat> {
+    let p = &scene.particles[index as usize];
+    if p.opacity < kernel.alpha_cull {
+        return None;
+    }
+    let t = camera.to_camera(p.mean);
+    if !(t.z > NEAR) {
+        return None;
+    }
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    let lim_x = FRUSTUM_GUARD * camera.cx.max(w - camera.cx) / camera.fx;
+    let lim_y = FRUSTUM_GUARD * camera.cy.max(h - camera.cy) / camera.fy;
+    let tx = (t.x / t.z).clamp(-lim_x, lim_x) * t.z;
+    let ty = (t.y / t.z).clamp(-lim_y, lim_y) * t.z;
+    let j = Mat3::from_cols(
+        Vec3::new(camera.fx / t.z, 0.0, 0.0),
+        Vec3::new(0.0, camera.fy / t.z, 0.0),
+        Vec3::new(-camera.fx * tx / (t.z * t.z), -camera.fy * ty / (t.z * t.z), 0.0),
+    );
+    let jw = j * camera.rotation;
+    let cov = jw * p.covariance() * jw.transpose();
+    let (a, b, c) = (cov.x_axis.x + DILATION, cov.y_axis.x, cov.y_axis.y + DILATION);
+    let det = a * c - b * b;
+    if !(det > 0.0) || !det.is_finite() {
+        return None;
+    }
+    let conic = Vec3::new(c / det, -b / det, a / det);
+    let mean = camera.project_camera(t);
+    let (rx, ry) = ((EXTENT_SQ * a).sqrt(), (EXTENT_SQ * c).sqrt());
+    let clip = |lo: f32, hi: f32, max: f32| -> Option<(u32, u32)> {
+        let lo = lo.floor().max(0.0);
+        let hi = hi.ceil().min(max);
+        (lo < hi).then_some((lo as u32, hi as u32))
+    };
+    let (x0, x1) = clip(mean.x - rx, mean.x + rx, w)?;
+    let (y0, y1) = clip(mean.y - ry, mean.y + ry, h)?;
+    let color = sh::eval(&p.sh, scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
+    Some(Splat { id: index, mean, conic, depth: t.z, opacity: p.opacity, color, rect: [x0, y0, x1, y1] })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::particle::Particle;
+    use approx::assert_relative_eq;
+    use glam::Quat;
+
+    fn camera() -> Camera {
+        Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 50.0, 64, 48).unwrap()
+    }
+
+    /// An isotropic particle on the axis projects to a circle of σ′² = (f σ / z)² + 0.3 px².
+    #[test]
+    fn isotropic_particle_projects_to_the_expected_circle() {
+        let cam = camera();
+        let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.8, Vec3::ONE);
+        let scene = Scene { particles: vec![p], sh_degree: 0 };
+        let s = project(&scene, 0, &cam, &KernelParams::default()).unwrap();
+        let sigma2 = (cam.fx * 0.1 / 4.0).powi(2) + DILATION;
+        assert_relative_eq!(s.conic.x, 1.0 / sigma2, max_relative = 1e-4);
+        assert_relative_eq!(s.conic.z, 1.0 / sigma2, max_relative = 1e-4);
+        assert_relative_eq!(s.conic.y, 0.0, epsilon = 1e-7);
+        assert_relative_eq!(s.mean.x, 32.0, epsilon = 1e-4);
+        assert_relative_eq!(s.depth, 4.0, epsilon = 1e-5);
+        // exp(−½A): at one σ′ from the centre the alpha is opacity × e^−½.
+        let a = s.alpha(s.mean + Vec2::new(sigma2.sqrt(), 0.0), &KernelParams::default()).unwrap();
+        assert_relative_eq!(a, 0.8 * (-0.5f32).exp(), max_relative = 1e-4);
+        assert!(s.alpha(s.mean + Vec2::new(2.9 * sigma2.sqrt(), 0.0), &KernelParams::default()).is_none());
+    }
+
+    /// The 2D covariance matches the finite-difference Jacobian of the projection applied to
+    /// Σ (the linearisation EWA makes), for an anisotropic, rotated, off-axis particle.
+    #[test]
+    fn covariance_matches_the_numerical_jacobian() {
+        let cam = camera();
+        let rot = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1);
+        let p = Particle::with_rgb(Vec3::new(0.4, -0.3, 0.5), Vec3::new(0.2, 0.05, 0.1), rot, 0.5, Vec3::ONE);
+        let scene = Scene { particles: vec![p.clone()], sh_degree: 0 };
+        let s = project(&scene, 0, &cam, &KernelParams::default()).unwrap();
+        let f = |x: Vec3| cam.project_camera(cam.to_camera(x));
+        let eps = 1e-3;
+        let cols: Vec<Vec2> = [Vec3::X, Vec3::Y, Vec3::Z]
+            .iter()
+            .map(|&e| (f(p.mean + eps * e) - f(p.mean - eps * e)) / (2.0 * eps))
+            .collect();
+        let sigma = p.covariance();
+        let cov = |i: usize, k: usize| -> f32 {
+            let g = |v: Vec2, i: usize| if i == 0 { v.x } else { v.y };
+            (0..3).map(|r| (0..3).map(|q| g(cols[r], i) * sigma.col(q)[r] * g(cols[q], k)).sum::<f32>()).sum()
+        };
+        let (a, b, c) = (cov(0, 0) + DILATION, cov(0, 1), cov(1, 1) + DILATION);
+        let det = a * c - b * b;
+        assert_relative_eq!(s.conic.x, c / det, max_relative = 2e-3);
+        assert_relative_eq!(s.conic.y, -b / det, max_relative = 2e-3, epsilon = 1e-4);
+        assert_relative_eq!(s.conic.z, a / det, max_relative = 2e-3);
+    }
+
+    #[test]
+    fn particles_behind_or_outside_are_culled() {
+        let cam = camera();
+        let at = |m: Vec3| Particle::with_rgb(m, Vec3::splat(0.05), Quat::IDENTITY, 0.8, Vec3::ONE);
+        let scene = Scene {
+            particles: vec![at(Vec3::new(0.0, 0.0, 5.0)), at(Vec3::new(30.0, 0.0, 0.0)), at(Vec3::ZERO)],
+            sh_degree: 0,
+        };
+        let k = KernelParams::default();
+        assert!(project(&scene, 0, &cam, &k).is_none(), "behind the camera");
+        assert!(project(&scene, 1, &cam, &k).is_none(), "outside the image");
+        assert!(project(&scene, 2, &cam, &k).is_some());
+    }
+}

@@ -1,0 +1,249 @@
+//! Deterministic tests of the raster reference: over = under, agreement with the ray-traced
+//! oracle where the projection is exact, the StochasticSplats expectation by enumeration, and
+//! the stratification properties of Laine & Karras §4.
+
+use super::*;
+use crate::particle::Particle;
+use crate::scenes;
+use approx::assert_relative_eq;
+use glam::Quat;
+
+fn sorted(blend: Blend) -> RasterMethod {
+    RasterMethod::Sorted { blend }
+}
+
+fn render(r: &Rasterizer, method: &RasterMethod, count: u32) -> RasterOutput {
+    render_raster(r, method, &Frames { count, seed: 3, ..Frames::default() }, &|_| {}).unwrap()
+}
+
+/// Back-to-front over and front-to-back under give the same image, for every sample count and
+/// both fragment depths, on two fixtures.
+#[test]
+fn over_equals_under() {
+    for (scene, camera) in [scenes::layers(), scenes::cloud()] {
+        let camera = camera.rescaled(40, 30).unwrap();
+        for samples in [1, 4] {
+            for fragment_depth in [FragmentDepth::Center, FragmentDepth::MaxDensityPlane] {
+                let raster = RasterSettings { samples, fragment_depth };
+                let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+                let over = render(&r, &sorted(Blend::Over), 1).frames;
+                let under = render(&r, &sorted(Blend::Under), 1).frames;
+                for (a, b) in over.mean.data().iter().zip(under.mean.data()) {
+                    assert_relative_eq!(a, b, epsilon = 1e-6);
+                }
+                assert_eq!(over.alpha, under.alpha);
+                assert!(under.alpha.data().iter().any(|&a| a > 0.5), "the fixture is visible");
+            }
+        }
+    }
+}
+
+/// A large isotropic particle seen head-on: the projection is then nearly exact, and sorted
+/// splatting reproduces the ray-traced oracle (max response along the ray) to the size of
+/// the 0.3 px² dilation once both cut at √8σ.
+#[test]
+fn sorted_splatting_matches_the_ray_traced_oracle_where_ewa_is_exact() {
+    let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.3), Quat::IDENTITY, 0.9, Vec3::new(1.0, 0.5, 0.2));
+    let scene = Scene { particles: vec![p], sh_degree: 0 };
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 20.0), Vec3::ZERO, Vec3::Y, 10.0, 48, 48).unwrap();
+    let mut settings = RenderSettings::default();
+    settings.kernel.cutoff = project::EXTENT_SQ.sqrt();
+    let r = Rasterizer::new(&scene, &camera, settings, RasterSettings::default()).unwrap();
+    let raster = render(&r, &sorted(Blend::Under), 1).frames;
+    let exact = crate::render::render_exact(&scene, &camera, &settings, &|_| {}).unwrap();
+    // Inside the footprint (away from the √8σ rim, where the dilated and undilated ellipses
+    // cut different pixels) the alphas differ by the dilation's effect only: σ′² = σ² + 0.3 with
+    // σ ≈ 4.1 px widens the Gaussian by k = 1.78 %, and max over x of o (e^(−x/(1+k)) − e^(−x))
+    // ≈ o k / e ≈ 0.0059 for o = 0.9.
+    let mut worst = 0.0f32;
+    for (a, b) in raster.alpha.data().iter().zip(exact.alpha.data()) {
+        if *b > 0.05 {
+            worst = worst.max((a - b).abs());
+        }
+    }
+    assert!(worst < 0.0065, "largest alpha difference {worst}");
+    let rmse = crate::stats::rmse(raster.alpha.data(), exact.alpha.data());
+    assert!(rmse < 0.002, "alpha RMSE {rmse}");
+    assert!(raster.alpha.data().iter().any(|&a| a > 0.85));
+}
+
+/// A one-pixel camera looking at a stack of splats, with their fragments.
+fn one_pixel(opacities: &[f32], samples: u32) -> (Scene, Camera) {
+    let particles = opacities
+        .iter()
+        .enumerate()
+        .map(|(i, &o)| {
+            let rgb = Vec3::new(0.1 + 0.2 * i as f32, 0.9 - 0.15 * i as f32, (i % 2) as f32);
+            let mean = Vec3::new(0.0, 0.0, -0.3 * i as f32);
+            Particle::with_rgb(mean, Vec3::splat(1.0), Quat::IDENTITY, o, rgb)
+        })
+        .collect();
+    let scene = Scene { particles, sh_degree: 0 };
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 2.0, 1, 1).unwrap();
+    assert!(SAMPLE_COUNTS.contains(&samples));
+    (scene, camera)
+}
+
+/// Scripted decisions: u = 0 (accept) or u = 1 − 2⁻²⁴ (reject) per (splat id, sample).
+struct Script(Vec<bool>, usize);
+
+impl Decide for Script {
+    fn needs_position(&self) -> bool {
+        false
+    }
+    fn particle(&self, id: u32, slot: u32, _: Vec3) -> f32 {
+        if self.0[id as usize * self.1 + slot as usize] { 0.0 } else { 1.0 - f32::EPSILON }
+    }
+    fn pass(&self, _: u32) -> f32 {
+        unreachable!("no passes in rasterization")
+    }
+}
+
+/// The same u for every decision: a threshold, not a random variable.
+struct Constant(f32);
+
+impl Decide for Constant {
+    fn needs_position(&self) -> bool {
+        false
+    }
+    fn particle(&self, _: u32, _: u32, _: Vec3) -> f32 {
+        self.0
+    }
+    fn pass(&self, _: u32) -> f32 {
+        self.0
+    }
+}
+
+/// Exact expectation of StochasticSplats by enumerating every accept/reject outcome of every
+/// (fragment, sample), through the rendering code: it equals sorted splatting to 1e-9, in any
+/// draw order. The same enumeration of a biased variant (a constant u = ½ threshold, i.e. the
+/// decision without randomness) does not.
+#[test]
+fn stochastic_splat_expectation_is_sorted_splatting() {
+    for (opacities, samples) in [(vec![0.3f32, 0.8, 0.5, 0.6], 1u32), (vec![0.45, 0.7, 0.2], 2)] {
+        let (scene, camera) = one_pixel(&opacities, samples);
+        let raster = RasterSettings { samples, ..RasterSettings::default() };
+        let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+        let px = r.pixel(0, 0);
+        let mut frags = r.fragments(&px);
+        assert_eq!(frags.len(), opacities.len());
+        let want = r.draw(&sorted(Blend::Under), &px, &frags, &Script(vec![], 0), 0).color;
+        let s = samples as usize;
+        let m = frags.len() * s;
+        for reverse in [false, true] {
+            if reverse {
+                frags.reverse();
+            }
+            let mut expectation = DVec3::ZERO;
+            for mask in 0u32..1 << m {
+                let accept: Vec<bool> = (0..m).map(|b| mask >> b & 1 == 1).collect();
+                let mut p = 1.0f64;
+                for f in &frags {
+                    let id = r.splats()[f.splat as usize].id as usize;
+                    for k in 0..s {
+                        let a = f64::from(f.alpha);
+                        p *= if accept[id * s + k] { a } else { 1.0 - a };
+                    }
+                }
+                let got = r.draw(&RasterMethod::StochasticSplat, &px, &frags, &Script(accept, s), 0);
+                expectation += p * got.color;
+            }
+            assert!((expectation - want).abs().max_element() < 1e-9, "{expectation} vs {want}");
+        }
+        let biased = r.draw(&RasterMethod::StochasticSplat, &px, &frags, &Constant(0.5), 0);
+        assert!((biased.color - want).abs().max_element() > 1e-2, "a fixed threshold is not an estimator");
+    }
+}
+
+/// Laine & Karras §4, Figure 5: two full-pixel surfaces of α = ½ at 16 samples. The nearest
+/// covers exactly 8 samples whatever the order; the far one ends with exactly 4 visible when
+/// drawn first (sorting by stored depth, Figure 5d) and when drawn last (early depth test,
+/// Figure 5b). Enderton's method gets 4 only on average.
+#[test]
+fn stratified_covers_exact_sample_counts() {
+    let (scene, camera) = one_pixel(&[0.5, 0.5], 16);
+    let raster = RasterSettings { samples: 16, ..RasterSettings::default() };
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+    let px = r.pixel(0, 0);
+    let near_to_far = r.fragments(&px);
+    let far_to_near: Vec<Fragment> = near_to_far.iter().rev().copied().collect();
+    let (near, far) = (scene.particles[0].sh[0], scene.particles[1].sh[0]);
+    assert_ne!(near, far);
+    let mut enderton_far = Vec::new();
+    for key in 0..64 {
+        for order in [&near_to_far, &far_to_near] {
+            let buf = r.stratified(&px, order, key, true);
+            let count = |k: u32| (0..16).filter(|&s| buf.splat[s] == k).count();
+            let (n, f) = (near_to_far[0].splat, near_to_far[1].splat);
+            assert_eq!((count(n), count(f)), (8, 4), "frame {key}");
+            let rng = RayRng::new(0, 0, key, RngScheme::Hash);
+            let e = r.enderton(&px, order, &rng);
+            enderton_far.push((0..16).filter(|&s| e.splat[s] == f).count());
+        }
+    }
+    assert!(enderton_far.iter().any(|&c| c != 4), "Enderton is not stratified across surfaces");
+}
+
+/// A surface of α = ¼ drawn as two fragments that split the samples (an edge inside the pixel)
+/// still covers exactly a quarter of the samples: the second fragment continues the surface's
+/// sequence (Figure 7, line 8) instead of restarting it.
+#[test]
+fn stratified_continues_a_surface_across_fragments() {
+    let (scene, camera) = one_pixel(&[0.25, 0.25], 16);
+    let raster = RasterSettings { samples: 16, ..RasterSettings::default() };
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+    let px = r.pixel(0, 0);
+    let mut frags = r.fragments(&px);
+    // Make the two fragments one surface cut in half, side by side, at equal depth coverage.
+    frags[0].covered = 0x00FF;
+    frags[1].covered = 0xFF00;
+    for key in 0..32 {
+        let buf = r.stratified(&px, &frags, key, true);
+        let written = (0..16).filter(|&s| buf.splat[s] != u32::MAX).count();
+        assert_eq!(written, 4, "frame {key}");
+    }
+}
+
+/// Frames are reproducible and independent of the draw order for StochasticSplats (whose
+/// decisions are hashes of ids, not of positions in a stream).
+#[test]
+fn stochastic_splat_does_not_depend_on_draw_order() {
+    let (scene, camera) = scenes::cloud();
+    let camera = camera.rescaled(24, 18).unwrap();
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), RasterSettings::default()).unwrap();
+    for (x, y) in [(12, 9), (5, 7), (20, 3)] {
+        let px = r.pixel(x, y);
+        let mut frags = r.fragments(&px);
+        let rng = RayRng::new(x, y, 5, RngScheme::Hash);
+        let a = r.draw(&RasterMethod::StochasticSplat, &px, &frags, &rng, 5);
+        frags.reverse();
+        let b = r.draw(&RasterMethod::StochasticSplat, &px, &frags, &rng, 5);
+        assert_eq!(a, b);
+    }
+}
+
+#[test]
+fn bad_raster_settings_are_refused() {
+    let (scene, camera) = scenes::layers();
+    let bad = RasterSettings { samples: 3, ..RasterSettings::default() };
+    let err = Rasterizer::new(&scene, &camera, RenderSettings::default(), bad).err().unwrap();
+    assert!(err.to_string().contains("3 samples per pixel"), "{err}");
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), RasterSettings::default()).unwrap();
+    let trig = Frames { rng: RngScheme::Trig, ..Frames::default() };
+    assert!(render_raster(&r, &RasterMethod::StochasticSplat, &trig, &|_| {}).is_err());
+    let none = Frames { count: 0, ..Frames::default() };
+    assert!(render_raster(&r, &RasterMethod::StochasticSplat, &none, &|_| {}).is_err());
+}
+
+/// Front to back picks the iso-opacity depth and splat: two full-pixel splats of α = 0.2 and
+/// 0.5 put T at 0.8 then 0.4, so with the threshold 0.7 the second one is picked.
+#[test]
+fn under_picks_the_iso_opacity_splat() {
+    let (scene, camera) = one_pixel(&[0.2, 0.5], 1);
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), RasterSettings::default()).unwrap();
+    let out = render(&r, &sorted(Blend::Under), 1);
+    assert_eq!(out.picked, vec![Some(1)]);
+    let depth = out.frames.depth.data()[0];
+    assert_relative_eq!(depth, 5.3, max_relative = 1e-3);
+    assert_relative_eq!(out.frames.normal.pixel(0, 0)[2], 1.0, epsilon = 1e-3);
+}
