@@ -224,6 +224,66 @@ pub mod stat {
     }
 }
 
+/// The same statistical method applied to the raster estimators, against sorted splatting
+/// (the raster oracle) with the same samples.
+pub mod raster_stat {
+    use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
+    use splat_core::stats::{ZTest, log_log_slope, rmse};
+    use splat_core::trace::{Frames, TraceOutput};
+
+    /// Render `frames` frames of `method`.
+    pub fn run(r: &Rasterizer, method: &RasterMethod, frames: Frames) -> TraceOutput {
+        render_raster(r, method, &frames, &|_| {}).expect("render").frames
+    }
+
+    /// Sorted splatting (front to back) and its coverage mask per pixel-channel.
+    pub fn sorted(r: &Rasterizer) -> (Vec<f32>, Vec<bool>) {
+        let out = run(r, &RasterMethod::Sorted { blend: Blend::Under }, Frames::default());
+        let mask = out.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
+        (out.mean.data().to_vec(), mask)
+    }
+
+    fn masked(v: &[f32], mask: &[bool]) -> Vec<f32> {
+        v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
+    }
+
+    /// z-test of `method` against sorted splatting: mean of `base.count` frames, variance from
+    /// an independent run of 4× as many.
+    pub fn z_test(r: &Rasterizer, method: &RasterMethod, base: Frames) -> ZTest {
+        let (sorted, mask) = sorted(r);
+        let mean = run(r, method, base);
+        let var = run(r, method, Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
+        ZTest::new(
+            &masked(mean.mean.data(), &mask),
+            &masked(&sorted, &mask),
+            &masked(var.variance.data(), &mask),
+            base.count,
+            3,
+        )
+    }
+
+    /// RMSE against sorted splatting at spp = 1, 2, 4, … `max_spp` averaged over `seeds`
+    /// seeds, and the log–log slope.
+    pub fn convergence(r: &Rasterizer, method: &RasterMethod, max_spp: u32, seeds: u32) -> (f64, Vec<(u32, f64)>) {
+        let (sorted, _) = sorted(r);
+        let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
+        let table: Vec<(u32, f64)> = levels
+            .iter()
+            .map(|&spp| {
+                let sum: f64 = (0..seeds)
+                    .map(|s| {
+                        let frames = Frames { count: spp, seed: 1000 * spp + s, ..Frames::default() };
+                        rmse(run(r, method, frames).mean.data(), &sorted)
+                    })
+                    .sum();
+                (spp, sum / f64::from(seeds))
+            })
+            .collect();
+        let (x, y): (Vec<f64>, Vec<f64>) = table.iter().map(|&(s, r)| (f64::from(s), r)).unzip();
+        (log_log_slope(&x, &y), table)
+    }
+}
+
 /// The bonsai capture fetched by `cargo xtask assets`, if present (tests skip without it,
 /// saying why; with `CI=true` they fail instead).
 pub fn bonsai() -> Option<splat_core::Scene> {
@@ -258,6 +318,9 @@ pub mod golden {
 
     /// Fixtures with golden images.
     pub const FIXTURES: [&str; 3] = ["layers", "ramp", "cloud"];
+    /// Fixtures of the stratification report (`splat stratify`), rendered with kernel degree
+    /// [`splat_core::scenes::PLATE_KERNEL_DEGREE`].
+    pub const STRATIFICATION_FIXTURES: [&str; 2] = ["plates", "cloth"];
 
     /// The methods rendered for every fixture: (file suffix, method, frames). `exact` is the
     /// brute-force oracle; the others go through the BVH with seed 1.

@@ -92,7 +92,7 @@ fn ensure_vulkan_driver() -> Result<()> {
 fn fixtures() -> Result<()> {
     let dir = root().join("fixtures");
     std::fs::create_dir_all(&dir)?;
-    for name in FIXTURES {
+    for name in FIXTURES.iter().chain(&splat_tests::golden::STRATIFICATION_FIXTURES) {
         let (scene, camera) = scenes::by_name(name).expect("fixture names are built-in scenes");
         let ply = dir.join(format!("{name}.ply"));
         write_ply(&ply, &scene, PlyFormat::BinaryLittleEndian)?;

@@ -4,6 +4,7 @@ mod bench;
 mod converge;
 mod info;
 mod render;
+mod stratify;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -15,8 +16,10 @@ use std::process::ExitCode;
 ///   splat render -o demo.png                          # the built-in demo scene
 ///   splat render scene.ply --camera cameras.json -o view.png --depth depth.npy
 ///   splat render scene.splat --method stochastic --spp 64 --seed 1 -o noisy.exr
+///   splat render scene.ply --method stratified --raster-samples 16 -o strat.png
 ///   splat converge scene.splat --max-spp 256 -o converge   # converge.csv, converge.png
 ///   splat bench scene.splat                                 # rays/s per method
+///   splat stratify -o strat                                 # Laine–Karras Table 1 analogue
 ///   splat info point_cloud.ply
 #[derive(Parser)]
 #[command(name = "splat", version, about, long_about, verbatim_doc_comment)]
@@ -31,10 +34,14 @@ enum Command {
     Render(Box<render::RenderArgs>),
     /// Print a scene's particle count, SH degree, bounds and opacity histogram.
     Info(info::InfoArgs),
-    /// RMSE against exact at spp 1, 2, 4, … for each method: CSV, log–log plot PNG, Markdown table.
+    /// RMSE against the oracle (exact; raster-sorted for raster methods) at spp 1, 2, 4, …:
+    /// CSV, log–log plot PNG, Markdown table.
     Converge(Box<converge::ConvergeArgs>),
     /// Rays per second of each ray-tracing method against an opaque closest-hit baseline.
     Bench(Box<bench::BenchArgs>),
+    /// Laine–Karras stratification gain: RMSE of stratified / Enderton at 4…64 samples per
+    /// pixel on the layered fixtures, as a table and a side-by-side PNG.
+    Stratify(stratify::StratifyArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +51,7 @@ fn main() -> ExitCode {
         Command::Info(args) => info::run(args),
         Command::Converge(args) => converge::run(*args),
         Command::Bench(args) => bench::run(*args),
+        Command::Stratify(args) => stratify::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

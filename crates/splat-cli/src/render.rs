@@ -6,6 +6,7 @@ use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::normal::NormalMode;
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, Rasterizer, render_raster};
 use splat_core::render::{RenderSettings, render_exact};
 use splat_core::rng::RngScheme;
 use splat_core::trace::{Frames, Method, TraceOutput, TraceScene, render_frames};
@@ -33,6 +34,44 @@ pub enum MethodArg {
     DepthSamplingK,
     /// Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline.
     Opaque,
+    /// 3DGS splatting: EWA projection, global depth sort, --blend over|under per sample (the
+    /// raster oracle; under also gives iso depth and normals).
+    RasterSorted,
+    /// StochasticSplats: no sort, depth-tested stochastic discard, --raster-samples per pixel.
+    StochasticSplat,
+    /// Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment.
+    Enderton,
+    /// Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting).
+    Stratified,
+}
+
+/// Blend order of raster-sorted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BlendArg {
+    /// Back to front, C ← αc + (1 − α)C.
+    Over,
+    /// Front to back, premultiplied; also picks the iso-opacity depth and integrates normals.
+    Under,
+}
+
+/// Depth of a raster fragment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FragmentDepthArg {
+    /// Billboard through the splat centre (3DGS, vk).
+    Center,
+    /// Maximum-density point along each sample's ray (StochasticSplats' pop-free variant).
+    Plane,
+}
+
+/// A method of either family, as the library takes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Resolved {
+    /// The brute-force ray-traced oracle.
+    Oracle,
+    /// A ray-tracing method.
+    Trace(Method),
+    /// A rasterization method.
+    Raster(RasterMethod),
 }
 
 /// Where rays are traced.
@@ -77,6 +116,19 @@ pub struct MethodOptions {
     /// Generator of the stochastic decisions.
     #[arg(long, value_enum, default_value = "hash")]
     pub rng: RngArg,
+    /// Raster methods: samples per pixel S (1, 2, 4, 8, 16, 32 or 64), at Hammersley positions.
+    #[arg(long, default_value_t = 1)]
+    pub raster_samples: u32,
+    /// Raster methods: depth of each fragment.
+    #[arg(long, value_enum, default_value = "center")]
+    pub fragment_depth: FragmentDepthArg,
+    /// raster-sorted: blend order (default under, which also yields --depth and --normal).
+    #[arg(long, value_enum, default_value = "under")]
+    pub blend: BlendArg,
+    /// stratified: skip the multiply–XOR scramble (the correlated radical inverse that
+    /// Laine–Karras warn about; biased, a negative control).
+    #[arg(long)]
+    pub no_scramble: bool,
 }
 
 impl MethodArg {
@@ -87,10 +139,43 @@ impl MethodArg {
 }
 
 impl MethodOptions {
-    /// The library method for a CLI method (`None` for the brute-force oracle).
+    /// The library method of either family for a CLI method.
+    pub fn resolve(&self, m: MethodArg) -> Resolved {
+        let raster = |r| Resolved::Raster(r);
+        match m {
+            MethodArg::Oracle => Resolved::Oracle,
+            MethodArg::RasterSorted => raster(RasterMethod::Sorted {
+                blend: match self.blend {
+                    BlendArg::Over => Blend::Over,
+                    BlendArg::Under => Blend::Under,
+                },
+            }),
+            MethodArg::StochasticSplat => raster(RasterMethod::StochasticSplat),
+            MethodArg::Enderton => raster(RasterMethod::Enderton),
+            MethodArg::Stratified => raster(RasterMethod::Stratified { scramble: !self.no_scramble }),
+            _ => self.method(m).map_or(Resolved::Oracle, Resolved::Trace),
+        }
+    }
+
+    /// The raster settings these options describe.
+    pub fn raster_settings(&self) -> RasterSettings {
+        RasterSettings {
+            samples: self.raster_samples,
+            fragment_depth: match self.fragment_depth {
+                FragmentDepthArg::Center => FragmentDepth::Center,
+                FragmentDepthArg::Plane => FragmentDepth::MaxDensityPlane,
+            },
+        }
+    }
+
+    /// The ray-tracing method for a CLI method (`None` for the oracle and raster methods).
     pub fn method(&self, m: MethodArg) -> Option<Method> {
         Some(match m {
-            MethodArg::Oracle => return None,
+            MethodArg::Oracle
+            | MethodArg::RasterSorted
+            | MethodArg::StochasticSplat
+            | MethodArg::Enderton
+            | MethodArg::Stratified => return None,
             MethodArg::Exact => Method::Exact,
             MethodArg::Kbuffer => {
                 Method::KBuffer { k: self.k, max_passes: self.max_passes, min_transmittance: self.min_transmittance }
@@ -345,19 +430,17 @@ fn render(
     settings: &RenderSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<TraceOutput> {
-    let Some(method) = args.options.method(args.method) else {
-        if args.scene.backend == BackendArg::Gpu {
-            bail!("the brute-force oracle runs on the CPU only: use --method exact on the GPU");
+    let method = match args.options.resolve(args.method) {
+        Resolved::Trace(method) => method,
+        Resolved::Raster(method) => {
+            if args.scene.backend == BackendArg::Gpu {
+                bail!("the raster methods run on the CPU reference only so far: use --backend cpu");
+            }
+            let raster = Rasterizer::new(scene, camera, *settings, args.options.raster_settings())?;
+            let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
+            return Ok(render_raster(&raster, &method, &frames, progress)?.frames);
         }
-        let out = render_exact(scene, camera, settings, progress)?;
-        let variance = splat_core::Image::filled(camera.width, camera.height, 3, 0.0);
-        return Ok(TraceOutput {
-            mean: out.radiance,
-            variance,
-            alpha: out.alpha,
-            depth: out.depth,
-            normal: out.normal,
-        });
+        Resolved::Oracle => return oracle(args, scene, camera, settings, progress),
     };
     let trace = TraceScene::new(scene, *settings)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
@@ -374,6 +457,22 @@ fn render(
         return Ok(TraceOutput { mean: out.mean, variance: out.variance, alpha: out.alpha, depth: nan, normal: zero });
     }
     Ok(render_frames(&trace, camera, &method, &frames, progress)?)
+}
+
+/// The brute-force oracle (CPU only).
+fn oracle(
+    args: &RenderArgs,
+    scene: &Scene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput> {
+    if args.scene.backend == BackendArg::Gpu {
+        bail!("the brute-force oracle runs on the CPU only: use --method exact on the GPU");
+    }
+    let out = render_exact(scene, camera, settings, progress)?;
+    let variance = splat_core::Image::filled(camera.width, camera.height, 3, 0.0);
+    Ok(TraceOutput { mean: out.radiance, variance, alpha: out.alpha, depth: out.depth, normal: out.normal })
 }
 
 /// The GPU context the backend choice asks for: `None` for the CPU.

@@ -92,6 +92,54 @@ pub fn cloud() -> (Scene, Camera) {
     (scene, camera(Vec3::new(0.0, 0.6, 3.4), Vec3::ZERO, 40.0, 128, 96))
 }
 
+/// Kernel degree the [`plates`] and [`cloth`] scenes are meant for: exp(−4.5 (d/3)⁸) is flat
+/// (≥ 0.98) out to 1.5σ, so each particle is a near-constant-alpha plate like the polygons of
+/// Laine & Karras' test models.
+pub const PLATE_KERNEL_DEGREE: u32 = 8;
+
+/// The analogue of Laine & Karras' motor (Figure 9): 40 white, flat, round plates of constant
+/// opacity 0.3 in a random clutter, each shaded grey by a two-sided diffuse term |n·l| from a
+/// fixed light. Render with kernel degree [`PLATE_KERNEL_DEGREE`].
+pub fn plates() -> (Scene, Camera) {
+    let mut rng = SplitMix64::new(0x9A7E5);
+    let light = Vec3::new(0.4, 0.8, 0.45).normalize();
+    let particles = (0..40)
+        .map(|_| {
+            let mean = Vec3::new(rng.range(-0.9, 0.9), rng.range(-0.65, 0.65), rng.range(-0.8, 0.8));
+            let rotation = Quat::from_rotation_y(rng.range(-0.9, 0.9)) * Quat::from_rotation_x(rng.range(-0.9, 0.9));
+            let radius = rng.range(0.12, 0.22);
+            let normal = rotation * Vec3::Z;
+            let grey = 0.15 + 0.8 * normal.dot(light).abs();
+            Particle::with_rgb(mean, Vec3::new(radius, radius, 0.004), rotation, 0.3, Vec3::splat(grey))
+        })
+        .collect();
+    let scene = Scene { particles, sh_degree: 0 };
+    (scene, camera(Vec3::new(0.0, 0.3, 3.6), Vec3::ZERO, 40.0, 200, 150))
+}
+
+/// The analogue of Laine & Karras' cloth (Figure 10): a coloured sheet of opacity 0.4 folded
+/// like an accordion and seen obliquely, so that the eye looks through several folds and sees
+/// both sides of the sheet. Each panel is three flat patches in a stripe of hues, the back
+/// faces darker. Render with kernel degree [`PLATE_KERNEL_DEGREE`].
+pub fn cloth() -> (Scene, Camera) {
+    let folds = 8;
+    let mut particles = Vec::new();
+    for i in 0..folds {
+        // Alternating ±55° panels along x: a zigzag seen from the side.
+        let angle = if i % 2 == 0 { 0.95f32 } else { -0.95 };
+        let rotation = Quat::from_rotation_y(angle);
+        let x = -0.95 + 0.27 * i as f32;
+        for j in 0..3 {
+            let mean = Vec3::new(x, -0.5 + 0.5 * j as f32, 0.0);
+            let shade = if i % 2 == 0 { 0.95 } else { 0.6 };
+            let rgb = hue((0.13 * i as f32 + 0.31 * j as f32) % 1.0, shade);
+            particles.push(Particle::with_rgb(mean, Vec3::new(0.11, 0.17, 0.004), rotation, 0.4, rgb));
+        }
+    }
+    let scene = Scene { particles, sh_degree: 0 };
+    (scene, camera(Vec3::new(1.2, 0.4, 3.2), Vec3::new(0.0, 0.0, 0.0), 38.0, 200, 150))
+}
+
 /// The built-in demo scene: a rainbow trefoil knot of soft Gaussians floating over a
 /// translucent checkered floor, with three large glassy bubbles. 640 × 480 camera.
 pub fn demo() -> (Scene, Camera) {
@@ -137,12 +185,14 @@ pub fn by_name(name: &str) -> Option<(Scene, Camera)> {
         "layers" => Some(layers()),
         "ramp" => Some(ramp()),
         "cloud" => Some(cloud()),
+        "plates" => Some(plates()),
+        "cloth" => Some(cloth()),
         _ => None,
     }
 }
 
 /// Names accepted by [`by_name`].
-pub const NAMES: [&str; 4] = ["demo", "layers", "ramp", "cloud"];
+pub const NAMES: [&str; 6] = ["demo", "layers", "ramp", "cloud", "plates", "cloth"];
 
 #[cfg(test)]
 mod tests {
