@@ -313,6 +313,7 @@ pub fn bonsai_camera() -> splat_core::Camera {
 
 /// Golden images: what `cargo xtask bless` renders and the golden test compares.
 pub mod golden {
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
     use splat_core::render::{RenderSettings, render_exact};
     use splat_core::trace::{Frames, Method, TraceScene, render_frames};
 
@@ -322,31 +323,55 @@ pub mod golden {
     /// [`splat_core::scenes::PLATE_KERNEL_DEGREE`].
     pub const STRATIFICATION_FIXTURES: [&str; 2] = ["plates", "cloth"];
 
-    /// The methods rendered for every fixture: (file suffix, method, frames). `exact` is the
-    /// brute-force oracle; the others go through the BVH with seed 1.
-    pub fn cases() -> Vec<(&'static str, Option<Method>, Frames)> {
+    /// What a golden image renders.
+    #[derive(Clone, Copy, Debug)]
+    pub enum Case {
+        /// The brute-force ray-traced oracle.
+        Oracle,
+        /// A ray-tracing method through the BVH.
+        Trace(Method),
+        /// A raster method.
+        Raster(RasterMethod, RasterSettings),
+    }
+
+    /// The methods rendered for every fixture: (file suffix, case, frames), stochastic ones
+    /// with seed 1.
+    pub fn cases() -> Vec<(&'static str, Case, Frames)> {
         let f = |count| Frames { count, seed: 1, ..Frames::default() };
+        let s4 = RasterSettings { samples: 4, ..RasterSettings::default() };
         vec![
-            ("exact", None, f(1)),
-            ("kbuffer", Some(Method::KBUFFER), f(1)),
-            ("stochastic", Some(Method::Stochastic), f(4)),
-            ("stochastic-n", Some(Method::StochasticN { m: 1, n: 4 }), f(1)),
-            ("stochastic-pass", Some(Method::STOCHASTIC_PASS), f(4)),
-            ("depth-sampling-k", Some(Method::DepthSampling { k: 2 }), f(4)),
+            ("exact", Case::Oracle, f(1)),
+            ("kbuffer", Case::Trace(Method::KBUFFER), f(1)),
+            ("stochastic", Case::Trace(Method::Stochastic), f(4)),
+            ("stochastic-n", Case::Trace(Method::StochasticN { m: 1, n: 4 }), f(1)),
+            ("stochastic-pass", Case::Trace(Method::STOCHASTIC_PASS), f(4)),
+            ("depth-sampling-k", Case::Trace(Method::DepthSampling { k: 2 }), f(4)),
+            (
+                "raster-sorted",
+                Case::Raster(RasterMethod::Sorted { blend: Blend::Over }, RasterSettings::default()),
+                f(1),
+            ),
+            ("stochastic-splat", Case::Raster(RasterMethod::StochasticSplat, s4), f(2)),
+            ("enderton", Case::Raster(RasterMethod::Enderton, s4), f(2)),
+            ("stratified", Case::Raster(RasterMethod::Stratified { scramble: true }, s4), f(2)),
         ]
     }
 
     /// Render one golden case of one fixture, read through the file formats, as 8-bit RGB.
-    pub fn render(fixture: &str, method: Option<&Method>, frames: &Frames) -> image::RgbImage {
+    pub fn render(fixture: &str, case: &Case, frames: &Frames) -> image::RgbImage {
         let dir = super::root().join("fixtures");
         let scene = splat_io::ply::read_ply(&dir.join(format!("{fixture}.ply"))).expect("fixture");
         let camera = splat_io::cameras::read_cameras(&dir.join(format!("{fixture}.cameras.json"))).expect("camera")[0];
         let settings = RenderSettings::default();
-        let rgb = match method {
-            None => render_exact(&scene, &camera, &settings, &|_| {}).expect("render").radiance,
-            Some(m) => {
+        let rgb = match case {
+            Case::Oracle => render_exact(&scene, &camera, &settings, &|_| {}).expect("render").radiance,
+            Case::Trace(m) => {
                 let trace = TraceScene::new(&scene, settings).expect("scene");
                 render_frames(&trace, &camera, m, frames, &|_| {}).expect("render").mean
+            }
+            Case::Raster(m, raster) => {
+                let r = Rasterizer::new(&scene, &camera, settings, *raster).expect("scene");
+                render_raster(&r, m, frames, &|_| {}).expect("render").frames.mean
             }
         };
         splat_io::image::to_rgba8(&rgb).to_rgb8()

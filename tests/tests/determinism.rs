@@ -1,6 +1,7 @@
 //! The same scene, settings and seed give the bit-identical image whatever the thread count,
-//! for the exact renderer and for every stochastic method.
+//! for the exact renderer, every stochastic ray-tracing method and every raster method.
 
+use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
 use splat_core::render::{RenderSettings, render_exact};
 use splat_core::scenes;
 use splat_core::trace::{Frames, Method, TraceScene, render_frames};
@@ -49,6 +50,32 @@ fn stochastic_images_are_identical_across_thread_counts_and_differ_across_seeds(
         assert!(same_bits(&one, &method_with_threads(&method, 2, 5)), "{method:?}: 2 threads differ");
         if method.is_stochastic() {
             assert!(!same_bits(&one, &method_with_threads(&method, 1, 6)), "{method:?}: seeds 5 and 6 agree");
+        }
+    }
+}
+
+fn raster_with_threads(method: &RasterMethod, threads: usize, seed: u32) -> Vec<f32> {
+    let (scene, camera) = scenes::cloud();
+    let camera = camera.rescaled(48, 36).unwrap();
+    let raster = RasterSettings { samples: 4, ..RasterSettings::default() };
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+    let frames = Frames { count: 3, seed, ..Frames::default() };
+    let out = pool(threads).install(|| render_raster(&r, method, &frames, &|_| {}).unwrap()).frames;
+    [out.mean, out.variance, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
+}
+
+#[test]
+fn raster_images_are_identical_across_thread_counts_and_differ_across_seeds() {
+    for method in [
+        RasterMethod::Sorted { blend: Blend::Under },
+        RasterMethod::StochasticSplat,
+        RasterMethod::Enderton,
+        RasterMethod::Stratified { scramble: true },
+    ] {
+        let one = raster_with_threads(&method, 1, 5);
+        assert!(same_bits(&one, &raster_with_threads(&method, 2, 5)), "{method:?}: 2 threads differ");
+        if method.is_stochastic() {
+            assert!(!same_bits(&one, &raster_with_threads(&method, 1, 6)), "{method:?}: seeds 5 and 6 agree");
         }
     }
 }

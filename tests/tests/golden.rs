@@ -20,8 +20,8 @@ fn render_fixture(name: &str, settings: &RenderSettings) -> image::RgbImage {
 fn every_method_matches_its_golden_images() {
     let mut failures = Vec::new();
     for fixture in golden::FIXTURES {
-        for (suffix, method, frames) in golden::cases() {
-            let image = golden::render(fixture, method.as_ref(), &frames);
+        for (suffix, case, frames) in golden::cases() {
+            let image = golden::render(fixture, &case, &frames);
             if let Err(e) = compare_golden(&golden::path(fixture, suffix), &image, TOLERANCE) {
                 failures.push(e);
             }

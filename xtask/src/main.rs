@@ -107,9 +107,9 @@ fn bless() -> Result<()> {
     use splat_tests::golden;
     std::fs::create_dir_all(root().join("fixtures/golden"))?;
     for fixture in golden::FIXTURES {
-        for (suffix, method, frames) in golden::cases() {
+        for (suffix, case, frames) in golden::cases() {
             let path = golden::path(fixture, suffix);
-            golden::render(fixture, method.as_ref(), &frames)
+            golden::render(fixture, &case, &frames)
                 .save(&path)
                 .with_context(|| format!("writing {}", path.display()))?;
             println!("blessed {}", path.display());

@@ -175,9 +175,20 @@ fn info_reports_count_degree_and_histogram() {
 
 #[test]
 fn every_method_renders_with_variance_and_the_same_seed_repeats() {
-    for method in
-        ["exact", "oracle", "kbuffer", "stochastic", "stochastic-n", "stochastic-pass", "depth-sampling-k", "opaque"]
-    {
+    for method in [
+        "exact",
+        "oracle",
+        "kbuffer",
+        "stochastic",
+        "stochastic-n",
+        "stochastic-pass",
+        "depth-sampling-k",
+        "opaque",
+        "raster-sorted",
+        "stochastic-splat",
+        "enderton",
+        "stratified",
+    ] {
         let out = scratch(&format!("m-{method}.npy"));
         let var = scratch(&format!("m-{method}-var.npy"));
         let args = |o: &PathBuf| {
@@ -198,6 +209,8 @@ fn every_method_renders_with_variance_and_the_same_seed_repeats() {
                 "3".into(),
                 "--samples".into(),
                 "4".into(),
+                "--raster-samples".into(),
+                "4".into(),
                 "-o".into(),
                 o.display().to_string(),
                 "--variance".into(),
@@ -216,7 +229,7 @@ fn every_method_renders_with_variance_and_the_same_seed_repeats() {
             "{method}: same seed, different image"
         );
         let variance = splat_io::image::read_npy(&var).unwrap();
-        let stochastic = !["exact", "oracle", "kbuffer", "opaque"].contains(&method);
+        let stochastic = !["exact", "oracle", "kbuffer", "opaque", "raster-sorted"].contains(&method);
         assert_eq!(variance.data().iter().any(|&v| v > 0.0), stochastic, "{method}: variance image");
     }
 }
@@ -236,18 +249,59 @@ fn converge_writes_csv_plot_and_table() {
         "--max-spp",
         "16",
         "--methods",
-        "stochastic,depth-sampling-k",
+        "stochastic,depth-sampling-k,stochastic-splat",
         "-o",
         prefix.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let csv = std::fs::read_to_string(prefix.with_extension("csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 2 * 5, "{csv}");
+    assert_eq!(csv.lines().count(), 1 + 3 * 5, "{csv}");
+    assert!(stderr(&o).contains("raster-sorted against ray-traced exact: RMSE"), "{}", stderr(&o));
     assert!(image::open(prefix.with_extension("png")).is_ok());
     let table = String::from_utf8_lossy(&o.stdout);
     assert!(table.contains("| slope |"), "{table}");
     let bad = splat(&["converge", "--max-spp", "100"]);
     assert!(!bad.status.success() && stderr(&bad).contains("power of two"));
+}
+
+/// Sorted splatting over and under write the same image; bad raster options are named; the
+/// stratification report prints its table.
+#[test]
+fn raster_over_equals_under_and_bad_options_are_named() {
+    let render = |blend: &str| {
+        let out = scratch(&format!("blend-{blend}.npy"));
+        let o = splat(&[
+            "render",
+            "fixtures/layers.ply",
+            "--camera",
+            "fixtures/layers.cameras.json",
+            "--method",
+            "raster-sorted",
+            "--blend",
+            blend,
+            "--raster-samples",
+            "4",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        splat_io::image::read_npy(&out).unwrap()
+    };
+    let (over, under) = (render("over"), render("under"));
+    let worst = over.data().iter().zip(under.data()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 1e-6, "over and under differ by {worst}");
+    let bad = splat(&["render", "--method", "stratified", "--raster-samples", "3", "-o", "x.png"]);
+    assert!(!bad.status.success() && stderr(&bad).contains("3 samples per pixel"), "{}", stderr(&bad));
+    let trig = splat(&["render", "--method", "stochastic-splat", "--rng", "trig", "-o", "x.png"]);
+    assert!(!trig.status.success() && stderr(&trig).contains("hash generator"), "{}", stderr(&trig));
+    let prefix = scratch("strat");
+    let o = splat(&["stratify", "--scenes", "cloth", "--frames", "2", "-o", prefix.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(table.lines().filter(|l| l.starts_with("| cloth |")).count(), 5, "{table}");
+    assert!(image::open(prefix.with_extension("png")).is_ok());
+    let unknown = splat(&["stratify", "--scenes", "teapot"]);
+    assert!(!unknown.status.success() && stderr(&unknown).contains("unknown scene 'teapot'"));
 }
 
 #[test]
