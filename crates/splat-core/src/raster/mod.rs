@@ -429,16 +429,14 @@ impl<'a> Rasterizer<'a> {
                 surface_id = surface_id.wrapping_add(1);
                 covered = 0;
             }
-            // Line 8: continue the surface's sequence where it stopped.
-            let mut n = covered.count_ones();
             // Line 9: order by the depth previously stored at each sample (ties by sample).
             alive.sort_by(|a, b| buf.cmp_stored(a.0, b.0));
-            // Lines 10–17: opacity test against the reference values, in that order.
-            for &(s, t) in &alive {
+            // Lines 8, 10–17: opacity test against the reference values, in that order, the
+            // surface's sequence continuing where it stopped (n starts at the bits set).
+            for (n, &(s, t)) in (covered.count_ones()..).zip(&alive) {
                 if f.alpha > calc_alpha_ref(n, pixel_id, surface_id, spp, scramble) {
                     buf.write(s, t, id, f.splat);
                 }
-                n += 1;
             }
             // Line 18.
             covered |= mask;

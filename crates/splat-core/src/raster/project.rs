@@ -68,7 +68,7 @@ pub fn project(scene: &Scene, index: u32, camera: &Camera, kernel: &KernelParams
         return None;
     }
     let t = camera.to_camera(p.mean);
-    if !(t.z > NEAR) {
+    if t.z.is_nan() || t.z <= NEAR {
         return None;
     }
     let (w, h) = (camera.width as f32, camera.height as f32);
@@ -85,7 +85,7 @@ pub fn project(scene: &Scene, index: u32, camera: &Camera, kernel: &KernelParams
     let cov = jw * p.covariance() * jw.transpose();
     let (a, b, c) = (cov.x_axis.x + DILATION, cov.y_axis.x, cov.y_axis.y + DILATION);
     let det = a * c - b * b;
-    if !(det > 0.0) || !det.is_finite() {
+    if det.is_nan() || det <= 0.0 || !det.is_finite() {
         return None;
     }
     let conic = Vec3::new(c / det, -b / det, a / det);
