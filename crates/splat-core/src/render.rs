@@ -237,6 +237,12 @@ pub fn tile_rect(camera: &Camera, tile: u32) -> (u32, u32, u32, u32) {
     (x0, y0, (x0 + TILE).min(camera.width), (y0 + TILE).min(camera.height))
 }
 
+/// The pixels (x, y) of tile `tile`, row by row.
+pub fn tile_coords(camera: &Camera, tile: u32) -> impl Iterator<Item = (u32, u32)> {
+    let (x0, y0, x1, y1) = tile_rect(camera, tile);
+    (y0..y1).flat_map(move |y| (x0..x1).map(move |x| (x, y)))
+}
+
 /// `f` of every tile, in tile order; tiles run in parallel with the `rayon` feature. Each
 /// tile's result depends only on the tile, so the output does not depend on the thread count.
 pub fn map_tiles<T: Send>(camera: &Camera, f: impl Fn(u32) -> T + Sync + Send) -> Vec<T> {
@@ -285,9 +291,7 @@ fn assemble(camera: &Camera, tiles: &[Vec<PixelValues>]) -> RenderOutput {
         normal: Image::filled(w, h, 3, 0.0),
     };
     for (tile, values) in tiles.iter().enumerate() {
-        let (x0, y0, x1, y1) = tile_rect(camera, tile as u32);
-        let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
-        for ((x, y), v) in pixels.zip(values) {
+        for ((x, y), v) in tile_coords(camera, tile as u32).zip(values) {
             out.radiance.pixel_mut(x, y).copy_from_slice(&v[0..3]);
             out.alpha.pixel_mut(x, y)[0] = v[3];
             out.depth.pixel_mut(x, y)[0] = v[4];

@@ -150,6 +150,13 @@ pub struct TraceScene<'a> {
     ids: Vec<u32>,
 }
 
+/// The total depth order of the whole crate: (t, id) strictly before (other_t, other_id) —
+/// distance first, ties by particle id — so no result depends on traversal or draw order.
+#[inline]
+pub(crate) fn depth_before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
+    t < other_t || (t == other_t && id < other_id)
+}
+
 /// A candidate hit in a k-buffer, ordered by (t, id).
 #[derive(Clone, Copy, Debug)]
 struct Slot {
@@ -165,7 +172,7 @@ impl Slot {
     /// Strict (t, id) order: distance, ties by particle id, whatever the traversal order.
     #[inline]
     fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
-        t < other_t || (t == other_t && id < other_id)
+        depth_before(t, id, other_t, other_id)
     }
 }
 
@@ -613,71 +620,60 @@ pub struct TraceOutput {
     pub normal: crate::image::Image,
 }
 
-/// Render `frames.count` frames of `method` (one for a deterministic method) through pixel centres and accumulate mean and
-/// per-frame variance per pixel in f64 (Welford). Each pixel loops over its frames, so the
-/// result does not depend on the thread count. `progress` receives finished pixel counts.
-pub fn render_frames(
-    trace: &TraceScene,
-    camera: &crate::camera::Camera,
-    method: &Method,
-    frames: &Frames,
-    progress: &(dyn Fn(u64) + Sync),
-) -> Result<TraceOutput, RenderError> {
-    use crate::render::{map_tiles, tile_rect};
-    use crate::stats::Welford;
-    camera.validate()?;
-    method.validate()?;
+/// The frame keys of a render: `frames.count` frames for a stochastic method, one otherwise (a
+/// deterministic method gives the same sample every frame).
+pub(crate) fn frame_keys(frames: &Frames, stochastic: bool) -> Result<Vec<u32>, RenderError> {
     if frames.count == 0 {
         return Err(RenderError::Settings("at least one frame is needed".into()));
     }
-    // A deterministic method gives the same sample every frame: one frame is the answer.
-    let count = if method.is_stochastic() { frames.count } else { 1 };
-    let keys: Vec<u32> = (0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect();
-    let results = map_tiles(camera, |tile| {
-        let (x0, y0, x1, y1) = tile_rect(camera, tile);
-        let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let ray = trace.clip(camera.pixel_ray(x, y));
-                let mut acc = [Welford::default(); 4];
-                let mut first = None;
-                for &key in &keys {
-                    let s = trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng));
-                    for (a, v) in acc.iter_mut().zip([s.color.x, s.color.y, s.color.z, s.alpha]) {
-                        a.push(v);
-                    }
-                    first.get_or_insert(s);
-                }
-                let f = first.expect("at least one frame");
-                let mean = acc.map(|a| a.mean as f32);
-                let var = acc.map(|a| a.variance() as f32);
-                let n = f.normal;
-                out.push([
-                    mean[0],
-                    mean[1],
-                    mean[2],
-                    var[0],
-                    var[1],
-                    var[2],
-                    mean[3],
-                    f.depth.unwrap_or(f32::NAN),
-                    n.x,
-                    n.y,
-                    n.z,
-                ]);
-            }
+    let count = if stochastic { frames.count } else { 1 };
+    Ok((0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect())
+}
+
+/// What one pixel writes to a [`TraceOutput`]: mean RGB, variance RGB, mean alpha, depth,
+/// normal.
+pub(crate) type PixelValues = [f32; 11];
+
+/// The frames of one pixel: f64 Welford mean and variance of colour and coverage, and the depth
+/// and normal of the first frame (picks are never averaged).
+#[derive(Default)]
+pub(crate) struct PixelFrames {
+    acc: [crate::stats::Welford; 4],
+    first: Option<(Option<f32>, Vec3)>,
+}
+
+impl PixelFrames {
+    /// Add one frame's sample.
+    pub(crate) fn push(&mut self, color: DVec3, alpha: f64, depth: Option<f32>, normal: Vec3) {
+        for (a, v) in self.acc.iter_mut().zip([color.x, color.y, color.z, alpha]) {
+            a.push(v);
         }
-        progress(out.len() as u64);
-        out
-    });
+        self.first.get_or_insert((depth, normal));
+    }
+
+    /// The pixel's output values.
+    pub(crate) fn values(&self) -> PixelValues {
+        let (depth, n) = self.first.unwrap_or((None, Vec3::ZERO));
+        let mean = self.acc.map(|a| a.mean as f32);
+        let var = self.acc.map(|a| a.variance() as f32);
+        let depth = depth.unwrap_or(f32::NAN);
+        [mean[0], mean[1], mean[2], var[0], var[1], var[2], mean[3], depth, n.x, n.y, n.z]
+    }
+}
+
+/// Scatter the tiles' pixel values (`values` of each tile entry) into the output images.
+pub(crate) fn assemble_frames<T>(
+    camera: &crate::camera::Camera,
+    tiles: &[Vec<T>],
+    values: impl Fn(&T) -> &PixelValues,
+) -> TraceOutput {
     let (w, h) = (camera.width, camera.height);
     let image = |c| crate::image::Image::filled(w, h, c, 0.0);
     let mut out =
         TraceOutput { mean: image(3), variance: image(3), alpha: image(1), depth: image(1), normal: image(3) };
-    for (tile, values) in results.iter().enumerate() {
-        let (x0, y0, x1, y1) = tile_rect(camera, tile as u32);
-        let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
-        for ((x, y), v) in pixels.zip(values) {
+    for (tile, entries) in tiles.iter().enumerate() {
+        for ((x, y), e) in crate::render::tile_coords(camera, tile as u32).zip(entries) {
+            let v = values(e);
             out.mean.pixel_mut(x, y).copy_from_slice(&v[0..3]);
             out.variance.pixel_mut(x, y).copy_from_slice(&v[3..6]);
             out.alpha.pixel_mut(x, y)[0] = v[6];
@@ -685,5 +681,38 @@ pub fn render_frames(
             out.normal.pixel_mut(x, y).copy_from_slice(&v[8..11]);
         }
     }
-    Ok(out)
+    out
+}
+
+/// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
+/// centres and accumulate mean and per-frame variance per pixel in f64 (Welford). Each pixel
+/// loops over its frames, so the result does not depend on the thread count. `progress`
+/// receives finished pixel counts.
+pub fn render_frames(
+    trace: &TraceScene,
+    camera: &crate::camera::Camera,
+    method: &Method,
+    frames: &Frames,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput, RenderError> {
+    use crate::render::{map_tiles, tile_coords};
+    camera.validate()?;
+    method.validate()?;
+    let keys = frame_keys(frames, method.is_stochastic())?;
+    let results = map_tiles(camera, |tile| {
+        let out: Vec<PixelValues> = tile_coords(camera, tile)
+            .map(|(x, y)| {
+                let ray = trace.clip(camera.pixel_ray(x, y));
+                let mut pixel = PixelFrames::default();
+                for &key in &keys {
+                    let s = trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng));
+                    pixel.push(s.color, s.alpha, s.depth, s.normal);
+                }
+                pixel.values()
+            })
+            .collect();
+        progress(out.len() as u64);
+        out
+    });
+    Ok(assemble_frames(camera, &results, |v| v))
 }

@@ -25,10 +25,9 @@ use crate::camera::Camera;
 use crate::hit::{PreparedParticle, Ray, to_canonical};
 use crate::normal::particle_normal;
 use crate::particle::Scene;
-use crate::render::{RenderError, RenderSettings, map_tiles, tile_count, tile_rect, validate_scene};
+use crate::render::{RenderError, RenderSettings, map_tiles, tile_coords, tile_count, validate_scene};
 use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
-use crate::stats::Welford;
-use crate::trace::{Decide, Frames, TraceOutput};
+use crate::trace::{Decide, Frames, PixelFrames, PixelValues, TraceOutput, assemble_frames, frame_keys};
 use glam::{DVec3, Vec2, Vec3};
 pub use project::{Splat, project};
 pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, sample_positions};
@@ -277,9 +276,10 @@ impl<'a> Rasterizer<'a> {
         self.splats[f.splat as usize].color.as_dvec3()
     }
 
-    fn normal(&self, px: &PixelSamples, f: &Fragment) -> Vec3 {
+    /// Unit normal of splat `splat` (index into [`Rasterizer::splats`]) along sample 0's ray.
+    fn normal(&self, px: &PixelSamples, splat: u32) -> Vec3 {
         let s = &self.settings;
-        particle_normal(&self.prepared[f.splat as usize], &px.rays[0], s.normal_mode, s.kernel.cutoff)
+        particle_normal(&self.prepared[splat as usize], &px.rays[0], s.normal_mode, s.kernel.cutoff)
     }
 
     /// The draw order of a stochastic frame: the fragments ordered by a hash of (splat id,
@@ -348,7 +348,7 @@ impl<'a> Rasterizer<'a> {
                         c += w * self.color(f);
                         transmittance *= 1.0 - f64::from(f.alpha);
                         if s == 0 {
-                            normal += w * self.normal(px, f).as_dvec3();
+                            normal += w * self.normal(px, f.splat).as_dvec3();
                             if out.depth.is_none() && transmittance < iso {
                                 (out.depth, out.picked) = (Some(t), Some(id));
                             }
@@ -393,8 +393,7 @@ impl<'a> Rasterizer<'a> {
         let mut alive: Vec<(usize, f32)> = Vec::with_capacity(self.offsets.len());
         for f in fragments {
             let id = self.id(f);
-            alive.clear();
-            alive.extend(bits(f.covered).map(|s| (s, self.depth(px, f, s))).filter(|&(s, t)| buf.passes(s, t, id)));
+            self.surviving(px, f, &buf, &mut alive);
             let m = alive.len();
             let xi = decide.particle(id, ENDERTON_XI_SLOT, Vec3::ZERO);
             let r = ((f.alpha * m as f32 + xi).floor() as usize).min(m);
@@ -409,6 +408,13 @@ impl<'a> Rasterizer<'a> {
         buf
     }
 
+    /// The covered samples of `f` that pass the depth test, with their depths, into `alive`.
+    fn surviving(&self, px: &PixelSamples, f: &Fragment, buf: &SampleBuffer, alive: &mut Vec<(usize, f32)>) {
+        let id = self.id(f);
+        alive.clear();
+        alive.extend(bits(f.covered).map(|s| (s, self.depth(px, f, s))).filter(|&(s, t)| buf.passes(s, t, id)));
+    }
+
     /// Laine & Karras 2011, Figure 7 (DrawFragment), line by line. The surface id of every
     /// pixel starts at a per-frame hash so that frames are independent.
     fn stratified(&self, px: &PixelSamples, fragments: &[Fragment], frame_key: u32, scramble: bool) -> SampleBuffer {
@@ -421,8 +427,7 @@ impl<'a> Rasterizer<'a> {
         for f in fragments {
             let id = self.id(f);
             // Lines 1–3: early per-sample depth test.
-            alive.clear();
-            alive.extend(bits(f.covered).map(|s| (s, self.depth(px, f, s))).filter(|&(s, t)| buf.passes(s, t, id)));
+            self.surviving(px, f, &buf, &mut alive);
             // Lines 4–7: a conflict with the current surface's coverage starts a new surface.
             let mask = alive.iter().fold(0u64, |m, &(s, _)| m | 1 << s);
             if mask & covered != 0 {
@@ -464,7 +469,7 @@ impl<'a> Rasterizer<'a> {
             color: color / n,
             alpha: written as f64 / n,
             depth: first.map(|_| buf.t[0]),
-            normal: first.map_or(Vec3::ZERO, |k| self.normal(px, &Fragment { splat: k, alpha: 1.0, covered: 1 })),
+            normal: first.map_or(Vec3::ZERO, |k| self.normal(px, k)),
             picked: first.map(|k| self.splats[k as usize].id),
         }
     }
@@ -488,7 +493,7 @@ impl SampleBuffer {
     /// The depth test: (t, id) strictly in front of what sample `s` holds.
     #[inline]
     fn passes(&self, s: usize, t: f32, id: u32) -> bool {
-        t < self.t[s] || (t == self.t[s] && id < self.id[s])
+        crate::trace::depth_before(t, id, self.t[s], self.id[s])
     }
 
     /// Order of two samples by what they hold, (depth, id), then by sample index.
@@ -548,66 +553,47 @@ pub fn render_raster(
     frames: &Frames,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<RasterOutput, RenderError> {
-    if frames.count == 0 {
-        return Err(RenderError::Settings("at least one frame is needed".into()));
-    }
     if frames.rng != RngScheme::Hash {
         return Err(RenderError::Settings("the raster methods draw their decisions with the hash generator".into()));
     }
     let camera = &raster.camera;
-    let count = if method.is_stochastic() { frames.count } else { 1 };
-    let keys: Vec<u32> = (0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect();
+    let keys = frame_keys(frames, method.is_stochastic())?;
     let results = map_tiles(camera, |tile| {
-        let (x0, y0, x1, y1) = tile_rect(camera, tile);
-        let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-        for y in y0..y1 {
-            for x in x0..x1 {
-                out.push(render_pixel(raster, method, x, y, &keys));
-            }
-        }
+        let out: Vec<_> = tile_coords(camera, tile).map(|(x, y)| render_pixel(raster, method, x, y, &keys)).collect();
         progress(out.len() as u64);
         out
     });
-    let (w, h) = (camera.width, camera.height);
-    let image = |c| crate::image::Image::filled(w, h, c, 0.0);
-    let mut out =
-        TraceOutput { mean: image(3), variance: image(3), alpha: image(1), depth: image(1), normal: image(3) };
-    let mut picked = vec![None; (w * h) as usize];
+    let out = assemble_frames(camera, &results, |(v, _)| v);
+    let mut picked = vec![None; (camera.width * camera.height) as usize];
     for (tile, values) in results.iter().enumerate() {
-        let (x0, y0, x1, y1) = tile_rect(camera, tile as u32);
-        let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
-        for ((x, y), (v, pick)) in pixels.zip(values) {
-            out.mean.pixel_mut(x, y).copy_from_slice(&v[0..3]);
-            out.variance.pixel_mut(x, y).copy_from_slice(&v[3..6]);
-            out.alpha.pixel_mut(x, y)[0] = v[6];
-            out.depth.pixel_mut(x, y)[0] = v[7];
-            out.normal.pixel_mut(x, y).copy_from_slice(&v[8..11]);
-            picked[(y * w + x) as usize] = *pick;
+        for ((x, y), (_, pick)) in tile_coords(camera, tile as u32).zip(values) {
+            picked[(y * camera.width + x) as usize] = *pick;
         }
     }
     Ok(RasterOutput { frames: out, picked })
 }
 
 /// Every frame of one pixel: mean and variance of colour and coverage, and frame 0's picks.
-fn render_pixel(raster: &Rasterizer, method: &RasterMethod, x: u32, y: u32, keys: &[u32]) -> ([f32; 11], Option<u32>) {
+fn render_pixel(
+    raster: &Rasterizer,
+    method: &RasterMethod,
+    x: u32,
+    y: u32,
+    keys: &[u32],
+) -> (PixelValues, Option<u32>) {
     let px = raster.pixel(x, y);
     let mut fragments = raster.fragments(&px);
-    let mut acc = [Welford::default(); 4];
-    let mut first = None;
-    for &key in keys {
+    let mut pixel = PixelFrames::default();
+    let mut picked = None;
+    for (f, &key) in keys.iter().enumerate() {
         if method.is_stochastic() {
             raster.shuffle(&mut fragments, key);
         }
         let s = raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash), key);
-        for (a, v) in acc.iter_mut().zip([s.color.x, s.color.y, s.color.z, s.alpha]) {
-            a.push(v);
+        pixel.push(s.color, s.alpha, s.depth, s.normal);
+        if f == 0 {
+            picked = s.picked;
         }
-        first.get_or_insert(s);
     }
-    let f = first.expect("at least one frame");
-    let mean = acc.map(|a| a.mean as f32);
-    let var = acc.map(|a| a.variance() as f32);
-    let n = f.normal;
-    let depth = f.depth.unwrap_or(f32::NAN);
-    ([mean[0], mean[1], mean[2], var[0], var[1], var[2], mean[3], depth, n.x, n.y, n.z], f.picked)
+    (pixel.values(), picked)
 }
