@@ -158,54 +158,46 @@ pub fn compare_golden(golden: &Path, actual: &image::RgbImage, tolerance: u8) ->
     ))
 }
 
-/// The statistical method of ARCHITECTURE.md applied to the ray-tracing estimators.
-pub mod stat {
-    use splat_core::Camera;
+/// The statistical method of ARCHITECTURE.md, for any estimator given as a renderer of frames
+/// and its oracle's image; [`stat`] and [`raster_stat`] bind it to each family.
+pub mod method {
     use splat_core::stats::{ZTest, log_log_slope, rmse};
-    use splat_core::trace::{Frames, Method, TraceOutput, TraceScene, render_frames};
+    use splat_core::trace::{Frames, TraceOutput};
 
-    /// Render `frames` frames of `method` with `seed` (hash RNG unless `frames` says otherwise).
-    pub fn run(trace: &TraceScene, camera: &Camera, method: &Method, frames: Frames) -> TraceOutput {
-        render_frames(trace, camera, method, &frames, &|_| {}).expect("render")
-    }
-
-    /// The exact image (RGB), its coverage mask (alpha > 1e-4 per pixel-channel).
-    pub fn exact(trace: &TraceScene, camera: &Camera) -> (Vec<f32>, Vec<bool>) {
-        let out = run(trace, camera, &Method::Exact, Frames::default());
-        let mask = out.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
-        (out.mean.data().to_vec(), mask)
+    /// The oracle's RGB and its coverage mask (alpha > 1e-4 per pixel-channel).
+    pub fn reference(oracle: &TraceOutput) -> (Vec<f32>, Vec<bool>) {
+        let mask = oracle.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
+        (oracle.mean.data().to_vec(), mask)
     }
 
     fn masked(v: &[f32], mask: &[bool]) -> Vec<f32> {
         v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
     }
 
-    /// The z-test of `method` against exact over the covered pixel-channels: mean from
-    /// `frames` frames with seed `base.seed`, per-frame variance from an independent run of
-    /// 4 × `frames` frames with seed `base.seed + 1`.
-    pub fn z_test(trace: &TraceScene, camera: &Camera, method: &Method, base: Frames) -> ZTest {
-        let (exact, mask) = exact(trace, camera);
-        let mean = run(trace, camera, method, base);
-        let var = run(trace, camera, method, Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
+    /// The z-test of `render` against `oracle` over the covered pixel-channels: mean from
+    /// `base.count` frames with seed `base.seed`, per-frame variance from an independent run of
+    /// 4 × as many frames with seed `base.seed + 1`.
+    pub fn z_test(oracle: &TraceOutput, render: impl Fn(Frames) -> TraceOutput, base: Frames) -> ZTest {
+        let (reference, mask) = reference(oracle);
+        let mean = render(base);
+        let var = render(Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
         ZTest::new(
             &masked(mean.mean.data(), &mask),
-            &masked(&exact, &mask),
+            &masked(&reference, &mask),
             &masked(var.variance.data(), &mask),
             base.count,
             3,
         )
     }
 
-    /// RMSE against exact at spp = 1, 2, 4, … `max_spp`, averaged over `seeds` seeds, and the
-    /// least-squares log–log slope.
+    /// RMSE against `oracle` at spp = 1, 2, 4, … `max_spp`, averaged over `seeds` seeds, and
+    /// the least-squares log–log slope.
     pub fn convergence(
-        trace: &TraceScene,
-        camera: &Camera,
-        method: &Method,
+        oracle: &TraceOutput,
+        render: impl Fn(Frames) -> TraceOutput,
         max_spp: u32,
         seeds: u32,
     ) -> (f64, Vec<(u32, f64)>) {
-        let (exact, _) = exact(trace, camera);
         let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
         let table: Vec<(u32, f64)> = levels
             .iter()
@@ -213,7 +205,7 @@ pub mod stat {
                 let sum: f64 = (0..seeds)
                     .map(|s| {
                         let frames = Frames { count: spp, seed: 1000 * spp + s, ..Frames::default() };
-                        rmse(run(trace, camera, method, frames).mean.data(), &exact)
+                        rmse(render(frames).mean.data(), oracle.mean.data())
                     })
                     .sum();
                 (spp, sum / f64::from(seeds))
@@ -224,11 +216,43 @@ pub mod stat {
     }
 }
 
-/// The same statistical method applied to the raster estimators, against sorted splatting
-/// (the raster oracle) with the same samples.
+/// The statistical method applied to the ray-tracing estimators, against `exact`.
+pub mod stat {
+    use splat_core::Camera;
+    use splat_core::stats::ZTest;
+    use splat_core::trace::{Frames, Method, TraceOutput, TraceScene, render_frames};
+
+    /// Render `frames` frames of `method` with `seed` (hash RNG unless `frames` says otherwise).
+    pub fn run(trace: &TraceScene, camera: &Camera, method: &Method, frames: Frames) -> TraceOutput {
+        render_frames(trace, camera, method, &frames, &|_| {}).expect("render")
+    }
+
+    fn exact(trace: &TraceScene, camera: &Camera) -> TraceOutput {
+        run(trace, camera, &Method::Exact, Frames::default())
+    }
+
+    /// [`super::method::z_test`] of `method` against exact.
+    pub fn z_test(trace: &TraceScene, camera: &Camera, method: &Method, base: Frames) -> ZTest {
+        super::method::z_test(&exact(trace, camera), |f| run(trace, camera, method, f), base)
+    }
+
+    /// [`super::method::convergence`] of `method` against exact.
+    pub fn convergence(
+        trace: &TraceScene,
+        camera: &Camera,
+        method: &Method,
+        max_spp: u32,
+        seeds: u32,
+    ) -> (f64, Vec<(u32, f64)>) {
+        super::method::convergence(&exact(trace, camera), |f| run(trace, camera, method, f), max_spp, seeds)
+    }
+}
+
+/// The statistical method applied to the raster estimators, against sorted splatting (the
+/// raster oracle) with the same samples.
 pub mod raster_stat {
     use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
-    use splat_core::stats::{ZTest, log_log_slope, rmse};
+    use splat_core::stats::ZTest;
     use splat_core::trace::{Frames, TraceOutput};
 
     /// Render `frames` frames of `method`.
@@ -236,51 +260,18 @@ pub mod raster_stat {
         render_raster(r, method, &frames, &|_| {}).expect("render").frames
     }
 
-    /// Sorted splatting (front to back) and its coverage mask per pixel-channel.
-    pub fn sorted(r: &Rasterizer) -> (Vec<f32>, Vec<bool>) {
-        let out = run(r, &RasterMethod::Sorted { blend: Blend::Under }, Frames::default());
-        let mask = out.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
-        (out.mean.data().to_vec(), mask)
+    fn sorted(r: &Rasterizer) -> TraceOutput {
+        run(r, &RasterMethod::Sorted { blend: Blend::Under }, Frames::default())
     }
 
-    fn masked(v: &[f32], mask: &[bool]) -> Vec<f32> {
-        v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
-    }
-
-    /// z-test of `method` against sorted splatting: mean of `base.count` frames, variance from
-    /// an independent run of 4× as many.
+    /// [`super::method::z_test`] of `method` against sorted splatting.
     pub fn z_test(r: &Rasterizer, method: &RasterMethod, base: Frames) -> ZTest {
-        let (sorted, mask) = sorted(r);
-        let mean = run(r, method, base);
-        let var = run(r, method, Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
-        ZTest::new(
-            &masked(mean.mean.data(), &mask),
-            &masked(&sorted, &mask),
-            &masked(var.variance.data(), &mask),
-            base.count,
-            3,
-        )
+        super::method::z_test(&sorted(r), |f| run(r, method, f), base)
     }
 
-    /// RMSE against sorted splatting at spp = 1, 2, 4, … `max_spp` averaged over `seeds`
-    /// seeds, and the log–log slope.
+    /// [`super::method::convergence`] of `method` against sorted splatting.
     pub fn convergence(r: &Rasterizer, method: &RasterMethod, max_spp: u32, seeds: u32) -> (f64, Vec<(u32, f64)>) {
-        let (sorted, _) = sorted(r);
-        let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
-        let table: Vec<(u32, f64)> = levels
-            .iter()
-            .map(|&spp| {
-                let sum: f64 = (0..seeds)
-                    .map(|s| {
-                        let frames = Frames { count: spp, seed: 1000 * spp + s, ..Frames::default() };
-                        rmse(run(r, method, frames).mean.data(), &sorted)
-                    })
-                    .sum();
-                (spp, sum / f64::from(seeds))
-            })
-            .collect();
-        let (x, y): (Vec<f64>, Vec<f64>) = table.iter().map(|&(s, r)| (f64::from(s), r)).unzip();
-        (log_log_slope(&x, &y), table)
+        super::method::convergence(&sorted(r), |f| run(r, method, f), max_spp, seeds)
     }
 }
 

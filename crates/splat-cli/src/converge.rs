@@ -55,9 +55,10 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     let settings = args.scene.settings();
     let trace = TraceScene::new(&scene, settings)?;
     let exact = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {})?;
-    let raster = Rasterizer::new(&scene, &camera, settings, args.options.raster_settings())?;
+    // The raster oracle, projected and rendered only when a raster method is measured.
     let any_raster = args.methods.iter().any(|&m| matches!(args.options.resolve(m), Resolved::Raster(_)));
-    let sorted = if any_raster {
+    let raster = if any_raster {
+        let raster = Rasterizer::new(&scene, &camera, settings, args.options.raster_settings())?;
         let under = RasterMethod::Sorted { blend: Blend::Under };
         let sorted = render_raster(&raster, &under, &Frames::default(), &|_| {})?.frames;
         eprintln!(
@@ -65,7 +66,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
              against ray-traced Eq. 3)",
             rmse(sorted.mean.data(), exact.mean.data())
         );
-        Some(sorted)
+        Some((raster, sorted))
     } else {
         None
     };
@@ -84,8 +85,8 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
                 Resolved::Oracle => bail!("the oracle is the reference, not a method to converge"),
                 Resolved::Trace(t) => (render_frames(&trace, &camera, &t, &frames, &progress)?, &exact),
                 Resolved::Raster(r) => {
-                    let reference = sorted.as_ref().context("raster reference")?;
-                    (render_raster(&raster, &r, &frames, &progress)?.frames, reference)
+                    let (raster, sorted) = raster.as_ref().context("raster reference")?;
+                    (render_raster(raster, &r, &frames, &progress)?.frames, sorted)
                 }
             };
             let seconds = start.elapsed().as_secs_f64();
