@@ -96,34 +96,6 @@ const LOOP_BUDGET: u32 = 65535u;
 
 // ---- rng.rs ---------------------------------------------------------------------------------
 
-fn xxhash32(p: vec3<u32>) -> u32 {
-    let P2 = 2246822519u;
-    let P3 = 3266489917u;
-    let P4 = 668265263u;
-    let P5 = 374761393u;
-    var h = p.z + P5 + p.x * P3;
-    h = P4 * ((h << 17u) | (h >> 15u));
-    h = h + p.y * P3;
-    h = P4 * ((h << 17u) | (h >> 15u));
-    h = P2 * (h ^ (h >> 15u));
-    h = P3 * (h ^ (h >> 13u));
-    return h ^ (h >> 16u);
-}
-
-fn pcg(v: u32) -> u32 {
-    let s = v * 747796405u + 2891336453u;
-    let w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
-    return (w >> 22u) ^ w;
-}
-
-fn unit_f32(bits: u32) -> f32 {
-    return f32(bits >> 8u) * (1.0 / 16777216.0);
-}
-
-fn frame_key(seed: u32, frame: u32) -> u32 {
-    return xxhash32(vec3<u32>(frame, seed, 0x5EEDF4A3u));
-}
-
 fn fract_(x: f32) -> f32 {
     return x - floor(x);
 }
@@ -152,16 +124,7 @@ fn pass_u(pixel_seed: u32, pass_index: u32) -> f32 {
 // ---- kernel.rs, hit.rs ----------------------------------------------------------------------
 
 fn response(d2: f32) -> f32 {
-    let u = d2 * (1.0 / 9.0);
-    var un = u;
-    if (params.kernel_degree == 4u) {
-        un = u * u;
-    } else if (params.kernel_degree == 8u) {
-        un = (u * u) * (u * u);
-    } else if (params.kernel_degree != 2u) {
-        un = pow(u, f32(params.kernel_degree) * 0.5);
-    }
-    return exp(-4.5 * un);
+    return kernel_response(d2, params.kernel_degree);
 }
 
 struct Ray {
@@ -214,35 +177,7 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
 // ---- sh.rs ------------------------------------------------------------------------------------
 
 fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
-    let deg = params.sh_degree;
-    let base = id * (deg + 1u) * (deg + 1u);
-    var c = 0.2820948 * sh[base].xyz;
-    if (deg >= 1u) {
-        let x = dir.x;
-        let y = dir.y;
-        let z = dir.z;
-        c += -0.48860252 * y * sh[base + 1u].xyz + 0.48860252 * z * sh[base + 2u].xyz - 0.48860252 * x * sh[base + 3u].xyz;
-        if (deg >= 2u) {
-            let xx = x * x;
-            let yy = y * y;
-            let zz = z * z;
-            c += 1.0925484 * x * y * sh[base + 4u].xyz
-                + -1.0925484 * y * z * sh[base + 5u].xyz
-                + 0.31539157 * (2.0 * zz - xx - yy) * sh[base + 6u].xyz
-                + -1.0925484 * x * z * sh[base + 7u].xyz
-                + 0.5462742 * (xx - yy) * sh[base + 8u].xyz;
-            if (deg >= 3u) {
-                c += -0.5900436 * y * (3.0 * xx - yy) * sh[base + 9u].xyz
-                    + 2.8906114 * x * y * z * sh[base + 10u].xyz
-                    + -0.4570458 * y * (4.0 * zz - xx - yy) * sh[base + 11u].xyz
-                    + 0.37317634 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * sh[base + 12u].xyz
-                    + -0.4570458 * x * (4.0 * zz - xx - yy) * sh[base + 13u].xyz
-                    + 1.4453057 * z * (xx - yy) * sh[base + 14u].xyz
-                    + -0.5900436 * x * (xx - 3.0 * yy) * sh[base + 15u].xyz;
-            }
-        }
-    }
-    return max(c + vec3<f32>(0.5), vec3<f32>(0.0));
+    return sh_eval(id, params.sh_degree, dir);
 }
 
 // ---- bvh.rs -----------------------------------------------------------------------------------

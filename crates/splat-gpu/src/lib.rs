@@ -17,11 +17,15 @@
 
 mod accumulate;
 mod layout;
+pub mod raster;
+pub mod sort;
 
 pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use layout::{GpuParticle, Params, PassState};
+pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
+pub use sort::RadixSort;
 
 use splat_core::Camera;
 use splat_core::image::Image;
@@ -31,7 +35,11 @@ use thiserror::Error;
 use wgpu::util::DeviceExt;
 
 /// WGSL of the ray-tracing kernel.
-pub const TRACE_WGSL: &str = include_str!("../../../shaders/trace.wgsl");
+pub const TRACE_WGSL: &str = concat!(
+    include_str!("../../../shaders/common.wgsl"),
+    include_str!("../../../shaders/sh.wgsl"),
+    include_str!("../../../shaders/trace.wgsl")
+);
 /// Dispatches encoded into one submission.
 pub const DISPATCHES_PER_SUBMIT: u32 = 64;
 /// Frames rendered per dispatch on a real GPU; longer runs are split so that no dispatch runs
@@ -154,7 +162,10 @@ impl GpuContext {
         let info = adapter.get_info();
         let limits = adapter.limits();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let required_features = if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() };
+        // Timestamps for the benchmarks and blendable RGBA32F targets for sorted splatting, where
+        // the adapter has them.
+        let required_features =
+            adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::FLOAT32_BLENDABLE);
         // The kernels bind five storage buffers per stage (downlevel defaults allow four):
         // ask for what the adapter offers.
         let required_limits = limits.clone();
@@ -265,6 +276,61 @@ impl GpuContext {
         };
         buffer.unmap();
         Ok(data)
+    }
+
+    /// Copy `words` u32 of `source` from word `first` into a staging buffer and read them.
+    pub(crate) fn read_u32_at(&self, source: &wgpu::Buffer, first: usize, words: usize) -> Result<Vec<u32>, GpuError> {
+        let bytes = (4 * words.max(1)) as u64;
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        encoder.copy_buffer_to_buffer(source, 4 * first as u64, &staging, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        let mut data: Vec<u32> = self.read_buffer(&staging)?.iter().map(|f| f.to_bits()).collect();
+        data.truncate(words);
+        Ok(data)
+    }
+
+    /// The first `words` u32 of `source`.
+    pub(crate) fn read_u32(&self, source: &wgpu::Buffer, words: usize) -> Result<Vec<u32>, GpuError> {
+        self.read_u32_at(source, 0, words)
+    }
+
+    /// The first `words` f32 of `source`.
+    pub(crate) fn read_f32(&self, source: &wgpu::Buffer, words: usize) -> Result<Vec<f32>, GpuError> {
+        Ok(self.read_u32(source, words)?.into_iter().map(f32::from_bits).collect())
+    }
+}
+
+/// Images from per-pixel Welford state (mean RGBA, M2 RGB) of `count` frames.
+pub(crate) fn output(
+    camera: &Camera,
+    mean: &[f32],
+    m2: &[f32],
+    count: u32,
+    gpu_time: Duration,
+    timestamps: bool,
+) -> GpuOutput {
+    let pixels = camera.width as usize * camera.height as usize;
+    let n = f64::from(count);
+    let image = |channels: usize, value: &dyn Fn(usize) -> f32| {
+        let data = (0..pixels).flat_map(|p| (0..channels).map(move |c| value(4 * p + c))).collect();
+        Image::from_data(camera.width, camera.height, channels as u32, data).expect("size")
+    };
+    GpuOutput {
+        mean: image(3, &|i| mean[i]),
+        variance: image(3, &|i| if count > 1 { (f64::from(m2[i]) / (n - 1.0)) as f32 } else { 0.0 }),
+        alpha: image(1, &|i| mean[i - i % 4 + 3]),
+        loop_iterations: 0,
+        frames_per_dispatch: 1,
+        pass_per_dispatch: false,
+        gpu_time,
+        timestamps,
     }
 }
 
@@ -531,20 +597,11 @@ impl Run<'_> {
         let mean = self.read(&out_mean, &read_mean, out_bytes)?;
         let m2 = self.read(&out_var, &read_var, out_bytes)?;
         let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
-        let n = f64::from(self.count);
-        let image = |channels: usize, value: &dyn Fn(usize) -> f32| {
-            let data = (0..pixels).flat_map(|p| (0..channels).map(move |c| value(4 * p + c))).collect();
-            Image::from_data(camera.width, camera.height, channels as u32, data).expect("size")
-        };
         let output = GpuOutput {
-            mean: image(3, &|i| mean[i]),
-            variance: image(3, &|i| if self.count > 1 { (f64::from(m2[i]) / (n - 1.0)) as f32 } else { 0.0 }),
-            alpha: image(1, &|i| mean[i - i % 4 + 3]),
             loop_iterations: busiest.0,
             frames_per_dispatch: per_dispatch,
             pass_per_dispatch: by_pass,
-            gpu_time,
-            timestamps: timer.is_some(),
+            ..output(camera, &mean, &m2, self.count, gpu_time, timer.is_some())
         };
         Ok(Finished { output, loop_iterations: busiest })
     }

@@ -1,0 +1,235 @@
+//! GPU splatting against the CPU raster reference (on lavapipe in CI): the radix sort against a
+//! CPU sort, projection and depth order, sorted over/under images, the tile rasterizer's
+//! iso-opacity depth and picked splat, and one StochasticSplats frame decision by decision.
+
+mod common;
+
+use common::{context, fixture};
+use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+use splat_core::render::RenderSettings;
+use splat_core::rng::SplitMix64;
+use splat_core::trace::Frames;
+use splat_core::{Camera, Scene};
+use splat_gpu::sort::{cpu_radix_sort, depth_key, sort_pairs};
+use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
+use std::sync::OnceLock;
+
+fn pipelines(ctx: &GpuContext) -> &'static RasterPipelines {
+    static PIPES: OnceLock<RasterPipelines> = OnceLock::new();
+    PIPES.get_or_init(|| RasterPipelines::new(ctx).expect("the raster kernels compile"))
+}
+
+fn cpu_sorted(keys: &[u32], bits: u32) -> (Vec<u32>, Vec<u32>) {
+    let (mut k, mut v) = (keys.to_vec(), (0..keys.len() as u32).collect());
+    cpu_radix_sort(&mut k, &mut v, bits);
+    (k, v)
+}
+
+/// The GPU sort equals the CPU sort (keys and the stable order of values) on random keys of
+/// sizes around block boundaries and on adversarial ones: all equal, reversed, few distinct,
+/// depth keys with NaN and negative depths filtered out before sorting.
+#[test]
+fn gpu_sort_equals_the_cpu_sort() {
+    let Some(ctx) = context() else { return };
+    let sort = pipelines(ctx).sort();
+    let mut rng = SplitMix64::new(7);
+    let mut cases: Vec<(String, Vec<u32>, u32)> = Vec::new();
+    for n in [1usize, 255, 256, 257, 1000, 65_537] {
+        cases.push((format!("random {n}"), (0..n).map(|_| rng.next_u64() as u32).collect(), 32));
+    }
+    cases.push(("all equal".into(), vec![0xDEAD_BEEF; 3000], 32));
+    cases.push(("reversed".into(), (0..5000u32).rev().collect(), 32));
+    cases.push(("few distinct".into(), (0..7000).map(|_| (rng.next_u64() % 5) as u32).collect(), 32));
+    cases.push(("12-bit tile keys".into(), (0..9000).map(|_| (rng.next_u64() % 3750) as u32).collect(), 12));
+    let depths: Vec<f32> = (0..4000)
+        .map(|i| match i % 50 {
+            0 => f32::NAN,
+            1 => -rng.range(0.0, 5.0),
+            2 => f32::INFINITY,
+            3 => 1.5, // ties
+            _ => rng.range(0.2, 100.0),
+        })
+        .collect();
+    cases.push(("depths, NaN filtered".into(), depths.iter().filter_map(|&z| depth_key(z)).collect(), 32));
+    for (name, keys, bits) in cases {
+        let vals: Vec<u32> = (0..keys.len() as u32).collect();
+        let gpu = sort_pairs(ctx, sort, &keys, &vals, bits).unwrap();
+        assert_eq!(gpu, cpu_sorted(&keys, bits), "{name}");
+        let mut std_sorted: Vec<(u32, u32)> = keys.iter().copied().zip(vals).collect();
+        std_sorted.sort_by_key(|&(k, _)| k); // std's stable sort: the specification
+        if bits == 32 {
+            assert_eq!(gpu.1, std_sorted.iter().map(|p| p.1).collect::<Vec<_>>(), "{name}: not stable");
+        }
+    }
+}
+
+/// A comparison that must fail: a sort that is wrong in one place is caught.
+#[test]
+fn sort_comparison_detects_a_single_misplaced_key() {
+    let keys: Vec<u32> = (0..1000u32).rev().collect();
+    let (k, v) = cpu_sorted(&keys, 32);
+    let (mut k2, v2) = (k.clone(), v.clone());
+    k2.swap(10, 11);
+    assert_ne!((k2, v2), (k, v));
+}
+
+struct Case {
+    scene: Scene,
+    camera: Camera,
+}
+
+fn case(name: &str, w: u32, h: u32) -> Case {
+    let (scene, camera) = fixture(name, w, h);
+    Case { scene, camera }
+}
+
+fn cpu_raster(c: &Case) -> Rasterizer<'_> {
+    Rasterizer::new(&c.scene, &c.camera, RenderSettings::default(), RasterSettings::default()).unwrap()
+}
+
+/// The GPU projection equals the CPU's splat by splat, and its depth order is the CPU's.
+#[test]
+fn projection_and_depth_order_equal_the_cpu() {
+    let Some(ctx) = context() else { return };
+    for name in ["layers", "ramp", "cloud"] {
+        let c = case(name, 64, 48);
+        let cpu = cpu_raster(&c);
+        let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap();
+        let splats = gpu.splats().unwrap();
+        let order = gpu.order().unwrap();
+        let cpu_order: Vec<u32> = cpu.splats().iter().map(|s| s.id).collect();
+        assert_eq!(order, cpu_order, "{name}: depth order");
+        for s in cpu.splats() {
+            let g = &splats[s.id as usize];
+            assert_eq!(g.rect, s.rect, "{name} splat {}", s.id);
+            let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * (1.0 + b.abs());
+            assert!(close(g.mean[0], s.mean.x) && close(g.mean[1], s.mean.y), "{name} {}: mean", s.id);
+            assert!(close(g.depth, s.depth), "{name} {}: depth", s.id);
+            for (a, b) in g.conic.iter().zip(s.conic.to_array()) {
+                assert!(
+                    (a - b).abs() <= 1e-3 * (1e-3 + b.abs()),
+                    "{name} {}: conic {:?} vs {}",
+                    s.id,
+                    g.conic,
+                    s.conic
+                );
+            }
+            for (a, b) in g.color.iter().zip(s.color.to_array()) {
+                assert!((a - b).abs() <= 1e-5, "{name} {}: colour", s.id);
+            }
+        }
+        let culled = splats.iter().filter(|s| s.rect[0] >= s.rect[2]).count();
+        assert_eq!(culled, c.scene.particles.len() - cpu.splats().len(), "{name}: culled count");
+    }
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+/// Sorted GPU splatting (instanced quads, hardware blending) equals the CPU `raster-sorted`
+/// image: within 1e-4 with RGBA32F blending (f32 against the CPU's f64; lavapipe: ~4e-7) and 8e-3 with RGBA16F
+/// (half floats: ~1/2 of an 8-bit unit); over = under on the GPU to the same tolerance.
+#[test]
+fn sorted_splatting_equals_the_cpu_over_and_under() {
+    let Some(ctx) = context() else { return };
+    let pipes = pipelines(ctx);
+    let tolerance = if pipes.blend_format == splat_gpu::wgpu::TextureFormat::Rgba32Float { 1e-4 } else { 8e-3 };
+    for name in ["layers", "ramp", "cloud"] {
+        let c = case(name, 64, 48);
+        let cpu =
+            render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
+                .unwrap()
+                .frames;
+        let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipes, &scene, &c.camera).unwrap();
+        let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap();
+        let under = gpu.render(&RasterMethod::Sorted { blend: Blend::Under }, &Frames::default()).unwrap();
+        let d_over = max_abs_diff(over.mean.data(), cpu.mean.data());
+        let d_under = max_abs_diff(under.mean.data(), cpu.mean.data());
+        let d_alpha =
+            max_abs_diff(under.alpha.data(), cpu.alpha.data()).max(max_abs_diff(over.alpha.data(), cpu.alpha.data()));
+        let d_both = max_abs_diff(over.mean.data(), under.mean.data());
+        eprintln!(
+            "{name}: |over − cpu| {d_over:.2e}, |under − cpu| {d_under:.2e}, alpha {d_alpha:.2e}, |over − under| {d_both:.2e}"
+        );
+        assert!(d_over <= tolerance && d_under <= tolerance && d_alpha <= tolerance && d_both <= tolerance, "{name}");
+        assert!(cpu.alpha.data().iter().any(|&a| a > 0.5), "{name}: the test image is not empty");
+    }
+}
+
+/// The tile rasterizer's iso-opacity depth and picked splat equal the CPU's sorted-under ones:
+/// picks identical except where the transmittance lies within f32 rounding of the threshold
+/// (bounded to 0.5 % of pixels), depths within 1e-5 relative where the picks agree.
+#[test]
+fn depth_pick_equals_the_cpu() {
+    let Some(ctx) = context() else { return };
+    for name in ["layers", "ramp", "cloud"] {
+        let c = case(name, 70, 50); // not a multiple of the tile size
+        let cpu =
+            render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
+                .unwrap();
+        let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap().depth_pick().unwrap();
+        let pixels = cpu.picked.len();
+        let differing = gpu.picked.iter().zip(&cpu.picked).filter(|(a, b)| a != b).count();
+        let picked = cpu.picked.iter().filter(|p| p.is_some()).count();
+        eprintln!("{name}: {differing} of {pixels} picks differ ({picked} picked, {} pairs)", gpu.pairs);
+        assert!(picked > pixels / 10, "{name}: too few picks to test");
+        assert!(differing * 200 <= pixels, "{name}");
+        for (i, (g, c)) in gpu.picked.iter().zip(&cpu.picked).enumerate() {
+            if g.is_some() && g == c {
+                let (dg, dc) = (gpu.depth[i].unwrap(), cpu.frames.depth.data()[i]);
+                assert!((dg - dc).abs() <= 1e-5 * dc, "{name} pixel {i}: depth {dg} vs {dc}");
+            }
+        }
+        assert!(max_abs_diff(gpu.color.data(), cpu.frames.mean.data()) <= 2e-4, "{name}: colour");
+    }
+}
+
+/// One StochasticSplats frame with a fixed seed makes the CPU frame's decisions: identical
+/// pixels except where an alpha lies within f32 rounding of its random number (≤ 0.5 %).
+#[test]
+fn one_stochastic_frame_equals_the_cpu_frame() {
+    let Some(ctx) = context() else { return };
+    for name in ["layers", "ramp", "cloud"] {
+        let c = case(name, 64, 48);
+        let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap();
+        let cpu_r = cpu_raster(&c);
+        for seed in [3, 4] {
+            let frames = Frames { count: 1, seed, ..Frames::default() };
+            let cpu = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap().frames;
+            let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap();
+            let pixels = (c.camera.width * c.camera.height) as usize;
+            let differing = (0..pixels)
+                .filter(|&p| {
+                    let rgb = |img: &splat_core::image::Image| img.data()[3 * p..3 * p + 3].to_vec();
+                    max_abs_diff(&rgb(&g.mean), &rgb(&cpu.mean)) > 1e-5 || g.alpha.data()[p] != cpu.alpha.data()[p]
+                })
+                .count();
+            let written = cpu.alpha.data().iter().filter(|&&a| a > 0.0).count();
+            eprintln!("{name} seed {seed}: {differing} of {pixels} pixels differ ({written} written)");
+            assert!(written > pixels / 10, "{name}: too few written pixels to test");
+            assert!(differing * 200 <= pixels, "{name} seed {seed}");
+        }
+        // Another seed makes other decisions: the comparison above can fail.
+        let a = gpu.render(&RasterMethod::StochasticSplat, &Frames { count: 1, seed: 3, ..Frames::default() }).unwrap();
+        let b = gpu.render(&RasterMethod::StochasticSplat, &Frames { count: 1, seed: 5, ..Frames::default() }).unwrap();
+        assert!(max_abs_diff(a.mean.data(), b.mean.data()) > 0.1, "{name}: seeds do not matter");
+    }
+}
+
+/// Methods the GPU does not rasterize are refused with a message, not rendered wrongly.
+#[test]
+fn cpu_only_raster_methods_are_refused() {
+    let Some(ctx) = context() else { return };
+    let c = case("layers", 16, 12);
+    let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap();
+    for m in [RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }] {
+        let e = gpu.render(&m, &Frames::default()).unwrap_err().to_string();
+        assert!(e.contains("CPU only"), "{e}");
+    }
+}

@@ -1,0 +1,44 @@
+// Shared by every kernel (prepended to each shader module by splat-gpu): the counter-based
+// hashes of crates/splat-core/src/rng.rs and the kernel response of kernel.rs.
+
+fn xxhash32(p: vec3<u32>) -> u32 {
+    let P2 = 2246822519u;
+    let P3 = 3266489917u;
+    let P4 = 668265263u;
+    let P5 = 374761393u;
+    var h = p.z + P5 + p.x * P3;
+    h = P4 * ((h << 17u) | (h >> 15u));
+    h = h + p.y * P3;
+    h = P4 * ((h << 17u) | (h >> 15u));
+    h = P2 * (h ^ (h >> 15u));
+    h = P3 * (h ^ (h >> 13u));
+    return h ^ (h >> 16u);
+}
+
+fn pcg(v: u32) -> u32 {
+    let s = v * 747796405u + 2891336453u;
+    let w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
+    return (w >> 22u) ^ w;
+}
+
+fn unit_f32(bits: u32) -> f32 {
+    return f32(bits >> 8u) * (1.0 / 16777216.0);
+}
+
+fn frame_key(seed: u32, frame: u32) -> u32 {
+    return xxhash32(vec3<u32>(frame, seed, 0x5EEDF4A3u));
+}
+
+// kernel.rs: the generalized Gaussian response exp(−4.5 (d²/9)^(n/2)) of degree n.
+fn kernel_response(d2: f32, degree: u32) -> f32 {
+    let u = d2 * (1.0 / 9.0);
+    var un = u;
+    if (degree == 4u) {
+        un = u * u;
+    } else if (degree == 8u) {
+        un = (u * u) * (u * u);
+    } else if (degree != 2u) {
+        un = pow(u, f32(degree) * 0.5);
+    }
+    return exp(-4.5 * un);
+}

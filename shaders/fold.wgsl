@@ -1,0 +1,33 @@
+// Temporal accumulation of raster frames: each frame's colour target is folded into a running
+// Welford mean and M2 per pixel, the accumulation of the ray-tracing kernel (trace.wgsl `fold`).
+
+@group(0) @binding(0) var<uniform> params: RasterParams;
+@group(0) @binding(1) var<uniform> frame: FrameParams;
+@group(0) @binding(2) var target_color: texture_2d<f32>;
+@group(0) @binding(3) var<storage, read_write> out_mean: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> out_var: array<vec4<f32>>;
+
+@compute @workgroup_size(8, 8, 1)
+fn fold(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) {
+        return;
+    }
+    let index = gid.y * params.size.x + gid.x;
+    var s = textureLoad(target_color, vec2<i32>(gid.xy), 0);
+    if (params.mode == 1u) {
+        // Front to back left premultiplied colour and coverage: the background shows through
+        // the remaining transmittance.
+        s = vec4<f32>(s.xyz + (1.0 - s.w) * params.background.xyz, s.w);
+    }
+    var mean = vec4<f32>(0.0);
+    var m2 = vec4<f32>(0.0);
+    if (frame.index > 0u) {
+        mean = out_mean[index];
+        m2 = out_var[index];
+    }
+    let delta = s - mean;
+    mean += delta / f32(frame.index + 1u);
+    m2 += delta * (s - mean);
+    out_mean[index] = mean;
+    out_var[index] = m2;
+}

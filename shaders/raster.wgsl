@@ -1,0 +1,240 @@
+// Compute stages of the splatting path, each the twin of a function of
+// crates/splat-core/src/raster: EWA projection and culling (project.rs), and the tile
+// rasterizer that composites every pixel's sorted fragments front to back to pick the
+// iso-opacity depth and splat (mod.rs, Rasterizer::sorted with Blend::Under).
+
+// One particle in scene order (48 bytes), mirrored by splat_gpu::RasterParticle.
+struct RasterParticle {
+    mean: vec3<f32>,
+    opacity: f32,
+    // Covariance Σ = R S² Rᵀ: (xx, xy, xz) and (yy, yz, zz).
+    cov_a: vec3<f32>,
+    pad0: f32,
+    cov_b: vec3<f32>,
+    pad1: f32,
+}
+
+@group(0) @binding(0) var<uniform> params: RasterParams;
+@group(0) @binding(1) var<storage, read> particles: array<RasterParticle>;
+@group(0) @binding(2) var<storage, read> sh: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read_write> splats: array<Splat>;
+// Depth sort: keys (depth bits, NONE when culled) and values (particle ids); after the sort,
+// `order[r]` is the particle of rank r.
+@group(0) @binding(4) var<storage, read_write> depth_keys: array<u32>;
+@group(0) @binding(5) var<storage, read_write> order: array<u32>;
+// Indirect draw arguments (vertex count, instance count = visible splats, 0, 0).
+@group(0) @binding(6) var<storage, read_write> draw_args: array<atomic<u32>, 4>;
+
+const NEAR: f32 = 0.2;
+const DILATION: f32 = 0.3;
+const TILE: u32 = 16u;
+
+fn flat_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.y * groups.x * 256u + gid.x;
+}
+
+fn cull(i: u32) {
+    splats[i].rect = vec4<u32>(0u);
+    depth_keys[i] = NONE;
+    order[i] = i;
+}
+
+// project.rs `project`: Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, the √8σ rect, the SH colour from the camera
+// centre, and the sort key; culled particles get the key NONE and sort behind all others.
+@compute @workgroup_size(256, 1, 1)
+fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = flat_index(gid, groups);
+    if (i >= params.count) {
+        return;
+    }
+    cull(i);
+    let p = particles[i];
+    if (p.opacity < params.alpha_cull) {
+        return;
+    }
+    let r0 = params.cam_row0.xyz;
+    let r1 = params.cam_row1.xyz;
+    let r2 = params.cam_row2.xyz;
+    let t = vec3<f32>(dot(r0, p.mean), dot(r1, p.mean), dot(r2, p.mean)) + params.cam_translation.xyz;
+    if (!(t.z > NEAR)) {
+        return;
+    }
+    let fx = params.intrinsics.x;
+    let fy = params.intrinsics.y;
+    let tx = clamp(t.x / t.z, -params.guard.x, params.guard.x) * t.z;
+    let ty = clamp(t.y / t.z, -params.guard.y, params.guard.y) * t.z;
+    // Rows of J W (2 × 3).
+    let jw0 = (fx / t.z) * r0 - (fx * tx / (t.z * t.z)) * r2;
+    let jw1 = (fy / t.z) * r1 - (fy * ty / (t.z * t.z)) * r2;
+    let sigma = mat3x3<f32>(
+        vec3<f32>(p.cov_a.x, p.cov_a.y, p.cov_a.z),
+        vec3<f32>(p.cov_a.y, p.cov_b.x, p.cov_b.y),
+        vec3<f32>(p.cov_a.z, p.cov_b.y, p.cov_b.z),
+    );
+    let s0 = sigma * jw0;
+    let s1 = sigma * jw1;
+    let a = dot(jw0, s0) + DILATION;
+    let b = dot(jw0, s1);
+    let c = dot(jw1, s1) + DILATION;
+    let det = a * c - b * b;
+    if (!(det > 0.0) || det > 3.0e38) {
+        return;
+    }
+    let mean = vec2<f32>(fx * t.x / t.z + params.intrinsics.z, fy * t.y / t.z + params.intrinsics.w);
+    let rx = sqrt(EXTENT_SQ * a);
+    let ry = sqrt(EXTENT_SQ * c);
+    let size = vec2<f32>(params.size);
+    let lo = max(floor(mean - vec2<f32>(rx, ry)), vec2<f32>(0.0));
+    let hi = min(ceil(mean + vec2<f32>(rx, ry)), size);
+    if (!(lo.x < hi.x && lo.y < hi.y)) {
+        return;
+    }
+    // R t is the world-to-camera rotation of the mean, so the camera centre is −Rᵀ t_cam.
+    let tr = params.cam_translation.xyz;
+    let center = -(tr.x * r0 + tr.y * r1 + tr.z * r2);
+    let v = p.mean - center;
+    var dir = vec3<f32>(0.0);
+    if (dot(v, v) > 0.0) {
+        dir = normalize(v);
+    }
+    var s: Splat;
+    s.mean = mean;
+    s.depth = t.z;
+    s.opacity = p.opacity;
+    s.conic = vec3<f32>(c / det, -b / det, a / det);
+    s.id = i;
+    s.color = sh_eval(i, params.sh_degree, dir);
+    s.pad = 0u;
+    s.rect = vec4<u32>(vec2<u32>(lo), vec2<u32>(hi));
+    splats[i] = s;
+    depth_keys[i] = bitcast<u32>(t.z);
+    atomicAdd(&draw_args[1], 1u);
+}
+
+// ---- tile binning: (tile, rank) pairs, sorted by tile, rank order kept within a tile --------
+
+// Pairs per rank, then their exclusive scan: where rank r's pairs start.
+@group(0) @binding(7) var<storage, read_write> offsets: array<u32>;
+@group(0) @binding(8) var<storage, read_write> pair_tiles: array<u32>;
+@group(0) @binding(9) var<storage, read_write> pair_ranks: array<u32>;
+// Per tile, the range [x, y) of its pairs.
+@group(0) @binding(10) var<storage, read_write> ranges: array<vec2<u32>>;
+// Per pixel: colour + coverage of front-to-back compositing, and (depth bits, picked id).
+@group(0) @binding(11) var<storage, read_write> out_color: array<vec4<f32>>;
+@group(0) @binding(12) var<storage, read_write> out_pick: array<vec2<u32>>;
+
+fn tile_rect(s: Splat) -> vec4<u32> {
+    return vec4<u32>(s.rect.x / TILE, s.rect.y / TILE, (s.rect.z - 1u) / TILE, (s.rect.w - 1u) / TILE);
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn tile_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let r = flat_index(gid, groups);
+    if (r > params.count) {
+        return;
+    }
+    var n = 0u;
+    if (r < atomicLoad(&draw_args[1])) {
+        let t = tile_rect(splats[order[r]]);
+        n = (t.z - t.x + 1u) * (t.w - t.y + 1u);
+    }
+    offsets[r] = n; // offsets[count] stays 0: after the scan it holds the total
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn tile_emit(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let r = flat_index(gid, groups);
+    if (r >= atomicLoad(&draw_args[1])) {
+        return;
+    }
+    let t = tile_rect(splats[order[r]]);
+    var at = offsets[r];
+    for (var ty = t.y; ty <= t.w; ty++) {
+        for (var tx = t.x; tx <= t.z; tx++) {
+            pair_tiles[at] = ty * params.tiles.x + tx;
+            pair_ranks[at] = r;
+            at++;
+        }
+    }
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn tile_ranges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = flat_index(gid, groups);
+    let total = offsets[params.count];
+    if (i >= total) {
+        return;
+    }
+    let tile = pair_tiles[i];
+    if (i == 0u || pair_tiles[i - 1u] != tile) {
+        ranges[tile].x = i;
+    }
+    if (i + 1u == total || pair_tiles[i + 1u] != tile) {
+        ranges[tile].y = i + 1u;
+    }
+}
+
+const BATCH: u32 = 128u;
+var<workgroup> batch: array<Splat, 128>;
+var<workgroup> tile_range: vec2<u32>;
+
+// One workgroup per 16 × 16 tile, one invocation per pixel, walking the tile's splats in depth
+// order in batches loaded cooperatively into workgroup memory (the 3DGS rasterizer's loop).
+//
+// Why a compute pass and not the raster pipeline: front-to-back blending gives the colour, but
+// the iso-opacity depth needs the transmittance *before and after* each fragment, in order,
+// which a fixed-function blend cannot return and a fragment shader can only read back through
+// a storage image under fragment-shader interlock (what vk_gaussian_splatting does). wgpu has
+// no interlock, and without it the read-modify-write of overlapping fragments races. Here one
+// invocation owns its pixel and walks the fragments sequentially in the global depth order, so
+// the depth and picked splat are exact, the same (depth, id) order as the CPU reference.
+@compute @workgroup_size(16, 16, 1)
+fn tile_blend(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(local_invocation_index) l: u32,
+) {
+    let tile = wg.y * params.tiles.x + wg.x;
+    let px = wg.xy * TILE + lid.xy;
+    let inside = px.x < params.size.x && px.y < params.size.y;
+    let centre = vec2<f32>(px) + vec2<f32>(0.5);
+    if (l == 0u) {
+        tile_range = ranges[tile];
+    }
+    // A storage load is not uniform to WGSL; the loop's barriers need a uniform bound.
+    let range = workgroupUniformLoad(&tile_range);
+    var transmittance = 1.0;
+    var color = vec3<f32>(0.0);
+    var depth = 0.0;
+    var picked = NONE;
+    for (var start = range.x; start < range.y; start += BATCH) {
+        if (l < BATCH && start + l < range.y) {
+            batch[l] = splats[order[pair_ranks[start + l]]];
+        }
+        workgroupBarrier();
+        let n = min(BATCH, range.y - start);
+        for (var j = 0u; j < n; j++) {
+            let s = batch[j];
+            let in_rect = all(px >= s.rect.xy) && all(px < s.rect.zw);
+            if (inside && in_rect) {
+                let alpha = splat_alpha(s, centre, params);
+                if (alpha > 0.0) {
+                    color += transmittance * alpha * s.color;
+                    transmittance *= 1.0 - alpha;
+                    if (picked == NONE && transmittance < params.iso_threshold) {
+                        picked = s.id;
+                        depth = s.depth;
+                    }
+                }
+            }
+        }
+        workgroupBarrier();
+    }
+    if (inside) {
+        let index = px.y * params.size.x + px.x;
+        out_color[index] = vec4<f32>(color + transmittance * params.background.xyz, 1.0 - transmittance);
+        // The depth as a distance along the pixel-centre ray: t = z |d_cam|.
+        let d_cam = vec3<f32>((centre - params.intrinsics.zw) / params.intrinsics.xy, 1.0);
+        out_pick[index] = vec2<u32>(bitcast<u32>(depth * length(d_cam)), picked);
+    }
+}

@@ -1,0 +1,75 @@
+// Types shared by the raster kernels (prepended to raster.wgsl, splat.wgsl and fold.wgsl).
+
+// Everything fixed for one camera (160 bytes), mirrored by splat_gpu::RasterParams.
+struct RasterParams {
+    cam_row0: vec4<f32>,
+    cam_row1: vec4<f32>,
+    cam_row2: vec4<f32>,
+    // World-to-camera translation (camera.rs: p_cam = R p + t).
+    cam_translation: vec4<f32>,
+    // fx, fy, cx, cy.
+    intrinsics: vec4<f32>,
+    background: vec4<f32>,
+    size: vec2<u32>,
+    // Particles in the scene.
+    count: u32,
+    sh_degree: u32,
+    kernel_degree: u32,
+    alpha_clamp: f32,
+    alpha_cull: f32,
+    iso_threshold: f32,
+    // 3DGS's frustum guard: |x/z| and |y/z| are clamped to these before the Jacobian.
+    guard: vec2<f32>,
+    // Tiles across and down.
+    tiles: vec2<u32>,
+    // Draw mode: 0 over, 1 under, 2 stochastic splat.
+    mode: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+// What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).
+struct FrameParams {
+    key: u32,
+    index: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+// One particle projected to the image (64 bytes), mirrored by splat_gpu::GpuSplat and
+// splat_core::raster::Splat. An empty rect (x0 >= x1) marks a culled particle.
+struct Splat {
+    mean: vec2<f32>,
+    depth: f32,
+    opacity: f32,
+    conic: vec3<f32>,
+    id: u32,
+    color: vec3<f32>,
+    pad: u32,
+    rect: vec4<u32>,
+}
+
+const NONE: u32 = 0xffffffffu;
+// The √8σ extent of a splat: fragments with a Mahalanobis term above 8 are discarded.
+const EXTENT_SQ: f32 = 8.0;
+
+// A = dᵀ Σ′⁻¹ d at continuous pixel position p (raster/project.rs, Splat::mahalanobis).
+fn mahalanobis(s: Splat, p: vec2<f32>) -> f32 {
+    let d = p - s.mean;
+    return s.conic.x * d.x * d.x + 2.0 * s.conic.y * d.x * d.y + s.conic.z * d.y * d.y;
+}
+
+// alpha = opacity × response(A) at p, clamped; 0 when outside the quad or below the cull
+// (Splat::alpha and KernelParams::alpha).
+fn splat_alpha(s: Splat, p: vec2<f32>, params: RasterParams) -> f32 {
+    let a = mahalanobis(s, p);
+    if (a > EXTENT_SQ) {
+        return 0.0;
+    }
+    let alpha = s.opacity * kernel_response(a, params.kernel_degree);
+    if (!(alpha >= params.alpha_cull && alpha > 0.0)) {
+        return 0.0;
+    }
+    return min(alpha, params.alpha_clamp);
+}

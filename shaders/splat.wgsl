@@ -1,0 +1,82 @@
+// The splatting render pipeline: one instanced quad per splat covering its √8σ rect, and the
+// fragment stages of sorted blending (seed 003 §1.5) and StochasticSplats (seed 002 §1), each
+// the twin of a branch of crates/splat-core/src/raster/mod.rs (Rasterizer::sorted and
+// Rasterizer::stochastic_splat with one sample at the pixel centre).
+
+@group(0) @binding(0) var<uniform> params: RasterParams;
+@group(0) @binding(1) var<uniform> frame: FrameParams;
+@group(0) @binding(2) var<storage, read> splats: array<Splat>;
+@group(0) @binding(3) var<storage, read> order: array<u32>;
+@group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;
+
+const MODE_OVER: u32 = 0u;
+const MODE_UNDER: u32 = 1u;
+// View depth z maps to the depth buffer as z · 2⁻¹⁰⁰: a power of two, so the map is exact and
+// keeps the f32 order of every depth (z ≥ 0.2 stays a normal float, z up to ~10³⁰ fits in [0, 1]).
+const DEPTH_SCALE: f32 = 7.888609e-31;
+
+struct VertexOut {
+    @builtin(position) position: vec4<f32>,
+    @location(0) @interpolate(flat) splat: u32,
+}
+
+// Instance i draws the splat of rank count − 1 − i (over: back to front), of rank i (under:
+// front to back), or particle i (stochastic: no sort, any order).
+@vertex
+fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
+    var index = instance;
+    if (params.mode == MODE_OVER) {
+        index = order[draw_args[1] - 1u - instance];
+    } else if (params.mode == MODE_UNDER) {
+        index = order[instance];
+    }
+    let rect = vec4<f32>(splats[index].rect);
+    // Two triangles: corners 0 1 2, 2 1 3 of the rect, in pixels.
+    let corner = array<vec2<u32>, 6>(
+        vec2<u32>(0u, 0u), vec2<u32>(1u, 0u), vec2<u32>(0u, 1u),
+        vec2<u32>(0u, 1u), vec2<u32>(1u, 0u), vec2<u32>(1u, 1u),
+    )[vertex];
+    let p = vec2<f32>(select(rect.x, rect.z, corner.x == 1u), select(rect.y, rect.w, corner.y == 1u));
+    let size = vec2<f32>(params.size);
+    // Pixel coordinates (y down) to clip space (y up); a culled splat's rect is empty, so its
+    // quad has no area.
+    let ndc = vec2<f32>(2.0 * p.x / size.x - 1.0, 1.0 - 2.0 * p.y / size.y);
+    return VertexOut(vec4<f32>(ndc, 0.0, 1.0), index);
+}
+
+// Sorted blending: over outputs (c, α) for SRC_ALPHA / ONE_MINUS_SRC_ALPHA; under outputs
+// premultiplied (α c, α) for ONE_MINUS_DST_ALPHA / ONE.
+@fragment
+fn fs_sorted(in: VertexOut) -> @location(0) vec4<f32> {
+    let s = splats[in.splat];
+    let alpha = splat_alpha(s, in.position.xy, params);
+    if (alpha <= 0.0) {
+        discard;
+    }
+    if (params.mode == MODE_UNDER) {
+        return vec4<f32>(alpha * s.color, alpha);
+    }
+    return vec4<f32>(s.color, alpha);
+}
+
+struct StochasticOut {
+    @location(0) color: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+}
+
+// StochasticSplats: u = hash(pixel, frame, splat id, sample 0), the decision of
+// splat_core::rng::RayRng::particle; accepted fragments are written opaque under the depth
+// test (less, write on), the others discarded. Equal depths keep the lower id, which is drawn
+// first (instances in id order, and Vulkan keeps primitive order): the CPU's (depth, id) test.
+@fragment
+fn fs_stochastic(in: VertexOut) -> StochasticOut {
+    let s = splats[in.splat];
+    let alpha = splat_alpha(s, in.position.xy, params);
+    let pixel = vec2<u32>(in.position.xy);
+    let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
+    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, 0u))));
+    if (!(u < alpha)) {
+        discard;
+    }
+    return StochasticOut(vec4<f32>(s.color, 1.0), s.depth * DEPTH_SCALE);
+}
