@@ -7,9 +7,8 @@
 //   histogram: per block of WG keys, the count of each digit  -> hist[digit * blocks + block];
 //   scan:      exclusive prefix sum of hist in that (digit-major) order: the first output
 //              position of each (digit, block);
-//   scatter:   each block sorts its keys by the digit locally with four stable 1-bit splits,
-//              then writes key i to hist[digit, block] + (its rank among the block's keys of
-//              that digit). Stable because blocks, and keys within a block, keep input order.
+//   scatter:   each key goes to hist[digit, block] + its rank among the block's keys of that
+//              digit. Stable because blocks, and keys within a block, keep input order.
 
 struct SortParams {
     // Keys to sort (or entries to scan).
@@ -32,11 +31,13 @@ struct SortParams {
 const WG: u32 = 256u;
 const RADIX: u32 = 16u;
 
+// Keys per segment of a block in the scatter's ranking (WG = SEGMENT²).
+const SEGMENT: u32 = 16u;
+
 var<workgroup> counts: array<atomic<u32>, 16>;
-var<workgroup> first: array<u32, 16>;
 var<workgroup> partial: array<u32, 256>;
-var<workgroup> local_keys: array<u32, 256>;
-var<workgroup> local_vals: array<u32, 256>;
+var<workgroup> digits: array<u32, 256>;
+var<workgroup> offsets: array<u32, 256>;
 
 fn digit(key: u32) -> u32 {
     return (key >> sp.shift) & (RADIX - 1u);
@@ -108,6 +109,10 @@ fn scan(@builtin(local_invocation_index) l: u32) {
     }
 }
 
+// Each key's rank among the block's keys of its digit, from counts over 16 segments of 16
+// keys: invocation (d, g) counts digit d in segment g, 16 invocations turn each digit's counts
+// into exclusive offsets, and each key adds the keys of its digit before it in its segment.
+// Three barriers per block; keys keep their input order within a digit, so the sort is stable.
 @compute @workgroup_size(256, 1, 1)
 fn scatter(
     @builtin(local_invocation_index) l: u32,
@@ -119,39 +124,41 @@ fn scatter(
         return;
     }
     let i = block * WG + l;
-    // Past the end: the largest key, so these stay behind every real key of the block.
-    var key = 0xffffffffu;
+    let valid = i < sp.count;
+    var key = 0u;
     var val = 0u;
-    if (i < sp.count) {
+    if (valid) {
         key = keys_in[i];
         val = vals_in[i];
     }
-    let valid = min(WG, sp.count - block * WG);
-    // Four stable 1-bit splits sort the block by the digit.
-    for (var b = 0u; b < 4u; b++) {
-        let bit = (digit(key) >> b) & 1u;
-        let zeros_before = workgroup_exclusive_scan(l, 1u - bit);
-        let zeros = partial[WG - 1u];
-        var at = zeros_before;
-        if (bit == 1u) {
-            at = zeros + l - zeros_before;
-        }
-        workgroupBarrier();
-        local_keys[at] = key;
-        local_vals[at] = val;
-        workgroupBarrier();
-        key = local_keys[l];
-        val = local_vals[l];
-        workgroupBarrier();
-    }
-    // The first local position of each digit.
     let d = digit(key);
-    if (l == 0u || digit(local_keys[l - 1u]) != d) {
-        first[d] = l;
+    // Past the end: digit RADIX, which no invocation counts.
+    digits[l] = select(RADIX, d, valid);
+    workgroupBarrier();
+    let counted = l / SEGMENT;
+    let segment = l % SEGMENT;
+    var c = 0u;
+    for (var j = 0u; j < SEGMENT; j++) {
+        c += u32(digits[segment * SEGMENT + j] == counted);
+    }
+    offsets[counted * SEGMENT + segment] = c;
+    workgroupBarrier();
+    if (l < RADIX) {
+        var running = 0u;
+        for (var g = 0u; g < SEGMENT; g++) {
+            let n = offsets[l * SEGMENT + g];
+            offsets[l * SEGMENT + g] = running;
+            running += n;
+        }
     }
     workgroupBarrier();
-    if (l < valid) {
-        let at = hist[d * sp.blocks + block] + (l - first[d]);
+    if (valid) {
+        let own = l / SEGMENT;
+        var rank = offsets[d * SEGMENT + own];
+        for (var s = own * SEGMENT; s < l; s++) {
+            rank += u32(digits[s] == d);
+        }
+        let at = hist[d * sp.blocks + block] + rank;
         keys_out[at] = key;
         vals_out[at] = val;
     }

@@ -41,7 +41,10 @@ fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32
     // Pixel coordinates (y down) to clip space (y up); a culled splat's rect is empty, so its
     // quad has no area.
     let ndc = vec2<f32>(2.0 * p.x / size.x - 1.0, 1.0 - 2.0 * p.y / size.y);
-    return VertexOut(vec4<f32>(ndc, 0.0, 1.0), index);
+    // A constant depth over the quad (w = 1, so no perspective division): the rasterizer's
+    // plane equation has zero slope and every fragment gets this value, with early depth tests.
+    let z = splats[index].depth * DEPTH_SCALE;
+    return VertexOut(vec4<f32>(ndc, z, 1.0), index);
 }
 
 // Sorted blending: over outputs (c, α) for SRC_ALPHA / ONE_MINUS_SRC_ALPHA; under outputs
@@ -59,17 +62,14 @@ fn fs_sorted(in: VertexOut) -> @location(0) vec4<f32> {
     return vec4<f32>(s.color, alpha);
 }
 
-struct StochasticOut {
-    @location(0) color: vec4<f32>,
-    @builtin(frag_depth) depth: f32,
-}
-
 // StochasticSplats: u = hash(pixel, frame, splat id, sample 0), the decision of
 // splat_core::rng::RayRng::particle; accepted fragments are written opaque under the depth
 // test (less, write on), the others discarded. Equal depths keep the lower id, which is drawn
 // first (instances in id order, and Vulkan keeps primitive order): the CPU's (depth, id) test.
+// The depth comes from the vertex stage, not frag_depth, so the hardware can test it before
+// the shader runs (a written frag_depth disables early depth testing).
 @fragment
-fn fs_stochastic(in: VertexOut) -> StochasticOut {
+fn fs_stochastic(in: VertexOut) -> @location(0) vec4<f32> {
     let s = splats[in.splat];
     let alpha = splat_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
@@ -78,5 +78,5 @@ fn fs_stochastic(in: VertexOut) -> StochasticOut {
     if (!(u < alpha)) {
         discard;
     }
-    return StochasticOut(vec4<f32>(s.color, 1.0), s.depth * DEPTH_SCALE);
+    return vec4<f32>(s.color, 1.0);
 }

@@ -233,3 +233,58 @@ fn cpu_only_raster_methods_are_refused() {
         assert!(e.contains("CPU only"), "{e}");
     }
 }
+
+/// Depth ties resolve as on the CPU, to the lower splat id (drawn first, kept by the `less`
+/// depth test); a nearer splat with a higher id still wins (the depth test, not draw order).
+#[test]
+fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
+    use glam::{Quat, Vec3};
+    use splat_core::particle::Particle;
+    use splat_core::rng::{RayRng, RngScheme, frame_key};
+    let Some(ctx) = context() else { return };
+    let at = |x: f32, z: f32, rgb: Vec3| {
+        Particle::with_rgb(Vec3::new(x, 0.0, z), Vec3::splat(0.3), Quat::IDENTITY, 0.99, rgb)
+    };
+    let (red, green, blue) = (Vec3::X, Vec3::Y, Vec3::Z);
+    // Left: ids 0 (red) and 1 (green) at the same place. Right: id 2 (blue) behind id 3 (red).
+    let scene = Scene {
+        particles: vec![at(-0.6, 0.0, red), at(-0.6, 0.0, green), at(0.6, -0.2, blue), at(0.6, 0.2, red)],
+        sh_degree: 0,
+    };
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 40.0, 48, 24).unwrap();
+    let c = Case { scene, camera };
+    let gpu_scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &c.camera).unwrap();
+    let mut contested = 0; // pairs where both splats were accepted: the tie rule decides
+    for seed in 0..8 {
+        let frames = Frames { count: 1, seed, ..Frames::default() };
+        let cpu = render_raster(&cpu_raster(&c), &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap().frames;
+        let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap();
+        assert!(max_abs_diff(g.mean.data(), cpu.mean.data()) <= 1e-6, "seed {seed}");
+        // At the pixel under each pair, the colour is the first accepted of (front, back):
+        // id 0 before the tied id 1, id 3 (in front) before id 2, decided by the core's hash.
+        let r = cpu_raster(&c);
+        for (front, back) in [(0u32, 1u32), (3, 2)] {
+            let q = c.camera.project_camera(c.camera.to_camera(c.scene.particles[front as usize].mean));
+            let (x, y) = (q.x as u32, q.y as u32);
+            let px = r.pixel(x, y);
+            let frags = r.fragments(&px);
+            let rng = RayRng::new(x, y, frame_key(seed, 0), RngScheme::Hash);
+            let accepted = |id: u32| {
+                let f = frags.iter().find(|f| r.splats()[f.splat as usize].id == id).unwrap();
+                rng.particle(id, 0, Vec3::ZERO) < f.alpha
+            };
+            let expected = [front, back]
+                .into_iter()
+                .find(|&id| accepted(id))
+                .map(|id| splat_core::sh::eval(&c.scene.particles[id as usize].sh, 0, Vec3::Z).to_array());
+            let p = (y * c.camera.width + x) as usize;
+            let rgb = &g.mean.data()[3 * p..3 * p + 3];
+            if let Some(e) = expected {
+                assert!(max_abs_diff(rgb, &e) < 1e-5, "seed {seed} pair ({front}, {back}): {rgb:?} vs {e:?}");
+            }
+            contested += usize::from(accepted(front) && accepted(back));
+        }
+    }
+    assert!(contested >= 8, "only {contested} of 16 pairs had both splats accepted: the rule went untested");
+}
