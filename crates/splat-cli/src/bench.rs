@@ -32,7 +32,15 @@ pub struct BenchArgs {
 
 /// Run `splat bench`.
 pub fn run(args: BenchArgs) -> Result<()> {
-    if let Some(ctx) = crate::render::gpu_context(args.scene.backend)? {
+    let raster = args.methods.iter().any(|m| matches!(m, MethodArg::RasterSorted | MethodArg::StochasticSplat));
+    let ctx = crate::render::gpu_context(args.scene.backend)?;
+    if raster {
+        return match &ctx {
+            Some(ctx) => run_raster_gpu(&args, ctx),
+            None => run_raster_cpu(&args),
+        };
+    }
+    if let Some(ctx) = ctx {
         return run_gpu(&args, &ctx);
     }
     let (scene, camera) = args.scene.load(1200, 800)?;
@@ -121,6 +129,84 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
                 best / base
             );
         }
+    }
+    Ok(())
+}
+
+/// The splatting path on the GPU, stage by stage in one run: projection, depth sort, sorted
+/// (over) draw, and a StochasticSplats draw at 1 spp; frames as ratios to the sorted frame.
+fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
+    let (scene, camera) = args.scene.load(1200, 800)?;
+    let pipes = splat_gpu::RasterPipelines::new(ctx)?;
+    let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &args.scene.settings())?;
+    let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera)?;
+    let t = raster.profile(args.repeat)?;
+    let visible = raster.order()?.len();
+    let n = scene.particles.len();
+    println!(
+        "{n} particles ({visible} visible) on {}, {}×{}, fastest of {} runs, {}\n",
+        ctx.describe(),
+        camera.width,
+        camera.height,
+        args.repeat.max(1),
+        if t.timestamps { "timestamp queries" } else { "wall time around submit + poll" }
+    );
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let sorted = ms(t.sorted_frame());
+    println!("| stage | time (ms) | share of the sorted frame |");
+    println!("|---|---:|---:|");
+    println!("| projection | {:.2} | {:.0} % |", ms(t.project), 100.0 * ms(t.project) / sorted);
+    println!(
+        "| depth sort ({n} keys, {:.1} Mkeys/s) | {:.2} | {:.0} % |",
+        n as f64 / t.sort.as_secs_f64() / 1e6,
+        ms(t.sort),
+        100.0 * ms(t.sort) / sorted
+    );
+    println!("| sorted draw (over) | {:.2} | {:.0} % |", ms(t.draw_sorted), 100.0 * ms(t.draw_sorted) / sorted);
+    println!("| **sorted frame** | {sorted:.2} | 100 % |");
+    println!("| stochastic-splat draw (1 spp) | {:.2} | |", ms(t.draw_stochastic));
+    println!(
+        "| **stochastic-splat frame** (projection + draw) | {:.2} | {:.2}× the sorted frame |",
+        ms(t.stochastic_frame()),
+        ms(t.stochastic_frame()) / sorted
+    );
+    Ok(())
+}
+
+/// The splatting path on the CPU reference: one frame of raster-sorted and of stochastic-splat
+/// (projection, sort and binning included), as a ratio in one run.
+fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+    let (scene, camera) = args.scene.load(1200, 800)?;
+    let pool = args.scene.pool()?;
+    let settings = args.scene.settings();
+    println!(
+        "{} particles, {}×{}, CPU reference, {} threads, fastest of {} runs\n",
+        scene.particles.len(),
+        camera.width,
+        camera.height,
+        pool.current_num_threads(),
+        args.repeat.max(1)
+    );
+    println!("| method | frame (ms) | cost vs raster-sorted |");
+    println!("|---|---:|---:|");
+    let mut baseline = None;
+    for (name, method) in [
+        ("raster-sorted", RasterMethod::Sorted { blend: Blend::Over }),
+        ("stochastic-splat", RasterMethod::StochasticSplat),
+    ] {
+        let mut best = f64::INFINITY;
+        for _ in 0..args.repeat.max(1) {
+            let start = Instant::now();
+            pool.install(|| -> Result<()> {
+                let r = Rasterizer::new(&scene, &camera, settings, RasterSettings::default())?;
+                render_raster(&r, &method, &Frames::default(), &|_| {})?;
+                Ok(())
+            })?;
+            best = best.min(start.elapsed().as_secs_f64());
+        }
+        let base = *baseline.get_or_insert(best);
+        println!("| {name} | {:.1} | {:.2}× |", 1e3 * best, best / base);
     }
     Ok(())
 }

@@ -433,8 +433,15 @@ fn render(
     let method = match args.options.resolve(args.method) {
         Resolved::Trace(method) => method,
         Resolved::Raster(method) => {
-            if args.scene.backend == BackendArg::Gpu {
-                bail!("the raster methods run on the CPU reference only so far: use --backend cpu");
+            let gpu_method = matches!(method, RasterMethod::Sorted { .. } | RasterMethod::StochasticSplat);
+            if args.scene.backend == BackendArg::Gpu && !gpu_method {
+                bail!(
+                    "{:?} rasterizes on the CPU only: use --backend cpu (the GPU rasterizes raster-sorted and stochastic-splat)",
+                    args.method
+                );
+            }
+            if gpu_method && let Some(ctx) = gpu_context(args.scene.backend)? {
+                return raster_gpu(args, &ctx, scene, camera, settings, &method, progress);
             }
             let raster = Rasterizer::new(scene, camera, *settings, args.options.raster_settings())?;
             let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
@@ -457,6 +464,41 @@ fn render(
         return Ok(TraceOutput { mean: out.mean, variance: out.variance, alpha: out.alpha, depth: nan, normal: zero });
     }
     Ok(render_frames(&trace, camera, &method, &frames, progress)?)
+}
+
+/// A raster method on the GPU: sorted splatting or StochasticSplats through the render
+/// pipeline; `--depth` of sorted splatting from the compute tile rasterizer.
+fn raster_gpu(
+    args: &RenderArgs,
+    ctx: &splat_gpu::GpuContext,
+    scene: &Scene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    method: &RasterMethod,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput> {
+    splat_gpu::raster::check_settings(&args.options.raster_settings())?;
+    let sorted = matches!(method, RasterMethod::Sorted { .. });
+    if args.normal.is_some() || (args.depth.is_some() && !sorted) {
+        bail!("on the GPU, --depth comes from raster-sorted only and --normal from the CPU backend: add --backend cpu");
+    }
+    eprintln!("rasterizing on {}", ctx.describe());
+    let pipes = splat_gpu::RasterPipelines::new(ctx)?;
+    let gpu_scene = splat_gpu::RasterScene::new(ctx, scene, settings)?;
+    let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera)?;
+    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
+    let out = raster.render(method, &frames)?;
+    let depth = match &args.depth {
+        Some(_) => {
+            let pick = raster.depth_pick()?;
+            let data = pick.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
+            splat_core::Image::from_data(camera.width, camera.height, 1, data).context("depth image")?
+        }
+        None => splat_core::Image::filled(camera.width, camera.height, 1, f32::NAN),
+    };
+    progress(u64::from(camera.width) * u64::from(camera.height));
+    let normal = splat_core::Image::filled(camera.width, camera.height, 3, 0.0);
+    Ok(TraceOutput { mean: out.mean, variance: out.variance, alpha: out.alpha, depth, normal })
 }
 
 /// The brute-force oracle (CPU only).

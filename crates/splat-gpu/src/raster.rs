@@ -34,7 +34,7 @@ use splat_core::Camera;
 use splat_core::image::Image;
 use splat_core::particle::{Scene, sh_coeff_count};
 use splat_core::raster::project::FRUSTUM_GUARD;
-use splat_core::raster::{Blend, RasterMethod};
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings};
 use splat_core::render::{RenderError, RenderSettings, TILE, validate_scene};
 use splat_core::trace::Frames;
 use std::time::{Duration, Instant};
@@ -936,6 +936,19 @@ impl<'a> GpuRasterizer<'a> {
             timestamps: timer.is_some(),
         })
     }
+}
+
+/// Whether the GPU rasterizer renders `settings`: one sample per pixel at the centre, billboard
+/// (centre) fragment depth. MSAA sample sets and max-density-plane depths are CPU-only.
+pub fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
+    settings.validate()?;
+    if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
+        return Err(GpuError::Unsupported(format!(
+            "the GPU rasterizer renders one sample per pixel with centre fragment depth ({} samples and {:?} depth asked for); use --backend cpu",
+            settings.samples, settings.fragment_depth
+        )));
+    }
+    Ok(())
 }
 
 /// The uniforms of a camera.
