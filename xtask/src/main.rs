@@ -130,6 +130,7 @@ fn bench() -> Result<()> {
         Ok(())
     };
     cargo(&["bench", "-p", "splat-tests", "--bench", "trace"])?;
+    cargo(&["bench", "-p", "splat-gpu", "--bench", "sort"])?;
     let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
     cargo(&[
         "run",

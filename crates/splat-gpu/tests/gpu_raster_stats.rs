@@ -33,7 +33,11 @@ fn gpu_frames(raster: &GpuRasterizer, frames: Frames) -> TraceOutput {
 fn z_test(ctx: &GpuContext, pipes: &RasterPipelines, scene: &Scene, truth: &Scene, camera: &Camera) -> ZTest {
     let gpu_scene = RasterScene::new(ctx, scene, &RenderSettings::default()).unwrap();
     let raster = GpuRasterizer::new(ctx, pipes, &gpu_scene, camera).unwrap();
-    method::z_test(&oracle(truth, camera), |f| gpu_frames(&raster, f), Frames { count: F, seed: 31, ..Frames::default() })
+    method::z_test(
+        &oracle(truth, camera),
+        |f| gpu_frames(&raster, f),
+        Frames { count: F, seed: 31, ..Frames::default() },
+    )
 }
 
 /// Every opacity scaled by `factor`: a renderer whose alphas are biased.
