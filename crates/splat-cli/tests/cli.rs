@@ -314,6 +314,71 @@ fn bench_reports_every_method_against_opaque() {
     }
 }
 
+/// `--backend gpu` renders the raster methods the GPU has as the CPU does (same decisions for
+/// `stochastic-splat`, same blending for `raster-sorted`, with its iso-depth image), and
+/// refuses the CPU-only raster methods and settings with a message and exit code 1.
+#[test]
+fn gpu_raster_backend_matches_cpu_backend() {
+    let render = |backend: &str, method: &str, out: &PathBuf, extra: &[&str]| {
+        let mut args = vec!["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.cameras.json"];
+        args.extend(["--width", "40", "--height", "30", "--spp", "8", "--seed", "5", "--method", method]);
+        args.extend(["--backend", backend, "-o", out.to_str().unwrap()]);
+        args.extend(extra);
+        splat(&args)
+    };
+    for method in ["raster-sorted", "stochastic-splat"] {
+        let (cpu_out, gpu_out) = (scratch(&format!("{method}-cpu.npy")), scratch(&format!("{method}-gpu.npy")));
+        let depth = |name: &str| scratch(&format!("{method}-{name}-depth.npy"));
+        let extra = |name: &str| {
+            if method == "raster-sorted" {
+                vec!["--depth".to_string(), depth(name).to_str().unwrap().to_string()]
+            } else {
+                vec![]
+            }
+        };
+        let (cpu_extra, gpu_extra) = (extra("cpu"), extra("gpu"));
+        let cpu_args: Vec<&str> = cpu_extra.iter().map(String::as_str).collect();
+        let gpu_args: Vec<&str> = gpu_extra.iter().map(String::as_str).collect();
+        assert!(render("cpu", method, &cpu_out, &cpu_args).status.success());
+        let o = render("gpu", method, &gpu_out, &gpu_args);
+        if !o.status.success() {
+            let err = stderr(&o);
+            assert!(std::env::var("CI").is_err(), "CI=true and the GPU backend failed: {err}");
+            assert!(err.contains("mesa-vulkan-drivers"), "{err}");
+            eprintln!("skipping: {err}");
+            return;
+        }
+        let read = |p: &PathBuf| splat_io::image::read_npy(p).unwrap();
+        let worst = |a: &splat_core::Image, b: &splat_core::Image| {
+            a.data()
+                .iter()
+                .zip(b.data())
+                .filter(|(x, y)| !(x.is_nan() && y.is_nan()))
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max)
+        };
+        let d = worst(&read(&cpu_out), &read(&gpu_out));
+        assert!(d < 1e-4, "{method}: GPU and CPU backends differ by {d}");
+        if method == "raster-sorted" {
+            let d = worst(&read(&depth("cpu")), &read(&depth("gpu")));
+            assert!(d < 1e-3, "iso-depth differs by {d}");
+        }
+    }
+    for (method, extra, message) in [
+        ("enderton", vec![], "CPU only"),
+        ("stochastic-splat", vec!["--raster-samples", "4"], "one sample per pixel"),
+        ("stochastic-splat", vec!["--depth", "/tmp/never.npy"], "--depth comes from raster-sorted only"),
+    ] {
+        let o = render("gpu", method, &scratch("refused.npy"), &extra);
+        let err = stderr(&o);
+        if err.contains("mesa-vulkan-drivers") && std::env::var("CI").is_err() {
+            return;
+        }
+        assert_eq!(o.status.code(), Some(1), "{method} {extra:?}: {err}");
+        assert!(err.contains(message), "{method} {extra:?}: {err}");
+    }
+}
+
 /// `--backend gpu` renders the same image as `--backend cpu` for the same seed (the kernels
 /// make the same decisions); without an adapter it fails with a message naming the driver to
 /// install, unless CI requires one.

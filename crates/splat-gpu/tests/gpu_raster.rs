@@ -288,3 +288,42 @@ fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
     }
     assert!(contested >= 8, "only {contested} of 16 pairs had both splats accepted: the rule went untested");
 }
+
+/// On real data (a 96 × 64 crop of the bonsai capture's standard view: anisotropic, SH
+/// degree 3, tens of thousands of overlapping splats) sorted splatting, one StochasticSplats
+/// frame and the picks agree with the CPU as on the fixtures.
+#[test]
+fn bonsai_crop_equals_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let Some(scene) = splat_tests::bonsai() else { return };
+    let camera = splat_tests::bonsai_camera().crop(552, 368, 96, 64).unwrap();
+    let c = Case { scene, camera };
+    let cpu_r = cpu_raster(&c);
+    let gpu_scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &c.camera).unwrap();
+    assert_eq!(gpu.order().unwrap(), cpu_r.splats().iter().map(|s| s.id).collect::<Vec<_>>(), "depth order");
+    let sorted =
+        render_raster(&cpu_r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
+    let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap();
+    let d = max_abs_diff(over.mean.data(), sorted.frames.mean.data());
+    let pick = gpu.depth_pick().unwrap();
+    let differing = pick.picked.iter().zip(&sorted.picked).filter(|(a, b)| a != b).count();
+    let frames = Frames { count: 1, seed: 8, ..Frames::default() };
+    let cpu_frame = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap().frames;
+    let gpu_frame = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap();
+    let pixels = sorted.picked.len();
+    let frame_diff = (0..pixels)
+        .filter(|&p| {
+            max_abs_diff(&gpu_frame.mean.data()[3 * p..3 * p + 3], &cpu_frame.mean.data()[3 * p..3 * p + 3]) > 1e-5
+        })
+        .count();
+    eprintln!(
+        "bonsai crop: {} splats, |over − cpu| {d:.2e}, {differing} of {pixels} picks and {frame_diff} stochastic pixels differ, {} pairs",
+        cpu_r.splats().len(),
+        pick.pairs
+    );
+    let tolerance =
+        if pipelines(ctx).blend_format == splat_gpu::wgpu::TextureFormat::Rgba32Float { 1e-4 } else { 8e-3 };
+    assert!(d <= tolerance, "sorted splatting differs by {d}");
+    assert!(differing * 200 <= pixels && frame_diff * 200 <= pixels);
+}
