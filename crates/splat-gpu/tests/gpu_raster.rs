@@ -327,3 +327,26 @@ fn bonsai_crop_equals_the_cpu() {
     assert!(d <= tolerance, "sorted splatting differs by {d}");
     assert!(differing * 200 <= pixels && frame_diff * 200 <= pixels);
 }
+
+/// Bad input gets a typed error naming the problem: a scene above the binding limit, an empty
+/// scene, a NaN particle, an invalid camera.
+#[test]
+fn bad_raster_input_is_refused_with_a_message() {
+    let Some(ctx) = context() else { return };
+    let c = case("cloud", 16, 12);
+    let small = GpuContext::new().unwrap().with_binding_limit(4096);
+    let e = RasterScene::new(&small, &c.scene, &RenderSettings::default()).err().expect("too large").to_string();
+    assert!(e.contains("splat buffer") && e.contains("4096"), "{e}");
+    let empty = Scene { particles: Vec::new(), sh_degree: 0 };
+    let e = RasterScene::new(ctx, &empty, &RenderSettings::default()).err().expect("empty").to_string();
+    assert!(e.contains("no particles"), "{e}");
+    let mut nan = c.scene.clone();
+    nan.particles[3].mean.x = f32::NAN;
+    let e = RasterScene::new(ctx, &nan, &RenderSettings::default()).err().expect("NaN").to_string();
+    assert!(e.to_lowercase().contains("particle 3"), "{e}");
+    let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+    let mut camera = c.camera;
+    camera.fx = 0.0;
+    let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &camera).err().expect("bad camera").to_string();
+    assert!(e.contains("focal") || e.contains("fx"), "{e}");
+}
