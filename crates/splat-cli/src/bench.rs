@@ -1,5 +1,7 @@
 //! `splat bench`: rays per second of every ray-tracing method through the same BVH, measured
-//! in one run, as ratios against the `opaque` closest-hit baseline.
+//! in one run, as ratios against the `opaque` closest-hit baseline; with `raster-sorted` or
+//! `stochastic-splat` among the methods, the splatting path instead (on the GPU stage by
+//! stage: projection, sort, sorted draw, StochasticSplats draw).
 
 use crate::render::{MethodArg, MethodOptions, SceneArgs};
 use anyhow::{Context, Result};
@@ -13,6 +15,8 @@ pub struct BenchArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Methods to time, comma separated; `opaque` is always measured first as the baseline.
+    /// Naming raster-sorted or stochastic-splat benchmarks the splatting path instead: stage
+    /// times, the sort's share and keys/s, and the stochastic/sorted frame ratio.
     #[arg(
         long,
         value_enum,

@@ -17,8 +17,10 @@ use std::process::ExitCode;
 ///   splat render scene.ply --camera cameras.json -o view.png --depth depth.npy
 ///   splat render scene.splat --method stochastic --spp 64 --seed 1 -o noisy.exr
 ///   splat render scene.ply --method stratified --raster-samples 16 -o strat.png
+///   splat render scene.splat --backend gpu --method stochastic-splat --spp 64 -o ss.png
 ///   splat converge scene.splat --max-spp 256 -o converge   # converge.csv, converge.png
 ///   splat bench scene.splat                                 # rays/s per method
+///   splat bench scene.splat --backend gpu --methods raster-sorted,stochastic-splat
 ///   splat stratify -o strat                                 # Laine–Karras Table 1 analogue
 ///   splat info point_cloud.ply
 #[derive(Parser)]
@@ -37,7 +39,8 @@ enum Command {
     /// RMSE against the oracle (exact; raster-sorted for raster methods) at spp 1, 2, 4, …:
     /// CSV, log–log plot PNG, Markdown table.
     Converge(Box<converge::ConvergeArgs>),
-    /// Rays per second of each ray-tracing method against an opaque closest-hit baseline.
+    /// Rays per second of each ray-tracing method against an opaque closest-hit baseline, or the
+    /// stages of the splatting path (--methods raster-sorted,stochastic-splat).
     Bench(Box<bench::BenchArgs>),
     /// Laine–Karras stratification gain: RMSE of stratified / Enderton at 4…64 samples per
     /// pixel on the layered fixtures, as a table and a side-by-side PNG.

@@ -74,15 +74,16 @@ pub enum Resolved {
     Raster(RasterMethod),
 }
 
-/// Where rays are traced.
+/// Where rays are traced or splats rasterized.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BackendArg {
     /// A hardware GPU when wgpu finds one, else the CPU (lavapipe, a CPU Vulkan driver, is
-    /// slower than the CPU tracer and is used only when asked for with --backend gpu).
+    /// slower than the CPU renderers and is used only when asked for with --backend gpu).
     Auto,
-    /// The CPU tracer of splat-core (rayon over tiles).
+    /// The CPU renderers of splat-core (rayon over tiles).
     Cpu,
-    /// The wgpu compute kernels (WGPU_BACKEND / WGPU_ADAPTER_NAME choose the adapter).
+    /// The wgpu kernels: compute ray tracing, and the splatting render pipeline for
+    /// raster-sorted and stochastic-splat (WGPU_BACKEND / WGPU_ADAPTER_NAME choose the adapter).
     Gpu,
 }
 

@@ -314,6 +314,27 @@ fn bench_reports_every_method_against_opaque() {
     }
 }
 
+/// `splat bench --methods raster-sorted,stochastic-splat` times the splatting path: on the CPU
+/// both methods as a ratio, on the GPU every stage with the sort's share and keys/s.
+#[test]
+fn bench_reports_the_splatting_path() {
+    let args = ["bench", "fixtures/cloud.ply", "--width", "32", "--height", "24", "--repeat", "1"];
+    let raster = ["--methods", "raster-sorted,stochastic-splat"];
+    let o = splat(&[&args[..], &raster[..], &["--backend", "cpu"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("| raster-sorted | ") && text.contains("| stochastic-splat | "), "{text}");
+    let o = splat(&[&args[..], &raster[..], &["--backend", "gpu"]].concat());
+    if !o.status.success() {
+        assert!(std::env::var("CI").is_err(), "CI=true and the GPU bench failed: {}", stderr(&o));
+        return;
+    }
+    let text = String::from_utf8_lossy(&o.stdout);
+    for row in ["| projection |", "| depth sort (", "Mkeys/s", "| **sorted frame** |", "× the sorted frame"] {
+        assert!(text.contains(row), "{row} missing:\n{text}");
+    }
+}
+
 /// `--backend gpu` renders the raster methods the GPU has as the CPU does (same decisions for
 /// `stochastic-splat`, same blending for `raster-sorted`, with its iso-depth image), and
 /// refuses the CPU-only raster methods and settings with a message and exit code 1.
