@@ -888,7 +888,7 @@ impl<'a> GpuRasterizer<'a> {
         let slots = FrameSlots::new(self.ctx);
         slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0);
         let group = self.draw_group(&slots.buffer);
-        let timer = self.ctx.timestamps.then(|| PhaseTimer::new(self.ctx));
+        let timer = self.ctx.timestamps.then(|| crate::Timer::new(self.ctx));
         let mut best = [Duration::MAX; 4];
         for _ in 0..repeat.max(1) {
             for (phase, slot) in best.iter_mut().enumerate() {
@@ -1076,32 +1076,6 @@ impl FrameSlots {
 
     fn offset(&self, slot: u32) -> u32 {
         (self.stride * u64::from(slot)) as u32
-    }
-}
-
-/// Timestamps at the start and end of one pass.
-struct PhaseTimer {
-    queries: wgpu::QuerySet,
-    resolved: wgpu::Buffer,
-    staging: wgpu::Buffer,
-}
-
-impl PhaseTimer {
-    fn new(ctx: &GpuContext) -> Self {
-        let t = crate::Timer::new(ctx);
-        Self { queries: t.queries, resolved: t.resolved, staging: t.staging }
-    }
-
-    fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
-        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
-    }
-
-    fn elapsed(&self, ctx: &GpuContext) -> Result<Duration, GpuError> {
-        let words = ctx.read_buffer(&self.staging)?;
-        let ticks = |i: usize| u64::from(words[2 * i].to_bits()) | (u64::from(words[2 * i + 1].to_bits()) << 32);
-        let nanos = ticks(1).saturating_sub(ticks(0)) as f64 * f64::from(ctx.queue.get_timestamp_period());
-        Ok(Duration::from_nanos(nanos as u64))
     }
 }
 
