@@ -50,14 +50,7 @@ impl Accumulator {
             label: Some("accumulate.wgsl"),
             source: wgpu::ShaderSource::Wgsl(ACCUMULATE_WGSL.into()),
         });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("accumulate"),
-            layout: None,
-            module: &module,
-            entry_point: Some("accumulate"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = crate::compute_pipeline(&ctx.device, &module, None, "accumulate");
         let buffer = |label, bytes: usize, usage| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),

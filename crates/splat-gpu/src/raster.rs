@@ -28,7 +28,7 @@
 //! ```
 
 use crate::sort::{RadixSort, SortBuffers, groups};
-use crate::{GpuContext, GpuError, GpuOutput};
+use crate::{GpuContext, GpuError, GpuOutput, compute_pipeline, storage_entry, uniform_entry};
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::image::Image;
@@ -161,57 +161,6 @@ pub struct FrameParams {
     pub pad0: u32,
     /// Padding.
     pub pad1: u32,
-}
-
-pub(crate) fn storage_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    read_only: bool,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-pub(crate) fn uniform_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    dynamic: bool,
-    size: usize,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: dynamic,
-            min_binding_size: wgpu::BufferSize::new(size as u64),
-        },
-        count: None,
-    }
-}
-
-pub(crate) fn compute_pipeline(
-    device: &wgpu::Device,
-    module: &wgpu::ShaderModule,
-    layout: Option<&wgpu::PipelineLayout>,
-    entry: &str,
-) -> wgpu::ComputePipeline {
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(entry),
-        layout,
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    })
 }
 
 /// Which render pipeline draws a method.
