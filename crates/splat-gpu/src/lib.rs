@@ -291,12 +291,8 @@ pub(crate) fn output(
     gpu_time: Duration,
     timestamps: bool,
 ) -> GpuOutput {
-    let pixels = camera.width as usize * camera.height as usize;
     let n = f64::from(count);
-    let image = |channels: usize, value: &dyn Fn(usize) -> f32| {
-        let data = (0..pixels).flat_map(|p| (0..channels).map(move |c| value(4 * p + c))).collect();
-        Image::from_data(camera.width, camera.height, channels as u32, data).expect("size")
-    };
+    let image = |channels, value: &dyn Fn(usize) -> f32| rgba_image(camera, channels, value);
     GpuOutput {
         mean: image(3, &|i| mean[i]),
         variance: image(3, &|i| if count > 1 { (f64::from(m2[i]) / (n - 1.0)) as f32 } else { 0.0 }),
@@ -307,6 +303,14 @@ pub(crate) fn output(
         gpu_time,
         timestamps,
     }
+}
+
+/// An image of `channels` channels whose pixel p, channel c is `value(4p + c)`: the first
+/// channels of a per-pixel RGBA buffer read back from the GPU.
+pub(crate) fn rgba_image(camera: &Camera, channels: u32, value: &dyn Fn(usize) -> f32) -> Image {
+    let pixels = camera.width as usize * camera.height as usize;
+    let data = (0..pixels).flat_map(|p| (0..channels as usize).map(move |c| value(4 * p + c))).collect();
+    Image::from_data(camera.width, camera.height, channels, data).expect("the buffer holds every pixel")
 }
 
 /// A storage-buffer entry of a bind group layout.

@@ -578,7 +578,7 @@ impl<'a> GpuRasterizer<'a> {
         self.set_mode(draw);
         let (w, h) = (self.camera.width, self.camera.height);
         let pixels = (w * h) as usize;
-        let targets = Targets::new(self.ctx, w, h, draw);
+        let targets = Targets::new(self.ctx, self.pipes, w, h, draw);
         let out_bytes = (pixels * 16) as u64;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let make = |label| {
@@ -813,11 +813,7 @@ impl<'a> GpuRasterizer<'a> {
         self.submit(encoder)?;
         let color = ctx.read_f32(&out_color, pixels * 4)?;
         let pick = ctx.read_u32(&out_pick, pixels * 2)?;
-        let (w, h) = (self.camera.width, self.camera.height);
-        let image = |channels: u32, f: &dyn Fn(usize) -> f32| {
-            let data = (0..pixels).flat_map(|p| (0..channels as usize).map(move |c| f(4 * p + c))).collect();
-            Image::from_data(w, h, channels, data).expect("size")
-        };
+        let image = |channels, f: &dyn Fn(usize) -> f32| crate::rgba_image(&self.camera, channels, f);
         let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
         Ok(DepthPick {
             color: image(3, &|i| color[i]),
@@ -832,8 +828,8 @@ impl<'a> GpuRasterizer<'a> {
     /// draw at 1 spp; the fastest of `repeat` runs of each.
     pub fn profile(&self, repeat: u32) -> Result<RasterTimings, GpuError> {
         let (w, h) = (self.camera.width, self.camera.height);
-        let sorted_targets = Targets::new(self.ctx, w, h, Draw::Over);
-        let stochastic_targets = Targets::new(self.ctx, w, h, Draw::Stochastic);
+        let sorted_targets = Targets::new(self.ctx, self.pipes, w, h, Draw::Over);
+        let stochastic_targets = Targets::new(self.ctx, self.pipes, w, h, Draw::Stochastic);
         let slots = FrameSlots::new(self.ctx);
         slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0);
         let group = self.draw_group(&slots.buffer);
@@ -964,7 +960,7 @@ struct Targets {
 }
 
 impl Targets {
-    fn new(ctx: &GpuContext, width: u32, height: u32, draw: Draw) -> Self {
+    fn new(ctx: &GpuContext, pipes: &RasterPipelines, width: u32, height: u32, draw: Draw) -> Self {
         let texture = |label, format, usage| {
             ctx.device
                 .create_texture(&wgpu::TextureDescriptor {
@@ -979,13 +975,8 @@ impl Targets {
                 })
                 .create_view(&Default::default())
         };
-        let format = if draw == Draw::Stochastic {
-            STOCHASTIC_FORMAT
-        } else if ctx.device.features().contains(wgpu::Features::FLOAT32_BLENDABLE) {
-            wgpu::TextureFormat::Rgba32Float
-        } else {
-            wgpu::TextureFormat::Rgba16Float
-        };
+        // The format the draw's pipeline was built for.
+        let format = if draw == Draw::Stochastic { STOCHASTIC_FORMAT } else { pipes.blend_format };
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
         Self {
             color_view: texture("splat colour", format, usage),
