@@ -226,38 +226,62 @@ pub fn params(
     }
 }
 
+/// Test helpers shared by every module with WGSL: naga's validation and its layout of a WGSL
+/// struct, and [`assert_mirrors`] to compare that layout with a Rust mirror.
+#[cfg(test)]
+pub(crate) mod wgsl_check {
+    /// Parse and validate `source` with no optional capability (so no subgroup operations).
+    pub(crate) fn validate(name: &str, source: &str) {
+        let module =
+            naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+    }
+
+    /// Size and (member name, offset) list of the WGSL struct `name` of `source`, as naga lays
+    /// it out.
+    pub(crate) fn struct_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
+        let module = naga::front::wgsl::parse_str(source).expect("parses");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name);
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        (*span as usize, members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect())
+    }
+
+    /// The Rust struct has the size and field offsets naga computes for the WGSL struct of the
+    /// same role, so the two cannot drift apart.
+    macro_rules! assert_mirrors {
+        ($source:expr, $rust:ty, $wgsl:literal, [$($field:ident),*]) => {{
+            let (size, members) = $crate::layout::wgsl_check::struct_layout($source, $wgsl);
+            assert_eq!(std::mem::size_of::<$rust>(), size, "size of {}", $wgsl);
+            let rust = vec![$((stringify!($field).to_string(), std::mem::offset_of!($rust, $field))),*];
+            assert_eq!(rust, members, "fields of {}", $wgsl);
+        }};
+    }
+    pub(crate) use assert_mirrors;
+}
+
 #[cfg(test)]
 mod tests {
+    use super::wgsl_check::{assert_mirrors, validate};
     use super::*;
 
     /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
     /// struct of the same role, so the two cannot drift apart.
     #[test]
     fn rust_structs_mirror_the_wgsl_structs() {
-        let module = naga::front::wgsl::parse_str(crate::TRACE_WGSL).expect("trace.wgsl parses");
-        let mut layouter = naga::proc::Layouter::default();
-        layouter.update(module.to_ctx()).expect("layout");
-        let wgsl = |name: &str| {
-            let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name);
-            let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
-            let _ = handle;
-            (
-                *span as usize,
-                members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect::<Vec<_>>(),
-            )
-        };
-        macro_rules! check {
-            ($rust:ty, $wgsl:literal, [$($field:ident),*]) => {{
-                let (size, members) = wgsl($wgsl);
-                assert_eq!(std::mem::size_of::<$rust>(), size, "size of {}", $wgsl);
-                let rust = vec![$((stringify!($field).to_string(), std::mem::offset_of!($rust, $field))),*];
-                assert_eq!(rust, members, "fields of {}", $wgsl);
-            }};
-        }
-        check!(GpuParticle, "Particle", [mean, opacity, row0, id, row1, pad1, row2, pad2]);
-        check!(GpuNode, "Node", [min, first, max, count]);
-        check!(PassState, "PassState", [radiance, transmittance, after_t, after_id, flags, pad]);
-        check!(
+        assert_mirrors!(crate::TRACE_WGSL, GpuParticle, "Particle", [mean, opacity, row0, id, row1, pad1, row2, pad2]);
+        assert_mirrors!(crate::TRACE_WGSL, GpuNode, "Node", [min, first, max, count]);
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            PassState,
+            "PassState",
+            [radiance, transmittance, after_t, after_id, flags, pad]
+        );
+        assert_mirrors!(
+            crate::TRACE_WGSL,
             Params,
             "Params",
             [
@@ -298,9 +322,6 @@ mod tests {
     /// The kernel is valid WGSL for naga's validator (a shader error fails `cargo test`).
     #[test]
     fn trace_wgsl_validates() {
-        let module = naga::front::wgsl::parse_str(crate::TRACE_WGSL).expect("parses");
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-            .validate(&module)
-            .expect("validates");
+        validate("trace", crate::TRACE_WGSL);
     }
 }

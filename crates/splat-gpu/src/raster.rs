@@ -1022,31 +1022,14 @@ impl FrameSlots {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn layout_of(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
-        let module = naga::front::wgsl::parse_str(source).expect("parses");
-        let mut layouter = naga::proc::Layouter::default();
-        layouter.update(module.to_ctx()).expect("layout");
-        let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name);
-        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
-        (*span as usize, members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect())
-    }
-
-    macro_rules! check {
-        ($source:expr, $rust:ty, $wgsl:literal, [$($field:ident),*]) => {{
-            let (size, members) = layout_of($source, $wgsl);
-            assert_eq!(std::mem::size_of::<$rust>(), size, "size of {}", $wgsl);
-            let rust = vec![$((stringify!($field).to_string(), std::mem::offset_of!($rust, $field))),*];
-            assert_eq!(rust, members, "fields of {}", $wgsl);
-        }};
-    }
+    use crate::layout::wgsl_check::{assert_mirrors, validate};
 
     /// Sizes and offsets of the Rust mirrors equal naga's layout of the WGSL structs.
     #[test]
     fn rust_structs_mirror_the_raster_wgsl_structs() {
-        check!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
-        check!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, pad, rect]);
-        check!(
+        assert_mirrors!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
+        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, pad, rect]);
+        assert_mirrors!(
             RASTER_WGSL,
             RasterParams,
             "RasterParams",
@@ -1072,18 +1055,14 @@ mod tests {
                 pad2
             ]
         );
-        check!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, pad1]);
+        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, pad1]);
     }
 
     /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).
     #[test]
     fn raster_wgsl_validates() {
         for (name, source) in [("raster", RASTER_WGSL), ("splat", SPLAT_WGSL), ("fold", FOLD_WGSL)] {
-            let module =
-                naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
-            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-                .validate(&module)
-                .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+            validate(name, source);
         }
     }
 }
