@@ -3,6 +3,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
+use splat_core::Scene;
 use splat_core::bvh::BvhNode;
 use splat_core::particle::sh_coeff_count;
 use splat_core::rng::RngScheme;
@@ -159,8 +160,7 @@ pub fn nodes(trace: &TraceScene) -> Vec<GpuNode> {
 }
 
 /// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle.
-pub fn sh(trace: &TraceScene) -> Vec<[f32; 4]> {
-    let scene = trace.scene();
+pub fn sh(scene: &Scene) -> Vec<[f32; 4]> {
     let per = sh_coeff_count(scene.sh_degree);
     let mut v: Vec<[f32; 4]> =
         scene.particles.iter().flat_map(|p| p.sh[..per].iter().map(|c| [c.x, c.y, c.z, 0.0])).collect();

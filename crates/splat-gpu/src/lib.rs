@@ -253,6 +253,24 @@ impl GpuContext {
         Ok(data)
     }
 
+    /// Refuse a storage buffer of `bytes` above the binding limit, naming the buffer and the
+    /// `count` of items (particles, keys) that needed it.
+    pub(crate) fn check_binding(&self, buffer: &'static str, bytes: u64, count: usize) -> Result<(), GpuError> {
+        if bytes > self.max_binding {
+            return Err(GpuError::SceneTooLarge { buffer, bytes, limit: self.max_binding, count });
+        }
+        Ok(())
+    }
+
+    /// A read-only storage buffer holding `contents`.
+    pub(crate) fn upload(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: wgpu::BufferUsages::STORAGE,
+        })
+    }
+
     /// Copy `words` u32 of `source` from word `first` into a staging buffer and read them.
     pub(crate) fn read_u32_at(&self, source: &wgpu::Buffer, first: usize, words: usize) -> Result<Vec<u32>, GpuError> {
         let bytes = (4 * words.max(1)) as u64;
@@ -379,29 +397,16 @@ impl GpuScene {
     pub fn new(ctx: &GpuContext, trace: &TraceScene) -> Result<Self, GpuError> {
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
-        let sh = layout::sh(trace);
+        let sh = layout::sh(trace.scene());
         let count = trace.scene().particles.len();
-        let check = |buffer: &'static str, bytes: usize| {
-            let bytes = bytes as u64;
-            if bytes > ctx.max_binding {
-                return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count });
-            }
-            Ok(())
-        };
-        check("particle", std::mem::size_of_val(particles.as_slice()))?;
-        check("BVH node", std::mem::size_of_val(nodes.as_slice()))?;
-        check("SH", std::mem::size_of_val(sh.as_slice()))?;
-        let storage = |label, contents: &[u8]| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
+        let bytes = |data: &[u8]| data.len() as u64;
+        ctx.check_binding("particle", bytes(bytemuck::cast_slice(&particles)), count)?;
+        ctx.check_binding("BVH node", bytes(bytemuck::cast_slice(&nodes)), count)?;
+        ctx.check_binding("SH", bytes(bytemuck::cast_slice(&sh)), count)?;
         Ok(Self {
-            particles: storage("particles", bytemuck::cast_slice(&particles)),
-            nodes: storage("nodes", bytemuck::cast_slice(&nodes)),
-            sh: storage("sh", bytemuck::cast_slice(&sh)),
+            particles: ctx.upload("particles", bytemuck::cast_slice(&particles)),
+            nodes: ctx.upload("nodes", bytemuck::cast_slice(&nodes)),
+            sh: ctx.upload("sh", bytemuck::cast_slice(&sh)),
         })
     }
 }

@@ -32,7 +32,7 @@ use crate::{GpuContext, GpuError, GpuOutput, compute_pipeline, storage_entry, un
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::image::Image;
-use splat_core::particle::{Scene, sh_coeff_count};
+use splat_core::particle::Scene;
 use splat_core::raster::project::FRUSTUM_GUARD;
 use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings};
 use splat_core::render::{RenderError, RenderSettings, TILE, validate_scene};
@@ -379,29 +379,15 @@ impl RasterScene {
                 }
             })
             .collect();
-        let per = sh_coeff_count(scene.sh_degree);
-        let mut sh: Vec<[f32; 4]> =
-            scene.particles.iter().flat_map(|p| p.sh[..per].iter().map(|c| [c.x, c.y, c.z, 0.0])).collect();
-        sh.resize(sh.len().max(1), [0.0; 4]);
-        let splat_bytes = (count.max(1) * size_of::<GpuSplat>()) as u64;
-        for (buffer, bytes) in [("splat", splat_bytes), ("SH", (sh.len() * 16) as u64)] {
-            if bytes > ctx.max_binding {
-                return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count });
-            }
-        }
+        let sh = crate::layout::sh(scene);
+        ctx.check_binding("splat", (count.max(1) * size_of::<GpuSplat>()) as u64, count)?;
+        ctx.check_binding("SH", (sh.len() * 16) as u64, count)?;
         if particles.is_empty() {
             return Err(GpuError::Render(RenderError::Settings("the scene has no particles".into())));
         }
-        let upload = |label, contents: &[u8]| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
         Ok(Self {
-            particles: upload("raster particles", bytemuck::cast_slice(&particles)),
-            sh: upload("raster sh", bytemuck::cast_slice(&sh)),
+            particles: ctx.upload("raster particles", bytemuck::cast_slice(&particles)),
+            sh: ctx.upload("raster sh", bytemuck::cast_slice(&sh)),
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
             settings: *settings,

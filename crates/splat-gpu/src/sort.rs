@@ -155,15 +155,7 @@ impl RadixSort {
         let capacity = capacity.max(1);
         let blocks = capacity.div_ceil(BLOCK);
         let hist_len = (16 * blocks).max(capacity);
-        let bytes = 4 * u64::from(hist_len);
-        if bytes > ctx.max_binding {
-            return Err(GpuError::SceneTooLarge {
-                buffer: "sort",
-                bytes,
-                limit: ctx.max_binding,
-                count: capacity as usize,
-            });
-        }
+        ctx.check_binding("sort", 4 * u64::from(hist_len), capacity as usize)?;
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let buffer = |label, words: u32| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
