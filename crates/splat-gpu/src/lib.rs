@@ -280,13 +280,25 @@ impl GpuContext {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
-        encoder.copy_buffer_to_buffer(source, 4 * first as u64, &staging, 0, bytes);
-        self.queue.submit([encoder.finish()]);
-        let mut data: Vec<u32> = self.read_buffer(&staging)?.iter().map(|f| f.to_bits()).collect();
+        let mut data: Vec<u32> =
+            self.read_through(source, 4 * first as u64, &staging, bytes)?.iter().map(|f| f.to_bits()).collect();
         data.truncate(words);
         Ok(data)
+    }
+
+    /// Copy `bytes` of `source` from byte `offset` into the mappable `staging` and read them.
+    fn read_through(
+        &self,
+        source: &wgpu::Buffer,
+        offset: u64,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+    ) -> Result<Vec<f32>, GpuError> {
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        encoder.copy_buffer_to_buffer(source, offset, staging, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        self.read_buffer(staging)
     }
 
     /// The first `words` u32 of `source`.
@@ -616,7 +628,7 @@ impl Run<'_> {
                         .collect();
                     pass_index += batch.len() as u32;
                     submit(&batch)?;
-                    let states = self.read(&pass_state, &read_state, state_bytes)?;
+                    let states = self.ctx.read_through(&pass_state, 0, &read_state, state_bytes)?;
                     if states.chunks(8).all(|s| s[6].to_bits() & 1 == 1) {
                         break;
                     }
@@ -632,8 +644,8 @@ impl Run<'_> {
             }
             submit(&params)?;
         }
-        let mean = self.read(&out_mean, &read_mean, out_bytes)?;
-        let m2 = self.read(&out_var, &read_var, out_bytes)?;
+        let mean = self.ctx.read_through(&out_mean, 0, &read_mean, out_bytes)?;
+        let m2 = self.ctx.read_through(&out_var, 0, &read_var, out_bytes)?;
         let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
         let output = GpuOutput {
             loop_iterations: busiest.0,
@@ -642,14 +654,6 @@ impl Run<'_> {
             ..output(camera, &mean, &m2, self.count, gpu_time, timer.is_some())
         };
         Ok(Finished { output, loop_iterations: busiest })
-    }
-
-    fn read(&self, source: &wgpu::Buffer, staging: &wgpu::Buffer, bytes: u64) -> Result<Vec<f32>, GpuError> {
-        let mut encoder =
-            self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
-        encoder.copy_buffer_to_buffer(source, 0, staging, 0, bytes);
-        self.ctx.queue.submit([encoder.finish()]);
-        self.ctx.read_buffer(staging)
     }
 }
 
