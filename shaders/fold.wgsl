@@ -14,7 +14,7 @@ fn fold(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let index = gid.y * params.size.x + gid.x;
     var s = textureLoad(target_color, vec2<i32>(gid.xy), 0);
-    if (params.mode == 1u) {
+    if (params.mode == MODE_UNDER) {
         // Front to back left premultiplied colour and coverage: the background shows through
         // the remaining transmittance.
         s = vec4<f32>(s.xyz + (1.0 - s.w) * params.background.xyz, s.w);

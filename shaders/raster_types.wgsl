@@ -51,6 +51,10 @@ struct Splat {
 }
 
 const NONE: u32 = 0xffffffffu;
+// params.mode: which draw the splatting pipeline runs (splat_gpu::raster::Draw, checked by a test).
+const MODE_OVER: u32 = 0u;
+const MODE_UNDER: u32 = 1u;
+const MODE_STOCHASTIC: u32 = 2u;
 // The √8σ extent of a splat: fragments with a Mahalanobis term above 8 are discarded.
 const EXTENT_SQ: f32 = 8.0;
 

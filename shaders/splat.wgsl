@@ -1,5 +1,5 @@
 // The splatting render pipeline: one instanced quad per splat covering its √8σ rect, and the
-// fragment stages of sorted blending (seed 003 §1.5) and StochasticSplats (seed 002 §1), each
+// fragment stages of sorted blending (vk_gaussian_splatting Lighting §1.5) and StochasticSplats (vk_gaussian_splatting Stochastic transparency §1), each
 // the twin of a branch of crates/splat-core/src/raster/mod.rs (Rasterizer::sorted and
 // Rasterizer::stochastic_splat with one sample at the pixel centre).
 
@@ -9,8 +9,6 @@
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;
 
-const MODE_OVER: u32 = 0u;
-const MODE_UNDER: u32 = 1u;
 // View depth z maps to the depth buffer as z · 2⁻¹⁰⁰: a power of two, so the map is exact and
 // keeps the f32 order of every depth (z ≥ 0.2 stays a normal float, z up to ~10³⁰ fits in [0, 1]).
 const DEPTH_SCALE: f32 = 7.888609e-31;

@@ -1,6 +1,7 @@
-// Ray tracing of transparent 3D Gaussians through a BVH, every method of splat_core::trace.
-// Each function mirrors its CPU twin in crates/splat-core/src/{hit,rng,bvh,trace}.rs; the
-// decisions use the same counter-based hashes, so a GPU frame makes the CPU frame's choices.
+// Ray tracing of transparent 3D Gaussians through a BVH (bvh.wgsl), every method of
+// splat_core::trace. Each function mirrors its CPU twin in crates/splat-core/src/{hit,rng,
+// trace,frame}.rs; the decisions use the same counter-based hashes, so a GPU frame makes the
+// CPU frame's choices.
 
 // One particle in BVH leaf order (64 bytes), mirrored by splat_gpu::GpuParticle.
 struct Particle {
@@ -13,14 +14,6 @@ struct Particle {
     pad1: f32,
     row2: vec3<f32>,
     pad2: f32,
-}
-
-// One BVH node (32 bytes), mirrored by splat_core::bvh::BvhNode.
-struct Node {
-    min: vec3<f32>,
-    first: u32,
-    max: vec3<f32>,
-    count: u32,
 }
 
 // Everything a dispatch needs (192 bytes), mirrored by splat_gpu::Params.
@@ -67,19 +60,22 @@ struct PassState {
     pad: u32,
 }
 
+// params.mode (splat_gpu::layout::MODE_*): whole frames per invocation, or one pass of one frame.
+const MODE_FRAMES: u32 = 0u;
+const MODE_PASS: u32 = 1u;
 const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
+// The method identities of splat_core::trace::MethodCode (a test compares them).
+const METHOD_EXACT: u32 = 0u;
 const METHOD_KBUFFER: u32 = 1u;
 const METHOD_STOCHASTIC: u32 = 2u;
 const METHOD_STOCHASTIC_N: u32 = 3u;
 const METHOD_STOCHASTIC_PASS: u32 = 4u;
 const METHOD_DEPTH_SAMPLING: u32 = 5u;
+const METHOD_OPAQUE: u32 = 6u; // CPU only: refused by GpuTracer::supports
 const MAX_SLOTS: u32 = 64u;
-const STACK_DEPTH: u32 = 64u;
-const NONE: u32 = 0xffffffffu;
 const PASS_ID: u32 = 0xffffffffu;
 const OFFSET_ID: u32 = 0xfffffffeu;
-const FAR: f32 = 3.0e38;
 // lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
 // invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
 // Every loop body below starts with `iterations += 1u`; a loop statement cannot iterate more
@@ -174,94 +170,51 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
     return Hit(t, alpha, true);
 }
 
+fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
+    return t < other_t || (t == other_t && id < other_id);
+}
+
 // ---- sh.rs ------------------------------------------------------------------------------------
 
 fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
     return sh_eval(id, params.sh_degree, dir);
 }
 
-// ---- bvh.rs -----------------------------------------------------------------------------------
-
-// Entry distance into the node's box within (t_min, t_max], FAR when the ray misses it.
-fn enter(n: Node, origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> f32 {
-    let t0 = (n.min - origin) * inv;
-    let t1 = (n.max - origin) * inv;
-    let near = min(t0, t1);
-    let far = max(t0, t1);
-    let e = max(max(max(near.x, near.y), near.z), params.t_min);
-    let x = min(min(min(far.x, far.y), far.z), t_max);
-    return select(FAR, e, e <= x);
-}
-
-fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
-    let tiny = select(vec3<f32>(1e-30), vec3<f32>(-1e-30), d < vec3<f32>(0.0));
-    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(1e-30));
-}
-
-fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
-    return t < other_t || (t == other_t && id < other_id);
-}
-
-// Stack traversal state of the current ray (bvh.rs `Bvh::traverse`).
-var<private> trav_stack: array<u32, 64>;
-var<private> trav_top: u32;
-var<private> trav_next: u32;
-
-fn traversal_begin(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) {
-    trav_top = 0u;
-    trav_next = select(NONE, 0u, enter(nodes[0], origin, inv, t_max) < FAR);
-}
-
-// The next leaf whose box the ray overlaps before t_max, nearer child first; NONE when the
-// traversal is over. Nodes are re-tested against the current t_max when popped, so a caller
-// that lowers t_max between leaves clips the rest of the traversal.
-fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
-    loop {
-        iterations += 1u;
-        if (trav_next == NONE) {
-            if (trav_top == 0u) {
-                return NONE;
-            }
-            trav_top -= 1u;
-            let c = trav_stack[trav_top];
-            if (enter(nodes[c], origin, inv, t_max) < FAR) {
-                trav_next = c;
-            }
-            continue;
-        }
-        let node = trav_next;
-        let nd = nodes[node];
-        if (nd.count > 0u) {
-            trav_next = NONE;
-            return node;
-        }
-        let a = nd.first;
-        let b = nd.first + 1u;
-        let ta = enter(nodes[a], origin, inv, t_max);
-        let tb = enter(nodes[b], origin, inv, t_max);
-        if (ta < FAR && tb < FAR) {
-            trav_stack[trav_top] = select(a, b, ta <= tb);
-            trav_next = select(b, a, ta <= tb);
-            trav_top += 1u;
-        } else if (ta < FAR) {
-            trav_next = a;
-        } else if (tb < FAR) {
-            trav_next = b;
-        } else {
-            trav_next = NONE;
-        }
-    }
-    return NONE; // unreachable: the loop only ends by returning
-}
-
 // ---- trace.rs: stochastic (Algorithm 1) and its N-sample extension (§3.5) ---------------------
 
 var<private> iterations: u32;
 
-var<private> best_t: array<f32, 64>;
-var<private> best_id: array<u32, 64>;
-var<private> best_leaf: array<u32, 64>;
-var<private> slot_u: array<f32, 64>;
+var<private> best_t: array<f32, MAX_SLOTS>;
+var<private> best_id: array<u32, MAX_SLOTS>;
+var<private> best_leaf: array<u32, MAX_SLOTS>;
+var<private> slot_u: array<f32, MAX_SLOTS>;
+
+// The visitors of `traverse` (bvh.wgsl), the closures that trace.rs hands to Bvh::traverse;
+// their inputs are set in the private variables below before the traversal.
+const VISIT_STOCHASTIC: u32 = 0u;
+const VISIT_NEXT_K: u32 = 1u;
+
+fn visit(visitor: u32, ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    if (visitor == VISIT_STOCHASTIC) {
+        return stochastic_visit(ray, leaf, t_max);
+    }
+    return next_k_visit(ray, leaf, t_max);
+}
+
+// What the visitors read: the pixel's decisions; for stochastic_visit the slots first_slot ..
+// first_slot + n; for next_k_visit the buffer size k, the hit (after_t, after_id) the hits must
+// lie behind, and whether only hits accepted in slot 0 count.
+struct VisitInputs {
+    pixel_seed: u32,
+    n: u32,
+    first_slot: u32,
+    k: u32,
+    after_t: f32,
+    after_id: u32,
+    accepted: bool,
+}
+
+var<private> visit_in: VisitInputs;
 
 fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
     for (var s = 0u; s < n; s++) {
@@ -269,114 +222,103 @@ fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
         best_t[s] = FAR;
         best_id[s] = NONE;
     }
+    visit_in = VisitInputs(pixel_seed, n, first_slot, 0u, 0.0, NONE, false);
+    traverse(ray, VISIT_STOCHASTIC);
+}
+
+// One particle of Algorithm 1's traversal in each of the n slots (trace.rs
+// `TraceScene::stochastic_n`); returns t_max clipped at the farthest slot's hit.
+fn stochastic_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    let p = particles[leaf];
     let early = params.rng_scheme == 0u;
-    let inv = safe_inverse(ray.dir);
-    var t_max = params.t_max;
-    traversal_begin(ray.origin, inv, t_max);
-    loop {
-        iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
-        if (node == NONE) {
-            break;
-        }
-        let nd = nodes[node];
-        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+    if (early) {
+        let bound = min(p.opacity, params.alpha_clamp);
+        var any = false;
+        for (var s = 0u; s < visit_in.n; s++) {
             iterations += 1u;
-            let p = particles[leaf];
-            if (early) {
-                let bound = min(p.opacity, params.alpha_clamp);
-                var any = false;
-                for (var s = 0u; s < n; s++) {
-                    iterations += 1u;
-                    slot_u[s] = particle_u(pixel_seed, p.id, first_slot + s, vec3<f32>(0.0));
-                    any = any || slot_u[s] < bound;
-                }
-                if (!any) {
-                    continue;
-                }
-            }
-            let h = intersect(p, ray);
-            if (!h.ok) {
-                continue;
-            }
-            var farthest = 0.0;
-            for (var s = 0u; s < n; s++) {
-                iterations += 1u;
-                if (before(h.t, p.id, best_t[s], best_id[s])) {
-                    var u = slot_u[s];
-                    if (!early) {
-                        u = particle_u(pixel_seed, p.id, first_slot + s, ray.origin + h.t * ray.dir);
-                    }
-                    if (u < h.alpha) {
-                        best_t[s] = h.t;
-                        best_id[s] = p.id;
-                        best_leaf[s] = leaf;
-                    }
-                }
-                farthest = max(farthest, best_t[s]);
-            }
-            t_max = min(farthest, params.t_max);
+            slot_u[s] = particle_u(visit_in.pixel_seed, p.id, visit_in.first_slot + s, vec3<f32>(0.0));
+            any = any || slot_u[s] < bound;
+        }
+        if (!any) {
+            return t_max;
         }
     }
+    let h = intersect(p, ray);
+    if (!h.ok) {
+        return t_max;
+    }
+    var farthest = 0.0;
+    for (var s = 0u; s < visit_in.n; s++) {
+        iterations += 1u;
+        if (before(h.t, p.id, best_t[s], best_id[s])) {
+            var u = slot_u[s];
+            if (!early) {
+                u = particle_u(visit_in.pixel_seed, p.id, visit_in.first_slot + s, ray.origin + h.t * ray.dir);
+            }
+            if (u < h.alpha) {
+                best_t[s] = h.t;
+                best_id[s] = p.id;
+                best_leaf[s] = leaf;
+            }
+        }
+        farthest = max(farthest, best_t[s]);
+    }
+    return min(farthest, params.t_max);
 }
 
 // ---- trace.rs: the k closest hits behind (after_t, after_id) ---------------------------------
 
-var<private> kb_t: array<f32, 64>;
-var<private> kb_id: array<u32, 64>;
-var<private> kb_alpha: array<f32, 64>;
+var<private> kb_t: array<f32, MAX_SLOTS>;
+var<private> kb_id: array<u32, MAX_SLOTS>;
+var<private> kb_alpha: array<f32, MAX_SLOTS>;
 var<private> kb_len: u32;
 
 // Collect the k closest hits strictly behind (after_t, after_id) into kb_*; with `accepted`,
 // only hits accepted by roulette in slot 0 count (depth sampling).
 fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_seed: u32) {
     kb_len = 0u;
-    let inv = safe_inverse(ray.dir);
-    var t_max = params.t_max;
-    traversal_begin(ray.origin, inv, t_max);
+    visit_in = VisitInputs(pixel_seed, 1u, 0u, k, after_t, after_id, accepted);
+    traverse(ray, VISIT_NEXT_K);
+}
+
+// One particle of next_k's traversal: kept in the sorted k-buffer when it is behind the
+// previous pass and before the farthest kept hit (trace.rs `KBuf::insert`); returns t_max
+// clipped at the farthest kept hit once the buffer is full.
+fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    let p = particles[leaf];
+    let k = visit_in.k;
+    let h = intersect(p, ray);
+    if (!h.ok || !before(visit_in.after_t, visit_in.after_id, h.t, p.id)) {
+        return t_max;
+    }
+    if (kb_len == k && !before(h.t, p.id, kb_t[k - 1u], kb_id[k - 1u])) {
+        return t_max;
+    }
+    if (visit_in.accepted && !(particle_u(visit_in.pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
+        return t_max;
+    }
+    // Insertion sort, dropping the farthest when full.
+    var i = select(kb_len, k - 1u, kb_len == k);
+    if (kb_len < k) {
+        kb_len += 1u;
+    }
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
-        if (node == NONE) {
+        if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
             break;
         }
-        let nd = nodes[node];
-        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
-            iterations += 1u;
-            let p = particles[leaf];
-            let h = intersect(p, ray);
-            if (!h.ok || !before(after_t, after_id, h.t, p.id)) {
-                continue;
-            }
-            if (kb_len == k && !before(h.t, p.id, kb_t[k - 1u], kb_id[k - 1u])) {
-                continue;
-            }
-            if (accepted && !(particle_u(pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
-                continue;
-            }
-            // Insertion sort, dropping the farthest when full.
-            var i = select(kb_len, k - 1u, kb_len == k);
-            if (kb_len < k) {
-                kb_len += 1u;
-            }
-            loop {
-                iterations += 1u;
-                if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
-                    break;
-                }
-                kb_t[i] = kb_t[i - 1u];
-                kb_id[i] = kb_id[i - 1u];
-                kb_alpha[i] = kb_alpha[i - 1u];
-                i -= 1u;
-            }
-            kb_t[i] = h.t;
-            kb_id[i] = p.id;
-            kb_alpha[i] = h.alpha;
-            if (kb_len == k) {
-                t_max = kb_t[k - 1u];
-            }
-        }
+        kb_t[i] = kb_t[i - 1u];
+        kb_id[i] = kb_id[i - 1u];
+        kb_alpha[i] = kb_alpha[i - 1u];
+        i -= 1u;
     }
+    kb_t[i] = h.t;
+    kb_id[i] = p.id;
+    kb_alpha[i] = h.alpha;
+    if (kb_len == k) {
+        return kb_t[k - 1u];
+    }
+    return t_max;
 }
 
 // ---- trace.rs: the methods -------------------------------------------------------------------
@@ -386,18 +328,24 @@ fn start_state() -> PassState {
     return PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, 0u);
 }
 
-// One pass of the k-buffer: the next K hits behind the last one, integrated front to back
-// (Eq. 3). true when the ray is finished.
-fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool {
-    if ((*st).transmittance <= params.min_transmittance) {
-        return true;
-    }
-    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
+// Eq. 3 front to back over the hits in kb_*, continuing the state's radiance and
+// transmittance (trace.rs `TraceScene::integrate`).
+fn integrate(st: ptr<function, PassState>, dir: vec3<f32>) {
     for (var i = 0u; i < kb_len; i++) {
         iterations += 1u;
-        (*st).radiance += (*st).transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
+        (*st).radiance += (*st).transmittance * kb_alpha[i] * sh_color(kb_id[i], dir);
         (*st).transmittance *= 1.0 - kb_alpha[i];
     }
+}
+
+// The integrated hits over the background: L + T × background, coverage 1 − T.
+fn over_background(st: PassState) -> vec4<f32> {
+    return vec4<f32>(st.radiance + st.transmittance * params.background.xyz, 1.0 - st.transmittance);
+}
+
+// The next pass starts behind the last hit of this one; true when the pass was not full (the
+// ray has no more hits).
+fn advance(st: ptr<function, PassState>) -> bool {
     if (kb_len < params.k) {
         return true;
     }
@@ -406,19 +354,65 @@ fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool
     return false;
 }
 
-fn kbuffer_sample(st: PassState) -> vec4<f32> {
-    return vec4<f32>(st.radiance + st.transmittance * params.background.xyz, 1.0 - st.transmittance);
+// One pass of the k-buffer: the next K hits behind the last one, integrated front to back
+// (Eq. 3). true when the ray is finished.
+fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool {
+    if ((*st).transmittance <= params.min_transmittance) {
+        return true;
+    }
+    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
+    integrate(st, ray.dir);
+    return advance(st);
 }
 
-fn kbuffer(ray: Ray, pixel_seed: u32) -> vec4<f32> {
+// One pass of the vk stochastic pass: its K sorted hits integrated from T = 1, accepted with
+// probability 1 − T_pass (radiance divided by it). true when the ray is finished.
+fn stochastic_pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
+    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
+    if (kb_len == 0u) {
+        return true;
+    }
+    var pass_st = start_state();
+    integrate(&pass_st, ray.dir);
+    let opacity = 1.0 - pass_st.transmittance;
+    if (pass_u(pixel_seed, pass_index) < opacity) {
+        (*st).radiance = pass_st.radiance / opacity;
+        (*st).flags |= ACCEPTED;
+        return true;
+    }
+    return advance(st);
+}
+
+// One pass of a multi-pass method (exact, k-buffer, stochastic pass); true when the ray is
+// finished.
+fn pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
+    if (params.method == METHOD_STOCHASTIC_PASS) {
+        return stochastic_pass_step(ray, pixel_seed, pass_index, st);
+    }
+    return kbuffer_step(ray, pixel_seed, st);
+}
+
+// The sample of a finished multi-pass ray.
+fn pass_sample(st: PassState) -> vec4<f32> {
+    if (params.method != METHOD_STOCHASTIC_PASS) {
+        return over_background(st);
+    }
+    if ((st.flags & ACCEPTED) != 0u) {
+        return vec4<f32>(st.radiance, 1.0);
+    }
+    return vec4<f32>(params.background.xyz, 0.0);
+}
+
+// Every pass of a multi-pass method in one invocation.
+fn multi_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     var st = start_state();
     for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
         iterations += 1u;
-        if (kbuffer_step(ray, pixel_seed, &st)) {
+        if (pass_step(ray, pixel_seed, pass_index, &st)) {
             break;
         }
     }
-    return kbuffer_sample(st);
+    return pass_sample(st);
 }
 
 fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
@@ -435,70 +429,20 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
     return sum / f32(n);
 }
 
-// One pass of the vk stochastic pass: its K sorted hits integrated from T = 1, accepted with
-// probability 1 − T_pass (radiance divided by it). true when the ray is finished.
-fn stochastic_pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
-    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
-    if (kb_len == 0u) {
-        return true;
-    }
-    var radiance = vec3<f32>(0.0);
-    var transmittance = 1.0;
-    for (var i = 0u; i < kb_len; i++) {
-        iterations += 1u;
-        radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
-        transmittance *= 1.0 - kb_alpha[i];
-    }
-    let opacity = 1.0 - transmittance;
-    if (pass_u(pixel_seed, pass_index) < opacity) {
-        (*st).radiance = radiance / opacity;
-        (*st).flags |= ACCEPTED;
-        return true;
-    }
-    if (kb_len < params.k) {
-        return true;
-    }
-    (*st).after_t = kb_t[kb_len - 1u];
-    (*st).after_id = kb_id[kb_len - 1u];
-    return false;
-}
-
-fn stochastic_pass_sample(st: PassState) -> vec4<f32> {
-    if ((st.flags & ACCEPTED) != 0u) {
-        return vec4<f32>(st.radiance, 1.0);
-    }
-    return vec4<f32>(params.background.xyz, 0.0);
-}
-
-fn stochastic_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    var st = start_state();
-    for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
-        iterations += 1u;
-        if (stochastic_pass_step(ray, pixel_seed, pass_index, &st)) {
-            break;
-        }
-    }
-    return stochastic_pass_sample(st);
-}
-
 fn depth_sampling(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     next_k(ray, params.k, params.t_min, NONE, true, pixel_seed);
-    var radiance = vec3<f32>(0.0);
-    var transmittance = 1.0;
-    for (var i = 0u; i < kb_len; i++) {
-        iterations += 1u;
-        radiance += transmittance * kb_alpha[i] * sh_color(kb_id[i], ray.dir);
-        transmittance *= 1.0 - kb_alpha[i];
-    }
-    return vec4<f32>(radiance + transmittance * params.background.xyz, 1.0 - transmittance);
+    var st = start_state();
+    integrate(&st, ray.dir);
+    return over_background(st);
 }
 
+// One frame of the method (trace.rs `TraceScene::sample`).
 fn sample(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     switch params.method {
-        case 2u: {
+        case METHOD_STOCHASTIC: {
             return stochastic_n(ray, pixel_seed, 1u, 0u);
         }
-        case 3u: {
+        case METHOD_STOCHASTIC_N: {
             var sum = vec4<f32>(0.0);
             for (var pass_index = 0u; pass_index < params.m; pass_index++) {
                 iterations += 1u;
@@ -506,14 +450,11 @@ fn sample(ray: Ray, pixel_seed: u32) -> vec4<f32> {
             }
             return sum / f32(params.m);
         }
-        case 4u: {
-            return stochastic_pass(ray, pixel_seed);
-        }
-        case 5u: {
+        case METHOD_DEPTH_SAMPLING: {
             return depth_sampling(ray, pixel_seed);
         }
-        default: {
-            return kbuffer(ray, pixel_seed);
+        default: { // METHOD_EXACT, METHOD_KBUFFER, METHOD_STOCHASTIC_PASS
+            return multi_pass(ray, pixel_seed);
         }
     }
 }
@@ -530,6 +471,14 @@ fn pixel_ray(x: u32, y: u32) -> Ray {
     return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz);
 }
 
+// frame.rs `PixelFrames::push` in f32: fold sample `s` of frame `frame` into a running mean
+// and M2 (Welford).
+fn welford(mean: ptr<function, vec4<f32>>, m2: ptr<function, vec4<f32>>, s: vec4<f32>, frame: u32) {
+    let delta = s - *mean;
+    *mean += delta / f32(frame + 1u);
+    *m2 += delta * (s - *mean);
+}
+
 // One invocation per pixel: frames first_frame .. first_frame + frames of the render, folded
 // into the running Welford state of the pixel (mean in out_mean, M2 in out_var.xyz, the most
 // loop iterations any of its dispatches spent in out_var.w). Long renders are many dispatches.
@@ -541,7 +490,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let index = gid.y * params.size.x + gid.x;
     let ray = pixel_ray(gid.x, gid.y);
     iterations = 0u;
-    if (params.mode == 1u) {
+    if (params.mode == MODE_PASS) {
         one_pass(index, gid.xy, ray);
         return;
     }
@@ -557,16 +506,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         iterations += 1u;
         let frame = params.first_frame + f;
         let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
-        let s = sample(ray, pixel_seed);
-        let delta = s - mean;
-        mean += delta / f32(frame + 1u);
-        m2 += delta * (s - mean);
+        welford(&mean, &m2, sample(ray, pixel_seed), frame);
     }
     out_mean[index] = mean;
     out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
 }
 
-// Fold one frame's sample into the pixel's running Welford state.
+// Fold one frame's sample into the pixel's running Welford state (pass-per-dispatch mode).
 fn fold(index: u32, s: vec4<f32>, frame: u32) {
     var mean = vec4<f32>(0.0);
     var m2 = vec4<f32>(0.0);
@@ -578,9 +524,7 @@ fn fold(index: u32, s: vec4<f32>, frame: u32) {
     if (frame > 0u || params.pass_index > 0u) {
         most = out_var[index].w;
     }
-    let delta = s - mean;
-    mean += delta / f32(frame + 1u);
-    m2 += delta * (s - mean);
+    welford(&mean, &m2, s, frame);
     out_mean[index] = mean;
     out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
 }
@@ -600,9 +544,7 @@ fn one_pass(index: u32, pixel: vec2<u32>, ray: Ray) {
     if ((st.flags & DONE) == 0u) {
         let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame_key(params.seed, params.first_frame)));
         var finished = false;
-        if (params.method == METHOD_STOCHASTIC_PASS) {
-            finished = stochastic_pass_step(ray, pixel_seed, params.pass_index, &st);
-        } else if (params.method == METHOD_STOCHASTIC_N) {
+        if (params.method == METHOD_STOCHASTIC_N) {
             // Slots pass_index·n … of the frame's params.m slots: the same decisions as one
             // traversal of all of them, since each slot's pick ignores the others.
             let s = stochastic_n(ray, pixel_seed, params.n, params.pass_index * params.n);
@@ -610,14 +552,12 @@ fn one_pass(index: u32, pixel: vec2<u32>, ray: Ray) {
             st.transmittance += s.w * f32(params.n);
             finished = (params.pass_index + 1u) * params.n >= params.m;
         } else {
-            finished = kbuffer_step(ray, pixel_seed, &st);
+            finished = pass_step(ray, pixel_seed, params.pass_index, &st);
         }
         if (finished || params.pass_index + 1u >= params.max_passes) {
             st.flags |= DONE;
-            var s = kbuffer_sample(st);
-            if (params.method == METHOD_STOCHASTIC_PASS) {
-                s = stochastic_pass_sample(st);
-            } else if (params.method == METHOD_STOCHASTIC_N) {
+            var s = pass_sample(st);
+            if (params.method == METHOD_STOCHASTIC_N) {
                 s = vec4<f32>(st.radiance, st.transmittance) / f32(params.m);
             }
             fold(index, s, params.first_frame);

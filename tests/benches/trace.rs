@@ -3,9 +3,9 @@
 //! without it), and Sun et al. Table 5: 1024 samples per pixel as 16 × 64 against 1024 × 1.
 //! Compare methods by their ratios to `opaque` in the same run.
 
-use splat_core::render::RenderSettings;
-use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, Scene};
+use splat_core::{Frames, RenderSettings};
 use std::sync::LazyLock;
 
 fn main() {

@@ -158,120 +158,156 @@ pub fn compare_golden(golden: &Path, actual: &image::RgbImage, tolerance: u8) ->
     ))
 }
 
-/// The statistical method of ARCHITECTURE.md, for any estimator given as a renderer of frames
-/// and its oracle's image; [`stat`] and [`raster_stat`] bind it to each family.
-pub mod method {
-    use splat_core::stats::{ZTest, log_log_slope, rmse};
-    use splat_core::trace::{Frames, TraceOutput};
-
-    /// The oracle's RGB and its coverage mask (alpha > 1e-4 per pixel-channel).
-    pub fn reference(oracle: &TraceOutput) -> (Vec<f32>, Vec<bool>) {
-        let mask = oracle.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
-        (oracle.mean.data().to_vec(), mask)
-    }
-
-    fn masked(v: &[f32], mask: &[bool]) -> Vec<f32> {
-        v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
-    }
-
-    /// The z-test of `render` against `oracle` over the covered pixel-channels: mean from
-    /// `base.count` frames with seed `base.seed`, per-frame variance from an independent run of
-    /// 4 × as many frames with seed `base.seed + 1`.
-    pub fn z_test(oracle: &TraceOutput, render: impl Fn(Frames) -> TraceOutput, base: Frames) -> ZTest {
-        let (reference, mask) = reference(oracle);
-        let mean = render(base);
-        let var = render(Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
-        ZTest::new(
-            &masked(mean.mean.data(), &mask),
-            &masked(&reference, &mask),
-            &masked(var.variance.data(), &mask),
-            base.count,
-            3,
-        )
-    }
-
-    /// RMSE against `oracle` at spp = 1, 2, 4, … `max_spp`, averaged over `seeds` seeds, and
-    /// the least-squares log–log slope.
-    pub fn convergence(
-        oracle: &TraceOutput,
-        render: impl Fn(Frames) -> TraceOutput,
-        max_spp: u32,
-        seeds: u32,
-    ) -> (f64, Vec<(u32, f64)>) {
-        let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
-        let table: Vec<(u32, f64)> = levels
-            .iter()
-            .map(|&spp| {
-                let sum: f64 = (0..seeds)
-                    .map(|s| {
-                        let frames = Frames { count: spp, seed: 1000 * spp + s, ..Frames::default() };
-                        rmse(render(frames).mean.data(), oracle.mean.data())
-                    })
-                    .sum();
-                (spp, sum / f64::from(seeds))
-            })
-            .collect();
-        let (x, y): (Vec<f64>, Vec<f64>) = table.iter().map(|&(s, r)| (f64::from(s), r)).unzip();
-        (log_log_slope(&x, &y), table)
-    }
-}
-
-/// The statistical method applied to the ray-tracing estimators, against `exact`.
-pub mod stat {
-    use splat_core::Camera;
-    use splat_core::stats::ZTest;
-    use splat_core::trace::{Frames, Method, TraceOutput, TraceScene, render_frames};
-
-    /// Render `frames` frames of `method` with `seed` (hash RNG unless `frames` says otherwise).
-    pub fn run(trace: &TraceScene, camera: &Camera, method: &Method, frames: Frames) -> TraceOutput {
-        render_frames(trace, camera, method, &frames, &|_| {}).expect("render")
-    }
-
-    fn exact(trace: &TraceScene, camera: &Camera) -> TraceOutput {
-        run(trace, camera, &Method::Exact, Frames::default())
-    }
-
-    /// [`super::method::z_test`] of `method` against exact.
-    pub fn z_test(trace: &TraceScene, camera: &Camera, method: &Method, base: Frames) -> ZTest {
-        super::method::z_test(&exact(trace, camera), |f| run(trace, camera, method, f), base)
-    }
-
-    /// [`super::method::convergence`] of `method` against exact.
-    pub fn convergence(
-        trace: &TraceScene,
-        camera: &Camera,
-        method: &Method,
-        max_spp: u32,
-        seeds: u32,
-    ) -> (f64, Vec<(u32, f64)>) {
-        super::method::convergence(&exact(trace, camera), |f| run(trace, camera, method, f), max_spp, seeds)
-    }
-}
-
-/// The statistical method applied to the raster estimators, against sorted splatting (the
-/// raster oracle) with the same samples.
-pub mod raster_stat {
+/// The statistical method of docs/architecture.md ("How correctness is proven") as one object,
+/// after Mitsuba 3's `ChiSquareTest`: a [`harness::StatTest`] is an oracle image and a sampler
+/// of frames (any estimator, CPU or GPU, ray or raster); every statistical suite is a few lines
+/// on it.
+pub mod harness {
+    use splat_core::frame::{Frames, RenderOutput};
     use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
-    use splat_core::stats::ZTest;
-    use splat_core::trace::{Frames, TraceOutput};
+    use splat_core::stats::{ZTest, log_log_slope, rmse};
+    use splat_core::trace::{Method, TraceScene, render_frames};
+    use splat_core::{Camera, Scene};
+    use std::ops::RangeInclusive;
 
-    /// Render `frames` frames of `method`.
-    pub fn run(r: &Rasterizer, method: &RasterMethod, frames: Frames) -> TraceOutput {
-        render_raster(r, method, &frames, &|_| {}).expect("render").frames
+    /// The log–log RMSE slope of an unbiased Monte Carlo estimator: −1/2 within the sampling
+    /// error of a 3-seed, 9-level fit.
+    pub const MONTE_CARLO_SLOPE: RangeInclusive<f64> = -0.58..=-0.42;
+
+    /// A built-in fixture scene and its camera at `width` × `height`.
+    pub fn fixture(name: &str, width: u32, height: u32) -> (Scene, Camera) {
+        let (scene, camera) = splat_core::scenes::by_name(name).expect("a built-in scene");
+        (scene, camera.rescaled(width, height).expect("a valid size"))
     }
 
-    fn sorted(r: &Rasterizer) -> TraceOutput {
-        run(r, &RasterMethod::Sorted { blend: Blend::Under }, Frames::default())
+    /// One estimator against its oracle.
+    pub struct StatTest<'a> {
+        name: String,
+        oracle: RenderOutput,
+        sampler: Box<dyn Fn(Frames) -> RenderOutput + 'a>,
     }
 
-    /// [`super::method::z_test`] of `method` against sorted splatting.
-    pub fn z_test(r: &Rasterizer, method: &RasterMethod, base: Frames) -> ZTest {
-        super::method::z_test(&sorted(r), |f| run(r, method, f), base)
+    impl<'a> StatTest<'a> {
+        /// `sampler(frames)` renders the mean and variance of `frames` of the estimator;
+        /// `oracle` is the image it must equal in expectation; `name` labels reports and the
+        /// z-map written on failure.
+        pub fn new(
+            name: impl Into<String>,
+            oracle: RenderOutput,
+            sampler: impl Fn(Frames) -> RenderOutput + 'a,
+        ) -> Self {
+            Self { name: name.into(), oracle, sampler: Box::new(sampler) }
+        }
+
+        /// The CPU ray-tracing `method` against `exact` (equal to the oracle, proven in
+        /// `tracer.rs`).
+        pub fn trace(name: impl Into<String>, trace: &'a TraceScene<'a>, camera: &'a Camera, method: Method) -> Self {
+            let run = move |m: &Method, f: Frames| render_frames(trace, camera, m, &f, &|_| {}).expect("render");
+            Self::new(name, run(&Method::Exact, Frames::default()), move |f| run(&method, f))
+        }
+
+        /// The CPU raster `method` against sorted splatting with the same samples (the raster
+        /// oracle).
+        pub fn raster(name: impl Into<String>, r: &'a Rasterizer<'a>, method: RasterMethod) -> Self {
+            let run = move |m: &RasterMethod, f: Frames| render_raster(r, m, &f, &|_| {}).expect("render");
+            let sorted = RasterMethod::Sorted { blend: Blend::Under };
+            Self::new(name, run(&sorted, Frames::default()), move |f| run(&method, f))
+        }
+
+        /// The z-test over the oracle's covered pixel-channels: the mean from `base.count`
+        /// frames with seed `base.seed`, the per-frame variance from an independent run of
+        /// 4 × as many frames with seed `base.seed + 1`.
+        pub fn z_test(&self, base: Frames) -> ZTest {
+            self.z_test_and_map(base).0
+        }
+
+        fn z_test_and_map(&self, base: Frames) -> (ZTest, image::RgbImage) {
+            let mask: Vec<bool> = self.oracle.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
+            let keep = |v: &[f32]| v.iter().zip(&mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect::<Vec<_>>();
+            let mean = (self.sampler)(base);
+            let var = (self.sampler)(Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
+            let (m, r, v) = (mean.mean.data(), self.oracle.mean.data(), var.variance.data());
+            let z = ZTest::new(&keep(m), &keep(r), &keep(v), base.count, 3);
+            (z, z_map(&self.oracle, m, v, base.count, &mask))
+        }
+
+        /// Assert that the estimator passes the z-test; on failure write the z-map.
+        pub fn assert_unbiased(&self, base: Frames) -> ZTest {
+            let (z, map) = self.z_test_and_map(base);
+            eprintln!("{}: {z:?}", self.name);
+            if !z.passes() {
+                panic!("{} fails the z-test: {z:?}; z-map: {}", self.name, self.write_map(&map));
+            }
+            z
+        }
+
+        /// Assert that the z-test rejects the estimator (a biased control).
+        pub fn assert_rejected(&self, base: Frames) -> ZTest {
+            let z = self.z_test(base);
+            eprintln!("{} (control): {z:?}", self.name);
+            assert!(!z.passes(), "the biased control {} passes the z-test: {z:?}", self.name);
+            z
+        }
+
+        /// RMSE against the oracle at spp = 1, 2, 4, … `max_spp`, averaged over `seeds` seeds
+        /// (seed 1000 × spp + s), and the least-squares log–log slope.
+        pub fn convergence(&self, max_spp: u32, seeds: u32) -> (f64, Vec<(u32, f64)>) {
+            let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= max_spp).collect();
+            let table: Vec<(u32, f64)> = levels
+                .iter()
+                .map(|&spp| {
+                    let sum: f64 = (0..seeds)
+                        .map(|s| {
+                            let frames = Frames { count: spp, seed: 1000 * spp + s, ..Frames::default() };
+                            rmse((self.sampler)(frames).mean.data(), self.oracle.mean.data())
+                        })
+                        .sum();
+                    (spp, sum / f64::from(seeds))
+                })
+                .collect();
+            let (x, y): (Vec<f64>, Vec<f64>) = table.iter().map(|&(s, r)| (f64::from(s), r)).unzip();
+            let slope = log_log_slope(&x, &y);
+            eprintln!("{}: slope {slope:.3} {table:?}", self.name);
+            (slope, table)
+        }
+
+        /// Assert that the RMSE falls at the Monte Carlo rate ([`MONTE_CARLO_SLOPE`]).
+        pub fn assert_converges(&self, max_spp: u32, seeds: u32) -> f64 {
+            let (slope, table) = self.convergence(max_spp, seeds);
+            assert!(MONTE_CARLO_SLOPE.contains(&slope), "{}: slope {slope} {table:?}", self.name);
+            slope
+        }
+
+        /// Write the z-map as `fixtures/NAME-zmap.png` (beside the fixtures, as the goldens
+        /// write their diffs) and return its path.
+        fn write_map(&self, map: &image::RgbImage) -> String {
+            let file: String =
+                self.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+            let path = super::root().join("fixtures").join(format!("{file}-zmap.png"));
+            match map.save(&path) {
+                Ok(()) => path.display().to_string(),
+                Err(e) => format!("(not written: {e})"),
+            }
+        }
     }
 
-    /// [`super::method::convergence`] of `method` against sorted splatting.
-    pub fn convergence(r: &Rasterizer, method: &RasterMethod, max_spp: u32, seeds: u32) -> (f64, Vec<(u32, f64)>) {
-        super::method::convergence(&sorted(r), |f| run(r, method, f), max_spp, seeds)
+    /// Per-pixel z = (mean − oracle) / max(√(var / F), 1 / F) of each channel as an image:
+    /// grey 128 is z = 0, 32 levels per unit of z (brighter: too bright), black outside the
+    /// oracle's coverage.
+    fn z_map(oracle: &RenderOutput, mean: &[f32], var: &[f32], frames: u32, mask: &[bool]) -> image::RgbImage {
+        let f = f64::from(frames);
+        let reference = oracle.mean.data();
+        image::RgbImage::from_fn(oracle.mean.width(), oracle.mean.height(), |x, y| {
+            let i = 3 * (y * oracle.mean.width() + x) as usize;
+            image::Rgb([0, 1, 2].map(|c| {
+                if !mask[i + c] {
+                    return 0;
+                }
+                let se = (f64::from(var[i + c]) / f).sqrt().max(1.0 / f);
+                let z = (f64::from(mean[i + c]) - f64::from(reference[i + c])) / se;
+                (128.0 + 32.0 * z).clamp(0.0, 255.0) as u8
+            }))
+        })
     }
 }
 
@@ -304,9 +340,9 @@ pub fn bonsai_camera() -> splat_core::Camera {
 
 /// Golden images: what `cargo xtask bless` renders and the golden test compares.
 pub mod golden {
-    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
-    use splat_core::render::{RenderSettings, render_exact};
-    use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings};
+    use splat_core::trace::Method;
+    use splat_core::{Algorithm, Frames, RenderSettings};
 
     /// Fixtures with golden images.
     pub const FIXTURES: [&str; 3] = ["layers", "ramp", "cloud"];
@@ -314,58 +350,36 @@ pub mod golden {
     /// [`splat_core::scenes::PLATE_KERNEL_DEGREE`].
     pub const STRATIFICATION_FIXTURES: [&str; 2] = ["plates", "cloth"];
 
-    /// What a golden image renders.
-    #[derive(Clone, Copy, Debug)]
-    pub enum Case {
-        /// The brute-force ray-traced oracle.
-        Oracle,
-        /// A ray-tracing method through the BVH.
-        Trace(Method),
-        /// A raster method.
-        Raster(RasterMethod, RasterSettings),
-    }
-
     /// The methods rendered for every fixture: (file suffix, case, frames), stochastic ones
     /// with seed 1.
-    pub fn cases() -> Vec<(&'static str, Case, Frames)> {
+    pub fn cases() -> Vec<(&'static str, Algorithm, Frames)> {
         let f = |count| Frames { count, seed: 1, ..Frames::default() };
         let s4 = RasterSettings { samples: 4, ..RasterSettings::default() };
         vec![
-            ("exact", Case::Oracle, f(1)),
-            ("kbuffer", Case::Trace(Method::KBUFFER), f(1)),
-            ("stochastic", Case::Trace(Method::Stochastic), f(4)),
-            ("stochastic-n", Case::Trace(Method::StochasticN { m: 1, n: 4 }), f(1)),
-            ("stochastic-pass", Case::Trace(Method::STOCHASTIC_PASS), f(4)),
-            ("depth-sampling-k", Case::Trace(Method::DepthSampling { k: 2 }), f(4)),
+            ("oracle", Algorithm::Oracle, f(1)),
+            ("kbuffer", Algorithm::Trace(Method::KBUFFER), f(1)),
+            ("stochastic", Algorithm::Trace(Method::Stochastic), f(4)),
+            ("stochastic-n", Algorithm::Trace(Method::StochasticN { m: 1, n: 4 }), f(1)),
+            ("stochastic-pass", Algorithm::Trace(Method::STOCHASTIC_PASS), f(4)),
+            ("depth-sampling-k", Algorithm::Trace(Method::DepthSampling { k: 2 }), f(4)),
             (
                 "raster-sorted",
-                Case::Raster(RasterMethod::Sorted { blend: Blend::Over }, RasterSettings::default()),
+                Algorithm::Raster(RasterMethod::Sorted { blend: Blend::Over }, RasterSettings::default()),
                 f(1),
             ),
-            ("stochastic-splat", Case::Raster(RasterMethod::StochasticSplat, s4), f(2)),
-            ("enderton", Case::Raster(RasterMethod::Enderton, s4), f(2)),
-            ("stratified", Case::Raster(RasterMethod::Stratified { scramble: true }, s4), f(2)),
+            ("stochastic-splat", Algorithm::Raster(RasterMethod::StochasticSplat, s4), f(2)),
+            ("enderton", Algorithm::Raster(RasterMethod::Enderton, s4), f(2)),
+            ("stratified", Algorithm::Raster(RasterMethod::Stratified { scramble: true }, s4), f(2)),
         ]
     }
 
     /// Render one golden case of one fixture, read through the file formats, as 8-bit RGB.
-    pub fn render(fixture: &str, case: &Case, frames: &Frames) -> image::RgbImage {
+    pub fn render(fixture: &str, algorithm: &Algorithm, frames: &Frames) -> image::RgbImage {
         let dir = super::root().join("fixtures");
         let scene = splat_io::ply::read_ply(&dir.join(format!("{fixture}.ply"))).expect("fixture");
         let camera = splat_io::cameras::read_cameras(&dir.join(format!("{fixture}.cameras.json"))).expect("camera")[0];
-        let settings = RenderSettings::default();
-        let rgb = match case {
-            Case::Oracle => render_exact(&scene, &camera, &settings, &|_| {}).expect("render").radiance,
-            Case::Trace(m) => {
-                let trace = TraceScene::new(&scene, settings).expect("scene");
-                render_frames(&trace, &camera, m, frames, &|_| {}).expect("render").mean
-            }
-            Case::Raster(m, raster) => {
-                let r = Rasterizer::new(&scene, &camera, settings, *raster).expect("scene");
-                render_raster(&r, m, frames, &|_| {}).expect("render").frames.mean
-            }
-        };
-        splat_io::image::to_rgba8(&rgb).to_rgb8()
+        let out = algorithm.render(&scene, &camera, &RenderSettings::default(), frames, &|_| {}).expect("render");
+        splat_io::image::to_rgba8(&out.mean).to_rgb8()
     }
 
     /// Path of a golden image.

@@ -2,9 +2,9 @@
 //! for the exact renderer, every stochastic ray-tracing method and every raster method.
 
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
-use splat_core::render::{RenderSettings, render_exact};
 use splat_core::scenes;
-use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+use splat_core::trace::{Method, TraceScene, render_frames};
+use splat_core::{Frames, RenderSettings, render_oracle};
 
 fn pool(threads: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
@@ -12,8 +12,8 @@ fn pool(threads: usize) -> rayon::ThreadPool {
 
 fn exact_with_threads(threads: usize) -> Vec<f32> {
     let (scene, camera) = scenes::cloud();
-    let out = pool(threads).install(|| render_exact(&scene, &camera, &RenderSettings::default(), &|_| {}).unwrap());
-    [out.radiance, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
+    let out = pool(threads).install(|| render_oracle(&scene, &camera, &RenderSettings::default(), &|_| {}).unwrap());
+    [out.mean, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
 }
 
 fn method_with_threads(method: &Method, threads: usize, seed: u32) -> Vec<f32> {
@@ -60,7 +60,7 @@ fn raster_with_threads(method: &RasterMethod, threads: usize, seed: u32) -> Vec<
     let raster = RasterSettings { samples: 4, ..RasterSettings::default() };
     let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
     let frames = Frames { count: 3, seed, ..Frames::default() };
-    let out = pool(threads).install(|| render_raster(&r, method, &frames, &|_| {}).unwrap()).frames;
+    let out = pool(threads).install(|| render_raster(&r, method, &frames, &|_| {}).unwrap());
     [out.mean, out.variance, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
 }
 

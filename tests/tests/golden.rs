@@ -1,7 +1,7 @@
-//! Golden images: the exact render of every fixture, read through the file formats, against
+//! Golden images: every method on every fixture, read through the file formats, against
 //! the committed PNGs in `fixtures/golden/` (`cargo xtask bless` rewrites them).
 
-use splat_core::render::{RenderSettings, render_exact};
+use splat_core::{RenderSettings, render_oracle};
 use splat_io::image::to_rgba8;
 use splat_tests::{compare_golden, golden, root};
 
@@ -12,8 +12,8 @@ fn render_fixture(name: &str, settings: &RenderSettings) -> image::RgbImage {
     let dir = root().join("fixtures");
     let scene = splat_io::ply::read_ply(&dir.join(format!("{name}.ply"))).unwrap();
     let camera = splat_io::cameras::read_cameras(&dir.join(format!("{name}.cameras.json"))).unwrap()[0];
-    let out = render_exact(&scene, &camera, settings, &|_| {}).unwrap();
-    to_rgba8(&out.radiance).to_rgb8()
+    let out = render_oracle(&scene, &camera, settings, &|_| {}).unwrap();
+    to_rgba8(&out.mean).to_rgb8()
 }
 
 #[test]
@@ -36,10 +36,10 @@ fn golden_comparison_rejects_a_different_image() {
     let settings = RenderSettings { background: glam::Vec3::new(0.0, 0.0, 0.05), ..Default::default() };
     let dir = std::env::temp_dir().join(format!("splat-golden-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let golden = dir.join("layers-exact.png");
-    std::fs::copy(root().join("fixtures/golden/layers-exact.png"), &golden).unwrap();
+    let golden = dir.join("layers-oracle.png");
+    std::fs::copy(root().join("fixtures/golden/layers-oracle.png"), &golden).unwrap();
     let err = compare_golden(&golden, &render_fixture("layers", &settings), TOLERANCE).unwrap_err();
     assert!(err.contains("differ"), "{err}");
-    assert!(dir.join("layers-exact-diff.png").exists());
-    assert!(dir.join("layers-exact-actual.png").exists());
+    assert!(dir.join("layers-oracle-diff.png").exists());
+    assert!(dir.join("layers-oracle-actual.png").exists());
 }

@@ -3,10 +3,11 @@
 //! `stochastic-splat` among the methods, the splatting path instead (on the GPU stage by
 //! stage: projection, sort, sorted draw, StochasticSplats draw).
 
-use crate::render::{MethodArg, MethodOptions, SceneArgs};
-use anyhow::{Context, Result};
+use crate::args::{MethodArg, MethodOptions, SceneArgs};
+use anyhow::Result;
 use clap::Args;
-use splat_core::trace::{Frames, TraceScene, render_frames};
+use splat_core::Frames;
+use splat_core::trace::{TraceScene, render_frames};
 use std::time::Instant;
 
 /// Arguments of `splat bench`.
@@ -37,7 +38,7 @@ pub struct BenchArgs {
 /// Run `splat bench`.
 pub fn run(args: BenchArgs) -> Result<()> {
     let raster = args.methods.iter().any(|m| matches!(m, MethodArg::RasterSorted | MethodArg::StochasticSplat));
-    let ctx = crate::render::gpu_context(args.scene.backend)?;
+    let ctx = crate::args::gpu_context(args.scene.backend)?;
     if raster {
         return match &ctx {
             Some(ctx) => run_raster_gpu(&args, ctx),
@@ -68,7 +69,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     methods.extend(args.methods.iter().copied().filter(|&m| m != MethodArg::Opaque));
     let mut baseline = None;
     for m in methods {
-        let method = args.options.method(m).context("the brute-force oracle is not benchmarked (it has no BVH)")?;
+        let method = args.options.method(m)?;
         let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
@@ -94,7 +95,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
 fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let (scene, camera) = args.scene.load(1200, 800)?;
     let trace = TraceScene::new(&scene, args.scene.settings())?;
-    let gpu_scene = splat_gpu::GpuScene::new(ctx, &trace)?;
+    let pipeline = splat_gpu::TracePipeline::new(ctx)?;
+    let tracer = splat_gpu::GpuTracer::new(ctx, &pipeline, &trace)?;
     println!(
         "{} particles on {}, {}×{} at {} spp, {}\n",
         scene.particles.len(),
@@ -111,13 +113,13 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
     let mut baseline = None;
     for m in methods {
-        let method = args.options.method(m).context("the brute-force oracle is not benchmarked (it has no BVH)")?;
+        let method = args.options.method(m)?;
         let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
         let name = m.name();
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
-            match splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &method, &frames) {
-                Ok(out) => best = best.min(out.gpu_time.as_secs_f64()),
+            match tracer.render(&camera, &method, &frames) {
+                Ok((_, stats)) => best = best.min(stats.gpu_time.as_secs_f64()),
                 Err(e) => {
                     println!("| {name} | refused: {e} | | |");
                     break;

@@ -2,12 +2,13 @@
 //! `exact` for the ray-tracing methods, `raster-sorted` (same samples) for the raster methods —
 //! as CSV, a PNG plot and a Markdown table.
 
-use crate::render::{MethodArg, MethodOptions, Resolved, SceneArgs, progress_bar};
+use crate::args::{BackendArg, MethodArg, MethodOptions, SceneArgs, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
 use splat_core::stats::{log_log_slope, rmse};
-use splat_core::trace::{Frames, Method, TraceScene, render_frames};
+use splat_core::trace::{Method, TraceScene, render_frames};
+use splat_core::{Algorithm, Frames};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -45,7 +46,7 @@ struct Row {
 
 /// Run `splat converge`.
 pub fn run(args: ConvergeArgs) -> Result<()> {
-    if args.scene.backend == crate::render::BackendArg::Gpu {
+    if args.scene.backend == BackendArg::Gpu {
         bail!("splat converge runs on the CPU tracer; the GPU kernels are compared with it by the test suite");
     }
     if !args.max_spp.is_power_of_two() {
@@ -56,11 +57,11 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     let trace = TraceScene::new(&scene, settings)?;
     let exact = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {})?;
     // The raster oracle, projected and rendered only when a raster method is measured.
-    let any_raster = args.methods.iter().any(|&m| matches!(args.options.resolve(m), Resolved::Raster(_)));
+    let any_raster = args.methods.iter().any(|&m| matches!(args.options.resolve(m), Algorithm::Raster(..)));
     let raster = if any_raster {
         let raster = Rasterizer::new(&scene, &camera, settings, args.options.raster_settings())?;
         let under = RasterMethod::Sorted { blend: Blend::Under };
-        let sorted = render_raster(&raster, &under, &Frames::default(), &|_| {})?.frames;
+        let sorted = render_raster(&raster, &under, &Frames::default(), &|_| {})?;
         eprintln!(
             "raster-sorted against ray-traced exact: RMSE {:.5} (the EWA projection and √8σ extent \
              against ray-traced Eq. 3)",
@@ -82,11 +83,11 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
             let progress = |n| bar.inc(n * u64::from(spp));
             let start = Instant::now();
             let (out, reference) = match method {
-                Resolved::Oracle => bail!("the oracle is the reference, not a method to converge"),
-                Resolved::Trace(t) => (render_frames(&trace, &camera, &t, &frames, &progress)?, &exact),
-                Resolved::Raster(r) => {
+                Algorithm::Oracle => bail!("the oracle is the reference, not a method to converge"),
+                Algorithm::Trace(t) => (render_frames(&trace, &camera, &t, &frames, &progress)?, &exact),
+                Algorithm::Raster(r, _) => {
                     let (raster, sorted) = raster.as_ref().context("raster reference")?;
-                    (render_raster(raster, &r, &frames, &progress)?.frames, sorted)
+                    (render_raster(raster, &r, &frames, &progress)?, sorted)
                 }
             };
             let seconds = start.elapsed().as_secs_f64();

@@ -2,7 +2,6 @@
 
 use anyhow::Result;
 use clap::Args;
-use splat_io::ply::{PlyOptions, read_ply_with};
 use std::path::PathBuf;
 
 /// Arguments of `splat info`.
@@ -15,15 +14,9 @@ pub struct InfoArgs {
     pub allow_unknown_properties: bool,
 }
 
-/// Load a scene by extension, honouring the `.ply` leniency option.
-pub fn load_scene(path: &std::path::Path, allow_unknown_properties: bool) -> Result<splat_core::Scene> {
-    let is_ply = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    Ok(if is_ply { read_ply_with(path, PlyOptions { allow_unknown_properties })? } else { splat_io::read_scene(path)? })
-}
-
 /// Run `splat info`.
 pub fn run(args: InfoArgs) -> Result<()> {
-    let scene = load_scene(&args.scene, args.allow_unknown_properties)?;
+    let scene = crate::args::load_scene(&args.scene, args.allow_unknown_properties)?;
     let n = scene.particles.len();
     println!("file       {}", args.scene.display());
     println!("particles  {n}");

@@ -1,5 +1,6 @@
 //! `splat`: render transparent 3D Gaussian scenes and inspect them.
 
+mod args;
 mod bench;
 mod converge;
 mod info;

@@ -4,10 +4,10 @@
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use splat_core::Frames;
+use splat_core::RenderSettings;
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
-use splat_core::render::RenderSettings;
 use splat_core::stats::rmse;
-use splat_core::trace::Frames;
 use splat_core::{Image, KernelParams, scenes};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -40,7 +40,7 @@ fn frame_rmse(r: &Rasterizer, method: &RasterMethod, reference: &Image, frames: 
     let mut sum = 0.0;
     let mut first = None;
     for seed in 0..frames {
-        let out = render_raster(r, method, &Frames { count: 1, seed, ..Frames::default() }, &|_| {})?.frames;
+        let out = render_raster(r, method, &Frames { count: 1, seed, ..Frames::default() }, &|_| {})?;
         sum += rmse(out.mean.data(), reference.data()).powi(2);
         first.get_or_insert(out.mean);
     }
@@ -66,7 +66,7 @@ pub fn run(args: StratifyArgs) -> Result<()> {
             let raster = RasterSettings { samples, ..RasterSettings::default() };
             let r = Rasterizer::new(&scene, &camera, settings, raster)?;
             let sorted = RasterMethod::Sorted { blend: Blend::Under };
-            let reference = render_raster(&r, &sorted, &Frames::default(), &|_| {})?.frames.mean;
+            let reference = render_raster(&r, &sorted, &Frames::default(), &|_| {})?.mean;
             let (ours, ours_image) =
                 frame_rmse(&r, &RasterMethod::Stratified { scramble: true }, &reference, args.frames)?;
             let (theirs, theirs_image) = frame_rmse(&r, &RasterMethod::Enderton, &reference, args.frames)?;

@@ -1,6 +1,10 @@
-//! The oracle: front-to-back compositing of depth-sorted hits (Sun et al. Eq. 3), in f64,
-//! with the iso-opacity depth (seed 003 §1.1) and the integrated normal (seed 003 §2.1).
+//! Exact front-to-back compositing of depth-sorted hits (Sun et al. Eq. 3), in f64,
+//! with the iso-opacity depth (vk_gaussian_splatting Lighting §1.1) and the integrated normal (vk_gaussian_splatting Lighting §2.1).
 
+use crate::hit::{Hit, PreparedParticle, Ray};
+use crate::normal::particle_normal;
+use crate::particle::Scene;
+use crate::sh;
 use glam::{DVec3, Vec3};
 
 /// Default iso-opacity threshold on transmittance (vk `depthIsoThreshold`).
@@ -56,7 +60,7 @@ impl Composite {
     }
 
     /// The integrated normal as a unit vector; when it is degenerate (e.g. two opposite normals
-    /// of equal weight) the camera-facing −`ray_dir` is used (seed 003 §2.1); zero with no hit.
+    /// of equal weight) the camera-facing −`ray_dir` is used (vk_gaussian_splatting Lighting §2.1); zero with no hit.
     pub fn unit_normal(&self, ray_dir: Vec3) -> Vec3 {
         if self.hits == 0 {
             return Vec3::ZERO;
@@ -67,8 +71,8 @@ impl Composite {
 }
 
 /// Composite hits sorted front to back (Eq. 3) in f64, with the iso-opacity depth at
-/// transmittance threshold `iso_threshold` (seed 003 §1.1: the first hit whose evaluation
-/// drops transmittance below the threshold) and the integrated normal (seed 003 §2.1).
+/// transmittance threshold `iso_threshold` (vk_gaussian_splatting Lighting §1.1: the first hit whose evaluation
+/// drops transmittance below the threshold) and the integrated normal (vk_gaussian_splatting Lighting §2.1).
 pub fn composite(sorted: &[ShadedHit], iso_threshold: f32) -> Composite {
     let iso = f64::from(iso_threshold);
     let mut radiance = DVec3::ZERO;
@@ -86,6 +90,25 @@ pub fn composite(sorted: &[ShadedHit], iso_threshold: f32) -> Composite {
         }
     }
     Composite { radiance, transmittance, depth, normal, hits: sorted.len() }
+}
+
+/// Shade a hit of particle `hit.index`: colour from its SH along the ray direction, normal by
+/// the settings' mode.
+pub fn shade_hit(
+    scene: &Scene,
+    p: &PreparedParticle,
+    hit: Hit,
+    ray: &Ray,
+    settings: &crate::settings::RenderSettings,
+) -> ShadedHit {
+    let particle = &scene.particles[hit.index as usize];
+    ShadedHit {
+        t: hit.t,
+        alpha: hit.alpha,
+        color: sh::eval(&particle.sh, scene.sh_degree, ray.dir),
+        normal: particle_normal(p, ray, settings.normal_mode, settings.kernel.cutoff),
+        index: hit.index,
+    }
 }
 
 #[cfg(test)]

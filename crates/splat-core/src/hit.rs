@@ -1,5 +1,5 @@
 //! One ray against one particle: hit distance, maximum response along the ray, and the
-//! negligible test of Eq. 2 (Sun et al. §3.1, Algorithm 1 lines 2–9; seed 003 §1.4.1).
+//! negligible test of Eq. 2 (Sun et al. §3.1, Algorithm 1 lines 2–9; vk_gaussian_splatting Lighting §1.4.1).
 
 use crate::kernel::KernelParams;
 use crate::particle::Particle;
@@ -14,12 +14,12 @@ pub const DEFAULT_T_MAX: f32 = 10_000.0;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum HitDistance {
     /// The point of maximum density along the ray, the mean of the 1D Gaussian:
-    /// t = −o_c·d_c / d_c·d_c in canonical space (3DGRT, seed 003 §1.4.1).
+    /// t = −o_c·d_c / d_c·d_c in canonical space (3DGRT, vk_gaussian_splatting Lighting §1.4.1).
     #[default]
     Mean,
     /// The particle centre projected on the view direction: the ray point on the plane through
     /// μ orthogonal to [`Ray::view`], t = (μ − o)·v / (d·v). For camera rays v is the camera's
-    /// forward axis, so this is the rasterizer's billboard depth (seed 003 §1.4.2).
+    /// forward axis, so this is the rasterizer's billboard depth (vk_gaussian_splatting Lighting §1.4.2).
     Center,
 }
 

@@ -1,39 +1,55 @@
 //! `splat-core`: the pure-Rust oracle for rendering transparent 3D Gaussians.
 //!
-//! Everything here is math: particles and their covariance ([`particle`]), the ray–particle
-//! response ([`kernel`], [`hit`]), view-dependent colour ([`sh`]), cameras ([`camera`]), the
-//! exact sorted compositing of Eq. 3 of Sun et al. ([`composite`]), normals and iso-opacity depth
-//! (seed 003, [`normal`], [`composite`]), the stochastic binary-opacity estimator of Eqs. 4–6
-//! ([`estimator`]) and a brute-force exact renderer ([`render`]). No I/O, no GPU.
+//! Everything here is math, in layers (docs/architecture.md):
+//!
+//! - the particle and its response: [`particle`], [`kernel`], [`hit`], [`sh`], [`normal`],
+//!   [`camera`];
+//! - exact compositing, Eq. 3 of Sun et al. ([`composite`]) and the stochastic estimator of
+//!   Eqs. 4–6 with its exact expectations ([`estimator`]);
+//! - the floor every renderer stands on: [`settings`] and errors, screen [`tile`]s, and the
+//!   [`frame`] loop with its one output type, [`RenderOutput`];
+//! - three siblings on that floor: the brute-force [`oracle`], the ray-tracing estimators
+//!   ([`trace`], through the [`bvh`]) and the splatting estimators ([`raster`]), named together
+//!   by [`Algorithm`];
+//! - decisions ([`rng`]), statistics ([`stats`]) and built-in scenes ([`scenes`]).
+//!
+//! No I/O, no GPU.
 //!
 //! ```
-//! use splat_core::{camera::Camera, render::{render_exact, RenderSettings}, scenes};
+//! use splat_core::{Algorithm, RenderSettings, frame::Frames, scenes};
 //! let (scene, camera) = scenes::layers();
 //! let camera = camera.rescaled(32, 24).unwrap();
-//! let out = render_exact(&scene, &camera, &RenderSettings::default(), &|_| {}).unwrap();
-//! assert_eq!(out.radiance.width(), 32);
+//! let out = Algorithm::Oracle.render(&scene, &camera, &RenderSettings::default(), &Frames::default(), &|_| {}).unwrap();
+//! assert_eq!(out.mean.width(), 32);
 //! ```
 
+pub mod algorithm;
 pub mod bvh;
 pub mod camera;
 pub mod composite;
 pub mod estimator;
+pub mod frame;
 pub mod hit;
 pub mod image;
 pub mod kernel;
 pub mod normal;
+pub mod oracle;
 pub mod particle;
 pub mod raster;
-pub mod render;
 pub mod rng;
 pub mod scenes;
+pub mod settings;
 pub mod sh;
 pub mod stats;
+pub mod tile;
 pub mod trace;
 
+pub use algorithm::Algorithm;
 pub use camera::Camera;
+pub use frame::{Frames, RenderOutput};
 pub use hit::{HitDistance, Ray};
 pub use image::Image;
 pub use kernel::KernelParams;
+pub use oracle::render_oracle;
 pub use particle::{Particle, ParticleError, Scene};
-pub use render::{RenderOutput, RenderSettings, render_exact};
+pub use settings::{RenderError, RenderSettings};

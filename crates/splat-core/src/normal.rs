@@ -1,9 +1,9 @@
-//! Normal of one particle at a ray hit (seed 003 §2.4).
+//! Normal of one particle at a ray hit (vk_gaussian_splatting Lighting §2.4).
 
 use crate::hit::{PreparedParticle, Ray, to_canonical};
 use glam::Vec3;
 
-/// How the normal of a single particle is computed (seed 003 §2.4).
+/// How the normal of a single particle is computed (vk_gaussian_splatting Lighting §2.4).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum NormalMode {
     /// Normal of the plane that linearly approximates the maximum-density surface,

@@ -122,7 +122,7 @@ pub enum RngScheme {
 /// Particle id reserved for per-pass decisions.
 pub const PASS_ID: u32 = u32::MAX;
 /// Particle id reserved for the trig hash's per-slot offsets.
-const OFFSET_ID: u32 = u32::MAX - 1;
+pub const OFFSET_ID: u32 = u32::MAX - 1;
 /// Largest particle count: ids up to `MAX_PARTICLES − 1` never collide with the reserved ones.
 pub const MAX_PARTICLES: usize = (u32::MAX - 1) as usize;
 

@@ -1,5 +1,5 @@
 //! Statistics that prove estimators right: Welford accumulators, the per-pixel z-test of
-//! ARCHITECTURE.md ("How correctness is proven"), the Welch t-test, RMSE and log–log slopes.
+//! docs/architecture.md ("How correctness is proven"), the Welch t-test, RMSE and log–log slopes.
 
 /// Running mean and variance (Welford 1962), in f64.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -42,7 +42,7 @@ pub struct ZTest {
     pub n: usize,
 }
 
-/// Thresholds of the z-test (ARCHITECTURE.md).
+/// Thresholds of the z-test (docs/architecture.md).
 pub const GLOBAL_MAX: f64 = 4.0;
 /// Largest accepted spread statistic.
 pub const SPREAD_MAX: f64 = 4.0;
@@ -136,7 +136,7 @@ mod tests {
         assert!((log_log_slope(&x, &y) + 0.5).abs() < 1e-12);
     }
 
-    /// Simulated Bernoulli estimators on 40 × 30 pixels at F = 256 (ARCHITECTURE.md): the
+    /// Simulated Bernoulli estimators on 40 × 30 pixels at F = 256 (docs/architecture.md): the
     /// unbiased one passes, a 1 % low bias and a ±5 % checkerboard bias are rejected.
     #[test]
     fn z_test_accepts_unbiased_and_rejects_biased_bernoulli() {

@@ -8,11 +8,13 @@
 //! exactly by enumeration.
 
 use crate::bvh::Bvh;
-use crate::composite::{ShadedHit, composite};
+use crate::camera::Camera;
+use crate::composite::{ShadedHit, composite, shade_hit};
+use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, PreparedParticle, Ray, intersect, to_canonical};
 use crate::particle::{Aabb, Scene};
-use crate::render::{RenderError, RenderSettings, shade_hit, validate_scene};
 use crate::rng::RayRng;
+use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
 use glam::{DVec3, Vec3};
 
@@ -76,6 +78,19 @@ impl Method {
     /// The stochastic pass with the vk defaults.
     pub const STOCHASTIC_PASS: Method = Method::StochasticPass { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES };
 
+    /// The method's identity, shared with the GPU kernel.
+    pub fn code(&self) -> MethodCode {
+        match self {
+            Method::Exact => MethodCode::Exact,
+            Method::KBuffer { .. } => MethodCode::KBuffer,
+            Method::Stochastic => MethodCode::Stochastic,
+            Method::StochasticN { .. } => MethodCode::StochasticN,
+            Method::StochasticPass { .. } => MethodCode::StochasticPass,
+            Method::DepthSampling { .. } => MethodCode::DepthSampling,
+            Method::Opaque => MethodCode::Opaque,
+        }
+    }
+
     /// Whether frames differ (the method draws random decisions).
     pub fn is_stochastic(&self) -> bool {
         matches!(
@@ -104,39 +119,38 @@ impl Method {
     }
 }
 
-/// The source of the stochastic decisions of one ray.
-pub trait Decide {
-    /// Whether [`Decide::particle`] reads the hit position.
-    fn needs_position(&self) -> bool;
-    /// u ∈ [0, 1): particle `id` is accepted in sample `slot` when u < α.
-    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32;
-    /// u ∈ [0, 1): pass `pass` is accepted when u < 1 − T_pass.
-    fn pass(&self, pass: u32) -> f32;
+/// The identity of a ray-tracing method on every backend: the GPU kernel switches on the same
+/// numbers (`METHOD_*` in `shaders/trace.wgsl`; a test reads them through naga and compares).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum MethodCode {
+    /// [`Method::Exact`].
+    Exact = 0,
+    /// [`Method::KBuffer`].
+    KBuffer = 1,
+    /// [`Method::Stochastic`].
+    Stochastic = 2,
+    /// [`Method::StochasticN`].
+    StochasticN = 3,
+    /// [`Method::StochasticPass`].
+    StochasticPass = 4,
+    /// [`Method::DepthSampling`].
+    DepthSampling = 5,
+    /// [`Method::Opaque`].
+    Opaque = 6,
 }
 
-impl Decide for RayRng {
-    fn needs_position(&self) -> bool {
-        RayRng::needs_position(self)
-    }
-    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
-        RayRng::particle(self, id, slot, hit)
-    }
-    fn pass(&self, pass: u32) -> f32 {
-        RayRng::pass(self, pass)
-    }
-}
-
-/// What one sample of one ray yields.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Sample {
-    /// Radiance over the background.
-    pub color: DVec3,
-    /// Coverage: 1 − T for deterministic methods, 0 or 1 for a stochastic pick.
-    pub alpha: f64,
-    /// Picked depth (iso-opacity for sorted methods, the accepted hit for stochastic ones).
-    pub depth: Option<f32>,
-    /// Unit normal of the pick (zero when nothing is hit).
-    pub normal: Vec3,
+impl MethodCode {
+    /// Every code with the name of its WGSL constant, for the test that compares them.
+    pub const ALL: [(MethodCode, &'static str); 7] = [
+        (MethodCode::Exact, "METHOD_EXACT"),
+        (MethodCode::KBuffer, "METHOD_KBUFFER"),
+        (MethodCode::Stochastic, "METHOD_STOCHASTIC"),
+        (MethodCode::StochasticN, "METHOD_STOCHASTIC_N"),
+        (MethodCode::StochasticPass, "METHOD_STOCHASTIC_PASS"),
+        (MethodCode::DepthSampling, "METHOD_DEPTH_SAMPLING"),
+        (MethodCode::Opaque, "METHOD_OPAQUE"),
+    ];
 }
 
 /// A scene ready for ray tracing: BVH, particles in leaf order, settings.
@@ -148,13 +162,6 @@ pub struct TraceScene<'a> {
     prims: Vec<PreparedParticle>,
     /// Scene index of each leaf-order particle.
     ids: Vec<u32>,
-}
-
-/// The total depth order of the whole crate: (t, id) strictly before (other_t, other_id) —
-/// distance first, ties by particle id — so no result depends on traversal or draw order.
-#[inline]
-pub(crate) fn depth_before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
-    t < other_t || (t == other_t && id < other_id)
 }
 
 /// A candidate hit in a k-buffer, ordered by (t, id).
@@ -256,6 +263,17 @@ impl Integrator {
         };
         c.unit_normal(dir)
     }
+
+    /// The integrated hits over the background (Eq. 3): L + T × background, coverage 1 − T.
+    fn over(&self, background: Vec3, dir: Vec3) -> Sample {
+        Sample {
+            color: self.radiance + self.transmittance * background.as_dvec3(),
+            alpha: 1.0 - self.transmittance,
+            depth: self.depth,
+            normal: self.unit_normal(dir),
+            picked: None,
+        }
+    }
 }
 
 impl<'a> TraceScene<'a> {
@@ -315,11 +333,18 @@ impl<'a> TraceScene<'a> {
     /// A shaded pick seen as an opaque sample.
     fn opaque_sample(&self, leaf: u32, t: f32, ray: &Ray) -> Sample {
         let h = self.shade(leaf, t, 1.0, ray);
-        Sample { color: h.color.as_dvec3(), alpha: 1.0, depth: Some(t), normal: h.normal }
+        Sample { color: h.color.as_dvec3(), alpha: 1.0, depth: Some(t), normal: h.normal, picked: Some(h.index) }
     }
 
     fn background_sample(&self) -> Sample {
-        Sample { color: self.settings.background.as_dvec3(), alpha: 0.0, depth: None, normal: Vec3::ZERO }
+        Sample::background(self.settings.background)
+    }
+
+    /// Eq. 3 front to back over the hits of a k-buffer, continuing `acc`.
+    fn integrate(&self, acc: &mut Integrator, buf: &KBuf, ray: &Ray) {
+        for s in buf.as_slice() {
+            acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), self.settings.iso_threshold);
+        }
     }
 
     /// One sample of `method` for `ray` (already clipped to the settings' range).
@@ -329,13 +354,13 @@ impl<'a> TraceScene<'a> {
             Method::KBuffer { k, max_passes, min_transmittance } => self.kbuffer(ray, k, max_passes, min_transmittance),
             Method::Stochastic => self.stochastic(ray, decide, 0),
             Method::StochasticN { m, n } => {
-                let mut sum = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO };
+                let mut sum = Sample { alpha: 0.0, ..Sample::background(Vec3::ZERO) };
                 for pass in 0..m {
                     let s = self.stochastic_n(ray, decide, n as usize, pass * n);
                     sum.color += s.color;
                     sum.alpha += s.alpha;
                     if pass == 0 {
-                        (sum.depth, sum.normal) = (s.depth, s.normal);
+                        (sum.depth, sum.normal, sum.picked) = (s.depth, s.normal, s.picked);
                     }
                 }
                 sum.color /= f64::from(m);
@@ -364,6 +389,7 @@ impl<'a> TraceScene<'a> {
             alpha: c.alpha(),
             depth: c.depth,
             normal: c.unit_normal(ray.dir),
+            picked: None,
         }
     }
 
@@ -399,7 +425,6 @@ impl<'a> TraceScene<'a> {
 
     /// k-buffer multi-pass (3DGRT / vk baseline).
     pub fn kbuffer(&self, ray: &Ray, k: usize, max_passes: u32, min_transmittance: f32) -> Sample {
-        let iso = self.settings.iso_threshold;
         let mut acc = Integrator::START;
         let mut after = (ray.t_min, u32::MAX);
         for _ in 0..max_passes {
@@ -407,20 +432,13 @@ impl<'a> TraceScene<'a> {
                 break;
             }
             let buf = self.next_k(ray, k, after, None);
-            for s in buf.as_slice() {
-                acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), iso);
-            }
+            self.integrate(&mut acc, &buf, ray);
             if !buf.is_full() {
                 break;
             }
             after = (buf.last().t, buf.last().id);
         }
-        Sample {
-            color: acc.radiance + acc.transmittance * self.settings.background.as_dvec3(),
-            alpha: 1.0 - acc.transmittance,
-            depth: acc.depth,
-            normal: acc.unit_normal(ray.dir),
-        }
+        acc.over(self.settings.background, ray.dir)
     }
 
     /// Algorithm 1: the closest hit accepted by Russian roulette (u < α), found in one
@@ -507,14 +525,13 @@ impl<'a> TraceScene<'a> {
         } else {
             self.opaque_sample(best[0].leaf, best[0].t, ray)
         };
-        Sample { color: color / n as f64, alpha: alpha / n as f64, depth: first.depth, normal: first.normal }
+        Sample { color: color / n as f64, alpha: alpha / n as f64, ..first }
     }
 
     /// vk stochastic pass: each pass integrates its K sorted hits from T = 1; it is accepted
     /// with probability O = 1 − T_pass and returns L_pass / O, else it is discarded and the
     /// next pass starts behind it. E = Σⱼ (Πᵢ<ⱼ Tᵢ) Lⱼ + (Π Tⱼ) background: Eq. 3 exactly.
     pub fn stochastic_pass(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> Sample {
-        let iso = self.settings.iso_threshold;
         let mut after = (ray.t_min, u32::MAX);
         for pass in 0..max_passes {
             let buf = self.next_k(ray, k, after, None);
@@ -522,17 +539,16 @@ impl<'a> TraceScene<'a> {
                 break;
             }
             let mut acc = Integrator::START;
-            for s in buf.as_slice() {
-                acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), iso);
-            }
+            self.integrate(&mut acc, &buf, ray);
             let opacity = 1.0 - acc.transmittance;
             if f64::from(decide.pass(pass)) < opacity {
                 return Sample {
                     color: acc.radiance / opacity,
                     alpha: 1.0,
-                    // seed 003 §1.3: iso-depth within the pass, else its farthest hit.
+                    // vk_gaussian_splatting Lighting §1.3: iso-depth within the pass, else its farthest hit.
                     depth: acc.depth.or(acc.farthest),
                     normal: acc.unit_normal(ray.dir),
+                    picked: None,
                 };
             }
             if !buf.is_full() {
@@ -549,15 +565,8 @@ impl<'a> TraceScene<'a> {
         let accept = |id: u32, p: Vec3, alpha: f32| decide.particle(id, 0, p) < alpha;
         let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept));
         let mut acc = Integrator::START;
-        for s in buf.as_slice() {
-            acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), self.settings.iso_threshold);
-        }
-        Sample {
-            color: acc.radiance + acc.transmittance * self.settings.background.as_dvec3(),
-            alpha: 1.0 - acc.transmittance,
-            depth: buf.as_slice().first().map(|s| s.t),
-            normal: acc.unit_normal(ray.dir),
-        }
+        self.integrate(&mut acc, &buf, ray);
+        Sample { depth: buf.as_slice().first().map(|s| s.t), ..acc.over(self.settings.background, ray.dir) }
     }
 
     /// Closest entry into any particle's cutoff ellipsoid, shaded opaque.
@@ -584,135 +593,29 @@ impl<'a> TraceScene<'a> {
         }
         let p = &self.scene.particles[best.id as usize];
         let color = sh::eval(&p.sh, self.scene.sh_degree, ray.dir).as_dvec3();
-        Sample { color, alpha: 1.0, depth: Some(best.t), normal: Vec3::ZERO }
+        Sample { color, alpha: 1.0, depth: Some(best.t), normal: Vec3::ZERO, picked: Some(best.id) }
     }
-}
-
-/// How frames are drawn: how many, from which seed, with which generator.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Frames {
-    /// Frames (samples per pixel) averaged.
-    pub count: u32,
-    /// Seed of the random stream; two seeds give independent runs.
-    pub seed: u32,
-    /// Generator of the decisions.
-    pub rng: crate::rng::RngScheme,
-}
-
-impl Default for Frames {
-    fn default() -> Self {
-        Self { count: 1, seed: 0, rng: crate::rng::RngScheme::Hash }
-    }
-}
-
-/// Images of a multi-frame render.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TraceOutput {
-    /// Mean radiance over the frames (RGB).
-    pub mean: crate::image::Image,
-    /// Per-frame variance of the radiance (RGB, unbiased; 0 with one frame).
-    pub variance: crate::image::Image,
-    /// Mean coverage.
-    pub alpha: crate::image::Image,
-    /// Depth of frame 0 (NaN where none): picks are never averaged (seed 003 §2.3).
-    pub depth: crate::image::Image,
-    /// Normal of frame 0.
-    pub normal: crate::image::Image,
-}
-
-/// The frame keys of a render: `frames.count` frames for a stochastic method, one otherwise (a
-/// deterministic method gives the same sample every frame).
-pub(crate) fn frame_keys(frames: &Frames, stochastic: bool) -> Result<Vec<u32>, RenderError> {
-    if frames.count == 0 {
-        return Err(RenderError::Settings("at least one frame is needed".into()));
-    }
-    let count = if stochastic { frames.count } else { 1 };
-    Ok((0..count).map(|f| crate::rng::frame_key(frames.seed, f)).collect())
-}
-
-/// What one pixel writes to a [`TraceOutput`]: mean RGB, variance RGB, mean alpha, depth,
-/// normal.
-pub(crate) type PixelValues = [f32; 11];
-
-/// The frames of one pixel: f64 Welford mean and variance of colour and coverage, and the depth
-/// and normal of the first frame (picks are never averaged).
-#[derive(Default)]
-pub(crate) struct PixelFrames {
-    acc: [crate::stats::Welford; 4],
-    first: Option<(Option<f32>, Vec3)>,
-}
-
-impl PixelFrames {
-    /// Add one frame's sample.
-    pub(crate) fn push(&mut self, color: DVec3, alpha: f64, depth: Option<f32>, normal: Vec3) {
-        for (a, v) in self.acc.iter_mut().zip([color.x, color.y, color.z, alpha]) {
-            a.push(v);
-        }
-        self.first.get_or_insert((depth, normal));
-    }
-
-    /// The pixel's output values.
-    pub(crate) fn values(&self) -> PixelValues {
-        let (depth, n) = self.first.unwrap_or((None, Vec3::ZERO));
-        let mean = self.acc.map(|a| a.mean as f32);
-        let var = self.acc.map(|a| a.variance() as f32);
-        let depth = depth.unwrap_or(f32::NAN);
-        [mean[0], mean[1], mean[2], var[0], var[1], var[2], mean[3], depth, n.x, n.y, n.z]
-    }
-}
-
-/// Scatter the tiles' pixel values (`values` of each tile entry) into the output images.
-pub(crate) fn assemble_frames<T>(
-    camera: &crate::camera::Camera,
-    tiles: &[Vec<T>],
-    values: impl Fn(&T) -> &PixelValues,
-) -> TraceOutput {
-    let (w, h) = (camera.width, camera.height);
-    let image = |c| crate::image::Image::filled(w, h, c, 0.0);
-    let mut out =
-        TraceOutput { mean: image(3), variance: image(3), alpha: image(1), depth: image(1), normal: image(3) };
-    for (tile, entries) in tiles.iter().enumerate() {
-        for ((x, y), e) in crate::render::tile_coords(camera, tile as u32).zip(entries) {
-            let v = values(e);
-            out.mean.pixel_mut(x, y).copy_from_slice(&v[0..3]);
-            out.variance.pixel_mut(x, y).copy_from_slice(&v[3..6]);
-            out.alpha.pixel_mut(x, y)[0] = v[6];
-            out.depth.pixel_mut(x, y)[0] = v[7];
-            out.normal.pixel_mut(x, y).copy_from_slice(&v[8..11]);
-        }
-    }
-    out
 }
 
 /// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
-/// centres and accumulate mean and per-frame variance per pixel in f64 (Welford). Each pixel
-/// loops over its frames, so the result does not depend on the thread count. `progress`
-/// receives finished pixel counts.
+/// centres on the frame loop of [`crate::frame`]. `progress` receives finished pixel counts.
 pub fn render_frames(
     trace: &TraceScene,
-    camera: &crate::camera::Camera,
+    camera: &Camera,
     method: &Method,
     frames: &Frames,
-    progress: &(dyn Fn(u64) + Sync),
-) -> Result<TraceOutput, RenderError> {
-    use crate::render::{map_tiles, tile_coords};
+    progress: Progress,
+) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
     method.validate()?;
-    let keys = frame_keys(frames, method.is_stochastic())?;
-    let results = map_tiles(camera, |tile| {
-        let out: Vec<PixelValues> = tile_coords(camera, tile)
-            .map(|(x, y)| {
-                let ray = trace.clip(camera.pixel_ray(x, y));
-                let mut pixel = PixelFrames::default();
-                for &key in &keys {
-                    let s = trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng));
-                    pixel.push(s.color, s.alpha, s.depth, s.normal);
-                }
-                pixel.values()
-            })
-            .collect();
-        progress(out.len() as u64);
-        out
-    });
-    Ok(assemble_frames(camera, &results, |v| v))
+    let keys = frames.keys(method.is_stochastic())?;
+    Ok(render_tiles(
+        camera,
+        progress,
+        |_| (),
+        |_, x, y| {
+            let ray = trace.clip(camera.pixel_ray(x, y));
+            PixelFrames::over(&keys, |key| trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng)))
+        },
+    ))
 }

@@ -4,8 +4,10 @@
 
 use glam::{DVec3, Quat, Vec3};
 use proptest::prelude::*;
-use splat_core::render::{RenderSettings, Tracer};
-use splat_core::trace::{Decide, Method, TraceScene};
+use splat_core::RenderSettings;
+use splat_core::frame::Decide;
+use splat_core::oracle::Oracle;
+use splat_core::trace::{Method, TraceScene};
 use splat_core::{HitDistance, Particle, Ray, Scene};
 use std::collections::HashMap;
 
@@ -54,7 +56,7 @@ fn settings_with(center: bool) -> RenderSettings {
 
 /// The particles the ray hits, with their alphas.
 fn hits(scene: &Scene, ray: &Ray, settings: &RenderSettings) -> Vec<(u32, f64)> {
-    let tracer = Tracer::new(scene, *settings).unwrap();
+    let tracer = Oracle::new(scene, *settings).unwrap();
     (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray).map(|h| (i, f64::from(h.alpha)))).collect()
 }
 
@@ -124,7 +126,7 @@ proptest! {
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
         let exact = trace.exact(&ray).color;
         // Pass opacities from the sorted alphas, independently of the integrator.
-        let tracer = Tracer::new(&scene, settings_with(center)).unwrap();
+        let tracer = Oracle::new(&scene, settings_with(center)).unwrap();
         let mut sorted: Vec<_> = (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, &ray)).collect();
         splat_core::composite::sort_front_to_back(&mut sorted);
         let k = 3;

@@ -50,7 +50,7 @@ impl Accumulator {
             label: Some("accumulate.wgsl"),
             source: wgpu::ShaderSource::Wgsl(ACCUMULATE_WGSL.into()),
         });
-        let pipeline = crate::compute_pipeline(&ctx.device, &module, None, "accumulate");
+        let pipeline = crate::context::compute_pipeline(&ctx.device, &module, None, "accumulate");
         let buffer = |label, bytes: usize, usage| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),

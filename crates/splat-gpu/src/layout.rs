@@ -1,13 +1,20 @@
 //! Buffer layouts shared with `shaders/trace.wgsl`: `#[repr(C)]` + `bytemuck::Pod` structs
 //! whose sizes and field offsets a test checks against the WGSL structs reflected by naga.
 
+use crate::trace::MethodParams;
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::Scene;
 use splat_core::bvh::BvhNode;
+use splat_core::frame::Frames;
 use splat_core::particle::sh_coeff_count;
 use splat_core::rng::RngScheme;
-use splat_core::trace::{Frames, TraceScene};
+use splat_core::trace::TraceScene;
+
+/// `Params::mode`: every frame of the dispatch in one invocation per pixel.
+pub const MODE_FRAMES: u32 = 0;
+/// `Params::mode`: one pass of one frame per dispatch, the ray's state kept in [`PassState`].
+pub const MODE_PASS: u32 = 1;
 
 /// One particle in BVH leaf order (WGSL `Particle`, 64 bytes).
 #[repr(C)]
@@ -83,7 +90,7 @@ pub struct Params {
     pub size: [u32; 2],
     /// SH degree of the scene.
     pub sh_degree: u32,
-    /// Method code (1 k-buffer, 2 stochastic, 3 stochastic-n, 4 stochastic pass, 5 depth sampling).
+    /// Method identity ([`splat_core::trace::MethodCode`], `METHOD_*` in WGSL).
     pub method: u32,
     /// Hits per pass.
     pub k: u32,
@@ -174,7 +181,7 @@ pub fn sh(scene: &Scene) -> Vec<[f32; 4]> {
 pub fn params(
     trace: &TraceScene,
     camera: &Camera,
-    code: (u32, u32, u32, f32, u32, u32),
+    method: &MethodParams,
     frames: &Frames,
     first_frame: u32,
     chunk: u32,
@@ -186,7 +193,7 @@ pub fn params(
         [v.x, v.y, v.z, 0.0]
     };
     let c = camera.center();
-    let (method, k, max_passes, min_transmittance, n, m) = code;
+    let MethodParams { code, k, max_passes, min_transmittance, n, m } = *method;
     Params {
         cam_row0: row(0),
         cam_row1: row(1),
@@ -196,7 +203,7 @@ pub fn params(
         background: [s.background.x, s.background.y, s.background.z, 0.0],
         size: [camera.width, camera.height],
         sh_degree: u32::from(trace.scene().sh_degree),
-        method,
+        method: code as u32,
         k,
         max_passes,
         n,
@@ -219,7 +226,7 @@ pub fn params(
         t_max: s.t_max,
         min_transmittance,
         first_frame,
-        mode: 0,
+        mode: MODE_FRAMES,
         pass_index: 0,
         pad1: 0,
         pad2: 0,
@@ -250,6 +257,37 @@ pub(crate) mod wgsl_check {
         (*span as usize, members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect())
     }
 
+    /// The value of the WGSL constant `name` of `source` as naga parses it: a u32, i32 or f32
+    /// literal, or an array of them, as f64 (one comparison serves every type).
+    pub(crate) fn constant(source: &str, name: &str) -> Vec<f64> {
+        let module = naga::front::wgsl::parse_str(source).expect("parses");
+        let (_, c) = module.constants.iter().find(|(_, c)| c.name.as_deref() == Some(name)).expect(name);
+        values(&module, c.init, name)
+    }
+
+    fn values(module: &naga::Module, expr: naga::Handle<naga::Expression>, name: &str) -> Vec<f64> {
+        match &module.global_expressions[expr] {
+            naga::Expression::Literal(naga::Literal::U32(v)) => vec![f64::from(*v)],
+            naga::Expression::Literal(naga::Literal::I32(v)) => vec![f64::from(*v)],
+            naga::Expression::Literal(naga::Literal::F32(v)) => vec![f64::from(*v)],
+            naga::Expression::Compose { components, .. } => {
+                components.iter().flat_map(|&c| values(module, c, name)).collect()
+            }
+            other => panic!("{name} is not a literal or an array of literals: {other:?}"),
+        }
+    }
+
+    /// Each WGSL constant equals its Rust twin: `assert_constants!(SOURCE, [NAME = value, …])`.
+    macro_rules! assert_constants {
+        ($source:expr, [$($name:literal = $value:expr),* $(,)?]) => {{
+            $(
+                let wgsl = $crate::layout::wgsl_check::constant($source, $name);
+                assert_eq!(wgsl, vec![$value as f64], "WGSL {} = {wgsl:?}, Rust {}", $name, stringify!($value));
+            )*
+        }};
+    }
+    pub(crate) use assert_constants;
+
     /// The Rust struct has the size and field offsets naga computes for the WGSL struct of the
     /// same role, so the two cannot drift apart.
     macro_rules! assert_mirrors {
@@ -265,7 +303,7 @@ pub(crate) mod wgsl_check {
 
 #[cfg(test)]
 mod tests {
-    use super::wgsl_check::{assert_mirrors, validate};
+    use super::wgsl_check::{assert_constants, assert_mirrors, constant, validate};
     use super::*;
 
     /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
@@ -317,6 +355,33 @@ mod tests {
             ]
         );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
+    }
+
+    /// Every constant the kernel shares with the core has the core's value: the method
+    /// identities, the fixed array sizes, the reserved decision ids and the SH constants.
+    #[test]
+    fn trace_constants_equal_their_rust_twins() {
+        use splat_core::{bvh, rng, sh, trace};
+        for (code, name) in trace::MethodCode::ALL {
+            assert_eq!(constant(crate::TRACE_WGSL, name), vec![f64::from(code as u32)], "{name}");
+        }
+        assert_constants!(
+            crate::TRACE_WGSL,
+            [
+                "MAX_SLOTS" = trace::MAX_SLOTS,
+                "STACK_DEPTH" = bvh::STACK_DEPTH,
+                "PASS_ID" = rng::PASS_ID,
+                "OFFSET_ID" = rng::OFFSET_ID,
+                "LOOP_BUDGET" = crate::LOOP_BUDGET,
+                "MODE_FRAMES" = MODE_FRAMES,
+                "MODE_PASS" = MODE_PASS,
+                "SH_C0" = sh::SH_C0,
+                "SH_C1" = sh::SH_C1,
+            ]
+        );
+        let f64s = |v: &[f32]| v.iter().map(|&c| f64::from(c)).collect::<Vec<_>>();
+        assert_eq!(constant(crate::TRACE_WGSL, "SH_C2"), f64s(&sh::SH_C2), "SH_C2");
+        assert_eq!(constant(crate::TRACE_WGSL, "SH_C3"), f64s(&sh::SH_C3), "SH_C3");
     }
 
     /// The kernel is valid WGSL for naga's validator (a shader error fails `cargo test`).

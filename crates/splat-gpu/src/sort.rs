@@ -118,8 +118,8 @@ impl RadixSort {
             label: Some("sort.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SORT_WGSL.into()),
         });
-        let uniform = crate::uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
-        let storage = |b, read_only| crate::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
+        let uniform = crate::context::uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
+        let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sort"),
             entries: &[
@@ -136,7 +136,7 @@ impl RadixSort {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = |entry| crate::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
+        let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
         let sort = Self {
             histogram: pipeline("histogram"),
             scan: pipeline("scan"),

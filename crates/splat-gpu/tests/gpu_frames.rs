@@ -3,10 +3,10 @@
 
 mod common;
 
-use common::{context, fixture};
-use splat_core::render::RenderSettings;
-use splat_core::trace::{Frames, Method, TraceScene, render_frames};
-use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuScene};
+use common::{context, fixture, gpu_run, trace_pipeline, tracer};
+use splat_core::trace::{Method, TraceScene, render_frames};
+use splat_core::{Frames, RenderSettings};
+use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
 
 fn methods() -> Vec<(&'static str, Method)> {
     vec![
@@ -28,11 +28,11 @@ fn one_frame_equals_the_cpu_frame() {
     for fixture_name in ["layers", "cloud"] {
         let (scene, camera) = fixture(fixture_name, 40, 30);
         let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-        let gpu_scene = GpuScene::new(ctx, &trace).unwrap();
+        let tracer = tracer(ctx, &trace);
         for (name, method) in methods() {
             let frames = Frames { count: 1, seed: 11, ..Frames::default() };
             let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
-            let gpu = splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &method, &frames).unwrap();
+            let gpu = gpu_run(&tracer, &camera, &method, frames);
             let differing = cpu
                 .mean
                 .data()
@@ -54,7 +54,8 @@ fn scenes_above_the_binding_limit_are_refused() {
     let small = GpuContext::new().unwrap().with_binding_limit(4096);
     let (scene, _) = fixture("cloud", 8, 8);
     let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-    match GpuScene::new(&small, &trace) {
+    let small_pipeline = splat_gpu::TracePipeline::new(&small).unwrap();
+    match GpuTracer::new(&small, &small_pipeline, &trace) {
         Err(e @ GpuError::SceneTooLarge { limit: 4096, .. }) => {
             let msg = e.to_string();
             assert!(msg.contains("192000 bytes") && msg.contains("4096"), "{msg}");
@@ -62,7 +63,7 @@ fn scenes_above_the_binding_limit_are_refused() {
         Err(e) => panic!("unexpected error {e}"),
         Ok(_) => panic!("a scene larger than the limit was accepted"),
     }
-    assert!(GpuScene::new(ctx, &trace).is_ok());
+    assert!(GpuTracer::new(ctx, trace_pipeline(ctx), &trace).is_ok());
 }
 
 /// vk_gaussian_splatting's warning, measured: a running mean stored in f16 drifts away from the
@@ -130,16 +131,16 @@ fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
     }
     let (scene, camera) = fixture("cloud", 32, 24);
     let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-    let gpu_scene = GpuScene::new(ctx, &trace).unwrap();
+    let gpu_tracer = tracer(ctx, &trace);
     for (method, count) in [
         (Method::KBuffer { k: 1, max_passes: 10_000, min_transmittance: 0.0 }, 1),
         (Method::StochasticPass { k: 1, max_passes: 200 }, 3),
         (Method::StochasticN { m: 1, n: 64 }, 2),
     ] {
         let frames = Frames { count, seed: 5, ..Frames::default() };
-        let gpu = splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &method, &frames).unwrap();
+        let (gpu, stats) = gpu_tracer.render(&camera, &method, &frames).unwrap();
         let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
-        assert!(gpu.pass_per_dispatch, "{method:?} fit in one invocation: the test shows nothing");
+        assert!(stats.pass_per_dispatch, "{method:?} fit in one invocation: the test shows nothing");
         let worst = cpu.mean.data().iter().zip(gpu.mean.data()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(worst < 1e-4, "{method:?}: GPU differs from CPU by {worst}");
     }
@@ -154,11 +155,10 @@ fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
     let line = splat_core::Scene { particles, sh_degree: 0 };
     let camera = splat_core::Camera::look_at(glam::Vec3::ZERO, glam::Vec3::Z, glam::Vec3::Y, 1.0, 4, 4).unwrap();
     let trace = TraceScene::new(&line, RenderSettings::default()).unwrap();
-    let gpu_scene = GpuScene::new(ctx, &trace).unwrap();
-    match splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &Method::Stochastic, &Frames::default()) {
+    match tracer(ctx, &trace).render(&camera, &Method::Stochastic, &Frames::default()) {
         Err(e @ GpuError::LoopBudget { .. }) => assert!(e.to_string().contains("--backend cpu"), "{e}"),
         Err(e) => panic!("unexpected error {e}"),
-        Ok(out) => panic!("accepted {} loop iterations with {} lanes", out.loop_iterations, ctx.lanes()),
+        Ok((_, stats)) => panic!("accepted {} loop iterations with {} lanes", stats.loop_iterations, ctx.lanes()),
     }
 }
 
@@ -169,8 +169,7 @@ fn frame_times_come_from_timestamp_queries_when_available() {
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("cloud", 48, 36);
     let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-    let gpu_scene = GpuScene::new(ctx, &trace).unwrap();
-    let out = splat_gpu::render(ctx, &gpu_scene, &trace, &camera, &Method::Stochastic, &Frames::default()).unwrap();
+    let (_, out) = tracer(ctx, &trace).render(&camera, &Method::Stochastic, &Frames::default()).unwrap();
     assert_eq!(out.timestamps, ctx.timestamps);
     assert!(out.gpu_time > std::time::Duration::ZERO);
 }

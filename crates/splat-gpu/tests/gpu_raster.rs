@@ -5,10 +5,10 @@
 mod common;
 
 use common::{context, fixture};
+use splat_core::Frames;
+use splat_core::RenderSettings;
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
-use splat_core::render::RenderSettings;
 use splat_core::rng::SplitMix64;
-use splat_core::trace::Frames;
 use splat_core::{Camera, Scene};
 use splat_gpu::sort::{cpu_radix_sort, depth_key, sort_pairs};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
@@ -140,12 +140,11 @@ fn sorted_splatting_equals_the_cpu_over_and_under() {
         let c = case(name, 64, 48);
         let cpu =
             render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
-                .unwrap()
-                .frames;
+                .unwrap();
         let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
         let gpu = GpuRasterizer::new(ctx, pipes, &scene, &c.camera).unwrap();
-        let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap();
-        let under = gpu.render(&RasterMethod::Sorted { blend: Blend::Under }, &Frames::default()).unwrap();
+        let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap().0;
+        let under = gpu.render(&RasterMethod::Sorted { blend: Blend::Under }, &Frames::default()).unwrap().0;
         let d_over = max_abs_diff(over.mean.data(), cpu.mean.data());
         let d_under = max_abs_diff(under.mean.data(), cpu.mean.data());
         let d_alpha =
@@ -180,11 +179,11 @@ fn depth_pick_equals_the_cpu() {
         assert!(differing * 200 <= pixels, "{name}");
         for (i, (g, c)) in gpu.picked.iter().zip(&cpu.picked).enumerate() {
             if g.is_some() && g == c {
-                let (dg, dc) = (gpu.depth[i].unwrap(), cpu.frames.depth.data()[i]);
+                let (dg, dc) = (gpu.depth[i].unwrap(), cpu.depth.data()[i]);
                 assert!((dg - dc).abs() <= 1e-5 * dc, "{name} pixel {i}: depth {dg} vs {dc}");
             }
         }
-        assert!(max_abs_diff(gpu.color.data(), cpu.frames.mean.data()) <= 2e-4, "{name}: colour");
+        assert!(max_abs_diff(gpu.color.data(), cpu.mean.data()) <= 2e-4, "{name}: colour");
     }
 }
 
@@ -200,8 +199,8 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
         let cpu_r = cpu_raster(&c);
         for seed in [3, 4] {
             let frames = Frames { count: 1, seed, ..Frames::default() };
-            let cpu = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap().frames;
-            let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap();
+            let cpu = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap();
+            let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap().0;
             let pixels = (c.camera.width * c.camera.height) as usize;
             let differing = (0..pixels)
                 .filter(|&p| {
@@ -215,8 +214,10 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
             assert!(differing * 200 <= pixels, "{name} seed {seed}");
         }
         // Another seed makes other decisions: the comparison above can fail.
-        let a = gpu.render(&RasterMethod::StochasticSplat, &Frames { count: 1, seed: 3, ..Frames::default() }).unwrap();
-        let b = gpu.render(&RasterMethod::StochasticSplat, &Frames { count: 1, seed: 5, ..Frames::default() }).unwrap();
+        let a =
+            gpu.render(&RasterMethod::StochasticSplat, &Frames { count: 1, seed: 3, ..Frames::default() }).unwrap().0;
+        let b =
+            gpu.render(&RasterMethod::StochasticSplat, &Frames { count: 1, seed: 5, ..Frames::default() }).unwrap().0;
         assert!(max_abs_diff(a.mean.data(), b.mean.data()) > 0.1, "{name}: seeds do not matter");
     }
 }
@@ -258,8 +259,8 @@ fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
     let mut contested = 0; // pairs where both splats were accepted: the tie rule decides
     for seed in 0..8 {
         let frames = Frames { count: 1, seed, ..Frames::default() };
-        let cpu = render_raster(&cpu_raster(&c), &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap().frames;
-        let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap();
+        let cpu = render_raster(&cpu_raster(&c), &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap();
+        let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap().0;
         assert!(max_abs_diff(g.mean.data(), cpu.mean.data()) <= 1e-6, "seed {seed}");
         // At the pixel under each pair, the colour is the first accepted of (front, back):
         // id 0 before the tied id 1, id 3 (in front) before id 2, decided by the core's hash.
@@ -304,13 +305,13 @@ fn bonsai_crop_equals_the_cpu() {
     assert_eq!(gpu.order().unwrap(), cpu_r.splats().iter().map(|s| s.id).collect::<Vec<_>>(), "depth order");
     let sorted =
         render_raster(&cpu_r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
-    let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap();
-    let d = max_abs_diff(over.mean.data(), sorted.frames.mean.data());
+    let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap().0;
+    let d = max_abs_diff(over.mean.data(), sorted.mean.data());
     let pick = gpu.depth_pick().unwrap();
     let differing = pick.picked.iter().zip(&sorted.picked).filter(|(a, b)| a != b).count();
     let frames = Frames { count: 1, seed: 8, ..Frames::default() };
-    let cpu_frame = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap().frames;
-    let gpu_frame = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap();
+    let cpu_frame = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap();
+    let gpu_frame = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap().0;
     let pixels = sorted.picked.len();
     let frame_diff = (0..pixels)
         .filter(|&p| {

@@ -1,43 +1,44 @@
 //! Statistical proof of GPU StochasticSplats against the CPU raster oracle (sorted splatting,
-//! on lavapipe in CI): the per-pixel z-test of ARCHITECTURE.md with F = 256 frames (variance
+//! on lavapipe in CI): the per-pixel z-test of docs/architecture.md with F = 256 frames (variance
 //! from 1024 independent ones) and its biased control, and the convergence slope. A binary of
 //! its own, since lavapipe leaks memory per submission and each test binary is a process.
 
 mod common;
 
 use common::{context, fixture};
+use splat_core::frame::RenderOutput;
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
-use splat_core::render::RenderSettings;
-use splat_core::stats::ZTest;
-use splat_core::trace::{Frames, TraceOutput};
-use splat_core::{Camera, Scene};
+use splat_core::{Camera, Frames, RenderSettings, Scene};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
-use splat_tests::method;
+use splat_tests::harness::StatTest;
 
 const F: u32 = 256;
 
 /// The CPU raster oracle: sorted splatting, one sample per pixel.
-fn oracle(scene: &Scene, camera: &Camera) -> TraceOutput {
+fn oracle(scene: &Scene, camera: &Camera) -> RenderOutput {
     let r = Rasterizer::new(scene, camera, RenderSettings::default(), RasterSettings::default()).unwrap();
-    render_raster(&r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap().frames
+    render_raster(&r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap()
 }
 
-/// GPU StochasticSplats frames of `scene` as a [`TraceOutput`] (no depth or normal images).
-fn gpu_frames(raster: &GpuRasterizer, frames: Frames) -> TraceOutput {
-    let out = raster.render(&RasterMethod::StochasticSplat, &frames).unwrap();
-    let empty = splat_core::image::Image::from_data(1, 1, 1, vec![0.0]).unwrap();
-    TraceOutput { mean: out.mean, variance: out.variance, alpha: out.alpha, depth: empty.clone(), normal: empty }
+/// The statistical test of GPU StochasticSplats drawn from `raster` against the oracle of
+/// `truth`.
+fn stat<'a>(name: String, raster: &'a GpuRasterizer<'a>, truth: &Scene, camera: &Camera) -> StatTest<'a> {
+    StatTest::new(name, oracle(truth, camera), move |f| {
+        raster.render(&RasterMethod::StochasticSplat, &f).expect("GPU render").0
+    })
 }
 
-/// The z-test of GPU StochasticSplats on `scene` against the oracle of `truth`.
-fn z_test(ctx: &GpuContext, pipes: &RasterPipelines, scene: &Scene, truth: &Scene, camera: &Camera) -> ZTest {
+/// GPU StochasticSplats of `scene` on `camera`, tested against the oracle of `truth`.
+fn with_raster<T>(
+    ctx: &GpuContext,
+    pipes: &RasterPipelines,
+    scene: &Scene,
+    camera: &Camera,
+    test: impl FnOnce(&GpuRasterizer) -> T,
+) -> T {
     let gpu_scene = RasterScene::new(ctx, scene, &RenderSettings::default()).unwrap();
     let raster = GpuRasterizer::new(ctx, pipes, &gpu_scene, camera).unwrap();
-    method::z_test(
-        &oracle(truth, camera),
-        |f| gpu_frames(&raster, f),
-        Frames { count: F, seed: 31, ..Frames::default() },
-    )
+    test(&raster)
 }
 
 /// Every opacity scaled by `factor`: a renderer whose alphas are biased.
@@ -55,14 +56,15 @@ fn scaled(scene: &Scene, factor: f32) -> Scene {
 fn gpu_stochastic_splat_is_unbiased_and_the_control_is_rejected() {
     let Some(ctx) = context() else { return };
     let pipes = RasterPipelines::new(ctx).unwrap();
+    let base = Frames { count: F, seed: 31, ..Frames::default() };
     for name in ["layers", "cloud"] {
         let (scene, camera) = fixture(name, 40, 30);
-        let z = z_test(ctx, &pipes, &scene, &scene, &camera);
-        eprintln!("{name} GPU stochastic-splat: {z:?}");
-        assert!(z.passes(), "{name}: GPU stochastic-splat fails the z-test: {z:?}");
-        let control = z_test(ctx, &pipes, &scaled(&scene, 0.9), &scene, &camera);
-        eprintln!("{name} control (opacity × 0.9): {control:?}");
-        assert!(!control.passes(), "{name}: the biased control passes: {control:?}");
+        with_raster(ctx, &pipes, &scene, &camera, |raster| {
+            stat(format!("GPU {name} stochastic-splat"), raster, &scene, &camera).assert_unbiased(base)
+        });
+        with_raster(ctx, &pipes, &scaled(&scene, 0.9), &camera, |raster| {
+            stat(format!("GPU {name} stochastic-splat, opacity × 0.9"), raster, &scene, &camera).assert_rejected(base)
+        });
     }
 }
 
@@ -72,9 +74,7 @@ fn gpu_stochastic_splat_converges_at_the_monte_carlo_rate() {
     let Some(ctx) = context() else { return };
     let pipes = RasterPipelines::new(ctx).unwrap();
     let (scene, camera) = fixture("cloud", 32, 24);
-    let gpu_scene = RasterScene::new(ctx, &scene, &RenderSettings::default()).unwrap();
-    let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera).unwrap();
-    let (slope, table) = method::convergence(&oracle(&scene, &camera), |f| gpu_frames(&raster, f), 256, 3);
-    eprintln!("GPU stochastic-splat: slope {slope:.3} {table:?}");
-    assert!((-0.58..=-0.42).contains(&slope), "slope {slope}");
+    with_raster(ctx, &pipes, &scene, &camera, |raster| {
+        stat("GPU cloud stochastic-splat".into(), raster, &scene, &camera).assert_converges(256, 3)
+    });
 }

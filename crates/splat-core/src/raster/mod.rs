@@ -1,6 +1,6 @@
 //! The CPU reference of the splatting path: EWA projection ([`project`]), the global depth
 //! sort, per-pixel blending over S sub-pixel samples, and the sorting-free stochastic
-//! rasterizers (seed 002 §1; Laine & Karras 2011).
+//! rasterizers (vk_gaussian_splatting Stochastic transparency §1; Laine & Karras 2011).
 //!
 //! A pixel is processed like a multisampled render target. Every splat that reaches the pixel
 //! makes one *fragment*: its alpha is evaluated once, at the pixel centre (the shading rate of
@@ -22,17 +22,18 @@ pub mod samples;
 mod tests;
 
 use crate::camera::Camera;
+use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{PreparedParticle, Ray, to_canonical};
 use crate::normal::particle_normal;
 use crate::particle::Scene;
-use crate::render::{RenderError, RenderSettings, map_tiles, tile_coords, tile_count, validate_scene};
 use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
-use crate::trace::{Decide, Frames, PixelFrames, PixelValues, TraceOutput, assemble_frames, frame_keys};
+use crate::settings::{RenderError, RenderSettings, validate_scene};
+use crate::tile::{TILE, tile_count};
 use glam::{DVec3, Vec2, Vec3};
 pub use project::{Splat, project};
 pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, sample_positions};
 
-/// Blend order of sorted splatting (seed 003 §1.5).
+/// Blend order of sorted splatting (vk_gaussian_splatting Lighting §1.5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Blend {
     /// Back to front, C ← α c + (1 − α) C (§1.5.1, the 3DGS default).
@@ -46,7 +47,7 @@ pub enum Blend {
 /// Depth of a fragment along its sample's ray.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum FragmentDepth {
-    /// The camera-facing billboard through the splat centre (seed 003 §1.4.2): every sample
+    /// The camera-facing billboard through the splat centre (vk_gaussian_splatting Lighting §1.4.2): every sample
     /// sees the splats in the order of the global sort of centre depths.
     #[default]
     Center,
@@ -122,22 +123,6 @@ pub struct Fragment {
     pub alpha: f32,
     /// Bit s set when sample s is inside the splat's √8σ ellipse.
     pub covered: u64,
-}
-
-/// What one frame of one pixel yields.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PixelSample {
-    /// Mean colour over the pixel's samples, background included.
-    pub color: DVec3,
-    /// Mean coverage over the samples.
-    pub alpha: f64,
-    /// Sample 0: iso-opacity depth (sorted under) or depth of the written fragment (stochastic),
-    /// as a distance along the sample's ray.
-    pub depth: Option<f32>,
-    /// Sample 0: integrated (sorted under) or written fragment's unit normal; zero if none.
-    pub normal: Vec3,
-    /// Sample 0: the splat that set the depth (scene index).
-    pub picked: Option<u32>,
 }
 
 /// The geometry of one pixel's samples.
@@ -232,8 +217,8 @@ impl<'a> Rasterizer<'a> {
 
     /// The fragments of pixel `px`, in global depth order.
     pub fn fragments(&self, px: &PixelSamples) -> Vec<Fragment> {
-        let tiles_x = self.camera.width.div_ceil(crate::render::TILE);
-        let tile = (px.y / crate::render::TILE) * tiles_x + px.x / crate::render::TILE;
+        let tiles_x = self.camera.width.div_ceil(TILE);
+        let tile = (px.y / TILE) * tiles_x + px.x / TILE;
         let centre = Vec2::new(px.x as f32 + 0.5, px.y as f32 + 0.5);
         let kernel = &self.settings.kernel;
         self.bins[tile as usize]
@@ -299,7 +284,7 @@ impl<'a> Rasterizer<'a> {
         fragments: &[Fragment],
         decide: &impl Decide,
         frame_key: u32,
-    ) -> PixelSample {
+    ) -> Sample {
         match *method {
             RasterMethod::Sorted { blend } => self.sorted(px, fragments, blend),
             RasterMethod::StochasticSplat => self.resolve(px, &self.stochastic_splat(px, fragments, decide)),
@@ -311,10 +296,10 @@ impl<'a> Rasterizer<'a> {
     }
 
     /// Sorted splatting of every sample (Eq. 3 over the fragments in depth order).
-    fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend) -> PixelSample {
+    fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend) -> Sample {
         let bg = self.settings.background.as_dvec3();
         let iso = f64::from(self.settings.iso_threshold);
-        let mut out = PixelSample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
+        let mut out = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
         let mut order: Vec<(f32, u32, usize)> = Vec::with_capacity(fragments.len());
         let mut normal = DVec3::ZERO;
         for s in 0..self.offsets.len() {
@@ -450,7 +435,7 @@ impl<'a> Rasterizer<'a> {
     }
 
     /// Average the samples of a stochastic frame; sample 0 gives depth, normal and pick.
-    fn resolve(&self, px: &PixelSamples, buf: &SampleBuffer) -> PixelSample {
+    fn resolve(&self, px: &PixelSamples, buf: &SampleBuffer) -> Sample {
         let bg = self.settings.background.as_dvec3();
         let mut color = DVec3::ZERO;
         let mut written = 0usize;
@@ -465,7 +450,7 @@ impl<'a> Rasterizer<'a> {
         }
         let n = buf.len as f64;
         let first = (buf.splat[0] != u32::MAX).then_some(buf.splat[0]);
-        PixelSample {
+        Sample {
             color: color / n,
             alpha: written as f64 / n,
             depth: first.map(|_| buf.t[0]),
@@ -493,7 +478,7 @@ impl SampleBuffer {
     /// The depth test: (t, id) strictly in front of what sample `s` holds.
     #[inline]
     fn passes(&self, s: usize, t: f32, id: u32) -> bool {
-        crate::trace::depth_before(t, id, self.t[s], self.id[s])
+        depth_before(t, id, self.t[s], self.id[s])
     }
 
     /// Order of two samples by what they hold, (depth, id), then by sample index.
@@ -520,7 +505,7 @@ fn bits(mask: u64) -> impl Iterator<Item = usize> {
 
 /// Splat indices per tile, in global depth order.
 fn bin_tiles(camera: &Camera, splats: &[Splat]) -> Vec<Vec<u32>> {
-    let t = crate::render::TILE;
+    let t = TILE;
     let tiles_x = camera.width.div_ceil(t);
     let mut bins = vec![Vec::new(); tile_count(camera) as usize];
     for (k, s) in splats.iter().enumerate() {
@@ -534,66 +519,32 @@ fn bin_tiles(camera: &Camera, splats: &[Splat]) -> Vec<Vec<u32>> {
     bins
 }
 
-/// Images of a raster render, as for ray tracing, plus the picked splat of sample 0.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RasterOutput {
-    /// Mean, variance, alpha, depth (frame 0) and normal (frame 0).
-    pub frames: TraceOutput,
-    /// Scene index of the splat that set the depth in frame 0, per pixel (row-major).
-    pub picked: Vec<Option<u32>>,
-}
-
-/// Render `frames.count` frames of `method` (one for sorted splatting) and accumulate the mean
-/// and per-frame variance per pixel in f64. Each pixel loops over its frames and every decision
-/// is a hash, so the result does not depend on the thread count. `progress` receives finished
-/// pixel counts.
+/// Render `frames.count` frames of `method` (one for sorted splatting) on the frame loop of
+/// [`crate::frame`]. Every decision is a hash, so the result does not depend on the thread
+/// count. `progress` receives finished pixel counts.
 pub fn render_raster(
     raster: &Rasterizer,
     method: &RasterMethod,
     frames: &Frames,
-    progress: &(dyn Fn(u64) + Sync),
-) -> Result<RasterOutput, RenderError> {
+    progress: Progress,
+) -> Result<RenderOutput, RenderError> {
     if frames.rng != RngScheme::Hash {
         return Err(RenderError::Settings("the raster methods draw their decisions with the hash generator".into()));
     }
-    let camera = &raster.camera;
-    let keys = frame_keys(frames, method.is_stochastic())?;
-    let results = map_tiles(camera, |tile| {
-        let out: Vec<_> = tile_coords(camera, tile).map(|(x, y)| render_pixel(raster, method, x, y, &keys)).collect();
-        progress(out.len() as u64);
-        out
-    });
-    let out = assemble_frames(camera, &results, |(v, _)| v);
-    let mut picked = vec![None; (camera.width * camera.height) as usize];
-    for (tile, values) in results.iter().enumerate() {
-        for ((x, y), (_, pick)) in tile_coords(camera, tile as u32).zip(values) {
-            picked[(y * camera.width + x) as usize] = *pick;
-        }
-    }
-    Ok(RasterOutput { frames: out, picked })
-}
-
-/// Every frame of one pixel: mean and variance of colour and coverage, and frame 0's picks.
-fn render_pixel(
-    raster: &Rasterizer,
-    method: &RasterMethod,
-    x: u32,
-    y: u32,
-    keys: &[u32],
-) -> (PixelValues, Option<u32>) {
-    let px = raster.pixel(x, y);
-    let mut fragments = raster.fragments(&px);
-    let mut pixel = PixelFrames::default();
-    let mut picked = None;
-    for (f, &key) in keys.iter().enumerate() {
-        if method.is_stochastic() {
-            raster.shuffle(&mut fragments, key);
-        }
-        let s = raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash), key);
-        pixel.push(s.color, s.alpha, s.depth, s.normal);
-        if f == 0 {
-            picked = s.picked;
-        }
-    }
-    (pixel.values(), picked)
+    let keys = frames.keys(method.is_stochastic())?;
+    Ok(render_tiles(
+        &raster.camera,
+        progress,
+        |_| (),
+        |_, x, y| {
+            let px = raster.pixel(x, y);
+            let mut fragments = raster.fragments(&px);
+            PixelFrames::over(&keys, |key| {
+                if method.is_stochastic() {
+                    raster.shuffle(&mut fragments, key);
+                }
+                raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash), key)
+            })
+        },
+    ))
 }

@@ -12,7 +12,7 @@ fn sorted(blend: Blend) -> RasterMethod {
     RasterMethod::Sorted { blend }
 }
 
-fn render(r: &Rasterizer, method: &RasterMethod, count: u32) -> RasterOutput {
+fn render(r: &Rasterizer, method: &RasterMethod, count: u32) -> RenderOutput {
     render_raster(r, method, &Frames { count, seed: 3, ..Frames::default() }, &|_| {}).unwrap()
 }
 
@@ -26,8 +26,8 @@ fn over_equals_under() {
             for fragment_depth in [FragmentDepth::Center, FragmentDepth::MaxDensityPlane] {
                 let raster = RasterSettings { samples, fragment_depth };
                 let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
-                let over = render(&r, &sorted(Blend::Over), 1).frames;
-                let under = render(&r, &sorted(Blend::Under), 1).frames;
+                let over = render(&r, &sorted(Blend::Over), 1);
+                let under = render(&r, &sorted(Blend::Under), 1);
                 for (a, b) in over.mean.data().iter().zip(under.mean.data()) {
                     assert_relative_eq!(a, b, epsilon = 1e-6);
                 }
@@ -49,8 +49,8 @@ fn sorted_splatting_matches_the_ray_traced_oracle_where_ewa_is_exact() {
     let mut settings = RenderSettings::default();
     settings.kernel.cutoff = project::EXTENT_SQ.sqrt();
     let r = Rasterizer::new(&scene, &camera, settings, RasterSettings::default()).unwrap();
-    let raster = render(&r, &sorted(Blend::Under), 1).frames;
-    let exact = crate::render::render_exact(&scene, &camera, &settings, &|_| {}).unwrap();
+    let raster = render(&r, &sorted(Blend::Under), 1);
+    let exact = crate::oracle::render_oracle(&scene, &camera, &settings, &|_| {}).unwrap();
     // Inside the footprint (away from the √8σ rim, where the dilated and undilated ellipses
     // cut different pixels) the alphas differ by the dilation's effect only: σ′² = σ² + 0.3 with
     // σ ≈ 4.1 px widens the Gaussian by k = 1.78 %, and max over x of o (e^(−x/(1+k)) − e^(−x))
@@ -243,7 +243,7 @@ fn under_picks_the_iso_opacity_splat() {
     let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), RasterSettings::default()).unwrap();
     let out = render(&r, &sorted(Blend::Under), 1);
     assert_eq!(out.picked, vec![Some(1)]);
-    let depth = out.frames.depth.data()[0];
+    let depth = out.depth.data()[0];
     assert_relative_eq!(depth, 5.3, max_relative = 1e-3);
-    assert_relative_eq!(out.frames.normal.pixel(0, 0)[2], 1.0, epsilon = 1e-3);
+    assert_relative_eq!(out.normal.pixel(0, 0)[2], 1.0, epsilon = 1e-3);
 }

@@ -1,9 +1,14 @@
-//! Shared helpers of the GPU test binaries.
+//! Shared helpers of the GPU test binaries: the adapter (or the loud skip), the compiled trace
+//! kernel, and GPU samplers for the statistical harness of `splat-tests`.
 #![allow(dead_code)]
 
-use splat_core::trace::{Frames, Method, TraceScene};
-use splat_core::{Camera, Scene};
-use splat_gpu::{GpuContext, GpuScene};
+pub use splat_tests::harness::fixture;
+
+use splat_core::Camera;
+use splat_core::frame::{Frames, RenderOutput};
+use splat_core::trace::{Method, TraceScene, render_frames};
+use splat_gpu::{GpuContext, GpuTracer, TracePipeline};
+use splat_tests::harness::StatTest;
 use std::sync::OnceLock;
 
 /// The shared context; `None` (with the reason printed) when there is no adapter, except under
@@ -20,21 +25,32 @@ pub fn context() -> Option<&'static GpuContext> {
     }
 }
 
-pub fn fixture(name: &str, width: u32, height: u32) -> (Scene, Camera) {
-    let (scene, camera) = splat_core::scenes::by_name(name).unwrap();
-    (scene, camera.rescaled(width, height).unwrap())
+/// The ray-tracing kernel, compiled once per test binary.
+pub fn trace_pipeline(ctx: &'static GpuContext) -> &'static TracePipeline {
+    static PIPELINE: OnceLock<TracePipeline> = OnceLock::new();
+    PIPELINE.get_or_init(|| TracePipeline::new(ctx).expect("the trace kernel compiles"))
 }
 
-/// GPU mean image (seed `seed`, `frames` frames).
-pub fn gpu_run(
-    ctx: &GpuContext,
-    scene: &GpuScene,
+/// `trace` uploaded for ray tracing on `ctx`.
+pub fn tracer<'a>(ctx: &'static GpuContext, trace: &'a TraceScene<'a>) -> GpuTracer<'a> {
+    GpuTracer::new(ctx, trace_pipeline(ctx), trace).expect("the scene fits")
+}
+
+/// GPU images of `frames` frames of `method`.
+pub fn gpu_run(tracer: &GpuTracer, camera: &Camera, method: &Method, frames: Frames) -> RenderOutput {
+    tracer.render(camera, method, &frames).expect("GPU render").0
+}
+
+/// The statistical test of the GPU `method` against the core's `exact` image.
+pub fn gpu_stat<'a>(
+    name: impl Into<String>,
+    tracer: &'a GpuTracer<'a>,
     trace: &TraceScene,
-    camera: &Camera,
-    method: &Method,
-    frames: Frames,
-) -> splat_gpu::GpuOutput {
-    splat_gpu::render(ctx, scene, trace, camera, method, &frames).unwrap()
+    camera: &'a Camera,
+    method: Method,
+) -> StatTest<'a> {
+    let exact = render_frames(trace, camera, &Method::Exact, &Frames::default(), &|_| {}).expect("render");
+    StatTest::new(name, exact, move |f| gpu_run(tracer, camera, &method, f))
 }
 
 /// The unbiased methods, with parameters whose rays stay within lavapipe's loop budget on the

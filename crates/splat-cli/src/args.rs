@@ -1,0 +1,365 @@
+//! What `render`, `converge` and `bench` share: the scene, camera and shading options, the
+//! method options and their resolution into a library [`Algorithm`], the backend choice, the
+//! scene loader and the progress bar.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use splat_core::normal::NormalMode;
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings};
+use splat_core::rng::RngScheme;
+use splat_core::trace::Method;
+use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene, scenes};
+use splat_io::ply::{PlyOptions, read_ply_with};
+use std::path::PathBuf;
+
+/// Rendering method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// Every hit along each ray through the BVH, sorted, composited by Eq. 3.
+    Exact,
+    /// The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3.
+    Oracle,
+    /// 3DGRT / vk multi-pass k-buffer: --k hits per pass, up to --max-passes passes.
+    Kbuffer,
+    /// Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray.
+    Stochastic,
+    /// Sun et al. §3.5: --passes traversals of --samples samples each per frame.
+    StochasticN,
+    /// vk stochastic pass: --k sorted hits a pass, accepted with probability 1 − T_pass.
+    StochasticPass,
+    /// 3DGRT stochastic depth sampling of the first --k accepted hits (biased; a control).
+    DepthSamplingK,
+    /// Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline.
+    Opaque,
+    /// 3DGS splatting: EWA projection, global depth sort, --blend over|under per sample (the
+    /// raster oracle; under also gives iso depth and normals).
+    RasterSorted,
+    /// StochasticSplats: no sort, depth-tested stochastic discard, --raster-samples per pixel.
+    StochasticSplat,
+    /// Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment.
+    Enderton,
+    /// Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting).
+    Stratified,
+}
+
+/// Blend order of raster-sorted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BlendArg {
+    /// Back to front, C ← αc + (1 − α)C.
+    Over,
+    /// Front to back, premultiplied; also picks the iso-opacity depth and integrates normals.
+    Under,
+}
+
+/// Depth of a raster fragment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FragmentDepthArg {
+    /// Billboard through the splat centre (3DGS, vk).
+    Center,
+    /// Maximum-density point along each sample's ray (StochasticSplats' pop-free variant).
+    Plane,
+}
+
+/// Where rays are traced or splats rasterized.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// A hardware GPU when wgpu finds one, else the CPU (lavapipe, a CPU Vulkan driver, is
+    /// slower than the CPU renderers and is used only when asked for with --backend gpu).
+    Auto,
+    /// The CPU renderers of splat-core (rayon over tiles).
+    Cpu,
+    /// The wgpu kernels: compute ray tracing, and the splatting render pipeline for
+    /// raster-sorted and stochastic-splat (WGPU_BACKEND / WGPU_ADAPTER_NAME choose the adapter).
+    Gpu,
+}
+
+/// Random number generator of the stochastic methods.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum RngArg {
+    /// xxhash32 + PCG (vk_gaussian_splatting), 24-bit uniform.
+    Hash,
+    /// Trigonometric hash of Sun et al. Eqs. 8–10 (coarse in f32: u on a grid up to 1/256).
+    Trig,
+}
+
+/// Options of the methods, shared by `render`, `converge` and `bench`.
+#[derive(Args, Clone)]
+pub struct MethodOptions {
+    /// Hits per pass (kbuffer, stochastic-pass) or accepted hits composited (depth-sampling-k).
+    #[arg(long, default_value_t = splat_core::trace::DEFAULT_K)]
+    pub k: usize,
+    /// Pass limit of kbuffer and stochastic-pass.
+    #[arg(long, default_value_t = splat_core::trace::DEFAULT_MAX_PASSES)]
+    pub max_passes: u32,
+    /// kbuffer stops when transmittance falls to this (0: never; exact up to --max-passes).
+    #[arg(long, default_value_t = splat_core::trace::DEFAULT_MIN_TRANSMITTANCE)]
+    pub min_transmittance: f32,
+    /// stochastic-n: samples per traversal (n, up to 64).
+    #[arg(long, default_value_t = 16)]
+    pub samples: u32,
+    /// stochastic-n: traversals per frame (m).
+    #[arg(long, default_value_t = 1)]
+    pub passes: u32,
+    /// Generator of the stochastic decisions.
+    #[arg(long, value_enum, default_value = "hash")]
+    pub rng: RngArg,
+    /// Raster methods: samples per pixel S (1, 2, 4, 8, 16, 32 or 64), at Hammersley positions.
+    #[arg(long, default_value_t = 1)]
+    pub raster_samples: u32,
+    /// Raster methods: depth of each fragment.
+    #[arg(long, value_enum, default_value = "center")]
+    pub fragment_depth: FragmentDepthArg,
+    /// raster-sorted: blend order (default under, which also yields --depth and --normal).
+    #[arg(long, value_enum, default_value = "under")]
+    pub blend: BlendArg,
+    /// stratified: skip the multiply–XOR scramble (the correlated radical inverse that
+    /// Laine–Karras warn about; biased, a negative control).
+    #[arg(long)]
+    pub no_scramble: bool,
+}
+
+impl MethodArg {
+    /// The method's name on the command line (`stochastic-n`, …).
+    pub fn name(self) -> String {
+        clap::ValueEnum::to_possible_value(&self).map(|v| v.get_name().to_string()).unwrap_or_default()
+    }
+}
+
+impl MethodOptions {
+    /// The library's algorithm for a CLI method, with these options' parameters.
+    pub fn resolve(&self, m: MethodArg) -> Algorithm {
+        let trace = Algorithm::Trace;
+        let raster = |method| Algorithm::Raster(method, self.raster_settings());
+        match m {
+            MethodArg::Oracle => Algorithm::Oracle,
+            MethodArg::Exact => trace(Method::Exact),
+            MethodArg::Kbuffer => trace(Method::KBuffer {
+                k: self.k,
+                max_passes: self.max_passes,
+                min_transmittance: self.min_transmittance,
+            }),
+            MethodArg::Stochastic => trace(Method::Stochastic),
+            MethodArg::StochasticN => trace(Method::StochasticN { m: self.passes, n: self.samples }),
+            MethodArg::StochasticPass => trace(Method::StochasticPass { k: self.k, max_passes: self.max_passes }),
+            MethodArg::DepthSamplingK => trace(Method::DepthSampling { k: self.k }),
+            MethodArg::Opaque => trace(Method::Opaque),
+            MethodArg::RasterSorted => raster(RasterMethod::Sorted {
+                blend: match self.blend {
+                    BlendArg::Over => Blend::Over,
+                    BlendArg::Under => Blend::Under,
+                },
+            }),
+            MethodArg::StochasticSplat => raster(RasterMethod::StochasticSplat),
+            MethodArg::Enderton => raster(RasterMethod::Enderton),
+            MethodArg::Stratified => raster(RasterMethod::Stratified { scramble: !self.no_scramble }),
+        }
+    }
+
+    /// The ray-tracing method for a CLI method; an error names any other.
+    pub fn method(&self, m: MethodArg) -> Result<Method> {
+        match self.resolve(m) {
+            Algorithm::Trace(method) => Ok(method),
+            _ => bail!("{} is not a ray-tracing method (it has no BVH to time)", m.name()),
+        }
+    }
+
+    /// The raster settings these options describe.
+    pub fn raster_settings(&self) -> RasterSettings {
+        RasterSettings {
+            samples: self.raster_samples,
+            fragment_depth: match self.fragment_depth {
+                FragmentDepthArg::Center => FragmentDepth::Center,
+                FragmentDepthArg::Plane => FragmentDepth::MaxDensityPlane,
+            },
+        }
+    }
+
+    /// The generator.
+    pub fn rng(&self) -> RngScheme {
+        match self.rng {
+            RngArg::Hash => RngScheme::Hash,
+            RngArg::Trig => RngScheme::Trig,
+        }
+    }
+}
+
+/// Hit distance convention (Sun et al. §4.1).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum HitArg {
+    /// Maximum density along the ray (3DGRT).
+    Mean,
+    /// Particle centre projected on the camera's view direction (3DGS rasterizer depth).
+    Center,
+}
+
+/// Per-particle normal (vk_gaussian_splatting Lighting §2.4).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum NormalArg {
+    /// Normal of the max-density plane, Σ⁻¹(μ − o).
+    Plane,
+    /// Normal of the cutoff ellipsoid where the ray enters it.
+    Ellipsoid,
+}
+
+/// Scene, camera and shading options shared by `render`, `converge` and `bench`.
+#[derive(Args, Clone)]
+pub struct SceneArgs {
+    /// Scene file (.ply or .splat). Without one, the built-in demo scene is used.
+    pub scene: Option<PathBuf>,
+    /// INRIA cameras.json; without it the camera frames the scene (or the demo's own camera).
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Which entry of the cameras.json to use.
+    #[arg(long, default_value_t = 0)]
+    pub camera_index: usize,
+    /// Image width; rescales the camera's intrinsics.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height; rescales the camera's intrinsics.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Look-at camera position "x,y,z" (with --target; world up from --up).
+    #[arg(long, value_parser = parse_vec3, requires = "target")]
+    pub eye: Option<Vec3>,
+    /// Look-at target "x,y,z".
+    #[arg(long, value_parser = parse_vec3, requires = "eye")]
+    pub target: Option<Vec3>,
+    /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0")]
+    pub up: Vec3,
+    /// Vertical field of view in degrees for --eye/--target.
+    #[arg(long, default_value_t = 50.0)]
+    pub fov: f32,
+    /// Background colour "r,g,b" behind the particles.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
+    pub background: Vec3,
+    /// Hit distance convention.
+    #[arg(long, value_enum, default_value = "mean")]
+    pub hit_distance: HitArg,
+    /// Per-particle normal.
+    #[arg(long, value_enum, default_value = "plane")]
+    pub normals: NormalArg,
+    /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8.
+    #[arg(long, default_value_t = splat_core::kernel::DEFAULT_DEGREE)]
+    pub kernel_degree: u32,
+    /// Cutoff in standard deviations (Eq. 2).
+    #[arg(long, default_value_t = splat_core::kernel::DEFAULT_CUTOFF)]
+    pub cutoff: f32,
+    /// Iso-opacity depth threshold on transmittance.
+    #[arg(long, default_value_t = splat_core::composite::DEFAULT_ISO_THRESHOLD)]
+    pub iso_threshold: f32,
+    /// Worker threads (default: all cores). The image does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Where rays are traced.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
+    /// Skip unknown `.ply` vertex properties instead of refusing the file.
+    #[arg(long)]
+    pub allow_unknown_properties: bool,
+}
+
+impl SceneArgs {
+    /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
+    /// a look-at or framing camera when none is given.
+    pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera)> {
+        let (scene, default_camera) = match &self.scene {
+            Some(path) => (load_scene(path, self.allow_unknown_properties)?, None),
+            None => {
+                let (scene, camera) = scenes::demo();
+                (scene, Some(camera))
+            }
+        };
+        let camera = self.choose_camera(&scene, default_camera, width, height)?;
+        Ok((scene, camera))
+    }
+
+    /// The render settings these options describe.
+    pub fn settings(&self) -> RenderSettings {
+        RenderSettings {
+            kernel: KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..KernelParams::default() },
+            hit_distance: match self.hit_distance {
+                HitArg::Mean => HitDistance::Mean,
+                HitArg::Center => HitDistance::Center,
+            },
+            normal_mode: match self.normals {
+                NormalArg::Plane => NormalMode::MaxDensityPlane,
+                NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
+            },
+            background: self.background,
+            iso_threshold: self.iso_threshold,
+            ..RenderSettings::default()
+        }
+    }
+
+    fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
+        let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
+        let camera = if let Some(path) = &self.camera {
+            let cameras = splat_io::cameras::read_cameras(path)?;
+            let n = cameras.len();
+            *cameras.get(self.camera_index).with_context(|| {
+                format!("{}: --camera-index {} but the file has {n} cameras", path.display(), self.camera_index)
+            })?
+        } else if let (Some(eye), Some(target)) = (self.eye, self.target) {
+            Camera::look_at(eye, target, self.up, self.fov, w, h)?
+        } else if let Some(camera) = default_camera {
+            camera
+        } else {
+            Camera::framing(&scene.robust_bounds(0.02), self.up, w, h)?
+        };
+        let (w, h) = (self.width.unwrap_or(camera.width), self.height.unwrap_or(camera.height));
+        if w == 0 || h == 0 {
+            bail!("--width and --height must be positive");
+        }
+        Ok(camera.rescaled(w, h)?)
+    }
+
+    /// A rayon pool with --threads workers.
+    pub fn pool(&self) -> Result<rayon::ThreadPool> {
+        let mut builder = rayon::ThreadPoolBuilder::new();
+        if let Some(n) = self.threads {
+            if n == 0 {
+                bail!("--threads must be at least 1");
+            }
+            builder = builder.num_threads(n);
+        }
+        Ok(builder.build()?)
+    }
+}
+
+/// Load a scene by extension, honouring the `.ply` leniency option.
+pub fn load_scene(path: &std::path::Path, allow_unknown_properties: bool) -> Result<splat_core::Scene> {
+    let is_ply = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    Ok(if is_ply { read_ply_with(path, PlyOptions { allow_unknown_properties })? } else { splat_io::read_scene(path)? })
+}
+
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> =
+        s.split(',').map(|c| c.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("'{s}': {e}"))?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!("'{s}' is not three finite numbers x,y,z")),
+    }
+}
+
+/// A progress bar over `pixels` pixels (hidden when stderr is not a terminal).
+pub fn progress_bar(pixels: u64) -> ProgressBar {
+    ProgressBar::new(pixels).with_style(
+        ProgressStyle::with_template("{spinner} rendering [{bar:40}] {percent:>3}% {elapsed} (eta {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    )
+}
+
+/// The GPU context the backend choice asks for: `None` for the CPU.
+pub fn gpu_context(backend: BackendArg) -> Result<Option<splat_gpu::GpuContext>> {
+    match backend {
+        BackendArg::Cpu => Ok(None),
+        BackendArg::Gpu => Ok(Some(splat_gpu::GpuContext::new()?)),
+        BackendArg::Auto => {
+            Ok(splat_gpu::GpuContext::new().ok().filter(|c| c.info.device_type != splat_gpu::wgpu::DeviceType::Cpu))
+        }
+    }
+}

@@ -1,0 +1,55 @@
+//! Which renderer makes an image: the oracle, a ray-tracing estimator or a splatting estimator.
+//! The one name that the CLI, the golden images and the GPU backend dispatch on.
+
+use crate::camera::Camera;
+use crate::frame::{Frames, Progress, RenderOutput};
+use crate::oracle::render_oracle;
+use crate::particle::Scene;
+use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster};
+use crate::settings::{RenderError, RenderSettings};
+use crate::trace::{Method, TraceScene, render_frames};
+
+/// A renderer of either family, with its parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Algorithm {
+    /// The brute-force oracle: every particle for every pixel, Eq. 3 ([`crate::oracle`]).
+    Oracle,
+    /// A ray-tracing method through the BVH ([`crate::trace`]).
+    Trace(Method),
+    /// A splatting method with its sample set ([`crate::raster`]).
+    Raster(RasterMethod, RasterSettings),
+}
+
+impl Algorithm {
+    /// Whether frames differ (the method draws random decisions).
+    pub fn is_stochastic(&self) -> bool {
+        match self {
+            Algorithm::Oracle => false,
+            Algorithm::Trace(m) => m.is_stochastic(),
+            Algorithm::Raster(m, _) => m.is_stochastic(),
+        }
+    }
+
+    /// Render `frames` on the CPU (one frame for a deterministic method). `progress` receives
+    /// finished pixel counts.
+    pub fn render(
+        &self,
+        scene: &Scene,
+        camera: &Camera,
+        settings: &RenderSettings,
+        frames: &Frames,
+        progress: Progress,
+    ) -> Result<RenderOutput, RenderError> {
+        match self {
+            Algorithm::Oracle => render_oracle(scene, camera, settings, progress),
+            Algorithm::Trace(method) => {
+                let trace = TraceScene::new(scene, *settings)?;
+                render_frames(&trace, camera, method, frames, progress)
+            }
+            Algorithm::Raster(method, raster) => {
+                let r = Rasterizer::new(scene, camera, *settings, *raster)?;
+                render_raster(&r, method, frames, progress)
+            }
+        }
+    }
+}

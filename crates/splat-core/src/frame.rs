@@ -1,0 +1,210 @@
+//! The frame loop every CPU renderer stands on (docs/architecture.md, "The frame loop").
+//!
+//! A render is `frames.count` frames of one method; each frame gives every pixel one
+//! [`Sample`], drawn with the counter-based decisions of [`crate::rng`] keyed by (pixel, frame
+//! key). [`render_tiles`] runs the pixels tile by tile, each pixel folding its own frames into
+//! f64 Welford accumulators ([`PixelFrames`]), and assembles one [`RenderOutput`]. The oracle,
+//! the ray-tracing estimators ([`crate::trace`]) and the rasterizers ([`crate::raster`]) differ
+//! only in the function that makes a pixel's sample; the images of the GPU backend have the
+//! same type.
+
+use crate::camera::Camera;
+use crate::image::Image;
+use crate::rng::{RayRng, RngScheme, frame_key};
+use crate::settings::RenderError;
+use crate::stats::Welford;
+use crate::tile::{map_tiles, tile_coords};
+use glam::{DVec3, Vec3};
+
+/// Receives the number of pixels finished since its last call (a progress bar, or `&|_| {}`).
+pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
+
+/// How frames are drawn: how many, from which seed, with which generator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frames {
+    /// Frames (samples per pixel) averaged.
+    pub count: u32,
+    /// Seed of the random stream; two seeds give independent runs.
+    pub seed: u32,
+    /// Generator of the decisions.
+    pub rng: RngScheme,
+}
+
+impl Default for Frames {
+    fn default() -> Self {
+        Self { count: 1, seed: 0, rng: RngScheme::Hash }
+    }
+}
+
+impl Frames {
+    /// The frame keys of a render: `count` frames for a stochastic method, one otherwise (a
+    /// deterministic method gives the same sample every frame).
+    pub fn keys(&self, stochastic: bool) -> Result<Vec<u32>, RenderError> {
+        if self.count == 0 {
+            return Err(RenderError::Settings("at least one frame is needed".into()));
+        }
+        let count = if stochastic { self.count } else { 1 };
+        Ok((0..count).map(|f| frame_key(self.seed, f)).collect())
+    }
+}
+
+/// The source of the stochastic decisions of one ray or pixel.
+pub trait Decide {
+    /// Whether [`Decide::particle`] reads the hit position.
+    fn needs_position(&self) -> bool;
+    /// u ∈ [0, 1): particle `id` is accepted in sample `slot` when u < α.
+    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32;
+    /// u ∈ [0, 1): pass `pass` is accepted when u < 1 − T_pass.
+    fn pass(&self, pass: u32) -> f32;
+}
+
+impl Decide for RayRng {
+    fn needs_position(&self) -> bool {
+        RayRng::needs_position(self)
+    }
+    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
+        RayRng::particle(self, id, slot, hit)
+    }
+    fn pass(&self, pass: u32) -> f32 {
+        RayRng::pass(self, pass)
+    }
+}
+
+/// The total depth order of the whole crate: (t, id) strictly before (other_t, other_id) —
+/// distance first, ties by particle id — so no result depends on traversal or draw order.
+#[inline]
+pub fn depth_before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
+    t < other_t || (t == other_t && id < other_id)
+}
+
+/// What one frame of one method yields at one pixel (or for one ray).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Radiance over the background.
+    pub color: DVec3,
+    /// Coverage: 1 − T for deterministic methods, the fraction of accepting samples for
+    /// stochastic ones.
+    pub alpha: f64,
+    /// Picked depth (iso-opacity for sorted methods, the accepted hit for stochastic ones).
+    pub depth: Option<f32>,
+    /// Unit normal of the pick (zero when nothing is hit).
+    pub normal: Vec3,
+    /// Scene index of the particle that set the depth, where the method tracks it.
+    pub picked: Option<u32>,
+}
+
+impl Sample {
+    /// Nothing hit: the background, no coverage.
+    pub fn background(background: Vec3) -> Self {
+        Self { color: background.as_dvec3(), alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None }
+    }
+}
+
+/// The images of a render, whatever the method and backend.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOutput {
+    /// Mean radiance over the frames (RGB): L + T × background (Eq. 3) in expectation.
+    pub mean: Image,
+    /// Per-frame variance of the radiance (RGB, unbiased; 0 with one frame).
+    pub variance: Image,
+    /// Mean coverage 1 − T.
+    pub alpha: Image,
+    /// Depth of frame 0 (ray distance t; NaN where none): picks are never averaged (vk_gaussian_splatting Lighting
+    /// §2.3).
+    pub depth: Image,
+    /// Unit normal of frame 0, world space; zero where nothing is hit.
+    pub normal: Image,
+    /// Scene index of the particle that set frame 0's depth, per pixel (row-major); `None`
+    /// where nothing was picked or the method does not track picks.
+    pub picked: Vec<Option<u32>>,
+}
+
+impl RenderOutput {
+    /// Colour-only images (depth NaN, normal zero, no picks), for backends that produce no
+    /// picks.
+    pub fn colour_only(mean: Image, variance: Image, alpha: Image) -> Self {
+        let (w, h) = (mean.width(), mean.height());
+        Self {
+            mean,
+            variance,
+            alpha,
+            depth: Image::filled(w, h, 1, f32::NAN),
+            normal: Image::filled(w, h, 3, 0.0),
+            picked: vec![None; w as usize * h as usize],
+        }
+    }
+}
+
+/// The frames of one pixel: f64 Welford mean and variance of colour and coverage, and the
+/// depth, normal and pick of the first frame (picks are never averaged).
+#[derive(Default)]
+pub struct PixelFrames {
+    acc: [Welford; 4],
+    first: Option<Sample>,
+}
+
+impl PixelFrames {
+    /// Fold the sample of every frame key: `sample(key)` is one frame of the pixel.
+    pub fn over(keys: &[u32], mut sample: impl FnMut(u32) -> Sample) -> Self {
+        let mut pixel = Self::default();
+        for &key in keys {
+            pixel.push(&sample(key));
+        }
+        pixel
+    }
+
+    /// Add one frame's sample.
+    pub fn push(&mut self, s: &Sample) {
+        for (a, v) in self.acc.iter_mut().zip([s.color.x, s.color.y, s.color.z, s.alpha]) {
+            a.push(v);
+        }
+        self.first.get_or_insert(*s);
+    }
+}
+
+/// The one frame loop: `pixel(state, x, y)` folds the frames of pixel (x, y), with `state` made
+/// once per tile by `tile_state(tile)` (scratch buffers, per-tile candidate lists). Tiles run in
+/// parallel; each pixel loops over its own frames, so the result does not depend on the thread
+/// count. `progress` receives finished pixel counts.
+pub fn render_tiles<S>(
+    camera: &Camera,
+    progress: Progress,
+    tile_state: impl Fn(u32) -> S + Sync + Send,
+    pixel: impl Fn(&mut S, u32, u32) -> PixelFrames + Sync + Send,
+) -> RenderOutput {
+    let tiles = map_tiles(camera, |tile| {
+        let mut state = tile_state(tile);
+        let out: Vec<PixelFrames> = tile_coords(camera, tile).map(|(x, y)| pixel(&mut state, x, y)).collect();
+        progress(out.len() as u64);
+        out
+    });
+    assemble(camera, &tiles)
+}
+
+/// Scatter the tiles' pixels into the output images.
+fn assemble(camera: &Camera, tiles: &[Vec<PixelFrames>]) -> RenderOutput {
+    let (w, h) = (camera.width, camera.height);
+    let image = |c| Image::filled(w, h, c, 0.0);
+    let mut out = RenderOutput {
+        mean: image(3),
+        variance: image(3),
+        alpha: image(1),
+        depth: image(1),
+        normal: image(3),
+        picked: vec![None; (w * h) as usize],
+    };
+    for (tile, pixels) in tiles.iter().enumerate() {
+        for ((x, y), p) in tile_coords(camera, tile as u32).zip(pixels) {
+            let mean = p.acc.map(|a| a.mean as f32);
+            let var = p.acc.map(|a| a.variance() as f32);
+            let first = p.first.unwrap_or(Sample::background(Vec3::ZERO));
+            out.mean.pixel_mut(x, y).copy_from_slice(&mean[..3]);
+            out.variance.pixel_mut(x, y).copy_from_slice(&var[..3]);
+            out.alpha.pixel_mut(x, y)[0] = mean[3];
+            out.depth.pixel_mut(x, y)[0] = first.depth.unwrap_or(f32::NAN);
+            out.normal.pixel_mut(x, y).copy_from_slice(&first.normal.to_array());
+            out.picked[(y * w + x) as usize] = first.picked;
+        }
+    }
+    out
+}

@@ -1,0 +1,106 @@
+//! What every renderer of the crate shares besides the scene and camera: the settings that
+//! decide an image ([`RenderSettings`]) and why a render cannot start ([`RenderError`]).
+
+use crate::camera::CameraError;
+use crate::composite::DEFAULT_ISO_THRESHOLD;
+use crate::hit::{DEFAULT_T_MAX, DEFAULT_T_MIN, HitDistance};
+use crate::kernel::KernelParams;
+use crate::normal::NormalMode;
+use crate::particle::{ParticleError, Scene};
+use glam::Vec3;
+use thiserror::Error;
+
+/// Everything that decides an image besides the scene, the camera and the method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Particle response.
+    pub kernel: KernelParams,
+    /// Hit distance convention (§4.1).
+    pub hit_distance: HitDistance,
+    /// Per-particle normal (vk_gaussian_splatting Lighting §2.4).
+    pub normal_mode: NormalMode,
+    /// Colour behind the particles.
+    pub background: Vec3,
+    /// Iso-opacity depth threshold on transmittance (vk_gaussian_splatting Lighting §1.1).
+    pub iso_threshold: f32,
+    /// Ray start t_min.
+    pub t_min: f32,
+    /// Ray end t_max.
+    pub t_max: f32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            kernel: KernelParams::default(),
+            hit_distance: HitDistance::Mean,
+            normal_mode: NormalMode::MaxDensityPlane,
+            background: Vec3::ZERO,
+            iso_threshold: DEFAULT_ISO_THRESHOLD,
+            t_min: DEFAULT_T_MIN,
+            t_max: DEFAULT_T_MAX,
+        }
+    }
+}
+
+/// Why a render cannot start.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum RenderError {
+    /// A setting is out of range.
+    #[error("invalid render setting: {0}")]
+    Settings(String),
+    /// The camera is invalid.
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    /// A particle is invalid.
+    #[error("particle {index}: {error}")]
+    Particle {
+        /// Its index in the scene.
+        index: usize,
+        /// What is wrong.
+        error: ParticleError,
+    },
+    /// The scene's SH degree is above 3.
+    #[error("SH degree {0} is above 3")]
+    ShDegree(u8),
+}
+
+impl RenderSettings {
+    /// Check every setting, naming the first bad one.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        self.kernel.validate().map_err(RenderError::Settings)?;
+        if !self.background.is_finite() {
+            return Err(RenderError::Settings(format!("background {} is not finite", self.background)));
+        }
+        if !(0.0..=1.0).contains(&self.iso_threshold) {
+            return Err(RenderError::Settings(format!("iso threshold {} is outside [0, 1]", self.iso_threshold)));
+        }
+        if !(self.t_min.is_finite() && self.t_min >= 0.0 && self.t_max > self.t_min) {
+            return Err(RenderError::Settings(format!(
+                "ray range ({}, {}) is empty or invalid",
+                self.t_min, self.t_max
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Check that a scene can be rendered with these settings: valid settings, SH degree ≤ 3,
+/// every particle valid, ids below the ones the RNG reserves.
+pub fn validate_scene(scene: &Scene, settings: &RenderSettings) -> Result<(), RenderError> {
+    settings.validate()?;
+    if scene.sh_degree > crate::particle::SH_MAX_DEGREE {
+        return Err(RenderError::ShDegree(scene.sh_degree));
+    }
+    if scene.particles.len() > crate::rng::MAX_PARTICLES {
+        return Err(RenderError::Settings(format!(
+            "{} particles is more than the {} supported",
+            scene.particles.len(),
+            crate::rng::MAX_PARTICLES
+        )));
+    }
+    for (index, p) in scene.particles.iter().enumerate() {
+        p.validate().map_err(|error| RenderError::Particle { index, error })?;
+    }
+    Ok(())
+}

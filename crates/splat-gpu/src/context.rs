@@ -1,0 +1,239 @@
+//! The headless wgpu device every kernel runs on, its buffer helpers and the layout-entry and
+//! pipeline helpers shared by the trace, raster and sort kernels.
+
+use crate::GpuError;
+use splat_core::Camera;
+use splat_core::image::Image;
+use wgpu::util::DeviceExt;
+
+/// A headless wgpu device.
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// What the adapter is.
+    pub info: wgpu::AdapterInfo,
+    /// Largest storage buffer binding accepted for a scene (the adapter's limit, or less).
+    pub max_binding: u64,
+    /// Whether timestamp queries are available.
+    pub timestamps: bool,
+    /// Alignment of dynamic uniform offsets.
+    pub(crate) uniform_alignment: u64,
+    /// Most frames one dispatch of the ray tracer renders ([`crate::FRAMES_PER_DISPATCH`] by
+    /// default).
+    pub frames_per_dispatch: u32,
+}
+
+impl GpuContext {
+    /// The adapter chosen as wgpu's `from_env` helpers do: backends from `WGPU_BACKEND`, the
+    /// first adapter whose name contains `WGPU_ADAPTER_NAME` (case-insensitive) when it is
+    /// set, else the default adapter. A typed error, never a panic, when none matches.
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            Ok(name) => {
+                let wanted = name.to_lowercase();
+                let adapters = instance.enumerate_adapters(backends).await;
+                adapters.into_iter().find(|a| a.get_info().name.to_lowercase().contains(&wanted)).ok_or_else(|| {
+                    GpuError::NoAdapter { detail: format!(" whose name contains '{name}' (WGPU_ADAPTER_NAME)") }
+                })?
+            }
+            Err(_) => instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::from_env()
+                        .unwrap_or(wgpu::PowerPreference::HighPerformance),
+                    ..Default::default()
+                })
+                .await
+                .map_err(|e| GpuError::NoAdapter { detail: format!(" for backends {backends:?} ({e})") })?,
+        };
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        // Timestamps for the benchmarks and blendable RGBA32F targets for sorted splatting, where
+        // the adapter has them.
+        let required_features =
+            adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::FLOAT32_BLENDABLE);
+        // The kernels bind five storage buffers per stage (downlevel defaults allow four):
+        // ask for what the adapter offers.
+        let required_limits = limits.clone();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("splat"),
+                required_features,
+                required_limits,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let uniform_alignment = u64::from(limits.min_uniform_buffer_offset_alignment);
+        Ok(Self {
+            device,
+            queue,
+            info,
+            max_binding,
+            timestamps,
+            uniform_alignment,
+            frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
+        })
+    }
+
+    /// Lower the storage binding limit scenes are checked against (to test the refusal).
+    pub fn with_binding_limit(mut self, bytes: u64) -> Self {
+        self.max_binding = self.max_binding.min(bytes);
+        self
+    }
+
+    /// Invocations a CPU adapter runs in lockstep (its largest subgroup size, at most 128).
+    pub fn lanes(&self) -> u32 {
+        self.info.subgroup_max_size.clamp(1, 128)
+    }
+
+    /// One line naming the adapter.
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {})", self.info.name, self.info.backend, self.info.driver)
+    }
+
+    pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<f32>, GpuError> {
+        let slice = buffer.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+        let data = {
+            let view = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+            bytemuck::cast_slice::<u8, f32>(&view).to_vec()
+        };
+        buffer.unmap();
+        Ok(data)
+    }
+
+    /// Refuse a storage buffer of `bytes` above the binding limit, naming the buffer and the
+    /// `count` of items (particles, keys) that needed it.
+    pub(crate) fn check_binding(&self, buffer: &'static str, bytes: u64, count: usize) -> Result<(), GpuError> {
+        if bytes > self.max_binding {
+            return Err(GpuError::SceneTooLarge { buffer, bytes, limit: self.max_binding, count });
+        }
+        Ok(())
+    }
+
+    /// A read-only storage buffer holding `contents`.
+    pub(crate) fn upload(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: wgpu::BufferUsages::STORAGE,
+        })
+    }
+
+    /// Copy `words` u32 of `source` from word `first` into a staging buffer and read them.
+    pub(crate) fn read_u32_at(&self, source: &wgpu::Buffer, first: usize, words: usize) -> Result<Vec<u32>, GpuError> {
+        let bytes = (4 * words.max(1)) as u64;
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut data: Vec<u32> =
+            self.read_through(source, 4 * first as u64, &staging, bytes)?.iter().map(|f| f.to_bits()).collect();
+        data.truncate(words);
+        Ok(data)
+    }
+
+    /// Copy `bytes` of `source` from byte `offset` into the mappable `staging` and read them.
+    pub(crate) fn read_through(
+        &self,
+        source: &wgpu::Buffer,
+        offset: u64,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+    ) -> Result<Vec<f32>, GpuError> {
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        encoder.copy_buffer_to_buffer(source, offset, staging, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        self.read_buffer(staging)
+    }
+
+    /// The first `words` u32 of `source`.
+    pub(crate) fn read_u32(&self, source: &wgpu::Buffer, words: usize) -> Result<Vec<u32>, GpuError> {
+        self.read_u32_at(source, 0, words)
+    }
+
+    /// The first `words` f32 of `source`.
+    pub(crate) fn read_f32(&self, source: &wgpu::Buffer, words: usize) -> Result<Vec<f32>, GpuError> {
+        Ok(self.read_u32(source, words)?.into_iter().map(f32::from_bits).collect())
+    }
+}
+
+/// An image of `channels` channels whose pixel p, channel c is `value(4p + c)`: the first
+/// channels of a per-pixel RGBA buffer read back from the GPU.
+pub(crate) fn rgba_image(camera: &Camera, channels: u32, value: &dyn Fn(usize) -> f32) -> Image {
+    let pixels = camera.width as usize * camera.height as usize;
+    let data = (0..pixels).flat_map(|p| (0..channels as usize).map(move |c| value(4 * p + c))).collect();
+    Image::from_data(camera.width, camera.height, channels, data).expect("the buffer holds every pixel")
+}
+
+/// A storage-buffer entry of a bind group layout.
+pub(crate) fn storage_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    read_only: bool,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A uniform-buffer entry of at least `size` bytes, with a dynamic offset when `dynamic`.
+pub(crate) fn uniform_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    dynamic: bool,
+    size: usize,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: wgpu::BufferSize::new(size as u64),
+        },
+        count: None,
+    }
+}
+
+/// A compute pipeline of `entry` (also its label); `layout: None` derives it from the shader.
+pub(crate) fn compute_pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    layout: Option<&wgpu::PipelineLayout>,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(entry),
+        layout,
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}

@@ -1,0 +1,147 @@
+//! Iso-opacity depth and picked splat of every pixel: the compute tile rasterizer.
+
+use super::*;
+
+/// Iso-opacity depth and picked splat of every pixel, with the front-to-back colour they come
+/// from (the GPU twin of sorted splatting with [`Blend::Under`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DepthPick {
+    /// Front-to-back colour over the background (RGB).
+    pub color: Image,
+    /// Coverage 1 − T.
+    pub alpha: Image,
+    /// Iso-opacity depth: distance along the pixel-centre ray, `None` where T never fell
+    /// below the threshold.
+    pub depth: Vec<Option<f32>>,
+    /// Scene index of the splat that set the depth.
+    pub picked: Vec<Option<u32>>,
+    /// (tile, splat) pairs the tile lists held.
+    pub pairs: u32,
+}
+
+impl GpuRasterizer<'_> {
+    /// Front-to-back iso-opacity depth and picked splat per pixel, by a compute tile rasterizer
+    /// in the 3DGS style: the sorted splats are binned into 16 × 16 tiles as (tile, rank)
+    /// pairs, the pairs sorted by tile with the radix sort (stable, so each tile's list stays
+    /// in depth order), and one invocation per pixel walks its tile's list front to back,
+    /// compositing with the under operator and recording the first fragment after which the
+    /// transmittance is below the iso threshold.
+    ///
+    /// Why not the render pipeline: the fixed-function blend gives the composited colour but
+    /// never the transmittance before a fragment, and reading it in the fragment shader from a
+    /// storage image needs fragment-shader interlock for overlapping fragments (what
+    /// vk_gaussian_splatting uses); wgpu has none, and without it the read-modify-write races.
+    /// Here each pixel is owned by one invocation that visits its fragments in the global
+    /// (depth, id) order of the CPU reference, so the result is exact and deterministic.
+    pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
+        self.set_mode(Draw::Under);
+        let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
+        let [tiles_x, tiles_y] = self.params.tiles;
+        // 1. Pairs per rank and their exclusive scan (offsets[n] is the total).
+        let count_group = bind(
+            ctx,
+            &pipes.tile_count,
+            &[
+                (0, &self.params_buffer),
+                (3, &self.splats),
+                (5, &self.depth.vals),
+                (6, &self.draw_args),
+                (7, &self.depth.hist),
+            ],
+        );
+        let mut encoder = self.encoder("tile count");
+        {
+            let mut pass = encoder
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile count"), timestamp_writes: None });
+            pass.set_pipeline(&pipes.tile_count);
+            pass.set_bind_group(0, &count_group, &[]);
+            let (gx, gy) = groups((n + 1).div_ceil(256));
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        pipes.sort.encode_scan(ctx, &mut encoder, &self.depth, n + 1);
+        self.submit(encoder)?;
+        let pairs = ctx.read_u32_at(&self.depth.hist, n as usize, 1)?[0];
+        // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
+        let pair_sort = pipes.sort.buffers(ctx, pairs.max(1))?;
+        let tiles = tiles_x * tiles_y;
+        let pixels = (self.camera.width * self.camera.height) as usize;
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let buffer = |label, bytes: usize| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes as u64,
+                usage: rw,
+                mapped_at_creation: false,
+            })
+        };
+        let ranges = buffer("tile ranges", tiles as usize * 8);
+        let out_color = buffer("depth pick colour", pixels * 16);
+        let out_pick = buffer("depth pick", pixels * 8);
+        let emit_group = bind(
+            ctx,
+            &pipes.tile_emit,
+            &[
+                (0, &self.params_buffer),
+                (3, &self.splats),
+                (5, &self.depth.vals),
+                (6, &self.draw_args),
+                (7, &self.depth.hist),
+                (8, &pair_sort.keys),
+                (9, &pair_sort.vals),
+            ],
+        );
+        let ranges_group = bind(
+            ctx,
+            &pipes.tile_ranges,
+            &[(0, &self.params_buffer), (7, &self.depth.hist), (8, &pair_sort.keys), (10, &ranges)],
+        );
+        let blend_group = bind(
+            ctx,
+            &pipes.tile_blend,
+            &[
+                (0, &self.params_buffer),
+                (3, &self.splats),
+                (5, &self.depth.vals),
+                (9, &pair_sort.vals),
+                (10, &ranges),
+                (11, &out_color),
+                (12, &out_pick),
+            ],
+        );
+        let mut encoder = self.encoder("tile lists");
+        encoder.clear_buffer(&ranges, 0, None);
+        {
+            let mut pass = encoder
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile emit"), timestamp_writes: None });
+            pass.set_pipeline(&pipes.tile_emit);
+            pass.set_bind_group(0, &emit_group, &[]);
+            let (gx, gy) = groups(n.div_ceil(256));
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        let tile_bits = u32::BITS - (tiles - 1).leading_zeros();
+        pipes.sort.encode(ctx, &mut encoder, &pair_sort, pairs, tile_bits, None)?;
+        {
+            let mut pass = encoder
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile blend"), timestamp_writes: None });
+            pass.set_pipeline(&pipes.tile_ranges);
+            pass.set_bind_group(0, &ranges_group, &[]);
+            let (gx, gy) = groups(pairs.div_ceil(256));
+            pass.dispatch_workgroups(gx, gy, 1);
+            pass.set_pipeline(&pipes.tile_blend);
+            pass.set_bind_group(0, &blend_group, &[]);
+            pass.dispatch_workgroups(tiles_x, tiles_y, 1);
+        }
+        self.submit(encoder)?;
+        let color = ctx.read_f32(&out_color, pixels * 4)?;
+        let pick = ctx.read_u32(&out_pick, pixels * 2)?;
+        let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
+        let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
+        Ok(DepthPick {
+            color: image(3, &|i| color[i]),
+            alpha: image(1, &|i| color[i + 3]),
+            depth: pick.chunks(2).zip(&picked).map(|(p, id)| id.map(|_| f32::from_bits(p[0]))).collect(),
+            picked,
+            pairs,
+        })
+    }
+}

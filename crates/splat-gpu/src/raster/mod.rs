@@ -1,0 +1,535 @@
+//! GPU splatting: the twin of [`splat_core::raster`] for one sample per pixel (the 3DGS and
+//! vk_gaussian_splatting rasterizers).
+//!
+//! Stages, each a kernel mirrored by a CPU function of the core:
+//! 1. projection and culling, a compute pass (`shaders/raster.wgsl` `project` =
+//!    [`splat_core::raster::project`]), which also writes the depth sort keys and counts the
+//!    visible splats into the indirect draw arguments;
+//! 2. the global depth sort by (depth, id): the [`RadixSort`] of the depth keys with the
+//!    particle ids as values (stable, and the ids start in order, so equal depths stay in id
+//!    order like the CPU's `sort_by(depth, id)`);
+//! 3. sorted splatting in a render pipeline of instanced quads with the blend states of seed
+//!    003 §1.5 (back-to-front *over*, front-to-back *under* with premultiplied alpha), or
+//!    StochasticSplats (no sort, depth test and write, no blending, discard), frames folded
+//!    into a running Welford mean like the ray tracer's;
+//! 4. for the iso-opacity depth and the picked splat, a compute tile rasterizer
+//!    ([`GpuRasterizer::depth_pick`]), whose doc explains why.
+//!
+//! ```no_run
+//! use splat_core::{RenderSettings, frame::Frames, raster::{Blend, RasterMethod}, scenes};
+//! let ctx = splat_gpu::GpuContext::new()?;
+//! let pipes = splat_gpu::RasterPipelines::new(&ctx)?;
+//! let (scene, camera) = scenes::cloud();
+//! let gpu_scene = splat_gpu::RasterScene::new(&ctx, &scene, &RenderSettings::default())?;
+//! let raster = splat_gpu::GpuRasterizer::new(&ctx, &pipes, &gpu_scene, &camera)?;
+//! let (sorted, _) = raster.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default())?;
+//! let (stochastic, stats) = raster.render(&RasterMethod::StochasticSplat, &Frames { count: 64, ..Frames::default() })?;
+//! # Ok::<(), splat_gpu::GpuError>(())
+//! ```
+
+mod depth_pick;
+mod pipelines;
+mod profile;
+mod scene;
+
+pub use depth_pick::DepthPick;
+pub use pipelines::RasterPipelines;
+use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT};
+pub use profile::RasterTimings;
+use scene::raster_params;
+pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene};
+
+use crate::context::{compute_pipeline, storage_entry, uniform_entry};
+use crate::sort::{RadixSort, SortBuffers, groups};
+use crate::{GpuContext, GpuError, GpuStats};
+use bytemuck::{Pod, Zeroable};
+use splat_core::Camera;
+use splat_core::frame::{Frames, RenderOutput};
+use splat_core::image::Image;
+use splat_core::particle::Scene;
+use splat_core::raster::project::FRUSTUM_GUARD;
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings};
+use splat_core::settings::{RenderError, RenderSettings, validate_scene};
+use splat_core::tile::TILE;
+use std::time::{Duration, Instant};
+use wgpu::util::DeviceExt;
+
+/// WGSL of the projection and tile kernels.
+pub const RASTER_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/sh.wgsl"),
+    include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/raster.wgsl")
+);
+/// WGSL of the splatting render pipeline.
+pub const SPLAT_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/splat.wgsl")
+);
+/// WGSL of the frame accumulation.
+pub const FOLD_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/fold.wgsl")
+);
+/// Frames encoded into one submission (and uniform slots of per-frame parameters).
+const FRAMES_PER_SUBMIT: u32 = 64;
+/// No splat / no depth in a pick buffer.
+const NONE: u32 = u32::MAX;
+
+/// Which render pipeline draws a method.
+#[derive(Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+enum Draw {
+    Over = 0,
+    Under = 1,
+    Stochastic = 2,
+}
+
+impl Draw {
+    fn of(method: &RasterMethod) -> Result<Self, GpuError> {
+        Ok(match method {
+            RasterMethod::Sorted { blend: Blend::Over } => Draw::Over,
+            RasterMethod::Sorted { blend: Blend::Under } => Draw::Under,
+            RasterMethod::StochasticSplat => Draw::Stochastic,
+            other => {
+                return Err(GpuError::Unsupported(format!(
+                    "{other:?} runs on the CPU only; the GPU rasterizes raster-sorted and stochastic-splat"
+                )));
+            }
+        })
+    }
+
+    /// `params.mode` of the raster shaders (`MODE_*`, checked by a test).
+    fn mode(self) -> u32 {
+        self as u32
+    }
+}
+
+/// A scene projected and depth-sorted for one camera on the GPU.
+pub struct GpuRasterizer<'a> {
+    pub(super) ctx: &'a GpuContext,
+    pub(super) pipes: &'a RasterPipelines,
+    pub(super) scene: &'a RasterScene,
+    pub(super) camera: Camera,
+    pub(super) params: RasterParams,
+    pub(super) params_buffer: wgpu::Buffer,
+    pub(super) splats: wgpu::Buffer,
+    pub(super) depth: SortBuffers,
+    pub(super) draw_args: wgpu::Buffer,
+    pub(super) compute_group: wgpu::BindGroup,
+}
+
+impl<'a> GpuRasterizer<'a> {
+    /// Check the camera, allocate the per-camera buffers, and project and sort the scene.
+    pub fn new(
+        ctx: &'a GpuContext,
+        pipes: &'a RasterPipelines,
+        scene: &'a RasterScene,
+        camera: &Camera,
+    ) -> Result<Self, GpuError> {
+        camera.validate().map_err(RenderError::from)?;
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("splats"),
+            size: (scene.count as usize * size_of::<GpuSplat>()) as u64,
+            usage: rw,
+            mapped_at_creation: false,
+        });
+        // Room for count + 1 tile counts in the histogram (their scan's last entry is the total).
+        let depth = pipes.sort.buffers(ctx, scene.count + 1)?;
+        let draw_args = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("draw args"),
+            size: 16,
+            usage: rw | wgpu::BufferUsages::INDIRECT,
+            mapped_at_creation: false,
+        });
+        let params = raster_params(scene, camera);
+        let params_buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("raster params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+        let compute_group = bind(
+            ctx,
+            &pipes.project,
+            &[
+                (0, &params_buffer),
+                (1, &scene.particles),
+                (2, &scene.sh),
+                (3, &splats),
+                (4, &depth.keys),
+                (5, &depth.vals),
+                (6, &draw_args),
+            ],
+        );
+        let raster =
+            Self { ctx, pipes, scene, camera: *camera, params, params_buffer, splats, depth, draw_args, compute_group };
+        let mut encoder = raster.encoder("project and sort");
+        raster.encode_project(&mut encoder, None);
+        raster.encode_sort(&mut encoder, None)?;
+        raster.submit(encoder)?;
+        Ok(raster)
+    }
+
+    fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
+        self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+    }
+
+    fn submit(&self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        self.ctx.queue.submit([encoder.finish()]);
+        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Projection: reset the visible count (6 vertices, 0 instances) and run `project`.
+    fn encode_project(&self, encoder: &mut wgpu::CommandEncoder, timestamps: Option<wgpu::ComputePassTimestampWrites>) {
+        self.ctx.queue.write_buffer(&self.draw_args, 0, bytemuck::cast_slice(&[6u32, 0, 0, 0]));
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("project"), timestamp_writes: timestamps });
+        pass.set_pipeline(&self.pipes.project);
+        pass.set_bind_group(0, &self.compute_group, &[]);
+        let (gx, gy) = groups(self.scene.count.div_ceil(256));
+        pass.dispatch_workgroups(gx, gy, 1);
+    }
+
+    /// The global depth sort: all particles, culled ones (key u32::MAX) last.
+    fn encode_sort(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamps: Option<wgpu::ComputePassTimestampWrites>,
+    ) -> Result<(), GpuError> {
+        self.pipes.sort.encode(self.ctx, encoder, &self.depth, self.scene.count, 32, timestamps)
+    }
+
+    /// The projected splats in scene order (culled ones have an empty rect).
+    pub fn splats(&self) -> Result<Vec<GpuSplat>, GpuError> {
+        let words = self.ctx.read_u32(&self.splats, self.scene.count as usize * 16)?;
+        Ok(bytemuck::cast_slice(&words).to_vec())
+    }
+
+    /// The visible splats' scene indices in (depth, id) order.
+    pub fn order(&self) -> Result<Vec<u32>, GpuError> {
+        let visible = self.ctx.read_u32(&self.draw_args, 4)?[1];
+        self.ctx.read_u32(&self.depth.vals, visible as usize)
+    }
+
+    /// Render `frames.count` frames of `method` (one for sorted splatting) and fold them into
+    /// the per-pixel running mean and M2 (f32 Welford, as the ray-tracing kernel does).
+    pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
+        let draw = Draw::of(method)?;
+        if frames.rng != splat_core::rng::RngScheme::Hash {
+            return Err(GpuError::Unsupported(
+                "the raster methods draw their decisions with the hash generator".into(),
+            ));
+        }
+        let keys = frames.keys(method.is_stochastic())?;
+        let count = keys.len() as u32;
+        self.set_mode(draw);
+        let (w, h) = (self.camera.width, self.camera.height);
+        let pixels = (w * h) as usize;
+        let targets = Targets::new(self.ctx, self.pipes, w, h, draw);
+        let out_bytes = (pixels * 16) as u64;
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let make = |label| {
+            self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: out_bytes,
+                usage: rw,
+                mapped_at_creation: false,
+            })
+        };
+        let (mean, m2) = (make("raster mean"), make("raster m2"));
+        let slots = FrameSlots::new(self.ctx);
+        let draw_group = self.draw_group(&slots.buffer);
+        let fold_group = self.fold_group(&slots.buffer, &targets.color_view, &mean, &m2);
+        let mut gpu_time = Duration::ZERO;
+        for (batch_index, batch) in keys.chunks(FRAMES_PER_SUBMIT as usize).enumerate() {
+            let first = batch_index as u32 * FRAMES_PER_SUBMIT;
+            slots.write(self.ctx, batch, first);
+            let mut encoder = self.encoder("raster frames");
+            for slot in 0..batch.len() as u32 {
+                let offset = slots.offset(slot);
+                self.encode_draw(&mut encoder, draw, &targets, &draw_group, offset, None);
+                let mut pass = encoder
+                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("fold"), timestamp_writes: None });
+                pass.set_pipeline(&self.pipes.fold);
+                pass.set_bind_group(0, &fold_group, &[offset]);
+                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            }
+            let start = Instant::now();
+            self.submit(encoder)?;
+            gpu_time += start.elapsed();
+        }
+        let mean = self.ctx.read_f32(&mean, pixels * 4)?;
+        let m2 = self.ctx.read_f32(&m2, pixels * 4)?;
+        Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
+    }
+
+    /// Whether the GPU rasterizer renders `method` with `settings`; the CPU reference renders
+    /// every raster method.
+    pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
+        supports(method, settings)
+    }
+
+    fn set_mode(&self, draw: Draw) {
+        let params = RasterParams { mode: draw.mode(), ..self.params };
+        self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+    }
+
+    fn draw_group(&self, frame_params: &wgpu::Buffer) -> wgpu::BindGroup {
+        self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("splat"),
+            layout: &self.pipes.splat_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
+                frame_entry(1, frame_params),
+                wgpu::BindGroupEntry { binding: 2, resource: self.splats.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
+            ],
+        })
+    }
+
+    fn fold_group(
+        &self,
+        frame_params: &wgpu::Buffer,
+        color: &wgpu::TextureView,
+        mean: &wgpu::Buffer,
+        m2: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("fold"),
+            layout: &self.pipes.fold_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
+                frame_entry(1, frame_params),
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(color) },
+                wgpu::BindGroupEntry { binding: 3, resource: mean.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: m2.as_entire_binding() },
+            ],
+        })
+    }
+
+    /// One render pass drawing every splat quad of `draw` into `targets`.
+    fn encode_draw(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        draw: Draw,
+        targets: &Targets,
+        group: &wgpu::BindGroup,
+        frame_offset: u32,
+        timestamps: Option<wgpu::RenderPassTimestampWrites>,
+    ) {
+        let bg = self.scene.settings.background.as_dvec3();
+        // Over and stochastic frames start from the background; under accumulates premultiplied
+        // colour from zero and the fold adds the background behind the remaining transmittance.
+        let clear = match draw {
+            Draw::Under => wgpu::Color::TRANSPARENT,
+            _ => wgpu::Color { r: bg.x, g: bg.y, b: bg.z, a: 0.0 },
+        };
+        let depth_attachment = targets.depth_view.as_ref().map(|view| wgpu::RenderPassDepthStencilAttachment {
+            view,
+            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+            stencil_ops: None,
+        });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("splat"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &targets.color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
+            })],
+            depth_stencil_attachment: depth_attachment,
+            timestamp_writes: timestamps,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(self.pipes.render_pipeline(draw));
+        pass.set_bind_group(0, group, &[frame_offset]);
+        match draw {
+            Draw::Stochastic => pass.draw(0..6, 0..self.scene.count),
+            _ => pass.draw_indirect(&self.draw_args, 0),
+        }
+    }
+}
+
+/// Whether the GPU rasterizer renders `method` with `settings` (the one place that decides it):
+/// sorted splatting and StochasticSplats, one sample per pixel at the centre, billboard (centre)
+/// fragment depth. Enderton, stratified, MSAA sample sets and max-density-plane depths are
+/// CPU-only.
+fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
+    Draw::of(method)?;
+    settings.validate()?;
+    if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
+        return Err(GpuError::Unsupported(format!(
+            "the GPU rasterizer renders one sample per pixel with centre fragment depth ({} samples and {:?} depth asked for); use --backend cpu",
+            settings.samples, settings.fragment_depth
+        )));
+    }
+    Ok(())
+}
+
+/// A bind group for an auto-layout compute pipeline: just the bindings its entry point uses.
+fn bind(ctx: &GpuContext, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> =
+        buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
+fn frame_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer,
+            offset: 0,
+            size: wgpu::BufferSize::new(size_of::<FrameParams>() as u64),
+        }),
+    }
+}
+
+/// Render targets of one draw: colour, and depth for StochasticSplats.
+struct Targets {
+    pub(super) color_view: wgpu::TextureView,
+    pub(super) depth_view: Option<wgpu::TextureView>,
+}
+
+impl Targets {
+    fn new(ctx: &GpuContext, pipes: &RasterPipelines, width: u32, height: u32, draw: Draw) -> Self {
+        let texture = |label, format, usage| {
+            ctx.device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default())
+        };
+        // The format the draw's pipeline was built for.
+        let format = if draw == Draw::Stochastic { STOCHASTIC_FORMAT } else { pipes.blend_format };
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        Self {
+            color_view: texture("splat colour", format, usage),
+            depth_view: (draw == Draw::Stochastic)
+                .then(|| texture("splat depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT)),
+        }
+    }
+}
+
+/// Per-frame uniform slots of one submission, addressed by dynamic offset.
+struct FrameSlots {
+    pub(super) buffer: wgpu::Buffer,
+    pub(super) stride: u64,
+}
+
+impl FrameSlots {
+    fn new(ctx: &GpuContext) -> Self {
+        let stride = (size_of::<FrameParams>() as u64).next_multiple_of(ctx.uniform_alignment);
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame params"),
+            size: stride * u64::from(FRAMES_PER_SUBMIT),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self { buffer, stride }
+    }
+
+    fn write(&self, ctx: &GpuContext, keys: &[u32], first: u32) {
+        let mut bytes = vec![0u8; (self.stride as usize) * keys.len()];
+        for (slot, &key) in keys.iter().enumerate() {
+            let p = FrameParams { key, index: first + slot as u32, pad0: 0, pad1: 0 };
+            let at = slot * self.stride as usize;
+            bytes[at..at + size_of::<FrameParams>()].copy_from_slice(bytemuck::bytes_of(&p));
+        }
+        ctx.queue.write_buffer(&self.buffer, 0, &bytes);
+    }
+
+    fn offset(&self, slot: u32) -> u32 {
+        (self.stride * u64::from(slot)) as u32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::wgsl_check::{assert_constants, assert_mirrors, validate};
+
+    /// Every constant the raster shaders share with the core has the core's value, and the
+    /// draw modes equal the pipeline's [`Draw`] codes.
+    #[test]
+    fn raster_constants_equal_their_rust_twins() {
+        use splat_core::raster::project;
+        assert_constants!(
+            RASTER_WGSL,
+            [
+                "TILE" = TILE,
+                "NEAR" = project::NEAR,
+                "DILATION" = project::DILATION,
+                "EXTENT_SQ" = project::EXTENT_SQ,
+                "NONE" = NONE,
+                "SH_C0" = splat_core::sh::SH_C0,
+            ]
+        );
+        assert_constants!(
+            SPLAT_WGSL,
+            [
+                "MODE_OVER" = Draw::Over.mode(),
+                "MODE_UNDER" = Draw::Under.mode(),
+                "MODE_STOCHASTIC" = Draw::Stochastic.mode()
+            ]
+        );
+    }
+
+    /// Sizes and offsets of the Rust mirrors equal naga's layout of the WGSL structs.
+    #[test]
+    fn rust_structs_mirror_the_raster_wgsl_structs() {
+        assert_mirrors!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
+        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, pad, rect]);
+        assert_mirrors!(
+            RASTER_WGSL,
+            RasterParams,
+            "RasterParams",
+            [
+                cam_row0,
+                cam_row1,
+                cam_row2,
+                cam_translation,
+                intrinsics,
+                background,
+                size,
+                count,
+                sh_degree,
+                kernel_degree,
+                alpha_clamp,
+                alpha_cull,
+                iso_threshold,
+                guard,
+                tiles,
+                mode,
+                pad0,
+                pad1,
+                pad2
+            ]
+        );
+        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, pad1]);
+    }
+
+    /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).
+    #[test]
+    fn raster_wgsl_validates() {
+        for (name, source) in [("raster", RASTER_WGSL), ("splat", SPLAT_WGSL), ("fold", FOLD_WGSL)] {
+            validate(name, source);
+        }
+    }
+}

@@ -1,0 +1,184 @@
+//! The splatting path's data on the device: particles and SH in scene order, and the uniform
+//! structs mirrored by `shaders/raster_types.wgsl`.
+
+use super::*;
+
+/// One particle in scene order (WGSL `RasterParticle`, 48 bytes): the 3D covariance is
+/// computed once on the CPU, as the rasterizers of 3DGS precompute it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RasterParticle {
+    /// Mean μ.
+    pub mean: [f32; 3],
+    /// Opacity.
+    pub opacity: f32,
+    /// Σ_xx, Σ_xy, Σ_xz.
+    pub cov_a: [f32; 3],
+    /// Padding.
+    pub pad0: f32,
+    /// Σ_yy, Σ_yz, Σ_zz.
+    pub cov_b: [f32; 3],
+    /// Padding.
+    pub pad1: f32,
+}
+
+/// A projected splat (WGSL `Splat`, 64 bytes), the GPU form of [`splat_core::raster::Splat`].
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuSplat {
+    /// Projected centre, pixels.
+    pub mean: [f32; 2],
+    /// View depth z.
+    pub depth: f32,
+    /// Opacity.
+    pub opacity: f32,
+    /// Inverse 2D covariance (a, b, c).
+    pub conic: [f32; 3],
+    /// Scene index.
+    pub id: u32,
+    /// SH colour.
+    pub color: [f32; 3],
+    /// Padding.
+    pub pad: u32,
+    /// Pixel rect [x0, y0, x1, y1); empty when the particle is culled.
+    pub rect: [u32; 4],
+}
+
+/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 160 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RasterParams {
+    /// World-to-camera rotation, row 0.
+    pub cam_row0: [f32; 4],
+    /// Row 1.
+    pub cam_row1: [f32; 4],
+    /// Row 2.
+    pub cam_row2: [f32; 4],
+    /// World-to-camera translation.
+    pub cam_translation: [f32; 4],
+    /// fx, fy, cx, cy.
+    pub intrinsics: [f32; 4],
+    /// Background RGB.
+    pub background: [f32; 4],
+    /// Image width and height.
+    pub size: [u32; 2],
+    /// Particles.
+    pub count: u32,
+    /// SH degree.
+    pub sh_degree: u32,
+    /// Kernel degree.
+    pub kernel_degree: u32,
+    /// Alpha clamp.
+    pub alpha_clamp: f32,
+    /// Alpha cull.
+    pub alpha_cull: f32,
+    /// Iso-opacity threshold on the transmittance.
+    pub iso_threshold: f32,
+    /// Frustum guard limits on |x/z|, |y/z|.
+    pub guard: [f32; 2],
+    /// Tiles across and down.
+    pub tiles: [u32; 2],
+    /// 0 over, 1 under, 2 stochastic splat.
+    pub mode: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
+}
+
+/// Per-frame uniforms (WGSL `FrameParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct FrameParams {
+    /// The frame key of the hashes ([`splat_core::rng::frame_key`]).
+    pub key: u32,
+    /// Index of the frame in the running mean.
+    pub index: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+}
+
+/// A scene uploaded for rasterization: particles (mean, opacity, covariance) and SH in scene
+/// order.
+pub struct RasterScene {
+    pub(super) particles: wgpu::Buffer,
+    pub(super) sh: wgpu::Buffer,
+    pub(super) count: u32,
+    pub(super) sh_degree: u32,
+    pub(super) settings: RenderSettings,
+}
+
+impl RasterScene {
+    /// Validate and upload `scene`; refuse buffers above the adapter's binding limit.
+    pub fn new(ctx: &GpuContext, scene: &Scene, settings: &RenderSettings) -> Result<Self, GpuError> {
+        validate_scene(scene, settings)?;
+        let count = scene.particles.len();
+        let particles: Vec<RasterParticle> = scene
+            .particles
+            .iter()
+            .map(|p| {
+                let c = p.covariance();
+                RasterParticle {
+                    mean: p.mean.to_array(),
+                    opacity: p.opacity,
+                    cov_a: [c.x_axis.x, c.y_axis.x, c.z_axis.x],
+                    pad0: 0.0,
+                    cov_b: [c.y_axis.y, c.z_axis.y, c.z_axis.z],
+                    pad1: 0.0,
+                }
+            })
+            .collect();
+        let sh = crate::layout::sh(scene);
+        ctx.check_binding("splat", (count.max(1) * size_of::<GpuSplat>()) as u64, count)?;
+        ctx.check_binding("SH", (sh.len() * 16) as u64, count)?;
+        if particles.is_empty() {
+            return Err(GpuError::Render(RenderError::Settings("the scene has no particles".into())));
+        }
+        Ok(Self {
+            particles: ctx.upload("raster particles", bytemuck::cast_slice(&particles)),
+            sh: ctx.upload("raster sh", bytemuck::cast_slice(&sh)),
+            count: count as u32,
+            sh_degree: u32::from(scene.sh_degree),
+            settings: *settings,
+        })
+    }
+}
+
+/// The uniforms of a camera.
+pub(super) fn raster_params(scene: &RasterScene, camera: &Camera) -> RasterParams {
+    let s = &scene.settings;
+    let row = |i: usize| {
+        let v = camera.rotation.row(i);
+        [v.x, v.y, v.z, 0.0]
+    };
+    let t = camera.translation;
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    RasterParams {
+        cam_row0: row(0),
+        cam_row1: row(1),
+        cam_row2: row(2),
+        cam_translation: [t.x, t.y, t.z, 0.0],
+        intrinsics: [camera.fx, camera.fy, camera.cx, camera.cy],
+        background: [s.background.x, s.background.y, s.background.z, 0.0],
+        size: [camera.width, camera.height],
+        count: scene.count,
+        sh_degree: scene.sh_degree,
+        kernel_degree: s.kernel.degree,
+        alpha_clamp: s.kernel.alpha_clamp,
+        alpha_cull: s.kernel.alpha_cull,
+        iso_threshold: s.iso_threshold,
+        guard: [
+            FRUSTUM_GUARD * camera.cx.max(w - camera.cx) / camera.fx,
+            FRUSTUM_GUARD * camera.cy.max(h - camera.cy) / camera.fy,
+        ],
+        tiles: [camera.width.div_ceil(TILE), camera.height.div_ceil(TILE)],
+        mode: 0,
+        pad0: 0,
+        pad1: 0,
+        pad2: 0,
+    }
+}

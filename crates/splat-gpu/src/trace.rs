@@ -1,0 +1,363 @@
+//! GPU ray tracing: the twin of [`splat_core::trace`]. The kernel (`shaders/bvh.wgsl` and
+//! `shaders/trace.wgsl`) traverses the BVH that the core builds, in software (as Sun et al. do
+//! on Metal and low-end GPUs), with the same counter-based decisions, hit conventions and
+//! defaults, so a GPU frame makes the CPU frame's accept/reject choices.
+//!
+//! ```no_run
+//! use splat_core::{RenderSettings, frame::Frames, scenes, trace::{Method, TraceScene}};
+//! let ctx = splat_gpu::GpuContext::new()?;
+//! let pipeline = splat_gpu::TracePipeline::new(&ctx)?;
+//! let (scene, camera) = scenes::cloud();
+//! let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+//! let tracer = splat_gpu::GpuTracer::new(&ctx, &pipeline, &trace)?;
+//! let (images, stats) = tracer.render(&camera, &Method::Stochastic, &Frames::default())?;
+//! # Ok::<(), splat_gpu::GpuError>(())
+//! ```
+
+use crate::context::{compute_pipeline, storage_entry, uniform_entry};
+use crate::layout::{self, Params, PassState};
+use crate::timing::Timer;
+use crate::{GpuContext, GpuError, GpuStats};
+use splat_core::Camera;
+use splat_core::frame::{Frames, RenderOutput};
+use splat_core::trace::{DEFAULT_K, Method, MethodCode, TraceScene};
+use std::time::{Duration, Instant};
+
+/// WGSL of the ray-tracing kernel.
+pub const TRACE_WGSL: &str = concat!(
+    include_str!("../../../shaders/common.wgsl"),
+    include_str!("../../../shaders/sh.wgsl"),
+    include_str!("../../../shaders/bvh.wgsl"),
+    include_str!("../../../shaders/trace.wgsl")
+);
+/// Dispatches encoded into one submission.
+pub const DISPATCHES_PER_SUBMIT: u32 = 64;
+/// Frames rendered per dispatch on a real GPU; longer runs are split so that no dispatch runs
+/// for long. CPU adapters (lavapipe) render one frame per dispatch (see [`LOOP_BUDGET`]).
+pub const FRAMES_PER_DISPATCH: u32 = 32;
+/// lavapipe ends a loop after 65535 iterations of its SIMD loop per invocation (gallivm's loop
+/// limiter), silently. A loop statement runs at most lanes × the busiest lane's total loop
+/// iterations, which the kernel counts: on a CPU adapter [`GpuTracer::render`] renders one
+/// frame per dispatch and refuses a result where that bound reaches the budget.
+pub const LOOP_BUDGET: u32 = 65_535;
+
+/// A method as the kernel reads it: its identity and every parameter, named.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MethodParams {
+    /// Which method (`params.method` in WGSL).
+    pub code: MethodCode,
+    /// Hits per pass.
+    pub k: u32,
+    /// Pass limit.
+    pub max_passes: u32,
+    /// Early-out transmittance of the k-buffer.
+    pub min_transmittance: f32,
+    /// Samples per traversal.
+    pub n: u32,
+    /// Traversals per frame.
+    pub m: u32,
+}
+
+impl TryFrom<&Method> for MethodParams {
+    type Error = GpuError;
+
+    /// The kernel's parameters of a method; `exact` runs the k-buffer loop with no early-out and
+    /// no pass limit (any k gives Eq. 3 then; 18 keeps each pass short).
+    fn try_from(method: &Method) -> Result<Self, GpuError> {
+        GpuTracer::supports(method)?;
+        let code = method.code();
+        let base = MethodParams { code, k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1 };
+        Ok(match *method {
+            Method::Exact => MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, ..base },
+            Method::KBuffer { k, max_passes, min_transmittance } => {
+                MethodParams { k: k as u32, max_passes, min_transmittance, ..base }
+            }
+            Method::StochasticN { m, n } => MethodParams { n, m, ..base },
+            Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, ..base },
+            Method::DepthSampling { k } => MethodParams { k: k as u32, ..base },
+            Method::Stochastic | Method::Opaque => base,
+        })
+    }
+}
+
+/// The compiled ray-tracing kernel and its bind group layout.
+pub struct TracePipeline {
+    pub(crate) pipeline: wgpu::ComputePipeline,
+    pub(crate) layout: wgpu::BindGroupLayout,
+}
+
+impl TracePipeline {
+    /// Compile the kernel; shader and pipeline errors come back as [`GpuError::Shader`], not
+    /// wgpu's panicking handler.
+    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("trace.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(TRACE_WGSL.into()),
+        });
+        let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("trace"),
+            entries: &[
+                uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
+                storage(1, true),
+                storage(2, true),
+                storage(3, true),
+                storage(4, false),
+                storage(5, false),
+                storage(6, false),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("trace"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = compute_pipeline(device, &module, Some(&pipeline_layout), "main");
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(Self { pipeline, layout })
+    }
+}
+
+/// A scene on the GPU, ready to trace: particles in BVH leaf order, BVH nodes and SH
+/// coefficients uploaded beside the [`TraceScene`] they came from.
+pub struct GpuTracer<'a> {
+    ctx: &'a GpuContext,
+    pipeline: &'a TracePipeline,
+    trace: &'a TraceScene<'a>,
+    particles: wgpu::Buffer,
+    nodes: wgpu::Buffer,
+    sh: wgpu::Buffer,
+}
+
+impl<'a> GpuTracer<'a> {
+    /// Upload the particles and BVH of `trace`; refuse buffers above the binding limit.
+    pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
+        let particles = layout::particles(trace);
+        let nodes = layout::nodes(trace);
+        let sh = layout::sh(trace.scene());
+        let count = trace.scene().particles.len();
+        let bytes = |data: &[u8]| data.len() as u64;
+        ctx.check_binding("particle", bytes(bytemuck::cast_slice(&particles)), count)?;
+        ctx.check_binding("BVH node", bytes(bytemuck::cast_slice(&nodes)), count)?;
+        ctx.check_binding("SH", bytes(bytemuck::cast_slice(&sh)), count)?;
+        Ok(Self {
+            ctx,
+            pipeline,
+            trace,
+            particles: ctx.upload("particles", bytemuck::cast_slice(&particles)),
+            nodes: ctx.upload("nodes", bytemuck::cast_slice(&nodes)),
+            sh: ctx.upload("sh", bytemuck::cast_slice(&sh)),
+        })
+    }
+
+    /// Whether the kernel runs `method` (the one place that decides it); the CPU backend runs
+    /// every method.
+    pub fn supports(method: &Method) -> Result<(), GpuError> {
+        method.validate()?;
+        match method {
+            Method::Opaque => Err(GpuError::Unsupported("the opaque baseline runs on the CPU only".into())),
+            _ => Ok(()),
+        }
+    }
+
+    /// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
+    /// centres, as [`splat_core::trace::render_frames`] does: per pixel a running Welford mean
+    /// and M2 in f32, frames in dispatches of up to [`FRAMES_PER_DISPATCH`]. The images have
+    /// no depth, normal or picks.
+    ///
+    /// On a CPU adapter (lavapipe) every dispatch renders one frame, since its loop limiter
+    /// counts per invocation, and the render fails with [`GpuError::LoopBudget`] rather than
+    /// return an image whose rays may have been cut short (see [`LOOP_BUDGET`]).
+    pub fn render(
+        &self,
+        camera: &Camera,
+        method: &Method,
+        frames: &Frames,
+    ) -> Result<(RenderOutput, GpuStats), GpuError> {
+        camera.validate().map_err(splat_core::RenderError::from)?;
+        let params = MethodParams::try_from(method)?;
+        let count = frames.keys(method.is_stochastic())?.len() as u32;
+        let ctx = self.ctx;
+        let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
+        let per_dispatch = if cpu_adapter { 1 } else { ctx.frames_per_dispatch };
+        let run = Run { tracer: self, camera, params, frames, count };
+        let lanes = u64::from(ctx.lanes());
+        let over = |f: &Finished| cpu_adapter && u64::from(f.loop_iterations.0) * lanes >= u64::from(LOOP_BUDGET);
+        let mut out = run.execute(per_dispatch, false)?;
+        // Multi-pass methods (and stochastic-n, slot by slot) that do not fit run again with one
+        // pass per dispatch.
+        let multi_pass = matches!(
+            params.code,
+            MethodCode::Exact | MethodCode::KBuffer | MethodCode::StochasticN | MethodCode::StochasticPass
+        );
+        if over(&out) && multi_pass {
+            out = run.execute(1, true)?;
+        }
+        if over(&out) {
+            let (iterations, pixel) = out.loop_iterations;
+            let lanes = lanes as u32;
+            return Err(GpuError::LoopBudget { x: pixel % camera.width, y: pixel / camera.width, iterations, lanes });
+        }
+        Ok((out.output, out.stats))
+    }
+}
+
+/// A finished render with the busiest pixel's loop count (count, pixel index).
+struct Finished {
+    output: RenderOutput,
+    stats: GpuStats,
+    loop_iterations: (u32, u32),
+}
+
+/// One attempt at a render.
+struct Run<'a> {
+    tracer: &'a GpuTracer<'a>,
+    camera: &'a Camera,
+    params: MethodParams,
+    frames: &'a Frames,
+    count: u32,
+}
+
+impl Run<'_> {
+    fn storage(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.tracer.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Render with `per_dispatch` frames a dispatch, or, with `by_pass`, one pass of one frame
+    /// per dispatch (k-buffer and stochastic pass), the rays' state kept between dispatches.
+    fn execute(&self, per_dispatch: u32, by_pass: bool) -> Result<Finished, GpuError> {
+        let (ctx, camera, tracer) = (self.tracer.ctx, self.camera, self.tracer);
+        let pixels = camera.width as usize * camera.height as usize;
+        let out_bytes = (pixels * 16) as u64;
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let (out_mean, out_var) = (self.storage("mean", out_bytes, rw), self.storage("m2", out_bytes, rw));
+        let (read_mean, read_var) =
+            (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
+        let state_bytes = (pixels * std::mem::size_of::<PassState>()) as u64;
+        let pass_state = self.storage("pass state", state_bytes, rw);
+        let read_state = self.storage("read pass state", state_bytes, read);
+        let stride = (std::mem::size_of::<Params>() as u64).next_multiple_of(ctx.uniform_alignment);
+        let uniform = self.storage(
+            "params",
+            stride * u64::from(DISPATCHES_PER_SUBMIT),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("trace"),
+            layout: &tracer.pipeline.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &uniform,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
+                    }),
+                },
+                wgpu::BindGroupEntry { binding: 1, resource: tracer.particles.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: tracer.nodes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: tracer.sh.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: out_mean.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: out_var.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: pass_state.as_entire_binding() },
+            ],
+        });
+        let mut gpu_time = Duration::ZERO;
+        let timer = ctx.timestamps.then(|| Timer::new(ctx));
+        // Submit the dispatches of `params`, one batch per submission.
+        let mut submit = |params: &[Params]| -> Result<(), GpuError> {
+            for batch in params.chunks(DISPATCHES_PER_SUBMIT as usize) {
+                let mut params_bytes = vec![0u8; stride as usize * batch.len()];
+                for (slot, p) in batch.iter().enumerate() {
+                    let at = slot * stride as usize;
+                    params_bytes[at..at + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
+                }
+                ctx.queue.write_buffer(&uniform, 0, &params_bytes);
+                let mut encoder =
+                    ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+                {
+                    let timestamp_writes = timer.as_ref().map(|t| wgpu::ComputePassTimestampWrites {
+                        query_set: &t.queries,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    });
+                    let mut pass = encoder
+                        .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
+                    pass.set_pipeline(&tracer.pipeline.pipeline);
+                    for slot in 0..batch.len() {
+                        pass.set_bind_group(0, &bind_group, &[(slot as u64 * stride) as u32]);
+                        pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
+                    }
+                }
+                if let Some(t) = &timer {
+                    t.resolve(&mut encoder);
+                }
+                let start = Instant::now();
+                ctx.queue.submit([encoder.finish()]);
+                ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+                gpu_time += match &timer {
+                    Some(t) => t.elapsed(ctx)?,
+                    None => start.elapsed(),
+                };
+            }
+            Ok(())
+        };
+        if by_pass {
+            // stochastic-n runs one slot per dispatch: m × n "passes" of n = 1 slot.
+            let MethodParams { code, max_passes, n, m, .. } = self.params;
+            let (max_passes, slots, chunk) =
+                if code == MethodCode::StochasticN { (n * m, n * m, 1) } else { (max_passes, m, n) };
+            for frame in 0..self.count {
+                let mut pass_index = 0u32;
+                while pass_index < max_passes {
+                    let batch: Vec<Params> = (pass_index..max_passes.min(pass_index.saturating_add(8)))
+                        .map(|p| Params {
+                            mode: layout::MODE_PASS,
+                            pass_index: p,
+                            max_passes,
+                            m: slots,
+                            n: chunk,
+                            ..layout::params(tracer.trace, camera, &self.params, self.frames, frame, 1)
+                        })
+                        .collect();
+                    pass_index += batch.len() as u32;
+                    submit(&batch)?;
+                    let states = ctx.read_through(&pass_state, 0, &read_state, state_bytes)?;
+                    if states.chunks(8).all(|s| s[6].to_bits() & 1 == 1) {
+                        break;
+                    }
+                }
+            }
+        } else {
+            let mut params = Vec::new();
+            let mut first = 0u32;
+            while first < self.count {
+                let chunk = per_dispatch.min(self.count - first);
+                params.push(layout::params(tracer.trace, camera, &self.params, self.frames, first, chunk));
+                first += chunk;
+            }
+            submit(&params)?;
+        }
+        let mean = ctx.read_through(&out_mean, 0, &read_mean, out_bytes)?;
+        let m2 = ctx.read_through(&out_var, 0, &read_var, out_bytes)?;
+        let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
+        let (output, stats) = crate::output(camera, &mean, &m2, self.count, gpu_time, timer.is_some());
+        let stats = GpuStats {
+            loop_iterations: busiest.0,
+            frames_per_dispatch: per_dispatch,
+            pass_per_dispatch: by_pass,
+            ..stats
+        };
+        Ok(Finished { output, stats, loop_iterations: busiest })
+    }
+}
