@@ -286,7 +286,7 @@ pub mod harness {
             let path = super::root().join("fixtures").join(format!("{file}-zmap.png"));
             match map.save(&path) {
                 Ok(()) => path.display().to_string(),
-                Err(e) => format!("(not written: {e})"),
+                Err(e) => format!("{} not written: {e}", path.display()),
             }
         }
     }
