@@ -1,4 +1,4 @@
-//! The CPU reference of the splatting path: EWA projection ([`project`]), the global depth
+//! The CPU reference of the splatting path: EWA projection ([`project()`]), the global depth
 //! sort, per-pixel blending over S sub-pixel samples, and the sorting-free stochastic
 //! rasterizers (vk_gaussian_splatting Stochastic transparency §1; Laine & Karras 2011).
 //!

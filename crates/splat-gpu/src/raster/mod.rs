@@ -3,7 +3,7 @@
 //!
 //! Stages, each a kernel mirrored by a CPU function of the core:
 //! 1. projection and culling, a compute pass (`shaders/raster.wgsl` `project` =
-//!    [`splat_core::raster::project`]), which also writes the depth sort keys and counts the
+//!    [`splat_core::raster::project()`]), which also writes the depth sort keys and counts the
 //!    visible splats into the indirect draw arguments;
 //! 2. the global depth sort by (depth, id): the [`RadixSort`] of the depth keys with the
 //!    particle ids as values (stable, and the ids start in order, so equal depths stay in id
