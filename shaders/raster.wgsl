@@ -39,7 +39,7 @@ fn cull(i: u32) {
     order[i] = i;
 }
 
-// project.rs `project`: Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, the √8σ rect, the SH colour from the camera
+// project.rs `project`: Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, the rect of the extent, the SH colour from the camera
 // centre, and the sort key; culled particles get the key NONE and sort behind all others.
 @compute @workgroup_size(256, 1, 1)
 fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -81,8 +81,15 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         return;
     }
     let mean = vec2<f32>(fx * t.x / t.z + params.intrinsics.z, fy * t.y / t.z + params.intrinsics.w);
-    let rx = sqrt(EXTENT_SQ * a);
-    let ry = sqrt(EXTENT_SQ * c);
+    let mid = 0.5 * (a + c);
+    let lambda_max = mid + sqrt(max(mid * mid - det, EIGEN_FLOOR));
+    let radius = ceil(BOX_SIGMAS * sqrt(lambda_max));
+    var rx = radius;
+    var ry = radius;
+    if (params.extent == EXTENT_SQRT8) {
+        rx = sqrt(EXTENT_SQ * a);
+        ry = sqrt(EXTENT_SQ * c);
+    }
     let size = vec2<f32>(params.size);
     let lo = max(floor(mean - vec2<f32>(rx, ry)), vec2<f32>(0.0));
     let hi = min(ceil(mean + vec2<f32>(rx, ry)), size);
@@ -104,7 +111,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.conic = vec3<f32>(c / det, -b / det, a / det);
     s.id = i;
     s.color = sh_eval(i, params.sh_degree, dir);
-    s.pad = 0u;
+    s.radius = radius;
     s.rect = vec4<u32>(vec2<u32>(lo), vec2<u32>(hi));
     splats[i] = s;
     depth_keys[i] = bitcast<u32>(t.z);

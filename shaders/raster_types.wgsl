@@ -24,7 +24,8 @@ struct RasterParams {
     tiles: vec2<u32>,
     // Draw mode: 0 over, 1 under, 2 stochastic splat.
     mode: u32,
-    pad0: u32,
+    // Splat extent: EXTENT_3DGS or EXTENT_SQRT8.
+    extent: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -46,7 +47,8 @@ struct Splat {
     conic: vec3<f32>,
     id: u32,
     color: vec3<f32>,
-    pad: u32,
+    // Half-width ⌈3 √λ_max⌉ of the 3DGS box, px.
+    radius: f32,
     rect: vec4<u32>,
 }
 
@@ -55,8 +57,23 @@ const NONE: u32 = 0xffffffffu;
 const MODE_OVER: u32 = 0u;
 const MODE_UNDER: u32 = 1u;
 const MODE_STOCHASTIC: u32 = 2u;
-// The √8σ extent of a splat: fragments with a Mahalanobis term above 8 are discarded.
+// params.extent (splat_core::raster::SplatExtent): the 3DGS box of half-width ⌈3 √λ_max⌉
+// (BOX_SIGMAS, with 3DGS's floor EIGEN_FLOOR under the eigenvalue discriminant), or the √8σ
+// ellipse (fragments with a Mahalanobis term above EXTENT_SQ are discarded).
+const EXTENT_3DGS: u32 = 0u;
+const EXTENT_SQRT8: u32 = 1u;
 const EXTENT_SQ: f32 = 8.0;
+const BOX_SIGMAS: f32 = 3.0;
+const EIGEN_FLOOR: f32 = 0.1;
+
+// project.rs `Splat::covers`: whether pixel position p lies in the splat's footprint.
+fn covers(s: Splat, p: vec2<f32>, params: RasterParams) -> bool {
+    if (params.extent == EXTENT_3DGS) {
+        let d = abs(p - s.mean);
+        return d.x <= s.radius && d.y <= s.radius;
+    }
+    return mahalanobis(s, p) <= EXTENT_SQ;
+}
 
 // A = dᵀ Σ′⁻¹ d at continuous pixel position p (raster/project.rs, Splat::mahalanobis).
 fn mahalanobis(s: Splat, p: vec2<f32>) -> f32 {
@@ -67,10 +84,10 @@ fn mahalanobis(s: Splat, p: vec2<f32>) -> f32 {
 // alpha = opacity × response(A) at p, clamped; 0 when outside the quad or below the cull
 // (Splat::alpha and KernelParams::alpha).
 fn splat_alpha(s: Splat, p: vec2<f32>, params: RasterParams) -> f32 {
-    let a = mahalanobis(s, p);
-    if (a > EXTENT_SQ) {
+    if (!covers(s, p, params)) {
         return 0.0;
     }
+    let a = mahalanobis(s, p);
     let alpha = s.opacity * kernel_response(a, params.kernel_degree);
     if (!(alpha >= params.alpha_cull && alpha > 0.0)) {
         return 0.0;

@@ -2,6 +2,8 @@
 //! render (Eq. 3), written from the formulas rather than from `splat-core`, and golden-image
 //! comparison.
 
+pub mod inria;
+
 use std::path::{Path, PathBuf};
 
 /// The workspace root.

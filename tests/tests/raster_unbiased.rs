@@ -35,7 +35,8 @@ fn z_test_on_layers() {
     for samples in [1, 4] {
         check("layers", &scene, &camera, RasterSettings { samples, ..RasterSettings::default() });
     }
-    let plane = RasterSettings { samples: 1, fragment_depth: FragmentDepth::MaxDensityPlane };
+    let plane =
+        RasterSettings { samples: 1, fragment_depth: FragmentDepth::MaxDensityPlane, ..RasterSettings::default() };
     check("layers", &scene, &camera, plane);
 }
 

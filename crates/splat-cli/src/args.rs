@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::normal::NormalMode;
-use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings};
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::trace::Method;
 use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene, scenes};
@@ -62,6 +62,17 @@ pub enum FragmentDepthArg {
     Plane,
 }
 
+/// Footprint of a splat.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ExtentArg {
+    /// The reference 3DGS rasterizer: the ⌈3√λmax⌉ box, the 1/255 alpha cull deciding the
+    /// footprint (what trained captures were optimised with).
+    #[value(name = "3dgs")]
+    ThreeDgs,
+    /// The √8σ ellipse of vk_gaussian_splatting and StochasticSplats.
+    Sqrt8,
+}
+
 /// Where rays are traced or splats rasterized.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BackendArg {
@@ -111,6 +122,13 @@ pub struct MethodOptions {
     /// Raster methods: depth of each fragment.
     #[arg(long, value_enum, default_value = "center")]
     pub fragment_depth: FragmentDepthArg,
+    /// Raster methods: which pixels a splat can touch.
+    #[arg(long, value_enum, default_value = "3dgs")]
+    pub extent: ExtentArg,
+    /// raster-sorted: stop a pixel before the splat that takes its transmittance below 1e-4, as
+    /// the 3DGS rasterizer does (default off: the exact sum of Eq. 3; CPU only).
+    #[arg(long)]
+    pub early_stop: bool,
     /// raster-sorted: blend order (default under, which also yields --depth and --normal).
     #[arg(long, value_enum, default_value = "under")]
     pub blend: BlendArg,
@@ -173,6 +191,11 @@ impl MethodOptions {
                 FragmentDepthArg::Center => FragmentDepth::Center,
                 FragmentDepthArg::Plane => FragmentDepth::MaxDensityPlane,
             },
+            extent: match self.extent {
+                ExtentArg::ThreeDgs => SplatExtent::ThreeDgs,
+                ExtentArg::Sqrt8 => SplatExtent::Sqrt8,
+            },
+            early_stop: self.early_stop,
         }
     }
 

@@ -145,7 +145,7 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let (scene, camera) = args.scene.load(1200, 800)?;
     let pipes = splat_gpu::RasterPipelines::new(ctx)?;
     let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &args.scene.settings())?;
-    let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera)?;
+    let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &args.options.raster_settings())?;
     let t = raster.profile(args.repeat)?;
     let visible = raster.order()?.len();
     let n = scene.particles.len();

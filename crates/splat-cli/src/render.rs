@@ -140,10 +140,10 @@ fn render_gpu(
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
             Ok(tracer.render(camera, method, frames)?.0)
         }
-        Algorithm::Raster(method, _) => {
+        Algorithm::Raster(method, raster_settings) => {
             let pipes = splat_gpu::RasterPipelines::new(ctx)?;
             let gpu_scene = splat_gpu::RasterScene::new(ctx, scene, settings)?;
-            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera)?;
+            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
             let mut out = raster.render(method, frames)?.0;
             if args.depth.is_some() {
                 let data = raster.depth_pick()?.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();

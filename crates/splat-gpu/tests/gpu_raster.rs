@@ -7,7 +7,7 @@ mod common;
 use common::{context, fixture};
 use splat_core::Frames;
 use splat_core::RenderSettings;
-use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SplatExtent, render_raster};
 use splat_core::rng::SplitMix64;
 use splat_core::{Camera, Scene};
 use splat_gpu::sort::{cpu_radix_sort, depth_key, sort_pairs};
@@ -95,7 +95,7 @@ fn projection_and_depth_order_equal_the_cpu() {
         let c = case(name, 64, 48);
         let cpu = cpu_raster(&c);
         let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
         let splats = gpu.splats().unwrap();
         let order = gpu.order().unwrap();
         let cpu_order: Vec<u32> = cpu.splats().iter().map(|s| s.id).collect();
@@ -103,6 +103,7 @@ fn projection_and_depth_order_equal_the_cpu() {
         for s in cpu.splats() {
             let g = &splats[s.id as usize];
             assert_eq!(g.rect, s.rect, "{name} splat {}", s.id);
+            assert_eq!(g.radius, s.radius, "{name} splat {}: 3DGS box radius", s.id);
             let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * (1.0 + b.abs());
             assert!(close(g.mean[0], s.mean.x) && close(g.mean[1], s.mean.y), "{name} {}: mean", s.id);
             assert!(close(g.depth, s.depth), "{name} {}: depth", s.id);
@@ -142,7 +143,7 @@ fn sorted_splatting_equals_the_cpu_over_and_under() {
             render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
                 .unwrap();
         let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-        let gpu = GpuRasterizer::new(ctx, pipes, &scene, &c.camera).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipes, &scene, &c.camera, &RasterSettings::default()).unwrap();
         let over = gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap().0;
         let under = gpu.render(&RasterMethod::Sorted { blend: Blend::Under }, &Frames::default()).unwrap().0;
         let d_over = max_abs_diff(over.mean.data(), cpu.mean.data());
@@ -170,7 +171,10 @@ fn depth_pick_equals_the_cpu() {
             render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
                 .unwrap();
         let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap().depth_pick().unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default())
+            .unwrap()
+            .depth_pick()
+            .unwrap();
         let pixels = cpu.picked.len();
         let differing = gpu.picked.iter().zip(&cpu.picked).filter(|(a, b)| a != b).count();
         let picked = cpu.picked.iter().filter(|p| p.is_some()).count();
@@ -195,7 +199,7 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
     for name in ["layers", "ramp", "cloud"] {
         let c = case(name, 64, 48);
         let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
         let cpu_r = cpu_raster(&c);
         for seed in [3, 4] {
             let frames = Frames { count: 1, seed, ..Frames::default() };
@@ -228,7 +232,7 @@ fn cpu_only_raster_methods_are_refused() {
     let Some(ctx) = context() else { return };
     let c = case("layers", 16, 12);
     let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
     for m in [RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }] {
         let e = gpu.render(&m, &Frames::default()).unwrap_err().to_string();
         assert!(e.contains("CPU only"), "{e}");
@@ -255,7 +259,7 @@ fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 40.0, 48, 24).unwrap();
     let c = Case { scene, camera };
     let gpu_scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &c.camera).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &c.camera, &RasterSettings::default()).unwrap();
     let mut contested = 0; // pairs where both splats were accepted: the tie rule decides
     for seed in 0..8 {
         let frames = Frames { count: 1, seed, ..Frames::default() };
@@ -301,7 +305,7 @@ fn bonsai_crop_equals_the_cpu() {
     let c = Case { scene, camera };
     let cpu_r = cpu_raster(&c);
     let gpu_scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &c.camera).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &c.camera, &RasterSettings::default()).unwrap();
     assert_eq!(gpu.order().unwrap(), cpu_r.splats().iter().map(|s| s.id).collect::<Vec<_>>(), "depth order");
     let sorted =
         render_raster(&cpu_r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
@@ -348,6 +352,39 @@ fn bad_raster_input_is_refused_with_a_message() {
     let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
     let mut camera = c.camera;
     camera.fx = 0.0;
-    let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &camera).err().expect("bad camera").to_string();
+    let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &camera, &RasterSettings::default())
+        .err()
+        .expect("bad camera")
+        .to_string();
     assert!(e.contains("focal") || e.contains("fx"), "{e}");
+    let early = RasterSettings { early_stop: true, ..RasterSettings::default() };
+    let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &early).err().expect("early stop").to_string();
+    assert!(e.contains("--early-stop") && e.contains("--backend cpu"), "{e}");
+}
+
+/// GPU sorted splatting with the default extent is the INRIA 3DGS rasterizer: it equals the
+/// independent forward pass of `splat_tests::inria` (no early stop, which the GPU refuses) on a
+/// fixture of SH degree 0 and one of degree 3, to the blend format's tolerance; the √8σ extent
+/// is rejected by the same comparison.
+#[test]
+fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
+    let Some(ctx) = context() else { return };
+    let pipes = pipelines(ctx);
+    let tolerance = if pipes.blend_format == splat_gpu::wgpu::TextureFormat::Rgba32Float { 1e-4 } else { 8e-3 };
+    for name in ["layers", "cloud"] {
+        let c = case(name, 128, 96);
+        let options = splat_tests::inria::Options { background: [0.0; 3], early_stop: false };
+        let reference: Vec<f32> = splat_tests::inria::render(&c.scene, &c.camera, &options).concat();
+        let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+        let render = |extent| {
+            let raster = RasterSettings { extent, ..RasterSettings::default() };
+            let gpu = GpuRasterizer::new(ctx, pipes, &scene, &c.camera, &raster).unwrap();
+            gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap().0
+        };
+        let d = max_abs_diff(render(SplatExtent::ThreeDgs).mean.data(), &reference);
+        let control = max_abs_diff(render(SplatExtent::Sqrt8).mean.data(), &reference);
+        eprintln!("{name}: |GPU 3dgs − reference| {d:.2e}, |GPU √8σ − reference| {control:.2e}");
+        assert!(d <= tolerance, "{name}: GPU sorted splatting differs from the 3DGS forward pass by {d}");
+        assert!(control > 1e-2, "{name}: the √8σ extent passes as 3DGS ({control})");
+    }
 }

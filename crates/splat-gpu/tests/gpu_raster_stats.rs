@@ -37,7 +37,7 @@ fn with_raster<T>(
     test: impl FnOnce(&GpuRasterizer) -> T,
 ) -> T {
     let gpu_scene = RasterScene::new(ctx, scene, &RenderSettings::default()).unwrap();
-    let raster = GpuRasterizer::new(ctx, pipes, &gpu_scene, camera).unwrap();
+    let raster = GpuRasterizer::new(ctx, pipes, &gpu_scene, camera, &RasterSettings::default()).unwrap();
     test(&raster)
 }
 

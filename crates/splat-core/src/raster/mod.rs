@@ -30,7 +30,7 @@ use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::tile::{TILE, tile_count};
 use glam::{DVec3, Vec2, Vec3};
-pub use project::{Splat, project};
+pub use project::{Splat, SplatExtent, project};
 pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, sample_positions};
 
 /// Blend order of sorted splatting (vk_gaussian_splatting Lighting §1.5).
@@ -93,11 +93,19 @@ pub struct RasterSettings {
     pub samples: u32,
     /// Fragment depth of each sample.
     pub fragment_depth: FragmentDepth,
+    /// Which pixels a splat can touch.
+    pub extent: SplatExtent,
+    /// Sorted splatting stops a sample before the fragment that would take its transmittance
+    /// below [`EARLY_STOP_T`], as the 3DGS rasterizer does (`false`: the exact sum of Eq. 3).
+    pub early_stop: bool,
 }
+
+/// The transmittance below which the 3DGS rasterizer stops compositing a pixel.
+pub const EARLY_STOP_T: f64 = 1e-4;
 
 impl Default for RasterSettings {
     fn default() -> Self {
-        Self { samples: 1, fragment_depth: FragmentDepth::Center }
+        Self { samples: 1, fragment_depth: FragmentDepth::Center, extent: SplatExtent::ThreeDgs, early_stop: false }
     }
 }
 
@@ -168,8 +176,9 @@ impl<'a> Rasterizer<'a> {
         validate_scene(scene, &settings)?;
         camera.validate()?;
         raster.validate()?;
-        let mut splats: Vec<Splat> =
-            (0..scene.particles.len() as u32).filter_map(|i| project(scene, i, camera, &settings.kernel)).collect();
+        let mut splats: Vec<Splat> = (0..scene.particles.len() as u32)
+            .filter_map(|i| project(scene, i, camera, &settings.kernel, raster.extent))
+            .collect();
         splats.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.id.cmp(&b.id)));
         let prepared = splats.iter().map(|s| PreparedParticle::new(&scene.particles[s.id as usize])).collect();
         let bins = bin_tiles(camera, &splats);
@@ -230,12 +239,8 @@ impl<'a> Rasterizer<'a> {
                     return None;
                 }
                 let alpha = kernel.alpha(s.opacity, kernel.response(s.mahalanobis(centre)))?;
-                let covered = px
-                    .positions
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, p)| s.mahalanobis(**p) <= project::EXTENT_SQ)
-                    .fold(0u64, |m, (i, _)| m | 1 << i);
+                let covered =
+                    px.positions.iter().enumerate().filter(|(_, p)| s.covers(**p)).fold(0u64, |m, (i, _)| m | 1 << i);
                 (covered != 0).then_some(Fragment { splat: k, alpha, covered })
             })
             .collect()
@@ -313,6 +318,9 @@ impl<'a> Rasterizer<'a> {
             );
             if self.raster.fragment_depth == FragmentDepth::MaxDensityPlane {
                 order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            }
+            if self.raster.early_stop {
+                order.truncate(early_stop_len(order.iter().map(|&(_, _, i)| fragments[i].alpha)));
             }
             let mut transmittance = 1.0f64;
             let color = match blend {
@@ -458,6 +466,21 @@ impl<'a> Rasterizer<'a> {
             picked: first.map(|k| self.splats[k as usize].id),
         }
     }
+}
+
+/// How many of the front-to-back alphas the 3DGS rasterizer composites: it stops before the
+/// first fragment that would take the transmittance below [`EARLY_STOP_T`].
+fn early_stop_len(alphas: impl Iterator<Item = f32>) -> usize {
+    let mut transmittance = 1.0f64;
+    let mut len = 0;
+    for alpha in alphas {
+        transmittance *= 1.0 - f64::from(alpha);
+        if transmittance < EARLY_STOP_T {
+            break;
+        }
+        len += 1;
+    }
+    len
 }
 
 /// Per-sample depth and colour buffer of one pixel: the nearest written fragment of each

@@ -9,8 +9,26 @@ use glam::{Mat3, Vec2, Vec3};
 
 /// Low-pass dilation added to the projected covariance, in px² (3DGS).
 pub const DILATION: f32 = 0.3;
-/// A splat's quad reaches √8 σ: fragments whose Mahalanobis term A exceeds 8 are discarded.
+/// The `Sqrt8` extent reaches √8 σ: fragments whose Mahalanobis term A exceeds 8 are discarded.
 pub const EXTENT_SQ: f32 = 8.0;
+/// The `ThreeDgs` extent is a square of half-width ⌈3 √λ_max⌉ px around the centre (λ_max the
+/// larger eigenvalue of Σ′), as the 3DGS rasterizer's `preprocessCUDA` computes its radius.
+pub const BOX_SIGMAS: f32 = 3.0;
+/// 3DGS takes λ = mid ± √max(0.1, mid² − det): the floor under the discriminant.
+pub const EIGEN_FLOOR: f32 = 0.1;
+
+/// Which pixels a splat can touch; within it, the alpha cull (1/255) decides.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum SplatExtent {
+    /// The reference 3DGS rasterizer (diff-gaussian-rasterization): every pixel within the
+    /// ⌈3 √λ_max⌉ box, so an opaque splat reaches 3.33σ along its minor axis where α ≥ 1/255.
+    /// What trained captures were optimised with: the default.
+    #[default]
+    ThreeDgs = 0,
+    /// The √8σ ellipse (A ≤ 8) of vk_gaussian_splatting and StochasticSplats' quads.
+    Sqrt8 = 1,
+}
 /// Particles whose centre is nearer than this along the view axis are culled (3DGS).
 pub const NEAR: f32 = 0.2;
 /// 3DGS clamps x/z and y/z of a centre to 1.3 × the image's half-extent before the Jacobian,
@@ -32,7 +50,11 @@ pub struct Splat {
     pub opacity: f32,
     /// SH colour seen along the direction from the camera centre to the particle centre.
     pub color: Vec3,
-    /// Pixel range [x0, x1) × [y0, y1) of the √8σ ellipse, clipped to the image.
+    /// Half-width ⌈3 √λ_max⌉ of the 3DGS box, px.
+    pub radius: f32,
+    /// The footprint: the 3DGS box or the √8σ ellipse.
+    pub extent: SplatExtent,
+    /// Pixel range [x0, x1) × [y0, y1) of the footprint, clipped to the image.
     pub rect: [u32; 4],
 }
 
@@ -44,15 +66,26 @@ impl Splat {
         self.conic.x * d.x * d.x + 2.0 * self.conic.y * d.x * d.y + self.conic.z * d.y * d.y
     }
 
+    /// Whether continuous pixel position `p` lies in the splat's footprint.
+    #[inline]
+    pub fn covers(&self, p: Vec2) -> bool {
+        match self.extent {
+            SplatExtent::ThreeDgs => {
+                let d = (p - self.mean).abs();
+                d.x <= self.radius && d.y <= self.radius
+            }
+            SplatExtent::Sqrt8 => self.mahalanobis(p) <= EXTENT_SQ,
+        }
+    }
+
     /// alpha = opacity × response(A) at `p` (exp(−½A) for the degree-2 kernel), `None` outside
-    /// the √8σ quad or below the alpha cull; clamped like every particle alpha.
+    /// the footprint or below the alpha cull; clamped like every particle alpha.
     #[inline]
     pub fn alpha(&self, p: Vec2, kernel: &KernelParams) -> Option<f32> {
-        let a = self.mahalanobis(p);
-        if a > EXTENT_SQ {
+        if !self.covers(p) {
             return None;
         }
-        kernel.alpha(self.opacity, kernel.response(a))
+        kernel.alpha(self.opacity, kernel.response(self.mahalanobis(p)))
     }
 }
 
@@ -62,7 +95,13 @@ impl Splat {
 /// Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, with W the world-to-camera rotation and J the Jacobian of the
 /// perspective projection at the centre t = (x, y, z): J = [[f_x/z, 0, −f_x x/z²],
 /// [0, f_y/z, −f_y y/z²]].
-pub fn project(scene: &Scene, index: u32, camera: &Camera, kernel: &KernelParams) -> Option<Splat> {
+pub fn project(
+    scene: &Scene,
+    index: u32,
+    camera: &Camera,
+    kernel: &KernelParams,
+    extent: SplatExtent,
+) -> Option<Splat> {
     let p = &scene.particles[index as usize];
     if p.opacity < kernel.alpha_cull {
         return None;
@@ -90,7 +129,13 @@ pub fn project(scene: &Scene, index: u32, camera: &Camera, kernel: &KernelParams
     }
     let conic = Vec3::new(c / det, -b / det, a / det);
     let mean = camera.project_camera(t);
-    let (rx, ry) = ((EXTENT_SQ * a).sqrt(), (EXTENT_SQ * c).sqrt());
+    let mid = 0.5 * (a + c);
+    let lambda_max = mid + (mid * mid - det).max(EIGEN_FLOOR).sqrt();
+    let radius = (BOX_SIGMAS * lambda_max.sqrt()).ceil();
+    let (rx, ry) = match extent {
+        SplatExtent::ThreeDgs => (radius, radius),
+        SplatExtent::Sqrt8 => ((EXTENT_SQ * a).sqrt(), (EXTENT_SQ * c).sqrt()),
+    };
     let clip = |lo: f32, hi: f32, max: f32| -> Option<(u32, u32)> {
         let lo = lo.floor().max(0.0);
         let hi = hi.ceil().min(max);
@@ -99,7 +144,8 @@ pub fn project(scene: &Scene, index: u32, camera: &Camera, kernel: &KernelParams
     let (x0, x1) = clip(mean.x - rx, mean.x + rx, w)?;
     let (y0, y1) = clip(mean.y - ry, mean.y + ry, h)?;
     let color = sh::eval(&p.sh, scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
-    Some(Splat { id: index, mean, conic, depth: t.z, opacity: p.opacity, color, rect: [x0, y0, x1, y1] })
+    let rect = [x0, y0, x1, y1];
+    Some(Splat { id: index, mean, conic, depth: t.z, opacity: p.opacity, color, radius, extent, rect })
 }
 
 #[cfg(test)]
@@ -119,7 +165,7 @@ mod tests {
         let cam = camera();
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.8, Vec3::ONE);
         let scene = Scene { particles: vec![p], sh_degree: 0 };
-        let s = project(&scene, 0, &cam, &KernelParams::default()).unwrap();
+        let s = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::Sqrt8).unwrap();
         let sigma2 = (cam.fx * 0.1 / 4.0).powi(2) + DILATION;
         assert_relative_eq!(s.conic.x, 1.0 / sigma2, max_relative = 1e-4);
         assert_relative_eq!(s.conic.z, 1.0 / sigma2, max_relative = 1e-4);
@@ -140,7 +186,7 @@ mod tests {
         let rot = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1);
         let p = Particle::with_rgb(Vec3::new(0.4, -0.3, 0.5), Vec3::new(0.2, 0.05, 0.1), rot, 0.5, Vec3::ONE);
         let scene = Scene { particles: vec![p.clone()], sh_degree: 0 };
-        let s = project(&scene, 0, &cam, &KernelParams::default()).unwrap();
+        let s = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::Sqrt8).unwrap();
         let f = |x: Vec3| cam.project_camera(cam.to_camera(x));
         let eps = 1e-3;
         let cols: Vec<Vec2> = [Vec3::X, Vec3::Y, Vec3::Z]
@@ -168,8 +214,27 @@ mod tests {
             sh_degree: 0,
         };
         let k = KernelParams::default();
-        assert!(project(&scene, 0, &cam, &k).is_none(), "behind the camera");
-        assert!(project(&scene, 1, &cam, &k).is_none(), "outside the image");
-        assert!(project(&scene, 2, &cam, &k).is_some());
+        assert!(project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).is_none(), "behind the camera");
+        assert!(project(&scene, 1, &cam, &k, SplatExtent::ThreeDgs).is_none(), "outside the image");
+        assert!(project(&scene, 2, &cam, &k, SplatExtent::ThreeDgs).is_some());
+    }
+
+    /// The 3DGS box: half-width ⌈3 √λ_max⌉; a point inside the box beyond √8σ is covered (and
+    /// visible while α ≥ 1/255), a point outside the box is not, whatever its alpha.
+    #[test]
+    fn the_3dgs_box_reaches_past_sqrt8_sigma() {
+        let cam = camera();
+        let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.99, Vec3::ONE);
+        let scene = Scene { particles: vec![p], sh_degree: 0 };
+        let k = KernelParams::default();
+        let s = project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).unwrap();
+        let sigma = (1.0 / s.conic.x).sqrt();
+        assert_relative_eq!(s.radius, (3.0 * sigma).ceil(), epsilon = 1e-4);
+        let at = |d: f32| s.mean + Vec2::new(d * sigma, 0.0);
+        assert!(s.alpha(at(3.0), &k).is_some(), "3σ is inside the box and above the cull");
+        let sqrt8 = project(&scene, 0, &cam, &k, SplatExtent::Sqrt8).unwrap();
+        assert!(sqrt8.alpha(at(3.0), &k).is_none(), "3σ is outside √8σ");
+        assert!(s.alpha(s.mean + Vec2::new(s.radius + 0.01, 0.0), &k).is_none(), "outside the box");
+        assert!(s.rect[2] - s.rect[0] > sqrt8.rect[2] - sqrt8.rect[0]);
     }
 }

@@ -24,7 +24,7 @@ fn over_equals_under() {
         let camera = camera.rescaled(40, 30).unwrap();
         for samples in [1, 4] {
             for fragment_depth in [FragmentDepth::Center, FragmentDepth::MaxDensityPlane] {
-                let raster = RasterSettings { samples, fragment_depth };
+                let raster = RasterSettings { samples, fragment_depth, ..RasterSettings::default() };
                 let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
                 let over = render(&r, &sorted(Blend::Over), 1);
                 let under = render(&r, &sorted(Blend::Under), 1);
@@ -48,7 +48,8 @@ fn sorted_splatting_matches_the_ray_traced_oracle_where_ewa_is_exact() {
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 20.0), Vec3::ZERO, Vec3::Y, 10.0, 48, 48).unwrap();
     let mut settings = RenderSettings::default();
     settings.kernel.cutoff = project::EXTENT_SQ.sqrt();
-    let r = Rasterizer::new(&scene, &camera, settings, RasterSettings::default()).unwrap();
+    let sqrt8 = RasterSettings { extent: SplatExtent::Sqrt8, ..RasterSettings::default() };
+    let r = Rasterizer::new(&scene, &camera, settings, sqrt8).unwrap();
     let raster = render(&r, &sorted(Blend::Under), 1);
     let exact = crate::oracle::render_oracle(&scene, &camera, &settings, &|_| {}).unwrap();
     // Inside the footprint (away from the √8σ rim, where the dilated and undilated ellipses
@@ -246,4 +247,30 @@ fn under_picks_the_iso_opacity_splat() {
     let depth = out.depth.data()[0];
     assert_relative_eq!(depth, 5.3, max_relative = 1e-3);
     assert_relative_eq!(out.normal.pixel(0, 0)[2], 1.0, epsilon = 1e-3);
+}
+
+/// The 3DGS early stop: behind two splats of α = 0.98 the transmittance is 4e-4, and the third
+/// would take it to 8e-6 < 1e-4, so the third and fourth are not composited (their colour,
+/// weighted 3.9e-4 and 7.8e-6, is missing); both blend orders stop at the same splat. Without
+/// the option the sum is Eq. 3 over all four.
+#[test]
+fn early_stop_drops_the_splats_behind_t_1e_4() {
+    let (scene, camera) = one_pixel(&[0.98, 0.98, 0.98, 0.98], 1);
+    let rgb = |i: usize| scene.particles[i].sh[0] * crate::sh::SH_C0 + Vec3::splat(0.5);
+    let with = |early_stop, blend| {
+        let raster = RasterSettings { early_stop, ..RasterSettings::default() };
+        let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+        assert_relative_eq!(r.fragments(&r.pixel(0, 0))[0].alpha, 0.98, epsilon = 1e-4);
+        let out = render(&r, &sorted(blend), 1);
+        Vec3::from_slice(out.mean.pixel(0, 0)).as_dvec3()
+    };
+    let weights = [0.98, 0.98 * 0.02, 0.98 * 4e-4, 0.98 * 8e-6];
+    let sum = |n: usize| (0..n).map(|i| weights[i] * rgb(i).as_dvec3()).sum::<DVec3>();
+    for blend in [Blend::Under, Blend::Over] {
+        let stopped = with(true, blend);
+        let full = with(false, blend);
+        assert!((stopped - sum(2)).abs().max_element() < 1e-5, "{blend:?}: {stopped} vs {}", sum(2));
+        assert!((full - sum(4)).abs().max_element() < 1e-5, "{blend:?}: {full} vs {}", sum(4));
+        assert!((full - stopped).max_element() > 1e-4, "{blend:?}: the early stop changed nothing");
+    }
 }

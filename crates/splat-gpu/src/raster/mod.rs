@@ -21,7 +21,7 @@
 //! let pipes = splat_gpu::RasterPipelines::new(&ctx)?;
 //! let (scene, camera) = scenes::cloud();
 //! let gpu_scene = splat_gpu::RasterScene::new(&ctx, &scene, &RenderSettings::default())?;
-//! let raster = splat_gpu::GpuRasterizer::new(&ctx, &pipes, &gpu_scene, &camera)?;
+//! let raster = splat_gpu::GpuRasterizer::new(&ctx, &pipes, &gpu_scene, &camera, &Default::default())?;
 //! let (sorted, _) = raster.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default())?;
 //! let (stochastic, stats) = raster.render(&RasterMethod::StochasticSplat, &Frames { count: 64, ..Frames::default() })?;
 //! # Ok::<(), splat_gpu::GpuError>(())
@@ -48,7 +48,7 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::image::Image;
 use splat_core::particle::Scene;
 use splat_core::raster::project::FRUSTUM_GUARD;
-use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings};
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
 use splat_core::settings::{RenderError, RenderSettings, validate_scene};
 use splat_core::tile::TILE;
 use std::time::{Duration, Instant};
@@ -128,8 +128,10 @@ impl<'a> GpuRasterizer<'a> {
         pipes: &'a RasterPipelines,
         scene: &'a RasterScene,
         camera: &Camera,
+        raster: &RasterSettings,
     ) -> Result<Self, GpuError> {
         camera.validate().map_err(RenderError::from)?;
+        check_settings(raster)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splats"),
@@ -145,7 +147,7 @@ impl<'a> GpuRasterizer<'a> {
             usage: rw | wgpu::BufferUsages::INDIRECT,
             mapped_at_creation: false,
         });
-        let params = raster_params(scene, camera);
+        let params = raster_params(scene, camera, raster.extent);
         let params_buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("raster params"),
             contents: bytemuck::bytes_of(&params),
@@ -362,7 +364,17 @@ impl<'a> GpuRasterizer<'a> {
 /// CPU-only.
 fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
     Draw::of(method)?;
+    check_settings(settings)
+}
+
+/// The raster settings the GPU renders: one centre sample, centre depth, no early stop.
+fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
     settings.validate()?;
+    if settings.early_stop {
+        return Err(GpuError::Unsupported(
+            "--early-stop needs the transmittance before each fragment, which hardware blending does not give: use --backend cpu".into(),
+        ));
+    }
     if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
         return Err(GpuError::Unsupported(format!(
             "the GPU rasterizer renders one sample per pixel with centre fragment depth ({} samples and {:?} depth asked for); use --backend cpu",
@@ -477,6 +489,10 @@ mod tests {
                 "NEAR" = project::NEAR,
                 "DILATION" = project::DILATION,
                 "EXTENT_SQ" = project::EXTENT_SQ,
+                "BOX_SIGMAS" = project::BOX_SIGMAS,
+                "EIGEN_FLOOR" = project::EIGEN_FLOOR,
+                "EXTENT_3DGS" = project::SplatExtent::ThreeDgs as u32,
+                "EXTENT_SQRT8" = project::SplatExtent::Sqrt8 as u32,
                 "NONE" = NONE,
                 "SH_C0" = splat_core::sh::SH_C0,
             ]
@@ -495,7 +511,7 @@ mod tests {
     #[test]
     fn rust_structs_mirror_the_raster_wgsl_structs() {
         assert_mirrors!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
-        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, pad, rect]);
+        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, radius, rect]);
         assert_mirrors!(
             RASTER_WGSL,
             RasterParams,
@@ -517,7 +533,7 @@ mod tests {
                 guard,
                 tiles,
                 mode,
-                pad0,
+                extent,
                 pad1,
                 pad2
             ]

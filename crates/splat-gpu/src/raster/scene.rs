@@ -38,8 +38,8 @@ pub struct GpuSplat {
     pub id: u32,
     /// SH colour.
     pub color: [f32; 3],
-    /// Padding.
-    pub pad: u32,
+    /// Half-width ⌈3 √λ_max⌉ of the 3DGS box, px.
+    pub radius: f32,
     /// Pixel rect [x0, y0, x1, y1); empty when the particle is culled.
     pub rect: [u32; 4],
 }
@@ -80,8 +80,8 @@ pub struct RasterParams {
     pub tiles: [u32; 2],
     /// 0 over, 1 under, 2 stochastic splat.
     pub mode: u32,
-    /// Padding.
-    pub pad0: u32,
+    /// The splat extent ([`splat_core::raster::SplatExtent`] as u32: 0 3DGS box, 1 √8σ).
+    pub extent: u32,
     /// Padding.
     pub pad1: u32,
     /// Padding.
@@ -149,7 +149,7 @@ impl RasterScene {
 }
 
 /// The uniforms of a camera.
-pub(super) fn raster_params(scene: &RasterScene, camera: &Camera) -> RasterParams {
+pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatExtent) -> RasterParams {
     let s = &scene.settings;
     let row = |i: usize| {
         let v = camera.rotation.row(i);
@@ -177,7 +177,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera) -> RasterParam
         ],
         tiles: [camera.width.div_ceil(TILE), camera.height.div_ceil(TILE)],
         mode: 0,
-        pad0: 0,
+        extent: extent as u32,
         pad1: 0,
         pad2: 0,
     }

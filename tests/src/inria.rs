@@ -1,0 +1,196 @@
+//! An independent forward pass of the INRIA 3DGS rasterizer (Kerbl et al. 2023,
+//! diff-gaussian-rasterization: `preprocessCUDA`, `computeCov2D`, `computeColorFromSH` and
+//! `renderCUDA`), written from the published algorithm in the rasterizer's own precision (f32),
+//! sharing no code with `splat-core`'s splatting path. It is what `raster-sorted` with the
+//! default `3dgs` extent must reproduce.
+//!
+//! Pixel coordinates follow this workspace (pixel i covers [i, i + 1), centre i + 0.5; 3DGS
+//! puts the centre at i and shifts the projected mean by −½ with it, so every offset d is the
+//! same). The footprint is the ⌈3 √λ_max⌉ box around the mean, each pixel of it evaluated down
+//! to α = 1/255.
+
+use splat_core::{Camera, Scene};
+
+/// What the forward pass takes besides the scene and camera.
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    /// Background colour.
+    pub background: [f32; 3],
+    /// Stop a pixel before the splat that would take T below 1e-4 (`renderCUDA`'s `done`).
+    pub early_stop: bool,
+}
+
+/// A splat after `preprocessCUDA`.
+struct Projected {
+    depth: f32,
+    id: usize,
+    mean: [f32; 2],
+    conic: [f32; 3],
+    radius: f32,
+    opacity: f32,
+    rgb: [f32; 3],
+}
+
+/// The image (row-major RGB) that the reference renders.
+pub fn render(scene: &Scene, camera: &Camera, options: &Options) -> Vec<[f32; 3]> {
+    let mut splats: Vec<Projected> =
+        scene.particles.iter().enumerate().filter_map(|(id, _)| preprocess(scene, id, camera)).collect();
+    // The (tile | depth) radix sort is stable over the splat index: depth, then id.
+    splats.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.id.cmp(&b.id)));
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut out = vec![[0.0f32; 3]; w * h];
+    for (i, pixel) in out.iter_mut().enumerate() {
+        let pixf = [(i % w) as f32 + 0.5, (i / w) as f32 + 0.5];
+        *pixel = render_pixel(&splats, pixf, options);
+    }
+    out
+}
+
+/// `renderCUDA` for one pixel: front to back, α = min(0.99, o e^power), skip α < 1/255.
+fn render_pixel(splats: &[Projected], pixf: [f32; 2], options: &Options) -> [f32; 3] {
+    let mut t = 1.0f32;
+    let mut c = [0.0f32; 3];
+    for s in splats {
+        let d = [s.mean[0] - pixf[0], s.mean[1] - pixf[1]];
+        if d[0].abs() > s.radius || d[1].abs() > s.radius {
+            continue;
+        }
+        let power = -0.5 * (s.conic[0] * d[0] * d[0] + s.conic[2] * d[1] * d[1]) - s.conic[1] * d[0] * d[1];
+        if power > 0.0 {
+            continue;
+        }
+        let alpha = (s.opacity * power.exp()).min(0.99);
+        if alpha < 1.0 / 255.0 {
+            continue;
+        }
+        let test_t = t * (1.0 - alpha);
+        if options.early_stop && test_t < 0.0001 {
+            break;
+        }
+        for k in 0..3 {
+            c[k] += s.rgb[k] * alpha * t;
+        }
+        t = test_t;
+    }
+    [0, 1, 2].map(|k| c[k] + t * options.background[k])
+}
+
+type M3 = [[f32; 3]; 3];
+
+fn mat_mul(a: &M3, b: &M3) -> M3 {
+    let mut m = [[0.0; 3]; 3];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    m
+}
+
+fn transpose(a: &M3) -> M3 {
+    let mut m = [[0.0; 3]; 3];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = a[j][i];
+        }
+    }
+    m
+}
+
+/// `preprocessCUDA` for particle `id`: near-plane cull, Σ from scale and rotation, the EWA 2D
+/// covariance with the 0.3 px² low-pass, conic, radius, screen box, SH colour.
+fn preprocess(scene: &Scene, id: usize, camera: &Camera) -> Option<Projected> {
+    let p = &scene.particles[id];
+    let r_view = camera.rotation.to_cols_array_2d(); // columns
+    let view = |i: usize, j: usize| r_view[j][i];
+    let world = p.mean.to_array();
+    let center = camera.center().to_array();
+    let rel = [0, 1, 2].map(|k| world[k] - center[k]);
+    let t: [f32; 3] = [0, 1, 2].map(|i| (0..3).map(|j| view(i, j) * rel[j]).sum());
+    if t[2] <= 0.2 {
+        return None;
+    }
+    // computeCov3D: Σ = Mᵀ M with M = S R (glm's layout), i.e. R S² Rᵀ.
+    let q = p.rotation.normalize();
+    let (r, x, y, z) = (q.w, q.x, q.y, q.z);
+    let rot: M3 = [
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y)],
+        [2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x)],
+        [2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y)],
+    ];
+    let s = p.scale.to_array();
+    let rs: M3 = [0, 1, 2].map(|i| [0, 1, 2].map(|j| rot[i][j] * s[j]));
+    let sigma = mat_mul(&rs, &transpose(&rs));
+    // computeCov2D, with 3DGS's clamp of x/z and y/z to 1.3 tan(fov / 2).
+    let (fx, fy) = (camera.fx, camera.fy);
+    let lim_x = 1.3 * (0.5 * camera.width as f32) / fx;
+    let lim_y = 1.3 * (0.5 * camera.height as f32) / fy;
+    let tx = (t[0] / t[2]).clamp(-lim_x, lim_x) * t[2];
+    let ty = (t[1] / t[2]).clamp(-lim_y, lim_y) * t[2];
+    let j: M3 = [[fx / t[2], 0.0, -(fx * tx) / (t[2] * t[2])], [0.0, fy / t[2], -(fy * ty) / (t[2] * t[2])], [0.0; 3]];
+    let w: M3 = [0, 1, 2].map(|i| [0, 1, 2].map(|k| view(i, k)));
+    let jw = mat_mul(&j, &w);
+    let cov = mat_mul(&mat_mul(&jw, &sigma), &transpose(&jw));
+    let (a, b, c) = (cov[0][0] + 0.3, cov[0][1], cov[1][1] + 0.3);
+    let det = a * c - b * b;
+    if det == 0.0 {
+        return None;
+    }
+    let conic = [c / det, -b / det, a / det];
+    let mid = 0.5 * (a + c);
+    let lambda1 = mid + (mid * mid - det).max(0.1).sqrt();
+    let lambda2 = mid - (mid * mid - det).max(0.1).sqrt();
+    let radius = (3.0 * lambda1.max(lambda2).sqrt()).ceil();
+    let mean = [fx * t[0] / t[2] + camera.cx, fy * t[1] / t[2] + camera.cy];
+    let (wf, hf) = (camera.width as f32, camera.height as f32);
+    if mean[0] + radius < 0.0 || mean[1] + radius < 0.0 || mean[0] - radius > wf || mean[1] - radius > hf {
+        return None;
+    }
+    let dir = normalize(rel);
+    let rgb = color_from_sh(&p.sh.map(|v| v.to_array()), scene.sh_degree, dir);
+    Some(Projected { depth: t[2], id, mean, conic, radius, opacity: p.opacity, rgb })
+}
+
+fn normalize(v: [f32; 3]) -> [f32; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|c| c / n)
+}
+
+/// `computeColorFromSH`: the real SH basis of degrees 0–3 along the direction from the camera
+/// centre to the mean, + 0.5, clamped at 0.
+fn color_from_sh(sh: &[[f32; 3]; 16], degree: u8, dir: [f32; 3]) -> [f32; 3] {
+    const C0: f32 = 0.28209479177387814;
+    const C1: f32 = 0.4886025119029199;
+    const C2: [f32; 5] =
+        [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396];
+    const C3: [f32; 7] = [
+        -0.5900435899266435,
+        2.890611442640554,
+        -0.4570457994644658,
+        0.3731763325901154,
+        -0.4570457994644658,
+        1.445305721320277,
+        -0.5900435899266435,
+    ];
+    let [x, y, z] = dir;
+    let (xx, yy, zz, xy, yz, xz) = (x * x, y * y, z * z, x * y, y * z, x * z);
+    let mut basis = vec![C0];
+    if degree >= 1 {
+        basis.extend([-C1 * y, C1 * z, -C1 * x]);
+    }
+    if degree >= 2 {
+        basis.extend([C2[0] * xy, C2[1] * yz, C2[2] * (2.0 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)]);
+    }
+    if degree >= 3 {
+        basis.extend([
+            C3[0] * y * (3.0 * xx - yy),
+            C3[1] * xy * z,
+            C3[2] * y * (4.0 * zz - xx - yy),
+            C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy),
+            C3[4] * x * (4.0 * zz - xx - yy),
+            C3[5] * z * (xx - yy),
+            C3[6] * x * (xx - 3.0 * yy),
+        ]);
+    }
+    [0, 1, 2].map(|k| (basis.iter().zip(sh).map(|(b, c)| b * c[k]).sum::<f32>() + 0.5).max(0.0))
+}
