@@ -67,8 +67,8 @@ fn render_pixel(splats: &[Projected], pixf: [f32; 2], options: &Options) -> [f32
         if options.early_stop && test_t < 0.0001 {
             break;
         }
-        for k in 0..3 {
-            c[k] += s.rgb[k] * alpha * t;
+        for (ck, rk) in c.iter_mut().zip(s.rgb) {
+            *ck += rk * alpha * t;
         }
         t = test_t;
     }
@@ -157,7 +157,9 @@ fn normalize(v: [f32; 3]) -> [f32; 3] {
 }
 
 /// `computeColorFromSH`: the real SH basis of degrees 0–3 along the direction from the camera
-/// centre to the mean, + 0.5, clamped at 0.
+/// centre to the mean, + 0.5, clamped at 0. The constants are written with the digits 3DGS
+/// publishes (`SH_C0` … `SH_C3`); f32 rounds them.
+#[allow(clippy::excessive_precision)]
 fn color_from_sh(sh: &[[f32; 3]; 16], degree: u8, dir: [f32; 3]) -> [f32; 3] {
     const C0: f32 = 0.28209479177387814;
     const C1: f32 = 0.4886025119029199;
