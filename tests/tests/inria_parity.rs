@@ -51,3 +51,24 @@ fn the_sqrt8_extent_is_not_the_3dgs_forward_pass() {
         assert!(worst > 1e-2 && rmse > 1e-3, "{name}: the √8σ extent passes as 3DGS: max {worst}, RMSE {rmse}");
     }
 }
+
+/// The comparison's power: a renderer whose opacities are 2 % high (the reference fed the
+/// scaled scene, our renderer the true one) is rejected by the tolerance of the parity test.
+#[test]
+fn a_two_percent_opacity_bias_is_rejected() {
+    for name in ["layers", "cloud"] {
+        let (scene, camera) = fixture(name, 128, 96);
+        let mut biased = scene.clone();
+        for p in &mut biased.particles {
+            p.opacity = (p.opacity * 1.02).min(1.0);
+        }
+        let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), RasterSettings::default()).unwrap();
+        let ours = render_raster(&r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {});
+        let options = inria::Options { background: [0.0; 3], early_stop: false };
+        let reference: Vec<f32> = inria::render(&biased, &camera, &options).concat();
+        let ours = ours.unwrap();
+        let worst = ours.mean.data().iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        eprintln!("{name}, opacity × 1.02: max {worst:.2e}");
+        assert!(worst > 1e-3, "{name}: a 2 % opacity bias passes the parity tolerance ({worst})");
+    }
+}

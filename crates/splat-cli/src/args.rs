@@ -126,7 +126,8 @@ pub struct MethodOptions {
     #[arg(long, value_enum, default_value = "3dgs")]
     pub extent: ExtentArg,
     /// raster-sorted: stop a pixel before the splat that takes its transmittance below 1e-4, as
-    /// the 3DGS rasterizer does (default off: the exact sum of Eq. 3; CPU only).
+    /// the 3DGS rasterizer does (default off: the exact sum of Eq. 3; CPU only; the stochastic
+    /// raster methods have no order to stop in and ignore it).
     #[arg(long)]
     pub early_stop: bool,
     /// raster-sorted: blend order (default under, which also yields --depth and --normal).
