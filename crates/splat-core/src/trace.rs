@@ -175,12 +175,6 @@ struct Slot {
 
 impl Slot {
     const EMPTY: Slot = Slot { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
-
-    /// Strict (t, id) order: distance, ties by particle id, whatever the traversal order.
-    #[inline]
-    fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
-        depth_before(t, id, other_t, other_id)
-    }
 }
 
 /// Up to `cap` hits kept sorted by (t, id).
@@ -206,7 +200,7 @@ impl KBuf {
 
     /// Whether a hit at (t, id) would be kept.
     fn admits(&self, t: f32, id: u32) -> bool {
-        !self.is_full() || Slot::before(t, id, self.last().t, self.last().id)
+        !self.is_full() || depth_before(t, id, self.last().t, self.last().id)
     }
 
     /// Insert, dropping the farthest when full (insertion sort, as the vk any-hit shader does).
@@ -215,7 +209,7 @@ impl KBuf {
         if !self.is_full() {
             self.len += 1;
         }
-        while i > 0 && Slot::before(s.t, s.id, self.slots[i - 1].t, self.slots[i - 1].id) {
+        while i > 0 && depth_before(s.t, s.id, self.slots[i - 1].t, self.slots[i - 1].id) {
             self.slots[i] = self.slots[i - 1];
             i -= 1;
         }
@@ -407,7 +401,7 @@ impl<'a> TraceScene<'a> {
         self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
             let Some(h) = self.hit(leaf, ray) else { return };
             let id = self.ids[leaf as usize];
-            if !Slot::before(after.0, after.1, h.t, id) || !buf.admits(h.t, id) {
+            if !depth_before(after.0, after.1, h.t, id) || !buf.admits(h.t, id) {
                 return;
             }
             if let Some(accept) = accepted
@@ -464,7 +458,7 @@ impl<'a> TraceScene<'a> {
                 0.0
             };
             let Some(h) = self.hit(leaf, ray) else { return };
-            if !Slot::before(h.t, id, best.t, best.id) {
+            if !depth_before(h.t, id, best.t, best.id) {
                 return;
             }
             let u = if early { u } else { decide.particle(id, slot, ray.at(h.t)) };
@@ -500,7 +494,7 @@ impl<'a> TraceScene<'a> {
             let Some(h) = self.hit(leaf, ray) else { return };
             let mut farthest = 0.0f32;
             for (s, (b, &us)) in best[..n].iter_mut().zip(&u[..n]).enumerate() {
-                if Slot::before(h.t, id, b.t, b.id) {
+                if depth_before(h.t, id, b.t, b.id) {
                     let us = if early { us } else { decide.particle(id, first_slot + s as u32, ray.at(h.t)) };
                     if us < h.alpha {
                         *b = Slot { t: h.t, id, leaf, alpha: h.alpha };
@@ -583,7 +577,7 @@ impl<'a> TraceScene<'a> {
             }
             let t = (-b - disc.sqrt()) / a;
             let id = self.ids[leaf as usize];
-            if t > ray.t_min && t < ray.t_max && Slot::before(t, id, best.t, best.id) {
+            if t > ray.t_min && t < ray.t_max && depth_before(t, id, best.t, best.id) {
                 best = Slot { t, id, leaf, alpha: 1.0 };
                 *t_max = t;
             }

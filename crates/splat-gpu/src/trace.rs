@@ -186,7 +186,7 @@ impl<'a> GpuTracer<'a> {
         let per_dispatch = if cpu_adapter { 1 } else { ctx.frames_per_dispatch };
         let run = Run { tracer: self, camera, params, frames, count };
         let lanes = u64::from(ctx.lanes());
-        let over = |f: &Finished| cpu_adapter && u64::from(f.loop_iterations.0) * lanes >= u64::from(LOOP_BUDGET);
+        let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
         let mut out = run.execute(per_dispatch, false)?;
         // Multi-pass methods (and stochastic-n, slot by slot) that do not fit run again with one
         // pass per dispatch.
@@ -198,7 +198,7 @@ impl<'a> GpuTracer<'a> {
             out = run.execute(1, true)?;
         }
         if over(&out) {
-            let (iterations, pixel) = out.loop_iterations;
+            let (iterations, pixel) = (out.stats.loop_iterations, out.busiest_pixel);
             let lanes = lanes as u32;
             return Err(GpuError::LoopBudget { x: pixel % camera.width, y: pixel / camera.width, iterations, lanes });
         }
@@ -206,11 +206,12 @@ impl<'a> GpuTracer<'a> {
     }
 }
 
-/// A finished render with the busiest pixel's loop count (count, pixel index).
+/// A finished render and the index of the pixel that ran the most loop iterations
+/// (`stats.loop_iterations`).
 struct Finished {
     output: RenderOutput,
     stats: GpuStats,
-    loop_iterations: (u32, u32),
+    busiest_pixel: u32,
 }
 
 /// One attempt at a render.
@@ -358,6 +359,6 @@ impl Run<'_> {
             pass_per_dispatch: by_pass,
             ..stats
         };
-        Ok(Finished { output, stats, loop_iterations: busiest })
+        Ok(Finished { output, stats, busiest_pixel: busiest.1 })
     }
 }

@@ -269,10 +269,13 @@ impl<'a> GpuRasterizer<'a> {
         Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
     }
 
-    /// Whether the GPU rasterizer renders `method` with `settings`; the CPU reference renders
-    /// every raster method.
+    /// Whether the GPU rasterizer renders `method` with `settings` (the one place that decides
+    /// it): sorted splatting and StochasticSplats, one sample per pixel at the centre, billboard
+    /// (centre) fragment depth. Enderton, stratified, MSAA sample sets, max-density-plane depths
+    /// and the early stop are CPU-only; the CPU reference renders every raster method.
     pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
-        supports(method, settings)
+        Draw::of(method)?;
+        check_settings(settings)
     }
 
     fn set_mode(&self, draw: Draw) {
@@ -356,15 +359,6 @@ impl<'a> GpuRasterizer<'a> {
             _ => pass.draw_indirect(&self.draw_args, 0),
         }
     }
-}
-
-/// Whether the GPU rasterizer renders `method` with `settings` (the one place that decides it):
-/// sorted splatting and StochasticSplats, one sample per pixel at the centre, billboard (centre)
-/// fragment depth. Enderton, stratified, MSAA sample sets and max-density-plane depths are
-/// CPU-only.
-fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
-    Draw::of(method)?;
-    check_settings(settings)
 }
 
 /// The raster settings the GPU renders: one centre sample, centre depth, no early stop.
