@@ -35,7 +35,8 @@ struct FrameParams {
     key: u32,
     index: u32,
     pad0: u32,
-    pad1: u32,
+    // splat_core::Frames::u_shift, a test hook: every u is drawn as u − u_shift (0 in renders).
+    u_shift: f32,
 }
 
 // One particle projected to the image (64 bytes), mirrored by splat_gpu::GpuSplat and

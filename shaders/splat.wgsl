@@ -73,7 +73,7 @@ fn fs_stochastic(in: VertexOut) -> @location(0) vec4<f32> {
     let alpha = splat_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
     let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
-    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, 0u))));
+    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, 0u)))) - frame.u_shift;
     if (!(u < alpha)) {
         discard;
     }

@@ -46,7 +46,8 @@ struct Params {
     // 0: whole frames per invocation; 1: one pass of frame first_frame (pass-per-dispatch).
     mode: u32,
     pass_index: u32,
-    pad1: u32,
+    // splat_core::Frames::u_shift, a test hook: every u is drawn as u − u_shift (0 in renders).
+    u_shift: f32,
     pad2: u32,
 }
 
@@ -101,7 +102,12 @@ fn trig_hash(p: vec3<f32>) -> f32 {
     return fract_(43758.547 * sin(12.9898 * (p.x + r) + 78.233 * (p.y + r)));
 }
 
+// rng.rs `RayRng::particle`: u of particle `id` in sample `slot`, lowered by the test hook.
 fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
+    return unshifted_particle_u(pixel_seed, id, slot, hit) - params.u_shift;
+}
+
+fn unshifted_particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
     if (params.rng_scheme == 0u) {
         return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, id, slot))));
     }
@@ -114,7 +120,7 @@ fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
 }
 
 fn pass_u(pixel_seed: u32, pass_index: u32) -> f32 {
-    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, PASS_ID, pass_index))));
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, PASS_ID, pass_index)))) - params.u_shift;
 }
 
 // ---- kernel.rs, hit.rs ----------------------------------------------------------------------

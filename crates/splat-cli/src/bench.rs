@@ -70,7 +70,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let mut baseline = None;
     for m in methods {
         let method = args.options.method(m)?;
-        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
+        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng(), ..Frames::default() };
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
@@ -114,7 +114,7 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let mut baseline = None;
     for m in methods {
         let method = args.options.method(m)?;
-        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng() };
+        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng(), ..Frames::default() };
         let name = m.name();
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {

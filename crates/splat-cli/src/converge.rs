@@ -79,7 +79,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     for &m in &args.methods {
         let method = args.options.resolve(m);
         for &spp in &levels {
-            let frames = Frames { count: spp, seed: spp, rng: args.options.rng() };
+            let frames = Frames { count: spp, seed: spp, rng: args.options.rng(), ..Frames::default() };
             let progress = |n| bar.inc(n * u64::from(spp));
             let start = Instant::now();
             let (out, reference) = match method {

@@ -55,7 +55,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let (scene, camera) = args.scene.load(640, 480)?;
     let settings = args.scene.settings();
     let algorithm = args.options.resolve(args.method);
-    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng() };
+    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu = choose_gpu(&args, &algorithm)?;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();

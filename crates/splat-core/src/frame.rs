@@ -28,11 +28,16 @@ pub struct Frames {
     pub seed: u32,
     /// Generator of the decisions.
     pub rng: RngScheme,
+    /// Test hook of the power study (docs/power.md): every uniform number of a stochastic
+    /// decision is drawn as u − `u_shift`, so a particle is accepted when u < α + `u_shift`
+    /// (a decision rule off by that much). Zero, the default, in every real render; the
+    /// statistical suites set it to show that they catch a small error in a decision.
+    pub u_shift: f32,
 }
 
 impl Default for Frames {
     fn default() -> Self {
-        Self { count: 1, seed: 0, rng: RngScheme::Hash }
+        Self { count: 1, seed: 0, rng: RngScheme::Hash, u_shift: 0.0 }
     }
 }
 
@@ -43,19 +48,42 @@ impl Frames {
         if self.count == 0 {
             return Err(RenderError::Settings("at least one frame is needed".into()));
         }
+        if self.u_shift.is_nan() || self.u_shift.abs() >= 1.0 {
+            return Err(RenderError::Settings(format!("u_shift {} is not in (−1, 1)", self.u_shift)));
+        }
         let count = if stochastic { self.count } else { 1 };
         Ok((0..count).map(|f| frame_key(self.seed, f)).collect())
     }
 }
 
-/// The source of the stochastic decisions of one ray or pixel.
+/// The source of the stochastic decisions of one ray or pixel, and the rules that turn them
+/// into outcomes.
+///
+/// Every estimator decides through [`Decide::accepts`] and [`Decide::accepts_pass`]; the
+/// renderers use the provided rules, and the enumeration tests replace them with wrong ones
+/// to show that they would be caught.
 pub trait Decide {
     /// Whether [`Decide::particle`] reads the hit position.
     fn needs_position(&self) -> bool;
-    /// u ∈ [0, 1): particle `id` is accepted in sample `slot` when u < α.
+    /// u ∈ [0, 1) of particle `id` in sample `slot`.
     fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32;
-    /// u ∈ [0, 1): pass `pass` is accepted when u < 1 − T_pass.
+    /// u ∈ [0, 1) of pass `pass`.
     fn pass(&self, pass: u32) -> f32;
+    /// Russian roulette (Sun et al. 2025, Algorithm 1, line 6): particle `id` with alpha α is
+    /// accepted when u < α, so with probability α.
+    fn accepts(&self, _id: u32, u: f32, alpha: f32) -> bool {
+        u < alpha
+    }
+    /// The stochastic pass (vk_gaussian_splatting): a pass of opacity O = 1 − T_pass is
+    /// accepted when u < O.
+    fn accepts_pass(&self, u: f64, opacity: f64) -> bool {
+        u < opacity
+    }
+    /// Laine & Karras 2011 §3: a fragment covers a sample when α exceeds the sample's
+    /// reference value `reference` (CalcAlphaRef, Figure 7 line 13).
+    fn covers(&self, alpha: f32, reference: f32) -> bool {
+        alpha > reference
+    }
 }
 
 impl Decide for RayRng {
@@ -67,6 +95,9 @@ impl Decide for RayRng {
     }
     fn pass(&self, pass: u32) -> f32 {
         RayRng::pass(self, pass)
+    }
+    fn covers(&self, alpha: f32, reference: f32) -> bool {
+        alpha > reference - self.u_shift
     }
 }
 

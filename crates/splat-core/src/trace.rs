@@ -462,7 +462,7 @@ impl<'a> TraceScene<'a> {
                 return;
             }
             let u = if early { u } else { decide.particle(id, slot, ray.at(h.t)) };
-            if u < h.alpha {
+            if decide.accepts(id, u, h.alpha) {
                 best = Slot { t: h.t, id, leaf, alpha: h.alpha };
                 *t_max = h.t;
             }
@@ -496,7 +496,7 @@ impl<'a> TraceScene<'a> {
             for (s, (b, &us)) in best[..n].iter_mut().zip(&u[..n]).enumerate() {
                 if depth_before(h.t, id, b.t, b.id) {
                     let us = if early { us } else { decide.particle(id, first_slot + s as u32, ray.at(h.t)) };
-                    if us < h.alpha {
+                    if decide.accepts(id, us, h.alpha) {
                         *b = Slot { t: h.t, id, leaf, alpha: h.alpha };
                     }
                 }
@@ -535,7 +535,7 @@ impl<'a> TraceScene<'a> {
             let mut acc = Integrator::START;
             self.integrate(&mut acc, &buf, ray);
             let opacity = 1.0 - acc.transmittance;
-            if f64::from(decide.pass(pass)) < opacity {
+            if decide.accepts_pass(f64::from(decide.pass(pass)), opacity) {
                 return Sample {
                     color: acc.radiance / opacity,
                     alpha: 1.0,
@@ -556,7 +556,7 @@ impl<'a> TraceScene<'a> {
     /// 3DGRT stochastic depth sampling: the k closest hits accepted by roulette (slot 0),
     /// composited in order with their alphas (biased: α counts twice).
     pub fn depth_sampling(&self, ray: &Ray, decide: &impl Decide, k: usize) -> Sample {
-        let accept = |id: u32, p: Vec3, alpha: f32| decide.particle(id, 0, p) < alpha;
+        let accept = |id: u32, p: Vec3, alpha: f32| decide.accepts(id, decide.particle(id, 0, p), alpha);
         let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept));
         let mut acc = Integrator::START;
         self.integrate(&mut acc, &buf, ray);
@@ -609,7 +609,9 @@ pub fn render_frames(
         |_| (),
         |_, x, y| {
             let ray = trace.clip(camera.pixel_ray(x, y));
-            PixelFrames::over(&keys, |key| trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng)))
+            PixelFrames::over(&keys, |key| {
+                trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng).shifted(frames.u_shift))
+            })
         },
     ))
 }

@@ -128,8 +128,8 @@ pub struct Params {
     pub mode: u32,
     /// The pass of pass-per-dispatch mode.
     pub pass_index: u32,
-    /// Padding.
-    pub pad1: u32,
+    /// [`splat_core::Frames::u_shift`], subtracted from every u (a test hook; 0 in renders).
+    pub u_shift: f32,
     /// Padding.
     pub pad2: u32,
 }
@@ -228,7 +228,7 @@ pub fn params(
         first_frame,
         mode: MODE_FRAMES,
         pass_index: 0,
-        pad1: 0,
+        u_shift: frames.u_shift,
         pad2: 0,
     }
 }
@@ -350,7 +350,7 @@ mod tests {
                 first_frame,
                 mode,
                 pass_index,
-                pad1,
+                u_shift,
                 pad2
             ]
         );

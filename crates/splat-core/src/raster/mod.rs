@@ -16,6 +16,8 @@
 //! is the sorted image with the same samples; depth ties are broken by splat id everywhere, so
 //! the order is total and no result depends on the draw order or the thread count.
 
+#[cfg(test)]
+mod enumeration;
 pub mod project;
 pub mod samples;
 #[cfg(test)]
@@ -295,7 +297,7 @@ impl<'a> Rasterizer<'a> {
             RasterMethod::StochasticSplat => self.resolve(px, &self.stochastic_splat(px, fragments, decide)),
             RasterMethod::Enderton => self.resolve(px, &self.enderton(px, fragments, decide)),
             RasterMethod::Stratified { scramble } => {
-                self.resolve(px, &self.stratified(px, fragments, frame_key, scramble))
+                self.resolve(px, &self.stratified(px, fragments, decide, frame_key, scramble))
             }
         }
     }
@@ -370,7 +372,7 @@ impl<'a> Rasterizer<'a> {
             let id = self.id(f);
             for s in bits(f.covered) {
                 let t = self.depth(px, f, s);
-                if buf.passes(s, t, id) && decide.particle(id, s as u32, Vec3::ZERO) < f.alpha {
+                if buf.passes(s, t, id) && decide.accepts(id, decide.particle(id, s as u32, Vec3::ZERO), f.alpha) {
                     buf.write(s, t, id, f.splat);
                 }
             }
@@ -410,7 +412,14 @@ impl<'a> Rasterizer<'a> {
 
     /// Laine & Karras 2011, Figure 7 (DrawFragment), line by line. The surface id of every
     /// pixel starts at a per-frame hash so that frames are independent.
-    fn stratified(&self, px: &PixelSamples, fragments: &[Fragment], frame_key: u32, scramble: bool) -> SampleBuffer {
+    fn stratified(
+        &self,
+        px: &PixelSamples,
+        fragments: &[Fragment],
+        decide: &impl Decide,
+        frame_key: u32,
+        scramble: bool,
+    ) -> SampleBuffer {
         let spp = self.offsets.len() as u32;
         let pixel_id = hilbert_index(self.hilbert_order, px.x, px.y);
         let mut buf = SampleBuffer::new(self.offsets.len());
@@ -432,7 +441,7 @@ impl<'a> Rasterizer<'a> {
             // Lines 8, 10–17: opacity test against the reference values, in that order, the
             // surface's sequence continuing where it stopped (n starts at the bits set).
             for (n, &(s, t)) in (covered.count_ones()..).zip(&alive) {
-                if f.alpha > calc_alpha_ref(n, pixel_id, surface_id, spp, scramble) {
+                if decide.covers(f.alpha, calc_alpha_ref(n, pixel_id, surface_id, spp, scramble)) {
                     buf.write(s, t, id, f.splat);
                 }
             }
@@ -566,7 +575,13 @@ pub fn render_raster(
                 if method.is_stochastic() {
                     raster.shuffle(&mut fragments, key);
                 }
-                raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash), key)
+                raster.draw(
+                    method,
+                    &px,
+                    &fragments,
+                    &RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift),
+                    key,
+                )
             })
         },
     ))

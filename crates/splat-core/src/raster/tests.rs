@@ -1,6 +1,6 @@
 //! Deterministic tests of the raster reference: over = under, agreement with the ray-traced
-//! oracle where the projection is exact, the StochasticSplats expectation by enumeration, and
-//! the stratification properties of Laine & Karras §4.
+//! oracle where the projection is exact, and the stratification properties of Laine & Karras
+//! §4 (the expectations of the stochastic methods are enumerated in `enumeration.rs`).
 
 use super::*;
 use crate::particle::Particle;
@@ -85,77 +85,6 @@ fn one_pixel(opacities: &[f32], samples: u32) -> (Scene, Camera) {
     (scene, camera)
 }
 
-/// Scripted decisions: u = 0 (accept) or u = 1 − 2⁻²⁴ (reject) per (splat id, sample).
-struct Script(Vec<bool>, usize);
-
-impl Decide for Script {
-    fn needs_position(&self) -> bool {
-        false
-    }
-    fn particle(&self, id: u32, slot: u32, _: Vec3) -> f32 {
-        if self.0[id as usize * self.1 + slot as usize] { 0.0 } else { 1.0 - f32::EPSILON }
-    }
-    fn pass(&self, _: u32) -> f32 {
-        unreachable!("no passes in rasterization")
-    }
-}
-
-/// The same u for every decision: a threshold, not a random variable.
-struct Constant(f32);
-
-impl Decide for Constant {
-    fn needs_position(&self) -> bool {
-        false
-    }
-    fn particle(&self, _: u32, _: u32, _: Vec3) -> f32 {
-        self.0
-    }
-    fn pass(&self, _: u32) -> f32 {
-        self.0
-    }
-}
-
-/// Exact expectation of StochasticSplats by enumerating every accept/reject outcome of every
-/// (fragment, sample), through the rendering code: it equals sorted splatting to 1e-9, in any
-/// draw order. The same enumeration of a biased variant (a constant u = ½ threshold, i.e. the
-/// decision without randomness) does not.
-#[test]
-fn stochastic_splat_expectation_is_sorted_splatting() {
-    for (opacities, samples) in [(vec![0.3f32, 0.8, 0.5, 0.6], 1u32), (vec![0.45, 0.7, 0.2], 2)] {
-        let (scene, camera) = one_pixel(&opacities, samples);
-        let raster = RasterSettings { samples, ..RasterSettings::default() };
-        let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
-        let px = r.pixel(0, 0);
-        let mut frags = r.fragments(&px);
-        assert_eq!(frags.len(), opacities.len());
-        let want = r.draw(&sorted(Blend::Under), &px, &frags, &Script(vec![], 0), 0).color;
-        let s = samples as usize;
-        let m = frags.len() * s;
-        for reverse in [false, true] {
-            if reverse {
-                frags.reverse();
-            }
-            let mut expectation = DVec3::ZERO;
-            for mask in 0u32..1 << m {
-                let accept: Vec<bool> = (0..m).map(|b| mask >> b & 1 == 1).collect();
-                let mut p = 1.0f64;
-                for f in &frags {
-                    let id = r.splats()[f.splat as usize].id as usize;
-                    for k in 0..s {
-                        let a = f64::from(f.alpha);
-                        p *= if accept[id * s + k] { a } else { 1.0 - a };
-                    }
-                }
-                let got = r.draw(&RasterMethod::StochasticSplat, &px, &frags, &Script(accept, s), 0);
-                expectation += p * got.color;
-            }
-            assert!((expectation - want).abs().max_element() < 1e-9, "{expectation} vs {want}");
-        }
-        let biased = r.draw(&RasterMethod::StochasticSplat, &px, &frags, &Constant(0.5), 0);
-        assert!((biased.color - want).abs().max_element() > 1e-2, "a fixed threshold is not an estimator");
-    }
-}
-
 /// Laine & Karras §4, Figure 5: two full-pixel surfaces of α = ½ at 16 samples. The nearest
 /// covers exactly 8 samples whatever the order; the far one ends with exactly 4 visible when
 /// drawn first (sorting by stored depth, Figure 5d) and when drawn last (early depth test,
@@ -173,11 +102,11 @@ fn stratified_covers_exact_sample_counts() {
     let mut enderton_far = Vec::new();
     for key in 0..64 {
         for order in [&near_to_far, &far_to_near] {
-            let buf = r.stratified(&px, order, key, true);
+            let rng = RayRng::new(0, 0, key, RngScheme::Hash);
+            let buf = r.stratified(&px, order, &rng, key, true);
             let count = |k: u32| (0..16).filter(|&s| buf.splat[s] == k).count();
             let (n, f) = (near_to_far[0].splat, near_to_far[1].splat);
             assert_eq!((count(n), count(f)), (8, 4), "frame {key}");
-            let rng = RayRng::new(0, 0, key, RngScheme::Hash);
             let e = r.enderton(&px, order, &rng);
             enderton_far.push((0..16).filter(|&s| e.splat[s] == f).count());
         }
@@ -199,7 +128,7 @@ fn stratified_continues_a_surface_across_fragments() {
     frags[0].covered = 0x00FF;
     frags[1].covered = 0xFF00;
     for key in 0..32 {
-        let buf = r.stratified(&px, &frags, key, true);
+        let buf = r.stratified(&px, &frags, &RayRng::new(0, 0, key, RngScheme::Hash), key, true);
         let written = (0..16).filter(|&s| buf.splat[s] != u32::MAX).count();
         assert_eq!(written, 4, "frame {key}");
     }

@@ -249,7 +249,7 @@ impl<'a> GpuRasterizer<'a> {
         let mut gpu_time = Duration::ZERO;
         for (batch_index, batch) in keys.chunks(FRAMES_PER_SUBMIT as usize).enumerate() {
             let first = batch_index as u32 * FRAMES_PER_SUBMIT;
-            slots.write(self.ctx, batch, first);
+            slots.write(self.ctx, batch, first, frames.u_shift);
             let mut encoder = self.encoder("raster frames");
             for slot in 0..batch.len() as u32 {
                 let offset = slots.offset(slot);
@@ -451,10 +451,10 @@ impl FrameSlots {
         Self { buffer, stride }
     }
 
-    fn write(&self, ctx: &GpuContext, keys: &[u32], first: u32) {
+    fn write(&self, ctx: &GpuContext, keys: &[u32], first: u32, u_shift: f32) {
         let mut bytes = vec![0u8; (self.stride as usize) * keys.len()];
         for (slot, &key) in keys.iter().enumerate() {
-            let p = FrameParams { key, index: first + slot as u32, pad0: 0, pad1: 0 };
+            let p = FrameParams { key, index: first + slot as u32, pad0: 0, u_shift };
             let at = slot * self.stride as usize;
             bytes[at..at + size_of::<FrameParams>()].copy_from_slice(bytemuck::bytes_of(&p));
         }
@@ -532,7 +532,7 @@ mod tests {
                 pad2
             ]
         );
-        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, pad1]);
+        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, u_shift]);
     }
 
     /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).

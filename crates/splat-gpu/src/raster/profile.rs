@@ -38,7 +38,7 @@ impl GpuRasterizer<'_> {
         let sorted_targets = Targets::new(self.ctx, self.pipes, w, h, Draw::Over);
         let stochastic_targets = Targets::new(self.ctx, self.pipes, w, h, Draw::Stochastic);
         let slots = FrameSlots::new(self.ctx);
-        slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0);
+        slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0, 0.0);
         let group = self.draw_group(&slots.buffer);
         let timer = self.ctx.timestamps.then(|| crate::timing::Timer::new(self.ctx));
         let mut best = [Duration::MAX; 4];

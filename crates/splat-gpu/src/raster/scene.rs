@@ -98,8 +98,8 @@ pub struct FrameParams {
     pub index: u32,
     /// Padding.
     pub pad0: u32,
-    /// Padding.
-    pub pad1: u32,
+    /// [`splat_core::Frames::u_shift`], subtracted from every u (a test hook; 0 in renders).
+    pub u_shift: f32,
 }
 
 /// A scene uploaded for rasterization: particles (mean, opacity, covariance) and SH in scene
