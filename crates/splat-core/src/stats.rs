@@ -1,5 +1,5 @@
 //! Statistics that prove estimators right: Welford accumulators, the per-pixel z-test of
-//! docs/architecture.md ("How correctness is proven"), the Welch t-test, RMSE and log–log slopes.
+//! docs/architecture.md ("How correctness is proven"), RMSE and log–log slopes.
 
 /// Running mean and variance (Welford 1962), in f64.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -38,6 +38,13 @@ pub struct ZTest {
     pub spread: f64,
     /// Fraction of two-sided p-values below 0.01, over all pixel-channels.
     pub outliers: f64,
+    /// The variance check: (Σ z² − n) / √(2n) over the pixel-channels where the independent
+    /// run varied, the smallest over channels. Far below zero when the variance image is too
+    /// large (every se too wide, so that a bias could hide in it); 0 when no channel varied.
+    pub variance: f64,
+    /// Fraction of pixel-channels whose se is the 1/F floor (the independent run never
+    /// varied there).
+    pub floored: f64,
     /// Pixel-channels tested.
     pub n: usize,
 }
@@ -48,13 +55,45 @@ pub const GLOBAL_MAX: f64 = 4.0;
 pub const SPREAD_MAX: f64 = 4.0;
 /// Largest accepted fraction of pixels with p < 0.01.
 pub const OUTLIERS_MAX: f64 = 0.03;
+/// Smallest accepted variance statistic ([`ZTest::variance`]).
+pub const VARIANCE_MIN: f64 = -4.0;
+/// Fewest pixel-channels a z-test must see to pass: a test of nothing proves nothing.
+pub const MIN_TESTED: usize = 96;
+/// Smallest standard error where the independent run varied: the f32 resolution of a mean
+/// of values of order 1 (GPU accumulators are f32).
+pub const SE_MIN: f64 = 1e-6;
+
+/// The standard error of a mean of `frames` frames from the per-frame variance `var` of an
+/// independent run: √(var / F); where that run never varied (var = 0), 1/F, since an event
+/// rarer than 1/(4F) could still be in the mean and one such event moves it by up to 1/F.
+pub fn standard_error(var: f32, frames: u32) -> f64 {
+    let f = f64::from(frames);
+    if var > 0.0 { (f64::from(var) / f).sqrt().max(SE_MIN) } else { 1.0 / f }
+}
 /// |z| above which the two-sided p-value is below 0.01.
 pub const Z_P01: f64 = 2.575_829_303_549;
 
+/// Per-channel sums of the z-test.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    d: f64,
+    se2: f64,
+    z2: f64,
+    n: usize,
+    /// Σ z² and count over the unfloored pixel-channels.
+    z2_free: f64,
+    n_free: usize,
+}
+
+/// (Σ z² − n) / √(2n): a χ²_n statistic in standard units.
+fn chi2_units(z2: f64, n: usize) -> f64 {
+    (z2 - n as f64) / (2.0 * n as f64).sqrt()
+}
+
 impl ZTest {
     /// Compare `mean` (over `frames` frames) with `exact`, using the per-frame `variance` of an
-    /// independent run: se = max(√(var / F), 1 / F) per pixel-channel. Values are interleaved
-    /// with `channels` channels per pixel.
+    /// independent run: se = [`standard_error`] per pixel-channel. Values are interleaved with
+    /// `channels` channels per pixel.
     ///
     /// The global and spread statistics sum over pixels, which are independent, but the
     /// channels of one pixel come from the same random decisions and are correlated (fully,
@@ -63,38 +102,43 @@ impl ZTest {
     pub fn new(mean: &[f32], exact: &[f32], variance: &[f32], frames: u32, channels: usize) -> Self {
         assert!(mean.len() == exact.len() && mean.len() == variance.len(), "image sizes differ");
         assert!(channels > 0 && mean.len().is_multiple_of(channels), "length is not a multiple of the channels");
-        let f = f64::from(frames);
-        let mut sums = vec![(0.0f64, 0.0f64, 0.0f64, 0usize); channels]; // Σd, Σse², Σz², n
-        let mut outliers = 0usize;
+        let mut sums = vec![Sums::default(); channels];
+        let (mut outliers, mut floored) = (0usize, 0usize);
         for (i, ((&m, &e), &v)) in mean.iter().zip(exact).zip(variance).enumerate() {
-            let se = (f64::from(v) / f).sqrt().max(1.0 / f);
+            let se = standard_error(v, frames);
             let d = f64::from(m) - f64::from(e);
             let z = d / se;
             let s = &mut sums[i % channels];
-            s.0 += d;
-            s.1 += se * se;
-            s.2 += z * z;
-            s.3 += 1;
-            outliers += usize::from(z.abs() > Z_P01);
+            s.d += d;
+            s.se2 += se * se;
+            s.z2 += z * z;
+            s.n += 1;
+            if v > 0.0 {
+                s.z2_free += z * z;
+                s.n_free += 1;
+            } else {
+                floored += 1;
+            }
+            outliers += usize::from(z.is_nan() || z.abs() > Z_P01);
         }
-        let per_channel = sums.iter().filter(|s| s.3 > 0);
-        let global = per_channel.clone().map(|s| s.0.abs() / s.1.sqrt()).fold(0.0, f64::max);
-        let spread =
-            per_channel.map(|s| (s.2 - s.3 as f64) / (2.0 * s.3 as f64).sqrt()).fold(f64::NEG_INFINITY, f64::max);
+        let tested = sums.iter().filter(|s| s.n > 0);
+        let global = tested.clone().map(|s| s.d.abs() / s.se2.sqrt()).fold(0.0, f64::max);
+        let spread = tested.map(|s| chi2_units(s.z2, s.n)).fold(f64::NEG_INFINITY, f64::max);
+        let variance =
+            sums.iter().filter(|s| s.n_free > 0).map(|s| chi2_units(s.z2_free, s.n_free)).fold(0.0, f64::min);
         let n = mean.len();
-        Self { global, spread, outliers: outliers as f64 / n.max(1) as f64, n }
+        let share = |k: usize| k as f64 / n.max(1) as f64;
+        Self { global, spread, outliers: share(outliers), variance, floored: share(floored), n }
     }
 
-    /// Whether all three criteria hold.
+    /// Whether all four criteria hold on at least [`MIN_TESTED`] pixel-channels.
     pub fn passes(&self) -> bool {
-        self.global <= GLOBAL_MAX && self.spread <= SPREAD_MAX && self.outliers <= OUTLIERS_MAX
+        self.n >= MIN_TESTED
+            && self.global <= GLOBAL_MAX
+            && self.spread <= SPREAD_MAX
+            && self.outliers <= OUTLIERS_MAX
+            && self.variance >= VARIANCE_MIN
     }
-}
-
-/// Welch's t statistic of two means with their variances and sample counts.
-pub fn welch_t(mean_a: f64, var_a: f64, n_a: u64, mean_b: f64, var_b: f64, n_b: u64) -> f64 {
-    let se2 = var_a / n_a as f64 + var_b / n_b as f64;
-    if se2 <= 0.0 { if mean_a == mean_b { 0.0 } else { f64::INFINITY } } else { (mean_a - mean_b) / se2.sqrt() }
 }
 
 /// Root mean square difference of two equally sized images.
@@ -137,7 +181,8 @@ mod tests {
     }
 
     /// Simulated Bernoulli estimators on 40 × 30 pixels at F = 256 (docs/architecture.md): the
-    /// unbiased one passes, a 1 % low bias and a ±5 % checkerboard bias are rejected.
+    /// unbiased one passes, a 1 % low bias and a ±5 % checkerboard bias are rejected, and so is
+    /// the unbiased one judged with a variance image twice too large or half too small.
     #[test]
     fn z_test_accepts_unbiased_and_rejects_biased_bernoulli() {
         let (w, h, frames) = (40usize, 30usize, 256u32);
@@ -165,5 +210,31 @@ mod tests {
         assert!(!low.passes() && low.global > 4.0, "{low:?}");
         let checker = test(&|i| if (i % w + i / w) % 2 == 0 { 1.05 } else { 0.95 }, &mut rng);
         assert!(!checker.passes() && checker.spread > 4.0, "{checker:?}");
+        let (mean, _) = run(&|_| 1.0, frames, &mut rng);
+        let (_, var) = run(&|_| 1.0, 4 * frames, &mut rng);
+        let scaled = |k: f32| var.iter().map(|v| v * k).collect::<Vec<f32>>();
+        let wide = ZTest::new(&mean, &exact, &scaled(2.0), frames, 1);
+        assert!(!wide.passes() && wide.variance < VARIANCE_MIN, "{wide:?}");
+        let narrow = ZTest::new(&mean, &exact, &scaled(0.5), frames, 1);
+        assert!(!narrow.passes() && narrow.spread > SPREAD_MAX, "{narrow:?}");
+    }
+
+    /// An empty mask, or a handful of pixels, is not a pass.
+    #[test]
+    fn a_z_test_of_too_few_pixels_fails() {
+        let empty = ZTest::new(&[], &[], &[], 256, 3);
+        assert!(!empty.passes() && empty.n == 0, "{empty:?}");
+        let few = ZTest::new(&[0.5; 30], &[0.5; 30], &[0.25; 30], 256, 3);
+        assert!(!few.passes(), "{few:?}");
+    }
+
+    /// A pixel where both runs have zero variance but the mean differs from the exact value
+    /// is caught by the floor, not divided by zero.
+    #[test]
+    fn zero_variance_disagreements_are_outliers() {
+        let mut mean = vec![0.5f32; 300];
+        mean[7] = 0.6;
+        let z = ZTest::new(&mean, &[0.5; 300], &[0.0; 300], 256, 3);
+        assert!(!z.passes() && z.floored == 1.0, "{z:?}");
     }
 }
