@@ -11,23 +11,77 @@ use splat_core::trace::{Method, TraceScene};
 use splat_core::{HitDistance, Particle, Ray, Scene};
 use std::collections::HashMap;
 
-/// Scripted decisions: `accept[(id, slot)]` accepts a particle (u = 0), anything else rejects
-/// it (u = 0.995 > the 0.99 alpha clamp); only pass `accept_pass` is accepted.
+/// Which acceptance rules the scripted decisions apply: the production ones (the provided
+/// methods of [`Decide`]) or one of the wrong rules the enumeration must reject.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+enum Rule {
+    #[default]
+    Production,
+    /// u < opacity: the particle's opacity instead of its alpha at the hit.
+    Opacity,
+    /// u ≤ 1 − α.
+    Complement,
+    /// A pass accepted when u < T_pass instead of u < 1 − T_pass.
+    PassTransmittance,
+}
+
+/// Scripted decisions at their thresholds: an accepted particle draws u = α (1 − 10⁻⁶), a
+/// rejected one u = α exactly, with α from the shading code (`Oracle::shade`, the function
+/// the tracer calls); an accepted pass draws u just below its opacity O, a rejected one the
+/// first f32 at or above O. Every comparison therefore runs with values on both sides of its
+/// boundary, one rounding step away.
 #[derive(Default)]
 struct Outcomes {
+    alpha: HashMap<u32, f32>,
+    opacity: HashMap<u32, f32>,
     accept: HashMap<(u32, u32), bool>,
+    pass_opacity: Vec<f64>,
     accept_pass: Option<u32>,
+    /// u depends on the hit position (the trig-hash path: no early opacity pre-check).
+    late: bool,
+    rule: Rule,
+}
+
+impl Outcomes {
+    fn new(scene: &Scene, hits: &[(u32, f64)]) -> Self {
+        Self {
+            alpha: hits.iter().map(|&(id, a)| (id, a as f32)).collect(),
+            opacity: hits.iter().map(|&(id, _)| (id, scene.particles[id as usize].opacity)).collect(),
+            ..Self::default()
+        }
+    }
+}
+
+/// The smallest f32 at or above `x`.
+fn f32_at_or_above(x: f64) -> f32 {
+    let u = x as f32;
+    if f64::from(u) < x { u.next_up() } else { u }
 }
 
 impl Decide for Outcomes {
     fn needs_position(&self) -> bool {
-        false
+        self.late
     }
     fn particle(&self, id: u32, slot: u32, _: Vec3) -> f32 {
-        if self.accept.get(&(id, slot)).copied().unwrap_or(false) { 0.0 } else { 0.995 }
+        let alpha = self.alpha.get(&id).copied().unwrap_or(1.0);
+        if self.accept.get(&(id, slot)).copied().unwrap_or(false) { alpha * (1.0 - 1e-6) } else { alpha }
     }
     fn pass(&self, pass: u32) -> f32 {
-        if self.accept_pass == Some(pass) { 0.0 } else { 1.0 }
+        let o = self.pass_opacity.get(pass as usize).copied().unwrap_or(1.0);
+        if self.accept_pass == Some(pass) { (o * (1.0 - 1e-6)) as f32 } else { f32_at_or_above(o) }
+    }
+    fn accepts(&self, id: u32, u: f32, alpha: f32) -> bool {
+        match self.rule {
+            Rule::Opacity => u < self.opacity[&id],
+            Rule::Complement => u <= 1.0 - alpha,
+            _ => u < alpha,
+        }
+    }
+    fn accepts_pass(&self, u: f64, opacity: f64) -> bool {
+        match self.rule {
+            Rule::PassTransmittance => u < 1.0 - opacity,
+            _ => u < opacity,
+        }
     }
 }
 
@@ -60,13 +114,23 @@ fn hits(scene: &Scene, ray: &Ray, settings: &RenderSettings) -> Vec<(u32, f64)> 
     (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray).map(|h| (i, f64::from(h.alpha)))).collect()
 }
 
-/// E[sample] over independent Bernoulli(α) decisions of every hit particle in `slots` slots.
-fn expectation(trace: &TraceScene, method: &Method, ray: &Ray, hits: &[(u32, f64)], slots: u32) -> DVec3 {
+/// E[sample] over independent Bernoulli(α) decisions of every hit particle in `slots` slots,
+/// with the decisions drawn `late` (after the kernel, as the trig hash does) or early, under
+/// `rule`.
+fn expectation_with(
+    trace: &TraceScene,
+    method: &Method,
+    ray: &Ray,
+    hits: &[(u32, f64)],
+    slots: u32,
+    late: bool,
+    rule: Rule,
+) -> DVec3 {
     let bits = hits.len() * slots as usize;
     assert!(bits <= 16);
     let mut sum = DVec3::ZERO;
     for mask in 0u32..(1 << bits) {
-        let mut outcomes = Outcomes::default();
+        let mut outcomes = Outcomes { late, rule, ..Outcomes::new(trace.scene(), hits) };
         let mut p = 1.0;
         for (b, &(id, alpha)) in hits.iter().cycle().take(bits).enumerate() {
             let accepted = mask >> b & 1 == 1;
@@ -76,6 +140,30 @@ fn expectation(trace: &TraceScene, method: &Method, ray: &Ray, hits: &[(u32, f64
         sum += p * trace.sample(method, ray, &outcomes).color;
     }
     sum
+}
+
+/// [`expectation_with`] the production rules, decisions drawn early.
+fn expectation(trace: &TraceScene, method: &Method, ray: &Ray, hits: &[(u32, f64)], slots: u32) -> DVec3 {
+    expectation_with(trace, method, ray, hits, slots, false, Rule::Production)
+}
+
+/// E[sample] of the stochastic pass with k hits a pass: the pass at which it stops is
+/// enumerated, with pass opacities from the sorted alphas, independently of the integrator.
+fn pass_expectation(scene: &Scene, trace: &TraceScene, ray: &Ray, k: usize, rule: Rule) -> DVec3 {
+    let tracer = Oracle::new(scene, *trace.settings()).unwrap();
+    let mut sorted: Vec<_> = (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray)).collect();
+    splat_core::composite::sort_front_to_back(&mut sorted);
+    let opacities: Vec<f64> =
+        sorted.chunks(k).map(|c| 1.0 - c.iter().map(|h| 1.0 - f64::from(h.alpha)).product::<f64>()).collect();
+    let method = Method::StochasticPass { k, max_passes: 200 };
+    let script = |accept_pass| Outcomes { pass_opacity: opacities.clone(), accept_pass, rule, ..Outcomes::default() };
+    let mut e = DVec3::ZERO;
+    let mut reach = 1.0;
+    for (j, &o) in opacities.iter().enumerate() {
+        e += reach * o * trace.sample(&method, ray, &script(Some(j as u32))).color;
+        reach *= 1.0 - o;
+    }
+    e + reach * trace.sample(&method, ray, &script(None)).color
 }
 
 /// Opacities, (x, y) offsets and colours of a stack of discs.
@@ -99,23 +187,26 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
     /// Algorithm 1 through the BVH: E[L̂] = Eq. 3 (with background) to 1e-9, with either hit
-    /// distance convention.
+    /// distance convention, with decisions drawn before the kernel (hash) or after it (the
+    /// trig hash's position-dependent path).
     #[test]
-    fn stochastic_is_unbiased((o, off, c) in stacks(12), center in any::<bool>()) {
+    fn stochastic_is_unbiased((o, off, c) in stacks(12), center in any::<bool>(), late in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
         let exact = trace.exact(&ray).color;
-        let e = expectation(&trace, &Method::Stochastic, &ray, &hits(&scene, &ray, trace.settings()), 1);
+        let h = hits(&scene, &ray, trace.settings());
+        let e = expectation_with(&trace, &Method::Stochastic, &ray, &h, 1, late, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
 
     /// §3.5 with two samples per traversal: every slot is an independent Algorithm 1.
     #[test]
-    fn stochastic_n_is_unbiased((o, off, c) in stacks(7)) {
+    fn stochastic_n_is_unbiased((o, off, c) in stacks(7), late in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
         let exact = trace.exact(&ray).color;
-        let e = expectation(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &hits(&scene, &ray, trace.settings()), 2);
+        let h = hits(&scene, &ray, trace.settings());
+        let e = expectation_with(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &h, 2, late, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
 
@@ -125,21 +216,7 @@ proptest! {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
         let exact = trace.exact(&ray).color;
-        // Pass opacities from the sorted alphas, independently of the integrator.
-        let tracer = Oracle::new(&scene, settings_with(center)).unwrap();
-        let mut sorted: Vec<_> = (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, &ray)).collect();
-        splat_core::composite::sort_front_to_back(&mut sorted);
-        let k = 3;
-        let opacities: Vec<f64> = sorted.chunks(k).map(|c| 1.0 - c.iter().map(|h| 1.0 - f64::from(h.alpha)).product::<f64>()).collect();
-        let method = Method::StochasticPass { k, max_passes: 200 };
-        let mut e = DVec3::ZERO;
-        let mut reach = 1.0;
-        for (j, &o) in opacities.iter().enumerate() {
-            let s = trace.sample(&method, &ray, &Outcomes { accept_pass: Some(j as u32), ..Default::default() });
-            e += reach * o * s.color;
-            reach *= 1.0 - o;
-        }
-        e += reach * trace.sample(&method, &ray, &Outcomes::default()).color;
+        let e = pass_expectation(&scene, &trace, &ray, 3, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
 
@@ -162,7 +239,7 @@ proptest! {
     fn stochastic_n_with_one_slot_is_algorithm_1((o, off, c) in stacks(8), mask in any::<u16>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
-        let mut outcomes = Outcomes::default();
+        let mut outcomes = Outcomes::new(&scene, &hits(&scene, &ray, trace.settings()));
         for id in 0..o.len() as u32 {
             outcomes.accept.insert((id, 0), mask >> id & 1 == 1);
         }
@@ -192,4 +269,36 @@ fn depth_sampling_is_rejected_by_the_same_enumeration() {
     }
     let unbiased = expectation(&trace, &Method::Stochastic, &ray, &h, 1);
     assert!(close(unbiased, exact, 1e-9));
+}
+
+/// The enumeration is tight enough to catch a wrong acceptance rule: u < opacity, u ≤ 1 − α
+/// (on particles, drawn early and late) and a pass accepted when u < T_pass each move the
+/// expectation away from Eq. 3, while the production rules meet it to 1e-9.
+#[test]
+fn wrong_acceptance_rules_are_rejected_by_the_enumeration() {
+    let (scene, ray) = stack(
+        &[0.6, 0.3, 0.8, 0.45, 0.7],
+        &[(0.1, 0.2), (-0.2, 0.1), (0.05, -0.3), (0.2, 0.2), (-0.1, -0.1)],
+        &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]],
+    );
+    let trace = TraceScene::new(&scene, settings()).unwrap();
+    let exact = trace.exact(&ray).color;
+    let h = hits(&scene, &ray, trace.settings());
+    assert_eq!(h.len(), 5, "every disc is hit");
+    assert!(h.iter().all(|&(id, a)| a < f64::from(scene.particles[id as usize].opacity)), "alpha = opacity at a hit");
+    for late in [false, true] {
+        for method in [Method::Stochastic, Method::StochasticN { m: 1, n: 1 }] {
+            let production = expectation_with(&trace, &method, &ray, &h, 1, late, Rule::Production);
+            assert!(close(production, exact, 1e-9), "{method:?} late {late}: {production} vs {exact}");
+            for rule in [Rule::Opacity, Rule::Complement] {
+                let e = expectation_with(&trace, &method, &ray, &h, 1, late, rule);
+                assert!(!close(e, exact, 1e-3), "{method:?} late {late}: {rule:?} passes ({e} vs {exact})");
+            }
+        }
+    }
+    for k in [1, 2] {
+        assert!(close(pass_expectation(&scene, &trace, &ray, k, Rule::Production), exact, 1e-9));
+        let e = pass_expectation(&scene, &trace, &ray, k, Rule::PassTransmittance);
+        assert!(!close(e, exact, 1e-3), "k = {k}: u < T_pass passes ({e} vs {exact})");
+    }
 }
