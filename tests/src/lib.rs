@@ -167,7 +167,7 @@ pub fn compare_golden(golden: &Path, actual: &image::RgbImage, tolerance: u8) ->
 pub mod harness {
     use splat_core::frame::{Frames, RenderOutput};
     use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
-    use splat_core::stats::{ZTest, log_log_slope, rmse};
+    use splat_core::stats::{MIN_TESTED, ZTest, log_log_slope, rmse};
     use splat_core::trace::{Method, TraceScene, render_frames};
     use splat_core::{Camera, Scene};
     use std::ops::RangeInclusive;
@@ -216,21 +216,39 @@ pub mod harness {
             Self::new(name, run(&sorted, Frames::default()), move |f| run(&method, f))
         }
 
-        /// The z-test over the oracle's covered pixel-channels: the mean from `base.count`
-        /// frames with seed `base.seed`, the per-frame variance from an independent run of
-        /// 4 × as many frames with seed `base.seed + 1`.
+        /// The z-test over the pixel-channels covered by the oracle or by the estimator: the
+        /// mean from `base.count` frames with seed `base.seed`, the per-frame variance from an
+        /// independent run of 4 × as many frames with seed `base.seed + 1`, pooled with the
+        /// mean run's own ([`pooled_variance`]).
         pub fn z_test(&self, base: Frames) -> ZTest {
             self.z_test_and_map(base).0
         }
 
         fn z_test_and_map(&self, base: Frames) -> (ZTest, image::RgbImage) {
-            let mask: Vec<bool> = self.oracle.alpha.data().iter().flat_map(|&a| [a > 1e-4; 3]).collect();
-            let keep = |v: &[f32]| v.iter().zip(&mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect::<Vec<_>>();
+            let (z, _, map) = self.z_tests(base, None);
+            (z, map)
+        }
+
+        /// The z-test, and the same test of `expectation` (the estimator's exact expected
+        /// image, where it is known) in place of the mean: the noise-free statistics, so the
+        /// z-test's expected value, which says whether a bias is visible at this budget at all.
+        pub fn z_test_with_expectation(&self, base: Frames, expectation: &RenderOutput) -> (ZTest, ZTest) {
+            let (z, expected, _) = self.z_tests(base, Some(expectation));
+            (z, expected.expect("an expectation was given"))
+        }
+
+        fn z_tests(&self, base: Frames, expectation: Option<&RenderOutput>) -> (ZTest, Option<ZTest>, image::RgbImage) {
             let mean = (self.sampler)(base);
             let var = (self.sampler)(Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
-            let (m, r, v) = (mean.mean.data(), self.oracle.mean.data(), var.variance.data());
+            let covered = [&self.oracle, &mean, &var].map(|o| o.alpha.data());
+            let mask: Vec<bool> =
+                (0..covered[0].len()).flat_map(|i| [covered.iter().any(|a| a[i].is_nan() || a[i] > 1e-4); 3]).collect();
+            let keep = |v: &[f32]| v.iter().zip(&mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect::<Vec<_>>();
+            let (m, r) = (mean.mean.data(), self.oracle.mean.data());
+            let v = &pooled_variance(&mean, base.count, &var, 4 * base.count);
             let z = ZTest::new(&keep(m), &keep(r), &keep(v), base.count, 3);
-            (z, z_map(&self.oracle, m, v, base.count, &mask))
+            let expected = expectation.map(|e| ZTest::new(&keep(e.mean.data()), &keep(r), &keep(v), base.count, 3));
+            (z, expected, z_map(&self.oracle, m, v, base.count, &mask))
         }
 
         /// Assert that the estimator passes the z-test; on failure write the z-map.
@@ -243,10 +261,12 @@ pub mod harness {
             z
         }
 
-        /// Assert that the z-test rejects the estimator (a biased control).
+        /// Assert that the z-test rejects the estimator (a biased control) on at least
+        /// [`MIN_TESTED`] pixel-channels: rejected for its bias, not for an empty mask.
         pub fn assert_rejected(&self, base: Frames) -> ZTest {
             let z = self.z_test(base);
             eprintln!("{} (control): {z:?}", self.name);
+            assert!(z.n >= MIN_TESTED, "the control {} was tested on {} pixel-channels only", self.name, z.n);
             assert!(!z.passes(), "the biased control {} passes the z-test: {z:?}", self.name);
             z
         }
@@ -293,11 +313,174 @@ pub mod harness {
         }
     }
 
-    /// Per-pixel z = (mean − oracle) / max(√(var / F), 1 / F) of each channel as an image:
+    /// The per-frame variance of two runs pooled by degrees of freedom,
+    /// ((F₁ − 1) v₁ + (F₂ − 1) v₂) / (F₁ + F₂ − 2). The independent run alone misses the rare
+    /// events of a heavy-tailed estimator (a stochastic pass rejected, then a far pass with a
+    /// large L / O): when the mean run meets one, its deviation is measured against a variance
+    /// that never saw it, and a single pixel-channel reaches z ≈ 30. Pooled, the event that
+    /// moves the mean also widens its se (z ≈ √5 at most for one event), while a bias, which
+    /// moves the mean without widening the variance, is still seen.
+    pub fn pooled_variance(a: &RenderOutput, fa: u32, b: &RenderOutput, fb: u32) -> Vec<f32> {
+        let (wa, wb) = (f64::from(fa.max(1) - 1), f64::from(fb.max(1) - 1));
+        let total = (wa + wb).max(1.0);
+        a.variance
+            .data()
+            .iter()
+            .zip(b.variance.data())
+            .map(|(&va, &vb)| ((wa * f64::from(va) + wb * f64::from(vb)) / total) as f32)
+            .collect()
+    }
+
+    /// A small error injected into the production estimator, to measure what the z-test can
+    /// see (docs/power.md). Opacity and radiance faults change the scene the estimator renders
+    /// (the oracle keeps the true one); the decision fault is [`Frames::u_shift`], applied by
+    /// the estimator's own random numbers on the CPU and in the kernels.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub enum Fault {
+        /// Every opacity × the factor: alphas biased.
+        Opacity(f32),
+        /// Every radiance × the factor (each SH coefficient, and the +0.5 offset through the
+        /// DC term): colours biased.
+        Radiance(f32),
+        /// Every decision u < α + ε instead of u < α.
+        Decision(f32),
+    }
+
+    /// The faults of every power study: 1 % and 2 % in opacity and in radiance, and a
+    /// decision rule off by 0.01.
+    pub const FAULTS: [Fault; 5] = [
+        Fault::Opacity(1.01),
+        Fault::Opacity(1.02),
+        Fault::Radiance(1.01),
+        Fault::Radiance(1.02),
+        Fault::Decision(0.01),
+    ];
+
+    impl Fault {
+        /// The scene the faulty estimator renders.
+        pub fn scene(&self, scene: &Scene) -> Scene {
+            let mut s = scene.clone();
+            for p in &mut s.particles {
+                match *self {
+                    Fault::Opacity(k) => p.opacity = (p.opacity * k).min(1.0),
+                    Fault::Radiance(k) => {
+                        // Σ cᵢ Yᵢ + 0.5 → k (Σ cᵢ Yᵢ + 0.5): every coefficient × k, and the DC
+                        // term gains (k − 1) 0.5 / C₀.
+                        p.sh.iter_mut().for_each(|c| *c *= k);
+                        p.sh[0] += glam::Vec3::splat((k - 1.0) * 0.5 / splat_core::sh::SH_C0);
+                    }
+                    Fault::Decision(_) => {}
+                }
+            }
+            s
+        }
+
+        /// The frames the faulty estimator draws.
+        pub fn frames(&self, base: Frames) -> Frames {
+            match *self {
+                Fault::Decision(e) => Frames { u_shift: e, ..base },
+                _ => base,
+            }
+        }
+
+        /// Whether it is one of the 2 % faults.
+        pub fn must_be_caught(&self) -> bool {
+            matches!(*self, Fault::Opacity(k) | Fault::Radiance(k) if (k - 1.0).abs() >= 0.0199)
+        }
+
+        fn label(&self) -> String {
+            match *self {
+                Fault::Opacity(k) => format!("opacity × {k}"),
+                Fault::Radiance(k) => format!("radiance × {k}"),
+                Fault::Decision(e) => format!("u < α + {e}"),
+            }
+        }
+    }
+
+    /// The expected global or spread statistic (noise-free, [`StatTest::z_test_with_expectation`])
+    /// from which a fault is visible at a suite's budget: a fault whose expected statistics
+    /// stay below it changes the image by less than the noise of F frames can show, and no
+    /// test of that budget can be required to see it (docs/power.md says which).
+    pub const VISIBLE: f64 = 6.0;
+
+    /// One row of a power study.
+    #[derive(Clone, Copy, Debug)]
+    pub struct PowerRow {
+        /// The injected error.
+        pub fault: Fault,
+        /// The z-test of the faulty estimator.
+        pub z: ZTest,
+        /// The same test of its exact expectation.
+        pub expected: ZTest,
+    }
+
+    impl PowerRow {
+        /// The spread statistic the faulty estimator has in expectation: the noise-free
+        /// Σ (d / se)² of `expected` over the √(2n) of each of the 3 channels (its own spread
+        /// subtracts the n that noise adds).
+        pub fn expected_spread(&self) -> f64 {
+            self.expected.spread + (self.expected.n as f64 / 3.0 / 2.0).sqrt()
+        }
+
+        /// Whether the suite must reject it: a 2 % fault visible at the budget.
+        pub fn must_be_caught(&self) -> bool {
+            self.fault.must_be_caught() && self.expected.global.max(self.expected_spread()) >= VISIBLE
+        }
+    }
+
+    /// Run the z-test of every fault (`z_of(fault)`: the z-test of the faulty estimator and of
+    /// its exact expectation), write the rows to `target/power/LABEL.md` (the source of
+    /// docs/power.md) and assert that every 2 % fault visible at the budget is rejected on at
+    /// least [`MIN_TESTED`] pixel-channels.
+    pub fn assert_power(label: &str, faults: &[Fault], z_of: impl Fn(Fault) -> (ZTest, ZTest)) -> Vec<PowerRow> {
+        let rows: Vec<PowerRow> = faults
+            .iter()
+            .map(|&fault| {
+                let (z, expected) = z_of(fault);
+                PowerRow { fault, z, expected }
+            })
+            .collect();
+        let table: String = rows
+            .iter()
+            .map(|r| {
+                // The exact expectation of a decision fault is not computed: no row to compare.
+                let expected = |v: f64| match r.fault {
+                    Fault::Decision(_) => "–".to_string(),
+                    _ => format!("{v:.1}"),
+                };
+                format!(
+                    "| {label} | {} | {:.1} ({}) | {:.1} ({}) | {:.1} % | {:.0} % | {} |\n",
+                    r.fault.label(),
+                    r.z.global,
+                    expected(r.expected.global),
+                    r.z.spread,
+                    expected(r.expected_spread()),
+                    100.0 * r.z.outliers,
+                    100.0 * r.z.floored,
+                    if r.z.passes() { "passes" } else { "**rejected**" }
+                )
+            })
+            .collect();
+        eprint!("{table}");
+        let dir = super::root().join("target/power");
+        let file: String = label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+        if let Err(e) =
+            std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(dir.join(format!("{file}.md")), &table))
+        {
+            eprintln!("power table of {label} not written: {e}");
+        }
+        for r in &rows {
+            if r.must_be_caught() {
+                assert!(r.z.n >= MIN_TESTED && !r.z.passes(), "{label}: {} is not caught: {r:?}", r.fault.label());
+            }
+        }
+        rows
+    }
+
+    /// Per-pixel z = (mean − oracle) / se ([`splat_core::stats::standard_error`]) of each channel as an image:
     /// grey 128 is z = 0, 32 levels per unit of z (brighter: too bright), black outside the
     /// oracle's coverage.
     fn z_map(oracle: &RenderOutput, mean: &[f32], var: &[f32], frames: u32, mask: &[bool]) -> image::RgbImage {
-        let f = f64::from(frames);
         let reference = oracle.mean.data();
         image::RgbImage::from_fn(oracle.mean.width(), oracle.mean.height(), |x, y| {
             let i = 3 * (y * oracle.mean.width() + x) as usize;
@@ -305,7 +488,7 @@ pub mod harness {
                 if !mask[i + c] {
                     return 0;
                 }
-                let se = (f64::from(var[i + c]) / f).sqrt().max(1.0 / f);
+                let se = splat_core::stats::standard_error(var[i + c], frames);
                 let z = (f64::from(mean[i + c]) - f64::from(reference[i + c])) / se;
                 (128.0 + 32.0 * z).clamp(0.0, 255.0) as u8
             }))
@@ -313,14 +496,124 @@ pub mod harness {
     }
 }
 
+/// How close a frame's decisions came to flipping: for CPU = GPU comparisons, where a pixel
+/// may differ between backends only if one of its decisions had u within rounding of its
+/// threshold.
+pub mod flips {
+    use glam::Vec3;
+    use splat_core::frame::Decide;
+    use splat_core::raster::{RasterMethod, Rasterizer};
+    use splat_core::rng::{RayRng, RngScheme, frame_key};
+    use splat_core::trace::{Method, TraceScene};
+    use splat_core::{Camera, Frames};
+    use std::cell::Cell;
+
+    /// A decision source that records the smallest |u − threshold| of the comparisons it
+    /// made (particles against α, passes against O, references against α).
+    pub struct Nearest<D> {
+        inner: D,
+        gap: Cell<f64>,
+    }
+
+    impl<D: Decide> Nearest<D> {
+        /// Wrap `inner`; the gap starts at infinity (no decision made).
+        pub fn new(inner: D) -> Self {
+            Self { inner, gap: Cell::new(f64::INFINITY) }
+        }
+
+        /// The smallest |u − threshold| so far.
+        pub fn gap(&self) -> f64 {
+            self.gap.get()
+        }
+
+        fn saw(&self, u: f64, threshold: f64) {
+            self.gap.set(self.gap.get().min((u - threshold).abs()));
+        }
+    }
+
+    impl<D: Decide> Decide for Nearest<D> {
+        fn needs_position(&self) -> bool {
+            self.inner.needs_position()
+        }
+        fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
+            self.inner.particle(id, slot, hit)
+        }
+        fn pass(&self, pass: u32) -> f32 {
+            self.inner.pass(pass)
+        }
+        fn accepts(&self, id: u32, u: f32, alpha: f32) -> bool {
+            self.saw(f64::from(u), f64::from(alpha));
+            self.inner.accepts(id, u, alpha)
+        }
+        fn accepts_pass(&self, u: f64, opacity: f64) -> bool {
+            self.saw(u, opacity);
+            self.inner.accepts_pass(u, opacity)
+        }
+        fn covers(&self, alpha: f32, reference: f32) -> bool {
+            self.saw(f64::from(reference), f64::from(alpha));
+            self.inner.covers(alpha, reference)
+        }
+    }
+
+    /// The smallest |u − threshold| among the decisions of the frames of `frames` at pixel
+    /// (x, y) of the CPU ray tracer.
+    pub fn trace_gap(trace: &TraceScene, camera: &Camera, method: &Method, frames: &Frames, x: u32, y: u32) -> f64 {
+        let ray = trace.clip(camera.pixel_ray(x, y));
+        (0..frames.count)
+            .map(|f| {
+                let rng = RayRng::new(x, y, frame_key(frames.seed, f), frames.rng).shifted(frames.u_shift);
+                let nearest = Nearest::new(rng);
+                trace.sample(method, &ray, &nearest);
+                nearest.gap()
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The same for the CPU rasterizer.
+    pub fn raster_gap(r: &Rasterizer, method: &RasterMethod, frames: &Frames, x: u32, y: u32) -> f64 {
+        let key = frame_key(frames.seed, 0);
+        let px = r.pixel(x, y);
+        let mut fragments = r.fragments(&px);
+        r.shuffle(&mut fragments, key);
+        let nearest = Nearest::new(RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift));
+        r.draw(method, &px, &fragments, &nearest, key);
+        nearest.gap()
+    }
+}
+
+/// File where skipped tests are recorded, one line each, for the summary that
+/// `cargo xtask test` prints at the end of a run.
+pub fn skip_log() -> PathBuf {
+    root().join("target/skipped-tests.log")
+}
+
+/// A test that cannot run here (no GPU adapter, no asset): under `CI=true` it fails, naming
+/// `reason`; otherwise it says so on stderr and in [`skip_log`], and the caller returns.
+pub fn skip(test: &str, reason: &str) {
+    assert!(std::env::var("CI").is_err(), "CI=true and {test} cannot run: {reason}");
+    eprintln!("SKIPPED {test}: {reason}");
+    let line = format!("{test}: {reason}\n");
+    let logged = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(skip_log())
+        .and_then(|mut f| std::io::Write::write_all(&mut f, line.as_bytes()));
+    if let Err(e) = logged {
+        eprintln!("(not recorded in {}: {e})", skip_log().display());
+    }
+}
+
+/// The name of the running test (its thread's name under libtest).
+pub fn current_test() -> String {
+    std::thread::current().name().unwrap_or("a test").to_string()
+}
+
 /// The bonsai capture fetched by `cargo xtask assets`, if present (tests skip without it,
-/// saying why; with `CI=true` they fail instead).
+/// loudly; with `CI=true` they fail instead).
 pub fn bonsai() -> Option<splat_core::Scene> {
     let path = root().join("target/assets/bonsai-7k-mini.splat");
     if !path.exists() {
-        let msg = format!("{} is absent: run `cargo xtask assets`", path.display());
-        assert!(std::env::var("CI").is_err(), "{msg} (CI must fetch it)");
-        eprintln!("skipping: {msg}");
+        skip(&current_test(), &format!("{} is absent (run `cargo xtask assets`)", path.display()));
         return None;
     }
     Some(splat_io::read_scene(&path).expect("the verified bonsai capture loads"))

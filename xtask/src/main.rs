@@ -16,6 +16,7 @@ fn main() -> Result<()> {
         Some("bless") => bless(),
         Some("assets") => assets().map(|path| println!("{}", path.display())),
         Some("bench") => bench(),
+        Some("power") => power(),
         _ => {
             eprintln!(
                 "usage: cargo xtask <command>\n\n\
@@ -24,6 +25,7 @@ fn main() -> Result<()> {
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
                  assets       fetch and verify the bonsai capture into target/assets/\n  \
+                 power        write the power tables of the last test run (target/power/) into docs/power.md\n  \
                  bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
             );
             bail!("missing or unknown command");
@@ -42,11 +44,28 @@ fn test(extra: &[String]) -> Result<()> {
     if std::env::var_os("WGPU_BACKEND").is_none() {
         cmd.env("WGPU_BACKEND", "vulkan");
     }
+    let skips = splat_tests::skip_log();
+    let _ = std::fs::remove_file(&skips);
     let status = cmd.status().context("running cargo test")?;
+    report_skips(&skips);
     if !status.success() {
         bail!("tests failed ({status})");
     }
     Ok(())
+}
+
+/// Print the tests that skipped (no adapter, no asset) as a summary after cargo's output, so
+/// that a run that proved less than it could is visible (under `CI=true` they fail instead).
+fn report_skips(log: &Path) {
+    let Ok(text) = std::fs::read_to_string(log) else { return };
+    let lines: Vec<&str> = text.lines().collect();
+    if lines.is_empty() {
+        return;
+    }
+    eprintln!("\n{} test(s) SKIPPED: they proved nothing on this machine", lines.len());
+    for line in lines {
+        eprintln!("  {line}");
+    }
 }
 
 /// Vulkan ICD manifests: a driver is installed when one exists.
@@ -69,6 +88,9 @@ fn ensure_vulkan_driver() -> Result<()> {
     }
     let uid = Command::new("id").arg("-u").output().map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
     if uid.ok().as_deref() != Some("0") {
+        if std::env::var_os("CI").is_some() {
+            bail!("CI is set, no Vulkan driver is installed and we are not root: install mesa-vulkan-drivers");
+        }
         eprintln!("no Vulkan driver found and not root: GPU tests will skip (install mesa-vulkan-drivers)");
         return Ok(());
     }
@@ -85,6 +107,39 @@ fn ensure_vulkan_driver() -> Result<()> {
     if vulkan_icds().is_empty() {
         bail!("mesa-vulkan-drivers is installed but no Vulkan ICD manifest was found");
     }
+    Ok(())
+}
+
+/// The marker lines of docs/power.md between which `cargo xtask power` writes the table.
+const POWER_BEGIN: &str = "<!-- power table: cargo xtask power -->";
+const POWER_END: &str = "<!-- end of power table -->";
+
+/// Gather the rows the power studies of the last test run wrote to `target/power/` into
+/// docs/power.md, suites in order.
+fn power() -> Result<()> {
+    let dir = root().join("target/power");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("{}: run `cargo xtask test` first", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .collect();
+    files.sort();
+    let mut table = String::from(
+        "| suite, fixture, method | injected error | global (expected) | spread (expected) | p < 0.01 | floored | z-test |\n\
+         |---|---|---:|---:|---:|---:|---|\n",
+    );
+    for file in &files {
+        table += &std::fs::read_to_string(file)?;
+    }
+    let doc_path = root().join("docs/power.md");
+    let doc = std::fs::read_to_string(&doc_path)?;
+    let (Some(begin), Some(end)) = (doc.find(POWER_BEGIN), doc.find(POWER_END)) else {
+        bail!("{} has no power table markers", doc_path.display());
+    };
+    let doc = format!("{}{POWER_BEGIN}\n{table}{}", &doc[..begin], &doc[end..]);
+    std::fs::write(&doc_path, doc)?;
+    println!("wrote {} rows from {} files into {}", table.lines().count() - 2, files.len(), doc_path.display());
     Ok(())
 }
 
