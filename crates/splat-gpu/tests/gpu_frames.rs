@@ -19,9 +19,17 @@ fn methods() -> Vec<(&'static str, Method)> {
     ]
 }
 
-/// One frame with a fixed seed makes the same decisions on both backends: the images agree to
-/// f32 compositing tolerance (the CPU composites in f64), except where an alpha lies within
-/// rounding of its random number and the decision flips, which is bounded here to 1 % of pixels.
+/// Largest difference of one frame between the backends for the same decisions: f32
+/// compositing on the GPU against f64 on the CPU.
+const FLOAT_TOLERANCE: f32 = 1e-4;
+/// A decision may flip between the backends only where u lies this close to its threshold
+/// (the backends' alphas differ by f32 rounding of the same formula).
+const FLIP_GAP: f64 = 1e-5;
+
+/// One frame with a fixed seed makes the same decisions on both backends: every pixel agrees
+/// to f32 compositing tolerance, for the deterministic methods without exception, for the
+/// stochastic ones except where a decision of the pixel had |u − threshold| < 1e-5 (counted,
+/// and each one checked through the CPU's own decisions).
 #[test]
 fn one_frame_equals_the_cpu_frame() {
     let Some(ctx) = context() else { return };
@@ -33,16 +41,21 @@ fn one_frame_equals_the_cpu_frame() {
             let frames = Frames { count: 1, seed: 11, ..Frames::default() };
             let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
             let gpu = gpu_run(&tracer, &camera, &method, frames);
-            let differing = cpu
-                .mean
-                .data()
-                .chunks(3)
-                .zip(gpu.mean.data().chunks(3))
-                .filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| (x - y).abs() > 1e-4))
-                .count();
-            let pixels = (camera.width * camera.height) as usize;
-            eprintln!("{fixture_name} {name}: {differing} of {pixels} pixels differ by more than 1e-4");
-            assert!(differing * 100 <= pixels, "{fixture_name} {name}: {differing} of {pixels} pixels differ");
+            let (mut near, mut bad) = (0, Vec::new());
+            for (p, (a, b)) in cpu.mean.data().chunks(3).zip(gpu.mean.data().chunks(3)).enumerate() {
+                let worst = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+                if worst.is_nan() || worst > FLOAT_TOLERANCE {
+                    let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+                    let gap = if method.is_stochastic() {
+                        splat_tests::flips::trace_gap(&trace, &camera, &method, &frames, x, y)
+                    } else {
+                        f64::INFINITY
+                    };
+                    if gap < FLIP_GAP { near += 1 } else { bad.push((x, y, worst, gap)) }
+                }
+            }
+            eprintln!("{fixture_name} {name}: {near} pixels differ by a decision within {FLIP_GAP} of its threshold");
+            assert!(bad.is_empty(), "{fixture_name} {name}: pixels (x, y, difference, gap) {bad:?}");
         }
     }
 }
@@ -162,14 +175,25 @@ fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
     }
 }
 
-/// GPU time is measured by timestamp queries when the adapter has them, else wall time (speed
-/// itself is measured by `splat bench --backend gpu`, not asserted here).
+/// The GPU time of a render (timestamp queries when the adapter has them, else wall time
+/// around submit and wait) is positive and within the wall time of the call, and grows with
+/// the work: 16 frames take longer than 1 (speed itself is measured by `splat bench --backend
+/// gpu`, not asserted here).
 #[test]
-fn frame_times_come_from_timestamp_queries_when_available() {
+fn gpu_time_is_measured_within_the_wall_time() {
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("cloud", 48, 36);
     let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-    let (_, out) = tracer(ctx, &trace).render(&camera, &Method::Stochastic, &Frames::default()).unwrap();
-    assert_eq!(out.timestamps, ctx.timestamps);
-    assert!(out.gpu_time > std::time::Duration::ZERO);
+    let tracer = tracer(ctx, &trace);
+    let time = |count| {
+        let start = std::time::Instant::now();
+        let frames = Frames { count, ..Frames::default() };
+        let (_, stats) = tracer.render(&camera, &Method::Stochastic, &frames).unwrap();
+        (stats.gpu_time, start.elapsed())
+    };
+    let (one, wall_one) = time(1);
+    let (many, wall_many) = time(16);
+    eprintln!("GPU time 1 frame {one:?} (wall {wall_one:?}), 16 frames {many:?} (wall {wall_many:?})");
+    assert!(one > std::time::Duration::ZERO && one <= wall_one, "{one:?} vs wall {wall_one:?}");
+    assert!(many <= wall_many && many > one, "{many:?} vs {one:?}, wall {wall_many:?}");
 }

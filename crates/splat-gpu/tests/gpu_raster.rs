@@ -63,16 +63,6 @@ fn gpu_sort_equals_the_cpu_sort() {
     }
 }
 
-/// A comparison that must fail: a sort that is wrong in one place is caught.
-#[test]
-fn sort_comparison_detects_a_single_misplaced_key() {
-    let keys: Vec<u32> = (0..1000u32).rev().collect();
-    let (k, v) = cpu_sorted(&keys, 32);
-    let (mut k2, v2) = (k.clone(), v.clone());
-    k2.swap(10, 11);
-    assert_ne!((k2, v2), (k, v));
-}
-
 struct Case {
     scene: Scene,
     camera: Camera,
@@ -125,8 +115,12 @@ fn projection_and_depth_order_equal_the_cpu() {
     }
 }
 
+/// The largest |a − b|, NaN if any difference is NaN (`f32::max` would skip it).
 fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, |m, d| if m.is_nan() || d.is_nan() { f32::NAN } else { m.max(d) })
 }
 
 /// Sorted GPU splatting (instanced quads, hardware blending) equals the CPU `raster-sorted`
@@ -192,7 +186,8 @@ fn depth_pick_equals_the_cpu() {
 }
 
 /// One StochasticSplats frame with a fixed seed makes the CPU frame's decisions: identical
-/// pixels except where an alpha lies within f32 rounding of its random number (≤ 0.5 %).
+/// pixels except where a decision's u lies within 1e-5 of its alpha (checked pixel by pixel
+/// through the CPU's own decisions, and counted).
 #[test]
 fn one_stochastic_frame_equals_the_cpu_frame() {
     let Some(ctx) = context() else { return };
@@ -206,16 +201,25 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
             let cpu = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap();
             let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap().0;
             let pixels = (c.camera.width * c.camera.height) as usize;
-            let differing = (0..pixels)
+            let differing: Vec<usize> = (0..pixels)
                 .filter(|&p| {
                     let rgb = |img: &splat_core::image::Image| img.data()[3 * p..3 * p + 3].to_vec();
-                    max_abs_diff(&rgb(&g.mean), &rgb(&cpu.mean)) > 1e-5 || g.alpha.data()[p] != cpu.alpha.data()[p]
+                    let d = max_abs_diff(&rgb(&g.mean), &rgb(&cpu.mean));
+                    d.is_nan() || d > 1e-5 || g.alpha.data()[p] != cpu.alpha.data()[p]
                 })
-                .count();
+                .collect();
+            // A pixel may differ only by a decision whose u lay within 1e-5 of its alpha.
+            let (near, bad): (Vec<usize>, Vec<usize>) = differing.iter().partition(|&&p| {
+                let (x, y) = (p as u32 % c.camera.width, p as u32 / c.camera.width);
+                splat_tests::flips::raster_gap(&cpu_r, &RasterMethod::StochasticSplat, &frames, x, y) < 1e-5
+            });
             let written = cpu.alpha.data().iter().filter(|&&a| a > 0.0).count();
-            eprintln!("{name} seed {seed}: {differing} of {pixels} pixels differ ({written} written)");
+            eprintln!(
+                "{name} seed {seed}: {} of {pixels} pixels differ by a decision within 1e-5 of its threshold ({written} written)",
+                near.len()
+            );
             assert!(written > pixels / 10, "{name}: too few written pixels to test");
-            assert!(differing * 200 <= pixels, "{name} seed {seed}");
+            assert!(bad.is_empty(), "{name} seed {seed}: pixels {bad:?} differ with no decision near its threshold");
         }
         // Another seed makes other decisions: the comparison above can fail.
         let a =
