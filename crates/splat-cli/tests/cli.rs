@@ -326,7 +326,7 @@ fn bench_reports_the_splatting_path() {
     assert!(text.contains("| raster-sorted | ") && text.contains("| stochastic-splat | "), "{text}");
     let o = splat(&[&args[..], &raster[..], &["--backend", "gpu"]].concat());
     if !o.status.success() {
-        assert!(std::env::var("CI").is_err(), "CI=true and the GPU bench failed: {}", stderr(&o));
+        gpu_missing(&stderr(&o));
         return;
     }
     let text = String::from_utf8_lossy(&o.stdout);
@@ -363,10 +363,7 @@ fn gpu_raster_backend_matches_cpu_backend() {
         assert!(render("cpu", method, &cpu_out, &cpu_args).status.success());
         let o = render("gpu", method, &gpu_out, &gpu_args);
         if !o.status.success() {
-            let err = stderr(&o);
-            assert!(std::env::var("CI").is_err(), "CI=true and the GPU backend failed: {err}");
-            assert!(err.contains("mesa-vulkan-drivers"), "{err}");
-            eprintln!("skipping: {err}");
+            gpu_missing(&stderr(&o));
             return;
         }
         let read = |p: &PathBuf| splat_io::image::read_npy(p).unwrap();
@@ -431,13 +428,17 @@ fn gpu_backend_matches_cpu_backend() {
     assert!(render("cpu", &cpu_out).status.success());
     let o = render("gpu", &gpu_out);
     if !o.status.success() {
-        let err = stderr(&o);
-        assert!(std::env::var("CI").is_err(), "CI=true and the GPU backend failed: {err}");
-        assert!(err.contains("mesa-vulkan-drivers"), "{err}");
-        eprintln!("skipping: {err}");
+        gpu_missing(&stderr(&o));
         return;
     }
     let (a, b) = (splat_io::image::read_npy(&cpu_out).unwrap(), splat_io::image::read_npy(&gpu_out).unwrap());
     let worst = a.data().iter().zip(b.data()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
     assert!(worst < 1e-4, "GPU and CPU backends differ by {worst}");
+}
+
+/// A `--backend gpu` run failed: only the missing-adapter error (which names the driver to
+/// install) may skip the test, loudly and never under `CI=true`; any other failure fails it.
+fn gpu_missing(err: &str) {
+    assert!(err.contains("mesa-vulkan-drivers"), "the GPU backend failed with adapters present: {err}");
+    splat_tests::skip(&splat_tests::current_test(), &format!("no GPU adapter ({})", err.trim()));
 }
