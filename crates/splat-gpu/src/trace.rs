@@ -33,12 +33,14 @@ pub const TRACE_WGSL: &str = concat!(
 /// Dispatches encoded into one submission.
 pub const DISPATCHES_PER_SUBMIT: u32 = 64;
 /// Frames rendered per dispatch on a real GPU; longer runs are split so that no dispatch runs
-/// for long. CPU adapters (lavapipe) render one frame per dispatch (see [`LOOP_BUDGET`]).
+/// for long. CPU adapters (lavapipe) render as many as fit their loop budget (see
+/// [`LOOP_BUDGET`]).
 pub const FRAMES_PER_DISPATCH: u32 = 32;
 /// lavapipe ends a loop after 65535 iterations of its SIMD loop per invocation (gallivm's loop
 /// limiter), silently. A loop statement runs at most lanes × the busiest lane's total loop
-/// iterations, which the kernel counts: on a CPU adapter [`GpuTracer::render`] renders one
-/// frame per dispatch and refuses a result where that bound reaches the budget.
+/// iterations, which the kernel counts: on a CPU adapter [`GpuTracer::render`] batches the
+/// frames that fit ¾ of it (by a probe of frame 0) and refuses a result where that bound
+/// reaches the budget.
 pub const LOOP_BUDGET: u32 = 65_535;
 
 /// A method as the kernel reads it: its identity and every parameter, named.

@@ -197,3 +197,34 @@ fn gpu_time_is_measured_within_the_wall_time() {
     assert!(one > std::time::Duration::ZERO && one <= wall_one, "{one:?} vs wall {wall_one:?}");
     assert!(many <= wall_many && many > one, "{many:?} vs {one:?}, wall {wall_many:?}");
 }
+
+/// The measurement behind the README's figures on batching frames per dispatch on lavapipe:
+/// 256 frames of `stochastic` on `layers` at 32 × 24, one frame per dispatch against the
+/// batched default, wall time and the growth of the process's resident memory. A report, not
+/// a pass/fail test: `cargo test --release -p splat-gpu --test gpu_frames -- --ignored
+/// --nocapture batching`.
+#[test]
+#[ignore]
+fn batching_frames_per_dispatch_report() {
+    let rss_kb = || -> u64 {
+        let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+        let line = status.lines().find(|l| l.starts_with("VmRSS")).unwrap_or("VmRSS: 0 kB");
+        line.split_whitespace().nth(1).and_then(|v| v.parse().ok()).unwrap_or(0)
+    };
+    let (scene, camera) = fixture("layers", 32, 24);
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    for per_dispatch in [1, splat_gpu::FRAMES_PER_DISPATCH] {
+        let Ok(mut ctx) = GpuContext::new() else { return splat_tests::skip("batching report", "no GPU adapter") };
+        ctx.frames_per_dispatch = per_dispatch;
+        let pipeline = splat_gpu::TracePipeline::new(&ctx).unwrap();
+        let tracer = GpuTracer::new(&ctx, &pipeline, &trace).unwrap();
+        let (before, start) = (rss_kb(), std::time::Instant::now());
+        let frames = Frames { count: 256, seed: 1, ..Frames::default() };
+        let (_, stats) = tracer.render(&camera, &Method::Stochastic, &frames).unwrap();
+        let (time, grown) = (start.elapsed(), rss_kb().saturating_sub(before));
+        eprintln!(
+            "at most {per_dispatch} frames a dispatch ({} used): {time:?}, +{grown} kB",
+            stats.frames_per_dispatch
+        );
+    }
+}
