@@ -603,6 +603,18 @@ pub fn skip(test: &str, reason: &str) {
     }
 }
 
+/// A test that does not apply to this machine (a lavapipe-only check on a hardware GPU): said
+/// on stderr and in [`skip_log`] like a skip, but not a failure under `CI=true`.
+pub fn not_applicable(test: &str, reason: &str) {
+    eprintln!("NOT APPLICABLE {test}: {reason}");
+    let line = format!("{test}: not applicable, {reason}\n");
+    let _ = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(skip_log())
+        .and_then(|mut f| std::io::Write::write_all(&mut f, line.as_bytes()));
+}
+
 /// The name of the running test (its thread's name under libtest).
 pub fn current_test() -> String {
     std::thread::current().name().unwrap_or("a test").to_string()

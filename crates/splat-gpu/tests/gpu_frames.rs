@@ -139,7 +139,7 @@ fn f16_accumulation_drifts_and_f32_does_not() {
 fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
     let Some(ctx) = context() else { return };
     if ctx.info.device_type != wgpu::DeviceType::Cpu {
-        eprintln!("skipping: {} has no loop limiter", ctx.describe());
+        splat_tests::not_applicable(&splat_tests::current_test(), &format!("{} has no loop limiter", ctx.describe()));
         return;
     }
     let (scene, camera) = fixture("cloud", 32, 24);

@@ -12,5 +12,5 @@ use common::{context, fixture, z_tests_and_power};
 fn gpu_methods_pass_the_z_test_on_layers() {
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("layers", 64, 48);
-    z_tests_and_power(ctx, "layers", &scene, &camera);
+    z_tests_and_power(ctx, "layers", &scene, &camera, true);
 }

@@ -10,5 +10,5 @@ fn gpu_methods_pass_the_z_test_on_a_bonsai_crop() {
     let Some(ctx) = context() else { return };
     let Some(scene) = splat_tests::bonsai() else { return };
     let camera = splat_tests::bonsai_camera().crop(560, 180, 32, 24).unwrap();
-    z_tests_and_power(ctx, "bonsai", &scene, &camera);
+    z_tests_and_power(ctx, "bonsai", &scene, &camera, false);
 }

@@ -8,5 +8,5 @@ use common::{context, fixture, z_tests_and_power};
 fn gpu_methods_pass_the_z_test_on_cloud() {
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("cloud", 32, 24);
-    z_tests_and_power(ctx, "cloud", &scene, &camera);
+    z_tests_and_power(ctx, "cloud", &scene, &camera, false);
 }

@@ -68,10 +68,17 @@ pub fn unbiased() -> Vec<(&'static str, Method)> {
 pub const F: u32 = 256;
 
 /// The GPU z-tests of one fixture: every unbiased method passes, `depth-sampling-1` is
-/// rejected, and the power study of `stochastic` (docs/power.md): each injected error, the
-/// 2 % ones that are visible at this budget rejected. (The other methods share its decision
-/// code, `particle_u`, and the power study of the CPU suites; on lavapipe each costs minutes.)
-pub fn z_tests_and_power(ctx: &'static GpuContext, fixture_name: &str, scene: &Scene, camera: &Camera) {
+/// rejected, and the power study (docs/power.md) of `stochastic`, or of every unbiased method
+/// with `all_methods`: each injected error, the 2 % ones that are visible at this budget
+/// rejected. (On lavapipe a method's power rows cost seconds on `layers` but minutes on the
+/// cloud and the bonsai crop, where only `stochastic` runs them.)
+pub fn z_tests_and_power(
+    ctx: &'static GpuContext,
+    fixture_name: &str,
+    scene: &Scene,
+    camera: &Camera,
+    all_methods: bool,
+) {
     let trace = TraceScene::new(scene, RenderSettings::default()).unwrap();
     let gpu = tracer(ctx, &trace);
     let base = Frames { count: F, seed: 21, ..Frames::default() };
@@ -82,11 +89,14 @@ pub fn z_tests_and_power(ctx: &'static GpuContext, fixture_name: &str, scene: &S
     gpu_stat(format!("GPU {fixture_name} depth-sampling-1"), &gpu, &trace, camera, control).assert_rejected(base);
     let exact = |trace: &TraceScene| render_frames(trace, camera, &Method::Exact, &Frames::default(), &|_| {}).unwrap();
     let oracle = exact(&trace);
-    assert_power(&format!("gpu-ray {fixture_name} stochastic"), &FAULTS, |fault| {
-        let faulty = fault.scene(scene);
-        let faulty = TraceScene::new(&faulty, RenderSettings::default()).unwrap();
-        let gpu = tracer(ctx, &faulty);
-        let test = StatTest::new("stochastic", oracle.clone(), |f| gpu_run(&gpu, camera, &Method::Stochastic, f));
-        test.z_test_with_expectation(fault.frames(base), &exact(&faulty))
-    });
+    let methods = if all_methods { unbiased() } else { vec![("stochastic", Method::Stochastic)] };
+    for (name, method) in methods {
+        assert_power(&format!("gpu-ray {fixture_name} {name}"), &FAULTS, |fault| {
+            let faulty = fault.scene(scene);
+            let faulty = TraceScene::new(&faulty, RenderSettings::default()).unwrap();
+            let gpu = tracer(ctx, &faulty);
+            let test = StatTest::new(name, oracle.clone(), |f| gpu_run(&gpu, camera, &method, f));
+            test.z_test_with_expectation(fault.frames(base), &exact(&faulty))
+        });
+    }
 }
