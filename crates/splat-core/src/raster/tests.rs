@@ -163,6 +163,11 @@ fn bad_raster_settings_are_refused() {
     assert!(render_raster(&r, &RasterMethod::StochasticSplat, &trig, &|_| {}).is_err());
     let none = Frames { count: 0, ..Frames::default() };
     assert!(render_raster(&r, &RasterMethod::StochasticSplat, &none, &|_| {}).is_err());
+    for u_shift in [f32::NAN, 1.0, -2.0] {
+        let bad = Frames { u_shift, ..Frames::default() };
+        let err = render_raster(&r, &RasterMethod::StochasticSplat, &bad, &|_| {}).unwrap_err().to_string();
+        assert!(err.contains("u_shift"), "{err}");
+    }
 }
 
 /// Front to back picks the iso-opacity depth and splat: two full-pixel splats of α = 0.2 and
