@@ -314,6 +314,37 @@ fn bench_reports_every_method_against_opaque() {
     }
 }
 
+/// `splat bench --sweep mn` prints the m × n rows of Sun et al. Tables 4–5 with their speed-ups
+/// and RMSE against exact (1024 × 1 is the baseline, 1.00× by definition; 4 × 256 is refused,
+/// n ≤ 64), every row the same image, on the CPU and on the GPU.
+#[test]
+fn bench_sweeps_the_m_n_rows_of_tables_4_and_5() {
+    let args = ["bench", "fixtures/layers.ply", "--width", "8", "--height", "6", "--repeat", "1", "--sweep", "mn"];
+    for backend in ["cpu", "gpu"] {
+        let o = splat(&[&args[..], &["--backend", backend]].concat());
+        if backend == "gpu" && !o.status.success() {
+            gpu_missing(&stderr(&o));
+            return;
+        }
+        assert!(o.status.success(), "{backend}: {}", stderr(&o));
+        let text = String::from_utf8_lossy(&o.stdout);
+        for row in ["| 1024 × 1 |", "| 256 × 4 |", "| 64 × 16 |", "| 16 × 64 |", "| 4 × 256 | refused"] {
+            assert!(text.contains(row), "{backend}: {row} missing:\n{text}");
+        }
+        let rows =
+            text.lines().filter(|l| l.strip_prefix("| ").is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit())));
+        for line in rows.filter(|l| !l.contains("refused")) {
+            let diff: f64 = line.split('|').nth(6).unwrap().trim().parse().unwrap();
+            assert!(diff < 1e-5, "{backend}: the rows differ: {line}");
+        }
+        let first = text.lines().find(|l| l.starts_with("| 1024 × 1 |")).unwrap();
+        assert!(first.contains("| 1.00× |"), "{backend}: {first}");
+        // 1024 samples of an unbiased estimator: close to exact on this small image.
+        let rmse: f64 = first.split('|').nth(5).unwrap().trim().parse().unwrap();
+        assert!(rmse > 0.0 && rmse < 0.05, "{backend}: RMSE {rmse}");
+    }
+}
+
 /// `splat bench --methods raster-sorted,stochastic-splat` times the splatting path: on the CPU
 /// both methods as a ratio, on the GPU every stage with the sort's share and keys/s.
 #[test]
