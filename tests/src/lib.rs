@@ -240,14 +240,13 @@ pub mod harness {
         fn z_tests(&self, base: Frames, expectation: Option<&RenderOutput>) -> (ZTest, Option<ZTest>, image::RgbImage) {
             let mean = (self.sampler)(base);
             let var = (self.sampler)(Frames { count: 4 * base.count, seed: base.seed + 1, ..base });
-            let covered = [&self.oracle, &mean, &var].map(|o| o.alpha.data());
-            let mask: Vec<bool> =
-                (0..covered[0].len()).flat_map(|i| [covered.iter().any(|a| a[i].is_nan() || a[i] > 1e-4); 3]).collect();
-            let keep = |v: &[f32]| v.iter().zip(&mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect::<Vec<_>>();
+            let mask = covered_channels(&[&self.oracle, &mean, &var]);
+            let kept = |v: &[f32]| keep(v, &mask);
             let (m, r) = (mean.mean.data(), self.oracle.mean.data());
             let v = &pooled_variance(&mean, base.count, &var, 4 * base.count);
-            let z = ZTest::new(&keep(m), &keep(r), &keep(v), base.count, 3);
-            let expected = expectation.map(|e| ZTest::new(&keep(e.mean.data()), &keep(r), &keep(v), base.count, 3));
+            let (kr, kv) = (kept(r), kept(v));
+            let z = ZTest::new(&kept(m), &kr, &kv, base.count, 3);
+            let expected = expectation.map(|e| ZTest::new(&kept(e.mean.data()), &kr, &kv, base.count, 3));
             (z, expected, z_map(&self.oracle, m, v, base.count, &mask))
         }
 
@@ -303,14 +302,37 @@ pub mod harness {
         /// Write the z-map as `fixtures/NAME-zmap.png` (beside the fixtures, as the goldens
         /// write their diffs) and return its path.
         fn write_map(&self, map: &image::RgbImage) -> String {
-            let file: String =
-                self.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
-            let path = super::root().join("fixtures").join(format!("{file}-zmap.png"));
+            let path = super::root().join("fixtures").join(format!("{}-zmap.png", file_name(&self.name)));
             match map.save(&path) {
                 Ok(()) => path.display().to_string(),
                 Err(e) => format!("{} not written: {e}", path.display()),
             }
         }
+    }
+
+    /// `name` as a file name: ASCII letters, digits and '-' kept, anything else '_'.
+    fn file_name(name: &str) -> String {
+        name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
+    }
+
+    /// The RGB channels the z-test tests: those of every pixel where any of `outputs` has
+    /// coverage (alpha > 1e-4, or NaN, which must not hide).
+    pub fn covered_channels(outputs: &[&RenderOutput]) -> Vec<bool> {
+        let pixels = outputs.first().map_or(0, |o| o.alpha.data().len());
+        (0..pixels)
+            .flat_map(|i| {
+                let covered = outputs.iter().any(|o| {
+                    let a = o.alpha.data()[i];
+                    a.is_nan() || a > 1e-4
+                });
+                [covered; 3]
+            })
+            .collect()
+    }
+
+    /// The values of `v` where `mask` is set.
+    pub fn keep(v: &[f32], mask: &[bool]) -> Vec<f32> {
+        v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
     }
 
     /// The per-frame variance of two runs pooled by degrees of freedom,
@@ -463,10 +485,8 @@ pub mod harness {
             .collect();
         eprint!("{table}");
         let dir = super::root().join("target/power");
-        let file: String = label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
-        if let Err(e) =
-            std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(dir.join(format!("{file}.md")), &table))
-        {
+        let file = dir.join(format!("{}.md", file_name(label)));
+        if let Err(e) = std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(file, &table)) {
             eprintln!("power table of {label} not written: {e}");
         }
         for r in &rows {
@@ -507,6 +527,13 @@ pub mod flips {
     use splat_core::trace::{Method, TraceScene};
     use splat_core::{Camera, Frames};
     use std::cell::Cell;
+
+    /// Largest difference of one frame between the backends for the same decisions: f32
+    /// compositing on the GPU against f64 on the CPU.
+    pub const FLOAT_TOLERANCE: f32 = 1e-4;
+    /// A decision may flip between the backends only where u lies this close to its threshold
+    /// (the backends' alphas differ by f32 rounding of the same formula).
+    pub const FLIP_GAP: f64 = 1e-5;
 
     /// A decision source that records the smallest |u − threshold| of the comparisons it
     /// made (particles against α, passes against O, references against α).
@@ -571,13 +598,17 @@ pub mod flips {
 
     /// The same for the CPU rasterizer.
     pub fn raster_gap(r: &Rasterizer, method: &RasterMethod, frames: &Frames, x: u32, y: u32) -> f64 {
-        let key = frame_key(frames.seed, 0);
         let px = r.pixel(x, y);
         let mut fragments = r.fragments(&px);
-        r.shuffle(&mut fragments, key);
-        let nearest = Nearest::new(RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift));
-        r.draw(method, &px, &fragments, &nearest, key);
-        nearest.gap()
+        (0..frames.count)
+            .map(|f| {
+                let key = frame_key(frames.seed, f);
+                r.shuffle(&mut fragments, key);
+                let nearest = Nearest::new(RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift));
+                r.draw(method, &px, &fragments, &nearest, key);
+                nearest.gap()
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 }
 
@@ -591,7 +622,18 @@ pub fn skip_log() -> PathBuf {
 /// `reason`; otherwise it says so on stderr and in [`skip_log`], and the caller returns.
 pub fn skip(test: &str, reason: &str) {
     assert!(std::env::var("CI").is_err(), "CI=true and {test} cannot run: {reason}");
-    eprintln!("SKIPPED {test}: {reason}");
+    record_skip("SKIPPED", test, reason);
+}
+
+/// A test that does not apply to this machine (a lavapipe-only check on a hardware GPU): said
+/// on stderr and in [`skip_log`] like a skip, but not a failure under `CI=true`.
+pub fn not_applicable(test: &str, reason: &str) {
+    record_skip("NOT APPLICABLE", test, &format!("not applicable, {reason}"));
+}
+
+/// Say `KIND test: reason` on stderr and append `test: reason` to [`skip_log`].
+fn record_skip(kind: &str, test: &str, reason: &str) {
+    eprintln!("{kind} {test}: {reason}");
     let line = format!("{test}: {reason}\n");
     let logged = std::fs::OpenOptions::new()
         .create(true)
@@ -601,18 +643,6 @@ pub fn skip(test: &str, reason: &str) {
     if let Err(e) = logged {
         eprintln!("(not recorded in {}: {e})", skip_log().display());
     }
-}
-
-/// A test that does not apply to this machine (a lavapipe-only check on a hardware GPU): said
-/// on stderr and in [`skip_log`] like a skip, but not a failure under `CI=true`.
-pub fn not_applicable(test: &str, reason: &str) {
-    eprintln!("NOT APPLICABLE {test}: {reason}");
-    let line = format!("{test}: not applicable, {reason}\n");
-    let _ = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(skip_log())
-        .and_then(|mut f| std::io::Write::write_all(&mut f, line.as_bytes()));
 }
 
 /// The name of the running test (its thread's name under libtest).

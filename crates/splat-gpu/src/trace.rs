@@ -191,20 +191,22 @@ impl<'a> GpuTracer<'a> {
         let run = Run { tracer: self, camera, params, frames, count };
         let lanes = u64::from(ctx.lanes());
         let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
-        let per_dispatch = if cpu_adapter && count > 1 {
-            // As many frames per dispatch as fit ¾ of the budget by a probe of frame 0.
+        let mut out = if cpu_adapter {
+            // Frame 0 alone first: it is the whole render of one frame, shows a ray too long
+            // for one invocation before any other frame is spent, and measures how many frames
+            // a dispatch can batch within ¾ of the budget.
             let probe = Run { count: 1, ..run }.execute(1, false)?;
-            let per_frame = u64::from(probe.stats.loop_iterations.max(1)) * lanes;
-            (3 * u64::from(LOOP_BUDGET) / (4 * per_frame)).clamp(1, u64::from(ctx.frames_per_dispatch)) as u32
-        } else if cpu_adapter {
-            1
+            if count == 1 || over(&probe) {
+                probe
+            } else {
+                let per_frame = u64::from(probe.stats.loop_iterations.max(1)) * lanes;
+                let batch = (3 * u64::from(LOOP_BUDGET) / (4 * per_frame)).clamp(1, u64::from(ctx.frames_per_dispatch));
+                let out = run.execute(batch as u32, false)?;
+                if over(&out) && batch > 1 { run.execute(1, false)? } else { out }
+            }
         } else {
-            ctx.frames_per_dispatch
+            run.execute(ctx.frames_per_dispatch, false)?
         };
-        let mut out = run.execute(per_dispatch, false)?;
-        if over(&out) && per_dispatch > 1 {
-            out = run.execute(1, false)?;
-        }
         // Multi-pass methods (and stochastic-n, slot by slot) that do not fit run again with one
         // pass per dispatch.
         let multi_pass = matches!(

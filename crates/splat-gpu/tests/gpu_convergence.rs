@@ -8,7 +8,8 @@ use splat_core::frame::RenderOutput;
 use splat_core::stats::{MIN_TESTED, ZTest};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Frames, RenderSettings};
-use splat_tests::harness::Fault;
+use splat_tests::flips::{FLIP_GAP, FLOAT_TOLERANCE};
+use splat_tests::harness::{Fault, covered_channels, keep};
 
 /// RMSE of GPU means against exact at spp 1 … 64 (three seeds each) falls as a power law
 /// with slope in [−0.58, −0.42].
@@ -36,13 +37,9 @@ fn welch(cpu: &RenderOutput, gpu: &RenderOutput, frames: u32) -> ZTest {
         .collect();
     assert!(fixed.is_empty(), "channels {fixed:?} differ where neither backend varied");
     // The pixel-channels either backend covers, as the harness tests them.
-    let covered = |i: usize| cpu.alpha.data()[i / 3] > 1e-4 || gpu.alpha.data()[i / 3] > 1e-4;
-    let keep = |v: &[f32]| (0..v.len()).filter(|&i| covered(i)).map(|i| v[i]).collect::<Vec<f32>>();
-    ZTest::new(&keep(g), &keep(c), &keep(&var), frames, 3)
+    let mask = covered_channels(&[cpu, gpu]);
+    ZTest::new(&keep(g, &mask), &keep(c, &mask), &keep(&var, &mask), frames, 3)
 }
-
-/// Largest difference between the backends for the same decisions (f32 against f64).
-const FLOAT_TOLERANCE: f32 = 1e-4;
 
 /// GPU and CPU `stochastic` estimate the same expectation (the two-sample test passes on the
 /// cloud, F = 256 each); a GPU kernel whose radiance is 2 % high fails the same test. With the
@@ -74,13 +71,13 @@ fn gpu_and_cpu_estimate_the_same_expectation_and_variance() {
         if (a - b).abs().is_nan() || (a - b).abs() > 1e-4 * (1.0 + a.abs()) {
             let p = (i / 3) as u32;
             let (x, y) = (p % camera.width, p / camera.width);
-            if splat_tests::flips::trace_gap(&trace, &camera, &Method::Stochastic, &same, x, y) < 1e-5 {
+            if splat_tests::flips::trace_gap(&trace, &camera, &Method::Stochastic, &same, x, y) < FLIP_GAP {
                 near += 1;
             } else {
                 bad.push((x, y, *a, *b));
             }
         }
     }
-    eprintln!("variance images: {near} channels differ by a decision within 1e-5 of its threshold");
+    eprintln!("variance images: {near} channels differ by a decision within {FLIP_GAP} of its threshold");
     assert!(bad.is_empty(), "variance differs with no decision near its threshold: {bad:?}");
 }

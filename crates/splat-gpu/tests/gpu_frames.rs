@@ -7,6 +7,7 @@ use common::{context, fixture, gpu_run, trace_pipeline, tracer};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Frames, RenderSettings};
 use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
+use splat_tests::flips::{FLIP_GAP, FLOAT_TOLERANCE};
 
 fn methods() -> Vec<(&'static str, Method)> {
     vec![
@@ -18,13 +19,6 @@ fn methods() -> Vec<(&'static str, Method)> {
         ("depth-sampling-k", Method::DepthSampling { k: 2 }),
     ]
 }
-
-/// Largest difference of one frame between the backends for the same decisions: f32
-/// compositing on the GPU against f64 on the CPU.
-const FLOAT_TOLERANCE: f32 = 1e-4;
-/// A decision may flip between the backends only where u lies this close to its threshold
-/// (the backends' alphas differ by f32 rounding of the same formula).
-const FLIP_GAP: f64 = 1e-5;
 
 /// One frame with a fixed seed makes the same decisions on both backends: every pixel agrees
 /// to f32 compositing tolerance, for the deterministic methods without exception, for the

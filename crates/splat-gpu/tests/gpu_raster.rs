@@ -211,7 +211,8 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
             // A pixel may differ only by a decision whose u lay within 1e-5 of its alpha.
             let (near, bad): (Vec<usize>, Vec<usize>) = differing.iter().partition(|&&p| {
                 let (x, y) = (p as u32 % c.camera.width, p as u32 / c.camera.width);
-                splat_tests::flips::raster_gap(&cpu_r, &RasterMethod::StochasticSplat, &frames, x, y) < 1e-5
+                splat_tests::flips::raster_gap(&cpu_r, &RasterMethod::StochasticSplat, &frames, x, y)
+                    < splat_tests::flips::FLIP_GAP
             });
             let written = cpu.alpha.data().iter().filter(|&&a| a > 0.0).count();
             eprintln!(
