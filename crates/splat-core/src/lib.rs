@@ -34,6 +34,7 @@ pub mod image;
 pub mod kernel;
 pub mod normal;
 pub mod oracle;
+mod par;
 pub mod particle;
 pub mod raster;
 pub mod rng;

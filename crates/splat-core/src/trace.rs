@@ -7,11 +7,12 @@
 //! set outcome by outcome, so that the expectation of the very code that renders is computed
 //! exactly by enumeration.
 
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
 use crate::composite::{ShadedHit, composite, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, PreparedParticle, Ray, intersect, to_canonical};
+use crate::par;
 use crate::particle::{Aabb, Scene};
 use crate::rng::RayRng;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
@@ -157,7 +158,10 @@ impl MethodCode {
 pub struct TraceScene<'a> {
     scene: &'a Scene,
     settings: RenderSettings,
+    /// The binary tree (what the GPU traverses).
     bvh: Bvh,
+    /// Its 4-wide collapse (what the CPU traverses): the same leaves.
+    wide: Bvh4,
     /// Prepared particles in BVH leaf order.
     prims: Vec<PreparedParticle>,
     /// Scene index of each leaf-order particle.
@@ -275,12 +279,19 @@ impl<'a> TraceScene<'a> {
     /// leaf order.
     pub fn new(scene: &'a Scene, settings: RenderSettings) -> Result<Self, RenderError> {
         validate_scene(scene, &settings)?;
+        if scene.particles.len() > MAX_PRIMITIVES {
+            return Err(RenderError::Settings(format!(
+                "{} particles exceed the {MAX_PRIMITIVES} a BVH can index",
+                scene.particles.len()
+            )));
+        }
         let cutoff = settings.kernel.cutoff;
-        let boxes: Vec<Aabb> = scene.particles.iter().map(|p| p.aabb(cutoff).padded()).collect();
+        let boxes: Vec<Aabb> = par::map(&scene.particles, |p| p.aabb(cutoff).padded());
         let bvh = Bvh::build(&boxes);
-        let prims = bvh.order.iter().map(|&i| PreparedParticle::new(&scene.particles[i as usize])).collect();
+        let wide = Bvh4::from_binary(&bvh);
+        let prims = par::map(&bvh.order, |&i| PreparedParticle::new(&scene.particles[i as usize]));
         let ids = bvh.order.clone();
-        Ok(Self { scene, settings, bvh, prims, ids })
+        Ok(Self { scene, settings, bvh, wide, prims, ids })
     }
 
     /// The settings.
@@ -288,9 +299,14 @@ impl<'a> TraceScene<'a> {
         &self.settings
     }
 
-    /// The BVH.
+    /// The binary BVH (the GPU's layout).
     pub fn bvh(&self) -> &Bvh {
         &self.bvh
+    }
+
+    /// The 4-wide BVH the CPU traverses, collapsed from [`TraceScene::bvh`].
+    pub fn wide_bvh(&self) -> &Bvh4 {
+        &self.wide
     }
 
     /// The scene.
@@ -371,7 +387,7 @@ impl<'a> TraceScene<'a> {
     pub fn exact(&self, ray: &Ray) -> Sample {
         let mut hits = Vec::new();
         let mut t_max = ray.t_max;
-        self.bvh.traverse(ray, &mut t_max, |leaf, _| {
+        self.wide.traverse(ray, &mut t_max, |leaf, _| {
             if let Some(h) = self.hit(leaf, ray) {
                 hits.push(self.shade(leaf, h.t, h.alpha, ray));
             }
@@ -398,7 +414,7 @@ impl<'a> TraceScene<'a> {
     ) -> KBuf {
         let mut buf = KBuf::new(k);
         let mut t_max = ray.t_max;
-        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
             let Some(h) = self.hit(leaf, ray) else { return };
             let id = self.ids[leaf as usize];
             if !depth_before(after.0, after.1, h.t, id) || !buf.admits(h.t, id) {
@@ -446,7 +462,7 @@ impl<'a> TraceScene<'a> {
         let clamp = self.settings.kernel.alpha_clamp;
         let mut best = Slot::EMPTY;
         let mut t_max = ray.t_max;
-        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
             let id = self.ids[leaf as usize];
             let u = if early {
                 let u = decide.particle(id, slot, Vec3::ZERO);
@@ -478,7 +494,7 @@ impl<'a> TraceScene<'a> {
         let mut best = [Slot::EMPTY; MAX_SLOTS];
         let mut u = [0.0f32; MAX_SLOTS];
         let mut t_max = ray.t_max;
-        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
             let id = self.ids[leaf as usize];
             if early {
                 let bound = self.prims[leaf as usize].opacity.min(clamp);
@@ -568,14 +584,9 @@ impl<'a> TraceScene<'a> {
         let s2 = self.settings.kernel.cutoff * self.settings.kernel.cutoff;
         let mut best = Slot::EMPTY;
         let mut t_max = ray.t_max;
-        self.bvh.traverse(ray, &mut t_max, |leaf, t_max| {
+        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
             let (o, d) = to_canonical(&self.prims[leaf as usize], ray);
-            let (a, b, c) = (d.length_squared(), o.dot(d), o.length_squared() - s2);
-            let disc = b * b - a * c;
-            if disc < 0.0 {
-                return;
-            }
-            let t = (-b - disc.sqrt()) / a;
+            let Some(t) = ellipsoid_entry(o, d, s2) else { return };
             let id = self.ids[leaf as usize];
             if t > ray.t_min && t < ray.t_max && depth_before(t, id, best.t, best.id) {
                 best = Slot { t, id, leaf, alpha: 1.0 };
@@ -589,6 +600,17 @@ impl<'a> TraceScene<'a> {
         let color = sh::eval(&p.sh, self.scene.sh_degree, ray.dir).as_dvec3();
         Sample { color, alpha: 1.0, depth: Some(best.t), normal: Vec3::ZERO, picked: Some(best.id) }
     }
+}
+
+/// Entry distance of the ray o + t d (canonical space) into the sphere |x|² = s², or `None` when
+/// it misses. The discriminant b² − a c = a s² − |o × d|² is formed without cancellation (as
+/// [`crate::hit::intersect`] forms d²_min): for a flat splat a = |d|² reaches 10⁷ and b² − a c
+/// in f32 loses every digit, which gave entries outside the particle's box.
+#[inline]
+fn ellipsoid_entry(o: Vec3, d: Vec3, s2: f32) -> Option<f32> {
+    let a = d.length_squared();
+    let disc = a * s2 - o.cross(d).length_squared();
+    (disc >= 0.0).then(|| (-o.dot(d) - disc.sqrt()) / a)
 }
 
 /// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
@@ -614,4 +636,38 @@ pub fn render_frames(
             })
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// Entries into the cutoff sphere agree with an f64 reference for rays through flat splats
+    /// (canonical directions stretched 10⁴ times along one axis, as a splat with scales 0.1 and
+    /// 10⁻⁵ makes them): a miss is never reported as a hit, which the textbook b² − a c did.
+    #[test]
+    fn ellipsoid_entries_of_flat_splats_match_f64() {
+        let mut rng = SplitMix64::new(5);
+        let (mut hits, mut misses) = (0, 0);
+        for _ in 0..20_000 {
+            let o = Vec3::new(rng.range(-4.0, 4.0), rng.range(-4.0, 4.0), rng.range(-4e4, 4e4));
+            let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1e4, 1e4));
+            let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+            let disc = dd.length_squared() * 9.0 - od.cross(dd).length_squared();
+            let margin = disc / (dd.length_squared() * 9.0);
+            match ellipsoid_entry(o, d, 9.0) {
+                Some(t) if margin > 1e-3 => {
+                    let t64 = (-od.dot(dd) - disc.sqrt()) / dd.length_squared();
+                    assert!((f64::from(t) - t64).abs() <= 1e-3 * (1.0 + t64.abs()), "t {t} vs {t64}");
+                    hits += 1;
+                }
+                None if margin < -1e-3 => misses += 1,
+                Some(t) if margin < -1e-3 => panic!("a miss (margin {margin}) reported as a hit at t = {t}"),
+                None if margin > 1e-3 => panic!("a hit (margin {margin}) reported as a miss"),
+                _ => {}
+            }
+        }
+        assert!(hits > 1000 && misses > 1000, "{hits} hits, {misses} misses");
+    }
 }

@@ -1,17 +1,21 @@
-//! Bounding volume hierarchy over particle boxes: binned SAH build, flattened nodes (the
-//! layout the GPU traverses too), and a stack traversal that visits children front to back and
-//! lets the caller shrink t_max, so that an accepted hit clips the rest of the ray.
+//! Bounding volume hierarchy over particle boxes: a parallel binned SAH build ([`build`]),
+//! flattened binary nodes (the layout the GPU traverses), their 4-wide collapse that the CPU
+//! traverses ([`Bvh4`]), and stack traversals that visit children front to back and let the
+//! caller shrink t_max, so that an accepted hit clips the rest of the ray.
+
+mod build;
+mod wide;
+
+pub use wide::{Bvh4, MAX_PRIMITIVES};
 
 use crate::hit::Ray;
 use crate::particle::Aabb;
-use glam::{Vec3, Vec3A};
+#[cfg(test)]
+use glam::Vec3;
+use glam::Vec3A;
 
 /// Largest number of primitives in a leaf.
 pub const MAX_LEAF: u32 = 4;
-/// Bins per axis of the SAH sweep.
-const BINS: usize = 16;
-/// Cost of visiting a node relative to testing one primitive.
-const TRAVERSAL_COST: f32 = 1.0;
 /// Depth of the traversal stack; a SAH tree over 2³² primitives stays far below it.
 pub const STACK_DEPTH: usize = 64;
 
@@ -51,45 +55,32 @@ pub struct Bvh {
     pub order: Vec<u32>,
 }
 
-fn area(b: &Aabb) -> f32 {
-    let e = (b.max - b.min).max(Vec3::ZERO);
+/// Half the surface area of a node's box (the SAH's measure).
+fn node_area(n: &BvhNode) -> f32 {
+    let e = (Vec3A::from_array(n.max) - Vec3A::from_array(n.min)).max(Vec3A::ZERO);
     e.x * e.y + e.y * e.z + e.z * e.x
 }
 
+/// 1/d with zero components replaced by ±1e-30, so that 1/d is finite and no 0 × ∞ = NaN can
+/// make a slab test drop a box the ray touches.
+#[inline(always)]
+fn inverse_direction(dir: glam::Vec3) -> Vec3A {
+    let d = Vec3A::from(dir);
+    let tiny = Vec3A::splat(1e-30).copysign(d);
+    Vec3A::select(d.abs().cmplt(Vec3A::splat(1e-30)), tiny, d).recip()
+}
+
 impl Bvh {
-    /// Build over `boxes` with a binned surface area heuristic. Deterministic.
+    /// Build over `boxes` with a binned surface area heuristic, in parallel with the `rayon`
+    /// feature. Deterministic: the same tree on any number of threads.
     pub fn build(boxes: &[Aabb]) -> Self {
-        let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
-        let mut nodes = Vec::with_capacity(2 * boxes.len().max(1));
-        nodes.push(BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 });
-        let centroids: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
-        let mut stack = vec![(0usize, 0usize, boxes.len())];
-        while let Some((node, start, end)) = stack.pop() {
-            let bounds = order[start..end].iter().fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]));
-            let split = split_point(&mut order[start..end], boxes, &centroids, &bounds);
-            let n = &mut nodes[node];
-            n.min = bounds.min.to_array();
-            n.max = bounds.max.to_array();
-            match split {
-                None => {
-                    n.first = start as u32;
-                    n.count = (end - start) as u32;
-                }
-                Some(mid) => {
-                    let left = nodes.len();
-                    nodes[node].first = left as u32;
-                    nodes.push(BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 });
-                    nodes.push(BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 });
-                    stack.push((left + 1, start + mid, end));
-                    stack.push((left, start, start + mid));
-                }
-            }
-        }
-        if boxes.is_empty() {
-            nodes[0].min = [f32::INFINITY; 3];
-            nodes[0].max = [f32::NEG_INFINITY; 3];
-        }
+        let (nodes, order) = build::build(boxes);
         Self { nodes, order }
+    }
+
+    /// Bytes of the nodes and the leaf order.
+    pub fn bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<BvhNode>() + self.order.len() * 4
     }
 
     /// Visit every leaf primitive whose node box the ray overlaps within (t_min, t_max],
@@ -100,11 +91,7 @@ impl Bvh {
         if self.order.is_empty() {
             return;
         }
-        // Zero direction components become ±1e-30 so that 1/d is finite and no 0 × ∞ = NaN can
-        // make a slab test drop a box the ray touches.
-        let d = Vec3A::from(ray.dir);
-        let tiny = Vec3A::splat(1e-30).copysign(d);
-        let inv = Vec3A::select(d.abs().cmplt(Vec3A::splat(1e-30)), tiny, d).recip();
+        let inv = inverse_direction(ray.dir);
         let origin = Vec3A::from(ray.origin);
         let mut stack = [0u32; STACK_DEPTH];
         let mut top = 0usize;
@@ -167,75 +154,6 @@ fn slab(min: Vec3A, max: Vec3A, origin: Vec3A, inv: Vec3A, t_min: f32, t_max: f3
     let enter = t0.min(t1).max_element().max(t_min);
     let exit = t0.max(t1).min_element().min(t_max);
     (enter <= exit).then_some(enter)
-}
-
-/// Choose a split of `order` (reordering it) or `None` for a leaf.
-fn split_point(order: &mut [u32], boxes: &[Aabb], centroids: &[Vec3], bounds: &Aabb) -> Option<usize> {
-    let n = order.len();
-    if n <= 1 {
-        return None;
-    }
-    let cb = order
-        .iter()
-        .fold(Aabb::EMPTY, |b, &i| b.union(Aabb { min: centroids[i as usize], max: centroids[i as usize] }));
-    let extent = cb.max - cb.min;
-    let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, bin boundary)
-    for axis in 0..3 {
-        if extent[axis] <= 0.0 {
-            continue;
-        }
-        let scale = BINS as f32 / extent[axis];
-        let bin_of = |i: u32| (((centroids[i as usize][axis] - cb.min[axis]) * scale) as usize).min(BINS - 1);
-        let mut counts = [0usize; BINS];
-        let mut bin_boxes = [Aabb::EMPTY; BINS];
-        for &i in order.iter() {
-            let b = bin_of(i);
-            counts[b] += 1;
-            bin_boxes[b] = bin_boxes[b].union(boxes[i as usize]);
-        }
-        let mut right_area = [0.0f32; BINS];
-        let mut acc = Aabb::EMPTY;
-        for b in (1..BINS).rev() {
-            acc = acc.union(bin_boxes[b]);
-            right_area[b] = area(&acc);
-        }
-        let (mut left, mut left_count) = (Aabb::EMPTY, 0usize);
-        for b in 1..BINS {
-            left = left.union(bin_boxes[b - 1]);
-            left_count += counts[b - 1];
-            let right_count = n - left_count;
-            if left_count == 0 || right_count == 0 {
-                continue;
-            }
-            let cost = area(&left) * left_count as f32 + right_area[b] * right_count as f32;
-            if best.is_none_or(|(c, _, _)| cost < c) {
-                best = Some((cost, axis, b));
-            }
-        }
-    }
-    let parent_area = area(bounds).max(f32::MIN_POSITIVE);
-    match best {
-        Some((cost, axis, boundary)) if TRAVERSAL_COST + cost / parent_area < n as f32 || n > MAX_LEAF as usize => {
-            let scale = BINS as f32 / extent[axis];
-            let goes_left =
-                |i: &u32| ((((centroids[*i as usize][axis] - cb.min[axis]) * scale) as usize).min(BINS - 1)) < boundary;
-            let mid = partition(order, goes_left);
-            Some(mid)
-        }
-        Some(_) => None,
-        // All centroids coincide: split by count when the leaf would be too large.
-        None if n > MAX_LEAF as usize => Some(n / 2),
-        None => None,
-    }
-}
-
-/// Stable partition: elements satisfying `pred` first; returns their count.
-fn partition(order: &mut [u32], pred: impl Fn(&u32) -> bool) -> usize {
-    let (left, right): (Vec<u32>, Vec<u32>) = order.iter().partition(|i| pred(i));
-    let mid = left.len();
-    order[..mid].copy_from_slice(&left);
-    order[mid..].copy_from_slice(&right);
-    mid
 }
 
 #[cfg(test)]

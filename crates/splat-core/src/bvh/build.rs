@@ -1,0 +1,263 @@
+//! Binned SAH build (Wald 2007, "On fast construction of SAH-based bounding volume
+//! hierarchies"), parallel over subtrees with rayon: the two halves of every split large enough
+//! are built on separate threads, and the largest splits also bin their primitives in parallel
+//! chunks. Every decision depends only on the boxes, never on the thread count, so the tree is
+//! the same on one thread or many.
+
+use super::{BvhNode, MAX_LEAF};
+use crate::par::{join, map};
+use crate::particle::Aabb;
+use glam::Vec3;
+
+/// Bins per axis of the SAH sweep.
+const BINS: usize = 16;
+/// Cost of visiting a node relative to testing one primitive.
+const TRAVERSAL_COST: f32 = 1.0;
+/// Subtrees with at least this many primitives build their two halves in parallel.
+const PARALLEL_SUBTREE: usize = 4096;
+/// Splits over at least this many primitives bin them in parallel chunks of this size.
+const PARALLEL_BINNING: usize = 32 * 1024;
+
+/// A subtree before flattening: the parallel recursion returns these, and [`flatten`] lays them
+/// out with siblings adjacent (the layout of [`super::Bvh::nodes`]).
+enum Tree {
+    Leaf { bounds: Aabb, first: u32, count: u32 },
+    Inner { bounds: Aabb, children: Box<[Tree; 2]> },
+}
+
+impl Tree {
+    fn node(&self) -> BvhNode {
+        match *self {
+            Tree::Leaf { bounds, first, count } => {
+                BvhNode { min: bounds.min.to_array(), first, max: bounds.max.to_array(), count }
+            }
+            Tree::Inner { bounds, .. } => {
+                BvhNode { min: bounds.min.to_array(), first: 0, max: bounds.max.to_array(), count: 0 }
+            }
+        }
+    }
+}
+
+/// What the build reads: the primitives' boxes and their centroids.
+struct Input<'a> {
+    boxes: &'a [Aabb],
+    centroids: Vec<Vec3>,
+}
+
+/// Build the flattened nodes and the leaf order over `boxes`.
+pub(super) fn build(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    if boxes.is_empty() {
+        let empty = BvhNode { min: [f32::INFINITY; 3], first: 0, max: [f32::NEG_INFINITY; 3], count: 0 };
+        return (vec![empty], order);
+    }
+    let input = Input { boxes, centroids: map(boxes, Aabb::center) };
+    let tree = subtree(&input, &mut order, 0);
+    (flatten(&tree, boxes.len()), order)
+}
+
+/// The subtree over `order` (reordered in place), whose first primitive sits at `offset` of the
+/// whole leaf order.
+fn subtree(input: &Input, order: &mut [u32], offset: usize) -> Tree {
+    let bins = bin(input, order);
+    let n = order.len();
+    match split_point(order, input, &bins) {
+        None => Tree::Leaf { bounds: bins.bounds, first: offset as u32, count: order.len() as u32 },
+        Some(mid) => {
+            let (left, right) = order.split_at_mut(mid);
+            let children = if n >= PARALLEL_SUBTREE {
+                join(|| subtree(input, left, offset), || subtree(input, right, offset + mid))
+            } else {
+                (subtree(input, left, offset), subtree(input, right, offset + mid))
+            };
+            Tree::Inner { bounds: bins.bounds, children: Box::new([children.0, children.1]) }
+        }
+    }
+}
+
+/// Lay the tree out as the node array: root at 0, the two children of every interior node at
+/// `first` and `first + 1`, pairs allocated in depth-first order (left subtree first).
+fn flatten(tree: &Tree, primitives: usize) -> Vec<BvhNode> {
+    let mut nodes = Vec::with_capacity(2 * primitives);
+    nodes.push(tree.node());
+    let mut stack = vec![(tree, 0usize)];
+    while let Some((t, index)) = stack.pop() {
+        if let Tree::Inner { children, .. } = t {
+            let first = nodes.len();
+            nodes[index].first = first as u32;
+            nodes.push(children[0].node());
+            nodes.push(children[1].node());
+            stack.push((&children[1], first + 1));
+            stack.push((&children[0], first));
+        }
+    }
+    nodes
+}
+
+/// Per-axis bins of a node's primitives by centroid, with the node's box and centroid box.
+#[derive(Clone, Copy)]
+struct Bins {
+    bounds: Aabb,
+    centroid_bounds: Aabb,
+    counts: [[u32; BINS]; 3],
+    boxes: [[Aabb; BINS]; 3],
+}
+
+impl Bins {
+    const EMPTY: Bins = Bins {
+        bounds: Aabb::EMPTY,
+        centroid_bounds: Aabb::EMPTY,
+        counts: [[0; BINS]; 3],
+        boxes: [[Aabb::EMPTY; BINS]; 3],
+    };
+
+    fn merge(mut self, other: &Bins) -> Bins {
+        self.bounds = self.bounds.union(other.bounds);
+        self.centroid_bounds = self.centroid_bounds.union(other.centroid_bounds);
+        for axis in 0..3 {
+            for b in 0..BINS {
+                self.counts[axis][b] += other.counts[axis][b];
+                self.boxes[axis][b] = self.boxes[axis][b].union(other.boxes[axis][b]);
+            }
+        }
+        self
+    }
+}
+
+/// The bin of a centroid along one axis of the centroid box.
+#[inline]
+fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
+    (((c - lo) * scale) as usize).min(BINS - 1)
+}
+
+/// Bounds, centroid bounds, then per-axis bins (two passes over the primitives; the largest
+/// nodes in parallel chunks, merged in chunk order so that the result is the same on any
+/// thread count: union and integer sums are exact).
+fn bin(input: &Input, order: &[u32]) -> Bins {
+    let bounds_of = |chunk: &[u32]| {
+        let mut b = Bins::EMPTY;
+        for &i in chunk {
+            let c = input.centroids[i as usize];
+            b.bounds = b.bounds.union(input.boxes[i as usize]);
+            b.centroid_bounds = b.centroid_bounds.union(Aabb { min: c, max: c });
+        }
+        b
+    };
+    let mut bins = reduce_chunks(order, bounds_of);
+    let cb = bins.centroid_bounds;
+    let scale = Vec3::splat(BINS as f32) / (cb.max - cb.min);
+    let fill = |chunk: &[u32]| {
+        let mut b = Bins::EMPTY;
+        for &i in chunk {
+            let c = input.centroids[i as usize];
+            let bx = input.boxes[i as usize];
+            for axis in 0..3 {
+                if (cb.max[axis] - cb.min[axis]) > 0.0 {
+                    let k = bin_index(c[axis], cb.min[axis], scale[axis]);
+                    b.counts[axis][k] += 1;
+                    b.boxes[axis][k] = b.boxes[axis][k].union(bx);
+                }
+            }
+        }
+        b
+    };
+    let filled = reduce_chunks(order, fill);
+    (bins.counts, bins.boxes) = (filled.counts, filled.boxes);
+    bins
+}
+
+/// `f` over the whole slice, or over chunks (in parallel with rayon) merged in order.
+fn reduce_chunks(order: &[u32], f: impl Fn(&[u32]) -> Bins + Sync) -> Bins {
+    if order.len() < PARALLEL_BINNING {
+        return f(order);
+    }
+    let chunks: Vec<&[u32]> = order.chunks(PARALLEL_BINNING).collect();
+    map(&chunks, |c| f(c)).iter().fold(Bins::EMPTY, |acc, b| acc.merge(b))
+}
+
+fn area(b: &Aabb) -> f32 {
+    let e = (b.max - b.min).max(Vec3::ZERO);
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
+
+/// Choose a split of `order` (partitioning it in place) or `None` for a leaf.
+fn split_point(order: &mut [u32], input: &Input, bins: &Bins) -> Option<usize> {
+    let n = order.len();
+    if n <= 1 {
+        return None;
+    }
+    let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, bin boundary)
+    for axis in 0..3 {
+        let (counts, boxes) = (&bins.counts[axis], &bins.boxes[axis]);
+        let mut right_area = [0.0f32; BINS];
+        let mut acc = Aabb::EMPTY;
+        for b in (1..BINS).rev() {
+            acc = acc.union(boxes[b]);
+            right_area[b] = area(&acc);
+        }
+        let (mut left, mut left_count) = (Aabb::EMPTY, 0usize);
+        for b in 1..BINS {
+            left = left.union(boxes[b - 1]);
+            left_count += counts[b - 1] as usize;
+            let right_count = n - left_count;
+            if left_count == 0 || right_count == 0 {
+                continue;
+            }
+            let cost = area(&left) * left_count as f32 + right_area[b] * right_count as f32;
+            if best.is_none_or(|(c, _, _)| cost < c) {
+                best = Some((cost, axis, b));
+            }
+        }
+    }
+    let parent_area = area(&bins.bounds).max(f32::MIN_POSITIVE);
+    let cb = bins.centroid_bounds;
+    match best {
+        Some((cost, axis, boundary)) if TRAVERSAL_COST + cost / parent_area < n as f32 || n > MAX_LEAF as usize => {
+            let scale = BINS as f32 / (cb.max[axis] - cb.min[axis]);
+            let goes_left = |i: u32| bin_index(input.centroids[i as usize][axis], cb.min[axis], scale) < boundary;
+            // The bins counted both sides non-empty with this very test, so neither side is.
+            Some(partition(order, goes_left))
+        }
+        Some(_) => None,
+        // All centroids coincide: split by count when the leaf would be too large.
+        None if n > MAX_LEAF as usize => Some(n / 2),
+        None => None,
+    }
+}
+
+/// In-place partition (Hoare): elements satisfying `pred` first; returns their count.
+/// Deterministic, not stable.
+fn partition(order: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+    let (mut i, mut j) = (0, order.len());
+    loop {
+        while i < j && pred(order[i]) {
+            i += 1;
+        }
+        while i < j && !pred(order[j - 1]) {
+            j -= 1;
+        }
+        if i >= j {
+            return i;
+        }
+        order.swap(i, j - 1);
+        i += 1;
+        j -= 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn partition_puts_matches_first() {
+        let mut v: Vec<u32> = (0..100).rev().collect();
+        let mid = partition(&mut v, |x| x % 3 == 0);
+        assert_eq!(mid, 34);
+        assert!(v[..mid].iter().all(|x| x % 3 == 0) && v[mid..].iter().all(|x| x % 3 != 0));
+        let mut sorted = v.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..100).collect::<Vec<_>>());
+        assert_eq!(partition(&mut [], |_| true), 0);
+    }
+}

@@ -1,0 +1,260 @@
+//! The 4-wide BVH the CPU traverses: the binary tree of [`Bvh`] collapsed so that every node
+//! holds up to four children, their boxes stored as SIMD lanes (structure of arrays) and tested
+//! against the ray together (Wald et al. 2008, "Getting rid of packets"; Dammertz et al. 2008,
+//! "Shallow bounding volume hierarchies"). It is a conversion of the same tree: the same leaves
+//! over the same leaf order, so the GPU (which walks the binary nodes) and the CPU visit the
+//! same primitives.
+
+use super::{Bvh, STACK_DEPTH, inverse_direction, slab};
+use crate::hit::Ray;
+use glam::{Vec3A, Vec4};
+
+/// Lanes of a wide node.
+const WIDTH: usize = 4;
+/// A child reference that is a leaf: this bit, the count − 1 in the next two bits, then the
+/// first leaf-order primitive.
+const LEAF: u32 = 1 << 31;
+const COUNT_SHIFT: u32 = 29;
+/// Largest leaf-order index a leaf reference can hold.
+pub const MAX_PRIMITIVES: usize = 1 << COUNT_SHIFT;
+/// Each popped node pushes at most `WIDTH` entries and removes itself, so the stack grows by at
+/// most WIDTH − 1 per level of the binary tree, whose depth [`STACK_DEPTH`] bounds.
+const WIDE_STACK: usize = (WIDTH - 1) * STACK_DEPTH + 1;
+
+/// One wide node, 128 bytes: per axis the lower and upper bounds of the four children as lanes;
+/// empty lanes are masked off by `count`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub struct Node4 {
+    min: [Vec4; 3],
+    max: [Vec4; 3],
+    child: [u32; WIDTH],
+    count: u32,
+}
+
+/// A 4-wide BVH over the leaf order of a [`Bvh`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bvh4 {
+    nodes: Vec<Node4>,
+    /// The root reference (a leaf when the whole scene fits in one), `None` for no primitives.
+    root: Option<u32>,
+    /// The root's box, tested first as [`Bvh::traverse`] does.
+    root_box: [[f32; 3]; 2],
+}
+
+fn leaf_ref(first: u32, count: u32) -> u32 {
+    debug_assert!((1..=4).contains(&count) && (first as usize) < MAX_PRIMITIVES);
+    LEAF | ((count - 1) << COUNT_SHIFT) | first
+}
+
+/// Leaf-order range of a leaf reference.
+#[inline(always)]
+fn leaf_range(r: u32) -> std::ops::Range<u32> {
+    let first = r & (MAX_PRIMITIVES as u32 - 1);
+    let count = ((r & !LEAF) >> COUNT_SHIFT) + 1;
+    first..first + count
+}
+
+impl Bvh4 {
+    /// Collapse a binary BVH: every wide node takes its binary node's two children and keeps
+    /// opening the interior child with the largest surface area until it has four. Leaves hold
+    /// at most [`super::MAX_LEAF`] = 4 primitives and at most [`MAX_PRIMITIVES`] of them.
+    pub fn from_binary(bvh: &Bvh) -> Self {
+        assert!(bvh.order.len() <= MAX_PRIMITIVES, "a wide BVH holds at most {MAX_PRIMITIVES} primitives");
+        if bvh.order.is_empty() {
+            return Self::default();
+        }
+        let root = &bvh.nodes[0];
+        let root_box = [root.min, root.max];
+        let mut wide = Self { nodes: Vec::with_capacity(bvh.nodes.len() / 2 + 1), root: None, root_box };
+        wide.root = Some(if root.count > 0 { leaf_ref(root.first, root.count) } else { wide.collapse(bvh, 0) });
+        wide
+    }
+
+    /// The wide node for binary interior node `b`; returns its index.
+    fn collapse(&mut self, bvh: &Bvh, b: usize) -> u32 {
+        let mut children = vec![bvh.nodes[b].first as usize, bvh.nodes[b].first as usize + 1];
+        while children.len() < WIDTH {
+            let interior = children.iter().enumerate().filter(|&(_, &c)| bvh.nodes[c].count == 0).max_by(|a, b| {
+                super::node_area(&bvh.nodes[*a.1]).total_cmp(&super::node_area(&bvh.nodes[*b.1])).then(b.0.cmp(&a.0))
+            });
+            let Some((k, &c)) = interior else { break };
+            let first = bvh.nodes[c].first as usize;
+            children.splice(k..=k, [first, first + 1]);
+        }
+        let index = self.nodes.len();
+        self.nodes.push(Node4 {
+            min: [Vec4::INFINITY; 3],
+            max: [Vec4::NEG_INFINITY; 3],
+            child: [0; WIDTH],
+            count: children.len() as u32,
+        });
+        for (lane, &c) in children.iter().enumerate() {
+            let n = bvh.nodes[c];
+            let r = if n.count > 0 { leaf_ref(n.first, n.count) } else { self.collapse(bvh, c) };
+            let node = &mut self.nodes[index];
+            for axis in 0..3 {
+                node.min[axis][lane] = n.min[axis];
+                node.max[axis][lane] = n.max[axis];
+            }
+            node.child[lane] = r;
+        }
+        index as u32
+    }
+
+    /// Number of wide nodes.
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Whether the tree holds no primitives.
+    pub fn is_empty(&self) -> bool {
+        self.root.is_none()
+    }
+
+    /// Bytes of the wide nodes.
+    pub fn bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<Node4>()
+    }
+
+    /// [`Bvh::traverse`] on the wide tree: the same contract (every leaf primitive whose node
+    /// boxes the ray overlaps within (t_min, t_max], nearer children first, `visit(k, t_max)` may
+    /// lower t_max and nodes entered beyond it are skipped); four boxes tested per step, and the
+    /// stack keeps each entry's distance so that a popped node is culled without a new test.
+    #[inline]
+    pub fn traverse(&self, ray: &Ray, t_max: &mut f32, mut visit: impl FnMut(u32, &mut f32)) {
+        let Some(root) = self.root else { return };
+        let inv = inverse_direction(ray.dir);
+        let [lo, hi] = self.root_box.map(Vec3A::from_array);
+        let Some(t_root) = slab(lo, hi, Vec3A::from(ray.origin), inv, ray.t_min, *t_max) else { return };
+        let (ox, oy, oz) = (Vec4::splat(ray.origin.x), Vec4::splat(ray.origin.y), Vec4::splat(ray.origin.z));
+        let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
+        let t_min = Vec4::splat(ray.t_min);
+        let mut stack = [(0u32, 0.0f32); WIDE_STACK];
+        stack[0] = (root, t_root);
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            let (r, t_enter) = stack[top];
+            if t_enter > *t_max {
+                continue;
+            }
+            if r & LEAF != 0 {
+                for k in leaf_range(r) {
+                    visit(k, t_max);
+                }
+                continue;
+            }
+            let n = &self.nodes[r as usize];
+            // Slab test of the four children, lane by lane the arithmetic of `super::slab`.
+            let (x0, x1) = ((n.min[0] - ox) * ix, (n.max[0] - ox) * ix);
+            let (y0, y1) = ((n.min[1] - oy) * iy, (n.max[1] - oy) * iy);
+            let (z0, z1) = ((n.min[2] - oz) * iz, (n.max[2] - oz) * iz);
+            let enter = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(t_min);
+            let exit = x0.max(x1).min(y0.max(y1)).min(z0.max(z1)).min(Vec4::splat(*t_max));
+            let mut mask = enter.cmple(exit).bitmask() & ((1 << n.count) - 1);
+            // Push the hit children far to near, so that the nearest is popped first.
+            let base = top;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let entry = (n.child[lane], enter[lane]);
+                let mut i = top;
+                while i > base && stack[i - 1].1 < entry.1 {
+                    stack[i] = stack[i - 1];
+                    i -= 1;
+                }
+                stack[i] = entry;
+                top += 1;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::particle::Aabb;
+    use crate::rng::SplitMix64;
+    use glam::Vec3;
+
+    fn random_boxes(n: usize, seed: u64) -> Vec<Aabb> {
+        let mut rng = SplitMix64::new(seed);
+        (0..n)
+            .map(|_| {
+                let c = Vec3::new(rng.range(-5.0, 5.0), rng.range(-5.0, 5.0), rng.range(-5.0, 5.0));
+                let h = Vec3::new(rng.range(0.001, 0.5), rng.range(0.001, 0.5), rng.range(0.001, 0.02));
+                Aabb { min: c - h, max: c + h }
+            })
+            .collect()
+    }
+
+    /// The leaf-order indices a traversal visits (sorted) and its final t_max; with `hit`, each
+    /// visit lowers t_max to the primitive's hit distance, as a closest-hit search does.
+    fn visits(
+        traverse: impl FnOnce(&mut f32, &mut dyn FnMut(u32, &mut f32)),
+        hit: Option<&dyn Fn(u32) -> f32>,
+    ) -> (Vec<u32>, f32) {
+        let mut found = Vec::new();
+        let mut t_max = 1e4;
+        traverse(&mut t_max, &mut |k, t| {
+            found.push(k);
+            if let Some(hit) = hit {
+                *t = t.min(hit(k));
+            }
+        });
+        found.sort_unstable();
+        (found, t_max)
+    }
+
+    /// The wide tree visits exactly the primitives the binary tree visits for free rays, and
+    /// with a closest-hit visitor that clips t_max it visits every primitive whose box the ray
+    /// enters before the final t_max (what makes the closest hit exact), each once; on a tree of one
+    /// leaf, of a few and of many, with axis-parallel rays among the random ones.
+    #[test]
+    fn wide_traversal_visits_what_the_binary_traversal_visits() {
+        for (n, seed) in [(1, 1), (3, 2), (7, 3), (40, 4), (5000, 5)] {
+            let boxes = random_boxes(n, seed);
+            let bvh = Bvh::build(&boxes);
+            let wide = Bvh4::from_binary(&bvh);
+            let mut rng = SplitMix64::new(seed + 100);
+            for r in 0..300 {
+                let o = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0));
+                let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                if r % 10 == 0 {
+                    d.x = 0.0;
+                }
+                let ray = Ray::new(o, d.normalize());
+                let (binary, _) = visits(|t, f| bvh.traverse(&ray, t, f), None);
+                let (four, _) = visits(|t, f| wide.traverse(&ray, t, f), None);
+                assert_eq!(binary, four, "n = {n}, ray {r}");
+                // A hit at the distance of the box centre along the ray, when in front.
+                let hit = |k: u32| {
+                    let t = (boxes[bvh.order[k as usize] as usize].center() - ray.origin).dot(ray.dir);
+                    if t > ray.t_min { t } else { f32::INFINITY }
+                };
+                let (clipped, t_final) = visits(|t, f| wide.traverse(&ray, t, f), Some(&hit));
+                assert!(clipped.windows(2).all(|w| w[0] < w[1]), "a primitive visited twice");
+                let inv = super::super::inverse_direction(ray.dir);
+                for (k, &i) in bvh.order.iter().enumerate() {
+                    let b = boxes[i as usize];
+                    let entered =
+                        super::super::slab(b.min.into(), b.max.into(), ray.origin.into(), inv, ray.t_min, t_final);
+                    if entered.is_some() {
+                        assert!(clipped.binary_search(&(k as u32)).is_ok(), "n = {n}, ray {r}: box {i} skipped");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn leaf_references_round_trip() {
+        for (first, count) in [(0, 1), (12345, 4), (MAX_PRIMITIVES as u32 - 1, 2)] {
+            let r = leaf_ref(first, count);
+            assert!(r & LEAF != 0);
+            assert_eq!(leaf_range(r), first..first + count);
+        }
+        assert!(Bvh4::from_binary(&Bvh::build(&[])).is_empty());
+    }
+}
