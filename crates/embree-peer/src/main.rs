@@ -1,0 +1,136 @@
+//! `embree-peer`: splat-core's CPU tracer against the Embree peer, in one run, on one capture
+//! and view: BVH build time, rays per second of `opaque`, `stochastic` (Algorithm 1) and
+//! `exact`, the ratios, and how far the two images are apart (the same seed must give the same
+//! image, or the peer is no baseline). `cargo xtask bench` runs it on the bonsai capture.
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use embree_peer::{EmbreePeer, PeerMethod};
+use glam::Vec3;
+use splat_core::frame::Frames;
+use splat_core::rng::frame_key;
+use splat_core::trace::{Method, TraceScene, render_frames};
+use splat_core::{Camera, RenderSettings};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// splat-core's CPU ray tracer against an Embree 3 user-geometry peer, same view, same decisions.
+#[derive(Parser)]
+struct Args {
+    /// Scene (.ply or .splat).
+    scene: PathBuf,
+    /// Camera position "x,y,z".
+    #[arg(long, value_parser = parse_vec3, default_value = "0,-1.5,4")]
+    eye: Vec3,
+    /// Look-at target "x,y,z".
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0.5,0")]
+    target: Vec3,
+    /// World up "x,y,z".
+    #[arg(long, value_parser = parse_vec3, default_value = "0,-1,0")]
+    up: Vec3,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 50.0)]
+    fov: f32,
+    /// Image width.
+    #[arg(long, default_value_t = 1200)]
+    width: u32,
+    /// Image height.
+    #[arg(long, default_value_t = 800)]
+    height: u32,
+    /// Threads for both (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Timed repetitions of each measurement; the fastest is reported.
+    #[arg(long, default_value_t = 3)]
+    repeat: u32,
+}
+
+fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> =
+        s.split(',').map(|c| c.trim().parse::<f32>().map_err(|e| format!("{s:?}: {e}"))).collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
+        _ => Err(format!("{s:?}: expected three finite numbers \"x,y,z\"")),
+    }
+}
+
+/// The fastest of `repeat` runs of `f`, in seconds, with the last result.
+fn fastest<T>(repeat: u32, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+    let mut best = f64::INFINITY;
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        let start = Instant::now();
+        let out = f()?;
+        best = best.min(start.elapsed().as_secs_f64());
+        last = Some(out);
+    }
+    Ok((best, last.expect("at least one run")))
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    if !embree_peer::available() {
+        bail!("{}", embree_peer::NOT_BUILT);
+    }
+    let scene = splat_io::read_scene(&args.scene).with_context(|| format!("loading {}", args.scene.display()))?;
+    let camera = Camera::look_at(args.eye, args.target, args.up, args.fov, args.width, args.height)?;
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let settings = RenderSettings::default();
+    let n = scene.particles.len();
+
+    let (splat_build, trace) = fastest(args.repeat, || Ok(pool.install(|| TraceScene::new(&scene, settings))?))?;
+    let (peer_build, peer) =
+        fastest(args.repeat, || EmbreePeer::build(&scene, &settings, threads).map_err(anyhow::Error::msg))?;
+    let rays = f64::from(camera.width) * f64::from(camera.height);
+    println!(
+        "{n} particles, {}×{} at 1 spp, {threads} threads, fastest of {} runs; throughput ratios > 1 mean splat is faster\n",
+        camera.width,
+        camera.height,
+        args.repeat.max(1)
+    );
+    println!("| | Embree peer | splat | splat ÷ Embree (throughput) | images: max |Δ|, pixels apart |");
+    println!("|---|---:|---:|---:|---:|");
+    println!("| BVH build, {n} splats | {peer_build:.3} s | {splat_build:.3} s | {:.2}× | |", peer_build / splat_build);
+    let frames = Frames { count: 1, seed: 1, ..Frames::default() };
+    let key = frame_key(frames.seed, 0);
+    let mut opaque_time = None;
+    for (name, method, peer_method) in [
+        ("opaque ray (closest ellipsoid)", Method::Opaque, PeerMethod::Opaque),
+        ("stochastic (Algorithm 1)", Method::Stochastic, PeerMethod::Stochastic),
+        ("exact (every hit, sorted)", Method::Exact, PeerMethod::Exact),
+    ] {
+        let (splat_s, out) =
+            fastest(args.repeat, || Ok(pool.install(|| render_frames(&trace, &camera, &method, &frames, &|_| {}))?))?;
+        let (peer_s, image) = fastest(args.repeat, || Ok(peer.render(&camera, peer_method, key, threads)))?;
+        let (max, apart) = difference(out.mean.data(), &image);
+        println!(
+            "| {name} | {:.3} M rays/s | {:.3} M rays/s | {:.2}× | {max:.1e}, {apart} of {} |",
+            rays / peer_s / 1e6,
+            rays / splat_s / 1e6,
+            peer_s / splat_s,
+            rays as u64
+        );
+        if method == Method::Opaque {
+            opaque_time = Some(splat_s);
+        } else if method == Method::Stochastic {
+            let opaque = opaque_time.expect("opaque is measured first");
+            println!("| splat stochastic ÷ opaque (cost per ray, same BVH) | | {:.2}× | | |", splat_s / opaque);
+        }
+    }
+    println!(
+        "\nsplat BVH: {:.1} bytes/splat binary (the GPU's), {:.1} bytes/splat 4-wide (the CPU's)",
+        trace.bvh().bytes() as f64 / n as f64,
+        trace.wide_bvh().bytes() as f64 / n as f64
+    );
+    println!("pixels apart: a channel differs by more than 1e-4 (a different decision, not float noise)");
+    Ok(())
+}
+
+/// Largest channel difference, and the number of pixels with a channel more than 1e-4 apart.
+fn difference(a: &[f32], b: &[f32]) -> (f32, usize) {
+    let max = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
+    let apart =
+        a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| (x - y).abs() > 1e-4)).count();
+    (max, apart)
+}
