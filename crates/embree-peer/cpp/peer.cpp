@@ -49,7 +49,8 @@ struct Particle {
     float mean[3];
     float m[9];  // canonical transform M = S^-1 R^T, column-major (glam's Mat3)
     float opacity;
-    float lo[3], hi[3];  // the padded cutoff box
+    float lo[3], hi[3];  // the padded box the BVH is built over
+    float radius_sq;     // squared radius of the bounding ellipsoid (the opaque ray's surface)
 };
 
 struct Settings {
@@ -134,13 +135,13 @@ inline bool gaussian_hit(const Particle& p, const Settings& s, Vec3 o, Vec3 d, f
     float dd = dot(dc, dc);
     Vec3 x = cross(oc, dc);
     float d2 = dot(x, x) / dd;
+    if (d2 > s.cutoff * s.cutoff) return false;  // outside the cutoff ellipsoid, before the exponential
     float response = std::exp(-4.5f * (d2 * (1.0f / 9.0f)));
     float alpha = p.opacity * response;
     if (!(alpha >= s.alpha_cull && alpha > 0.0f)) return false;
     alpha = std::min(alpha, s.alpha_clamp);
     float t = -dot(oc, dc) / dd;
     if (!(t > s.t_min && t < s.t_max)) return false;
-    if (d2 > s.cutoff * s.cutoff) return false;
     *t_out = t;
     *alpha_out = alpha;
     return true;
@@ -172,7 +173,7 @@ void intersect(const RTCIntersectFunctionNArguments* args) {
             Vec3 dc = mul(p.m, c->dir);
             float a = dot(dc, dc);
             Vec3 x = cross(oc, dc);
-            float disc = a * (s.cutoff * s.cutoff) - dot(x, x);
+            float disc = a * p.radius_sq - dot(x, x);
             if (disc < 0.0f) return;
             t = (-dot(oc, dc) - std::sqrt(disc)) / a;
             if (!(t > s.t_min && t < s.t_max) || !depth_before(t, id, c->best_t, c->best_id)) return;

@@ -5,14 +5,15 @@
 //!
 //! The peer makes splat-core's decisions: the same hit test (kernel degree 2, mean hit
 //! distance, cutoff, clamp, cull), the same xxhash32/PCG keys per pixel, frame and particle, the
-//! same tie-break by particle id, so the same seed gives the same image; the `embree-peer`
-//! binary checks that before it reports a time. A peer that computed something else would be no
+//! same tie-break by particle id, and the same bounding ellipsoid for the opaque ray, so the
+//! same seed gives the same image; the `embree-peer` binary checks that beside every time. A peer that computed something else would be no
 //! baseline.
 //!
 //! The C++ (`cpp/peer.cpp`) is compiled only where Embree 3's headers are installed (Debian:
 //! `libembree-dev`); elsewhere [`EmbreePeer::build`] returns an error that says so.
 
 use splat_core::hit::{HitDistance, PreparedParticle};
+use splat_core::trace::bounding_radius;
 use splat_core::{Camera, RenderSettings, Scene};
 
 /// What the peer traces.
@@ -27,8 +28,18 @@ pub enum PeerMethod {
 }
 
 /// Floats per particle handed to the peer: mean, canonical transform (column-major), opacity,
-/// padded cutoff box.
-const PARTICLE_FLOATS: usize = 19;
+/// padded box, squared radius of the bounding ellipsoid.
+const PARTICLE_FLOATS: usize = 20;
+
+/// The boxes Embree builds its BVH over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PeerBounds {
+    /// The box of each particle's cutoff ellipsoid (Eq. 2), as Sun et al. bound particles.
+    Cutoff,
+    /// splat's boxes: each particle's visible extent
+    /// ([`splat_core::trace::bounding_radius`]), so that both BVHs bound the same volumes.
+    Splat,
+}
 
 /// An Embree scene over a splat scene.
 pub struct EmbreePeer {
@@ -40,11 +51,11 @@ impl EmbreePeer {
     /// Build the Embree BVH over the scene's particles on `threads` threads (what Embree calls
     /// the commit). Errors when Embree is not compiled in, or the settings ask for what the peer
     /// does not implement.
-    pub fn build(scene: &Scene, settings: &RenderSettings, threads: usize) -> Result<Self, String> {
+    pub fn build(scene: &Scene, settings: &RenderSettings, bounds: PeerBounds, threads: usize) -> Result<Self, String> {
         if settings.kernel.degree != 2 || settings.hit_distance != HitDistance::Mean {
             return Err("the Embree peer implements kernel degree 2 with the mean hit distance only".into());
         }
-        let particles = pack_particles(scene, settings.kernel.cutoff);
+        let particles = pack_particles(scene, settings, bounds);
         let sh: Vec<f32> = scene.particles.iter().flat_map(|p| p.sh.iter().flat_map(|c| c.to_array())).collect();
         let k = &settings.kernel;
         let b = settings.background;
@@ -104,16 +115,22 @@ pub const fn available() -> bool {
     cfg!(embree)
 }
 
-fn pack_particles(scene: &Scene, cutoff: f32) -> Vec<f32> {
+fn pack_particles(scene: &Scene, settings: &RenderSettings, bounds: PeerBounds) -> Vec<f32> {
     let mut out = Vec::with_capacity(scene.particles.len() * PARTICLE_FLOATS);
     for p in &scene.particles {
         let prepared = PreparedParticle::new(p);
-        let b = p.aabb(cutoff).padded();
+        let radius = bounding_radius(settings, p.opacity);
+        let b = match bounds {
+            PeerBounds::Cutoff => p.aabb(settings.kernel.cutoff),
+            PeerBounds::Splat => p.aabb(radius),
+        }
+        .padded();
         out.extend(prepared.mean.to_array());
         out.extend(prepared.canonical.to_cols_array());
         out.push(prepared.opacity);
         out.extend(b.min.to_array());
         out.extend(b.max.to_array());
+        out.push(radius * radius);
     }
     out
 }

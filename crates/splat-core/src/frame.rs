@@ -90,6 +90,7 @@ impl Decide for RayRng {
     fn needs_position(&self) -> bool {
         RayRng::needs_position(self)
     }
+    #[inline(always)]
     fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
         RayRng::particle(self, id, slot, hit)
     }

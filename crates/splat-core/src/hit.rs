@@ -103,6 +103,13 @@ pub fn intersect(
     // Squared distance of the line to the canonical origin: ‖o_c × d_c‖² / ‖d_c‖², the
     // minimum of ‖o_c + t d_c‖² over t, computed without cancellation.
     let d2_min = o_c.cross(d_c).length_squared() / dd;
+    let s2 = kernel.cutoff * kernel.cutoff;
+    // With the mean convention the hit is the closest point, so a line outside the cutoff
+    // ellipsoid is rejected before the exponential (most box hits of flat splats are; the
+    // result is the same, only sooner).
+    if convention == HitDistance::Mean && d2_min > s2 {
+        return None;
+    }
     let alpha = kernel.alpha(p.opacity, kernel.response(d2_min))?;
     let t_mean = -o_c.dot(d_c) / dd;
     let t = match convention {
@@ -118,7 +125,6 @@ pub fn intersect(
     if !(t > ray.t_min && t < ray.t_max) {
         return None;
     }
-    let s2 = kernel.cutoff * kernel.cutoff;
     let d2_hit = match convention {
         HitDistance::Mean => d2_min,
         HitDistance::Center => (o_c + t * d_c).length_squared(),

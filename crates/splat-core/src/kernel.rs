@@ -64,6 +64,29 @@ impl KernelParams {
         response(self.cutoff * self.cutoff, self.degree)
     }
 
+    /// The visible extent of a particle of this opacity, in standard deviations: the Mahalanobis
+    /// radius beyond which opacity × response < alpha_cull, so [`KernelParams::alpha`] culls
+    /// every hit, capped at the cutoff. From exp(−4.5 (d/3)ⁿ) ≥ cull / opacity:
+    /// d² ≤ 9 (ln(opacity / cull) / 4.5)^(2/n). It is widened by 10⁻⁵ in the logarithm and 0.1 %
+    /// in d² (far more than the f32 error of the response and of d²), so that no hit the kernel
+    /// keeps lies outside it; a particle below the cull has extent 0. Bounding a particle by this extent rather than the
+    /// cutoff (3DGRT's adaptive bounds) shrinks the boxes of faint particles without changing
+    /// a single hit: at opacity 0.05 the extent is 2.26σ, at 0.01 1.37σ.
+    pub fn visible_extent(&self, opacity: f32) -> f32 {
+        if self.alpha_cull <= 0.0 {
+            return self.cutoff;
+        }
+        if !(opacity >= self.alpha_cull) {
+            return 0.0;
+        }
+        // 10⁻⁵ in the exponent covers the f32 rounding of opacity × response (a few ulps, and a
+        // response that rounds to 1 near the centre for high degrees).
+        let x = ((f64::from(opacity) / f64::from(self.alpha_cull)).ln() + 1e-5) / 4.5;
+        let d2 = 9.0 * x.powf(2.0 / f64::from(self.degree));
+        let widened = (d2 * 1.001).sqrt();
+        (widened as f32).min(self.cutoff)
+    }
+
     /// alpha = opacity × response, `None` when culled, clamped to [`KernelParams::alpha_clamp`].
     pub fn alpha(&self, opacity: f32, response: f32) -> Option<f32> {
         let alpha = opacity * response;
@@ -89,6 +112,35 @@ pub fn response(d2: f32, degree: u32) -> f32 {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    /// Just inside the visible extent a particle can still be kept; beyond it, never: for every
+    /// degree and opacities from the cull to 1, the alpha at the extent (minus the widening) is
+    /// at the cull and the alpha just past it is culled.
+    #[test]
+    fn the_visible_extent_bounds_every_kept_alpha() {
+        for degree in [1, 2, 3, 4, 8] {
+            let k = KernelParams { degree, ..KernelParams::default() };
+            for i in 0..=1000 {
+                let opacity = ALPHA_CULL + (1.0 - ALPHA_CULL) * (i as f32 / 1000.0).powi(3);
+                let r = k.visible_extent(opacity);
+                assert!(r <= k.cutoff && r > 0.0);
+                let past = r * r * 1.0001;
+                assert!(
+                    k.alpha(opacity, k.response(past)).is_none() || past > k.cutoff * k.cutoff,
+                    "degree {degree}, opacity {opacity}: kept at d² = {past} beyond r = {r}"
+                );
+                if r < k.cutoff && opacity > 2.0 * ALPHA_CULL {
+                    let inside = r * r / 1.001 * 0.999;
+                    assert!(
+                        k.alpha(opacity, k.response(inside)).is_some(),
+                        "degree {degree}, opacity {opacity}: r = {r} is not tight"
+                    );
+                }
+            }
+            assert_eq!(k.visible_extent(ALPHA_CULL * 0.99), 0.0);
+        }
+        assert_eq!(KernelParams { alpha_cull: 0.0, ..KernelParams::default() }.visible_extent(0.5), DEFAULT_CUTOFF);
+    }
 
     #[test]
     fn degree_two_is_the_classic_gaussian() {

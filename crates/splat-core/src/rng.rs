@@ -164,11 +164,12 @@ impl RayRng {
 
     /// u ∈ [0, 1) deciding whether particle `id` is accepted in sample `slot`; `hit` is the
     /// hit position (used by [`RngScheme::Trig`] only).
-    #[inline]
+    #[inline(always)]
     pub fn particle(&self, id: u32, slot: u32, hit: glam::Vec3) -> f32 {
         self.particle_u(id, slot, hit) - self.u_shift
     }
 
+    #[inline(always)]
     fn particle_u(&self, id: u32, slot: u32, hit: glam::Vec3) -> f32 {
         match self.scheme {
             RngScheme::Hash => unit_f32(pcg(xxhash32([self.pixel_seed, id, slot]))),

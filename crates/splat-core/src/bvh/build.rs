@@ -7,7 +7,7 @@
 use super::{BvhNode, MAX_LEAF};
 use crate::par::{join, map};
 use crate::particle::Aabb;
-use glam::Vec3;
+use glam::Vec3A;
 
 /// Bins per axis of the SAH sweep.
 const BINS: usize = 16;
@@ -21,27 +21,60 @@ const PARALLEL_BINNING: usize = 32 * 1024;
 /// A subtree before flattening: the parallel recursion returns these, and [`flatten`] lays them
 /// out with siblings adjacent (the layout of [`super::Bvh::nodes`]).
 enum Tree {
-    Leaf { bounds: Aabb, first: u32, count: u32 },
-    Inner { bounds: Aabb, children: Box<[Tree; 2]> },
+    Leaf { bounds: Box3, first: u32, count: u32 },
+    Inner { bounds: Box3, children: Box<[Tree; 2]> },
 }
 
 impl Tree {
     fn node(&self) -> BvhNode {
         match *self {
             Tree::Leaf { bounds, first, count } => {
-                BvhNode { min: bounds.min.to_array(), first, max: bounds.max.to_array(), count }
+                let b = bounds.aabb();
+                BvhNode { min: b.min.to_array(), first, max: b.max.to_array(), count }
             }
             Tree::Inner { bounds, .. } => {
-                BvhNode { min: bounds.min.to_array(), first: 0, max: bounds.max.to_array(), count: 0 }
+                let b = bounds.aabb();
+                BvhNode { min: b.min.to_array(), first: 0, max: b.max.to_array(), count: 0 }
             }
         }
     }
 }
 
+/// A box as two SIMD corners (the build's working form of [`Aabb`]).
+#[derive(Clone, Copy)]
+struct Box3 {
+    min: Vec3A,
+    max: Vec3A,
+}
+
+impl Box3 {
+    const EMPTY: Box3 = Box3 { min: Vec3A::INFINITY, max: Vec3A::NEG_INFINITY };
+
+    #[inline(always)]
+    fn union(self, o: Box3) -> Box3 {
+        Box3 { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+
+    #[inline(always)]
+    fn grow(self, p: Vec3A) -> Box3 {
+        Box3 { min: self.min.min(p), max: self.max.max(p) }
+    }
+
+    fn aabb(self) -> Aabb {
+        Aabb { min: self.min.into(), max: self.max.into() }
+    }
+
+    /// Half the surface area (the SAH's measure).
+    fn area(&self) -> f32 {
+        let e = (self.max - self.min).max(Vec3A::ZERO);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+}
+
 /// What the build reads: the primitives' boxes and their centroids.
-struct Input<'a> {
-    boxes: &'a [Aabb],
-    centroids: Vec<Vec3>,
+struct Input {
+    boxes: Vec<Box3>,
+    centroids: Vec<Vec3A>,
 }
 
 /// Build the flattened nodes and the leaf order over `boxes`.
@@ -51,7 +84,10 @@ pub(super) fn build(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
         let empty = BvhNode { min: [f32::INFINITY; 3], first: 0, max: [f32::NEG_INFINITY; 3], count: 0 };
         return (vec![empty], order);
     }
-    let input = Input { boxes, centroids: map(boxes, Aabb::center) };
+    let input = Input {
+        boxes: map(boxes, |b| Box3 { min: b.min.into(), max: b.max.into() }),
+        centroids: map(boxes, |b| b.center().into()),
+    };
     let tree = subtree(&input, &mut order, 0);
     (flatten(&tree, boxes.len()), order)
 }
@@ -59,10 +95,10 @@ pub(super) fn build(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
 /// The subtree over `order` (reordered in place), whose first primitive sits at `offset` of the
 /// whole leaf order.
 fn subtree(input: &Input, order: &mut [u32], offset: usize) -> Tree {
-    let bins = bin(input, order);
+    let b = bounds(input, order);
     let n = order.len();
-    match split_point(order, input, &bins) {
-        None => Tree::Leaf { bounds: bins.bounds, first: offset as u32, count: order.len() as u32 },
+    match split_point(order, input, &b) {
+        None => Tree::Leaf { bounds: b.bounds, first: offset as u32, count: order.len() as u32 },
         Some(mid) => {
             let (left, right) = order.split_at_mut(mid);
             let children = if n >= PARALLEL_SUBTREE {
@@ -70,7 +106,7 @@ fn subtree(input: &Input, order: &mut [u32], offset: usize) -> Tree {
             } else {
                 (subtree(input, left, offset), subtree(input, right, offset + mid))
             };
-            Tree::Inner { bounds: bins.bounds, children: Box::new([children.0, children.1]) }
+            Tree::Inner { bounds: b.bounds, children: Box::new([children.0, children.1]) }
         }
     }
 }
@@ -94,26 +130,32 @@ fn flatten(tree: &Tree, primitives: usize) -> Vec<BvhNode> {
     nodes
 }
 
-/// Per-axis bins of a node's primitives by centroid, with the node's box and centroid box.
+/// A node's box and the box of its primitives' centroids.
+#[derive(Clone, Copy)]
+struct Bounds {
+    bounds: Box3,
+    centroids: Box3,
+}
+
+impl Bounds {
+    const EMPTY: Bounds = Bounds { bounds: Box3::EMPTY, centroids: Box3::EMPTY };
+
+    fn merge(self, o: &Bounds) -> Bounds {
+        Bounds { bounds: self.bounds.union(o.bounds), centroids: self.centroids.union(o.centroids) }
+    }
+}
+
+/// Per-axis bins of a node's primitives by centroid.
 #[derive(Clone, Copy)]
 struct Bins {
-    bounds: Aabb,
-    centroid_bounds: Aabb,
     counts: [[u32; BINS]; 3],
-    boxes: [[Aabb; BINS]; 3],
+    boxes: [[Box3; BINS]; 3],
 }
 
 impl Bins {
-    const EMPTY: Bins = Bins {
-        bounds: Aabb::EMPTY,
-        centroid_bounds: Aabb::EMPTY,
-        counts: [[0; BINS]; 3],
-        boxes: [[Aabb::EMPTY; BINS]; 3],
-    };
+    const EMPTY: Bins = Bins { counts: [[0; BINS]; 3], boxes: [[Box3::EMPTY; BINS]; 3] };
 
     fn merge(mut self, other: &Bins) -> Bins {
-        self.bounds = self.bounds.union(other.bounds);
-        self.centroid_bounds = self.centroid_bounds.union(other.centroid_bounds);
         for axis in 0..3 {
             for b in 0..BINS {
                 self.counts[axis][b] += other.counts[axis][b];
@@ -125,77 +167,78 @@ impl Bins {
 }
 
 /// The bin of a centroid along one axis of the centroid box.
-#[inline]
+#[inline(always)]
 fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
     (((c - lo) * scale) as usize).min(BINS - 1)
 }
 
-/// Bounds, centroid bounds, then per-axis bins (two passes over the primitives; the largest
-/// nodes in parallel chunks, merged in chunk order so that the result is the same on any
-/// thread count: union and integer sums are exact).
-fn bin(input: &Input, order: &[u32]) -> Bins {
-    let bounds_of = |chunk: &[u32]| {
-        let mut b = Bins::EMPTY;
-        for &i in chunk {
-            let c = input.centroids[i as usize];
-            b.bounds = b.bounds.union(input.boxes[i as usize]);
-            b.centroid_bounds = b.centroid_bounds.union(Aabb { min: c, max: c });
-        }
-        b
-    };
-    let mut bins = reduce_chunks(order, bounds_of);
-    let cb = bins.centroid_bounds;
-    let scale = Vec3::splat(BINS as f32) / (cb.max - cb.min);
-    let fill = |chunk: &[u32]| {
-        let mut b = Bins::EMPTY;
-        for &i in chunk {
-            let c = input.centroids[i as usize];
-            let bx = input.boxes[i as usize];
-            for axis in 0..3 {
-                if (cb.max[axis] - cb.min[axis]) > 0.0 {
+/// The node's bounds over `order` (in parallel chunks for the largest nodes, merged in chunk
+/// order so that the result is the same on any thread count: unions are exact).
+fn bounds(input: &Input, order: &[u32]) -> Bounds {
+    reduce_chunks(order, Bounds::EMPTY, Bounds::merge, |chunk| {
+        chunk.iter().fold(Bounds::EMPTY, |b, &i| Bounds {
+            bounds: b.bounds.union(input.boxes[i as usize]),
+            centroids: b.centroids.grow(input.centroids[i as usize]),
+        })
+    })
+}
+
+/// Per-axis bins over the centroid box `cb` (chunked like [`bounds`]; integer sums are exact).
+fn bin(input: &Input, order: &[u32], cb: &Box3) -> Bins {
+    let scale = Vec3A::splat(BINS as f32) / (cb.max - cb.min);
+    let axes: Vec<usize> = (0..3).filter(|&a| cb.max[a] - cb.min[a] > 0.0).collect();
+    reduce_chunks(
+        order,
+        Bins::EMPTY,
+        |a, b| a.merge(b),
+        |chunk| {
+            let mut b = Bins::EMPTY;
+            for &i in chunk {
+                let c = input.centroids[i as usize];
+                let bx = input.boxes[i as usize];
+                for &axis in &axes {
                     let k = bin_index(c[axis], cb.min[axis], scale[axis]);
                     b.counts[axis][k] += 1;
                     b.boxes[axis][k] = b.boxes[axis][k].union(bx);
                 }
             }
-        }
-        b
-    };
-    let filled = reduce_chunks(order, fill);
-    (bins.counts, bins.boxes) = (filled.counts, filled.boxes);
-    bins
+            b
+        },
+    )
 }
 
 /// `f` over the whole slice, or over chunks (in parallel with rayon) merged in order.
-fn reduce_chunks(order: &[u32], f: impl Fn(&[u32]) -> Bins + Sync) -> Bins {
+fn reduce_chunks<T: Send + Sync + Copy>(
+    order: &[u32],
+    empty: T,
+    merge: impl Fn(T, &T) -> T,
+    f: impl Fn(&[u32]) -> T + Sync + Send,
+) -> T {
     if order.len() < PARALLEL_BINNING {
         return f(order);
     }
     let chunks: Vec<&[u32]> = order.chunks(PARALLEL_BINNING).collect();
-    map(&chunks, |c| f(c)).iter().fold(Bins::EMPTY, |acc, b| acc.merge(b))
-}
-
-fn area(b: &Aabb) -> f32 {
-    let e = (b.max - b.min).max(Vec3::ZERO);
-    e.x * e.y + e.y * e.z + e.z * e.x
+    map(&chunks, |c| f(c)).iter().fold(empty, merge)
 }
 
 /// Choose a split of `order` (partitioning it in place) or `None` for a leaf.
-fn split_point(order: &mut [u32], input: &Input, bins: &Bins) -> Option<usize> {
+fn split_point(order: &mut [u32], input: &Input, node: &Bounds) -> Option<usize> {
     let n = order.len();
     if n <= 1 {
         return None;
     }
+    let cb = node.centroids;
+    let bins = bin(input, order, &cb);
     let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, bin boundary)
     for axis in 0..3 {
         let (counts, boxes) = (&bins.counts[axis], &bins.boxes[axis]);
         let mut right_area = [0.0f32; BINS];
-        let mut acc = Aabb::EMPTY;
+        let mut acc = Box3::EMPTY;
         for b in (1..BINS).rev() {
             acc = acc.union(boxes[b]);
-            right_area[b] = area(&acc);
+            right_area[b] = acc.area();
         }
-        let (mut left, mut left_count) = (Aabb::EMPTY, 0usize);
+        let (mut left, mut left_count) = (Box3::EMPTY, 0usize);
         for b in 1..BINS {
             left = left.union(boxes[b - 1]);
             left_count += counts[b - 1] as usize;
@@ -203,14 +246,13 @@ fn split_point(order: &mut [u32], input: &Input, bins: &Bins) -> Option<usize> {
             if left_count == 0 || right_count == 0 {
                 continue;
             }
-            let cost = area(&left) * left_count as f32 + right_area[b] * right_count as f32;
+            let cost = left.area() * left_count as f32 + right_area[b] * right_count as f32;
             if best.is_none_or(|(c, _, _)| cost < c) {
                 best = Some((cost, axis, b));
             }
         }
     }
-    let parent_area = area(&bins.bounds).max(f32::MIN_POSITIVE);
-    let cb = bins.centroid_bounds;
+    let parent_area = node.bounds.area().max(f32::MIN_POSITIVE);
     match best {
         Some((cost, axis, boundary)) if TRAVERSAL_COST + cost / parent_area < n as f32 || n > MAX_LEAF as usize => {
             let scale = BINS as f32 / (cb.max[axis] - cb.min[axis]);

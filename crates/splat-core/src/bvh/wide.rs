@@ -21,13 +21,13 @@ pub const MAX_PRIMITIVES: usize = 1 << COUNT_SHIFT;
 /// most WIDTH − 1 per level of the binary tree, whose depth [`STACK_DEPTH`] bounds.
 const WIDE_STACK: usize = (WIDTH - 1) * STACK_DEPTH + 1;
 
-/// One wide node, 128 bytes: per axis the lower and upper bounds of the four children as lanes;
-/// empty lanes are masked off by `count`.
+/// One wide node, 128 bytes: the six bounding planes of the four children as lanes, lower x, y,
+/// z then upper x, y, z (so that a ray picks its near and far plane per axis by index); empty
+/// lanes are masked off by `count`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub struct Node4 {
-    min: [Vec4; 3],
-    max: [Vec4; 3],
+    planes: [Vec4; 6],
     child: [u32; WIDTH],
     count: u32,
 }
@@ -84,8 +84,14 @@ impl Bvh4 {
         }
         let index = self.nodes.len();
         self.nodes.push(Node4 {
-            min: [Vec4::INFINITY; 3],
-            max: [Vec4::NEG_INFINITY; 3],
+            planes: [
+                Vec4::INFINITY,
+                Vec4::INFINITY,
+                Vec4::INFINITY,
+                Vec4::NEG_INFINITY,
+                Vec4::NEG_INFINITY,
+                Vec4::NEG_INFINITY,
+            ],
             child: [0; WIDTH],
             count: children.len() as u32,
         });
@@ -94,8 +100,8 @@ impl Bvh4 {
             let r = if n.count > 0 { leaf_ref(n.first, n.count) } else { self.collapse(bvh, c) };
             let node = &mut self.nodes[index];
             for axis in 0..3 {
-                node.min[axis][lane] = n.min[axis];
-                node.max[axis][lane] = n.max[axis];
+                node.planes[axis][lane] = n.min[axis];
+                node.planes[3 + axis][lane] = n.max[axis];
             }
             node.child[lane] = r;
         }
@@ -126,46 +132,71 @@ impl Bvh4 {
         let Some(root) = self.root else { return };
         let inv = inverse_direction(ray.dir);
         let [lo, hi] = self.root_box.map(Vec3A::from_array);
-        let Some(t_root) = slab(lo, hi, Vec3A::from(ray.origin), inv, ray.t_min, *t_max) else { return };
+        if slab(lo, hi, Vec3A::from(ray.origin), inv, ray.t_min, *t_max).is_none() {
+            return;
+        }
         let (ox, oy, oz) = (Vec4::splat(ray.origin.x), Vec4::splat(ray.origin.y), Vec4::splat(ray.origin.z));
         let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
         let t_min = Vec4::splat(ray.t_min);
+        // Each axis's near plane is the lower one where the ray goes up the axis.
+        let [near, far] = [0, 3].map(|side| {
+            let plane = |axis: usize, i: f32| axis + if (i >= 0.0) == (side == 0) { 0 } else { 3 };
+            [plane(0, inv.x), plane(1, inv.y), plane(2, inv.z)]
+        });
         let mut stack = [(0u32, 0.0f32); WIDE_STACK];
-        stack[0] = (root, t_root);
-        let mut top = 1usize;
-        while top > 0 {
-            top -= 1;
-            let (r, t_enter) = stack[top];
-            if t_enter > *t_max {
-                continue;
-            }
-            if r & LEAF != 0 {
-                for k in leaf_range(r) {
+        let mut top = 0usize;
+        let mut current = root;
+        loop {
+            if current & LEAF != 0 {
+                for k in leaf_range(current) {
                     visit(k, t_max);
                 }
-                continue;
-            }
-            let n = &self.nodes[r as usize];
-            // Slab test of the four children, lane by lane the arithmetic of `super::slab`.
-            let (x0, x1) = ((n.min[0] - ox) * ix, (n.max[0] - ox) * ix);
-            let (y0, y1) = ((n.min[1] - oy) * iy, (n.max[1] - oy) * iy);
-            let (z0, z1) = ((n.min[2] - oz) * iz, (n.max[2] - oz) * iz);
-            let enter = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(t_min);
-            let exit = x0.max(x1).min(y0.max(y1)).min(z0.max(z1)).min(Vec4::splat(*t_max));
-            let mut mask = enter.cmple(exit).bitmask() & ((1 << n.count) - 1);
-            // Push the hit children far to near, so that the nearest is popped first.
-            let base = top;
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let entry = (n.child[lane], enter[lane]);
-                let mut i = top;
-                while i > base && stack[i - 1].1 < entry.1 {
-                    stack[i] = stack[i - 1];
-                    i -= 1;
+            } else {
+                let n = &self.nodes[current as usize];
+                // Slab test of the four children: the arithmetic of `super::slab`, with the min
+                // and max of each axis's two distances taken by choosing the planes (1/d is
+                // finite and non-zero, so its sign orders them).
+                let tx = ((n.planes[near[0]] - ox) * ix, (n.planes[far[0]] - ox) * ix);
+                let ty = ((n.planes[near[1]] - oy) * iy, (n.planes[far[1]] - oy) * iy);
+                let tz = ((n.planes[near[2]] - oz) * iz, (n.planes[far[2]] - oz) * iz);
+                let enter = tx.0.max(ty.0).max(tz.0).max(t_min);
+                let exit = tx.1.min(ty.1).min(tz.1).min(Vec4::splat(*t_max));
+                let mask = enter.cmple(exit).bitmask() & ((1 << n.count) - 1);
+                if mask != 0 {
+                    // Go on with the nearest child; push the others far to near.
+                    let lane = mask.trailing_zeros() as usize;
+                    let mut nearest = (n.child[lane], enter[lane]);
+                    let mut rest = mask & (mask - 1);
+                    let base = top;
+                    while rest != 0 {
+                        let lane = rest.trailing_zeros() as usize;
+                        rest &= rest - 1;
+                        let mut entry = (n.child[lane], enter[lane]);
+                        if entry.1 < nearest.1 {
+                            std::mem::swap(&mut entry, &mut nearest);
+                        }
+                        let mut i = top;
+                        while i > base && stack[i - 1].1 < entry.1 {
+                            stack[i] = stack[i - 1];
+                            i -= 1;
+                        }
+                        stack[i] = entry;
+                        top += 1;
+                    }
+                    current = nearest.0;
+                    continue;
                 }
-                stack[i] = entry;
-                top += 1;
+            }
+            // Pop the nearest pushed entry still in front of t_max.
+            loop {
+                if top == 0 {
+                    return;
+                }
+                top -= 1;
+                if stack[top].1 <= *t_max {
+                    current = stack[top].0;
+                    break;
+                }
             }
         }
     }
