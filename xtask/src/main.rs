@@ -39,6 +39,7 @@ fn root() -> PathBuf {
 
 fn test(extra: &[String]) -> Result<()> {
     ensure_vulkan_driver()?;
+    ensure_embree()?;
     let mut cmd = Command::new(env!("CARGO"));
     cmd.current_dir(root()).args(["test", "--workspace", "--release"]).args(extra);
     if std::env::var_os("WGPU_BACKEND").is_none() {
@@ -83,18 +84,36 @@ fn vulkan_icds() -> Vec<PathBuf> {
 /// Install Mesa's Vulkan drivers (lavapipe, a CPU Vulkan implementation) when no Vulkan driver
 /// is present and we run as root, so the GPU tests have an adapter on any machine.
 fn ensure_vulkan_driver() -> Result<()> {
-    if !vulkan_icds().is_empty() {
+    let have = || !vulkan_icds().is_empty();
+    ensure_packages(have, &["mesa-vulkan-drivers", "libvulkan1"], "Vulkan driver", "GPU tests will skip")
+}
+
+/// Embree 3's headers and library, for the Embree peer of the CPU tracer (`embree-peer`).
+const EMBREE_HEADER: &str = "/usr/include/embree3/rtcore.h";
+
+/// Install Embree 3 (Debian's libembree-dev) when it is missing and we run as root, so that the
+/// peer's image test and `cargo xtask bench` can build the C++ peer.
+fn ensure_embree() -> Result<()> {
+    let have = || Path::new(EMBREE_HEADER).exists();
+    ensure_packages(have, &["libembree-dev"], "Embree 3", "the Embree peer's test will skip")
+}
+
+/// Make `have()` true by installing Debian `packages` with apt-get when we are root; otherwise
+/// fail under `CI` and warn (`consequence`) elsewhere.
+fn ensure_packages(have: impl Fn() -> bool, packages: &[&str], what: &str, consequence: &str) -> Result<()> {
+    if have() {
         return Ok(());
     }
+    let list = packages.join(" ");
     let uid = Command::new("id").arg("-u").output().map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
     if uid.ok().as_deref() != Some("0") {
         if std::env::var_os("CI").is_some() {
-            bail!("CI is set, no Vulkan driver is installed and we are not root: install mesa-vulkan-drivers");
+            bail!("CI is set, {what} is not installed and we are not root: install {list}");
         }
-        eprintln!("no Vulkan driver found and not root: GPU tests will skip (install mesa-vulkan-drivers)");
+        eprintln!("{what} not found and not root: {consequence} (install {list})");
         return Ok(());
     }
-    eprintln!("no Vulkan driver found: installing mesa-vulkan-drivers (lavapipe) with apt-get …");
+    eprintln!("{what} not found: installing {list} with apt-get …");
     let apt = |args: &[&str]| -> Result<()> {
         let status = Command::new("apt-get").args(args).env("DEBIAN_FRONTEND", "noninteractive").status()?;
         if !status.success() {
@@ -103,9 +122,9 @@ fn ensure_vulkan_driver() -> Result<()> {
         Ok(())
     };
     apt(&["update", "-qq"])?;
-    apt(&["install", "-y", "-qq", "mesa-vulkan-drivers", "libvulkan1"])?;
-    if vulkan_icds().is_empty() {
-        bail!("mesa-vulkan-drivers is installed but no Vulkan ICD manifest was found");
+    apt(&[&["install", "-y", "-qq"][..], packages].concat())?;
+    if !have() {
+        bail!("{list} is installed but {what} is still not found");
     }
     Ok(())
 }
@@ -173,10 +192,14 @@ fn bless() -> Result<()> {
     Ok(())
 }
 
-/// The benchmarks: divan (`cargo bench -p splat-tests`) and `splat bench` on the bonsai
-/// capture at 1200 × 800 (the standard view of `splat_tests::bonsai_camera`).
+/// The benchmarks, every one a ratio measured in one run: divan (`cargo bench`), the Embree
+/// peer against the CPU tracer (`embree-peer`), `splat bench` (every method against `opaque`
+/// through the same BVH) and `splat bench --sweep mn` (Sun et al. Tables 4–5), all on the
+/// bonsai capture from the standard view (`splat_tests::bonsai_camera`) at 1200 × 800, the
+/// sweep at 300 × 200 (1024 samples a pixel per row).
 fn bench() -> Result<()> {
     let bonsai = assets()?;
+    ensure_embree()?;
     let cargo = |args: &[&str]| -> Result<()> {
         let status = Command::new(env!("CARGO")).current_dir(root()).args(args).status()?;
         if !status.success() {
@@ -187,21 +210,20 @@ fn bench() -> Result<()> {
     cargo(&["bench", "-p", "splat-tests", "--bench", "trace"])?;
     cargo(&["bench", "-p", "splat-gpu", "--bench", "sort"])?;
     let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
-    cargo(&[
-        "run",
-        "--release",
-        "-p",
-        "splat-cli",
-        "--",
-        "bench",
-        bonsai,
-        "--eye",
-        "0,-1.5,4",
-        "--target",
-        "0,0.5,0",
-        "--up",
-        "0,-1,0",
-    ])
+    let view = ["--eye", "0,-1.5,4", "--target", "0,0.5,0", "--up", "0,-1,0"];
+    if Path::new(EMBREE_HEADER).exists() {
+        println!("\n## The CPU tracer against Embree 3 (user geometry, one callback per particle)\n");
+        cargo(&[&["run", "--release", "-p", "embree-peer", "--", bonsai][..], &view].concat())?;
+    } else {
+        eprintln!("SKIPPED the Embree comparison: {EMBREE_HEADER} is absent (install libembree-dev as root)");
+    }
+    let splat = |args: &[&str]| {
+        cargo(&[&["run", "--release", "-p", "splat-cli", "--", "bench", bonsai][..], &view, args].concat())
+    };
+    println!("\n## Every ray-tracing method against opaque, through the same BVH\n");
+    splat(&["--backend", "cpu"])?;
+    println!("\n## Sun et al. Tables 4–5: m traversals × n samples, CPU\n");
+    splat(&["--backend", "cpu", "--sweep", "mn", "--width", "300", "--height", "200"])
 }
 
 /// PyPI source distribution that carries the bonsai capture, pinned by version and hash.

@@ -67,6 +67,14 @@ pub trait Decide {
     fn needs_position(&self) -> bool;
     /// u ∈ [0, 1) of particle `id` in sample `slot`.
     fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32;
+    /// u of particle `id` in the samples `first_slot..first_slot + out.len()`, into `out`: what
+    /// [`Decide::particle`] gives slot by slot (a generator may batch it).
+    #[inline(always)]
+    fn particles(&self, id: u32, first_slot: u32, hit: Vec3, out: &mut [f32]) {
+        for (s, u) in (first_slot..).zip(out.iter_mut()) {
+            *u = self.particle(id, s, hit);
+        }
+    }
     /// u ∈ [0, 1) of pass `pass`.
     fn pass(&self, pass: u32) -> f32;
     /// Russian roulette (Sun et al. 2025, Algorithm 1, line 6): particle `id` with alpha α is
@@ -93,6 +101,10 @@ impl Decide for RayRng {
     #[inline(always)]
     fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
         RayRng::particle(self, id, slot, hit)
+    }
+    #[inline(always)]
+    fn particles(&self, id: u32, first_slot: u32, hit: Vec3, out: &mut [f32]) {
+        RayRng::particles(self, id, first_slot, hit, out)
     }
     fn pass(&self, pass: u32) -> f32 {
         RayRng::pass(self, pass)

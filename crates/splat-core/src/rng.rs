@@ -180,6 +180,22 @@ impl RayRng {
         }
     }
 
+    /// [`RayRng::particle`] for the slots `first_slot..first_slot + out.len()`: the same
+    /// numbers, in a loop the compiler vectorizes (the hash's words that depend on the slot
+    /// alone are hoisted out of it).
+    #[inline(always)]
+    pub fn particles(&self, id: u32, first_slot: u32, hit: glam::Vec3, out: &mut [f32]) {
+        if self.scheme != RngScheme::Hash {
+            for (s, u) in (first_slot..).zip(out.iter_mut()) {
+                *u = self.particle(id, s, hit);
+            }
+            return;
+        }
+        for (s, u) in (first_slot..).zip(out.iter_mut()) {
+            *u = unit_f32(pcg(xxhash32([self.pixel_seed, id, s]))) - self.u_shift;
+        }
+    }
+
     /// u ∈ [0, 1) deciding whether pass `pass` is accepted (stochastic pass).
     #[inline]
     pub fn pass(&self, pass: u32) -> f32 {
@@ -385,6 +401,20 @@ mod hash_tests {
     fn draw(scheme: RngScheme, i: u32, [dx, df, did, ds]: [u32; 4]) -> f32 {
         let (x, y, frame, id, slot) = (i % 640 + dx, (i / 640) % 480, i % 7 + df, i % 1000 + did, i % 4 + ds);
         RayRng::new(x, y, frame_key(1, frame), scheme).particle(id, slot, hit(id))
+    }
+
+    /// The batched draws are the draws, for both generators and a shifted one.
+    #[test]
+    fn batched_draws_equal_single_draws() {
+        for scheme in [RngScheme::Hash, RngScheme::Trig] {
+            let rng = RayRng::new(3, 4, frame_key(1, 2), scheme).shifted(0.01);
+            let hit = glam::Vec3::new(0.1, 0.2, 0.3);
+            let mut out = [0.0f32; 64];
+            rng.particles(77, 5, hit, &mut out);
+            for (s, u) in (5..).zip(out) {
+                assert_eq!(u.to_bits(), rng.particle(77, s, hit).to_bits());
+            }
+        }
     }
 
     /// P(u < α) = α for every α (Kolmogorov–Smirnov over 10⁶ draws, p = 10⁻³), and u of keys

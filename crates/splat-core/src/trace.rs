@@ -13,7 +13,7 @@ use crate::composite::{ShadedHit, composite, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, to_canonical};
 use crate::par;
-use crate::particle::{Aabb, Particle, Scene};
+use crate::particle::{Aabb, Scene};
 use crate::rng::RayRng;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
@@ -305,15 +305,16 @@ impl<'a> TraceScene<'a> {
                 scene.particles.len()
             )));
         }
-        let radius = |p: &Particle| bounding_radius(&settings, p.opacity);
-        let boxes: Vec<Aabb> = par::map(&scene.particles, |p| p.aabb(radius(p)).padded());
+        let radii = par::map(&scene.particles, |p| bounding_radius(&settings, p.opacity));
+        let indices: Vec<u32> = (0..scene.particles.len() as u32).collect();
+        let boxes: Vec<Aabb> = par::map(&indices, |&i| scene.particles[i as usize].aabb(radii[i as usize]).padded());
         let bvh = Bvh::build(&boxes);
         let wide = Bvh4::from_binary(&bvh);
         let prims = par::map(&bvh.order, |&i| PreparedParticle::new(&scene.particles[i as usize]));
         let ids = bvh.order.clone();
         let clamp = settings.kernel.alpha_clamp;
         let alpha_bound = bvh.order.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
-        let radius_sq = bvh.order.iter().map(|&i| radius(&scene.particles[i as usize]).powi(2)).collect();
+        let radius_sq = bvh.order.iter().map(|&i| radii[i as usize].powi(2)).collect();
         Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq })
     }
 
@@ -519,12 +520,8 @@ impl<'a> TraceScene<'a> {
             let id = self.ids[leaf as usize];
             if early {
                 let bound = self.alpha_bound[leaf as usize];
-                let mut any = false;
-                for (s, us) in u[..n].iter_mut().enumerate() {
-                    *us = decide.particle(id, first_slot + s as u32, Vec3::ZERO);
-                    any |= *us < bound;
-                }
-                if !any {
+                decide.particles(id, first_slot, Vec3::ZERO, &mut u[..n]);
+                if u[..n].iter().all(|&us| us >= bound) {
                     return;
                 }
             }

@@ -71,40 +71,56 @@ impl Box3 {
     }
 }
 
-/// What the build reads: the primitives' boxes and their centroids.
-struct Input {
-    boxes: Vec<Box3>,
-    centroids: Vec<Vec3A>,
+/// A primitive reference, 32 bytes: its box and its index. The build partitions these records
+/// themselves, not indices into the boxes, so that every pass reads memory in order.
+#[derive(Clone, Copy)]
+struct PrimRef {
+    min: [f32; 3],
+    id: u32,
+    max: [f32; 3],
+}
+
+impl PrimRef {
+    #[inline(always)]
+    fn bounds(&self) -> Box3 {
+        Box3 { min: Vec3A::from_array(self.min), max: Vec3A::from_array(self.max) }
+    }
+
+    /// The centroid, as [`Aabb::center`] computes it.
+    #[inline(always)]
+    fn centroid(&self) -> Vec3A {
+        0.5 * (Vec3A::from_array(self.min) + Vec3A::from_array(self.max))
+    }
 }
 
 /// Build the flattened nodes and the leaf order over `boxes`.
 pub(super) fn build(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
-    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
     if boxes.is_empty() {
         let empty = BvhNode { min: [f32::INFINITY; 3], first: 0, max: [f32::NEG_INFINITY; 3], count: 0 };
-        return (vec![empty], order);
+        return (vec![empty], Vec::new());
     }
-    let input = Input {
-        boxes: map(boxes, |b| Box3 { min: b.min.into(), max: b.max.into() }),
-        centroids: map(boxes, |b| b.center().into()),
-    };
-    let tree = subtree(&input, &mut order, 0);
-    (flatten(&tree, boxes.len()), order)
+    let ids: Vec<u32> = (0..boxes.len() as u32).collect();
+    let mut refs = map(&ids, |&i| {
+        let b = &boxes[i as usize];
+        PrimRef { min: b.min.to_array(), id: i, max: b.max.to_array() }
+    });
+    let tree = subtree(&mut refs, 0);
+    (flatten(&tree, boxes.len()), refs.iter().map(|r| r.id).collect())
 }
 
-/// The subtree over `order` (reordered in place), whose first primitive sits at `offset` of the
+/// The subtree over `refs` (reordered in place), whose first primitive sits at `offset` of the
 /// whole leaf order.
-fn subtree(input: &Input, order: &mut [u32], offset: usize) -> Tree {
-    let b = bounds(input, order);
-    let n = order.len();
-    match split_point(order, input, &b) {
-        None => Tree::Leaf { bounds: b.bounds, first: offset as u32, count: order.len() as u32 },
+fn subtree(refs: &mut [PrimRef], offset: usize) -> Tree {
+    let b = bounds(refs);
+    let n = refs.len();
+    match split_point(refs, &b) {
+        None => Tree::Leaf { bounds: b.bounds, first: offset as u32, count: n as u32 },
         Some(mid) => {
-            let (left, right) = order.split_at_mut(mid);
+            let (left, right) = refs.split_at_mut(mid);
             let children = if n >= PARALLEL_SUBTREE {
-                join(|| subtree(input, left, offset), || subtree(input, right, offset + mid))
+                join(|| subtree(left, offset), || subtree(right, offset + mid))
             } else {
-                (subtree(input, left, offset), subtree(input, right, offset + mid))
+                (subtree(left, offset), subtree(right, offset + mid))
             };
             Tree::Inner { bounds: b.bounds, children: Box::new([children.0, children.1]) }
         }
@@ -172,63 +188,59 @@ fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
     (((c - lo) * scale) as usize).min(BINS - 1)
 }
 
-/// The node's bounds over `order` (in parallel chunks for the largest nodes, merged in chunk
+/// The node's bounds over `refs` (in parallel chunks for the largest nodes, merged in chunk
 /// order so that the result is the same on any thread count: unions are exact).
-fn bounds(input: &Input, order: &[u32]) -> Bounds {
-    reduce_chunks(order, Bounds::EMPTY, Bounds::merge, |chunk| {
-        chunk.iter().fold(Bounds::EMPTY, |b, &i| Bounds {
-            bounds: b.bounds.union(input.boxes[i as usize]),
-            centroids: b.centroids.grow(input.centroids[i as usize]),
+fn bounds(refs: &[PrimRef]) -> Bounds {
+    reduce_chunks(refs, Bounds::EMPTY, Bounds::merge, |chunk| {
+        chunk.iter().fold(Bounds::EMPTY, |b, r| Bounds {
+            bounds: b.bounds.union(r.bounds()),
+            centroids: b.centroids.grow(r.centroid()),
         })
     })
 }
 
 /// Per-axis bins over the centroid box `cb` (chunked like [`bounds`]; integer sums are exact).
-fn bin(input: &Input, order: &[u32], cb: &Box3) -> Bins {
+fn bin(refs: &[PrimRef], cb: &Box3) -> Bins {
     let scale = Vec3A::splat(BINS as f32) / (cb.max - cb.min);
-    let axes: Vec<usize> = (0..3).filter(|&a| cb.max[a] - cb.min[a] > 0.0).collect();
-    reduce_chunks(
-        order,
-        Bins::EMPTY,
-        |a, b| a.merge(b),
-        |chunk| {
-            let mut b = Bins::EMPTY;
-            for &i in chunk {
-                let c = input.centroids[i as usize];
-                let bx = input.boxes[i as usize];
-                for &axis in &axes {
-                    let k = bin_index(c[axis], cb.min[axis], scale[axis]);
-                    b.counts[axis][k] += 1;
-                    b.boxes[axis][k] = b.boxes[axis][k].union(bx);
-                }
+    let extent = cb.max - cb.min;
+    let axes = [0, 1, 2].map(|a| extent[a] > 0.0);
+    let fill = |chunk: &[PrimRef]| {
+        let mut b = Bins::EMPTY;
+        for r in chunk {
+            let (c, bx) = (r.centroid(), r.bounds());
+            for axis in (0..3).filter(|&a| axes[a]) {
+                let k = bin_index(c[axis], cb.min[axis], scale[axis]);
+                b.counts[axis][k] += 1;
+                b.boxes[axis][k] = b.boxes[axis][k].union(bx);
             }
-            b
-        },
-    )
+        }
+        b
+    };
+    reduce_chunks(refs, Bins::EMPTY, |a, b| a.merge(b), fill)
 }
 
 /// `f` over the whole slice, or over chunks (in parallel with rayon) merged in order.
 fn reduce_chunks<T: Send + Sync + Copy>(
-    order: &[u32],
+    refs: &[PrimRef],
     empty: T,
     merge: impl Fn(T, &T) -> T,
-    f: impl Fn(&[u32]) -> T + Sync + Send,
+    f: impl Fn(&[PrimRef]) -> T + Sync + Send,
 ) -> T {
-    if order.len() < PARALLEL_BINNING {
-        return f(order);
+    if refs.len() < PARALLEL_BINNING {
+        return f(refs);
     }
-    let chunks: Vec<&[u32]> = order.chunks(PARALLEL_BINNING).collect();
+    let chunks: Vec<&[PrimRef]> = refs.chunks(PARALLEL_BINNING).collect();
     map(&chunks, |c| f(c)).iter().fold(empty, merge)
 }
 
 /// Choose a split of `order` (partitioning it in place) or `None` for a leaf.
-fn split_point(order: &mut [u32], input: &Input, node: &Bounds) -> Option<usize> {
-    let n = order.len();
+fn split_point(refs: &mut [PrimRef], node: &Bounds) -> Option<usize> {
+    let n = refs.len();
     if n <= 1 {
         return None;
     }
     let cb = node.centroids;
-    let bins = bin(input, order, &cb);
+    let bins = bin(refs, &cb);
     let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, bin boundary)
     for axis in 0..3 {
         let (counts, boxes) = (&bins.counts[axis], &bins.boxes[axis]);
@@ -256,9 +268,9 @@ fn split_point(order: &mut [u32], input: &Input, node: &Bounds) -> Option<usize>
     match best {
         Some((cost, axis, boundary)) if TRAVERSAL_COST + cost / parent_area < n as f32 || n > MAX_LEAF as usize => {
             let scale = BINS as f32 / (cb.max[axis] - cb.min[axis]);
-            let goes_left = |i: u32| bin_index(input.centroids[i as usize][axis], cb.min[axis], scale) < boundary;
+            let goes_left = |r: &PrimRef| bin_index(r.centroid()[axis], cb.min[axis], scale) < boundary;
             // The bins counted both sides non-empty with this very test, so neither side is.
-            Some(partition(order, goes_left))
+            Some(partition(refs, goes_left))
         }
         Some(_) => None,
         // All centroids coincide: split by count when the leaf would be too large.
@@ -269,19 +281,19 @@ fn split_point(order: &mut [u32], input: &Input, node: &Bounds) -> Option<usize>
 
 /// In-place partition (Hoare): elements satisfying `pred` first; returns their count.
 /// Deterministic, not stable.
-fn partition(order: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
-    let (mut i, mut j) = (0, order.len());
+fn partition<T>(items: &mut [T], pred: impl Fn(&T) -> bool) -> usize {
+    let (mut i, mut j) = (0, items.len());
     loop {
-        while i < j && pred(order[i]) {
+        while i < j && pred(&items[i]) {
             i += 1;
         }
-        while i < j && !pred(order[j - 1]) {
+        while i < j && !pred(&items[j - 1]) {
             j -= 1;
         }
         if i >= j {
             return i;
         }
-        order.swap(i, j - 1);
+        items.swap(i, j - 1);
         i += 1;
         j -= 1;
     }
@@ -300,6 +312,6 @@ mod tests {
         let mut sorted = v.clone();
         sorted.sort_unstable();
         assert_eq!(sorted, (0..100).collect::<Vec<_>>());
-        assert_eq!(partition(&mut [], |_| true), 0);
+        assert_eq!(partition(&mut [0u32; 0], |_| true), 0);
     }
 }
