@@ -76,7 +76,7 @@ impl KernelParams {
         if self.alpha_cull <= 0.0 {
             return self.cutoff;
         }
-        if !(opacity >= self.alpha_cull) {
+        if opacity.is_nan() || opacity < self.alpha_cull {
             return 0.0;
         }
         // 10⁻⁵ in the exponent covers the f32 rounding of opacity × response (a few ulps, and a

@@ -21,13 +21,13 @@ pub const MAX_PRIMITIVES: usize = 1 << COUNT_SHIFT;
 /// most WIDTH − 1 per level of the binary tree, whose depth [`STACK_DEPTH`] bounds.
 const WIDE_STACK: usize = (WIDTH - 1) * STACK_DEPTH + 1;
 
-/// One wide node, 128 bytes: the six bounding planes of the four children as lanes, lower x, y,
-/// z then upper x, y, z (so that a ray picks its near and far plane per axis by index); empty
-/// lanes are masked off by `count`.
+/// One wide node, 128 bytes: the bounding planes of the four children as lanes, `planes[axis][0]`
+/// the lower and `planes[axis][1]` the upper (so that a ray picks its near and far plane per axis
+/// by a 0/1 index); empty lanes are masked off by `count`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub struct Node4 {
-    planes: [Vec4; 6],
+    planes: [[Vec4; 2]; 3],
     child: [u32; WIDTH],
     count: u32,
 }
@@ -84,14 +84,7 @@ impl Bvh4 {
         }
         let index = self.nodes.len();
         self.nodes.push(Node4 {
-            planes: [
-                Vec4::INFINITY,
-                Vec4::INFINITY,
-                Vec4::INFINITY,
-                Vec4::NEG_INFINITY,
-                Vec4::NEG_INFINITY,
-                Vec4::NEG_INFINITY,
-            ],
+            planes: [[Vec4::INFINITY, Vec4::NEG_INFINITY]; 3],
             child: [0; WIDTH],
             count: children.len() as u32,
         });
@@ -100,8 +93,8 @@ impl Bvh4 {
             let r = if n.count > 0 { leaf_ref(n.first, n.count) } else { self.collapse(bvh, c) };
             let node = &mut self.nodes[index];
             for axis in 0..3 {
-                node.planes[axis][lane] = n.min[axis];
-                node.planes[3 + axis][lane] = n.max[axis];
+                node.planes[axis][0][lane] = n.min[axis];
+                node.planes[axis][1][lane] = n.max[axis];
             }
             node.child[lane] = r;
         }
@@ -138,11 +131,9 @@ impl Bvh4 {
         let (ox, oy, oz) = (Vec4::splat(ray.origin.x), Vec4::splat(ray.origin.y), Vec4::splat(ray.origin.z));
         let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
         let t_min = Vec4::splat(ray.t_min);
-        // Each axis's near plane is the lower one where the ray goes up the axis.
-        let [near, far] = [0, 3].map(|side| {
-            let plane = |axis: usize, i: f32| axis + if (i >= 0.0) == (side == 0) { 0 } else { 3 };
-            [plane(0, inv.x), plane(1, inv.y), plane(2, inv.z)]
-        });
+        // Each axis's near plane is the lower one (0) where the ray goes up the axis, else the
+        // upper one (1); the far plane is the other.
+        let near = [inv.x, inv.y, inv.z].map(|i| usize::from(i < 0.0));
         let mut stack = [(0u32, 0.0f32); WIDE_STACK];
         let mut top = 0usize;
         let mut current = root;
@@ -156,14 +147,17 @@ impl Bvh4 {
                 // Slab test of the four children: the arithmetic of `super::slab`, with the min
                 // and max of each axis's two distances taken by choosing the planes (1/d is
                 // finite and non-zero, so its sign orders them).
-                let tx = ((n.planes[near[0]] - ox) * ix, (n.planes[far[0]] - ox) * ix);
-                let ty = ((n.planes[near[1]] - oy) * iy, (n.planes[far[1]] - oy) * iy);
-                let tz = ((n.planes[near[2]] - oz) * iz, (n.planes[far[2]] - oz) * iz);
+                let [px, py, pz] = &n.planes;
+                let tx = ((px[near[0]] - ox) * ix, (px[near[0] ^ 1] - ox) * ix);
+                let ty = ((py[near[1]] - oy) * iy, (py[near[1] ^ 1] - oy) * iy);
+                let tz = ((pz[near[2]] - oz) * iz, (pz[near[2] ^ 1] - oz) * iz);
                 let enter = tx.0.max(ty.0).max(tz.0).max(t_min);
                 let exit = tx.1.min(ty.1).min(tz.1).min(Vec4::splat(*t_max));
                 let mask = enter.cmple(exit).bitmask() & ((1 << n.count) - 1);
                 if mask != 0 {
-                    // Go on with the nearest child; push the others far to near.
+                    // Go on with the nearest child; push the others far to near. (Lanes are
+                    // read from an array: glam's `Vec4` indexing is a jump table.)
+                    let enter = enter.to_array();
                     let lane = mask.trailing_zeros() as usize;
                     let mut nearest = (n.child[lane], enter[lane]);
                     let mut rest = mask & (mask - 1);
