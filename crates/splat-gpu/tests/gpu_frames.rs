@@ -151,18 +151,21 @@ fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
         let worst = cpu.mean.data().iter().zip(gpu.mean.data()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(worst < 1e-4, "{method:?}: GPU differs from CPU by {worst}");
     }
-    // 12,000 particles on one line, too faint ever to be hit (alpha below the 1/255 cull): a
-    // single stochastic traversal visits every one.
+    // 12,000 particles of opacity 0.5 on one line, and every draw raised by 0.6 (the u_shift
+    // test hook lowers u by −0.6), so that no particle is ever accepted: a single stochastic
+    // traversal visits every one. (Particles below the 1/255 cull would not do: their bounds are
+    // empty, and no ray visits them.)
     let particles = (0..12_000)
         .map(|i| {
             let mean = glam::Vec3::new(0.0, 0.0, 1.0 + i as f32 * 0.01);
-            splat_core::Particle::with_rgb(mean, glam::Vec3::splat(0.02), glam::Quat::IDENTITY, 0.003, glam::Vec3::ONE)
+            splat_core::Particle::with_rgb(mean, glam::Vec3::splat(0.2), glam::Quat::IDENTITY, 0.5, glam::Vec3::ONE)
         })
         .collect();
     let line = splat_core::Scene { particles, sh_degree: 0 };
     let camera = splat_core::Camera::look_at(glam::Vec3::ZERO, glam::Vec3::Z, glam::Vec3::Y, 1.0, 4, 4).unwrap();
     let trace = TraceScene::new(&line, RenderSettings::default()).unwrap();
-    match tracer(ctx, &trace).render(&camera, &Method::Stochastic, &Frames::default()) {
+    let never = Frames { u_shift: -0.6, ..Frames::default() };
+    match tracer(ctx, &trace).render(&camera, &Method::Stochastic, &never) {
         Err(e @ GpuError::LoopBudget { .. }) => assert!(e.to_string().contains("--backend cpu"), "{e}"),
         Err(e) => panic!("unexpected error {e}"),
         Ok((_, stats)) => panic!("accepted {} loop iterations with {} lanes", stats.loop_iterations, ctx.lanes()),

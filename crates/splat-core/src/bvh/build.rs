@@ -303,6 +303,26 @@ fn partition<T>(items: &mut [T], pred: impl Fn(&T) -> bool) -> usize {
 mod tests {
     use super::*;
 
+    /// The same tree on one thread and on four, over enough boxes (80 000) that the parallel
+    /// subtrees and the chunked binning both run.
+    #[cfg(feature = "rayon")]
+    #[test]
+    fn the_tree_does_not_depend_on_the_thread_count() {
+        let mut rng = crate::rng::SplitMix64::new(17);
+        let boxes: Vec<Aabb> = (0..80_000)
+            .map(|_| {
+                let c = glam::Vec3::new(rng.range(-9.0, 9.0), rng.range(-9.0, 9.0), rng.range(-1.0, 1.0));
+                let h = glam::Vec3::splat(rng.range(0.001, 0.1));
+                Aabb { min: c - h, max: c + h }
+            })
+            .collect();
+        let on =
+            |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| build(&boxes));
+        let (one, four) = (on(1), on(4));
+        assert!(one.0 == four.0 && one.1 == four.1, "the trees differ");
+        assert!(PARALLEL_BINNING < boxes.len() && one.0.len() > 2 * PARALLEL_SUBTREE / MAX_LEAF as usize);
+    }
+
     #[test]
     fn partition_puts_matches_first() {
         let mut v: Vec<u32> = (0..100).rev().collect();
