@@ -409,14 +409,17 @@ impl<'a> TraceScene<'a> {
 
     /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3.
     pub fn exact(&self, ray: &Ray) -> Sample {
-        let mut hits = Vec::new();
+        // Collect (t, id) and sort those small records, then shade in order: the order of
+        // `composite::sort_front_to_back`, with shading once per hit as before.
+        let mut found = Vec::with_capacity(64);
         let mut t_max = ray.t_max;
         self.wide.traverse(ray, &mut t_max, |leaf, _| {
             if let Some(h) = self.hit(leaf, ray) {
-                hits.push(self.shade(leaf, h.t, h.alpha, ray));
+                found.push(Slot { t: h.t, id: h.index, leaf, alpha: h.alpha });
             }
         });
-        crate::composite::sort_front_to_back(&mut hits);
+        found.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.id.cmp(&b.id)));
+        let hits: Vec<ShadedHit> = found.iter().map(|s| self.shade(s.leaf, s.t, s.alpha, ray)).collect();
         let c = composite(&hits, self.settings.iso_threshold);
         Sample {
             color: c.color_over(self.settings.background),
