@@ -75,6 +75,12 @@ pub trait Decide {
             *u = self.particle(id, s, hit);
         }
     }
+    /// The draws of every particle in the slots `first_slot..first_slot + n` of one traversal,
+    /// as a function `(id, hit, out)` prepared once before it ([`Decide::particles`] unless a
+    /// generator can share work across the particles).
+    fn slot_draws(&self, first_slot: u32, n: usize) -> impl Fn(u32, Vec3, &mut [f32]) {
+        move |id, hit, out: &mut [f32]| self.particles(id, first_slot, hit, &mut out[..n])
+    }
     /// u ∈ [0, 1) of pass `pass`.
     fn pass(&self, pass: u32) -> f32;
     /// Russian roulette (Sun et al. 2025, Algorithm 1, line 6): particle `id` with alpha α is
@@ -105,6 +111,11 @@ impl Decide for RayRng {
     #[inline(always)]
     fn particles(&self, id: u32, first_slot: u32, hit: Vec3, out: &mut [f32]) {
         RayRng::particles(self, id, first_slot, hit, out)
+    }
+    #[inline(always)]
+    fn slot_draws(&self, first_slot: u32, n: usize) -> impl Fn(u32, Vec3, &mut [f32]) {
+        let draws = RayRng::slot_draws(self, first_slot, n);
+        move |id, hit, out: &mut [f32]| draws.draw(id, hit, out)
     }
     fn pass(&self, pass: u32) -> f32 {
         RayRng::pass(self, pass)

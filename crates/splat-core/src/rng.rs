@@ -49,19 +49,32 @@ mod tests {
     }
 }
 
+const XX_P2: u32 = 2_246_822_519;
+const XX_P3: u32 = 3_266_489_917;
+const XX_P4: u32 = 668_265_263;
+const XX_P5: u32 = 374_761_393;
+
 /// xxhash32 of three words (Jarzynski & Olano 2020, the hash of vk_gaussian_splatting).
-#[inline]
+#[inline(always)]
 pub fn xxhash32(p: [u32; 3]) -> u32 {
-    const P2: u32 = 2_246_822_519;
-    const P3: u32 = 3_266_489_917;
-    const P4: u32 = 668_265_263;
-    const P5: u32 = 374_761_393;
-    let mut h = p[2].wrapping_add(P5).wrapping_add(p[0].wrapping_mul(P3));
-    h = P4.wrapping_mul(h.rotate_left(17));
-    h = h.wrapping_add(p[1].wrapping_mul(P3));
-    h = P4.wrapping_mul(h.rotate_left(17));
-    h = P2.wrapping_mul(h ^ (h >> 15));
-    h = P3.wrapping_mul(h ^ (h >> 13));
+    xxhash32_tail(xxhash32_head(p[0], p[2]), p[1])
+}
+
+/// The first round of [`xxhash32`], which reads words 0 and 2 only: a draw keyed by (pixel,
+/// particle, slot) computes it once per (pixel, slot).
+#[inline(always)]
+pub fn xxhash32_head(p0: u32, p2: u32) -> u32 {
+    let h = p2.wrapping_add(XX_P5).wrapping_add(p0.wrapping_mul(XX_P3));
+    XX_P4.wrapping_mul(h.rotate_left(17))
+}
+
+/// The rest of [`xxhash32`]: word 1 mixed into a [`xxhash32_head`], then the avalanche.
+#[inline(always)]
+pub fn xxhash32_tail(head: u32, p1: u32) -> u32 {
+    let mut h = head.wrapping_add(p1.wrapping_mul(XX_P3));
+    h = XX_P4.wrapping_mul(h.rotate_left(17));
+    h = XX_P2.wrapping_mul(h ^ (h >> 15));
+    h = XX_P3.wrapping_mul(h ^ (h >> 13));
     h ^ (h >> 16)
 }
 
@@ -123,6 +136,36 @@ pub enum RngScheme {
 pub const PASS_ID: u32 = u32::MAX;
 /// Particle id reserved for the trig hash's per-slot offsets.
 pub const OFFSET_ID: u32 = u32::MAX - 1;
+/// Most slots one [`SlotDraws`] holds (the largest n of `stochastic-n`).
+pub const MAX_SLOT_DRAWS: usize = 64;
+
+/// The draws of one pixel's slots, prepared once per traversal ([`RayRng::slot_draws`]).
+#[derive(Clone, Copy, Debug)]
+pub struct SlotDraws {
+    rng: RayRng,
+    first_slot: u32,
+    heads: [u32; MAX_SLOT_DRAWS],
+    n: usize,
+}
+
+impl SlotDraws {
+    /// u of particle `id` in each slot, into `out` (at most the prepared n):
+    /// [`RayRng::particle`] slot by slot, bit for bit.
+    #[inline(always)]
+    pub fn draw(&self, id: u32, hit: glam::Vec3, out: &mut [f32]) {
+        let out = &mut out[..self.n];
+        if self.rng.scheme != RngScheme::Hash {
+            for (s, u) in (self.first_slot..).zip(out.iter_mut()) {
+                *u = self.rng.particle(id, s, hit);
+            }
+            return;
+        }
+        for (u, &head) in out.iter_mut().zip(&self.heads) {
+            *u = unit_f32(pcg(xxhash32_tail(head, id))) - self.rng.u_shift;
+        }
+    }
+}
+
 /// Largest particle count: ids up to `MAX_PARTICLES − 1` never collide with the reserved ones.
 pub const MAX_PARTICLES: usize = (u32::MAX - 1) as usize;
 
@@ -181,19 +224,25 @@ impl RayRng {
     }
 
     /// [`RayRng::particle`] for the slots `first_slot..first_slot + out.len()`: the same
-    /// numbers, in a loop the compiler vectorizes (the hash's words that depend on the slot
-    /// alone are hoisted out of it).
+    /// numbers, in a loop the compiler vectorizes.
     #[inline(always)]
     pub fn particles(&self, id: u32, first_slot: u32, hit: glam::Vec3, out: &mut [f32]) {
-        if self.scheme != RngScheme::Hash {
-            for (s, u) in (first_slot..).zip(out.iter_mut()) {
-                *u = self.particle(id, s, hit);
+        self.slot_draws(first_slot, out.len()).draw(id, hit, out);
+    }
+
+    /// The draws of the slots `first_slot..first_slot + n` (n ≤ [`MAX_SLOT_DRAWS`]) with the
+    /// first round of the hash, which depends on the pixel and the slot only, done once: what
+    /// one traversal of `stochastic-n` asks for every particle it visits.
+    #[inline(always)]
+    pub fn slot_draws(&self, first_slot: u32, n: usize) -> SlotDraws {
+        assert!(n <= MAX_SLOT_DRAWS, "{n} slots exceed {MAX_SLOT_DRAWS}");
+        let mut heads = [0u32; MAX_SLOT_DRAWS];
+        if self.scheme == RngScheme::Hash {
+            for (s, h) in (first_slot..).zip(&mut heads[..n]) {
+                *h = xxhash32_head(self.pixel_seed, s);
             }
-            return;
         }
-        for (s, u) in (first_slot..).zip(out.iter_mut()) {
-            *u = unit_f32(pcg(xxhash32([self.pixel_seed, id, s]))) - self.u_shift;
-        }
+        SlotDraws { rng: *self, first_slot, heads, n }
     }
 
     /// u ∈ [0, 1) deciding whether pass `pass` is accepted (stochastic pass).

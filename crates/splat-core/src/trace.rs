@@ -519,11 +519,12 @@ impl<'a> TraceScene<'a> {
         let mut best = [Slot::EMPTY; MAX_SLOTS];
         let mut u = [0.0f32; MAX_SLOTS];
         let mut t_max = ray.t_max;
+        let draw = decide.slot_draws(first_slot, n);
         self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
             let id = self.ids[leaf as usize];
             if early {
                 let bound = self.alpha_bound[leaf as usize];
-                decide.particles(id, first_slot, Vec3::ZERO, &mut u[..n]);
+                draw(id, Vec3::ZERO, &mut u[..n]);
                 if u[..n].iter().all(|&us| us >= bound) {
                     return;
                 }
