@@ -82,7 +82,7 @@ impl KernelParams {
         // 10⁻⁵ in the exponent covers the f32 rounding of opacity × response (a few ulps, and a
         // response that rounds to 1 near the centre for high degrees).
         let x = ((f64::from(opacity) / f64::from(self.alpha_cull)).ln() + 1e-5) / 4.5;
-        let d2 = 9.0 * x.powf(2.0 / f64::from(self.degree));
+        let d2 = 9.0 * if self.degree == 2 { x } else { x.powf(2.0 / f64::from(self.degree)) };
         let widened = (d2 * 1.001).sqrt();
         (widened as f32).min(self.cutoff)
     }

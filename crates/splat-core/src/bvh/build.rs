@@ -9,7 +9,7 @@ use crate::par::{join, map};
 use crate::particle::Aabb;
 use glam::Vec3A;
 
-/// Bins per axis of the SAH sweep.
+/// Bins per axis of the SAH sweep (a node of n < 16 primitives uses n).
 const BINS: usize = 16;
 /// Cost of visiting a node relative to testing one primitive.
 const TRAVERSAL_COST: f32 = 1.0;
@@ -182,10 +182,10 @@ impl Bins {
     }
 }
 
-/// The bin of a centroid along one axis of the centroid box.
+/// The bin of a centroid along one axis of the centroid box, of `k` bins.
 #[inline(always)]
-fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
-    (((c - lo) * scale) as usize).min(BINS - 1)
+fn bin_index(c: f32, lo: f32, scale: f32, k: usize) -> usize {
+    (((c - lo) * scale) as usize).min(k - 1)
 }
 
 /// The node's bounds over `refs` (in parallel chunks for the largest nodes, merged in chunk
@@ -199,9 +199,10 @@ fn bounds(refs: &[PrimRef]) -> Bounds {
     })
 }
 
-/// Per-axis bins over the centroid box `cb` (chunked like [`bounds`]; integer sums are exact).
-fn bin(refs: &[PrimRef], cb: &Box3) -> Bins {
-    let scale = Vec3A::splat(BINS as f32) / (cb.max - cb.min);
+/// Per-axis bins, `k` of them, over the centroid box `cb` (chunked like [`bounds`]; integer
+/// sums are exact).
+fn bin(refs: &[PrimRef], cb: &Box3, k: usize) -> Bins {
+    let scale = Vec3A::splat(k as f32) / (cb.max - cb.min);
     let extent = cb.max - cb.min;
     let axes = [0, 1, 2].map(|a| extent[a] > 0.0);
     let fill = |chunk: &[PrimRef]| {
@@ -209,9 +210,9 @@ fn bin(refs: &[PrimRef], cb: &Box3) -> Bins {
         for r in chunk {
             let (c, bx) = (r.centroid(), r.bounds());
             for axis in (0..3).filter(|&a| axes[a]) {
-                let k = bin_index(c[axis], cb.min[axis], scale[axis]);
-                b.counts[axis][k] += 1;
-                b.boxes[axis][k] = b.boxes[axis][k].union(bx);
+                let i = bin_index(c[axis], cb.min[axis], scale[axis], k);
+                b.counts[axis][i] += 1;
+                b.boxes[axis][i] = b.boxes[axis][i].union(bx);
             }
         }
         b
@@ -240,18 +241,19 @@ fn split_point(refs: &mut [PrimRef], node: &Bounds) -> Option<usize> {
         return None;
     }
     let cb = node.centroids;
-    let bins = bin(refs, &cb);
+    let k = n.min(BINS);
+    let bins = bin(refs, &cb, k);
     let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, bin boundary)
     for axis in 0..3 {
         let (counts, boxes) = (&bins.counts[axis], &bins.boxes[axis]);
         let mut right_area = [0.0f32; BINS];
         let mut acc = Box3::EMPTY;
-        for b in (1..BINS).rev() {
+        for b in (1..k).rev() {
             acc = acc.union(boxes[b]);
             right_area[b] = acc.area();
         }
         let (mut left, mut left_count) = (Box3::EMPTY, 0usize);
-        for b in 1..BINS {
+        for b in 1..k {
             left = left.union(boxes[b - 1]);
             left_count += counts[b - 1] as usize;
             let right_count = n - left_count;
@@ -267,8 +269,8 @@ fn split_point(refs: &mut [PrimRef], node: &Bounds) -> Option<usize> {
     let parent_area = node.bounds.area().max(f32::MIN_POSITIVE);
     match best {
         Some((cost, axis, boundary)) if TRAVERSAL_COST + cost / parent_area < n as f32 || n > MAX_LEAF as usize => {
-            let scale = BINS as f32 / (cb.max[axis] - cb.min[axis]);
-            let goes_left = |r: &PrimRef| bin_index(r.centroid()[axis], cb.min[axis], scale) < boundary;
+            let scale = k as f32 / (cb.max[axis] - cb.min[axis]);
+            let goes_left = |r: &PrimRef| bin_index(r.centroid()[axis], cb.min[axis], scale, k) < boundary;
             // The bins counted both sides non-empty with this very test, so neither side is.
             Some(partition(refs, goes_left))
         }
