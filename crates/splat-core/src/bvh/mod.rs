@@ -1,4 +1,4 @@
-//! Bounding volume hierarchy over particle boxes: a parallel binned SAH build ([`build`]),
+//! Bounding volume hierarchy over particle boxes: a parallel binned SAH build ([`Bvh::build`]),
 //! flattened binary nodes (the layout the GPU traverses), their 4-wide collapse that the CPU
 //! traverses ([`Bvh4`]), and stack traversals that visit children front to back and let the
 //! caller shrink t_max, so that an accepted hit clips the rest of the ray.
