@@ -110,6 +110,16 @@ pub const NOT_BUILT: &str = "the Embree peer was not compiled: Embree 3's header
      (/usr/include/embree3/rtcore.h; Debian: `apt-get install libembree-dev`, which `cargo xtask bench` \
      does as root); rebuild after installing";
 
+/// How far two RGB images (row-major, 3 floats a pixel) are apart: the largest channel
+/// difference, and the number of pixels with a channel more than 1e-4 apart (a different
+/// decision, not float noise).
+pub fn difference(a: &[f32], b: &[f32]) -> (f32, usize) {
+    let max = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
+    let apart =
+        a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| (x - y).abs() > 1e-4)).count();
+    (max, apart)
+}
+
 /// Whether the C++ peer is compiled into this build.
 pub const fn available() -> bool {
     cfg!(embree)

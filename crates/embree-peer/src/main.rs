@@ -5,7 +5,7 @@
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
-use embree_peer::{EmbreePeer, PeerBounds, PeerMethod};
+use embree_peer::{EmbreePeer, PeerBounds, PeerMethod, difference};
 use glam::Vec3;
 use splat_core::frame::Frames;
 use splat_core::rng::frame_key;
@@ -146,12 +146,4 @@ fn main() -> Result<()> {
         rays as u64
     );
     Ok(())
-}
-
-/// Largest channel difference, and the number of pixels with a channel more than 1e-4 apart.
-fn difference(a: &[f32], b: &[f32]) -> (f32, usize) {
-    let max = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
-    let apart =
-        a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| (x - y).abs() > 1e-4)).count();
-    (max, apart)
 }

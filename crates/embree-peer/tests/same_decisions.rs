@@ -9,11 +9,10 @@ use splat_core::rng::frame_key;
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{RenderSettings, scenes};
 
-/// Largest channel difference and the share of pixels with a channel more than 1e-4 apart.
+/// Largest channel difference and the share of pixels apart ([`embree_peer::difference`]).
 fn compare(a: &[f32], b: &[f32]) -> (f32, f64) {
-    let max = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
-    let apart = a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| (x - y).abs() > 1e-4));
-    (max, apart.count() as f64 / (a.len() / 3) as f64)
+    let (max, apart) = embree_peer::difference(a, b);
+    (max, apart as f64 / (a.len() / 3) as f64)
 }
 
 /// Opaque, stochastic (Algorithm 1) and exact agree with splat-core to float noise on two

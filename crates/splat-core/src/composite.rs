@@ -27,10 +27,15 @@ pub struct ShadedHit {
     pub index: u32,
 }
 
-/// Sort hits front to back: by distance, ties by particle index, so the order is total and
-/// does not depend on the order the hits were found in.
+/// The front-to-back order of two hits (t, id): by distance, ties by particle index, so the order
+/// is total and does not depend on the order the hits were found in.
+pub fn depth_order(t: f32, id: u32, other_t: f32, other_id: u32) -> std::cmp::Ordering {
+    t.total_cmp(&other_t).then(id.cmp(&other_id))
+}
+
+/// Sort hits front to back by [`depth_order`].
 pub fn sort_front_to_back(hits: &mut [ShadedHit]) {
-    hits.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.index.cmp(&b.index)));
+    hits.sort_unstable_by(|a, b| depth_order(a.t, a.index, b.t, b.index));
 }
 
 /// Result of compositing one ray.

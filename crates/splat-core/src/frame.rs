@@ -67,19 +67,15 @@ pub trait Decide {
     fn needs_position(&self) -> bool;
     /// u ∈ [0, 1) of particle `id` in sample `slot`.
     fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32;
-    /// u of particle `id` in the samples `first_slot..first_slot + out.len()`, into `out`: what
-    /// [`Decide::particle`] gives slot by slot (a generator may batch it).
-    #[inline(always)]
-    fn particles(&self, id: u32, first_slot: u32, hit: Vec3, out: &mut [f32]) {
-        for (s, u) in (first_slot..).zip(out.iter_mut()) {
-            *u = self.particle(id, s, hit);
-        }
-    }
     /// The draws of every particle in the slots `first_slot..first_slot + n` of one traversal,
-    /// as a function `(id, hit, out)` prepared once before it ([`Decide::particles`] unless a
-    /// generator can share work across the particles).
+    /// as a function `(id, hit, out)` prepared once before it: [`Decide::particle`] slot by slot,
+    /// unless a generator can share work across the particles.
     fn slot_draws(&self, first_slot: u32, n: usize) -> impl Fn(u32, Vec3, &mut [f32]) {
-        move |id, hit, out: &mut [f32]| self.particles(id, first_slot, hit, &mut out[..n])
+        move |id, hit, out: &mut [f32]| {
+            for (s, u) in (first_slot..).zip(&mut out[..n]) {
+                *u = self.particle(id, s, hit);
+            }
+        }
     }
     /// u ∈ [0, 1) of pass `pass`.
     fn pass(&self, pass: u32) -> f32;
@@ -107,10 +103,6 @@ impl Decide for RayRng {
     #[inline(always)]
     fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
         RayRng::particle(self, id, slot, hit)
-    }
-    #[inline(always)]
-    fn particles(&self, id: u32, first_slot: u32, hit: Vec3, out: &mut [f32]) {
-        RayRng::particles(self, id, first_slot, hit, out)
     }
     #[inline(always)]
     fn slot_draws(&self, first_slot: u32, n: usize) -> impl Fn(u32, Vec3, &mut [f32]) {

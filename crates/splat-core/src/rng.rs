@@ -223,13 +223,6 @@ impl RayRng {
         }
     }
 
-    /// [`RayRng::particle`] for the slots `first_slot..first_slot + out.len()`: the same
-    /// numbers, in a loop the compiler vectorizes.
-    #[inline(always)]
-    pub fn particles(&self, id: u32, first_slot: u32, hit: glam::Vec3, out: &mut [f32]) {
-        self.slot_draws(first_slot, out.len()).draw(id, hit, out);
-    }
-
     /// The draws of the slots `first_slot..first_slot + n` (n ≤ [`MAX_SLOT_DRAWS`]) with the
     /// first round of the hash, which depends on the pixel and the slot only, done once: what
     /// one traversal of `stochastic-n` asks for every particle it visits.
@@ -452,14 +445,14 @@ mod hash_tests {
         RayRng::new(x, y, frame_key(1, frame), scheme).particle(id, slot, hit(id))
     }
 
-    /// The batched draws are the draws, for both generators and a shifted one.
+    /// The draws prepared per traversal are the draws, for both generators and a shifted one.
     #[test]
     fn batched_draws_equal_single_draws() {
         for scheme in [RngScheme::Hash, RngScheme::Trig] {
             let rng = RayRng::new(3, 4, frame_key(1, 2), scheme).shifted(0.01);
             let hit = glam::Vec3::new(0.1, 0.2, 0.3);
             let mut out = [0.0f32; 64];
-            rng.particles(77, 5, hit, &mut out);
+            rng.slot_draws(5, 64).draw(77, hit, &mut out);
             for (s, u) in (5..).zip(out) {
                 assert_eq!(u.to_bits(), rng.particle(77, s, hit).to_bits());
             }

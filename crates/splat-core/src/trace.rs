@@ -9,7 +9,7 @@
 
 use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
-use crate::composite::{ShadedHit, composite, shade_hit};
+use crate::composite::{ShadedHit, composite, depth_order, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
 use crate::par;
@@ -305,9 +305,12 @@ impl<'a> TraceScene<'a> {
                 scene.particles.len()
             )));
         }
-        let radii = par::map(&scene.particles, |p| bounding_radius(&settings, p.opacity));
-        let indices: Vec<u32> = (0..scene.particles.len() as u32).collect();
-        let boxes: Vec<Aabb> = par::map(&indices, |&i| scene.particles[i as usize].aabb(radii[i as usize]).padded());
+        let (radii, boxes): (Vec<f32>, Vec<Aabb>) = par::map(&scene.particles, |p| {
+            let radius = bounding_radius(&settings, p.opacity);
+            (radius, p.aabb(radius).padded())
+        })
+        .into_iter()
+        .unzip();
         let bvh = Bvh::build(&boxes);
         let wide = Bvh4::from_binary(&bvh);
         let prims = par::map(&bvh.order, |&i| PreparedParticle::new(&scene.particles[i as usize]));
@@ -409,8 +412,8 @@ impl<'a> TraceScene<'a> {
 
     /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3.
     pub fn exact(&self, ray: &Ray) -> Sample {
-        // Collect (t, id) and sort those small records, then shade in order: the order of
-        // `composite::sort_front_to_back`, with shading once per hit as before.
+        // Sort small (t, id) records by the order of `composite::sort_front_to_back`, then shade
+        // each hit once, in that order.
         let mut found = Vec::with_capacity(64);
         let mut t_max = ray.t_max;
         self.wide.traverse(ray, &mut t_max, |leaf, _| {
@@ -418,7 +421,7 @@ impl<'a> TraceScene<'a> {
                 found.push(Slot { t: h.t, id: h.index, leaf, alpha: h.alpha });
             }
         });
-        found.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.id.cmp(&b.id)));
+        found.sort_unstable_by(|a, b| depth_order(a.t, a.id, b.t, b.id));
         let hits: Vec<ShadedHit> = found.iter().map(|s| self.shade(s.leaf, s.t, s.alpha, ray)).collect();
         let c = composite(&hits, self.settings.iso_threshold);
         Sample {

@@ -157,24 +157,32 @@ fn slab(min: Vec3A, max: Vec3A, origin: Vec3A, inv: Vec3A, t_min: f32, t_max: f3
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::rng::SplitMix64;
 
-    fn random_boxes(n: usize, seed: u64) -> Vec<Aabb> {
+    /// `n` boxes centred in [−5, 5]³ with half-extents drawn in `half.0..half.1` per axis.
+    pub(super) fn random_boxes(n: usize, seed: u64, half: (Vec3, Vec3)) -> Vec<Aabb> {
         let mut rng = SplitMix64::new(seed);
         (0..n)
             .map(|_| {
                 let c = Vec3::new(rng.range(-5.0, 5.0), rng.range(-5.0, 5.0), rng.range(-5.0, 5.0));
-                let h = Vec3::new(rng.range(0.01, 0.5), rng.range(0.01, 0.5), rng.range(0.01, 0.5));
+                let h = Vec3::new(
+                    rng.range(half.0.x, half.1.x),
+                    rng.range(half.0.y, half.1.y),
+                    rng.range(half.0.z, half.1.z),
+                );
                 Aabb { min: c - h, max: c + h }
             })
             .collect()
     }
 
+    /// Half-extents of [`random_boxes`] for the binary tree's tests.
+    const HALF: (Vec3, Vec3) = (Vec3::splat(0.01), Vec3::splat(0.5));
+
     #[test]
     fn every_primitive_is_in_exactly_one_leaf_inside_its_ancestors() {
-        let boxes = random_boxes(2000, 3);
+        let boxes = random_boxes(2000, 3, HALF);
         let bvh = Bvh::build(&boxes);
         let mut seen = vec![0u32; boxes.len()];
         let mut stack = vec![(0usize, Aabb::EMPTY, true)];
@@ -201,7 +209,7 @@ mod tests {
 
     #[test]
     fn traversal_finds_every_box_the_ray_crosses() {
-        let boxes = random_boxes(3000, 9);
+        let boxes = random_boxes(3000, 9, HALF);
         let bvh = Bvh::build(&boxes);
         let mut rng = SplitMix64::new(11);
         for _ in 0..200 {

@@ -43,7 +43,7 @@ pub struct Bvh4 {
 }
 
 fn leaf_ref(first: u32, count: u32) -> u32 {
-    debug_assert!((1..=4).contains(&count) && (first as usize) < MAX_PRIMITIVES);
+    debug_assert!((1..=super::MAX_LEAF).contains(&count) && (first as usize) < MAX_PRIMITIVES);
     LEAF | ((count - 1) << COUNT_SHIFT) | first
 }
 
@@ -203,15 +203,9 @@ mod tests {
     use crate::rng::SplitMix64;
     use glam::Vec3;
 
+    /// Flat boxes (thin along z), as flat splats make them.
     fn random_boxes(n: usize, seed: u64) -> Vec<Aabb> {
-        let mut rng = SplitMix64::new(seed);
-        (0..n)
-            .map(|_| {
-                let c = Vec3::new(rng.range(-5.0, 5.0), rng.range(-5.0, 5.0), rng.range(-5.0, 5.0));
-                let h = Vec3::new(rng.range(0.001, 0.5), rng.range(0.001, 0.5), rng.range(0.001, 0.02));
-                Aabb { min: c - h, max: c + h }
-            })
-            .collect()
+        super::super::tests::random_boxes(n, seed, (Vec3::splat(0.001), Vec3::new(0.5, 0.5, 0.02)))
     }
 
     /// The leaf-order indices a traversal visits (sorted) and its final t_max; with `hit`, each
