@@ -6,12 +6,14 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
+use splat_core::lighting::{Lighting, Look, Shadows};
 use splat_core::normal::NormalMode;
 use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::trace::Method;
 use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene, scenes};
 use splat_io::ply::{PlyOptions, read_ply_with};
+use splat_io::world::World;
 use std::path::PathBuf;
 
 /// Rendering method.
@@ -227,10 +229,45 @@ pub enum NormalArg {
     Ellipsoid,
 }
 
+/// Integration of the sorted methods when lit.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum LookArg {
+    /// Integrate radiance and normal, light once at the iso-opacity depth (hard, surface-like).
+    Surface,
+    /// Light every hit, then integrate (soft; the expectation of the stochastic methods).
+    Volumetric,
+}
+
+/// Shadow rays of the ray-tracing methods.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ShadowsArg {
+    /// No shadows.
+    None,
+    /// vk_gaussian_splatting: one pass of --k sorted hits, in shadow below transmittance 0.8.
+    Sorted,
+    /// One traversal, Russian roulette on α, blocked at the first accept (unbiased).
+    Stochastic,
+    /// The exact transmittance Π(1 − α) (the stochastic shadow's expectation).
+    Exact,
+}
+
+/// A scene with its lighting, camera and render settings, ready to render.
+pub struct Loaded {
+    /// Particles of every set.
+    pub scene: Scene,
+    /// The camera.
+    pub camera: Camera,
+    /// Materials, lights and shadows (emissive for a bare scene file).
+    pub lighting: Lighting,
+    /// Render settings, with the world's background unless --background is given.
+    pub settings: RenderSettings,
+}
+
 /// Scene, camera and shading options shared by `render`, `converge` and `bench`.
 #[derive(Args, Clone)]
 pub struct SceneArgs {
-    /// Scene file (.ply or .splat). Without one, the built-in demo scene is used.
+    /// Scene file (.ply or .splat) or world file (.toml: splat sets, materials, lights, camera;
+    /// see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
     /// INRIA cameras.json; without it the camera frames the scene (or the demo's own camera).
     #[arg(long)]
@@ -256,9 +293,18 @@ pub struct SceneArgs {
     /// Vertical field of view in degrees for --eye/--target.
     #[arg(long, default_value_t = 50.0)]
     pub fov: f32,
-    /// Background colour "r,g,b" behind the particles.
-    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
-    pub background: Vec3,
+    /// Background colour "r,g,b" behind the particles [default: the world's, else 0,0,0].
+    #[arg(long, value_parser = parse_vec3)]
+    pub background: Option<Vec3>,
+    /// Drop the SH bands above this degree (0–3), removing some baked lighting before relighting.
+    #[arg(long)]
+    pub sh_degree: Option<u8>,
+    /// Lit worlds: integration of the sorted methods [default: the world's, else surface].
+    #[arg(long, value_enum)]
+    pub look: Option<LookArg>,
+    /// Lit worlds: shadow rays of the ray-tracing methods [default: the world's, else none].
+    #[arg(long, value_enum)]
+    pub shadows: Option<ShadowsArg>,
     /// Hit distance convention.
     #[arg(long, value_enum, default_value = "mean")]
     pub hit_distance: HitArg,
@@ -289,15 +335,50 @@ impl SceneArgs {
     /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
     /// a look-at or framing camera when none is given.
     pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera)> {
-        let (scene, default_camera) = match &self.scene {
-            Some(path) => (load_scene(path, self.allow_unknown_properties)?, None),
+        let loaded = self.load_world(width, height)?;
+        if loaded.lighting.is_on() {
+            bail!("this command renders unlit radiance; a lit world renders with `splat render`");
+        }
+        Ok((loaded.scene, loaded.camera))
+    }
+
+    /// Load the scene, world file or demo with its lighting, apply --sh-degree, --look,
+    /// --shadows and --background, and choose the camera.
+    pub fn load_world(&self, width: u32, height: u32) -> Result<Loaded> {
+        let is_world = |p: &std::path::Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        let world = match &self.scene {
+            Some(path) if is_world(path) => splat_io::world::read_world(path)?,
+            Some(path) => World::of(load_scene(path, self.allow_unknown_properties)?),
             None => {
                 let (scene, camera) = scenes::demo();
-                (scene, Some(camera))
+                World { camera: Some(camera), ..World::of(scene) }
             }
         };
-        let camera = self.choose_camera(&scene, default_camera, width, height)?;
-        Ok((scene, camera))
+        let World { mut scene, mut lighting, camera, background } = world;
+        if let Some(degree) = self.sh_degree {
+            if degree > 3 {
+                bail!("--sh-degree {degree} is above 3");
+            }
+            splat_io::world::truncate_sh(&mut scene, degree);
+        }
+        if let Some(look) = self.look {
+            lighting.look = match look {
+                LookArg::Surface => Look::Surface,
+                LookArg::Volumetric => Look::Volumetric,
+            };
+        }
+        if let Some(shadows) = self.shadows {
+            lighting.shadows = match shadows {
+                ShadowsArg::None => Shadows::None,
+                ShadowsArg::Sorted => Shadows::SORTED,
+                ShadowsArg::Stochastic => Shadows::Stochastic,
+                ShadowsArg::Exact => Shadows::Exact,
+            };
+        }
+        let camera = self.choose_camera(&scene, camera, width, height)?;
+        let settings =
+            RenderSettings { background: self.background.or(background).unwrap_or(Vec3::ZERO), ..self.settings() };
+        Ok(Loaded { scene, camera, lighting, settings })
     }
 
     /// The render settings these options describe.
@@ -312,7 +393,7 @@ impl SceneArgs {
                 NormalArg::Plane => NormalMode::MaxDensityPlane,
                 NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
             },
-            background: self.background,
+            background: self.background.unwrap_or(Vec3::ZERO),
             iso_threshold: self.iso_threshold,
             ..RenderSettings::default()
         }

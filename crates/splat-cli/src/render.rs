@@ -1,10 +1,11 @@
 //! `splat render`: one image of a scene, read as four steps: resolve the method, choose the
 //! backend, render, write.
 
-use crate::args::{BackendArg, MethodArg, MethodOptions, SceneArgs, progress_bar};
+use crate::args::{BackendArg, Loaded, MethodArg, MethodOptions, SceneArgs, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::frame::{Frames, RenderOutput};
+use splat_core::lighting::Lighting;
 use splat_core::trace::TraceScene;
 use splat_core::{Algorithm, Camera, RenderSettings, Scene};
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
@@ -52,18 +53,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
     for path in outputs.into_iter().flatten() {
         ImageFormat::from_path(path)?;
     }
-    let (scene, camera) = args.scene.load(640, 480)?;
-    let settings = args.scene.settings();
+    let Loaded { scene, camera, lighting, settings } = args.scene.load_world(640, 480)?;
     let algorithm = args.options.resolve(args.method);
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
-    let gpu = choose_gpu(&args, &algorithm)?;
+    let gpu = choose_gpu(&args, &algorithm, &lighting)?;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
     let out = match &gpu {
         Some(ctx) => render_gpu(&args, ctx, &scene, &camera, &settings, &algorithm, &frames)?,
         None => {
             let progress = |n| bar.inc(n);
-            args.scene.pool()?.install(|| algorithm.render(&scene, &camera, &settings, &frames, &progress))?
+            let render = || algorithm.render_lit(&scene, &camera, &settings, &lighting, &frames, &progress);
+            args.scene.pool()?.install(render)?
         }
     };
     bar.finish_and_clear();
@@ -83,8 +84,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
 
 /// Whether the GPU renders `algorithm` with the images `args` asks for (the backends' own
 /// `supports` decide the methods).
-fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm) -> Result<(), GpuError> {
+fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> Result<(), GpuError> {
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
+    if lighting.is_on() {
+        return unsupported("lit worlds render on the CPU backend only for now: add --backend cpu");
+    }
     match algorithm {
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
         Algorithm::Trace(method) => {
@@ -110,13 +114,15 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm) -> Result<(), GpuError
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
 /// with the reason when the GPU cannot render this), `auto` takes a hardware GPU when one is
 /// found and it renders this, `cpu` never.
-fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm) -> Result<Option<GpuContext>> {
+fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> Result<Option<GpuContext>> {
     match args.scene.backend {
         BackendArg::Gpu => {
-            gpu_supports(args, algorithm)?;
+            gpu_supports(args, algorithm, lighting)?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if gpu_supports(args, algorithm).is_ok() => crate::args::gpu_context(BackendArg::Auto),
+        BackendArg::Auto if gpu_supports(args, algorithm, lighting).is_ok() => {
+            crate::args::gpu_context(BackendArg::Auto)
+        }
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
 }

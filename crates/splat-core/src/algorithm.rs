@@ -3,6 +3,7 @@
 
 use crate::camera::Camera;
 use crate::frame::{Frames, Progress, RenderOutput};
+use crate::lighting::Lighting;
 use crate::oracle::render_oracle;
 use crate::particle::Scene;
 use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster};
@@ -30,8 +31,8 @@ impl Algorithm {
         }
     }
 
-    /// Render `frames` on the CPU (one frame for a deterministic method). `progress` receives
-    /// finished pixel counts.
+    /// Render `frames` on the CPU (one frame for a deterministic method), unlit. `progress`
+    /// receives finished pixel counts.
     pub fn render(
         &self,
         scene: &Scene,
@@ -40,14 +41,32 @@ impl Algorithm {
         frames: &Frames,
         progress: Progress,
     ) -> Result<RenderOutput, RenderError> {
+        self.render_lit(scene, camera, settings, &Lighting::default(), frames, progress)
+    }
+
+    /// Render `frames` on the CPU lit by `lighting` ([`crate::lighting`]); with the default
+    /// (emissive) lighting this is exactly [`Algorithm::render`]. The brute-force oracle renders
+    /// radiance only: lit references are `exact` in each look.
+    pub fn render_lit(
+        &self,
+        scene: &Scene,
+        camera: &Camera,
+        settings: &RenderSettings,
+        lighting: &Lighting,
+        frames: &Frames,
+        progress: Progress,
+    ) -> Result<RenderOutput, RenderError> {
         match self {
+            Algorithm::Oracle if lighting.is_on() => Err(RenderError::Settings(
+                "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
+            )),
             Algorithm::Oracle => render_oracle(scene, camera, settings, progress),
             Algorithm::Trace(method) => {
-                let trace = TraceScene::new(scene, *settings)?;
+                let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?;
                 render_frames(&trace, camera, method, frames, progress)
             }
             Algorithm::Raster(method, raster) => {
-                let r = Rasterizer::new(scene, camera, *settings, *raster)?;
+                let r = Rasterizer::new(scene, camera, *settings, *raster)?.with_lighting(lighting.clone())?;
                 render_raster(&r, method, frames, progress)
             }
         }

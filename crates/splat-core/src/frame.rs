@@ -14,7 +14,7 @@ use crate::rng::{RayRng, RngScheme, frame_key};
 use crate::settings::RenderError;
 use crate::stats::Welford;
 use crate::tile::{map_tiles, tile_coords};
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 /// Receives the number of pixels finished since its last call (a progress bar, or `&|_| {}`).
 pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
@@ -79,6 +79,11 @@ pub trait Decide {
     }
     /// u ∈ [0, 1) of pass `pass`.
     fn pass(&self, pass: u32) -> f32;
+    /// A point of [0, 1)² choosing where on area light `light` the sample of slot `slot` is lit
+    /// from (soft shadows); the emitter's centre unless a generator overrides it.
+    fn light_sample(&self, _light: u32, _slot: u32) -> Vec2 {
+        Vec2::splat(0.5)
+    }
     /// Russian roulette (Sun et al. 2025, Algorithm 1, line 6): particle `id` with alpha α is
     /// accepted when u < α, so with probability α.
     fn accepts(&self, _id: u32, u: f32, alpha: f32) -> bool {
@@ -111,6 +116,9 @@ impl Decide for RayRng {
     }
     fn pass(&self, pass: u32) -> f32 {
         RayRng::pass(self, pass)
+    }
+    fn light_sample(&self, light: u32, slot: u32) -> Vec2 {
+        RayRng::light_sample(self, light, slot)
     }
     fn covers(&self, alpha: f32, reference: f32) -> bool {
         alpha > reference - self.u_shift

@@ -32,6 +32,7 @@ pub mod frame;
 pub mod hit;
 pub mod image;
 pub mod kernel;
+pub mod lighting;
 pub mod normal;
 pub mod oracle;
 mod par;

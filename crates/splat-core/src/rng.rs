@@ -136,6 +136,8 @@ pub enum RngScheme {
 pub const PASS_ID: u32 = u32::MAX;
 /// Particle id reserved for the trig hash's per-slot offsets.
 pub const OFFSET_ID: u32 = u32::MAX - 1;
+/// Particle id reserved for area-light samples (ids − 2 and − 3 are the rasterizer's).
+pub const LIGHT_ID: u32 = u32::MAX - 4;
 /// Most slots one [`SlotDraws`] holds (the largest n of `stochastic-n`).
 pub const MAX_SLOT_DRAWS: usize = 64;
 
@@ -236,6 +238,13 @@ impl RayRng {
             }
         }
         SlotDraws { rng: *self, first_slot, heads, n }
+    }
+
+    /// A point of [0, 1)² on area light `light` for sample slot `slot` (not shifted by
+    /// `u_shift`: it places a light sample, it decides nothing).
+    pub fn light_sample(&self, light: u32, slot: u32) -> glam::Vec2 {
+        let u = |k: u32| unit_f32(pcg(xxhash32([self.pixel_seed, LIGHT_ID, (slot << 7) | (light << 1) | k])));
+        glam::Vec2::new(u(0), u(1))
     }
 
     /// u ∈ [0, 1) deciding whether pass `pass` is accepted (stochastic pass).

@@ -47,6 +47,102 @@ pub fn rgb_to_dc(rgb: Vec3) -> Vec3 {
     (rgb - Vec3::splat(0.5)) / SH_C0
 }
 
+/// The 16 real SH basis functions of [`eval`] at unit direction `d` (with 3DGS's signs), in f64.
+fn basis(d: glam::DVec3) -> [f64; 16] {
+    let (x, y, z) = (d.x, d.y, d.z);
+    let (c1, c2, c3) = (f64::from(SH_C1), SH_C2.map(f64::from), SH_C3.map(f64::from));
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    [
+        f64::from(SH_C0),
+        -c1 * y,
+        c1 * z,
+        -c1 * x,
+        c2[0] * x * y,
+        c2[1] * y * z,
+        c2[2] * (2.0 * zz - xx - yy),
+        c2[3] * x * z,
+        c2[4] * (xx - yy),
+        c3[0] * y * (3.0 * xx - yy),
+        c3[1] * x * y * z,
+        c3[2] * y * (4.0 * zz - xx - yy),
+        c3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy),
+        c3[4] * x * (4.0 * zz - xx - yy),
+        c3[5] * z * (xx - yy),
+        c3[6] * x * (xx - 3.0 * yy),
+    ]
+}
+
+/// The linear map of SH coefficients under a rotation R of the particle: the rotated
+/// coefficients c' give the colour c'(d) = c(R⁻¹ d) in every direction d.
+///
+/// Each band is closed under rotation, so c' is found exactly by least squares on sampled
+/// directions: with Y(d) the basis row, Y(dᵢ) c' = Y(R⁻¹ dᵢ) c for 64 spiral directions, solved
+/// once per rotation through the normal equations.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rotation {
+    m: [[f64; 16]; 16],
+}
+
+impl Rotation {
+    /// The map for rotation `r`.
+    pub fn new(r: glam::Quat) -> Self {
+        let inv = r.as_dquat().inverse();
+        let n = 64;
+        let dirs = (0..n).map(|i| {
+            // A Fibonacci spiral: directions spread over the sphere.
+            let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+            let phi = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+            let r = (1.0 - z * z).sqrt();
+            glam::DVec3::new(r * phi.cos(), r * phi.sin(), z)
+        });
+        let mut ata = [[0.0f64; 16]; 16];
+        let mut atb = [[0.0f64; 16]; 16];
+        for d in dirs {
+            let (a, b) = (basis(d), basis(inv * d));
+            for i in 0..16 {
+                for j in 0..16 {
+                    ata[i][j] += a[i] * a[j];
+                    atb[i][j] += a[i] * b[j];
+                }
+            }
+        }
+        Self { m: solve(ata, atb) }
+    }
+
+    /// The rotated coefficients of `sh`.
+    pub fn apply(&self, sh: &[Vec3; 16]) -> [Vec3; 16] {
+        std::array::from_fn(|i| {
+            let c = (0..16).fold(glam::DVec3::ZERO, |acc, j| acc + self.m[i][j] * sh[j].as_dvec3());
+            c.as_vec3()
+        })
+    }
+}
+
+/// X with A X = B for a symmetric positive definite A, by Gauss–Jordan elimination with
+/// partial pivoting.
+fn solve(mut a: [[f64; 16]; 16], mut b: [[f64; 16]; 16]) -> [[f64; 16]; 16] {
+    for col in 0..16 {
+        let pivot = (col..16).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs())).unwrap_or(col);
+        a.swap(col, pivot);
+        b.swap(col, pivot);
+        let p = a[col][col];
+        for k in 0..16 {
+            a[col][k] /= p;
+            b[col][k] /= p;
+        }
+        for row in 0..16 {
+            if row != col {
+                let f = a[row][col];
+                for k in 0..16 {
+                    a[row][k] -= f * a[col][k];
+                    b[row][k] -= f * b[col][k];
+                }
+            }
+        }
+    }
+    b
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,6 +177,27 @@ mod tests {
         let a = eval(&sh, 1, d) - Vec3::splat(0.5);
         let b = eval(&sh, 1, -d) - Vec3::splat(0.5);
         assert_relative_eq!(a.x, -b.x, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn rotated_coefficients_give_the_colour_of_the_rotated_direction() {
+        let mut sh = [Vec3::ZERO; 16];
+        for (i, c) in sh.iter_mut().enumerate() {
+            *c = Vec3::new(0.3 * (i as f32).sin(), 0.2 * (i as f32 * 0.7).cos(), 0.1 * i as f32 / 16.0);
+        }
+        let r = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.4, -1.1, 2.3);
+        let rotated = Rotation::new(r).apply(&sh);
+        for d in [Vec3::X, Vec3::new(0.3, -0.5, 0.8).normalize(), Vec3::new(-0.9, 0.1, 0.2).normalize()] {
+            let want = eval(&sh, 3, r.inverse() * d);
+            let got = eval(&rotated, 3, d);
+            assert_relative_eq!(got.x, want.x, epsilon = 1e-5);
+            assert_relative_eq!(got.y, want.y, epsilon = 1e-5);
+            assert_relative_eq!(got.z, want.z, epsilon = 1e-5);
+        }
+        // The identity changes nothing, and band 0 never moves.
+        let same = Rotation::new(glam::Quat::IDENTITY).apply(&sh);
+        assert_relative_eq!(same[7].x, sh[7].x, epsilon = 1e-6);
+        assert_relative_eq!(rotated[0].y, sh[0].y, epsilon = 1e-6);
     }
 
     #[test]

@@ -9,15 +9,16 @@
 
 use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
-use crate::composite::{ShadedHit, composite, depth_order, shade_hit};
+use crate::composite::{ShadedHit, depth_order, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
+use crate::lighting::{Incident, Lighting, Look, Shadows, headlight, shadow_slot};
 use crate::par;
 use crate::particle::{Aabb, Scene};
 use crate::rng::RayRng;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 /// Particles per pass of the k-buffer (vk `PARTICLES_SPP`).
 pub const DEFAULT_K: usize = 18;
@@ -175,6 +176,8 @@ pub struct TraceScene<'a> {
     /// Squared radius (in standard deviations) of each leaf-order particle's bounding
     /// ellipsoid, [`bounding_radius`].
     radius_sq: Vec<f32>,
+    /// Materials, lights and shadows ([`crate::lighting`]); off by default.
+    lighting: Lighting,
 }
 
 /// The radius, in standard deviations, of the ellipsoid a particle is bounded by in the BVH: its
@@ -251,31 +254,35 @@ struct Integrator {
     radiance: DVec3,
     normal: DVec3,
     transmittance: f64,
-    depth: Option<f32>,
-    farthest: Option<f32>,
+    /// Iso-opacity depth and the particle that set it (vk_gaussian_splatting Lighting §1.1).
+    depth: Option<(f32, u32)>,
+    /// The farthest hit so far and its particle (the stochastic pass's fallback, §1.3).
+    farthest: Option<(f32, u32)>,
 }
 
 impl Integrator {
     const START: Integrator =
         Integrator { radiance: DVec3::ZERO, normal: DVec3::ZERO, transmittance: 1.0, depth: None, farthest: None };
 
-    fn add(&mut self, h: &ShadedHit, iso: f32) {
+    /// Composite one more hit behind the others, with colour `color` (its SH colour, or its lit
+    /// colour in the volumetric look).
+    fn add(&mut self, h: &ShadedHit, color: Vec3, iso: f32) {
         let alpha = f64::from(h.alpha);
         let w = self.transmittance * alpha;
-        self.radiance += w * h.color.as_dvec3();
+        self.radiance += w * color.as_dvec3();
         self.normal += w * h.normal.as_dvec3();
         self.transmittance *= 1.0 - alpha;
         if self.depth.is_none() && self.transmittance < f64::from(iso) {
-            self.depth = Some(h.t);
+            self.depth = Some((h.t, h.index));
         }
-        self.farthest = Some(h.t);
+        self.farthest = Some((h.t, h.index));
     }
 
     fn unit_normal(&self, dir: Vec3) -> Vec3 {
         let c = crate::composite::Composite {
             radiance: self.radiance,
             transmittance: self.transmittance,
-            depth: self.depth,
+            depth: self.depth.map(|d| d.0),
             normal: self.normal,
             hits: usize::from(self.farthest.is_some()),
         };
@@ -287,7 +294,7 @@ impl Integrator {
         Sample {
             color: self.radiance + self.transmittance * background.as_dvec3(),
             alpha: 1.0 - self.transmittance,
-            depth: self.depth,
+            depth: self.depth.map(|d| d.0),
             normal: self.unit_normal(dir),
             picked: None,
         }
@@ -318,7 +325,19 @@ impl<'a> TraceScene<'a> {
         let clamp = settings.kernel.alpha_clamp;
         let alpha_bound = bvh.order.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
         let radius_sq = bvh.order.iter().map(|&i| radii[i as usize].powi(2)).collect();
-        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq })
+        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq, lighting: Lighting::default() })
+    }
+
+    /// The same scene lit by `lighting` (checked against the scene's particle count).
+    pub fn with_lighting(mut self, lighting: Lighting) -> Result<Self, RenderError> {
+        lighting.validate(self.scene.particles.len()).map_err(RenderError::Settings)?;
+        self.lighting = lighting;
+        Ok(self)
+    }
+
+    /// The lighting.
+    pub fn lighting(&self) -> &Lighting {
+        &self.lighting
     }
 
     /// The settings.
@@ -367,28 +386,158 @@ impl<'a> TraceScene<'a> {
         shade_hit(self.scene, &self.prims[leaf as usize], hit, ray, &self.settings)
     }
 
-    /// A shaded pick seen as an opaque sample.
-    fn opaque_sample(&self, leaf: u32, t: f32, ray: &Ray) -> Sample {
+    /// Whether sorted methods light every hit before integrating ([`Look::Volumetric`]).
+    fn volumetric(&self) -> bool {
+        self.lighting.is_on() && self.lighting.look == Look::Volumetric
+    }
+
+    /// A shaded pick seen as an opaque sample, lit at its own position and normal (§1.2, §2.2).
+    fn opaque_sample(&self, leaf: u32, t: f32, ray: &Ray, decide: &impl Decide, slot: u32) -> Sample {
         let h = self.shade(leaf, t, 1.0, ray);
-        Sample { color: h.color.as_dvec3(), alpha: 1.0, depth: Some(t), normal: h.normal, picked: Some(h.index) }
+        let color = self.lit(h.color, h.index, t, h.normal, ray, decide, slot);
+        Sample { color: color.as_dvec3(), alpha: 1.0, depth: Some(t), normal: h.normal, picked: Some(h.index) }
     }
 
     fn background_sample(&self) -> Sample {
         Sample::background(self.settings.background)
     }
 
-    /// Eq. 3 front to back over the hits of a k-buffer, continuing `acc`.
-    fn integrate(&self, acc: &mut Integrator, buf: &KBuf, ray: &Ray) {
+    /// Eq. 3 front to back over the hits of a k-buffer, continuing `acc`; in the volumetric look
+    /// each hit is lit first.
+    fn integrate(&self, acc: &mut Integrator, buf: &KBuf, ray: &Ray, decide: &impl Decide) {
         for s in buf.as_slice() {
-            acc.add(&self.shade(s.leaf, s.t, s.alpha, ray), self.settings.iso_threshold);
+            self.add(acc, &self.shade(s.leaf, s.t, s.alpha, ray), ray, decide);
         }
+    }
+
+    fn add(&self, acc: &mut Integrator, h: &ShadedHit, ray: &Ray, decide: &impl Decide) {
+        let color = if self.volumetric() { self.lit(h.color, h.index, h.t, h.normal, ray, decide, 0) } else { h.color };
+        acc.add(h, color, self.settings.iso_threshold);
+    }
+
+    /// The sample of a sorted integration over the background. Lit in the surface look
+    /// (vk_gaussian_splatting Lighting §1.1, §2.1): the integrated radiance L, as the base colour,
+    /// lit once at the iso-opacity depth with the integrated normal and the material of the
+    /// particle that set the depth, then L + T × background; a ray that never reaches the
+    /// threshold shows the background.
+    fn finish(&self, acc: &Integrator, ray: &Ray, decide: &impl Decide) -> Sample {
+        let unlit = acc.over(self.settings.background, ray.dir);
+        if !self.lighting.is_on() || self.volumetric() {
+            return unlit;
+        }
+        let Some((t, id)) = acc.depth else { return self.background_sample() };
+        let base = acc.radiance.as_vec3();
+        let lit = self.lit(base, id, t, unlit.normal, ray, decide, 0).as_dvec3();
+        Sample { color: lit + acc.transmittance * self.settings.background.as_dvec3(), picked: Some(id), ..unlit }
+    }
+
+    /// Lit(x, n, v, c) of [`crate::lighting`] for colour `c` of particle `id` at distance `t`
+    /// along `ray` with unit normal `n`; `c` itself when lighting is off or the particle's set only
+    /// emits. Decisions of area-light samples and shadow rays are drawn for sample slot `slot`.
+    #[allow(clippy::too_many_arguments)]
+    fn lit(&self, c: Vec3, id: u32, t: f32, n: Vec3, ray: &Ray, decide: &impl Decide, slot: u32) -> Vec3 {
+        let lighting = &self.lighting;
+        let material = lighting.material(id);
+        if material.is_emissive() {
+            return c;
+        }
+        let (x, v) = (ray.at(t), -ray.dir);
+        if lighting.lights.is_empty() {
+            return material.shade(c, n, v, [(headlight(ray, t), Vec3::ONE)]);
+        }
+        let mut sum = material.unlit(c);
+        for (j, light) in lighting.lights.iter().enumerate() {
+            let u = if light.is_area() { decide.light_sample(j as u32, slot) } else { Vec2::ZERO };
+            let Some(incident) = light.incident(x, u) else { continue };
+            let direct = material.direct(c, n, v, &incident);
+            if direct != Vec3::ZERO {
+                sum += direct * self.visibility(x, &incident, decide, shadow_slot(slot, j));
+            }
+        }
+        sum
+    }
+
+    /// Visibility of a light from `x` ([`Shadows`]): the shadow ray starts `shadow_offset` along
+    /// the light direction and ends at the light (vk_gaussian_splatting Lighting §4).
+    fn visibility(&self, x: Vec3, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
+        let offset = self.lighting.shadow_offset;
+        let shadow = Ray {
+            origin: x + offset * incident.l,
+            dir: incident.l,
+            view: incident.l,
+            t_min: self.settings.t_min,
+            t_max: (incident.distance - offset).min(self.settings.t_max),
+        };
+        if shadow.t_max <= shadow.t_min {
+            return Vec3::ONE;
+        }
+        match self.lighting.shadows {
+            Shadows::None => Vec3::ONE,
+            Shadows::Exact => Vec3::splat(self.transmittance(&shadow) as f32),
+            Shadows::Stochastic => Vec3::splat(if self.occluded(&shadow, decide, slot) { 0.0 } else { 1.0 }),
+            Shadows::Sorted { k, threshold, colored } => self.sorted_shadow(&shadow, k, threshold, colored),
+        }
+    }
+
+    /// The exact transmittance Π(1 − αᵢ) over every hit of `ray` (f64; order does not matter).
+    pub fn transmittance(&self, ray: &Ray) -> f64 {
+        let mut t = 1.0f64;
+        let mut t_max = ray.t_max;
+        self.wide.traverse(ray, &mut t_max, |leaf, _| {
+            if let Some(h) = self.hit(leaf, ray) {
+                t *= 1.0 - f64::from(h.alpha);
+            }
+        });
+        t
+    }
+
+    /// The unbiased stochastic shadow ray: one traversal, each hit accepted by Russian roulette
+    /// (u < α, decisions of slot `slot`), stopped at the first accept. P(no accept) = Π(1 − αᵢ).
+    pub fn occluded(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> bool {
+        let early = !decide.needs_position();
+        let mut occluded = false;
+        let mut t_max = ray.t_max;
+        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
+            if occluded {
+                return;
+            }
+            let id = self.ids[leaf as usize];
+            if early && decide.particle(id, slot, Vec3::ZERO) >= self.alpha_bound[leaf as usize] {
+                return;
+            }
+            let Some(h) = self.hit(leaf, ray) else { return };
+            let u = decide.particle(id, slot, ray.at(h.t));
+            if decide.accepts(id, u, h.alpha) {
+                occluded = true;
+                *t_max = f32::NEG_INFINITY;
+            }
+        });
+        occluded
+    }
+
+    /// vk_gaussian_splatting's shadow ray (§4): the `k` nearest hits sorted, transmittance
+    /// T ← T ⊙ ((1 − α) + `colored` α c) front to back; in shadow (0) once every channel of T is
+    /// below `threshold`.
+    fn sorted_shadow(&self, ray: &Ray, k: usize, threshold: f32, colored: f32) -> Vec3 {
+        let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), None);
+        let mut t = Vec3::ONE;
+        for s in buf.as_slice() {
+            let tint = if colored > 0.0 { self.shade(s.leaf, s.t, s.alpha, ray).color } else { Vec3::ZERO };
+            t *= Vec3::splat(1.0 - s.alpha) + colored * s.alpha * tint;
+            if t.max_element() < threshold {
+                return Vec3::ZERO;
+            }
+        }
+        t
     }
 
     /// One sample of `method` for `ray` (already clipped to the settings' range).
     pub fn sample(&self, method: &Method, ray: &Ray, decide: &impl Decide) -> Sample {
         match *method {
-            Method::Exact => self.exact(ray),
-            Method::KBuffer { k, max_passes, min_transmittance } => self.kbuffer(ray, k, max_passes, min_transmittance),
+            Method::Exact => self.exact(ray, decide),
+            Method::KBuffer { k, max_passes, min_transmittance } => {
+                self.kbuffer(ray, decide, k, max_passes, min_transmittance)
+            }
             Method::Stochastic => self.stochastic(ray, decide, 0),
             Method::StochasticN { m, n } => {
                 let mut sum = Sample { alpha: 0.0, ..Sample::background(Vec3::ZERO) };
@@ -410,8 +559,9 @@ impl<'a> TraceScene<'a> {
         }
     }
 
-    /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3.
-    pub fn exact(&self, ray: &Ray) -> Sample {
+    /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3 (lit by the
+    /// look when lighting is on; `decide` draws only shadow rays and area-light samples).
+    pub fn exact(&self, ray: &Ray, decide: &impl Decide) -> Sample {
         // Sort small (t, id) records by the order of `composite::sort_front_to_back`, then shade
         // each hit once, in that order.
         let mut found = Vec::with_capacity(64);
@@ -422,15 +572,11 @@ impl<'a> TraceScene<'a> {
             }
         });
         found.sort_unstable_by(|a, b| depth_order(a.t, a.id, b.t, b.id));
-        let hits: Vec<ShadedHit> = found.iter().map(|s| self.shade(s.leaf, s.t, s.alpha, ray)).collect();
-        let c = composite(&hits, self.settings.iso_threshold);
-        Sample {
-            color: c.color_over(self.settings.background),
-            alpha: c.alpha(),
-            depth: c.depth,
-            normal: c.unit_normal(ray.dir),
-            picked: None,
+        let mut acc = Integrator::START;
+        for s in &found {
+            self.add(&mut acc, &self.shade(s.leaf, s.t, s.alpha, ray), ray, decide);
         }
+        self.finish(&acc, ray, decide)
     }
 
     /// The k closest hits strictly behind (after_t, after_id), by (t, id); when `decide` is
@@ -464,7 +610,14 @@ impl<'a> TraceScene<'a> {
     }
 
     /// k-buffer multi-pass (3DGRT / vk baseline).
-    pub fn kbuffer(&self, ray: &Ray, k: usize, max_passes: u32, min_transmittance: f32) -> Sample {
+    pub fn kbuffer(
+        &self,
+        ray: &Ray,
+        decide: &impl Decide,
+        k: usize,
+        max_passes: u32,
+        min_transmittance: f32,
+    ) -> Sample {
         let mut acc = Integrator::START;
         let mut after = (ray.t_min, u32::MAX);
         for _ in 0..max_passes {
@@ -472,13 +625,13 @@ impl<'a> TraceScene<'a> {
                 break;
             }
             let buf = self.next_k(ray, k, after, None);
-            self.integrate(&mut acc, &buf, ray);
+            self.integrate(&mut acc, &buf, ray, decide);
             if !buf.is_full() {
                 break;
             }
             after = (buf.last().t, buf.last().id);
         }
-        acc.over(self.settings.background, ray.dir)
+        self.finish(&acc, ray, decide)
     }
 
     /// Algorithm 1: the closest hit accepted by Russian roulette (u < α), found in one
@@ -512,7 +665,11 @@ impl<'a> TraceScene<'a> {
                 *t_max = h.t;
             }
         });
-        if best.id == u32::MAX { self.background_sample() } else { self.opaque_sample(best.leaf, best.t, ray) }
+        if best.id == u32::MAX {
+            self.background_sample()
+        } else {
+            self.opaque_sample(best.leaf, best.t, ray, decide, slot)
+        }
     }
 
     /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
@@ -547,19 +704,19 @@ impl<'a> TraceScene<'a> {
         });
         let mut color = DVec3::ZERO;
         let mut alpha = 0.0;
-        for b in &best[..n] {
-            if b.id == u32::MAX {
-                color += self.settings.background.as_dvec3();
+        let mut first = self.background_sample();
+        for (slot, b) in (first_slot..).zip(&best[..n]) {
+            let s = if b.id == u32::MAX {
+                self.background_sample()
             } else {
-                color += self.shade(b.leaf, b.t, 1.0, ray).color.as_dvec3();
                 alpha += 1.0;
+                self.opaque_sample(b.leaf, b.t, ray, decide, slot)
+            };
+            color += s.color;
+            if slot == first_slot {
+                first = s;
             }
         }
-        let first = if best[0].id == u32::MAX {
-            self.background_sample()
-        } else {
-            self.opaque_sample(best[0].leaf, best[0].t, ray)
-        };
         Sample { color: color / n as f64, alpha: alpha / n as f64, ..first }
     }
 
@@ -567,31 +724,69 @@ impl<'a> TraceScene<'a> {
     /// with probability O = 1 − T_pass and returns L_pass / O, else it is discarded and the
     /// next pass starts behind it. E = Σⱼ (Πᵢ<ⱼ Tᵢ) Lⱼ + (Π Tⱼ) background: Eq. 3 exactly.
     pub fn stochastic_pass(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> Sample {
+        let mut accepted = None;
+        self.passes(ray, k, max_passes, |pass, acc| {
+            let opacity = 1.0 - acc.transmittance;
+            if decide.accepts_pass(f64::from(decide.pass(pass)), opacity) {
+                accepted = Some(self.pass_sample(acc, ray, decide));
+            }
+            accepted.is_none()
+        });
+        accepted.unwrap_or_else(|| self.background_sample())
+    }
+
+    /// The exact expectation of the stochastic pass (its oracle when lit): Σⱼ (Πᵢ<ⱼ Tᵢ) Oⱼ Sⱼ +
+    /// (Π Tⱼ) background, with Sⱼ the sample pass j returns when accepted. Unlit Sⱼ = Lⱼ / Oⱼ
+    /// and this is Eq. 3; lit it is not, since the specular term is not proportional to the
+    /// base colour. `decide` draws only shadow rays and area-light samples.
+    pub fn stochastic_pass_expectation(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> DVec3 {
+        let mut reach = 1.0f64;
+        let mut sum = DVec3::ZERO;
+        self.passes(ray, k, max_passes, |_, acc| {
+            let opacity = 1.0 - acc.transmittance;
+            if opacity > 0.0 {
+                sum += reach * opacity * self.pass_sample(acc, ray, decide).color;
+            }
+            reach *= acc.transmittance;
+            true
+        });
+        sum + reach * self.settings.background.as_dvec3()
+    }
+
+    /// The passes of K sorted hits along `ray`, each integrated from T = 1 and handed to
+    /// `visit(pass, integrator)` until it returns false, a pass is not full or `max_passes`.
+    fn passes(&self, ray: &Ray, k: usize, max_passes: u32, mut visit: impl FnMut(u32, &Integrator) -> bool) {
         let mut after = (ray.t_min, u32::MAX);
         for pass in 0..max_passes {
             let buf = self.next_k(ray, k, after, None);
             if buf.len == 0 {
-                break;
+                return;
             }
             let mut acc = Integrator::START;
-            self.integrate(&mut acc, &buf, ray);
-            let opacity = 1.0 - acc.transmittance;
-            if decide.accepts_pass(f64::from(decide.pass(pass)), opacity) {
-                return Sample {
-                    color: acc.radiance / opacity,
-                    alpha: 1.0,
-                    // vk_gaussian_splatting Lighting §1.3: iso-depth within the pass, else its farthest hit.
-                    depth: acc.depth.or(acc.farthest),
-                    normal: acc.unit_normal(ray.dir),
-                    picked: None,
-                };
+            for s in buf.as_slice() {
+                let h = self.shade(s.leaf, s.t, s.alpha, ray);
+                acc.add(&h, h.color, self.settings.iso_threshold);
             }
-            if !buf.is_full() {
-                break;
+            if !visit(pass, &acc) || !buf.is_full() {
+                return;
             }
             after = (buf.last().t, buf.last().id);
         }
-        self.background_sample()
+    }
+
+    /// An accepted pass as one opaque sample: colour L_pass / O. Lit (vk_gaussian_splatting
+    /// Lighting §1.3, §2.3), that base colour is lit with the pass's integrated normal at its
+    /// iso-depth, or else at its farthest hit, with the material of the particle there.
+    fn pass_sample(&self, acc: &Integrator, ray: &Ray, decide: &impl Decide) -> Sample {
+        let (t, id) = acc.depth.or(acc.farthest).expect("a pass with hits has a farthest hit");
+        let normal = acc.unit_normal(ray.dir);
+        let base = acc.radiance / (1.0 - acc.transmittance);
+        let color = if self.lighting.is_on() {
+            self.lit(base.as_vec3(), id, t, normal, ray, decide, 0).as_dvec3()
+        } else {
+            base
+        };
+        Sample { color, alpha: 1.0, depth: Some(t), normal, picked: None }
     }
 
     /// 3DGRT stochastic depth sampling: the k closest hits accepted by roulette (slot 0),
@@ -600,8 +795,8 @@ impl<'a> TraceScene<'a> {
         let accept = |id: u32, p: Vec3, alpha: f32| decide.accepts(id, decide.particle(id, 0, p), alpha);
         let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept));
         let mut acc = Integrator::START;
-        self.integrate(&mut acc, &buf, ray);
-        Sample { depth: buf.as_slice().first().map(|s| s.t), ..acc.over(self.settings.background, ray.dir) }
+        self.integrate(&mut acc, &buf, ray, decide);
+        Sample { depth: buf.as_slice().first().map(|s| s.t), ..self.finish(&acc, ray, decide) }
     }
 
     /// Closest entry into any particle's bounding ellipsoid ([`bounding_radius`]), shaded opaque.
@@ -637,7 +832,7 @@ pub fn render_frames(
 ) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
     method.validate()?;
-    let keys = frames.keys(method.is_stochastic())?;
+    let keys = frames.keys(method.is_stochastic() || trace.lighting().is_random())?;
     Ok(render_tiles(
         camera,
         progress,

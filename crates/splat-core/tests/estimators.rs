@@ -6,6 +6,7 @@ use glam::{DVec3, Quat, Vec3};
 use proptest::prelude::*;
 use splat_core::RenderSettings;
 use splat_core::frame::Decide;
+use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::oracle::Oracle;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{HitDistance, Particle, Ray, Scene};
@@ -193,7 +194,7 @@ proptest! {
     fn stochastic_is_unbiased((o, off, c) in stacks(12), center in any::<bool>(), late in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
-        let exact = trace.exact(&ray).color;
+        let exact = trace.exact(&ray, &Outcomes::default()).color;
         let h = hits(&scene, &ray, trace.settings());
         let e = expectation_with(&trace, &Method::Stochastic, &ray, &h, 1, late, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
@@ -204,7 +205,7 @@ proptest! {
     fn stochastic_n_is_unbiased((o, off, c) in stacks(7), late in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
-        let exact = trace.exact(&ray).color;
+        let exact = trace.exact(&ray, &Outcomes::default()).color;
         let h = hits(&scene, &ray, trace.settings());
         let e = expectation_with(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &h, 2, late, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
@@ -215,7 +216,7 @@ proptest! {
     fn stochastic_pass_is_unbiased((o, off, c) in stacks(12), center in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
-        let exact = trace.exact(&ray).color;
+        let exact = trace.exact(&ray, &Outcomes::default()).color;
         let e = pass_expectation(&scene, &trace, &ray, 3, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
@@ -226,11 +227,11 @@ proptest! {
     fn kbuffer_matches_exact((o, off, c) in stacks(12), k in 1usize..6) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
-        let exact = trace.exact(&ray);
-        let full = trace.kbuffer(&ray, k, 1000, 0.0);
+        let exact = trace.exact(&ray, &Outcomes::default());
+        let full = trace.kbuffer(&ray, &Outcomes::default(), k, 1000, 0.0);
         prop_assert!(close(full.color, exact.color, 1e-12));
         prop_assert_eq!(full.depth, exact.depth);
-        let early = trace.kbuffer(&ray, k, 200, 0.01);
+        let early = trace.kbuffer(&ray, &Outcomes::default(), k, 200, 0.01);
         prop_assert!(close(early.color, exact.color, 0.01 * 1.0001));
     }
 
@@ -260,7 +261,7 @@ fn depth_sampling_is_rejected_by_the_same_enumeration() {
         &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]],
     );
     let trace = TraceScene::new(&scene, settings()).unwrap();
-    let exact = trace.exact(&ray).color;
+    let exact = trace.exact(&ray, &Outcomes::default()).color;
     let h = hits(&scene, &ray, trace.settings());
     assert_eq!(h.len(), 4);
     for k in [1, 2] {
@@ -282,7 +283,7 @@ fn wrong_acceptance_rules_are_rejected_by_the_enumeration() {
         &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]],
     );
     let trace = TraceScene::new(&scene, settings()).unwrap();
-    let exact = trace.exact(&ray).color;
+    let exact = trace.exact(&ray, &Outcomes::default()).color;
     let h = hits(&scene, &ray, trace.settings());
     assert_eq!(h.len(), 5, "every disc is hit");
     assert!(h.iter().all(|&(id, a)| a < f64::from(scene.particles[id as usize].opacity)), "alpha = opacity at a hit");
@@ -300,5 +301,177 @@ fn wrong_acceptance_rules_are_rejected_by_the_enumeration() {
         assert!(close(pass_expectation(&scene, &trace, &ray, k, Rule::Production), exact, 1e-9));
         let e = pass_expectation(&scene, &trace, &ray, k, Rule::PassTransmittance);
         assert!(!close(e, exact, 1e-3), "k = {k}: u < T_pass passes ({e} vs {exact})");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lighting (vk_gaussian_splatting, "Lighting, Shading and Shadows"): the lit stochastic
+// estimators against the volumetric oracle, the stochastic pass against its own expectation,
+// the stochastic shadow ray against the transmittance, and one case known in closed form.
+
+/// A material with every term and two lights that reach the stack from the camera's side, so
+/// that shadow rays cross the discs in front of each hit.
+fn lit(shadows: Shadows, look: Look) -> Lighting {
+    let material = Material {
+        emissive: Vec3::splat(0.1),
+        ambient: Vec3::splat(0.05),
+        diffuse: Vec3::new(0.8, 0.7, 0.9),
+        specular: Vec3::splat(0.4),
+        shininess: 16.0,
+    };
+    let lights = vec![
+        Light {
+            kind: LightKind::Directional { direction: Vec3::new(-0.3, -0.2, 1.0).normalize() },
+            color: Vec3::new(1.0, 0.9, 0.8),
+            intensity: 1.5,
+            radius: 0.0,
+        },
+        Light {
+            kind: LightKind::Point { position: Vec3::new(0.8, 0.5, -0.5) },
+            color: Vec3::new(0.4, 0.5, 1.0),
+            intensity: 2.0,
+            radius: 0.0,
+        },
+    ];
+    Lighting { look, shadow_offset: 0.05, ..Lighting::single(material, lights, shadows) }
+}
+
+/// The shadow kinds whose visibility is a deterministic function of the point.
+fn deterministic_shadows() -> impl Strategy<Value = Shadows> {
+    prop_oneof![Just(Shadows::None), Just(Shadows::Exact), Just(Shadows::SORTED)]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// Lit, each accepted sample is shaded at its own position and normal (§1.2, §2.2), so
+    /// E[Algorithm 1] and E[stochastic-n] are the volumetric oracle Σ Tᵢ αᵢ Lit(xᵢ, nᵢ, cᵢ)
+    /// (exact in the volumetric look) to 1e-9, whatever the shadow kind.
+    #[test]
+    fn lit_stochastic_estimators_are_unbiased((o, off, c) in stacks(7), shadows in deterministic_shadows()) {
+        let (scene, ray) = stack(&o, &off, &c);
+        let trace = TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(shadows, Look::Volumetric)).unwrap();
+        let oracle = trace.exact(&ray, &Outcomes::default()).color;
+        let h = hits(&scene, &ray, trace.settings());
+        let e = expectation(&trace, &Method::Stochastic, &ray, &h, 1);
+        prop_assert!(close(e, oracle, 1e-9), "stochastic {e} vs {oracle}");
+        let e = expectation(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &h, 2);
+        prop_assert!(close(e, oracle, 1e-9), "stochastic-n {e} vs {oracle}");
+    }
+
+    /// The lit stochastic pass (§1.3, §2.3) has its own expectation: enumerating the pass at
+    /// which it stops gives `stochastic_pass_expectation`; unlit, that is Eq. 3.
+    #[test]
+    fn lit_stochastic_pass_meets_its_expectation((o, off, c) in stacks(10), shadows in deterministic_shadows()) {
+        let (scene, ray) = stack(&o, &off, &c);
+        let unlit = TraceScene::new(&scene, settings()).unwrap();
+        let exact = unlit.exact(&ray, &Outcomes::default()).color;
+        prop_assert!(close(unlit.stochastic_pass_expectation(&ray, &Outcomes::default(), 3, 200), exact, 1e-9));
+        let trace = unlit.with_lighting(lit(shadows, Look::Surface)).unwrap();
+        let e = pass_expectation(&scene, &trace, &ray, 3, Rule::Production);
+        let oracle = trace.stochastic_pass_expectation(&ray, &Outcomes::default(), 3, 200);
+        prop_assert!(close(e, oracle, 1e-9), "{e} vs {oracle}");
+    }
+
+    /// The unbiased stochastic shadow ray: over every outcome of the roulette on its hits,
+    /// P(visible) = Π(1 − αᵢ) = `transmittance`, with decisions drawn early or late.
+    #[test]
+    fn stochastic_shadow_ray_expectation_is_the_transmittance((o, off, c) in stacks(12), late in any::<bool>()) {
+        let (scene, ray) = stack(&o, &off, &c);
+        let trace = TraceScene::new(&scene, settings()).unwrap();
+        let h = hits(&scene, &ray, trace.settings());
+        let product: f64 = h.iter().map(|&(_, a)| 1.0 - a).product();
+        prop_assert!((trace.transmittance(&ray) - product).abs() < 1e-12);
+        let visible = shadow_visibility(&trace, &ray, &h, late, Rule::Production);
+        prop_assert!((visible - product).abs() < 1e-9, "{visible} vs {product}");
+    }
+}
+
+/// P(the shadow ray is not blocked), enumerating the roulette of every hit in shadow slot 0.
+fn shadow_visibility(trace: &TraceScene, ray: &Ray, hits: &[(u32, f64)], late: bool, rule: Rule) -> f64 {
+    let slot = splat_core::lighting::shadow_slot(0, 0);
+    let mut p_visible = 0.0;
+    for mask in 0u32..(1 << hits.len()) {
+        let mut outcomes = Outcomes { late, rule, ..Outcomes::new(trace.scene(), hits) };
+        let mut p = 1.0;
+        for (b, &(id, alpha)) in hits.iter().enumerate() {
+            let accepted = mask >> b & 1 == 1;
+            outcomes.accept.insert((id, slot), accepted);
+            p *= if accepted { alpha } else { 1.0 - alpha };
+        }
+        if !trace.occluded(ray, &outcomes, slot) {
+            p_visible += p;
+        }
+    }
+    p_visible
+}
+
+/// The same enumerations reject wrong rules on the lit path: u ≤ 1 − α in the primary
+/// roulette, u < opacity in the shadow roulette; and the surface look (lit once) is not the
+/// expectation of the stochastic estimators, which is why both oracles exist.
+#[test]
+fn lit_enumerations_reject_wrong_rules_and_the_other_look() {
+    let (scene, ray) = stack(
+        &[0.6, 0.3, 0.8, 0.45, 0.7],
+        &[(0.1, 0.2), (-0.2, 0.1), (0.05, -0.3), (0.2, 0.2), (-0.1, -0.1)],
+        &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]],
+    );
+    let trace =
+        TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::Exact, Look::Volumetric)).unwrap();
+    let oracle = trace.exact(&ray, &Outcomes::default()).color;
+    let unshadowed = TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::None, Look::Volumetric));
+    let unshadowed = unshadowed.unwrap().exact(&ray, &Outcomes::default()).color;
+    assert!(!close(oracle, unshadowed, 1e-2), "the shadow rays cross the stack: {oracle} vs {unshadowed}");
+    let h = hits(&scene, &ray, trace.settings());
+    let wrong = expectation_with(&trace, &Method::Stochastic, &ray, &h, 1, false, Rule::Complement);
+    assert!(!close(wrong, oracle, 1e-3), "u ≤ 1 − α passes lit: {wrong} vs {oracle}");
+    let product: f64 = h.iter().map(|&(_, a)| 1.0 - a).product();
+    let wrong = shadow_visibility(&trace, &ray, &h, false, Rule::Opacity);
+    assert!((wrong - product).abs() > 1e-3, "u < opacity passes the shadow enumeration: {wrong} vs {product}");
+    let surface =
+        TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::Exact, Look::Surface)).unwrap();
+    let surface = surface.exact(&ray, &Outcomes::default()).color;
+    let e = expectation(&trace, &Method::Stochastic, &ray, &h, 1);
+    assert!(close(e, oracle, 1e-9));
+    assert!(!close(e, surface, 1e-3), "the surface look {surface} is not E[stochastic] {e}");
+}
+
+/// One flat, nearly opaque splat facing the camera under a directional light at angle θ from
+/// its normal, no shadows: the lit pixel in closed form. With alpha α (the clamp) and base c:
+/// surface look, Lit(α c) + (1 − α) bg = α (k_e + k_a + E k_d cos θ) c + E k_s cosⁿ(θ/2)
+/// + (1 − α) bg; volumetric look, α Lit(c) + (1 − α) bg.
+#[test]
+fn one_flat_splat_under_a_directional_light_in_closed_form() {
+    let c = Vec3::new(0.8, 0.5, 0.2);
+    let disc = Particle::with_rgb(Vec3::ZERO, Vec3::new(1.0, 1.0, 1e-3), Quat::IDENTITY, 1.0, c);
+    let scene = Scene { particles: vec![disc], sh_degree: 0 };
+    let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+    let theta = 50f32.to_radians();
+    let (ke, ka, kd, ks, n, e) = (0.1f64, 0.05f64, 0.7f64, 0.3f64, 12.0f32, 2.0f64);
+    let material = Material {
+        emissive: Vec3::splat(ke as f32),
+        ambient: Vec3::splat(ka as f32),
+        diffuse: Vec3::splat(kd as f32),
+        specular: Vec3::splat(ks as f32),
+        shininess: n,
+    };
+    let light = Light {
+        kind: LightKind::Directional { direction: -Vec3::new(0.0, theta.sin(), theta.cos()) },
+        color: Vec3::ONE,
+        intensity: e as f32,
+        radius: 0.0,
+    };
+    let bg = DVec3::new(0.1, 0.2, 0.3);
+    let settings = RenderSettings { background: bg.as_vec3(), ..Default::default() };
+    let alpha = f64::from(settings.kernel.alpha_clamp);
+    let (cos, half) = (f64::from(theta.cos()), f64::from((theta / 2.0).cos()).powf(f64::from(n)));
+    let c = c.as_dvec3();
+    let surface = alpha * (ke + ka + e * kd * cos) * c + DVec3::splat(e * ks * half) + (1.0 - alpha) * bg;
+    let volumetric = alpha * ((ke + ka + e * kd * cos) * c + DVec3::splat(e * ks * half)) + (1.0 - alpha) * bg;
+    for (look, want) in [(Look::Surface, surface), (Look::Volumetric, volumetric)] {
+        let lighting = Lighting { look, ..Lighting::single(material, vec![light], Shadows::None) };
+        let trace = TraceScene::new(&scene, settings).unwrap().with_lighting(lighting).unwrap();
+        let got = trace.exact(&ray, &Outcomes::default()).color;
+        assert!(close(got, want, 1e-5), "{look:?}: {got} vs closed form {want}");
     }
 }

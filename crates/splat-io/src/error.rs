@@ -167,4 +167,7 @@ pub enum ErrorKind {
     /// An image cannot be written or read.
     #[error("image: {0}")]
     Image(String),
+    /// A world file is malformed or names something invalid.
+    #[error("world: {0}")]
+    World(String),
 }

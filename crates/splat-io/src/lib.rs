@@ -18,6 +18,7 @@ mod error;
 pub mod image;
 pub mod ply;
 pub mod splat;
+pub mod world;
 
 pub use error::{Error, ErrorKind};
 

@@ -26,6 +26,7 @@ mod tests;
 use crate::camera::Camera;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{PreparedParticle, Ray, to_canonical};
+use crate::lighting::{Lighting, Look};
 use crate::normal::particle_normal;
 use crate::particle::Scene;
 use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
@@ -158,6 +159,7 @@ pub struct Rasterizer<'a> {
     bins: Vec<Vec<u32>>,
     offsets: Vec<Vec2>,
     hilbert_order: u32,
+    lighting: Lighting,
 }
 
 /// Reserved splat ids of the hashes (scene ids stay below [`crate::rng::MAX_PARTICLES`]).
@@ -194,7 +196,32 @@ impl<'a> Rasterizer<'a> {
             bins,
             offsets: sample_positions(raster.samples),
             hilbert_order: hilbert_order(camera.width, camera.height),
+            lighting: Lighting::default(),
         })
+    }
+
+    /// The same rasterizer lit by `lighting` (no shadows: the raster pipelines have none,
+    /// vk_gaussian_splatting Lighting §3).
+    pub fn with_lighting(mut self, lighting: Lighting) -> Result<Self, RenderError> {
+        lighting.validate(self.scene.particles.len()).map_err(RenderError::Settings)?;
+        self.lighting = lighting;
+        Ok(self)
+    }
+
+    /// Whether every fragment is lit before blending ([`Look::Volumetric`]).
+    fn volumetric(&self) -> bool {
+        self.lighting.is_on() && self.lighting.look == Look::Volumetric
+    }
+
+    /// The colour of splat `splat` written at depth `t` of sample `s`: its SH colour, lit at
+    /// that point with its normal when lighting is on.
+    fn lit_color(&self, px: &PixelSamples, splat: u32, s: usize, t: f32) -> DVec3 {
+        let c = self.splats[splat as usize].color;
+        if !self.lighting.is_on() {
+            return c.as_dvec3();
+        }
+        let id = self.splats[splat as usize].id;
+        self.lighting.shade_unshadowed(c, id, &px.rays[s], t, self.normal(px, splat)).as_dvec3()
     }
 
     /// The projected splats in global depth order.
@@ -264,8 +291,13 @@ impl<'a> Rasterizer<'a> {
         self.splats[f.splat as usize].id
     }
 
-    fn color(&self, f: &Fragment) -> DVec3 {
-        self.splats[f.splat as usize].color.as_dvec3()
+    /// The colour a fragment blends at sample `s` and depth `t`: lit first in the volumetric look.
+    fn color(&self, px: &PixelSamples, f: &Fragment, s: usize, t: f32) -> DVec3 {
+        if self.volumetric() {
+            self.lit_color(px, f.splat, s, t)
+        } else {
+            self.splats[f.splat as usize].color.as_dvec3()
+        }
     }
 
     /// Unit normal of splat `splat` (index into [`Rasterizer::splats`]) along sample 0's ray.
@@ -302,9 +334,13 @@ impl<'a> Rasterizer<'a> {
         }
     }
 
-    /// Sorted splatting of every sample (Eq. 3 over the fragments in depth order).
+    /// Sorted splatting of every sample (Eq. 3 over the fragments in depth order). Lit, the
+    /// blend is front to back (vk_gaussian_splatting Lighting §1.5: the picked surface needs it);
+    /// the surface look lights the pixel once ([`Rasterizer::light_surface`]).
     fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend) -> Sample {
-        let bg = self.settings.background.as_dvec3();
+        let blend = if self.lighting.is_on() { Blend::Under } else { blend };
+        let bg =
+            if self.lighting.is_on() && !self.volumetric() { DVec3::ZERO } else { self.settings.background.as_dvec3() };
         let iso = f64::from(self.settings.iso_threshold);
         let mut out = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
         let mut order: Vec<(f32, u32, usize)> = Vec::with_capacity(fragments.len());
@@ -328,9 +364,9 @@ impl<'a> Rasterizer<'a> {
             let color = match blend {
                 Blend::Over => {
                     let mut c = bg;
-                    for &(_, _, i) in order.iter().rev() {
+                    for &(t, _, i) in order.iter().rev() {
                         let a = f64::from(fragments[i].alpha);
-                        c = a * self.color(&fragments[i]) + (1.0 - a) * c;
+                        c = a * self.color(px, &fragments[i], s, t) + (1.0 - a) * c;
                         transmittance *= 1.0 - a;
                     }
                     c
@@ -340,7 +376,7 @@ impl<'a> Rasterizer<'a> {
                     for &(t, id, i) in &order {
                         let f = &fragments[i];
                         let w = transmittance * f64::from(f.alpha);
-                        c += w * self.color(f);
+                        c += w * self.color(px, f, s, t);
                         transmittance *= 1.0 - f64::from(f.alpha);
                         if s == 0 {
                             normal += w * self.normal(px, f.splat).as_dvec3();
@@ -361,7 +397,21 @@ impl<'a> Rasterizer<'a> {
         if normal != DVec3::ZERO {
             out.normal = normal.as_vec3().try_normalize().unwrap_or(-px.rays[0].dir);
         }
-        out
+        if self.lighting.is_on() && !self.volumetric() { self.light_surface(px, out) } else { out }
+    }
+
+    /// The surface look of sorted splatting (vk_gaussian_splatting Lighting §1.1, §2.1, §3 step
+    /// 6): `blended` holds the pixel's radiance L without background, its coverage 1 − T, the
+    /// picked depth and particle and the integrated normal; L is lit once at the picked depth
+    /// along sample 0's ray with the picked particle's material, then T × background is added.
+    /// A pixel whose transmittance never reached the threshold shows the background.
+    fn light_surface(&self, px: &PixelSamples, blended: Sample) -> Sample {
+        let bg = self.settings.background.as_dvec3();
+        let (Some(t), Some(id)) = (blended.depth, blended.picked) else {
+            return Sample::background(self.settings.background);
+        };
+        let lit = self.lighting.shade_unshadowed(blended.color.as_vec3(), id, &px.rays[0], t, blended.normal);
+        Sample { color: lit.as_dvec3() + (1.0 - blended.alpha) * bg, ..blended }
     }
 
     /// StochasticSplats: each covered sample that passes the depth test draws u = hash(pixel,
@@ -460,7 +510,7 @@ impl<'a> Rasterizer<'a> {
             match buf.splat[s] {
                 u32::MAX => color += bg,
                 k => {
-                    color += self.splats[k as usize].color.as_dvec3();
+                    color += self.lit_color(px, k, s, buf.t[s]);
                     written += 1;
                 }
             }

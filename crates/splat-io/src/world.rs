@@ -1,0 +1,454 @@
+//! World files: splat sets with transforms and materials, lights, shadows and a camera, in TOML
+//! (docs/architecture.md, "Lighting"). A bare `.ply` or `.splat` is a world of one emissive set.
+//!
+//! ```toml
+//! background = [0.02, 0.02, 0.03]
+//! look = "surface"                 # sorted methods: "surface" (lit once) or "volumetric"
+//!
+//! [shadows]
+//! kind = "stochastic"              # none | sorted | stochastic | exact
+//! offset = 0.05                    # shadow-ray origin offset along the light (vk default 0.2)
+//!
+//! [camera]
+//! eye = [0.0, 1.9, 3.6]
+//! target = [0.0, 0.75, 0.0]
+//! fov = 45                          # vertical, degrees; up = [0, 1, 0] unless given
+//! width = 640
+//! height = 480
+//!
+//! [[splats]]
+//! builtin = "demo"                  # or file = "bonsai.splat" (relative to this file)
+//! translate = [0.0, 0.0, 0.0]
+//! rotate = [0.0, 0.0, 0.0]          # degrees about x, then y, then z
+//! scale = 1.0
+//! sh_degree = 3                     # drop the SH bands above (baked lighting)
+//! material = { emissive = 0.1, ambient = 0.1, diffuse = 0.8, specular = 0.3, shininess = 32 }
+//!
+//! [[lights]]
+//! kind = "spot"                     # point | spot | directional
+//! position = [1.5, 3.0, 1.5]
+//! target = [0.0, 0.5, 0.0]          # or direction = [x, y, z]
+//! inner = 20                        # spot half-angles, degrees
+//! outer = 30
+//! color = [1.0, 0.95, 0.9]          # a colour is [r, g, b] or one number
+//! intensity = 12
+//! radius = 0.05                     # soft shadows
+//! ```
+//!
+//! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
+//! without one is fully emissive. Particle ids run over the sets in file order.
+
+use crate::{Error, ErrorKind};
+use glam::{EulerRot, Quat, Vec3};
+use serde::Deserialize;
+use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, SplatSet};
+use splat_core::particle::sh_coeff_count;
+use splat_core::sh::Rotation;
+use splat_core::{Camera, Scene};
+use std::path::{Path, PathBuf};
+
+/// A world read from a file: the particles of every set in one id space, their lighting, and
+/// the camera and background when the file gives them.
+#[derive(Clone, Debug)]
+pub struct World {
+    /// All sets' particles, set after set.
+    pub scene: Scene,
+    /// Materials per set, lights, shadows, look.
+    pub lighting: Lighting,
+    /// The file's camera, or the built-in scene's when the file has none and its first set is
+    /// built in.
+    pub camera: Option<Camera>,
+    /// The file's background colour.
+    pub background: Option<Vec3>,
+}
+
+impl World {
+    /// A world of one emissive set: how a bare `.ply` or `.splat` renders.
+    pub fn of(scene: Scene) -> Self {
+        Self { scene, lighting: Lighting::default(), camera: None, background: None }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WorldFile {
+    background: Option<[f32; 3]>,
+    look: Option<LookName>,
+    shadows: Option<ShadowsFile>,
+    camera: Option<CameraFile>,
+    #[serde(default)]
+    splats: Vec<SplatsFile>,
+    #[serde(default)]
+    lights: Vec<LightFile>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum LookName {
+    Surface,
+    Volumetric,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum ShadowKind {
+    None,
+    Sorted,
+    Stochastic,
+    Exact,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ShadowsFile {
+    kind: ShadowKind,
+    offset: Option<f32>,
+    k: Option<usize>,
+    threshold: Option<f32>,
+    colored: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraFile {
+    eye: [f32; 3],
+    target: [f32; 3],
+    up: Option<[f32; 3]>,
+    fov: Option<f32>,
+    width: Option<u32>,
+    height: Option<u32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SplatsFile {
+    file: Option<PathBuf>,
+    builtin: Option<String>,
+    translate: Option<[f32; 3]>,
+    rotate: Option<[f32; 3]>,
+    scale: Option<f32>,
+    sh_degree: Option<u8>,
+    material: Option<MaterialFile>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum Colour {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl Colour {
+    fn rgb(self) -> Vec3 {
+        match self {
+            Colour::Grey(g) => Vec3::splat(g),
+            Colour::Rgb(c) => Vec3::from(c),
+        }
+    }
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct MaterialFile {
+    emissive: Option<Colour>,
+    ambient: Option<Colour>,
+    diffuse: Option<Colour>,
+    specular: Option<Colour>,
+    shininess: Option<f32>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum LightKindName {
+    Point,
+    Spot,
+    Directional,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightFile {
+    kind: LightKindName,
+    position: Option<[f32; 3]>,
+    direction: Option<[f32; 3]>,
+    target: Option<[f32; 3]>,
+    inner: Option<f32>,
+    outer: Option<f32>,
+    color: Option<Colour>,
+    intensity: Option<f32>,
+    radius: Option<f32>,
+}
+
+/// Read a world file (`.toml`); set files are resolved relative to its folder.
+pub fn read_world(path: &Path) -> Result<World, Error> {
+    let text = String::from_utf8(crate::read_file(path)?)
+        .map_err(|e| Error::new(path, ErrorKind::World(format!("not UTF-8 text: {e}"))))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    parse_world(&text, base).map_err(|e| match e {
+        Nested::Here(message) => Error::new(path, ErrorKind::World(message)),
+        Nested::File(error) => error,
+    })
+}
+
+/// An error of the world file itself, or of a set file it names (which names its own path).
+enum Nested {
+    Here(String),
+    File(Error),
+}
+
+impl From<String> for Nested {
+    fn from(s: String) -> Self {
+        Nested::Here(s)
+    }
+}
+
+/// Parse world-file text; set files are resolved relative to `base`.
+fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
+    let file: WorldFile = toml::from_str(text).map_err(|e| e.to_string())?;
+    if file.splats.is_empty() {
+        return Err("no [[splats]] set: a world needs at least one".to_string().into());
+    }
+    let mut scene = Scene::default();
+    let mut sets = Vec::new();
+    let mut camera = None;
+    for (i, set) in file.splats.iter().enumerate() {
+        let (mut particles, builtin_camera) = load_set(set, base).map_err(|e| match e {
+            Nested::Here(m) => Nested::Here(format!("splats[{i}]: {m}")),
+            other => other,
+        })?;
+        if i == 0 {
+            camera = builtin_camera;
+        }
+        let degree = set.sh_degree.map_or(particles.sh_degree, |d| d.min(particles.sh_degree));
+        if set.sh_degree.is_some_and(|d| d > 3) {
+            return Err(format!("splats[{i}]: sh_degree {} is above 3", set.sh_degree.unwrap_or(0)).into());
+        }
+        truncate_sh(&mut particles, degree);
+        transform(&mut particles, set).map_err(|m| format!("splats[{i}]: {m}"))?;
+        let material = set.material.as_ref().map_or(Material::EMISSIVE, material);
+        if !particles.particles.is_empty() {
+            sets.push(SplatSet { first: scene.particles.len() as u32, material });
+        }
+        scene.sh_degree = scene.sh_degree.max(particles.sh_degree);
+        scene.particles.append(&mut particles.particles);
+    }
+    if sets.is_empty() {
+        sets.push(SplatSet { first: 0, material: Material::EMISSIVE });
+    }
+    let lights = file
+        .lights
+        .iter()
+        .enumerate()
+        .map(|(i, l)| light(l).map_err(|m| format!("lights[{i}]: {m}")))
+        .collect::<Result<_, _>>()?;
+    let (shadows, shadow_offset) = shadows(file.shadows.as_ref());
+    let look = match file.look {
+        Some(LookName::Volumetric) => Look::Volumetric,
+        _ => Look::Surface,
+    };
+    let lighting = Lighting { sets, lights, shadows, shadow_offset, look };
+    lighting.validate(scene.particles.len())?;
+    if let Some(c) = &file.camera {
+        camera = Some(camera_from(c)?);
+    }
+    let background = file.background.map(Vec3::from);
+    if background.is_some_and(|b| !b.is_finite()) {
+        return Err("background is not finite".to_string().into());
+    }
+    Ok(World { scene, lighting, camera, background })
+}
+
+/// The particles of one set and, for a built-in scene, its camera.
+fn load_set(set: &SplatsFile, base: &Path) -> Result<(Scene, Option<Camera>), Nested> {
+    match (&set.file, &set.builtin) {
+        (Some(file), None) => Ok((crate::read_scene(&base.join(file)).map_err(Nested::File)?, None)),
+        (None, Some(name)) => {
+            let (scene, camera) = splat_core::scenes::by_name(name)
+                .ok_or_else(|| format!("no built-in scene '{name}' (demo, layers, ramp, cloud, plates, cloth)"))?;
+            Ok((scene, Some(camera)))
+        }
+        _ => Err("give exactly one of file = \"…\" or builtin = \"…\"".to_string().into()),
+    }
+}
+
+/// Zero the SH coefficients above `degree` and lower the scene's degree to it (the seed's way of
+/// removing some baked lighting before relighting).
+pub fn truncate_sh(scene: &mut Scene, degree: u8) {
+    if degree >= scene.sh_degree {
+        return;
+    }
+    let keep = sh_coeff_count(degree);
+    for p in &mut scene.particles {
+        p.sh[keep..].fill(Vec3::ZERO);
+    }
+    scene.sh_degree = degree;
+}
+
+/// Apply the set's similarity transform x ↦ s R x + t to means, rotations, scales and SH.
+fn transform(scene: &mut Scene, set: &SplatsFile) -> Result<(), String> {
+    let t = Vec3::from(set.translate.unwrap_or([0.0; 3]));
+    let [rx, ry, rz] = set.rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
+    let s = set.scale.unwrap_or(1.0);
+    if !(t.is_finite() && rx.is_finite() && ry.is_finite() && rz.is_finite()) {
+        return Err("translate and rotate must be finite".into());
+    }
+    if !(s.is_finite() && s > 0.0) {
+        return Err(format!("scale {s} must be finite and positive"));
+    }
+    let r = Quat::from_euler(EulerRot::ZYX, rz, ry, rx);
+    let rotate_sh = (r != Quat::IDENTITY && scene.sh_degree > 0).then(|| Rotation::new(r));
+    for p in &mut scene.particles {
+        p.mean = s * (r * p.mean) + t;
+        p.rotation = (r * p.rotation).normalize();
+        p.scale *= s;
+        if let Some(rot) = &rotate_sh {
+            p.sh = rot.apply(&p.sh);
+        }
+    }
+    Ok(())
+}
+
+fn material(m: &MaterialFile) -> Material {
+    let c = |c: Option<Colour>| c.map_or(Vec3::ZERO, Colour::rgb);
+    Material {
+        emissive: c(m.emissive),
+        ambient: c(m.ambient),
+        diffuse: c(m.diffuse),
+        specular: c(m.specular),
+        shininess: m.shininess.unwrap_or(32.0),
+    }
+}
+
+fn light(l: &LightFile) -> Result<Light, String> {
+    let position = || l.position.map(Vec3::from).ok_or("needs a position");
+    let direction = |from: Option<Vec3>| -> Result<Vec3, String> {
+        let d = match (l.direction, l.target, from) {
+            (Some(d), None, _) => Vec3::from(d),
+            (None, Some(target), Some(p)) => Vec3::from(target) - p,
+            (None, Some(target), None) => -Vec3::from(target),
+            _ => return Err("needs one of direction = [x, y, z] or target = [x, y, z]".into()),
+        };
+        d.try_normalize().ok_or_else(|| format!("direction {d} has no length"))
+    };
+    let kind = match l.kind {
+        LightKindName::Point => LightKind::Point { position: position()? },
+        LightKindName::Spot => {
+            let p = position()?;
+            LightKind::Spot {
+                position: p,
+                direction: direction(Some(p))?,
+                inner_deg: l.inner.unwrap_or(20.0),
+                outer_deg: l.outer.unwrap_or(30.0),
+            }
+        }
+        LightKindName::Directional => LightKind::Directional { direction: direction(None)? },
+    };
+    let light = Light {
+        kind,
+        color: l.color.map_or(Vec3::ONE, Colour::rgb),
+        intensity: l.intensity.unwrap_or(1.0),
+        radius: l.radius.unwrap_or(0.0),
+    };
+    light.validate()?;
+    Ok(light)
+}
+
+fn shadows(s: Option<&ShadowsFile>) -> (Shadows, f32) {
+    let offset = s.and_then(|s| s.offset).unwrap_or(splat_core::lighting::DEFAULT_SHADOW_OFFSET);
+    let Some(s) = s else { return (Shadows::None, offset) };
+    let kind = match s.kind {
+        ShadowKind::None => Shadows::None,
+        ShadowKind::Stochastic => Shadows::Stochastic,
+        ShadowKind::Exact => Shadows::Exact,
+        ShadowKind::Sorted => Shadows::Sorted {
+            k: s.k.unwrap_or(splat_core::trace::DEFAULT_K),
+            threshold: s.threshold.unwrap_or(splat_core::lighting::DEFAULT_SHADOW_THRESHOLD),
+            colored: s.colored.unwrap_or(0.0),
+        },
+    };
+    (kind, offset)
+}
+
+fn camera_from(c: &CameraFile) -> Result<Camera, String> {
+    let up = Vec3::from(c.up.unwrap_or([0.0, 1.0, 0.0]));
+    Camera::look_at(
+        Vec3::from(c.eye),
+        Vec3::from(c.target),
+        up,
+        c.fov.unwrap_or(50.0),
+        c.width.unwrap_or(640),
+        c.height.unwrap_or(480),
+    )
+    .map_err(|e| format!("camera: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<World, String> {
+        parse_world(text, Path::new(".")).map_err(|e| match e {
+            Nested::Here(m) => m,
+            Nested::File(e) => e.to_string(),
+        })
+    }
+
+    #[test]
+    fn two_sets_share_one_id_space_with_their_materials() {
+        let w = parse(
+            r#"
+            [[splats]]
+            builtin = "layers"
+            [[splats]]
+            builtin = "layers"
+            translate = [0, 0, 5]
+            material = { diffuse = [0.5, 0.6, 0.7], shininess = 8 }
+            [[lights]]
+            kind = "directional"
+            direction = [0, -1, 0]
+            "#,
+        )
+        .unwrap();
+        let n = splat_core::scenes::layers().0.particles.len();
+        assert_eq!(w.scene.particles.len(), 2 * n);
+        assert_eq!(*w.lighting.material(0), Material::EMISSIVE);
+        assert_eq!(w.lighting.material(n as u32).diffuse, Vec3::new(0.5, 0.6, 0.7));
+        assert_eq!(w.lighting.material(n as u32).emissive, Vec3::ZERO);
+        assert_eq!(w.scene.particles[n].mean.z, w.scene.particles[0].mean.z + 5.0);
+        assert!(w.lighting.is_on());
+        assert!(w.camera.is_some(), "the first built-in set's camera");
+    }
+
+    #[test]
+    fn bad_worlds_name_the_problem() {
+        let cases = [
+            ("", "no [[splats]]"),
+            ("[[splats]]\nbuiltin = \"nope\"", "no built-in scene 'nope'"),
+            ("[[splats]]\nbuiltin = \"demo\"\nfile = \"x.ply\"", "exactly one of"),
+            ("[[splats]]\nbuiltin = \"demo\"\nscale = 0", "scale 0"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[lights]]\nkind = \"spot\"\nposition = [0,1,0]", "direction"),
+            (
+                "[[splats]]\nbuiltin = \"demo\"\n[[lights]]\nkind = \"point\"\nposition = [0,1,0]\nintensity = -1",
+                "intensity",
+            ),
+            ("[[splats]]\nbuiltin = \"demo\"\nmaterial = { diffuse = -0.5 }", "non-negative"),
+            ("[[splats]]\nbuiltin = \"demo\"\ncolour = 1", "unknown field"),
+            ("[[splats]]\nbuiltin = \"demo\"\nsh_degree = 7", "above 3"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[shadows]\nkind = \"sorted\"\nk = 0", "shadow k"),
+        ];
+        for (text, want) in cases {
+            let err = parse(text).err().unwrap_or_else(|| panic!("accepted: {text}"));
+            assert!(err.contains(want), "{text:?}: {err}");
+        }
+    }
+
+    #[test]
+    fn sh_degree_cut_zeroes_the_upper_bands() {
+        let mut scene = Scene { particles: vec![splat_core::scenes::layers().0.particles[0].clone()], sh_degree: 3 };
+        scene.particles[0].sh = [Vec3::ONE; 16];
+        truncate_sh(&mut scene, 1);
+        assert_eq!(scene.sh_degree, 1);
+        assert_eq!(scene.particles[0].sh[3], Vec3::ONE);
+        assert_eq!(scene.particles[0].sh[4], Vec3::ZERO);
+    }
+}
