@@ -30,6 +30,20 @@ fn every_method_matches_its_golden_images() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
+/// The lit demo world, every family's look: with the default emissive material the images
+/// above are unchanged; these prove the lit ones stay as blessed.
+#[test]
+fn lit_world_matches_its_golden_images() {
+    let mut failures = Vec::new();
+    for (suffix, case, frames) in golden::lit_cases() {
+        let image = golden::render_lit(&case, &frames);
+        if let Err(e) = compare_golden(&golden::path("demo-lit", suffix), &image, TOLERANCE) {
+            failures.push(e);
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 /// The comparison can fail: a render with another background differs from the golden image.
 #[test]
 fn golden_comparison_rejects_a_different_image() {

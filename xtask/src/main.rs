@@ -189,6 +189,11 @@ fn bless() -> Result<()> {
             println!("blessed {}", path.display());
         }
     }
+    for (suffix, case, frames) in golden::lit_cases() {
+        let path = golden::path("demo-lit", suffix);
+        golden::render_lit(&case, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
+        println!("blessed {}", path.display());
+    }
     Ok(())
 }
 
