@@ -90,7 +90,7 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
 // meaningful.
 fn traverse(ray: Ray, visitor: u32) {
     let inv = safe_inverse(ray.dir);
-    var t_max = params.t_max;
+    var t_max = ray.t_max;
     traversal_begin(ray.origin, inv, t_max);
     loop {
         iterations += 1u;

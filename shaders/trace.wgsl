@@ -48,17 +48,36 @@ struct Params {
     pass_index: u32,
     // splat_core::Frames::u_shift, a test hook: every u is drawn as u − u_shift (0 in renders).
     u_shift: f32,
-    pad2: u32,
+    // Lighting (lighting.rs): 1 when a set reflects light (`Lighting::is_on`).
+    lit: u32,
+    // LOOK_SURFACE or LOOK_VOLUMETRIC.
+    look: u32,
+    // SHADOWS_*.
+    shadows: u32,
+    shadow_k: u32,
+    shadow_threshold: f32,
+    shadow_colored: f32,
+    shadow_offset: f32,
+    light_count: u32,
+    set_count: u32,
+    iso_threshold: f32,
+    pad3: u32,
+    pad4: u32,
+    pad5: u32,
 }
 
-// The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState.
+// The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
+// Eq. 3 so far, where the next pass starts, and for the surface look the integrated normal and
+// the iso-opacity depth with its particle (trace.rs `Integrator`).
 struct PassState {
     radiance: vec3<f32>,
     transmittance: f32,
     after_t: f32,
     after_id: u32,
     flags: u32,
-    pad: u32,
+    picked: u32,
+    normal: vec3<f32>,
+    depth: f32,
 }
 
 // params.mode (splat_gpu::layout::MODE_*): whole frames per invocation, or one pass of one frame.
@@ -77,6 +96,14 @@ const METHOD_OPAQUE: u32 = 6u; // CPU only: refused by GpuTracer::supports
 const MAX_SLOTS: u32 = 64u;
 const PASS_ID: u32 = 0xffffffffu;
 const OFFSET_ID: u32 = 0xfffffffeu;
+const LIGHT_ID: u32 = 0xfffffffbu;
+// lighting.rs `Look` and `Shadows`.
+const LOOK_SURFACE: u32 = 0u;
+const LOOK_VOLUMETRIC: u32 = 1u;
+const SHADOWS_NONE: u32 = 0u;
+const SHADOWS_SORTED: u32 = 1u;
+const SHADOWS_STOCHASTIC: u32 = 2u;
+const SHADOWS_EXACT: u32 = 3u;
 // lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
 // invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
 // Every loop body below starts with `iterations += 1u`; a loop statement cannot iterate more
@@ -90,6 +117,8 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(4) var<storage, read_write> out_mean: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> out_var: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> pass_state: array<PassState>;
+@group(0) @binding(7) var<storage, read> materials: array<Material>;
+@group(0) @binding(8) var<storage, read> lights: array<Light>;
 
 // ---- rng.rs ---------------------------------------------------------------------------------
 
@@ -133,6 +162,7 @@ struct Ray {
     origin: vec3<f32>,
     dir: vec3<f32>,
     view: vec3<f32>,
+    t_max: f32,
 }
 
 struct Hit {
@@ -167,7 +197,7 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
         let q = oc + t * dc;
         d2_hit = dot(q, q);
     }
-    if (!(t > params.t_min && t < params.t_max)) {
+    if (!(t > params.t_min && t < ray.t_max)) {
         return miss;
     }
     if (d2_hit > params.cutoff * params.cutoff) {
@@ -199,12 +229,28 @@ var<private> slot_u: array<f32, MAX_SLOTS>;
 // their inputs are set in the private variables below before the traversal.
 const VISIT_STOCHASTIC: u32 = 0u;
 const VISIT_NEXT_K: u32 = 1u;
+const VISIT_TRANSMITTANCE: u32 = 2u;
+const VISIT_OCCLUDED: u32 = 3u;
+const VISIT_SHADOW_SORTED: u32 = 4u;
 
 fn visit(visitor: u32, ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    if (visitor == VISIT_STOCHASTIC) {
-        return stochastic_visit(ray, leaf, t_max);
+    switch visitor {
+        case VISIT_STOCHASTIC: {
+            return stochastic_visit(ray, leaf, t_max);
+        }
+        case VISIT_NEXT_K: {
+            return next_k_visit(ray, leaf, t_max);
+        }
+        case VISIT_TRANSMITTANCE: {
+            return transmittance_visit(ray, leaf, t_max);
+        }
+        case VISIT_OCCLUDED: {
+            return occluded_visit(ray, leaf, t_max);
+        }
+        default: { // VISIT_SHADOW_SORTED
+            return shadow_sorted_visit(ray, leaf, t_max);
+        }
     }
-    return next_k_visit(ray, leaf, t_max);
 }
 
 // What the visitors read: the pixel's decisions; for stochastic_visit the slots first_slot ..
@@ -269,27 +315,67 @@ fn stochastic_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
         }
         farthest = max(farthest, best_t[s]);
     }
-    return min(farthest, params.t_max);
+    return min(farthest, ray.t_max);
 }
 
 // ---- trace.rs: the k closest hits behind (after_t, after_id) ---------------------------------
 
-var<private> kb_t: array<f32, MAX_SLOTS>;
-var<private> kb_id: array<u32, MAX_SLOTS>;
-var<private> kb_alpha: array<f32, MAX_SLOTS>;
-var<private> kb_len: u32;
+// Up to k hits kept sorted by (t, id) (trace.rs `KBuf`), with each hit's alpha and leaf.
+struct HitBuf {
+    t: array<f32, MAX_SLOTS>,
+    id: array<u32, MAX_SLOTS>,
+    alpha: array<f32, MAX_SLOTS>,
+    leaf: array<u32, MAX_SLOTS>,
+    len: u32,
+}
 
-// Collect the k closest hits strictly behind (after_t, after_id) into kb_*; with `accepted`,
+// The primary ray's k-buffer, and the sorted shadow ray's (which may run while kb is read).
+var<private> kb: HitBuf;
+var<private> sb: HitBuf;
+
+// Keep the hit (t, id) in the sorted buffer `b` of capacity k when it is before the farthest
+// kept hit or the buffer is not full (trace.rs `KBuf::admits` and `KBuf::insert`: insertion
+// sort, dropping the farthest when full); returns t_max clipped at the farthest kept hit once
+// the buffer is full.
+fn hitbuf_insert(b: ptr<private, HitBuf>, k: u32, t: f32, id: u32, alpha: f32, leaf: u32, t_max: f32) -> f32 {
+    if ((*b).len == k && !before(t, id, (*b).t[k - 1u], (*b).id[k - 1u])) {
+        return t_max;
+    }
+    var i = select((*b).len, k - 1u, (*b).len == k);
+    if ((*b).len < k) {
+        (*b).len += 1u;
+    }
+    loop {
+        iterations += 1u;
+        if (i == 0u || !before(t, id, (*b).t[i - 1u], (*b).id[i - 1u])) {
+            break;
+        }
+        (*b).t[i] = (*b).t[i - 1u];
+        (*b).id[i] = (*b).id[i - 1u];
+        (*b).alpha[i] = (*b).alpha[i - 1u];
+        (*b).leaf[i] = (*b).leaf[i - 1u];
+        i -= 1u;
+    }
+    (*b).t[i] = t;
+    (*b).id[i] = id;
+    (*b).alpha[i] = alpha;
+    (*b).leaf[i] = leaf;
+    if ((*b).len == k) {
+        return (*b).t[k - 1u];
+    }
+    return t_max;
+}
+
+// Collect the k closest hits strictly behind (after_t, after_id) into kb; with `accepted`,
 // only hits accepted by roulette in slot 0 count (depth sampling).
 fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_seed: u32) {
-    kb_len = 0u;
+    kb.len = 0u;
     visit_in = VisitInputs(pixel_seed, 1u, 0u, k, after_t, after_id, accepted);
     traverse(ray, VISIT_NEXT_K);
 }
 
-// One particle of next_k's traversal: kept in the sorted k-buffer when it is behind the
-// previous pass and before the farthest kept hit (trace.rs `KBuf::insert`); returns t_max
-// clipped at the farthest kept hit once the buffer is full.
+// One particle of next_k's traversal: kept when it is behind the previous pass (and, for depth
+// sampling, accepted).
 fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     let p = particles[leaf];
     let k = visit_in.k;
@@ -297,66 +383,258 @@ fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     if (!h.ok || !before(visit_in.after_t, visit_in.after_id, h.t, p.id)) {
         return t_max;
     }
-    if (kb_len == k && !before(h.t, p.id, kb_t[k - 1u], kb_id[k - 1u])) {
+    if (kb.len == k && !before(h.t, p.id, kb.t[k - 1u], kb.id[k - 1u])) {
         return t_max;
     }
     if (visit_in.accepted && !(particle_u(visit_in.pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
         return t_max;
     }
-    // Insertion sort, dropping the farthest when full.
-    var i = select(kb_len, k - 1u, kb_len == k);
-    if (kb_len < k) {
-        kb_len += 1u;
+    return hitbuf_insert(&kb, k, h.t, p.id, h.alpha, leaf, t_max);
+}
+
+// ---- normal.rs, lighting.rs and the shadow rays of trace.rs ----------------------------------
+
+// normal.rs `particle_normal`, max-density plane: n ∝ Mᵀ M (o − μ), toward the ray origin.
+fn particle_normal(leaf: u32, ray: Ray) -> vec3<f32> {
+    let p = particles[leaf];
+    let rel = ray.origin - p.mean;
+    let oc = vec3<f32>(dot(p.row0, rel), dot(p.row1, rel), dot(p.row2, rel));
+    let m = p.row0 * oc.x + p.row1 * oc.y + p.row2 * oc.z;
+    let rcp = 1.0 / sqrt(dot(m, m));
+    var n = -ray.dir;
+    if (rcp > 0.0 && rcp < 3.0e38) {
+        n = m * rcp;
     }
-    loop {
+    if (dot(n, ray.dir) > 0.0) {
+        n = -n;
+    }
+    return n;
+}
+
+// composite.rs `Composite::unit_normal` for a ray with hits: the integrated normal, or the
+// camera-facing −dir when it is degenerate.
+fn unit_normal(sum: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    let len = length(sum);
+    return select(-dir, sum / len, len > 1e-6);
+}
+
+// lighting.rs `Lighting::material`: the set whose first id is the last at or below `id`.
+fn material_of(id: u32) -> Material {
+    var m = materials[0];
+    for (var i = 1u; i < params.set_count; i++) {
         iterations += 1u;
-        if (i == 0u || !before(h.t, p.id, kb_t[i - 1u], kb_id[i - 1u])) {
+        if (materials[i].first > id) {
             break;
         }
-        kb_t[i] = kb_t[i - 1u];
-        kb_id[i] = kb_id[i - 1u];
-        kb_alpha[i] = kb_alpha[i - 1u];
-        i -= 1u;
+        m = materials[i];
     }
-    kb_t[i] = h.t;
-    kb_id[i] = p.id;
-    kb_alpha[i] = h.alpha;
-    if (kb_len == k) {
-        return kb_t[k - 1u];
+    return m;
+}
+
+// rng.rs `RayRng::light_sample`.
+fn light_sample(pixel_seed: u32, light: u32, slot: u32) -> vec2<f32> {
+    let key = (slot << 7u) | (light << 1u);
+    return vec2<f32>(
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key | 1u)))),
+    );
+}
+
+// lighting.rs `shadow_slot`.
+fn shadow_slot(slot: u32, light: u32) -> u32 {
+    return 0x80000000u | (slot << 6u) | light;
+}
+
+// trace.rs `TraceScene::lit`: Lit(x, n, v, c) of particle `id` at distance t along the ray;
+// c itself when lighting is off or the particle's set only emits.
+fn lit(c: vec3<f32>, id: u32, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, slot: u32) -> vec3<f32> {
+    if (params.lit == 0u) {
+        return c;
+    }
+    let m = material_of(id);
+    if (m.emissive_only == 1u) {
+        return c;
+    }
+    let x = ray.origin + t * ray.dir;
+    let v = -ray.dir;
+    if (params.light_count == 0u) {
+        // lighting.rs `headlight`: from the eye, no falloff, no shadows.
+        return material_unlit(m, c) + material_direct(m, c, n, v, Incident(-ray.dir, t, vec3<f32>(1.0), true));
+    }
+    var sum = material_unlit(m, c);
+    for (var j = 0u; j < params.light_count; j++) {
+        iterations += 1u;
+        let light = lights[j];
+        var u = vec2<f32>(0.0);
+        if (light.radius > 0.0) {
+            u = light_sample(pixel_seed, j, slot);
+        }
+        let inc = light_incident(light, x, u);
+        if (!inc.ok) {
+            continue;
+        }
+        let direct = material_direct(m, c, n, v, inc);
+        if (any(direct != vec3<f32>(0.0))) {
+            sum += direct * visibility(x, inc, pixel_seed, shadow_slot(slot, j));
+        }
+    }
+    return sum;
+}
+
+// The decisions of the current stochastic shadow ray and what the shadow visitors found.
+struct ShadowInputs {
+    pixel_seed: u32,
+    slot: u32,
+}
+
+var<private> shadow_in: ShadowInputs;
+var<private> shadow_t: f32;
+var<private> shadow_blocked: bool;
+
+// trace.rs `TraceScene::visibility`: the shadow ray from x + offset l toward the light.
+fn visibility(x: vec3<f32>, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
+    let offset = params.shadow_offset;
+    let shadow = Ray(x + offset * inc.l, inc.l, inc.l, min(inc.distance - offset, params.t_max));
+    if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
+        return vec3<f32>(1.0);
+    }
+    switch params.shadows {
+        case SHADOWS_EXACT: {
+            shadow_t = 1.0;
+            traverse(shadow, VISIT_TRANSMITTANCE);
+            return vec3<f32>(shadow_t);
+        }
+        case SHADOWS_STOCHASTIC: {
+            shadow_in = ShadowInputs(pixel_seed, slot);
+            shadow_blocked = false;
+            traverse(shadow, VISIT_OCCLUDED);
+            return select(vec3<f32>(1.0), vec3<f32>(0.0), shadow_blocked);
+        }
+        default: { // SHADOWS_SORTED
+            return sorted_shadow(shadow);
+        }
+    }
+}
+
+// trace.rs `TraceScene::transmittance`: Π(1 − αᵢ) over every hit.
+fn transmittance_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    let h = intersect(particles[leaf], ray);
+    if (h.ok) {
+        shadow_t *= 1.0 - h.alpha;
     }
     return t_max;
+}
+
+// trace.rs `TraceScene::occluded`: Russian roulette on each hit, stopped at the first accept.
+fn occluded_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    if (shadow_blocked) {
+        return t_max;
+    }
+    let p = particles[leaf];
+    if (params.rng_scheme == 0u
+        && particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, vec3<f32>(0.0)) >= min(p.opacity, params.alpha_clamp)) {
+        return t_max;
+    }
+    let h = intersect(p, ray);
+    if (!h.ok) {
+        return t_max;
+    }
+    if (particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, ray.origin + h.t * ray.dir) < h.alpha) {
+        shadow_blocked = true;
+        return -1.0; // every node is now beyond t_max
+    }
+    return t_max;
+}
+
+// trace.rs `TraceScene::sorted_shadow`'s pass: the shadow_k nearest hits, into sb.
+fn shadow_sorted_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    let p = particles[leaf];
+    let h = intersect(p, ray);
+    if (!h.ok) {
+        return t_max;
+    }
+    return hitbuf_insert(&sb, params.shadow_k, h.t, p.id, h.alpha, leaf, t_max);
+}
+
+// trace.rs `TraceScene::sorted_shadow`: T ← T ((1 − α) + colored α c) front to back, in shadow
+// once every channel is below the threshold.
+fn sorted_shadow(ray: Ray) -> vec3<f32> {
+    sb.len = 0u;
+    traverse(ray, VISIT_SHADOW_SORTED);
+    var t = vec3<f32>(1.0);
+    for (var i = 0u; i < sb.len; i++) {
+        iterations += 1u;
+        var tint = vec3<f32>(0.0);
+        if (params.shadow_colored > 0.0) {
+            tint = sh_color(sb.id[i], ray.dir);
+        }
+        t *= vec3<f32>(1.0 - sb.alpha[i]) + params.shadow_colored * sb.alpha[i] * tint;
+        if (max(max(t.x, t.y), t.z) < params.shadow_threshold) {
+            return vec3<f32>(0.0);
+        }
+    }
+    return t;
 }
 
 // ---- trace.rs: the methods -------------------------------------------------------------------
 
 // A sample: rgb radiance over the background, a = coverage.
 fn start_state() -> PassState {
-    return PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, 0u);
+    return PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, NONE, vec3<f32>(0.0), 0.0);
 }
 
-// Eq. 3 front to back over the hits in kb_*, continuing the state's radiance and
-// transmittance (trace.rs `TraceScene::integrate`).
-fn integrate(st: ptr<function, PassState>, dir: vec3<f32>) {
-    for (var i = 0u; i < kb_len; i++) {
+// Eq. 3 front to back over the hits in kb, continuing the state (trace.rs
+// `TraceScene::integrate`); lit, also the integrated normal and the iso-opacity depth, and with
+// `light_hits` (the volumetric look) each hit lit before it is composited.
+fn integrate(st: ptr<function, PassState>, ray: Ray, pixel_seed: u32, light_hits: bool) {
+    for (var i = 0u; i < kb.len; i++) {
         iterations += 1u;
-        (*st).radiance += (*st).transmittance * kb_alpha[i] * sh_color(kb_id[i], dir);
-        (*st).transmittance *= 1.0 - kb_alpha[i];
+        var c = sh_color(kb.id[i], ray.dir);
+        let alpha = kb.alpha[i];
+        if (params.lit == 1u) {
+            let n = particle_normal(kb.leaf[i], ray);
+            if (light_hits) {
+                c = lit(c, kb.id[i], kb.t[i], n, ray, pixel_seed, 0u);
+            }
+            (*st).normal += (*st).transmittance * alpha * n;
+        }
+        (*st).radiance += (*st).transmittance * alpha * c;
+        (*st).transmittance *= 1.0 - alpha;
+        if ((*st).picked == NONE && (*st).transmittance < params.iso_threshold) {
+            (*st).picked = kb.id[i];
+            (*st).depth = kb.t[i];
+        }
     }
 }
 
-// The integrated hits over the background: L + T × background, coverage 1 − T.
-fn over_background(st: PassState) -> vec4<f32> {
-    return vec4<f32>(st.radiance + st.transmittance * params.background.xyz, 1.0 - st.transmittance);
+fn volumetric() -> bool {
+    return params.lit == 1u && params.look == LOOK_VOLUMETRIC;
+}
+
+// The integrated hits over the background: L + T × background, coverage 1 − T (trace.rs
+// `TraceScene::finish`). Lit in the surface look: L lit once at the iso-opacity depth with the
+// integrated normal and the picked particle's material; a ray that never reaches the threshold
+// shows the background.
+fn over_background(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    let unlit = vec4<f32>(st.radiance + st.transmittance * params.background.xyz, 1.0 - st.transmittance);
+    if (params.lit == 0u || volumetric()) {
+        return unlit;
+    }
+    if (st.picked == NONE) {
+        return vec4<f32>(params.background.xyz, 0.0);
+    }
+    let c = lit(st.radiance, st.picked, st.depth, unit_normal(st.normal, ray.dir), ray, pixel_seed, 0u);
+    return vec4<f32>(c + st.transmittance * params.background.xyz, unlit.w);
 }
 
 // The next pass starts behind the last hit of this one; true when the pass was not full (the
 // ray has no more hits).
 fn advance(st: ptr<function, PassState>) -> bool {
-    if (kb_len < params.k) {
+    if (kb.len < params.k) {
         return true;
     }
-    (*st).after_t = kb_t[kb_len - 1u];
-    (*st).after_id = kb_id[kb_len - 1u];
+    (*st).after_t = kb.t[kb.len - 1u];
+    (*st).after_id = kb.id[kb.len - 1u];
     return false;
 }
 
@@ -367,7 +645,7 @@ fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool
         return true;
     }
     next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
-    integrate(st, ray.dir);
+    integrate(st, ray, pixel_seed, volumetric());
     return advance(st);
 }
 
@@ -375,14 +653,24 @@ fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool
 // probability 1 − T_pass (radiance divided by it). true when the ray is finished.
 fn stochastic_pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
     next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
-    if (kb_len == 0u) {
+    if (kb.len == 0u) {
         return true;
     }
     var pass_st = start_state();
-    integrate(&pass_st, ray.dir);
+    integrate(&pass_st, ray, pixel_seed, false);
     let opacity = 1.0 - pass_st.transmittance;
     if (pass_u(pixel_seed, pass_index) < opacity) {
         (*st).radiance = pass_st.radiance / opacity;
+        if (params.lit == 1u) {
+            // trace.rs `pass_sample`: lit at the pass's iso-depth, else its farthest hit.
+            var t = pass_st.depth;
+            var id = pass_st.picked;
+            if (id == NONE) {
+                t = kb.t[kb.len - 1u];
+                id = kb.id[kb.len - 1u];
+            }
+            (*st).radiance = lit((*st).radiance, id, t, unit_normal(pass_st.normal, ray.dir), ray, pixel_seed, 0u);
+        }
         (*st).flags |= ACCEPTED;
         return true;
     }
@@ -399,9 +687,9 @@ fn pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassS
 }
 
 // The sample of a finished multi-pass ray.
-fn pass_sample(st: PassState) -> vec4<f32> {
+fn pass_sample(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
     if (params.method != METHOD_STOCHASTIC_PASS) {
-        return over_background(st);
+        return over_background(st, ray, pixel_seed);
     }
     if ((st.flags & ACCEPTED) != 0u) {
         return vec4<f32>(st.radiance, 1.0);
@@ -418,7 +706,7 @@ fn multi_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
             break;
         }
     }
-    return pass_sample(st);
+    return pass_sample(st, ray, pixel_seed);
 }
 
 fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
@@ -429,7 +717,12 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
         if (best_id[s] == NONE) {
             sum += vec4<f32>(params.background.xyz, 0.0);
         } else {
-            sum += vec4<f32>(sh_color(best_id[s], ray.dir), 1.0);
+            var c = sh_color(best_id[s], ray.dir);
+            if (params.lit == 1u) {
+                let n = particle_normal(best_leaf[s], ray);
+                c = lit(c, best_id[s], best_t[s], n, ray, pixel_seed, first_slot + s);
+            }
+            sum += vec4<f32>(c, 1.0);
         }
     }
     return sum / f32(n);
@@ -438,8 +731,8 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
 fn depth_sampling(ray: Ray, pixel_seed: u32) -> vec4<f32> {
     next_k(ray, params.k, params.t_min, NONE, true, pixel_seed);
     var st = start_state();
-    integrate(&st, ray.dir);
-    return over_background(st);
+    integrate(&st, ray, pixel_seed, volumetric());
+    return over_background(st, ray, pixel_seed);
 }
 
 // One frame of the method (trace.rs `TraceScene::sample`).
@@ -474,7 +767,7 @@ fn pixel_ray(x: u32, y: u32) -> Ray {
         1.0,
     );
     let d = params.cam_row0.xyz * d_cam.x + params.cam_row1.xyz * d_cam.y + params.cam_row2.xyz * d_cam.z;
-    return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz);
+    return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz, params.t_max);
 }
 
 // frame.rs `PixelFrames::push` in f32: fold sample `s` of frame `frame` into a running mean
@@ -562,7 +855,7 @@ fn one_pass(index: u32, pixel: vec2<u32>, ray: Ray) {
         }
         if (finished || params.pass_index + 1u >= params.max_passes) {
             st.flags |= DONE;
-            var s = pass_sample(st);
+            var s = pass_sample(st, ray, pixel_seed);
             if (params.method == METHOD_STOCHASTIC_N) {
                 s = vec4<f32>(st.radiance, st.transmittance) / f32(params.m);
             }

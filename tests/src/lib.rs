@@ -568,6 +568,9 @@ pub mod flips {
         fn pass(&self, pass: u32) -> f32 {
             self.inner.pass(pass)
         }
+        fn light_sample(&self, light: u32, slot: u32) -> glam::Vec2 {
+            self.inner.light_sample(light, slot)
+        }
         fn accepts(&self, id: u32, u: f32, alpha: f32) -> bool {
             self.saw(f64::from(u), f64::from(alpha));
             self.inner.accepts(id, u, alpha)

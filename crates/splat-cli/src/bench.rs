@@ -38,6 +38,11 @@ pub struct BenchArgs {
     /// samples a pixel: choose --width/--height to suit).
     #[arg(long, value_enum)]
     pub sweep: Option<Sweep>,
+    /// With a lit world file: the frame time of each method unlit, lit without shadows and lit
+    /// with each shadow kind (sorted, stochastic, exact transmittance), as ratios against the
+    /// unlit frame measured in the same run (CPU).
+    #[arg(long)]
+    pub lighting: bool,
     #[command(flatten)]
     pub options: MethodOptions,
 }
@@ -56,6 +61,9 @@ pub const MN_ROWS: [(u32, u32); 5] = [(1024, 1), (256, 4), (64, 16), (16, 64), (
 pub fn run(args: BenchArgs) -> Result<()> {
     if args.sweep == Some(Sweep::Mn) {
         return run_mn_sweep(&args);
+    }
+    if args.lighting {
+        return run_lighting(&args);
     }
     let raster = args.methods.iter().any(|m| matches!(m, MethodArg::RasterSorted | MethodArg::StochasticSplat));
     let ctx = crate::args::gpu_context(args.scene.backend)?;
@@ -106,6 +114,59 @@ pub fn run(args: BenchArgs) -> Result<()> {
             mrays / threads as f64,
             best / base
         );
+    }
+    Ok(())
+}
+
+/// The cost of lighting: each method's frame unlit, lit without shadows and lit with each
+/// shadow kind, through the same BVH, as ratios against the unlit frame of the same run.
+fn run_lighting(args: &BenchArgs) -> Result<()> {
+    use splat_core::lighting::{Lighting, Shadows};
+    let loaded = args.scene.load_world(1200, 800)?;
+    if !loaded.lighting.is_on() {
+        anyhow::bail!("--lighting needs a lit world: a .toml whose splat sets have a non-emissive material");
+    }
+    let (scene, camera) = (&loaded.scene, &loaded.camera);
+    let pool = args.scene.pool()?;
+    println!(
+        "{} particles, {} lights, {}×{} at {} spp, {} threads; frame time in ms (× the unlit frame)\n",
+        scene.particles.len(),
+        loaded.lighting.lights.len(),
+        camera.width,
+        camera.height,
+        args.spp,
+        pool.current_num_threads()
+    );
+    let variants = [
+        ("unlit", Lighting::default()),
+        ("lit, no shadows", Lighting { shadows: Shadows::None, ..loaded.lighting.clone() }),
+        ("sorted shadows", Lighting { shadows: Shadows::SORTED, ..loaded.lighting.clone() }),
+        ("stochastic shadows", Lighting { shadows: Shadows::Stochastic, ..loaded.lighting.clone() }),
+        ("exact transmittance", Lighting { shadows: Shadows::Exact, ..loaded.lighting.clone() }),
+    ];
+    let names: Vec<&str> = variants.iter().map(|v| v.0).collect();
+    println!("| method | {} |", names.join(" | "));
+    println!("|---|{}", "---:|".repeat(names.len()));
+    let traces = variants
+        .iter()
+        .map(|(_, l)| Ok(TraceScene::new(scene, loaded.settings)?.with_lighting(l.clone())?))
+        .collect::<Result<Vec<_>>>()?;
+    for &m in &args.methods {
+        let method = args.options.method(m)?;
+        let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng(), ..Frames::default() };
+        let mut cells = Vec::new();
+        let mut unlit = None;
+        for trace in &traces {
+            let mut best = f64::INFINITY;
+            for _ in 0..args.repeat.max(1) {
+                let start = Instant::now();
+                pool.install(|| render_frames(trace, camera, &method, &frames, &|_| {}))?;
+                best = best.min(start.elapsed().as_secs_f64());
+            }
+            let base = *unlit.get_or_insert(best);
+            cells.push(format!("{:.1} ({:.2}×)", 1e3 * best / f64::from(args.spp), best / base));
+        }
+        println!("| {} | {} |", m.name(), cells.join(" | "));
     }
     Ok(())
 }

@@ -4,10 +4,10 @@
 use crate::args::{BackendArg, Loaded, MethodArg, MethodOptions, SceneArgs, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::lighting::Lighting;
 use splat_core::trace::TraceScene;
-use splat_core::{Algorithm, Camera, RenderSettings, Scene};
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
 use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
 use std::path::{Path, PathBuf};
@@ -53,17 +53,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
     for path in outputs.into_iter().flatten() {
         ImageFormat::from_path(path)?;
     }
-    let Loaded { scene, camera, lighting, settings } = args.scene.load_world(640, 480)?;
+    let world = args.scene.load_world(640, 480)?;
+    let Loaded { scene, camera, lighting, settings } = &world;
     let algorithm = args.options.resolve(args.method);
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
-    let gpu = choose_gpu(&args, &algorithm, &lighting)?;
+    let gpu = choose_gpu(&args, &algorithm, lighting)?;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
     let out = match &gpu {
-        Some(ctx) => render_gpu(&args, ctx, &scene, &camera, &settings, &algorithm, &frames)?,
+        Some(ctx) => render_gpu(&args, ctx, &world, &algorithm, &frames)?,
         None => {
             let progress = |n| bar.inc(n);
-            let render = || algorithm.render_lit(&scene, &camera, &settings, &lighting, &frames, &progress);
+            let render = || algorithm.render_lit(scene, camera, settings, lighting, &frames, &progress);
             args.scene.pool()?.install(render)?
         }
     };
@@ -86,8 +87,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
 /// `supports` decide the methods).
 fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> Result<(), GpuError> {
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
-    if lighting.is_on() {
-        return unsupported("lit worlds render on the CPU backend only for now: add --backend cpu");
+    if lighting.is_on() && matches!(algorithm, Algorithm::Raster(..)) {
+        return unsupported("lit worlds rasterize on the CPU backend only for now: add --backend cpu");
     }
     match algorithm {
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
@@ -127,21 +128,20 @@ fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> 
     }
 }
 
-/// Render on the GPU: the tracer for ray-tracing methods, the rasterizer (and, for `--depth`,
+/// Render on the GPU: the tracer for ray-tracing methods (lit or not), the rasterizer (and, for `--depth`,
 /// its compute tile rasterizer) for splatting methods.
 fn render_gpu(
     args: &RenderArgs,
     ctx: &GpuContext,
-    scene: &Scene,
-    camera: &Camera,
-    settings: &RenderSettings,
+    world: &Loaded,
     algorithm: &Algorithm,
     frames: &Frames,
 ) -> Result<RenderOutput> {
     eprintln!("rendering on {}", ctx.describe());
+    let Loaded { scene, camera, lighting, settings } = world;
     match algorithm {
         Algorithm::Trace(method) => {
-            let trace = TraceScene::new(scene, *settings)?;
+            let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?;
             let pipeline = splat_gpu::TracePipeline::new(ctx)?;
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
             Ok(tracer.render(camera, method, frames)?.0)

@@ -93,6 +93,7 @@ impl Material {
             return Vec3::ZERO;
         }
         let h = (incident.l + v).normalize_or_zero();
+        // max(0, n·h)^s, with 0^0 = 1 as powf has it.
         let specular = if self.specular == Vec3::ZERO { 0.0 } else { n.dot(h).max(0.0).powf(self.shininess) };
         incident.irradiance * (self.diffuse * c * n_l + self.specular * specular)
     }
@@ -232,9 +233,9 @@ impl Light {
                 let l = (-direction + self.radius * disk_offset(-direction, u)).normalize();
                 Some(Incident { l, distance: f32::INFINITY, irradiance: e })
             }
-            LightKind::Point { position } => point_incident(x, disk_point(position, position - x, self.radius, u), e),
+            LightKind::Point { position } => point_incident(x, self.sample_point(position, x, u), e),
             LightKind::Spot { position, direction, inner_deg, outer_deg } => {
-                let mut inc = point_incident(x, disk_point(position, position - x, self.radius, u), e)?;
+                let mut inc = point_incident(x, self.sample_point(position, x, u), e)?;
                 let cos = (-inc.l).dot(direction);
                 let (ci, co) = (inner_deg.to_radians().cos(), outer_deg.to_radians().cos());
                 let cone = if ci <= co { f32::from(cos >= co) } else { smoothstep(co, ci, cos) };
@@ -242,6 +243,17 @@ impl Light {
                 (cone > 0.0).then_some(inc)
             }
         }
+    }
+}
+
+impl Light {
+    /// The point of a point or spot emitter at `position` that lights `x` in sample `u`: on the
+    /// disk of the light's radius facing `x`.
+    fn sample_point(&self, position: Vec3, x: Vec3, u: Vec2) -> Vec3 {
+        if self.radius == 0.0 {
+            return position;
+        }
+        disk_point(position, (position - x).normalize(), self.radius, u)
     }
 }
 
@@ -274,6 +286,11 @@ pub fn headlight(ray: &Ray, t: f32) -> Incident {
 
 /// Default offset of a shadow ray's origin along the light direction (vk `particleShadowOffset`).
 pub const DEFAULT_SHADOW_OFFSET: f32 = 0.2;
+/// Default hits of vk's sorted shadow pass: the any-hit payload size (vk `PARTICLES_SPP`, the
+/// k of the k-buffer).
+pub const DEFAULT_SHADOW_K: usize = 18;
+/// Largest k of the sorted shadow pass (a fixed array on the stack, as the k-buffer's).
+pub const MAX_SHADOW_K: usize = 64;
 /// Default transmittance below which vk's shadow ray stops and the point is in shadow
 /// (vk `shadowTransmittanceThreshold`).
 pub const DEFAULT_SHADOW_THRESHOLD: f32 = 0.8;
@@ -308,7 +325,7 @@ pub enum Shadows {
 impl Shadows {
     /// vk's sorted shadow with its defaults (K of the k-buffer, threshold 0.8, no tint).
     pub const SORTED: Shadows =
-        Shadows::Sorted { k: crate::trace::DEFAULT_K, threshold: DEFAULT_SHADOW_THRESHOLD, colored: 0.0 };
+        Shadows::Sorted { k: DEFAULT_SHADOW_K, threshold: DEFAULT_SHADOW_THRESHOLD, colored: 0.0 };
 }
 
 /// Which integration sorted methods (`exact`, `kbuffer`, `raster-sorted`) use when lit.
@@ -435,8 +452,8 @@ impl Lighting {
             return Err(format!("shadow offset {} must be finite and non-negative", self.shadow_offset));
         }
         if let Shadows::Sorted { k, threshold, colored } = self.shadows {
-            if !(1..=crate::trace::MAX_SLOTS).contains(&k) {
-                return Err(format!("shadow k = {k} is outside 1..={}", crate::trace::MAX_SLOTS));
+            if !(1..=MAX_SHADOW_K).contains(&k) {
+                return Err(format!("shadow k = {k} is outside 1..={MAX_SHADOW_K}"));
             }
             if !(0.0..=1.0).contains(&threshold) || !(0.0..=1.0).contains(&colored) {
                 return Err(format!("shadow threshold {threshold} and colored strength {colored} must lie in [0, 1]"));

@@ -28,6 +28,8 @@ pub const DEFAULT_MAX_PASSES: u32 = 200;
 pub const DEFAULT_MIN_TRANSMITTANCE: f32 = 0.01;
 /// Largest k of a k-buffer and largest N of `stochastic-n` (fixed arrays on the stack).
 pub const MAX_SLOTS: usize = 64;
+// The sorted shadow pass keeps its hits in a k-buffer.
+const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_SLOTS);
 
 /// A ray-tracing method.
 #[derive(Clone, Copy, Debug, PartialEq)]

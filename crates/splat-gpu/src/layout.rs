@@ -7,6 +7,7 @@ use splat_core::Camera;
 use splat_core::Scene;
 use splat_core::bvh::BvhNode;
 use splat_core::frame::Frames;
+use splat_core::lighting::{LightKind, Lighting, Look, Shadows};
 use splat_core::particle::sh_coeff_count;
 use splat_core::rng::RngScheme;
 use splat_core::trace::TraceScene;
@@ -15,6 +16,24 @@ use splat_core::trace::TraceScene;
 pub const MODE_FRAMES: u32 = 0;
 /// `Params::mode`: one pass of one frame per dispatch, the ray's state kept in [`PassState`].
 pub const MODE_PASS: u32 = 1;
+/// `Params::look` of [`Look::Surface`].
+pub const LOOK_SURFACE: u32 = 0;
+/// `Params::look` of [`Look::Volumetric`].
+pub const LOOK_VOLUMETRIC: u32 = 1;
+/// `Params::shadows` of [`Shadows::None`].
+pub const SHADOWS_NONE: u32 = 0;
+/// `Params::shadows` of [`Shadows::Sorted`].
+pub const SHADOWS_SORTED: u32 = 1;
+/// `Params::shadows` of [`Shadows::Stochastic`].
+pub const SHADOWS_STOCHASTIC: u32 = 2;
+/// `Params::shadows` of [`Shadows::Exact`].
+pub const SHADOWS_EXACT: u32 = 3;
+/// [`GpuLight::kind`] of a point light.
+pub const LIGHT_POINT: u32 = 0;
+/// [`GpuLight::kind`] of a spot light.
+pub const LIGHT_SPOT: u32 = 1;
+/// [`GpuLight::kind`] of a directional light.
+pub const LIGHT_DIRECTIONAL: u32 = 2;
 
 /// One particle in BVH leaf order (WGSL `Particle`, 64 bytes).
 #[repr(C)]
@@ -66,8 +85,60 @@ pub struct PassState {
     pub after_id: u32,
     /// 1 done, 2 accepted (stochastic pass).
     pub flags: u32,
+    /// Particle that set the iso-opacity depth (u32::MAX: none yet).
+    pub picked: u32,
+    /// Integrated normal Σ nᵢ αᵢ Tᵢ (lit renders).
+    pub normal: [f32; 3],
+    /// Iso-opacity depth.
+    pub depth: f32,
+}
+
+/// The material of one splat set and its first particle id (WGSL `Material`, 64 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuMaterial {
+    /// k_e.
+    pub emissive: [f32; 3],
+    /// First particle id of the set.
+    pub first: u32,
+    /// k_a.
+    pub ambient: [f32; 3],
+    /// Blinn–Phong exponent.
+    pub shininess: f32,
+    /// k_d.
+    pub diffuse: [f32; 3],
+    /// 1 when the material only emits.
+    pub emissive_only: u32,
+    /// k_s.
+    pub specular: [f32; 3],
     /// Padding.
     pub pad: u32,
+}
+
+/// One light (WGSL `Light`, 64 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuLight {
+    /// Position (point and spot).
+    pub position: [f32; 3],
+    /// 0 point, 1 spot, 2 directional.
+    pub kind: u32,
+    /// Unit direction (spot axis, directional travel).
+    pub direction: [f32; 3],
+    /// Emitter radius.
+    pub radius: f32,
+    /// Colour.
+    pub color: [f32; 3],
+    /// Intensity.
+    pub intensity: f32,
+    /// cos of the spot's inner half-angle.
+    pub cos_inner: f32,
+    /// cos of the spot's outer half-angle.
+    pub cos_outer: f32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
 }
 
 /// Everything one dispatch needs (WGSL `Params`, 192 bytes).
@@ -130,8 +201,84 @@ pub struct Params {
     pub pass_index: u32,
     /// [`splat_core::Frames::u_shift`], subtracted from every u (a test hook; 0 in renders).
     pub u_shift: f32,
+    /// 1 when lighting is on ([`splat_core::lighting::Lighting::is_on`]).
+    pub lit: u32,
+    /// 0 surface, 1 volumetric.
+    pub look: u32,
+    /// 0 none, 1 sorted, 2 stochastic, 3 exact.
+    pub shadows: u32,
+    /// Hits of the sorted shadow pass.
+    pub shadow_k: u32,
+    /// Transmittance threshold of the sorted shadow.
+    pub shadow_threshold: f32,
+    /// Coloured-shadow strength.
+    pub shadow_colored: f32,
+    /// Shadow-ray origin offset.
+    pub shadow_offset: f32,
+    /// Lights in the light buffer (0: the headlight).
+    pub light_count: u32,
+    /// Sets in the material buffer.
+    pub set_count: u32,
+    /// Iso-opacity threshold on transmittance.
+    pub iso_threshold: f32,
     /// Padding.
-    pub pad2: u32,
+    pub pad3: u32,
+    /// Padding.
+    pub pad4: u32,
+    /// Padding.
+    pub pad5: u32,
+}
+
+/// The material buffer of a lighting: one entry per splat set.
+pub fn materials(lighting: &Lighting) -> Vec<GpuMaterial> {
+    lighting
+        .sets
+        .iter()
+        .map(|s| {
+            let m = &s.material;
+            GpuMaterial {
+                emissive: m.emissive.to_array(),
+                first: s.first,
+                ambient: m.ambient.to_array(),
+                shininess: m.shininess,
+                diffuse: m.diffuse.to_array(),
+                emissive_only: u32::from(m.is_emissive()),
+                specular: m.specular.to_array(),
+                pad: 0,
+            }
+        })
+        .collect()
+}
+
+/// The light buffer of a lighting (one unused entry when it has none: a binding cannot be
+/// empty). Cone cosines are computed here as the core computes them.
+pub fn lights(lighting: &Lighting) -> Vec<GpuLight> {
+    let mut v: Vec<GpuLight> = lighting
+        .lights
+        .iter()
+        .map(|l| {
+            let base =
+                GpuLight { color: l.color.to_array(), intensity: l.intensity, radius: l.radius, ..GpuLight::default() };
+            match l.kind {
+                LightKind::Point { position } => GpuLight { position: position.to_array(), kind: LIGHT_POINT, ..base },
+                LightKind::Spot { position, direction, inner_deg, outer_deg } => GpuLight {
+                    position: position.to_array(),
+                    kind: LIGHT_SPOT,
+                    direction: direction.to_array(),
+                    cos_inner: inner_deg.to_radians().cos(),
+                    cos_outer: outer_deg.to_radians().cos(),
+                    ..base
+                },
+                LightKind::Directional { direction } => {
+                    GpuLight { kind: LIGHT_DIRECTIONAL, direction: direction.to_array(), ..base }
+                }
+            }
+        })
+        .collect();
+    if v.is_empty() {
+        v.push(GpuLight::default());
+    }
+    v
 }
 
 /// The leaf-order particles of a scene.
@@ -229,7 +376,34 @@ pub fn params(
         mode: MODE_FRAMES,
         pass_index: 0,
         u_shift: frames.u_shift,
-        pad2: 0,
+        ..lighting_params(trace)
+    }
+}
+
+/// The lighting fields of [`Params`] (the rest zero).
+fn lighting_params(trace: &TraceScene) -> Params {
+    let l = trace.lighting();
+    let (shadows, shadow_k, shadow_threshold, shadow_colored) = match l.shadows {
+        Shadows::None => (SHADOWS_NONE, 1, 0.0, 0.0),
+        Shadows::Sorted { k, threshold, colored } => (SHADOWS_SORTED, k as u32, threshold, colored),
+        Shadows::Stochastic => (SHADOWS_STOCHASTIC, 1, 0.0, 0.0),
+        Shadows::Exact => (SHADOWS_EXACT, 1, 0.0, 0.0),
+    };
+    Params {
+        lit: u32::from(l.is_on()),
+        look: match l.look {
+            Look::Surface => LOOK_SURFACE,
+            Look::Volumetric => LOOK_VOLUMETRIC,
+        },
+        shadows,
+        shadow_k,
+        shadow_threshold,
+        shadow_colored,
+        shadow_offset: l.shadow_offset,
+        light_count: l.lights.len() as u32,
+        set_count: l.sets.len() as u32,
+        iso_threshold: trace.settings().iso_threshold,
+        ..Params::default()
     }
 }
 
@@ -316,7 +490,19 @@ mod tests {
             crate::TRACE_WGSL,
             PassState,
             "PassState",
-            [radiance, transmittance, after_t, after_id, flags, pad]
+            [radiance, transmittance, after_t, after_id, flags, picked, normal, depth]
+        );
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            GpuMaterial,
+            "Material",
+            [emissive, first, ambient, shininess, diffuse, emissive_only, specular, pad]
+        );
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            GpuLight,
+            "Light",
+            [position, kind, direction, radius, color, intensity, cos_inner, cos_outer, pad0, pad1]
         );
         assert_mirrors!(
             crate::TRACE_WGSL,
@@ -351,7 +537,19 @@ mod tests {
                 mode,
                 pass_index,
                 u_shift,
-                pad2
+                lit,
+                look,
+                shadows,
+                shadow_k,
+                shadow_threshold,
+                shadow_colored,
+                shadow_offset,
+                light_count,
+                set_count,
+                iso_threshold,
+                pad3,
+                pad4,
+                pad5
             ]
         );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
@@ -375,6 +573,16 @@ mod tests {
                 "LOOP_BUDGET" = crate::LOOP_BUDGET,
                 "MODE_FRAMES" = MODE_FRAMES,
                 "MODE_PASS" = MODE_PASS,
+                "LIGHT_ID" = rng::LIGHT_ID,
+                "LOOK_SURFACE" = LOOK_SURFACE,
+                "LOOK_VOLUMETRIC" = LOOK_VOLUMETRIC,
+                "SHADOWS_NONE" = SHADOWS_NONE,
+                "SHADOWS_SORTED" = SHADOWS_SORTED,
+                "SHADOWS_STOCHASTIC" = SHADOWS_STOCHASTIC,
+                "SHADOWS_EXACT" = SHADOWS_EXACT,
+                "LIGHT_POINT" = LIGHT_POINT,
+                "LIGHT_SPOT" = LIGHT_SPOT,
+                "LIGHT_DIRECTIONAL" = LIGHT_DIRECTIONAL,
                 "SH_C0" = sh::SH_C0,
                 "SH_C1" = sh::SH_C1,
             ]

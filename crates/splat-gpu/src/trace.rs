@@ -27,6 +27,7 @@ use std::time::{Duration, Instant};
 pub const TRACE_WGSL: &str = concat!(
     include_str!("../../../shaders/common.wgsl"),
     include_str!("../../../shaders/sh.wgsl"),
+    include_str!("../../../shaders/lighting.wgsl"),
     include_str!("../../../shaders/bvh.wgsl"),
     include_str!("../../../shaders/trace.wgsl")
 );
@@ -109,6 +110,8 @@ impl TracePipeline {
                 storage(4, false),
                 storage(5, false),
                 storage(6, false),
+                storage(7, true),
+                storage(8, true),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -133,11 +136,21 @@ pub struct GpuTracer<'a> {
     particles: wgpu::Buffer,
     nodes: wgpu::Buffer,
     sh: wgpu::Buffer,
+    materials: wgpu::Buffer,
+    lights: wgpu::Buffer,
 }
 
 impl<'a> GpuTracer<'a> {
-    /// Upload the particles and BVH of `trace`; refuse buffers above the binding limit.
+    /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
+    /// binding limit, and lighting with kernel-ellipsoid normals (the kernel has the max-density
+    /// plane normal only).
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
+        if trace.lighting().is_on() && trace.settings().normal_mode != splat_core::normal::NormalMode::MaxDensityPlane {
+            return Err(GpuError::Unsupported(
+                "lit GPU ray tracing computes max-density-plane normals only: use --normals plane or --backend cpu"
+                    .into(),
+            ));
+        }
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());
@@ -153,6 +166,8 @@ impl<'a> GpuTracer<'a> {
             particles: ctx.upload("particles", bytemuck::cast_slice(&particles)),
             nodes: ctx.upload("nodes", bytemuck::cast_slice(&nodes)),
             sh: ctx.upload("sh", bytemuck::cast_slice(&sh)),
+            materials: ctx.upload("materials", bytemuck::cast_slice(&layout::materials(trace.lighting()))),
+            lights: ctx.upload("lights", bytemuck::cast_slice(&layout::lights(trace.lighting()))),
         })
     }
 
@@ -185,7 +200,7 @@ impl<'a> GpuTracer<'a> {
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         let params = MethodParams::try_from(method)?;
-        let count = frames.keys(method.is_stochastic())?.len() as u32;
+        let count = frames.keys(method.is_stochastic() || self.trace.lighting().is_random())?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
         let run = Run { tracer: self, camera, params, frames, count };
@@ -290,6 +305,8 @@ impl Run<'_> {
                 wgpu::BindGroupEntry { binding: 4, resource: out_mean.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: out_var.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 6, resource: pass_state.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: tracer.materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 8, resource: tracer.lights.as_entire_binding() },
             ],
         });
         let mut gpu_time = Duration::ZERO;
@@ -353,7 +370,9 @@ impl Run<'_> {
                     pass_index += batch.len() as u32;
                     submit(&batch)?;
                     let states = ctx.read_through(&pass_state, 0, &read_state, state_bytes)?;
-                    if states.chunks(8).all(|s| s[6].to_bits() & 1 == 1) {
+                    let words = std::mem::size_of::<PassState>() / 4;
+                    let flags = std::mem::offset_of!(PassState, flags) / 4;
+                    if states.chunks(words).all(|s| s[flags].to_bits() & 1 == 1) {
                         break;
                     }
                 }

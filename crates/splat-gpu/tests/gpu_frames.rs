@@ -4,6 +4,8 @@
 mod common;
 
 use common::{context, fixture, gpu_run, trace_pipeline, tracer};
+use glam::Vec3;
+use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Frames, RenderSettings};
 use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
@@ -53,6 +55,92 @@ fn one_frame_equals_the_cpu_frame() {
         }
     }
 }
+
+/// A lit world on a fixture: every material term, a soft spot light (its samples drawn per
+/// pixel and frame) and a directional light, with the given shadows and look.
+fn lighting(shadows: Shadows, look: Look) -> Lighting {
+    let material = Material {
+        emissive: Vec3::splat(0.05),
+        ambient: Vec3::splat(0.1),
+        diffuse: Vec3::new(0.9, 0.8, 0.7),
+        specular: Vec3::splat(0.3),
+        shininess: 16.0,
+    };
+    let lights = vec![
+        Light {
+            kind: LightKind::Spot {
+                position: Vec3::new(1.5, 1.5, 2.5),
+                direction: Vec3::new(-1.5, -1.5, -2.5).normalize(),
+                inner_deg: 15.0,
+                outer_deg: 30.0,
+            },
+            color: Vec3::new(1.0, 0.9, 0.8),
+            intensity: 8.0,
+            radius: 0.1,
+        },
+        Light {
+            kind: LightKind::Directional { direction: Vec3::new(0.4, -0.6, -1.0).normalize() },
+            color: Vec3::new(0.4, 0.5, 1.0),
+            intensity: 0.6,
+            radius: 0.0,
+        },
+    ];
+    Lighting { look, shadow_offset: 0.02, ..Lighting::single(material, lights, shadows) }
+}
+
+/// Lit, one frame makes the same decisions and the same shading on both backends, for every
+/// shadow kind (vk's sorted pass with a coloured tint, the stochastic shadow ray, the exact
+/// transmittance) and both looks: as [`one_frame_equals_the_cpu_frame`].
+#[test]
+fn one_lit_frame_equals_the_cpu_frame() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 32, 24);
+    let sorted = Shadows::Sorted { k: 8, threshold: 0.8, colored: 0.5 };
+    let unlit = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let cases = [
+        (Shadows::None, Look::Surface),
+        (sorted, Look::Surface),
+        (Shadows::Stochastic, Look::Surface),
+        (Shadows::Exact, Look::Volumetric),
+        (Shadows::Stochastic, Look::Volumetric),
+    ];
+    for (shadows, look) in cases {
+        let trace =
+            TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lighting(shadows, look)).unwrap();
+        let tracer = tracer(ctx, &trace);
+        for (name, method) in methods() {
+            let frames = Frames { count: 1, seed: 11, ..Frames::default() };
+            let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
+            let gpu = gpu_run(&tracer, &camera, &method, frames);
+            // The comparison means something: lighting changes the frame far beyond the tolerance.
+            let plain = render_frames(&unlit, &camera, &method, &frames, &|_| {}).unwrap();
+            let lit_effect = max_difference(cpu.mean.data(), plain.mean.data());
+            assert!(lit_effect > 0.1, "{shadows:?} {look:?} {name}: lighting changes the frame by {lit_effect} only");
+            let (mut near, mut bad, mut largest) = (0, Vec::new(), 0.0f32);
+            for (p, (a, b)) in cpu.mean.data().chunks(3).zip(gpu.mean.data().chunks(3)).enumerate() {
+                let worst = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+                largest = largest.max(worst);
+                if worst.is_nan() || worst > LIT_TOLERANCE {
+                    let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+                    let gap = splat_tests::flips::trace_gap(&trace, &camera, &method, &frames, x, y);
+                    if gap < FLIP_GAP { near += 1 } else { bad.push((x, y, worst, gap)) }
+                }
+            }
+            eprintln!(
+                "{shadows:?} {look:?} {name}: largest difference {largest:.1e}, {near} pixels differ by a decision near its threshold"
+            );
+            assert!(bad.is_empty(), "{shadows:?} {look:?} {name}: pixels (x, y, difference, gap) {bad:?}");
+        }
+    }
+}
+
+fn max_difference(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+/// Lit frames add f32 shading (pow, sin/cos of the light samples, normalisation) to the f32
+/// compositing of [`FLOAT_TOLERANCE`].
+const LIT_TOLERANCE: f32 = 1e-3;
 
 /// Scenes above the storage binding limit are refused with an error naming sizes and limit.
 #[test]

@@ -361,7 +361,7 @@ fn shadows(s: Option<&ShadowsFile>) -> (Shadows, f32) {
         ShadowKind::Stochastic => Shadows::Stochastic,
         ShadowKind::Exact => Shadows::Exact,
         ShadowKind::Sorted => Shadows::Sorted {
-            k: s.k.unwrap_or(splat_core::trace::DEFAULT_K),
+            k: s.k.unwrap_or(splat_core::lighting::DEFAULT_SHADOW_K),
             threshold: s.threshold.unwrap_or(splat_core::lighting::DEFAULT_SHADOW_THRESHOLD),
             colored: s.colored.unwrap_or(0.0),
         },

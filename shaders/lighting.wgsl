@@ -1,0 +1,146 @@
+// Twin of crates/splat-core/src/lighting.rs, prepended to the kernels that light particles:
+// the material of a splat set, the incident light of one light sample and the Blinn–Phong
+// shading Lit(x, n, v, c) = (k_e + k_a) c + Σ_l V_l E_l [k_d c max(0, n·l) + k_s max(0, n·h)^s].
+
+// One splat set's material and first particle id (64 bytes), mirrored by splat_gpu::GpuMaterial.
+struct Material {
+    emissive: vec3<f32>,
+    first: u32,
+    ambient: vec3<f32>,
+    shininess: f32,
+    diffuse: vec3<f32>,
+    // 1 when the set only emits (lighting.rs `Material::is_emissive`).
+    emissive_only: u32,
+    specular: vec3<f32>,
+    pad: u32,
+}
+
+// One light (64 bytes), mirrored by splat_gpu::GpuLight; the cone's cosines come from the host.
+struct Light {
+    position: vec3<f32>,
+    kind: u32,
+    direction: vec3<f32>,
+    radius: f32,
+    color: vec3<f32>,
+    intensity: f32,
+    cos_inner: f32,
+    cos_outer: f32,
+    pad0: u32,
+    pad1: u32,
+}
+
+const LIGHT_POINT: u32 = 0u;
+const LIGHT_SPOT: u32 = 1u;
+const LIGHT_DIRECTIONAL: u32 = 2u;
+
+// lighting.rs `Incident`; `ok` is false where the light sends nothing.
+struct Incident {
+    l: vec3<f32>,
+    distance: f32,
+    irradiance: vec3<f32>,
+    ok: bool,
+}
+
+// lighting.rs `concentric_disk`.
+fn concentric_disk(u: vec2<f32>) -> vec2<f32> {
+    let p = 2.0 * u - vec2<f32>(1.0);
+    if (p.x == 0.0 && p.y == 0.0) {
+        return vec2<f32>(0.0);
+    }
+    var r = p.y;
+    var theta = 1.5707964 - 0.7853982 * (p.x / p.y);
+    if (abs(p.x) > abs(p.y)) {
+        r = p.x;
+        theta = 0.7853982 * (p.y / p.x);
+    }
+    return r * vec2<f32>(cos(theta), sin(theta));
+}
+
+// glam's `Vec3::any_orthonormal_pair` (Duff et al. 2017), with Rust's signum (−0 is negative).
+fn orthonormal_pair(n: vec3<f32>) -> array<vec3<f32>, 2> {
+    let sign = select(1.0, -1.0, (bitcast<u32>(n.z) >> 31u) == 1u);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return array<vec3<f32>, 2>(
+        vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        vec3<f32>(b, sign + n.y * n.y * a, -n.y),
+    );
+}
+
+// lighting.rs `disk_point`: a point of the disk of `radius` around `centre` facing `axis`.
+fn disk_point(centre: vec3<f32>, axis: vec3<f32>, radius: f32, u: vec2<f32>) -> vec3<f32> {
+    if (radius == 0.0) {
+        return centre;
+    }
+    let b = orthonormal_pair(axis);
+    let d = radius * concentric_disk(u);
+    return centre + d.x * b[0] + d.y * b[1];
+}
+
+fn point_incident(x: vec3<f32>, light: vec3<f32>, e: vec3<f32>) -> Incident {
+    let to = light - x;
+    let d2 = dot(to, to);
+    if (!(d2 > 0.0)) {
+        return Incident(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), false);
+    }
+    let distance = sqrt(d2);
+    return Incident(to / distance, distance, e / d2, true);
+}
+
+fn smoothstep_(a: f32, b: f32, x: f32) -> f32 {
+    let t = clamp((x - a) / (b - a), 0.0, 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+// lighting.rs `Light::incident`: the light arriving at `x` from sample `u` of the emitter.
+fn light_incident(light: Light, x: vec3<f32>, u: vec2<f32>) -> Incident {
+    let e = light.color * light.intensity;
+    if (light.kind == LIGHT_DIRECTIONAL) {
+        let back = -light.direction;
+        let b = orthonormal_pair(back);
+        let d = concentric_disk(u);
+        let l = normalize(back + light.radius * (d.x * b[0] + d.y * b[1]));
+        return Incident(l, 3.0e38, e, true);
+    }
+    var sample = light.position;
+    if (light.radius != 0.0) {
+        sample = disk_point(light.position, normalize(light.position - x), light.radius, u);
+    }
+    var inc = point_incident(x, sample, e);
+    if (light.kind == LIGHT_SPOT && inc.ok) {
+        let c = dot(-inc.l, light.direction);
+        var cone = smoothstep_(light.cos_outer, light.cos_inner, c);
+        if (light.cos_inner <= light.cos_outer) {
+            cone = select(0.0, 1.0, c >= light.cos_outer);
+        }
+        inc.irradiance *= cone;
+        inc.ok = cone > 0.0;
+    }
+    return inc;
+}
+
+// lighting.rs `Material::unlit`: (k_e + k_a) c.
+fn material_unlit(m: Material, c: vec3<f32>) -> vec3<f32> {
+    return (m.emissive + m.ambient) * c;
+}
+
+// lighting.rs `Material::direct`: one light's Blinn–Phong term before visibility.
+fn material_direct(m: Material, c: vec3<f32>, n: vec3<f32>, v: vec3<f32>, inc: Incident) -> vec3<f32> {
+    let n_l = dot(n, inc.l);
+    if (!(n_l > 0.0)) {
+        return vec3<f32>(0.0);
+    }
+    let hv = inc.l + v;
+    let hl = length(hv);
+    var specular = 0.0;
+    if (any(m.specular != vec3<f32>(0.0))) {
+        var h = vec3<f32>(0.0);
+        if (hl > 0.0) {
+            h = hv * (1.0 / hl);
+        }
+        // max(0, n·h)^s with 0^0 = 1, as Rust's powf has it (WGSL's pow is undefined at 0).
+        let nh = max(dot(n, h), 0.0);
+        specular = select(select(0.0, 1.0, m.shininess == 0.0), pow(nh, m.shininess), nh > 0.0);
+    }
+    return inc.irradiance * (m.diffuse * c * n_l + m.specular * specular);
+}
