@@ -41,6 +41,23 @@ struct Incident {
     ok: bool,
 }
 
+// normal.rs `particle_normal` in its max-density-plane mode: n ∝ Mᵀ M (o − μ) for the rows of
+// the canonical transform M = S⁻¹ Rᵀ, oriented toward the ray origin (−dir when degenerate).
+fn plane_normal(row0: vec3<f32>, row1: vec3<f32>, row2: vec3<f32>, mean: vec3<f32>, origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    let rel = origin - mean;
+    let oc = vec3<f32>(dot(row0, rel), dot(row1, rel), dot(row2, rel));
+    let m = row0 * oc.x + row1 * oc.y + row2 * oc.z;
+    let rcp = 1.0 / sqrt(dot(m, m));
+    var n = -dir;
+    if (rcp > 0.0 && rcp < 3.0e38) {
+        n = m * rcp;
+    }
+    if (dot(n, dir) > 0.0) {
+        n = -n;
+    }
+    return n;
+}
+
 // lighting.rs `concentric_disk`.
 fn concentric_disk(u: vec2<f32>) -> vec2<f32> {
     let p = 2.0 * u - vec2<f32>(1.0);
@@ -143,4 +160,47 @@ fn material_direct(m: Material, c: vec3<f32>, n: vec3<f32>, v: vec3<f32>, inc: I
         specular = select(select(0.0, 1.0, m.shininess == 0.0), pow(nh, m.shininess), nh > 0.0);
     }
     return inc.irradiance * (m.diffuse * c * n_l + m.specular * specular);
+}
+
+// lighting.rs `Lighting::material`: the set whose first id is the last at or below `id`. Reads
+// the including kernel's `materials` and `params.set_count`; `count_iteration` is the kernel's
+// loop counter (trace.wgsl's lavapipe budget) or nothing.
+fn material_of(id: u32) -> Material {
+    var m = materials[0];
+    for (var i = 1u; i < params.set_count; i++) {
+        count_iteration();
+        if (materials[i].first > id) {
+            break;
+        }
+        m = materials[i];
+    }
+    return m;
+}
+
+// lighting.rs `Lighting::shade_unshadowed`: Lit of particle `id` hit at t along the ray
+// (origin, dir) with normal n, every light visible and sampled at its centre (the raster
+// pipelines have no shadows, vk_gaussian_splatting Lighting §3); c itself when lighting is off or
+// the set only emits. Reads `params.lit`, `params.light_count` and `lights`.
+fn shade_unshadowed(c: vec3<f32>, id: u32, origin: vec3<f32>, dir: vec3<f32>, t: f32, n: vec3<f32>) -> vec3<f32> {
+    if (params.lit == 0u) {
+        return c;
+    }
+    let m = material_of(id);
+    if (m.emissive_only == 1u) {
+        return c;
+    }
+    let x = origin + t * dir;
+    let v = -dir;
+    var sum = material_unlit(m, c);
+    if (params.light_count == 0u) {
+        return sum + material_direct(m, c, n, v, Incident(-dir, t, vec3<f32>(1.0), true));
+    }
+    for (var j = 0u; j < params.light_count; j++) {
+        count_iteration();
+        let inc = light_incident(lights[j], x, vec2<f32>(0.5));
+        if (inc.ok) {
+            sum += material_direct(m, c, n, v, inc);
+        }
+    }
+    return sum;
 }

@@ -214,6 +214,11 @@ fn tile_blend(
     var color = vec3<f32>(0.0);
     var depth = 0.0;
     var picked = NONE;
+    // Lit: the pixel-centre ray, and the integrated normal Σ nᵢ αᵢ Tᵢ.
+    let origin = camera_origin();
+    let dir = pixel_dir(centre);
+    let to_t = stretch(centre);
+    var normal = vec3<f32>(0.0);
     for (var start = range.x; start < range.y; start += BATCH) {
         if (l < BATCH && start + l < range.y) {
             batch[l] = splats[order[pair_ranks[start + l]]];
@@ -226,7 +231,15 @@ fn tile_blend(
             if (inside && in_rect) {
                 let alpha = splat_alpha(s, centre, params);
                 if (alpha > 0.0) {
-                    color += transmittance * alpha * s.color;
+                    var c = s.color;
+                    if (params.lit == 1u) {
+                        let n = splat_normal(s.id, origin, dir);
+                        if (params.look == LOOK_VOLUMETRIC) {
+                            c = shade_unshadowed(s.color, s.id, origin, dir, s.depth * to_t, n);
+                        }
+                        normal += transmittance * alpha * n;
+                    }
+                    color += transmittance * alpha * c;
                     transmittance *= 1.0 - alpha;
                     if (picked == NONE && transmittance < params.iso_threshold) {
                         picked = s.id;
@@ -239,9 +252,25 @@ fn tile_blend(
     }
     if (inside) {
         let index = px.y * params.size.x + px.x;
-        out_color[index] = vec4<f32>(color + transmittance * params.background.xyz, 1.0 - transmittance);
+        var out = vec4<f32>(color + transmittance * params.background.xyz, 1.0 - transmittance);
+        if (params.lit == 1u && params.look == LOOK_SURFACE) {
+            // raster/mod.rs `light_surface`: L lit once at the picked depth with the integrated
+            // normal and the picked splat's material; the background where T stayed above the
+            // threshold.
+            if (picked == NONE) {
+                out = vec4<f32>(params.background.xyz, 0.0);
+            } else {
+                var n = normal;
+                if (any(n != vec3<f32>(0.0))) {
+                    let rcp = 1.0 / length(n);
+                    n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
+                }
+                let lit = shade_unshadowed(color, picked, origin, dir, depth * to_t, n);
+                out = vec4<f32>(lit + transmittance * params.background.xyz, out.w);
+            }
+        }
+        out_color[index] = out;
         // The depth as a distance along the pixel-centre ray: t = z |d_cam|.
-        let d_cam = vec3<f32>((centre - params.intrinsics.zw) / params.intrinsics.xy, 1.0);
-        out_pick[index] = vec2<u32>(bitcast<u32>(depth * length(d_cam)), picked);
+        out_pick[index] = vec2<u32>(bitcast<u32>(depth * to_t), picked);
     }
 }

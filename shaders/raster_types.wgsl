@@ -1,6 +1,6 @@
 // Types shared by the raster kernels (prepended to raster.wgsl, splat.wgsl and fold.wgsl).
 
-// Everything fixed for one camera (160 bytes), mirrored by splat_gpu::RasterParams.
+// Everything fixed for one camera (176 bytes), mirrored by splat_gpu::RasterParams.
 struct RasterParams {
     cam_row0: vec4<f32>,
     cam_row1: vec4<f32>,
@@ -26,6 +26,11 @@ struct RasterParams {
     mode: u32,
     // Splat extent: EXTENT_3DGS or EXTENT_SQRT8.
     extent: u32,
+    // Lighting (lighting.rs): 1 when a set reflects light; the look (LOOK_*); lights and sets.
+    lit: u32,
+    look: u32,
+    light_count: u32,
+    set_count: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -61,6 +66,8 @@ const MODE_STOCHASTIC: u32 = 2u;
 // params.extent (splat_core::raster::SplatExtent): the 3DGS box of half-width ⌈3 √λ_max⌉
 // (BOX_SIGMAS, with 3DGS's floor EIGEN_FLOOR under the eigenvalue discriminant), or the √8σ
 // ellipse (fragments with a Mahalanobis term above EXTENT_SQ are discarded).
+const LOOK_SURFACE: u32 = 0u;
+const LOOK_VOLUMETRIC: u32 = 1u;
 const EXTENT_3DGS: u32 = 0u;
 const EXTENT_SQRT8: u32 = 1u;
 const EXTENT_SQ: f32 = 8.0;

@@ -77,5 +77,7 @@ fn fs_stochastic(in: VertexOut) -> @location(0) vec4<f32> {
     if (!(u < alpha)) {
         discard;
     }
-    return vec4<f32>(s.color, 1.0);
+    // Lit, each written sample is shaded with its own splat's normal and position (forward
+    // shading; vk_gaussian_splatting Lighting §1.2, §2.2).
+    return vec4<f32>(splat_lit(s, in.position.xy), 1.0);
 }

@@ -394,21 +394,10 @@ fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
 
 // ---- normal.rs, lighting.rs and the shadow rays of trace.rs ----------------------------------
 
-// normal.rs `particle_normal`, max-density plane: n ∝ Mᵀ M (o − μ), toward the ray origin.
+// normal.rs `particle_normal` of the particle in leaf `leaf` (lighting.wgsl `plane_normal`).
 fn particle_normal(leaf: u32, ray: Ray) -> vec3<f32> {
     let p = particles[leaf];
-    let rel = ray.origin - p.mean;
-    let oc = vec3<f32>(dot(p.row0, rel), dot(p.row1, rel), dot(p.row2, rel));
-    let m = p.row0 * oc.x + p.row1 * oc.y + p.row2 * oc.z;
-    let rcp = 1.0 / sqrt(dot(m, m));
-    var n = -ray.dir;
-    if (rcp > 0.0 && rcp < 3.0e38) {
-        n = m * rcp;
-    }
-    if (dot(n, ray.dir) > 0.0) {
-        n = -n;
-    }
-    return n;
+    return plane_normal(p.row0, p.row1, p.row2, p.mean, ray.origin, ray.dir);
 }
 
 // composite.rs `Composite::unit_normal` for a ray with hits: the integrated normal, or the
@@ -418,17 +407,9 @@ fn unit_normal(sum: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
     return select(-dir, sum / len, len > 1e-6);
 }
 
-// lighting.rs `Lighting::material`: the set whose first id is the last at or below `id`.
-fn material_of(id: u32) -> Material {
-    var m = materials[0];
-    for (var i = 1u; i < params.set_count; i++) {
-        iterations += 1u;
-        if (materials[i].first > id) {
-            break;
-        }
-        m = materials[i];
-    }
-    return m;
+// lighting.wgsl's loop counter: every loop body counts toward lavapipe's budget.
+fn count_iteration() {
+    iterations += 1u;
 }
 
 // rng.rs `RayRng::light_sample`.

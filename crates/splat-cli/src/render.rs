@@ -87,8 +87,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
 /// `supports` decide the methods).
 fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> Result<(), GpuError> {
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
-    if lighting.is_on() && matches!(algorithm, Algorithm::Raster(..)) {
-        return unsupported("lit worlds rasterize on the CPU backend only for now: add --backend cpu");
+    if lighting.is_on() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
+        return unsupported("the GPU lights with max-density-plane normals only: use --normals plane or --backend cpu");
     }
     match algorithm {
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
@@ -148,7 +148,7 @@ fn render_gpu(
         }
         Algorithm::Raster(method, raster_settings) => {
             let pipes = splat_gpu::RasterPipelines::new(ctx)?;
-            let gpu_scene = splat_gpu::RasterScene::new(ctx, scene, settings)?;
+            let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?;
             let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
             let mut out = raster.render(method, frames)?.0;
             if args.depth.is_some() {

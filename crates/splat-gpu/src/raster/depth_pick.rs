@@ -106,6 +106,9 @@ impl GpuRasterizer<'_> {
                 (10, &ranges),
                 (11, &out_color),
                 (12, &out_pick),
+                (13, &self.scene.materials),
+                (14, &self.scene.lights),
+                (15, &self.scene.canonical),
             ],
         );
         let mut encoder = self.encoder("tile lists");

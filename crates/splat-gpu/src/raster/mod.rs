@@ -46,6 +46,7 @@ use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::image::Image;
+use splat_core::lighting::{Lighting, Look};
 use splat_core::particle::Scene;
 use splat_core::raster::project::FRUSTUM_GUARD;
 use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
@@ -59,12 +60,16 @@ pub const RASTER_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/sh.wgsl"),
     include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/lighting.wgsl"),
+    include_str!("../../../../shaders/raster_lighting.wgsl"),
     include_str!("../../../../shaders/raster.wgsl")
 );
 /// WGSL of the splatting render pipeline.
 pub const SPLAT_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/lighting.wgsl"),
+    include_str!("../../../../shaders/raster_lighting.wgsl"),
     include_str!("../../../../shaders/splat.wgsl")
 );
 /// WGSL of the frame accumulation.
@@ -219,8 +224,16 @@ impl<'a> GpuRasterizer<'a> {
 
     /// Render `frames.count` frames of `method` (one for sorted splatting) and fold them into
     /// the per-pixel running mean and M2 (f32 Welford, as the ray-tracing kernel does).
+    ///
+    /// Lit, sorted splatting runs on the compute tile rasterizer ([`GpuRasterizer::depth_pick`]),
+    /// which composites front to back with the transmittance at hand (as the CPU does when
+    /// lit), integrates the normals and lights each pixel once (the surface look) or each
+    /// fragment (the volumetric look); StochasticSplats lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
         let draw = Draw::of(method)?;
+        if self.scene.is_lit() && draw != Draw::Stochastic {
+            return self.render_lit_sorted(frames);
+        }
         if frames.rng != splat_core::rng::RngScheme::Hash {
             return Err(GpuError::Unsupported(
                 "the raster methods draw their decisions with the hash generator".into(),
@@ -269,6 +282,22 @@ impl<'a> GpuRasterizer<'a> {
         Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
     }
 
+    /// One lit frame of sorted splatting from the compute tile rasterizer.
+    fn render_lit_sorted(&self, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
+        frames.keys(false)?;
+        let start = Instant::now();
+        let pick = self.depth_pick()?;
+        let mean: Vec<f32> =
+            pick.color.data().chunks(3).zip(pick.alpha.data()).flat_map(|(c, &a)| [c[0], c[1], c[2], a]).collect();
+        let m2 = vec![0.0; mean.len()];
+        let (mut out, stats) = crate::output(&self.camera, &mean, &m2, 1, start.elapsed(), false);
+        let depth = pick.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
+        out.depth = Image::from_data(self.camera.width, self.camera.height, 1, depth)
+            .ok_or_else(|| GpuError::Readback("depth image of the wrong size".into()))?;
+        out.picked = pick.picked;
+        Ok((out, stats))
+    }
+
     /// Whether the GPU rasterizer renders `method` with `settings` (the one place that decides
     /// it): sorted splatting and StochasticSplats, one sample per pixel at the centre, billboard
     /// (centre) fragment depth. Enderton, stratified, MSAA sample sets, max-density-plane depths
@@ -293,6 +322,9 @@ impl<'a> GpuRasterizer<'a> {
                 wgpu::BindGroupEntry { binding: 2, resource: self.splats.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 15, resource: self.scene.canonical.as_entire_binding() },
             ],
         })
     }
@@ -528,6 +560,10 @@ mod tests {
                 tiles,
                 mode,
                 extent,
+                lit,
+                look,
+                light_count,
+                set_count,
                 pad1,
                 pad2
             ]

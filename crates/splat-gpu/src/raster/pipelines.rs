@@ -48,6 +48,9 @@ impl RasterPipelines {
                 storage_entry(2, draw_stages, true),
                 storage_entry(3, wgpu::ShaderStages::VERTEX, true),
                 storage_entry(4, wgpu::ShaderStages::VERTEX, true),
+                storage_entry(13, wgpu::ShaderStages::FRAGMENT, true),
+                storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
+                storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
             ],
         });
         let fold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

@@ -44,7 +44,7 @@ pub struct GpuSplat {
     pub rect: [u32; 4],
 }
 
-/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 160 bytes).
+/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 176 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RasterParams {
@@ -82,6 +82,14 @@ pub struct RasterParams {
     pub mode: u32,
     /// The splat extent ([`splat_core::raster::SplatExtent`] as u32: 0 3DGS box, 1 √8σ).
     pub extent: u32,
+    /// 1 when lighting is on ([`Lighting::is_on`]).
+    pub lit: u32,
+    /// 0 surface, 1 volumetric ([`crate::layout::LOOK_SURFACE`], [`crate::layout::LOOK_VOLUMETRIC`]).
+    pub look: u32,
+    /// Lights (0: the headlight).
+    pub light_count: u32,
+    /// Splat sets.
+    pub set_count: u32,
     /// Padding.
     pub pad1: u32,
     /// Padding.
@@ -103,19 +111,42 @@ pub struct FrameParams {
 }
 
 /// A scene uploaded for rasterization: particles (mean, opacity, covariance) and SH in scene
-/// order.
+/// order, and its lighting (materials, lights, and each particle's canonical transform for its
+/// normal).
 pub struct RasterScene {
     pub(super) particles: wgpu::Buffer,
     pub(super) sh: wgpu::Buffer,
     pub(super) count: u32,
     pub(super) sh_degree: u32,
     pub(super) settings: RenderSettings,
+    pub(super) lighting: Lighting,
+    pub(super) materials: wgpu::Buffer,
+    pub(super) lights: wgpu::Buffer,
+    pub(super) canonical: wgpu::Buffer,
 }
 
 impl RasterScene {
-    /// Validate and upload `scene`; refuse buffers above the adapter's binding limit.
+    /// Validate and upload `scene`, unlit; refuse buffers above the adapter's binding limit.
     pub fn new(ctx: &GpuContext, scene: &Scene, settings: &RenderSettings) -> Result<Self, GpuError> {
+        Self::new_lit(ctx, scene, settings, &Lighting::default())
+    }
+
+    /// Validate and upload `scene` lit by `lighting` (no shadows: the raster pipelines have
+    /// none, vk_gaussian_splatting Lighting §3); max-density-plane normals only.
+    pub fn new_lit(
+        ctx: &GpuContext,
+        scene: &Scene,
+        settings: &RenderSettings,
+        lighting: &Lighting,
+    ) -> Result<Self, GpuError> {
         validate_scene(scene, settings)?;
+        lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
+        if lighting.is_on() && settings.normal_mode != splat_core::normal::NormalMode::MaxDensityPlane {
+            return Err(GpuError::Unsupported(
+                "lit GPU rasterization computes max-density-plane normals only: use --normals plane or --backend cpu"
+                    .into(),
+            ));
+        }
         let count = scene.particles.len();
         let particles: Vec<RasterParticle> = scene
             .particles
@@ -138,13 +169,40 @@ impl RasterScene {
         if particles.is_empty() {
             return Err(GpuError::Render(RenderError::Settings("the scene has no particles".into())));
         }
+        // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals; one
+        // unused entry when unlit.
+        let canonical: Vec<[f32; 4]> = if lighting.is_on() {
+            scene
+                .particles
+                .iter()
+                .flat_map(|p| {
+                    let m = p.canonical_transform();
+                    (0..3).map(move |i| {
+                        let r = m.row(i);
+                        [r.x, r.y, r.z, p.mean[i]]
+                    })
+                })
+                .collect()
+        } else {
+            vec![[0.0; 4]]
+        };
+        ctx.check_binding("canonical transform", (canonical.len() * 16) as u64, count)?;
         Ok(Self {
             particles: ctx.upload("raster particles", bytemuck::cast_slice(&particles)),
             sh: ctx.upload("raster sh", bytemuck::cast_slice(&sh)),
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
             settings: *settings,
+            materials: ctx.upload("raster materials", bytemuck::cast_slice(&crate::layout::materials(lighting))),
+            lights: ctx.upload("raster lights", bytemuck::cast_slice(&crate::layout::lights(lighting))),
+            canonical: ctx.upload("raster canonical", bytemuck::cast_slice(&canonical)),
+            lighting: lighting.clone(),
         })
+    }
+
+    /// Whether lighting is on.
+    pub fn is_lit(&self) -> bool {
+        self.lighting.is_on()
     }
 }
 
@@ -178,6 +236,13 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatE
         tiles: [camera.width.div_ceil(TILE), camera.height.div_ceil(TILE)],
         mode: 0,
         extent: extent as u32,
+        lit: u32::from(scene.lighting.is_on()),
+        look: match scene.lighting.look {
+            Look::Surface => crate::layout::LOOK_SURFACE,
+            Look::Volumetric => crate::layout::LOOK_VOLUMETRIC,
+        },
+        light_count: scene.lighting.lights.len() as u32,
+        set_count: scene.lighting.sets.len() as u32,
         pad1: 0,
         pad2: 0,
     }
