@@ -105,3 +105,25 @@ fn traverse(ray: Ray, visitor: u32) {
         }
     }
 }
+
+// `traverse` for shadow rays, handing leaves to `visit_shadow`. A second copy of the loop, not
+// a third visitor family of `visit`: GPU compilers inline every function, so each traversal
+// call site carries the bodies of all the visitors its `visit` can reach, and the shadow ray is
+// traced from inside the primary methods.
+fn traverse_shadow(ray: Ray) {
+    let inv = safe_inverse(ray.dir);
+    var t_max = ray.t_max;
+    traversal_begin(ray.origin, inv, t_max);
+    loop {
+        iterations += 1u;
+        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        if (node == NONE) {
+            break;
+        }
+        let nd = nodes[node];
+        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+            iterations += 1u;
+            t_max = visit_shadow(ray, leaf, t_max);
+        }
+    }
+}

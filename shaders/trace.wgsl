@@ -85,6 +85,8 @@ const MODE_FRAMES: u32 = 0u;
 const MODE_PASS: u32 = 1u;
 const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
+// The ray met at least one hit (the integrated normal is defined).
+const HIT: u32 = 4u;
 // The method identities of splat_core::trace::MethodCode (a test compares them).
 const METHOD_EXACT: u32 = 0u;
 const METHOD_KBUFFER: u32 = 1u;
@@ -119,6 +121,26 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(6) var<storage, read_write> pass_state: array<PassState>;
 @group(0) @binding(7) var<storage, read> materials: array<Material>;
 @group(0) @binding(8) var<storage, read> lights: array<Light>;
+@group(0) @binding(9) var<storage, read_write> out_pick: array<Pick>;
+
+// The depth, unit normal and picked particle of a sample (frame.rs `Sample`), written for frame
+// 0 only (picks are never averaged); mirrored by splat_gpu::GpuPick. depth < 0: none; picked
+// NONE: none; normal zero where nothing was hit.
+struct Pick {
+    normal: vec3<f32>,
+    depth: f32,
+    picked: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+// The pick of the sample the last call of `sample` (or the pass method's last state) made.
+var<private> sample_pick: Pick;
+
+fn no_pick() -> Pick {
+    return Pick(vec3<f32>(0.0), -1.0, NONE, 0u, 0u, 0u);
+}
 
 // ---- rng.rs ---------------------------------------------------------------------------------
 
@@ -229,25 +251,24 @@ var<private> slot_u: array<f32, MAX_SLOTS>;
 // their inputs are set in the private variables below before the traversal.
 const VISIT_STOCHASTIC: u32 = 0u;
 const VISIT_NEXT_K: u32 = 1u;
-const VISIT_TRANSMITTANCE: u32 = 2u;
-const VISIT_OCCLUDED: u32 = 3u;
-const VISIT_SHADOW_SORTED: u32 = 4u;
 
 fn visit(visitor: u32, ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    switch visitor {
-        case VISIT_STOCHASTIC: {
-            return stochastic_visit(ray, leaf, t_max);
-        }
-        case VISIT_NEXT_K: {
-            return next_k_visit(ray, leaf, t_max);
-        }
-        case VISIT_TRANSMITTANCE: {
+    if (visitor == VISIT_STOCHASTIC) {
+        return stochastic_visit(ray, leaf, t_max);
+    }
+    return next_k_visit(ray, leaf, t_max);
+}
+
+// The visitor of `traverse_shadow` (bvh.wgsl) for the world's shadow kind.
+fn visit_shadow(ray: Ray, leaf: u32, t_max: f32) -> f32 {
+    switch params.shadows {
+        case SHADOWS_EXACT: {
             return transmittance_visit(ray, leaf, t_max);
         }
-        case VISIT_OCCLUDED: {
+        case SHADOWS_STOCHASTIC: {
             return occluded_visit(ray, leaf, t_max);
         }
-        default: { // VISIT_SHADOW_SORTED
+        default: { // SHADOWS_SORTED
             return shadow_sorted_visit(ray, leaf, t_max);
         }
     }
@@ -479,16 +500,17 @@ fn visibility(x: vec3<f32>, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f
     if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
         return vec3<f32>(1.0);
     }
+    // One traversal call for every kind (see traverse_shadow).
+    shadow_t = 1.0;
+    shadow_in = ShadowInputs(pixel_seed, slot);
+    shadow_blocked = false;
+    sb.len = 0u;
+    traverse_shadow(shadow);
     switch params.shadows {
         case SHADOWS_EXACT: {
-            shadow_t = 1.0;
-            traverse(shadow, VISIT_TRANSMITTANCE);
             return vec3<f32>(shadow_t);
         }
         case SHADOWS_STOCHASTIC: {
-            shadow_in = ShadowInputs(pixel_seed, slot);
-            shadow_blocked = false;
-            traverse(shadow, VISIT_OCCLUDED);
             return select(vec3<f32>(1.0), vec3<f32>(0.0), shadow_blocked);
         }
         default: { // SHADOWS_SORTED
@@ -537,11 +559,9 @@ fn shadow_sorted_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     return hitbuf_insert(&sb, params.shadow_k, h.t, p.id, h.alpha, leaf, t_max);
 }
 
-// trace.rs `TraceScene::sorted_shadow`: T ← T ((1 − α) + colored α c) front to back, in shadow
-// once every channel is below the threshold.
+// trace.rs `TraceScene::sorted_shadow`: T ← T ((1 − α) + colored α c) front to back over the
+// pass in sb, in shadow once every channel is below the threshold.
 fn sorted_shadow(ray: Ray) -> vec3<f32> {
-    sb.len = 0u;
-    traverse(ray, VISIT_SHADOW_SORTED);
     var t = vec3<f32>(1.0);
     for (var i = 0u; i < sb.len; i++) {
         iterations += 1u;
@@ -559,26 +579,39 @@ fn sorted_shadow(ray: Ray) -> vec3<f32> {
 
 // ---- trace.rs: the methods -------------------------------------------------------------------
 
-// A sample: rgb radiance over the background, a = coverage.
+// A ray's state at the start of a frame: no radiance, T = 1, the first pass starting at t_min
+// (stochastic-n sums colour and coverage in radiance and transmittance instead).
 fn start_state() -> PassState {
-    return PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, NONE, vec3<f32>(0.0), 0.0);
+    var st = PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, NONE, vec3<f32>(0.0), 0.0);
+    if (stochastic_slots()) {
+        st.transmittance = 0.0;
+    }
+    return st;
+}
+
+// Algorithm 1 and stochastic-n, which the kernel runs alike (Algorithm 1 is m = n = 1).
+fn stochastic_slots() -> bool {
+    return params.method == METHOD_STOCHASTIC || params.method == METHOD_STOCHASTIC_N;
+}
+
+fn volumetric() -> bool {
+    return params.lit == 1u && params.look == LOOK_VOLUMETRIC;
 }
 
 // Eq. 3 front to back over the hits in kb, continuing the state (trace.rs
-// `TraceScene::integrate`); lit, also the integrated normal and the iso-opacity depth, and with
-// `light_hits` (the volumetric look) each hit lit before it is composited.
+// `TraceScene::integrate`), with the integrated normal and the iso-opacity depth; with
+// `light_hits` (the volumetric look) each hit is lit before it is composited.
 fn integrate(st: ptr<function, PassState>, ray: Ray, pixel_seed: u32, light_hits: bool) {
     for (var i = 0u; i < kb.len; i++) {
         iterations += 1u;
         var c = sh_color(kb.id[i], ray.dir);
         let alpha = kb.alpha[i];
-        if (params.lit == 1u) {
-            let n = particle_normal(kb.leaf[i], ray);
-            if (light_hits) {
-                c = lit(c, kb.id[i], kb.t[i], n, ray, pixel_seed, 0u);
-            }
-            (*st).normal += (*st).transmittance * alpha * n;
+        let n = particle_normal(kb.leaf[i], ray);
+        if (light_hits) {
+            c = lit(c, kb.id[i], kb.t[i], n, ray, pixel_seed, 0u);
         }
+        (*st).normal += (*st).transmittance * alpha * n;
+        (*st).flags |= HIT;
         (*st).radiance += (*st).transmittance * alpha * c;
         (*st).transmittance *= 1.0 - alpha;
         if ((*st).picked == NONE && (*st).transmittance < params.iso_threshold) {
@@ -586,26 +619,6 @@ fn integrate(st: ptr<function, PassState>, ray: Ray, pixel_seed: u32, light_hits
             (*st).depth = kb.t[i];
         }
     }
-}
-
-fn volumetric() -> bool {
-    return params.lit == 1u && params.look == LOOK_VOLUMETRIC;
-}
-
-// The integrated hits over the background: L + T × background, coverage 1 − T (trace.rs
-// `TraceScene::finish`). Lit in the surface look: L lit once at the iso-opacity depth with the
-// integrated normal and the picked particle's material; a ray that never reaches the threshold
-// shows the background.
-fn over_background(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    let unlit = vec4<f32>(st.radiance + st.transmittance * params.background.xyz, 1.0 - st.transmittance);
-    if (params.lit == 0u || volumetric()) {
-        return unlit;
-    }
-    if (st.picked == NONE) {
-        return vec4<f32>(params.background.xyz, 0.0);
-    }
-    let c = lit(st.radiance, st.picked, st.depth, unit_normal(st.normal, ray.dir), ray, pixel_seed, 0u);
-    return vec4<f32>(c + st.transmittance * params.background.xyz, unlit.w);
 }
 
 // The next pass starts behind the last hit of this one; true when the pass was not full (the
@@ -619,77 +632,8 @@ fn advance(st: ptr<function, PassState>) -> bool {
     return false;
 }
 
-// One pass of the k-buffer: the next K hits behind the last one, integrated front to back
-// (Eq. 3). true when the ray is finished.
-fn kbuffer_step(ray: Ray, pixel_seed: u32, st: ptr<function, PassState>) -> bool {
-    if ((*st).transmittance <= params.min_transmittance) {
-        return true;
-    }
-    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
-    integrate(st, ray, pixel_seed, volumetric());
-    return advance(st);
-}
-
-// One pass of the vk stochastic pass: its K sorted hits integrated from T = 1, accepted with
-// probability 1 − T_pass (radiance divided by it). true when the ray is finished.
-fn stochastic_pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
-    next_k(ray, params.k, (*st).after_t, (*st).after_id, false, pixel_seed);
-    if (kb.len == 0u) {
-        return true;
-    }
-    var pass_st = start_state();
-    integrate(&pass_st, ray, pixel_seed, false);
-    let opacity = 1.0 - pass_st.transmittance;
-    if (pass_u(pixel_seed, pass_index) < opacity) {
-        (*st).radiance = pass_st.radiance / opacity;
-        if (params.lit == 1u) {
-            // trace.rs `pass_sample`: lit at the pass's iso-depth, else its farthest hit.
-            var t = pass_st.depth;
-            var id = pass_st.picked;
-            if (id == NONE) {
-                t = kb.t[kb.len - 1u];
-                id = kb.id[kb.len - 1u];
-            }
-            (*st).radiance = lit((*st).radiance, id, t, unit_normal(pass_st.normal, ray.dir), ray, pixel_seed, 0u);
-        }
-        (*st).flags |= ACCEPTED;
-        return true;
-    }
-    return advance(st);
-}
-
-// One pass of a multi-pass method (exact, k-buffer, stochastic pass); true when the ray is
-// finished.
-fn pass_step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
-    if (params.method == METHOD_STOCHASTIC_PASS) {
-        return stochastic_pass_step(ray, pixel_seed, pass_index, st);
-    }
-    return kbuffer_step(ray, pixel_seed, st);
-}
-
-// The sample of a finished multi-pass ray.
-fn pass_sample(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    if (params.method != METHOD_STOCHASTIC_PASS) {
-        return over_background(st, ray, pixel_seed);
-    }
-    if ((st.flags & ACCEPTED) != 0u) {
-        return vec4<f32>(st.radiance, 1.0);
-    }
-    return vec4<f32>(params.background.xyz, 0.0);
-}
-
-// Every pass of a multi-pass method in one invocation.
-fn multi_pass(ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    var st = start_state();
-    for (var pass_index = 0u; pass_index < params.max_passes; pass_index++) {
-        iterations += 1u;
-        if (pass_step(ray, pixel_seed, pass_index, &st)) {
-            break;
-        }
-    }
-    return pass_sample(st, ray, pixel_seed);
-}
-
+// Algorithm 1 in n slots of one traversal (trace.rs `TraceScene::stochastic_n`), each accepted
+// particle lit at its own position and normal; the pick is that of slot 0 of the frame.
 fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
     stochastic_traverse(ray, pixel_seed, n, first_slot);
     var sum = vec4<f32>(0.0);
@@ -697,11 +641,14 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
         iterations += 1u;
         if (best_id[s] == NONE) {
             sum += vec4<f32>(params.background.xyz, 0.0);
+            if (first_slot + s == 0u) {
+                sample_pick = no_pick();
+            }
         } else {
-            var c = sh_color(best_id[s], ray.dir);
-            if (params.lit == 1u) {
-                let n = particle_normal(best_leaf[s], ray);
-                c = lit(c, best_id[s], best_t[s], n, ray, pixel_seed, first_slot + s);
+            let normal = particle_normal(best_leaf[s], ray);
+            let c = lit(sh_color(best_id[s], ray.dir), best_id[s], best_t[s], normal, ray, pixel_seed, first_slot + s);
+            if (first_slot + s == 0u) {
+                sample_pick = Pick(normal, best_t[s], best_id[s], 0u, 0u, 0u);
             }
             sum += vec4<f32>(c, 1.0);
         }
@@ -709,34 +656,118 @@ fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32>
     return sum / f32(n);
 }
 
-fn depth_sampling(ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    next_k(ray, params.k, params.t_min, NONE, true, pixel_seed);
-    var st = start_state();
-    integrate(&st, ray, pixel_seed, volumetric());
-    return over_background(st, ray, pixel_seed);
+// One step of a frame (trace.rs `TraceScene::sample`, cut where a pass ends): a traversal of n
+// slots of stochastic-n; a pass of the k-buffer (exact is the k-buffer with no limit) or of the
+// stochastic pass; or depth sampling's one pass. True when the frame's sample is complete.
+//
+// Every method goes through this one function, which calls next_k, integrate and stochastic_n
+// once each, and `finish` lights the rest in one place: GPU compilers inline every call, and
+// the lit shading with its shadow traversal would be copied at every call site (lavapipe took
+// minutes to compile the kernel with one call per method and mode).
+fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
+    if (stochastic_slots()) {
+        let s = stochastic_n(ray, pixel_seed, params.n, pass_index * params.n);
+        (*st).radiance += s.xyz * f32(params.n);
+        (*st).transmittance += s.w * f32(params.n);
+        if (pass_index == 0u) {
+            // The pick of slot 0, kept in the state's otherwise unused fields.
+            (*st).normal = sample_pick.normal;
+            (*st).depth = sample_pick.depth;
+            (*st).picked = sample_pick.picked;
+        }
+        return pass_index + 1u >= params.m;
+    }
+    // The k-buffer stops when T ≤ min_transmittance (0 for the other methods, whose T stays
+    // above it).
+    if ((*st).transmittance <= params.min_transmittance) {
+        return true;
+    }
+    let pass_method = params.method == METHOD_STOCHASTIC_PASS;
+    let sampling = params.method == METHOD_DEPTH_SAMPLING;
+    next_k(ray, params.k, (*st).after_t, (*st).after_id, sampling, pixel_seed);
+    if (pass_method && kb.len == 0u) {
+        return true;
+    }
+    // The stochastic pass integrates each pass from T = 1, unlit.
+    var acc = *st;
+    if (pass_method) {
+        acc = start_state();
+    }
+    integrate(&acc, ray, pixel_seed, volumetric() && !pass_method);
+    if (!pass_method) {
+        *st = acc;
+        return sampling || advance(st);
+    }
+    let opacity = 1.0 - acc.transmittance;
+    if (pass_u(pixel_seed, pass_index) < opacity) {
+        // trace.rs `pass_sample`: colour L_pass / O at the pass's iso-depth, else its farthest
+        // hit, with its normal; lit in `finish`.
+        var t = acc.depth;
+        var id = acc.picked;
+        if (id == NONE) {
+            t = kb.t[kb.len - 1u];
+            id = kb.id[kb.len - 1u];
+        }
+        (*st).radiance = acc.radiance / opacity;
+        (*st).depth = t;
+        (*st).picked = id;
+        (*st).normal = unit_normal(acc.normal, ray.dir);
+        (*st).flags |= ACCEPTED;
+        return true;
+    }
+    return advance(st);
 }
 
-// One frame of the method (trace.rs `TraceScene::sample`).
-fn sample(ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    switch params.method {
-        case METHOD_STOCHASTIC: {
-            return stochastic_n(ray, pixel_seed, 1u, 0u);
+// The sample of a finished frame and its pick: stochastic-n's average; the stochastic pass's
+// accepted pass (or the background); the integrated hits over the background for the others
+// (trace.rs `TraceScene::finish`), depth sampling reporting the depth of its first accepted hit.
+// Lit once here where the method lights once: the accepted pass, and the surface look (L lit
+// at the iso-opacity depth with the integrated normal and the picked particle's material, the
+// background where the threshold was never reached).
+fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    let bg = params.background.xyz;
+    if (stochastic_slots()) {
+        sample_pick = Pick(st.normal, st.depth, st.picked, 0u, 0u, 0u);
+        return vec4<f32>(st.radiance, st.transmittance) / f32(params.m * params.n);
+    }
+    var out = vec4<f32>(st.radiance + st.transmittance * bg, 1.0 - st.transmittance);
+    var shade = false;
+    var add_bg = st.transmittance;
+    if (params.method == METHOD_STOCHASTIC_PASS) {
+        if ((st.flags & ACCEPTED) == 0u) {
+            sample_pick = no_pick();
+            return vec4<f32>(bg, 0.0);
         }
-        case METHOD_STOCHASTIC_N: {
-            var sum = vec4<f32>(0.0);
-            for (var pass_index = 0u; pass_index < params.m; pass_index++) {
-                iterations += 1u;
-                sum += stochastic_n(ray, pixel_seed, params.n, pass_index * params.n);
+        sample_pick = Pick(st.normal, st.depth, NONE, 0u, 0u, 0u);
+        out = vec4<f32>(st.radiance, 1.0);
+        shade = params.lit == 1u;
+        add_bg = 0.0;
+    } else {
+        sample_pick = no_pick();
+        if ((st.flags & HIT) != 0u) {
+            sample_pick.normal = unit_normal(st.normal, ray.dir);
+        }
+        if (st.picked != NONE) {
+            sample_pick.depth = st.depth;
+        }
+        if (params.lit == 1u && !volumetric()) {
+            if (st.picked == NONE) {
+                sample_pick = no_pick();
+                out = vec4<f32>(bg, 0.0);
+            } else {
+                sample_pick.picked = st.picked;
+                shade = true;
             }
-            return sum / f32(params.m);
         }
-        case METHOD_DEPTH_SAMPLING: {
-            return depth_sampling(ray, pixel_seed);
-        }
-        default: { // METHOD_EXACT, METHOD_KBUFFER, METHOD_STOCHASTIC_PASS
-            return multi_pass(ray, pixel_seed);
+        if (params.method == METHOD_DEPTH_SAMPLING) {
+            sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
         }
     }
+    if (shade) {
+        let c = lit(st.radiance, st.picked, st.depth, sample_pick.normal, ray, pixel_seed, 0u);
+        out = vec4<f32>(c + add_bg * bg, out.w);
+    }
+    return out;
 }
 
 // ---- camera.rs and frame accumulation (render_frames) ----------------------------------------
@@ -759,9 +790,30 @@ fn welford(mean: ptr<function, vec4<f32>>, m2: ptr<function, vec4<f32>>, s: vec4
     *m2 += delta * (s - *mean);
 }
 
-// One invocation per pixel: frames first_frame .. first_frame + frames of the render, folded
-// into the running Welford state of the pixel (mean in out_mean, M2 in out_var.xyz, the most
-// loop iterations any of its dispatches spent in out_var.w). Long renders are many dispatches.
+// Fold frame `frame`'s sample into the pixel's running Welford state (mean in out_mean, M2
+// in out_var.xyz) and, for frame 0, write its pick.
+fn fold(index: u32, s: vec4<f32>, frame: u32) {
+    var mean = vec4<f32>(0.0);
+    var m2 = vec4<f32>(0.0);
+    if (frame > 0u) {
+        mean = out_mean[index];
+        m2 = vec4<f32>(out_var[index].xyz, 0.0);
+    }
+    welford(&mean, &m2, s, frame);
+    out_mean[index] = mean;
+    out_var[index] = vec4<f32>(m2.xyz, out_var[index].w);
+    if (frame == 0u) {
+        out_pick[index] = sample_pick;
+    }
+}
+
+// One invocation per pixel. MODE_FRAMES: frames first_frame .. first_frame + frames of the
+// render, each run to the end. MODE_PASS: step `pass_index` of frame `first_frame` only (a
+// k-buffer or stochastic pass, or a chunk of params.n of the params.m slots of stochastic-n),
+// the ray's state kept in pass_state between dispatches, so that each dispatch runs one
+// traversal per ray, within lavapipe's loop budget. Either way the sample is folded in when the
+// frame finishes, and out_var.w records the most loop iterations any dispatch of the render
+// spent on the pixel. Long renders are many dispatches.
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {
@@ -770,82 +822,43 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let index = gid.y * params.size.x + gid.x;
     let ray = pixel_ray(gid.x, gid.y);
     iterations = 0u;
-    if (params.mode == MODE_PASS) {
-        one_pass(index, gid.xy, ray);
-        return;
-    }
-    var mean = vec4<f32>(0.0);
-    var m2 = vec4<f32>(0.0);
+    let by_pass = params.mode == MODE_PASS;
     var most = 0.0;
-    if (params.first_frame > 0u) {
-        mean = out_mean[index];
-        m2 = vec4<f32>(out_var[index].xyz, 0.0);
+    if (params.first_frame > 0u || params.pass_index > 0u) {
         most = out_var[index].w;
     }
-    for (var f = 0u; f < params.frames; f++) {
+    let frames = select(params.frames, 1u, by_pass);
+    for (var f = 0u; f < frames; f++) {
         iterations += 1u;
         let frame = params.first_frame + f;
         let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
-        welford(&mean, &m2, sample(ray, pixel_seed), frame);
-    }
-    out_mean[index] = mean;
-    out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
-}
-
-// Fold one frame's sample into the pixel's running Welford state (pass-per-dispatch mode).
-fn fold(index: u32, s: vec4<f32>, frame: u32) {
-    var mean = vec4<f32>(0.0);
-    var m2 = vec4<f32>(0.0);
-    var most = 0.0;
-    if (frame > 0u) {
-        mean = out_mean[index];
-        m2 = vec4<f32>(out_var[index].xyz, 0.0);
-    }
-    if (frame > 0u || params.pass_index > 0u) {
-        most = out_var[index].w;
-    }
-    welford(&mean, &m2, s, frame);
-    out_mean[index] = mean;
-    out_var[index] = vec4<f32>(m2.xyz, max(most, f32(iterations)));
-}
-
-// Pass-per-dispatch mode: pass `params.pass_index` of frame `params.first_frame` (a k-buffer or
-// stochastic pass, or a chunk of params.n of the params.m slots of stochastic-n), continuing the
-// ray's state; the sample is folded in when it finishes. Each dispatch then runs one traversal
-// per ray, within lavapipe's loop budget.
-fn one_pass(index: u32, pixel: vec2<u32>, ray: Ray) {
-    var st = pass_state[index];
-    if (params.pass_index == 0u) {
-        st = start_state();
-        if (params.method == METHOD_STOCHASTIC_N) {
-            st.transmittance = 0.0; // the stochastic-n state sums colour and coverage instead
-        }
-    }
-    if ((st.flags & DONE) == 0u) {
-        let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame_key(params.seed, params.first_frame)));
-        var finished = false;
-        if (params.method == METHOD_STOCHASTIC_N) {
-            // Slots pass_index·n … of the frame's params.m slots: the same decisions as one
-            // traversal of all of them, since each slot's pick ignores the others.
-            let s = stochastic_n(ray, pixel_seed, params.n, params.pass_index * params.n);
-            st.radiance += s.xyz * f32(params.n);
-            st.transmittance += s.w * f32(params.n);
-            finished = (params.pass_index + 1u) * params.n >= params.m;
-        } else {
-            finished = pass_step(ray, pixel_seed, params.pass_index, &st);
-        }
-        if (finished || params.pass_index + 1u >= params.max_passes) {
-            st.flags |= DONE;
-            var s = pass_sample(st, ray, pixel_seed);
-            if (params.method == METHOD_STOCHASTIC_N) {
-                s = vec4<f32>(st.radiance, st.transmittance) / f32(params.m);
+        var st = start_state();
+        var first = 0u;
+        var last = max(params.max_passes, params.m);
+        if (by_pass) {
+            first = params.pass_index;
+            last = params.pass_index + 1u;
+            if (params.pass_index > 0u) {
+                st = pass_state[index];
             }
-            fold(index, s, params.first_frame);
-        } else if (params.first_frame > 0u || params.pass_index > 0u) {
-            out_var[index].w = max(out_var[index].w, f32(iterations));
-        } else {
-            out_var[index] = vec4<f32>(0.0, 0.0, 0.0, f32(iterations));
+        }
+        if ((st.flags & DONE) == 0u) {
+            var done = false;
+            for (var p = first; p < last; p++) {
+                iterations += 1u;
+                if (step(ray, pixel_seed, p, &st)) {
+                    done = true;
+                    break;
+                }
+            }
+            if (done || last >= params.max_passes) {
+                st.flags |= DONE;
+                fold(index, finish(st, ray, pixel_seed), frame);
+            }
+        }
+        if (by_pass) {
+            pass_state[index] = st;
         }
     }
-    pass_state[index] = st;
+    out_var[index].w = max(most, f32(iterations));
 }

@@ -94,8 +94,10 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
         Algorithm::Trace(method) => {
             GpuTracer::supports(method)?;
-            if args.depth.is_some() || args.normal.is_some() {
-                return unsupported("--depth and --normal are produced by the CPU backend only: add --backend cpu");
+            if args.normal.is_some() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
+                return unsupported(
+                    "the GPU computes max-density-plane normals only: use --normals plane or --backend cpu",
+                );
             }
             Ok(())
         }

@@ -93,6 +93,25 @@ pub struct PassState {
     pub depth: f32,
 }
 
+/// The depth, unit normal and picked particle of frame 0 at one pixel (WGSL `Pick`, 32 bytes):
+/// depth < 0 for none, picked `u32::MAX` for none.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuPick {
+    /// Unit normal (zero where nothing was hit).
+    pub normal: [f32; 3],
+    /// Picked depth t.
+    pub depth: f32,
+    /// Scene index of the picked particle.
+    pub picked: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
+}
+
 /// The material of one splat set and its first particle id (WGSL `Material`, 64 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -492,6 +511,7 @@ mod tests {
             "PassState",
             [radiance, transmittance, after_t, after_id, flags, picked, normal, depth]
         );
+        assert_mirrors!(crate::TRACE_WGSL, GpuPick, "Pick", [normal, depth, picked, pad0, pad1, pad2]);
         assert_mirrors!(
             crate::TRACE_WGSL,
             GpuMaterial,

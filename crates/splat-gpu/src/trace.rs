@@ -15,7 +15,7 @@
 //! ```
 
 use crate::context::{compute_pipeline, storage_entry, uniform_entry};
-use crate::layout::{self, Params, PassState};
+use crate::layout::{self, GpuPick, Params, PassState};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats};
 use splat_core::Camera;
@@ -112,6 +112,7 @@ impl TracePipeline {
                 storage(6, false),
                 storage(7, true),
                 storage(8, true),
+                storage(9, false),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -183,8 +184,8 @@ impl<'a> GpuTracer<'a> {
 
     /// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
     /// centres, as [`splat_core::trace::render_frames`] does: per pixel a running Welford mean
-    /// and M2 in f32, frames in dispatches of up to [`FRAMES_PER_DISPATCH`]. The images have
-    /// no depth, normal or picks.
+    /// and M2 in f32, frames in dispatches of up to [`FRAMES_PER_DISPATCH`]; with the depth, normal
+    /// and picked particle of frame 0, as the CPU reports them (max-density-plane normals).
     ///
     /// On a CPU adapter (lavapipe), whose loop limiter counts per invocation, a dispatch
     /// renders as many frames as fit ¾ of the budget by a probe of frame 0 (one frame when a
@@ -240,6 +241,16 @@ impl<'a> GpuTracer<'a> {
     }
 }
 
+/// Frame 0's depth, normal and picked particle of every pixel into `out`.
+fn set_picks(out: &mut RenderOutput, picks: &[GpuPick]) {
+    let (w, h) = (out.depth.width(), out.depth.height());
+    let depth = picks.iter().map(|p| if p.depth >= 0.0 { p.depth } else { f32::NAN }).collect();
+    let normal = picks.iter().flat_map(|p| p.normal).collect();
+    out.depth = splat_core::Image::from_data(w, h, 1, depth).expect("one depth per pixel");
+    out.normal = splat_core::Image::from_data(w, h, 3, normal).expect("one normal per pixel");
+    out.picked = picks.iter().map(|p| (p.picked != u32::MAX).then_some(p.picked)).collect();
+}
+
 /// A finished render and the index of the pixel that ran the most loop iterations
 /// (`stats.loop_iterations`).
 struct Finished {
@@ -278,6 +289,8 @@ impl Run<'_> {
         let (out_mean, out_var) = (self.storage("mean", out_bytes, rw), self.storage("m2", out_bytes, rw));
         let (read_mean, read_var) =
             (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
+        let pick_bytes = (pixels * std::mem::size_of::<GpuPick>()) as u64;
+        let (out_pick, read_pick) = (self.storage("pick", pick_bytes, rw), self.storage("read pick", pick_bytes, read));
         let state_bytes = (pixels * std::mem::size_of::<PassState>()) as u64;
         let pass_state = self.storage("pass state", state_bytes, rw);
         let read_state = self.storage("read pass state", state_bytes, read);
@@ -307,6 +320,7 @@ impl Run<'_> {
                 wgpu::BindGroupEntry { binding: 6, resource: pass_state.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 7, resource: tracer.materials.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 8, resource: tracer.lights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 9, resource: out_pick.as_entire_binding() },
             ],
         });
         let mut gpu_time = Duration::ZERO;
@@ -390,7 +404,9 @@ impl Run<'_> {
         let mean = ctx.read_through(&out_mean, 0, &read_mean, out_bytes)?;
         let m2 = ctx.read_through(&out_var, 0, &read_var, out_bytes)?;
         let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
-        let (output, stats) = crate::output(camera, &mean, &m2, self.count, gpu_time, timer.is_some());
+        let picks = ctx.read_through(&out_pick, 0, &read_pick, pick_bytes)?;
+        let (mut output, stats) = crate::output(camera, &mean, &m2, self.count, gpu_time, timer.is_some());
+        set_picks(&mut output, bytemuck::cast_slice(&picks));
         let stats = GpuStats {
             loop_iterations: busiest.0,
             frames_per_dispatch: per_dispatch,
