@@ -129,6 +129,8 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
 // Per pixel: colour + coverage of front-to-back compositing, and (depth bits, picked id).
 @group(0) @binding(11) var<storage, read_write> out_color: array<vec4<f32>>;
 @group(0) @binding(12) var<storage, read_write> out_pick: array<vec2<u32>>;
+// Per pixel: the integrated unit normal (zero where no fragment, w unused).
+@group(0) @binding(16) var<storage, read_write> out_normal: array<vec4<f32>>;
 
 fn tile_rect(s: Splat) -> vec4<u32> {
     return vec4<u32>(s.rect.x / TILE, s.rect.y / TILE, (s.rect.z - 1u) / TILE, (s.rect.w - 1u) / TILE);
@@ -214,7 +216,7 @@ fn tile_blend(
     var color = vec3<f32>(0.0);
     var depth = 0.0;
     var picked = NONE;
-    // Lit: the pixel-centre ray, and the integrated normal Σ nᵢ αᵢ Tᵢ.
+    // The pixel-centre ray, and the integrated normal Σ nᵢ αᵢ Tᵢ.
     let origin = camera_origin();
     let dir = pixel_dir(centre);
     let to_t = stretch(centre);
@@ -232,13 +234,11 @@ fn tile_blend(
                 let alpha = splat_alpha(s, centre, params);
                 if (alpha > 0.0) {
                     var c = s.color;
-                    if (params.lit == 1u) {
-                        let n = splat_normal(s.id, origin, dir);
-                        if (params.look == LOOK_VOLUMETRIC) {
-                            c = shade_unshadowed(s.color, s.id, origin, dir, s.depth * to_t, n);
-                        }
-                        normal += transmittance * alpha * n;
+                    let n = splat_normal(s.id, origin, dir);
+                    if (params.lit == 1u && params.look == LOOK_VOLUMETRIC) {
+                        c = shade_unshadowed(s.color, s.id, origin, dir, s.depth * to_t, n);
                     }
+                    normal += transmittance * alpha * n;
                     color += transmittance * alpha * c;
                     transmittance *= 1.0 - alpha;
                     if (picked == NONE && transmittance < params.iso_threshold) {
@@ -253,6 +253,13 @@ fn tile_blend(
     if (inside) {
         let index = px.y * params.size.x + px.x;
         var out = vec4<f32>(color + transmittance * params.background.xyz, 1.0 - transmittance);
+        // raster/mod.rs `sorted`: the integrated normal normalised, −dir when degenerate.
+        var n = normal;
+        if (any(n != vec3<f32>(0.0))) {
+            let rcp = 1.0 / length(n);
+            n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
+        }
+        out_normal[index] = vec4<f32>(n, 0.0);
         if (params.lit == 1u && params.look == LOOK_SURFACE) {
             // raster/mod.rs `light_surface`: L lit once at the picked depth with the integrated
             // normal and the picked splat's material; the background where T stayed above the
@@ -260,11 +267,6 @@ fn tile_blend(
             if (picked == NONE) {
                 out = vec4<f32>(params.background.xyz, 0.0);
             } else {
-                var n = normal;
-                if (any(n != vec3<f32>(0.0))) {
-                    let rcp = 1.0 / length(n);
-                    n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
-                }
                 let lit = shade_unshadowed(color, picked, origin, dir, depth * to_t, n);
                 out = vec4<f32>(lit + transmittance * params.background.xyz, out.w);
             }

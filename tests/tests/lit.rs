@@ -180,3 +180,15 @@ fn surface_and_volumetric_looks_differ() {
     let i = thin.expect("a faint pixel") as usize;
     assert_eq!(&surface.mean.data()[3 * i..3 * i + 3], &[0.0; 3], "below the iso threshold: the background");
 }
+
+/// Lit, with stochastic shadow rays and a soft light, the RMSE of `stochastic` against the
+/// volumetric oracle falls at the Monte Carlo rate (slope −1/2 on log–log axes), as unlit.
+#[test]
+fn lit_convergence_slope_is_monte_carlo() {
+    let (scene, camera) = fixture("cloud", 24, 18);
+    let fill = Vec3::new(1.5, 1.5, 2.5);
+    let oracle = exact(&lit(&scene, lighting(fill, Shadows::Exact, Look::Volumetric)), &camera);
+    let trace = lit(&scene, lighting(fill, Shadows::Stochastic, Look::Volumetric));
+    let run = |f: Frames| render_frames(&trace, &camera, &Method::Stochastic, &f, &|_| {}).unwrap();
+    StatTest::new("lit cloud stochastic", oracle, run).assert_converges(256, 3);
+}

@@ -104,10 +104,8 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -
         Algorithm::Raster(method, raster) => {
             GpuRasterizer::supports(method, raster)?;
             let sorted = matches!(method, splat_core::raster::RasterMethod::Sorted { .. });
-            if args.normal.is_some() || (args.depth.is_some() && !sorted) {
-                return unsupported(
-                    "on the GPU, --depth comes from raster-sorted only and --normal from the CPU backend: add --backend cpu",
-                );
+            if (args.depth.is_some() || args.normal.is_some()) && !sorted {
+                return unsupported("on the GPU, --depth and --normal come from raster-sorted only: add --backend cpu");
             }
             Ok(())
         }
@@ -153,10 +151,12 @@ fn render_gpu(
             let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?;
             let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
             let mut out = raster.render(method, frames)?.0;
-            if args.depth.is_some() {
-                let data = raster.depth_pick()?.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
+            if args.depth.is_some() || args.normal.is_some() {
+                let pick = raster.depth_pick()?;
+                let data = pick.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
                 out.depth =
                     splat_core::Image::from_data(camera.width, camera.height, 1, data).context("depth image")?;
+                out.normal = pick.normal;
             }
             Ok(out)
         }

@@ -460,8 +460,9 @@ impl<'a> TraceScene<'a> {
     }
 
     /// Visibility of a light from `x` ([`Shadows`]): the shadow ray starts `shadow_offset` along
-    /// the light direction and ends at the light (vk_gaussian_splatting Lighting §4).
-    fn visibility(&self, x: Vec3, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
+    /// the light direction and ends at the light (vk_gaussian_splatting Lighting §4); `decide`
+    /// draws the stochastic shadow ray's decisions in slot `slot`.
+    pub fn visibility(&self, x: Vec3, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
         let offset = self.lighting.shadow_offset;
         let shadow = Ray {
             origin: x + offset * incident.l,

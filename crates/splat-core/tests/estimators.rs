@@ -6,7 +6,7 @@ use glam::{DVec3, Quat, Vec3};
 use proptest::prelude::*;
 use splat_core::RenderSettings;
 use splat_core::frame::Decide;
-use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
+use splat_core::lighting::{Incident, Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::oracle::Oracle;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{HitDistance, Particle, Ray, Scene};
@@ -474,4 +474,46 @@ fn one_flat_splat_under_a_directional_light_in_closed_form() {
         let got = trace.exact(&ray, &Outcomes::default()).color;
         assert!(close(got, want, 1e-5), "{look:?}: {got} vs closed form {want}");
     }
+}
+
+/// vk_gaussian_splatting's sorted shadow ray, deterministic, against the transmittance along the
+/// stack: with no early stop and k above the hit count it is Π(1 − αᵢ) (what `Exact` returns);
+/// with k = 2 only the two nearest hits count; with threshold 0.99 any hit puts the point in
+/// shadow; with colored = 1 each hit tints by its colour, (1 − α) + α c per channel. The shadow
+/// ray starts `shadow_offset` along the light, so hits within it do not count.
+#[test]
+fn sorted_shadow_ray_by_hand() {
+    let (scene, ray) = stack(&[0.6, 0.3, 0.8], &[(0.0, 0.0); 3], &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+    let h = hits(&scene, &ray, &settings());
+    assert_eq!(h.len(), 3);
+    let mut by_depth: Vec<(f32, f64, Vec3)> = h
+        .iter()
+        .map(|&(id, a)| {
+            let z = scene.particles[id as usize].mean.z;
+            (z, a, Vec3::from([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]][id as usize]))
+        })
+        .collect();
+    by_depth.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let light = Incident { l: Vec3::Z, distance: 100.0, irradiance: Vec3::ONE };
+    let visibility = |shadows: Shadows, offset: f32| {
+        let lighting = Lighting { shadow_offset: offset, ..lit(shadows, Look::Surface) };
+        let trace = TraceScene::new(&scene, settings()).unwrap().with_lighting(lighting).unwrap();
+        trace.visibility(ray.origin, &light, &Outcomes::default(), 0)
+    };
+    let product: f64 = by_depth.iter().map(|d| 1.0 - d.1).product();
+    let close3 = |v: Vec3, w: Vec3| (v - w).abs().max_element() < 1e-6;
+    assert!(close3(visibility(Shadows::Exact, 0.0), Vec3::splat(product as f32)));
+    let sorted = |k, threshold, colored| Shadows::Sorted { k, threshold, colored };
+    assert!(close3(visibility(sorted(8, 0.0, 0.0), 0.0), Vec3::splat(product as f32)));
+    let two = ((1.0 - by_depth[0].1) * (1.0 - by_depth[1].1)) as f32;
+    assert!(close3(visibility(sorted(2, 0.0, 0.0), 0.0), Vec3::splat(two)));
+    assert_eq!(visibility(sorted(8, 0.99, 0.0), 0.0), Vec3::ZERO);
+    let tinted = by_depth.iter().fold(Vec3::ONE, |t, &(_, a, c)| {
+        let a = a as f32;
+        t * (Vec3::splat(1.0 - a) + a * c)
+    });
+    assert!(close3(visibility(sorted(8, 0.0, 1.0), 0.0), tinted));
+    // Past the first disc (z = 1 is 2 along the ray), only the other two count.
+    let behind = ((1.0 - by_depth[1].1) * (1.0 - by_depth[2].1)) as f32;
+    assert!(close3(visibility(Shadows::Exact, by_depth[0].0 + 1.25), Vec3::splat(behind)));
 }

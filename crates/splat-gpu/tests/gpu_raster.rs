@@ -155,9 +155,10 @@ fn sorted_splatting_equals_the_cpu_over_and_under() {
     }
 }
 
-/// The tile rasterizer's iso-opacity depth and picked splat equal the CPU's sorted-under ones:
-/// picks identical except where the transmittance lies within f32 rounding of the threshold
-/// (bounded to 0.5 % of pixels), depths within 1e-5 relative where the picks agree.
+/// The tile rasterizer's iso-opacity depth, picked splat and integrated normal equal the CPU's
+/// sorted-under ones: picks identical except where the transmittance lies within f32 rounding
+/// of the threshold (bounded to 0.5 % of pixels), depths within 1e-5 relative where the picks
+/// agree, normals within 1e-3.
 #[test]
 fn depth_pick_equals_the_cpu() {
     let Some(ctx) = context() else { return };
@@ -183,6 +184,10 @@ fn depth_pick_equals_the_cpu() {
                 assert!((dg - dc).abs() <= 1e-5 * dc, "{name} pixel {i}: depth {dg} vs {dc}");
             }
         }
+        // The integrated normal of every pixel, as the CPU's (zero where no fragment).
+        let normals = max_abs_diff(gpu.normal.data(), cpu.normal.data());
+        assert!(normals <= 1e-3, "{name}: normals differ by {normals}");
+        assert!(cpu.normal.data().iter().any(|&n| n.abs() > 0.5), "{name}: no normals to compare");
         assert!(max_abs_diff(gpu.color.data(), cpu.mean.data()) <= 2e-4, "{name}: colour");
     }
 }

@@ -160,17 +160,20 @@ fn small_scene() -> (Scene, Camera) {
 /// E[frame] of `method` at every pixel equals sorted splatting to `tol`, on `samples` samples
 /// per pixel; returns the number of paths enumerated and the most fragments in a pixel.
 fn check(method: RasterMethod, samples: u32, tol: f64) -> (usize, usize) {
-    let (paths, most, worst) = enumerate(method, samples, false);
+    let (paths, most, worst) = enumerate(method, samples, false, None);
     assert!(worst < tol, "{method:?} S={samples}: E[frame] differs from sorted splatting by {worst}");
     (paths, most)
 }
 
 /// The largest difference from sorted splatting over the pixels, with the paths and the most
 /// fragments a pixel.
-fn enumerate(method: RasterMethod, samples: u32, mutant: bool) -> (usize, usize, f64) {
+fn enumerate(method: RasterMethod, samples: u32, mutant: bool, lighting: Option<Lighting>) -> (usize, usize, f64) {
     let (scene, camera) = small_scene();
     let raster = RasterSettings { samples, ..RasterSettings::default() };
-    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+    let mut r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
+    if let Some(lighting) = lighting {
+        r = r.with_lighting(lighting).unwrap();
+    }
     let (mut paths, mut most, mut worst) = (0, 0, 0.0f64);
     for y in 0..camera.height {
         for x in 0..camera.width {
@@ -234,8 +237,64 @@ fn the_comparisons_are_strict_at_their_thresholds() {
 /// the value that raises R.
 #[test]
 fn rules_one_rounding_step_off_are_rejected() {
-    let (_, _, worst) = enumerate(RasterMethod::StochasticSplat, 1, true);
+    let (_, _, worst) = enumerate(RasterMethod::StochasticSplat, 1, true, None);
     assert!(worst > 1e-2, "u ≤ α passes: {worst}");
-    let (_, _, worst) = enumerate(RasterMethod::Enderton, 2, true);
+    let (_, _, worst) = enumerate(RasterMethod::Enderton, 2, true, None);
     assert!(worst > 1e-2, "ξ one step low passes: {worst}");
+}
+
+/// A material with every term, lit by a directional and a point light, in the volumetric look
+/// (each fragment lit at its own depth and normal, then blended: the stochastic methods'
+/// expectation).
+fn volumetric_lighting() -> Lighting {
+    use crate::lighting::{Light, LightKind, Look, Material, Shadows};
+    let material = Material {
+        emissive: Vec3::splat(0.1),
+        ambient: Vec3::splat(0.05),
+        diffuse: Vec3::new(0.8, 0.7, 0.9),
+        specular: Vec3::splat(0.4),
+        shininess: 12.0,
+    };
+    let lights = vec![
+        Light {
+            kind: LightKind::Directional { direction: Vec3::new(0.3, -0.4, -1.0).normalize() },
+            color: Vec3::ONE,
+            intensity: 1.5,
+            radius: 0.0,
+        },
+        Light {
+            kind: LightKind::Point { position: Vec3::new(0.5, 0.8, 3.0) },
+            color: Vec3::X,
+            intensity: 6.0,
+            radius: 0.0,
+        },
+    ];
+    Lighting { look: Look::Volumetric, ..Lighting::single(material, lights, Shadows::None) }
+}
+
+/// Lit, each written sample is shaded at its own fragment (vk_gaussian_splatting Lighting §1.2,
+/// §2.2), so the expectation of every stochastic raster method is lit sorted splatting in the
+/// volumetric look, on every pixel; the mutant rule is still caught, and lighting moves the
+/// image (the comparison is not of two unlit images).
+#[test]
+fn lit_stochastic_raster_expectations_are_volumetric_sorted_splatting() {
+    for samples in [1, 2] {
+        for (method, tol) in [
+            (RasterMethod::StochasticSplat, 1e-9),
+            (RasterMethod::Enderton, 1e-6),
+            (RasterMethod::Stratified { scramble: true }, 1e-9),
+        ] {
+            let (_, _, worst) = enumerate(method, samples, false, Some(volumetric_lighting()));
+            assert!(worst < tol, "lit {method:?} S={samples}: E[frame] differs from sorted splatting by {worst}");
+        }
+    }
+    let (_, _, worst) = enumerate(RasterMethod::StochasticSplat, 1, true, Some(volumetric_lighting()));
+    assert!(worst > 1e-2, "u ≤ α passes lit: {worst}");
+    let (scene, camera) = small_scene();
+    let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), RasterSettings::default()).unwrap();
+    let sorted = RasterMethod::Sorted { blend: Blend::Under };
+    let unlit = render_raster(&r, &sorted, &Frames::default(), &|_| {}).unwrap();
+    let lit =
+        render_raster(&r.with_lighting(volumetric_lighting()).unwrap(), &sorted, &Frames::default(), &|_| {}).unwrap();
+    assert!(crate::stats::rmse(unlit.mean.data(), lit.mean.data()) > 0.05);
 }

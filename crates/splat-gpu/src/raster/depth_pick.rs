@@ -10,6 +10,8 @@ pub struct DepthPick {
     pub color: Image,
     /// Coverage 1 − T.
     pub alpha: Image,
+    /// Integrated unit normal (max-density plane), zero where no fragment.
+    pub normal: Image,
     /// Iso-opacity depth: distance along the pixel-centre ray, `None` where T never fell
     /// below the threshold.
     pub depth: Vec<Option<f32>>,
@@ -77,6 +79,7 @@ impl GpuRasterizer<'_> {
         let ranges = buffer("tile ranges", tiles as usize * 8);
         let out_color = buffer("depth pick colour", pixels * 16);
         let out_pick = buffer("depth pick", pixels * 8);
+        let out_normal = buffer("depth pick normal", pixels * 16);
         let emit_group = bind(
             ctx,
             &pipes.tile_emit,
@@ -109,6 +112,7 @@ impl GpuRasterizer<'_> {
                 (13, &self.scene.materials),
                 (14, &self.scene.lights),
                 (15, &self.scene.canonical),
+                (16, &out_normal),
             ],
         );
         let mut encoder = self.encoder("tile lists");
@@ -137,11 +141,13 @@ impl GpuRasterizer<'_> {
         self.submit(encoder)?;
         let color = ctx.read_f32(&out_color, pixels * 4)?;
         let pick = ctx.read_u32(&out_pick, pixels * 2)?;
+        let normal = ctx.read_f32(&out_normal, pixels * 4)?;
         let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
         let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
         Ok(DepthPick {
             color: image(3, &|i| color[i]),
             alpha: image(1, &|i| color[i + 3]),
+            normal: image(3, &|i| normal[i]),
             depth: pick.chunks(2).zip(&picked).map(|(p, id)| id.map(|_| f32::from_bits(p[0]))).collect(),
             picked,
             pairs,

@@ -295,6 +295,7 @@ impl<'a> GpuRasterizer<'a> {
         out.depth = Image::from_data(self.camera.width, self.camera.height, 1, depth)
             .ok_or_else(|| GpuError::Readback("depth image of the wrong size".into()))?;
         out.picked = pick.picked;
+        out.normal = pick.normal;
         Ok((out, stats))
     }
 

@@ -169,23 +169,18 @@ impl RasterScene {
         if particles.is_empty() {
             return Err(GpuError::Render(RenderError::Settings("the scene has no particles".into())));
         }
-        // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals; one
-        // unused entry when unlit.
-        let canonical: Vec<[f32; 4]> = if lighting.is_on() {
-            scene
-                .particles
-                .iter()
-                .flat_map(|p| {
-                    let m = p.canonical_transform();
-                    (0..3).map(move |i| {
-                        let r = m.row(i);
-                        [r.x, r.y, r.z, p.mean[i]]
-                    })
+        // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals.
+        let canonical: Vec<[f32; 4]> = scene
+            .particles
+            .iter()
+            .flat_map(|p| {
+                let m = p.canonical_transform();
+                (0..3).map(move |i| {
+                    let r = m.row(i);
+                    [r.x, r.y, r.z, p.mean[i]]
                 })
-                .collect()
-        } else {
-            vec![[0.0; 4]]
-        };
+            })
+            .collect();
         ctx.check_binding("canonical transform", (canonical.len() * 16) as u64, count)?;
         Ok(Self {
             particles: ctx.upload("raster particles", bytemuck::cast_slice(&particles)),
