@@ -416,7 +416,7 @@ fn gpu_raster_backend_matches_cpu_backend() {
     for (method, extra, message) in [
         ("enderton", vec![], "CPU only"),
         ("stochastic-splat", vec!["--raster-samples", "4"], "one sample per pixel"),
-        ("stochastic-splat", vec!["--depth", "/tmp/never.npy"], "--depth comes from raster-sorted only"),
+        ("stochastic-splat", vec!["--depth", "/tmp/never.npy"], "come from raster-sorted only"),
     ] {
         let o = render("gpu", method, &scratch("refused.npy"), &extra);
         let err = stderr(&o);
@@ -472,4 +472,56 @@ fn gpu_backend_matches_cpu_backend() {
 fn gpu_missing(err: &str) {
     assert!(err.contains("mesa-vulkan-drivers"), "the GPU backend failed with adapters present: {err}");
     splat_tests::skip(&splat_tests::current_test(), &format!("no GPU adapter ({})", err.trim()));
+}
+
+/// `splat render WORLD.toml` lights: the lit demo world renders on the CPU (the world's camera
+/// and background, overridable from the command line), `--shadows none` changes the image,
+/// the GPU backend renders the same image, and a malformed world is refused with the field named.
+#[test]
+fn render_lights_a_world_file_on_both_backends() {
+    let run = |backend: &str, out: &PathBuf, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "fixtures/worlds/demo-lit.toml",
+            "--method",
+            "stochastic",
+            "--spp",
+            "2",
+            "--width",
+            "40",
+            "--height",
+            "30",
+            "--backend",
+            backend,
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        splat(&args)
+    };
+    let read = |p: &PathBuf| splat_io::image::read_npy(p).unwrap();
+    let (cpu, unshadowed, gpu) = (scratch("lit-cpu.npy"), scratch("lit-none.npy"), scratch("lit-gpu.npy"));
+    let o = run("cpu", &cpu, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run("cpu", &unshadowed, &["--shadows", "none"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let diff = |a: &PathBuf, b: &PathBuf| {
+        read(a).data().iter().zip(read(b).data()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
+    };
+    assert!(diff(&cpu, &unshadowed) > 0.05, "the shadows change nothing");
+    let bad = scratch("bad-world.toml");
+    std::fs::write(
+        &bad,
+        "[[splats]]\nbuiltin = \"demo\"\n[[lights]]\nkind = \"point\"\nposition = [0, 1, 0]\nintensity = -2\n",
+    )
+    .unwrap();
+    let o = splat(&["render", bad.to_str().unwrap(), "-o", scratch("never.png").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("lights[0]") && stderr(&o).contains("intensity"), "{}", stderr(&o));
+    let o = run("gpu", &gpu, &[]);
+    if !o.status.success() {
+        gpu_missing(&stderr(&o));
+        return;
+    }
+    assert!(diff(&cpu, &gpu) < 1e-4, "GPU and CPU lit images differ by {}", diff(&cpu, &gpu));
 }
