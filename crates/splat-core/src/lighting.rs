@@ -176,9 +176,6 @@ pub fn concentric_disk(u: Vec2) -> Vec2 {
 
 /// A point of the disk of radius `radius` centred at `centre` and facing `axis`, from `u` ∈ [0, 1)².
 fn disk_point(centre: Vec3, axis: Vec3, radius: f32, u: Vec2) -> Vec3 {
-    if radius == 0.0 {
-        return centre;
-    }
     let (b1, b2) = axis.any_orthonormal_pair();
     let d = radius * concentric_disk(u);
     centre + d.x * b1 + d.y * b2
@@ -224,6 +221,15 @@ impl Light {
         self.radius > 0.0
     }
 
+    /// The point of a point or spot emitter at `position` that lights `x` in sample `u`: on the
+    /// disk of the light's radius facing `x`.
+    fn sample_point(&self, position: Vec3, x: Vec3, u: Vec2) -> Vec3 {
+        if self.radius == 0.0 {
+            return position;
+        }
+        disk_point(position, (position - x).normalize(), self.radius, u)
+    }
+
     /// The light arriving at `x` from the sample `u` ∈ [0, 1)² of the emitter; `None` where it
     /// sends nothing (outside a spot's cone, or at the light's own position).
     pub fn incident(&self, x: Vec3, u: Vec2) -> Option<Incident> {
@@ -243,17 +249,6 @@ impl Light {
                 (cone > 0.0).then_some(inc)
             }
         }
-    }
-}
-
-impl Light {
-    /// The point of a point or spot emitter at `position` that lights `x` in sample `u`: on the
-    /// disk of the light's radius facing `x`.
-    fn sample_point(&self, position: Vec3, x: Vec3, u: Vec2) -> Vec3 {
-        if self.radius == 0.0 {
-            return position;
-        }
-        disk_point(position, (position - x).normalize(), self.radius, u)
     }
 }
 

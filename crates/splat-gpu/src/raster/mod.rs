@@ -385,7 +385,7 @@ impl<'a> GpuRasterizer<'a> {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        pass.set_pipeline(self.pipes.render_pipeline(draw));
+        pass.set_pipeline(self.pipes.render_pipeline(draw, self.scene.is_lit()));
         pass.set_bind_group(0, group, &[frame_offset]);
         match draw {
             Draw::Stochastic => pass.draw(0..6, 0..self.scene.count),

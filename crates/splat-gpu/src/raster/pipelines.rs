@@ -14,6 +14,7 @@ pub struct RasterPipelines {
     pub(super) over: wgpu::RenderPipeline,
     pub(super) under: wgpu::RenderPipeline,
     pub(super) stochastic: wgpu::RenderPipeline,
+    pub(super) stochastic_lit: wgpu::RenderPipeline,
     pub(super) fold_layout: wgpu::BindGroupLayout,
     pub(super) fold: wgpu::ComputePipeline,
     /// Colour target of sorted blending: RGBA32F where the adapter blends it, else RGBA16F.
@@ -134,6 +135,7 @@ impl RasterPipelines {
             over: render("fs_sorted", blend_format, Some(over), false),
             under: render("fs_sorted", blend_format, Some(under), false),
             stochastic: render("fs_stochastic", STOCHASTIC_FORMAT, None, true),
+            stochastic_lit: render("fs_stochastic_lit", STOCHASTIC_FORMAT, None, true),
             fold: compute_pipeline(device, &fold, Some(&pipeline_layout("fold", &fold_layout)), "fold"),
             splat_layout,
             fold_layout,
@@ -151,10 +153,11 @@ impl RasterPipelines {
         &self.sort
     }
 
-    pub(super) fn render_pipeline(&self, draw: Draw) -> &wgpu::RenderPipeline {
+    pub(super) fn render_pipeline(&self, draw: Draw, lit: bool) -> &wgpu::RenderPipeline {
         match draw {
             Draw::Over => &self.over,
             Draw::Under => &self.under,
+            Draw::Stochastic if lit => &self.stochastic_lit,
             Draw::Stochastic => &self.stochastic,
         }
     }
