@@ -522,6 +522,9 @@ mod tests {
                 "EXTENT_SQRT8" = project::SplatExtent::Sqrt8 as u32,
                 "NONE" = NONE,
                 "SH_C0" = splat_core::sh::SH_C0,
+                "LOOK_SURFACE" = crate::layout::LOOK_SURFACE,
+                "LOOK_VOLUMETRIC" = crate::layout::LOOK_VOLUMETRIC,
+                "LIGHT_SPOT" = crate::layout::LIGHT_SPOT,
             ]
         );
         assert_constants!(

@@ -84,7 +84,7 @@ pub struct RasterParams {
     pub extent: u32,
     /// 1 when lighting is on ([`Lighting::is_on`]).
     pub lit: u32,
-    /// 0 surface, 1 volumetric ([`crate::layout::LOOK_SURFACE`], [`crate::layout::LOOK_VOLUMETRIC`]).
+    /// 0 surface, 1 volumetric (the `LOOK_*` constants of the shaders).
     pub look: u32,
     /// Lights (0: the headlight).
     pub light_count: u32,
