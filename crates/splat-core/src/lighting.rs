@@ -390,10 +390,21 @@ impl Lighting {
         self.is_on() && (self.shadows == Shadows::Stochastic || self.lights.iter().any(Light::is_area))
     }
 
-    /// Lit(x, n, v, c) of particle `id` hit at distance `t` along `ray` with unit normal `n`,
-    /// every light visible and sampled at its centre: the lighting of the raster pipelines,
-    /// which have no shadows (vk_gaussian_splatting Lighting §3). `c` itself for an emissive set.
-    pub fn shade_unshadowed(&self, c: Vec3, id: u32, ray: &Ray, t: f32, n: Vec3) -> Vec3 {
+    /// Lit(x, n, v, c) of particle `id` hit at distance `t` along `ray` with unit normal `n`:
+    /// `c` itself for an emissive set, the headlight when there are no lights. Light j is
+    /// sampled at `sample(j, light)` and seen from x with visibility `visible(j, x, incident)`,
+    /// asked only where the light contributes (a shadow ray there would change nothing).
+    #[allow(clippy::too_many_arguments)]
+    pub fn shade(
+        &self,
+        c: Vec3,
+        id: u32,
+        ray: &Ray,
+        t: f32,
+        n: Vec3,
+        sample: impl Fn(usize, &Light) -> Vec2,
+        mut visible: impl FnMut(usize, Vec3, &Incident) -> Vec3,
+    ) -> Vec3 {
         let material = self.material(id);
         if material.is_emissive() {
             return c;
@@ -402,8 +413,21 @@ impl Lighting {
         if self.lights.is_empty() {
             return material.shade(c, n, v, [(headlight(ray, t), Vec3::ONE)]);
         }
-        let centre = Vec2::splat(0.5);
-        material.shade(c, n, v, self.lights.iter().filter_map(|l| l.incident(x, centre).map(|i| (i, Vec3::ONE))))
+        let mut sum = material.unlit(c);
+        for (j, light) in self.lights.iter().enumerate() {
+            let Some(incident) = light.incident(x, sample(j, light)) else { continue };
+            let direct = material.direct(c, n, v, &incident);
+            if direct != Vec3::ZERO {
+                sum += direct * visible(j, x, &incident);
+            }
+        }
+        sum
+    }
+
+    /// [`Lighting::shade`] with every light visible and sampled at its centre: the lighting of
+    /// the raster pipelines, which have no shadows (vk_gaussian_splatting Lighting §3).
+    pub fn shade_unshadowed(&self, c: Vec3, id: u32, ray: &Ray, t: f32, n: Vec3) -> Vec3 {
+        self.shade(c, id, ray, t, n, |_, _| Vec2::splat(0.5), |_, _, _| Vec3::ONE)
     }
 
     /// The material of particle `id`.

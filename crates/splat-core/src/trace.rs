@@ -12,7 +12,7 @@ use crate::camera::Camera;
 use crate::composite::{ShadedHit, depth_order, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
-use crate::lighting::{Incident, Lighting, Look, Shadows, headlight, shadow_slot};
+use crate::lighting::{Incident, Light, Lighting, Look, Shadows, shadow_slot};
 use crate::par;
 use crate::particle::{Aabb, Scene};
 use crate::rng::RayRng;
@@ -433,30 +433,16 @@ impl<'a> TraceScene<'a> {
         Sample { color: lit + acc.transmittance * self.settings.background.as_dvec3(), picked: Some(id), ..unlit }
     }
 
-    /// Lit(x, n, v, c) of [`crate::lighting`] for colour `c` of particle `id` at distance `t`
-    /// along `ray` with unit normal `n`; `c` itself when lighting is off or the particle's set only
-    /// emits. Decisions of area-light samples and shadow rays are drawn for sample slot `slot`.
+    /// Lit(x, n, v, c) ([`Lighting::shade`]) for colour `c` of particle `id` at distance `t`
+    /// along `ray` with unit normal `n`, each light behind its shadow ray; area-light samples and
+    /// shadow-ray decisions are drawn for sample slot `slot`.
     #[allow(clippy::too_many_arguments)]
     fn lit(&self, c: Vec3, id: u32, t: f32, n: Vec3, ray: &Ray, decide: &impl Decide, slot: u32) -> Vec3 {
-        let lighting = &self.lighting;
-        let material = lighting.material(id);
-        if material.is_emissive() {
-            return c;
-        }
-        let (x, v) = (ray.at(t), -ray.dir);
-        if lighting.lights.is_empty() {
-            return material.shade(c, n, v, [(headlight(ray, t), Vec3::ONE)]);
-        }
-        let mut sum = material.unlit(c);
-        for (j, light) in lighting.lights.iter().enumerate() {
-            let u = if light.is_area() { decide.light_sample(j as u32, slot) } else { Vec2::ZERO };
-            let Some(incident) = light.incident(x, u) else { continue };
-            let direct = material.direct(c, n, v, &incident);
-            if direct != Vec3::ZERO {
-                sum += direct * self.visibility(x, &incident, decide, shadow_slot(slot, j));
-            }
-        }
-        sum
+        let sample =
+            |j: usize, light: &Light| if light.is_area() { decide.light_sample(j as u32, slot) } else { Vec2::ZERO };
+        let visible =
+            |j: usize, x: Vec3, incident: &Incident| self.visibility(x, incident, decide, shadow_slot(slot, j));
+        self.lighting.shade(c, id, ray, t, n, sample, visible)
     }
 
     /// Visibility of a light from `x` ([`Shadows`]): the shadow ray starts `shadow_offset` along
