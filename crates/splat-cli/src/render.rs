@@ -2,7 +2,7 @@
 //! backend, render, write.
 
 use crate::args::{BackendArg, Loaded, MethodArg, MethodOptions, SceneArgs, progress_bar};
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
 use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
@@ -151,11 +151,11 @@ fn render_gpu(
             let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?;
             let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
             let mut out = raster.render(method, frames)?.0;
-            if args.depth.is_some() || args.normal.is_some() {
+            // Lit sorted splatting already ran on the tile rasterizer, depth and normal included.
+            let picked = gpu_scene.is_lit() && matches!(method, splat_core::raster::RasterMethod::Sorted { .. });
+            if (args.depth.is_some() || args.normal.is_some()) && !picked {
                 let pick = raster.depth_pick()?;
-                let data = pick.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
-                out.depth =
-                    splat_core::Image::from_data(camera.width, camera.height, 1, data).context("depth image")?;
+                out.depth = pick.depth_image();
                 out.normal = pick.normal;
             }
             Ok(out)

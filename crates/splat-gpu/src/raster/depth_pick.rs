@@ -21,6 +21,15 @@ pub struct DepthPick {
     pub pairs: u32,
 }
 
+impl DepthPick {
+    /// The depth as an image, NaN where there is none (the form of [`RenderOutput::depth`]).
+    pub fn depth_image(&self) -> Image {
+        let (w, h) = (self.color.width(), self.color.height());
+        let data = self.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
+        Image::from_data(w, h, 1, data).expect("one depth per pixel")
+    }
+}
+
 impl GpuRasterizer<'_> {
     /// Front-to-back iso-opacity depth and picked splat per pixel, by a compute tile rasterizer
     /// in the 3DGS style: the sorted splats are binned into 16 × 16 tiles as (tile, rank)

@@ -287,15 +287,21 @@ impl<'a> GpuRasterizer<'a> {
         frames.keys(false)?;
         let start = Instant::now();
         let pick = self.depth_pick()?;
-        let mean: Vec<f32> =
-            pick.color.data().chunks(3).zip(pick.alpha.data()).flat_map(|(c, &a)| [c[0], c[1], c[2], a]).collect();
-        let m2 = vec![0.0; mean.len()];
-        let (mut out, stats) = crate::output(&self.camera, &mean, &m2, 1, start.elapsed(), false);
-        let depth = pick.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
-        out.depth = Image::from_data(self.camera.width, self.camera.height, 1, depth)
-            .ok_or_else(|| GpuError::Readback("depth image of the wrong size".into()))?;
-        out.picked = pick.picked;
-        out.normal = pick.normal;
+        let stats = GpuStats {
+            loop_iterations: 0,
+            frames_per_dispatch: 1,
+            pass_per_dispatch: false,
+            gpu_time: start.elapsed(),
+            timestamps: false,
+        };
+        let out = RenderOutput {
+            variance: Image::filled(self.camera.width, self.camera.height, 3, 0.0),
+            depth: pick.depth_image(),
+            mean: pick.color,
+            alpha: pick.alpha,
+            normal: pick.normal,
+            picked: pick.picked,
+        };
         Ok((out, stats))
     }
 
