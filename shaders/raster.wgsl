@@ -259,19 +259,20 @@ fn tile_blend(
             let rcp = 1.0 / length(n);
             n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
         }
-        out_normal[index] = vec4<f32>(n, 0.0);
         if (params.lit == 1u && params.look == LOOK_SURFACE) {
             // raster/mod.rs `light_surface`: L lit once at the picked depth with the integrated
-            // normal and the picked splat's material; the background where T stayed above the
-            // threshold.
+            // normal and the picked splat's material; the background (and no normal) where T
+            // stayed above the threshold.
             if (picked == NONE) {
                 out = vec4<f32>(params.background.xyz, 0.0);
+                n = vec3<f32>(0.0);
             } else {
                 let lit = shade_unshadowed(color, picked, origin, dir, depth * to_t, n);
                 out = vec4<f32>(lit + transmittance * params.background.xyz, out.w);
             }
         }
         out_color[index] = out;
+        out_normal[index] = vec4<f32>(n, 0.0);
         // The depth as a distance along the pixel-centre ray: t = z |d_cam|.
         out_pick[index] = vec2<u32>(bitcast<u32>(depth * to_t), picked);
     }

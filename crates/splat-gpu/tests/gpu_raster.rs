@@ -464,6 +464,14 @@ fn lit_rasterization_equals_the_cpu() {
             let pick_flips = off.iter().filter(|&&p| g.picked[p] != cpu.picked[p]).count();
             eprintln!("{name} {look:?} sorted: {} pixels off, {pick_flips} of them by a different pick", off.len());
             assert!(off.len() == pick_flips && pick_flips * 200 <= pixels, "{name} {look:?}: pixels {off:?}");
+            // The normal image too: zero where the surface look found no surface, as on the CPU.
+            let normals_off = (0..pixels)
+                .filter(|&p| g.picked[p] == cpu.picked[p])
+                .filter(|&p| {
+                    max_abs_diff(&g.normal.data()[3 * p..3 * p + 3], &cpu.normal.data()[3 * p..3 * p + 3]) > 1e-3
+                })
+                .count();
+            assert_eq!(normals_off, 0, "{name} {look:?}: normals differ");
             let frames = Frames { count: 1, seed: 3, ..Frames::default() };
             let cpu = render_raster(&cpu_r, &RasterMethod::StochasticSplat, &frames, &|_| {}).unwrap();
             let g = gpu.render(&RasterMethod::StochasticSplat, &frames).unwrap().0;
