@@ -297,7 +297,7 @@ pub struct SceneArgs {
     #[arg(long, value_parser = parse_vec3)]
     pub background: Option<Vec3>,
     /// Drop the SH bands above this degree (0–3), removing some baked lighting before relighting.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u8).range(..=3))]
     pub sh_degree: Option<u8>,
     /// Lit worlds: integration of the sorted methods [default: the world's, else surface].
     #[arg(long, value_enum)]
@@ -356,9 +356,6 @@ impl SceneArgs {
         };
         let World { mut scene, mut lighting, camera, background } = world;
         if let Some(degree) = self.sh_degree {
-            if degree > 3 {
-                bail!("--sh-degree {degree} is above 3");
-            }
             splat_io::world::truncate_sh(&mut scene, degree);
         }
         if let Some(look) = self.look {

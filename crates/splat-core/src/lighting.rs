@@ -445,7 +445,7 @@ impl Lighting {
         for (i, w) in self.sets.windows(2).enumerate() {
             if w[1].first <= w[0].first {
                 return Err(format!(
-                    "splat set {} starts at {} , not after set {i} ({})",
+                    "splat set {} starts at {}, not after set {i} ({})",
                     i + 1,
                     w[1].first,
                     w[0].first

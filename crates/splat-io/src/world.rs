@@ -212,6 +212,9 @@ fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
     let mut sets = Vec::new();
     let mut camera = None;
     for (i, set) in file.splats.iter().enumerate() {
+        if let Some(d) = set.sh_degree.filter(|&d| d > 3) {
+            return Err(format!("splats[{i}]: sh_degree {d} is above 3").into());
+        }
         let (mut particles, builtin_camera) = load_set(set, base).map_err(|e| match e {
             Nested::Here(m) => Nested::Here(format!("splats[{i}]: {m}")),
             other => other,
@@ -219,11 +222,9 @@ fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
         if i == 0 {
             camera = builtin_camera;
         }
-        let degree = set.sh_degree.map_or(particles.sh_degree, |d| d.min(particles.sh_degree));
-        if set.sh_degree.is_some_and(|d| d > 3) {
-            return Err(format!("splats[{i}]: sh_degree {} is above 3", set.sh_degree.unwrap_or(0)).into());
+        if let Some(d) = set.sh_degree {
+            truncate_sh(&mut particles, d);
         }
-        truncate_sh(&mut particles, degree);
         transform(&mut particles, set).map_err(|m| format!("splats[{i}]: {m}"))?;
         let material = set.material.as_ref().map_or(Material::EMISSIVE, material);
         if !particles.particles.is_empty() {
