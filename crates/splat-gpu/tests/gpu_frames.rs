@@ -3,9 +3,8 @@
 
 mod common;
 
-use common::{context, fixture, gpu_run, trace_pipeline, tracer};
-use glam::Vec3;
-use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
+use common::{context, fixture, gpu_run, lighting, trace_pipeline, tracer};
+use splat_core::lighting::{Look, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Frames, RenderSettings};
 use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
@@ -54,38 +53,6 @@ fn one_frame_equals_the_cpu_frame() {
             assert!(bad.is_empty(), "{fixture_name} {name}: pixels (x, y, difference, gap) {bad:?}");
         }
     }
-}
-
-/// A lit world on a fixture: every material term, a soft spot light (its samples drawn per
-/// pixel and frame) and a directional light, with the given shadows and look.
-fn lighting(shadows: Shadows, look: Look) -> Lighting {
-    let material = Material {
-        emissive: Vec3::splat(0.05),
-        ambient: Vec3::splat(0.1),
-        diffuse: Vec3::new(0.9, 0.8, 0.7),
-        specular: Vec3::splat(0.3),
-        shininess: 16.0,
-    };
-    let lights = vec![
-        Light {
-            kind: LightKind::Spot {
-                position: Vec3::new(1.5, 1.5, 2.5),
-                direction: Vec3::new(-1.5, -1.5, -2.5).normalize(),
-                inner_deg: 15.0,
-                outer_deg: 30.0,
-            },
-            color: Vec3::new(1.0, 0.9, 0.8),
-            intensity: 8.0,
-            radius: 0.1,
-        },
-        Light {
-            kind: LightKind::Directional { direction: Vec3::new(0.4, -0.6, -1.0).normalize() },
-            color: Vec3::new(0.4, 0.5, 1.0),
-            intensity: 0.6,
-            radius: 0.0,
-        },
-    ];
-    Lighting { look, shadow_offset: 0.02, ..Lighting::single(material, lights, shadows) }
 }
 
 /// Lit, one frame makes the same decisions and the same shading on both backends, for every

@@ -5,10 +5,9 @@
 mod common;
 
 use common::{context, fixture};
-use glam::Vec3;
 use splat_core::Frames;
 use splat_core::RenderSettings;
-use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
+use splat_core::lighting::{Look, Shadows};
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SplatExtent, render_raster};
 use splat_core::rng::SplitMix64;
 use splat_core::{Camera, Scene};
@@ -401,38 +400,6 @@ fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
     }
 }
 
-/// A lit world on a fixture for the raster pipelines (no shadows there): every material term,
-/// a spot and a directional light.
-fn raster_lighting(look: Look) -> Lighting {
-    let material = Material {
-        emissive: Vec3::splat(0.05),
-        ambient: Vec3::splat(0.1),
-        diffuse: Vec3::new(0.9, 0.8, 0.7),
-        specular: Vec3::splat(0.3),
-        shininess: 16.0,
-    };
-    let lights = vec![
-        Light {
-            kind: LightKind::Spot {
-                position: Vec3::new(1.5, 1.5, 2.5),
-                direction: Vec3::new(-1.5, -1.5, -2.5).normalize(),
-                inner_deg: 15.0,
-                outer_deg: 30.0,
-            },
-            color: Vec3::new(1.0, 0.9, 0.8),
-            intensity: 8.0,
-            radius: 0.1,
-        },
-        Light {
-            kind: LightKind::Directional { direction: Vec3::new(0.4, -0.6, -1.0).normalize() },
-            color: Vec3::new(0.4, 0.5, 1.0),
-            intensity: 0.6,
-            radius: 0.0,
-        },
-    ];
-    Lighting { look, ..Lighting::single(material, lights, Shadows::None) }
-}
-
 /// Lit, the GPU rasterizer equals the CPU reference: sorted splatting through the compute tile
 /// rasterizer in both looks (the surface look lit once per pixel at the picked depth, the
 /// volumetric one per fragment) within 1e-3 except where the pick differs by f32 rounding at the
@@ -448,7 +415,7 @@ fn lit_rasterization_equals_the_cpu() {
             render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
                 .unwrap();
         for look in [Look::Surface, Look::Volumetric] {
-            let lighting = raster_lighting(look);
+            let lighting = common::lighting(Shadows::None, look);
             let cpu_r = cpu_raster(&c).with_lighting(lighting.clone()).unwrap();
             let scene = RasterScene::new_lit(ctx, &c.scene, &RenderSettings::default(), &lighting).unwrap();
             let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();

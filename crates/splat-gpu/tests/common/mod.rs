@@ -5,7 +5,9 @@
 #[allow(unused_imports)] // not every test binary uses every helper
 pub use splat_tests::harness::fixture;
 
+use glam::Vec3;
 use splat_core::frame::{Frames, RenderOutput};
+use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, RenderSettings, Scene};
 use splat_gpu::{GpuContext, GpuTracer, TracePipeline};
@@ -99,4 +101,36 @@ pub fn z_tests_and_power(
             test.z_test_with_expectation(fault.frames(base), &exact(&faulty))
         });
     }
+}
+
+/// The lit world of the GPU tests on the fixtures: every material term, a soft spot light (its
+/// samples drawn per pixel and frame) and a directional light, with the given shadows and look.
+pub fn lighting(shadows: Shadows, look: Look) -> Lighting {
+    let material = Material {
+        emissive: Vec3::splat(0.05),
+        ambient: Vec3::splat(0.1),
+        diffuse: Vec3::new(0.9, 0.8, 0.7),
+        specular: Vec3::splat(0.3),
+        shininess: 16.0,
+    };
+    let lights = vec![
+        Light {
+            kind: LightKind::Spot {
+                position: Vec3::new(1.5, 1.5, 2.5),
+                direction: Vec3::new(-1.5, -1.5, -2.5).normalize(),
+                inner_deg: 15.0,
+                outer_deg: 30.0,
+            },
+            color: Vec3::new(1.0, 0.9, 0.8),
+            intensity: 8.0,
+            radius: 0.1,
+        },
+        Light {
+            kind: LightKind::Directional { direction: Vec3::new(0.4, -0.6, -1.0).normalize() },
+            color: Vec3::new(0.4, 0.5, 1.0),
+            intensity: 0.6,
+            radius: 0.0,
+        },
+    ];
+    Lighting { look, shadow_offset: 0.02, ..Lighting::single(material, lights, shadows) }
 }
