@@ -31,6 +31,9 @@ fn material() -> Material {
     }
 }
 
+/// The fill light's position on the fixtures: in front of them, up and to the right.
+const FILL: Vec3 = Vec3::new(1.5, 1.5, 2.5);
+
 /// A key light from the camera's upper left (its shadow rays cross the particles in front)
 /// and a point fill light.
 fn lights(fill: Vec3) -> Vec<Light> {
@@ -110,13 +113,13 @@ fn check(name: &str, scene: &Scene, camera: &Camera, fill: Vec3) {
 #[test]
 fn lit_z_test_on_layers() {
     let (scene, camera) = fixture("layers", 32, 24);
-    check("layers", &scene, &camera, Vec3::new(1.5, 1.5, 2.5));
+    check("layers", &scene, &camera, FILL);
 }
 
 #[test]
 fn lit_z_test_on_cloud() {
     let (scene, camera) = fixture("cloud", 32, 24);
-    check("cloud", &scene, &camera, Vec3::new(1.5, 1.5, 2.5));
+    check("cloud", &scene, &camera, FILL);
 }
 
 #[test]
@@ -133,9 +136,8 @@ fn lit_z_test_on_a_bonsai_crop() {
 #[test]
 fn stochastic_shadow_ray_z_test_against_the_exact_transmittance() {
     let (scene, camera) = fixture("layers", 32, 24);
-    let fill = Vec3::new(1.5, 1.5, 2.5);
-    let oracle = exact(&lit(&scene, lighting(fill, Shadows::Exact, Look::Surface)), &camera);
-    let trace = lit(&scene, lighting(fill, Shadows::Stochastic, Look::Surface));
+    let oracle = exact(&lit(&scene, lighting(FILL, Shadows::Exact, Look::Surface)), &camera);
+    let trace = lit(&scene, lighting(FILL, Shadows::Stochastic, Look::Surface));
     let run = |f: Frames| render_frames(&trace, &camera, &Method::Exact, &f, &|_| {}).unwrap();
     assert_unbiased_and_control("stochastic shadow ray", &oracle, run);
 }
@@ -147,9 +149,8 @@ fn stochastic_shadow_ray_z_test_against_the_exact_transmittance() {
 fn lit_raster_z_tests() {
     let (scene, camera) = fixture("layers", 32, 24);
     let raster = RasterSettings { samples: 4, ..RasterSettings::default() };
-    let fill = Vec3::new(1.5, 1.5, 2.5);
     let r = Rasterizer::new(&scene, &camera, RenderSettings::default(), raster).unwrap();
-    let r = r.with_lighting(lighting(fill, Shadows::None, Look::Volumetric)).unwrap();
+    let r = r.with_lighting(lighting(FILL, Shadows::None, Look::Volumetric)).unwrap();
     let sorted = RasterMethod::Sorted { blend: Blend::Under };
     let oracle = render_raster(&r, &sorted, &Frames::default(), &|_| {}).unwrap();
     let methods = [
@@ -168,9 +169,8 @@ fn lit_raster_z_tests() {
 #[test]
 fn surface_and_volumetric_looks_differ() {
     let (scene, camera) = fixture("cloud", 32, 24);
-    let fill = Vec3::new(1.5, 1.5, 2.5);
-    let surface = exact(&lit(&scene, lighting(fill, Shadows::Exact, Look::Surface)), &camera);
-    let volumetric = exact(&lit(&scene, lighting(fill, Shadows::Exact, Look::Volumetric)), &camera);
+    let surface = exact(&lit(&scene, lighting(FILL, Shadows::Exact, Look::Surface)), &camera);
+    let volumetric = exact(&lit(&scene, lighting(FILL, Shadows::Exact, Look::Volumetric)), &camera);
     let rmse = splat_core::stats::rmse(surface.mean.data(), volumetric.mean.data());
     assert!(rmse > 0.01, "RMSE {rmse}");
     let thin = (0..camera.width * camera.height).find(|&i| {
@@ -186,9 +186,8 @@ fn surface_and_volumetric_looks_differ() {
 #[test]
 fn lit_convergence_slope_is_monte_carlo() {
     let (scene, camera) = fixture("cloud", 24, 18);
-    let fill = Vec3::new(1.5, 1.5, 2.5);
-    let oracle = exact(&lit(&scene, lighting(fill, Shadows::Exact, Look::Volumetric)), &camera);
-    let trace = lit(&scene, lighting(fill, Shadows::Stochastic, Look::Volumetric));
+    let oracle = exact(&lit(&scene, lighting(FILL, Shadows::Exact, Look::Volumetric)), &camera);
+    let trace = lit(&scene, lighting(FILL, Shadows::Stochastic, Look::Volumetric));
     let run = |f: Frames| render_frames(&trace, &camera, &Method::Stochastic, &f, &|_| {}).unwrap();
     StatTest::new("lit cloud stochastic", oracle, run).assert_converges(256, 3);
 }

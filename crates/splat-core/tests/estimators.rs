@@ -272,16 +272,21 @@ fn depth_sampling_is_rejected_by_the_same_enumeration() {
     assert!(close(unbiased, exact, 1e-9));
 }
 
+/// Five tilted discs of different opacities and colours, all hit by the ray.
+fn five_discs() -> (Scene, Ray) {
+    stack(
+        &[0.6, 0.3, 0.8, 0.45, 0.7],
+        &[(0.1, 0.2), (-0.2, 0.1), (0.05, -0.3), (0.2, 0.2), (-0.1, -0.1)],
+        &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]],
+    )
+}
+
 /// The enumeration is tight enough to catch a wrong acceptance rule: u < opacity, u ≤ 1 − α
 /// (on particles, drawn early and late) and a pass accepted when u < T_pass each move the
 /// expectation away from Eq. 3, while the production rules meet it to 1e-9.
 #[test]
 fn wrong_acceptance_rules_are_rejected_by_the_enumeration() {
-    let (scene, ray) = stack(
-        &[0.6, 0.3, 0.8, 0.45, 0.7],
-        &[(0.1, 0.2), (-0.2, 0.1), (0.05, -0.3), (0.2, 0.2), (-0.1, -0.1)],
-        &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]],
-    );
+    let (scene, ray) = five_discs();
     let trace = TraceScene::new(&scene, settings()).unwrap();
     let exact = trace.exact(&ray, &Outcomes::default()).color;
     let h = hits(&scene, &ray, trace.settings());
@@ -411,11 +416,7 @@ fn shadow_visibility(trace: &TraceScene, ray: &Ray, hits: &[(u32, f64)], late: b
 /// expectation of the stochastic estimators, which is why both oracles exist.
 #[test]
 fn lit_enumerations_reject_wrong_rules_and_the_other_look() {
-    let (scene, ray) = stack(
-        &[0.6, 0.3, 0.8, 0.45, 0.7],
-        &[(0.1, 0.2), (-0.2, 0.1), (0.05, -0.3), (0.2, 0.2), (-0.1, -0.1)],
-        &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]],
-    );
+    let (scene, ray) = five_discs();
     let trace =
         TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::Exact, Look::Volumetric)).unwrap();
     let oracle = trace.exact(&ray, &Outcomes::default()).color;
