@@ -4,6 +4,7 @@
 use crate::camera::Camera;
 use crate::frame::{Frames, Progress, RenderOutput};
 use crate::lighting::Lighting;
+use crate::mesh::Meshes;
 use crate::oracle::render_oracle;
 use crate::particle::Scene;
 use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster};
@@ -56,13 +57,36 @@ impl Algorithm {
         frames: &Frames,
         progress: Progress,
     ) -> Result<RenderOutput, RenderError> {
+        self.render_world(scene, &Meshes::none(), camera, settings, lighting, frames, progress)
+    }
+
+    /// Render `frames` on the CPU of the splats among `meshes` ([`crate::mesh`]), lit by
+    /// `lighting`; without meshes this is exactly [`Algorithm::render_lit`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_world(
+        &self,
+        scene: &Scene,
+        meshes: &Meshes,
+        camera: &Camera,
+        settings: &RenderSettings,
+        lighting: &Lighting,
+        frames: &Frames,
+        progress: Progress,
+    ) -> Result<RenderOutput, RenderError> {
         match self {
+            Algorithm::Oracle if !meshes.is_empty() => Err(RenderError::Settings(
+                "the brute-force oracle renders splats alone; render meshes with a ray-tracing method".into(),
+            )),
+            Algorithm::Raster(..) if !meshes.is_empty() => Err(RenderError::Settings(
+                "meshes are composited by the ray-tracing methods; splatting them is not built yet".into(),
+            )),
             Algorithm::Oracle if lighting.is_on() => Err(RenderError::Settings(
                 "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
             )),
             Algorithm::Oracle => render_oracle(scene, camera, settings, progress),
             Algorithm::Trace(method) => {
-                let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?;
+                let trace =
+                    TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
                 render_frames(&trace, camera, method, frames, progress)
             }
             Algorithm::Raster(method, raster) => {

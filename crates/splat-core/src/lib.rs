@@ -33,6 +33,7 @@ pub mod hit;
 pub mod image;
 pub mod kernel;
 pub mod lighting;
+pub mod mesh;
 pub mod normal;
 pub mod oracle;
 mod par;

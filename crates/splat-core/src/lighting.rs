@@ -52,6 +52,16 @@ impl Material {
         shininess: 32.0,
     };
 
+    /// A matte surface: 0.1 ambient and 0.9 diffuse (the default of a mesh,
+    /// [`crate::mesh::MeshMaterial`]).
+    pub const DIFFUSE: Material = Material {
+        emissive: Vec3::ZERO,
+        ambient: Vec3::splat(0.1),
+        diffuse: Vec3::splat(0.9),
+        specular: Vec3::ZERO,
+        shininess: 32.0,
+    };
+
     /// Whether the material only emits: lighting it changes nothing, so no light is evaluated.
     pub fn is_emissive(&self) -> bool {
         self.emissive == Vec3::ONE
@@ -387,7 +397,12 @@ impl Lighting {
     /// Whether a lit sample is random even for a deterministic method: stochastic shadow rays,
     /// or an area light sampled per frame.
     pub fn is_random(&self) -> bool {
-        self.is_on() && (self.shadows == Shadows::Stochastic || self.lights.iter().any(Light::is_area))
+        self.is_on() && self.draws()
+    }
+
+    /// Whether lighting a point draws random numbers: stochastic shadow rays or an area light.
+    pub fn draws(&self) -> bool {
+        self.shadows == Shadows::Stochastic || self.lights.iter().any(Light::is_area)
     }
 
     /// Lit(x, n, v, c) of particle `id` hit at distance `t` along `ray` with unit normal `n`:
@@ -403,9 +418,24 @@ impl Lighting {
         t: f32,
         n: Vec3,
         sample: impl Fn(usize, &Light) -> Vec2,
+        visible: impl FnMut(usize, Vec3, &Incident) -> Vec3,
+    ) -> Vec3 {
+        self.shade_material(self.material(id), c, ray, t, n, sample, visible)
+    }
+
+    /// [`Lighting::shade`] with `material` given rather than looked up by particle (how a mesh
+    /// surface is lit, [`crate::mesh`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn shade_material(
+        &self,
+        material: &Material,
+        c: Vec3,
+        ray: &Ray,
+        t: f32,
+        n: Vec3,
+        sample: impl Fn(usize, &Light) -> Vec2,
         mut visible: impl FnMut(usize, Vec3, &Incident) -> Vec3,
     ) -> Vec3 {
-        let material = self.material(id);
         if material.is_emissive() {
             return c;
         }

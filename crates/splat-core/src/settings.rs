@@ -27,7 +27,16 @@ pub struct RenderSettings {
     pub t_min: f32,
     /// Ray end t_max.
     pub t_max: f32,
+    /// Most mirror and glass bounces after the camera ray ([`crate::mesh`]); a ray that would
+    /// bounce once more takes black.
+    pub max_bounces: u32,
 }
+
+/// Default bounce limit (the title figure of the vk_gaussian_splatting lighting documentation
+/// shows 3 reflection and refraction bounces).
+pub const DEFAULT_MAX_BOUNCES: u32 = 3;
+/// Largest bounce limit (the bounce number is packed into decision slots, [`crate::trace`]).
+pub const MAX_BOUNCES: u32 = 15;
 
 impl Default for RenderSettings {
     fn default() -> Self {
@@ -39,6 +48,7 @@ impl Default for RenderSettings {
             iso_threshold: DEFAULT_ISO_THRESHOLD,
             t_min: DEFAULT_T_MIN,
             t_max: DEFAULT_T_MAX,
+            max_bounces: DEFAULT_MAX_BOUNCES,
         }
     }
 }
@@ -79,6 +89,12 @@ impl RenderSettings {
             return Err(RenderError::Settings(format!(
                 "ray range ({}, {}) is empty or invalid",
                 self.t_min, self.t_max
+            )));
+        }
+        if self.max_bounces > MAX_BOUNCES {
+            return Err(RenderError::Settings(format!(
+                "{} bounces is more than the {MAX_BOUNCES} supported",
+                self.max_bounces
             )));
         }
         Ok(())

@@ -13,12 +13,14 @@ use crate::composite::{ShadedHit, depth_order, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
 use crate::lighting::{Incident, Light, Lighting, Look, Shadows, shadow_slot};
+use crate::mesh::{Meshes, SurfaceHit, fresnel, reflect, refract};
 use crate::par;
 use crate::particle::{Aabb, Scene};
 use crate::rng::RayRng;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
 use glam::{DVec3, Vec2, Vec3};
+use std::cell::OnceCell;
 
 /// Particles per pass of the k-buffer (vk `PARTICLES_SPP`).
 pub const DEFAULT_K: usize = 18;
@@ -120,6 +122,14 @@ impl Method {
             Method::StochasticN { n, m } if !(1..=MAX_SLOTS as u32).contains(&n) || m == 0 => {
                 bad(format!("stochastic-n needs 1 ≤ n ≤ {MAX_SLOTS} and m ≥ 1 (got m = {m}, n = {n})"))
             }
+            Method::StochasticN { n, m } if u64::from(m) * u64::from(n) > u64::from(MAX_PRIMARY_SLOTS) => {
+                bad(format!("stochastic-n draws m × n = {} samples a ray, more than {MAX_PRIMARY_SLOTS}", m * n))
+            }
+            Method::KBuffer { max_passes, .. } | Method::StochasticPass { max_passes, .. }
+                if max_passes > MAX_PRIMARY_SLOTS =>
+            {
+                bad(format!("{max_passes} passes is more than {MAX_PRIMARY_SLOTS}"))
+            }
             _ => Ok(()),
         }
     }
@@ -180,6 +190,8 @@ pub struct TraceScene<'a> {
     radius_sq: Vec<f32>,
     /// Materials, lights and shadows ([`crate::lighting`]); off by default.
     lighting: Lighting,
+    /// Opaque meshes that clip every ray ([`crate::mesh`]); none by default.
+    meshes: Meshes,
 }
 
 /// The radius, in standard deviations, of the ellipsoid a particle is bounded by in the BVH: its
@@ -291,13 +303,16 @@ impl Integrator {
         c.unit_normal(dir)
     }
 
-    /// The integrated hits over the background (Eq. 3): L + T × background, coverage 1 − T.
-    fn over(&self, background: Vec3, dir: Vec3) -> Sample {
+    /// The integrated hits over what lies behind them (Eq. 3): L + T × behind, coverage
+    /// 1 − T + T × its coverage. Depth and normal are the splats' where they reach the
+    /// iso-opacity threshold, else those of a surface behind, if any.
+    fn over(&self, behind: &Sample, dir: Vec3) -> Sample {
+        let splats_first = self.depth.is_some() || behind.depth.is_none();
         Sample {
-            color: self.radiance + self.transmittance * background.as_dvec3(),
-            alpha: 1.0 - self.transmittance,
-            depth: self.depth.map(|d| d.0),
-            normal: self.unit_normal(dir),
+            color: self.radiance + self.transmittance * behind.color,
+            alpha: 1.0 - self.transmittance + self.transmittance * behind.alpha,
+            depth: if splats_first { self.depth.map(|d| d.0) } else { behind.depth },
+            normal: if splats_first { self.unit_normal(dir) } else { behind.normal },
             picked: None,
         }
     }
@@ -327,7 +342,8 @@ impl<'a> TraceScene<'a> {
         let clamp = settings.kernel.alpha_clamp;
         let alpha_bound = bvh.order.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
         let radius_sq = bvh.order.iter().map(|&i| radii[i as usize].powi(2)).collect();
-        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq, lighting: Lighting::default() })
+        let lighting = Lighting::default();
+        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq, lighting, meshes: Meshes::none() })
     }
 
     /// The same scene lit by `lighting` (checked against the scene's particle count).
@@ -337,9 +353,26 @@ impl<'a> TraceScene<'a> {
         Ok(self)
     }
 
+    /// The same scene among `meshes`, which clip every ray and shadow the splats.
+    pub fn with_meshes(mut self, meshes: Meshes) -> Self {
+        self.meshes = meshes;
+        self
+    }
+
     /// The lighting.
     pub fn lighting(&self) -> &Lighting {
         &self.lighting
+    }
+
+    /// The meshes.
+    pub fn meshes(&self) -> &Meshes {
+        &self.meshes
+    }
+
+    /// Whether a sample is random even for a deterministic method: lit splats or lit meshes
+    /// with stochastic shadow rays or area lights.
+    pub fn is_random(&self) -> bool {
+        (self.lighting.is_on() || !self.meshes.is_empty()) && self.lighting.draws()
     }
 
     /// The settings.
@@ -394,9 +427,9 @@ impl<'a> TraceScene<'a> {
     }
 
     /// A shaded pick seen as an opaque sample, lit at its own position and normal (§1.2, §2.2).
-    fn opaque_sample(&self, leaf: u32, t: f32, ray: &Ray, decide: &impl Decide, slot: u32) -> Sample {
-        let h = self.shade(leaf, t, 1.0, ray);
-        let color = self.lit(h.color, h.index, t, h.normal, ray, decide, slot);
+    fn opaque_sample<D: Decide>(&self, leaf: u32, t: f32, seg: &Segment<D>, slot: u32) -> Sample {
+        let h = self.shade(leaf, t, 1.0, &seg.ray);
+        let color = self.lit(h.color, h.index, t, h.normal, &seg.ray, &seg.decide, slot);
         Sample { color: color.as_dvec3(), alpha: 1.0, depth: Some(t), normal: h.normal, picked: Some(h.index) }
     }
 
@@ -404,33 +437,47 @@ impl<'a> TraceScene<'a> {
         Sample::background(self.settings.background)
     }
 
+    /// What lies behind the splats of a segment: the background, or the shaded mesh surface
+    /// that clips it (computed once, when a method first looks past the splats).
+    fn behind<D: Decide>(&self, seg: &Segment<D>) -> Sample {
+        *seg.behind.get_or_init(|| match &seg.surface {
+            None => self.background_sample(),
+            Some(hit) => self.surface_sample(seg, hit),
+        })
+    }
+
     /// Eq. 3 front to back over the hits of a k-buffer, continuing `acc`; in the volumetric look
     /// each hit is lit first.
-    fn integrate(&self, acc: &mut Integrator, buf: &KBuf, ray: &Ray, decide: &impl Decide) {
+    fn integrate<D: Decide>(&self, acc: &mut Integrator, buf: &KBuf, seg: &Segment<D>) {
         for s in buf.as_slice() {
-            self.add(acc, &self.shade(s.leaf, s.t, s.alpha, ray), ray, decide);
+            self.add(acc, &self.shade(s.leaf, s.t, s.alpha, &seg.ray), seg);
         }
     }
 
-    fn add(&self, acc: &mut Integrator, h: &ShadedHit, ray: &Ray, decide: &impl Decide) {
-        let color = if self.volumetric() { self.lit(h.color, h.index, h.t, h.normal, ray, decide, 0) } else { h.color };
+    fn add<D: Decide>(&self, acc: &mut Integrator, h: &ShadedHit, seg: &Segment<D>) {
+        let color = if self.volumetric() {
+            self.lit(h.color, h.index, h.t, h.normal, &seg.ray, &seg.decide, 0)
+        } else {
+            h.color
+        };
         acc.add(h, color, self.settings.iso_threshold);
     }
 
-    /// The sample of a sorted integration over the background. Lit in the surface look
+    /// The sample of a sorted integration over what lies behind it. Lit in the surface look
     /// (vk_gaussian_splatting Lighting §1.1, §2.1): the integrated radiance L, as the base colour,
     /// lit once at the iso-opacity depth with the integrated normal and the material of the
-    /// particle that set the depth, then L + T × background; a ray that never reaches the
-    /// threshold shows the background.
-    fn finish(&self, acc: &Integrator, ray: &Ray, decide: &impl Decide) -> Sample {
-        let unlit = acc.over(self.settings.background, ray.dir);
+    /// particle that set the depth, then L + T × behind; a ray that never reaches the threshold
+    /// shows what lies behind.
+    fn finish<D: Decide>(&self, acc: &Integrator, seg: &Segment<D>) -> Sample {
+        let behind = self.behind(seg);
+        let unlit = acc.over(&behind, seg.ray.dir);
         if !self.lighting.is_on() || self.volumetric() {
             return unlit;
         }
-        let Some((t, id)) = acc.depth else { return self.background_sample() };
+        let Some((t, id)) = acc.depth else { return behind };
         let base = acc.radiance.as_vec3();
-        let lit = self.lit(base, id, t, unlit.normal, ray, decide, 0).as_dvec3();
-        Sample { color: lit + acc.transmittance * self.settings.background.as_dvec3(), picked: Some(id), ..unlit }
+        let lit = self.lit(base, id, t, unlit.normal, &seg.ray, &seg.decide, 0).as_dvec3();
+        Sample { color: lit + acc.transmittance * behind.color, picked: Some(id), ..unlit }
     }
 
     /// Lit(x, n, v, c) ([`Lighting::shade`]) for colour `c` of particle `id` at distance `t`
@@ -447,9 +494,13 @@ impl<'a> TraceScene<'a> {
 
     /// Visibility of a light from `x` ([`Shadows`]): the shadow ray starts `shadow_offset` along
     /// the light direction and ends at the light (vk_gaussian_splatting Lighting §4); `decide`
-    /// draws the stochastic shadow ray's decisions in slot `slot`.
+    /// draws the stochastic shadow ray's decisions in slot `slot`. A mesh on the way blocks the
+    /// light.
     pub fn visibility(&self, x: Vec3, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
-        let offset = self.lighting.shadow_offset;
+        self.visibility_from(x, self.lighting.shadow_offset, incident, decide, slot)
+    }
+
+    fn visibility_from(&self, x: Vec3, offset: f32, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
         let shadow = Ray {
             origin: x + offset * incident.l,
             dir: incident.l,
@@ -457,8 +508,11 @@ impl<'a> TraceScene<'a> {
             t_min: self.settings.t_min,
             t_max: (incident.distance - offset).min(self.settings.t_max),
         };
-        if shadow.t_max <= shadow.t_min {
+        if shadow.t_max <= shadow.t_min || self.lighting.shadows == Shadows::None {
             return Vec3::ONE;
+        }
+        if self.meshes.occludes(&shadow) {
+            return Vec3::ZERO;
         }
         match self.lighting.shadows {
             Shadows::None => Vec3::ONE,
@@ -520,18 +574,80 @@ impl<'a> TraceScene<'a> {
         t
     }
 
+    /// The shaded colour S of a mesh surface hit by the segment's ray ([`crate::mesh`]): the
+    /// material's local share lit by the world's lights (shadow rays through meshes and splats),
+    /// plus the mirror and glass shares from secondary rays traced by the same method one bounce
+    /// deeper, while the bounce limit allows. Depth and normal are the surface's.
+    fn surface_sample<D: Decide>(&self, seg: &Segment<D>, hit: &SurfaceHit) -> Sample {
+        let material = self.meshes.material(hit.mesh);
+        let d = seg.ray.dir;
+        // Normals facing the incoming ray; `outside` tells the side for refraction.
+        let outside = d.dot(hit.face_normal) < 0.0;
+        let side = if outside { 1.0 } else { -1.0 };
+        let (face, n) = (side * hit.face_normal, side * hit.normal);
+        let n = if n.dot(d) < 0.0 { n } else { face };
+        let x = seg.ray.at(hit.t);
+        let mut color = Vec3::ZERO;
+        if material.local_share() > 0.0 {
+            let (decide, ray) = (&seg.decide, &seg.ray);
+            let offset = surface_offset(x);
+            let sample =
+                |j: usize, light: &Light| if light.is_area() { decide.light_sample(j as u32, 0) } else { Vec2::ZERO };
+            let visible = |j: usize, x: Vec3, incident: &Incident| {
+                self.visibility_from(x, offset, incident, decide, shadow_slot(0, j))
+            };
+            let lit = self.lighting.shade_material(&material.shading, material.color, ray, hit.t, n, sample, visible);
+            color += material.local_share() * lit;
+        }
+        if seg.decide.depth < self.settings.max_bounces {
+            let next = seg.decide.deeper();
+            let trace = |dir: Vec3| self.secondary(&seg.method, x, dir, face, next);
+            if material.mirror > 0.0 {
+                color += material.mirror * trace(reflect(d, n));
+            }
+            if material.transmission > 0.0 {
+                let eta = if outside { 1.0 / material.ior } else { material.ior };
+                let f = fresnel((-d.dot(n)).clamp(0.0, 1.0), eta);
+                let reflected = if f > 0.0 { f * trace(reflect(d, n)) } else { Vec3::ZERO };
+                let refracted = match refract(d, n, eta) {
+                    Some(dir) if f < 1.0 => (1.0 - f) * trace(dir),
+                    _ => Vec3::ZERO,
+                };
+                color += material.transmission * (reflected + refracted);
+            }
+        }
+        Sample { color: color.as_dvec3(), alpha: 1.0, depth: Some(hit.t), normal: n, picked: None }
+    }
+
+    /// The radiance of a secondary ray from surface point `x` along `dir`, started off the
+    /// surface on the side it leaves to (`face` is the face normal toward the incoming ray).
+    fn secondary<D: Decide>(&self, method: &Method, x: Vec3, dir: Vec3, face: Vec3, decide: Bounce<D>) -> Vec3 {
+        let side = if dir.dot(face) >= 0.0 { face } else { -face };
+        let ray = Ray { origin: x + surface_offset(x) * side, dir, view: dir, t_min: 0.0, t_max: self.settings.t_max };
+        self.trace_ray(method, &ray, decide).color.as_vec3()
+    }
+
     /// One sample of `method` for `ray` (already clipped to the settings' range).
     pub fn sample(&self, method: &Method, ray: &Ray, decide: &impl Decide) -> Sample {
+        self.trace_ray(method, ray, Bounce::camera(decide))
+    }
+
+    /// One sample of `method` along `ray`, `decide.depth` bounces after the camera ray: the ray
+    /// is clipped at the closest mesh, whose shaded colour takes the background's place.
+    fn trace_ray<D: Decide>(&self, method: &Method, ray: &Ray, decide: Bounce<D>) -> Sample {
+        let surface = self.meshes.closest(ray);
+        let ray = Ray { t_max: surface.map_or(ray.t_max, |s| s.t), ..*ray };
+        let seg = Segment { ray, surface, method: *method, decide, behind: OnceCell::new() };
         match *method {
-            Method::Exact => self.exact(ray, decide),
+            Method::Exact => self.exact(&seg),
             Method::KBuffer { k, max_passes, min_transmittance } => {
-                self.kbuffer(ray, decide, k, max_passes, min_transmittance)
+                self.kbuffer(&seg, k, max_passes, min_transmittance)
             }
-            Method::Stochastic => self.stochastic(ray, decide, 0),
+            Method::Stochastic => self.stochastic(&seg, 0),
             Method::StochasticN { m, n } => {
                 let mut sum = Sample { alpha: 0.0, ..Sample::background(Vec3::ZERO) };
                 for pass in 0..m {
-                    let s = self.stochastic_n(ray, decide, n as usize, pass * n);
+                    let s = self.stochastic_n(&seg, n as usize, pass * n);
                     sum.color += s.color;
                     sum.alpha += s.alpha;
                     if pass == 0 {
@@ -542,15 +658,16 @@ impl<'a> TraceScene<'a> {
                 sum.alpha /= f64::from(m);
                 sum
             }
-            Method::StochasticPass { k, max_passes } => self.stochastic_pass(ray, decide, k, max_passes),
-            Method::DepthSampling { k } => self.depth_sampling(ray, decide, k),
-            Method::Opaque => self.opaque(ray),
+            Method::StochasticPass { k, max_passes } => self.stochastic_pass(&seg, k, max_passes),
+            Method::DepthSampling { k } => self.depth_sampling(&seg, k),
+            Method::Opaque => self.opaque(&seg),
         }
     }
 
     /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3 (lit by the
     /// look when lighting is on; `decide` draws only shadow rays and area-light samples).
-    pub fn exact(&self, ray: &Ray, decide: &impl Decide) -> Sample {
+    fn exact<D: Decide>(&self, seg: &Segment<D>) -> Sample {
+        let ray = &seg.ray;
         // Sort small (t, id) records by the order of `composite::sort_front_to_back`, then shade
         // each hit once, in that order.
         let mut found = Vec::with_capacity(64);
@@ -563,9 +680,9 @@ impl<'a> TraceScene<'a> {
         found.sort_unstable_by(|a, b| depth_order(a.t, a.id, b.t, b.id));
         let mut acc = Integrator::START;
         for s in &found {
-            self.add(&mut acc, &self.shade(s.leaf, s.t, s.alpha, ray), ray, decide);
+            self.add(&mut acc, &self.shade(s.leaf, s.t, s.alpha, ray), seg);
         }
-        self.finish(&acc, ray, decide)
+        self.finish(&acc, seg)
     }
 
     /// The k closest hits strictly behind (after_t, after_id), by (t, id); when `decide` is
@@ -599,28 +716,21 @@ impl<'a> TraceScene<'a> {
     }
 
     /// k-buffer multi-pass (3DGRT / vk baseline).
-    pub fn kbuffer(
-        &self,
-        ray: &Ray,
-        decide: &impl Decide,
-        k: usize,
-        max_passes: u32,
-        min_transmittance: f32,
-    ) -> Sample {
+    fn kbuffer<D: Decide>(&self, seg: &Segment<D>, k: usize, max_passes: u32, min_transmittance: f32) -> Sample {
         let mut acc = Integrator::START;
-        let mut after = (ray.t_min, u32::MAX);
+        let mut after = (seg.ray.t_min, u32::MAX);
         for _ in 0..max_passes {
             if acc.transmittance <= f64::from(min_transmittance) {
                 break;
             }
-            let buf = self.next_k(ray, k, after, None);
-            self.integrate(&mut acc, &buf, ray, decide);
+            let buf = self.next_k(&seg.ray, k, after, None);
+            self.integrate(&mut acc, &buf, seg);
             if !buf.is_full() {
                 break;
             }
             after = (buf.last().t, buf.last().id);
         }
-        self.finish(&acc, ray, decide)
+        self.finish(&acc, seg)
     }
 
     /// Algorithm 1: the closest hit accepted by Russian roulette (u < α), found in one
@@ -629,7 +739,8 @@ impl<'a> TraceScene<'a> {
     /// With a position-free generator u is drawn before the kernel: α ≤ min(opacity, clamp),
     /// so u ≥ that bound rejects the hit without evaluating the exponential; the decision is
     /// the same because u is a hash, not a stream.
-    pub fn stochastic(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> Sample {
+    fn stochastic<D: Decide>(&self, seg: &Segment<D>, slot: u32) -> Sample {
+        let (ray, decide) = (&seg.ray, &seg.decide);
         let early = !decide.needs_position();
         let mut best = Slot::EMPTY;
         let mut t_max = ray.t_max;
@@ -654,16 +765,13 @@ impl<'a> TraceScene<'a> {
                 *t_max = h.t;
             }
         });
-        if best.id == u32::MAX {
-            self.background_sample()
-        } else {
-            self.opaque_sample(best.leaf, best.t, ray, decide, slot)
-        }
+        if best.id == u32::MAX { self.behind(seg) } else { self.opaque_sample(best.leaf, best.t, seg, slot) }
     }
 
     /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
     /// `first_slot..first_slot + n`; the traversal is clipped at the farthest slot's hit.
-    pub fn stochastic_n(&self, ray: &Ray, decide: &impl Decide, n: usize, first_slot: u32) -> Sample {
+    fn stochastic_n<D: Decide>(&self, seg: &Segment<D>, n: usize, first_slot: u32) -> Sample {
+        let (ray, decide) = (&seg.ray, &seg.decide);
         let early = !decide.needs_position();
         let mut best = [Slot::EMPTY; MAX_SLOTS];
         let mut u = [0.0f32; MAX_SLOTS];
@@ -695,13 +803,9 @@ impl<'a> TraceScene<'a> {
         let mut alpha = 0.0;
         let mut first = self.background_sample();
         for (slot, b) in (first_slot..).zip(&best[..n]) {
-            let s = if b.id == u32::MAX {
-                self.background_sample()
-            } else {
-                alpha += 1.0;
-                self.opaque_sample(b.leaf, b.t, ray, decide, slot)
-            };
+            let s = if b.id == u32::MAX { self.behind(seg) } else { self.opaque_sample(b.leaf, b.t, seg, slot) };
             color += s.color;
+            alpha += s.alpha;
             if slot == first_slot {
                 first = s;
             }
@@ -712,34 +816,39 @@ impl<'a> TraceScene<'a> {
     /// vk stochastic pass: each pass integrates its K sorted hits from T = 1; it is accepted
     /// with probability O = 1 − T_pass and returns L_pass / O, else it is discarded and the
     /// next pass starts behind it. E = Σⱼ (Πᵢ<ⱼ Tᵢ) Lⱼ + (Π Tⱼ) background: Eq. 3 exactly.
-    pub fn stochastic_pass(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> Sample {
+    fn stochastic_pass<D: Decide>(&self, seg: &Segment<D>, k: usize, max_passes: u32) -> Sample {
         let mut accepted = None;
-        self.passes(ray, k, max_passes, |pass, acc| {
+        self.passes(&seg.ray, k, max_passes, |pass, acc| {
             let opacity = 1.0 - acc.transmittance;
-            if decide.accepts_pass(f64::from(decide.pass(pass)), opacity) {
-                accepted = Some(self.pass_sample(acc, ray, decide));
+            if seg.decide.accepts_pass(f64::from(seg.decide.pass(pass)), opacity) {
+                accepted = Some(self.pass_sample(acc, seg));
             }
             accepted.is_none()
         });
-        accepted.unwrap_or_else(|| self.background_sample())
+        accepted.unwrap_or_else(|| self.behind(seg))
     }
 
     /// The exact expectation of the stochastic pass (its oracle when lit): Σⱼ (Πᵢ<ⱼ Tᵢ) Oⱼ Sⱼ +
-    /// (Π Tⱼ) background, with Sⱼ the sample pass j returns when accepted. Unlit Sⱼ = Lⱼ / Oⱼ
-    /// and this is Eq. 3; lit it is not, since the specular term is not proportional to the
-    /// base colour. `decide` draws only shadow rays and area-light samples.
+    /// (Π Tⱼ) behind, with Sⱼ the sample pass j returns when accepted and `behind` the
+    /// background or the mesh surface clipping the ray. Unlit Sⱼ = Lⱼ / Oⱼ and this is Eq. 3;
+    /// lit it is not, since the specular term is not proportional to the base colour. `decide`
+    /// draws only shadow rays, area-light samples and the decisions of secondary rays.
     pub fn stochastic_pass_expectation(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> DVec3 {
+        let surface = self.meshes.closest(ray);
+        let ray = Ray { t_max: surface.map_or(ray.t_max, |s| s.t), ..*ray };
+        let method = Method::StochasticPass { k, max_passes };
+        let seg = Segment { ray, surface, method, decide: Bounce::camera(decide), behind: OnceCell::new() };
         let mut reach = 1.0f64;
         let mut sum = DVec3::ZERO;
-        self.passes(ray, k, max_passes, |_, acc| {
+        self.passes(&seg.ray, k, max_passes, |_, acc| {
             let opacity = 1.0 - acc.transmittance;
             if opacity > 0.0 {
-                sum += reach * opacity * self.pass_sample(acc, ray, decide).color;
+                sum += reach * opacity * self.pass_sample(acc, &seg).color;
             }
             reach *= acc.transmittance;
             true
         });
-        sum + reach * self.settings.background.as_dvec3()
+        sum + reach * self.behind(&seg).color
     }
 
     /// The passes of K sorted hits along `ray`, each integrated from T = 1 and handed to
@@ -766,12 +875,12 @@ impl<'a> TraceScene<'a> {
     /// An accepted pass as one opaque sample: colour L_pass / O. Lit (vk_gaussian_splatting
     /// Lighting §1.3, §2.3), that base colour is lit with the pass's integrated normal at its
     /// iso-depth, or else at its farthest hit, with the material of the particle there.
-    fn pass_sample(&self, acc: &Integrator, ray: &Ray, decide: &impl Decide) -> Sample {
+    fn pass_sample<D: Decide>(&self, acc: &Integrator, seg: &Segment<D>) -> Sample {
         let (t, id) = acc.depth.or(acc.farthest).expect("a pass with hits has a farthest hit");
-        let normal = acc.unit_normal(ray.dir);
+        let normal = acc.unit_normal(seg.ray.dir);
         let base = acc.radiance / (1.0 - acc.transmittance);
         let color = if self.lighting.is_on() {
-            self.lit(base.as_vec3(), id, t, normal, ray, decide, 0).as_dvec3()
+            self.lit(base.as_vec3(), id, t, normal, &seg.ray, &seg.decide, 0).as_dvec3()
         } else {
             base
         };
@@ -780,16 +889,18 @@ impl<'a> TraceScene<'a> {
 
     /// 3DGRT stochastic depth sampling: the k closest hits accepted by roulette (slot 0),
     /// composited in order with their alphas (biased: α counts twice).
-    pub fn depth_sampling(&self, ray: &Ray, decide: &impl Decide, k: usize) -> Sample {
+    fn depth_sampling<D: Decide>(&self, seg: &Segment<D>, k: usize) -> Sample {
+        let decide = &seg.decide;
         let accept = |id: u32, p: Vec3, alpha: f32| decide.accepts(id, decide.particle(id, 0, p), alpha);
-        let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept));
+        let buf = self.next_k(&seg.ray, k, (seg.ray.t_min, u32::MAX), Some(&accept));
         let mut acc = Integrator::START;
-        self.integrate(&mut acc, &buf, ray, decide);
-        Sample { depth: buf.as_slice().first().map(|s| s.t), ..self.finish(&acc, ray, decide) }
+        self.integrate(&mut acc, &buf, seg);
+        Sample { depth: buf.as_slice().first().map(|s| s.t), ..self.finish(&acc, seg) }
     }
 
     /// Closest entry into any particle's bounding ellipsoid ([`bounding_radius`]), shaded opaque.
-    pub fn opaque(&self, ray: &Ray) -> Sample {
+    fn opaque<D: Decide>(&self, seg: &Segment<D>) -> Sample {
+        let ray = &seg.ray;
         let mut best = Slot::EMPTY;
         let mut t_max = ray.t_max;
         self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
@@ -802,11 +913,101 @@ impl<'a> TraceScene<'a> {
             }
         });
         if best.id == u32::MAX {
-            return self.background_sample();
+            return self.behind(seg);
         }
         let p = &self.scene.particles[best.id as usize];
         let color = sh::eval(&p.sh, self.scene.sh_degree, ray.dir).as_dvec3();
         Sample { color, alpha: 1.0, depth: Some(best.t), normal: Vec3::ZERO, picked: Some(best.id) }
+    }
+}
+
+/// How far a secondary or shadow ray starts off a mesh surface at `x`: far enough that the
+/// surface does not hit itself in f32, relative to the point's magnitude.
+fn surface_offset(x: Vec3) -> f32 {
+    1e-4 * x.abs().max_element().max(1.0)
+}
+
+/// One straight piece of a light path: the ray clipped at the closest mesh, the method and
+/// decisions that sample the splats in front of it, and what lies behind them (filled when a
+/// method first needs it).
+struct Segment<'d, D> {
+    ray: Ray,
+    surface: Option<SurfaceHit>,
+    method: Method,
+    decide: Bounce<'d, D>,
+    behind: OnceCell<Sample>,
+}
+
+/// Bit of a decision slot where the bounce number starts, for primary slots (every slot a
+/// method draws in is below it) …
+const BOUNCE_SHIFT: u32 = 20;
+/// … and for shadow slots ([`shadow_slot`] keeps bits 26–30 free for primary slots below 2²⁰).
+const SHADOW_BOUNCE_SHIFT: u32 = 26;
+/// Largest slot (and pass) a method may draw in, so that bounces get slots of their own.
+pub const MAX_PRIMARY_SLOTS: u32 = 1 << BOUNCE_SHIFT;
+
+/// The decisions of a ray `depth` bounces after the camera ray: slot s of bounce d is slot
+/// s + d·2²⁰ (shadow slots s + d·2²⁶, passes likewise), so that every bounce decides
+/// independently of the rays before it (a particle seen directly and in a mirror is accepted
+/// or not independently in each, as the expectation over the path needs). At depth 0 the
+/// decisions are the camera ray's, bit for bit.
+struct Bounce<'d, D> {
+    inner: &'d D,
+    depth: u32,
+}
+
+// By hand: a derive would ask D: Copy, and only the reference is copied.
+impl<D> Clone for Bounce<'_, D> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<D> Copy for Bounce<'_, D> {}
+
+impl<'d, D: Decide> Bounce<'d, D> {
+    fn camera(inner: &'d D) -> Self {
+        Self { inner, depth: 0 }
+    }
+
+    fn deeper(&self) -> Self {
+        Self { depth: self.depth + 1, ..*self }
+    }
+
+    #[inline(always)]
+    fn slot(&self, slot: u32) -> u32 {
+        let shift = if slot & 0x8000_0000 != 0 { SHADOW_BOUNCE_SHIFT } else { BOUNCE_SHIFT };
+        slot + (self.depth << shift)
+    }
+}
+
+impl<D: Decide> Decide for Bounce<'_, D> {
+    #[inline(always)]
+    fn needs_position(&self) -> bool {
+        self.inner.needs_position()
+    }
+    #[inline(always)]
+    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
+        self.inner.particle(id, self.slot(slot), hit)
+    }
+    #[inline(always)]
+    fn slot_draws(&self, first_slot: u32, n: usize) -> impl Fn(u32, Vec3, &mut [f32]) {
+        self.inner.slot_draws(self.slot(first_slot), n)
+    }
+    fn pass(&self, pass: u32) -> f32 {
+        self.inner.pass(self.slot(pass))
+    }
+    fn light_sample(&self, light: u32, slot: u32) -> Vec2 {
+        self.inner.light_sample(light, self.slot(slot))
+    }
+    #[inline(always)]
+    fn accepts(&self, id: u32, u: f32, alpha: f32) -> bool {
+        self.inner.accepts(id, u, alpha)
+    }
+    fn accepts_pass(&self, u: f64, opacity: f64) -> bool {
+        self.inner.accepts_pass(u, opacity)
+    }
+    fn covers(&self, alpha: f32, reference: f32) -> bool {
+        self.inner.covers(alpha, reference)
     }
 }
 
@@ -821,7 +1022,7 @@ pub fn render_frames(
 ) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
     method.validate()?;
-    let keys = frames.keys(method.is_stochastic() || trace.lighting().is_random())?;
+    let keys = frames.keys(method.is_stochastic() || trace.is_random())?;
     Ok(render_tiles(
         camera,
         progress,

@@ -2,11 +2,12 @@
 //! their random decisions through the very code that renders (`TraceScene::sample` with a
 //! scripted [`Decide`]), against Eq. 3.
 
-use glam::{DVec3, Quat, Vec3};
+use glam::{Affine3A, DVec3, Quat, Vec3};
 use proptest::prelude::*;
 use splat_core::RenderSettings;
 use splat_core::frame::Decide;
 use splat_core::lighting::{Incident, Light, LightKind, Lighting, Look, Material, Shadows};
+use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
 use splat_core::oracle::Oracle;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{HitDistance, Particle, Ray, Scene};
@@ -151,8 +152,14 @@ fn expectation(trace: &TraceScene, method: &Method, ray: &Ray, hits: &[(u32, f64
 /// E[sample] of the stochastic pass with k hits a pass: the pass at which it stops is
 /// enumerated, with pass opacities from the sorted alphas, independently of the integrator.
 fn pass_expectation(scene: &Scene, trace: &TraceScene, ray: &Ray, k: usize, rule: Rule) -> DVec3 {
+    pass_expectation_before(scene, trace, ray, k, rule, f32::INFINITY)
+}
+
+/// [`pass_expectation`] over the hits in front of distance `clip` (a mesh there).
+fn pass_expectation_before(scene: &Scene, trace: &TraceScene, ray: &Ray, k: usize, rule: Rule, clip: f32) -> DVec3 {
     let tracer = Oracle::new(scene, *trace.settings()).unwrap();
-    let mut sorted: Vec<_> = (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray)).collect();
+    let mut sorted: Vec<_> =
+        (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray)).filter(|h| h.t < clip).collect();
     splat_core::composite::sort_front_to_back(&mut sorted);
     let opacities: Vec<f64> =
         sorted.chunks(k).map(|c| 1.0 - c.iter().map(|h| 1.0 - f64::from(h.alpha)).product::<f64>()).collect();
@@ -194,7 +201,7 @@ proptest! {
     fn stochastic_is_unbiased((o, off, c) in stacks(12), center in any::<bool>(), late in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
-        let exact = trace.exact(&ray, &Outcomes::default()).color;
+        let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
         let h = hits(&scene, &ray, trace.settings());
         let e = expectation_with(&trace, &Method::Stochastic, &ray, &h, 1, late, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
@@ -205,7 +212,7 @@ proptest! {
     fn stochastic_n_is_unbiased((o, off, c) in stacks(7), late in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
-        let exact = trace.exact(&ray, &Outcomes::default()).color;
+        let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
         let h = hits(&scene, &ray, trace.settings());
         let e = expectation_with(&trace, &Method::StochasticN { m: 1, n: 2 }, &ray, &h, 2, late, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
@@ -216,7 +223,7 @@ proptest! {
     fn stochastic_pass_is_unbiased((o, off, c) in stacks(12), center in any::<bool>()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings_with(center)).unwrap();
-        let exact = trace.exact(&ray, &Outcomes::default()).color;
+        let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
         let e = pass_expectation(&scene, &trace, &ray, 3, Rule::Production);
         prop_assert!(close(e, exact, 1e-9), "{e} vs {exact}");
     }
@@ -227,11 +234,11 @@ proptest! {
     fn kbuffer_matches_exact((o, off, c) in stacks(12), k in 1usize..6) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap();
-        let exact = trace.exact(&ray, &Outcomes::default());
-        let full = trace.kbuffer(&ray, &Outcomes::default(), k, 1000, 0.0);
+        let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default());
+        let full = trace.sample(&Method::KBuffer { k, max_passes: 1000, min_transmittance: 0.0 }, &ray, &Outcomes::default());
         prop_assert!(close(full.color, exact.color, 1e-12));
         prop_assert_eq!(full.depth, exact.depth);
-        let early = trace.kbuffer(&ray, &Outcomes::default(), k, 200, 0.01);
+        let early = trace.sample(&Method::KBuffer { k, max_passes: 200, min_transmittance: 0.01 }, &ray, &Outcomes::default());
         prop_assert!(close(early.color, exact.color, 0.01 * 1.0001));
     }
 
@@ -244,8 +251,8 @@ proptest! {
         for id in 0..o.len() as u32 {
             outcomes.accept.insert((id, 0), mask >> id & 1 == 1);
         }
-        let a = trace.stochastic(&ray, &outcomes, 0);
-        let b = trace.stochastic_n(&ray, &outcomes, 1, 0);
+        let a = trace.sample(&Method::Stochastic, &ray, &outcomes);
+        let b = trace.sample(&Method::StochasticN { m: 1, n: 1 }, &ray, &outcomes);
         prop_assert_eq!(a.color, b.color);
         prop_assert_eq!(a.depth, b.depth);
     }
@@ -261,7 +268,7 @@ fn depth_sampling_is_rejected_by_the_same_enumeration() {
         &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]],
     );
     let trace = TraceScene::new(&scene, settings()).unwrap();
-    let exact = trace.exact(&ray, &Outcomes::default()).color;
+    let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
     let h = hits(&scene, &ray, trace.settings());
     assert_eq!(h.len(), 4);
     for k in [1, 2] {
@@ -288,7 +295,7 @@ fn five_discs() -> (Scene, Ray) {
 fn wrong_acceptance_rules_are_rejected_by_the_enumeration() {
     let (scene, ray) = five_discs();
     let trace = TraceScene::new(&scene, settings()).unwrap();
-    let exact = trace.exact(&ray, &Outcomes::default()).color;
+    let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
     let h = hits(&scene, &ray, trace.settings());
     assert_eq!(h.len(), 5, "every disc is hit");
     assert!(h.iter().all(|&(id, a)| a < f64::from(scene.particles[id as usize].opacity)), "alpha = opacity at a hit");
@@ -356,7 +363,7 @@ proptest! {
     fn lit_stochastic_estimators_are_unbiased((o, off, c) in stacks(7), shadows in deterministic_shadows()) {
         let (scene, ray) = stack(&o, &off, &c);
         let trace = TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(shadows, Look::Volumetric)).unwrap();
-        let oracle = trace.exact(&ray, &Outcomes::default()).color;
+        let oracle = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
         let h = hits(&scene, &ray, trace.settings());
         let e = expectation(&trace, &Method::Stochastic, &ray, &h, 1);
         prop_assert!(close(e, oracle, 1e-9), "stochastic {e} vs {oracle}");
@@ -370,7 +377,7 @@ proptest! {
     fn lit_stochastic_pass_meets_its_expectation((o, off, c) in stacks(10), shadows in deterministic_shadows()) {
         let (scene, ray) = stack(&o, &off, &c);
         let unlit = TraceScene::new(&scene, settings()).unwrap();
-        let exact = unlit.exact(&ray, &Outcomes::default()).color;
+        let exact = unlit.sample(&Method::Exact, &ray, &Outcomes::default()).color;
         prop_assert!(close(unlit.stochastic_pass_expectation(&ray, &Outcomes::default(), 3, 200), exact, 1e-9));
         let trace = unlit.with_lighting(lit(shadows, Look::Surface)).unwrap();
         let e = pass_expectation(&scene, &trace, &ray, 3, Rule::Production);
@@ -419,9 +426,9 @@ fn lit_enumerations_reject_wrong_rules_and_the_other_look() {
     let (scene, ray) = five_discs();
     let trace =
         TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::Exact, Look::Volumetric)).unwrap();
-    let oracle = trace.exact(&ray, &Outcomes::default()).color;
+    let oracle = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
     let unshadowed = TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::None, Look::Volumetric));
-    let unshadowed = unshadowed.unwrap().exact(&ray, &Outcomes::default()).color;
+    let unshadowed = unshadowed.unwrap().sample(&Method::Exact, &ray, &Outcomes::default()).color;
     assert!(!close(oracle, unshadowed, 1e-2), "the shadow rays cross the stack: {oracle} vs {unshadowed}");
     let h = hits(&scene, &ray, trace.settings());
     let wrong = expectation_with(&trace, &Method::Stochastic, &ray, &h, 1, false, Rule::Complement);
@@ -431,7 +438,7 @@ fn lit_enumerations_reject_wrong_rules_and_the_other_look() {
     assert!((wrong - product).abs() > 1e-3, "u < opacity passes the shadow enumeration: {wrong} vs {product}");
     let surface =
         TraceScene::new(&scene, settings()).unwrap().with_lighting(lit(Shadows::Exact, Look::Surface)).unwrap();
-    let surface = surface.exact(&ray, &Outcomes::default()).color;
+    let surface = surface.sample(&Method::Exact, &ray, &Outcomes::default()).color;
     let e = expectation(&trace, &Method::Stochastic, &ray, &h, 1);
     assert!(close(e, oracle, 1e-9));
     assert!(!close(e, surface, 1e-3), "the surface look {surface} is not E[stochastic] {e}");
@@ -472,7 +479,7 @@ fn one_flat_splat_under_a_directional_light_in_closed_form() {
     for (look, want) in [(Look::Surface, surface), (Look::Volumetric, volumetric)] {
         let lighting = Lighting { look, ..Lighting::single(material, vec![light], Shadows::None) };
         let trace = TraceScene::new(&scene, settings).unwrap().with_lighting(lighting).unwrap();
-        let got = trace.exact(&ray, &Outcomes::default()).color;
+        let got = trace.sample(&Method::Exact, &ray, &Outcomes::default()).color;
         assert!(close(got, want, 1e-5), "{look:?}: {got} vs closed form {want}");
     }
 }
@@ -517,4 +524,73 @@ fn sorted_shadow_ray_by_hand() {
     // Past the first disc (z = 1 is 2 along the ray), only the other two count.
     let behind = ((1.0 - by_depth[1].1) * (1.0 - by_depth[2].1)) as f32;
     assert!(close3(visibility(Shadows::Exact, by_depth[0].0 + 1.25), Vec3::splat(behind)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Meshes (splat_core::mesh): an opaque quad inside the stack clips the ray; every estimator's
+// expectation is Eq. 3 over the discs in front of it plus their transmittance times its colour.
+
+/// An emissive quad facing the ray at depth z, with colour `c`: its shaded colour is `c`.
+fn quad_at(z: f32, c: Vec3) -> Meshes {
+    let m = Affine3A::from_scale_rotation_translation(
+        Vec3::splat(5.0),
+        Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+        Vec3::new(0.0, 0.0, z),
+    );
+    let material = MeshMaterial { color: c, shading: Material::EMISSIVE, ..MeshMaterial::default() };
+    Meshes::new(&[(TriangleMesh::plane().transformed(m), material)]).unwrap()
+}
+
+/// Eq. 3 by hand over the oracle's hits in front of `clip`, over `behind`.
+fn composite_before(scene: &Scene, ray: &Ray, settings: &RenderSettings, clip: f32, behind: Vec3) -> DVec3 {
+    let tracer = Oracle::new(scene, *settings).unwrap();
+    let mut h: Vec<_> =
+        (0..scene.particles.len() as u32).filter_map(|i| tracer.shade(i, ray)).filter(|h| h.t < clip).collect();
+    splat_core::composite::sort_front_to_back(&mut h);
+    let (mut c, mut t) = (DVec3::ZERO, 1.0f64);
+    for hit in &h {
+        c += t * f64::from(hit.alpha) * hit.color.as_dvec3();
+        t *= 1.0 - f64::from(hit.alpha);
+    }
+    c + t * behind.as_dvec3()
+}
+
+/// With the quad between the third and fourth disc: `exact` is the hand composite in front of
+/// it over its colour; the enumerated expectations of `stochastic`, `stochastic-n` (two slots)
+/// and the stochastic pass meet it to 1e-9; ignoring the clip (every disc over the quad's
+/// colour) is far from it, so the enumeration would catch a method that ignored the mesh.
+#[test]
+fn a_mesh_clips_every_estimator_to_eq_3_in_front_of_it() {
+    let (scene, ray) = five_discs();
+    let c_mesh = Vec3::new(0.9, 0.4, 0.1);
+    // Discs sit at z = 1, 1.5, … 3; the quad at z = 2.2 leaves three in front (t = z + 1).
+    let trace = TraceScene::new(&scene, settings()).unwrap().with_meshes(quad_at(2.2, c_mesh));
+    let clip = 3.2;
+    let oracle = composite_before(&scene, &ray, trace.settings(), clip, c_mesh);
+    let exact = trace.sample(&Method::Exact, &ray, &Outcomes::default());
+    assert!(close(exact.color, oracle, 1e-6), "{} vs {oracle}", exact.color);
+    let ignoring_clip = composite_before(&scene, &ray, trace.settings(), f32::INFINITY, c_mesh);
+    assert!(!close(ignoring_clip, oracle, 0.01), "the control must differ: {ignoring_clip} vs {oracle}");
+    let h: Vec<_> = hits(&scene, &ray, trace.settings());
+    let in_front: Vec<_> = {
+        let tracer = Oracle::new(&scene, *trace.settings()).unwrap();
+        h.iter().copied().filter(|&(id, _)| tracer.shade(id, &ray).unwrap().t < clip).collect()
+    };
+    assert_eq!(in_front.len(), 3);
+    for (method, slots) in [(Method::Stochastic, 1), (Method::StochasticN { m: 1, n: 2 }, 2)] {
+        let e = expectation(&trace, &method, &ray, &in_front, slots);
+        assert!(close(e, exact.color, 1e-9), "{method:?}: {e} vs {}", exact.color);
+    }
+    for k in [1, 2] {
+        let e = pass_expectation_before(&scene, &trace, &ray, k, Rule::Production, clip);
+        assert!(close(e, exact.color, 1e-9), "pass k = {k}: {e} vs {}", exact.color);
+        let pass = trace.stochastic_pass_expectation(&ray, &Outcomes::default(), k, 200);
+        assert!(close(pass, exact.color, 1e-9), "pass expectation k = {k}: {pass}");
+    }
+    // Depth and normal of the first surface: the quad where the discs never reach the iso
+    // threshold in front of it.
+    let faint = TraceScene::new(&scene, settings()).unwrap().with_meshes(quad_at(0.5, c_mesh));
+    let s = faint.sample(&Method::Exact, &ray, &Outcomes::default());
+    assert_eq!(s.color, c_mesh.as_dvec3(), "a mesh in front hides every disc");
+    assert!((s.depth.unwrap() - 1.5).abs() < 1e-5 && s.normal.abs_diff_eq(-Vec3::Z, 1e-6), "{s:?}");
 }

@@ -170,4 +170,7 @@ pub enum ErrorKind {
     /// A world file is malformed or names something invalid.
     #[error("world: {0}")]
     World(String),
+    /// A mesh file (OBJ, glTF) is malformed or holds no triangles.
+    #[error("mesh: {0}")]
+    Mesh(String),
 }

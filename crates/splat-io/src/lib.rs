@@ -2,6 +2,8 @@
 //!
 //! - Scenes: INRIA 3DGS `.ply` (binary and ASCII, read and write) and antimatter15 `.splat`.
 //! - Cameras: INRIA `cameras.json`.
+//! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
+//! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
 //! - Images: `.png` (8-bit), `.exr` (f32), `.npy` (f32, H × W × C), chosen by extension.
 //!
 //! Every reader returns a typed [`Error`] naming the file and, where it applies, the element
@@ -16,6 +18,7 @@
 pub mod cameras;
 mod error;
 pub mod image;
+pub mod mesh;
 pub mod ply;
 pub mod splat;
 pub mod world;

@@ -33,15 +33,30 @@
 //! color = [1.0, 0.95, 0.9]          # a colour is [r, g, b] or one number
 //! intensity = 12
 //! radius = 0.05                     # soft shadows
+//!
+//! [[meshes]]                        # opaque triangles that clip rays (splat_core::mesh)
+//! shape = "sphere"                  # plane | cube | sphere, or file = "pedestal.obj" / ".gltf" / ".glb"
+//! segments = 48                     # sphere tessellation (around; half as many rings)
+//! translate = [0.8, 0.5, 0.6]
+//! rotate = [0.0, 0.0, 0.0]
+//! scale = 0.4                       # one number or [x, y, z]
+//! color = [0.9, 0.9, 0.9]
+//! material = { ambient = 0.1, diffuse = 0.9 }
+//! transmission = 0.9                # glass: Fresnel mix of reflection and refraction
+//! ior = 1.5
+//! mirror = 0.0                      # perfect mirror share
 //! ```
 //!
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
-//! without one is fully emissive. Particle ids run over the sets in file order.
+//! without one is fully emissive, a mesh without one matte (ambient 0.1, diffuse 0.9). Particle
+//! ids run over the sets in file order. `max_bounces` (top level, default 3) limits mirror and
+//! glass bounces.
 
 use crate::{Error, ErrorKind};
 use glam::{EulerRot, Quat, Vec3};
 use serde::Deserialize;
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, SplatSet};
+use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
 use splat_core::sh::Rotation;
 use splat_core::{Camera, Scene};
@@ -60,12 +75,23 @@ pub struct World {
     pub camera: Option<Camera>,
     /// The file's background colour.
     pub background: Option<Vec3>,
+    /// Meshes in world space with their materials.
+    pub meshes: Vec<(TriangleMesh, MeshMaterial)>,
+    /// The file's bounce limit.
+    pub max_bounces: Option<u32>,
 }
 
 impl World {
     /// A world of one emissive set: how a bare `.ply` or `.splat` renders.
     pub fn of(scene: Scene) -> Self {
-        Self { scene, lighting: Lighting::default(), camera: None, background: None }
+        Self {
+            scene,
+            lighting: Lighting::default(),
+            camera: None,
+            background: None,
+            meshes: Vec::new(),
+            max_bounces: None,
+        }
     }
 }
 
@@ -80,6 +106,33 @@ struct WorldFile {
     splats: Vec<SplatsFile>,
     #[serde(default)]
     lights: Vec<LightFile>,
+    #[serde(default)]
+    meshes: Vec<MeshFile>,
+    max_bounces: Option<u32>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum ShapeName {
+    Plane,
+    Cube,
+    Sphere,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshFile {
+    shape: Option<ShapeName>,
+    file: Option<PathBuf>,
+    segments: Option<u32>,
+    translate: Option<[f32; 3]>,
+    rotate: Option<[f32; 3]>,
+    scale: Option<Colour>,
+    color: Option<Colour>,
+    material: Option<MaterialFile>,
+    mirror: Option<f32>,
+    transmission: Option<f32>,
+    ior: Option<f32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -256,7 +309,56 @@ fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
     if background.is_some_and(|b| !b.is_finite()) {
         return Err("background is not finite".to_string().into());
     }
-    Ok(World { scene, lighting, camera, background })
+    let mut meshes = Vec::new();
+    for (i, m) in file.meshes.iter().enumerate() {
+        let in_mesh = |e: Nested| match e {
+            Nested::Here(m) => Nested::Here(format!("meshes[{i}]: {m}")),
+            other => other,
+        };
+        meshes.push(load_mesh(m, base).map_err(in_mesh)?);
+    }
+    if let Some(b) = file.max_bounces.filter(|&b| b > splat_core::settings::MAX_BOUNCES) {
+        return Err(format!("max_bounces {b} is above {}", splat_core::settings::MAX_BOUNCES).into());
+    }
+    Ok(World { scene, lighting, camera, background, meshes, max_bounces: file.max_bounces })
+}
+
+/// One mesh in world space with its material.
+fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), Nested> {
+    let mesh = match (&m.file, m.shape) {
+        (Some(file), None) => crate::mesh::read_mesh(&base.join(file)).map_err(Nested::File)?,
+        (None, Some(ShapeName::Plane)) => TriangleMesh::plane(),
+        (None, Some(ShapeName::Cube)) => TriangleMesh::cube(),
+        (None, Some(ShapeName::Sphere)) => {
+            let segments = m.segments.unwrap_or(48);
+            if !(3..=4096).contains(&segments) {
+                return Err(format!("segments {segments} is outside 3..=4096").into());
+            }
+            TriangleMesh::sphere(segments, segments / 2)
+        }
+        _ => return Err("give exactly one of shape = \"plane|cube|sphere\" or file = \"…\"".to_string().into()),
+    };
+    let t = Vec3::from(m.translate.unwrap_or([0.0; 3]));
+    let [rx, ry, rz] = m.rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
+    let s = m.scale.map_or(Vec3::ONE, Colour::rgb);
+    if !(t.is_finite() && rx.is_finite() && ry.is_finite() && rz.is_finite()) {
+        return Err("translate and rotate must be finite".to_string().into());
+    }
+    if !(s.is_finite() && s.min_element() > 0.0) {
+        return Err(format!("scale {s} must be finite and positive").into());
+    }
+    let r = Quat::from_euler(EulerRot::ZYX, rz, ry, rx);
+    let mesh = mesh.transformed(glam::Affine3A::from_scale_rotation_translation(s, r, t));
+    let defaults = MeshMaterial::default();
+    let material = MeshMaterial {
+        color: m.color.map_or(defaults.color, Colour::rgb),
+        shading: m.material.as_ref().map_or(defaults.shading, material),
+        mirror: m.mirror.unwrap_or(0.0),
+        transmission: m.transmission.unwrap_or(0.0),
+        ior: m.ior.unwrap_or(defaults.ior),
+    };
+    material.validate()?;
+    Ok((mesh, material))
 }
 
 /// The particles of one set and, for a built-in scene, its camera.
@@ -436,6 +538,12 @@ mod tests {
             ("[[splats]]\nbuiltin = \"demo\"\ncolour = 1", "unknown field"),
             ("[[splats]]\nbuiltin = \"demo\"\nsh_degree = 7", "above 3"),
             ("[[splats]]\nbuiltin = \"demo\"\n[shadows]\nkind = \"sorted\"\nk = 0", "shadow k"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nscale = 1", "meshes[0]: give exactly one of"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nmirror = 2", "meshes[0]: mirror 2"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nscale = [1, 0, 1]", "scale"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"sphere\"\nsegments = 1", "segments 1"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cone\"", "unknown variant"),
+            ("max_bounces = 99\n[[splats]]\nbuiltin = \"demo\"", "max_bounces 99"),
         ];
         for (text, want) in cases {
             let err = parse(text).err().unwrap_or_else(|| panic!("accepted: {text}"));
