@@ -7,9 +7,11 @@ use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::lighting::{Lighting, Look, Shadows};
+use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
 use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
 use splat_core::rng::RngScheme;
+use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
 use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene, scenes};
 use splat_io::ply::{PlyOptions, read_ply_with};
@@ -261,6 +263,8 @@ pub struct Loaded {
     pub lighting: Lighting,
     /// Render settings, with the world's background unless --background is given.
     pub settings: RenderSettings,
+    /// The world's meshes (none for a bare scene file).
+    pub meshes: Meshes,
 }
 
 /// Scene, camera and shading options shared by `render`, `converge` and `bench`.
@@ -320,6 +324,9 @@ pub struct SceneArgs {
     /// Iso-opacity depth threshold on transmittance.
     #[arg(long, default_value_t = splat_core::composite::DEFAULT_ISO_THRESHOLD)]
     pub iso_threshold: f32,
+    /// Most mirror and glass bounces of a ray among meshes (default: the world's, else 3).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=i64::from(splat_core::settings::MAX_BOUNCES)))]
+    pub max_bounces: Option<u32>,
     /// Worker threads (default: all cores). The image does not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -354,7 +361,8 @@ impl SceneArgs {
                 World { camera: Some(camera), ..World::of(scene) }
             }
         };
-        let World { mut scene, mut lighting, camera, background } = world;
+        let World { mut scene, mut lighting, camera, background, meshes, max_bounces } = world;
+        let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
             splat_io::world::truncate_sh(&mut scene, degree);
         }
@@ -373,9 +381,12 @@ impl SceneArgs {
             };
         }
         let camera = self.choose_camera(&scene, camera, width, height)?;
-        let settings =
-            RenderSettings { background: self.background.or(background).unwrap_or(Vec3::ZERO), ..self.settings() };
-        Ok(Loaded { scene, camera, lighting, settings })
+        let settings = RenderSettings {
+            background: self.background.or(background).unwrap_or(Vec3::ZERO),
+            max_bounces: self.max_bounces.or(max_bounces).unwrap_or(DEFAULT_MAX_BOUNCES),
+            ..self.settings()
+        };
+        Ok(Loaded { scene, camera, lighting, settings, meshes })
     }
 
     /// The render settings these options describe.

@@ -6,7 +6,6 @@ use anyhow::{Result, bail};
 use clap::Args;
 use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
-use splat_core::lighting::Lighting;
 use splat_core::trace::TraceScene;
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
 use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
@@ -54,17 +53,17 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ImageFormat::from_path(path)?;
     }
     let world = args.scene.load_world(640, 480)?;
-    let Loaded { scene, camera, lighting, settings } = &world;
+    let Loaded { scene, camera, lighting, settings, meshes } = &world;
     let algorithm = args.options.resolve(args.method);
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
-    let gpu = choose_gpu(&args, &algorithm, lighting)?;
+    let gpu = choose_gpu(&args, &algorithm, &world)?;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
     let out = match &gpu {
         Some(ctx) => render_gpu(&args, ctx, &world, &algorithm, &frames)?,
         None => {
             let progress = |n| bar.inc(n);
-            let render = || algorithm.render_lit(scene, camera, settings, lighting, &frames, &progress);
+            let render = || algorithm.render_world(scene, meshes, camera, settings, lighting, &frames, &progress);
             args.scene.pool()?.install(render)?
         }
     };
@@ -85,8 +84,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
 
 /// Whether the GPU renders `algorithm` with the images `args` asks for (the backends' own
 /// `supports` decide the methods).
-fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> Result<(), GpuError> {
+fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<(), GpuError> {
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
+    let lighting = &world.lighting;
+    if !world.meshes.is_empty() {
+        return unsupported("meshes render on the CPU only so far (--backend cpu)");
+    }
     if lighting.is_on() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
         return unsupported("the GPU lights with max-density-plane normals only: use --normals plane or --backend cpu");
     }
@@ -115,15 +118,13 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
 /// with the reason when the GPU cannot render this), `auto` takes a hardware GPU when one is
 /// found and it renders this, `cpu` never.
-fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, lighting: &Lighting) -> Result<Option<GpuContext>> {
+fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<Option<GpuContext>> {
     match args.scene.backend {
         BackendArg::Gpu => {
-            gpu_supports(args, algorithm, lighting)?;
+            gpu_supports(args, algorithm, world)?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if gpu_supports(args, algorithm, lighting).is_ok() => {
-            crate::args::gpu_context(BackendArg::Auto)
-        }
+        BackendArg::Auto if gpu_supports(args, algorithm, world).is_ok() => crate::args::gpu_context(BackendArg::Auto),
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
 }
@@ -138,7 +139,7 @@ fn render_gpu(
     frames: &Frames,
 ) -> Result<RenderOutput> {
     eprintln!("rendering on {}", ctx.describe());
-    let Loaded { scene, camera, lighting, settings } = world;
+    let Loaded { scene, camera, lighting, settings, .. } = world;
     match algorithm {
         Algorithm::Trace(method) => {
             let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?;
