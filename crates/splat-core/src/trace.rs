@@ -601,7 +601,7 @@ impl<'a> TraceScene<'a> {
         }
         if seg.decide.depth < self.settings.max_bounces {
             let next = seg.decide.deeper();
-            let trace = |dir: Vec3| self.secondary(&seg.method, x, dir, face, next);
+            let trace = |dir: Vec3| self.secondary(&seg.method, x, dir, next);
             if material.mirror > 0.0 {
                 color += material.mirror * trace(reflect(d, n));
             }
@@ -619,23 +619,24 @@ impl<'a> TraceScene<'a> {
         Sample { color: color.as_dvec3(), alpha: 1.0, depth: Some(hit.t), normal: n, picked: None }
     }
 
-    /// The radiance of a secondary ray from surface point `x` along `dir`, started off the
-    /// surface on the side it leaves to (`face` is the face normal toward the incoming ray).
-    fn secondary<D: Decide>(&self, method: &Method, x: Vec3, dir: Vec3, face: Vec3, decide: Bounce<D>) -> Vec3 {
-        let side = if dir.dot(face) >= 0.0 { face } else { -face };
-        let ray = Ray { origin: x + surface_offset(x) * side, dir, view: dir, t_min: 0.0, t_max: self.settings.t_max };
-        self.trace_ray(method, &ray, decide).color.as_vec3()
+    /// The radiance of a secondary ray from surface point `x` along `dir`: the splats from
+    /// x on (the line continues exactly the mirrored or refracted line), the meshes from
+    /// [`surface_offset`] on, so that the surface does not hit itself.
+    fn secondary<D: Decide>(&self, method: &Method, x: Vec3, dir: Vec3, decide: Bounce<D>) -> Vec3 {
+        let ray = Ray { origin: x, dir, view: dir, t_min: 0.0, t_max: self.settings.t_max };
+        self.trace_ray(method, &ray, decide, surface_offset(x)).color.as_vec3()
     }
 
     /// One sample of `method` for `ray` (already clipped to the settings' range).
     pub fn sample(&self, method: &Method, ray: &Ray, decide: &impl Decide) -> Sample {
-        self.trace_ray(method, ray, Bounce::camera(decide))
+        self.trace_ray(method, ray, Bounce::camera(decide), 0.0)
     }
 
     /// One sample of `method` along `ray`, `decide.depth` bounces after the camera ray: the ray
-    /// is clipped at the closest mesh, whose shaded colour takes the background's place.
-    fn trace_ray<D: Decide>(&self, method: &Method, ray: &Ray, decide: Bounce<D>) -> Sample {
-        let surface = self.meshes.closest(ray);
+    /// is clipped at the closest mesh beyond `mesh_t_min`, whose shaded colour takes the
+    /// background's place.
+    fn trace_ray<D: Decide>(&self, method: &Method, ray: &Ray, decide: Bounce<D>, mesh_t_min: f32) -> Sample {
+        let surface = self.meshes.closest(&Ray { t_min: ray.t_min.max(mesh_t_min), ..*ray });
         let ray = Ray { t_max: surface.map_or(ray.t_max, |s| s.t), ..*ray };
         let seg = Segment { ray, surface, method: *method, decide, behind: OnceCell::new() };
         match *method {
@@ -921,8 +922,8 @@ impl<'a> TraceScene<'a> {
     }
 }
 
-/// How far a secondary or shadow ray starts off a mesh surface at `x`: far enough that the
-/// surface does not hit itself in f32, relative to the point's magnitude.
+/// How far from a mesh surface point `x` a secondary or shadow ray starts looking for meshes:
+/// far enough that the surface does not hit itself in f32, relative to the point's magnitude.
 fn surface_offset(x: Vec3) -> f32 {
     1e-4 * x.abs().max_element().max(1.0)
 }

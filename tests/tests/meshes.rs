@@ -1,0 +1,261 @@
+//! Meshes beside the splats (docs/architecture.md, "Meshes"): the analytic composite
+//! C_splats + T·C_mesh against the brute-force oracle, a mesh in front hiding the splats, a
+//! perfect mirror showing the exact image of the mirrored camera, index-matched glass
+//! vanishing, meshes shadowing splats, and z-tests of the stochastic methods in a world with a
+//! lit wall, a mirror and a glass sphere against `exact`, each with a rejected 2 % control.
+
+use glam::{Affine3A, Mat3, Quat, Vec3};
+use splat_core::frame::RenderOutput;
+use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
+use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
+use splat_core::rng::{RayRng, RngScheme};
+use splat_core::trace::{Method, TraceScene, render_frames};
+use splat_core::{Camera, Frames, RenderSettings, Scene, render_oracle};
+use splat_tests::harness::{StatTest, fixture};
+
+/// The injected error every z-test control must be rejected with: each decision u < α + 0.02.
+const BIASED: f32 = 0.02;
+
+/// A square of half-side `half` centred at `center`, facing `normal`.
+fn quad(center: Vec3, normal: Vec3, half: f32) -> TriangleMesh {
+    let r = Quat::from_rotation_arc(Vec3::Y, normal.normalize());
+    TriangleMesh::plane().transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(half), r, center))
+}
+
+fn sphere(center: Vec3, radius: f32) -> TriangleMesh {
+    TriangleMesh::sphere(32, 16).transformed(Affine3A::from_scale_rotation_translation(
+        Vec3::splat(radius),
+        Quat::IDENTITY,
+        center,
+    ))
+}
+
+fn emissive(color: Vec3) -> MeshMaterial {
+    MeshMaterial { color, shading: Material::EMISSIVE, ..MeshMaterial::default() }
+}
+
+fn render(trace: &TraceScene, camera: &Camera, method: &Method, frames: &Frames) -> RenderOutput {
+    render_frames(trace, camera, method, frames, &|_| {}).unwrap()
+}
+
+fn exact(trace: &TraceScene, camera: &Camera) -> RenderOutput {
+    render(trace, camera, &Method::Exact, &Frames::default())
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+/// Distance along the camera's forward axis to the nearest point of any particle's cutoff box.
+fn nearest_splat(scene: &Scene, camera: &Camera, settings: &RenderSettings) -> f32 {
+    let f = camera.forward();
+    let c = camera.center();
+    scene
+        .particles
+        .iter()
+        .flat_map(|p| p.aabb(settings.kernel.cutoff).corners())
+        .map(|x| (x - c).dot(f))
+        .fold(f32::INFINITY, f32::min)
+}
+
+/// Behind every particle, a quad of colour C_mesh fills the view: each pixel of `exact` and the
+/// k-buffer is the brute-force oracle's C_splats + (1 − α) C_mesh. In front of every particle,
+/// the quad hides them: every pixel is C_mesh.
+#[test]
+fn a_splat_layer_over_a_mesh_quad_is_c_splats_plus_t_times_c_mesh() {
+    let (scene, camera) = fixture("layers", 32, 24);
+    let settings = RenderSettings::default();
+    let c_mesh = Vec3::new(0.2, 0.5, 0.9);
+    let oracle = render_oracle(&scene, &camera, &settings, &|_| {}).unwrap();
+    let expected: Vec<f32> = (0..oracle.alpha.data().len())
+        .flat_map(|i| {
+            let t = 1.0 - oracle.alpha.data()[i];
+            (0..3).map(move |c| (i, c, t))
+        })
+        .map(|(i, c, t)| oracle.mean.data()[3 * i + c] + t * c_mesh[c])
+        .collect();
+    let behind = camera.center() + 8.0 * camera.forward();
+    let meshes = Meshes::new(&[(quad(behind, -camera.forward(), 40.0), emissive(c_mesh))]).unwrap();
+    let trace = TraceScene::new(&scene, settings).unwrap().with_meshes(meshes);
+    let kbuffer = Method::KBuffer { k: 2, max_passes: 200, min_transmittance: 0.0 };
+    for method in [Method::Exact, kbuffer] {
+        let out = render(&trace, &camera, &method, &Frames::default());
+        let err = max_abs_diff(out.mean.data(), &expected);
+        assert!(err < 1e-4, "{method:?}: largest difference {err}");
+        assert!(out.alpha.data().iter().all(|&a| a == 1.0), "the quad covers every pixel");
+    }
+    let front = camera.center() + 0.5 * nearest_splat(&scene, &camera, &settings) * camera.forward();
+    let meshes = Meshes::new(&[(quad(front, -camera.forward(), 40.0), emissive(c_mesh))]).unwrap();
+    let trace = TraceScene::new(&scene, settings).unwrap().with_meshes(meshes);
+    for method in [Method::Exact, Method::Stochastic, Method::STOCHASTIC_PASS] {
+        let out = render(&trace, &camera, &method, &Frames { count: 2, ..Frames::default() });
+        assert!(out.mean.data().chunks(3).all(|p| p == c_mesh.to_array()), "{method:?} shows a splat");
+    }
+}
+
+/// The mirror image of `camera` in the plane through `point` with unit normal `n`, made a proper
+/// camera by flipping its x axis: its pixel (x, y) sees what `camera` sees at (W − 1 − x, y).
+fn mirrored(camera: &Camera, point: Vec3, n: Vec3) -> Camera {
+    let reflect = |v: Vec3| v - 2.0 * v.dot(n) * n;
+    let eye = camera.center() - 2.0 * (camera.center() - point).dot(n) * n;
+    let axes =
+        Mat3::from_cols(-reflect(camera.rotation.row(0)), reflect(camera.rotation.row(1)), reflect(camera.forward()));
+    let rotation = axes.transpose();
+    Camera { rotation, translation: -(rotation * eye), ..*camera }
+}
+
+/// A perfect mirror (reflectance 1, nothing else) between the camera and the splats, seen from
+/// the mirrored camera, shows `exact`'s image of the original camera, flipped left to right.
+#[test]
+fn a_perfect_mirror_shows_the_exact_image_of_the_mirrored_camera() {
+    let (scene, camera) = fixture("layers", 32, 24);
+    let settings = RenderSettings { background: Vec3::new(0.1, 0.1, 0.2), ..RenderSettings::default() };
+    let direct = exact(&TraceScene::new(&scene, settings).unwrap(), &camera);
+    // The mirror a third of the way to the nearest particle, facing the original camera; the
+    // mirrored camera sits two thirds of the way, looking back at it.
+    let n = camera.forward();
+    let point = camera.center() + nearest_splat(&scene, &camera, &settings) / 3.0 * n;
+    let mirror = MeshMaterial { mirror: 1.0, ..MeshMaterial::default() };
+    let meshes = Meshes::new(&[(quad(point, -n, 40.0), mirror)]).unwrap();
+    let trace = TraceScene::new(&scene, settings).unwrap().with_meshes(meshes);
+    let seen = exact(&trace, &mirrored(&camera, point, n));
+    let (w, h) = (camera.width, camera.height);
+    let mut err = 0.0f32;
+    for y in 0..h {
+        for x in 0..w {
+            err = err.max(max_abs_diff(seen.mean.pixel(x, y), direct.mean.pixel(w - 1 - x, y)));
+        }
+    }
+    eprintln!("mirror: largest difference {err}");
+    assert!(err < 1e-4, "largest difference {err}");
+    let rmse = splat_core::stats::rmse(seen.mean.data(), direct.mean.data());
+    assert!(rmse > 0.01, "unflipped the images must differ (RMSE {rmse}), or the test proves nothing");
+    // A mirror with no bounce left shows black.
+    let none = TraceScene::new(&scene, RenderSettings { max_bounces: 0, ..settings }).unwrap().with_meshes(
+        Meshes::new(&[(quad(point, -n, 40.0), MeshMaterial { mirror: 1.0, ..MeshMaterial::default() })]).unwrap(),
+    );
+    let black = exact(&none, &mirrored(&camera, point, n));
+    assert!(black.mean.data().iter().all(|&v| v == 0.0));
+}
+
+/// Glass of index 1 with full transmission bends nothing and reflects nothing: a sphere of it
+/// through the middle of the sheets leaves `exact` and the k-buffer unchanged.
+#[test]
+fn index_matched_glass_is_invisible() {
+    let (scene, camera) = fixture("layers", 32, 24);
+    let settings = RenderSettings { background: Vec3::new(0.1, 0.1, 0.2), ..RenderSettings::default() };
+    let glass = MeshMaterial { transmission: 1.0, ior: 1.0, ..MeshMaterial::default() };
+    let meshes = Meshes::new(&[(sphere(Vec3::new(0.1, 0.0, 0.0), 0.5), glass)]).unwrap();
+    let without = TraceScene::new(&scene, settings).unwrap();
+    let with = TraceScene::new(&scene, settings).unwrap().with_meshes(meshes);
+    let kbuffer = Method::KBuffer { k: 2, max_passes: 200, min_transmittance: 0.0 };
+    for method in [Method::Exact, kbuffer] {
+        let a = render(&without, &camera, &method, &Frames::default());
+        let b = render(&with, &camera, &method, &Frames::default());
+        let err = max_abs_diff(a.mean.data(), b.mean.data());
+        assert!(err < 1e-4, "{method:?}: largest difference {err}");
+    }
+    // Index 1.5 does show: the test can tell.
+    let visible = MeshMaterial { transmission: 1.0, ior: 1.5, ..MeshMaterial::default() };
+    let refracting = TraceScene::new(&scene, settings)
+        .unwrap()
+        .with_meshes(Meshes::new(&[(sphere(Vec3::new(0.1, 0.0, 0.0), 0.5), visible)]).unwrap());
+    let a = exact(&without, &camera);
+    let b = exact(&refracting, &camera);
+    assert!(max_abs_diff(a.mean.data(), b.mean.data()) > 0.05);
+}
+
+/// A mesh between a light and the splats puts them in shadow for every kind of shadow ray.
+#[test]
+fn meshes_shadow_splats() {
+    let (scene, _) = fixture("layers", 32, 24);
+    let light = Light {
+        kind: LightKind::Point { position: Vec3::new(0.0, 0.0, 3.0) },
+        color: Vec3::ONE,
+        intensity: 1.0,
+        radius: 0.0,
+    };
+    let x = Vec3::ZERO;
+    let incident = light.incident(x, glam::Vec2::splat(0.5)).unwrap();
+    let rng = RayRng::new(0, 0, 0, RngScheme::Hash);
+    for shadows in [Shadows::Exact, Shadows::Stochastic, Shadows::SORTED] {
+        let lighting = Lighting { shadow_offset: 0.0, ..Lighting::single(Material::DIFFUSE, vec![light], shadows) };
+        let trace = |meshes: Meshes| {
+            TraceScene::new(&scene, RenderSettings::default())
+                .unwrap()
+                .with_lighting(lighting.clone())
+                .unwrap()
+                .with_meshes(meshes)
+        };
+        let blocker = Meshes::new(&[(quad(Vec3::new(0.0, 0.0, 2.0), Vec3::Z, 1.0), MeshMaterial::default())]).unwrap();
+        assert_eq!(trace(blocker).visibility(x, &incident, &rng, 0), Vec3::ZERO, "{shadows:?}");
+        let aside = Meshes::new(&[(quad(Vec3::new(5.0, 0.0, 2.0), Vec3::Z, 1.0), MeshMaterial::default())]).unwrap();
+        let open = trace(aside).visibility(x, &incident, &rng, 0);
+        assert_eq!(open, trace(Meshes::none()).visibility(x, &incident, &rng, 0), "{shadows:?}");
+    }
+}
+
+/// The z-test world: the sheets before a lit back wall, a mirror to their right and a glass
+/// sphere in front, one point light; splat lighting `material`.
+fn world(material: Material, shadows: Shadows) -> (Lighting, Meshes) {
+    let light = Light {
+        kind: LightKind::Point { position: Vec3::new(1.2, 1.5, 2.5) },
+        color: Vec3::new(1.0, 0.95, 0.9),
+        intensity: 4.0,
+        radius: 0.0,
+    };
+    let lighting =
+        Lighting { look: Look::Volumetric, shadow_offset: 0.02, ..Lighting::single(material, vec![light], shadows) };
+    let meshes = Meshes::new(&[
+        (
+            quad(Vec3::new(0.0, 0.0, -1.2), Vec3::Z, 3.0),
+            MeshMaterial { color: Vec3::new(0.8, 0.75, 0.7), ..MeshMaterial::default() },
+        ),
+        (
+            quad(Vec3::new(1.1, 0.0, 0.0), Vec3::new(-1.0, 0.0, 0.6), 1.0),
+            MeshMaterial { color: Vec3::splat(0.2), mirror: 0.8, ..MeshMaterial::default() },
+        ),
+        (
+            sphere(Vec3::new(-0.45, -0.3, 1.0), 0.3),
+            MeshMaterial { transmission: 0.9, ior: 1.5, ..MeshMaterial::default() },
+        ),
+    ])
+    .unwrap();
+    (lighting, meshes)
+}
+
+fn assert_unbiased_and_control(name: &str, oracle: &RenderOutput, run: impl Fn(Frames) -> RenderOutput) {
+    let base = Frames { count: 256, seed: 17, rng: RngScheme::Hash, ..Frames::default() };
+    StatTest::new(name, oracle.clone(), &run).assert_unbiased(base);
+    let biased = |f: Frames| run(Frames { u_shift: BIASED, ..f });
+    StatTest::new(format!("{name} u < α + {BIASED}"), oracle.clone(), biased).assert_rejected(base);
+}
+
+/// Among a lit wall, a mirror and a glass sphere, with stochastic shadow rays: `stochastic` and
+/// `stochastic-n` with lit splats (volumetric look) and the stochastic pass with emissive splats
+/// pass the z-test against `exact` with the exact transmittance; the 2 % decision error is
+/// rejected (the smallest error rejected on this fixture at 256 frames is u < α + 0.01; 0.005
+/// passes `stochastic`).
+#[test]
+fn stochastic_methods_among_meshes_z_test() {
+    let (scene, camera) = fixture("layers", 24, 18);
+    let settings = RenderSettings { background: Vec3::new(0.05, 0.05, 0.1), ..RenderSettings::default() };
+    let lit_material = Material { emissive: Vec3::splat(0.2), diffuse: Vec3::splat(0.8), ..Material::DIFFUSE };
+    let build = |material: Material, shadows: Shadows| {
+        let (lighting, meshes) = world(material, shadows);
+        TraceScene::new(&scene, settings).unwrap().with_lighting(lighting).unwrap().with_meshes(meshes)
+    };
+    let oracle = exact(&build(lit_material, Shadows::Exact), &camera);
+    let trace = build(lit_material, Shadows::Stochastic);
+    for (label, method) in
+        [("stochastic", Method::Stochastic), ("stochastic-n 2×4", Method::StochasticN { m: 2, n: 4 })]
+    {
+        let run = |f: Frames| render(&trace, &camera, &method, &f);
+        assert_unbiased_and_control(&format!("meshes {label}"), &oracle, run);
+    }
+    let oracle = exact(&build(Material::EMISSIVE, Shadows::Exact), &camera);
+    let trace = build(Material::EMISSIVE, Shadows::Stochastic);
+    let pass = Method::StochasticPass { k: 2, max_passes: 200 };
+    let run = |f: Frames| render(&trace, &camera, &pass, &f);
+    assert_unbiased_and_control("meshes stochastic-pass", &oracle, run);
+}
