@@ -84,6 +84,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
             let start = Instant::now();
             let (out, reference) = match method {
                 Algorithm::Oracle => bail!("the oracle is the reference, not a method to converge"),
+                Algorithm::Hybrid(..) => bail!("converge runs the ray-tracing or the raster family, not hybrid"),
                 Algorithm::Trace(t) => (render_frames(&trace, &camera, &t, &frames, &progress)?, &exact),
                 Algorithm::Raster(r, _) => {
                     let (raster, sorted) = raster.as_ref().context("raster reference")?;

@@ -2,7 +2,7 @@
 //! backend, render, write.
 
 use crate::args::{BackendArg, Loaded, MethodArg, MethodOptions, SceneArgs, progress_bar};
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
@@ -20,9 +20,18 @@ pub struct RenderArgs {
     /// Output image; the format follows the extension: .png (8-bit), .exr or .npy (f32).
     #[arg(short, long, default_value = "render.png")]
     pub output: PathBuf,
-    /// Rendering method.
+    /// Rendering method (default: exact; raster-sorted with --pipeline raster or hybrid).
+    #[arg(long, value_enum)]
+    pub method: Option<MethodArg>,
+    /// Pipeline for a world with meshes: rt ray traces splats and meshes (mirror and glass
+    /// bounces), raster splats in three passes (mesh depth, splats front to back, meshes under
+    /// them), hybrid rasterizes the first hit and ray traces shadows and bounces from it.
+    /// Without it, --method decides.
+    #[arg(long, value_enum)]
+    pub pipeline: Option<PipelineArg>,
+    /// Ray-tracing method of the hybrid pipeline's shadow and bounce rays.
     #[arg(long, value_enum, default_value = "exact")]
-    pub method: MethodArg,
+    pub secondary: MethodArg,
     /// Frames (samples per pixel) averaged; stochastic methods converge as 1/√spp.
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
@@ -54,7 +63,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     let world = args.scene.load_world(640, 480)?;
     let Loaded { scene, camera, lighting, settings, meshes } = &world;
-    let algorithm = args.options.resolve(args.method);
+    let algorithm = algorithm(&args)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu = choose_gpu(&args, &algorithm, &world)?;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
@@ -75,11 +84,58 @@ pub fn run(args: RenderArgs) -> Result<()> {
         scene.particles.len(),
         camera.width,
         camera.height,
-        args.method.name(),
+        describe(&args),
         args.spp,
         args.output.display()
     );
     Ok(())
+}
+
+/// A rendering pipeline (vk_gaussian_splatting Lighting §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PipelineArg {
+    /// Ray tracing: every method of the ray-tracing family.
+    Rt,
+    /// Rasterization: every splatting method, meshes composited in three passes.
+    Raster,
+    /// Rasterized first hit, ray-traced shadows and bounces.
+    Hybrid,
+}
+
+/// The method the options name, with the pipeline's default.
+fn method_arg(args: &RenderArgs) -> MethodArg {
+    args.method.unwrap_or(match args.pipeline {
+        Some(PipelineArg::Raster | PipelineArg::Hybrid) => MethodArg::RasterSorted,
+        _ => MethodArg::Exact,
+    })
+}
+
+/// The algorithm of `--pipeline`, `--method` and `--secondary`, refusing a method of the other
+/// family.
+fn algorithm(args: &RenderArgs) -> Result<Algorithm> {
+    let m = method_arg(args);
+    let algorithm = args.options.resolve(m);
+    let family = |want: &str| anyhow::anyhow!("--method {} is not a {want} method", m.name());
+    match (args.pipeline, algorithm) {
+        (None, a) => Ok(a),
+        (Some(PipelineArg::Rt), a @ (Algorithm::Trace(_) | Algorithm::Oracle)) => Ok(a),
+        (Some(PipelineArg::Rt), _) => Err(family("ray-tracing")),
+        (Some(PipelineArg::Raster), a @ Algorithm::Raster(..)) => Ok(a),
+        (Some(PipelineArg::Raster), _) => Err(family("raster")),
+        (Some(PipelineArg::Hybrid), Algorithm::Raster(method, raster)) => {
+            let secondary = args.options.method(args.secondary).context("--secondary")?;
+            Ok(Algorithm::Hybrid(method, raster, secondary))
+        }
+        (Some(PipelineArg::Hybrid), _) => Err(family("raster (the hybrid pipeline's first hit)")),
+    }
+}
+
+/// The method (and pipeline) for the summary line.
+fn describe(args: &RenderArgs) -> String {
+    match args.pipeline {
+        Some(PipelineArg::Hybrid) => format!("hybrid {} + {}", method_arg(args).name(), args.secondary.name()),
+        _ => method_arg(args).name(),
+    }
 }
 
 /// Whether the GPU renders `algorithm` with the images `args` asks for (the backends' own
@@ -95,6 +151,7 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
     }
     match algorithm {
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
+        Algorithm::Hybrid(..) => unsupported("the hybrid pipeline runs on the CPU only so far (--backend cpu)"),
         Algorithm::Trace(method) => {
             GpuTracer::supports(method)?;
             if args.normal.is_some() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
@@ -161,7 +218,7 @@ fn render_gpu(
             }
             Ok(out)
         }
-        Algorithm::Oracle => bail!("the brute-force oracle runs on the CPU only"),
+        Algorithm::Oracle | Algorithm::Hybrid(..) => bail!("the {algorithm:?} renderer runs on the CPU only"),
     }
 }
 

@@ -20,6 +20,10 @@ pub enum Algorithm {
     Trace(Method),
     /// A splatting method with its sample set ([`crate::raster`]).
     Raster(RasterMethod, RasterSettings),
+    /// The hybrid pipeline (vk_gaussian_splatting Lighting §5): the splatting method gives the
+    /// first hit, the ray tracer continues with shadow rays and mesh bounces traced by the
+    /// ray-tracing method ([`Rasterizer::hybrid`]).
+    Hybrid(RasterMethod, RasterSettings, Method),
 }
 
 impl Algorithm {
@@ -29,6 +33,7 @@ impl Algorithm {
             Algorithm::Oracle => false,
             Algorithm::Trace(m) => m.is_stochastic(),
             Algorithm::Raster(m, _) => m.is_stochastic(),
+            Algorithm::Hybrid(m, _, secondary) => m.is_stochastic() || secondary.is_stochastic(),
         }
     }
 
@@ -77,9 +82,6 @@ impl Algorithm {
             Algorithm::Oracle if !meshes.is_empty() => Err(RenderError::Settings(
                 "the brute-force oracle renders splats alone; render meshes with a ray-tracing method".into(),
             )),
-            Algorithm::Raster(..) if !meshes.is_empty() => Err(RenderError::Settings(
-                "meshes are composited by the ray-tracing methods; splatting them is not built yet".into(),
-            )),
             Algorithm::Oracle if lighting.is_on() => Err(RenderError::Settings(
                 "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
             )),
@@ -90,7 +92,15 @@ impl Algorithm {
                 render_frames(&trace, camera, method, frames, progress)
             }
             Algorithm::Raster(method, raster) => {
-                let r = Rasterizer::new(scene, camera, *settings, *raster)?.with_lighting(lighting.clone())?;
+                let r = Rasterizer::new(scene, camera, *settings, *raster)?
+                    .with_lighting(lighting.clone())?
+                    .with_meshes(meshes.clone());
+                render_raster(&r, method, frames, progress)
+            }
+            Algorithm::Hybrid(method, raster, secondary) => {
+                let trace =
+                    TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
+                let r = Rasterizer::new(scene, camera, *settings, *raster)?.hybrid(&trace, *secondary)?;
                 render_raster(&r, method, frames, progress)
             }
         }

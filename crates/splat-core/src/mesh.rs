@@ -192,6 +192,11 @@ impl MeshMaterial {
     }
 }
 
+/// Barycentric slack of the edge tests: a ray through the edge two triangles share hits at
+/// least one of them despite rounding (Möller–Trumbore alone is not watertight; a hit just
+/// outside the edge lands on the neighbour's plane, so two hits there agree).
+const EDGE_SLACK: f32 = 1e-6;
+
 /// One triangle ready for intersection: a vertex, two edges, the vertex normals and its mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PreparedTriangle {
@@ -224,12 +229,12 @@ impl PreparedTriangle {
         let inv = 1.0 / det;
         let s = ray.origin - self.p0;
         let b1 = s.dot(p) * inv;
-        if !(0.0..=1.0).contains(&b1) {
+        if !(-EDGE_SLACK..=1.0 + EDGE_SLACK).contains(&b1) {
             return None;
         }
         let q = s.cross(self.e1);
         let b2 = ray.dir.dot(q) * inv;
-        if b2 < 0.0 || b1 + b2 > 1.0 {
+        if b2 < -EDGE_SLACK || b1 + b2 > 1.0 + EDGE_SLACK {
             return None;
         }
         let t = self.e2.dot(q) * inv;
@@ -250,6 +255,18 @@ pub struct SurfaceHit {
     pub face_normal: Vec3,
     /// Unit interpolated shading normal, outward.
     pub normal: Vec3,
+}
+
+impl SurfaceHit {
+    /// The face and shading normals turned toward a ray of unit direction `d` (the shading
+    /// normal falls back to the face normal where interpolation turns it away), and whether the
+    /// ray arrives from outside (against the outward face normal).
+    pub fn facing(&self, d: Vec3) -> (Vec3, Vec3, bool) {
+        let outside = d.dot(self.face_normal) < 0.0;
+        let side = if outside { 1.0 } else { -1.0 };
+        let (face, n) = (side * self.face_normal, side * self.normal);
+        (face, if n.dot(d) < 0.0 { n } else { face }, outside)
+    }
 }
 
 /// Every mesh of a world, with its material, in one triangle BVH.

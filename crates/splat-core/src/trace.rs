@@ -581,11 +581,7 @@ impl<'a> TraceScene<'a> {
     fn surface_sample<D: Decide>(&self, seg: &Segment<D>, hit: &SurfaceHit) -> Sample {
         let material = self.meshes.material(hit.mesh);
         let d = seg.ray.dir;
-        // Normals facing the incoming ray; `outside` tells the side for refraction.
-        let outside = d.dot(hit.face_normal) < 0.0;
-        let side = if outside { 1.0 } else { -1.0 };
-        let (face, n) = (side * hit.face_normal, side * hit.normal);
-        let n = if n.dot(d) < 0.0 { n } else { face };
+        let (_, n, outside) = hit.facing(d);
         let x = seg.ray.at(hit.t);
         let mut color = Vec3::ZERO;
         if material.local_share() > 0.0 {
@@ -625,6 +621,27 @@ impl<'a> TraceScene<'a> {
     fn secondary<D: Decide>(&self, method: &Method, x: Vec3, dir: Vec3, decide: Bounce<D>) -> Vec3 {
         let ray = Ray { origin: x, dir, view: dir, t_min: 0.0, t_max: self.settings.t_max };
         self.trace_ray(method, &ray, decide, surface_offset(x)).color.as_vec3()
+    }
+
+    /// The shaded colour of mesh surface `hit` on `ray` as the ray tracer sees it: lit with
+    /// shadow rays, mirror and glass bounces traced by `method` (the hybrid pipeline's
+    /// continuation of a rasterized first hit, vk_gaussian_splatting Lighting §5).
+    pub fn surface(&self, method: &Method, ray: &Ray, hit: &SurfaceHit, decide: &impl Decide) -> Sample {
+        let seg = Segment {
+            ray: Ray { t_max: hit.t, ..*ray },
+            surface: Some(*hit),
+            method: *method,
+            decide: Bounce::camera(decide),
+            behind: OnceCell::new(),
+        };
+        self.surface_sample(&seg, hit)
+    }
+
+    /// Lit(x, n, v, c) of particle `id` at distance `t` along `ray` with unit normal `n`, each
+    /// light behind a shadow ray through splats and meshes (slot 0's decisions): how the hybrid
+    /// pipeline lights a rasterized pick.
+    pub fn light_pick(&self, c: Vec3, id: u32, t: f32, n: Vec3, ray: &Ray, decide: &impl Decide) -> Vec3 {
+        self.lit(c, id, t, n, ray, decide, 0)
     }
 
     /// One sample of `method` for `ray` (already clipped to the settings' range).

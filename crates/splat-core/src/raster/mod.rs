@@ -27,11 +27,13 @@ use crate::camera::Camera;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{PreparedParticle, Ray, to_canonical};
 use crate::lighting::{Lighting, Look};
+use crate::mesh::{Meshes, SurfaceHit};
 use crate::normal::particle_normal;
 use crate::particle::Scene;
 use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::tile::{TILE, tile_count};
+use crate::trace::{Method, TraceScene};
 use glam::{DVec3, Vec2, Vec3};
 pub use project::{Splat, SplatExtent, project};
 pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, sample_positions};
@@ -146,6 +148,8 @@ pub struct PixelSamples {
     /// |d_cam| of each sample's ray: a point at view depth z is at t = z |d_cam|.
     stretch: Vec<f32>,
     positions: Vec<Vec2>,
+    /// The nearest mesh along each sample's ray (the mesh depth pre-pass).
+    surfaces: Vec<Option<SurfaceHit>>,
 }
 
 /// A scene projected for one camera and binned into tiles, ready to rasterize.
@@ -160,6 +164,9 @@ pub struct Rasterizer<'a> {
     offsets: Vec<Vec2>,
     hilbert_order: u32,
     lighting: Lighting,
+    meshes: Meshes,
+    /// The hybrid pipeline's ray tracer and the method of its secondary rays.
+    hybrid: Option<(&'a TraceScene<'a>, Method)>,
 }
 
 /// Reserved splat ids of the hashes (scene ids stay below [`crate::rng::MAX_PARTICLES`]).
@@ -167,6 +174,9 @@ const ORDER_ID: u32 = u32::MAX - 2;
 const SURFACE_ID: u32 = u32::MAX - 3;
 /// Slot of Enderton's ξ; the random choice of samples uses the slots after it.
 const ENDERTON_XI_SLOT: u32 = MAX_SAMPLES;
+/// What a sample buffer holds where a mesh was drawn (as splat index and as id; every particle
+/// id is below it, so a splat at the mesh's exact depth stays in front).
+const MESH: u32 = u32::MAX - 1;
 
 impl<'a> Rasterizer<'a> {
     /// Validate, project every particle (EWA), sort the splats by (centre depth, id) and bin
@@ -197,7 +207,69 @@ impl<'a> Rasterizer<'a> {
             offsets: sample_positions(raster.samples),
             hilbert_order: hilbert_order(camera.width, camera.height),
             lighting: Lighting::default(),
+            meshes: Meshes::none(),
+            hybrid: None,
         })
+    }
+
+    /// The same rasterizer among `meshes` (vk_gaussian_splatting Lighting §1.5.3 and §3): a
+    /// depth pre-pass finds the nearest mesh of every sample, splat fragments behind it fail the
+    /// depth test, and the mesh's forward-shaded colour (lit, no shadows, no bounces: its mirror
+    /// and glass shares see the background) is blended under the splats with (1 − α_dst).
+    pub fn with_meshes(mut self, meshes: Meshes) -> Self {
+        self.meshes = meshes;
+        self
+    }
+
+    /// The hybrid pipeline (vk_gaussian_splatting Lighting §5): rasterized splats and mesh depth
+    /// give the first hit, and `trace` continues from it: the pick is lit with shadow rays,
+    /// meshes are shaded by the ray tracer with shadows and bounces traced by `method`. The
+    /// meshes and lighting are the tracer's.
+    pub fn hybrid(mut self, trace: &'a TraceScene<'a>, method: Method) -> Result<Self, RenderError> {
+        method.validate()?;
+        self = self.with_lighting(trace.lighting().clone())?.with_meshes(trace.meshes().clone());
+        self.hybrid = Some((trace, method));
+        Ok(self)
+    }
+
+    /// Whether frames of `method` differ: a stochastic method, or the hybrid pipeline's ray
+    /// tracer drawing decisions (a stochastic secondary method, stochastic shadows, area lights).
+    pub fn is_random(&self, method: &RasterMethod) -> bool {
+        method.is_stochastic() || self.hybrid.is_some_and(|(trace, m)| m.is_stochastic() || trace.is_random())
+    }
+
+    /// The colour of sample `s` behind the splats and whether a mesh is there: the background,
+    /// or the mesh forward-shaded (raster) or ray traced (hybrid).
+    fn behind(&self, px: &PixelSamples, s: usize, decide: &impl Decide) -> DVec3 {
+        let Some(hit) = &px.surfaces[s] else { return self.settings.background.as_dvec3() };
+        let ray = &px.rays[s];
+        if let Some((trace, method)) = &self.hybrid {
+            return trace.surface(method, ray, hit, decide).color;
+        }
+        let m = self.meshes.material(hit.mesh);
+        let (_, n, _) = hit.facing(ray.dir);
+        let local = self.lighting.shade_material(
+            &m.shading,
+            m.color,
+            ray,
+            hit.t,
+            n,
+            |_, _| Vec2::splat(0.5),
+            |_, _, _| Vec3::ONE,
+        );
+        f64::from(m.local_share()) * local.as_dvec3()
+            + f64::from(m.mirror + m.transmission) * self.settings.background.as_dvec3()
+    }
+
+    /// A sample buffer with the meshes drawn in (their depth, for the depth test).
+    fn sample_buffer(&self, px: &PixelSamples) -> SampleBuffer {
+        let mut buf = SampleBuffer::new(self.offsets.len());
+        for (s, hit) in px.surfaces.iter().enumerate() {
+            if let Some(hit) = hit {
+                buf.write(s, hit.t, MESH, MESH);
+            }
+        }
+        buf
     }
 
     /// The same rasterizer lit by `lighting` (no shadows: the raster pipelines have none,
@@ -243,10 +315,15 @@ impl<'a> Rasterizer<'a> {
     pub fn pixel(&self, x: u32, y: u32) -> PixelSamples {
         let c = &self.camera;
         let positions: Vec<Vec2> = self.offsets.iter().map(|&o| Vec2::new(x as f32, y as f32) + o).collect();
-        let rays = self.offsets.iter().map(|&o| self.clip(c.ray(x, y, o))).collect();
+        let rays: Vec<Ray> = self.offsets.iter().map(|&o| self.clip(c.ray(x, y, o))).collect();
         let stretch =
             positions.iter().map(|p| Vec3::new((p.x - c.cx) / c.fx, (p.y - c.cy) / c.fy, 1.0).length()).collect();
-        PixelSamples { x, y, rays, stretch, positions }
+        let surfaces = if self.meshes.is_empty() {
+            vec![None; rays.len()]
+        } else {
+            rays.iter().map(|r| self.meshes.closest(r)).collect()
+        };
+        PixelSamples { x, y, rays, stretch, positions, surfaces }
     }
 
     fn clip(&self, ray: Ray) -> Ray {
@@ -325,34 +402,41 @@ impl<'a> Rasterizer<'a> {
         frame_key: u32,
     ) -> Sample {
         match *method {
-            RasterMethod::Sorted { blend } => self.sorted(px, fragments, blend),
-            RasterMethod::StochasticSplat => self.resolve(px, &self.stochastic_splat(px, fragments, decide)),
-            RasterMethod::Enderton => self.resolve(px, &self.enderton(px, fragments, decide)),
+            RasterMethod::Sorted { blend } => self.sorted(px, fragments, blend, decide),
+            RasterMethod::StochasticSplat => self.resolve(px, &self.stochastic_splat(px, fragments, decide), decide),
+            RasterMethod::Enderton => self.resolve(px, &self.enderton(px, fragments, decide), decide),
             RasterMethod::Stratified { scramble } => {
-                self.resolve(px, &self.stratified(px, fragments, decide, frame_key, scramble))
+                self.resolve(px, &self.stratified(px, fragments, decide, frame_key, scramble), decide)
             }
         }
     }
 
-    /// Sorted splatting of every sample (Eq. 3 over the fragments in depth order). Lit, the
-    /// blend is front to back (vk_gaussian_splatting Lighting §1.5: the picked surface needs it);
-    /// the surface look lights the pixel once ([`Rasterizer::light_surface`]).
-    fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend) -> Sample {
+    /// Sorted splatting of every sample (Eq. 3 over the fragments in depth order, in front of
+    /// the sample's mesh, over its colour). Lit, the blend is front to back
+    /// (vk_gaussian_splatting Lighting §1.5: the picked surface needs it); the surface look
+    /// lights the pixel once ([`Rasterizer::light_surface`]). Where no splat reaches the iso
+    /// threshold, the mesh of sample 0 gives depth and normal (depth consolidation, §1.5.3).
+    fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend, decide: &impl Decide) -> Sample {
         let blend = if self.lighting.is_on() { Blend::Under } else { blend };
-        let bg =
-            if self.lighting.is_on() && !self.volumetric() { DVec3::ZERO } else { self.settings.background.as_dvec3() };
+        let surface_look = self.lighting.is_on() && !self.volumetric();
         let iso = f64::from(self.settings.iso_threshold);
         let mut out = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
         let mut order: Vec<(f32, u32, usize)> = Vec::with_capacity(fragments.len());
         let mut normal = DVec3::ZERO;
+        // Σ_s T_s behind_s and Σ_s behind_s, for the surface look.
+        let (mut seen_behind, mut behind_sum) = (DVec3::ZERO, DVec3::ZERO);
         for s in 0..self.offsets.len() {
+            let behind = self.behind(px, s, decide);
+            let bg = if surface_look { DVec3::ZERO } else { behind };
+            let t_mesh = px.surfaces[s].map_or(f32::INFINITY, |h| h.t);
             order.clear();
             order.extend(
                 fragments
                     .iter()
                     .enumerate()
                     .filter(|(_, f)| f.covered >> s & 1 == 1)
-                    .map(|(i, f)| (self.depth(px, f, s), self.id(f), i)),
+                    .map(|(i, f)| (self.depth(px, f, s), self.id(f), i))
+                    .filter(|&(t, _, _)| t < t_mesh),
             );
             if self.raster.fragment_depth == FragmentDepth::MaxDensityPlane {
                 order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -389,7 +473,10 @@ impl<'a> Rasterizer<'a> {
                 }
             };
             out.color += color;
-            out.alpha += 1.0 - transmittance;
+            let mesh = if px.surfaces[s].is_some() { 1.0 } else { 0.0 };
+            out.alpha += 1.0 - transmittance + transmittance * mesh;
+            seen_behind += transmittance * behind;
+            behind_sum += behind;
         }
         let n = self.offsets.len() as f64;
         out.color /= n;
@@ -397,27 +484,46 @@ impl<'a> Rasterizer<'a> {
         if normal != DVec3::ZERO {
             out.normal = normal.as_vec3().try_normalize().unwrap_or(-px.rays[0].dir);
         }
-        if self.lighting.is_on() && !self.volumetric() { self.light_surface(px, out) } else { out }
+        if let (None, Some(hit)) = (out.depth, &px.surfaces[0]) {
+            (out.depth, out.normal) = (Some(hit.t), hit.facing(px.rays[0].dir).1);
+        }
+        if surface_look { self.light_surface(px, out, seen_behind / n, behind_sum / n, decide) } else { out }
     }
 
     /// The surface look of sorted splatting (vk_gaussian_splatting Lighting §1.1, §2.1, §3 step
-    /// 6): `blended` holds the pixel's radiance L without background, its coverage 1 − T, the
-    /// picked depth and particle and the integrated normal; L is lit once at the picked depth
-    /// along sample 0's ray with the picked particle's material, then T × background is added.
-    /// A pixel whose transmittance never reached the threshold shows the background.
-    fn light_surface(&self, px: &PixelSamples, blended: Sample) -> Sample {
-        let bg = self.settings.background.as_dvec3();
+    /// 6): `blended` holds the pixel's radiance L without what lies behind, the picked depth and
+    /// particle and the integrated normal; L is lit once at the picked depth along sample 0's
+    /// ray with the picked particle's material (with shadow rays in the hybrid pipeline), then
+    /// `seen_behind` = mean of T_s × behind_s is added. A pixel whose transmittance never
+    /// reached the threshold shows what lies behind, `behind`.
+    fn light_surface(
+        &self,
+        px: &PixelSamples,
+        blended: Sample,
+        seen_behind: DVec3,
+        behind: DVec3,
+        decide: &impl Decide,
+    ) -> Sample {
         let (Some(t), Some(id)) = (blended.depth, blended.picked) else {
-            return Sample::background(self.settings.background);
+            let meshes = px.surfaces.iter().filter(|h| h.is_some()).count();
+            if meshes == 0 {
+                return Sample::background(self.settings.background);
+            }
+            let alpha = meshes as f64 / px.surfaces.len() as f64;
+            return Sample { color: behind, alpha, picked: None, ..blended };
         };
-        let lit = self.lighting.shade_unshadowed(blended.color.as_vec3(), id, &px.rays[0], t, blended.normal);
-        Sample { color: lit.as_dvec3() + (1.0 - blended.alpha) * bg, ..blended }
+        let (c, ray, n) = (blended.color.as_vec3(), &px.rays[0], blended.normal);
+        let lit = match &self.hybrid {
+            Some((trace, _)) => trace.light_pick(c, id, t, n, ray, decide),
+            None => self.lighting.shade_unshadowed(c, id, ray, t, n),
+        };
+        Sample { color: lit.as_dvec3() + seen_behind, ..blended }
     }
 
     /// StochasticSplats: each covered sample that passes the depth test draws u = hash(pixel,
     /// frame, splat id, sample) and is written opaque when u < α, else discarded.
     fn stochastic_splat(&self, px: &PixelSamples, fragments: &[Fragment], decide: &impl Decide) -> SampleBuffer {
-        let mut buf = SampleBuffer::new(self.offsets.len());
+        let mut buf = self.sample_buffer(px);
         for f in fragments {
             let id = self.id(f);
             for s in bits(f.covered) {
@@ -434,7 +540,7 @@ impl<'a> Rasterizer<'a> {
     /// writes, on a uniformly random subset (partial Fisher–Yates); each is written with
     /// probability E[R]/m = α.
     fn enderton(&self, px: &PixelSamples, fragments: &[Fragment], decide: &impl Decide) -> SampleBuffer {
-        let mut buf = SampleBuffer::new(self.offsets.len());
+        let mut buf = self.sample_buffer(px);
         let mut alive: Vec<(usize, f32)> = Vec::with_capacity(self.offsets.len());
         for f in fragments {
             let id = self.id(f);
@@ -472,7 +578,7 @@ impl<'a> Rasterizer<'a> {
     ) -> SampleBuffer {
         let spp = self.offsets.len() as u32;
         let pixel_id = hilbert_index(self.hilbert_order, px.x, px.y);
-        let mut buf = SampleBuffer::new(self.offsets.len());
+        let mut buf = self.sample_buffer(px);
         let mut covered = 0u64;
         let mut surface_id = xxhash32([frame_key, SURFACE_ID, 0]);
         let mut alive: Vec<(usize, f32)> = Vec::with_capacity(self.offsets.len());
@@ -502,13 +608,17 @@ impl<'a> Rasterizer<'a> {
     }
 
     /// Average the samples of a stochastic frame; sample 0 gives depth, normal and pick.
-    fn resolve(&self, px: &PixelSamples, buf: &SampleBuffer) -> Sample {
+    fn resolve(&self, px: &PixelSamples, buf: &SampleBuffer, decide: &impl Decide) -> Sample {
         let bg = self.settings.background.as_dvec3();
         let mut color = DVec3::ZERO;
         let mut written = 0usize;
         for s in 0..buf.len {
             match buf.splat[s] {
                 u32::MAX => color += bg,
+                MESH => {
+                    color += self.behind(px, s, decide);
+                    written += 1;
+                }
                 k => {
                     color += self.lit_color(px, k, s, buf.t[s]);
                     written += 1;
@@ -516,14 +626,12 @@ impl<'a> Rasterizer<'a> {
             }
         }
         let n = buf.len as f64;
-        let first = (buf.splat[0] != u32::MAX).then_some(buf.splat[0]);
-        Sample {
-            color: color / n,
-            alpha: written as f64 / n,
-            depth: first.map(|_| buf.t[0]),
-            normal: first.map_or(Vec3::ZERO, |k| self.normal(px, k)),
-            picked: first.map(|k| self.splats[k as usize].id),
-        }
+        let (depth, normal, picked) = match buf.splat[0] {
+            u32::MAX => (None, Vec3::ZERO, None),
+            MESH => (Some(buf.t[0]), px.surfaces[0].map_or(Vec3::ZERO, |h| h.facing(px.rays[0].dir).1), None),
+            k => (Some(buf.t[0]), self.normal(px, k), Some(self.splats[k as usize].id)),
+        };
+        Sample { color: color / n, alpha: written as f64 / n, depth, normal, picked }
     }
 }
 
@@ -613,7 +721,7 @@ pub fn render_raster(
     if frames.rng != RngScheme::Hash {
         return Err(RenderError::Settings("the raster methods draw their decisions with the hash generator".into()));
     }
-    let keys = frames.keys(method.is_stochastic())?;
+    let keys = frames.keys(raster.is_random(method))?;
     Ok(render_tiles(
         &raster.camera,
         progress,
