@@ -377,7 +377,7 @@ fn hybrid_shadows_at_the_picks_are_the_ray_tracers() {
             let incident = light.incident(point, glam::Vec2::splat(0.5)).unwrap();
             let v = trace.visibility(point, &incident, &rng, 0).x;
             match v {
-                v if v == 0.0 => dark += 1,
+                0.0 => dark += 1,
                 v if v > 0.999 => lit += 1,
                 _ => partial += 1,
             }
