@@ -745,6 +745,40 @@ pub mod golden {
         ]
     }
 
+    /// The world of the mesh golden images: the lit demo on a pedestal, with a mirror and a
+    /// glass sphere.
+    pub const MESH_WORLD: &str = "fixtures/worlds/demo-meshes.toml";
+
+    /// The mesh cases: each pipeline (rt, raster, hybrid) on [`MESH_WORLD`] at 160 × 120, seed 1.
+    pub fn mesh_cases() -> Vec<(&'static str, Algorithm, Frames)> {
+        let f = |count| Frames { count, seed: 1, ..Frames::default() };
+        let s4 = RasterSettings { samples: 4, ..RasterSettings::default() };
+        let under = RasterMethod::Sorted { blend: Blend::Under };
+        vec![
+            ("rt-exact", Algorithm::Trace(Method::Exact), f(4)),
+            ("rt-stochastic", Algorithm::Trace(Method::Stochastic), f(4)),
+            ("raster-sorted", Algorithm::Raster(under, s4), f(1)),
+            ("raster-stochastic-splat", Algorithm::Raster(RasterMethod::StochasticSplat, s4), f(2)),
+            ("hybrid", Algorithm::Hybrid(under, s4, Method::Exact), f(4)),
+        ]
+    }
+
+    /// Render one case of [`MESH_WORLD`] as 8-bit RGB.
+    pub fn render_meshes(algorithm: &Algorithm, frames: &Frames) -> image::RgbImage {
+        let world = splat_io::world::read_world(&super::root().join(MESH_WORLD)).expect("the mesh world");
+        let camera = world.camera.expect("the world's camera").rescaled(160, 120).expect("a valid size");
+        let meshes = splat_core::mesh::Meshes::new(&world.meshes).expect("valid meshes");
+        let settings = RenderSettings {
+            background: world.background.unwrap_or_default(),
+            max_bounces: world.max_bounces.unwrap_or(splat_core::settings::DEFAULT_MAX_BOUNCES),
+            ..RenderSettings::default()
+        };
+        let out = algorithm
+            .render_world(&world.scene, &meshes, &camera, &settings, &world.lighting, frames, &|_| {})
+            .expect("render");
+        splat_io::image::to_rgba8(&out.mean).to_rgb8()
+    }
+
     /// Render one lit case of [`LIT_WORLD`] as 8-bit RGB.
     pub fn render_lit(algorithm: &Algorithm, frames: &Frames) -> image::RgbImage {
         let world = splat_io::world::read_world(&super::root().join(LIT_WORLD)).expect("the lit world");

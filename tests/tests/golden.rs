@@ -44,6 +44,20 @@ fn lit_world_matches_its_golden_images() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
+/// The demo among meshes by each pipeline: ray tracing (splats in front of meshes, shadows,
+/// mirror and glass bounces), raster three-pass compositing and the hybrid.
+#[test]
+fn mesh_world_matches_its_golden_images() {
+    let mut failures = Vec::new();
+    for (suffix, case, frames) in golden::mesh_cases() {
+        let image = golden::render_meshes(&case, &frames);
+        if let Err(e) = compare_golden(&golden::path("demo-meshes", suffix), &image, TOLERANCE) {
+            failures.push(e);
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 /// The comparison can fail: a render with another background differs from the golden image.
 #[test]
 fn golden_comparison_rejects_a_different_image() {

@@ -194,6 +194,11 @@ fn bless() -> Result<()> {
         golden::render_lit(&case, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
         println!("blessed {}", path.display());
     }
+    for (suffix, case, frames) in golden::mesh_cases() {
+        let path = golden::path("demo-meshes", suffix);
+        golden::render_meshes(&case, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
+        println!("blessed {}", path.display());
+    }
     Ok(())
 }
 
