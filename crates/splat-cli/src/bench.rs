@@ -43,6 +43,11 @@ pub struct BenchArgs {
     /// unlit frame measured in the same run (CPU).
     #[arg(long)]
     pub lighting: bool,
+    /// With a world file with meshes: the frame of each pipeline (raster three-pass, hybrid,
+    /// ray tracing) with a deterministic and a stochastic method each, as ratios against
+    /// raster-sorted measured in the same run (CPU; --raster-samples applies).
+    #[arg(long)]
+    pub pipelines: bool,
     #[command(flatten)]
     pub options: MethodOptions,
 }
@@ -64,6 +69,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     if args.lighting {
         return run_lighting(&args);
+    }
+    if args.pipelines {
+        return run_pipelines(&args);
     }
     let raster = args.methods.iter().any(|m| matches!(m, MethodArg::RasterSorted | MethodArg::StochasticSplat));
     let ctx = crate::args::gpu_context(args.scene.backend)?;
@@ -167,6 +175,58 @@ fn run_lighting(args: &BenchArgs) -> Result<()> {
             cells.push(format!("{:.1} ({:.2}×)", 1e3 * best / f64::from(args.spp), best / base));
         }
         println!("| {} | {} |", m.name(), cells.join(" | "));
+    }
+    Ok(())
+}
+
+/// The cost of each pipeline on a world with meshes, as ratios against `raster-sorted`
+/// measured in the same run.
+fn run_pipelines(args: &BenchArgs) -> Result<()> {
+    use splat_core::Algorithm;
+    use splat_core::raster::{Blend, RasterMethod};
+    use splat_core::trace::Method;
+    let loaded = args.scene.load_world(640, 480)?;
+    if loaded.meshes.is_empty() {
+        anyhow::bail!("--pipelines needs a world file with [[meshes]]");
+    }
+    let (scene, camera) = (&loaded.scene, &loaded.camera);
+    let pool = args.scene.pool()?;
+    let raster = args.options.raster_settings();
+    let sorted = RasterMethod::Sorted { blend: Blend::Under };
+    let rows = [
+        ("raster", "raster-sorted", Algorithm::Raster(sorted, raster)),
+        ("raster", "stochastic-splat", Algorithm::Raster(RasterMethod::StochasticSplat, raster)),
+        ("hybrid", "raster-sorted + exact", Algorithm::Hybrid(sorted, raster, Method::Exact)),
+        ("hybrid", "raster-sorted + stochastic", Algorithm::Hybrid(sorted, raster, Method::Stochastic)),
+        ("rt", "exact", Algorithm::Trace(Method::Exact)),
+        ("rt", "stochastic", Algorithm::Trace(Method::Stochastic)),
+    ];
+    println!(
+        "{} particles, {} meshes' triangles, {}×{}, {} raster samples, {} spp, {} threads\n",
+        scene.particles.len(),
+        loaded.meshes.triangles().len(),
+        camera.width,
+        camera.height,
+        raster.samples,
+        args.spp,
+        pool.current_num_threads()
+    );
+    println!("| pipeline | method | frame (ms) | cost vs raster-sorted |");
+    println!("|---|---|---:|---:|");
+    let frames = Frames { count: args.spp, seed: 1, ..Frames::default() };
+    let mut baseline = None;
+    for (pipeline, name, algorithm) in rows {
+        let mut best = f64::INFINITY;
+        for _ in 0..args.repeat.max(1) {
+            let start = Instant::now();
+            pool.install(|| {
+                let (l, s) = (&loaded.lighting, &loaded.settings);
+                algorithm.render_world(scene, &loaded.meshes, camera, s, l, &frames, &|_| {})
+            })?;
+            best = best.min(start.elapsed().as_secs_f64());
+        }
+        let base = *baseline.get_or_insert(best);
+        println!("| {pipeline} | {name} | {:.1} | {:.2}× |", 1e3 * best / f64::from(args.spp), best / base);
     }
     Ok(())
 }

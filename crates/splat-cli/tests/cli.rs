@@ -525,3 +525,35 @@ fn render_lights_a_world_file_on_both_backends() {
     }
     assert!(diff(&cpu, &gpu) < 1e-4, "GPU and CPU lit images differ by {}", diff(&cpu, &gpu));
 }
+
+/// `splat render demo-meshes.toml --pipeline rt|raster|hybrid` renders each pipeline (with the
+/// pipeline's default method), the three images differ, a method of the other family and the
+/// GPU are refused with the reason, and a mesh file that does not exist is named.
+#[test]
+fn render_meshes_with_each_pipeline() {
+    let run = |extra: &[&str], out: &PathBuf| {
+        let mut args = vec!["render", "fixtures/worlds/demo-meshes.toml", "--width", "40", "--height", "30"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--backend", "cpu", "-o", out.to_str().unwrap()]);
+        splat(&args)
+    };
+    let mut images = Vec::new();
+    for pipeline in ["rt", "raster", "hybrid"] {
+        let out = scratch(&format!("meshes-{pipeline}.npy"));
+        let o = run(&["--pipeline", pipeline], &out);
+        assert!(o.status.success(), "{pipeline}: {}", stderr(&o));
+        images.push(splat_io::image::read_npy(&out).unwrap());
+    }
+    let rmse = |a: &splat_core::Image, b: &splat_core::Image| splat_core::stats::rmse(a.data(), b.data());
+    assert!(rmse(&images[0], &images[1]) > 0.01 && rmse(&images[1], &images[2]) > 0.01);
+    let o = run(&["--pipeline", "raster", "--method", "exact"], &scratch("never.png"));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("not a raster method"), "{}", stderr(&o));
+    let o = splat(&["render", "fixtures/worlds/demo-meshes.toml", "--backend", "gpu", "-o", "never.png"]);
+    assert!(!o.status.success() && stderr(&o).contains("meshes render on the CPU only"), "{}", stderr(&o));
+    let bad = scratch("missing-mesh.toml");
+    std::fs::write(&bad, "[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nfile = \"nowhere.obj\"\n").unwrap();
+    let o = splat(&["render", bad.to_str().unwrap(), "-o", scratch("never.png").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("nowhere.obj"), "{}", stderr(&o));
+}
