@@ -36,9 +36,11 @@ var<private> trav_stack: array<u32, STACK_DEPTH>;
 var<private> trav_top: u32;
 var<private> trav_next: u32;
 
-fn traversal_begin(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) {
+// Start a traversal at node `root`: 0 for the splats, params.mesh_root for the meshes, whose
+// nodes follow the splats' in the same buffer (splat_gpu::layout::nodes).
+fn traversal_begin(root: u32, origin: vec3<f32>, inv: vec3<f32>, t_max: f32) {
     trav_top = 0u;
-    trav_next = select(NONE, 0u, enter(nodes[0], origin, inv, t_max) < FAR);
+    trav_next = select(NONE, root, enter(nodes[root], origin, inv, t_max) < FAR);
 }
 
 // The next leaf whose box the ray overlaps before t_max, nearer child first; NONE when the
@@ -91,7 +93,7 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
 fn traverse(ray: Ray, visitor: u32) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(ray.origin, inv, t_max);
+    traversal_begin(0u, ray.origin, inv, t_max);
     loop {
         iterations += 1u;
         let node = traversal_next_leaf(ray.origin, inv, t_max);
@@ -113,7 +115,7 @@ fn traverse(ray: Ray, visitor: u32) {
 fn traverse_shadow(ray: Ray) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(ray.origin, inv, t_max);
+    traversal_begin(0u, ray.origin, inv, t_max);
     loop {
         iterations += 1u;
         let node = traversal_next_leaf(ray.origin, inv, t_max);
@@ -126,4 +128,41 @@ fn traverse_shadow(ray: Ray) {
             t_max = visit_shadow(ray, leaf, t_max);
         }
     }
+}
+
+// ---- mesh.rs: the closest triangle, and whether any lies on a shadow ray ---------------------
+
+// Meshes::closest (any_hit false) and Meshes::occludes (any_hit true) over the mesh BVH: every
+// triangle of every leaf the ray overlaps, Möller–Trumbore with the core's edge slack; the
+// closest hit within (t_min, t_max], ties to the lower leaf index, or the first hit within
+// (t_min, t_max). One loop for both: the shadow ray and the camera ray call it at one site each.
+fn mesh_traverse(ray: Ray, any_hit: bool) -> SurfaceHit {
+    var best = SurfaceHit(FAR, NONE, 0.0, 0.0);
+    let inv = safe_inverse(ray.dir);
+    var t_max = ray.t_max;
+    traversal_begin(params.mesh_root, ray.origin, inv, t_max);
+    loop {
+        iterations += 1u;
+        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        if (node == NONE) {
+            break;
+        }
+        let nd = nodes[node];
+        for (var k = nd.first; k < nd.first + nd.count; k++) {
+            iterations += 1u;
+            let h = triangle_intersect(triangles[k], ray);
+            if (h.x < 0.0) {
+                continue;
+            }
+            if (any_hit) {
+                if (h.x < ray.t_max) {
+                    return SurfaceHit(h.x, k, h.y, h.z);
+                }
+            } else if (h.x <= t_max && (h.x < best.t || (h.x == best.t && k < best.triangle))) {
+                best = SurfaceHit(h.x, k, h.y, h.z);
+                t_max = h.x;
+            }
+        }
+    }
+    return best;
 }

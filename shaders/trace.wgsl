@@ -61,9 +61,42 @@ struct Params {
     light_count: u32,
     set_count: u32,
     iso_threshold: f32,
-    pad3: u32,
+    // Node index of the mesh BVH's root (after the splats' nodes), NONE without meshes.
+    mesh_root: u32,
     pad4: u32,
     pad5: u32,
+}
+
+// One mesh triangle in the mesh BVH's leaf order (96 bytes), mirrored by splat_gpu::GpuTriangle
+// (mesh.rs `PreparedTriangle`).
+struct Triangle {
+    p0: vec3<f32>,
+    mesh: u32,
+    e1: vec3<f32>,
+    pad0: u32,
+    e2: vec3<f32>,
+    pad1: u32,
+    n0: vec3<f32>,
+    pad2: u32,
+    n1: vec3<f32>,
+    pad3: u32,
+    n2: vec3<f32>,
+    pad4: u32,
+}
+
+// A mesh's base colour and shading shares (80 bytes), mirrored by splat_gpu::GpuMeshMaterial.
+struct MeshMaterial {
+    color: vec3<f32>,
+    pad: u32,
+    shading: Material,
+}
+
+// Where a ray meets a mesh: distance, leaf-order triangle (NONE: no hit) and barycentrics.
+struct SurfaceHit {
+    t: f32,
+    triangle: u32,
+    b1: f32,
+    b2: f32,
 }
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
@@ -106,6 +139,9 @@ const SHADOWS_NONE: u32 = 0u;
 const SHADOWS_SORTED: u32 = 1u;
 const SHADOWS_STOCHASTIC: u32 = 2u;
 const SHADOWS_EXACT: u32 = 3u;
+// mesh.rs `EDGE_SLACK` and trace.rs `SURFACE_OFFSET`.
+const EDGE_SLACK: f32 = 1e-6;
+const SURFACE_OFFSET: f32 = 1e-4;
 // lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
 // invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
 // Every loop body below starts with `iterations += 1u`; a loop statement cannot iterate more
@@ -122,6 +158,8 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(7) var<storage, read> materials: array<Material>;
 @group(0) @binding(8) var<storage, read> lights: array<Light>;
 @group(0) @binding(9) var<storage, read_write> out_pick: array<Pick>;
+@group(0) @binding(10) var<storage, read> triangles: array<Triangle>;
+@group(0) @binding(11) var<storage, read> mesh_materials: array<MeshMaterial>;
 
 // The depth, unit normal and picked particle of a sample (frame.rs `Sample`), written for frame
 // 0 only (picks are never averaged); mirrored by splat_gpu::GpuPick. depth < 0: none; picked
@@ -453,7 +491,12 @@ fn lit(c: vec3<f32>, id: u32, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, s
     if (params.lit == 0u) {
         return c;
     }
-    let m = material_of(id);
+    return lit_material(material_of(id), c, t, n, ray, pixel_seed, slot, params.shadow_offset);
+}
+
+// lighting.rs `Lighting::shade_material`: Lit(x, n, v, c) with material m, each light's shadow
+// ray starting `offset` along it.
+fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, slot: u32, offset: f32) -> vec3<f32> {
     if (m.emissive_only == 1u) {
         return c;
     }
@@ -477,7 +520,7 @@ fn lit(c: vec3<f32>, id: u32, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, s
         }
         let direct = material_direct(m, c, n, v, inc);
         if (any(direct != vec3<f32>(0.0))) {
-            sum += direct * visibility(x, inc, pixel_seed, shadow_slot(slot, j));
+            sum += direct * visibility(x, offset, inc, pixel_seed, shadow_slot(slot, j));
         }
     }
     return sum;
@@ -493,12 +536,15 @@ var<private> shadow_in: ShadowInputs;
 var<private> shadow_t: f32;
 var<private> shadow_blocked: bool;
 
-// trace.rs `TraceScene::visibility`: the shadow ray from x + offset l toward the light.
-fn visibility(x: vec3<f32>, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
-    let offset = params.shadow_offset;
+// trace.rs `TraceScene::visibility_from`: the shadow ray from x + offset l toward the light;
+// a mesh on the way blocks it.
+fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
     let shadow = Ray(x + offset * inc.l, inc.l, inc.l, min(inc.distance - offset, params.t_max));
     if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
         return vec3<f32>(1.0);
+    }
+    if (params.mesh_root != NONE && mesh_traverse(shadow, true).triangle != NONE) {
+        return vec3<f32>(0.0);
     }
     // One traversal call for every kind (see traverse_shadow).
     shadow_t = 1.0;
@@ -633,14 +679,15 @@ fn advance(st: ptr<function, PassState>) -> bool {
 }
 
 // Algorithm 1 in n slots of one traversal (trace.rs `TraceScene::stochastic_n`), each accepted
-// particle lit at its own position and normal; the pick is that of slot 0 of the frame.
+// particle lit at its own position and normal; the pick is that of slot 0 of the frame. Returns
+// the mean of the accepted colours (misses count zero) and the accepted share.
 fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
     stochastic_traverse(ray, pixel_seed, n, first_slot);
     var sum = vec4<f32>(0.0);
     for (var s = 0u; s < n; s++) {
         iterations += 1u;
         if (best_id[s] == NONE) {
-            sum += vec4<f32>(params.background.xyz, 0.0);
+            // What lies behind (background or mesh) is added in `finish`, once per frame.
             if (first_slot + s == 0u) {
                 sample_pick = no_pick();
             }
@@ -718,30 +765,110 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
     return advance(st);
 }
 
-// The sample of a finished frame and its pick: stochastic-n's average; the stochastic pass's
-// accepted pass (or the background); the integrated hits over the background for the others
-// (trace.rs `TraceScene::finish`), depth sampling reporting the depth of its first accepted hit.
-// Lit once here where the method lights once: the accepted pass, and the surface look (L lit
-// at the iso-opacity depth with the integrated normal and the picked particle's material, the
-// background where the threshold was never reached).
-fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    let bg = params.background.xyz;
-    if (stochastic_slots()) {
-        sample_pick = Pick(st.normal, st.depth, st.picked, 0u, 0u, 0u);
-        return vec4<f32>(st.radiance, st.transmittance) / f32(params.m * params.n);
+// ---- mesh.rs and trace.rs: what lies behind the splats ---------------------------------------
+
+// The closest mesh along the pixel's camera ray (set in `main`; triangle NONE where none).
+var<private> surface: SurfaceHit;
+
+// mesh.rs `PreparedTriangle::intersect` (Möller–Trumbore with the edge slack): (t, b1, b2) for
+// t > t_min; t = −1 on a miss. The caller checks t against its t_max.
+fn triangle_intersect(tri: Triangle, ray: Ray) -> vec3<f32> {
+    let miss = vec3<f32>(-1.0, 0.0, 0.0);
+    let p = cross(ray.dir, tri.e2);
+    let det = dot(tri.e1, p);
+    if (abs(det) < 1e-12) {
+        return miss;
     }
-    var out = vec4<f32>(st.radiance + st.transmittance * bg, 1.0 - st.transmittance);
+    let inv = 1.0 / det;
+    let s = ray.origin - tri.p0;
+    let b1 = dot(s, p) * inv;
+    if (!(b1 >= -EDGE_SLACK && b1 <= 1.0 + EDGE_SLACK)) {
+        return miss;
+    }
+    let q = cross(s, tri.e1);
+    let b2 = dot(ray.dir, q) * inv;
+    if (b2 < -EDGE_SLACK || b1 + b2 > 1.0 + EDGE_SLACK) {
+        return miss;
+    }
+    let t = dot(tri.e2, q) * inv;
+    if (!(t > params.t_min)) {
+        return miss;
+    }
+    return vec3<f32>(t, b1, b2);
+}
+
+// v / |v| where that is finite, else `fallback` (glam's `try_normalize`).
+fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let rcp = 1.0 / length(v);
+    return select(fallback, v * rcp, rcp > 0.0 && rcp < 3.0e38);
+}
+
+// mesh.rs `Meshes::closest` and `SurfaceHit::facing`: the interpolated shading normal turned
+// toward the ray (the face normal where interpolation turns it away).
+fn surface_normal(h: SurfaceHit, ray: Ray) -> vec3<f32> {
+    let tri = triangles[h.triangle];
+    let face = normalize_or(cross(tri.e1, tri.e2), vec3<f32>(0.0));
+    let n = normalize_or((1.0 - h.b1 - h.b2) * tri.n0 + h.b1 * tri.n1 + h.b2 * tri.n2, face);
+    let side = select(-1.0, 1.0, dot(ray.dir, face) < 0.0);
+    return select(side * face, side * n, dot(side * n, ray.dir) < 0.0);
+}
+
+// trace.rs `surface_sample` without bounces (mirror and glass bounce on the CPU only, and
+// GpuTracer refuses them): the mesh's colour lit by the world's lights, in slot 0, its shadow
+// rays starting SURFACE_OFFSET × max(1, |x|∞) along the light.
+fn surface_color(ray: Ray, pixel_seed: u32) -> vec3<f32> {
+    let mm = mesh_materials[triangles[surface.triangle].mesh];
+    let x = ray.origin + surface.t * ray.dir;
+    let offset = SURFACE_OFFSET * max(max(max(abs(x.x), abs(x.y)), abs(x.z)), 1.0);
+    return lit_material(mm.shading, mm.color, surface.t, surface_normal(surface, ray), ray, pixel_seed, 0u, offset);
+}
+
+// The sample of a finished frame and its pick: stochastic-n's average; the stochastic pass's
+// accepted pass (or what lies behind); the integrated hits over what lies behind for the others
+// (trace.rs `TraceScene::finish`), depth sampling reporting the depth of its first accepted hit.
+// What lies behind is the background or the lit mesh that clipped the ray (trace.rs `behind`),
+// computed here only, and only where the sample shows it. Lit once here where the method lights
+// once: the accepted pass, and the surface look (L lit at the iso-opacity depth with the
+// integrated normal and the picked particle's material, what lies behind where the threshold
+// was never reached).
+fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    let mesh = surface.triangle != NONE;
+    let mesh_alpha = select(0.0, 1.0, mesh);
+    var need = true;
+    if (stochastic_slots()) {
+        need = st.transmittance < f32(params.m * params.n);
+    } else if (params.method == METHOD_STOCHASTIC_PASS) {
+        need = (st.flags & ACCEPTED) == 0u;
+    }
+    var behind = params.background.xyz;
+    var behind_pick = no_pick();
+    if (mesh) {
+        behind_pick = Pick(surface_normal(surface, ray), surface.t, NONE, 0u, 0u, 0u);
+        if (need) {
+            behind = surface_color(ray, pixel_seed);
+        }
+    }
+    if (stochastic_slots()) {
+        let samples = f32(params.m * params.n);
+        let misses = samples - st.transmittance;
+        sample_pick = behind_pick;
+        if (st.picked != NONE) {
+            sample_pick = Pick(st.normal, st.depth, st.picked, 0u, 0u, 0u);
+        }
+        return vec4<f32>(st.radiance + misses * behind, st.transmittance + misses * mesh_alpha) / samples;
+    }
+    var out = vec4<f32>(st.radiance + st.transmittance * behind, 1.0 - st.transmittance + st.transmittance * mesh_alpha);
     var shade = false;
-    var add_bg = st.transmittance;
+    var add_behind = st.transmittance;
     if (params.method == METHOD_STOCHASTIC_PASS) {
         if ((st.flags & ACCEPTED) == 0u) {
-            sample_pick = no_pick();
-            return vec4<f32>(bg, 0.0);
+            sample_pick = behind_pick;
+            return vec4<f32>(behind, mesh_alpha);
         }
         sample_pick = Pick(st.normal, st.depth, NONE, 0u, 0u, 0u);
         out = vec4<f32>(st.radiance, 1.0);
         shade = params.lit == 1u;
-        add_bg = 0.0;
+        add_behind = 0.0;
     } else {
         sample_pick = no_pick();
         if ((st.flags & HIT) != 0u) {
@@ -749,11 +876,13 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
         }
         if (st.picked != NONE) {
             sample_pick.depth = st.depth;
+        } else if (mesh) {
+            sample_pick = behind_pick;
         }
         if (params.lit == 1u && !volumetric()) {
             if (st.picked == NONE) {
-                sample_pick = no_pick();
-                out = vec4<f32>(bg, 0.0);
+                sample_pick = behind_pick;
+                out = vec4<f32>(behind, mesh_alpha);
             } else {
                 sample_pick.picked = st.picked;
                 shade = true;
@@ -765,7 +894,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
     }
     if (shade) {
         let c = lit(st.radiance, st.picked, st.depth, sample_pick.normal, ray, pixel_seed, 0u);
-        out = vec4<f32>(c + add_bg * bg, out.w);
+        out = vec4<f32>(c + add_behind * behind, out.w);
     }
     return out;
 }
@@ -820,7 +949,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * params.size.x + gid.x;
-    let ray = pixel_ray(gid.x, gid.y);
+    var ray = pixel_ray(gid.x, gid.y);
+    // trace.rs `trace_ray`: the closest mesh clips the ray (the same every dispatch).
+    surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
+    if (params.mesh_root != NONE) {
+        surface = mesh_traverse(ray, false);
+        if (surface.triangle != NONE) {
+            ray.t_max = surface.t;
+        }
+    }
     iterations = 0u;
     let by_pass = params.mode == MODE_PASS;
     var most = 0.0;

@@ -144,7 +144,14 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
     let lighting = &world.lighting;
     if !world.meshes.is_empty() {
-        return unsupported("meshes render on the CPU only so far (--backend cpu)");
+        if !matches!(algorithm, Algorithm::Trace(_)) {
+            return unsupported(
+                "the GPU ray traces meshes; splatting them runs on the CPU only so far (--backend cpu)",
+            );
+        }
+        if world.meshes.materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0) {
+            return unsupported("mirror and glass meshes bounce on the CPU only so far: use --backend cpu");
+        }
     }
     if lighting.is_on() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
         return unsupported("the GPU lights with max-density-plane normals only: use --normals plane or --backend cpu");
@@ -199,7 +206,8 @@ fn render_gpu(
     let Loaded { scene, camera, lighting, settings, .. } = world;
     match algorithm {
         Algorithm::Trace(method) => {
-            let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?;
+            let trace =
+                TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(world.meshes.clone());
             let pipeline = splat_gpu::TracePipeline::new(ctx)?;
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
             Ok(tracer.render(camera, method, frames)?.0)

@@ -550,7 +550,7 @@ fn render_meshes_with_each_pipeline() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("not a raster method"), "{}", stderr(&o));
     let o = splat(&["render", "fixtures/worlds/demo-meshes.toml", "--backend", "gpu", "-o", "never.png"]);
-    assert!(!o.status.success() && stderr(&o).contains("meshes render on the CPU only"), "{}", stderr(&o));
+    assert!(!o.status.success() && stderr(&o).contains("bounce on the CPU only"), "{}", stderr(&o));
     let bad = scratch("missing-mesh.toml");
     std::fs::write(&bad, "[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nfile = \"nowhere.obj\"\n").unwrap();
     let o = splat(&["render", bad.to_str().unwrap(), "-o", scratch("never.png").to_str().unwrap()]);

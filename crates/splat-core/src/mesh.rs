@@ -195,7 +195,7 @@ impl MeshMaterial {
 /// Barycentric slack of the edge tests: a ray through the edge two triangles share hits at
 /// least one of them despite rounding (Möller–Trumbore alone is not watertight; a hit just
 /// outside the edge lands on the neighbour's plane, so two hits there agree).
-const EDGE_SLACK: f32 = 1e-6;
+pub const EDGE_SLACK: f32 = 1e-6;
 
 /// One triangle ready for intersection: a vertex, two edges, the vertex normals and its mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]

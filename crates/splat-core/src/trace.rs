@@ -942,8 +942,11 @@ impl<'a> TraceScene<'a> {
 /// How far from a mesh surface point `x` a secondary or shadow ray starts looking for meshes:
 /// far enough that the surface does not hit itself in f32, relative to the point's magnitude.
 fn surface_offset(x: Vec3) -> f32 {
-    1e-4 * x.abs().max_element().max(1.0)
+    SURFACE_OFFSET * x.abs().max_element().max(1.0)
 }
+
+/// [`surface_offset`] relative to max(1, the largest coordinate's magnitude).
+pub const SURFACE_OFFSET: f32 = 1e-4;
 
 /// One straight piece of a light path: the ray clipped at the closest mesh, the method and
 /// decisions that sample the splats in front of it, and what lies behind them (filled when a

@@ -7,7 +7,7 @@ use splat_core::Camera;
 use splat_core::Scene;
 use splat_core::bvh::BvhNode;
 use splat_core::frame::Frames;
-use splat_core::lighting::{LightKind, Lighting, Look, Shadows};
+use splat_core::lighting::{LightKind, Lighting, Look, Material, Shadows};
 use splat_core::particle::sh_coeff_count;
 use splat_core::rng::RngScheme;
 use splat_core::trace::TraceScene;
@@ -240,33 +240,118 @@ pub struct Params {
     pub set_count: u32,
     /// Iso-opacity threshold on transmittance.
     pub iso_threshold: f32,
-    /// Padding.
-    pub pad3: u32,
+    /// Index in the node buffer of the mesh BVH's root ([`nodes`]), [`NO_MESHES`] without meshes.
+    pub mesh_root: u32,
     /// Padding.
     pub pad4: u32,
     /// Padding.
     pub pad5: u32,
 }
 
+/// [`Params::mesh_root`] of a scene without meshes (WGSL `NONE`).
+pub const NO_MESHES: u32 = u32::MAX;
+
+/// One mesh triangle in the mesh BVH's leaf order (WGSL `Triangle`, 96 bytes):
+/// [`splat_core::mesh::PreparedTriangle`].
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuTriangle {
+    /// Vertex p₀.
+    pub p0: [f32; 3],
+    /// Index of its mesh (its material).
+    pub mesh: u32,
+    /// p₁ − p₀.
+    pub e1: [f32; 3],
+    /// Padding.
+    pub pad0: u32,
+    /// p₂ − p₀.
+    pub e2: [f32; 3],
+    /// Padding.
+    pub pad1: u32,
+    /// Vertex normal at p₀.
+    pub n0: [f32; 3],
+    /// Padding.
+    pub pad2: u32,
+    /// Vertex normal at p₁.
+    pub n1: [f32; 3],
+    /// Padding.
+    pub pad3: u32,
+    /// Vertex normal at p₂.
+    pub n2: [f32; 3],
+    /// Padding.
+    pub pad4: u32,
+}
+
+/// One mesh's material (WGSL `MeshMaterial`, 80 bytes): its base colour and the splat material
+/// model's shares (mirror and glass bounce on the CPU only).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuMeshMaterial {
+    /// Base colour c.
+    pub color: [f32; 3],
+    /// Padding.
+    pub pad: u32,
+    /// Emissive, ambient, diffuse and specular shares (`first` unused).
+    pub shading: GpuMaterial,
+}
+
 /// The material buffer of a lighting: one entry per splat set.
 pub fn materials(lighting: &Lighting) -> Vec<GpuMaterial> {
-    lighting
-        .sets
+    lighting.sets.iter().map(|s| gpu_material(&s.material, s.first)).collect()
+}
+
+fn gpu_material(m: &Material, first: u32) -> GpuMaterial {
+    GpuMaterial {
+        emissive: m.emissive.to_array(),
+        first,
+        ambient: m.ambient.to_array(),
+        shininess: m.shininess,
+        diffuse: m.diffuse.to_array(),
+        emissive_only: u32::from(m.is_emissive()),
+        specular: m.specular.to_array(),
+        pad: 0,
+    }
+}
+
+/// The triangles of the trace scene's meshes in their BVH's leaf order (one unused entry when
+/// there are none: a binding cannot be empty).
+pub fn triangles(trace: &TraceScene) -> Vec<GpuTriangle> {
+    let mut v: Vec<GpuTriangle> = trace
+        .meshes()
+        .triangles()
         .iter()
-        .map(|s| {
-            let m = &s.material;
-            GpuMaterial {
-                emissive: m.emissive.to_array(),
-                first: s.first,
-                ambient: m.ambient.to_array(),
-                shininess: m.shininess,
-                diffuse: m.diffuse.to_array(),
-                emissive_only: u32::from(m.is_emissive()),
-                specular: m.specular.to_array(),
-                pad: 0,
+        .map(|t| {
+            let [n0, n1, n2] = t.normals.map(|n| n.to_array());
+            GpuTriangle {
+                p0: t.p0.to_array(),
+                mesh: t.mesh,
+                e1: t.e1.to_array(),
+                e2: t.e2.to_array(),
+                n0,
+                n1,
+                n2,
+                ..GpuTriangle::default()
             }
         })
-        .collect()
+        .collect();
+    if v.is_empty() {
+        v.push(GpuTriangle::default());
+    }
+    v
+}
+
+/// The material of each mesh (one unused entry when there are none).
+pub fn mesh_materials(trace: &TraceScene) -> Vec<GpuMeshMaterial> {
+    let mut v: Vec<GpuMeshMaterial> = trace
+        .meshes()
+        .materials()
+        .iter()
+        .map(|m| GpuMeshMaterial { color: m.color.to_array(), pad: 0, shading: gpu_material(&m.shading, 0) })
+        .collect();
+    if v.is_empty() {
+        v.push(GpuMeshMaterial::default());
+    }
+    v
 }
 
 /// The light buffer of a lighting (one unused entry when it has none: a binding cannot be
@@ -324,12 +409,22 @@ pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
 
 /// The BVH nodes of a scene.
 pub fn nodes(trace: &TraceScene) -> Vec<GpuNode> {
-    trace
-        .bvh()
-        .nodes
-        .iter()
-        .map(|n: &BvhNode| GpuNode { min: n.min, first: n.first, max: n.max, count: n.count })
-        .collect()
+    let gpu = |offset: u32| {
+        move |n: &BvhNode| {
+            // An inner node's `first` is its first child's index; a leaf's is a primitive's.
+            let first = if n.count == 0 { n.first + offset } else { n.first };
+            GpuNode { min: n.min, first, max: n.max, count: n.count }
+        }
+    };
+    let mut v: Vec<GpuNode> = trace.bvh().nodes.iter().map(gpu(0)).collect();
+    let offset = v.len() as u32;
+    v.extend(trace.meshes().bvh().nodes.iter().map(gpu(offset)));
+    v
+}
+
+/// Where [`nodes`] puts the mesh BVH's root: after the splat BVH's nodes, or [`NO_MESHES`].
+pub fn mesh_root(trace: &TraceScene) -> u32 {
+    if trace.meshes().is_empty() { NO_MESHES } else { trace.bvh().nodes.len() as u32 }
 }
 
 /// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle.
@@ -422,6 +517,7 @@ fn lighting_params(trace: &TraceScene) -> Params {
         light_count: l.lights.len() as u32,
         set_count: l.sets.len() as u32,
         iso_threshold: trace.settings().iso_threshold,
+        mesh_root: mesh_root(trace),
         ..Params::default()
     }
 }
@@ -567,11 +663,18 @@ mod tests {
                 light_count,
                 set_count,
                 iso_threshold,
-                pad3,
+                mesh_root,
                 pad4,
                 pad5
             ]
         );
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            GpuTriangle,
+            "Triangle",
+            [p0, mesh, e1, pad0, e2, pad1, n0, pad2, n1, pad3, n2, pad4]
+        );
+        assert_mirrors!(crate::TRACE_WGSL, GpuMeshMaterial, "MeshMaterial", [color, pad, shading]);
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
     }
 
@@ -605,6 +708,9 @@ mod tests {
                 "LIGHT_DIRECTIONAL" = LIGHT_DIRECTIONAL,
                 "SH_C0" = sh::SH_C0,
                 "SH_C1" = sh::SH_C1,
+                "NONE" = NO_MESHES,
+                "EDGE_SLACK" = splat_core::mesh::EDGE_SLACK,
+                "SURFACE_OFFSET" = splat_core::trace::SURFACE_OFFSET,
             ]
         );
         let f64s = |v: &[f32]| v.iter().map(|&c| f64::from(c)).collect::<Vec<_>>();

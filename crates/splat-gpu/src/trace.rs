@@ -113,6 +113,8 @@ impl TracePipeline {
                 storage(7, true),
                 storage(8, true),
                 storage(9, false),
+                storage(10, true),
+                storage(11, true),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -139,6 +141,8 @@ pub struct GpuTracer<'a> {
     sh: wgpu::Buffer,
     materials: wgpu::Buffer,
     lights: wgpu::Buffer,
+    triangles: wgpu::Buffer,
+    mesh_materials: wgpu::Buffer,
 }
 
 impl<'a> GpuTracer<'a> {
@@ -150,6 +154,11 @@ impl<'a> GpuTracer<'a> {
             return Err(GpuError::Unsupported(
                 "lit GPU ray tracing computes max-density-plane normals only: use --normals plane or --backend cpu"
                     .into(),
+            ));
+        }
+        if trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0) {
+            return Err(GpuError::Unsupported(
+                "mirror and glass meshes bounce on the CPU only so far: use --backend cpu".into(),
             ));
         }
         let particles = layout::particles(trace);
@@ -169,6 +178,8 @@ impl<'a> GpuTracer<'a> {
             sh: ctx.upload("sh", bytemuck::cast_slice(&sh)),
             materials: ctx.upload("materials", bytemuck::cast_slice(&layout::materials(trace.lighting()))),
             lights: ctx.upload("lights", bytemuck::cast_slice(&layout::lights(trace.lighting()))),
+            triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace))),
+            mesh_materials: ctx.upload("mesh materials", bytemuck::cast_slice(&layout::mesh_materials(trace))),
         })
     }
 
@@ -321,6 +332,8 @@ impl Run<'_> {
                 wgpu::BindGroupEntry { binding: 7, resource: tracer.materials.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 8, resource: tracer.lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 9, resource: out_pick.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 10, resource: tracer.triangles.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 11, resource: tracer.mesh_materials.as_entire_binding() },
             ],
         });
         let mut gpu_time = Duration::ZERO;

@@ -149,6 +149,79 @@ fn depth_normal_and_picks_equal_the_cpu() {
     }
 }
 
+/// Meshes on the GPU ray tracer (splat_core::mesh, without mirror and glass, which bounce on the
+/// CPU only): a lit back wall behind the sheets, a matte sphere among them and a quad that
+/// shadows them. One frame of every method, for three shadow kinds and both looks, equals the
+/// CPU frame as [`one_lit_frame_equals_the_cpu_frame`] does, and so do depth, normal and pick
+/// (the mesh's where the splats stay below the iso threshold); the meshes change every frame
+/// far beyond the tolerance. Mirror and glass are refused with the reason.
+#[test]
+fn one_frame_among_meshes_equals_the_cpu_frame() {
+    use glam::{Affine3A, Quat, Vec3};
+    use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 32, 24);
+    let place = |mesh: TriangleMesh, scale: f32, facing: Vec3, at: Vec3| {
+        let r = Quat::from_rotation_arc(Vec3::Y, facing.normalize());
+        mesh.transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(scale), r, at))
+    };
+    let matte = |r: f32, g: f32, b: f32| MeshMaterial { color: Vec3::new(r, g, b), ..MeshMaterial::default() };
+    let meshes = Meshes::new(&[
+        (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
+        (place(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3)), matte(0.9, 0.3, 0.2)),
+        (place(TriangleMesh::plane(), 0.4, Vec3::new(1.0, 1.0, 1.5), Vec3::new(0.9, 0.9, 1.4)), matte(0.5, 0.5, 0.5)),
+    ])
+    .unwrap();
+    let sorted = Shadows::Sorted { k: 8, threshold: 0.8, colored: 0.5 };
+    let cases = [(sorted, Look::Surface), (Shadows::Stochastic, Look::Surface), (Shadows::Exact, Look::Volumetric)];
+    for (shadows, look) in cases {
+        let lit = lighting(shadows, look);
+        let bare = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lit.clone()).unwrap();
+        let trace = TraceScene::new(&scene, RenderSettings::default())
+            .unwrap()
+            .with_lighting(lit)
+            .unwrap()
+            .with_meshes(meshes.clone());
+        let tracer = tracer(ctx, &trace);
+        for (name, method) in methods() {
+            let frames = Frames { count: 1, seed: 11, ..Frames::default() };
+            let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
+            let gpu = gpu_run(&tracer, &camera, &method, frames);
+            let without = render_frames(&bare, &camera, &method, &frames, &|_| {}).unwrap();
+            let effect = max_difference(cpu.mean.data(), without.mean.data());
+            assert!(effect > 0.1, "{shadows:?} {look:?} {name}: the meshes change the frame by {effect} only");
+            let (mut near, mut bad) = (0, Vec::new());
+            let pixels = (camera.width * camera.height) as usize;
+            for p in 0..pixels {
+                let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
+                let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
+                let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
+                let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
+                if colour.is_nan()
+                    || colour > LIT_TOLERANCE
+                    || !depth
+                    || normal > 1e-3
+                    || cpu.picked[p] != gpu.picked[p]
+                {
+                    let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+                    let gap = splat_tests::flips::trace_gap(&trace, &camera, &method, &frames, x, y);
+                    if gap < FLIP_GAP { near += 1 } else { bad.push((x, y, colour, gap)) }
+                }
+            }
+            eprintln!("meshes {shadows:?} {look:?} {name}: {near} pixels differ by a decision near its threshold");
+            assert!(bad.len() * 100 <= pixels, "{shadows:?} {look:?} {name}: pixels (x, y, difference, gap) {bad:?}");
+        }
+    }
+    let mirror =
+        Meshes::new(&[(TriangleMesh::plane(), MeshMaterial { mirror: 0.5, ..MeshMaterial::default() })]).unwrap();
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_meshes(mirror);
+    match GpuTracer::new(ctx, trace_pipeline(ctx), &trace) {
+        Err(GpuError::Unsupported(m)) => assert!(m.contains("bounce on the CPU only"), "{m}"),
+        Err(e) => panic!("wrong error: {e}"),
+        Ok(_) => panic!("mirror meshes accepted on the GPU"),
+    }
+}
+
 fn max_difference(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
 }
