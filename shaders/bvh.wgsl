@@ -1,7 +1,9 @@
-// BVH traversal of crates/splat-core/src/bvh.rs (`Bvh::traverse`), prepended to trace.wgsl:
-// a stack traversal that yields the leaves a ray overlaps, nearer child first, and lets the
-// caller shrink t_max between leaves. It reads `nodes`, `params.t_min` and counts loop
-// iterations in `iterations`, all declared by the including kernel.
+// BVH traversal of crates/splat-core/src/bvh.rs (`Bvh::traverse`), prepended to the kernels
+// that trace rays (trace.wgsl, mesh_prepass.wgsl): a stack traversal that yields the leaves a
+// ray overlaps, nearer child first, and lets the caller shrink t_max between leaves; the leaf
+// loops are the callers' (trace.wgsl `traverse`, mesh.wgsl `mesh_traverse`). It reads `nodes`,
+// `params.t_min` and counts loop iterations in `iterations`, all declared by the including
+// kernel.
 
 // One BVH node (32 bytes), mirrored by splat_core::bvh::BvhNode.
 struct Node {
@@ -12,7 +14,6 @@ struct Node {
 }
 
 const STACK_DEPTH: u32 = 64u;
-const NONE: u32 = 0xffffffffu;
 const FAR: f32 = 3.0e38;
 
 // Entry distance into the node's box within (t_min, t_max], FAR when the ray misses it.
@@ -83,86 +84,4 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
         }
     }
     return NONE; // unreachable: the loop only ends by returning
-}
-
-// Bvh::traverse: every particle of every leaf the ray overlaps before t_max, nearer child
-// first, handed to `visit` (the including kernel's twin of the CPU closure), which returns the
-// new t_max. The leaf loop is nested in the node loop, as on the CPU: each loop statement then
-// runs few iterations per ray, which keeps lavapipe's loop limiter bound (see LOOP_BUDGET)
-// meaningful.
-fn traverse(ray: Ray, visitor: u32) {
-    let inv = safe_inverse(ray.dir);
-    var t_max = ray.t_max;
-    traversal_begin(0u, ray.origin, inv, t_max);
-    loop {
-        iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
-        if (node == NONE) {
-            break;
-        }
-        let nd = nodes[node];
-        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
-            iterations += 1u;
-            t_max = visit(visitor, ray, leaf, t_max);
-        }
-    }
-}
-
-// `traverse` for shadow rays, handing leaves to `visit_shadow`. A second copy of the loop, not
-// a third visitor family of `visit`: GPU compilers inline every function, so each traversal
-// call site carries the bodies of all the visitors its `visit` can reach, and the shadow ray is
-// traced from inside the primary methods.
-fn traverse_shadow(ray: Ray) {
-    let inv = safe_inverse(ray.dir);
-    var t_max = ray.t_max;
-    traversal_begin(0u, ray.origin, inv, t_max);
-    loop {
-        iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
-        if (node == NONE) {
-            break;
-        }
-        let nd = nodes[node];
-        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
-            iterations += 1u;
-            t_max = visit_shadow(ray, leaf, t_max);
-        }
-    }
-}
-
-// ---- mesh.rs: the closest triangle, and whether any lies on a shadow ray ---------------------
-
-// Meshes::closest (any_hit false) and Meshes::occludes (any_hit true) over the mesh BVH: every
-// triangle of every leaf the ray overlaps, Möller–Trumbore with the core's edge slack; the
-// closest hit within (t_min, t_max], ties to the lower leaf index, or the first hit within
-// (t_min, t_max). One loop for both: the shadow ray and the camera ray call it at one site each.
-fn mesh_traverse(ray: Ray, any_hit: bool) -> SurfaceHit {
-    var best = SurfaceHit(FAR, NONE, 0.0, 0.0);
-    let inv = safe_inverse(ray.dir);
-    var t_max = ray.t_max;
-    traversal_begin(params.mesh_root, ray.origin, inv, t_max);
-    loop {
-        iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
-        if (node == NONE) {
-            break;
-        }
-        let nd = nodes[node];
-        for (var k = nd.first; k < nd.first + nd.count; k++) {
-            iterations += 1u;
-            let h = triangle_intersect(triangles[k], ray);
-            if (h.x < 0.0) {
-                continue;
-            }
-            if (any_hit) {
-                if (h.x < ray.t_max) {
-                    return SurfaceHit(h.x, k, h.y, h.z);
-                }
-            } else if (h.x <= t_max && (h.x < best.t || (h.x == best.t && k < best.triangle))) {
-                best = SurfaceHit(h.x, k, h.y, h.z);
-                t_max = h.x;
-            }
-        }
-    }
-    return best;
 }

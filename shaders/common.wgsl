@@ -42,3 +42,6 @@ fn kernel_response(d2: f32, degree: u32) -> f32 {
     }
     return exp(-4.5 * un);
 }
+
+// No index: no particle, splat, triangle or node (u32::MAX).
+const NONE: u32 = 0xffffffffu;

@@ -6,6 +6,9 @@
 @group(0) @binding(2) var target_color: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> out_mean: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> out_var: array<vec4<f32>>;
+// The mesh pre-pass's colour and distance per pixel (mesh_prepass.wgsl), read where
+// params.meshes is 1.
+@group(0) @binding(5) var<storage, read> behind: array<vec4<f32>>;
 
 @compute @workgroup_size(8, 8, 1)
 fn fold(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -14,7 +17,14 @@ fn fold(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let index = gid.y * params.size.x + gid.x;
     var s = textureLoad(target_color, vec2<i32>(gid.xy), 0);
-    if (params.mode == MODE_UNDER) {
+    if (params.meshes == 1u) {
+        // Every draw started from transparent black: what lies behind (a mesh or the
+        // background) shows through the remaining transmittance, the mesh covering it
+        // (vk_gaussian_splatting Lighting §1.5.3, the mesh blended with 1 − α_dst).
+        let b = behind[index];
+        let covered = select(0.0, 1.0, b.w < 3.0e38);
+        s = vec4<f32>(s.xyz + (1.0 - s.w) * b.xyz, s.w + (1.0 - s.w) * covered);
+    } else if (params.mode == MODE_UNDER) {
         // Front to back left premultiplied colour and coverage: the background shows through
         // the remaining transmittance.
         s = vec4<f32>(s.xyz + (1.0 - s.w) * params.background.xyz, s.w);

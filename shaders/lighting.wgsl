@@ -185,7 +185,11 @@ fn shade_unshadowed(c: vec3<f32>, id: u32, origin: vec3<f32>, dir: vec3<f32>, t:
     if (params.lit == 0u) {
         return c;
     }
-    let m = material_of(id);
+    return shade_material_unshadowed(material_of(id), c, origin, dir, t, n);
+}
+
+// `shade_unshadowed` with the material given (a mesh's, lit whatever the splats' sets say).
+fn shade_material_unshadowed(m: Material, c: vec3<f32>, origin: vec3<f32>, dir: vec3<f32>, t: f32, n: vec3<f32>) -> vec3<f32> {
     if (m.emissive_only == 1u) {
         return c;
     }

@@ -1,6 +1,6 @@
 // Types shared by the raster kernels (prepended to raster.wgsl, splat.wgsl and fold.wgsl).
 
-// Everything fixed for one camera (176 bytes), mirrored by splat_gpu::RasterParams.
+// Everything fixed for one camera (192 bytes), mirrored by splat_gpu::RasterParams.
 struct RasterParams {
     cam_row0: vec4<f32>,
     cam_row1: vec4<f32>,
@@ -31,8 +31,15 @@ struct RasterParams {
     look: u32,
     light_count: u32,
     set_count: u32,
+    // Ray range of the mesh pre-pass (settings.rs `t_min`, `t_max`).
+    t_min: f32,
+    t_max: f32,
+    // 1 when the scene has meshes: the splats are depth tested against the mesh pre-pass and
+    // the fold blends its colour under them.
+    meshes: u32,
     pad1: u32,
     pad2: u32,
+    pad3: u32,
 }
 
 // What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).
@@ -58,7 +65,6 @@ struct Splat {
     rect: vec4<u32>,
 }
 
-const NONE: u32 = 0xffffffffu;
 // params.mode: which draw the splatting pipeline runs (splat_gpu::raster::Draw, checked by a test).
 const MODE_OVER: u32 = 0u;
 const MODE_UNDER: u32 = 1u;

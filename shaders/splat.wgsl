@@ -9,6 +9,22 @@
 @group(0) @binding(2) var<storage, read> splats: array<Splat>;
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;
+// Per pixel the mesh pre-pass's colour and distance (mesh_prepass.wgsl), read where
+// params.meshes is 1.
+@group(0) @binding(5) var<storage, read> behind: array<vec4<f32>>;
+
+// The depth test against the meshes (raster/mod.rs `Rasterizer::sorted` keeps fragments with
+// t < t_mesh, the stochastic methods' sample buffers those with t ≤ t_mesh): whether splat s's
+// fragment at pixel position p lies behind the pixel's mesh, at distance z |d_cam|.
+fn behind_mesh(s: Splat, p: vec2<f32>, at_mesh: bool) -> bool {
+    if (params.meshes == 0u) {
+        return false;
+    }
+    let pixel = vec2<u32>(p);
+    let t_mesh = behind[pixel.y * params.size.x + pixel.x].w;
+    let t = s.depth * stretch(p);
+    return t > t_mesh || (at_mesh && t == t_mesh);
+}
 
 // View depth z maps to the depth buffer as z · 2⁻¹⁰⁰: a power of two, so the map is exact and
 // keeps the f32 order of every depth (z ≥ 0.2 stays a normal float, z up to ~10³⁰ fits in [0, 1]).
@@ -52,7 +68,7 @@ fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32
 fn fs_sorted(in: VertexOut) -> @location(0) vec4<f32> {
     let s = splats[in.splat];
     let alpha = splat_alpha(s, in.position.xy, params);
-    if (alpha <= 0.0) {
+    if (alpha <= 0.0 || behind_mesh(s, in.position.xy, true)) {
         discard;
     }
     if (params.mode == MODE_UNDER) {
@@ -74,7 +90,7 @@ fn accepted_splat(in: VertexOut) -> Splat {
     let pixel = vec2<u32>(in.position.xy);
     let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
     let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, 0u)))) - frame.u_shift;
-    if (!(u < alpha)) {
+    if (!(u < alpha) || behind_mesh(s, in.position.xy, false)) {
         discard;
     }
     return s;

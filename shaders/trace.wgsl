@@ -67,38 +67,6 @@ struct Params {
     pad5: u32,
 }
 
-// One mesh triangle in the mesh BVH's leaf order (96 bytes), mirrored by splat_gpu::GpuTriangle
-// (mesh.rs `PreparedTriangle`).
-struct Triangle {
-    p0: vec3<f32>,
-    mesh: u32,
-    e1: vec3<f32>,
-    pad0: u32,
-    e2: vec3<f32>,
-    pad1: u32,
-    n0: vec3<f32>,
-    pad2: u32,
-    n1: vec3<f32>,
-    pad3: u32,
-    n2: vec3<f32>,
-    pad4: u32,
-}
-
-// A mesh's base colour and shading shares (80 bytes), mirrored by splat_gpu::GpuMeshMaterial.
-struct MeshMaterial {
-    color: vec3<f32>,
-    pad: u32,
-    shading: Material,
-}
-
-// Where a ray meets a mesh: distance, leaf-order triangle (NONE: no hit) and barycentrics.
-struct SurfaceHit {
-    t: f32,
-    triangle: u32,
-    b1: f32,
-    b2: f32,
-}
-
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
 // Eq. 3 so far, where the next pass starts, and for the surface look the integrated normal and
 // the iso-opacity depth with its particle (trace.rs `Integrator`).
@@ -139,8 +107,7 @@ const SHADOWS_NONE: u32 = 0u;
 const SHADOWS_SORTED: u32 = 1u;
 const SHADOWS_STOCHASTIC: u32 = 2u;
 const SHADOWS_EXACT: u32 = 3u;
-// mesh.rs `EDGE_SLACK` and trace.rs `SURFACE_OFFSET`.
-const EDGE_SLACK: f32 = 1e-6;
+// trace.rs `SURFACE_OFFSET`.
 const SURFACE_OFFSET: f32 = 1e-4;
 // lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
 // invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
@@ -274,6 +241,53 @@ fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
 
 fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
     return sh_eval(id, params.sh_degree, dir);
+}
+
+// ---- bvh.rs: the splats' traversals -----------------------------------------------------------
+
+// Bvh::traverse: every particle of every leaf the ray overlaps before t_max, nearer child
+// first, handed to `visit` (the including kernel's twin of the CPU closure), which returns the
+// new t_max. The leaf loop is nested in the node loop, as on the CPU: each loop statement then
+// runs few iterations per ray, which keeps lavapipe's loop limiter bound (see LOOP_BUDGET)
+// meaningful.
+fn traverse(ray: Ray, visitor: u32) {
+    let inv = safe_inverse(ray.dir);
+    var t_max = ray.t_max;
+    traversal_begin(0u, ray.origin, inv, t_max);
+    loop {
+        iterations += 1u;
+        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        if (node == NONE) {
+            break;
+        }
+        let nd = nodes[node];
+        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+            iterations += 1u;
+            t_max = visit(visitor, ray, leaf, t_max);
+        }
+    }
+}
+
+// `traverse` for shadow rays, handing leaves to `visit_shadow`. A second copy of the loop, not
+// a third visitor family of `visit`: GPU compilers inline every function, so each traversal
+// call site carries the bodies of all the visitors its `visit` can reach, and the shadow ray is
+// traced from inside the primary methods.
+fn traverse_shadow(ray: Ray) {
+    let inv = safe_inverse(ray.dir);
+    var t_max = ray.t_max;
+    traversal_begin(0u, ray.origin, inv, t_max);
+    loop {
+        iterations += 1u;
+        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        if (node == NONE) {
+            break;
+        }
+        let nd = nodes[node];
+        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+            iterations += 1u;
+            t_max = visit_shadow(ray, leaf, t_max);
+        }
+    }
 }
 
 // ---- trace.rs: stochastic (Algorithm 1) and its N-sample extension (§3.5) ---------------------
@@ -543,7 +557,7 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u
     if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
         return vec3<f32>(1.0);
     }
-    if (params.mesh_root != NONE && mesh_traverse(shadow, true).triangle != NONE) {
+    if (params.mesh_root != NONE && mesh_traverse(params.mesh_root, shadow, true).triangle != NONE) {
         return vec3<f32>(0.0);
     }
     // One traversal call for every kind (see traverse_shadow).
@@ -770,49 +784,6 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
 // The closest mesh along the pixel's camera ray (set in `main`; triangle NONE where none).
 var<private> surface: SurfaceHit;
 
-// mesh.rs `PreparedTriangle::intersect` (Möller–Trumbore with the edge slack): (t, b1, b2) for
-// t > t_min; t = −1 on a miss. The caller checks t against its t_max.
-fn triangle_intersect(tri: Triangle, ray: Ray) -> vec3<f32> {
-    let miss = vec3<f32>(-1.0, 0.0, 0.0);
-    let p = cross(ray.dir, tri.e2);
-    let det = dot(tri.e1, p);
-    if (abs(det) < 1e-12) {
-        return miss;
-    }
-    let inv = 1.0 / det;
-    let s = ray.origin - tri.p0;
-    let b1 = dot(s, p) * inv;
-    if (!(b1 >= -EDGE_SLACK && b1 <= 1.0 + EDGE_SLACK)) {
-        return miss;
-    }
-    let q = cross(s, tri.e1);
-    let b2 = dot(ray.dir, q) * inv;
-    if (b2 < -EDGE_SLACK || b1 + b2 > 1.0 + EDGE_SLACK) {
-        return miss;
-    }
-    let t = dot(tri.e2, q) * inv;
-    if (!(t > params.t_min)) {
-        return miss;
-    }
-    return vec3<f32>(t, b1, b2);
-}
-
-// v / |v| where that is finite, else `fallback` (glam's `try_normalize`).
-fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
-    let rcp = 1.0 / length(v);
-    return select(fallback, v * rcp, rcp > 0.0 && rcp < 3.0e38);
-}
-
-// mesh.rs `Meshes::closest` and `SurfaceHit::facing`: the interpolated shading normal turned
-// toward the ray (the face normal where interpolation turns it away).
-fn surface_normal(h: SurfaceHit, ray: Ray) -> vec3<f32> {
-    let tri = triangles[h.triangle];
-    let face = normalize_or(cross(tri.e1, tri.e2), vec3<f32>(0.0));
-    let n = normalize_or((1.0 - h.b1 - h.b2) * tri.n0 + h.b1 * tri.n1 + h.b2 * tri.n2, face);
-    let side = select(-1.0, 1.0, dot(ray.dir, face) < 0.0);
-    return select(side * face, side * n, dot(side * n, ray.dir) < 0.0);
-}
-
 // trace.rs `surface_sample` without bounces (mirror and glass bounce on the CPU only, and
 // GpuTracer refuses them): the mesh's colour lit by the world's lights, in slot 0, its shadow
 // rays starting SURFACE_OFFSET × max(1, |x|∞) along the light.
@@ -953,7 +924,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // trace.rs `trace_ray`: the closest mesh clips the ray (the same every dispatch).
     surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
     if (params.mesh_root != NONE) {
-        surface = mesh_traverse(ray, false);
+        surface = mesh_traverse(params.mesh_root, ray, false);
         if (surface.triangle != NONE) {
             ray.t_max = surface.t;
         }

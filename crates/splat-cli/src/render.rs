@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
+use splat_core::raster::RasterMethod;
 use splat_core::trace::TraceScene;
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
 use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
@@ -144,13 +145,18 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
     let lighting = &world.lighting;
     if !world.meshes.is_empty() {
-        if !matches!(algorithm, Algorithm::Trace(_)) {
-            return unsupported(
-                "the GPU ray traces meshes; splatting them runs on the CPU only so far (--backend cpu)",
-            );
-        }
-        if world.meshes.materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0) {
-            return unsupported("mirror and glass meshes bounce on the CPU only so far: use --backend cpu");
+        let bounces = world.meshes.materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
+        match algorithm {
+            Algorithm::Trace(_) if bounces => {
+                return unsupported("mirror and glass meshes bounce on the CPU only so far: use --backend cpu");
+            }
+            Algorithm::Raster(RasterMethod::Sorted { .. }, _) if lighting.is_on() => {
+                return unsupported("lit raster-sorted among meshes runs on the CPU only so far: use --backend cpu");
+            }
+            Algorithm::Raster(..) if args.depth.is_some() || args.normal.is_some() => {
+                return unsupported("among meshes the GPU rasterizer writes colour only: add --backend cpu");
+            }
+            _ => {}
         }
     }
     if lighting.is_on() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
@@ -214,7 +220,8 @@ fn render_gpu(
         }
         Algorithm::Raster(method, raster_settings) => {
             let pipes = splat_gpu::RasterPipelines::new(ctx)?;
-            let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?;
+            let gpu_scene =
+                splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, &world.meshes)?;
             let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
             let mut out = raster.render(method, frames)?.0;
             // Lit sorted splatting already ran on the tile rasterizer, depth and normal included.

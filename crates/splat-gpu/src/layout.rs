@@ -5,9 +5,10 @@ use crate::trace::MethodParams;
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::Scene;
-use splat_core::bvh::BvhNode;
+use splat_core::bvh::{Bvh, BvhNode};
 use splat_core::frame::Frames;
 use splat_core::lighting::{LightKind, Lighting, Look, Material, Shadows};
+use splat_core::mesh::Meshes;
 use splat_core::particle::sh_coeff_count;
 use splat_core::rng::RngScheme;
 use splat_core::trace::TraceScene;
@@ -289,8 +290,8 @@ pub struct GpuTriangle {
 pub struct GpuMeshMaterial {
     /// Base colour c.
     pub color: [f32; 3],
-    /// Padding.
-    pub pad: u32,
+    /// mirror + transmission: the share the raster pipeline shades with the background.
+    pub reflective: f32,
     /// Emissive, ambient, diffuse and specular shares (`first` unused).
     pub shading: GpuMaterial,
 }
@@ -315,9 +316,8 @@ fn gpu_material(m: &Material, first: u32) -> GpuMaterial {
 
 /// The triangles of the trace scene's meshes in their BVH's leaf order (one unused entry when
 /// there are none: a binding cannot be empty).
-pub fn triangles(trace: &TraceScene) -> Vec<GpuTriangle> {
-    let mut v: Vec<GpuTriangle> = trace
-        .meshes()
+pub fn triangles(meshes: &Meshes) -> Vec<GpuTriangle> {
+    let mut v: Vec<GpuTriangle> = meshes
         .triangles()
         .iter()
         .map(|t| {
@@ -341,12 +341,15 @@ pub fn triangles(trace: &TraceScene) -> Vec<GpuTriangle> {
 }
 
 /// The material of each mesh (one unused entry when there are none).
-pub fn mesh_materials(trace: &TraceScene) -> Vec<GpuMeshMaterial> {
-    let mut v: Vec<GpuMeshMaterial> = trace
-        .meshes()
+pub fn mesh_materials(meshes: &Meshes) -> Vec<GpuMeshMaterial> {
+    let mut v: Vec<GpuMeshMaterial> = meshes
         .materials()
         .iter()
-        .map(|m| GpuMeshMaterial { color: m.color.to_array(), pad: 0, shading: gpu_material(&m.shading, 0) })
+        .map(|m| GpuMeshMaterial {
+            color: m.color.to_array(),
+            reflective: m.mirror + m.transmission,
+            shading: gpu_material(&m.shading, 0),
+        })
         .collect();
     if v.is_empty() {
         v.push(GpuMeshMaterial::default());
@@ -409,17 +412,22 @@ pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
 
 /// The BVH nodes of a scene.
 pub fn nodes(trace: &TraceScene) -> Vec<GpuNode> {
-    let gpu = |offset: u32| {
-        move |n: &BvhNode| {
-            // An inner node's `first` is its first child's index; a leaf's is a primitive's.
+    let mut v = bvh_nodes(trace.bvh(), 0);
+    v.extend(bvh_nodes(trace.meshes().bvh(), v.len() as u32));
+    v
+}
+
+/// The nodes of `bvh` placed at index `offset` of a node buffer (an inner node's `first` is its
+/// first child's index, moved by the offset; a leaf's is a primitive's, kept); one unused node
+/// for an empty BVH.
+pub fn bvh_nodes(bvh: &Bvh, offset: u32) -> Vec<GpuNode> {
+    bvh.nodes
+        .iter()
+        .map(|n: &BvhNode| {
             let first = if n.count == 0 { n.first + offset } else { n.first };
             GpuNode { min: n.min, first, max: n.max, count: n.count }
-        }
-    };
-    let mut v: Vec<GpuNode> = trace.bvh().nodes.iter().map(gpu(0)).collect();
-    let offset = v.len() as u32;
-    v.extend(trace.meshes().bvh().nodes.iter().map(gpu(offset)));
-    v
+        })
+        .collect()
 }
 
 /// Where [`nodes`] puts the mesh BVH's root: after the splat BVH's nodes, or [`NO_MESHES`].
@@ -674,7 +682,7 @@ mod tests {
             "Triangle",
             [p0, mesh, e1, pad0, e2, pad1, n0, pad2, n1, pad3, n2, pad4]
         );
-        assert_mirrors!(crate::TRACE_WGSL, GpuMeshMaterial, "MeshMaterial", [color, pad, shading]);
+        assert_mirrors!(crate::TRACE_WGSL, GpuMeshMaterial, "MeshMaterial", [color, reflective, shading]);
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
     }
 

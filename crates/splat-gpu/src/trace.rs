@@ -29,6 +29,7 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../../../shaders/sh.wgsl"),
     include_str!("../../../shaders/lighting.wgsl"),
     include_str!("../../../shaders/bvh.wgsl"),
+    include_str!("../../../shaders/mesh.wgsl"),
     include_str!("../../../shaders/trace.wgsl")
 );
 /// Dispatches encoded into one submission.
@@ -178,8 +179,8 @@ impl<'a> GpuTracer<'a> {
             sh: ctx.upload("sh", bytemuck::cast_slice(&sh)),
             materials: ctx.upload("materials", bytemuck::cast_slice(&layout::materials(trace.lighting()))),
             lights: ctx.upload("lights", bytemuck::cast_slice(&layout::lights(trace.lighting()))),
-            triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace))),
-            mesh_materials: ctx.upload("mesh materials", bytemuck::cast_slice(&layout::mesh_materials(trace))),
+            triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace.meshes()))),
+            mesh_materials: ctx.upload("mesh materials", bytemuck::cast_slice(&layout::mesh_materials(trace.meshes()))),
         })
     }
 

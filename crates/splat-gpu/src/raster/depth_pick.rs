@@ -45,6 +45,12 @@ impl GpuRasterizer<'_> {
     /// Here each pixel is owned by one invocation that visits its fragments in the global
     /// (depth, id) order of the CPU reference, so the result is exact and deterministic.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
+        if self.scene.has_meshes {
+            return Err(GpuError::Unsupported(
+                "depth, normals and picks among meshes come from the CPU rasterizer only so far: use --backend cpu"
+                    .into(),
+            ));
+        }
         self.set_mode(Draw::Under);
         let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
         let [tiles_x, tiles_y] = self.params.tiles;

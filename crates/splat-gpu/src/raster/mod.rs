@@ -47,6 +47,7 @@ use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::image::Image;
 use splat_core::lighting::{Lighting, Look};
+use splat_core::mesh::Meshes;
 use splat_core::particle::Scene;
 use splat_core::raster::project::FRUSTUM_GUARD;
 use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
@@ -71,6 +72,16 @@ pub const SPLAT_WGSL: &str = concat!(
     include_str!("../../../../shaders/lighting.wgsl"),
     include_str!("../../../../shaders/raster_lighting.wgsl"),
     include_str!("../../../../shaders/splat.wgsl")
+);
+/// WGSL of the mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3).
+pub const MESH_PREPASS_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/lighting.wgsl"),
+    include_str!("../../../../shaders/raster_lighting.wgsl"),
+    include_str!("../../../../shaders/bvh.wgsl"),
+    include_str!("../../../../shaders/mesh.wgsl"),
+    include_str!("../../../../shaders/mesh_prepass.wgsl")
 );
 /// WGSL of the frame accumulation.
 pub const FOLD_WGSL: &str = concat!(
@@ -124,6 +135,8 @@ pub struct GpuRasterizer<'a> {
     pub(super) depth: SortBuffers,
     pub(super) draw_args: wgpu::Buffer,
     pub(super) compute_group: wgpu::BindGroup,
+    /// The mesh pre-pass's colour and distance per pixel (one unused entry without meshes).
+    pub(super) behind: wgpu::Buffer,
 }
 
 impl<'a> GpuRasterizer<'a> {
@@ -171,13 +184,58 @@ impl<'a> GpuRasterizer<'a> {
                 (6, &draw_args),
             ],
         );
-        let raster =
-            Self { ctx, pipes, scene, camera: *camera, params, params_buffer, splats, depth, draw_args, compute_group };
+        let pixels = if scene.has_meshes { (camera.width * camera.height) as u64 } else { 1 };
+        let behind = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("mesh pre-pass"),
+            size: pixels * 16,
+            usage: rw,
+            mapped_at_creation: false,
+        });
+        let raster = Self {
+            ctx,
+            pipes,
+            scene,
+            camera: *camera,
+            params,
+            params_buffer,
+            splats,
+            depth,
+            draw_args,
+            compute_group,
+            behind,
+        };
         let mut encoder = raster.encoder("project and sort");
         raster.encode_project(&mut encoder, None);
         raster.encode_sort(&mut encoder, None)?;
+        raster.encode_mesh_prepass(&mut encoder);
         raster.submit(encoder)?;
         Ok(raster)
+    }
+
+    /// The mesh pre-pass, once per camera: each pixel's nearest mesh and its forward-shaded
+    /// colour (`shaders/mesh_prepass.wgsl`).
+    fn encode_mesh_prepass(&self, encoder: &mut wgpu::CommandEncoder) {
+        if !self.scene.has_meshes {
+            return;
+        }
+        let s = self.scene;
+        let group = bind(
+            self.ctx,
+            &self.pipes.mesh_prepass,
+            &[
+                (0, &self.params_buffer),
+                (1, &s.mesh_nodes),
+                (2, &s.triangles),
+                (3, &s.mesh_materials),
+                (4, &self.behind),
+                (14, &s.lights),
+            ],
+        );
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("mesh pre-pass"), timestamp_writes: None });
+        pass.set_pipeline(&self.pipes.mesh_prepass);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(self.camera.width.div_ceil(8), self.camera.height.div_ceil(8), 1);
     }
 
     fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
@@ -232,6 +290,11 @@ impl<'a> GpuRasterizer<'a> {
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
         let draw = Draw::of(method)?;
         if self.scene.is_lit() && draw != Draw::Stochastic {
+            if self.scene.has_meshes {
+                return Err(GpuError::Unsupported(
+                    "lit raster-sorted among meshes runs on the CPU only so far: use --backend cpu".into(),
+                ));
+            }
             return self.render_lit_sorted(frames);
         }
         if frames.rng != splat_core::rng::RngScheme::Hash {
@@ -329,6 +392,7 @@ impl<'a> GpuRasterizer<'a> {
                 wgpu::BindGroupEntry { binding: 2, resource: self.splats.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 15, resource: self.scene.canonical.as_entire_binding() },
@@ -352,6 +416,7 @@ impl<'a> GpuRasterizer<'a> {
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(color) },
                 wgpu::BindGroupEntry { binding: 3, resource: mean.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: m2.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
             ],
         })
     }
@@ -369,7 +434,9 @@ impl<'a> GpuRasterizer<'a> {
         let bg = self.scene.settings.background.as_dvec3();
         // Over and stochastic frames start from the background; under accumulates premultiplied
         // colour from zero and the fold adds the background behind the remaining transmittance.
+        // Among meshes every draw starts transparent and the fold adds what lies behind.
         let clear = match draw {
+            _ if self.scene.has_meshes => wgpu::Color::TRANSPARENT,
             Draw::Under => wgpu::Color::TRANSPARENT,
             _ => wgpu::Color { r: bg.x, g: bg.y, b: bg.z, a: 0.0 },
         };
@@ -574,8 +641,12 @@ mod tests {
                 look,
                 light_count,
                 set_count,
+                t_min,
+                t_max,
+                meshes,
                 pad1,
-                pad2
+                pad2,
+                pad3
             ]
         );
         assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, u_shift]);
@@ -584,7 +655,9 @@ mod tests {
     /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).
     #[test]
     fn raster_wgsl_validates() {
-        for (name, source) in [("raster", RASTER_WGSL), ("splat", SPLAT_WGSL), ("fold", FOLD_WGSL)] {
+        let modules =
+            [("raster", RASTER_WGSL), ("splat", SPLAT_WGSL), ("fold", FOLD_WGSL), ("mesh pre-pass", MESH_PREPASS_WGSL)];
+        for (name, source) in modules {
             validate(name, source);
         }
     }

@@ -10,6 +10,7 @@ pub struct RasterPipelines {
     pub(super) tile_emit: wgpu::ComputePipeline,
     pub(super) tile_ranges: wgpu::ComputePipeline,
     pub(super) tile_blend: wgpu::ComputePipeline,
+    pub(super) mesh_prepass: wgpu::ComputePipeline,
     pub(super) splat_layout: wgpu::BindGroupLayout,
     pub(super) over: wgpu::RenderPipeline,
     pub(super) under: wgpu::RenderPipeline,
@@ -40,6 +41,7 @@ impl RasterPipelines {
         let raster = module("raster.wgsl", RASTER_WGSL);
         let splat = module("splat.wgsl", SPLAT_WGSL);
         let fold = module("fold.wgsl", FOLD_WGSL);
+        let mesh_prepass = module("mesh_prepass.wgsl", MESH_PREPASS_WGSL);
         let draw_stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat"),
@@ -49,6 +51,7 @@ impl RasterPipelines {
                 storage_entry(2, draw_stages, true),
                 storage_entry(3, wgpu::ShaderStages::VERTEX, true),
                 storage_entry(4, wgpu::ShaderStages::VERTEX, true),
+                storage_entry(5, wgpu::ShaderStages::FRAGMENT, true),
                 storage_entry(13, wgpu::ShaderStages::FRAGMENT, true),
                 storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
                 storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
@@ -71,6 +74,7 @@ impl RasterPipelines {
                 },
                 storage_entry(3, wgpu::ShaderStages::COMPUTE, false),
                 storage_entry(4, wgpu::ShaderStages::COMPUTE, false),
+                storage_entry(5, wgpu::ShaderStages::COMPUTE, true),
             ],
         });
         let pipeline_layout = |label, layout: &wgpu::BindGroupLayout| {
@@ -132,6 +136,7 @@ impl RasterPipelines {
             tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
             tile_ranges: compute_pipeline(device, &raster, None, "tile_ranges"),
             tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
+            mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
             over: render("fs_sorted", blend_format, Some(over), false),
             under: render("fs_sorted", blend_format, Some(under), false),
             stochastic: render("fs_stochastic", STOCHASTIC_FORMAT, None, true),

@@ -90,10 +90,18 @@ pub struct RasterParams {
     pub light_count: u32,
     /// Splat sets.
     pub set_count: u32,
+    /// Ray start of the mesh pre-pass.
+    pub t_min: f32,
+    /// Ray end of the mesh pre-pass.
+    pub t_max: f32,
+    /// 1 when the scene has meshes ([`RasterScene::with_meshes`]).
+    pub meshes: u32,
     /// Padding.
     pub pad1: u32,
     /// Padding.
     pub pad2: u32,
+    /// Padding.
+    pub pad3: u32,
 }
 
 /// Per-frame uniforms (WGSL `FrameParams`).
@@ -123,6 +131,11 @@ pub struct RasterScene {
     pub(super) materials: wgpu::Buffer,
     pub(super) lights: wgpu::Buffer,
     pub(super) canonical: wgpu::Buffer,
+    /// The meshes' BVH nodes, triangles and materials (one unused entry each without meshes).
+    pub(super) mesh_nodes: wgpu::Buffer,
+    pub(super) triangles: wgpu::Buffer,
+    pub(super) mesh_materials: wgpu::Buffer,
+    pub(super) has_meshes: bool,
 }
 
 impl RasterScene {
@@ -192,7 +205,38 @@ impl RasterScene {
             lights: ctx.upload("raster lights", bytemuck::cast_slice(&crate::layout::lights(lighting))),
             canonical: ctx.upload("raster canonical", bytemuck::cast_slice(&canonical)),
             lighting: lighting.clone(),
+            mesh_nodes: ctx.upload("raster mesh nodes", bytemuck::cast_slice(&[crate::layout::GpuNode::default()])),
+            triangles: ctx.upload("raster triangles", bytemuck::cast_slice(&[crate::layout::GpuTriangle::default()])),
+            mesh_materials: ctx
+                .upload("raster mesh materials", bytemuck::cast_slice(&[crate::layout::GpuMeshMaterial::default()])),
+            has_meshes: false,
         })
+    }
+
+    /// The same scene among `meshes` (vk_gaussian_splatting Lighting §1.5.3 and §3): a mesh
+    /// pre-pass per camera finds each pixel's nearest mesh and forward-shades it, the splats are
+    /// depth tested against it and it is blended under them with their transmittance, as the
+    /// CPU reference `splat_core::raster::Rasterizer::with_meshes` does, at one sample per pixel.
+    pub fn with_meshes(mut self, ctx: &GpuContext, meshes: &Meshes) -> Result<Self, GpuError> {
+        if meshes.is_empty() {
+            return Ok(self);
+        }
+        let nodes = crate::layout::bvh_nodes(meshes.bvh(), 0);
+        let triangles = crate::layout::triangles(meshes);
+        let count = meshes.triangles().len();
+        ctx.check_binding("mesh BVH node", (nodes.len() * size_of::<crate::layout::GpuNode>()) as u64, count)?;
+        ctx.check_binding("triangle", (triangles.len() * size_of::<crate::layout::GpuTriangle>()) as u64, count)?;
+        self.mesh_nodes = ctx.upload("raster mesh nodes", bytemuck::cast_slice(&nodes));
+        self.triangles = ctx.upload("raster triangles", bytemuck::cast_slice(&triangles));
+        self.mesh_materials =
+            ctx.upload("raster mesh materials", bytemuck::cast_slice(&crate::layout::mesh_materials(meshes)));
+        self.has_meshes = true;
+        Ok(self)
+    }
+
+    /// Whether the scene has meshes.
+    pub fn has_meshes(&self) -> bool {
+        self.has_meshes
     }
 
     /// Whether lighting is on.
@@ -238,7 +282,11 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatE
         },
         light_count: scene.lighting.lights.len() as u32,
         set_count: scene.lighting.sets.len() as u32,
+        t_min: s.t_min,
+        t_max: s.t_max,
+        meshes: u32::from(scene.has_meshes),
         pad1: 0,
         pad2: 0,
+        pad3: 0,
     }
 }

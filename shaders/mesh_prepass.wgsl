@@ -1,0 +1,43 @@
+// The raster pipeline's mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3), the twin of
+// the CPU reference's `Rasterizer::pixel` ray cast and `Rasterizer::behind`: per pixel, the
+// nearest mesh along the ray through the pixel centre, its distance (the splats' depth test) and
+// its forward-shaded colour (lit with every light visible and sampled at its centre, no bounces:
+// the mirror and glass shares see the background), or the background at distance FAR. The splat
+// fragments read the distance (splat.wgsl), the fold blends the colour under them with the
+// remaining transmittance (fold.wgsl).
+
+@group(0) @binding(0) var<uniform> params: RasterParams;
+@group(0) @binding(1) var<storage, read> nodes: array<Node>;
+@group(0) @binding(2) var<storage, read> triangles: array<Triangle>;
+@group(0) @binding(3) var<storage, read> mesh_materials: array<MeshMaterial>;
+@group(0) @binding(4) var<storage, read_write> behind: array<vec4<f32>>;
+
+// hit.rs `Ray` as mesh.wgsl reads it.
+struct Ray {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    view: vec3<f32>,
+    t_max: f32,
+}
+
+// bvh.wgsl's loop counter (no budget is checked here).
+var<private> iterations: u32;
+
+@compute @workgroup_size(8, 8, 1)
+fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) {
+        return;
+    }
+    let index = gid.y * params.size.x + gid.x;
+    let p = vec2<f32>(gid.xy) + vec2<f32>(0.5);
+    let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_max);
+    let hit = mesh_traverse(0u, ray, false);
+    if (hit.triangle == NONE) {
+        behind[index] = vec4<f32>(params.background.xyz, FAR);
+        return;
+    }
+    let m = mesh_materials[triangles[hit.triangle].mesh];
+    let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, surface_normal(hit, ray));
+    let local = max(1.0 - m.reflective, 0.0);
+    behind[index] = vec4<f32>(local * lit + m.reflective * params.background.xyz, hit.t);
+}
