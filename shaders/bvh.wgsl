@@ -2,7 +2,7 @@
 // that trace rays (trace.wgsl, mesh_prepass.wgsl): a stack traversal that yields the leaves a
 // ray overlaps, nearer child first, and lets the caller shrink t_max between leaves; the leaf
 // loops are the callers' (trace.wgsl `traverse`, mesh.wgsl `mesh_traverse`). It reads `nodes`,
-// `params.t_min` and counts loop iterations in `iterations`, all declared by the including
+// and counts loop iterations in `iterations`, both declared by the including
 // kernel.
 
 // One BVH node (32 bytes), mirrored by splat_core::bvh::BvhNode.
@@ -17,12 +17,12 @@ const STACK_DEPTH: u32 = 64u;
 const FAR: f32 = 3.0e38;
 
 // Entry distance into the node's box within (t_min, t_max], FAR when the ray misses it.
-fn enter(n: Node, origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> f32 {
+fn enter(n: Node, origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -> f32 {
     let t0 = (n.min - origin) * inv;
     let t1 = (n.max - origin) * inv;
     let near = min(t0, t1);
     let far = max(t0, t1);
-    let e = max(max(max(near.x, near.y), near.z), params.t_min);
+    let e = max(max(max(near.x, near.y), near.z), t_min);
     let x = min(min(min(far.x, far.y), far.z), t_max);
     return select(FAR, e, e <= x);
 }
@@ -39,15 +39,15 @@ var<private> trav_next: u32;
 
 // Start a traversal at node `root`: 0 for the splats, params.mesh_root for the meshes, whose
 // nodes follow the splats' in the same buffer (splat_gpu::layout::nodes).
-fn traversal_begin(root: u32, origin: vec3<f32>, inv: vec3<f32>, t_max: f32) {
+fn traversal_begin(root: u32, origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) {
     trav_top = 0u;
-    trav_next = select(NONE, root, enter(nodes[root], origin, inv, t_max) < FAR);
+    trav_next = select(NONE, root, enter(nodes[root], origin, inv, t_min, t_max) < FAR);
 }
 
 // The next leaf whose box the ray overlaps before t_max, nearer child first; NONE when the
 // traversal is over. Nodes are re-tested against the current t_max when popped, so a caller
 // that lowers t_max between leaves clips the rest of the traversal.
-fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
+fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -> u32 {
     loop {
         iterations += 1u;
         if (trav_next == NONE) {
@@ -56,7 +56,7 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
             }
             trav_top -= 1u;
             let c = trav_stack[trav_top];
-            if (enter(nodes[c], origin, inv, t_max) < FAR) {
+            if (enter(nodes[c], origin, inv, t_min, t_max) < FAR) {
                 trav_next = c;
             }
             continue;
@@ -69,8 +69,8 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_max: f32) -> u32 {
         }
         let a = nd.first;
         let b = nd.first + 1u;
-        let ta = enter(nodes[a], origin, inv, t_max);
-        let tb = enter(nodes[b], origin, inv, t_max);
+        let ta = enter(nodes[a], origin, inv, t_min, t_max);
+        let tb = enter(nodes[b], origin, inv, t_min, t_max);
         if (ta < FAR && tb < FAR) {
             trav_stack[trav_top] = select(a, b, ta <= tb);
             trav_next = select(b, a, ta <= tb);

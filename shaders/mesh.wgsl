@@ -1,7 +1,7 @@
 // Twin of crates/splat-core/src/mesh.rs, prepended to the kernels that meet meshes (trace.wgsl
 // and the raster pipeline's mesh pre-pass, mesh_prepass.wgsl): triangles, their intersection and
 // normals, and the traversal of their BVH (after bvh.wgsl). Reads the including kernel's
-// `triangles`, `nodes`, `params.t_min` and `iterations`, and its `Ray`.
+// `triangles`, `nodes` and `iterations`, and its `Ray`.
 
 // mesh.rs `EDGE_SLACK`.
 const EDGE_SLACK: f32 = 1e-6;
@@ -23,13 +23,63 @@ struct Triangle {
     pad4: u32,
 }
 
-// A mesh's base colour, the share of it that mirror and glass take (what the raster pipeline
-// shades with the background) and its shading shares (80 bytes), mirrored by
-// splat_gpu::GpuMeshMaterial.
+// A mesh's material (96 bytes), mirrored by splat_gpu::GpuMeshMaterial (mesh.rs `MeshMaterial`):
+// base colour, mirror and glass shares, index of refraction, and the shading shares.
 struct MeshMaterial {
     color: vec3<f32>,
-    reflective: f32,
+    mirror: f32,
+    transmission: f32,
+    ior: f32,
+    pad0: u32,
+    pad1: u32,
     shading: Material,
+}
+
+// mesh.rs `MeshMaterial::local_share`: 1 − mirror − transmission.
+fn local_share(m: MeshMaterial) -> f32 {
+    return max(1.0 - m.mirror - m.transmission, 0.0);
+}
+
+// mesh.rs `reflect`.
+fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return d - 2.0 * dot(d, n) * n;
+}
+
+// mesh.rs `refract`: the refracted unit direction through a surface of unit normal n facing the
+// incoming ray, eta = n_incident / n_transmitted; w = 0 under total internal reflection.
+fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
+    if (eta == 1.0) {
+        return vec4<f32>(d, 1.0);
+    }
+    let cos_i = -dot(d, n);
+    let sin2_t = eta * eta * max(1.0 - cos_i * cos_i, 0.0);
+    if (sin2_t >= 1.0) {
+        return vec4<f32>(0.0);
+    }
+    let cos_t = sqrt(1.0 - sin2_t);
+    return vec4<f32>(normalize(eta * d + (eta * cos_i - cos_t) * n), 1.0);
+}
+
+// mesh.rs `fresnel`: the unpolarised reflectance of a smooth dielectric.
+fn fresnel(cos_i: f32, eta: f32) -> f32 {
+    if (eta == 1.0) {
+        return 0.0;
+    }
+    let sin2_t = eta * eta * max(1.0 - cos_i * cos_i, 0.0);
+    if (sin2_t >= 1.0) {
+        return 1.0;
+    }
+    let cos_t = sqrt(1.0 - sin2_t);
+    let r_s = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let r_p = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    return 0.5 * (r_s * r_s + r_p * r_p);
+}
+
+// Whether a ray of direction d meets the hit's triangle from outside (against its outward face
+// normal), mesh.rs `SurfaceHit::facing`.
+fn from_outside(h: SurfaceHit, d: vec3<f32>) -> bool {
+    let tri = triangles[h.triangle];
+    return dot(d, normalize_or(cross(tri.e1, tri.e2), vec3<f32>(0.0))) < 0.0;
 }
 
 // Where a ray meets a mesh: distance, leaf-order triangle (NONE: no hit) and barycentrics.
@@ -41,7 +91,7 @@ struct SurfaceHit {
 }
 
 // mesh.rs `PreparedTriangle::intersect` (Möller–Trumbore with the edge slack): (t, b1, b2) for
-// t > t_min; t = −1 on a miss. The caller checks t against its t_max.
+// t > ray.t_min; t = −1 on a miss. The caller checks t against its t_max.
 fn triangle_intersect(tri: Triangle, ray: Ray) -> vec3<f32> {
     let miss = vec3<f32>(-1.0, 0.0, 0.0);
     let p = cross(ray.dir, tri.e2);
@@ -61,7 +111,7 @@ fn triangle_intersect(tri: Triangle, ray: Ray) -> vec3<f32> {
         return miss;
     }
     let t = dot(tri.e2, q) * inv;
-    if (!(t > params.t_min)) {
+    if (!(t > ray.t_min)) {
         return miss;
     }
     return vec3<f32>(t, b1, b2);
@@ -92,10 +142,10 @@ fn mesh_traverse(root: u32, ray: Ray, any_hit: bool) -> SurfaceHit {
     var best = SurfaceHit(FAR, NONE, 0.0, 0.0);
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(root, ray.origin, inv, t_max);
+    traversal_begin(root, ray.origin, inv, ray.t_min, t_max);
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
         if (node == NONE) {
             break;
         }

@@ -17,6 +17,7 @@ struct Ray {
     origin: vec3<f32>,
     dir: vec3<f32>,
     view: vec3<f32>,
+    t_min: f32,
     t_max: f32,
 }
 
@@ -30,7 +31,7 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let index = gid.y * params.size.x + gid.x;
     let p = vec2<f32>(gid.xy) + vec2<f32>(0.5);
-    let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_max);
+    let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_min, params.t_max);
     let hit = mesh_traverse(0u, ray, false);
     if (hit.triangle == NONE) {
         behind[index] = vec4<f32>(params.background.xyz, FAR);
@@ -38,6 +39,5 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let m = mesh_materials[triangles[hit.triangle].mesh];
     let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, surface_normal(hit, ray));
-    let local = max(1.0 - m.reflective, 0.0);
-    behind[index] = vec4<f32>(local * lit + m.reflective * params.background.xyz, hit.t);
+    behind[index] = vec4<f32>(local_share(m) * lit + (m.mirror + m.transmission) * params.background.xyz, hit.t);
 }

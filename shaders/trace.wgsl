@@ -63,7 +63,8 @@ struct Params {
     iso_threshold: f32,
     // Node index of the mesh BVH's root (after the splats' nodes), NONE without meshes.
     mesh_root: u32,
-    pad4: u32,
+    // settings.rs `max_bounces`: mirror and glass bounces after the camera ray.
+    max_bounces: u32,
     pad5: u32,
 }
 
@@ -107,8 +108,11 @@ const SHADOWS_NONE: u32 = 0u;
 const SHADOWS_SORTED: u32 = 1u;
 const SHADOWS_STOCHASTIC: u32 = 2u;
 const SHADOWS_EXACT: u32 = 3u;
-// trace.rs `SURFACE_OFFSET`.
+// trace.rs `SURFACE_OFFSET`, `BOUNCE_SHIFT`, `SHADOW_BOUNCE_SHIFT` and settings.rs `MAX_BOUNCES`.
 const SURFACE_OFFSET: f32 = 1e-4;
+const BOUNCE_SHIFT: u32 = 20u;
+const SHADOW_BOUNCE_SHIFT: u32 = 26u;
+const MAX_BOUNCES: u32 = 15u;
 // lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
 // invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
 // Every loop body below starts with `iterations += 1u`; a loop statement cannot iterate more
@@ -158,9 +162,18 @@ fn trig_hash(p: vec3<f32>) -> f32 {
     return fract_(43758.547 * sin(12.9898 * (p.x + r) + 78.233 * (p.y + r)));
 }
 
-// rng.rs `RayRng::particle`: u of particle `id` in sample `slot`, lowered by the test hook.
+// The bounce number of the segment being traced (trace.rs `Bounce`): slot s of bounce d is
+// s + d·2²⁰, shadow slot s + d·2²⁶, pass p + d·2²⁰, so that every bounce decides anew.
+var<private> bounce: u32;
+
+fn bounce_slot(slot: u32) -> u32 {
+    return slot + (bounce << select(BOUNCE_SHIFT, SHADOW_BOUNCE_SHIFT, slot >= 0x80000000u));
+}
+
+// rng.rs `RayRng::particle` through trace.rs `Bounce`: u of particle `id` in sample `slot` of
+// the current bounce, lowered by the test hook.
 fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
-    return unshifted_particle_u(pixel_seed, id, slot, hit) - params.u_shift;
+    return unshifted_particle_u(pixel_seed, id, bounce_slot(slot), hit) - params.u_shift;
 }
 
 fn unshifted_particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
@@ -176,7 +189,7 @@ fn unshifted_particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> 
 }
 
 fn pass_u(pixel_seed: u32, pass_index: u32) -> f32 {
-    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, PASS_ID, pass_index)))) - params.u_shift;
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, PASS_ID, bounce_slot(pass_index))))) - params.u_shift;
 }
 
 // ---- kernel.rs, hit.rs ----------------------------------------------------------------------
@@ -189,6 +202,7 @@ struct Ray {
     origin: vec3<f32>,
     dir: vec3<f32>,
     view: vec3<f32>,
+    t_min: f32,
     t_max: f32,
 }
 
@@ -224,7 +238,7 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
         let q = oc + t * dc;
         d2_hit = dot(q, q);
     }
-    if (!(t > params.t_min && t < ray.t_max)) {
+    if (!(t > ray.t_min && t < ray.t_max)) {
         return miss;
     }
     if (d2_hit > params.cutoff * params.cutoff) {
@@ -253,10 +267,10 @@ fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
 fn traverse(ray: Ray, visitor: u32) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(0u, ray.origin, inv, t_max);
+    traversal_begin(0u, ray.origin, inv, ray.t_min, t_max);
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
         if (node == NONE) {
             break;
         }
@@ -275,10 +289,10 @@ fn traverse(ray: Ray, visitor: u32) {
 fn traverse_shadow(ray: Ray) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(0u, ray.origin, inv, t_max);
+    traversal_begin(0u, ray.origin, inv, ray.t_min, t_max);
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, t_max);
+        let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
         if (node == NONE) {
             break;
         }
@@ -487,7 +501,7 @@ fn count_iteration() {
 
 // rng.rs `RayRng::light_sample`.
 fn light_sample(pixel_seed: u32, light: u32, slot: u32) -> vec2<f32> {
-    let key = (slot << 7u) | (light << 1u);
+    let key = (bounce_slot(slot) << 7u) | (light << 1u);
     return vec2<f32>(
         unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key)))),
         unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key | 1u)))),
@@ -553,7 +567,7 @@ var<private> shadow_blocked: bool;
 // trace.rs `TraceScene::visibility_from`: the shadow ray from x + offset l toward the light;
 // a mesh on the way blocks it.
 fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
-    let shadow = Ray(x + offset * inc.l, inc.l, inc.l, min(inc.distance - offset, params.t_max));
+    let shadow = Ray(x + offset * inc.l, inc.l, inc.l, params.t_min, min(inc.distance - offset, params.t_max));
     if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
         return vec3<f32>(1.0);
     }
@@ -641,8 +655,8 @@ fn sorted_shadow(ray: Ray) -> vec3<f32> {
 
 // A ray's state at the start of a frame: no radiance, T = 1, the first pass starting at t_min
 // (stochastic-n sums colour and coverage in radiance and transmittance instead).
-fn start_state() -> PassState {
-    var st = PassState(vec3<f32>(0.0), 1.0, params.t_min, NONE, 0u, NONE, vec3<f32>(0.0), 0.0);
+fn start_state(t_min: f32) -> PassState {
+    var st = PassState(vec3<f32>(0.0), 1.0, t_min, NONE, 0u, NONE, vec3<f32>(0.0), 0.0);
     if (stochastic_slots()) {
         st.transmittance = 0.0;
     }
@@ -752,7 +766,7 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
     // The stochastic pass integrates each pass from T = 1, unlit.
     var acc = *st;
     if (pass_method) {
-        acc = start_state();
+        acc = start_state(ray.t_min);
     }
     integrate(&acc, ray, pixel_seed, volumetric() && !pass_method);
     if (!pass_method) {
@@ -783,15 +797,29 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
 
 // The closest mesh along the pixel's camera ray (set in `main`; triangle NONE where none).
 var<private> surface: SurfaceHit;
+// The coefficient of what lies behind in the sample `finish` returned (T for the sorted
+// methods, the share of missing slots for stochastic-n, 1 for a stochastic pass that accepted
+// none): the weight of the mesh's mirror and glass segments.
+var<private> behind_weight: f32;
 
-// trace.rs `surface_sample` without bounces (mirror and glass bounce on the CPU only, and
-// GpuTracer refuses them): the mesh's colour lit by the world's lights, in slot 0, its shadow
-// rays starting SURFACE_OFFSET × max(1, |x|∞) along the light.
+// trace.rs `surface_sample`'s local part: the mesh's colour lit by the world's lights, in slot
+// 0, its shadow rays starting SURFACE_OFFSET × max(1, |x|∞) along the light, times
+// 1 − mirror − transmission (the mirror and glass shares are the segments `push_bounces`
+// queues).
 fn surface_color(ray: Ray, pixel_seed: u32) -> vec3<f32> {
     let mm = mesh_materials[triangles[surface.triangle].mesh];
+    let share = local_share(mm);
+    if (share <= 0.0) {
+        return vec3<f32>(0.0);
+    }
     let x = ray.origin + surface.t * ray.dir;
-    let offset = SURFACE_OFFSET * max(max(max(abs(x.x), abs(x.y)), abs(x.z)), 1.0);
-    return lit_material(mm.shading, mm.color, surface.t, surface_normal(surface, ray), ray, pixel_seed, 0u, offset);
+    let lit = lit_material(mm.shading, mm.color, surface.t, surface_normal(surface, ray), ray, pixel_seed, 0u, surface_offset(x));
+    return share * lit;
+}
+
+// trace.rs `surface_offset`.
+fn surface_offset(x: vec3<f32>) -> f32 {
+    return SURFACE_OFFSET * max(max(max(abs(x.x), abs(x.y)), abs(x.z)), 1.0);
 }
 
 // The sample of a finished frame and its pick: stochastic-n's average; the stochastic pass's
@@ -803,6 +831,7 @@ fn surface_color(ray: Ray, pixel_seed: u32) -> vec3<f32> {
 // integrated normal and the picked particle's material, what lies behind where the threshold
 // was never reached).
 fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
+    behind_weight = 0.0;
     let mesh = surface.triangle != NONE;
     let mesh_alpha = select(0.0, 1.0, mesh);
     var need = true;
@@ -826,6 +855,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
         if (st.picked != NONE) {
             sample_pick = Pick(st.normal, st.depth, st.picked, 0u, 0u, 0u);
         }
+        behind_weight = misses / samples;
         return vec4<f32>(st.radiance + misses * behind, st.transmittance + misses * mesh_alpha) / samples;
     }
     var out = vec4<f32>(st.radiance + st.transmittance * behind, 1.0 - st.transmittance + st.transmittance * mesh_alpha);
@@ -834,6 +864,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
     if (params.method == METHOD_STOCHASTIC_PASS) {
         if ((st.flags & ACCEPTED) == 0u) {
             sample_pick = behind_pick;
+            behind_weight = 1.0;
             return vec4<f32>(behind, mesh_alpha);
         }
         sample_pick = Pick(st.normal, st.depth, NONE, 0u, 0u, 0u);
@@ -841,6 +872,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
         shade = params.lit == 1u;
         add_behind = 0.0;
     } else {
+        behind_weight = st.transmittance;
         sample_pick = no_pick();
         if ((st.flags & HIT) != 0u) {
             sample_pick.normal = unit_normal(st.normal, ray.dir);
@@ -854,6 +886,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
             if (st.picked == NONE) {
                 sample_pick = behind_pick;
                 out = vec4<f32>(behind, mesh_alpha);
+                behind_weight = 1.0;
             } else {
                 sample_pick.picked = st.picked;
                 shade = true;
@@ -879,7 +912,7 @@ fn pixel_ray(x: u32, y: u32) -> Ray {
         1.0,
     );
     let d = params.cam_row0.xyz * d_cam.x + params.cam_row1.xyz * d_cam.y + params.cam_row2.xyz * d_cam.z;
-    return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz, params.t_max);
+    return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz, params.t_min, params.t_max);
 }
 
 // frame.rs `PixelFrames::push` in f32: fold sample `s` of frame `frame` into a running mean
@@ -907,28 +940,67 @@ fn fold(index: u32, s: vec4<f32>, frame: u32) {
     }
 }
 
+// One straight piece of a light path waiting to be traced (trace.rs `secondary`): where it
+// starts, where it goes, its weight in the pixel's sample and its bounce number.
+struct Segment {
+    origin: vec3<f32>,
+    weight: f32,
+    dir: vec3<f32>,
+    depth: u32,
+}
+
+// The pending segments of one frame, depth first: each segment pushes at most two (the
+// reflected and the refracted ray), so MAX_BOUNCES + 1 entries hold the deepest path.
+var<private> segments: array<Segment, 16>;
+
+// trace.rs `surface_sample`'s bounces: the mirror share and Fresnel's share of the glass go to the
+// reflected ray, the rest of the glass to the refracted one (none under total internal
+// reflection), each one bounce deeper, weighted by the segment's weight and by what lies
+// behind's coefficient in its sample. Returns the new stack top.
+fn push_bounces(ray: Ray, seg: Segment, top: u32) -> u32 {
+    let m = mesh_materials[triangles[surface.triangle].mesh];
+    let n = surface_normal(surface, ray);
+    let x = ray.origin + surface.t * ray.dir;
+    let w = seg.weight * behind_weight;
+    var reflected = m.mirror;
+    var refracted = vec4<f32>(0.0);
+    if (m.transmission > 0.0) {
+        let eta = select(m.ior, 1.0 / m.ior, from_outside(surface, ray.dir));
+        let f = fresnel(clamp(-dot(ray.dir, n), 0.0, 1.0), eta);
+        reflected += m.transmission * f;
+        if (f < 1.0) {
+            refracted = refract_dir(ray.dir, n, eta);
+            refracted.w *= m.transmission * (1.0 - f);
+        }
+    }
+    var t = top;
+    if (refracted.w > 0.0) {
+        segments[t] = Segment(x, w * refracted.w, refracted.xyz, seg.depth + 1u);
+        t += 1u;
+    }
+    if (reflected > 0.0) {
+        segments[t] = Segment(x, w * reflected, reflect_dir(ray.dir, n), seg.depth + 1u);
+        t += 1u;
+    }
+    return t;
+}
+
 // One invocation per pixel. MODE_FRAMES: frames first_frame .. first_frame + frames of the
-// render, each run to the end. MODE_PASS: step `pass_index` of frame `first_frame` only (a
-// k-buffer or stochastic pass, or a chunk of params.n of the params.m slots of stochastic-n),
-// the ray's state kept in pass_state between dispatches, so that each dispatch runs one
-// traversal per ray, within lavapipe's loop budget. Either way the sample is folded in when the
-// frame finishes, and out_var.w records the most loop iterations any dispatch of the render
-// spent on the pixel. Long renders are many dispatches.
+// render, each run to the end: the camera segment, then, among mirror and glass meshes, the
+// segments it spawns, each a whole sample of the method (trace.rs `trace_ray`), summed with their
+// weights. MODE_PASS: step `pass_index` of frame `first_frame` only (a k-buffer or stochastic
+// pass, or a chunk of params.n of the params.m slots of stochastic-n), the camera ray's state
+// kept in pass_state between dispatches, so that each dispatch runs one traversal per ray,
+// within lavapipe's loop budget (the host never runs a world with bounces this way). Either way
+// the sample is folded in when the frame finishes, and out_var.w records the most loop
+// iterations any dispatch of the render spent on the pixel. Long renders are many dispatches.
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {
         return;
     }
     let index = gid.y * params.size.x + gid.x;
-    var ray = pixel_ray(gid.x, gid.y);
-    // trace.rs `trace_ray`: the closest mesh clips the ray (the same every dispatch).
-    surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
-    if (params.mesh_root != NONE) {
-        surface = mesh_traverse(params.mesh_root, ray, false);
-        if (surface.triangle != NONE) {
-            ray.t_max = surface.t;
-        }
-    }
+    let camera = pixel_ray(gid.x, gid.y);
     iterations = 0u;
     let by_pass = params.mode == MODE_PASS;
     var most = 0.0;
@@ -940,32 +1012,75 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         iterations += 1u;
         let frame = params.first_frame + f;
         let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
-        var st = start_state();
-        var first = 0u;
-        var last = max(params.max_passes, params.m);
-        if (by_pass) {
-            first = params.pass_index;
-            last = params.pass_index + 1u;
-            if (params.pass_index > 0u) {
-                st = pass_state[index];
+        var total = vec4<f32>(0.0);
+        var camera_pick = no_pick();
+        var finished = false;
+        segments[0] = Segment(camera.origin, 1.0, camera.dir, 0u);
+        var top = 1u;
+        loop {
+            iterations += 1u;
+            if (top == 0u) {
+                break;
             }
-        }
-        if ((st.flags & DONE) == 0u) {
-            var done = false;
-            for (var p = first; p < last; p++) {
-                iterations += 1u;
-                if (step(ray, pixel_seed, p, &st)) {
-                    done = true;
-                    break;
+            top -= 1u;
+            let seg = segments[top];
+            bounce = seg.depth;
+            // The camera ray from t_min; a secondary ray from the surface point on (its line
+            // continues the mirrored or refracted one), meshes from surface_offset on.
+            var ray = camera;
+            var mesh_ray = camera;
+            if (seg.depth > 0u) {
+                ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
+                mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
+            }
+            // trace.rs `trace_ray`: the closest mesh clips the ray.
+            surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
+            if (params.mesh_root != NONE) {
+                surface = mesh_traverse(params.mesh_root, mesh_ray, false);
+                if (surface.triangle != NONE) {
+                    ray.t_max = surface.t;
                 }
             }
-            if (done || last >= params.max_passes) {
-                st.flags |= DONE;
-                fold(index, finish(st, ray, pixel_seed), frame);
+            var st = start_state(ray.t_min);
+            var first = 0u;
+            var last = max(params.max_passes, params.m);
+            if (by_pass) {
+                first = params.pass_index;
+                last = params.pass_index + 1u;
+                if (params.pass_index > 0u) {
+                    st = pass_state[index];
+                }
+            }
+            if ((st.flags & DONE) == 0u) {
+                var done = false;
+                for (var p = first; p < last; p++) {
+                    iterations += 1u;
+                    if (step(ray, pixel_seed, p, &st)) {
+                        done = true;
+                        break;
+                    }
+                }
+                if (done || last >= params.max_passes) {
+                    st.flags |= DONE;
+                    let s = finish(st, ray, pixel_seed);
+                    total += vec4<f32>(seg.weight * s.xyz, select(0.0, s.w, seg.depth == 0u));
+                    if (seg.depth == 0u) {
+                        camera_pick = sample_pick;
+                        finished = true;
+                    }
+                    let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
+                    if (bounces && !by_pass && behind_weight > 0.0) {
+                        top = push_bounces(ray, seg, top);
+                    }
+                }
+            }
+            if (by_pass) {
+                pass_state[index] = st;
             }
         }
-        if (by_pass) {
-            pass_state[index] = st;
+        if (finished) {
+            sample_pick = camera_pick;
+            fold(index, total, frame);
         }
     }
     out_var[index].w = max(most, f32(iterations));

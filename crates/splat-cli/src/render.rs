@@ -145,11 +145,7 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
     let lighting = &world.lighting;
     if !world.meshes.is_empty() {
-        let bounces = world.meshes.materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
         match algorithm {
-            Algorithm::Trace(_) if bounces => {
-                return unsupported("mirror and glass meshes bounce on the CPU only so far: use --backend cpu");
-            }
             Algorithm::Raster(RasterMethod::Sorted { .. }, _) if lighting.is_on() => {
                 return unsupported("lit raster-sorted among meshes runs on the CPU only so far: use --backend cpu");
             }

@@ -961,9 +961,9 @@ struct Segment<'d, D> {
 
 /// Bit of a decision slot where the bounce number starts, for primary slots (every slot a
 /// method draws in is below it) …
-const BOUNCE_SHIFT: u32 = 20;
+pub const BOUNCE_SHIFT: u32 = 20;
 /// … and for shadow slots ([`shadow_slot`] keeps bits 26–30 free for primary slots below 2²⁰).
-const SHADOW_BOUNCE_SHIFT: u32 = 26;
+pub const SHADOW_BOUNCE_SHIFT: u32 = 26;
 /// Largest slot (and pass) a method may draw in, so that bounces get slots of their own.
 pub const MAX_PRIMARY_SLOTS: u32 = 1 << BOUNCE_SHIFT;
 

@@ -243,8 +243,8 @@ pub struct Params {
     pub iso_threshold: f32,
     /// Index in the node buffer of the mesh BVH's root ([`nodes`]), [`NO_MESHES`] without meshes.
     pub mesh_root: u32,
-    /// Padding.
-    pub pad4: u32,
+    /// Most mirror and glass bounces (`RenderSettings::max_bounces`).
+    pub max_bounces: u32,
     /// Padding.
     pub pad5: u32,
 }
@@ -283,15 +283,22 @@ pub struct GpuTriangle {
     pub pad4: u32,
 }
 
-/// One mesh's material (WGSL `MeshMaterial`, 80 bytes): its base colour and the splat material
-/// model's shares (mirror and glass bounce on the CPU only).
+/// One mesh's material (WGSL `MeshMaterial`, 96 bytes): [`splat_core::mesh::MeshMaterial`].
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuMeshMaterial {
     /// Base colour c.
     pub color: [f32; 3],
-    /// mirror + transmission: the share the raster pipeline shades with the background.
-    pub reflective: f32,
+    /// Mirror share.
+    pub mirror: f32,
+    /// Glass share.
+    pub transmission: f32,
+    /// Index of refraction.
+    pub ior: f32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
     /// Emissive, ambient, diffuse and specular shares (`first` unused).
     pub shading: GpuMaterial,
 }
@@ -347,8 +354,11 @@ pub fn mesh_materials(meshes: &Meshes) -> Vec<GpuMeshMaterial> {
         .iter()
         .map(|m| GpuMeshMaterial {
             color: m.color.to_array(),
-            reflective: m.mirror + m.transmission,
+            mirror: m.mirror,
+            transmission: m.transmission,
+            ior: m.ior,
             shading: gpu_material(&m.shading, 0),
+            ..GpuMeshMaterial::default()
         })
         .collect();
     if v.is_empty() {
@@ -526,6 +536,7 @@ fn lighting_params(trace: &TraceScene) -> Params {
         set_count: l.sets.len() as u32,
         iso_threshold: trace.settings().iso_threshold,
         mesh_root: mesh_root(trace),
+        max_bounces: trace.settings().max_bounces,
         ..Params::default()
     }
 }
@@ -672,7 +683,7 @@ mod tests {
                 set_count,
                 iso_threshold,
                 mesh_root,
-                pad4,
+                max_bounces,
                 pad5
             ]
         );
@@ -682,7 +693,12 @@ mod tests {
             "Triangle",
             [p0, mesh, e1, pad0, e2, pad1, n0, pad2, n1, pad3, n2, pad4]
         );
-        assert_mirrors!(crate::TRACE_WGSL, GpuMeshMaterial, "MeshMaterial", [color, reflective, shading]);
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            GpuMeshMaterial,
+            "MeshMaterial",
+            [color, mirror, transmission, ior, pad0, pad1, shading]
+        );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
     }
 
@@ -719,6 +735,9 @@ mod tests {
                 "NONE" = NO_MESHES,
                 "EDGE_SLACK" = splat_core::mesh::EDGE_SLACK,
                 "SURFACE_OFFSET" = splat_core::trace::SURFACE_OFFSET,
+                "BOUNCE_SHIFT" = splat_core::trace::BOUNCE_SHIFT,
+                "SHADOW_BOUNCE_SHIFT" = splat_core::trace::SHADOW_BOUNCE_SHIFT,
+                "MAX_BOUNCES" = splat_core::settings::MAX_BOUNCES,
             ]
         );
         let f64s = |v: &[f32]| v.iter().map(|&c| f64::from(c)).collect::<Vec<_>>();

@@ -157,11 +157,6 @@ impl<'a> GpuTracer<'a> {
                     .into(),
             ));
         }
-        if trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0) {
-            return Err(GpuError::Unsupported(
-                "mirror and glass meshes bounce on the CPU only so far: use --backend cpu".into(),
-            ));
-        }
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());
@@ -213,7 +208,7 @@ impl<'a> GpuTracer<'a> {
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         let params = MethodParams::try_from(method)?;
-        let count = frames.keys(method.is_stochastic() || self.trace.lighting().is_random())?.len() as u32;
+        let count = frames.keys(method.is_stochastic() || self.trace.is_random())?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
         let run = Run { tracer: self, camera, params, frames, count };
@@ -241,7 +236,10 @@ impl<'a> GpuTracer<'a> {
             params.code,
             MethodCode::Exact | MethodCode::KBuffer | MethodCode::StochasticN | MethodCode::StochasticPass
         );
-        if over(&out) && multi_pass {
+        // Mirror and glass bounces run whole frames only: the state between passes is the
+        // camera ray's.
+        let bounces = self.trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
+        if over(&out) && multi_pass && !bounces {
             out = run.execute(1, true)?;
         }
         if over(&out) {

@@ -149,12 +149,15 @@ fn depth_normal_and_picks_equal_the_cpu() {
     }
 }
 
-/// Meshes on the GPU ray tracer (splat_core::mesh, without mirror and glass, which bounce on the
-/// CPU only): a lit back wall behind the sheets, a matte sphere among them and a quad that
-/// shadows them. One frame of every method, for three shadow kinds and both looks, equals the
-/// CPU frame as [`one_lit_frame_equals_the_cpu_frame`] does, and so do depth, normal and pick
-/// (the mesh's where the splats stay below the iso threshold); the meshes change every frame
-/// far beyond the tolerance. Mirror and glass are refused with the reason.
+/// Meshes on the GPU ray tracer (splat_core::mesh): a lit back wall behind the sheets, a sphere
+/// among them and a quad that shadows them; the sphere matte, then glass (index 1.5) with the
+/// quad a half mirror, so that every segment kind runs (camera, reflected, refracted, total
+/// internal reflection). One frame of every method, for three shadow kinds and both looks,
+/// equals the CPU frame as [`one_lit_frame_equals_the_cpu_frame`] does, and so do depth, normal
+/// and pick (the mesh's where the splats stay below the iso threshold); the meshes change every
+/// frame far beyond the tolerance. A pixel may differ only where a decision lay near its
+/// threshold or, for at most 1 % of pixels, where f32 rounding along a bounce path (a direction
+/// off a tessellated sphere) moves a secondary ray across a splat's edge.
 #[test]
 fn one_frame_among_meshes_equals_the_cpu_frame() {
     use glam::{Affine3A, Quat, Vec3};
@@ -166,15 +169,27 @@ fn one_frame_among_meshes_equals_the_cpu_frame() {
         mesh.transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(scale), r, at))
     };
     let matte = |r: f32, g: f32, b: f32| MeshMaterial { color: Vec3::new(r, g, b), ..MeshMaterial::default() };
-    let meshes = Meshes::new(&[
-        (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
-        (place(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3)), matte(0.9, 0.3, 0.2)),
-        (place(TriangleMesh::plane(), 0.4, Vec3::new(1.0, 1.0, 1.5), Vec3::new(0.9, 0.9, 1.4)), matte(0.5, 0.5, 0.5)),
-    ])
-    .unwrap();
+    let world = |sphere: MeshMaterial, quad: MeshMaterial| {
+        Meshes::new(&[
+            (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
+            (place(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3)), sphere),
+            (place(TriangleMesh::plane(), 0.4, Vec3::new(1.0, 1.0, 1.5), Vec3::new(0.9, 0.9, 1.4)), quad),
+        ])
+        .unwrap()
+    };
+    let matte_world = world(matte(0.9, 0.3, 0.2), matte(0.5, 0.5, 0.5));
+    let glass = MeshMaterial { transmission: 0.9, ior: 1.5, ..MeshMaterial::default() };
+    let mirror = MeshMaterial { mirror: 0.5, ..matte(0.5, 0.5, 0.5) };
+    let bounce_world = world(glass, mirror);
     let sorted = Shadows::Sorted { k: 8, threshold: 0.8, colored: 0.5 };
-    let cases = [(sorted, Look::Surface), (Shadows::Stochastic, Look::Surface), (Shadows::Exact, Look::Volumetric)];
-    for (shadows, look) in cases {
+    let cases = [
+        (sorted, Look::Surface, &matte_world),
+        (Shadows::Stochastic, Look::Surface, &matte_world),
+        (Shadows::Exact, Look::Volumetric, &matte_world),
+        (Shadows::Stochastic, Look::Surface, &bounce_world),
+        (Shadows::Exact, Look::Volumetric, &bounce_world),
+    ];
+    for (shadows, look, meshes) in cases {
         let lit = lighting(shadows, look);
         let bare = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lit.clone()).unwrap();
         let trace = TraceScene::new(&scene, RenderSettings::default())
@@ -208,17 +223,12 @@ fn one_frame_among_meshes_equals_the_cpu_frame() {
                     if gap < FLIP_GAP { near += 1 } else { bad.push((x, y, colour, gap)) }
                 }
             }
-            eprintln!("meshes {shadows:?} {look:?} {name}: {near} pixels differ by a decision near its threshold");
+            eprintln!(
+                "meshes {shadows:?} {look:?} {name}: {near} pixels differ by a decision near its threshold, {} by rounding",
+                bad.len()
+            );
             assert!(bad.len() * 100 <= pixels, "{shadows:?} {look:?} {name}: pixels (x, y, difference, gap) {bad:?}");
         }
-    }
-    let mirror =
-        Meshes::new(&[(TriangleMesh::plane(), MeshMaterial { mirror: 0.5, ..MeshMaterial::default() })]).unwrap();
-    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_meshes(mirror);
-    match GpuTracer::new(ctx, trace_pipeline(ctx), &trace) {
-        Err(GpuError::Unsupported(m)) => assert!(m.contains("bounce on the CPU only"), "{m}"),
-        Err(e) => panic!("wrong error: {e}"),
-        Ok(_) => panic!("mirror meshes accepted on the GPU"),
     }
 }
 
