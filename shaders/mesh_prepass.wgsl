@@ -11,6 +11,9 @@
 @group(0) @binding(2) var<storage, read> triangles: array<Triangle>;
 @group(0) @binding(3) var<storage, read> mesh_materials: array<MeshMaterial>;
 @group(0) @binding(4) var<storage, read_write> behind: array<vec4<f32>>;
+// The mesh's shading normal turned toward the ray (zero without a mesh), for the depth
+// consolidation of the tile rasterizer.
+@group(0) @binding(5) var<storage, read_write> behind_normal: array<vec4<f32>>;
 
 // hit.rs `Ray` as mesh.wgsl reads it.
 struct Ray {
@@ -35,9 +38,12 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
     let hit = mesh_traverse(0u, ray, false);
     if (hit.triangle == NONE) {
         behind[index] = vec4<f32>(params.background.xyz, FAR);
+        behind_normal[index] = vec4<f32>(0.0);
         return;
     }
     let m = mesh_materials[triangles[hit.triangle].mesh];
-    let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, surface_normal(hit, ray));
+    let n = surface_normal(hit, ray);
+    behind_normal[index] = vec4<f32>(n, 0.0);
+    let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, n);
     behind[index] = vec4<f32>(local_share(m) * lit + (m.mirror + m.transmission) * params.background.xyz, hit.t);
 }

@@ -131,6 +131,10 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
 @group(0) @binding(12) var<storage, read_write> out_pick: array<vec2<u32>>;
 // Per pixel: the integrated unit normal (zero where no fragment, w unused).
 @group(0) @binding(16) var<storage, read_write> out_normal: array<vec4<f32>>;
+// The mesh pre-pass (mesh_prepass.wgsl): colour and distance, and the mesh's normal, per pixel;
+// read where params.meshes is 1.
+@group(0) @binding(17) var<storage, read> behind: array<vec4<f32>>;
+@group(0) @binding(18) var<storage, read> behind_normal: array<vec4<f32>>;
 
 fn tile_rect(s: Splat) -> vec4<u32> {
     return vec4<u32>(s.rect.x / TILE, s.rect.y / TILE, (s.rect.z - 1u) / TILE, (s.rect.w - 1u) / TILE);
@@ -183,6 +187,8 @@ fn tile_ranges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
     }
 }
 
+// The mesh pre-pass's distance where a pixel has no mesh (bvh.wgsl `FAR`).
+const FAR_DEPTH: f32 = 3.0e38;
 const BATCH: u32 = 128u;
 var<workgroup> batch: array<Splat, 128>;
 var<workgroup> tile_range: vec2<u32>;
@@ -221,6 +227,13 @@ fn tile_blend(
     let dir = pixel_dir(centre);
     let to_t = stretch(centre);
     var normal = vec3<f32>(0.0);
+    // What lies behind (raster/mod.rs `Rasterizer::behind`): the background, or the pixel's
+    // mesh, which hides the fragments at or behind it (the depth test of the splat pass).
+    var back = vec4<f32>(params.background.xyz, FAR_DEPTH);
+    if (inside && params.meshes == 1u) {
+        back = behind[px.y * params.size.x + px.x];
+    }
+    let mesh = back.w < FAR_DEPTH;
     for (var start = range.x; start < range.y; start += BATCH) {
         if (l < BATCH && start + l < range.y) {
             batch[l] = splats[order[pair_ranks[start + l]]];
@@ -230,7 +243,7 @@ fn tile_blend(
         for (var j = 0u; j < n; j++) {
             let s = batch[j];
             let in_rect = all(px >= s.rect.xy) && all(px < s.rect.zw);
-            if (inside && in_rect) {
+            if (inside && in_rect && s.depth * to_t < back.w) {
                 let alpha = splat_alpha(s, centre, params);
                 if (alpha > 0.0) {
                     var c = s.color;
@@ -252,28 +265,37 @@ fn tile_blend(
     }
     if (inside) {
         let index = px.y * params.size.x + px.x;
-        var out = vec4<f32>(color + transmittance * params.background.xyz, 1.0 - transmittance);
-        // raster/mod.rs `sorted`: the integrated normal normalised, −dir when degenerate.
+        let covered = select(0.0, 1.0, mesh);
+        var out = vec4<f32>(color + transmittance * back.xyz, 1.0 - transmittance + transmittance * covered);
+        // raster/mod.rs `sorted`: the integrated normal normalised, −dir when degenerate; the
+        // depth as a distance along the pixel-centre ray, t = z |d_cam|, where T fell below the
+        // threshold, else the mesh's (depth consolidation, vk_gaussian_splatting Lighting §1.5.3).
         var n = normal;
         if (any(n != vec3<f32>(0.0))) {
             let rcp = 1.0 / length(n);
             n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
         }
+        var t = -1.0;
+        if (picked != NONE) {
+            t = depth * to_t;
+        } else if (mesh) {
+            t = back.w;
+            n = behind_normal[index].xyz;
+        }
         if (params.lit == 1u && params.look == LOOK_SURFACE) {
             // raster/mod.rs `light_surface`: L lit once at the picked depth with the integrated
-            // normal and the picked splat's material; the background (and no normal) where T
-            // stayed above the threshold.
+            // normal and the picked splat's material; what lies behind (the mesh's normal and
+            // depth, or the background and no normal) where T stayed above the threshold.
             if (picked == NONE) {
-                out = vec4<f32>(params.background.xyz, 0.0);
-                n = vec3<f32>(0.0);
+                out = vec4<f32>(back.xyz, covered);
+                n = select(vec3<f32>(0.0), n, mesh);
             } else {
                 let lit = shade_unshadowed(color, picked, origin, dir, depth * to_t, n);
-                out = vec4<f32>(lit + transmittance * params.background.xyz, out.w);
+                out = vec4<f32>(lit + transmittance * back.xyz, out.w);
             }
         }
         out_color[index] = out;
         out_normal[index] = vec4<f32>(n, 0.0);
-        // The depth as a distance along the pixel-centre ray: t = z |d_cam|.
-        out_pick[index] = vec2<u32>(bitcast<u32>(depth * to_t), picked);
+        out_pick[index] = vec2<u32>(bitcast<u32>(t), picked);
     }
 }

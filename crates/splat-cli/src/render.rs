@@ -6,7 +6,6 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
-use splat_core::raster::RasterMethod;
 use splat_core::trace::TraceScene;
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
 use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
@@ -144,17 +143,6 @@ fn describe(args: &RenderArgs) -> String {
 fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<(), GpuError> {
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
     let lighting = &world.lighting;
-    if !world.meshes.is_empty() {
-        match algorithm {
-            Algorithm::Raster(RasterMethod::Sorted { .. }, _) if lighting.is_on() => {
-                return unsupported("lit raster-sorted among meshes runs on the CPU only so far: use --backend cpu");
-            }
-            Algorithm::Raster(..) if args.depth.is_some() || args.normal.is_some() => {
-                return unsupported("among meshes the GPU rasterizer writes colour only: add --backend cpu");
-            }
-            _ => {}
-        }
-    }
     if lighting.is_on() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
         return unsupported("the GPU lights with max-density-plane normals only: use --normals plane or --backend cpu");
     }

@@ -462,7 +462,8 @@ fn lit_rasterization_equals_the_cpu() {
 /// pre-pass, the splats' depth test and the mesh blended under them. Sorted over and under and
 /// one StochasticSplats frame (unlit and lit) agree at every pixel within 1e-4, the stochastic
 /// frame but for decisions within 1e-5 of their threshold; the meshes change every image far
-/// beyond that. Lit sorted splatting and depth picks among meshes are refused with the reason.
+/// beyond that. Lit sorted splatting in both looks, with its depth, normal and pick (the mesh's
+/// where the splats stay below the iso threshold), agrees at every pixel too.
 #[test]
 fn three_pass_compositing_among_meshes_equals_the_cpu() {
     use glam::{Affine3A, Quat, Vec3};
@@ -534,9 +535,37 @@ fn three_pass_compositing_among_meshes_equals_the_cpu() {
         eprintln!("{method:?} lit {is_lit}: {near} pixels differ by a decision near its threshold");
         assert!(bad.is_empty(), "{method:?} lit {is_lit}: pixels (x, y, difference) {bad:?}");
     }
-    let scene = RasterScene::new_lit(ctx, &c.scene, &settings, &lit).unwrap().with_meshes(ctx, &meshes).unwrap();
-    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
-    let err = gpu.render(&RasterMethod::Sorted { blend: Blend::Under }, &Frames::default()).err().unwrap();
-    assert!(err.to_string().contains("CPU only"), "{err}");
-    assert!(gpu.depth_pick().err().unwrap().to_string().contains("CPU"));
+    // Lit sorted splatting (the compute tile rasterizer, which reads the pre-pass too) in both
+    // looks, and its depth, normal and pick: the mesh's where the splats stay below the iso
+    // threshold (depth consolidation).
+    for look in [Look::Surface, Look::Volumetric] {
+        let lighting = common::lighting(Shadows::None, look);
+        let cpu_r = Rasterizer::new(&c.scene, &c.camera, settings, RasterSettings::default())
+            .unwrap()
+            .with_lighting(lighting.clone())
+            .unwrap()
+            .with_meshes(meshes.clone());
+        let scene =
+            RasterScene::new_lit(ctx, &c.scene, &settings, &lighting).unwrap().with_meshes(ctx, &meshes).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
+        let under = RasterMethod::Sorted { blend: Blend::Under };
+        let cpu = render_raster(&cpu_r, &under, &Frames::default(), &|_| {}).unwrap();
+        let g = gpu.render(&under, &Frames::default()).unwrap().0;
+        let pixels = cpu.picked.len();
+        let mut mesh_depths = 0;
+        for p in 0..pixels {
+            let (dc, dg) = (cpu.depth.data()[p], g.depth.data()[p]);
+            let same_depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
+            let colour = max_abs_diff(&g.mean.data()[3 * p..3 * p + 3], &cpu.mean.data()[3 * p..3 * p + 3]);
+            let normal = max_abs_diff(&g.normal.data()[3 * p..3 * p + 3], &cpu.normal.data()[3 * p..3 * p + 3]);
+            assert!(
+                colour <= 1e-3 && normal <= 1e-3 && same_depth && g.picked[p] == cpu.picked[p],
+                "{look:?} pixel {p}: colour {colour}, normal {normal}, depth {dc} vs {dg}, pick {:?} vs {:?}",
+                cpu.picked[p],
+                g.picked[p]
+            );
+            mesh_depths += usize::from(cpu.picked[p].is_none() && !dc.is_nan());
+        }
+        assert!(mesh_depths > pixels / 10, "{look:?}: only {mesh_depths} pixels take the mesh's depth");
+    }
 }

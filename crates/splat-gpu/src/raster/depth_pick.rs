@@ -45,12 +45,6 @@ impl GpuRasterizer<'_> {
     /// Here each pixel is owned by one invocation that visits its fragments in the global
     /// (depth, id) order of the CPU reference, so the result is exact and deterministic.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
-        if self.scene.has_meshes {
-            return Err(GpuError::Unsupported(
-                "depth, normals and picks among meshes come from the CPU rasterizer only so far: use --backend cpu"
-                    .into(),
-            ));
-        }
         self.set_mode(Draw::Under);
         let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
         let [tiles_x, tiles_y] = self.params.tiles;
@@ -128,6 +122,8 @@ impl GpuRasterizer<'_> {
                 (14, &self.scene.lights),
                 (15, &self.scene.canonical),
                 (16, &out_normal),
+                (17, &self.behind),
+                (18, &self.behind_normal),
             ],
         );
         let mut encoder = self.encoder("tile lists");
@@ -163,7 +159,8 @@ impl GpuRasterizer<'_> {
             color: image(3, &|i| color[i]),
             alpha: image(1, &|i| color[i + 3]),
             normal: image(3, &|i| normal[i]),
-            depth: pick.chunks(2).zip(&picked).map(|(p, id)| id.map(|_| f32::from_bits(p[0]))).collect(),
+            // Negative where neither a splat nor a mesh set the depth.
+            depth: pick.chunks(2).map(|p| Some(f32::from_bits(p[0])).filter(|&d| d >= 0.0)).collect(),
             picked,
             pairs,
         })

@@ -137,6 +137,8 @@ pub struct GpuRasterizer<'a> {
     pub(super) compute_group: wgpu::BindGroup,
     /// The mesh pre-pass's colour and distance per pixel (one unused entry without meshes).
     pub(super) behind: wgpu::Buffer,
+    /// The mesh pre-pass's normal per pixel (one unused entry without meshes).
+    pub(super) behind_normal: wgpu::Buffer,
 }
 
 impl<'a> GpuRasterizer<'a> {
@@ -185,12 +187,15 @@ impl<'a> GpuRasterizer<'a> {
             ],
         );
         let pixels = if scene.has_meshes { (camera.width * camera.height) as u64 } else { 1 };
-        let behind = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("mesh pre-pass"),
-            size: pixels * 16,
-            usage: rw,
-            mapped_at_creation: false,
-        });
+        let pre_pass = |label| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: pixels * 16,
+                usage: rw,
+                mapped_at_creation: false,
+            })
+        };
+        let (behind, behind_normal) = (pre_pass("mesh pre-pass"), pre_pass("mesh pre-pass normal"));
         let raster = Self {
             ctx,
             pipes,
@@ -203,6 +208,7 @@ impl<'a> GpuRasterizer<'a> {
             draw_args,
             compute_group,
             behind,
+            behind_normal,
         };
         let mut encoder = raster.encoder("project and sort");
         raster.encode_project(&mut encoder, None);
@@ -228,6 +234,7 @@ impl<'a> GpuRasterizer<'a> {
                 (2, &s.triangles),
                 (3, &s.mesh_materials),
                 (4, &self.behind),
+                (5, &self.behind_normal),
                 (14, &s.lights),
             ],
         );
@@ -290,11 +297,6 @@ impl<'a> GpuRasterizer<'a> {
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
         let draw = Draw::of(method)?;
         if self.scene.is_lit() && draw != Draw::Stochastic {
-            if self.scene.has_meshes {
-                return Err(GpuError::Unsupported(
-                    "lit raster-sorted among meshes runs on the CPU only so far: use --backend cpu".into(),
-                ));
-            }
             return self.render_lit_sorted(frames);
         }
         if frames.rng != splat_core::rng::RngScheme::Hash {
