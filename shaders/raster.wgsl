@@ -276,6 +276,13 @@ fn tile_blend(
             n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
         }
         var t = -1.0;
+        if (params.first_hit == 1u) {
+            // The hybrid pipeline lights and continues from this in the ray tracer.
+            out_color[index] = vec4<f32>(color, transmittance);
+            out_normal[index] = vec4<f32>(n, 0.0);
+            out_pick[index] = vec2<u32>(bitcast<u32>(select(-1.0, depth * to_t, picked != NONE)), picked);
+            return;
+        }
         if (picked != NONE) {
             t = depth * to_t;
         } else if (mesh) {

@@ -37,7 +37,9 @@ struct RasterParams {
     // 1 when the scene has meshes: the splats are depth tested against the mesh pre-pass and
     // the fold blends its colour under them.
     meshes: u32,
-    pad1: u32,
+    // 1 when the tile rasterizer writes the hybrid pipeline's first hit (splat_gpu::GpuFirstHit:
+    // L and T before lighting and what lies behind, the picked depth or −1) instead of a pixel.
+    first_hit: u32,
     pad2: u32,
     pad3: u32,
 }

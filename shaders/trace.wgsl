@@ -85,6 +85,9 @@ struct PassState {
 // params.mode (splat_gpu::layout::MODE_*): whole frames per invocation, or one pass of one frame.
 const MODE_FRAMES: u32 = 0u;
 const MODE_PASS: u32 = 1u;
+// Whole frames whose camera segment is the rasterized first hit in hybrid_in (the hybrid
+// pipeline, vk_gaussian_splatting Lighting §5).
+const MODE_HYBRID: u32 = 2u;
 const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
 // The ray met at least one hit (the integrated normal is defined).
@@ -131,6 +134,22 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(9) var<storage, read_write> out_pick: array<Pick>;
 @group(0) @binding(10) var<storage, read> triangles: array<Triangle>;
 @group(0) @binding(11) var<storage, read> mesh_materials: array<MeshMaterial>;
+@group(0) @binding(12) var<storage, read> hybrid_in: array<FirstHit>;
+
+// The hybrid pipeline's first hit of a pixel, from the rasterizer (48 bytes), mirrored by
+// splat_gpu::GpuFirstHit: the splats' radiance L and transmittance T in front of the meshes
+// (lit per fragment in the volumetric look, raw in the surface look), the integrated unit
+// normal (zero where no fragment), and the iso-opacity depth and splat (picked NONE: none).
+struct FirstHit {
+    radiance: vec3<f32>,
+    transmittance: f32,
+    normal: vec3<f32>,
+    depth: f32,
+    picked: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
 
 // The depth, unit normal and picked particle of a sample (frame.rs `Sample`), written for frame
 // 0 only (picks are never averaged); mirrored by splat_gpu::GpuPick. depth < 0: none; picked
@@ -668,6 +687,14 @@ fn stochastic_slots() -> bool {
     return params.method == METHOD_STOCHASTIC || params.method == METHOD_STOCHASTIC_N;
 }
 
+// The method whose sample `finish` completes: params.method, or the sorted composite of the
+// hybrid pipeline's rasterized first hit (METHOD_EXACT) for its camera segment.
+var<private> segment_method: u32;
+
+fn segment_slots() -> bool {
+    return segment_method == METHOD_STOCHASTIC || segment_method == METHOD_STOCHASTIC_N;
+}
+
 fn volumetric() -> bool {
     return params.lit == 1u && params.look == LOOK_VOLUMETRIC;
 }
@@ -835,9 +862,9 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
     let mesh = surface.triangle != NONE;
     let mesh_alpha = select(0.0, 1.0, mesh);
     var need = true;
-    if (stochastic_slots()) {
+    if (segment_slots()) {
         need = st.transmittance < f32(params.m * params.n);
-    } else if (params.method == METHOD_STOCHASTIC_PASS) {
+    } else if (segment_method == METHOD_STOCHASTIC_PASS) {
         need = (st.flags & ACCEPTED) == 0u;
     }
     var behind = params.background.xyz;
@@ -848,7 +875,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
             behind = surface_color(ray, pixel_seed);
         }
     }
-    if (stochastic_slots()) {
+    if (segment_slots()) {
         let samples = f32(params.m * params.n);
         let misses = samples - st.transmittance;
         sample_pick = behind_pick;
@@ -861,7 +888,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
     var out = vec4<f32>(st.radiance + st.transmittance * behind, 1.0 - st.transmittance + st.transmittance * mesh_alpha);
     var shade = false;
     var add_behind = st.transmittance;
-    if (params.method == METHOD_STOCHASTIC_PASS) {
+    if (segment_method == METHOD_STOCHASTIC_PASS) {
         if ((st.flags & ACCEPTED) == 0u) {
             sample_pick = behind_pick;
             behind_weight = 1.0;
@@ -892,7 +919,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
                 shade = true;
             }
         }
-        if (params.method == METHOD_DEPTH_SAMPLING) {
+        if (segment_method == METHOD_DEPTH_SAMPLING) {
             sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
         }
     }
@@ -1003,6 +1030,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let camera = pixel_ray(gid.x, gid.y);
     iterations = 0u;
     let by_pass = params.mode == MODE_PASS;
+    let hybrid = params.mode == MODE_HYBRID;
     var most = 0.0;
     if (params.first_frame > 0u || params.pass_index > 0u) {
         most = out_var[index].w;
@@ -1051,9 +1079,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     st = pass_state[index];
                 }
             }
+            segment_method = params.method;
+            let rasterized = hybrid && seg.depth == 0u;
+            if (rasterized) {
+                // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
+                // ray tracer lights the pick with shadows and continues at the mesh.
+                segment_method = METHOD_EXACT;
+                let h = hybrid_in[index];
+                st.radiance = h.radiance;
+                st.transmittance = h.transmittance;
+                st.normal = h.normal;
+                if (any(h.normal != vec3<f32>(0.0))) {
+                    st.flags |= HIT;
+                }
+                if (h.picked != NONE) {
+                    st.picked = h.picked;
+                    st.depth = h.depth;
+                }
+            }
             if ((st.flags & DONE) == 0u) {
-                var done = false;
-                for (var p = first; p < last; p++) {
+                var done = rasterized;
+                for (var p = first; p < last && !rasterized; p++) {
                     iterations += 1u;
                     if (step(ray, pixel_seed, p, &st)) {
                         done = true;
@@ -1066,6 +1112,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     total += vec4<f32>(seg.weight * s.xyz, select(0.0, s.w, seg.depth == 0u));
                     if (seg.depth == 0u) {
                         camera_pick = sample_pick;
+                        if (rasterized) {
+                            camera_pick.picked = st.picked; // the rasterizer reports its pick
+                        }
                         finished = true;
                     }
                     let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);

@@ -148,7 +148,14 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
     }
     match algorithm {
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
-        Algorithm::Hybrid(..) => unsupported("the hybrid pipeline runs on the CPU only so far (--backend cpu)"),
+        Algorithm::Hybrid(method, raster, secondary) => {
+            if !matches!(method, splat_core::raster::RasterMethod::Sorted { .. }) {
+                return unsupported("the GPU hybrid rasterizes its first hit with raster-sorted: add --backend cpu");
+            }
+            GpuRasterizer::supports(method, raster)?;
+            GpuTracer::supports(secondary)?;
+            Ok(())
+        }
         Algorithm::Trace(method) => {
             GpuTracer::supports(method)?;
             if args.normal.is_some() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
@@ -202,6 +209,17 @@ fn render_gpu(
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
             Ok(tracer.render(camera, method, frames)?.0)
         }
+        Algorithm::Hybrid(_, raster_settings, secondary) => {
+            let trace =
+                TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(world.meshes.clone());
+            let pipeline = splat_gpu::TracePipeline::new(ctx)?;
+            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
+            let pipes = splat_gpu::RasterPipelines::new(ctx)?;
+            let gpu_scene =
+                splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, &world.meshes)?;
+            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
+            Ok(tracer.render_hybrid(&raster, camera, secondary, frames)?.0)
+        }
         Algorithm::Raster(method, raster_settings) => {
             let pipes = splat_gpu::RasterPipelines::new(ctx)?;
             let gpu_scene =
@@ -217,7 +235,7 @@ fn render_gpu(
             }
             Ok(out)
         }
-        Algorithm::Oracle | Algorithm::Hybrid(..) => bail!("the {algorithm:?} renderer runs on the CPU only"),
+        Algorithm::Oracle => bail!("the brute-force oracle runs on the CPU only"),
     }
 }
 

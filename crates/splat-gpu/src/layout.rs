@@ -17,6 +17,9 @@ use splat_core::trace::TraceScene;
 pub const MODE_FRAMES: u32 = 0;
 /// `Params::mode`: one pass of one frame per dispatch, the ray's state kept in [`PassState`].
 pub const MODE_PASS: u32 = 1;
+/// `Params::mode`: whole frames whose camera segment is the rasterized first hit
+/// ([`GpuFirstHit`], the hybrid pipeline).
+pub const MODE_HYBRID: u32 = 2;
 /// `Params::look` of [`Look::Surface`].
 pub const LOOK_SURFACE: u32 = 0;
 /// `Params::look` of [`Look::Volumetric`].
@@ -247,6 +250,29 @@ pub struct Params {
     pub max_bounces: u32,
     /// Padding.
     pub pad5: u32,
+}
+
+/// The hybrid pipeline's first hit of a pixel (WGSL `FirstHit`, 48 bytes), from the tile
+/// rasterizer ([`crate::GpuRasterizer::first_hits`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuFirstHit {
+    /// The splats' radiance L in front of the meshes.
+    pub radiance: [f32; 3],
+    /// Their transmittance T.
+    pub transmittance: f32,
+    /// Integrated unit normal (zero where no fragment).
+    pub normal: [f32; 3],
+    /// Iso-opacity depth along the pixel-centre ray (−1: none).
+    pub depth: f32,
+    /// The splat that set it (`u32::MAX`: none).
+    pub picked: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
 }
 
 /// [`Params::mesh_root`] of a scene without meshes (WGSL `NONE`).
@@ -622,6 +648,12 @@ mod tests {
         assert_mirrors!(crate::TRACE_WGSL, GpuNode, "Node", [min, first, max, count]);
         assert_mirrors!(
             crate::TRACE_WGSL,
+            GpuFirstHit,
+            "FirstHit",
+            [radiance, transmittance, normal, depth, picked, pad0, pad1, pad2]
+        );
+        assert_mirrors!(
+            crate::TRACE_WGSL,
             PassState,
             "PassState",
             [radiance, transmittance, after_t, after_id, flags, picked, normal, depth]
@@ -720,6 +752,7 @@ mod tests {
                 "LOOP_BUDGET" = crate::LOOP_BUDGET,
                 "MODE_FRAMES" = MODE_FRAMES,
                 "MODE_PASS" = MODE_PASS,
+                "MODE_HYBRID" = MODE_HYBRID,
                 "LIGHT_ID" = rng::LIGHT_ID,
                 "LOOK_SURFACE" = LOOK_SURFACE,
                 "LOOK_VOLUMETRIC" = LOOK_VOLUMETRIC,

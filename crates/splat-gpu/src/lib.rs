@@ -25,7 +25,7 @@ pub use wgpu;
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use context::GpuContext;
 pub use error::GpuError;
-pub use layout::{GpuParticle, Params, PassState};
+pub use layout::{GpuFirstHit, GpuParticle, Params, PassState};
 pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use sort::RadixSort;
 pub use trace::{

@@ -116,6 +116,7 @@ impl TracePipeline {
                 storage(9, false),
                 storage(10, true),
                 storage(11, true),
+                storage(12, true),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -144,6 +145,8 @@ pub struct GpuTracer<'a> {
     lights: wgpu::Buffer,
     triangles: wgpu::Buffer,
     mesh_materials: wgpu::Buffer,
+    /// Binding 12 when no first hits are given (one unused entry).
+    no_first_hits: wgpu::Buffer,
 }
 
 impl<'a> GpuTracer<'a> {
@@ -176,6 +179,7 @@ impl<'a> GpuTracer<'a> {
             lights: ctx.upload("lights", bytemuck::cast_slice(&layout::lights(trace.lighting()))),
             triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace.meshes()))),
             mesh_materials: ctx.upload("mesh materials", bytemuck::cast_slice(&layout::mesh_materials(trace.meshes()))),
+            no_first_hits: ctx.upload("no first hits", bytemuck::cast_slice(&[layout::GpuFirstHit::default()])),
         })
     }
 
@@ -206,12 +210,43 @@ impl<'a> GpuTracer<'a> {
         method: &Method,
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
+        self.render_with(camera, method, frames, None)
+    }
+
+    /// The hybrid pipeline (vk_gaussian_splatting Lighting §5; the twin of
+    /// `splat_core::raster::Rasterizer::hybrid` with sorted splatting at one sample per pixel):
+    /// `raster` (the same scene, meshes and lighting, for `camera`) rasterizes the first hit of
+    /// every pixel on the compute tile rasterizer, and this tracer continues from it: the pick
+    /// lit with shadow rays, the mesh behind the splats shaded with shadows and its mirror and
+    /// glass bounces traced by `method`.
+    pub fn render_hybrid(
+        &self,
+        raster: &crate::GpuRasterizer,
+        camera: &Camera,
+        method: &Method,
+        frames: &Frames,
+    ) -> Result<(RenderOutput, GpuStats), GpuError> {
+        let hits = raster.first_hits()?;
+        if hits.len() != (camera.width * camera.height) as usize {
+            return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
+        }
+        let buffer = self.ctx.upload("first hits", bytemuck::cast_slice(&hits));
+        self.render_with(camera, method, frames, Some(&buffer))
+    }
+
+    fn render_with(
+        &self,
+        camera: &Camera,
+        method: &Method,
+        frames: &Frames,
+        first_hits: Option<&wgpu::Buffer>,
+    ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         let params = MethodParams::try_from(method)?;
         let count = frames.keys(method.is_stochastic() || self.trace.is_random())?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
-        let run = Run { tracer: self, camera, params, frames, count };
+        let run = Run { tracer: self, camera, params, frames, count, first_hits };
         let lanes = u64::from(ctx.lanes());
         let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
         let mut out = if cpu_adapter {
@@ -239,7 +274,7 @@ impl<'a> GpuTracer<'a> {
         // Mirror and glass bounces run whole frames only: the state between passes is the
         // camera ray's.
         let bounces = self.trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
-        if over(&out) && multi_pass && !bounces {
+        if over(&out) && multi_pass && !bounces && first_hits.is_none() {
             out = run.execute(1, true)?;
         }
         if over(&out) {
@@ -276,6 +311,8 @@ struct Run<'a> {
     params: MethodParams,
     frames: &'a Frames,
     count: u32,
+    /// The hybrid pipeline's rasterized first hits, if this is a hybrid render.
+    first_hits: Option<&'a wgpu::Buffer>,
 }
 
 impl Run<'_> {
@@ -333,6 +370,10 @@ impl Run<'_> {
                 wgpu::BindGroupEntry { binding: 9, resource: out_pick.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 10, resource: tracer.triangles.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 11, resource: tracer.mesh_materials.as_entire_binding() },
+                wgpu::BindGroupEntry {
+                    binding: 12,
+                    resource: self.first_hits.unwrap_or(&tracer.no_first_hits).as_entire_binding(),
+                },
             ],
         });
         let mut gpu_time = Duration::ZERO;
@@ -408,7 +449,9 @@ impl Run<'_> {
             let mut first = 0u32;
             while first < self.count {
                 let chunk = per_dispatch.min(self.count - first);
-                params.push(layout::params(tracer.trace, camera, &self.params, self.frames, first, chunk));
+                let p = layout::params(tracer.trace, camera, &self.params, self.frames, first, chunk);
+                let mode = if self.first_hits.is_some() { layout::MODE_HYBRID } else { layout::MODE_FRAMES };
+                params.push(Params { mode, ..p });
                 first += chunk;
             }
             submit(&params)?;

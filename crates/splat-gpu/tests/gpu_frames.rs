@@ -411,3 +411,80 @@ fn batching_frames_per_dispatch_report() {
         );
     }
 }
+
+/// The hybrid pipeline on the GPU (the tile rasterizer's first hit, then the tracer's shadow
+/// rays at the pick and its segments from the mesh) equals the CPU's `Rasterizer::hybrid` with
+/// sorted splatting: colour, depth, normal and pick, among a glass sphere, a half mirror and a
+/// lit wall, in both looks, with stochastic and exact secondary rays; the shadows change the
+/// image (the hybrid differs from plain lit rasterization) far beyond the tolerance.
+#[test]
+fn hybrid_frame_equals_the_cpu_frame() {
+    use glam::{Affine3A, Quat, Vec3};
+    use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 32, 24);
+    let place = |mesh: TriangleMesh, scale: f32, facing: Vec3, at: Vec3| {
+        let r = Quat::from_rotation_arc(Vec3::Y, facing.normalize());
+        mesh.transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(scale), r, at))
+    };
+    let meshes = Meshes::new(&[
+        (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), MeshMaterial::default()),
+        (
+            place(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3)),
+            MeshMaterial { transmission: 0.9, ior: 1.5, ..MeshMaterial::default() },
+        ),
+        (
+            place(TriangleMesh::plane(), 0.4, Vec3::new(1.0, 1.0, 1.5), Vec3::new(0.9, 0.9, 1.4)),
+            MeshMaterial { mirror: 0.5, ..MeshMaterial::default() },
+        ),
+    ])
+    .unwrap();
+    let pipes = splat_gpu::RasterPipelines::new(ctx).unwrap();
+    let under = RasterMethod::Sorted { blend: Blend::Under };
+    let raster = RasterSettings::default();
+    let cases = [
+        (Shadows::Stochastic, Look::Surface, Method::Stochastic),
+        (Shadows::Exact, Look::Surface, Method::Exact),
+        (Shadows::Stochastic, Look::Volumetric, Method::Stochastic),
+    ];
+    for (shadows, look, secondary) in cases {
+        let lighting = lighting(shadows, look);
+        let settings = RenderSettings::default();
+        let trace = TraceScene::new(&scene, settings)
+            .unwrap()
+            .with_lighting(lighting.clone())
+            .unwrap()
+            .with_meshes(meshes.clone());
+        let frames = Frames { count: 1, seed: 7, ..Frames::default() };
+        let cpu_r = Rasterizer::new(&scene, &camera, settings, raster).unwrap().hybrid(&trace, secondary).unwrap();
+        let cpu = render_raster(&cpu_r, &under, &frames, &|_| {}).unwrap();
+        let plain = Rasterizer::new(&scene, &camera, settings, raster)
+            .unwrap()
+            .with_lighting(lighting.clone())
+            .unwrap()
+            .with_meshes(meshes.clone());
+        let plain = render_raster(&plain, &under, &frames, &|_| {}).unwrap();
+        let effect = max_difference(cpu.mean.data(), plain.mean.data());
+        assert!(effect > 0.1, "{shadows:?} {look:?}: the ray tracer changes the image by {effect} only");
+        let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, &scene, &settings, &lighting)
+            .unwrap()
+            .with_meshes(ctx, &meshes)
+            .unwrap();
+        let rasterizer = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &raster).unwrap();
+        let tracer = tracer(ctx, &trace);
+        let gpu = tracer.render_hybrid(&rasterizer, &camera, &secondary, &frames).unwrap().0;
+        let pixels = (camera.width * camera.height) as usize;
+        let bad: Vec<usize> = (0..pixels)
+            .filter(|&p| {
+                let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
+                let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
+                let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
+                let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
+                colour.is_nan() || colour > LIT_TOLERANCE || !depth || normal > 1e-3 || cpu.picked[p] != gpu.picked[p]
+            })
+            .collect();
+        eprintln!("hybrid {shadows:?} {look:?} {secondary:?}: {} of {pixels} pixels differ", bad.len());
+        assert!(bad.is_empty(), "{shadows:?} {look:?} {secondary:?}: pixels {bad:?}");
+    }
+}

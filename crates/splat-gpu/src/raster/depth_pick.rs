@@ -1,6 +1,7 @@
 //! Iso-opacity depth and picked splat of every pixel: the compute tile rasterizer.
 
 use super::*;
+use crate::layout::GpuFirstHit;
 
 /// Iso-opacity depth and picked splat of every pixel, with the front-to-back colour they come
 /// from (the GPU twin of sorted splatting with [`Blend::Under`]).
@@ -30,6 +31,15 @@ impl DepthPick {
     }
 }
 
+/// What one tile pass reads back: per pixel RGBA colour, (depth bits, pick) and normal, and
+/// the (tile, splat) pair count.
+struct TilePass {
+    color: Vec<f32>,
+    pick: Vec<u32>,
+    normal: Vec<f32>,
+    pairs: u32,
+}
+
 impl GpuRasterizer<'_> {
     /// Front-to-back iso-opacity depth and picked splat per pixel, by a compute tile rasterizer
     /// in the 3DGS style: the sorted splats are binned into 16 × 16 tiles as (tile, rank)
@@ -45,7 +55,43 @@ impl GpuRasterizer<'_> {
     /// Here each pixel is owned by one invocation that visits its fragments in the global
     /// (depth, id) order of the CPU reference, so the result is exact and deterministic.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
-        self.set_mode(Draw::Under);
+        let TilePass { color, pick, normal, pairs } = self.tile_pass(false)?;
+        let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
+        let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
+        Ok(DepthPick {
+            color: image(3, &|i| color[i]),
+            alpha: image(1, &|i| color[i + 3]),
+            normal: image(3, &|i| normal[i]),
+            // Negative where neither a splat nor a mesh set the depth.
+            depth: pick.chunks(2).map(|p| Some(f32::from_bits(p[0])).filter(|&d| d >= 0.0)).collect(),
+            picked,
+            pairs,
+        })
+    }
+
+    /// The hybrid pipeline's first hit of every pixel (vk_gaussian_splatting Lighting §5), by the
+    /// same tile pass: the splats' radiance and transmittance in front of the meshes (lit per
+    /// fragment in the volumetric look, before lighting in the surface look), the integrated
+    /// normal, and the picked depth and splat, which the ray tracer then lights with shadows and
+    /// continues from at the mesh ([`crate::GpuTracer::render_hybrid`]).
+    pub fn first_hits(&self) -> Result<Vec<GpuFirstHit>, GpuError> {
+        let TilePass { color, pick, normal, .. } = self.tile_pass(true)?;
+        Ok((0..pick.len() / 2)
+            .map(|i| GpuFirstHit {
+                radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
+                transmittance: color[4 * i + 3],
+                normal: [normal[4 * i], normal[4 * i + 1], normal[4 * i + 2]],
+                depth: f32::from_bits(pick[2 * i]),
+                picked: pick[2 * i + 1],
+                ..GpuFirstHit::default()
+            })
+            .collect())
+    }
+
+    /// One tile pass: per pixel RGBA colour, (depth bits, pick) and normal, and the pair count.
+    fn tile_pass(&self, first_hit: bool) -> Result<TilePass, GpuError> {
+        let params = RasterParams { mode: Draw::Under.mode(), first_hit: u32::from(first_hit), ..self.params };
+        self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
         let [tiles_x, tiles_y] = self.params.tiles;
         // 1. Pairs per rank and their exclusive scan (offsets[n] is the total).
@@ -153,16 +199,6 @@ impl GpuRasterizer<'_> {
         let color = ctx.read_f32(&out_color, pixels * 4)?;
         let pick = ctx.read_u32(&out_pick, pixels * 2)?;
         let normal = ctx.read_f32(&out_normal, pixels * 4)?;
-        let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
-        let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
-        Ok(DepthPick {
-            color: image(3, &|i| color[i]),
-            alpha: image(1, &|i| color[i + 3]),
-            normal: image(3, &|i| normal[i]),
-            // Negative where neither a splat nor a mesh set the depth.
-            depth: pick.chunks(2).map(|p| Some(f32::from_bits(p[0])).filter(|&d| d >= 0.0)).collect(),
-            picked,
-            pairs,
-        })
+        Ok(TilePass { color, pick, normal, pairs })
     }
 }

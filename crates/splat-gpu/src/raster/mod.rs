@@ -646,7 +646,7 @@ mod tests {
                 t_min,
                 t_max,
                 meshes,
-                pad1,
+                first_hit,
                 pad2,
                 pad3
             ]

@@ -96,8 +96,8 @@ pub struct RasterParams {
     pub t_max: f32,
     /// 1 when the scene has meshes ([`RasterScene::with_meshes`]).
     pub meshes: u32,
-    /// Padding.
-    pub pad1: u32,
+    /// 1 when the tile rasterizer writes the hybrid pipeline's first hit.
+    pub first_hit: u32,
     /// Padding.
     pub pad2: u32,
     /// Padding.
@@ -285,7 +285,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatE
         t_min: s.t_min,
         t_max: s.t_max,
         meshes: u32::from(scene.has_meshes),
-        pad1: 0,
+        first_hit: 0,
         pad2: 0,
         pad3: 0,
     }
