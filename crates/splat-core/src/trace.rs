@@ -945,7 +945,8 @@ fn surface_offset(x: Vec3) -> f32 {
     SURFACE_OFFSET * x.abs().max_element().max(1.0)
 }
 
-/// [`surface_offset`] relative to max(1, the largest coordinate's magnitude).
+/// How far from a mesh surface point x a secondary or shadow ray starts looking for meshes,
+/// relative to max(1, |x|∞).
 pub const SURFACE_OFFSET: f32 = 1e-4;
 
 /// One straight piece of a light path: the ray clipped at the closest mesh, the method and

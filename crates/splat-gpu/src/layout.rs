@@ -244,7 +244,7 @@ pub struct Params {
     pub set_count: u32,
     /// Iso-opacity threshold on transmittance.
     pub iso_threshold: f32,
-    /// Index in the node buffer of the mesh BVH's root ([`nodes`]), [`NO_MESHES`] without meshes.
+    /// Index in the node buffer of the mesh BVH's root (after the splats' nodes), `u32::MAX` without meshes.
     pub mesh_root: u32,
     /// Most mirror and glass bounces (`RenderSettings::max_bounces`).
     pub max_bounces: u32,
