@@ -305,10 +305,19 @@ fn traverse(ray: Ray, visitor: u32) {
 // a third visitor family of `visit`: GPU compilers inline every function, so each traversal
 // call site carries the bodies of all the visitors its `visit` can reach, and the shadow ray is
 // traced from inside the primary methods.
+//
+// Meshes block the light (trace.rs `visibility_from`): their BVH follows the splats' in the node
+// buffer, so the same loop walks it first (the splats' root waits on the stack, and a mesh hit
+// ends the walk before any splat could shorten t_max), with triangles at its leaves.
 fn traverse_shadow(ray: Ray) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(0u, ray.origin, inv, ray.t_min, t_max);
+    let meshes = params.mesh_root != NONE;
+    traversal_begin(select(0u, params.mesh_root, meshes), ray.origin, inv, ray.t_min, t_max);
+    if (meshes) {
+        trav_stack[trav_top] = 0u;
+        trav_top += 1u;
+    }
     loop {
         iterations += 1u;
         let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
@@ -316,9 +325,19 @@ fn traverse_shadow(ray: Ray) {
             break;
         }
         let nd = nodes[node];
+        let triangle_leaf = node >= params.mesh_root;
         for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
             iterations += 1u;
-            t_max = visit_shadow(ray, leaf, t_max);
+            if (!triangle_leaf) {
+                t_max = visit_shadow(ray, leaf, t_max);
+                continue;
+            }
+            let h = triangle_intersect(triangles[leaf], ray);
+            if (h.x >= 0.0 && h.x < ray.t_max) {
+                shadow_mesh = true;
+                t_max = -1.0; // every node is now beyond t_max
+                break;
+            }
         }
     }
 }
@@ -582,6 +601,7 @@ struct ShadowInputs {
 var<private> shadow_in: ShadowInputs;
 var<private> shadow_t: f32;
 var<private> shadow_blocked: bool;
+var<private> shadow_mesh: bool;
 
 // trace.rs `TraceScene::visibility_from`: the shadow ray from x + offset l toward the light;
 // a mesh on the way blocks it.
@@ -590,15 +610,16 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u
     if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
         return vec3<f32>(1.0);
     }
-    if (params.mesh_root != NONE && mesh_traverse(params.mesh_root, shadow, true).triangle != NONE) {
-        return vec3<f32>(0.0);
-    }
-    // One traversal call for every kind (see traverse_shadow).
+    // One traversal call for every kind and the meshes (see traverse_shadow).
     shadow_t = 1.0;
     shadow_in = ShadowInputs(pixel_seed, slot);
     shadow_blocked = false;
+    shadow_mesh = false;
     sb.len = 0u;
     traverse_shadow(shadow);
+    if (shadow_mesh) {
+        return vec3<f32>(0.0);
+    }
     switch params.shadows {
         case SHADOWS_EXACT: {
             return vec3<f32>(shadow_t);
@@ -829,21 +850,6 @@ var<private> surface: SurfaceHit;
 // none): the weight of the mesh's mirror and glass segments.
 var<private> behind_weight: f32;
 
-// trace.rs `surface_sample`'s local part: the mesh's colour lit by the world's lights, in slot
-// 0, its shadow rays starting SURFACE_OFFSET × max(1, |x|∞) along the light, times
-// 1 − mirror − transmission (the mirror and glass shares are the segments `push_bounces`
-// queues).
-fn surface_color(ray: Ray, pixel_seed: u32) -> vec3<f32> {
-    let mm = mesh_materials[triangles[surface.triangle].mesh];
-    let share = local_share(mm);
-    if (share <= 0.0) {
-        return vec3<f32>(0.0);
-    }
-    let x = ray.origin + surface.t * ray.dir;
-    let lit = lit_material(mm.shading, mm.color, surface.t, surface_normal(surface, ray), ray, pixel_seed, 0u, surface_offset(x));
-    return share * lit;
-}
-
 // trace.rs `surface_offset`.
 fn surface_offset(x: vec3<f32>) -> f32 {
     return SURFACE_OFFSET * max(max(max(abs(x.x), abs(x.y)), abs(x.z)), 1.0);
@@ -858,23 +864,17 @@ fn surface_offset(x: vec3<f32>) -> f32 {
 // integrated normal and the picked particle's material, what lies behind where the threshold
 // was never reached).
 fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
-    behind_weight = 0.0;
     let mesh = surface.triangle != NONE;
     let mesh_alpha = select(0.0, 1.0, mesh);
-    var need = true;
-    if (segment_slots()) {
-        need = st.transmittance < f32(params.m * params.n);
-    } else if (segment_method == METHOD_STOCHASTIC_PASS) {
-        need = (st.flags & ACCEPTED) == 0u;
-    }
-    var behind = params.background.xyz;
     var behind_pick = no_pick();
     if (mesh) {
         behind_pick = Pick(surface_normal(surface, ray), surface.t, NONE, 0u, 0u, 0u);
-        if (need) {
-            behind = surface_color(ray, pixel_seed);
-        }
     }
+    // The sample is out + behind_weight × (what lies behind), out.xyz + the lit pick where
+    // `shade`; both lightings happen at the end, at one call site.
+    var out = vec4<f32>(st.radiance, 1.0 - st.transmittance + st.transmittance * mesh_alpha);
+    var shade = false;
+    behind_weight = st.transmittance;
     if (segment_slots()) {
         let samples = f32(params.m * params.n);
         let misses = samples - st.transmittance;
@@ -882,24 +882,20 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
         if (st.picked != NONE) {
             sample_pick = Pick(st.normal, st.depth, st.picked, 0u, 0u, 0u);
         }
+        out = vec4<f32>(st.radiance, st.transmittance + misses * mesh_alpha) / samples;
         behind_weight = misses / samples;
-        return vec4<f32>(st.radiance + misses * behind, st.transmittance + misses * mesh_alpha) / samples;
-    }
-    var out = vec4<f32>(st.radiance + st.transmittance * behind, 1.0 - st.transmittance + st.transmittance * mesh_alpha);
-    var shade = false;
-    var add_behind = st.transmittance;
-    if (segment_method == METHOD_STOCHASTIC_PASS) {
+    } else if (segment_method == METHOD_STOCHASTIC_PASS) {
         if ((st.flags & ACCEPTED) == 0u) {
             sample_pick = behind_pick;
+            out = vec4<f32>(0.0, 0.0, 0.0, mesh_alpha);
             behind_weight = 1.0;
-            return vec4<f32>(behind, mesh_alpha);
+        } else {
+            sample_pick = Pick(st.normal, st.depth, NONE, 0u, 0u, 0u);
+            out = vec4<f32>(st.radiance, 1.0);
+            shade = params.lit == 1u;
+            behind_weight = 0.0;
         }
-        sample_pick = Pick(st.normal, st.depth, NONE, 0u, 0u, 0u);
-        out = vec4<f32>(st.radiance, 1.0);
-        shade = params.lit == 1u;
-        add_behind = 0.0;
     } else {
-        behind_weight = st.transmittance;
         sample_pick = no_pick();
         if ((st.flags & HIT) != 0u) {
             sample_pick.normal = unit_normal(st.normal, ray.dir);
@@ -912,7 +908,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
         if (params.lit == 1u && !volumetric()) {
             if (st.picked == NONE) {
                 sample_pick = behind_pick;
-                out = vec4<f32>(behind, mesh_alpha);
+                out = vec4<f32>(0.0, 0.0, 0.0, mesh_alpha);
                 behind_weight = 1.0;
             } else {
                 sample_pick.picked = st.picked;
@@ -923,11 +919,49 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
             sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
         }
     }
-    if (shade) {
-        let c = lit(st.radiance, st.picked, st.depth, sample_pick.normal, ray, pixel_seed, 0u);
-        out = vec4<f32>(c + add_behind * behind, out.w);
+    // Lit(…) of the pick (k = 0) and of the mesh's local share (k = 1), where the sample shows
+    // them: one inlined copy of the lighting and its shadow traversal for both.
+    var behind = params.background.xyz;
+    for (var k = 0u; k < 2u; k++) {
+        iterations += 1u;
+        var m: Material;
+        var c: vec3<f32>;
+        var t: f32;
+        var n: vec3<f32>;
+        var offset = params.shadow_offset;
+        var share = 1.0;
+        if (k == 0u) {
+            if (!shade) {
+                continue;
+            }
+            m = material_of(st.picked);
+            c = st.radiance;
+            t = st.depth;
+            n = sample_pick.normal;
+        } else {
+            if (!mesh || !(behind_weight > 0.0)) {
+                continue;
+            }
+            let mm = mesh_materials[triangles[surface.triangle].mesh];
+            share = local_share(mm);
+            behind = vec3<f32>(0.0);
+            if (share <= 0.0) {
+                continue;
+            }
+            m = mm.shading;
+            c = mm.color;
+            t = surface.t;
+            n = behind_pick.normal;
+            offset = surface_offset(ray.origin + t * ray.dir);
+        }
+        let lit = share * lit_material(m, c, t, n, ray, pixel_seed, 0u, offset);
+        if (k == 0u) {
+            out = vec4<f32>(lit, out.w);
+        } else {
+            behind = lit;
+        }
     }
-    return out;
+    return vec4<f32>(out.xyz + behind_weight * behind, out.w);
 }
 
 // ---- camera.rs and frame accumulation (render_frames) ----------------------------------------

@@ -360,8 +360,8 @@ fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
 
 /// The GPU time of a render (timestamp queries when the adapter has them, else wall time
 /// around submit and wait) is positive and within the wall time of the call, and grows with
-/// the work: 16 frames take longer than 1 (speed itself is measured by `splat bench --backend
-/// gpu`, not asserted here).
+/// the work: 16 frames take longer than 1, each the fastest of three runs (speed itself is
+/// measured by `splat bench --backend gpu`, not asserted here).
 #[test]
 fn gpu_time_is_measured_within_the_wall_time() {
     let Some(ctx) = context() else { return };
@@ -374,8 +374,10 @@ fn gpu_time_is_measured_within_the_wall_time() {
         let (_, stats) = tracer.render(&camera, &Method::Stochastic, &frames).unwrap();
         (stats.gpu_time, start.elapsed())
     };
-    let (one, wall_one) = time(1);
-    let (many, wall_many) = time(16);
+    // Each the fastest of three, so that other tests' load on the machine does not decide.
+    let fastest = |count| (0..3).map(|_| time(count)).min_by_key(|t| t.0).unwrap();
+    let (one, wall_one) = fastest(1);
+    let (many, wall_many) = fastest(16);
     eprintln!("GPU time 1 frame {one:?} (wall {wall_one:?}), 16 frames {many:?} (wall {wall_many:?})");
     assert!(one > std::time::Duration::ZERO && one <= wall_one, "{one:?} vs wall {wall_one:?}");
     assert!(many <= wall_many && many > one, "{many:?} vs {one:?}, wall {wall_many:?}");
