@@ -922,8 +922,9 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
     // Lit(…) of the pick (k = 0) and of the mesh's local share (k = 1), where the sample shows
     // them: one inlined copy of the lighting and its shadow traversal for both.
     var behind = params.background.xyz;
+    // Two iterations a call, not counted: `iterations` bounds each loop statement's total by the
+    // busiest lane's, and the batches of frames per dispatch shrink with every count a frame adds.
     for (var k = 0u; k < 2u; k++) {
-        iterations += 1u;
         var m: Material;
         var c: vec3<f32>;
         var t: f32;
@@ -1077,15 +1078,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var total = vec4<f32>(0.0);
         var camera_pick = no_pick();
         var finished = false;
-        segments[0] = Segment(camera.origin, 1.0, camera.dir, 0u);
-        var top = 1u;
+        // The camera segment first, then the pending ones: the stack (a dynamically indexed
+        // private array, slow on CPU adapters) is touched only where a mesh bounces.
+        var seg = Segment(camera.origin, 1.0, camera.dir, 0u);
+        var top = 0u;
         loop {
-            iterations += 1u;
-            if (top == 0u) {
-                break;
-            }
-            top -= 1u;
-            let seg = segments[top];
             bounce = seg.depth;
             // The camera ray from t_min; a secondary ray from the surface point on (its line
             // continues the mirrored or refracted one), meshes from surface_offset on.
@@ -1160,6 +1157,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (by_pass) {
                 pass_state[index] = st;
             }
+            if (top == 0u) {
+                break;
+            }
+            // The camera segment is the frame (counted by the frame loop); every other segment
+            // counts itself, so frames without meshes batch as many per dispatch as before.
+            iterations += 1u;
+            top -= 1u;
+            seg = segments[top];
         }
         if (finished) {
             sample_pick = camera_pick;
