@@ -1,7 +1,7 @@
 // Twin of crates/splat-core/src/mesh.rs, prepended to the kernels that meet meshes (trace.wgsl
 // and the raster pipeline's mesh pre-pass, mesh_prepass.wgsl): triangles, their intersection and
 // normals, and the traversal of their BVH (after bvh.wgsl). Reads the including kernel's
-// `triangles`, `nodes` and `iterations`, and its `Ray`.
+// `triangles`, `nodes` and `iterations`, and bvh.wgsl's `Ray`.
 
 // mesh.rs `EDGE_SLACK`.
 const EDGE_SLACK: f32 = 1e-6;

@@ -15,15 +15,6 @@
 // consolidation of the tile rasterizer.
 @group(0) @binding(5) var<storage, read_write> behind_normal: array<vec4<f32>>;
 
-// hit.rs `Ray` as mesh.wgsl reads it.
-struct Ray {
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    view: vec3<f32>,
-    t_min: f32,
-    t_max: f32,
-}
-
 // bvh.wgsl's loop counter (no budget is checked here).
 var<private> iterations: u32;
 

@@ -217,14 +217,6 @@ fn response(d2: f32) -> f32 {
     return kernel_response(d2, params.kernel_degree);
 }
 
-struct Ray {
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    view: vec3<f32>,
-    t_min: f32,
-    t_max: f32,
-}
-
 struct Hit {
     t: f32,
     alpha: f32,

@@ -176,6 +176,21 @@ pub mod harness {
     /// error of a 3-seed, 9-level fit.
     pub const MONTE_CARLO_SLOPE: RangeInclusive<f64> = -0.58..=-0.42;
 
+    /// `run` (frames of an estimator) passes the z-test against `oracle` at `base`, and the same
+    /// estimator with every decision lowered by `shift` (u < α + shift, [`Frames::u_shift`]) is
+    /// rejected: the suite shows it can fail.
+    pub fn assert_unbiased_and_shift_rejected(
+        name: &str,
+        oracle: &RenderOutput,
+        base: Frames,
+        shift: f32,
+        run: impl Fn(Frames) -> RenderOutput,
+    ) {
+        StatTest::new(name, oracle.clone(), &run).assert_unbiased(base);
+        let biased = |f: Frames| run(Frames { u_shift: shift, ..f });
+        StatTest::new(format!("{name} u < α + {shift}"), oracle.clone(), biased).assert_rejected(base);
+    }
+
     /// A built-in fixture scene and its camera at `width` × `height`.
     pub fn fixture(name: &str, width: u32, height: u32) -> (Scene, Camera) {
         let (scene, camera) = splat_core::scenes::by_name(name).expect("a built-in scene");
@@ -662,6 +677,18 @@ pub fn bonsai() -> Option<splat_core::Scene> {
         return None;
     }
     Some(splat_io::read_scene(&path).expect("the verified bonsai capture loads"))
+}
+
+/// `mesh` scaled by `scale`, turned so that its +y axis faces `facing`, and moved to `at`: how
+/// the mesh tests place the procedural plane and sphere.
+pub fn placed(
+    mesh: splat_core::mesh::TriangleMesh,
+    scale: f32,
+    facing: glam::Vec3,
+    at: glam::Vec3,
+) -> splat_core::mesh::TriangleMesh {
+    let r = glam::Quat::from_rotation_arc(glam::Vec3::Y, facing.normalize());
+    mesh.transformed(glam::Affine3A::from_scale_rotation_translation(glam::Vec3::splat(scale), r, at))
 }
 
 /// The standard bonsai view (the capture's world up is −y): 1200 × 800 from (0, −1.5, 4)

@@ -14,7 +14,7 @@ use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render
 use splat_core::rng::{RayRng, RngScheme};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, Frames, RenderSettings, Scene};
-use splat_tests::harness::{StatTest, fixture};
+use splat_tests::harness::{StatTest, assert_unbiased_and_shift_rejected, fixture};
 
 /// Frames of the mean run (the variance run has 4×).
 const F: u32 = 256;
@@ -86,9 +86,7 @@ fn expectation_image(
 /// passes the z-test against `oracle`, the second is rejected.
 fn assert_unbiased_and_control(name: &str, oracle: &RenderOutput, run: impl Fn(Frames) -> RenderOutput) {
     let base = Frames { count: F, seed: 11, rng: RngScheme::Hash, ..Frames::default() };
-    StatTest::new(name, oracle.clone(), &run).assert_unbiased(base);
-    let biased = |f: Frames| run(Frames { u_shift: BIASED, ..f });
-    StatTest::new(format!("{name} u < α + {BIASED}"), oracle.clone(), biased).assert_rejected(base);
+    assert_unbiased_and_shift_rejected(name, oracle, base, BIASED, run);
 }
 
 fn check(name: &str, scene: &Scene, camera: &Camera, fill: Vec3) {

@@ -4,7 +4,7 @@
 //! vanishing, meshes shadowing splats, and z-tests of the stochastic methods in a world with a
 //! lit wall, a mirror and a glass sphere against `exact`, each with a rejected 2 % control.
 
-use glam::{Affine3A, Mat3, Quat, Vec3};
+use glam::{Mat3, Vec3};
 use splat_core::frame::RenderOutput;
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
@@ -12,23 +12,19 @@ use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render
 use splat_core::rng::{RayRng, RngScheme};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, Frames, RenderSettings, Scene, render_oracle};
-use splat_tests::harness::{StatTest, fixture};
+use splat_tests::harness::{assert_unbiased_and_shift_rejected, fixture};
+use splat_tests::placed;
 
 /// The injected error every z-test control must be rejected with: each decision u < α + 0.02.
 const BIASED: f32 = 0.02;
 
 /// A square of half-side `half` centred at `center`, facing `normal`.
 fn quad(center: Vec3, normal: Vec3, half: f32) -> TriangleMesh {
-    let r = Quat::from_rotation_arc(Vec3::Y, normal.normalize());
-    TriangleMesh::plane().transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(half), r, center))
+    placed(TriangleMesh::plane(), half, normal, center)
 }
 
 fn sphere(center: Vec3, radius: f32) -> TriangleMesh {
-    TriangleMesh::sphere(32, 16).transformed(Affine3A::from_scale_rotation_translation(
-        Vec3::splat(radius),
-        Quat::IDENTITY,
-        center,
-    ))
+    placed(TriangleMesh::sphere(32, 16), radius, Vec3::Y, center)
 }
 
 fn emissive(color: Vec3) -> MeshMaterial {
@@ -227,9 +223,7 @@ fn world(material: Material, shadows: Shadows) -> (Lighting, Meshes) {
 
 fn assert_unbiased_and_control(name: &str, oracle: &RenderOutput, run: impl Fn(Frames) -> RenderOutput) {
     let base = Frames { count: 256, seed: 17, rng: RngScheme::Hash, ..Frames::default() };
-    StatTest::new(name, oracle.clone(), &run).assert_unbiased(base);
-    let biased = |f: Frames| run(Frames { u_shift: BIASED, ..f });
-    StatTest::new(format!("{name} u < α + {BIASED}"), oracle.clone(), biased).assert_rejected(base);
+    assert_unbiased_and_shift_rejected(name, oracle, base, BIASED, run);
 }
 
 /// Among a lit wall, a mirror and a glass sphere, with stochastic shadow rays: `stochastic` and

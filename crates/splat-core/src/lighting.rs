@@ -457,7 +457,13 @@ impl Lighting {
     /// [`Lighting::shade`] with every light visible and sampled at its centre: the lighting of
     /// the raster pipelines, which have no shadows (vk_gaussian_splatting Lighting §3).
     pub fn shade_unshadowed(&self, c: Vec3, id: u32, ray: &Ray, t: f32, n: Vec3) -> Vec3 {
-        self.shade(c, id, ray, t, n, |_, _| Vec2::splat(0.5), |_, _, _| Vec3::ONE)
+        self.shade_material_unshadowed(self.material(id), c, ray, t, n)
+    }
+
+    /// [`Lighting::shade_unshadowed`] with `material` given (how the raster pipelines light a
+    /// mesh, [`crate::mesh`]).
+    pub fn shade_material_unshadowed(&self, material: &Material, c: Vec3, ray: &Ray, t: f32, n: Vec3) -> Vec3 {
+        self.shade_material(material, c, ray, t, n, |_, _| Vec2::splat(0.5), |_, _, _| Vec3::ONE)
     }
 
     /// The material of particle `id`.

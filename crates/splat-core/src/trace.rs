@@ -649,13 +649,24 @@ impl<'a> TraceScene<'a> {
         self.trace_ray(method, ray, Bounce::camera(decide), 0.0)
     }
 
+    /// The segment of `ray` in front of its closest mesh beyond `mesh_t_min`.
+    fn segment<'d, D: Decide>(
+        &self,
+        method: &Method,
+        ray: &Ray,
+        decide: Bounce<'d, D>,
+        mesh_t_min: f32,
+    ) -> Segment<'d, D> {
+        let surface = self.meshes.closest(&Ray { t_min: ray.t_min.max(mesh_t_min), ..*ray });
+        let ray = Ray { t_max: surface.map_or(ray.t_max, |s| s.t), ..*ray };
+        Segment { ray, surface, method: *method, decide, behind: OnceCell::new() }
+    }
+
     /// One sample of `method` along `ray`, `decide.depth` bounces after the camera ray: the ray
     /// is clipped at the closest mesh beyond `mesh_t_min`, whose shaded colour takes the
     /// background's place.
     fn trace_ray<D: Decide>(&self, method: &Method, ray: &Ray, decide: Bounce<D>, mesh_t_min: f32) -> Sample {
-        let surface = self.meshes.closest(&Ray { t_min: ray.t_min.max(mesh_t_min), ..*ray });
-        let ray = Ray { t_max: surface.map_or(ray.t_max, |s| s.t), ..*ray };
-        let seg = Segment { ray, surface, method: *method, decide, behind: OnceCell::new() };
+        let seg = self.segment(method, ray, decide, mesh_t_min);
         match *method {
             Method::Exact => self.exact(&seg),
             Method::KBuffer { k, max_passes, min_transmittance } => {
@@ -852,10 +863,7 @@ impl<'a> TraceScene<'a> {
     /// lit it is not, since the specular term is not proportional to the base colour. `decide`
     /// draws only shadow rays, area-light samples and the decisions of secondary rays.
     pub fn stochastic_pass_expectation(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> DVec3 {
-        let surface = self.meshes.closest(ray);
-        let ray = Ray { t_max: surface.map_or(ray.t_max, |s| s.t), ..*ray };
-        let method = Method::StochasticPass { k, max_passes };
-        let seg = Segment { ray, surface, method, decide: Bounce::camera(decide), behind: OnceCell::new() };
+        let seg = self.segment(&Method::StochasticPass { k, max_passes }, ray, Bounce::camera(decide), 0.0);
         let mut reach = 1.0f64;
         let mut sum = DVec3::ZERO;
         self.passes(&seg.ray, k, max_passes, |_, acc| {

@@ -160,14 +160,11 @@ fn depth_normal_and_picks_equal_the_cpu() {
 /// off a tessellated sphere) moves a secondary ray across a splat's edge.
 #[test]
 fn one_frame_among_meshes_equals_the_cpu_frame() {
-    use glam::{Affine3A, Quat, Vec3};
+    use glam::Vec3;
     use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("layers", 32, 24);
-    let place = |mesh: TriangleMesh, scale: f32, facing: Vec3, at: Vec3| {
-        let r = Quat::from_rotation_arc(Vec3::Y, facing.normalize());
-        mesh.transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(scale), r, at))
-    };
+    let place = splat_tests::placed;
     let matte = |r: f32, g: f32, b: f32| MeshMaterial { color: Vec3::new(r, g, b), ..MeshMaterial::default() };
     let world = |sphere: MeshMaterial, quad: MeshMaterial| {
         Meshes::new(&[
@@ -421,15 +418,12 @@ fn batching_frames_per_dispatch_report() {
 /// image (the hybrid differs from plain lit rasterization) far beyond the tolerance.
 #[test]
 fn hybrid_frame_equals_the_cpu_frame() {
-    use glam::{Affine3A, Quat, Vec3};
+    use glam::Vec3;
     use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
     use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("layers", 32, 24);
-    let place = |mesh: TriangleMesh, scale: f32, facing: Vec3, at: Vec3| {
-        let r = Quat::from_rotation_arc(Vec3::Y, facing.normalize());
-        mesh.transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(scale), r, at))
-    };
+    let place = splat_tests::placed;
     let meshes = Meshes::new(&[
         (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), MeshMaterial::default()),
         (

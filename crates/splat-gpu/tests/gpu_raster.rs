@@ -466,14 +466,11 @@ fn lit_rasterization_equals_the_cpu() {
 /// where the splats stay below the iso threshold), agrees at every pixel too.
 #[test]
 fn three_pass_compositing_among_meshes_equals_the_cpu() {
-    use glam::{Affine3A, Quat, Vec3};
+    use glam::Vec3;
     use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
     let Some(ctx) = context() else { return };
     let c = case("layers", 48, 36);
-    let place = |mesh: TriangleMesh, scale: f32, facing: Vec3, at: Vec3| {
-        let r = Quat::from_rotation_arc(Vec3::Y, facing.normalize());
-        mesh.transformed(Affine3A::from_scale_rotation_translation(Vec3::splat(scale), r, at))
-    };
+    let place = splat_tests::placed;
     let meshes = Meshes::new(&[
         (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), MeshMaterial::default()),
         (

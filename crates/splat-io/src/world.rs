@@ -338,16 +338,11 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), 
         }
         _ => return Err("give exactly one of shape = \"plane|cube|sphere\" or file = \"…\"".to_string().into()),
     };
-    let t = Vec3::from(m.translate.unwrap_or([0.0; 3]));
-    let [rx, ry, rz] = m.rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
+    let (t, r) = translate_rotate(m.translate, m.rotate)?;
     let s = m.scale.map_or(Vec3::ONE, Colour::rgb);
-    if !(t.is_finite() && rx.is_finite() && ry.is_finite() && rz.is_finite()) {
-        return Err("translate and rotate must be finite".to_string().into());
-    }
     if !(s.is_finite() && s.min_element() > 0.0) {
         return Err(format!("scale {s} must be finite and positive").into());
     }
-    let r = Quat::from_euler(EulerRot::ZYX, rz, ry, rx);
     let mesh = mesh.transformed(glam::Affine3A::from_scale_rotation_translation(s, r, t));
     let defaults = MeshMaterial::default();
     let material = MeshMaterial {
@@ -387,18 +382,24 @@ pub fn truncate_sh(scene: &mut Scene, degree: u8) {
     scene.sh_degree = degree;
 }
 
-/// Apply the set's similarity transform x ↦ s R x + t to means, rotations, scales and SH.
-fn transform(scene: &mut Scene, set: &SplatsFile) -> Result<(), String> {
-    let t = Vec3::from(set.translate.unwrap_or([0.0; 3]));
-    let [rx, ry, rz] = set.rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
-    let s = set.scale.unwrap_or(1.0);
+/// A world entry's `translate` and `rotate` (degrees about x, then y, then z) as a translation
+/// and a rotation, both finite.
+fn translate_rotate(translate: Option<[f32; 3]>, rotate: Option<[f32; 3]>) -> Result<(Vec3, Quat), String> {
+    let t = Vec3::from(translate.unwrap_or([0.0; 3]));
+    let [rx, ry, rz] = rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
     if !(t.is_finite() && rx.is_finite() && ry.is_finite() && rz.is_finite()) {
         return Err("translate and rotate must be finite".into());
     }
+    Ok((t, Quat::from_euler(EulerRot::ZYX, rz, ry, rx)))
+}
+
+/// Apply the set's similarity transform x ↦ s R x + t to means, rotations, scales and SH.
+fn transform(scene: &mut Scene, set: &SplatsFile) -> Result<(), String> {
+    let (t, r) = translate_rotate(set.translate, set.rotate)?;
+    let s = set.scale.unwrap_or(1.0);
     if !(s.is_finite() && s > 0.0) {
         return Err(format!("scale {s} must be finite and positive"));
     }
-    let r = Quat::from_euler(EulerRot::ZYX, rz, ry, rx);
     let rotate_sh = (r != Quat::IDENTITY && scene.sh_degree > 0).then(|| Rotation::new(r));
     for p in &mut scene.particles {
         p.mean = s * (r * p.mean) + t;

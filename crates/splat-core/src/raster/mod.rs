@@ -248,15 +248,7 @@ impl<'a> Rasterizer<'a> {
         }
         let m = self.meshes.material(hit.mesh);
         let (_, n, _) = hit.facing(ray.dir);
-        let local = self.lighting.shade_material(
-            &m.shading,
-            m.color,
-            ray,
-            hit.t,
-            n,
-            |_, _| Vec2::splat(0.5),
-            |_, _, _| Vec3::ONE,
-        );
+        let local = self.lighting.shade_material_unshadowed(&m.shading, m.color, ray, hit.t, n);
         f64::from(m.local_share()) * local.as_dvec3()
             + f64::from(m.mirror + m.transmission) * self.settings.background.as_dvec3()
     }
