@@ -213,6 +213,26 @@ impl Camera {
     pub fn pixel_ray(&self, x: u32, y: u32) -> Ray {
         self.ray(x, y, Vec2::splat(0.5))
     }
+
+    /// The ray of a thin lens (depth of field): through pixel (x, y) at sub-pixel `offset`, from
+    /// the point `lens` ∈ [0, 1)² of a lens of radius `aperture` (concentric disk mapping) in the
+    /// camera's z = 0 plane toward the point the pinhole ray meets the plane in focus, at depth
+    /// `focus_distance` along the camera's axis. Points at that depth are sharp; the ray is the
+    /// pinhole's when `aperture` is 0.
+    pub fn lens_ray(&self, x: u32, y: u32, offset: Vec2, aperture: f32, focus_distance: f32, lens: Vec2) -> Ray {
+        let pinhole = self.ray(x, y, offset);
+        if aperture <= 0.0 {
+            return pinhole;
+        }
+        let u = x as f32 + offset.x;
+        let v = y as f32 + offset.y;
+        let focus = focus_distance * Vec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0);
+        let on_lens = (aperture * crate::lighting::concentric_disk(lens)).extend(0.0);
+        let to_world = self.rotation.transpose();
+        let origin = to_world * (on_lens - self.translation);
+        let dir = (to_world * (focus - on_lens)).normalize();
+        Ray { origin, dir, ..pinhole }
+    }
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@
 //! - three siblings on that floor: the brute-force [`oracle`], the ray-tracing estimators
 //!   ([`trace`], through the [`bvh`]) and the splatting estimators ([`raster`]), named together
 //!   by [`Algorithm`];
+//! - a Monte Carlo [`path`] tracer in which Gaussians sit beside meshes;
 //! - decisions ([`rng`]), statistics ([`stats`]) and built-in scenes ([`scenes`]).
 //!
 //! No I/O, no GPU.
@@ -38,6 +39,7 @@ pub mod normal;
 pub mod oracle;
 mod par;
 pub mod particle;
+pub mod path;
 pub mod raster;
 pub mod rng;
 pub mod scenes;

@@ -157,12 +157,15 @@ pub struct MeshMaterial {
     pub transmission: f32,
     /// Index of refraction of the dielectric (outside is 1).
     pub ior: f32,
+    /// GGX roughness of the mirror and glass shares in the path tracer ([`crate::path`]; 0 is
+    /// perfectly smooth). The ray-tracing and raster pipelines treat both shares as smooth.
+    pub roughness: f32,
 }
 
 impl Default for MeshMaterial {
     /// A grey diffuse surface with a little ambient light.
     fn default() -> Self {
-        Self { color: Vec3::splat(0.8), shading: Material::DIFFUSE, mirror: 0.0, transmission: 0.0, ior: 1.5 }
+        Self { color: Vec3::splat(0.8), shading: Material::DIFFUSE, mirror: 0.0, transmission: 0.0, ior: 1.5, roughness: 0.0 }
     }
 }
 
@@ -182,6 +185,9 @@ impl MeshMaterial {
         }
         if !(self.ior.is_finite() && self.ior > 0.0) {
             return Err(format!("index of refraction {} must be finite and positive", self.ior));
+        }
+        if !(0.0..=1.0).contains(&self.roughness) {
+            return Err(format!("roughness {} must lie in [0, 1]", self.roughness));
         }
         Ok(())
     }

@@ -207,19 +207,24 @@ pub fn bounding_radius(settings: &RenderSettings, opacity: f32) -> f32 {
 
 /// A candidate hit in a k-buffer, ordered by (t, id).
 #[derive(Clone, Copy, Debug)]
-struct Slot {
-    t: f32,
-    id: u32,
-    leaf: u32,
-    alpha: f32,
+pub(crate) struct Slot {
+    pub(crate) t: f32,
+    pub(crate) id: u32,
+    pub(crate) leaf: u32,
+    pub(crate) alpha: f32,
 }
 
 impl Slot {
-    const EMPTY: Slot = Slot { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
+    pub(crate) const EMPTY: Slot = Slot { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
+
+    /// Whether the slot holds a hit.
+    pub(crate) fn is_hit(&self) -> bool {
+        self.id != u32::MAX
+    }
 }
 
 /// Up to `cap` hits kept sorted by (t, id).
-struct KBuf {
+pub(crate) struct KBuf {
     slots: [Slot; MAX_SLOTS],
     len: usize,
     cap: usize,
@@ -257,7 +262,7 @@ impl KBuf {
         self.slots[i] = s;
     }
 
-    fn as_slice(&self) -> &[Slot] {
+    pub(crate) fn as_slice(&self) -> &[Slot] {
         &self.slots[..self.len]
     }
 }
@@ -416,7 +421,7 @@ impl<'a> TraceScene<'a> {
         intersect(&self.prims[leaf as usize], self.ids[leaf as usize], ray, &s.kernel, s.hit_distance)
     }
 
-    fn shade(&self, leaf: u32, t: f32, alpha: f32, ray: &Ray) -> ShadedHit {
+    pub(crate) fn shade(&self, leaf: u32, t: f32, alpha: f32, ray: &Ray) -> ShadedHit {
         let hit = Hit { t, alpha, index: self.ids[leaf as usize] };
         shade_hit(self.scene, &self.prims[leaf as usize], hit, ray, &self.settings)
     }
@@ -696,9 +701,16 @@ impl<'a> TraceScene<'a> {
     /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3 (lit by the
     /// look when lighting is on; `decide` draws only shadow rays and area-light samples).
     fn exact<D: Decide>(&self, seg: &Segment<D>) -> Sample {
-        let ray = &seg.ray;
-        // Sort small (t, id) records by the order of `composite::sort_front_to_back`, then shade
-        // each hit once, in that order.
+        let mut acc = Integrator::START;
+        for s in &self.sorted_hits(&seg.ray) {
+            self.add(&mut acc, &self.shade(s.leaf, s.t, s.alpha, &seg.ray), seg);
+        }
+        self.finish(&acc, seg)
+    }
+
+    /// Every hit of `ray` through the BVH, sorted front to back by (t, id) (the order of
+    /// `composite::sort_front_to_back`), as small records: each is shaded once, in that order.
+    pub(crate) fn sorted_hits(&self, ray: &Ray) -> Vec<Slot> {
         let mut found = Vec::with_capacity(64);
         let mut t_max = ray.t_max;
         self.wide.traverse(ray, &mut t_max, |leaf, _| {
@@ -707,11 +719,7 @@ impl<'a> TraceScene<'a> {
             }
         });
         found.sort_unstable_by(|a, b| depth_order(a.t, a.id, b.t, b.id));
-        let mut acc = Integrator::START;
-        for s in &found {
-            self.add(&mut acc, &self.shade(s.leaf, s.t, s.alpha, ray), seg);
-        }
-        self.finish(&acc, seg)
+        found
     }
 
     /// The k closest hits strictly behind (after_t, after_id), by (t, id); when `decide` is
@@ -769,7 +777,14 @@ impl<'a> TraceScene<'a> {
     /// so u ≥ that bound rejects the hit without evaluating the exponential; the decision is
     /// the same because u is a hash, not a stream.
     fn stochastic<D: Decide>(&self, seg: &Segment<D>, slot: u32) -> Sample {
-        let (ray, decide) = (&seg.ray, &seg.decide);
+        match self.first_accepted(&seg.ray, &seg.decide, slot) {
+            Some(best) => self.opaque_sample(best.leaf, best.t, seg, slot),
+            None => self.behind(seg),
+        }
+    }
+
+    /// Algorithm 1's traversal: the closest hit of `ray` accepted in slot `slot`, if any.
+    pub(crate) fn first_accepted(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> Option<Slot> {
         let early = !decide.needs_position();
         let mut best = Slot::EMPTY;
         let mut t_max = ray.t_max;
@@ -794,13 +809,37 @@ impl<'a> TraceScene<'a> {
                 *t_max = h.t;
             }
         });
-        if best.id == u32::MAX { self.behind(seg) } else { self.opaque_sample(best.leaf, best.t, seg, slot) }
+        best.is_hit().then_some(best)
     }
 
     /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
     /// `first_slot..first_slot + n`; the traversal is clipped at the farthest slot's hit.
     fn stochastic_n<D: Decide>(&self, seg: &Segment<D>, n: usize, first_slot: u32) -> Sample {
-        let (ray, decide) = (&seg.ray, &seg.decide);
+        let best = self.first_accepted_n(&seg.ray, &seg.decide, first_slot, n);
+        let mut color = DVec3::ZERO;
+        let mut alpha = 0.0;
+        let mut first = self.background_sample();
+        for (slot, b) in (first_slot..).zip(&best[..n]) {
+            let s = if b.is_hit() { self.opaque_sample(b.leaf, b.t, seg, slot) } else { self.behind(seg) };
+            color += s.color;
+            alpha += s.alpha;
+            if slot == first_slot {
+                first = s;
+            }
+        }
+        Sample { color: color / n as f64, alpha: alpha / n as f64, ..first }
+    }
+
+    /// The traversal of §3.5: for each slot of `first_slot..first_slot + n`, the closest hit of
+    /// `ray` accepted in that slot ([`Slot::EMPTY`] where none is); the traversal is clipped at
+    /// the farthest slot's hit.
+    pub(crate) fn first_accepted_n(
+        &self,
+        ray: &Ray,
+        decide: &impl Decide,
+        first_slot: u32,
+        n: usize,
+    ) -> [Slot; MAX_SLOTS] {
         let early = !decide.needs_position();
         let mut best = [Slot::EMPTY; MAX_SLOTS];
         let mut u = [0.0f32; MAX_SLOTS];
@@ -828,18 +867,7 @@ impl<'a> TraceScene<'a> {
             }
             *t_max = farthest.min(ray.t_max);
         });
-        let mut color = DVec3::ZERO;
-        let mut alpha = 0.0;
-        let mut first = self.background_sample();
-        for (slot, b) in (first_slot..).zip(&best[..n]) {
-            let s = if b.id == u32::MAX { self.behind(seg) } else { self.opaque_sample(b.leaf, b.t, seg, slot) };
-            color += s.color;
-            alpha += s.alpha;
-            if slot == first_slot {
-                first = s;
-            }
-        }
-        Sample { color: color / n as f64, alpha: alpha / n as f64, ..first }
+        best
     }
 
     /// vk stochastic pass: each pass integrates its K sorted hits from T = 1; it is accepted
@@ -916,12 +944,16 @@ impl<'a> TraceScene<'a> {
     /// 3DGRT stochastic depth sampling: the k closest hits accepted by roulette (slot 0),
     /// composited in order with their alphas (biased: α counts twice).
     fn depth_sampling<D: Decide>(&self, seg: &Segment<D>, k: usize) -> Sample {
-        let decide = &seg.decide;
-        let accept = |id: u32, p: Vec3, alpha: f32| decide.accepts(id, decide.particle(id, 0, p), alpha);
-        let buf = self.next_k(&seg.ray, k, (seg.ray.t_min, u32::MAX), Some(&accept));
+        let buf = self.first_k_accepted(&seg.ray, &seg.decide, k, 0);
         let mut acc = Integrator::START;
         self.integrate(&mut acc, &buf, seg);
         Sample { depth: buf.as_slice().first().map(|s| s.t), ..self.finish(&acc, seg) }
+    }
+
+    /// The k closest hits of `ray` accepted by roulette in slot `slot`, sorted.
+    pub(crate) fn first_k_accepted(&self, ray: &Ray, decide: &impl Decide, k: usize, slot: u32) -> KBuf {
+        let accept = |id: u32, p: Vec3, alpha: f32| decide.accepts(id, decide.particle(id, slot, p), alpha);
+        self.next_k(ray, k, (ray.t_min, u32::MAX), Some(&accept))
     }
 
     /// Closest entry into any particle's bounding ellipsoid ([`bounding_radius`]), shaded opaque.
@@ -949,7 +981,7 @@ impl<'a> TraceScene<'a> {
 
 /// How far from a mesh surface point `x` a secondary or shadow ray starts looking for meshes:
 /// far enough that the surface does not hit itself in f32, relative to the point's magnitude.
-fn surface_offset(x: Vec3) -> f32 {
+pub(crate) fn surface_offset(x: Vec3) -> f32 {
     SURFACE_OFFSET * x.abs().max_element().max(1.0)
 }
 

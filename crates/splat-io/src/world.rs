@@ -133,6 +133,7 @@ struct MeshFile {
     mirror: Option<f32>,
     transmission: Option<f32>,
     ior: Option<f32>,
+    roughness: Option<f32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -351,6 +352,7 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), 
         mirror: m.mirror.unwrap_or(0.0),
         transmission: m.transmission.unwrap_or(0.0),
         ior: m.ior.unwrap_or(defaults.ior),
+        roughness: m.roughness.unwrap_or(0.0),
     };
     material.validate()?;
     Ok((mesh, material))
