@@ -165,7 +165,14 @@ pub struct MeshMaterial {
 impl Default for MeshMaterial {
     /// A grey diffuse surface with a little ambient light.
     fn default() -> Self {
-        Self { color: Vec3::splat(0.8), shading: Material::DIFFUSE, mirror: 0.0, transmission: 0.0, ior: 1.5, roughness: 0.0 }
+        Self {
+            color: Vec3::splat(0.8),
+            shading: Material::DIFFUSE,
+            mirror: 0.0,
+            transmission: 0.0,
+            ior: 1.5,
+            roughness: 0.0,
+        }
     }
 }
 

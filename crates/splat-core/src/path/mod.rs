@@ -101,9 +101,7 @@ impl Environment {
         let ok = |c: Vec3| c.is_finite() && c.min_element() >= 0.0;
         match *self {
             Environment::Constant(c) if ok(c) => Ok(()),
-            Environment::Gradient { horizon, zenith, up } if ok(horizon) && ok(zenith) && up.is_normalized() => {
-                Ok(())
-            }
+            Environment::Gradient { horizon, zenith, up } if ok(horizon) && ok(zenith) && up.is_normalized() => Ok(()),
             _ => Err(format!("environment {self:?} needs finite non-negative colours and a unit up")),
         }
     }
@@ -236,6 +234,13 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     if a2 + b2 > 0.0 { a2 / (a2 + b2) } else { 0.0 }
 }
 
+/// Whether world direction `w` lies on the side of the face normal `face` that its local z
+/// (along the shading normal) says: where interpolated normals disagree with the geometry, a
+/// direction would leak through the surface, and it carries nothing.
+fn same_side(w: Vec3, face: Vec3, local_z: f32) -> bool {
+    (w.dot(face) > 0.0) == (local_z > 0.0)
+}
+
 /// An orthonormal frame around a unit normal.
 #[derive(Clone, Copy)]
 struct Frame {
@@ -326,7 +331,7 @@ impl<'a> PathTracer<'a> {
             if bounce == self.settings.max_depth {
                 break;
             }
-            let (_, n, outside) = hit.facing(ray.dir);
+            let (face, n, outside) = hit.facing(ray.dir);
             let frame = Frame::new(n);
             let wo = frame.to_local(-ray.dir);
             let eta = if outside { material.ior } else { 1.0 / material.ior };
@@ -340,12 +345,16 @@ impl<'a> PathTracer<'a> {
                 eta,
             );
             if f.has_smooth_part() {
-                l += beta * self.direct_at_surface(x, &frame, wo, &f, bounce, s);
+                l += beta * self.direct_at_surface(x, face, &frame, wo, &f, bounce, s);
             }
             let Some(next) = f.sample(wo, s.get(Dim::Lobe(bounce).index()), s.get2(Dim::Direction(bounce).index()))
             else {
                 break;
             };
+            let dir = frame.to_world(next.wi).normalize();
+            if !same_side(dir, face, next.wi.z) {
+                break;
+            }
             beta *= next.weight;
             prev_pdf = (!next.delta).then_some(next.pdf);
             if bounce + 1 >= self.settings.roulette_depth {
@@ -355,7 +364,6 @@ impl<'a> PathTracer<'a> {
                 }
                 beta /= q;
             }
-            let dir = frame.to_world(next.wi).normalize();
             ray = Ray { origin: x, dir, view: dir, t_min: 0.0, t_max: self.trace.settings().t_max };
             mesh_t_min = surface_offset(x);
         }
@@ -444,20 +452,35 @@ impl<'a> PathTracer<'a> {
 
     /// Next-event estimation at a mesh vertex: every world light, and one emitter sample
     /// weighted against BSDF sampling by the power heuristic.
-    fn direct_at_surface(&self, x: Vec3, frame: &Frame, wo: Vec3, f: &Bsdf, bounce: u32, s: &PathSampler) -> Vec3 {
+    #[allow(clippy::too_many_arguments)]
+    fn direct_at_surface(
+        &self,
+        x: Vec3,
+        face: Vec3,
+        frame: &Frame,
+        wo: Vec3,
+        f: &Bsdf,
+        bounce: u32,
+        s: &PathSampler,
+    ) -> Vec3 {
         let decide = PathDecide { sampler: s, bounce };
         let offset = surface_offset(x);
         let mut sum = Vec3::ZERO;
         for (j, light) in self.trace.lighting().lights.iter().enumerate() {
             let Some(inc) = light.incident(x, decide.light_sample(j as u32, 0)) else { continue };
-            let (fc, _) = f.eval(wo, frame.to_local(inc.l));
+            let wi = frame.to_local(inc.l);
+            if !same_side(inc.l, face, wi.z) {
+                continue;
+            }
+            let (fc, _) = f.eval(wo, wi);
             if fc != Vec3::ZERO {
                 let v = self.visibility(x, offset, &inc, &decide, shadow_decision(bounce, j as u32), false);
                 sum += fc * inc.irradiance * v;
             }
         }
         if let Some((inc, pdf_light)) = self.emitter_sample(x, bounce, s) {
-            let (fc, pdf_bsdf) = f.eval(wo, frame.to_local(inc.l));
+            let wi = frame.to_local(inc.l);
+            let (fc, pdf_bsdf) = if same_side(inc.l, face, wi.z) { f.eval(wo, wi) } else { (Vec3::ZERO, 0.0) };
             if fc != Vec3::ZERO {
                 let decision = shadow_decision(bounce, crate::lighting::MAX_LIGHTS as u32);
                 let v = self.visibility(x, offset, &inc, &decide, decision, false);

@@ -190,9 +190,8 @@ mod tests {
         let b = PathSampler::new(SamplerKind::Sobol, 4, 4, 9, 0).get(5);
         assert_ne!(a[0], b);
         // Each particle's acceptance draws are a stratified sequence of their own.
-        let s: Vec<f32> = (0..32)
-            .map(|i| PathSampler::new(SamplerKind::Sobol, 3, 4, 9, i).particle(77, decision(1, 0)))
-            .collect();
+        let s: Vec<f32> =
+            (0..32).map(|i| PathSampler::new(SamplerKind::Sobol, 3, 4, 9, i).particle(77, decision(1, 0))).collect();
         let mut cells = [0u32; 32];
         s.iter().for_each(|&u| cells[(u * 32.0) as usize] += 1);
         assert!(cells.iter().all(|&c| c == 1), "{cells:?}");
