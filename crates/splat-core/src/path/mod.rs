@@ -254,10 +254,10 @@ impl Frame {
         let (t, b) = n.any_orthonormal_pair();
         Self { t, b, n }
     }
-    fn to_local(&self, v: Vec3) -> Vec3 {
+    fn to_local(self, v: Vec3) -> Vec3 {
         Vec3::new(v.dot(self.t), v.dot(self.b), v.dot(self.n))
     }
-    fn to_world(&self, v: Vec3) -> Vec3 {
+    fn to_world(self, v: Vec3) -> Vec3 {
         v.x * self.t + v.y * self.b + v.z * self.n
     }
 }
