@@ -265,6 +265,10 @@ pub struct Loaded {
     pub settings: RenderSettings,
     /// The world's meshes (none for a bare scene file).
     pub meshes: Meshes,
+    /// The world's environment for the path tracer, if it gives one.
+    pub environment: Option<splat_core::path::Environment>,
+    /// The world camera's thin lens, if it gives one.
+    pub lens: Option<splat_core::path::ThinLens>,
 }
 
 /// Scene, camera and shading options shared by `render`, `converge` and `bench`.
@@ -361,7 +365,7 @@ impl SceneArgs {
                 World { camera: Some(camera), ..World::of(scene) }
             }
         };
-        let World { mut scene, mut lighting, camera, background, meshes, max_bounces } = world;
+        let World { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } = world;
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
             splat_io::world::truncate_sh(&mut scene, degree);
@@ -386,7 +390,7 @@ impl SceneArgs {
             max_bounces: self.max_bounces.or(max_bounces).unwrap_or(DEFAULT_MAX_BOUNCES),
             ..self.settings()
         };
-        Ok(Loaded { scene, camera, lighting, settings, meshes })
+        Ok(Loaded { scene, camera, lighting, settings, meshes, environment, lens })
     }
 
     /// The render settings these options describe.

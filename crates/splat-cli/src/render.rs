@@ -6,6 +6,8 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
+use splat_core::path::sampler::SamplerKind;
+use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
 use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
@@ -52,6 +54,37 @@ pub struct RenderArgs {
     pub normal: Option<PathBuf>,
     #[command(flatten)]
     pub options: MethodOptions,
+    #[command(flatten)]
+    pub path: PathOptions,
+}
+
+/// Options of the path tracer (`--pipeline path`).
+#[derive(Args)]
+pub struct PathOptions {
+    /// Path tracer: most bounces off meshes.
+    #[arg(long, default_value_t = splat_core::path::DEFAULT_MAX_DEPTH)]
+    pub max_depth: u32,
+    /// Path tracer: Russian roulette on the throughput after this many bounces.
+    #[arg(long, default_value_t = 3)]
+    pub roulette_depth: u32,
+    /// Path tracer: Owen-scrambled Sobol (one sequence per pixel) or the counter-based hash.
+    #[arg(long, value_enum, default_value = "sobol")]
+    pub sampler: SamplerArg,
+    /// Path tracer: thin-lens radius (depth of field; overrides the world's camera).
+    #[arg(long)]
+    pub aperture: Option<f32>,
+    /// Path tracer: distance of the plane in focus (default: the world's, else eye to target).
+    #[arg(long)]
+    pub focus_distance: Option<f32>,
+}
+
+/// The path tracer's generator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SamplerArg {
+    /// Owen-scrambled Sobol (Burley 2020).
+    Sobol,
+    /// The counter-based hash (independent frames).
+    Hash,
 }
 
 /// Run `splat render`.
@@ -62,7 +95,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ImageFormat::from_path(path)?;
     }
     let world = args.scene.load_world(640, 480)?;
-    let Loaded { scene, camera, lighting, settings, meshes } = &world;
+    if args.pipeline == Some(PipelineArg::Path) {
+        return run_path(&args, &world);
+    }
+    let Loaded { scene, camera, lighting, settings, meshes, .. } = &world;
     let algorithm = algorithm(&args)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu = choose_gpu(&args, &algorithm, &world)?;
@@ -100,6 +136,80 @@ pub enum PipelineArg {
     Raster,
     /// Rasterized first hit, ray-traced shadows and bounces.
     Hybrid,
+    /// Monte Carlo path tracing (CPU): Gaussians by --method stochastic (default),
+    /// stochastic-n, exact or depth-sampling-k at every segment, meshes by their BSDFs.
+    Path,
+}
+
+/// The path tracer's settings from the options and the world.
+fn path_settings(args: &RenderArgs, world: &Loaded) -> Result<PathSettings> {
+    let gaussians = match args.method.unwrap_or(MethodArg::Stochastic) {
+        MethodArg::Stochastic => GaussianEstimator::Stochastic,
+        MethodArg::StochasticN => GaussianEstimator::StochasticN { n: args.options.samples },
+        MethodArg::Exact => GaussianEstimator::Exact,
+        MethodArg::DepthSamplingK => GaussianEstimator::DepthSampling { k: args.options.k as u32 },
+        m => bail!(
+            "--method {} is not a Gaussian estimator of the path tracer: use stochastic, stochastic-n, exact or depth-sampling-k",
+            m.name()
+        ),
+    };
+    let o = &args.path;
+    let lens = match (o.aperture, world.lens) {
+        (Some(aperture), lens) => {
+            let focus_distance = o.focus_distance.or(lens.map(|l| l.focus_distance)).unwrap_or(1.0);
+            Some(ThinLens { aperture, focus_distance })
+        }
+        (None, Some(lens)) => {
+            Some(ThinLens { focus_distance: o.focus_distance.unwrap_or(lens.focus_distance), ..lens })
+        }
+        (None, None) => None,
+    };
+    let settings = PathSettings {
+        max_depth: o.max_depth,
+        roulette_depth: o.roulette_depth,
+        gaussians,
+        sampler: match o.sampler {
+            SamplerArg::Sobol => SamplerKind::Sobol,
+            SamplerArg::Hash => SamplerKind::Hash,
+        },
+        environment: world.environment.unwrap_or(Environment::Constant(world.settings.background)),
+        lens,
+    };
+    settings.validate()?;
+    Ok(settings)
+}
+
+/// `splat render --pipeline path`: the Monte Carlo path tracer, on the CPU.
+fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
+    if args.scene.backend == BackendArg::Gpu {
+        bail!("the path tracer runs on the CPU only for now: use --backend cpu or auto");
+    }
+    if args.depth.is_some() || args.normal.is_some() || args.alpha.is_some() {
+        bail!("the path tracer writes colour and --variance only (no --depth, --normal or --alpha)");
+    }
+    let settings = path_settings(args, world)?;
+    let Loaded { scene, camera, lighting, settings: render_settings, meshes, .. } = world;
+    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
+    let tracer = PathTracer::new(&trace, settings)?;
+    let frames = Frames { count: args.spp, seed: args.seed, ..Frames::default() };
+    let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
+    let start = Instant::now();
+    let progress = |n| bar.inc(n);
+    let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    write_outputs(args, &out)?;
+    eprintln!(
+        "path traced {} particles and {} triangles at {}×{}, {} Gaussians, {} spp in {seconds:.2} s → {}",
+        scene.particles.len(),
+        meshes.triangles().len(),
+        camera.width,
+        camera.height,
+        args.method.unwrap_or(MethodArg::Stochastic).name(),
+        args.spp,
+        args.output.display()
+    );
+    Ok(())
 }
 
 /// The method the options name, with the pipeline's default.
@@ -127,6 +237,7 @@ fn algorithm(args: &RenderArgs) -> Result<Algorithm> {
             Ok(Algorithm::Hybrid(method, raster, secondary))
         }
         (Some(PipelineArg::Hybrid), _) => Err(family("raster (the hybrid pipeline's first hit)")),
+        (Some(PipelineArg::Path), _) => bail!("the path tracer is not an algorithm of the frame loop"),
     }
 }
 

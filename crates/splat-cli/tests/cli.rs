@@ -589,3 +589,42 @@ fn render_meshes_with_each_pipeline() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("nowhere.obj"), "{}", stderr(&o));
 }
+
+/// `--pipeline path` path traces a world with meshes (Gaussian estimators by `--method`, both
+/// samplers, a thin lens), the same seed gives the same image, and what it cannot do is refused
+/// with the reason.
+#[test]
+fn path_trace_a_world_with_meshes() {
+    let run = |extra: &[&str], out: &PathBuf| {
+        let mut args = vec!["render", "fixtures/worlds/demo-meshes.toml", "--width", "32", "--height", "24"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--pipeline", "path", "--spp", "4", "-o", out.to_str().unwrap()]);
+        splat(&args)
+    };
+    let mut images = Vec::new();
+    for (name, extra) in [
+        ("stochastic", &["--backend", "cpu"][..]),
+        ("stochastic-again", &["--backend", "cpu"][..]),
+        ("exact", &["--method", "exact", "--sampler", "hash"][..]),
+        ("lens", &["--method", "stochastic-n", "--samples", "4", "--aperture", "0.05", "--focus-distance", "4"][..]),
+    ] {
+        let out = scratch(&format!("path-{name}.npy"));
+        let o = run(extra, &out);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        assert!(stderr(&o).contains("path traced"), "{}", stderr(&o));
+        images.push(splat_io::image::read_npy(&out).unwrap());
+    }
+    assert_eq!(images[0].data(), images[1].data(), "the same seed gave two images");
+    assert!(images.iter().all(|i| i.data().iter().all(|v| v.is_finite())));
+    assert_ne!(images[0].data(), images[3].data());
+    let never = scratch("never.png");
+    let o = run(&["--method", "raster-sorted"], &never);
+    assert!(stderr(&o).contains("not a Gaussian estimator of the path tracer"), "{}", stderr(&o));
+    let o = run(&["--backend", "gpu"], &never);
+    assert!(stderr(&o).contains("CPU only"), "{}", stderr(&o));
+    let o = run(&["--max-depth", "1000"], &never);
+    assert!(stderr(&o).contains("max depth 1000 is above"), "{}", stderr(&o));
+    let o = run(&["--aperture=-1"], &never);
+    assert!(stderr(&o).contains("aperture"), "{}", stderr(&o));
+    assert!(!never.exists());
+}

@@ -15,6 +15,13 @@
 //! fov = 45                          # vertical, degrees; up = [0, 1, 0] unless given
 //! width = 640
 //! height = 480
+//! aperture = 0.03                   # thin-lens radius (path tracer; 0 or absent: pinhole)
+//! focus_distance = 3.5              # plane in focus (default: eye to target along the view)
+//!
+//! [environment]                     # where paths escape (path tracer; default: the background)
+//! horizon = [0.6, 0.55, 0.5]        # or color = [r, g, b] for a constant environment
+//! zenith = [0.25, 0.35, 0.6]
+//! up = [0.0, 1.0, 0.0]
 //!
 //! [[splats]]
 //! builtin = "demo"                  # or file = "bonsai.splat" (relative to this file)
@@ -45,6 +52,7 @@
 //! transmission = 0.9                # glass: Fresnel mix of reflection and refraction
 //! ior = 1.5
 //! mirror = 0.0                      # perfect mirror share
+//! roughness = 0.0                   # GGX roughness of mirror and glass (path tracer only)
 //! ```
 //!
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
@@ -58,6 +66,7 @@ use serde::Deserialize;
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, SplatSet};
 use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
+use splat_core::path::{Environment, ThinLens};
 use splat_core::sh::Rotation;
 use splat_core::{Camera, Scene};
 use std::path::{Path, PathBuf};
@@ -79,6 +88,10 @@ pub struct World {
     pub meshes: Vec<(TriangleMesh, MeshMaterial)>,
     /// The file's bounce limit.
     pub max_bounces: Option<u32>,
+    /// The path tracer's environment (`[environment]`), if the file gives one.
+    pub environment: Option<Environment>,
+    /// The camera's thin lens (`aperture` and `focus_distance` in `[camera]`), if any.
+    pub lens: Option<ThinLens>,
 }
 
 impl World {
@@ -91,6 +104,8 @@ impl World {
             background: None,
             meshes: Vec::new(),
             max_bounces: None,
+            environment: None,
+            lens: None,
         }
     }
 }
@@ -109,6 +124,18 @@ struct WorldFile {
     #[serde(default)]
     meshes: Vec<MeshFile>,
     max_bounces: Option<u32>,
+    environment: Option<EnvironmentFile>,
+}
+
+/// The environment a path escapes to: a constant colour, or a gradient from the horizon to the
+/// zenith.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EnvironmentFile {
+    color: Option<Colour>,
+    horizon: Option<Colour>,
+    zenith: Option<Colour>,
+    up: Option<[f32; 3]>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -171,6 +198,8 @@ struct CameraFile {
     fov: Option<f32>,
     width: Option<u32>,
     height: Option<u32>,
+    aperture: Option<f32>,
+    focus_distance: Option<f32>,
 }
 
 #[derive(Deserialize)]
@@ -321,7 +350,9 @@ fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
     if let Some(b) = file.max_bounces.filter(|&b| b > splat_core::settings::MAX_BOUNCES) {
         return Err(format!("max_bounces {b} is above {}", splat_core::settings::MAX_BOUNCES).into());
     }
-    Ok(World { scene, lighting, camera, background, meshes, max_bounces: file.max_bounces })
+    let environment = file.environment.as_ref().map(environment).transpose()?;
+    let lens = file.camera.as_ref().and_then(|c| lens(c, camera.as_ref())).transpose()?;
+    Ok(World { scene, lighting, camera, background, meshes, max_bounces: file.max_bounces, environment, lens })
 }
 
 /// One mesh in world space with its material.
@@ -473,6 +504,42 @@ fn shadows(s: Option<&ShadowsFile>) -> (Shadows, f32) {
         },
     };
     (kind, offset)
+}
+
+fn environment(e: &EnvironmentFile) -> Result<Environment, String> {
+    let env = match (e.color, e.horizon, e.zenith) {
+        (Some(c), None, None) => Environment::Constant(c.rgb()),
+        (None, Some(h), Some(z)) => {
+            let up = Vec3::from(e.up.unwrap_or([0.0, 1.0, 0.0]));
+            let up = up.try_normalize().ok_or("environment: up must be a non-zero finite vector")?;
+            Environment::Gradient { horizon: h.rgb(), zenith: z.rgb(), up }
+        }
+        _ => return Err("environment: give either color, or horizon and zenith".into()),
+    };
+    let ok = |c: Vec3| c.is_finite() && c.min_element() >= 0.0;
+    match env {
+        Environment::Constant(c) if !ok(c) => Err(format!("environment colour {c} must be finite and non-negative")),
+        Environment::Gradient { horizon, zenith, .. } if !ok(horizon) || !ok(zenith) => {
+            Err("environment colours must be finite and non-negative".into())
+        }
+        env => Ok(env),
+    }
+}
+
+/// The thin lens of `[camera]`: `aperture` (lens radius) with `focus_distance` (by default the
+/// distance from the eye to the target).
+fn lens(c: &CameraFile, camera: Option<&Camera>) -> Option<Result<ThinLens, String>> {
+    let aperture = c.aperture?;
+    let focus_distance = c.focus_distance.unwrap_or_else(|| {
+        let target = Vec3::from(c.target);
+        camera.map_or(1.0, |cam| (target - cam.center()).dot(cam.forward()))
+    });
+    let ok = aperture.is_finite() && aperture >= 0.0 && focus_distance.is_finite() && focus_distance > 0.0;
+    Some(if ok {
+        Ok(ThinLens { aperture, focus_distance })
+    } else {
+        Err(format!("camera: aperture {aperture} must be ≥ 0 and focus_distance {focus_distance} > 0"))
+    })
 }
 
 fn camera_from(c: &CameraFile) -> Result<Camera, String> {
