@@ -30,7 +30,8 @@ struct MeshMaterial {
     mirror: f32,
     transmission: f32,
     ior: f32,
-    pad0: u32,
+    // GGX roughness of the mirror and glass shares (the path tracer's).
+    roughness: f32,
     pad1: u32,
     shading: Material,
 }

@@ -191,7 +191,11 @@ fn bounce_slot(slot: u32) -> u32 {
 
 // rng.rs `RayRng::particle` through trace.rs `Bounce`: u of particle `id` in sample `slot` of
 // the current bounce, lowered by the test hook.
+// In the path tracer (path.wgsl) the path's own decisions, slot being its decision number.
 fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
+    if (path_mode) {
+        return path_particle(id, slot) - params.u_shift;
+    }
     return unshifted_particle_u(pixel_seed, id, bounce_slot(slot), hit) - params.u_shift;
 }
 
@@ -355,9 +359,10 @@ fn visit(visitor: u32, ray: Ray, leaf: u32, t_max: f32) -> f32 {
     return next_k_visit(ray, leaf, t_max);
 }
 
-// The visitor of `traverse_shadow` (bvh.wgsl) for the world's shadow kind.
+// The visitor of `traverse_shadow` (bvh.wgsl) for the world's shadow kind (the path tracer's
+// own in path.wgsl).
 fn visit_shadow(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    switch params.shadows {
+    switch select(params.shadows, path_shadows, path_mode) {
         case SHADOWS_EXACT: {
             return transmittance_visit(ray, leaf, t_max);
         }

@@ -705,6 +705,77 @@ pub fn bonsai_camera() -> splat_core::Camera {
     .expect("valid camera")
 }
 
+/// Small worlds of the path tracer's tests (CPU and GPU): Gaussians with meshes, emitters and
+/// lights.
+pub mod path_worlds {
+    use glam::Vec3;
+    use splat_core::lighting::{Light, LightKind, Lighting, Material, Shadows};
+    use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
+    use splat_core::{Camera, Scene};
+
+    fn quad(center: Vec3, normal: Vec3, half: f32) -> TriangleMesh {
+        super::placed(TriangleMesh::plane(), half, normal, center)
+    }
+
+    fn sphere(center: Vec3, radius: f32) -> TriangleMesh {
+        super::placed(TriangleMesh::sphere(32, 16), radius, Vec3::Y, center)
+    }
+
+    /// A Lambertian material of albedo `color` (no ambient term).
+    pub fn lambert(color: Vec3) -> MeshMaterial {
+        let shading = Material { ambient: Vec3::ZERO, diffuse: Vec3::ONE, ..Material::DIFFUSE };
+        MeshMaterial { color, shading, ..MeshMaterial::default() }
+    }
+
+    /// An emitter of radiance `radiance`.
+    pub fn emitter(radiance: Vec3) -> MeshMaterial {
+        MeshMaterial { color: radiance, shading: Material::EMISSIVE, ..MeshMaterial::default() }
+    }
+
+    /// Lit layers of Gaussians over a floor, before a rough mirror that reflects them, under an
+    /// emissive panel, a point light and a sky: Gaussians on camera, mirror and shadow segments.
+    pub fn lit_world() -> (Scene, Camera, Meshes, Lighting) {
+        let (scene, camera) = super::harness::fixture("layers", 24, 18);
+        let meshes = Meshes::new(&[
+            (quad(Vec3::new(0.0, -0.8, 0.0), Vec3::Y, 4.0), lambert(Vec3::new(0.7, 0.65, 0.6))),
+            (
+                quad(Vec3::new(0.0, 0.0, -1.4), Vec3::Z, 3.0),
+                MeshMaterial { mirror: 0.8, roughness: 0.3, ..lambert(Vec3::splat(0.5)) },
+            ),
+            (quad(Vec3::new(0.3, 2.0, 0.5), -Vec3::Y, 0.6), emitter(Vec3::new(6.0, 5.5, 5.0))),
+        ])
+        .unwrap();
+        let material = Material {
+            emissive: Vec3::splat(0.2),
+            ambient: Vec3::ZERO,
+            diffuse: Vec3::splat(0.8),
+            ..Material::DIFFUSE
+        };
+        let light = Light {
+            kind: LightKind::Point { position: Vec3::new(1.5, 1.5, 1.5) },
+            color: Vec3::ONE,
+            intensity: 2.0,
+            radius: 0.0,
+        };
+        let lighting = Lighting { shadow_offset: 0.05, ..Lighting::single(material, vec![light], Shadows::Stochastic) };
+        (scene, camera, meshes, lighting)
+    }
+
+    /// Emissive layers seen through a rough glass sphere and over a glossy floor.
+    pub fn glass_world() -> (Scene, Camera, Meshes, Lighting) {
+        let (scene, camera) = super::harness::fixture("layers", 24, 18);
+        let floor = MeshMaterial { mirror: 0.4, roughness: 0.4, ..lambert(Vec3::new(0.6, 0.6, 0.7)) };
+        let glass = MeshMaterial { transmission: 0.95, roughness: 0.25, ior: 1.5, ..MeshMaterial::default() };
+        let meshes = Meshes::new(&[
+            (quad(Vec3::new(0.0, -0.7, 0.0), Vec3::Y, 4.0), floor),
+            (sphere(Vec3::new(0.25, -0.05, 1.3), 0.4), glass),
+            (quad(Vec3::new(-1.0, 2.0, 1.0), -Vec3::Y, 0.8), emitter(Vec3::splat(4.0))),
+        ])
+        .unwrap();
+        (scene, camera, meshes, Lighting::default())
+    }
+}
+
 /// Golden images: what `cargo xtask bless` renders and the golden test compares.
 pub mod golden {
     use splat_core::raster::{Blend, RasterMethod, RasterSettings};
@@ -803,6 +874,35 @@ pub mod golden {
         let out = algorithm
             .render_world(&world.scene, &meshes, &camera, &settings, &world.lighting, frames, &|_| {})
             .expect("render");
+        splat_io::image::to_rgba8(&out.mean).to_rgb8()
+    }
+
+    /// The path-tracer cases: the Gaussian estimators inside the path tracer on [`MESH_WORLD`]
+    /// at 160 × 120, 16 Sobol samples per pixel, seed 1.
+    pub fn path_cases() -> Vec<(&'static str, splat_core::path::GaussianEstimator, Frames)> {
+        use splat_core::path::GaussianEstimator;
+        let f = Frames { count: 16, seed: 1, ..Frames::default() };
+        vec![
+            ("path-stochastic", GaussianEstimator::Stochastic, f),
+            ("path-stochastic-n", GaussianEstimator::StochasticN { n: 4 }, f),
+            ("path-exact", GaussianEstimator::Exact, f),
+        ]
+    }
+
+    /// Render one path-tracer case of [`MESH_WORLD`] as 8-bit RGB (the environment is the
+    /// world's background).
+    pub fn render_path(gaussians: splat_core::path::GaussianEstimator, frames: &Frames) -> image::RgbImage {
+        use splat_core::path::{Environment, PathSettings, PathTracer};
+        let world = splat_io::world::read_world(&super::root().join(MESH_WORLD)).expect("the mesh world");
+        let camera = world.camera.expect("the world's camera").rescaled(160, 120).expect("a valid size");
+        let meshes = splat_core::mesh::Meshes::new(&world.meshes).expect("valid meshes");
+        let trace = splat_core::trace::TraceScene::new(&world.scene, RenderSettings::default())
+            .and_then(|t| t.with_lighting(world.lighting.clone()))
+            .expect("a valid world")
+            .with_meshes(meshes);
+        let environment = Environment::Constant(world.background.unwrap_or_default());
+        let settings = PathSettings { gaussians, environment, ..PathSettings::default() };
+        let out = PathTracer::new(&trace, settings).and_then(|p| p.render(&camera, frames, &|_| {})).expect("render");
         splat_io::image::to_rgba8(&out.mean).to_rgb8()
     }
 

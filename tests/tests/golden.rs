@@ -71,3 +71,17 @@ fn golden_comparison_rejects_a_different_image() {
     assert!(dir.join("layers-oracle-diff.png").exists());
     assert!(dir.join("layers-oracle-actual.png").exists());
 }
+
+/// The path tracer on the mesh world: Algorithm 1, stochastic-n and exact compositing of the
+/// Gaussians at every segment, 16 Sobol samples (shadows, glossy and glass bounces, the lights).
+#[test]
+fn path_traced_mesh_world_matches_its_golden_images() {
+    let mut failures = Vec::new();
+    for (suffix, gaussians, frames) in golden::path_cases() {
+        let image = golden::render_path(gaussians, &frames);
+        if let Err(e) = compare_golden(&golden::path("demo-meshes", suffix), &image, TOLERANCE) {
+            failures.push(e);
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

@@ -14,6 +14,7 @@ use splat_core::stats::{ZTest, log_log_slope, rmse};
 use splat_core::trace::TraceScene;
 use splat_core::{Camera, Frames, RenderSettings, Scene};
 use splat_tests::harness::fixture;
+use splat_tests::path_worlds::{glass_world, lambert, lit_world};
 use splat_tests::placed;
 
 /// The injected error of the acceptance controls: each decision u < α + 0.02.
@@ -25,15 +26,6 @@ fn quad(center: Vec3, normal: Vec3, half: f32) -> TriangleMesh {
 
 fn sphere(center: Vec3, radius: f32) -> TriangleMesh {
     placed(TriangleMesh::sphere(32, 16), radius, Vec3::Y, center)
-}
-
-fn lambert(color: Vec3) -> MeshMaterial {
-    let shading = Material { ambient: Vec3::ZERO, diffuse: Vec3::ONE, ..Material::DIFFUSE };
-    MeshMaterial { color, shading, ..MeshMaterial::default() }
-}
-
-fn emitter(radiance: Vec3) -> MeshMaterial {
-    MeshMaterial { color: radiance, shading: Material::EMISSIVE, ..MeshMaterial::default() }
 }
 
 fn render(trace: &TraceScene, camera: &Camera, settings: PathSettings, frames: Frames) -> RenderOutput {
@@ -127,45 +119,6 @@ fn the_white_furnace_hides_lossless_surfaces() {
     let control = z_for(0.98);
     eprintln!("white furnace: {z:?}; albedo 0.98: {control:?}");
     assert!(!control.passes(), "albedo 0.98 passes the furnace: {control:?}");
-}
-
-/// Lit layers of Gaussians over a floor, before a rough mirror that reflects them, under an
-/// emissive panel, a point light and a sky: Gaussians on camera, mirror and shadow segments.
-fn lit_world() -> (Scene, Camera, Meshes, Lighting) {
-    let (scene, camera) = fixture("layers", 24, 18);
-    let meshes = Meshes::new(&[
-        (quad(Vec3::new(0.0, -0.8, 0.0), Vec3::Y, 4.0), lambert(Vec3::new(0.7, 0.65, 0.6))),
-        (
-            quad(Vec3::new(0.0, 0.0, -1.4), Vec3::Z, 3.0),
-            MeshMaterial { mirror: 0.8, roughness: 0.3, ..lambert(Vec3::splat(0.5)) },
-        ),
-        (quad(Vec3::new(0.3, 2.0, 0.5), -Vec3::Y, 0.6), emitter(Vec3::new(6.0, 5.5, 5.0))),
-    ])
-    .unwrap();
-    let material =
-        Material { emissive: Vec3::splat(0.2), ambient: Vec3::ZERO, diffuse: Vec3::splat(0.8), ..Material::DIFFUSE };
-    let light = Light {
-        kind: LightKind::Point { position: Vec3::new(1.5, 1.5, 1.5) },
-        color: Vec3::ONE,
-        intensity: 2.0,
-        radius: 0.0,
-    };
-    let lighting = Lighting { shadow_offset: 0.05, ..Lighting::single(material, vec![light], Shadows::Stochastic) };
-    (scene, camera, meshes, lighting)
-}
-
-/// Emissive layers seen through a rough glass sphere and over a glossy floor.
-fn glass_world() -> (Scene, Camera, Meshes, Lighting) {
-    let (scene, camera) = fixture("layers", 24, 18);
-    let floor = MeshMaterial { mirror: 0.4, roughness: 0.4, ..lambert(Vec3::new(0.6, 0.6, 0.7)) };
-    let glass = MeshMaterial { transmission: 0.95, roughness: 0.25, ior: 1.5, ..MeshMaterial::default() };
-    let meshes = Meshes::new(&[
-        (quad(Vec3::new(0.0, -0.7, 0.0), Vec3::Y, 4.0), floor),
-        (sphere(Vec3::new(0.25, -0.05, 1.3), 0.4), glass),
-        (quad(Vec3::new(-1.0, 2.0, 1.0), -Vec3::Y, 0.8), emitter(Vec3::splat(4.0))),
-    ])
-    .unwrap();
-    (scene, camera, meshes, Lighting::default())
 }
 
 fn world_settings(gaussians: GaussianEstimator) -> PathSettings {
@@ -335,4 +288,64 @@ fn path_traced_images_do_not_depend_on_the_thread_count() {
     let (one, two) = (on(1), on(2));
     assert_eq!(one.mean.data(), two.mean.data());
     assert_ne!(one.mean.data(), render(&trace, &world.1, settings, Frames { seed: 4, ..frames }).mean.data());
+}
+
+/// A Gaussian inside the path tracer is lit exactly as the ray tracer lights it: with every hit
+/// composited (exact), no meshes and a hard point light, a path through a pixel centre is the
+/// ray tracer's exact volumetric sample with exact shadows (Σ Tᵢ αᵢ Lit(xᵢ) + T · background).
+#[test]
+fn gaussians_are_lit_as_the_ray_tracer_lights_them() {
+    use splat_core::lighting::Look;
+    use splat_core::path::sampler::PathSampler;
+    use splat_core::trace::{Method, render_frames};
+    let (scene, camera, _, lighting) = lit_world();
+    let lighting = Lighting { look: Look::Volumetric, shadows: Shadows::Exact, ..lighting };
+    let background = Vec3::new(0.1, 0.2, 0.3);
+    let settings = RenderSettings { background, ..RenderSettings::default() };
+    let trace = TraceScene::new(&scene, settings).unwrap().with_lighting(lighting).unwrap();
+    let rt = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {}).unwrap();
+    let path_settings = PathSettings {
+        gaussians: GaussianEstimator::Exact,
+        environment: Environment::Constant(background),
+        ..PathSettings::default()
+    };
+    let tracer = PathTracer::new(&trace, path_settings).unwrap();
+    let mut worst = 0.0f32;
+    for y in 0..camera.height {
+        for x in 0..camera.width {
+            let s = PathSampler::new(SamplerKind::Hash, x, y, 0, 0);
+            let l = tracer.radiance(trace.clip(camera.pixel_ray(x, y)), &s);
+            let expected = Vec3::from_slice(rt.mean.pixel(x, y));
+            worst = worst.max((l - expected).abs().max_element());
+        }
+    }
+    assert!(worst < 1e-5, "the path tracer's lit Gaussians differ from the ray tracer's by {worst}");
+}
+
+/// Next-event estimation of a point light on a Lambertian floor, by hand: one bounce, no
+/// randomness left, L = ρ/π · I cos θ / d².
+#[test]
+fn a_point_light_on_a_lambertian_floor_by_hand() {
+    let scene = Scene::default();
+    let albedo = 0.6;
+    let meshes = Meshes::new(&[(quad(Vec3::ZERO, Vec3::Y, 10.0), lambert(Vec3::splat(albedo)))]).unwrap();
+    let position = Vec3::new(0.3, 2.0, -0.4);
+    let light = Light { kind: LightKind::Point { position }, color: Vec3::ONE, intensity: 5.0, radius: 0.0 };
+    let lighting = Lighting::single(Material::EMISSIVE, vec![light], Shadows::Stochastic);
+    let trace = TraceScene::new(&scene, RenderSettings::default())
+        .unwrap()
+        .with_lighting(lighting)
+        .unwrap()
+        .with_meshes(meshes);
+    let tracer = PathTracer::new(&trace, PathSettings { max_depth: 1, ..PathSettings::default() }).unwrap();
+    let s = splat_core::path::sampler::PathSampler::new(SamplerKind::Sobol, 0, 0, 0, 0);
+    for target in [Vec3::ZERO, Vec3::new(1.5, 0.0, 0.7), Vec3::new(-2.0, 0.0, -3.0)] {
+        let eye = Vec3::new(0.0, 1.0, 4.0);
+        let ray = trace.clip(splat_core::Ray::new(eye, (target - eye).normalize()));
+        let to_light = position - target;
+        let d2 = to_light.length_squared();
+        let expected = albedo / std::f32::consts::PI * 5.0 * (to_light.y / d2.sqrt()) / d2;
+        let l = tracer.radiance(ray, &s);
+        assert!((l.x - expected).abs() < 1e-5 * expected.max(1.0), "{target}: {l} vs {expected}");
+    }
 }

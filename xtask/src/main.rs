@@ -199,6 +199,11 @@ fn bless() -> Result<()> {
         golden::render_meshes(&case, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
         println!("blessed {}", path.display());
     }
+    for (suffix, gaussians, frames) in golden::path_cases() {
+        let path = golden::path("demo-meshes", suffix);
+        golden::render_path(gaussians, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
+        println!("blessed {}", path.display());
+    }
     Ok(())
 }
 

@@ -34,6 +34,18 @@ pub struct ConvergeArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub options: MethodOptions,
+    /// `path`: converge the path tracer's Gaussian estimators (stochastic, stochastic-n, exact)
+    /// on a world file against a long exact-compositing path-traced reference.
+    #[arg(long, value_enum)]
+    pub pipeline: Option<crate::render::PipelineArg>,
+    /// Path tracer: samples per pixel of the exact-compositing reference (hash sampler).
+    #[arg(long, default_value_t = 2048)]
+    pub reference_spp: u32,
+    /// Path tracer: the RMSE whose time to reach each method's table reports.
+    #[arg(long, default_value_t = 0.01)]
+    pub target_rmse: f64,
+    #[command(flatten)]
+    pub path: crate::render::PathOptions,
 }
 
 /// One measurement.
@@ -51,6 +63,13 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     }
     if !args.max_spp.is_power_of_two() {
         bail!("--max-spp must be a power of two, not {}", args.max_spp);
+    }
+    match args.pipeline {
+        Some(crate::render::PipelineArg::Path) => return run_path(&args),
+        Some(other) => {
+            bail!("converge measures the ray-tracing and raster families, or --pipeline path (not {other:?})")
+        }
+        None => {}
     }
     let (scene, camera) = args.scene.load(160, 120)?;
     let settings = args.scene.settings();
@@ -100,10 +119,80 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
     let png = args.output.with_extension("png");
     let names: Vec<String> = args.methods.iter().map(|&m| m.name()).collect();
-    plot(&png, &rows, &names)?;
+    plot(&png, &rows, &names, "RMSE against the oracle (exact, or raster-sorted)")?;
     print!("{}", to_markdown(&rows, &names));
     eprintln!("wrote {} and {}", csv.display(), png.display());
     Ok(())
+}
+
+/// `splat converge --pipeline path`: RMSE and time of each Gaussian estimator inside the path
+/// tracer at spp 1, 2, 4, … against an exact-compositing reference of `--reference-spp` samples
+/// (hash sampler, its own seed), and the time each needs to reach `--target-rmse` (RMSE ∝
+/// spp^−½ fitted at the largest spp, times the measured time per sample).
+fn run_path(args: &ConvergeArgs) -> Result<()> {
+    use splat_core::path::sampler::SamplerKind;
+    use splat_core::path::{GaussianEstimator, PathSettings, PathTracer};
+    let world = args.scene.load_world(160, 120)?;
+    let trace = TraceScene::new(&world.scene, world.settings)?
+        .with_lighting(world.lighting.clone())?
+        .with_meshes(world.meshes.clone());
+    let camera = &world.camera;
+    let base = crate::render::path_options_settings(&args.path, &world, GaussianEstimator::Exact)?;
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= args.max_spp).collect();
+    let total =
+        u64::from(args.reference_spp) + levels.iter().map(|&s| u64::from(s)).sum::<u64>() * args.methods.len() as u64;
+    let bar = progress_bar(pixels * total);
+    let reference_settings = PathSettings { sampler: SamplerKind::Hash, ..base };
+    let frames = Frames { count: args.reference_spp, seed: u32::MAX, ..Frames::default() };
+    let progress = |n| bar.inc(n * u64::from(args.reference_spp));
+    let reference = args
+        .scene
+        .pool()?
+        .install(|| PathTracer::new(&trace, reference_settings)?.render(camera, &frames, &progress))?;
+    let mut rows = Vec::new();
+    for &m in &args.methods {
+        let gaussians = crate::render::gaussian_estimator(m, &args.options)?;
+        let tracer = PathTracer::new(&trace, PathSettings { gaussians, ..base })?;
+        for &spp in &levels {
+            let frames = Frames { count: spp, seed: spp, ..Frames::default() };
+            let progress = |n| bar.inc(n * u64::from(spp));
+            let start = Instant::now();
+            let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
+            let seconds = start.elapsed().as_secs_f64();
+            rows.push(Row { method: m.name(), spp, rmse: rmse(out.mean.data(), reference.mean.data()), seconds });
+        }
+    }
+    bar.finish_and_clear();
+    let names: Vec<String> = args.methods.iter().map(|&m| m.name()).collect();
+    let csv = args.output.with_extension("csv");
+    std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
+    let png = args.output.with_extension("png");
+    plot(&png, &rows, &names, "RMSE against the exact-compositing path tracer")?;
+    print!("{}", to_markdown(&rows, &names));
+    print!("{}", time_to_rmse(&rows, &names, args.target_rmse));
+    eprintln!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
+}
+
+/// Each method's time to reach `target`: RMSE = c / √spp fitted at its largest spp, times its
+/// time per sample over all levels; as ratios against the first method.
+fn time_to_rmse(rows: &[Row], methods: &[String], target: f64) -> String {
+    let mut s = format!(
+        "\n| method | ms/spp | RMSE·√spp | time to RMSE {target} (s) | vs {} |\n|---|---:|---:|---:|---:|\n",
+        methods[0]
+    );
+    let mut first = None;
+    for m in methods {
+        let of: Vec<&Row> = rows.iter().filter(|r| &r.method == m).collect();
+        let Some(last) = of.iter().max_by_key(|r| r.spp) else { continue };
+        let per_spp = of.iter().map(|r| r.seconds).sum::<f64>() / of.iter().map(|r| f64::from(r.spp)).sum::<f64>();
+        let c = last.rmse * f64::from(last.spp).sqrt();
+        let time = per_spp * (c / target).powi(2);
+        let base = *first.get_or_insert(time);
+        let _ = writeln!(s, "| {m} | {:.2} | {c:.4} | {time:.2} | {:.2}× |", 1e3 * per_spp, time / base);
+    }
+    s
 }
 
 fn to_csv(rows: &[Row]) -> String {
@@ -146,7 +235,7 @@ fn to_markdown(rows: &[Row], methods: &[String]) -> String {
 }
 
 /// Log–log plot of RMSE against spp, one line per method, with the 1/√spp reference.
-fn plot(path: &std::path::Path, rows: &[Row], methods: &[String]) -> Result<()> {
+fn plot(path: &std::path::Path, rows: &[Row], methods: &[String], caption: &str) -> Result<()> {
     use plotters::prelude::*;
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
     let max_spp = rows.iter().map(|r| r.spp).max().unwrap_or(1).max(2);
@@ -156,7 +245,7 @@ fn plot(path: &std::path::Path, rows: &[Row], methods: &[String]) -> Result<()> 
     let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("plotting {}: {e}", path.display());
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
-        .caption("RMSE against the oracle (exact, or raster-sorted)", ("sans-serif", 24))
+        .caption(caption, ("sans-serif", 24))
         .margin(16)
         .x_label_area_size(48)
         .y_label_area_size(72)

@@ -136,24 +136,27 @@ pub enum PipelineArg {
     Raster,
     /// Rasterized first hit, ray-traced shadows and bounces.
     Hybrid,
-    /// Monte Carlo path tracing (CPU): Gaussians by --method stochastic (default),
-    /// stochastic-n, exact or depth-sampling-k at every segment, meshes by their BSDFs.
+    /// Monte Carlo path tracing: Gaussians by --method stochastic (default), stochastic-n,
+    /// exact or depth-sampling-k (CPU only) at every segment, meshes by their BSDFs.
     Path,
 }
 
-/// The path tracer's settings from the options and the world.
-fn path_settings(args: &RenderArgs, world: &Loaded) -> Result<PathSettings> {
-    let gaussians = match args.method.unwrap_or(MethodArg::Stochastic) {
+/// The Gaussian estimator of the path tracer that `--method` names.
+pub fn gaussian_estimator(method: MethodArg, options: &MethodOptions) -> Result<GaussianEstimator> {
+    Ok(match method {
         MethodArg::Stochastic => GaussianEstimator::Stochastic,
-        MethodArg::StochasticN => GaussianEstimator::StochasticN { n: args.options.samples },
+        MethodArg::StochasticN => GaussianEstimator::StochasticN { n: options.samples },
         MethodArg::Exact => GaussianEstimator::Exact,
-        MethodArg::DepthSamplingK => GaussianEstimator::DepthSampling { k: args.options.k as u32 },
+        MethodArg::DepthSamplingK => GaussianEstimator::DepthSampling { k: options.k as u32 },
         m => bail!(
             "--method {} is not a Gaussian estimator of the path tracer: use stochastic, stochastic-n, exact or depth-sampling-k",
             m.name()
         ),
-    };
-    let o = &args.path;
+    })
+}
+
+/// The path tracer's settings from its options and the world, with `gaussians`.
+pub fn path_options_settings(o: &PathOptions, world: &Loaded, gaussians: GaussianEstimator) -> Result<PathSettings> {
     let lens = match (o.aperture, world.lens) {
         (Some(aperture), lens) => {
             let focus_distance = o.focus_distance.or(lens.map(|l| l.focus_distance)).unwrap_or(1.0);
@@ -179,24 +182,41 @@ fn path_settings(args: &RenderArgs, world: &Loaded) -> Result<PathSettings> {
     Ok(settings)
 }
 
-/// `splat render --pipeline path`: the Monte Carlo path tracer, on the CPU.
+/// `splat render --pipeline path`: the Monte Carlo path tracer, on the CPU or the GPU.
 fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
-    if args.scene.backend == BackendArg::Gpu {
-        bail!("the path tracer runs on the CPU only for now: use --backend cpu or auto");
-    }
     if args.depth.is_some() || args.normal.is_some() || args.alpha.is_some() {
         bail!("the path tracer writes colour and --variance only (no --depth, --normal or --alpha)");
     }
-    let settings = path_settings(args, world)?;
+    let gaussians = gaussian_estimator(args.method.unwrap_or(MethodArg::Stochastic), &args.options)?;
+    let settings = path_options_settings(&args.path, world, gaussians)?;
     let Loaded { scene, camera, lighting, settings: render_settings, meshes, .. } = world;
     let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
-    let tracer = PathTracer::new(&trace, settings)?;
     let frames = Frames { count: args.spp, seed: args.seed, ..Frames::default() };
-    let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
+    let gpu = match args.scene.backend {
+        BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
+        BackendArg::Auto if !matches!(gaussians, GaussianEstimator::DepthSampling { .. }) => {
+            crate::args::gpu_context(BackendArg::Auto)?
+        }
+        _ => None,
+    };
     let start = Instant::now();
-    let progress = |n| bar.inc(n);
-    let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
-    bar.finish_and_clear();
+    let out = match &gpu {
+        Some(ctx) => {
+            eprintln!("rendering on {}", ctx.describe());
+            let pipeline = splat_gpu::TracePipeline::new(ctx)?;
+            let path = splat_gpu::PathPipeline::new(ctx, &pipeline)?;
+            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
+            tracer.render_path(&path, camera, &settings, &frames)?.0
+        }
+        None => {
+            let tracer = PathTracer::new(&trace, settings)?;
+            let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
+            let progress = |n| bar.inc(n);
+            let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
+            bar.finish_and_clear();
+            out
+        }
+    };
     let seconds = start.elapsed().as_secs_f64();
     write_outputs(args, &out)?;
     eprintln!(

@@ -142,3 +142,50 @@ fn a_two_percent_roughness_error_is_rejected() {
         assert!(p < ALPHA, "{name}: a 2 % roughness error passes (p = {p})");
     }
 }
+
+/// f and the sampling weights describe the same lobe: the directional albedo ∫ f |cos θᵢ| dωᵢ by
+/// quadrature of `eval` equals the mean weight f|cos θᵢ|/p of sampled directions, is at most 1,
+/// and is 1 for lossless smooth glass and nearly 1 for a nearly smooth conductor.
+#[test]
+fn evaluated_and_sampled_albedos_agree() {
+    let albedo_by_quadrature = |b: &Bsdf, wo: Vec3| {
+        let (nz, np) = (400, 200);
+        let mut sum = 0.0f64;
+        for i in 0..nz {
+            for j in 0..np {
+                let z = -1.0 + (i as f64 + 0.5) / nz as f64 * 2.0;
+                let phi = (j as f64 + 0.5) / np as f64 * 2.0 * std::f64::consts::PI;
+                let r = (1.0 - z * z).sqrt();
+                let wi = Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
+                sum += f64::from(b.eval(wo, wi).0.x);
+            }
+        }
+        sum * 4.0 * std::f64::consts::PI / (nz * np) as f64
+    };
+    let albedo_by_sampling = |b: &Bsdf, wo: Vec3| {
+        let mut rng = SplitMix64::new(11);
+        let n = 400_000;
+        let sum: f64 = (0..n)
+            .filter_map(|_| b.sample(wo, rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32())))
+            .map(|s| f64::from(s.weight.x))
+            .sum();
+        sum / n as f64
+    };
+    for (name, b) in cases() {
+        let wo = dir(40.0);
+        let (q, s) = (albedo_by_quadrature(&b, wo), albedo_by_sampling(&b, wo));
+        eprintln!("{name}: albedo {q:.4} by quadrature, {s:.4} by sampling");
+        assert!((q - s).abs() < 0.01, "{name}: {q} by quadrature, {s} by sampling");
+        assert!(q <= 1.0 + 1e-3, "{name} creates energy: {q}");
+    }
+    let smooth_glass = Bsdf::new(0.0, Vec3::ONE, 0.0, 1.0, 0.0, 1.5);
+    let mut rng = SplitMix64::new(3);
+    let mean: f64 = (0..10_000)
+        .filter_map(|_| smooth_glass.sample(dir(50.0), rng.next_f32(), Vec2::new(rng.next_f32(), 0.5)))
+        .map(|s| f64::from(s.weight.x) * if s.wi.z < 0.0 { 1.5f64.powi(2) } else { 1.0 })
+        .sum::<f64>()
+        / 10_000.0;
+    assert!((mean - 1.0).abs() < 1e-6, "smooth glass loses energy: {mean}");
+    let near_mirror = Bsdf::new(0.0, Vec3::ONE, 1.0, 0.0, 0.05, 1.0);
+    assert!(albedo_by_sampling(&near_mirror, dir(30.0)) > 0.99);
+}

@@ -321,8 +321,8 @@ pub struct GpuMeshMaterial {
     pub transmission: f32,
     /// Index of refraction.
     pub ior: f32,
-    /// Padding.
-    pub pad0: u32,
+    /// GGX roughness of the mirror and glass shares (the path tracer's).
+    pub roughness: f32,
     /// Padding.
     pub pad1: u32,
     /// Emissive, ambient, diffuse and specular shares (`first` unused).
@@ -383,6 +383,7 @@ pub fn mesh_materials(meshes: &Meshes) -> Vec<GpuMeshMaterial> {
             mirror: m.mirror,
             transmission: m.transmission,
             ior: m.ior,
+            roughness: m.roughness,
             shading: gpu_material(&m.shading, 0),
             ..GpuMeshMaterial::default()
         })
@@ -569,6 +570,89 @@ fn lighting_params(trace: &TraceScene) -> Params {
 
 /// Test helpers shared by every module with WGSL: naga's validation and its layout of a WGSL
 /// struct, and [`assert_mirrors`] to compare that layout with a Rust mirror.
+
+/// `PATH_STOCHASTIC` in `shaders/path.wgsl`: Algorithm 1 at every segment.
+pub const PATH_STOCHASTIC: u32 = 0;
+/// `PATH_STOCHASTIC_N`: §3.5 at every segment.
+pub const PATH_STOCHASTIC_N: u32 = 1;
+/// `PATH_EXACT`: every hit composited at every segment.
+pub const PATH_EXACT: u32 = 2;
+
+/// `splat_core::path::PathSettings` as `shaders/path.wgsl` reads it (96 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PathParams {
+    /// Most bounces off meshes.
+    pub max_depth: u32,
+    /// Bounces before Russian roulette.
+    pub roulette_depth: u32,
+    /// `PATH_*`.
+    pub estimator: u32,
+    /// Instantiations of stochastic-n.
+    pub n: u32,
+    /// 0: Sobol, 1: hash.
+    pub sampler: u32,
+    /// 0: constant, 1: gradient.
+    pub environment: u32,
+    /// Emissive triangles.
+    pub emitters: u32,
+    /// 1 with a thin lens.
+    pub lens: u32,
+    /// Constant colour or horizon.
+    pub env_a: [f32; 4],
+    /// Zenith.
+    pub env_b: [f32; 4],
+    /// Up.
+    pub env_up: [f32; 4],
+    /// Lens radius.
+    pub aperture: f32,
+    /// Distance in focus.
+    pub focus_distance: f32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+}
+
+/// The kernel's parameters of `settings` with `emitters` emissive triangles; `None` for an
+/// estimator the kernel does not run (depth sampling, the CPU's control only).
+pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> Option<PathParams> {
+    use splat_core::path::sampler::SamplerKind;
+    use splat_core::path::{Environment, GaussianEstimator};
+    let (estimator, n) = match settings.gaussians {
+        GaussianEstimator::Stochastic => (PATH_STOCHASTIC, 1),
+        GaussianEstimator::StochasticN { n } => (PATH_STOCHASTIC_N, n),
+        GaussianEstimator::Exact => (PATH_EXACT, 1),
+        GaussianEstimator::DepthSampling { .. } => return None,
+    };
+    let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
+    let (environment, env_a, env_b, env_up) = match settings.environment {
+        Environment::Constant(c) => (0, v4(c), [0.0; 4], [0.0; 4]),
+        Environment::Gradient { horizon, zenith, up } => (1, v4(horizon), v4(zenith), v4(up)),
+    };
+    let lens = settings.lens.unwrap_or(splat_core::path::ThinLens { aperture: 0.0, focus_distance: 1.0 });
+    Some(PathParams {
+        max_depth: settings.max_depth,
+        roulette_depth: settings.roulette_depth,
+        estimator,
+        n,
+        sampler: match settings.sampler {
+            SamplerKind::Sobol => 0,
+            SamplerKind::Hash => 1,
+        },
+        environment,
+        emitters,
+        lens: u32::from(settings.lens.is_some()),
+        env_a,
+        env_b,
+        env_up,
+        aperture: lens.aperture,
+        focus_distance: lens.focus_distance,
+        pad0: 0,
+        pad1: 0,
+    })
+}
+
 #[cfg(test)]
 pub(crate) mod wgsl_check {
     /// Parse and validate `source` with no optional capability (so no subgroup operations).
@@ -729,7 +813,29 @@ mod tests {
             crate::TRACE_WGSL,
             GpuMeshMaterial,
             "MeshMaterial",
-            [color, mirror, transmission, ior, pad0, pad1, shading]
+            [color, mirror, transmission, ior, roughness, pad1, shading]
+        );
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            PathParams,
+            "PathParams",
+            [
+                max_depth,
+                roulette_depth,
+                estimator,
+                n,
+                sampler,
+                environment,
+                emitters,
+                lens,
+                env_a,
+                env_b,
+                env_up,
+                aperture,
+                focus_distance,
+                pad0,
+                pad1
+            ]
         );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
     }
@@ -771,6 +877,14 @@ mod tests {
                 "BOUNCE_SHIFT" = splat_core::trace::BOUNCE_SHIFT,
                 "SHADOW_BOUNCE_SHIFT" = splat_core::trace::SHADOW_BOUNCE_SHIFT,
                 "MAX_BOUNCES" = splat_core::settings::MAX_BOUNCES,
+                "PATH_DIM_ID" = splat_core::path::sampler::PATH_DIM_ID,
+                "LIGHT_STREAM" = splat_core::path::sampler::LIGHT_STREAM,
+                "DIMS_PER_BOUNCE" = splat_core::path::sampler::Dim::PER_BOUNCE,
+                "SOBOL_DIMENSIONS" = splat_core::path::sampler::SOBOL_DIMENSIONS,
+                "MIN_ROUGHNESS" = splat_core::path::bsdf::MIN_ROUGHNESS,
+                "PATH_STOCHASTIC" = PATH_STOCHASTIC,
+                "PATH_STOCHASTIC_N" = PATH_STOCHASTIC_N,
+                "PATH_EXACT" = PATH_EXACT,
             ]
         );
         let f64s = |v: &[f32]| v.iter().map(|&c| f64::from(c)).collect::<Vec<_>>();

@@ -25,11 +25,12 @@ pub use wgpu;
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use context::GpuContext;
 pub use error::GpuError;
-pub use layout::{GpuFirstHit, GpuParticle, Params, PassState};
+pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};
 pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use sort::RadixSort;
 pub use trace::{
-    DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MethodParams, TRACE_WGSL, TracePipeline,
+    DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MethodParams, PathPipeline, TRACE_WGSL,
+    TracePipeline,
 };
 
 use splat_core::Camera;

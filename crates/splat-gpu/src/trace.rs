@@ -23,14 +23,16 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{DEFAULT_K, Method, MethodCode, TraceScene};
 use std::time::{Duration, Instant};
 
-/// WGSL of the ray-tracing kernel.
+/// WGSL of the ray-tracing kernel (entry point `main`) and of the path tracer that calls its
+/// traversals (`path_main`, `shaders/path.wgsl`).
 pub const TRACE_WGSL: &str = concat!(
     include_str!("../../../shaders/common.wgsl"),
     include_str!("../../../shaders/sh.wgsl"),
     include_str!("../../../shaders/lighting.wgsl"),
     include_str!("../../../shaders/bvh.wgsl"),
     include_str!("../../../shaders/mesh.wgsl"),
-    include_str!("../../../shaders/trace.wgsl")
+    include_str!("../../../shaders/trace.wgsl"),
+    include_str!("../../../shaders/path.wgsl")
 );
 /// Dispatches encoded into one submission.
 pub const DISPATCHES_PER_SUBMIT: u32 = 64;
@@ -88,6 +90,8 @@ impl TryFrom<&Method> for MethodParams {
 pub struct TracePipeline {
     pub(crate) pipeline: wgpu::ComputePipeline,
     pub(crate) layout: wgpu::BindGroupLayout,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
 }
 
 impl TracePipeline {
@@ -117,6 +121,10 @@ impl TracePipeline {
                 storage(10, true),
                 storage(11, true),
                 storage(12, true),
+                uniform_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
+                storage(14, true),
+                storage(15, true),
+                storage(16, true),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -128,7 +136,25 @@ impl TracePipeline {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        Ok(Self { pipeline, layout })
+        Ok(Self { pipeline, layout, module, pipeline_layout })
+    }
+}
+
+/// The compiled path tracer (`path_main` of [`TRACE_WGSL`]), on the ray-tracing kernel's
+/// bindings; compiled apart, since only path-traced renders need it.
+pub struct PathPipeline {
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl PathPipeline {
+    /// Compile `path_main` against `trace`'s module and layout.
+    pub fn new(ctx: &GpuContext, trace: &TracePipeline) -> Result<Self, GpuError> {
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = compute_pipeline(&ctx.device, &trace.module, Some(&trace.pipeline_layout), "path_main");
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(Self { pipeline })
     }
 }
 
@@ -147,6 +173,15 @@ pub struct GpuTracer<'a> {
     mesh_materials: wgpu::Buffer,
     /// Binding 12 when no first hits are given (one unused entry).
     no_first_hits: wgpu::Buffer,
+    /// Binding 13 outside path-traced renders.
+    no_path: wgpu::Buffer,
+    /// The Sobol direction numbers (binding 14).
+    sobol: wgpu::Buffer,
+    /// The emissive triangles (binding 15) and every triangle's emitter density (binding 16).
+    emitters: wgpu::Buffer,
+    emitter_density: wgpu::Buffer,
+    /// Emissive triangles.
+    emitter_count: u32,
 }
 
 impl<'a> GpuTracer<'a> {
@@ -168,7 +203,26 @@ impl<'a> GpuTracer<'a> {
         ctx.check_binding("particle", bytes(bytemuck::cast_slice(&particles)), count)?;
         ctx.check_binding("BVH node", bytes(bytemuck::cast_slice(&nodes)), count)?;
         ctx.check_binding("SH", bytes(bytemuck::cast_slice(&sh)), count)?;
+        let path = splat_core::path::PathTracer::new(trace, splat_core::path::PathSettings::default())?;
+        let (mut emitters, mut density) = path.emitter_table();
+        let emitter_count = emitters.len() as u32;
+        // A binding cannot be empty.
+        emitters.push([0, 0]);
+        density.push(0.0);
+        let uniform = |label: &str, contents: &[u8]| {
+            use wgpu::util::DeviceExt;
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
         Ok(Self {
+            no_path: uniform("no path", bytemuck::bytes_of(&layout::PathParams::default())),
+            sobol: ctx.upload("sobol", bytemuck::cast_slice(&splat_core::path::sampler::sobol_directions())),
+            emitters: ctx.upload("emitters", bytemuck::cast_slice(&emitters)),
+            emitter_density: ctx.upload("emitter density", bytemuck::cast_slice(&density)),
+            emitter_count,
             ctx,
             pipeline,
             trace,
@@ -210,7 +264,7 @@ impl<'a> GpuTracer<'a> {
         method: &Method,
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
-        self.render_with(camera, method, frames, None)
+        self.render_with(camera, method, frames, None, None)
     }
 
     /// The hybrid pipeline (vk_gaussian_splatting Lighting §5; the twin of
@@ -231,7 +285,33 @@ impl<'a> GpuTracer<'a> {
             return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
         }
         let buffer = self.ctx.upload("first hits", bytemuck::cast_slice(&hits));
-        self.render_with(camera, method, frames, Some(&buffer))
+        self.render_with(camera, method, frames, Some(&buffer), None)
+    }
+
+    /// The Monte Carlo path tracer (the twin of [`splat_core::path::PathTracer::render`]):
+    /// `frames.count` paths per pixel with the CPU's decisions for the same seed, frames batched
+    /// as in [`GpuTracer::render`] (on lavapipe within its loop budget, or refused with the
+    /// pixel named). Every Gaussian estimator but depth sampling (the CPU's control) runs.
+    pub fn render_path(
+        &self,
+        pipeline: &PathPipeline,
+        camera: &Camera,
+        settings: &splat_core::path::PathSettings,
+        frames: &Frames,
+    ) -> Result<(RenderOutput, GpuStats), GpuError> {
+        settings.validate()?;
+        let params = layout::path_params(settings, self.emitter_count)
+            .ok_or_else(|| GpuError::Unsupported("depth sampling in the path tracer runs on the CPU only".into()))?;
+        let buffer = {
+            use wgpu::util::DeviceExt;
+            self.ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("path"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..*frames };
+        self.render_with(camera, &Method::Stochastic, &frames, None, Some((&pipeline.pipeline, &buffer)))
     }
 
     fn render_with(
@@ -240,13 +320,14 @@ impl<'a> GpuTracer<'a> {
         method: &Method,
         frames: &Frames,
         first_hits: Option<&wgpu::Buffer>,
+        path: Option<(&wgpu::ComputePipeline, &wgpu::Buffer)>,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         let params = MethodParams::try_from(method)?;
         let count = frames.keys(method.is_stochastic() || self.trace.is_random())?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
-        let run = Run { tracer: self, camera, params, frames, count, first_hits };
+        let run = Run { tracer: self, camera, params, frames, count, first_hits, path };
         let lanes = u64::from(ctx.lanes());
         let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
         let mut out = if cpu_adapter {
@@ -274,7 +355,7 @@ impl<'a> GpuTracer<'a> {
         // Mirror and glass bounces run whole frames only: the state between passes is the
         // camera ray's.
         let bounces = self.trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
-        if over(&out) && multi_pass && !bounces && first_hits.is_none() {
+        if over(&out) && multi_pass && !bounces && first_hits.is_none() && path.is_none() {
             out = run.execute(1, true)?;
         }
         if over(&out) {
@@ -313,6 +394,8 @@ struct Run<'a> {
     count: u32,
     /// The hybrid pipeline's rasterized first hits, if this is a hybrid render.
     first_hits: Option<&'a wgpu::Buffer>,
+    /// The path tracer's pipeline and parameters, if this is a path-traced render.
+    path: Option<(&'a wgpu::ComputePipeline, &'a wgpu::Buffer)>,
 }
 
 impl Run<'_> {
@@ -374,6 +457,13 @@ impl Run<'_> {
                     binding: 12,
                     resource: self.first_hits.unwrap_or(&tracer.no_first_hits).as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 13,
+                    resource: self.path.map_or(&tracer.no_path, |p| p.1).as_entire_binding(),
+                },
+                wgpu::BindGroupEntry { binding: 14, resource: tracer.sobol.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 15, resource: tracer.emitters.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 16, resource: tracer.emitter_density.as_entire_binding() },
             ],
         });
         let mut gpu_time = Duration::ZERO;
@@ -397,7 +487,7 @@ impl Run<'_> {
                     });
                     let mut pass = encoder
                         .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
-                    pass.set_pipeline(&tracer.pipeline.pipeline);
+                    pass.set_pipeline(self.path.map_or(&tracer.pipeline.pipeline, |p| p.0));
                     for slot in 0..batch.len() {
                         pass.set_bind_group(0, &bind_group, &[(slot as u64 * stride) as u32]);
                         pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);

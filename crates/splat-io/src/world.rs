@@ -593,6 +593,22 @@ mod tests {
     }
 
     #[test]
+    fn environment_and_lens_are_read() {
+        let w = parse(
+            "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 1]\naperture = 0.1\n\
+             [environment]\nhorizon = [1, 0.5, 0]\nzenith = 0.2\n[[splats]]\nbuiltin = \"demo\"",
+        )
+        .unwrap();
+        let lens = w.lens.unwrap();
+        assert_eq!(lens.aperture, 0.1);
+        assert!((lens.focus_distance - 4.0).abs() < 1e-5, "eye to target: {}", lens.focus_distance);
+        assert_eq!(
+            w.environment,
+            Some(Environment::Gradient { horizon: Vec3::new(1.0, 0.5, 0.0), zenith: Vec3::splat(0.2), up: Vec3::Y })
+        );
+    }
+
+    #[test]
     fn bad_worlds_name_the_problem() {
         let cases = [
             ("", "no [[splats]]"),
@@ -614,6 +630,14 @@ mod tests {
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"sphere\"\nsegments = 1", "segments 1"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cone\"", "unknown variant"),
             ("max_bounces = 99\n[[splats]]\nbuiltin = \"demo\"", "max_bounces 99"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nroughness = 2", "roughness 2"),
+            ("[environment]\ncolor = 1\nhorizon = 1\n[[splats]]\nbuiltin = \"demo\"", "either color, or horizon"),
+            ("[environment]\ncolor = -1\n[[splats]]\nbuiltin = \"demo\"", "environment colour"),
+            ("[environment]\nhorizon = 1\nzenith = 1\nup = [0, 0, 0]\n[[splats]]\nbuiltin = \"demo\"", "up must be"),
+            (
+                "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 0]\naperture = -0.1\n[[splats]]\nbuiltin = \"demo\"",
+                "aperture -0.1",
+            ),
         ];
         for (text, want) in cases {
             let err = parse(text).err().unwrap_or_else(|| panic!("accepted: {text}"));

@@ -289,6 +289,14 @@ impl<'a> PathTracer<'a> {
         &self.settings
     }
 
+    /// The emitter table a GPU uploads: per emissive triangle its cumulative selection
+    /// probability (f32 bits) and leaf-order index, and per leaf-order triangle P(select) / area.
+    pub fn emitter_table(&self) -> (Vec<[u32; 2]>, Vec<f32>) {
+        let e = &self.emitters;
+        let picks = e.cdf.iter().zip(&e.triangles).map(|(c, &t)| [c.to_bits(), t]).collect();
+        (picks, e.density.clone())
+    }
+
     /// The camera ray of sample `s` through pixel (x, y): a random position in the pixel and,
     /// with a lens, on the lens.
     pub fn camera_ray(&self, camera: &Camera, x: u32, y: u32, s: &PathSampler) -> Ray {
@@ -501,9 +509,12 @@ impl<'a> PathTracer<'a> {
         let p = tri.p0 + b1 * tri.e1 + b2 * tri.e2;
         let to = p - x;
         let distance = to.length();
+        if distance.is_nan() || distance <= 0.0 {
+            return None;
+        }
         let l = to / distance;
         let cos_l = tri.face_normal().dot(l).abs();
-        if cos_l <= 0.0 || distance <= 0.0 {
+        if cos_l.is_nan() || cos_l <= 0.0 {
             return None;
         }
         let pdf = self.emitters.density[k as usize] * distance * distance / cos_l;

@@ -67,9 +67,21 @@ impl Dim {
 }
 
 /// Particle ids above the scene's: the seeds of the path's own dimensions …
-const PATH_DIM_ID: u32 = u32::MAX - 7;
+pub const PATH_DIM_ID: u32 = u32::MAX - 7;
 /// … and of light j's samples (`LIGHT_STREAM − j`).
-const LIGHT_STREAM: u32 = u32::MAX - 16;
+pub const LIGHT_STREAM: u32 = u32::MAX - 16;
+/// Dimensions of one Sobol sequence; further dimensions continue with a fresh seed.
+pub const SOBOL_DIMENSIONS: u32 = sobol_burley::NUM_DIMENSIONS;
+
+/// The direction numbers behind [`SamplerKind::Sobol`], bit-reversed, 16 per dimension (the
+/// sequence is 2¹⁶ points long): entry 16 d + k is what bit 31 − k of a reversed sample index
+/// contributes to dimension d (`sobol_burley::parts::sobol_rev`). What a GPU uploads to draw
+/// the same points.
+pub fn sobol_directions() -> Vec<u32> {
+    (0..SOBOL_DIMENSIONS)
+        .flat_map(|d| (0..16).map(move |k| sobol_burley::parts::sobol_rev(1u32 << (31 - k), d)))
+        .collect()
+}
 
 /// The numbers of one pixel's sample.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -195,6 +207,20 @@ mod tests {
         let mut cells = [0u32; 32];
         s.iter().for_each(|&u| cells[(u * 32.0) as usize] += 1);
         assert!(cells.iter().all(|&c| c == 1), "{cells:?}");
+    }
+
+    #[test]
+    fn the_direction_table_rebuilds_the_sequence() {
+        // sobol_rev is linear over XOR in the index bits: the table reproduces it.
+        let table = sobol_directions();
+        for d in [0, 1, 5, 77, 255] {
+            for index in [0u32, 1, 2, 3, 1000, 65_535] {
+                let rev = index.reverse_bits();
+                let by_table =
+                    (0..16).filter(|k| rev & (1u32 << (31 - k)) != 0).fold(0, |s, k| s ^ table[(16 * d + k) as usize]);
+                assert_eq!(by_table, sobol_burley::parts::sobol_rev(rev, d));
+            }
+        }
     }
 
     #[test]
