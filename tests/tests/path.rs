@@ -13,7 +13,6 @@ use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer,
 use splat_core::stats::{ZTest, log_log_slope, rmse};
 use splat_core::trace::TraceScene;
 use splat_core::{Camera, Frames, RenderSettings, Scene};
-use splat_tests::harness::fixture;
 use splat_tests::path_worlds::{glass_world, lambert, lit_world};
 use splat_tests::placed;
 

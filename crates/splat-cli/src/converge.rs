@@ -132,6 +132,8 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
 fn run_path(args: &ConvergeArgs) -> Result<()> {
     use splat_core::path::sampler::SamplerKind;
     use splat_core::path::{GaussianEstimator, PathSettings, PathTracer};
+    let estimators: Vec<GaussianEstimator> =
+        args.methods.iter().map(|&m| crate::render::gaussian_estimator(m, &args.options)).collect::<Result<_>>()?;
     let world = args.scene.load_world(160, 120)?;
     let trace = TraceScene::new(&world.scene, world.settings)?
         .with_lighting(world.lighting.clone())?
@@ -151,8 +153,7 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
         .pool()?
         .install(|| PathTracer::new(&trace, reference_settings)?.render(camera, &frames, &progress))?;
     let mut rows = Vec::new();
-    for &m in &args.methods {
-        let gaussians = crate::render::gaussian_estimator(m, &args.options)?;
+    for (&m, &gaussians) in args.methods.iter().zip(&estimators) {
         let tracer = PathTracer::new(&trace, PathSettings { gaussians, ..base })?;
         for &spp in &levels {
             let frames = Frames { count: spp, seed: spp, ..Frames::default() };

@@ -568,9 +568,6 @@ fn lighting_params(trace: &TraceScene) -> Params {
     }
 }
 
-/// Test helpers shared by every module with WGSL: naga's validation and its layout of a WGSL
-/// struct, and [`assert_mirrors`] to compare that layout with a Rust mirror.
-
 /// `PATH_STOCHASTIC` in `shaders/path.wgsl`: Algorithm 1 at every segment.
 pub const PATH_STOCHASTIC: u32 = 0;
 /// `PATH_STOCHASTIC_N`: §3.5 at every segment.
@@ -653,6 +650,8 @@ pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> 
     })
 }
 
+/// Test helpers shared by every module with WGSL: naga's validation and its layout of a WGSL
+/// struct, and [`assert_mirrors`] to compare that layout with a Rust mirror.
 #[cfg(test)]
 pub(crate) mod wgsl_check {
     /// Parse and validate `source` with no optional capability (so no subgroup operations).
