@@ -45,9 +45,10 @@ const PATH_EXACT: u32 = 2u;
 
 // ---- sampler.rs --------------------------------------------------------------------------------
 
-// Whether the running entry point is path_main: trace.wgsl's particle_u, light_sample and
-// visit_shadow then take the path's decisions.
-var<private> path_mode: bool;
+// Whether the pipeline is the path tracer's (splat_gpu::PathPipeline sets it): trace.wgsl's
+// particle_u and visit_shadow then take the path's decisions. A pipeline-overridable constant,
+// so that the ray-tracing kernel compiles without the path's code in its traversal loops.
+override PATH_MODE: bool = false;
 // The pixel's sequence seed (Sobol) or pixel-and-frame seed (hash), and the sample index.
 var<private> path_seed: u32;
 var<private> path_index: u32;
@@ -739,7 +740,6 @@ fn path_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {
         return;
     }
-    path_mode = true;
     bounce = 0u;
     let index = gid.y * params.size.x + gid.x;
     iterations = 0u;

@@ -193,7 +193,7 @@ fn bounce_slot(slot: u32) -> u32 {
 // the current bounce, lowered by the test hook.
 // In the path tracer (path.wgsl) the path's own decisions, slot being its decision number.
 fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
-    if (path_mode) {
+    if (PATH_MODE) {
         return path_particle(id, slot) - params.u_shift;
     }
     return unshifted_particle_u(pixel_seed, id, bounce_slot(slot), hit) - params.u_shift;
@@ -362,7 +362,7 @@ fn visit(visitor: u32, ray: Ray, leaf: u32, t_max: f32) -> f32 {
 // The visitor of `traverse_shadow` (bvh.wgsl) for the world's shadow kind (the path tracer's
 // own in path.wgsl).
 fn visit_shadow(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    switch select(params.shadows, path_shadows, path_mode) {
+    switch select(params.shadows, path_shadows, PATH_MODE) {
         case SHADOWS_EXACT: {
             return transmittance_visit(ray, leaf, t_max);
         }

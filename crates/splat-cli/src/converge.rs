@@ -18,14 +18,10 @@ use std::time::Instant;
 pub struct ConvergeArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
-    /// Methods to measure, comma separated.
-    #[arg(
-        long,
-        value_enum,
-        value_delimiter = ',',
-        default_value = "stochastic,stochastic-n,stochastic-pass,depth-sampling-k"
-    )]
-    pub methods: Vec<MethodArg>,
+    /// Methods to measure, comma separated (default: stochastic, stochastic-n, stochastic-pass
+    /// and depth-sampling-k; with --pipeline path: stochastic, stochastic-n and exact).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub methods: Option<Vec<MethodArg>>,
     /// Largest spp (a power of two).
     #[arg(long, default_value_t = 1024)]
     pub max_spp: u32,
@@ -71,12 +67,15 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         }
         None => {}
     }
+    let methods = args.methods.clone().unwrap_or_else(|| {
+        vec![MethodArg::Stochastic, MethodArg::StochasticN, MethodArg::StochasticPass, MethodArg::DepthSamplingK]
+    });
     let (scene, camera) = args.scene.load(160, 120)?;
     let settings = args.scene.settings();
     let trace = TraceScene::new(&scene, settings)?;
     let exact = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {})?;
     // The raster oracle, projected and rendered only when a raster method is measured.
-    let any_raster = args.methods.iter().any(|&m| matches!(args.options.resolve(m), Algorithm::Raster(..)));
+    let any_raster = methods.iter().any(|&m| matches!(args.options.resolve(m), Algorithm::Raster(..)));
     let raster = if any_raster {
         let raster = Rasterizer::new(&scene, &camera, settings, args.options.raster_settings())?;
         let under = RasterMethod::Sorted { blend: Blend::Under };
@@ -92,10 +91,10 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     };
     let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= args.max_spp).collect();
     let pixels = u64::from(camera.width) * u64::from(camera.height);
-    let total: u64 = levels.iter().map(|&s| u64::from(s)).sum::<u64>() * args.methods.len() as u64;
+    let total: u64 = levels.iter().map(|&s| u64::from(s)).sum::<u64>() * methods.len() as u64;
     let bar = progress_bar(pixels * total);
     let mut rows = Vec::new();
-    for &m in &args.methods {
+    for &m in &methods {
         let method = args.options.resolve(m);
         for &spp in &levels {
             let frames = Frames { count: spp, seed: spp, rng: args.options.rng(), ..Frames::default() };
@@ -118,7 +117,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     let csv = args.output.with_extension("csv");
     std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
     let png = args.output.with_extension("png");
-    let names: Vec<String> = args.methods.iter().map(|&m| m.name()).collect();
+    let names: Vec<String> = methods.iter().map(|&m| m.name()).collect();
     plot(&png, &rows, &names, "RMSE against the oracle (exact, or raster-sorted)")?;
     print!("{}", to_markdown(&rows, &names));
     eprintln!("wrote {} and {}", csv.display(), png.display());
@@ -132,8 +131,10 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
 fn run_path(args: &ConvergeArgs) -> Result<()> {
     use splat_core::path::sampler::SamplerKind;
     use splat_core::path::{GaussianEstimator, PathSettings, PathTracer};
+    let methods =
+        args.methods.clone().unwrap_or_else(|| vec![MethodArg::Stochastic, MethodArg::StochasticN, MethodArg::Exact]);
     let estimators: Vec<GaussianEstimator> =
-        args.methods.iter().map(|&m| crate::render::gaussian_estimator(m, &args.options)).collect::<Result<_>>()?;
+        methods.iter().map(|&m| crate::render::gaussian_estimator(m, &args.options)).collect::<Result<_>>()?;
     let world = args.scene.load_world(160, 120)?;
     let trace = TraceScene::new(&world.scene, world.settings)?
         .with_lighting(world.lighting.clone())?
@@ -143,7 +144,7 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
     let pixels = u64::from(camera.width) * u64::from(camera.height);
     let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= args.max_spp).collect();
     let total =
-        u64::from(args.reference_spp) + levels.iter().map(|&s| u64::from(s)).sum::<u64>() * args.methods.len() as u64;
+        u64::from(args.reference_spp) + levels.iter().map(|&s| u64::from(s)).sum::<u64>() * methods.len() as u64;
     let bar = progress_bar(pixels * total);
     let reference_settings = PathSettings { sampler: SamplerKind::Hash, ..base };
     let frames = Frames { count: args.reference_spp, seed: u32::MAX, ..Frames::default() };
@@ -153,7 +154,7 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
         .pool()?
         .install(|| PathTracer::new(&trace, reference_settings)?.render(camera, &frames, &progress))?;
     let mut rows = Vec::new();
-    for (&m, &gaussians) in args.methods.iter().zip(&estimators) {
+    for (&m, &gaussians) in methods.iter().zip(&estimators) {
         let tracer = PathTracer::new(&trace, PathSettings { gaussians, ..base })?;
         for &spp in &levels {
             let frames = Frames { count: spp, seed: spp, ..Frames::default() };
@@ -165,7 +166,7 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
-    let names: Vec<String> = args.methods.iter().map(|&m| m.name()).collect();
+    let names: Vec<String> = methods.iter().map(|&m| m.name()).collect();
     let csv = args.output.with_extension("csv");
     std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
     let png = args.output.with_extension("png");

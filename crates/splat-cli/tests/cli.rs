@@ -282,14 +282,14 @@ fn converge_the_path_tracer() {
         "4",
         "--reference-spp",
         "16",
-        "--methods",
-        "stochastic,exact",
         "-o",
         prefix.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // The path tracer's default methods: stochastic, stochastic-n and exact, at spp 1, 2, 4.
     let csv = std::fs::read_to_string(prefix.with_extension("csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 2 * 3, "{csv}");
+    assert_eq!(csv.lines().count(), 1 + 3 * 3, "{csv}");
+    assert!(csv.contains("stochastic-n,") && csv.contains("exact,"), "{csv}");
     let table = String::from_utf8_lossy(&o.stdout);
     assert!(table.contains("| slope |") && table.contains("time to RMSE 0.01"), "{table}");
     let bad = splat(&["converge", "fixtures/worlds/demo-meshes.toml", "--pipeline", "path", "--methods", "opaque"]);

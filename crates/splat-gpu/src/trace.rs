@@ -150,7 +150,17 @@ impl PathPipeline {
     /// Compile `path_main` against `trace`'s module and layout.
     pub fn new(ctx: &GpuContext, trace: &TracePipeline) -> Result<Self, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipeline = compute_pipeline(&ctx.device, &trace.module, Some(&trace.pipeline_layout), "path_main");
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("path_main"),
+            layout: Some(&trace.pipeline_layout),
+            module: &trace.module,
+            entry_point: Some("path_main"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("PATH_MODE", 1.0)],
+                ..Default::default()
+            },
+            cache: None,
+        });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
