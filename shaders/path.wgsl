@@ -503,27 +503,11 @@ fn emitter_pdf(h: SurfaceHit, dir: vec3<f32>) -> f32 {
     return select(0.0, emitter_density[h.triangle] * h.t * h.t / cos_l, cos_l > 0.0);
 }
 
-// `PathTracer::visibility`: 0 behind a mesh, else the stochastic shadow ray through the
-// Gaussians or (exact) their transmittance (trace.wgsl's traverse_shadow, the kind chosen by
-// path_shadows).
+// `PathTracer::visibility`: trace.wgsl's `visibility` by the path's shadow kind, stochastic or
+// (exact) the transmittance.
 fn path_visibility(x: vec3<f32>, offset: f32, inc: Incident, slot: u32, exact: bool) -> f32 {
-    let shadow = Ray(x + offset * inc.l, inc.l, inc.l, params.t_min, min(inc.distance - offset, params.t_max));
-    if (shadow.t_max <= shadow.t_min) {
-        return 1.0;
-    }
     path_shadows = select(SHADOWS_STOCHASTIC, SHADOWS_EXACT, exact);
-    shadow_t = 1.0;
-    shadow_in = ShadowInputs(0u, slot);
-    shadow_blocked = false;
-    shadow_mesh = false;
-    traverse_shadow(shadow);
-    if (shadow_mesh) {
-        return 0.0;
-    }
-    if (exact) {
-        return shadow_t;
-    }
-    return select(1.0, 0.0, shadow_blocked);
+    return visibility(x, offset, inc, 0u, slot).x;
 }
 
 // `gaussian_radiance`: Lᵢ of the Gaussian in leaf `leaf` hit at t.
@@ -639,18 +623,12 @@ fn direct_at_surface(x: vec3<f32>, face: vec3<f32>, fr: Frame, wo: vec3<f32>, bs
 
 // `PathTracer::camera_ray`: a random point in the pixel and, with a lens, on the lens.
 fn path_camera_ray(x: u32, y: u32) -> Ray {
-    let o = path_dim2(0u);
-    let d_cam = vec3<f32>(
-        (f32(x) + o.x - params.intrinsics.z) / params.intrinsics.x,
-        (f32(y) + o.y - params.intrinsics.w) / params.intrinsics.y,
-        1.0,
-    );
-    let cam_to_world = mat3x3<f32>(params.cam_row0.xyz, params.cam_row1.xyz, params.cam_row2.xyz);
-    var ray = Ray(params.cam_center.xyz, normalize(cam_to_world * d_cam), params.cam_row2.xyz, params.t_min, params.t_max);
+    let offset = path_dim2(0u);
+    var ray = camera_ray(x, y, offset);
     if (path.lens == 1u && path.aperture > 0.0) {
         let on_lens = vec3<f32>(path.aperture * concentric_disk(path_dim2(2u)), 0.0);
-        ray.origin = params.cam_center.xyz + cam_to_world * on_lens;
-        ray.dir = normalize(cam_to_world * (path.focus_distance * d_cam - on_lens));
+        ray.origin = params.cam_center.xyz + camera_to_world(on_lens);
+        ray.dir = normalize(camera_to_world(path.focus_distance * camera_dir(x, y, offset) - on_lens));
     }
     return ray;
 }

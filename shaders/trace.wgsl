@@ -359,10 +359,15 @@ fn visit(visitor: u32, ray: Ray, leaf: u32, t_max: f32) -> f32 {
     return next_k_visit(ray, leaf, t_max);
 }
 
-// The visitor of `traverse_shadow` (bvh.wgsl) for the world's shadow kind (the path tracer's
-// own in path.wgsl).
+// The shadow kind of the current shadow ray: the world's, or in the path tracer's pipeline
+// the one path.wgsl chose (path_shadows).
+fn shadow_kind() -> u32 {
+    return select(params.shadows, path_shadows, PATH_MODE);
+}
+
+// The visitor of `traverse_shadow` (bvh.wgsl) for the current shadow kind.
 fn visit_shadow(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    switch select(params.shadows, path_shadows, PATH_MODE) {
+    switch shadow_kind() {
         case SHADOWS_EXACT: {
             return transmittance_visit(ray, leaf, t_max);
         }
@@ -600,11 +605,13 @@ var<private> shadow_t: f32;
 var<private> shadow_blocked: bool;
 var<private> shadow_mesh: bool;
 
-// trace.rs `TraceScene::visibility_from`: the shadow ray from x + offset l toward the light;
-// a mesh on the way blocks it.
+// trace.rs `TraceScene::shadow_visibility`: the shadow ray from x + offset l toward the light,
+// by the world's shadow kind (the path tracer's, path_shadows, in its pipeline); a mesh on the
+// way blocks it.
 fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
     let shadow = Ray(x + offset * inc.l, inc.l, inc.l, params.t_min, min(inc.distance - offset, params.t_max));
-    if (shadow.t_max <= params.t_min || params.shadows == SHADOWS_NONE) {
+    let kind = shadow_kind();
+    if (shadow.t_max <= params.t_min || kind == SHADOWS_NONE) {
         return vec3<f32>(1.0);
     }
     // One traversal call for every kind and the meshes (see traverse_shadow).
@@ -617,7 +624,7 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u
     if (shadow_mesh) {
         return vec3<f32>(0.0);
     }
-    switch params.shadows {
+    switch kind {
         case SHADOWS_EXACT: {
             return vec3<f32>(shadow_t);
         }
@@ -965,13 +972,26 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
 // ---- camera.rs and frame accumulation (render_frames) ----------------------------------------
 
 fn pixel_ray(x: u32, y: u32) -> Ray {
-    let d_cam = vec3<f32>(
-        (f32(x) + 0.5 - params.intrinsics.z) / params.intrinsics.x,
-        (f32(y) + 0.5 - params.intrinsics.w) / params.intrinsics.y,
+    return camera_ray(x, y, vec2<f32>(0.5));
+}
+
+// camera.rs `Camera::ray`: through pixel (x, y) at sub-pixel position `offset`.
+fn camera_ray(x: u32, y: u32, offset: vec2<f32>) -> Ray {
+    return Ray(params.cam_center.xyz, normalize(camera_to_world(camera_dir(x, y, offset))), params.cam_row2.xyz, params.t_min, params.t_max);
+}
+
+// The camera-space direction through pixel (x, y) at `offset`, z = 1.
+fn camera_dir(x: u32, y: u32, offset: vec2<f32>) -> vec3<f32> {
+    return vec3<f32>(
+        (f32(x) + offset.x - params.intrinsics.z) / params.intrinsics.x,
+        (f32(y) + offset.y - params.intrinsics.w) / params.intrinsics.y,
         1.0,
     );
-    let d = params.cam_row0.xyz * d_cam.x + params.cam_row1.xyz * d_cam.y + params.cam_row2.xyz * d_cam.z;
-    return Ray(params.cam_center.xyz, normalize(d), params.cam_row2.xyz, params.t_min, params.t_max);
+}
+
+// Rᵀ v: a camera-space vector in world space.
+fn camera_to_world(v: vec3<f32>) -> vec3<f32> {
+    return params.cam_row0.xyz * v.x + params.cam_row1.xyz * v.y + params.cam_row2.xyz * v.z;
 }
 
 // frame.rs `PixelFrames::push` in f32: fold sample `s` of frame `frame` into a running mean

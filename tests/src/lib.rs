@@ -721,6 +721,15 @@ pub mod path_worlds {
         super::placed(TriangleMesh::sphere(32, 16), radius, Vec3::Y, center)
     }
 
+    /// One of these worlds ready to trace: its Gaussians lit and among its meshes.
+    pub fn trace_scene(world: &(Scene, Camera, Meshes, Lighting)) -> splat_core::trace::TraceScene<'_> {
+        let (scene, _, meshes, lighting) = world;
+        splat_core::trace::TraceScene::new(scene, splat_core::RenderSettings::default())
+            .and_then(|t| t.with_lighting(lighting.clone()))
+            .expect("a valid world")
+            .with_meshes(meshes.clone())
+    }
+
     /// A Lambertian material of albedo `color` (no ambient term).
     pub fn lambert(color: Vec3) -> MeshMaterial {
         let shading = Material { ambient: Vec3::ZERO, diffuse: Vec3::ONE, ..Material::DIFFUSE };

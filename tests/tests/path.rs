@@ -13,7 +13,7 @@ use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer,
 use splat_core::stats::{ZTest, log_log_slope, rmse};
 use splat_core::trace::TraceScene;
 use splat_core::{Camera, Frames, RenderSettings, Scene};
-use splat_tests::path_worlds::{glass_world, lambert, lit_world};
+use splat_tests::path_worlds::{glass_world, lambert, lit_world, trace_scene};
 use splat_tests::placed;
 
 /// The injected error of the acceptance controls: each decision u < α + 0.02.
@@ -160,38 +160,25 @@ fn two_sample(a: &Runs, b: &Runs, frames: u32) -> ZTest {
 #[test]
 fn gaussians_inside_the_path_tracer_are_unbiased() {
     let frames = 512;
-    for (name, (scene, camera, meshes, lighting)) in [("lit layers", lit_world()), ("glass", glass_world())] {
-        let trace = TraceScene::new(&scene, RenderSettings::default())
-            .unwrap()
-            .with_lighting(lighting)
-            .unwrap()
-            .with_meshes(meshes);
-        let exact = runs(&trace, &camera, world_settings(GaussianEstimator::Exact), frames, 0.0, 100);
+    for (name, world) in [("lit layers", lit_world()), ("glass", glass_world())] {
+        let (trace, camera) = (trace_scene(&world), &world.1);
+        let exact = runs(&trace, camera, world_settings(GaussianEstimator::Exact), frames, 0.0, 100);
         let stochastic = world_settings(GaussianEstimator::Stochastic);
         for (label, settings) in
             [("stochastic", stochastic), ("stochastic-n 4", world_settings(GaussianEstimator::StochasticN { n: 4 }))]
         {
-            let z = two_sample(&runs(&trace, &camera, settings, frames, 0.0, 200), &exact, frames);
+            let z = two_sample(&runs(&trace, camera, settings, frames, 0.0, 200), &exact, frames);
             eprintln!("{name}, {label}: {z:?}");
             assert!(z.passes(), "{name}: {label} differs from exact compositing: {z:?}");
         }
         let depth = world_settings(GaussianEstimator::DepthSampling { k: 1 });
-        let z = two_sample(&runs(&trace, &camera, depth, frames, 0.0, 300), &exact, frames);
+        let z = two_sample(&runs(&trace, camera, depth, frames, 0.0, 300), &exact, frames);
         eprintln!("{name}, depth sampling at secondary segments: {z:?}");
         assert!(!z.passes(), "{name}: depth sampling at secondary segments passes: {z:?}");
-        let z = two_sample(&runs(&trace, &camera, stochastic, frames, BIASED, 400), &exact, frames);
+        let z = two_sample(&runs(&trace, camera, stochastic, frames, BIASED, 400), &exact, frames);
         eprintln!("{name}, u < α + {BIASED}: {z:?}");
         assert!(!z.passes(), "{name}: a 2 % acceptance error passes: {z:?}");
     }
-}
-
-fn lit_trace(world: &(Scene, Camera, Meshes, Lighting)) -> TraceScene<'_> {
-    let (scene, _, meshes, lighting) = world;
-    TraceScene::new(scene, RenderSettings::default())
-        .unwrap()
-        .with_lighting(lighting.clone())
-        .unwrap()
-        .with_meshes(meshes.clone())
 }
 
 /// The RMSE of Algorithm 1 inside the path tracer against a long exact-compositing render falls
@@ -199,7 +186,7 @@ fn lit_trace(world: &(Scene, Camera, Meshes, Lighting)) -> TraceScene<'_> {
 #[test]
 fn the_stochastic_path_tracer_converges_at_the_monte_carlo_rate() {
     let world = lit_world();
-    let trace = lit_trace(&world);
+    let trace = trace_scene(&world);
     let camera = &world.1;
     let reference = render(&trace, camera, world_settings(GaussianEstimator::Exact), hash_frames(8192, 77));
     let spp = [16u32, 32, 64, 128, 256];
@@ -232,7 +219,7 @@ fn the_stochastic_path_tracer_converges_at_the_monte_carlo_rate() {
 #[test]
 fn sobol_paths_are_unbiased_and_converge_faster_than_hashed_ones() {
     let world = lit_world();
-    let trace = lit_trace(&world);
+    let trace = trace_scene(&world);
     let camera = &world.1;
     let ref_frames = 8192;
     let reference = render(&trace, camera, world_settings(GaussianEstimator::Exact), hash_frames(ref_frames, 5));
@@ -274,7 +261,7 @@ fn sobol_paths_are_unbiased_and_converge_faster_than_hashed_ones() {
 #[test]
 fn path_traced_images_do_not_depend_on_the_thread_count() {
     let world = glass_world();
-    let trace = lit_trace(&world);
+    let trace = trace_scene(&world);
     let settings = PathSettings {
         lens: Some(ThinLens { aperture: 0.08, focus_distance: 3.0 }),
         ..world_settings(GaussianEstimator::StochasticN { n: 3 })

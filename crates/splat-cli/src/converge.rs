@@ -114,12 +114,17 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
-    let csv = args.output.with_extension("csv");
-    std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
-    let png = args.output.with_extension("png");
+    report(&args, &rows, &methods, "RMSE against the oracle (exact, or raster-sorted)", "")
+}
+
+/// Write PREFIX.csv and PREFIX.png and print the table of `rows`, then `extra`.
+fn report(args: &ConvergeArgs, rows: &[Row], methods: &[MethodArg], caption: &str, extra: &str) -> Result<()> {
     let names: Vec<String> = methods.iter().map(|&m| m.name()).collect();
-    plot(&png, &rows, &names, "RMSE against the oracle (exact, or raster-sorted)")?;
-    print!("{}", to_markdown(&rows, &names));
+    let csv = args.output.with_extension("csv");
+    std::fs::write(&csv, to_csv(rows)).with_context(|| format!("writing {}", csv.display()))?;
+    let png = args.output.with_extension("png");
+    plot(&png, rows, &names, caption)?;
+    print!("{}{extra}", to_markdown(rows, &names));
     eprintln!("wrote {} and {}", csv.display(), png.display());
     Ok(())
 }
@@ -167,14 +172,8 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     let names: Vec<String> = methods.iter().map(|&m| m.name()).collect();
-    let csv = args.output.with_extension("csv");
-    std::fs::write(&csv, to_csv(&rows)).with_context(|| format!("writing {}", csv.display()))?;
-    let png = args.output.with_extension("png");
-    plot(&png, &rows, &names, "RMSE against the exact-compositing path tracer")?;
-    print!("{}", to_markdown(&rows, &names));
-    print!("{}", time_to_rmse(&rows, &names, args.target_rmse));
-    eprintln!("wrote {} and {}", csv.display(), png.display());
-    Ok(())
+    let times = time_to_rmse(&rows, &names, args.target_rmse);
+    report(args, &rows, &methods, "RMSE against the exact-compositing path tracer", &times)
 }
 
 /// Each method's time to reach `target`: RMSE = c / √spp fitted at its largest spp, times its

@@ -506,6 +506,21 @@ impl<'a> TraceScene<'a> {
     }
 
     fn visibility_from(&self, x: Vec3, offset: f32, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
+        self.shadow_visibility(x, offset, incident, decide, slot, self.lighting.shadows)
+    }
+
+    /// The visibility of a light from `x` by shadow kind `shadows`: the shadow ray starts
+    /// `offset` along the light direction and ends at the light; a mesh on the way blocks it.
+    /// How the world's shadow kind ([`TraceScene::visibility`]) and the path tracer see lights.
+    pub fn shadow_visibility(
+        &self,
+        x: Vec3,
+        offset: f32,
+        incident: &Incident,
+        decide: &impl Decide,
+        slot: u32,
+        shadows: Shadows,
+    ) -> Vec3 {
         let shadow = Ray {
             origin: x + offset * incident.l,
             dir: incident.l,
@@ -513,13 +528,13 @@ impl<'a> TraceScene<'a> {
             t_min: self.settings.t_min,
             t_max: (incident.distance - offset).min(self.settings.t_max),
         };
-        if shadow.t_max <= shadow.t_min || self.lighting.shadows == Shadows::None {
+        if shadow.t_max <= shadow.t_min || shadows == Shadows::None {
             return Vec3::ONE;
         }
         if self.meshes.occludes(&shadow) {
             return Vec3::ZERO;
         }
-        match self.lighting.shadows {
+        match shadows {
             Shadows::None => Vec3::ONE,
             Shadows::Exact => Vec3::splat(self.transmittance(&shadow) as f32),
             Shadows::Stochastic => Vec3::splat(if self.occluded(&shadow, decide, slot) { 0.0 } else { 1.0 }),

@@ -5,7 +5,6 @@
 
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
-use wgpu::util::DeviceExt;
 
 /// WGSL of the accumulation kernel.
 pub const ACCUMULATE_WGSL: &str = include_str!("../../../shaders/accumulate.wgsl");
@@ -98,11 +97,7 @@ impl Accumulator {
             },
             pad: 0,
         };
-        let uniform = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("acc params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let uniform = ctx.upload_uniform("acc params", bytemuck::bytes_of(&params));
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("accumulate"),
             layout: &self.pipeline.get_bind_group_layout(0),

@@ -128,11 +128,16 @@ impl GpuContext {
 
     /// A read-only storage buffer holding `contents`.
     pub(crate) fn upload(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage: wgpu::BufferUsages::STORAGE,
-        })
+        self.upload_as(label, contents, wgpu::BufferUsages::STORAGE)
+    }
+
+    /// A uniform buffer holding `contents`.
+    pub(crate) fn upload_uniform(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
+        self.upload_as(label, contents, wgpu::BufferUsages::UNIFORM)
+    }
+
+    fn upload_as(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
     }
 
     /// Copy `words` u32 of `source` from word `first` into a staging buffer and read them.

@@ -213,22 +213,13 @@ impl<'a> GpuTracer<'a> {
         ctx.check_binding("particle", bytes(bytemuck::cast_slice(&particles)), count)?;
         ctx.check_binding("BVH node", bytes(bytemuck::cast_slice(&nodes)), count)?;
         ctx.check_binding("SH", bytes(bytemuck::cast_slice(&sh)), count)?;
-        let path = splat_core::path::PathTracer::new(trace, splat_core::path::PathSettings::default())?;
-        let (mut emitters, mut density) = path.emitter_table();
+        let (mut emitters, mut density) = splat_core::path::emitter_table(trace);
         let emitter_count = emitters.len() as u32;
         // A binding cannot be empty.
         emitters.push([0, 0]);
         density.push(0.0);
-        let uniform = |label: &str, contents: &[u8]| {
-            use wgpu::util::DeviceExt;
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
         Ok(Self {
-            no_path: uniform("no path", bytemuck::bytes_of(&layout::PathParams::default())),
+            no_path: ctx.upload_uniform("no path", bytemuck::bytes_of(&layout::PathParams::default())),
             sobol: ctx.upload("sobol", bytemuck::cast_slice(&splat_core::path::sampler::sobol_directions())),
             emitters: ctx.upload("emitters", bytemuck::cast_slice(&emitters)),
             emitter_density: ctx.upload("emitter density", bytemuck::cast_slice(&density)),
@@ -312,14 +303,7 @@ impl<'a> GpuTracer<'a> {
         settings.validate()?;
         let params = layout::path_params(settings, self.emitter_count)
             .ok_or_else(|| GpuError::Unsupported("depth sampling in the path tracer runs on the CPU only".into()))?;
-        let buffer = {
-            use wgpu::util::DeviceExt;
-            self.ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("path"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
+        let buffer = self.ctx.upload_uniform("path", bytemuck::bytes_of(&params));
         let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..*frames };
         self.render_with(camera, &Method::Stochastic, &frames, None, Some((&pipeline.pipeline, &buffer)))
     }

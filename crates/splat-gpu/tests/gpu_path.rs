@@ -8,10 +8,8 @@ use common::{context, trace_pipeline, tracer};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
-use splat_core::trace::TraceScene;
-use splat_core::{Camera, RenderSettings};
 use splat_gpu::{GpuError, PathPipeline};
-use splat_tests::path_worlds::{glass_world, lit_world};
+use splat_tests::path_worlds::{glass_world, lit_world, trace_scene};
 use std::sync::OnceLock;
 
 fn path_pipeline(ctx: &'static splat_gpu::GpuContext) -> &'static PathPipeline {
@@ -51,12 +49,8 @@ fn differences(a: &RenderOutput, b: &RenderOutput) -> (usize, f64) {
 #[test]
 fn gpu_paths_are_the_cpu_paths() {
     let Some(ctx) = context() else { return };
-    for (name, (scene, camera, meshes, lighting)) in [("lit layers", lit_world()), ("glass", glass_world())] {
-        let trace = TraceScene::new(&scene, RenderSettings::default())
-            .unwrap()
-            .with_lighting(lighting)
-            .unwrap()
-            .with_meshes(meshes);
+    for (name, world) in [("lit layers", lit_world()), ("glass", glass_world())] {
+        let (trace, camera) = (trace_scene(&world), &world.1);
         let gpu = tracer(ctx, &trace);
         for sampler in [SamplerKind::Sobol, SamplerKind::Hash] {
             for gaussians in
@@ -64,8 +58,8 @@ fn gpu_paths_are_the_cpu_paths() {
             {
                 let s = settings(gaussians, sampler);
                 let frames = Frames { count: 4, seed: 9, ..Frames::default() };
-                let cpu = PathTracer::new(&trace, s).unwrap().render(&camera, &frames, &|_| {}).unwrap();
-                let out = gpu.render_path(path_pipeline(ctx), &camera, &s, &frames).expect("GPU path render").0;
+                let cpu = PathTracer::new(&trace, s).unwrap().render(camera, &frames, &|_| {}).unwrap();
+                let out = gpu.render_path(path_pipeline(ctx), camera, &s, &frames).expect("GPU path render").0;
                 let (differ, mean) = differences(&cpu, &out);
                 let share = differ as f64 / f64::from(camera.width * camera.height);
                 eprintln!("{name}, {gaussians:?}, {sampler:?}: {differ} pixels differ, mean |Δ| {mean:.2e}");
@@ -79,16 +73,11 @@ fn gpu_paths_are_the_cpu_paths() {
 #[test]
 fn depth_sampling_stays_on_the_cpu() {
     let Some(ctx) = context() else { return };
-    let (scene, camera, meshes, lighting) = lit_world();
-    let trace = TraceScene::new(&scene, RenderSettings::default())
-        .unwrap()
-        .with_lighting(lighting)
-        .unwrap()
-        .with_meshes(meshes);
+    let world = lit_world();
+    let trace = trace_scene(&world);
     let gpu = tracer(ctx, &trace);
     let s = settings(GaussianEstimator::DepthSampling { k: 2 }, SamplerKind::Hash);
-    let camera: Camera = camera;
-    match gpu.render_path(path_pipeline(ctx), &camera, &s, &Frames::default()) {
+    match gpu.render_path(path_pipeline(ctx), &world.1, &s, &Frames::default()) {
         Err(GpuError::Unsupported(m)) => assert!(m.contains("CPU only"), "{m}"),
         other => panic!("depth sampling was not refused: {:?}", other.map(|_| ())),
     }

@@ -42,7 +42,7 @@ pub mod sampler;
 use crate::camera::Camera;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, render_tiles};
 use crate::hit::Ray;
-use crate::lighting::{Incident, Light};
+use crate::lighting::{Incident, Light, Shadows};
 use crate::mesh::SurfaceHit;
 use crate::settings::RenderError;
 use crate::trace::{MAX_SLOTS, Slot, TraceScene, surface_offset};
@@ -194,11 +194,14 @@ struct Emitters {
 impl Emitters {
     fn new(trace: &TraceScene) -> Self {
         let meshes = trace.meshes();
-        let power: Vec<f32> = meshes
+        let (areas, power): (Vec<f32>, Vec<f32>) = meshes
             .triangles()
             .iter()
-            .map(|t| 0.5 * t.e1.cross(t.e2).length() * luminance(emission(meshes.material(t.mesh))))
-            .collect();
+            .map(|t| {
+                let area = 0.5 * t.e1.cross(t.e2).length();
+                (area, area * luminance(emission(meshes.material(t.mesh))))
+            })
+            .unzip();
         let total: f64 = power.iter().map(|&p| f64::from(p)).sum();
         let mut density = vec![0.0; power.len()];
         let (mut triangles, mut cdf, mut sum) = (Vec::new(), Vec::new(), 0.0f64);
@@ -206,8 +209,7 @@ impl Emitters {
             sum += f64::from(p);
             triangles.push(k as u32);
             cdf.push((sum / total) as f32);
-            let area = 0.5 * meshes.triangles()[k].e1.cross(meshes.triangles()[k].e2).length();
-            density[k] = (f64::from(p) / total) as f32 / area;
+            density[k] = (f64::from(p) / total) as f32 / areas[k];
         }
         Self { triangles, cdf, density }
     }
@@ -217,6 +219,15 @@ impl Emitters {
         let i = self.cdf.partition_point(|&c| c <= u).min(self.triangles.len().checked_sub(1)?);
         Some(self.triangles[i])
     }
+}
+
+/// The emitter table of `trace`'s meshes, as a GPU uploads it: per emissive triangle its
+/// cumulative selection probability (f32 bits) and leaf-order index, and per leaf-order triangle
+/// P(select) / area.
+pub fn emitter_table(trace: &TraceScene) -> (Vec<[u32; 2]>, Vec<f32>) {
+    let e = Emitters::new(trace);
+    let picks = e.cdf.iter().zip(&e.triangles).map(|(c, &t)| [c.to_bits(), t]).collect();
+    (picks, e.density)
 }
 
 /// The radiance a mesh material emits: the local share of k_e ⊙ c (what the ray tracer shows).
@@ -287,14 +298,6 @@ impl<'a> PathTracer<'a> {
     /// The settings.
     pub fn settings(&self) -> &PathSettings {
         &self.settings
-    }
-
-    /// The emitter table a GPU uploads: per emissive triangle its cumulative selection
-    /// probability (f32 bits) and leaf-order index, and per leaf-order triangle P(select) / area.
-    pub fn emitter_table(&self) -> (Vec<[u32; 2]>, Vec<f32>) {
-        let e = &self.emitters;
-        let picks = e.cdf.iter().zip(&e.triangles).map(|(c, &t)| [c.to_bits(), t]).collect();
-        (picks, e.density.clone())
     }
 
     /// The camera ray of sample `s` through pixel (x, y): a random position in the pixel and,
@@ -531,31 +534,12 @@ impl<'a> PathTracer<'a> {
         if cos_l <= 0.0 { 0.0 } else { self.emitters.density[hit.triangle as usize] * hit.t * hit.t / cos_l }
     }
 
-    /// Visibility of a light sample from `x`: 0 behind a mesh; through the Gaussians the
-    /// stochastic shadow ray (1 or 0, expectation the transmittance), or with `exact` the
-    /// transmittance itself.
+    /// Visibility of a light sample from `x` ([`TraceScene::shadow_visibility`]): 0 behind a
+    /// mesh; through the Gaussians the stochastic shadow ray (1 or 0, expectation the
+    /// transmittance), or with `exact` the transmittance itself.
     fn visibility(&self, x: Vec3, offset: f32, inc: &Incident, decide: &impl Decide, slot: u32, exact: bool) -> f32 {
-        let settings = self.trace.settings();
-        let shadow = Ray {
-            origin: x + offset * inc.l,
-            dir: inc.l,
-            view: inc.l,
-            t_min: settings.t_min,
-            t_max: (inc.distance - offset).min(settings.t_max),
-        };
-        if shadow.t_max <= shadow.t_min {
-            return 1.0;
-        }
-        if self.trace.meshes().occludes(&shadow) {
-            return 0.0;
-        }
-        if exact {
-            self.trace.transmittance(&shadow) as f32
-        } else if self.trace.occluded(&shadow, decide, slot) {
-            0.0
-        } else {
-            1.0
-        }
+        let kind = if exact { Shadows::Exact } else { Shadows::Stochastic };
+        self.trace.shadow_visibility(x, offset, inc, decide, slot, kind).x
     }
 
     /// `frames.count` samples per pixel (sample indices 0, 1, …, the frames of the run seeded
