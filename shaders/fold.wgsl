@@ -1,9 +1,10 @@
 // Temporal accumulation of raster frames: each frame's colour target is folded into a running
 // Welford mean and M2 per pixel, the accumulation of the ray-tracing kernel (trace.wgsl `fold`).
+// The target is read by `frame_color` (fold_target.wgsl: one sample; fold_target_msaa.wgsl: the
+// mean of the S samples, the MSAA resolve).
 
 @group(0) @binding(0) var<uniform> params: RasterParams;
 @group(0) @binding(1) var<uniform> frame: FrameParams;
-@group(0) @binding(2) var target_color: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> out_mean: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> out_var: array<vec4<f32>>;
 // The mesh pre-pass's colour and distance per pixel (mesh_prepass.wgsl), read where
@@ -16,7 +17,7 @@ fn fold(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * params.size.x + gid.x;
-    var s = textureLoad(target_color, vec2<i32>(gid.xy), 0);
+    var s = frame_color(vec2<i32>(gid.xy));
     if (params.meshes == 1u) {
         // Every draw started from transparent black: what lies behind (a mesh or the
         // background) shows through the remaining transmittance, the mesh covering it

@@ -47,3 +47,15 @@ fn splat_lit(s: Splat, p: vec2<f32>) -> vec3<f32> {
     let dir = pixel_dir(p);
     return shade_unshadowed(s.color, s.id, origin, dir, s.depth * stretch(p), splat_normal(s.id, origin, dir));
 }
+
+// raster/mod.rs `Rasterizer::depth` with FragmentDepth::MaxDensityPlane: in the particle's
+// canonical frame (o, d) = M (origin − μ, dir), t = −o·d / d·d along the sample's unit ray.
+fn plane_depth(id: u32, origin: vec3<f32>, dir: vec3<f32>) -> f32 {
+    let r0 = canonical[3u * id];
+    let r1 = canonical[3u * id + 1u];
+    let r2 = canonical[3u * id + 2u];
+    let x = origin - vec3<f32>(r0.w, r1.w, r2.w);
+    let o = vec3<f32>(dot(r0.xyz, x), dot(r1.xyz, x), dot(r2.xyz, x));
+    let d = vec3<f32>(dot(r0.xyz, dir), dot(r1.xyz, dir), dot(r2.xyz, dir));
+    return -dot(o, d) / dot(d, d);
+}

@@ -22,7 +22,8 @@ struct RasterParams {
     guard: vec2<f32>,
     // Tiles across and down.
     tiles: vec2<u32>,
-    // Draw mode: 0 over, 1 under, 2 stochastic splat.
+    // Draw mode: 0 over, 1 under, 2 stochastic splat, 3 Enderton, 4 stratified, 5 stratified
+    // without the scramble.
     mode: u32,
     // Splat extent: EXTENT_3DGS or EXTENT_SQRT8.
     extent: u32,
@@ -40,8 +41,11 @@ struct RasterParams {
     // 1 when the tile rasterizer writes the hybrid pipeline's first hit (splat_gpu::GpuFirstHit:
     // L and T before lighting and what lies behind, the picked depth or −1) instead of a pixel.
     first_hit: u32,
-    pad2: u32,
-    pad3: u32,
+    // Samples per pixel S (raster/samples.rs), at the positions of the sample-offset buffer.
+    samples: u32,
+    // The order of the Hilbert curve over the image (rng.rs `hilbert_order`): Laine–Karras's
+    // pixel ids.
+    hilbert_order: u32,
 }
 
 // What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).
@@ -103,6 +107,13 @@ fn splat_alpha(s: Splat, p: vec2<f32>, params: RasterParams) -> f32 {
     if (!covers(s, p, params)) {
         return 0.0;
     }
+    return fragment_alpha(s, p, params);
+}
+
+// The alpha of a fragment whose samples may lie elsewhere in the pixel: the same at p without
+// the footprint test (raster/mod.rs `Rasterizer::fragments` evaluates it at the pixel centre
+// and tests each sample's coverage apart).
+fn fragment_alpha(s: Splat, p: vec2<f32>, params: RasterParams) -> f32 {
     let a = mahalanobis(s, p);
     let alpha = s.opacity * kernel_response(a, params.kernel_degree);
     if (!(alpha >= params.alpha_cull && alpha > 0.0)) {

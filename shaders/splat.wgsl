@@ -110,3 +110,95 @@ fn fs_stochastic_lit(in: VertexOut) -> @location(0) vec4<f32> {
     let s = accepted_splat(in);
     return vec4<f32>(splat_lit(s, in.position.xy), 1.0);
 }
+
+// ---- S samples per pixel: the hardware's multisampling (Laine & Karras 2011 §1, §5) ---------
+//
+// The fragment shader runs once per pixel at its centre (alpha evaluated there, the shading
+// rate of MSAA), and returns through @builtin(sample_mask) which of the S samples it writes:
+// those inside the footprint (raster/mod.rs `Rasterizer::fragments`' coverage), and for
+// StochasticSplats only those whose own decision accepts it. The depth test and write then run
+// per sample in fixed function, and the fold resolves the S samples to their mean. The sample
+// positions are the hardware's (the standard pattern, raster/samples.rs), uploaded from the
+// core so that the CPU reference decides at the same points.
+
+// Sub-pixel position of sample i in [0, 1)² (params.samples of them).
+@group(0) @binding(6) var<storage, read> sample_offsets: array<vec2<f32>>;
+
+struct Masked {
+    @location(0) color: vec4<f32>,
+    @builtin(sample_mask) mask: u32,
+}
+
+// Bit i set where sample i of the pixel at corner `pixel` lies in splat s's footprint.
+fn coverage(s: Splat, pixel: vec2<f32>) -> u32 {
+    var mask = 0u;
+    for (var i = 0u; i < params.samples; i++) {
+        if (covers(s, pixel + sample_offsets[i], params)) {
+            mask |= 1u << i;
+        }
+    }
+    return mask;
+}
+
+// Sorted blending at S samples: the fragment's alpha once per pixel, its coverage per sample.
+@fragment
+fn fs_sorted_msaa(in: VertexOut) -> Masked {
+    let s = splats[in.splat];
+    let alpha = fragment_alpha(s, in.position.xy, params);
+    let mask = coverage(s, floor(in.position.xy));
+    if (alpha <= 0.0 || mask == 0u) {
+        discard;
+    }
+    if (params.mode == MODE_UNDER) {
+        return Masked(vec4<f32>(alpha * s.color, alpha), mask);
+    }
+    return Masked(vec4<f32>(s.color, alpha), mask);
+}
+
+// StochasticSplats at S samples: sample i is written where it is covered and its own
+// u_i = hash(pixel, frame, splat id, i) is below α (raster/mod.rs `stochastic_splat`, slot = i).
+@fragment
+fn fs_stochastic_msaa(in: VertexOut) -> Masked {
+    let s = splats[in.splat];
+    let alpha = fragment_alpha(s, in.position.xy, params);
+    let pixel = vec2<u32>(in.position.xy);
+    let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
+    var mask = coverage(s, floor(in.position.xy));
+    for (var i = 0u; i < params.samples; i++) {
+        let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, i)))) - frame.u_shift;
+        if (!(u < alpha)) {
+            mask &= ~(1u << i);
+        }
+    }
+    if (alpha <= 0.0 || mask == 0u) {
+        discard;
+    }
+    return Masked(vec4<f32>(s.color, 1.0), mask);
+}
+
+// ---- the max-density plane (StochasticSplats' pop-free billboards) --------------------------
+//
+// Each sample's depth is the point of maximum density along its own ray, so the shader runs
+// per sample (reading @builtin(sample_index) asks for sample-rate shading) and writes it as
+// @builtin(frag_depth): the hardware can no longer test depth before the shader runs.
+
+struct PlaneOut {
+    @location(0) color: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+}
+
+@fragment
+fn fs_stochastic_plane(in: VertexOut, @builtin(sample_index) i: u32) -> PlaneOut {
+    let s = splats[in.splat];
+    let corner = floor(in.position.xy);
+    let p = corner + sample_offsets[i];
+    let alpha = fragment_alpha(s, corner + vec2<f32>(0.5), params);
+    let pixel = vec2<u32>(corner);
+    let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
+    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, i)))) - frame.u_shift;
+    if (alpha <= 0.0 || !covers(s, p, params) || !(u < alpha)) {
+        discard;
+    }
+    let t = plane_depth(s.id, camera_origin(), pixel_dir(p));
+    return PlaneOut(vec4<f32>(s.color, 1.0), t * DEPTH_SCALE);
+}

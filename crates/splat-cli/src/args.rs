@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::lighting::{Lighting, Look, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
-use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
@@ -66,6 +66,15 @@ pub enum FragmentDepthArg {
     Plane,
 }
 
+/// Sub-pixel sample positions of the raster methods.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SamplePatternArg {
+    /// The Hammersley set: a Latin square at every power of two (S up to 64).
+    Hammersley,
+    /// The standard MSAA positions of Vulkan, Direct3D and Metal (S up to 16): the GPU's.
+    Standard,
+}
+
 /// Footprint of a splat.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum ExtentArg {
@@ -120,9 +129,14 @@ pub struct MethodOptions {
     /// Generator of the stochastic decisions.
     #[arg(long, value_enum, default_value = "hash")]
     pub rng: RngArg,
-    /// Raster methods: samples per pixel S (1, 2, 4, 8, 16, 32 or 64), at Hammersley positions.
+    /// Raster methods: samples per pixel S (1, 2, 4, 8, 16, 32 or 64; the standard pattern has
+    /// up to 16).
     #[arg(long, default_value_t = 1)]
     pub raster_samples: u32,
+    /// Raster methods: where the samples lie (default: hammersley on the CPU, standard on the
+    /// GPU, whose multisampling hardware has no other).
+    #[arg(long, value_enum)]
+    pub sample_pattern: Option<SamplePatternArg>,
     /// Raster methods: depth of each fragment.
     #[arg(long, value_enum, default_value = "center")]
     pub fragment_depth: FragmentDepthArg,
@@ -192,6 +206,10 @@ impl MethodOptions {
     pub fn raster_settings(&self) -> RasterSettings {
         RasterSettings {
             samples: self.raster_samples,
+            sample_pattern: match self.sample_pattern {
+                None | Some(SamplePatternArg::Hammersley) => SamplePattern::Hammersley,
+                Some(SamplePatternArg::Standard) => SamplePattern::Standard,
+            },
             fragment_depth: match self.fragment_depth {
                 FragmentDepthArg::Center => FragmentDepth::Center,
                 FragmentDepthArg::Plane => FragmentDepth::MaxDensityPlane,
@@ -201,6 +219,19 @@ impl MethodOptions {
                 ExtentArg::Sqrt8 => SplatExtent::Sqrt8,
             },
             early_stop: self.early_stop,
+        }
+    }
+
+    /// `algorithm` as the GPU renders it: without `--sample-pattern`, at the standard pattern.
+    pub fn on_gpu(&self, algorithm: Algorithm) -> Algorithm {
+        let standard = |raster: RasterSettings| match self.sample_pattern {
+            None => RasterSettings { sample_pattern: SamplePattern::Standard, ..raster },
+            Some(_) => raster,
+        };
+        match algorithm {
+            Algorithm::Raster(method, raster) => Algorithm::Raster(method, standard(raster)),
+            Algorithm::Hybrid(method, raster, secondary) => Algorithm::Hybrid(method, standard(raster), secondary),
+            other => other,
         }
     }
 

@@ -99,9 +99,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
         return run_path(&args, &world);
     }
     let Loaded { scene, camera, lighting, settings, meshes, .. } = &world;
-    let algorithm = algorithm(&args)?;
+    let cpu_algorithm = algorithm(&args)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
-    let gpu = choose_gpu(&args, &algorithm, &world)?;
+    let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
+    let gpu = choose_gpu(&args, &gpu_algorithm, &world)?;
+    let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
     let out = match &gpu {

@@ -20,6 +20,9 @@ pub struct GpuContext {
     pub timestamps: bool,
     /// Alignment of dynamic uniform offsets.
     pub(crate) uniform_alignment: u64,
+    /// The sample counts the rasterizer's targets (RGBA32F, the blend format and Depth32F)
+    /// multisample at on this adapter: 1, and those of 2, 4, 8 and 16 that every format has.
+    pub msaa_counts: Vec<u32>,
     /// Most frames one dispatch of the ray tracer renders ([`crate::FRAMES_PER_DISPATCH`] by
     /// default).
     pub frames_per_dispatch: u32,
@@ -58,8 +61,13 @@ impl GpuContext {
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         // Timestamps for the benchmarks and blendable RGBA32F targets for sorted splatting, where
         // the adapter has them.
-        let required_features =
-            adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::FLOAT32_BLENDABLE);
+        // Timestamps for the benchmarks, blendable RGBA32F targets for sorted splatting, and the
+        // adapter's own multisample counts for the MSAA rasterizer, where the adapter has them.
+        let required_features = adapter.features()
+            & (wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::FLOAT32_BLENDABLE
+                | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+        let msaa_counts = msaa_counts(&adapter, required_features);
         // The kernels bind five storage buffers per stage (downlevel defaults allow four):
         // ask for what the adapter offers.
         let required_limits = limits.clone();
@@ -81,8 +89,15 @@ impl GpuContext {
             max_binding,
             timestamps,
             uniform_alignment,
+            msaa_counts,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
         })
+    }
+
+    /// The colour format sorted splatting blends in: RGBA32F where the device blends it, else
+    /// RGBA16F.
+    pub fn blend_format(&self) -> wgpu::TextureFormat {
+        blend_format(self.device.features())
     }
 
     /// Lower the storage binding limit scenes are checked against (to test the refusal).
@@ -241,4 +256,28 @@ pub(crate) fn compute_pipeline(
         compilation_options: Default::default(),
         cache: None,
     })
+}
+
+/// The colour format sorted splatting blends in with `features`.
+fn blend_format(features: wgpu::Features) -> wgpu::TextureFormat {
+    if features.contains(wgpu::Features::FLOAT32_BLENDABLE) {
+        wgpu::TextureFormat::Rgba32Float
+    } else {
+        wgpu::TextureFormat::Rgba16Float
+    }
+}
+
+/// The sample counts every raster target format multisamples at (1 only without the adapter's
+/// format features: WebGPU's own guarantee does not cover RGBA32F).
+fn msaa_counts(adapter: &wgpu::Adapter, features: wgpu::Features) -> Vec<u32> {
+    let formats = [wgpu::TextureFormat::Rgba32Float, blend_format(features), wgpu::TextureFormat::Depth32Float];
+    let adapter_specific = features.contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+    [1, 2, 4, 8, 16]
+        .into_iter()
+        .filter(|&count| {
+            count == 1
+                || adapter_specific
+                    && formats.iter().all(|&f| adapter.get_texture_format_features(f).flags.sample_count_supported(count))
+        })
+        .collect()
 }

@@ -237,17 +237,23 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
     }
 }
 
-/// Methods the GPU does not rasterize are refused with a message, not rendered wrongly.
+/// Settings the GPU does not rasterize are refused with a message, not rendered wrongly: the
+/// early stop, and the Hammersley pattern at S > 1 (the hardware's samples are the standard
+/// ones); tests/gpu_msaa.rs has the rest.
 #[test]
-fn cpu_only_raster_methods_are_refused() {
+fn cpu_only_raster_settings_are_refused() {
     let Some(ctx) = context() else { return };
     let c = case("layers", 16, 12);
     let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
+    let hammersley = RasterSettings { samples: 4, ..RasterSettings::default() };
     for m in [RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }] {
-        let e = gpu.render(&m, &Frames::default()).unwrap_err().to_string();
-        assert!(e.contains("CPU only"), "{e}");
+        let e = GpuRasterizer::supports(&m, &hammersley).unwrap_err().to_string();
+        assert!(e.contains("standard"), "{e}");
+        assert!(GpuRasterizer::supports(&m, &RasterSettings::default()).is_ok());
     }
+    let early = RasterSettings { early_stop: true, ..RasterSettings::default() };
+    let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &early).err().expect("early stop").to_string();
+    assert!(e.contains("--early-stop"), "{e}");
 }
 
 /// Depth ties resolve as on the CPU, to the lower splat id (drawn first, kept by the `less`

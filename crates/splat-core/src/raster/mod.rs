@@ -36,7 +36,7 @@ use crate::tile::{TILE, tile_count};
 use crate::trace::{Method, TraceScene};
 use glam::{DVec3, Vec2, Vec3};
 pub use project::{Splat, SplatExtent, project};
-pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, sample_positions};
+pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, STANDARD_COUNTS, SamplePattern, sample_positions};
 
 /// Blend order of sorted splatting (vk_gaussian_splatting Lighting §1.5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -94,8 +94,11 @@ impl RasterMethod {
 /// Raster-specific settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct RasterSettings {
-    /// Samples per pixel S, one of [`SAMPLE_COUNTS`].
+    /// Samples per pixel S, one of [`SAMPLE_COUNTS`] ([`STANDARD_COUNTS`] for the standard
+    /// pattern).
     pub samples: u32,
+    /// Where the samples lie in the pixel.
+    pub sample_pattern: SamplePattern,
     /// Fragment depth of each sample.
     pub fragment_depth: FragmentDepth,
     /// Which pixels a splat can touch.
@@ -110,7 +113,13 @@ pub const EARLY_STOP_T: f64 = 1e-4;
 
 impl Default for RasterSettings {
     fn default() -> Self {
-        Self { samples: 1, fragment_depth: FragmentDepth::Center, extent: SplatExtent::ThreeDgs, early_stop: false }
+        Self {
+            samples: 1,
+            sample_pattern: SamplePattern::Hammersley,
+            fragment_depth: FragmentDepth::Center,
+            extent: SplatExtent::ThreeDgs,
+            early_stop: false,
+        }
     }
 }
 
@@ -120,6 +129,12 @@ impl RasterSettings {
         if !SAMPLE_COUNTS.contains(&self.samples) {
             return Err(RenderError::Settings(format!(
                 "{} samples per pixel is not one of {SAMPLE_COUNTS:?}",
+                self.samples
+            )));
+        }
+        if !self.sample_pattern.has(self.samples) {
+            return Err(RenderError::Settings(format!(
+                "the standard sample pattern has {STANDARD_COUNTS:?} samples per pixel, not {}: use the hammersley pattern",
                 self.samples
             )));
         }
@@ -204,7 +219,7 @@ impl<'a> Rasterizer<'a> {
             splats,
             prepared,
             bins,
-            offsets: sample_positions(raster.samples),
+            offsets: sample_positions(raster.samples, raster.sample_pattern),
             hilbert_order: hilbert_order(camera.width, camera.height),
             lighting: Lighting::default(),
             meshes: Meshes::none(),

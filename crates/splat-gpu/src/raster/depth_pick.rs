@@ -90,34 +90,18 @@ impl GpuRasterizer<'_> {
 
     /// One tile pass: per pixel RGBA colour, (depth bits, pick) and normal, and the pair count.
     fn tile_pass(&self, first_hit: bool) -> Result<TilePass, GpuError> {
+        if self.raster.samples != 1 || self.raster.fragment_depth != FragmentDepth::Center {
+            return Err(GpuError::Unsupported(format!(
+                "the GPU's iso-opacity depth, lit sorted splatting and hybrid first hit take one sample at the pixel centre and centre depth, not {} samples at {:?}: use --backend cpu",
+                self.raster.samples, self.raster.fragment_depth
+            )));
+        }
         let params = RasterParams { mode: Draw::Under.mode(), first_hit: u32::from(first_hit), ..self.params };
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
         let [tiles_x, tiles_y] = self.params.tiles;
         // 1. Pairs per rank and their exclusive scan (offsets[n] is the total).
-        let count_group = bind(
-            ctx,
-            &pipes.tile_count,
-            &[
-                (0, &self.params_buffer),
-                (3, &self.splats),
-                (5, &self.depth.vals),
-                (6, &self.draw_args),
-                (7, &self.depth.hist),
-            ],
-        );
-        let mut encoder = self.encoder("tile count");
-        {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile count"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_count);
-            pass.set_bind_group(0, &count_group, &[]);
-            let (gx, gy) = groups((n + 1).div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
-        pipes.sort.encode_scan(ctx, &mut encoder, &self.depth, n + 1);
-        self.submit(encoder)?;
-        let pairs = ctx.read_u32_at(&self.depth.hist, n as usize, 1)?[0];
+        let pairs = self.pair_count()?;
         // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
         let pair_sort = pipes.sort.buffers(ctx, pairs.max(1))?;
         let tiles = tiles_x * tiles_y;
@@ -200,5 +184,35 @@ impl GpuRasterizer<'_> {
         let pick = ctx.read_u32(&out_pick, pixels * 2)?;
         let normal = ctx.read_f32(&out_normal, pixels * 4)?;
         Ok(TilePass { color, pick, normal, pairs })
+    }
+
+    /// How many (tile, splat) pairs the visible splats make: per rank the tiles its rect
+    /// touches, and their exclusive scan, left in the depth sort's histogram (the offsets of
+    /// each rank's pairs in depth order); the total is the same in any draw order.
+    pub(super) fn pair_count(&self) -> Result<u32, GpuError> {
+        let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
+        let count_group = bind(
+            ctx,
+            &pipes.tile_count,
+            &[
+                (0, &self.params_buffer),
+                (3, &self.splats),
+                (5, &self.depth.vals),
+                (6, &self.draw_args),
+                (7, &self.depth.hist),
+            ],
+        );
+        let mut encoder = self.encoder("tile count");
+        {
+            let mut pass = encoder
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile count"), timestamp_writes: None });
+            pass.set_pipeline(&pipes.tile_count);
+            pass.set_bind_group(0, &count_group, &[]);
+            let (gx, gy) = groups((n + 1).div_ceil(256));
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        pipes.sort.encode_scan(ctx, &mut encoder, &self.depth, n + 1);
+        self.submit(encoder)?;
+        Ok(ctx.read_u32_at(&self.depth.hist, n as usize, 1)?[0])
     }
 }

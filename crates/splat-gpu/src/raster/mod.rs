@@ -30,6 +30,7 @@
 mod depth_pick;
 mod pipelines;
 mod profile;
+mod rop;
 mod scene;
 
 pub use depth_pick::DepthPick;
@@ -50,7 +51,7 @@ use splat_core::lighting::{Lighting, Look};
 use splat_core::mesh::Meshes;
 use splat_core::particle::Scene;
 use splat_core::raster::project::FRUSTUM_GUARD;
-use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SplatExtent};
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SamplePattern, sample_positions};
 use splat_core::settings::{RenderError, RenderSettings, validate_scene};
 use splat_core::tile::TILE;
 use std::time::{Duration, Instant};
@@ -87,6 +88,14 @@ pub const MESH_PREPASS_WGSL: &str = concat!(
 pub const FOLD_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/fold_target.wgsl"),
+    include_str!("../../../../shaders/fold.wgsl")
+);
+/// WGSL of the frame accumulation from a multisampled target (resolving its samples).
+pub const FOLD_MSAA_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/fold_target_msaa.wgsl"),
     include_str!("../../../../shaders/fold.wgsl")
 );
 /// Frames encoded into one submission (and uniform slots of per-frame parameters).
@@ -94,32 +103,39 @@ const FRAMES_PER_SUBMIT: u32 = 64;
 /// No splat / no depth in a pick buffer.
 const NONE: u32 = u32::MAX;
 
-/// Which render pipeline draws a method.
-#[derive(Clone, Copy, PartialEq, Eq)]
+/// How a method is drawn: a render pipeline (sorted blending, StochasticSplats) or the
+/// per-pixel raster operations of the compute tile pass (Enderton, Laine–Karras).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
 #[repr(u32)]
 enum Draw {
     Over = 0,
     Under = 1,
     Stochastic = 2,
+    Enderton = 3,
+    Stratified = 4,
+    StratifiedPlain = 5,
 }
 
 impl Draw {
-    fn of(method: &RasterMethod) -> Result<Self, GpuError> {
-        Ok(match method {
+    fn of(method: &RasterMethod) -> Self {
+        match method {
             RasterMethod::Sorted { blend: Blend::Over } => Draw::Over,
             RasterMethod::Sorted { blend: Blend::Under } => Draw::Under,
             RasterMethod::StochasticSplat => Draw::Stochastic,
-            other => {
-                return Err(GpuError::Unsupported(format!(
-                    "{other:?} runs on the CPU only; the GPU rasterizes raster-sorted and stochastic-splat"
-                )));
-            }
-        })
+            RasterMethod::Enderton => Draw::Enderton,
+            RasterMethod::Stratified { scramble: true } => Draw::Stratified,
+            RasterMethod::Stratified { scramble: false } => Draw::StratifiedPlain,
+        }
     }
 
     /// `params.mode` of the raster shaders (`MODE_*`, checked by a test).
     fn mode(self) -> u32 {
         self as u32
+    }
+
+    /// Whether the compute tile pass plays the pixel's raster operations (no render pipeline).
+    fn is_rop(self) -> bool {
+        matches!(self, Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain)
     }
 }
 
@@ -139,6 +155,12 @@ pub struct GpuRasterizer<'a> {
     pub(super) behind: wgpu::Buffer,
     /// The mesh pre-pass's normal per pixel (one unused entry without meshes).
     pub(super) behind_normal: wgpu::Buffer,
+    /// Samples, their pattern, fragment depth and extent.
+    pub(super) raster: RasterSettings,
+    /// Sub-pixel position of each sample ([`splat_core::raster::sample_positions`]).
+    pub(super) sample_offsets: wgpu::Buffer,
+    /// The render pipelines at `raster.samples` per pixel, built on first use (S > 1).
+    pub(super) msaa: std::sync::OnceLock<pipelines::SamplePipelines>,
 }
 
 impl<'a> GpuRasterizer<'a> {
@@ -167,7 +189,7 @@ impl<'a> GpuRasterizer<'a> {
             usage: rw | wgpu::BufferUsages::INDIRECT,
             mapped_at_creation: false,
         });
-        let params = raster_params(scene, camera, raster.extent);
+        let params = raster_params(scene, camera, raster);
         let params_buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("raster params"),
             contents: bytemuck::bytes_of(&params),
@@ -196,6 +218,9 @@ impl<'a> GpuRasterizer<'a> {
             })
         };
         let (behind, behind_normal) = (pre_pass("mesh pre-pass"), pre_pass("mesh pre-pass normal"));
+        let offsets: Vec<[f32; 2]> =
+            sample_positions(raster.samples, raster.sample_pattern).iter().map(|p| p.to_array()).collect();
+        let sample_offsets = ctx.upload("sample offsets", bytemuck::cast_slice(&offsets));
         let raster = Self {
             ctx,
             pipes,
@@ -209,6 +234,9 @@ impl<'a> GpuRasterizer<'a> {
             compute_group,
             behind,
             behind_normal,
+            raster: *raster,
+            sample_offsets,
+            msaa: std::sync::OnceLock::new(),
         };
         let mut encoder = raster.encoder("project and sort");
         raster.encode_project(&mut encoder, None);
@@ -290,13 +318,20 @@ impl<'a> GpuRasterizer<'a> {
     /// Render `frames.count` frames of `method` (one for sorted splatting) and fold them into
     /// the per-pixel running mean and M2 (f32 Welford, as the ray-tracing kernel does).
     ///
-    /// Lit, sorted splatting runs on the compute tile rasterizer ([`GpuRasterizer::depth_pick`]),
-    /// which composites front to back with the transmittance at hand (as the CPU does when
-    /// lit), integrates the normals and lights each pixel once (the surface look) or each
-    /// fragment (the volumetric look); StochasticSplats lights each written fragment.
+    /// Sorted splatting and StochasticSplats draw in a render pipeline, at S > 1 samples per
+    /// pixel through the hardware's multisampling (a sample mask per fragment, the depth test
+    /// per sample, the fold resolving the samples). Enderton and Laine–Karras run their raster
+    /// operations in the compute tile pass ([`GpuRasterizer::render`]'s `tile_rop`, whose
+    /// comment in `shaders/raster.wgsl` says why). Lit, sorted splatting runs on the compute
+    /// tile rasterizer ([`GpuRasterizer::depth_pick`]), which composites front to back with the
+    /// transmittance at hand (as the CPU does when lit), integrates the normals and lights each
+    /// pixel once (the surface look) or each fragment (the volumetric look); StochasticSplats
+    /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
-        let draw = Draw::of(method)?;
-        if self.scene.is_lit() && draw != Draw::Stochastic {
+        Self::supports(method, &self.raster)?;
+        let draw = Draw::of(method);
+        self.check_scene(draw)?;
+        if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
         }
         if frames.rng != splat_core::rng::RngScheme::Hash {
@@ -309,7 +344,8 @@ impl<'a> GpuRasterizer<'a> {
         self.set_mode(draw);
         let (w, h) = (self.camera.width, self.camera.height);
         let pixels = (w * h) as usize;
-        let targets = Targets::new(self.ctx, self.pipes, w, h, draw);
+        let target_samples = if draw.is_rop() { 1 } else { self.raster.samples };
+        let targets = Targets::new(self.ctx, self.pipes, w, h, draw, target_samples);
         let out_bytes = (pixels * 16) as u64;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let make = |label| {
@@ -323,7 +359,9 @@ impl<'a> GpuRasterizer<'a> {
         let (mean, m2) = (make("raster mean"), make("raster m2"));
         let slots = FrameSlots::new(self.ctx);
         let draw_group = self.draw_group(&slots.buffer);
-        let fold_group = self.fold_group(&slots.buffer, &targets.color_view, &mean, &m2);
+        let fold_group = self.fold_group(&slots.buffer, &targets.color_view, &mean, &m2, target_samples > 1);
+        let fold = if target_samples > 1 { &self.pipes.fold_msaa } else { &self.pipes.fold };
+        let rop = draw.is_rop().then(|| rop::RopPass::new(self, &targets)).transpose()?;
         let mut gpu_time = Duration::ZERO;
         for (batch_index, batch) in keys.chunks(FRAMES_PER_SUBMIT as usize).enumerate() {
             let first = batch_index as u32 * FRAMES_PER_SUBMIT;
@@ -331,10 +369,13 @@ impl<'a> GpuRasterizer<'a> {
             let mut encoder = self.encoder("raster frames");
             for slot in 0..batch.len() as u32 {
                 let offset = slots.offset(slot);
-                self.encode_draw(&mut encoder, draw, &targets, &draw_group, offset, None);
+                match &rop {
+                    Some(rop) => rop.encode(self, &mut encoder, &slots, slot)?,
+                    None => self.encode_draw(&mut encoder, draw, &targets, &draw_group, offset, None)?,
+                }
                 let mut pass = encoder
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("fold"), timestamp_writes: None });
-                pass.set_pipeline(&self.pipes.fold);
+                pass.set_pipeline(fold);
                 pass.set_bind_group(0, &fold_group, &[offset]);
                 pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
             }
@@ -345,6 +386,33 @@ impl<'a> GpuRasterizer<'a> {
         let mean = self.ctx.read_f32(&mean, pixels * 4)?;
         let m2 = self.ctx.read_f32(&m2, pixels * 4)?;
         Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
+    }
+
+    /// What the scene and the adapter allow `draw` at these settings: the mesh pre-pass and the
+    /// lighting have one sample at the pixel centre, so meshes and lights go with one sample at
+    /// centre depth; the compute raster operations are unlit and mesh-free; a render pipeline
+    /// multisamples at the counts the adapter has.
+    fn check_scene(&self, draw: Draw) -> Result<(), GpuError> {
+        let s = self.raster.samples;
+        let plane = self.raster.fragment_depth == FragmentDepth::MaxDensityPlane;
+        let refuse = |what: String| Err(GpuError::Unsupported(format!("{what}: use --backend cpu")));
+        if self.scene.has_meshes && (s > 1 || plane || draw.is_rop()) {
+            return refuse(format!(
+                "meshes on the GPU rasterizer go with one sample per pixel, centre depth and raster-sorted or stochastic-splat (the mesh pre-pass is one sample at the pixel centre), not {draw:?} at {s} samples"
+            ));
+        }
+        if self.scene.is_lit() && (s > 1 || plane || draw.is_rop()) {
+            return refuse(format!(
+                "lit splatting on the GPU goes with one sample per pixel, centre depth and raster-sorted or stochastic-splat (each fragment is lit once at the pixel centre), not {draw:?} at {s} samples"
+            ));
+        }
+        if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
+            return refuse(format!(
+                "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter)",
+                self.ctx.info.name, self.ctx.msaa_counts
+            ));
+        }
+        Ok(())
     }
 
     /// One lit frame of sorted splatting from the compute tile rasterizer.
@@ -370,13 +438,20 @@ impl<'a> GpuRasterizer<'a> {
         Ok((out, stats))
     }
 
-    /// Whether the GPU rasterizer renders `method` with `settings` (the one place that decides
-    /// it): sorted splatting and StochasticSplats, one sample per pixel at the centre, billboard
-    /// (centre) fragment depth. Enderton, stratified, MSAA sample sets, max-density-plane depths
-    /// and the early stop are CPU-only; the CPU reference renders every raster method.
+    /// Whether the GPU rasterizer renders `method` with `settings`, before the scene and the
+    /// adapter are known (the one place that decides it; [`GpuRasterizer::render`] then checks
+    /// the adapter's sample counts and the scene): every raster method, at the standard sample
+    /// pattern, without the early stop; sorted splatting at centre depth (the max-density plane
+    /// orders each sample's fragments apart, which blending hardware cannot). The CPU reference
+    /// renders everything.
     pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
-        Draw::of(method)?;
-        check_settings(settings)
+        check_settings(settings)?;
+        if matches!(method, RasterMethod::Sorted { .. }) && settings.fragment_depth == FragmentDepth::MaxDensityPlane {
+            return Err(GpuError::Unsupported(
+                "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot: use --fragment-depth center or --backend cpu".into(),
+            ));
+        }
+        Ok(())
     }
 
     fn set_mode(&self, draw: Draw) {
@@ -395,6 +470,7 @@ impl<'a> GpuRasterizer<'a> {
                 wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: self.sample_offsets.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 15, resource: self.scene.canonical.as_entire_binding() },
@@ -408,10 +484,11 @@ impl<'a> GpuRasterizer<'a> {
         color: &wgpu::TextureView,
         mean: &wgpu::Buffer,
         m2: &wgpu::Buffer,
+        multisampled: bool,
     ) -> wgpu::BindGroup {
         self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("fold"),
-            layout: &self.pipes.fold_layout,
+            layout: if multisampled { &self.pipes.fold_msaa_layout } else { &self.pipes.fold_layout },
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
                 frame_entry(1, frame_params),
@@ -432,7 +509,19 @@ impl<'a> GpuRasterizer<'a> {
         group: &wgpu::BindGroup,
         frame_offset: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites>,
-    ) {
+    ) -> Result<(), GpuError> {
+        let pipelines = match self.raster.samples {
+            1 => &self.pipes.single,
+            s => match self.msaa.get() {
+                Some(p) => p,
+                None => {
+                    let built = self.pipes.at_samples(self.ctx, s)?;
+                    self.msaa.get_or_init(|| built)
+                }
+            },
+        };
+        let plane = self.raster.fragment_depth == FragmentDepth::MaxDensityPlane;
+        let pipeline = pipelines.get(draw, self.scene.is_lit(), plane);
         let bg = self.scene.settings.background.as_dvec3();
         // Over and stochastic frames start from the background; under accumulates premultiplied
         // colour from zero and the fold adds the background behind the remaining transmittance.
@@ -460,12 +549,13 @@ impl<'a> GpuRasterizer<'a> {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        pass.set_pipeline(self.pipes.render_pipeline(draw, self.scene.is_lit()));
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, group, &[frame_offset]);
         match draw {
-            Draw::Stochastic => pass.draw(0..6, 0..self.scene.count),
-            _ => pass.draw_indirect(&self.draw_args, 0),
+            Draw::Over | Draw::Under => pass.draw_indirect(&self.draw_args, 0),
+            _ => pass.draw(0..6, 0..self.scene.count),
         }
+        Ok(())
     }
 }
 
@@ -477,10 +567,11 @@ fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
             "--early-stop needs the transmittance before each fragment, which hardware blending does not give: use --backend cpu".into(),
         ));
     }
-    if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
+    if settings.samples > 1 && settings.sample_pattern != SamplePattern::Standard {
         return Err(GpuError::Unsupported(format!(
-            "the GPU rasterizer renders one sample per pixel with centre fragment depth ({} samples and {:?} depth asked for); use --backend cpu",
-            settings.samples, settings.fragment_depth
+            "the GPU's {} samples per pixel lie at the hardware's standard positions, not the {} pattern: use --sample-pattern standard or --backend cpu",
+            settings.samples,
+            settings.sample_pattern.name()
         )));
     }
     Ok(())
@@ -508,21 +599,22 @@ fn frame_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> 
     }
 }
 
-/// Render targets of one draw: colour, and depth for StochasticSplats.
+/// Render targets of one draw: colour (written by the raster operations' kernel for Enderton
+/// and stratified), and depth for StochasticSplats; `samples` per pixel.
 struct Targets {
     pub(super) color_view: wgpu::TextureView,
     pub(super) depth_view: Option<wgpu::TextureView>,
 }
 
 impl Targets {
-    fn new(ctx: &GpuContext, pipes: &RasterPipelines, width: u32, height: u32, draw: Draw) -> Self {
+    fn new(ctx: &GpuContext, pipes: &RasterPipelines, width: u32, height: u32, draw: Draw, samples: u32) -> Self {
         let texture = |label, format, usage| {
             ctx.device
                 .create_texture(&wgpu::TextureDescriptor {
                     label: Some(label),
                     size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
                     mip_level_count: 1,
-                    sample_count: 1,
+                    sample_count: samples,
                     dimension: wgpu::TextureDimension::D2,
                     format,
                     usage,
@@ -530,9 +622,13 @@ impl Targets {
                 })
                 .create_view(&Default::default())
         };
+        let blended = matches!(draw, Draw::Over | Draw::Under);
         // The format the draw's pipeline was built for.
-        let format = if draw == Draw::Stochastic { STOCHASTIC_FORMAT } else { pipes.blend_format };
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let format = if blended { pipes.blend_format } else { STOCHASTIC_FORMAT };
+        let usage = match draw {
+            _ if draw.is_rop() => wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+            _ => wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        };
         Self {
             color_view: texture("splat colour", format, usage),
             depth_view: (draw == Draw::Stochastic)
@@ -553,7 +649,7 @@ impl FrameSlots {
         let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame params"),
             size: stride * u64::from(FRAMES_PER_SUBMIT),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
         Self { buffer, stride }
@@ -647,8 +743,8 @@ mod tests {
                 t_max,
                 meshes,
                 first_hit,
-                pad2,
-                pad3
+                samples,
+                hilbert_order
             ]
         );
         assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, u_shift]);

@@ -10,16 +10,31 @@ pub struct RasterPipelines {
     pub(super) tile_emit: wgpu::ComputePipeline,
     pub(super) tile_ranges: wgpu::ComputePipeline,
     pub(super) tile_blend: wgpu::ComputePipeline,
+    pub(super) shuffle_keys: wgpu::ComputePipeline,
+    /// The per-pixel raster operations of Enderton and Laine–Karras (centre, plane depth).
+    pub(super) tile_rop: [wgpu::ComputePipeline; 2],
     pub(super) mesh_prepass: wgpu::ComputePipeline,
+    pub(super) splat_module: wgpu::ShaderModule,
     pub(super) splat_layout: wgpu::BindGroupLayout,
+    pub(super) splat_pipeline_layout: wgpu::PipelineLayout,
+    /// The one-sample pipelines.
+    pub(super) single: SamplePipelines,
+    pub(super) fold_layout: wgpu::BindGroupLayout,
+    pub(super) fold: wgpu::ComputePipeline,
+    pub(super) fold_msaa_layout: wgpu::BindGroupLayout,
+    pub(super) fold_msaa: wgpu::ComputePipeline,
+    /// Colour target of sorted blending: RGBA32F where the adapter blends it, else RGBA16F.
+    pub blend_format: wgpu::TextureFormat,
+}
+
+/// The render pipelines of one sample count: sorted over and under, StochasticSplats (unlit,
+/// lit) and StochasticSplats at the max-density plane.
+pub(crate) struct SamplePipelines {
     pub(super) over: wgpu::RenderPipeline,
     pub(super) under: wgpu::RenderPipeline,
     pub(super) stochastic: wgpu::RenderPipeline,
-    pub(super) stochastic_lit: wgpu::RenderPipeline,
-    pub(super) fold_layout: wgpu::BindGroupLayout,
-    pub(super) fold: wgpu::ComputePipeline,
-    /// Colour target of sorted blending: RGBA32F where the adapter blends it, else RGBA16F.
-    pub blend_format: wgpu::TextureFormat,
+    pub(super) stochastic_lit: Option<wgpu::RenderPipeline>,
+    pub(super) stochastic_plane: wgpu::RenderPipeline,
 }
 
 /// Colour target of a stochastic frame (written, never blended).
@@ -39,8 +54,9 @@ impl RasterPipelines {
             })
         };
         let raster = module("raster.wgsl", RASTER_WGSL);
-        let splat = module("splat.wgsl", SPLAT_WGSL);
+        let splat_module = module("splat.wgsl", SPLAT_WGSL);
         let fold = module("fold.wgsl", FOLD_WGSL);
+        let fold_msaa = module("fold.wgsl (msaa)", FOLD_MSAA_WGSL);
         let mesh_prepass = module("mesh_prepass.wgsl", MESH_PREPASS_WGSL);
         let draw_stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -52,31 +68,35 @@ impl RasterPipelines {
                 storage_entry(3, wgpu::ShaderStages::VERTEX, true),
                 storage_entry(4, wgpu::ShaderStages::VERTEX, true),
                 storage_entry(5, wgpu::ShaderStages::FRAGMENT, true),
+                storage_entry(6, wgpu::ShaderStages::FRAGMENT, true),
                 storage_entry(13, wgpu::ShaderStages::FRAGMENT, true),
                 storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
                 storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
             ],
         });
-        let fold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("fold"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::COMPUTE, false, size_of::<RasterParams>()),
-                uniform_entry(1, wgpu::ShaderStages::COMPUTE, true, size_of::<FrameParams>()),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
+        let fold_layout_of = |multisampled| {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("fold"),
+                entries: &[
+                    uniform_entry(0, wgpu::ShaderStages::COMPUTE, false, size_of::<RasterParams>()),
+                    uniform_entry(1, wgpu::ShaderStages::COMPUTE, true, size_of::<FrameParams>()),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 2,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                            view_dimension: wgpu::TextureViewDimension::D2,
+                            multisampled,
+                        },
+                        count: None,
                     },
-                    count: None,
-                },
-                storage_entry(3, wgpu::ShaderStages::COMPUTE, false),
-                storage_entry(4, wgpu::ShaderStages::COMPUTE, false),
-                storage_entry(5, wgpu::ShaderStages::COMPUTE, true),
-            ],
-        });
+                    storage_entry(3, wgpu::ShaderStages::COMPUTE, false),
+                    storage_entry(4, wgpu::ShaderStages::COMPUTE, false),
+                    storage_entry(5, wgpu::ShaderStages::COMPUTE, true),
+                ],
+            })
+        };
+        let (fold_layout, fold_msaa_layout) = (fold_layout_of(false), fold_layout_of(true));
         let pipeline_layout = |label, layout: &wgpu::BindGroupLayout| {
             device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some(label),
@@ -85,17 +105,85 @@ impl RasterPipelines {
             })
         };
         let splat_pipeline_layout = pipeline_layout("splat", &splat_layout);
-        let blend_format = if device.features().contains(wgpu::Features::FLOAT32_BLENDABLE) {
-            wgpu::TextureFormat::Rgba32Float
-        } else {
-            wgpu::TextureFormat::Rgba16Float
+        let blend_format = ctx.blend_format();
+        let rop = |plane: f64| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("tile_rop"),
+                layout: None,
+                module: &raster,
+                entry_point: Some("tile_rop"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("PLANE_DEPTH", plane)],
+                    ..Default::default()
+                },
+                cache: None,
+            })
         };
+        let single = SamplePipelines::new(device, &splat_module, &splat_pipeline_layout, blend_format, 1);
+        let pipes = Self {
+            project: compute_pipeline(device, &raster, None, "project"),
+            tile_count: compute_pipeline(device, &raster, None, "tile_count"),
+            tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
+            tile_ranges: compute_pipeline(device, &raster, None, "tile_ranges"),
+            tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
+            shuffle_keys: compute_pipeline(device, &raster, None, "shuffle_keys"),
+            tile_rop: [rop(0.0), rop(1.0)],
+            mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
+            fold: compute_pipeline(device, &fold, Some(&pipeline_layout("fold", &fold_layout)), "fold"),
+            fold_msaa: compute_pipeline(
+                device,
+                &fold_msaa,
+                Some(&pipeline_layout("fold (msaa)", &fold_msaa_layout)),
+                "fold",
+            ),
+            single,
+            splat_module,
+            splat_layout,
+            splat_pipeline_layout,
+            fold_layout,
+            fold_msaa_layout,
+            blend_format,
+            sort,
+        };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(pipes)
+    }
+}
+
+impl RasterPipelines {
+    /// The radix sort.
+    pub fn sort(&self) -> &RadixSort {
+        &self.sort
+    }
+
+    /// The render pipelines at `samples` per pixel (the one-sample set is [`RasterPipelines::single`]).
+    pub(super) fn at_samples(&self, ctx: &GpuContext, samples: u32) -> Result<SamplePipelines, GpuError> {
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipes =
+            SamplePipelines::new(&ctx.device, &self.splat_module, &self.splat_pipeline_layout, self.blend_format, samples);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(pipes)
+    }
+}
+
+impl SamplePipelines {
+    fn new(
+        device: &wgpu::Device,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::PipelineLayout,
+        blend_format: wgpu::TextureFormat,
+        samples: u32,
+    ) -> Self {
         let render = |entry, format, blend: Option<wgpu::BlendState>, depth: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(entry),
-                layout: Some(&splat_pipeline_layout),
+                layout: Some(layout),
                 vertex: wgpu::VertexState {
-                    module: &splat,
+                    module,
                     entry_point: Some("vs"),
                     compilation_options: Default::default(),
                     buffers: &[],
@@ -108,9 +196,9 @@ impl RasterPipelines {
                     stencil: Default::default(),
                     bias: Default::default(),
                 }),
-                multisample: wgpu::MultisampleState::default(),
+                multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
                 fragment: Some(wgpu::FragmentState {
-                    module: &splat,
+                    module,
                     entry_point: Some(entry),
                     compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
@@ -122,48 +210,38 @@ impl RasterPipelines {
         let component =
             |src, dst| wgpu::BlendComponent { src_factor: src, dst_factor: dst, operation: wgpu::BlendOperation::Add };
         use wgpu::BlendFactor::{One, OneMinusDstAlpha, OneMinusSrcAlpha, SrcAlpha};
-        // Seed 003 §1.5.1 for the colour. The alpha channel uses the over operator too (ONE,
-        // ONE_MINUS_SRC_ALPHA) so that it holds the coverage 1 − T; vk's additive ONE / ONE
-        // alpha (a sum of opacities) is read only by its mesh pass, which we do not have.
+        // vk_gaussian_splatting Lighting §1.5.1 for the colour. The alpha channel uses the over
+        // operator too (ONE, ONE_MINUS_SRC_ALPHA) so that it holds the coverage 1 − T; vk's
+        // additive ONE / ONE alpha (a sum of opacities) is read only by its mesh pass.
         let over =
             wgpu::BlendState { color: component(SrcAlpha, OneMinusSrcAlpha), alpha: component(One, OneMinusSrcAlpha) };
-        // Seed 003 §1.5.2: premultiplied colour and alpha, ONE_MINUS_DST_ALPHA / ONE.
+        // §1.5.2: premultiplied colour and alpha, ONE_MINUS_DST_ALPHA / ONE.
         let under =
             wgpu::BlendState { color: component(OneMinusDstAlpha, One), alpha: component(OneMinusDstAlpha, One) };
-        let pipes = Self {
-            project: compute_pipeline(device, &raster, None, "project"),
-            tile_count: compute_pipeline(device, &raster, None, "tile_count"),
-            tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
-            tile_ranges: compute_pipeline(device, &raster, None, "tile_ranges"),
-            tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
-            mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
-            over: render("fs_sorted", blend_format, Some(over), false),
-            under: render("fs_sorted", blend_format, Some(under), false),
-            stochastic: render("fs_stochastic", STOCHASTIC_FORMAT, None, true),
-            stochastic_lit: render("fs_stochastic_lit", STOCHASTIC_FORMAT, None, true),
-            fold: compute_pipeline(device, &fold, Some(&pipeline_layout("fold", &fold_layout)), "fold"),
-            splat_layout,
-            fold_layout,
-            blend_format,
-            sort,
+        // One sample: the centre-only entry points; S samples: those writing a sample mask.
+        let (sorted, stochastic) = if samples == 1 {
+            ("fs_sorted", "fs_stochastic")
+        } else {
+            ("fs_sorted_msaa", "fs_stochastic_msaa")
         };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
+        Self {
+            over: render(sorted, blend_format, Some(over), false),
+            under: render(sorted, blend_format, Some(under), false),
+            stochastic: render(stochastic, STOCHASTIC_FORMAT, None, true),
+            stochastic_lit: (samples == 1).then(|| render("fs_stochastic_lit", STOCHASTIC_FORMAT, None, true)),
+            stochastic_plane: render("fs_stochastic_plane", STOCHASTIC_FORMAT, None, true),
         }
-        Ok(pipes)
     }
 
-    /// The radix sort.
-    pub fn sort(&self) -> &RadixSort {
-        &self.sort
-    }
-
-    pub(super) fn render_pipeline(&self, draw: Draw, lit: bool) -> &wgpu::RenderPipeline {
+    /// The pipeline that draws `draw` (lit: StochasticSplats' shaded variant; plane: the
+    /// max-density-plane depth).
+    pub(super) fn get(&self, draw: Draw, lit: bool, plane: bool) -> &wgpu::RenderPipeline {
         match draw {
             Draw::Over => &self.over,
             Draw::Under => &self.under,
-            Draw::Stochastic if lit => &self.stochastic_lit,
-            Draw::Stochastic => &self.stochastic,
+            Draw::Stochastic if plane => &self.stochastic_plane,
+            Draw::Stochastic if lit => self.stochastic_lit.as_ref().unwrap_or(&self.stochastic),
+            _ => &self.stochastic,
         }
     }
 }

@@ -98,10 +98,10 @@ pub struct RasterParams {
     pub meshes: u32,
     /// 1 when the tile rasterizer writes the hybrid pipeline's first hit.
     pub first_hit: u32,
-    /// Padding.
-    pub pad2: u32,
-    /// Padding.
-    pub pad3: u32,
+    /// Samples per pixel S.
+    pub samples: u32,
+    /// Order of the Hilbert curve over the image (Laine–Karras pixel ids).
+    pub hilbert_order: u32,
 }
 
 /// Per-frame uniforms (WGSL `FrameParams`).
@@ -246,7 +246,7 @@ impl RasterScene {
 }
 
 /// The uniforms of a camera.
-pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatExtent) -> RasterParams {
+pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &RasterSettings) -> RasterParams {
     let s = &scene.settings;
     let row = |i: usize| {
         let v = camera.rotation.row(i);
@@ -274,7 +274,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatE
         ],
         tiles: [camera.width.div_ceil(TILE), camera.height.div_ceil(TILE)],
         mode: 0,
-        extent: extent as u32,
+        extent: raster.extent as u32,
         lit: u32::from(scene.lighting.is_on()),
         look: match scene.lighting.look {
             Look::Surface => crate::layout::LOOK_SURFACE,
@@ -286,7 +286,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, extent: SplatE
         t_max: s.t_max,
         meshes: u32::from(scene.has_meshes),
         first_hit: 0,
-        pad2: 0,
-        pad3: 0,
+        samples: raster.samples,
+        hilbert_order: splat_core::rng::hilbert_order(camera.width, camera.height),
     }
 }

@@ -1,0 +1,222 @@
+//! The GPU rasterizer at S samples per pixel (Laine & Karras 2011's MSAA setting): every raster
+//! method's frame equals the CPU reference's frame at the standard sample pattern, decision for
+//! decision; what the GPU cannot render is refused with a message.
+
+mod common;
+
+use common::{context, fixture};
+use splat_core::frame::RenderOutput;
+use splat_core::raster::{
+    Blend, FragmentDepth, RasterMethod, RasterSettings, Rasterizer, SamplePattern, SplatExtent, render_raster,
+};
+use splat_core::{Camera, Frames, RenderSettings, Scene};
+use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
+use std::sync::OnceLock;
+
+fn pipelines(ctx: &GpuContext) -> &'static RasterPipelines {
+    static PIPES: OnceLock<RasterPipelines> = OnceLock::new();
+    PIPES.get_or_init(|| RasterPipelines::new(ctx).expect("raster pipelines"))
+}
+
+const METHODS: [RasterMethod; 6] = [
+    RasterMethod::Sorted { blend: Blend::Over },
+    RasterMethod::Sorted { blend: Blend::Under },
+    RasterMethod::StochasticSplat,
+    RasterMethod::Enderton,
+    RasterMethod::Stratified { scramble: true },
+    RasterMethod::Stratified { scramble: false },
+];
+
+fn standard(samples: u32, fragment_depth: FragmentDepth) -> RasterSettings {
+    RasterSettings { samples, sample_pattern: SamplePattern::Standard, fragment_depth, ..RasterSettings::default() }
+}
+
+/// Pixels whose colour differs by more than `tol` or whose coverage differs, and the largest
+/// colour difference of the others.
+fn differing(a: &RenderOutput, b: &RenderOutput, tol: f32) -> (Vec<usize>, f32) {
+    let pixels = a.alpha.data().len();
+    let mut worst = 0.0f32;
+    let bad = (0..pixels)
+        .filter(|&p| {
+            let d = (0..3).map(|c| (a.mean.data()[3 * p + c] - b.mean.data()[3 * p + c]).abs()).fold(0.0, f32::max);
+            let da = (a.alpha.data()[p] - b.alpha.data()[p]).abs();
+            let off = !(d <= tol) || !(da <= tol);
+            if !off {
+                worst = worst.max(d);
+            }
+            off
+        })
+        .collect();
+    (bad, worst)
+}
+
+struct Compared {
+    /// Pixels that differ although no decision of theirs lay within 1e-5 of its threshold.
+    bad: Vec<usize>,
+    /// Pixels that differ by such a near decision (f32 rounding may flip it).
+    near: usize,
+    /// Pixels with some coverage on the CPU.
+    written: usize,
+    worst: f32,
+}
+
+/// One frame (seed `seed`) of `method` at `raster` on both backends, the CPU's samples at
+/// `cpu_pattern`.
+fn compare_with(
+    ctx: &GpuContext,
+    scene: &Scene,
+    camera: &Camera,
+    method: &RasterMethod,
+    raster: RasterSettings,
+    cpu_pattern: SamplePattern,
+    seed: u32,
+) -> Compared {
+    let settings = RenderSettings::default();
+    let cpu_raster = RasterSettings { sample_pattern: cpu_pattern, ..raster };
+    let cpu_r = Rasterizer::new(scene, camera, settings, cpu_raster).unwrap();
+    let frames = Frames { count: 1, seed, ..Frames::default() };
+    let cpu = render_raster(&cpu_r, method, &frames, &|_| {}).unwrap();
+    let gpu_scene = RasterScene::new(ctx, scene, &settings).unwrap();
+    let gpu_r = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, camera, &raster).unwrap();
+    let gpu = gpu_r.render(method, &frames).unwrap().0;
+    let (differ, worst) = differing(&gpu, &cpu, 1e-5);
+    let (near, bad): (Vec<usize>, Vec<usize>) = differ.iter().partition(|&&p| {
+        let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+        method.is_stochastic()
+            && splat_tests::flips::raster_gap(&cpu_r, method, &frames, x, y) < splat_tests::flips::FLIP_GAP
+    });
+    let written = cpu.alpha.data().iter().filter(|&&a| a > 0.0).count();
+    Compared { bad, near: near.len(), written, worst }
+}
+
+fn compare(ctx: &GpuContext, scene: &Scene, camera: &Camera, method: &RasterMethod, raster: RasterSettings, seed: u32) -> Compared {
+    compare_with(ctx, scene, camera, method, raster, raster.sample_pattern, seed)
+}
+
+/// One frame of every raster method at S = 4 standard samples equals the CPU frame pixel for
+/// pixel (sample masks equal: the coverage is the written share of the samples), on three
+/// fixtures, two seeds and both footprints (the 3DGS box, the √8σ ellipse); Enderton and stratified also at S = 8 and 16 (compute, any adapter).
+#[test]
+fn one_frame_at_standard_samples_equals_the_cpu_frame() {
+    let Some(ctx) = context() else { return };
+    eprintln!("adapter multisamples at {:?}", ctx.msaa_counts);
+    for name in ["layers", "ramp", "cloud"] {
+        let (scene, camera) = fixture(name, 64, 48);
+        for method in METHODS {
+            let counts: &[u32] = match method {
+                RasterMethod::Enderton | RasterMethod::Stratified { .. } => &[4, 8, 16],
+                _ => &[4, 8],
+            };
+            for &s in counts {
+                if !matches!(method, RasterMethod::Enderton | RasterMethod::Stratified { .. })
+                    && !ctx.msaa_counts.contains(&s)
+                {
+                    continue;
+                }
+                for (seed, extent) in [(3, SplatExtent::ThreeDgs), (4, SplatExtent::Sqrt8)] {
+                    let raster = RasterSettings { extent, ..standard(s, FragmentDepth::Center) };
+                    let c = compare(ctx, &scene, &camera, &method, raster, seed);
+                    eprintln!(
+                        "{name} {method:?} S = {s} seed {seed} {extent:?}: {} of {} written pixels differ by a near decision, max |Δ| of the rest {:.1e}",
+                        c.near, c.written, c.worst
+                    );
+                    assert!(c.written > 64 * 48 / 10, "{name}: too few written pixels to test");
+                    assert!(c.bad.is_empty(), "{name} {method:?} S = {s} seed {seed}: pixels {:?} differ", c.bad);
+                }
+            }
+        }
+    }
+}
+
+/// The comparison above can fail: against the CPU at the Hammersley positions (the same count,
+/// other points; the decisions are keyed by sample index, so only footprint edges differ: the
+/// √8σ ellipse cuts many pixels whose centre alpha passes the cull) every method differs on many
+/// pixels.
+#[test]
+fn other_sample_positions_are_told_apart() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("cloud", 64, 48);
+    for method in METHODS {
+        let raster = RasterSettings { extent: SplatExtent::Sqrt8, ..standard(4, FragmentDepth::Center) };
+        let c = compare_with(ctx, &scene, &camera, &method, raster, SamplePattern::Hammersley, 3);
+        eprintln!("{method:?}: {} pixels differ from the CPU at Hammersley positions", c.bad.len() + c.near);
+        assert!(c.bad.len() > 20, "{method:?}: only {} pixels differ", c.bad.len());
+    }
+}
+
+/// The max-density-plane depth (StochasticSplats' pop-free billboards): StochasticSplats written
+/// through frag_depth at sample rate, Enderton and stratified in the compute raster operations,
+/// equal the CPU frame at S = 1 and 4; the depth changes the image (centre depth differs).
+#[test]
+fn max_density_plane_frames_equal_the_cpu_frame() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 64, 48);
+    let methods =
+        [RasterMethod::StochasticSplat, RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }];
+    for method in methods {
+        for s in [1, 4] {
+            for seed in [3, 4] {
+                let c = compare(ctx, &scene, &camera, &method, standard(s, FragmentDepth::MaxDensityPlane), seed);
+                eprintln!(
+                    "plane {method:?} S = {s} seed {seed}: {} of {} written pixels differ by a near decision, max |Δ| of the rest {:.1e}",
+                    c.near, c.written, c.worst
+                );
+                assert!(c.bad.is_empty(), "plane {method:?} S = {s} seed {seed}: pixels {:?} differ", c.bad);
+            }
+        }
+        let settings = RenderSettings::default();
+        let cpu_centre = Rasterizer::new(&scene, &camera, settings, standard(4, FragmentDepth::Center)).unwrap();
+        let frames = Frames { count: 1, seed: 3, ..Frames::default() };
+        let centre = render_raster(&cpu_centre, &method, &frames, &|_| {}).unwrap();
+        let gpu_scene = RasterScene::new(ctx, &scene, &settings).unwrap();
+        let plane = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(4, FragmentDepth::MaxDensityPlane))
+            .unwrap()
+            .render(&method, &frames)
+            .unwrap()
+            .0;
+        let (differ, _) = differing(&plane, &centre, 1e-5);
+        assert!(differ.len() > 20, "{method:?}: the plane depth changed only {} pixels", differ.len());
+    }
+}
+
+/// What the GPU cannot render at these settings is refused with a message naming it: the
+/// Hammersley pattern at S > 1, sorted splatting at the plane depth, a count the adapter does not
+/// multisample at, lit or mesh scenes at S > 1, the iso-opacity depth at S > 1.
+#[test]
+fn unsupported_sample_settings_are_refused_with_a_message() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 16, 12);
+    let settings = RenderSettings::default();
+    let gpu_scene = RasterScene::new(ctx, &scene, &settings).unwrap();
+    let frames = Frames::default();
+    let sorted = RasterMethod::Sorted { blend: Blend::Over };
+    let hammersley = RasterSettings { samples: 4, ..RasterSettings::default() };
+    let e = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &hammersley).err().unwrap().to_string();
+    assert!(e.contains("--sample-pattern standard"), "{e}");
+    let plane = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(1, FragmentDepth::MaxDensityPlane))
+        .unwrap();
+    let e = plane.render(&sorted, &frames).unwrap_err().to_string();
+    assert!(e.contains("max-density plane") && e.contains("--backend cpu"), "{e}");
+    for s in [2, 8, 16] {
+        let r = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(s, FragmentDepth::Center)).unwrap();
+        match r.render(&RasterMethod::StochasticSplat, &frames) {
+            Ok(_) => assert!(ctx.msaa_counts.contains(&s), "S = {s} rendered although the adapter lacks it"),
+            Err(e) => {
+                let e = e.to_string();
+                assert!(!ctx.msaa_counts.contains(&s), "S = {s}: {e}");
+                assert!(e.contains(&format!("{:?}", ctx.msaa_counts)), "{e}");
+            }
+        }
+    }
+    let four = standard(4, FragmentDepth::Center);
+    let r = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &four).unwrap();
+    let e = r.depth_pick().err().expect("depth pick at S = 4").to_string();
+    assert!(e.contains("one sample") && e.contains("--backend cpu"), "{e}");
+    let lighting = common::lighting(splat_core::lighting::Shadows::None, splat_core::lighting::Look::Surface);
+    let lit = RasterScene::new_lit(ctx, &scene, &settings, &lighting).unwrap();
+    let r = GpuRasterizer::new(ctx, pipelines(ctx), &lit, &camera, &four).unwrap();
+    for method in [sorted, RasterMethod::StochasticSplat, RasterMethod::Enderton] {
+        let e = r.render(&method, &frames).unwrap_err().to_string();
+        assert!(e.contains("lit") && e.contains("--backend cpu"), "{method:?}: {e}");
+    }
+}
