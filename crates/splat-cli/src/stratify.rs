@@ -1,12 +1,14 @@
 //! `splat stratify`: the stratification gain of Laine & Karras (their Table 1) — RMSE of one
 //! frame of `stratified` divided by that of `enderton`, at S = 4 … 64 samples per pixel, on the
-//! two layered fixtures drawn in random order, with a side-by-side image.
+//! two layered fixtures drawn in random order, with a side-by-side image. With `--backend gpu`
+//! the GPU's rows (S = 4, 8, 16 at the standard sample pattern) stand beside the CPU's.
 
+use crate::args::SamplePatternArg;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Frames;
 use splat_core::RenderSettings;
-use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SamplePattern, render_raster};
 use splat_core::stats::rmse;
 use splat_core::{Image, KernelParams, scenes};
 use std::fmt::Write as _;
@@ -27,6 +29,22 @@ pub struct StratifyArgs {
     /// Output prefix: writes PREFIX.png (Enderton | stratified | sorted, rows S = 4, 16, 64).
     #[arg(short, long, default_value = "stratification")]
     pub output: PathBuf,
+    /// Sample positions of the CPU rows (the GPU's rows are at the standard pattern, the
+    /// hardware's; the standard pattern has no 32 or 64, whose rows stay Hammersley).
+    #[arg(long, value_enum, default_value = "hammersley")]
+    pub sample_pattern: SamplePatternArg,
+    /// cpu: the CPU reference only; gpu: also the GPU's rows at S = 4, 8 and 16.
+    #[arg(long, value_enum, default_value = "cpu")]
+    pub backend: StratifyBackend,
+}
+
+/// Where `splat stratify` renders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StratifyBackend {
+    /// The CPU reference.
+    Cpu,
+    /// The CPU reference and the GPU beside it.
+    Gpu,
 }
 
 /// Samples per pixel of Table 1.
@@ -34,17 +52,30 @@ const SAMPLES: [u32; 5] = [4, 8, 16, 32, 64];
 /// Rows of the side-by-side image.
 const IMAGE_SAMPLES: [u32; 3] = [4, 16, 64];
 
-/// RMSE in 8-bit units of single frames of `method` against sorted splatting, root mean square
-/// over `frames` frames; also frame 0's image.
-fn frame_rmse(r: &Rasterizer, method: &RasterMethod, reference: &Image, frames: u32) -> Result<(f64, Image)> {
+/// RMSE in 8-bit units of single frames of a method (`frame(seed)`) against sorted splatting,
+/// root mean square over `frames` frames; also frame 0's image.
+fn frame_rmse(frame: impl Fn(u32) -> Result<Image>, reference: &Image, frames: u32) -> Result<(f64, Image)> {
     let mut sum = 0.0;
     let mut first = None;
     for seed in 0..frames {
-        let out = render_raster(r, method, &Frames { count: 1, seed, ..Frames::default() }, &|_| {})?;
-        sum += rmse(out.mean.data(), reference.data()).powi(2);
-        first.get_or_insert(out.mean);
+        let image = frame(seed)?;
+        sum += rmse(image.data(), reference.data()).powi(2);
+        first.get_or_insert(image);
     }
     Ok((255.0 * (sum / f64::from(frames)).sqrt(), first.context("at least one frame")?))
+}
+
+/// One frame of seed `seed`.
+fn one(seed: u32) -> Frames {
+    Frames { count: 1, seed, ..Frames::default() }
+}
+
+/// The pattern of the CPU rows at `samples`: the one asked for where it has that count.
+fn cpu_pattern(args: &StratifyArgs, samples: u32) -> SamplePattern {
+    match args.sample_pattern {
+        SamplePatternArg::Standard if SamplePattern::Standard.has(samples) => SamplePattern::Standard,
+        _ => SamplePattern::Hammersley,
+    }
 }
 
 /// Run `splat stratify`.
@@ -56,23 +87,46 @@ pub fn run(args: StratifyArgs) -> Result<()> {
         kernel: KernelParams { degree: args.kernel_degree, ..KernelParams::default() },
         ..Default::default()
     };
-    let mut table =
-        String::from("| scene | S | stratified RMSE | enderton RMSE | ratio |\n|---|---:|---:|---:|---:|\n");
+    let ctx = match args.backend {
+        StratifyBackend::Gpu => Some(splat_gpu::GpuContext::new()?),
+        StratifyBackend::Cpu => None,
+    };
+    let pipes = ctx.as_ref().map(splat_gpu::RasterPipelines::new).transpose()?;
+    let mut table = String::from(
+        "| scene | S | backend | pattern | stratified RMSE | enderton RMSE | ratio |\n|---|---:|---|---|---:|---:|---:|\n",
+    );
+    let mut row = |name: &str, samples, backend, pattern: SamplePattern, ours: f64, theirs: f64| {
+        let _ = writeln!(
+            table,
+            "| {name} | {samples} | {backend} | {} | {ours:.3} | {theirs:.3} | {:.2} |",
+            pattern.name(),
+            ours / theirs
+        );
+    };
+    let stratified = RasterMethod::Stratified { scramble: true };
     let mut tiles: Vec<Vec<Image>> = Vec::new();
     for name in &args.scenes {
         let (scene, camera) = scenes::by_name(name)
             .with_context(|| format!("unknown scene '{name}' (built-in: {})", scenes::NAMES.join(", ")))?;
         for samples in SAMPLES {
-            let raster = RasterSettings { samples, ..RasterSettings::default() };
+            let pattern = cpu_pattern(&args, samples);
+            let raster = RasterSettings { samples, sample_pattern: pattern, ..RasterSettings::default() };
             let r = Rasterizer::new(&scene, &camera, settings, raster)?;
             let sorted = RasterMethod::Sorted { blend: Blend::Under };
             let reference = render_raster(&r, &sorted, &Frames::default(), &|_| {})?.mean;
-            let (ours, ours_image) =
-                frame_rmse(&r, &RasterMethod::Stratified { scramble: true }, &reference, args.frames)?;
-            let (theirs, theirs_image) = frame_rmse(&r, &RasterMethod::Enderton, &reference, args.frames)?;
-            let _ = writeln!(table, "| {name} | {samples} | {ours:.2} | {theirs:.2} | {:.2} |", ours / theirs);
+            let r = &r;
+            let cpu_frame = |method| move |seed| Ok(render_raster(r, &method, &one(seed), &|_| {})?.mean);
+            let (ours, ours_image) = frame_rmse(cpu_frame(stratified), &reference, args.frames)?;
+            let (theirs, theirs_image) = frame_rmse(cpu_frame(RasterMethod::Enderton), &reference, args.frames)?;
+            row(name, samples, "cpu", pattern, ours, theirs);
             if IMAGE_SAMPLES.contains(&samples) {
                 tiles.push(vec![theirs_image, ours_image, reference]);
+            }
+            if let (Some(ctx), Some(pipes)) = (&ctx, &pipes) {
+                if SamplePattern::Standard.has(samples) {
+                    let (ours, theirs) = gpu_rmse(ctx, pipes, &scene, &camera, settings, samples, args.frames)?;
+                    row(name, samples, "gpu", SamplePattern::Standard, ours, theirs);
+                }
             }
         }
     }
@@ -81,6 +135,30 @@ pub fn run(args: StratifyArgs) -> Result<()> {
     splat_io::image::write_image(&png, &mosaic(&tiles))?;
     eprintln!("wrote {} (columns: enderton, stratified, sorted; rows: S = 4, 16, 64 per scene)", png.display());
     Ok(())
+}
+
+/// The GPU's stratified and Enderton frame RMSE at `samples` standard samples, against the CPU's
+/// sorted splatting with the same samples.
+fn gpu_rmse(
+    ctx: &splat_gpu::GpuContext,
+    pipes: &splat_gpu::RasterPipelines,
+    scene: &splat_core::Scene,
+    camera: &splat_core::Camera,
+    settings: RenderSettings,
+    samples: u32,
+    frames: u32,
+) -> Result<(f64, f64)> {
+    let raster = RasterSettings { samples, sample_pattern: SamplePattern::Standard, ..RasterSettings::default() };
+    let cpu = Rasterizer::new(scene, camera, settings, raster)?;
+    let reference =
+        render_raster(&cpu, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})?.mean;
+    let gpu_scene = splat_gpu::RasterScene::new(ctx, scene, &settings)?;
+    let gpu = splat_gpu::GpuRasterizer::new(ctx, pipes, &gpu_scene, camera, &raster)?;
+    let gpu = &gpu;
+    let gpu_frame = |method| move |seed| Ok(gpu.render(&method, &one(seed))?.0.mean);
+    let (ours, _) = frame_rmse(gpu_frame(RasterMethod::Stratified { scramble: true }), &reference, frames)?;
+    let (theirs, _) = frame_rmse(gpu_frame(RasterMethod::Enderton), &reference, frames)?;
+    Ok((ours, theirs))
 }
 
 /// Images laid out in a grid (rows × columns) with a 4-pixel grey gutter.

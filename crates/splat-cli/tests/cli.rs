@@ -332,8 +332,32 @@ fn raster_over_equals_under_and_bad_options_are_named() {
     let table = String::from_utf8_lossy(&o.stdout);
     assert_eq!(table.lines().filter(|l| l.starts_with("| cloth |")).count(), 5, "{table}");
     assert!(image::open(prefix.with_extension("png")).is_ok());
+    stratify_on_the_gpu_equals_the_cpu(&prefix);
     let unknown = splat(&["stratify", "--scenes", "teapot"]);
     assert!(!unknown.status.success() && stderr(&unknown).contains("unknown scene 'teapot'"));
+}
+
+/// `splat stratify --backend gpu`: the GPU's rows at S = 4, 8, 16 beside the CPU's, the same
+/// RMSE when the CPU takes the standard pattern too (the same decisions).
+fn stratify_on_the_gpu_equals_the_cpu(prefix: &std::path::Path) {
+    let args = ["stratify", "--scenes", "plates", "--frames", "2", "--sample-pattern", "standard", "--backend", "gpu"];
+    let o = splat(&[&args[..], &["-o", prefix.to_str().unwrap()]].concat());
+    if !o.status.success() {
+        gpu_missing(&stderr(&o));
+        return;
+    }
+    let table = String::from_utf8_lossy(&o.stdout);
+    for s in [4, 8, 16] {
+        let cells = |backend: &str| {
+            let row = table.lines().find(|l| l.starts_with(&format!("| plates | {s} | {backend} | standard |")));
+            row.unwrap_or_else(|| panic!("no {backend} row at S = {s}:\n{table}"))
+                .split('|')
+                .skip(5)
+                .collect::<String>()
+        };
+        assert_eq!(cells("cpu"), cells("gpu"), "S = {s}:\n{table}");
+    }
+    assert!(table.contains("| plates | 64 | cpu | hammersley |"), "{table}");
 }
 
 #[test]
@@ -398,9 +422,10 @@ fn bench_reports_the_splatting_path() {
     }
 }
 
-/// `--backend gpu` renders the raster methods the GPU has as the CPU does (same decisions for
-/// `stochastic-splat`, same blending for `raster-sorted`, with its iso-depth image), and
-/// refuses the CPU-only raster methods and settings with a message and exit code 1.
+/// `--backend gpu` renders the raster methods as the CPU does (same decisions for the
+/// stochastic methods, same blending for `raster-sorted`, with its iso-depth image), at one
+/// sample and at four, where the GPU takes the standard pattern by default and the CPU is asked
+/// for it; what the GPU cannot do is refused with a message and exit code 1.
 #[test]
 fn gpu_raster_backend_matches_cpu_backend() {
     let render = |backend: &str, method: &str, out: &PathBuf, extra: &[&str]| {
@@ -410,15 +435,28 @@ fn gpu_raster_backend_matches_cpu_backend() {
         args.extend(extra);
         splat(&args)
     };
-    for method in ["raster-sorted", "stochastic-splat"] {
-        let (cpu_out, gpu_out) = (scratch(&format!("{method}-cpu.npy")), scratch(&format!("{method}-gpu.npy")));
-        let depth = |name: &str| scratch(&format!("{method}-{name}-depth.npy"));
+    let four = ["--raster-samples", "4"];
+    let cases: [(&str, &[&str]); 6] = [
+        ("raster-sorted", &[]),
+        ("stochastic-splat", &[]),
+        ("raster-sorted", &four),
+        ("stochastic-splat", &four),
+        ("enderton", &four),
+        ("stratified", &four),
+    ];
+    for (method, samples) in cases {
+        let tag = format!("{method}-{}", samples.len());
+        let (cpu_out, gpu_out) = (scratch(&format!("{tag}-cpu.npy")), scratch(&format!("{tag}-gpu.npy")));
+        let depth = |name: &str| scratch(&format!("{tag}-{name}-depth.npy"));
         let extra = |name: &str| {
-            if method == "raster-sorted" {
-                vec!["--depth".to_string(), depth(name).to_str().unwrap().to_string()]
-            } else {
-                vec![]
+            let mut e: Vec<String> = samples.iter().map(|s| s.to_string()).collect();
+            if name == "cpu" && !samples.is_empty() {
+                e.extend(["--sample-pattern".into(), "standard".into()]);
             }
+            if method == "raster-sorted" && samples.is_empty() {
+                e.extend(["--depth".to_string(), depth(name).to_str().unwrap().to_string()]);
+            }
+            e
         };
         let (cpu_extra, gpu_extra) = (extra("cpu"), extra("gpu"));
         let cpu_args: Vec<&str> = cpu_extra.iter().map(String::as_str).collect();
@@ -439,15 +477,20 @@ fn gpu_raster_backend_matches_cpu_backend() {
                 .fold(0.0f32, f32::max)
         };
         let d = worst(&read(&cpu_out), &read(&gpu_out));
-        assert!(d < 1e-4, "{method}: GPU and CPU backends differ by {d}");
-        if method == "raster-sorted" {
+        assert!(d < 1e-4, "{method} {samples:?}: GPU and CPU backends differ by {d}");
+        if method == "raster-sorted" && samples.is_empty() {
             let d = worst(&read(&depth("cpu")), &read(&depth("gpu")));
             assert!(d < 1e-3, "iso-depth differs by {d}");
         }
     }
     for (method, extra, message) in [
-        ("enderton", vec![], "CPU only"),
-        ("stochastic-splat", vec!["--raster-samples", "4"], "one sample per pixel"),
+        (
+            "stochastic-splat",
+            vec!["--raster-samples", "4", "--sample-pattern", "hammersley"],
+            "--sample-pattern standard",
+        ),
+        ("raster-sorted", vec!["--fragment-depth", "plane"], "max-density plane"),
+        ("raster-sorted", vec!["--raster-samples", "4", "--depth", "/tmp/never.npy"], "one sample at the pixel centre"),
         ("stochastic-splat", vec!["--depth", "/tmp/never.npy"], "come from raster-sorted only"),
     ] {
         let o = render("gpu", method, &scratch("refused.npy"), &extra);

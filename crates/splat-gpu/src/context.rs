@@ -277,7 +277,9 @@ fn msaa_counts(adapter: &wgpu::Adapter, features: wgpu::Features) -> Vec<u32> {
         .filter(|&count| {
             count == 1
                 || adapter_specific
-                    && formats.iter().all(|&f| adapter.get_texture_format_features(f).flags.sample_count_supported(count))
+                    && formats
+                        .iter()
+                        .all(|&f| adapter.get_texture_format_features(f).flags.sample_count_supported(count))
         })
         .collect()
 }

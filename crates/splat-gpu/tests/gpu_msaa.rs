@@ -89,7 +89,14 @@ fn compare_with(
     Compared { bad, near: near.len(), written, worst }
 }
 
-fn compare(ctx: &GpuContext, scene: &Scene, camera: &Camera, method: &RasterMethod, raster: RasterSettings, seed: u32) -> Compared {
+fn compare(
+    ctx: &GpuContext,
+    scene: &Scene,
+    camera: &Camera,
+    method: &RasterMethod,
+    raster: RasterSettings,
+    seed: u32,
+) -> Compared {
     compare_with(ctx, scene, camera, method, raster, raster.sample_pattern, seed)
 }
 
@@ -151,8 +158,7 @@ fn other_sample_positions_are_told_apart() {
 fn max_density_plane_frames_equal_the_cpu_frame() {
     let Some(ctx) = context() else { return };
     let (scene, camera) = fixture("layers", 64, 48);
-    let methods =
-        [RasterMethod::StochasticSplat, RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }];
+    let methods = [RasterMethod::StochasticSplat, RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }];
     for method in methods {
         for s in [1, 4] {
             for seed in [3, 4] {
@@ -169,11 +175,12 @@ fn max_density_plane_frames_equal_the_cpu_frame() {
         let frames = Frames { count: 1, seed: 3, ..Frames::default() };
         let centre = render_raster(&cpu_centre, &method, &frames, &|_| {}).unwrap();
         let gpu_scene = RasterScene::new(ctx, &scene, &settings).unwrap();
-        let plane = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(4, FragmentDepth::MaxDensityPlane))
-            .unwrap()
-            .render(&method, &frames)
-            .unwrap()
-            .0;
+        let plane =
+            GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(4, FragmentDepth::MaxDensityPlane))
+                .unwrap()
+                .render(&method, &frames)
+                .unwrap()
+                .0;
         let (differ, _) = differing(&plane, &centre, 1e-5);
         assert!(differ.len() > 20, "{method:?}: the plane depth changed only {} pixels", differ.len());
     }
@@ -193,12 +200,14 @@ fn unsupported_sample_settings_are_refused_with_a_message() {
     let hammersley = RasterSettings { samples: 4, ..RasterSettings::default() };
     let e = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &hammersley).err().unwrap().to_string();
     assert!(e.contains("--sample-pattern standard"), "{e}");
-    let plane = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(1, FragmentDepth::MaxDensityPlane))
-        .unwrap();
+    let plane =
+        GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(1, FragmentDepth::MaxDensityPlane))
+            .unwrap();
     let e = plane.render(&sorted, &frames).unwrap_err().to_string();
     assert!(e.contains("max-density plane") && e.contains("--backend cpu"), "{e}");
     for s in [2, 8, 16] {
-        let r = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(s, FragmentDepth::Center)).unwrap();
+        let r =
+            GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(s, FragmentDepth::Center)).unwrap();
         match r.render(&RasterMethod::StochasticSplat, &frames) {
             Ok(_) => assert!(ctx.msaa_counts.contains(&s), "S = {s} rendered although the adapter lacks it"),
             Err(e) => {

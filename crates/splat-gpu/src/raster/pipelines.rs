@@ -161,8 +161,13 @@ impl RasterPipelines {
     /// The render pipelines at `samples` per pixel (the one-sample set is [`RasterPipelines::single`]).
     pub(super) fn at_samples(&self, ctx: &GpuContext, samples: u32) -> Result<SamplePipelines, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipes =
-            SamplePipelines::new(&ctx.device, &self.splat_module, &self.splat_pipeline_layout, self.blend_format, samples);
+        let pipes = SamplePipelines::new(
+            &ctx.device,
+            &self.splat_module,
+            &self.splat_pipeline_layout,
+            self.blend_format,
+            samples,
+        );
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
@@ -219,11 +224,8 @@ impl SamplePipelines {
         let under =
             wgpu::BlendState { color: component(OneMinusDstAlpha, One), alpha: component(OneMinusDstAlpha, One) };
         // One sample: the centre-only entry points; S samples: those writing a sample mask.
-        let (sorted, stochastic) = if samples == 1 {
-            ("fs_sorted", "fs_stochastic")
-        } else {
-            ("fs_sorted_msaa", "fs_stochastic_msaa")
-        };
+        let (sorted, stochastic) =
+            if samples == 1 { ("fs_sorted", "fs_stochastic") } else { ("fs_sorted_msaa", "fs_stochastic_msaa") };
         Self {
             over: render(sorted, blend_format, Some(over), false),
             under: render(sorted, blend_format, Some(under), false),

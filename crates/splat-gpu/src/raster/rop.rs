@@ -88,7 +88,18 @@ impl RopPass {
                 wgpu::BindGroupEntry { binding: 21, resource: wgpu::BindingResource::TextureView(&targets.color_view) },
             ],
         });
-        Ok(Self { shuffle, pairs, pair_count, ranges, frame, keys_group, count_group, emit_group, ranges_group, rop_group })
+        Ok(Self {
+            shuffle,
+            pairs,
+            pair_count,
+            ranges,
+            frame,
+            keys_group,
+            count_group,
+            emit_group,
+            ranges_group,
+            rop_group,
+        })
     }
 
     /// Encode frame `slot` of `slots`: its parameters into place, the shuffled order, the tile
@@ -132,8 +143,8 @@ impl RopPass {
         let [tiles_x, tiles_y] = r.params.tiles;
         let tile_bits = u32::BITS - (tiles_x * tiles_y - 1).leading_zeros();
         pipes.sort.encode(ctx, encoder, &self.pairs, self.pair_count, tile_bits, None)?;
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
         pass.set_pipeline(&pipes.tile_ranges);
         pass.set_bind_group(0, &self.ranges_group, &[]);
         let (px, py) = groups(self.pair_count.div_ceil(256));
