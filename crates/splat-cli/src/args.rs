@@ -158,6 +158,14 @@ pub struct MethodOptions {
 }
 
 impl MethodArg {
+    /// Whether the method is one of the splatting (raster) family.
+    pub fn is_raster(self) -> bool {
+        matches!(
+            self,
+            MethodArg::RasterSorted | MethodArg::StochasticSplat | MethodArg::Enderton | MethodArg::Stratified
+        )
+    }
+
     /// The method's name on the command line (`stochastic-n`, …).
     pub fn name(self) -> String {
         clap::ValueEnum::to_possible_value(&self).map(|v| v.get_name().to_string()).unwrap_or_default()

@@ -73,7 +73,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if args.pipelines {
         return run_pipelines(&args);
     }
-    let raster = args.methods.iter().any(|m| matches!(m, MethodArg::RasterSorted | MethodArg::StochasticSplat));
+    let raster = args.methods.iter().any(|m| m.is_raster());
     let ctx = crate::args::gpu_context(args.scene.backend)?;
     if raster {
         return match &ctx {
@@ -280,13 +280,23 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     Ok(())
 }
 
-/// The splatting path on the GPU, stage by stage in one run: projection, depth sort, sorted
-/// (over) draw, and a StochasticSplats draw at 1 spp; frames as ratios to the sorted frame.
+/// The splatting path on the GPU: at one sample per pixel, stage by stage in one run
+/// (projection, depth sort, sorted (over) draw, and a StochasticSplats draw at 1 spp; frames as
+/// ratios to the sorted frame); then the frame of every raster method named, at
+/// `--raster-samples`, against raster-sorted's in the same run ([`raster_methods_gpu`]).
 fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let (scene, camera) = args.scene.load(1200, 800)?;
     let pipes = splat_gpu::RasterPipelines::new(ctx)?;
     let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &args.scene.settings())?;
-    let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &args.options.raster_settings())?;
+    let settings = match args.options.on_gpu(args.options.resolve(MethodArg::RasterSorted)) {
+        splat_core::Algorithm::Raster(_, settings) => settings,
+        _ => unreachable!("raster-sorted resolves to a raster algorithm"),
+    };
+    let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &settings)?;
+    if settings.samples > 1 || settings.fragment_depth != splat_core::raster::FragmentDepth::Center {
+        println!("{} particles on {}, {}×{}\n", scene.particles.len(), ctx.describe(), camera.width, camera.height);
+        return raster_methods_gpu(args, &raster, &settings);
+    }
     let t = raster.profile(args.repeat)?;
     let visible = raster.order()?.len();
     let n = scene.particles.len();
@@ -317,6 +327,66 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         ms(t.stochastic_frame()),
         ms(t.stochastic_frame()) / sorted
     );
+    println!();
+    raster_methods_gpu(args, &raster, &settings)
+}
+
+/// The frame of each raster method of `args.methods` on the GPU at `settings` (raster-sorted
+/// first, the baseline, and StochasticSplats at both fragment depths: the max-density plane
+/// writes frag_depth per sample, which turns off early depth tests), fastest of `--repeat` runs
+/// of `--spp` frames after one untimed run. A frame is its draw (or raster operations, with the
+/// per-frame shuffle and binning of Enderton and stratified) and the fold; the projection and
+/// depth sort run once per camera and are not in it.
+fn raster_methods_gpu(
+    args: &BenchArgs,
+    raster: &splat_gpu::GpuRasterizer,
+    settings: &splat_core::raster::RasterSettings,
+) -> Result<()> {
+    use splat_core::raster::{FragmentDepth, RasterSettings};
+    let mut methods = vec![MethodArg::RasterSorted];
+    methods.extend(args.methods.iter().copied().filter(|&m| m.is_raster() && m != MethodArg::RasterSorted));
+    println!(
+        "{} samples per pixel ({} pattern), {} frames per run, fastest of {} runs\n",
+        settings.samples,
+        settings.sample_pattern.name(),
+        args.spp,
+        args.repeat.max(1)
+    );
+    println!("| method | fragment depth | frame (ms) | cost vs raster-sorted |");
+    println!("|---|---|---:|---:|");
+    let mut baseline = None;
+    for m in methods {
+        let splat_core::Algorithm::Raster(method, _) = args.options.resolve(m) else { continue };
+        let depths: &[FragmentDepth] = match m {
+            MethodArg::RasterSorted => &[FragmentDepth::Center],
+            MethodArg::StochasticSplat => &[FragmentDepth::Center, FragmentDepth::MaxDensityPlane],
+            _ => &[settings.fragment_depth],
+        };
+        for &depth in depths {
+            let at = RasterSettings { fragment_depth: depth, ..*settings };
+            let gpu = raster.with_settings(&at)?;
+            let frames = Frames { count: args.spp, seed: 1, ..Frames::default() };
+            let label = if depth == FragmentDepth::Center { "centre" } else { "max-density plane" };
+            let mut best = f64::INFINITY;
+            for run in 0..=args.repeat.max(1) {
+                match gpu.render(&method, &frames) {
+                    Ok((_, stats)) if run > 0 => {
+                        let rendered = if method.is_stochastic() { args.spp } else { 1 };
+                        best = best.min(stats.gpu_time.as_secs_f64() / f64::from(rendered));
+                    }
+                    Ok(_) => {}
+                    Err(e) => {
+                        println!("| {} | {label} | refused: {e} | |", m.name());
+                        break;
+                    }
+                }
+            }
+            if best.is_finite() {
+                let base = *baseline.get_or_insert(best);
+                println!("| {} | {label} | {:.2} | {:.2}× |", m.name(), 1e3 * best, best / base);
+            }
+        }
+    }
     Ok(())
 }
 

@@ -246,6 +246,11 @@ impl<'a> GpuRasterizer<'a> {
         Ok(raster)
     }
 
+    /// The same scene and camera at other raster settings (projected and sorted anew).
+    pub fn with_settings(&self, raster: &RasterSettings) -> Result<GpuRasterizer<'a>, GpuError> {
+        Self::new(self.ctx, self.pipes, self.scene, &self.camera, raster)
+    }
+
     /// The mesh pre-pass, once per camera: each pixel's nearest mesh and its forward-shaded
     /// colour (`shaders/mesh_prepass.wgsl`).
     fn encode_mesh_prepass(&self, encoder: &mut wgpu::CommandEncoder) {
