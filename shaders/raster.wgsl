@@ -341,6 +341,13 @@ fn tile_blend(
 @group(0) @binding(20) var<storage, read> rop_offsets: array<vec2<f32>>;
 // The frame's resolved colour and coverage, folded by fold.wgsl.
 @group(0) @binding(21) var rop_target: texture_storage_2d<rgba32float, write>;
+// Each pixel's raster-operation state between the chunks of its tile list: depth bits and id
+// of every sample, the surface's coverage and id (2 S + 2 words).
+@group(0) @binding(22) var<storage, read_write> rop_state: array<u32>;
+// This dispatch's chunk of every tile's list: (index, length, count). lavapipe stops a shader
+// invocation's loops after 65,535 iterations in all, so the host cuts the lists into chunks
+// that stay below it (one chunk on other adapters).
+@group(0) @binding(23) var<uniform> rop_chunk: vec4<u32>;
 
 // Reserved ids of the hashes (raster/mod.rs ORDER_ID, SURFACE_ID) and Enderton's ξ slot.
 const ORDER_ID: u32 = 4294967293u;
@@ -503,17 +510,30 @@ fn tile_rop(
     if (l == 0u) {
         tile_range = ranges[tile];
     }
-    let range = workgroupUniformLoad(&tile_range);
+    let tile_list = workgroupUniformLoad(&tile_range);
+    // This chunk of the tile's list.
+    let first = min(tile_list.x + rop_chunk.x * rop_chunk.y, tile_list.y);
+    let range = vec2<u32>(first, min(tile_list.y, first + rop_chunk.y));
     let spp = params.samples;
+    let pixel = px.y * params.size.x + px.x;
+    let state = pixel * (2u * spp + 2u);
     var rop: Rop;
-    for (var i = 0u; i < ROP_SAMPLES; i++) {
+    var surface = xxhash32(vec3<u32>(rop_frame.key, SURFACE_ID, 0u));
+    var covered = 0u;
+    for (var i = 0u; i < spp; i++) {
         rop.t[i] = EMPTY_DEPTH;
         rop.id[i] = NONE;
+        if (inside && rop_chunk.x > 0u) {
+            rop.t[i] = bitcast<f32>(rop_state[state + i]);
+            rop.id[i] = rop_state[state + spp + i];
+        }
+    }
+    if (inside && rop_chunk.x > 0u) {
+        covered = rop_state[state + 2u * spp];
+        surface = rop_state[state + 2u * spp + 1u];
     }
     let pixel_seed = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
     let pixel_id = hilbert_index(params.hilbert_order, px.x, px.y);
-    var surface = xxhash32(vec3<u32>(rop_frame.key, SURFACE_ID, 0u));
-    var covered = 0u;
     for (var start = range.x; start < range.y; start += BATCH) {
         if (l < BATCH && start + l < range.y) {
             batch[l] = splats[order[pair_ranks[start + l]]];
@@ -559,7 +579,14 @@ fn tile_rop(
         }
         workgroupBarrier();
     }
-    if (inside) {
+    if (inside && rop_chunk.x + 1u < rop_chunk.z) {
+        for (var i = 0u; i < spp; i++) {
+            rop_state[state + i] = bitcast<u32>(rop.t[i]);
+            rop_state[state + spp + i] = rop.id[i];
+        }
+        rop_state[state + 2u * spp] = covered;
+        rop_state[state + 2u * spp + 1u] = surface;
+    } else if (inside) {
         // raster/mod.rs `resolve`: the mean of the samples, the background where none was written.
         var color = vec3<f32>(0.0);
         var written = 0u;

@@ -229,3 +229,28 @@ fn unsupported_sample_settings_are_refused_with_a_message() {
         assert!(e.contains("lit") && e.contains("--backend cpu"), "{method:?}: {e}");
     }
 }
+
+/// A view of the bonsai capture whose tiles hold more splats than lavapipe's loop budget lets one
+/// dispatch walk: Enderton and stratified take the lists in chunks (the state kept between
+/// them), and the frame still equals the CPU's at S = 4.
+#[test]
+fn long_tile_lists_are_walked_in_chunks_and_equal_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let Some(bonsai) = splat_tests::bonsai() else { return };
+    let camera = splat_tests::bonsai_camera().rescaled(300, 200).unwrap().crop(112, 80, 64, 16).unwrap();
+    let scene = splat_tests::in_view(&bonsai, &camera);
+    let settings = RenderSettings::default();
+    let gpu_scene = RasterScene::new(ctx, &scene, &settings).unwrap();
+    let raster = standard(4, FragmentDepth::Center);
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &raster).unwrap();
+    let (chunk, chunks) = gpu.raster_operation_chunks().unwrap();
+    eprintln!("{} splats in view, lists walked {chunk} splats at a time in {chunks} chunks", scene.particles.len());
+    if ctx.info.device_type == wgpu::DeviceType::Cpu {
+        assert!(chunks > 1, "the view should need several chunks on lavapipe");
+    }
+    for method in [RasterMethod::Enderton, RasterMethod::Stratified { scramble: true }] {
+        let c = compare(ctx, &scene, &camera, &method, raster, 3);
+        eprintln!("bonsai {method:?}: {} near, max |Δ| {:.1e}", c.near, c.worst);
+        assert!(c.written > 64 * 16 / 2 && c.bad.is_empty(), "bonsai {method:?}: pixels {:?} differ", c.bad);
+    }
+}

@@ -41,17 +41,6 @@ fn with_raster<T>(
     test(&raster)
 }
 
-/// The particles of `scene` whose splats reach `camera`'s image, in id order: the same image
-/// (the others cover none of its pixels), and a frame costs what the crop needs rather than
-/// the whole capture (lavapipe runs the vertex stage of every instance: 66 ms a frame for the
-/// bonsai's 273k splats).
-fn in_view(scene: &Scene, camera: &Camera) -> Scene {
-    let r = Rasterizer::new(scene, camera, RenderSettings::default(), RasterSettings::default()).unwrap();
-    let mut ids: Vec<u32> = r.splats().iter().map(|s| s.id).collect();
-    ids.sort_unstable();
-    Scene { particles: ids.iter().map(|&i| scene.particles[i as usize].clone()).collect(), sh_degree: scene.sh_degree }
-}
-
 /// Every opacity scaled by `factor`: a renderer whose alphas are biased.
 fn scaled(scene: &Scene, factor: f32) -> Scene {
     let mut s = scene.clone();
@@ -77,7 +66,7 @@ fn gpu_stochastic_splat_is_unbiased_and_the_control_is_rejected() {
             .collect();
     if let Some(bonsai) = splat_tests::bonsai() {
         let camera = splat_tests::bonsai_camera().crop(560, 180, 32, 24).unwrap();
-        cases.push(("bonsai", in_view(&bonsai, &camera), camera));
+        cases.push(("bonsai", splat_tests::in_view(&bonsai, &camera), camera));
     }
     for (name, scene, camera) in &cases {
         with_raster(ctx, &pipes, scene, camera, |raster| {

@@ -6,6 +6,12 @@
 //! (every particle keyed by a hash of its id and the frame, radix sorted), the tile lists
 //! binned in that order (the depth pick's binning with the shuffled order), and `tile_rop`,
 //! which writes the frame's resolved colour to the target the fold reads.
+//!
+//! lavapipe stops an invocation's loops after [`crate::LOOP_BUDGET`] iterations in all (every
+//! loop of the inlined shader counts, for the SIMD group as a whole), silently: a tile of the
+//! bonsai at 300 × 200 holds tens of thousands of splats. On a CPU adapter the lists are
+//! therefore walked in chunks, one dispatch each, that stay below the budget, the pixels' state
+//! kept in a buffer between them; other adapters take each list in one chunk.
 
 use super::*;
 
@@ -21,6 +27,17 @@ pub(super) struct RopPass {
     emit_group: wgpu::BindGroup,
     ranges_group: wgpu::BindGroup,
     rop_group: wgpu::BindGroup,
+    /// The current chunk (index, length, count), and every chunk's, copied in before its dispatch.
+    chunk: wgpu::Buffer,
+    chunks: wgpu::Buffer,
+    chunk_count: u32,
+}
+
+/// Most loop iterations one fragment of the raster operations can cost at S samples (its
+/// iteration of the list, the coverage loop, Enderton's writes or stratified's insertion sort
+/// and tests), bounding the fragments a chunk may hold.
+fn iterations_per_fragment(samples: u32) -> u32 {
+    2 + samples + samples * (samples - 1) / 2 + 2 * samples
 }
 
 impl RopPass {
@@ -29,6 +46,27 @@ impl RopPass {
     pub(super) fn new(r: &GpuRasterizer, targets: &Targets) -> Result<Self, GpuError> {
         let (ctx, pipes, n) = (r.ctx, r.pipes, r.scene.count);
         let pair_count = r.pair_count()?;
+        let (chunk_len, chunk_count) = r.raster_operation_chunks()?;
+        let table: Vec<[u32; 4]> = (0..chunk_count).map(|c| [c, chunk_len, chunk_count, 0]).collect();
+        let chunks = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("rop chunks"),
+            contents: bytemuck::cast_slice(&table),
+            usage: wgpu::BufferUsages::COPY_SRC,
+        });
+        let chunk = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rop chunk"),
+            size: 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let pixels = u64::from(r.camera.width * r.camera.height);
+        let words = if chunk_count > 1 { pixels * u64::from(2 * r.raster.samples + 2) } else { 1 };
+        let state = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rop state"),
+            size: words * 4,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         let shuffle = pipes.sort.buffers(ctx, n + 1)?;
         let pairs = pipes.sort.buffers(ctx, pair_count.max(1))?;
         let [tiles_x, tiles_y] = r.params.tiles;
@@ -86,6 +124,8 @@ impl RopPass {
                 wgpu::BindGroupEntry { binding: 19, resource: frame.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 20, resource: r.sample_offsets.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 21, resource: wgpu::BindingResource::TextureView(&targets.color_view) },
+                wgpu::BindGroupEntry { binding: 22, resource: state.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
             ],
         });
         Ok(Self {
@@ -99,6 +139,9 @@ impl RopPass {
             emit_group,
             ranges_group,
             rop_group,
+            chunk,
+            chunks,
+            chunk_count,
         })
     }
 
@@ -143,20 +186,61 @@ impl RopPass {
         let [tiles_x, tiles_y] = r.params.tiles;
         let tile_bits = u32::BITS - (tiles_x * tiles_y - 1).leading_zeros();
         pipes.sort.encode(ctx, encoder, &self.pairs, self.pair_count, tile_bits, None)?;
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
-        pass.set_pipeline(&pipes.tile_ranges);
-        pass.set_bind_group(0, &self.ranges_group, &[]);
-        let (px, py) = groups(self.pair_count.div_ceil(256));
-        pass.dispatch_workgroups(px, py, 1);
-        pass.set_pipeline(r.rop_pipeline());
-        pass.set_bind_group(0, &self.rop_group, &[]);
-        pass.dispatch_workgroups(tiles_x, tiles_y, 1);
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("tile ranges"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&pipes.tile_ranges);
+            pass.set_bind_group(0, &self.ranges_group, &[]);
+            let (px, py) = groups(self.pair_count.div_ceil(256));
+            pass.dispatch_workgroups(px, py, 1);
+        }
+        for c in 0..self.chunk_count {
+            encoder.copy_buffer_to_buffer(&self.chunks, u64::from(c) * 16, &self.chunk, 0, 16);
+            let mut pass = encoder
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
+            pass.set_pipeline(r.rop_pipeline());
+            pass.set_bind_group(0, &self.rop_group, &[]);
+            pass.dispatch_workgroups(tiles_x, tiles_y, 1);
+        }
         Ok(())
     }
 }
 
 impl GpuRasterizer<'_> {
+    /// The most splats any tile's list holds (the same in every draw order), counted from the
+    /// projected rects.
+    fn longest_tile_list(&self) -> Result<u32, GpuError> {
+        let [tiles_x, tiles_y] = self.params.tiles;
+        let mut lengths = vec![0u32; (tiles_x * tiles_y) as usize];
+        for s in self.splats()? {
+            let [x0, y0, x1, y1] = s.rect;
+            if x0 >= x1 || y0 >= y1 {
+                continue;
+            }
+            for ty in y0 / TILE..=(y1 - 1) / TILE {
+                for tx in x0 / TILE..=(x1 - 1) / TILE {
+                    lengths[(ty * tiles_x + tx) as usize] += 1;
+                }
+            }
+        }
+        Ok(lengths.into_iter().max().unwrap_or(0))
+    }
+
+    /// How Enderton and stratified walk each tile's list: (splats per chunk, chunks), one chunk
+    /// on a hardware adapter, chunks within lavapipe's loop budget on a CPU adapter.
+    pub fn raster_operation_chunks(&self) -> Result<(u32, u32), GpuError> {
+        let longest = self.longest_tile_list()?.max(1);
+        let chunk_len = if self.ctx.info.device_type == wgpu::DeviceType::Cpu {
+            // A margin of 5,000 iterations for the loops outside the list (setup, resolve).
+            ((crate::LOOP_BUDGET - 5_000) / iterations_per_fragment(self.raster.samples)).min(longest)
+        } else {
+            longest
+        };
+        Ok((chunk_len, longest.div_ceil(chunk_len)))
+    }
+
     /// The raster-operations kernel of this rasterizer's fragment depth.
     fn rop_pipeline(&self) -> &wgpu::ComputePipeline {
         &self.pipes.tile_rop[usize::from(self.raster.fragment_depth == FragmentDepth::MaxDensityPlane)]
