@@ -285,6 +285,11 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
             if !matches!(method, splat_core::raster::RasterMethod::Sorted { .. }) {
                 return unsupported("the GPU hybrid rasterizes its first hit with raster-sorted: add --backend cpu");
             }
+            if raster.samples > 1 || raster.fragment_depth != splat_core::raster::FragmentDepth::Center {
+                return unsupported(
+                    "the GPU hybrid's first hit is one sample at the pixel centre and centre depth: add --backend cpu",
+                );
+            }
             GpuRasterizer::supports(method, raster)?;
             GpuTracer::supports(secondary)?;
             Ok(())
@@ -299,7 +304,7 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
             Ok(())
         }
         Algorithm::Raster(method, raster) => {
-            GpuRasterizer::supports(method, raster)?;
+            GpuRasterizer::supports_scene(method, raster, lighting.is_on(), !world.meshes.is_empty())?;
             let sorted = matches!(method, splat_core::raster::RasterMethod::Sorted { .. });
             if (args.depth.is_some() || args.normal.is_some()) && !sorted {
                 return unsupported("on the GPU, --depth and --normal come from raster-sorted only: add --backend cpu");

@@ -122,11 +122,11 @@ pub fn run(args: StratifyArgs) -> Result<()> {
             if IMAGE_SAMPLES.contains(&samples) {
                 tiles.push(vec![theirs_image, ours_image, reference]);
             }
-            if let (Some(ctx), Some(pipes)) = (&ctx, &pipes) {
-                if SamplePattern::Standard.has(samples) {
-                    let (ours, theirs) = gpu_rmse(ctx, pipes, &scene, &camera, settings, samples, args.frames)?;
-                    row(name, samples, "gpu", SamplePattern::Standard, ours, theirs);
-                }
+            if let (Some(ctx), Some(pipes)) = (&ctx, &pipes)
+                && SamplePattern::Standard.has(samples)
+            {
+                let (ours, theirs) = gpu_rmse(ctx, pipes, &scene, &camera, settings, samples, args.frames)?;
+                row(name, samples, "gpu", SamplePattern::Standard, ours, theirs);
             }
         }
     }

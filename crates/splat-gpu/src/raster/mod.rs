@@ -335,7 +335,7 @@ impl<'a> GpuRasterizer<'a> {
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
         Self::supports(method, &self.raster)?;
         let draw = Draw::of(method);
-        self.check_scene(draw)?;
+        self.check_scene(draw, method)?;
         if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
         }
@@ -393,29 +393,45 @@ impl<'a> GpuRasterizer<'a> {
         Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
     }
 
-    /// What the scene and the adapter allow `draw` at these settings: the mesh pre-pass and the
-    /// lighting have one sample at the pixel centre, so meshes and lights go with one sample at
-    /// centre depth; the compute raster operations are unlit and mesh-free; a render pipeline
-    /// multisamples at the counts the adapter has.
-    fn check_scene(&self, draw: Draw) -> Result<(), GpuError> {
+    /// What the scene and the adapter allow `draw` at these settings ([`GpuRasterizer::supports_scene`]),
+    /// and a render pipeline multisamples at the counts the adapter has.
+    fn check_scene(&self, draw: Draw, method: &RasterMethod) -> Result<(), GpuError> {
+        Self::supports_scene(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
         let s = self.raster.samples;
-        let plane = self.raster.fragment_depth == FragmentDepth::MaxDensityPlane;
-        let refuse = |what: String| Err(GpuError::Unsupported(format!("{what}: use --backend cpu")));
-        if self.scene.has_meshes && (s > 1 || plane || draw.is_rop()) {
-            return refuse(format!(
-                "meshes on the GPU rasterizer go with one sample per pixel, centre depth and raster-sorted or stochastic-splat (the mesh pre-pass is one sample at the pixel centre), not {draw:?} at {s} samples"
-            ));
-        }
-        if self.scene.is_lit() && (s > 1 || plane || draw.is_rop()) {
-            return refuse(format!(
-                "lit splatting on the GPU goes with one sample per pixel, centre depth and raster-sorted or stochastic-splat (each fragment is lit once at the pixel centre), not {draw:?} at {s} samples"
-            ));
-        }
         if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
-            return refuse(format!(
-                "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter)",
+            return Err(GpuError::Unsupported(format!(
+                "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter): use --backend cpu",
                 self.ctx.info.name, self.ctx.msaa_counts
-            ));
+            )));
+        }
+        Ok(())
+    }
+
+    /// Whether the GPU rasterizes `method` at `settings` in a scene that is `lit` or has
+    /// `meshes`: the mesh pre-pass and the lighting have one sample at the pixel centre, so
+    /// meshes and lights go with one sample at centre depth, and with sorted splatting or
+    /// StochasticSplats (the compute raster operations of Enderton and stratified are unlit and
+    /// mesh-free).
+    pub fn supports_scene(
+        method: &RasterMethod,
+        settings: &RasterSettings,
+        lit: bool,
+        meshes: bool,
+    ) -> Result<(), GpuError> {
+        Self::supports(method, settings)?;
+        let (s, draw) = (settings.samples, Draw::of(method));
+        let plane = settings.fragment_depth == FragmentDepth::MaxDensityPlane;
+        let what = match (lit, meshes) {
+            (true, true) => "lit splatting among meshes",
+            (true, false) => "lit splatting",
+            (false, true) => "splatting among meshes",
+            (false, false) => return Ok(()),
+        };
+        if s > 1 || plane || draw.is_rop() {
+            return Err(GpuError::Unsupported(format!(
+                "{what} on the GPU goes with one sample per pixel, centre depth and raster-sorted or stochastic-splat (lights and the mesh pre-pass are evaluated once at the pixel centre), not {draw:?} at {s} samples and {:?} depth: use --backend cpu",
+                settings.fragment_depth
+            )));
         }
         Ok(())
     }
