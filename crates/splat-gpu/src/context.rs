@@ -23,6 +23,9 @@ pub struct GpuContext {
     /// The sample counts the rasterizer's targets (RGBA32F, the blend format and Depth32F)
     /// multisample at on this adapter: 1, and those of 2, 4, 8 and 16 that every format has.
     pub msaa_counts: Vec<u32>,
+    /// Whether the device shades per sample (wgpu's `MULTISAMPLED_SHADING`), which the
+    /// max-density-plane depth of StochasticSplats needs.
+    pub sample_rate_shading: bool,
     /// Most frames one dispatch of the ray tracer renders ([`crate::FRAMES_PER_DISPATCH`] by
     /// default).
     pub frames_per_dispatch: u32,
@@ -68,6 +71,8 @@ impl GpuContext {
                 | wgpu::Features::FLOAT32_BLENDABLE
                 | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
         let msaa_counts = msaa_counts(&adapter, required_features);
+        let sample_rate_shading =
+            adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::MULTISAMPLED_SHADING);
         // The kernels bind five storage buffers per stage (downlevel defaults allow four):
         // ask for what the adapter offers.
         let required_limits = limits.clone();
@@ -90,6 +95,7 @@ impl GpuContext {
             timestamps,
             uniform_alignment,
             msaa_counts,
+            sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
         })
     }

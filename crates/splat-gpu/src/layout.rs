@@ -656,9 +656,14 @@ pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> 
 pub(crate) mod wgsl_check {
     /// Parse and validate `source` with no optional capability (so no subgroup operations).
     pub(crate) fn validate(name: &str, source: &str) {
+        validate_with(name, source, naga::valid::Capabilities::empty());
+    }
+
+    /// Parse and validate `source` with only the optional `capabilities`.
+    pub(crate) fn validate_with(name: &str, source: &str, capabilities: naga::valid::Capabilities) {
         let module =
             naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
     }

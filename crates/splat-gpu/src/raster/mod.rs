@@ -74,6 +74,16 @@ pub const SPLAT_WGSL: &str = concat!(
     include_str!("../../../../shaders/raster_lighting.wgsl"),
     include_str!("../../../../shaders/splat.wgsl")
 );
+/// WGSL of the splatting render pipeline with the max-density-plane entry point, which needs
+/// sample-rate shading.
+pub const SPLAT_PLANE_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/raster_types.wgsl"),
+    include_str!("../../../../shaders/lighting.wgsl"),
+    include_str!("../../../../shaders/raster_lighting.wgsl"),
+    include_str!("../../../../shaders/splat.wgsl"),
+    include_str!("../../../../shaders/splat_plane.wgsl")
+);
 /// WGSL of the mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3).
 pub const MESH_PREPASS_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
@@ -542,7 +552,7 @@ impl<'a> GpuRasterizer<'a> {
             },
         };
         let plane = self.raster.fragment_depth == FragmentDepth::MaxDensityPlane;
-        let pipeline = pipelines.get(draw, self.scene.is_lit(), plane);
+        let pipeline = pipelines.get(draw, self.scene.is_lit(), plane)?;
         let bg = self.scene.settings.background.as_dvec3();
         // Over and stochastic frames start from the background; under accumulates premultiplied
         // colour from zero and the fold adds the background behind the remaining transmittance.
@@ -694,7 +704,7 @@ impl FrameSlots {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::layout::wgsl_check::{assert_constants, assert_mirrors, validate};
+    use crate::layout::wgsl_check::{assert_constants, assert_mirrors, validate, validate_with};
 
     /// Every constant the raster shaders share with the core has the core's value, and the
     /// draw modes equal the pipeline's [`Draw`] codes.
@@ -779,5 +789,6 @@ mod tests {
         for (name, source) in modules {
             validate(name, source);
         }
+        validate_with("splat (plane)", SPLAT_PLANE_WGSL, naga::valid::Capabilities::MULTISAMPLED_SHADING);
     }
 }

@@ -15,6 +15,8 @@ pub struct RasterPipelines {
     pub(super) tile_rop: [wgpu::ComputePipeline; 2],
     pub(super) mesh_prepass: wgpu::ComputePipeline,
     pub(super) splat_module: wgpu::ShaderModule,
+    /// The same with the max-density-plane entry point, where the device shades per sample.
+    pub(super) plane_module: Option<wgpu::ShaderModule>,
     pub(super) splat_layout: wgpu::BindGroupLayout,
     pub(super) splat_pipeline_layout: wgpu::PipelineLayout,
     /// The one-sample pipelines.
@@ -34,7 +36,7 @@ pub(crate) struct SamplePipelines {
     pub(super) under: wgpu::RenderPipeline,
     pub(super) stochastic: wgpu::RenderPipeline,
     pub(super) stochastic_lit: Option<wgpu::RenderPipeline>,
-    pub(super) stochastic_plane: wgpu::RenderPipeline,
+    pub(super) stochastic_plane: Option<wgpu::RenderPipeline>,
 }
 
 /// Colour target of a stochastic frame (written, never blended).
@@ -55,6 +57,7 @@ impl RasterPipelines {
         };
         let raster = module("raster.wgsl", RASTER_WGSL);
         let splat_module = module("splat.wgsl", SPLAT_WGSL);
+        let plane_module = ctx.sample_rate_shading.then(|| module("splat.wgsl (plane)", SPLAT_PLANE_WGSL));
         let fold = module("fold.wgsl", FOLD_WGSL);
         let fold_msaa = module("fold.wgsl (msaa)", FOLD_MSAA_WGSL);
         let mesh_prepass = module("mesh_prepass.wgsl", MESH_PREPASS_WGSL);
@@ -119,7 +122,8 @@ impl RasterPipelines {
                 cache: None,
             })
         };
-        let single = SamplePipelines::new(device, &splat_module, &splat_pipeline_layout, blend_format, 1);
+        let modules = (&splat_module, plane_module.as_ref());
+        let single = SamplePipelines::new(device, modules, &splat_pipeline_layout, blend_format, 1);
         let pipes = Self {
             project: compute_pipeline(device, &raster, None, "project"),
             tile_count: compute_pipeline(device, &raster, None, "tile_count"),
@@ -138,6 +142,7 @@ impl RasterPipelines {
             ),
             single,
             splat_module,
+            plane_module,
             splat_layout,
             splat_pipeline_layout,
             fold_layout,
@@ -161,13 +166,8 @@ impl RasterPipelines {
     /// The render pipelines at `samples` per pixel (the one-sample set is [`RasterPipelines::single`]).
     pub(super) fn at_samples(&self, ctx: &GpuContext, samples: u32) -> Result<SamplePipelines, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipes = SamplePipelines::new(
-            &ctx.device,
-            &self.splat_module,
-            &self.splat_pipeline_layout,
-            self.blend_format,
-            samples,
-        );
+        let modules = (&self.splat_module, self.plane_module.as_ref());
+        let pipes = SamplePipelines::new(&ctx.device, modules, &self.splat_pipeline_layout, self.blend_format, samples);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
@@ -178,12 +178,12 @@ impl RasterPipelines {
 impl SamplePipelines {
     fn new(
         device: &wgpu::Device,
-        module: &wgpu::ShaderModule,
+        (splat, plane): (&wgpu::ShaderModule, Option<&wgpu::ShaderModule>),
         layout: &wgpu::PipelineLayout,
         blend_format: wgpu::TextureFormat,
         samples: u32,
     ) -> Self {
-        let render = |entry, format, blend: Option<wgpu::BlendState>, depth: bool| {
+        let render_from = |module, entry, format, blend: Option<wgpu::BlendState>, depth: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(entry),
                 layout: Some(layout),
@@ -212,6 +212,7 @@ impl SamplePipelines {
                 cache: None,
             })
         };
+        let render = |entry, format, blend, depth| render_from(splat, entry, format, blend, depth);
         let component =
             |src, dst| wgpu::BlendComponent { src_factor: src, dst_factor: dst, operation: wgpu::BlendOperation::Add };
         use wgpu::BlendFactor::{One, OneMinusDstAlpha, OneMinusSrcAlpha, SrcAlpha};
@@ -231,19 +232,23 @@ impl SamplePipelines {
             under: render(sorted, blend_format, Some(under), false),
             stochastic: render(stochastic, STOCHASTIC_FORMAT, None, true),
             stochastic_lit: (samples == 1).then(|| render("fs_stochastic_lit", STOCHASTIC_FORMAT, None, true)),
-            stochastic_plane: render("fs_stochastic_plane", STOCHASTIC_FORMAT, None, true),
+            stochastic_plane: plane.map(|m| render_from(m, "fs_stochastic_plane", STOCHASTIC_FORMAT, None, true)),
         }
     }
 
     /// The pipeline that draws `draw` (lit: StochasticSplats' shaded variant; plane: the
     /// max-density-plane depth).
-    pub(super) fn get(&self, draw: Draw, lit: bool, plane: bool) -> &wgpu::RenderPipeline {
-        match draw {
+    pub(super) fn get(&self, draw: Draw, lit: bool, plane: bool) -> Result<&wgpu::RenderPipeline, GpuError> {
+        Ok(match draw {
             Draw::Over => &self.over,
             Draw::Under => &self.under,
-            Draw::Stochastic if plane => &self.stochastic_plane,
+            Draw::Stochastic if plane => self.stochastic_plane.as_ref().ok_or_else(|| {
+                GpuError::Unsupported(
+                    "the max-density-plane depth shades per sample, which this adapter cannot (wgpu's MULTISAMPLED_SHADING): use --backend cpu".into(),
+                )
+            })?,
             Draw::Stochastic if lit => self.stochastic_lit.as_ref().unwrap_or(&self.stochastic),
             _ => &self.stochastic,
-        }
+        })
     }
 }
