@@ -12,7 +12,7 @@ use splat_core::frame::RenderOutput;
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SamplePattern, render_raster};
 use splat_core::{Camera, Frames, RenderSettings, Scene};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
-use splat_tests::harness::{FAULTS, MONTE_CARLO_SLOPE, StatTest, assert_power};
+use splat_tests::harness::{FAULTS, Fault, MONTE_CARLO_SLOPE, StatTest, assert_power};
 use std::sync::OnceLock;
 
 const F: u32 = 256;
@@ -56,8 +56,9 @@ fn base() -> Frames {
 
 /// Each method passes the z-test on overlapping layers (every pixel has the four sheets' edges
 /// or overlaps; F = 256, variance from 1024 more frames); stratified without the scramble is
-/// rejected; the power study of each method (docs/power.md): every 2 % error visible at this
-/// budget (opacity × 1.02 among them) is rejected. Lavapipe's cost sets the fixture: a frame of
+/// rejected; the power study of each method (docs/power.md; Enderton and stratified without the
+/// radiance rows): every 2 % error visible at this budget (opacity × 1.02 among them) is
+/// rejected. Lavapipe's cost sets the fixture: a frame of
 /// the 3000-splat cloud takes 60 ms in the raster-operations kernel against 2.4 ms here (the
 /// frame equality of tests/gpu_msaa.rs covers the cloud and the ramp).
 #[test]
@@ -77,7 +78,13 @@ fn gpu_msaa_methods_are_unbiased_and_the_controls_are_rejected() {
         stat("GPU layers unscrambled stratified S=4".into(), gpu, control, truth.clone()).assert_rejected(base());
     });
     for (name, method) in UNBIASED {
-        assert_power(&format!("gpu-raster layers {name} S=4"), &FAULTS, |fault| {
+        // The radiance faults go through the resolve, which tests/gpu_msaa.rs proves equal to
+        // the CPU's; the raster operations' frames cost 4× the hardware path's on lavapipe.
+        let faults: &[Fault] = match method {
+            RasterMethod::StochasticSplat => &FAULTS,
+            _ => &[Fault::Opacity(1.01), Fault::Opacity(1.02), Fault::Decision(0.01)],
+        };
+        assert_power(&format!("gpu-raster layers {name} S=4"), faults, |fault| {
             let faulty = fault.scene(&scene);
             with_gpu(ctx, &faulty, &camera, |gpu| {
                 let test = stat(format!("GPU layers {name} {fault:?}"), gpu, method, truth.clone());
