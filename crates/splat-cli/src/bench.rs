@@ -390,40 +390,44 @@ fn raster_methods_gpu(
     Ok(())
 }
 
-/// The splatting path on the CPU reference: one frame of raster-sorted and of stochastic-splat
-/// (projection, sort and binning included), as a ratio in one run.
+/// The splatting path on the CPU reference: one frame of each raster method of `args.methods`
+/// (raster-sorted first, the baseline; projection, sort and binning included) at the raster
+/// settings of the options, as ratios in one run.
 fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
-    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+    use splat_core::raster::{Rasterizer, render_raster};
     let (scene, camera) = args.scene.load(1200, 800)?;
     let pool = args.scene.pool()?;
     let settings = args.scene.settings();
+    let raster = args.options.raster_settings();
     println!(
-        "{} particles, {}×{}, CPU reference, {} threads, fastest of {} runs\n",
+        "{} particles, {}×{}, CPU reference, {} samples per pixel ({} pattern), {} threads, fastest of {} runs\n",
         scene.particles.len(),
         camera.width,
         camera.height,
+        raster.samples,
+        raster.sample_pattern.name(),
         pool.current_num_threads(),
         args.repeat.max(1)
     );
     println!("| method | frame (ms) | cost vs raster-sorted |");
     println!("|---|---:|---:|");
+    let mut methods = vec![MethodArg::RasterSorted];
+    methods.extend(args.methods.iter().copied().filter(|&m| m.is_raster() && m != MethodArg::RasterSorted));
     let mut baseline = None;
-    for (name, method) in [
-        ("raster-sorted", RasterMethod::Sorted { blend: Blend::Over }),
-        ("stochastic-splat", RasterMethod::StochasticSplat),
-    ] {
+    for m in methods {
+        let splat_core::Algorithm::Raster(method, raster) = args.options.resolve(m) else { continue };
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
             pool.install(|| -> Result<()> {
-                let r = Rasterizer::new(&scene, &camera, settings, RasterSettings::default())?;
+                let r = Rasterizer::new(&scene, &camera, settings, raster)?;
                 render_raster(&r, &method, &Frames::default(), &|_| {})?;
                 Ok(())
             })?;
             best = best.min(start.elapsed().as_secs_f64());
         }
         let base = *baseline.get_or_insert(best);
-        println!("| {name} | {:.1} | {:.2}× |", 1e3 * best, best / base);
+        println!("| {} | {:.1} | {:.2}× |", m.name(), 1e3 * best, best / base);
     }
     Ok(())
 }
