@@ -420,14 +420,86 @@ fn calc_alpha_ref(sample_id: u32, pixel_id: u32, surface_id: u32, spp: u32, scra
     return unit_f32(x);
 }
 
-// The per-sample state of one pixel (raster/mod.rs `SampleBuffer`): depth and id (= scene
-// index) of the nearest written fragment, and the surviving samples of the fragment being
-// drawn with their depths.
+// The state of one pixel (raster/mod.rs `SampleBuffer` and the locals of `stratified`): depth and
+// id (= scene index) of the nearest written fragment of each sample, the surviving samples of
+// the fragment being drawn with their depths, and the current surface's coverage bits and id.
 struct Rop {
     t: array<f32, 16>,
     id: array<u32, 16>,
     alive: array<u32, 16>,
     alive_t: array<f32, 16>,
+    covered: u32,
+    surface: u32,
+}
+
+// Words of rop_state per pixel: depth bits and id of each sample, coverage and surface id.
+fn rop_words(spp: u32) -> u32 {
+    return 2u * spp + 2u;
+}
+
+// The pixel's state at the start of this chunk: empty samples and the frame's first surface id
+// for the first chunk, else what the previous chunk stored at `at`.
+fn load_rop(at: u32, spp: u32, resume: bool) -> Rop {
+    var rop: Rop;
+    rop.surface = xxhash32(vec3<u32>(rop_frame.key, SURFACE_ID, 0u));
+    for (var i = 0u; i < spp; i++) {
+        rop.t[i] = EMPTY_DEPTH;
+        rop.id[i] = NONE;
+        if (resume) {
+            rop.t[i] = bitcast<f32>(rop_state[at + i]);
+            rop.id[i] = rop_state[at + spp + i];
+        }
+    }
+    if (resume) {
+        rop.covered = rop_state[at + 2u * spp];
+        rop.surface = rop_state[at + 2u * spp + 1u];
+    }
+    return rop;
+}
+
+// Keep the pixel's state for the next chunk.
+fn store_rop(rop: ptr<function, Rop>, at: u32, spp: u32) {
+    for (var i = 0u; i < spp; i++) {
+        rop_state[at + i] = bitcast<u32>((*rop).t[i]);
+        rop_state[at + spp + i] = (*rop).id[i];
+    }
+    rop_state[at + 2u * spp] = (*rop).covered;
+    rop_state[at + 2u * spp + 1u] = (*rop).surface;
+}
+
+// raster/mod.rs `resolve`: the mean of the samples (colour, written share), the background
+// where none was written.
+fn resolve_rop(rop: ptr<function, Rop>, spp: u32) -> vec4<f32> {
+    var color = vec3<f32>(0.0);
+    var written = 0u;
+    for (var i = 0u; i < spp; i++) {
+        if ((*rop).id[i] == NONE) {
+            color += params.background.xyz;
+        } else {
+            color += splats[(*rop).id[i]].color;
+            written++;
+        }
+    }
+    return vec4<f32>(color, f32(written)) / f32(spp);
+}
+
+// Lines 1–3 of Figure 7 (and Enderton's depth test): the samples of the pixel at `corner` that
+// splat s covers and whose stored fragment lies behind it, with their depths, into
+// rop.alive[..m]; returns (m, their mask).
+fn surviving(rop: ptr<function, Rop>, s: Splat, corner: vec2<f32>, spp: u32) -> vec2<u32> {
+    var m = 0u;
+    var mask = 0u;
+    for (var i = 0u; i < spp; i++) {
+        let p = corner + rop_offsets[i];
+        let t = fragment_depth(s, p);
+        if (covers(s, p, params) && depth_before(t, s.id, (*rop).t[i], (*rop).id[i])) {
+            (*rop).alive[m] = i;
+            (*rop).alive_t[m] = t;
+            m++;
+            mask |= 1u << i;
+        }
+    }
+    return vec2<u32>(m, mask);
 }
 
 // frame.rs `depth_before`: (t, id) strictly in front of (other_t, other_id).
@@ -471,9 +543,17 @@ fn stored_before(rop: ptr<function, Rop>, a: u32, b: u32) -> bool {
     return a < b;
 }
 
-// raster/mod.rs `stratified`, lines 9–17 of Figure 7: the survivors sorted by their stored
-// depth, then tested against the surface's reference values from n = `first` on.
-fn stratified(rop: ptr<function, Rop>, m: u32, alpha: f32, id: u32, first: u32, pixel_id: u32, surface: u32) {
+// raster/mod.rs `stratified`, lines 4–18 of Figure 7 for the m survivors (their bits `mask`):
+// a conflict with the surface's coverage starts a new surface; the survivors sorted by their
+// stored depth are tested against the surface's reference values, the sequence continuing
+// where the surface left it.
+fn stratified(rop: ptr<function, Rop>, m: u32, mask: u32, alpha: f32, id: u32, pixel_id: u32) {
+    // Lines 4–7.
+    if ((mask & (*rop).covered) != 0u) {
+        (*rop).surface += 1u;
+        (*rop).covered = 0u;
+    }
+    // Line 9.
     for (var a = 1u; a < m; a++) {
         let s = (*rop).alive[a];
         let t = (*rop).alive_t[a];
@@ -485,15 +565,19 @@ fn stratified(rop: ptr<function, Rop>, m: u32, alpha: f32, id: u32, first: u32, 
         (*rop).alive[b] = s;
         (*rop).alive_t[b] = t;
     }
+    // Lines 8, 10–17.
     let scramble = params.mode == MODE_STRATIFIED;
+    let first = countOneBits((*rop).covered);
     for (var j = 0u; j < m; j++) {
-        let reference = calc_alpha_ref(first + j, pixel_id, surface, params.samples, scramble);
+        let reference = calc_alpha_ref(first + j, pixel_id, (*rop).surface, params.samples, scramble);
         if (alpha > reference - rop_frame.u_shift) {
             let s = (*rop).alive[j];
             (*rop).t[s] = (*rop).alive_t[j];
             (*rop).id[s] = id;
         }
     }
+    // Line 18.
+    (*rop).covered |= mask;
 }
 
 @compute @workgroup_size(16, 16, 1)
@@ -515,23 +599,8 @@ fn tile_rop(
     let first = min(tile_list.x + rop_chunk.x * rop_chunk.y, tile_list.y);
     let range = vec2<u32>(first, min(tile_list.y, first + rop_chunk.y));
     let spp = params.samples;
-    let pixel = px.y * params.size.x + px.x;
-    let state = pixel * (2u * spp + 2u);
-    var rop: Rop;
-    var surface = xxhash32(vec3<u32>(rop_frame.key, SURFACE_ID, 0u));
-    var covered = 0u;
-    for (var i = 0u; i < spp; i++) {
-        rop.t[i] = EMPTY_DEPTH;
-        rop.id[i] = NONE;
-        if (inside && rop_chunk.x > 0u) {
-            rop.t[i] = bitcast<f32>(rop_state[state + i]);
-            rop.id[i] = rop_state[state + spp + i];
-        }
-    }
-    if (inside && rop_chunk.x > 0u) {
-        covered = rop_state[state + 2u * spp];
-        surface = rop_state[state + 2u * spp + 1u];
-    }
+    let at = (px.y * params.size.x + px.x) * rop_words(spp);
+    var rop = load_rop(at, spp, inside && rop_chunk.x > 0u);
     let pixel_seed = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
     let pixel_id = hilbert_index(params.hilbert_order, px.x, px.y);
     for (var start = range.x; start < range.y; start += BATCH) {
@@ -549,56 +618,22 @@ fn tile_rop(
             if (alpha <= 0.0) {
                 continue;
             }
-            // Lines 1–3: the covered samples that pass the depth test, with their depths.
-            var m = 0u;
-            var mask = 0u;
-            for (var i = 0u; i < spp; i++) {
-                let p = corner + rop_offsets[i];
-                let t = fragment_depth(s, p);
-                if (covers(s, p, params) && depth_before(t, s.id, rop.t[i], rop.id[i])) {
-                    rop.alive[m] = i;
-                    rop.alive_t[m] = t;
-                    m++;
-                    mask |= 1u << i;
-                }
-            }
+            let alive = surviving(&rop, s, corner, spp);
+            let m = alive.x;
             if (m == 0u) {
                 continue;
             }
             if (params.mode == MODE_ENDERTON) {
                 enderton(&rop, m, alpha, s.id, pixel_seed);
             } else {
-                // Lines 4–8, 18: a conflict with the surface's coverage starts a new surface.
-                if ((mask & covered) != 0u) {
-                    surface += 1u;
-                    covered = 0u;
-                }
-                stratified(&rop, m, alpha, s.id, countOneBits(covered), pixel_id, surface);
-                covered |= mask;
+                stratified(&rop, m, alive.y, alpha, s.id, pixel_id);
             }
         }
         workgroupBarrier();
     }
     if (inside && rop_chunk.x + 1u < rop_chunk.z) {
-        for (var i = 0u; i < spp; i++) {
-            rop_state[state + i] = bitcast<u32>(rop.t[i]);
-            rop_state[state + spp + i] = rop.id[i];
-        }
-        rop_state[state + 2u * spp] = covered;
-        rop_state[state + 2u * spp + 1u] = surface;
+        store_rop(&rop, at, spp);
     } else if (inside) {
-        // raster/mod.rs `resolve`: the mean of the samples, the background where none was written.
-        var color = vec3<f32>(0.0);
-        var written = 0u;
-        for (var i = 0u; i < spp; i++) {
-            if (rop.id[i] == NONE) {
-                color += params.background.xyz;
-            } else {
-                color += splats[rop.id[i]].color;
-                written++;
-            }
-        }
-        let n = f32(spp);
-        textureStore(rop_target, vec2<i32>(px), vec4<f32>(color / n, f32(written) / n));
+        textureStore(rop_target, vec2<i32>(px), resolve_rop(&rop, spp));
     }
 }

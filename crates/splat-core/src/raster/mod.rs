@@ -184,11 +184,13 @@ pub struct Rasterizer<'a> {
     hybrid: Option<(&'a TraceScene<'a>, Method)>,
 }
 
-/// Reserved splat ids of the hashes (scene ids stay below [`crate::rng::MAX_PARTICLES`]).
-const ORDER_ID: u32 = u32::MAX - 2;
-const SURFACE_ID: u32 = u32::MAX - 3;
+/// Reserved splat id of the hash that orders a stochastic frame's draws (scene ids stay below
+/// [`crate::rng::MAX_PARTICLES`]).
+pub const ORDER_ID: u32 = u32::MAX - 2;
+/// Reserved splat id of the hash that gives a frame's first Laine–Karras surface id.
+pub const SURFACE_ID: u32 = u32::MAX - 3;
 /// Slot of Enderton's ξ; the random choice of samples uses the slots after it.
-const ENDERTON_XI_SLOT: u32 = MAX_SAMPLES;
+pub const ENDERTON_XI_SLOT: u32 = MAX_SAMPLES;
 /// What a sample buffer holds where a mesh was drawn (as splat index and as id; every particle
 /// id is below it, so a splat at the mesh's exact depth stays in front).
 const MESH: u32 = u32::MAX - 1;

@@ -727,6 +727,13 @@ mod tests {
                 "LOOK_SURFACE" = crate::layout::LOOK_SURFACE,
                 "LOOK_VOLUMETRIC" = crate::layout::LOOK_VOLUMETRIC,
                 "LIGHT_SPOT" = crate::layout::LIGHT_SPOT,
+                "ORDER_ID" = splat_core::raster::ORDER_ID,
+                "SURFACE_ID" = splat_core::raster::SURFACE_ID,
+                "ENDERTON_XI_SLOT" = splat_core::raster::ENDERTON_XI_SLOT,
+                "ROP_SAMPLES" = splat_core::raster::STANDARD_COUNTS[4],
+                "MODE_ENDERTON" = Draw::Enderton.mode(),
+                "MODE_STRATIFIED" = Draw::Stratified.mode(),
+                "MODE_STRATIFIED_PLAIN" = Draw::StratifiedPlain.mode(),
             ]
         );
         assert_constants!(
