@@ -117,6 +117,7 @@ fn gpu_msaa_methods_converge() {
         }
         let control = RasterMethod::Stratified { scramble: false };
         let (slope, table) = stat("GPU layers unscrambled".into(), gpu, control, truth.clone()).convergence(256, 3);
+        eprintln!("GPU layers unscrambled stratified S=4 (control): slope {slope:.3} {table:?}");
         assert!(slope > *MONTE_CARLO_SLOPE.end(), "the biased control converges: {slope} {table:?}");
     });
 }
