@@ -10,7 +10,7 @@ use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
 use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
-use splat_io::image::{ImageFormat, depth_for_display, normal_for_display, write_image};
+use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -383,10 +383,10 @@ fn write_outputs(args: &RenderArgs, out: &RenderOutput) -> Result<()> {
         write_image(path, &out.variance)?;
     }
     if let Some(path) = &args.alpha {
-        write_image(path, &out.alpha)?;
+        write_image_as(path, &out.alpha, Single::Alpha)?;
     }
     if let Some(path) = &args.depth {
-        write_image(path, &display_if_png(path, &out.depth, depth_for_display))?;
+        write_image_as(path, &display_if_png(path, &out.depth, depth_for_display), Single::Depth)?;
     }
     if let Some(path) = &args.normal {
         write_image(path, &display_if_png(path, &out.normal, normal_for_display))?;

@@ -31,12 +31,42 @@ impl ImageFormat {
     }
 }
 
-/// Write an image, format chosen by extension.
+/// What a one-channel image holds: it names the channel of an EXR file, by OpenEXR's
+/// conventions (Z for depth, A for coverage, Y for a grey image).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Single {
+    /// A grey image: channel `Y`.
+    #[default]
+    Luminance,
+    /// A depth (distance along the ray): channel `Z`.
+    Depth,
+    /// Coverage 1 − T: channel `A`.
+    Alpha,
+}
+
+impl Single {
+    /// The EXR channel name.
+    pub fn exr_channel(self) -> &'static str {
+        match self {
+            Single::Luminance => "Y",
+            Single::Depth => "Z",
+            Single::Alpha => "A",
+        }
+    }
+}
+
+/// Write an image, format chosen by extension (a one-channel image as a grey image).
 pub fn write_image(path: &Path, image: &Image) -> Result<(), Error> {
+    write_image_as(path, image, Single::Luminance)
+}
+
+/// Write an image, format chosen by extension; a one-channel image holds `single`, which names
+/// its EXR channel.
+pub fn write_image_as(path: &Path, image: &Image, single: Single) -> Result<(), Error> {
     let err = |m: String| Error::new(path, ErrorKind::Image(m));
     match ImageFormat::from_path(path)? {
         ImageFormat::Png => write_png(path, image),
-        ImageFormat::Exr => write_exr(path, image).map_err(|e| err(e.to_string())),
+        ImageFormat::Exr => write_exr(path, image, single).map_err(|e| err(e.to_string())),
         ImageFormat::Npy => std::fs::write(path, encode_npy(image)).map_err(|e| Error::new(path, ErrorKind::Io(e))),
     }
 }
@@ -69,14 +99,15 @@ fn write_png(path: &Path, image: &Image) -> Result<(), Error> {
         .map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))
 }
 
-fn write_exr(path: &Path, image: &Image) -> exr::error::Result<()> {
+fn write_exr(path: &Path, image: &Image, single: Single) -> exr::error::Result<()> {
     use exr::prelude::*;
     let size = (image.width() as usize, image.height() as usize);
     let at = |p: Vec2<usize>, c: usize| image.pixel(p.0 as u32, p.1 as u32)[c];
     match image.channels() {
-        1 => Image::from_channels(size, SpecificChannels::build().with_channel("Y").with_pixel_fn(|p| (at(p, 0),)))
-            .write()
-            .to_file(path),
+        1 => {
+            let channels = SpecificChannels::build().with_channel(single.exr_channel()).with_pixel_fn(|p| (at(p, 0),));
+            Image::from_channels(size, channels).write().to_file(path)
+        }
         3 => write_rgb_file(path, size.0, size.1, |x, y| {
             let p = image.pixel(x as u32, y as u32);
             (p[0], p[1], p[2])
@@ -181,4 +212,39 @@ pub fn normal_for_display(normal: &Image) -> Image {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The channel names of an EXR file.
+    fn exr_channels(path: &Path) -> Vec<String> {
+        let meta = exr::meta::MetaData::read_from_file(path, false).expect("EXR header");
+        meta.headers[0].channels.list.iter().map(|c| c.name.to_string()).collect()
+    }
+
+    /// A depth EXR holds channel Z, an alpha EXR channel A, a grey one Y, colour R G B (the
+    /// names other tools look for), each with its values.
+    #[test]
+    fn exr_channels_are_named_by_what_they_hold() {
+        let dir = std::env::temp_dir().join(format!("splat-io-exr-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let one = Image::from_data(2, 1, 1, vec![1.5, 2.5]).unwrap();
+        for (single, name) in [(Single::Depth, "Z"), (Single::Alpha, "A"), (Single::Luminance, "Y")] {
+            let path = dir.join(format!("{name}.exr"));
+            write_image_as(&path, &one, single).unwrap();
+            assert_eq!(exr_channels(&path), vec![name.to_string()]);
+            let read = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
+            let values: Vec<f32> = read.layer_data.channel_data.list[0].sample_data.values_as_f32().collect();
+            assert_eq!(values, vec![1.5, 2.5], "{name}");
+        }
+        let rgb = Image::filled(2, 2, 3, 0.25);
+        let path = dir.join("rgb.exr");
+        write_image(&path, &rgb).unwrap();
+        let mut names = exr_channels(&path);
+        names.sort();
+        assert_eq!(names, ["B", "G", "R"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
