@@ -208,6 +208,23 @@ const BATCH: u32 = 128u;
 var<workgroup> batch: array<Splat, 128>;
 var<workgroup> tile_range: vec2<u32>;
 
+// The range of pairs of the workgroup's tile, the same for every invocation (a storage load is
+// not uniform to WGSL; the tile loops' barriers need a uniform bound).
+fn tile_pairs(tile: u32, l: u32) -> vec2<u32> {
+    if (l == 0u) {
+        tile_range = ranges[tile];
+    }
+    return workgroupUniformLoad(&tile_range);
+}
+
+// Pairs [start, min(start + BATCH, end)) of the tile's list into `batch`, one per invocation.
+fn load_batch(start: u32, end: u32, l: u32) {
+    if (l < BATCH && start + l < end) {
+        batch[l] = splats[order[pair_ranks[start + l]]];
+    }
+    workgroupBarrier();
+}
+
 // One workgroup per 16 × 16 tile, one invocation per pixel, walking the tile's splats in depth
 // order in batches loaded cooperatively into workgroup memory (the 3DGS rasterizer's loop).
 //
@@ -228,11 +245,7 @@ fn tile_blend(
     let px = wg.xy * TILE + lid.xy;
     let inside = px.x < params.size.x && px.y < params.size.y;
     let centre = vec2<f32>(px) + vec2<f32>(0.5);
-    if (l == 0u) {
-        tile_range = ranges[tile];
-    }
-    // A storage load is not uniform to WGSL; the loop's barriers need a uniform bound.
-    let range = workgroupUniformLoad(&tile_range);
+    let range = tile_pairs(tile, l);
     var transmittance = 1.0;
     var color = vec3<f32>(0.0);
     var depth = 0.0;
@@ -250,10 +263,7 @@ fn tile_blend(
     }
     let mesh = back.w < FAR_DEPTH;
     for (var start = range.x; start < range.y; start += BATCH) {
-        if (l < BATCH && start + l < range.y) {
-            batch[l] = splats[order[pair_ranks[start + l]]];
-        }
-        workgroupBarrier();
+        load_batch(start, range.y, l);
         let n = min(BATCH, range.y - start);
         for (var j = 0u; j < n; j++) {
             let s = batch[j];
@@ -591,10 +601,7 @@ fn tile_rop(
     let inside = px.x < params.size.x && px.y < params.size.y;
     let corner = vec2<f32>(px);
     let centre = corner + vec2<f32>(0.5);
-    if (l == 0u) {
-        tile_range = ranges[tile];
-    }
-    let tile_list = workgroupUniformLoad(&tile_range);
+    let tile_list = tile_pairs(tile, l);
     // This chunk of the tile's list.
     let first = min(tile_list.x + rop_chunk.x * rop_chunk.y, tile_list.y);
     let range = vec2<u32>(first, min(tile_list.y, first + rop_chunk.y));
@@ -604,10 +611,7 @@ fn tile_rop(
     let pixel_seed = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
     let pixel_id = hilbert_index(params.hilbert_order, px.x, px.y);
     for (var start = range.x; start < range.y; start += BATCH) {
-        if (l < BATCH && start + l < range.y) {
-            batch[l] = splats[order[pair_ranks[start + l]]];
-        }
-        workgroupBarrier();
+        load_batch(start, range.y, l);
         let n = min(BATCH, range.y - start);
         for (var j = 0u; j < n; j++) {
             let s = batch[j];

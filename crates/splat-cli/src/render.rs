@@ -285,12 +285,8 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
             if !matches!(method, splat_core::raster::RasterMethod::Sorted { .. }) {
                 return unsupported("the GPU hybrid rasterizes its first hit with raster-sorted: add --backend cpu");
             }
-            if raster.samples > 1 || raster.fragment_depth != splat_core::raster::FragmentDepth::Center {
-                return unsupported(
-                    "the GPU hybrid's first hit is one sample at the pixel centre and centre depth: add --backend cpu",
-                );
-            }
             GpuRasterizer::supports(method, raster)?;
+            GpuRasterizer::supports_tile_pass(raster)?;
             GpuTracer::supports(secondary)?;
             Ok(())
         }

@@ -90,23 +90,17 @@ impl GpuRasterizer<'_> {
 
     /// One tile pass: per pixel RGBA colour, (depth bits, pick) and normal, and the pair count.
     fn tile_pass(&self, first_hit: bool) -> Result<TilePass, GpuError> {
-        if self.raster.samples != 1 || self.raster.fragment_depth != FragmentDepth::Center {
-            return Err(GpuError::Unsupported(format!(
-                "the GPU's iso-opacity depth, lit sorted splatting and hybrid first hit take one sample at the pixel centre and centre depth, not {} samples at {:?}: use --backend cpu",
-                self.raster.samples, self.raster.fragment_depth
-            )));
-        }
+        Self::supports_tile_pass(&self.raster)?;
         let params = RasterParams { mode: Draw::Under.mode(), first_hit: u32::from(first_hit), ..self.params };
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
-        let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
+        let (ctx, pipes) = (self.ctx, self.pipes);
         let [tiles_x, tiles_y] = self.params.tiles;
-        // 1. Pairs per rank and their exclusive scan (offsets[n] is the total).
+        // 1. Pairs per rank and their exclusive scan in depth order (offsets[n] is the total).
         let pairs = self.pair_count()?;
         // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
-        let pair_sort = pipes.sort.buffers(ctx, pairs.max(1))?;
-        let tiles = tiles_x * tiles_y;
+        let lists = TileLists::new(self, &self.depth.vals, &self.depth, pairs)?;
         let pixels = (self.camera.width * self.camera.height) as usize;
-        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let buffer = |label, bytes: usize| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -115,28 +109,9 @@ impl GpuRasterizer<'_> {
                 mapped_at_creation: false,
             })
         };
-        let ranges = buffer("tile ranges", tiles as usize * 8);
         let out_color = buffer("depth pick colour", pixels * 16);
         let out_pick = buffer("depth pick", pixels * 8);
         let out_normal = buffer("depth pick normal", pixels * 16);
-        let emit_group = bind(
-            ctx,
-            &pipes.tile_emit,
-            &[
-                (0, &self.params_buffer),
-                (3, &self.splats),
-                (5, &self.depth.vals),
-                (6, &self.draw_args),
-                (7, &self.depth.hist),
-                (8, &pair_sort.keys),
-                (9, &pair_sort.vals),
-            ],
-        );
-        let ranges_group = bind(
-            ctx,
-            &pipes.tile_ranges,
-            &[(0, &self.params_buffer), (7, &self.depth.hist), (8, &pair_sort.keys), (10, &ranges)],
-        );
         let blend_group = bind(
             ctx,
             &pipes.tile_blend,
@@ -144,8 +119,8 @@ impl GpuRasterizer<'_> {
                 (0, &self.params_buffer),
                 (3, &self.splats),
                 (5, &self.depth.vals),
-                (9, &pair_sort.vals),
-                (10, &ranges),
+                (9, &lists.pairs.vals),
+                (10, &lists.ranges),
                 (11, &out_color),
                 (12, &out_pick),
                 (13, &self.scene.materials),
@@ -157,24 +132,10 @@ impl GpuRasterizer<'_> {
             ],
         );
         let mut encoder = self.encoder("tile lists");
-        encoder.clear_buffer(&ranges, 0, None);
-        {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile emit"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_emit);
-            pass.set_bind_group(0, &emit_group, &[]);
-            let (gx, gy) = groups(n.div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
-        let tile_bits = u32::BITS - (tiles - 1).leading_zeros();
-        pipes.sort.encode(ctx, &mut encoder, &pair_sort, pairs, tile_bits, None)?;
+        lists.encode_lists(self, &mut encoder)?;
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile blend"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_ranges);
-            pass.set_bind_group(0, &ranges_group, &[]);
-            let (gx, gy) = groups(pairs.div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
             pass.set_pipeline(&pipes.tile_blend);
             pass.set_bind_group(0, &blend_group, &[]);
             pass.dispatch_workgroups(tiles_x, tiles_y, 1);
@@ -184,35 +145,5 @@ impl GpuRasterizer<'_> {
         let pick = ctx.read_u32(&out_pick, pixels * 2)?;
         let normal = ctx.read_f32(&out_normal, pixels * 4)?;
         Ok(TilePass { color, pick, normal, pairs })
-    }
-
-    /// How many (tile, splat) pairs the visible splats make: per rank the tiles its rect
-    /// touches, and their exclusive scan, left in the depth sort's histogram (the offsets of
-    /// each rank's pairs in depth order); the total is the same in any draw order.
-    pub(super) fn pair_count(&self) -> Result<u32, GpuError> {
-        let (ctx, pipes, n) = (self.ctx, self.pipes, self.scene.count);
-        let count_group = bind(
-            ctx,
-            &pipes.tile_count,
-            &[
-                (0, &self.params_buffer),
-                (3, &self.splats),
-                (5, &self.depth.vals),
-                (6, &self.draw_args),
-                (7, &self.depth.hist),
-            ],
-        );
-        let mut encoder = self.encoder("tile count");
-        {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile count"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_count);
-            pass.set_bind_group(0, &count_group, &[]);
-            let (gx, gy) = groups((n + 1).div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
-        pipes.sort.encode_scan(ctx, &mut encoder, &self.depth, n + 1);
-        self.submit(encoder)?;
-        Ok(ctx.read_u32_at(&self.depth.hist, n as usize, 1)?[0])
     }
 }

@@ -27,12 +27,14 @@
 //! # Ok::<(), splat_gpu::GpuError>(())
 //! ```
 
+mod binning;
 mod depth_pick;
 mod pipelines;
 mod profile;
 mod rop;
 mod scene;
 
+use binning::TileLists;
 pub use depth_pick::DepthPick;
 pub use pipelines::RasterPipelines;
 use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT};
@@ -343,9 +345,8 @@ impl<'a> GpuRasterizer<'a> {
     /// pixel once (the surface look) or each fragment (the volumetric look); StochasticSplats
     /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
-        Self::supports(method, &self.raster)?;
+        self.check_scene(method)?;
         let draw = Draw::of(method);
-        self.check_scene(draw, method)?;
         if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
         }
@@ -403,12 +404,12 @@ impl<'a> GpuRasterizer<'a> {
         Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
     }
 
-    /// What the scene and the adapter allow `draw` at these settings ([`GpuRasterizer::supports_scene`]),
+    /// What the scene and the adapter allow `method` at these settings ([`GpuRasterizer::supports_scene`]),
     /// and a render pipeline multisamples at the counts the adapter has.
-    fn check_scene(&self, draw: Draw, method: &RasterMethod) -> Result<(), GpuError> {
+    fn check_scene(&self, method: &RasterMethod) -> Result<(), GpuError> {
         Self::supports_scene(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
         let s = self.raster.samples;
-        if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
+        if !Draw::of(method).is_rop() && !self.ctx.msaa_counts.contains(&s) {
             return Err(GpuError::Unsupported(format!(
                 "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter): use --backend cpu",
                 self.ctx.info.name, self.ctx.msaa_counts
@@ -481,6 +482,19 @@ impl<'a> GpuRasterizer<'a> {
             return Err(GpuError::Unsupported(
                 "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot: use --fragment-depth center or --backend cpu".into(),
             ));
+        }
+        Ok(())
+    }
+
+    /// Whether the compute tile rasterizer (the iso-opacity depth pick, lit sorted splatting, the
+    /// hybrid's first hit) takes `settings`: it composites one sample at the pixel centre, at
+    /// centre depth.
+    pub fn supports_tile_pass(settings: &RasterSettings) -> Result<(), GpuError> {
+        if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
+            return Err(GpuError::Unsupported(format!(
+                "the GPU's iso-opacity depth, lit sorted splatting and hybrid first hit take one sample at the pixel centre and centre depth, not {} samples at {:?}: use --backend cpu",
+                settings.samples, settings.fragment_depth
+            )));
         }
         Ok(())
     }

@@ -247,7 +247,11 @@ impl SamplePipelines {
                     "the max-density-plane depth shades per sample, which this adapter cannot (wgpu's MULTISAMPLED_SHADING): use --backend cpu".into(),
                 )
             })?,
-            Draw::Stochastic if lit => self.stochastic_lit.as_ref().unwrap_or(&self.stochastic),
+            Draw::Stochastic if lit => self.stochastic_lit.as_ref().ok_or_else(|| {
+                GpuError::Unsupported(
+                    "lit StochasticSplats shades once per pixel, at one sample: use --backend cpu".into(),
+                )
+            })?,
             _ => &self.stochastic,
         })
     }

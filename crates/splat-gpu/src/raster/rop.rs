@@ -18,14 +18,10 @@ use super::*;
 /// The buffers and bind groups of the raster-operations frames of one render.
 pub(super) struct RopPass {
     shuffle: SortBuffers,
-    pairs: SortBuffers,
-    pair_count: u32,
-    ranges: wgpu::Buffer,
+    /// The tile lists in the shuffled order.
+    lists: TileLists,
     frame: wgpu::Buffer,
     keys_group: wgpu::BindGroup,
-    count_group: wgpu::BindGroup,
-    emit_group: wgpu::BindGroup,
-    ranges_group: wgpu::BindGroup,
     rop_group: wgpu::BindGroup,
     /// The current chunk (index, length, count), and every chunk's, copied in before its dispatch.
     chunk: wgpu::Buffer,
@@ -68,14 +64,7 @@ impl RopPass {
             mapped_at_creation: false,
         });
         let shuffle = pipes.sort.buffers(ctx, n + 1)?;
-        let pairs = pipes.sort.buffers(ctx, pair_count.max(1))?;
-        let [tiles_x, tiles_y] = r.params.tiles;
-        let ranges = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("rop tile ranges"),
-            size: u64::from(tiles_x * tiles_y) * 8,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let lists = TileLists::new(r, &shuffle.vals, &shuffle, pair_count)?;
         let frame = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rop frame"),
             size: size_of::<FrameParams>() as u64,
@@ -87,29 +76,6 @@ impl RopPass {
             &pipes.shuffle_keys,
             &[(0, &r.params_buffer), (4, &shuffle.keys), (5, &shuffle.vals), (19, &frame)],
         );
-        let count_group = bind(
-            ctx,
-            &pipes.tile_count,
-            &[(0, &r.params_buffer), (3, &r.splats), (5, &shuffle.vals), (6, &r.draw_args), (7, &shuffle.hist)],
-        );
-        let emit_group = bind(
-            ctx,
-            &pipes.tile_emit,
-            &[
-                (0, &r.params_buffer),
-                (3, &r.splats),
-                (5, &shuffle.vals),
-                (6, &r.draw_args),
-                (7, &shuffle.hist),
-                (8, &pairs.keys),
-                (9, &pairs.vals),
-            ],
-        );
-        let ranges_group = bind(
-            ctx,
-            &pipes.tile_ranges,
-            &[(0, &r.params_buffer), (7, &shuffle.hist), (8, &pairs.keys), (10, &ranges)],
-        );
         let rop = r.rop_pipeline();
         let rop_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("tile rop"),
@@ -118,8 +84,8 @@ impl RopPass {
                 wgpu::BindGroupEntry { binding: 0, resource: r.params_buffer.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 3, resource: r.splats.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: shuffle.vals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 9, resource: pairs.vals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 10, resource: ranges.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 9, resource: lists.pairs.vals.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 10, resource: lists.ranges.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 15, resource: r.scene.canonical.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 19, resource: frame.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 20, resource: r.sample_offsets.as_entire_binding() },
@@ -128,21 +94,7 @@ impl RopPass {
                 wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
             ],
         });
-        Ok(Self {
-            shuffle,
-            pairs,
-            pair_count,
-            ranges,
-            frame,
-            keys_group,
-            count_group,
-            emit_group,
-            ranges_group,
-            rop_group,
-            chunk,
-            chunks,
-            chunk_count,
-        })
+        Ok(Self { shuffle, lists, frame, keys_group, rop_group, chunk, chunks, chunk_count })
     }
 
     /// Encode frame `slot` of `slots`: its parameters into place, the shuffled order, the tile
@@ -166,36 +118,9 @@ impl RopPass {
             pass.dispatch_workgroups(gx, gy, 1);
         }
         pipes.sort.encode(ctx, encoder, &self.shuffle, n, 32, None)?;
-        {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("rop count"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_count);
-            pass.set_bind_group(0, &self.count_group, &[]);
-            let (cx, cy) = groups((n + 1).div_ceil(256));
-            pass.dispatch_workgroups(cx, cy, 1);
-        }
-        pipes.sort.encode_scan(ctx, encoder, &self.shuffle, n + 1);
-        encoder.clear_buffer(&self.ranges, 0, None);
-        {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("rop emit"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_emit);
-            pass.set_bind_group(0, &self.emit_group, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
+        self.lists.encode_count(r, encoder, &self.shuffle);
+        self.lists.encode_lists(r, encoder)?;
         let [tiles_x, tiles_y] = r.params.tiles;
-        let tile_bits = u32::BITS - (tiles_x * tiles_y - 1).leading_zeros();
-        pipes.sort.encode(ctx, encoder, &self.pairs, self.pair_count, tile_bits, None)?;
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("tile ranges"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&pipes.tile_ranges);
-            pass.set_bind_group(0, &self.ranges_group, &[]);
-            let (px, py) = groups(self.pair_count.div_ceil(256));
-            pass.dispatch_workgroups(px, py, 1);
-        }
         for c in 0..self.chunk_count {
             encoder.copy_buffer_to_buffer(&self.chunks, u64::from(c) * 16, &self.chunk, 0, 16);
             let mut pass = encoder
