@@ -14,7 +14,12 @@ fn main() -> Result<()> {
         Some("test") => test(&args[1..]),
         Some("fixtures") => fixtures(),
         Some("bless") => bless(),
-        Some("assets") => assets().map(|path| println!("{}", path.display())),
+        Some("assets") => {
+            let bonsai = assets()?;
+            println!("{}", bonsai.display());
+            println!("{}", interop()?.display());
+            Ok(())
+        }
         Some("bench") => bench(),
         Some("power") => power(),
         _ => {
@@ -24,7 +29,8 @@ fn main() -> Result<()> {
                  test [ARGS]  run every test of the workspace (optimized build); ARGS go to cargo test\n  \
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
-                 assets       fetch and verify the bonsai capture into target/assets/\n  \
+                 assets       fetch and verify the bonsai capture into target/assets/, and write\n               \
+                 files of other tools (npm: splat-transform, spz-js) into target/interop/\n  \
                  power        write the power tables of the last test run (target/power/) into docs/power.md\n  \
                  bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
             );
@@ -305,4 +311,44 @@ fn assets() -> Result<PathBuf> {
     std::fs::rename(&extracted, &bonsai)?;
     let _ = std::fs::remove_dir_all(dir.join("gradio_model3dgs-0.2.5"));
     Ok(bonsai)
+}
+
+/// Folder of the npm packages that write the interop files: package.json, package-lock.json
+/// (versions and sha512 integrity of every package, checked by `npm ci`) and make.mjs.
+const INTEROP_SOURCES: &str = "xtask/interop";
+
+/// Write `target/interop/`: `source.ply` (the SH degree 3 cloud scene) and what other
+/// implementations make of it (spz versions 2–4, compressed .ply), for the reader tests in
+/// tests/tests/formats.rs. Installs Node.js (Debian's nodejs, npm) when missing and root.
+fn interop() -> Result<PathBuf> {
+    let dir = root().join("target/interop");
+    let npm_dir = dir.join("npm");
+    std::fs::create_dir_all(&npm_dir)?;
+    let have_node = || Command::new("npm").arg("--version").output().is_ok_and(|o| o.status.success());
+    ensure_packages(have_node, &["nodejs", "npm"], "Node.js", "the tests on other tools' files will skip")?;
+    if !have_node() {
+        return Ok(dir);
+    }
+    for file in ["package.json", "package-lock.json", "make.mjs"] {
+        std::fs::copy(root().join(INTEROP_SOURCES).join(file), npm_dir.join(file))?;
+    }
+    let (scene, _) = scenes::cloud();
+    write_ply(&dir.join("source.ply"), &scene, PlyFormat::BinaryLittleEndian)?;
+    let run = |program: &str, args: &[&str]| -> Result<()> {
+        let status = Command::new(program)
+            .args(args)
+            .current_dir(&npm_dir)
+            .status()
+            .with_context(|| format!("running {program}"))?;
+        if !status.success() {
+            bail!("{program} {} failed ({status})", args.join(" "));
+        }
+        Ok(())
+    };
+    if !npm_dir.join("node_modules/spz-js").exists() || !npm_dir.join("node_modules/@playcanvas").exists() {
+        eprintln!("installing the pinned npm packages (package-lock.json) …");
+        run("npm", &["ci", "--ignore-scripts", "--no-audit", "--no-fund", "--loglevel=error"])?;
+    }
+    run("node", &["make.mjs", dir.to_str().context("target path is not UTF-8")?])?;
+    Ok(dir)
 }

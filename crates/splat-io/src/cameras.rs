@@ -79,6 +79,14 @@ pub fn read_cameras(path: &Path) -> Result<Vec<Camera>, Error> {
     parse_cameras(&bytes).map_err(|kind| Error::new(path, kind))
 }
 
+/// Read every camera of a `cameras.json` with its `img_name`.
+pub fn read_named_cameras(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
+    let bytes = read_file(path)?;
+    let names = serde_json::from_slice::<Vec<CameraEntry>>(&bytes).map(|e| e.into_iter().map(|e| e.img_name));
+    let cameras = parse_cameras(&bytes).map_err(|kind| Error::new(path, kind))?;
+    Ok(names.map_err(|e| Error::new(path, ErrorKind::Json(e)))?.zip(cameras).collect())
+}
+
 /// Parse a `cameras.json`.
 pub fn parse_cameras(bytes: &[u8]) -> Result<Vec<Camera>, ErrorKind> {
     let entries: Vec<CameraEntry> = serde_json::from_slice(bytes)?;

@@ -42,7 +42,7 @@ pub enum ErrorKind {
     },
     /// A property of the vertex element is not one this reader knows.
     #[error(
-        "PLY header line {line}: unknown vertex property '{name}' (pass allow_unknown_properties / --allow-unknown-properties to skip it)"
+        "PLY header line {line}: unknown vertex property '{name}' (refused in strict mode: drop --strict to skip it with a warning)"
     )]
     UnknownProperty {
         /// 1-based header line.
@@ -153,6 +153,15 @@ pub enum ErrorKind {
         /// Its bytes present.
         remainder: u64,
     },
+    /// A `.spz` file is malformed or uses what this reader does not support.
+    #[error("spz: {0}")]
+    Spz(String),
+    /// A compressed `.ply` (PlayCanvas / SuperSplat) is malformed.
+    #[error("compressed PLY: {0}")]
+    CompressedPly(String),
+    /// A COLMAP model is malformed or uses a camera model this reader does not render.
+    #[error("COLMAP: {0}")]
+    Colmap(String),
     /// The camera file is malformed.
     #[error("camera {index}: {message}")]
     Camera {

@@ -1,7 +1,9 @@
 //! `splat-io`: reading and writing scenes, cameras and images for `splat`.
 //!
-//! - Scenes: INRIA 3DGS `.ply` (binary and ASCII, read and write) and antimatter15 `.splat`.
-//! - Cameras: INRIA `cameras.json`.
+//! - Scenes (read and write unless noted): INRIA 3DGS `.ply` (binary and ASCII), PlayCanvas
+//!   compressed `.ply` (read), antimatter15 `.splat`, Niantic `.spz` (versions 2–4); see
+//!   [`SceneFormat`].
+//! - Cameras: INRIA `cameras.json`, COLMAP `cameras`/`images` `.bin` and `.txt` ([`colmap`]).
 //! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
 //! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
 //! - Images: `.png` (8-bit), `.exr` (f32), `.npy` (f32, H × W × C), chosen by extension.
@@ -16,11 +18,14 @@
 //! ```
 
 pub mod cameras;
+pub mod colmap;
+pub mod compressed_ply;
 mod error;
 pub mod image;
 pub mod mesh;
 pub mod ply;
 pub mod splat;
+pub mod spz;
 pub mod world;
 
 pub use error::{Error, ErrorKind};
@@ -28,14 +33,103 @@ pub use error::{Error, ErrorKind};
 use splat_core::Scene;
 use std::path::Path;
 
-/// Read a scene, choosing the format by extension (`.ply` or `.splat`).
-pub fn read_scene(path: &Path) -> Result<Scene, Error> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        Some("ply") => ply::read_ply(path),
-        Some("splat") => splat::read_splat(path),
-        _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply or .splat" })),
+/// The scene formats, by what the file holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneFormat {
+    /// INRIA 3DGS `.ply`: f32 properties, SH up to degree 3, lossless.
+    Ply,
+    /// PlayCanvas / SuperSplat `.compressed.ply`: 256-splat chunks, quantised (read only).
+    CompressedPly,
+    /// antimatter15 `.splat`: 32 bytes a splat, colour without view dependence.
+    Splat,
+    /// Niantic `.spz`: quantised, gzip (versions 2, 3) or zstd (version 4).
+    Spz,
+}
+
+impl SceneFormat {
+    /// The format an output path asks for, by extension (`.ply`, `.splat`, `.spz`).
+    pub fn for_output(path: &Path) -> Result<Self, Error> {
+        match extension(path).as_deref() {
+            Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => Err(Error::new(
+                path,
+                ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz (compressed .ply is read only)" },
+            )),
+            Some("ply") => Ok(Self::Ply),
+            Some("splat") => Ok(Self::Splat),
+            Some("spz") => Ok(Self::Spz),
+            _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz" })),
+        }
     }
+
+    /// Its name as users know it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ply => ".ply",
+            Self::CompressedPly => "compressed .ply",
+            Self::Splat => ".splat",
+            Self::Spz => ".spz",
+        }
+    }
+}
+
+/// Options of [`read_scene_with`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Refuse `.ply` vertex properties this reader does not know, instead of skipping them.
+    pub strict: bool,
+    /// The axes of `.spz` data.
+    pub spz_axes: spz::SpzAxes,
+}
+
+/// A scene read from a file, with what the reader made of it.
+#[derive(Clone, Debug)]
+pub struct SceneRead {
+    /// The scene.
+    pub scene: Scene,
+    /// The format found.
+    pub format: SceneFormat,
+    /// `.ply` vertex properties skipped as unknown (e.g. Mip-Splatting's `filter_3D`).
+    pub skipped_properties: Vec<String>,
+}
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
+}
+
+/// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`
+/// or `.spz`) with default options: unknown `.ply` properties are skipped.
+pub fn read_scene(path: &Path) -> Result<Scene, Error> {
+    read_scene_with(path, ReadOptions::default()).map(|read| read.scene)
+}
+
+/// Read a scene, choosing the format by extension, and report what was skipped.
+pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, Error> {
+    let read = |format, scene| SceneRead { scene, format, skipped_properties: Vec::new() };
+    match extension(path).as_deref() {
+        Some("ply") => {
+            let bytes = read_file(path)?;
+            let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
+            let ply = ply::parse_ply_report(&bytes, plain).map_err(|kind| Error::new(path, kind))?;
+            let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
+            Ok(SceneRead { scene: ply.scene, format, skipped_properties: ply.skipped })
+        }
+        Some("splat") => Ok(read(SceneFormat::Splat, splat::read_splat(path)?)),
+        Some("spz") => Ok(read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?)),
+        _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz" })),
+    }
+}
+
+/// Write a scene in the format its extension names (`.ply`: binary little-endian f32;
+/// `.splat`; `.spz` with `spz` options).
+pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Result<SceneFormat, Error> {
+    let format = SceneFormat::for_output(path)?;
+    match format {
+        SceneFormat::Ply => ply::write_ply(path, scene, ply::PlyFormat::BinaryLittleEndian)?,
+        SceneFormat::Splat => splat::write_splat(path, scene)?,
+        SceneFormat::Spz => spz::write_spz(path, scene, spz)?,
+        SceneFormat::CompressedPly => unreachable!("for_output refuses it"),
+    }
+    Ok(format)
 }
 
 /// Read a whole file, with the path in the error.

@@ -5,6 +5,9 @@
 //! 24 or 45 of them for degree 0–3), `opacity` (logit), `scale_0..2` (log), `rot_0..3`
 //! (quaternion w, x, y, z, not necessarily normalised). Activations are applied on reading:
 //! sigmoid, exp, normalisation.
+//!
+//! A file whose first element is `chunk` is a PlayCanvas compressed `.ply`, decoded by
+//! [`crate::compressed_ply`].
 
 use crate::{Error, ErrorKind, read_file};
 use glam::{Quat, Vec3};
@@ -19,7 +22,8 @@ const MAX_HEADER: usize = 1 << 20;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PlyOptions {
     /// Skip vertex properties this reader does not know (e.g. Mip-Splatting's `filter_3D`)
-    /// instead of refusing the file.
+    /// instead of refusing the file. [`crate::read_scene`] allows them and reports them; the
+    /// default here is strict.
     pub allow_unknown_properties: bool,
 }
 
@@ -45,8 +49,28 @@ pub fn read_ply_with(path: &Path, options: PlyOptions) -> Result<Scene, Error> {
     parse_ply(&bytes, options).map_err(|kind| Error::new(path, kind))
 }
 
-/// Parse the bytes of a 3DGS `.ply`.
+/// Parse the bytes of a 3DGS `.ply` (or a compressed `.ply`, see [`crate::compressed_ply`]).
 pub fn parse_ply(bytes: &[u8], options: PlyOptions) -> Result<Scene, ErrorKind> {
+    parse_ply_report(bytes, options).map(|read| read.scene)
+}
+
+/// A parsed `.ply` and what the reader made of it.
+#[derive(Clone, Debug)]
+pub struct PlyRead {
+    /// The scene.
+    pub scene: Scene,
+    /// Vertex properties skipped as unknown (only when they are allowed).
+    pub skipped: Vec<String>,
+    /// Whether the file was a PlayCanvas compressed `.ply`.
+    pub compressed: bool,
+}
+
+/// Parse the bytes of a `.ply`, reporting the properties it skipped.
+pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, ErrorKind> {
+    if let Some((elements, body)) = crate::compressed_ply::sniff(bytes)? {
+        let scene = crate::compressed_ply::parse(bytes, &elements, body)?;
+        return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true });
+    }
     let header = Header::parse(bytes, options)?;
     let body = &bytes[header.body_offset..];
     let count = header.count;
@@ -93,7 +117,8 @@ pub fn parse_ply(bytes: &[u8], options: PlyOptions) -> Result<Scene, ErrorKind> 
             }
         }
     }
-    Ok(Scene { particles, sh_degree: layout.sh_degree })
+    let skipped = header.properties.iter().filter(|p| p.unknown).map(|p| p.name.clone()).collect();
+    Ok(PlyRead { scene: Scene { particles, sh_degree: layout.sh_degree }, skipped, compressed: false })
 }
 
 /// Vec capacity for `count` vertices that cannot exceed what the body could hold.
@@ -127,7 +152,7 @@ fn parse_ascii_vertex(
 
 /// Scalar types of the PLY format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -139,7 +164,7 @@ enum Scalar {
 }
 
 impl Scalar {
-    fn from_name(name: &str) -> Option<Self> {
+    pub(crate) fn from_name(name: &str) -> Option<Self> {
         Some(match name {
             "char" | "int8" => Self::I8,
             "uchar" | "uint8" => Self::U8,
@@ -153,7 +178,7 @@ impl Scalar {
         })
     }
 
-    fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             Self::I8 | Self::U8 => 1,
             Self::I16 | Self::U16 => 2,
@@ -234,6 +259,8 @@ struct Property {
     name: String,
     ty: Scalar,
     slot: Slot,
+    /// Not a 3DGS property: skipped because the options allow it.
+    unknown: bool,
 }
 
 struct Header {
@@ -305,7 +332,8 @@ impl Header {
                             return Err(ErrorKind::UnknownProperty { line, name: name.to_string() });
                         }
                     };
-                    properties.push(Property { name: name.to_string(), ty, slot });
+                    let unknown = Slot::from_name(name).is_none();
+                    properties.push(Property { name: name.to_string(), ty, slot, unknown });
                 }
                 ["property", ..] if count.is_none() => {
                     return Err(err(line, "property before any element".into()));
@@ -432,18 +460,18 @@ fn vec3(v: [f64; 3]) -> Vec3 {
 }
 
 /// Lines of a byte buffer with their 1-based numbers and the byte offset after each.
-struct Lines<'a> {
+pub(crate) struct Lines<'a> {
     bytes: &'a [u8],
-    offset: usize,
+    pub(crate) offset: usize,
     line: usize,
 }
 
 impl<'a> Lines<'a> {
-    fn new(bytes: &'a [u8], line: usize) -> Self {
+    pub(crate) fn new(bytes: &'a [u8], line: usize) -> Self {
         Self { bytes, offset: 0, line }
     }
 
-    fn next(&mut self) -> Option<(usize, &'a str)> {
+    pub(crate) fn next(&mut self) -> Option<(usize, &'a str)> {
         if self.offset >= self.bytes.len() {
             return None;
         }

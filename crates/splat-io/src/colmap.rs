@@ -1,0 +1,317 @@
+//! COLMAP sparse reconstructions: `cameras.bin` + `images.bin` or `cameras.txt` + `images.txt`
+//! (the `sparse/0` folder most 3DGS captures arrive with), PINHOLE and SIMPLE_PINHOLE cameras.
+//!
+//! An image's pose is COLMAP's world-to-camera rotation q = (qw, qx, qy, qz) and translation
+//! t: x_cam = R(q) x_world + t, camera axes x right, y down, z forward — the convention of
+//! [`Camera`] itself. The views are returned sorted by image name, the order in which 3DGS
+//! lists them in its `cameras.json` (`id` = index).
+
+use crate::{Error, ErrorKind, read_file};
+use glam::{DQuat, DVec3, Mat3, Quat, Vec3};
+use splat_core::Camera;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// One registered image: its name and the camera that took it.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// Image file name, as COLMAP stores it.
+    pub name: String,
+    /// The camera.
+    pub camera: Camera,
+}
+
+/// Intrinsics of a COLMAP camera.
+#[derive(Clone, Copy, Debug)]
+struct Intrinsics {
+    width: u32,
+    height: u32,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+}
+
+/// A pose and the id of its camera.
+struct Pose {
+    name: String,
+    q: [f64; 4],
+    t: [f64; 3],
+    camera_id: u32,
+}
+
+fn colmap_error(message: impl Into<String>) -> ErrorKind {
+    ErrorKind::Colmap(message.into())
+}
+
+/// Whether `path` is a COLMAP model: a folder with `images.bin` or `images.txt`, or one of
+/// those files.
+pub fn is_colmap(path: &Path) -> bool {
+    model_files(path).is_some()
+}
+
+/// The (cameras, images) files of a model given as a folder or as either file.
+fn model_files(path: &Path) -> Option<(PathBuf, PathBuf)> {
+    let in_dir = |dir: &Path, ext: &str| {
+        let images = dir.join(format!("images.{ext}"));
+        images.exists().then(|| (dir.join(format!("cameras.{ext}")), images))
+    };
+    if path.is_dir() {
+        return in_dir(path, "bin").or_else(|| in_dir(path, "txt"));
+    }
+    let name = path.file_name()?.to_str()?;
+    let ext = path.extension()?.to_str()?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    matches!(name, "images.bin" | "images.txt" | "cameras.bin" | "cameras.txt")
+        .then(|| (dir.join(format!("cameras.{ext}")), dir.join(format!("images.{ext}"))))
+}
+
+/// Read every registered view of a COLMAP model (folder, `images.*` or `cameras.*`), sorted by
+/// image name.
+pub fn read_colmap(path: &Path) -> Result<Vec<View>, Error> {
+    let (cameras_path, images_path) = model_files(path).ok_or_else(|| {
+        Error::new(path, colmap_error("not a COLMAP model: expected a folder with images.bin or images.txt"))
+    })?;
+    let binary = images_path.extension().is_some_and(|e| e == "bin");
+    let cameras = read_file(&cameras_path)?;
+    let images = read_file(&images_path)?;
+    let intrinsics = if binary { parse_cameras_bin(&cameras) } else { parse_cameras_txt(&cameras) }
+        .map_err(|kind| Error::new(&cameras_path, kind))?;
+    let poses = if binary { parse_images_bin(&images) } else { parse_images_txt(&images) }
+        .map_err(|kind| Error::new(&images_path, kind))?;
+    views(&intrinsics, poses).map_err(|kind| Error::new(&images_path, kind))
+}
+
+/// Parse a model from the bytes of its two files (`binary`: `.bin`, else `.txt`).
+pub fn parse_colmap(cameras: &[u8], images: &[u8], binary: bool) -> Result<Vec<View>, ErrorKind> {
+    let intrinsics = if binary { parse_cameras_bin(cameras)? } else { parse_cameras_txt(cameras)? };
+    let poses = if binary { parse_images_bin(images)? } else { parse_images_txt(images)? };
+    views(&intrinsics, poses)
+}
+
+fn views(intrinsics: &HashMap<u32, Intrinsics>, mut poses: Vec<Pose>) -> Result<Vec<View>, ErrorKind> {
+    if poses.is_empty() {
+        return Err(colmap_error("the model has no registered image"));
+    }
+    poses.sort_by(|a, b| a.name.cmp(&b.name));
+    poses
+        .into_iter()
+        .map(|p| {
+            let k = intrinsics.get(&p.camera_id).ok_or_else(|| {
+                colmap_error(format!("image '{}' names camera {}, which cameras.* does not list", p.name, p.camera_id))
+            })?;
+            let [w, x, y, z] = p.q;
+            let q = DQuat::from_xyzw(x, y, z, w);
+            if !(q.length() > 1e-6 && q.is_finite()) {
+                return Err(colmap_error(format!("image '{}': quaternion {:?} is not a rotation", p.name, p.q)));
+            }
+            let rotation = Mat3::from_quat(q.normalize().as_quat().normalize());
+            let translation = DVec3::from(p.t).as_vec3();
+            let camera = Camera::from_intrinsics(
+                k.width,
+                k.height,
+                k.fx as f32,
+                k.fy as f32,
+                k.cx as f32,
+                k.cy as f32,
+                rotation,
+                translation,
+            )
+            .map_err(|e| colmap_error(format!("image '{}': {e}", p.name)))?;
+            Ok(View { name: p.name, camera })
+        })
+        .collect()
+}
+
+/// COLMAP's camera models with their parameter counts; only the pinhole ones are rendered.
+const MODELS: [(&str, usize); 11] = [
+    ("SIMPLE_PINHOLE", 3),
+    ("PINHOLE", 4),
+    ("SIMPLE_RADIAL", 4),
+    ("RADIAL", 5),
+    ("OPENCV", 8),
+    ("OPENCV_FISHEYE", 8),
+    ("FULL_OPENCV", 12),
+    ("FOV", 5),
+    ("SIMPLE_RADIAL_FISHEYE", 4),
+    ("RADIAL_FISHEYE", 5),
+    ("THIN_PRISM_FISHEYE", 12),
+];
+
+fn intrinsics(id: u32, model: &str, width: u64, height: u64, params: &[f64]) -> Result<Intrinsics, ErrorKind> {
+    let (fx, fy, cx, cy) = match (model, params) {
+        ("SIMPLE_PINHOLE", &[f, cx, cy]) => (f, f, cx, cy),
+        ("PINHOLE", &[fx, fy, cx, cy]) => (fx, fy, cx, cy),
+        _ => {
+            return Err(colmap_error(format!(
+                "camera {id}: model {model} is not supported (PINHOLE and SIMPLE_PINHOLE are; undistort the \
+                 images first, e.g. `colmap image_undistorter`, as 3DGS's convert.py does)"
+            )));
+        }
+    };
+    let size = |v: u64, what: &str| {
+        u32::try_from(v).ok().filter(|&v| v > 0).ok_or_else(|| colmap_error(format!("camera {id}: {what} {v}")))
+    };
+    if ![fx, fy, cx, cy].iter().all(|v| v.is_finite()) || fx <= 0.0 || fy <= 0.0 {
+        return Err(colmap_error(format!("camera {id}: focal lengths and principal point {params:?} are unusable")));
+    }
+    Ok(Intrinsics { width: size(width, "width")?, height: size(height, "height")?, fx, fy, cx, cy })
+}
+
+/// A little-endian reader that names what it was reading when the bytes run out.
+struct Bytes<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Bytes<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], ErrorKind> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.data.len()).ok_or_else(|| {
+            colmap_error(format!(
+                "truncated: {what} at byte {} needs {n} bytes, {} remain",
+                self.at,
+                self.data.len() - self.at
+            ))
+        })?;
+        let out = &self.data[self.at..end];
+        self.at = end;
+        Ok(out)
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32, ErrorKind> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().expect("4 bytes")))
+    }
+
+    fn u64(&mut self, what: &str) -> Result<u64, ErrorKind> {
+        Ok(u64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
+    }
+
+    fn f64(&mut self, what: &str) -> Result<f64, ErrorKind> {
+        Ok(f64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
+    }
+
+    /// A count of records of at least `min_bytes` each, checked against the bytes left.
+    fn count(&mut self, min_bytes: usize, what: &str) -> Result<usize, ErrorKind> {
+        let n = self.u64(what)?;
+        let left = (self.data.len() - self.at) as u64;
+        if n.saturating_mul(min_bytes as u64) > left {
+            return Err(colmap_error(format!("truncated: {what} is {n} but only {left} bytes follow")));
+        }
+        Ok(n as usize)
+    }
+}
+
+fn parse_cameras_bin(data: &[u8]) -> Result<HashMap<u32, Intrinsics>, ErrorKind> {
+    let mut b = Bytes { data, at: 0 };
+    let n = b.count(24, "the camera count")?;
+    let mut out = HashMap::new();
+    for _ in 0..n {
+        let id = b.u32("a camera id")?;
+        let model_id = b.u32("a camera model")? as usize;
+        let (model, params) =
+            *MODELS.get(model_id).ok_or_else(|| colmap_error(format!("camera {id}: unknown model id {model_id}")))?;
+        let (width, height) = (b.u64("a width")?, b.u64("a height")?);
+        let params = (0..params).map(|_| b.f64("a camera parameter")).collect::<Result<Vec<_>, _>>()?;
+        out.insert(id, intrinsics(id, model, width, height, &params)?);
+    }
+    Ok(out)
+}
+
+fn parse_images_bin(data: &[u8]) -> Result<Vec<Pose>, ErrorKind> {
+    let mut b = Bytes { data, at: 0 };
+    let n = b.count(64, "the image count")?;
+    let mut out = Vec::new();
+    for _ in 0..n {
+        let _image_id = b.u32("an image id")?;
+        let q = [b.f64("qw")?, b.f64("qx")?, b.f64("qy")?, b.f64("qz")?];
+        let t = [b.f64("tx")?, b.f64("ty")?, b.f64("tz")?];
+        let camera_id = b.u32("a camera id")?;
+        let rest = &b.data[b.at..];
+        let len =
+            rest.iter().position(|&c| c == 0).ok_or_else(|| colmap_error("an image name has no terminating NUL"))?;
+        let name = String::from_utf8_lossy(b.take(len + 1, "an image name")?.split_last().expect("NUL").1).into_owned();
+        let points = b.count(24, "a 2D point count")?;
+        b.take(points * 24, "the 2D points")?;
+        out.push(Pose { name, q, t, camera_id });
+    }
+    Ok(out)
+}
+
+/// Lines that are neither blank nor comments, with their 1-based numbers.
+fn content_lines(data: &[u8]) -> impl Iterator<Item = (usize, &str)> {
+    std::str::from_utf8(data)
+        .unwrap_or("")
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
+fn number<T: std::str::FromStr>(line: usize, token: &str, what: &str) -> Result<T, ErrorKind> {
+    token.parse().map_err(|_| colmap_error(format!("line {line}: {what} '{token}' is not a number")))
+}
+
+fn parse_cameras_txt(data: &[u8]) -> Result<HashMap<u32, Intrinsics>, ErrorKind> {
+    if std::str::from_utf8(data).is_err() {
+        return Err(colmap_error("cameras.txt is not UTF-8 text"));
+    }
+    let mut out = HashMap::new();
+    for (line, text) in content_lines(data) {
+        let words: Vec<&str> = text.split_whitespace().collect();
+        let [id, model, width, height, params @ ..] = words.as_slice() else {
+            return Err(colmap_error(format!("line {line}: expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS…")));
+        };
+        let id: u32 = number(line, id, "camera id")?;
+        let params = params.iter().map(|p| number(line, p, "parameter")).collect::<Result<Vec<f64>, _>>()?;
+        let k = intrinsics(id, model, number(line, width, "width")?, number(line, height, "height")?, &params)?;
+        out.insert(id, k);
+    }
+    Ok(out)
+}
+
+fn parse_images_txt(data: &[u8]) -> Result<Vec<Pose>, ErrorKind> {
+    let text = std::str::from_utf8(data).map_err(|_| colmap_error("images.txt is not UTF-8 text"))?;
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
+    let mut out = Vec::new();
+    // Each image is a pose line and a 2D-point line; the latter may be empty, so only the pose
+    // lines skip blanks and comments (as COLMAP's own reader does).
+    while let Some((line, pose)) = lines.find(|(_, l)| !l.is_empty() && !l.starts_with('#')) {
+        let words: Vec<&str> = pose.split_whitespace().collect();
+        let [_, qw, qx, qy, qz, tx, ty, tz, camera, name @ ..] = words.as_slice() else {
+            return Err(colmap_error(format!("line {line}: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")));
+        };
+        if name.is_empty() {
+            return Err(colmap_error(format!("line {line}: the image has no name")));
+        }
+        let f = |t: &str, what: &str| number::<f64>(line, t, what);
+        out.push(Pose {
+            name: name.join(" "),
+            q: [f(qw, "qw")?, f(qx, "qx")?, f(qy, "qy")?, f(qz, "qz")?],
+            t: [f(tx, "tx")?, f(ty, "ty")?, f(tz, "tz")?],
+            camera_id: number(line, camera, "camera id")?,
+        });
+        lines.next(); // the 2D points
+    }
+    Ok(out)
+}
+
+/// Write a model as `cameras.txt` and `images.txt` into `dir` (one PINHOLE camera per view):
+/// for tests and for handing views to COLMAP-based tools.
+pub fn write_colmap_txt(dir: &Path, views: &[View]) -> Result<(), Error> {
+    let mut cameras = String::from("# CAMERA_ID MODEL WIDTH HEIGHT fx fy cx cy\n");
+    let mut images = String::from("# IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, then POINTS2D\n");
+    for (i, v) in views.iter().enumerate() {
+        let c = &v.camera;
+        cameras += &format!("{} PINHOLE {} {} {} {} {} {}\n", i + 1, c.width, c.height, c.fx, c.fy, c.cx, c.cy);
+        let q = Quat::from_mat3(&c.rotation).normalize();
+        let t: Vec3 = c.translation;
+        images +=
+            &format!("{} {} {} {} {} {} {} {} {} {}\n\n", i + 1, q.w, q.x, q.y, q.z, t.x, t.y, t.z, i + 1, v.name);
+    }
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).map_err(|e| Error::new(&path, ErrorKind::Io(e)))
+    };
+    write("cameras.txt", &cameras)?;
+    write("images.txt", &images)
+}

@@ -1,0 +1,482 @@
+//! Niantic `.spz`: the compressed splat format of the spz library (nianticlabs/spz), versions 2,
+//! 3 and 4, read and written.
+//!
+//! | version | container | rotation |
+//! |---|---|---|
+//! | 2 | gzip around a 16-byte header and the attribute arrays | x, y, z of q (w ≥ 0), 8 bits each |
+//! | 3 | as 2 | "smallest three": index of the largest of w, x, y, z (2 bits), the other three as sign + 9 bits of \|c\|/√½ |
+//! | 4 | 32-byte plain header, a table of contents, one zstd stream per attribute | as 3 |
+//!
+//! The attributes, in file order, per splat: position (3 × 24-bit signed fixed point with
+//! `fractional_bits`), alpha (u8, opacity × 255), colour (3 × u8, SH DC × 0.15 × 255 + 127.5),
+//! scale (3 × u8, (ln s + 10) × 16), rotation (3 or 4 bytes), higher SH bands (u8, x × 128 +
+//! 128, coefficient-major with the three channels inner; the writer rounds band 1 to 5 bits and
+//! bands 2–3 to 4 bits, the spz library's defaults).
+//!
+//! **Axes.** The spz README says spz stores right-up-back (RUB) axes, but the library's default
+//! options (`UNSPECIFIED`) convert nothing, and so do its `ply_to_spz`, PlayCanvas
+//! splat-transform 3.7 and spz-js 1.2: files made from a 3DGS `.ply` by these tools hold the
+//! `.ply`'s own (OpenCV, right-down-forward) axes. [`SpzAxes::AsStored`] (the default) reads
+//! and writes those files unchanged; [`SpzAxes::Rub`] converts from and to RUB (y and z
+//! flipped, the quaternion and SH coefficients with them), for captures exported in RUB.
+
+use crate::{Error, ErrorKind, read_file};
+use glam::{Quat, Vec3};
+use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_core::{Particle, Scene};
+use std::io::Read;
+use std::path::Path;
+
+/// "NGSP", little-endian.
+const MAGIC: u32 = 0x5053_474e;
+/// Colour scale of the DC term.
+const COLOR_SCALE: f32 = 0.15;
+/// Bytes of the version 2–3 header (inside the gzip stream).
+const LEGACY_HEADER: usize = 16;
+/// Bytes of the version 4 header.
+const HEADER_V4: usize = 32;
+/// Largest SH degree the format stores (this reader keeps up to 3).
+const SPZ_MAX_DEGREE: u8 = 4;
+
+/// Which axes the file's data are in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SpzAxes {
+    /// The scene's own axes, unconverted (what the spz tools write from a `.ply`).
+    #[default]
+    AsStored,
+    /// Right-up-back: y and z flipped with respect to the 3DGS (OpenCV) axes.
+    Rub,
+}
+
+/// Options of the writer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SpzWriteOptions {
+    /// Format version, 2, 3 or 4.
+    pub version: u32,
+    /// Axes to store.
+    pub axes: SpzAxes,
+}
+
+impl Default for SpzWriteOptions {
+    /// Version 3 (gzip, read by every spz reader since 2025), the scene's own axes.
+    fn default() -> Self {
+        Self { version: 3, axes: SpzAxes::AsStored }
+    }
+}
+
+fn spz_error(message: impl Into<String>) -> ErrorKind {
+    ErrorKind::Spz(message.into())
+}
+
+/// Read a `.spz` file.
+pub fn read_spz(path: &Path, axes: SpzAxes) -> Result<Scene, Error> {
+    let bytes = read_file(path)?;
+    parse_spz(&bytes, axes).map_err(|kind| Error::new(path, kind))
+}
+
+/// Write a scene as `.spz`.
+pub fn write_spz(path: &Path, scene: &Scene, options: SpzWriteOptions) -> Result<(), Error> {
+    let bytes = encode_spz(scene, options).map_err(|kind| Error::new(path, kind))?;
+    std::fs::write(path, bytes).map_err(|e| Error::new(path, ErrorKind::Io(e)))
+}
+
+/// The fields of either header.
+#[derive(Clone, Copy, Debug)]
+struct Header {
+    version: u32,
+    count: u32,
+    sh_degree: u8,
+    fractional_bits: u8,
+}
+
+impl Header {
+    fn check(self) -> Result<Self, ErrorKind> {
+        if !(2..=4).contains(&self.version) {
+            return Err(spz_error(format!(
+                "version {} is not supported (this reader handles versions 2, 3 and 4)",
+                self.version
+            )));
+        }
+        if self.sh_degree > SPZ_MAX_DEGREE {
+            return Err(spz_error(format!("SH degree {} is out of range 0–4", self.sh_degree)));
+        }
+        if self.sh_degree > splat_core::particle::SH_MAX_DEGREE {
+            return Err(spz_error(
+                "SH degree 4 is not supported (splats here carry degree ≤ 3): drop band 4 first, e.g. \
+                 `splat-transform in.spz -H 3 out.spz`",
+            ));
+        }
+        if self.fractional_bits > 23 {
+            return Err(spz_error(format!("{} fractional bits do not fit 24-bit positions", self.fractional_bits)));
+        }
+        Ok(self)
+    }
+
+    /// Bytes of a rotation.
+    fn rotation_bytes(self) -> usize {
+        if self.version >= 3 { 4 } else { 3 }
+    }
+
+    /// Bytes per splat of each attribute stream, in file order.
+    fn stream_strides(self) -> [(&'static str, usize); 6] {
+        let sh = 3 * (sh_coeff_count(self.sh_degree) - 1);
+        [
+            ("positions", 9),
+            ("alphas", 1),
+            ("colors", 3),
+            ("scales", 3),
+            ("rotations", self.rotation_bytes()),
+            ("sh", sh),
+        ]
+    }
+}
+
+/// The attribute arrays, as stored.
+struct Packed {
+    header: Header,
+    /// positions, alphas, colors, scales, rotations, sh.
+    streams: [Vec<u8>; 6],
+}
+
+/// Parse the bytes of a `.spz` file (versions 2, 3: gzip; 4: zstd streams).
+pub fn parse_spz(bytes: &[u8], axes: SpzAxes) -> Result<Scene, ErrorKind> {
+    let packed = match bytes {
+        [0x1f, 0x8b, ..] => unpack_legacy(bytes)?,
+        [b'N', b'G', b'S', b'P', ..] => unpack_v4(bytes)?,
+        _ => return Err(spz_error("not an spz file: neither gzip (1f 8b) nor 'NGSP' at byte 0")),
+    };
+    decode(&packed, axes)
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
+}
+
+/// Read exactly `len` bytes of `reader` into a buffer that grows only as data arrive, so that a
+/// header claiming billions of splats costs no memory before the data run out.
+fn read_stream(reader: impl Read, len: usize, name: &str, count: u32) -> Result<Vec<u8>, ErrorKind> {
+    let mut out = Vec::with_capacity(len.min(1 << 24));
+    reader
+        .take(len as u64)
+        .read_to_end(&mut out)
+        .map_err(|e| spz_error(format!("decompressing the {name} stream: {e}")))?;
+    if out.len() < len {
+        return Err(spz_error(format!(
+            "the {name} stream ends after {} of {len} bytes: the file is truncated or the header's count \
+             ({count} splats) is wrong",
+            out.len()
+        )));
+    }
+    Ok(out)
+}
+
+fn unpack_legacy(bytes: &[u8]) -> Result<Packed, ErrorKind> {
+    let mut gz = flate2::read::GzDecoder::new(bytes);
+    let head = read_stream(&mut gz, LEGACY_HEADER, "header", 0)?;
+    if u32_at(&head, 0) != MAGIC {
+        return Err(spz_error(format!("bad magic {:#010x} in the gzip stream (expected 'NGSP')", u32_at(&head, 0))));
+    }
+    let header =
+        Header { version: u32_at(&head, 4), count: u32_at(&head, 8), sh_degree: head[12], fractional_bits: head[13] }
+            .check()?;
+    if header.version == 4 {
+        return Err(spz_error("version 4 inside a gzip stream: version 4 files start with a plain 'NGSP' header"));
+    }
+    let mut streams: [Vec<u8>; 6] = Default::default();
+    for (stream, (name, stride)) in streams.iter_mut().zip(header.stream_strides()) {
+        *stream = read_stream(&mut gz, stride * header.count as usize, name, header.count)?;
+    }
+    Ok(Packed { header, streams })
+}
+
+fn unpack_v4(bytes: &[u8]) -> Result<Packed, ErrorKind> {
+    if bytes.len() < HEADER_V4 {
+        return Err(spz_error(format!("{} bytes: shorter than the 32-byte version 4 header", bytes.len())));
+    }
+    let header =
+        Header { version: u32_at(bytes, 4), count: u32_at(bytes, 8), sh_degree: bytes[12], fractional_bits: bytes[13] }
+            .check()?;
+    if header.version != 4 {
+        return Err(spz_error(format!(
+            "a plain 'NGSP' header says version {}: only version 4 is stored so",
+            header.version
+        )));
+    }
+    let stream_count = usize::from(bytes[15]);
+    let toc = u32_at(bytes, 16) as usize;
+    let lengths = header.stream_strides().map(|(name, stride)| (name, stride * header.count as usize));
+    let present = lengths.iter().filter(|&&(_, len)| len > 0).count();
+    if stream_count != present {
+        return Err(spz_error(format!(
+            "{stream_count} attribute streams, expected {present} for {} splats of SH degree {}",
+            header.count, header.sh_degree
+        )));
+    }
+    let toc_end = toc.checked_add(16 * stream_count).filter(|&e| toc >= HEADER_V4 && e <= bytes.len());
+    let Some(mut at) = toc_end else {
+        return Err(spz_error(format!("table of contents at byte {toc} lies outside the {}-byte file", bytes.len())));
+    };
+    let mut streams: [Vec<u8>; 6] = Default::default();
+    let entries = (0..stream_count).map(|i| (u64_at(bytes, toc + 16 * i), u64_at(bytes, toc + 16 * i + 8)));
+    let wanted = streams.iter_mut().zip(lengths).filter(|(_, (_, len))| *len > 0);
+    for ((stream, (name, len)), (compressed, uncompressed)) in wanted.zip(entries) {
+        if uncompressed != len as u64 {
+            return Err(spz_error(format!(
+                "the {name} stream holds {uncompressed} bytes, expected {len} for {} splats",
+                header.count
+            )));
+        }
+        let end = (at as u64).checked_add(compressed).filter(|&e| e <= bytes.len() as u64).ok_or_else(|| {
+            spz_error(format!("the {name} stream ({compressed} bytes at offset {at}) runs past the end of the file"))
+        })? as usize;
+        let decoder = ruzstd::decoding::StreamingDecoder::new(&bytes[at..end])
+            .map_err(|e| spz_error(format!("the {name} stream is not a zstd frame: {e}")))?;
+        *stream = read_stream(decoder, len, name, header.count)?;
+        at = end;
+    }
+    Ok(Packed { header, streams })
+}
+
+/// Flips of the 15 SH coefficients of bands 1–3 under (x, y, z) ↦ (x, −y, −z), in the 3DGS
+/// order (y, z, x; xy, yz, 3z²−1, xz, x²−y²; band 3 likewise): each basis function's parity.
+const RUB_SH_FLIP: [f32; 15] = [-1., -1., 1., -1., 1., 1., -1., 1., -1., 1., -1., -1., 1., -1., 1.];
+
+/// Convert a particle between the 3DGS axes and RUB (an involution: a half turn about x).
+fn flip_rub(p: &mut Particle) {
+    p.mean = Vec3::new(p.mean.x, -p.mean.y, -p.mean.z);
+    let q = p.rotation;
+    p.rotation = Quat::from_xyzw(q.x, -q.y, -q.z, q.w);
+    for (c, s) in p.sh[1..].iter_mut().zip(RUB_SH_FLIP) {
+        *c *= s;
+    }
+}
+
+fn decode(packed: &Packed, axes: SpzAxes) -> Result<Scene, ErrorKind> {
+    let h = packed.header;
+    let [positions, alphas, colors, scales, rotations, sh] = &packed.streams;
+    let rest = sh_coeff_count(h.sh_degree) - 1;
+    let unit = 1.0 / (1u32 << h.fractional_bits) as f32;
+    let rb = h.rotation_bytes();
+    let mut particles = Vec::with_capacity(h.count as usize);
+    for i in 0..h.count as usize {
+        let fixed = |k: usize| {
+            let b = &positions[9 * i + 3 * k..9 * i + 3 * k + 3];
+            // Sign-extend 24 bits: place them high in an i32, shift back arithmetically.
+            (i32::from_le_bytes([0, b[0], b[1], b[2]]) >> 8) as f32 * unit
+        };
+        let mean = Vec3::new(fixed(0), fixed(1), fixed(2));
+        let scale = Vec3::from_array([0, 1, 2].map(|k| (f32::from(scales[3 * i + k]) / 16.0 - 10.0).exp()));
+        let r = &rotations[rb * i..rb * (i + 1)];
+        let rotation = if rb == 4 { smallest_three(u32_at(r, 0)) } else { first_three([r[0], r[1], r[2]]) };
+        let opacity = f32::from(alphas[i]) / 255.0;
+        let mut coeffs = [Vec3::ZERO; SH_MAX_COEFFS];
+        coeffs[0] = Vec3::from_array([0, 1, 2].map(|k| (f32::from(colors[3 * i + k]) / 255.0 - 0.5) / COLOR_SCALE));
+        for (k, c) in coeffs[1..=rest].iter_mut().enumerate() {
+            let at = 3 * (rest * i + k);
+            *c = Vec3::from_array([0, 1, 2].map(|ch| (f32::from(sh[at + ch]) - 128.0) / 128.0));
+        }
+        let mut p = Particle::new(mean, scale, rotation, opacity, coeffs)
+            .map_err(|error| ErrorKind::Particle { index: i as u64, error })?;
+        if axes == SpzAxes::Rub {
+            flip_rub(&mut p);
+        }
+        particles.push(p);
+    }
+    Ok(Scene { particles, sh_degree: h.sh_degree })
+}
+
+/// Version 2 rotation: x, y, z as (c + 1) × 127.5, w = √(1 − |xyz|²) ≥ 0.
+fn first_three(r: [u8; 3]) -> Quat {
+    let xyz = Vec3::from_array(r.map(|b| f32::from(b) / 127.5 - 1.0));
+    let w = (1.0 - xyz.length_squared()).max(0.0).sqrt();
+    Quat::from_xyzw(xyz.x, xyz.y, xyz.z, w).normalize()
+}
+
+/// Versions 3–4 rotation: bits 30–31 index the largest of (x, y, z, w) (stored positive); the
+/// other three, from the last down, each a sign bit and 9 bits of |c| / √½.
+fn smallest_three(mut comp: u32) -> Quat {
+    let largest = (comp >> 30) as usize;
+    let mut q = [0.0f32; 4];
+    let mut sum = 0.0;
+    for i in (0..4).rev().filter(|&i| i != largest) {
+        let magnitude = (comp & 0x1ff) as f32 / 511.0 * std::f32::consts::FRAC_1_SQRT_2;
+        q[i] = if comp & 0x200 != 0 { -magnitude } else { magnitude };
+        sum += q[i] * q[i];
+        comp >>= 10;
+    }
+    q[largest] = (1.0 - sum).max(0.0).sqrt();
+    Quat::from_array(q).normalize()
+}
+
+/// Largest fractional-bit count (≤ 12, the spz library's choice) whose 24-bit range holds every
+/// coordinate.
+fn fractional_bits(scene: &Scene) -> Result<u8, ErrorKind> {
+    let extent = scene.particles.iter().map(|p| p.mean.abs().max_element()).fold(0.0f32, f32::max);
+    (0..=12u8)
+        .rev()
+        .find(|&bits| (extent * (1u32 << bits) as f32).round() < (1 << 23) as f32)
+        .ok_or_else(|| spz_error(format!("a coordinate of magnitude {extent} exceeds the 24-bit range (±8,388,607)")))
+}
+
+fn to_u8(x: f32) -> u8 {
+    x.round().clamp(0.0, 255.0) as u8
+}
+
+/// The spz library's SH quantisation: 8 bits, rounded to the centre of a bucket of
+/// 2^(8 − bits) steps.
+fn quantize_sh(x: f32, bits: u32) -> u8 {
+    let bucket = 1i32 << (8 - bits);
+    let q = (x * 128.0).round() as i32 + 128;
+    ((q + bucket / 2) / bucket * bucket).clamp(0, 255) as u8
+}
+
+fn pack_first_three(q: Quat) -> [u8; 3] {
+    let q = if q.w < 0.0 { -q } else { q };
+    [q.x, q.y, q.z].map(|c| to_u8(c * 127.5 + 127.5))
+}
+
+fn pack_smallest_three(q: Quat) -> [u8; 4] {
+    let q = q.to_array();
+    let largest = (1..4).fold(0, |l, i| if q[i].abs() > q[l].abs() { i } else { l });
+    let negate = q[largest] < 0.0;
+    let mut comp = largest as u32;
+    for (_, &c) in q.iter().enumerate().filter(|&(i, _)| i != largest) {
+        let sign = u32::from((c < 0.0) != negate);
+        let magnitude = (511.0 * (c.abs() / std::f32::consts::FRAC_1_SQRT_2) + 0.5) as u32;
+        comp = (comp << 10) | (sign << 9) | magnitude.min(511);
+    }
+    comp.to_le_bytes()
+}
+
+/// Encode a scene as `.spz` (see the module documentation for the quantisation).
+pub fn encode_spz(scene: &Scene, options: SpzWriteOptions) -> Result<Vec<u8>, ErrorKind> {
+    if !(2..=4).contains(&options.version) {
+        return Err(spz_error(format!("cannot write version {} (choose 2, 3 or 4)", options.version)));
+    }
+    let count = u32::try_from(scene.particles.len())
+        .map_err(|_| spz_error(format!("{} splats exceed the format's 32-bit count", scene.particles.len())))?;
+    let header = Header { version: options.version, count, sh_degree: scene.sh_degree, fractional_bits: 0 };
+    let header = Header { fractional_bits: fractional_bits(scene)?, ..header };
+    let streams = pack(scene, header, options.axes);
+    Ok(if options.version == 4 { container_v4(header, &streams) } else { container_legacy(header, &streams) })
+}
+
+fn pack(scene: &Scene, h: Header, axes: SpzAxes) -> [Vec<u8>; 6] {
+    let rest = sh_coeff_count(h.sh_degree) - 1;
+    let mut s: [Vec<u8>; 6] = Default::default();
+    let unit = (1u32 << h.fractional_bits) as f32;
+    for p in &scene.particles {
+        let mut p = p.clone();
+        if axes == SpzAxes::Rub {
+            flip_rub(&mut p);
+        }
+        for c in p.mean.to_array() {
+            s[0].extend_from_slice(&((c * unit).round() as i32).to_le_bytes()[..3]);
+        }
+        s[1].push(to_u8(p.opacity * 255.0));
+        s[2].extend(p.sh[0].to_array().map(|c| to_u8(c * COLOR_SCALE * 255.0 + 127.5)));
+        s[3].extend(p.scale.to_array().map(|v| to_u8((v.ln() + 10.0) * 16.0)));
+        let q = p.rotation.normalize();
+        if h.version >= 3 {
+            s[4].extend(pack_smallest_three(q));
+        } else {
+            s[4].extend(pack_first_three(q));
+        }
+        for (k, c) in p.sh[1..=rest].iter().enumerate() {
+            let bits = if k < 3 { 5 } else { 4 };
+            s[5].extend(c.to_array().map(|v| quantize_sh(v, bits)));
+        }
+    }
+    s
+}
+
+fn container_legacy(h: Header, streams: &[Vec<u8>; 6]) -> Vec<u8> {
+    let mut raw = Vec::with_capacity(LEGACY_HEADER + streams.iter().map(Vec::len).sum::<usize>());
+    raw.extend(MAGIC.to_le_bytes());
+    raw.extend(h.version.to_le_bytes());
+    raw.extend(h.count.to_le_bytes());
+    raw.extend([h.sh_degree, h.fractional_bits, 0, 0]);
+    streams.iter().for_each(|s| raw.extend(s));
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut gz, &raw).expect("writing to memory");
+    gz.finish().expect("writing to memory")
+}
+
+fn container_v4(h: Header, streams: &[Vec<u8>; 6]) -> Vec<u8> {
+    let present: Vec<&Vec<u8>> = streams.iter().filter(|s| !s.is_empty()).collect();
+    let compressed: Vec<Vec<u8>> = present
+        .iter()
+        .map(|s| ruzstd::encoding::compress_to_vec(s.as_slice(), ruzstd::encoding::CompressionLevel::Fastest))
+        .collect();
+    let mut out = Vec::new();
+    out.extend(MAGIC.to_le_bytes());
+    out.extend(h.version.to_le_bytes());
+    out.extend(h.count.to_le_bytes());
+    out.extend([h.sh_degree, h.fractional_bits, 0, present.len() as u8]);
+    out.extend((HEADER_V4 as u32).to_le_bytes());
+    out.extend([0u8; 12]);
+    for (raw, packed) in present.iter().zip(&compressed) {
+        out.extend((packed.len() as u64).to_le_bytes());
+        out.extend((raw.len() as u64).to_le_bytes());
+    }
+    compressed.iter().for_each(|c| out.extend(c));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smallest_three_round_trips_within_its_step() {
+        for (i, axis) in [Vec3::X, Vec3::Y, Vec3::Z, Vec3::new(1.0, -2.0, 0.5).normalize()].into_iter().enumerate() {
+            for angle in [0.0f32, 0.3, -1.2, 2.9, 3.1] {
+                let q = Quat::from_axis_angle(axis, angle + i as f32 * 0.1);
+                let back = smallest_three(u32::from_le_bytes(pack_smallest_three(q)));
+                assert!(q.dot(back).abs() > 1.0 - 1e-5, "{q:?} → {back:?}");
+                // Version 2 loses w near 0 (tests/tests/formats.rs derives the 0.234 rad bound).
+                let back2 = first_three(pack_first_three(q));
+                assert!(2.0 * q.dot(back2).abs().min(1.0).acos() < 0.234, "{q:?} → {back2:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn sh_quantisation_matches_the_spz_library() {
+        // quantizeSH(x, bucket): round(x·128) + 128, then to the bucket's centre.
+        assert_eq!(quantize_sh(0.0, 5), 128);
+        assert_eq!(quantize_sh(0.0, 4), 128);
+        assert_eq!(quantize_sh(0.1, 8), 141);
+        assert_eq!(quantize_sh(0.1, 5), 144);
+        assert_eq!(quantize_sh(-1.0, 4), 0);
+        assert_eq!(quantize_sh(1.0, 4), 255);
+    }
+
+    #[test]
+    fn rub_flip_is_a_half_turn_about_x() {
+        let mut coeffs = [Vec3::ZERO; SH_MAX_COEFFS];
+        for (k, c) in coeffs.iter_mut().enumerate() {
+            *c = Vec3::splat(0.1 * k as f32 - 0.5);
+        }
+        let p =
+            Particle::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.1, 0.2, 0.3), Quat::from_rotation_y(0.4), 0.5, coeffs)
+                .unwrap();
+        let mut flipped = p.clone();
+        flip_rub(&mut flipped);
+        let half_turn = Quat::from_rotation_x(std::f32::consts::PI);
+        assert!((flipped.mean - half_turn * p.mean).length() < 1e-5);
+        // The Gaussian's covariance turns with it.
+        let turned = glam::Mat3::from_quat(half_turn);
+        let expected = turned * p.covariance() * turned.transpose();
+        assert!(flipped.covariance().abs_diff_eq(expected, 1e-5));
+        // Colour in a turned direction equals the original colour in the original direction.
+        let d = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let a = splat_core::sh::eval(&p.sh, 3, d);
+        let b = splat_core::sh::eval(&flipped.sh, 3, half_turn * d);
+        assert!((a - b).length() < 1e-5, "{a} vs {b}");
+    }
+}

@@ -1,0 +1,535 @@
+//! Scene formats: round trips through every writer, with each format's quantisation bounds, and
+//! files written by other tools (`cargo xtask assets` makes them with the pinned npm packages
+//! PlayCanvas splat-transform and spz-js).
+//!
+//! A round trip passes when (1) every attribute is within half the format's quantisation step
+//! (derived from the encoder, below) and (2) the exact image (Eq. 3, the oracle) moves by no
+//! more than twice what a random within-step perturbation of the same attributes moves it: the
+//! round trip costs what the format's precision costs, and not more. The controls decode with
+//! the wrong axes and with a version 2 file read as version 3 data, and must fail (2).
+
+use glam::{Quat, Vec3};
+use splat_core::rng::SplitMix64;
+use splat_core::sh::SH_C0;
+use splat_core::{Camera, Particle, RenderSettings, Scene, render_oracle, scenes};
+use splat_io::spz::{SpzAxes, SpzWriteOptions, encode_spz, parse_spz};
+use std::path::PathBuf;
+
+/// Half quantisation steps of a format, per attribute.
+#[derive(Clone, Copy, Debug)]
+struct Steps {
+    /// Position, scene units.
+    position: f32,
+    /// ln(scale).
+    log_scale: f32,
+    /// Linear opacity.
+    opacity: f32,
+    /// SH DC coefficient.
+    dc: f32,
+    /// Band-1 SH coefficients.
+    sh1: f32,
+    /// Band 2–3 SH coefficients.
+    sh_rest: f32,
+    /// Rotation angle between the quaternions, radians.
+    angle: f32,
+}
+
+/// `.spz` with 12 fractional bits: half steps of its encoder. SH: rounding to 1/128, then to
+/// the centre of a bucket of 8 (band 1, 5 bits) or 16 (bands 2–3, 4 bits) steps.
+fn spz_steps(version: u32) -> Steps {
+    Steps {
+        position: 0.5 / 4096.0,
+        log_scale: 0.5 / 16.0,
+        opacity: 0.5 / 255.0,
+        dc: 0.5 / (0.15 * 255.0),
+        sh1: 4.5 / 128.0,
+        sh_rest: 8.5 / 128.0,
+        angle: if version == 2 { v2_angle_bound() } else { 0.004 },
+    }
+}
+
+/// Version 2 stores x, y, z of q (w ≥ 0) to δ = 0.5/127.5 and derives w = √(1 − |xyz|²): near
+/// w = 0 the rounding can raise |xyz|² by up to 2√3δ + 3δ², which the decoder takes from w², so
+/// w is lost up to √(2√3δ + 3δ²) and the rotation angle up to twice its arcsine (0.234 rad).
+/// Versions 3–4 store the three smallest components to √½/511 (the bound 0.004 rad holds with
+/// room: each component is off by ≤ 6.9e-4).
+fn v2_angle_bound() -> f32 {
+    let d = 0.5f32 / 127.5;
+    2.0 * (2.0 * 3f32.sqrt() * d + 3.0 * d * d).sqrt().asin()
+}
+
+/// `.splat`: f32 position and scale, 8-bit RGB of the degree-0 colour and opacity, 8-bit
+/// quaternion components.
+fn splat_steps() -> Steps {
+    Steps {
+        position: 1e-7,
+        log_scale: 1e-6,
+        opacity: 0.5 / 255.0,
+        dc: 0.5 / 255.0 / SH_C0,
+        sh1: 0.0,
+        sh_rest: 0.0,
+        angle: 0.03,
+    }
+}
+
+/// Largest error of each attribute between two scenes, as a `Steps`.
+fn errors(a: &Scene, b: &Scene) -> Steps {
+    assert_eq!(a.particles.len(), b.particles.len());
+    assert_eq!(a.sh_degree, b.sh_degree);
+    let mut e = Steps { position: 0.0, log_scale: 0.0, opacity: 0.0, dc: 0.0, sh1: 0.0, sh_rest: 0.0, angle: 0.0 };
+    let max = |m: &mut f32, v: f32| *m = m.max(v);
+    for (p, q) in a.particles.iter().zip(&b.particles) {
+        max(&mut e.position, (p.mean - q.mean).abs().max_element());
+        max(&mut e.log_scale, (p.scale.ln() - q.scale.ln()).abs().max_element());
+        max(&mut e.opacity, (p.opacity - q.opacity).abs());
+        max(&mut e.dc, (p.sh[0] - q.sh[0]).abs().max_element());
+        for k in 1..16 {
+            let d = (p.sh[k] - q.sh[k]).abs().max_element();
+            max(if k < 4 { &mut e.sh1 } else { &mut e.sh_rest }, d);
+        }
+        max(&mut e.angle, 2.0 * p.rotation.dot(q.rotation).abs().min(1.0).acos());
+    }
+    e
+}
+
+fn within(e: Steps, s: Steps) -> Result<(), String> {
+    let checks = [
+        ("position", e.position, s.position),
+        ("ln scale", e.log_scale, s.log_scale),
+        ("opacity", e.opacity, s.opacity),
+        ("dc", e.dc, s.dc),
+        ("sh band 1", e.sh1, s.sh1),
+        ("sh bands 2-3", e.sh_rest, s.sh_rest),
+        ("rotation angle", e.angle, s.angle),
+    ];
+    for (name, error, bound) in checks {
+        // One part in 10⁵ (plus 1e-6 absolute) for f32 arithmetic in the decode.
+        if error > bound * 1.00001 + 1e-6 {
+            return Err(format!("{name}: error {error:.3e} exceeds the half step {bound:.3e}"));
+        }
+    }
+    Ok(())
+}
+
+/// The test scene: the 3,000-splat SH degree 3 cloud at 64 × 48.
+fn cloud() -> (Scene, Camera) {
+    let (scene, camera) = scenes::cloud();
+    (scene, camera.rescaled(64, 48).unwrap())
+}
+
+fn image(scene: &Scene, camera: &Camera) -> Vec<f32> {
+    render_oracle(scene, camera, &RenderSettings::default(), &|_| {}).unwrap().mean.data().to_vec()
+}
+
+fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    let sum: f64 = a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum();
+    (sum / a.len() as f64).sqrt()
+}
+
+/// The scene with every attribute moved by a uniform random amount within ± its half step.
+fn perturbed(scene: &Scene, s: Steps, seed: u64) -> Scene {
+    let mut rng = SplitMix64::new(seed);
+    let mut u = |h: f32| rng.range(-h, h);
+    let particles = scene
+        .particles
+        .iter()
+        .map(|p| {
+            let mut q = p.clone();
+            q.mean += Vec3::new(u(s.position), u(s.position), u(s.position));
+            q.scale *= Vec3::new(u(s.log_scale).exp(), u(s.log_scale).exp(), u(s.log_scale).exp());
+            q.opacity = (q.opacity + u(s.opacity)).clamp(0.0, 1.0);
+            q.sh[0] += Vec3::new(u(s.dc), u(s.dc), u(s.dc));
+            for k in 1..16 {
+                let h = if k < 4 { s.sh1 } else { s.sh_rest };
+                q.sh[k] += Vec3::new(u(h), u(h), u(h));
+            }
+            let axis = Vec3::new(u(1.0), u(1.0), u(1.0)).normalize_or(Vec3::X);
+            q.rotation = (Quat::from_axis_angle(axis, u(s.angle)) * q.rotation).normalize();
+            q
+        })
+        .collect();
+    Scene { particles, sh_degree: scene.sh_degree }
+}
+
+/// Image RMSE of `back` against `scene`, and the bound: twice the RMSE of a within-step
+/// perturbation.
+fn image_check(scene: &Scene, back: &Scene, camera: &Camera, s: Steps) -> (f64, f64) {
+    let reference = image(scene, camera);
+    let bound = 2.0 * rmse(&reference, &image(&perturbed(scene, s, 7), camera));
+    (rmse(&reference, &image(back, camera)), bound)
+}
+
+#[test]
+fn spz_round_trips_stay_within_the_quantisation_step() {
+    let (scene, camera) = cloud();
+    for version in [2, 3, 4] {
+        for axes in [SpzAxes::AsStored, SpzAxes::Rub] {
+            let bytes = encode_spz(&scene, SpzWriteOptions { version, axes }).unwrap();
+            let back = parse_spz(&bytes, axes).unwrap();
+            let e = errors(&scene, &back);
+            within(e, spz_steps(version)).unwrap_or_else(|m| panic!("spz v{version} {axes:?}: {m}"));
+            let (error, bound) = image_check(&scene, &back, &camera, spz_steps(version));
+            eprintln!(
+                "spz v{version} {axes:?}: {} bytes ({:.1} per splat); image RMSE {error:.2e}, bound {bound:.2e}; \
+                 errors {e:?}",
+                bytes.len(),
+                bytes.len() as f64 / scene.particles.len() as f64
+            );
+            assert!(error <= bound, "spz v{version}: image RMSE {error:.3e} > bound {bound:.3e}");
+        }
+    }
+}
+
+#[test]
+fn the_round_trip_check_rejects_wrong_axes_and_a_wrong_rotation_code() {
+    let (scene, camera) = cloud();
+    let bytes = encode_spz(&scene, SpzWriteOptions { version: 3, axes: SpzAxes::Rub }).unwrap();
+    let wrong_axes = parse_spz(&bytes, SpzAxes::AsStored).unwrap();
+    let (error, bound) = image_check(&scene, &wrong_axes, &camera, spz_steps(3));
+    eprintln!("control, RUB file read as stored: image RMSE {error:.2e}, bound {bound:.2e}");
+    assert!(error > 4.0 * bound, "reading RUB data unconverted must fail the check ({error:.3e} vs {bound:.3e})");
+    assert!(within(errors(&scene, &wrong_axes), spz_steps(3)).is_err());
+    // A version 2 file whose header is changed to say 3 (its 3-byte rotations read as 4): the
+    // decode fails or the check does.
+    let v2 = encode_spz(&scene, SpzWriteOptions { version: 2, axes: SpzAxes::AsStored }).unwrap();
+    let raw = gunzip(&v2);
+    let mut relabelled = raw.clone();
+    relabelled[4] = 3;
+    match parse_spz(&gzip(&relabelled), SpzAxes::AsStored) {
+        Err(e) => eprintln!("control, v2 data labelled v3: refused ({e})"),
+        Ok(back) => assert!(within(errors(&scene, &back), spz_steps(3)).is_err()),
+    }
+    // The smallest detected change: one quantisation step of ln(scale) on every splat.
+    let mut nudged = parse_spz(&bytes, SpzAxes::Rub).unwrap();
+    for p in &mut nudged.particles {
+        p.scale *= (1.0f32 / 16.0).exp();
+    }
+    assert!(within(errors(&scene, &nudged), spz_steps(3)).is_err(), "one step of scale must be seen");
+}
+
+fn gunzip(bytes: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(bytes), &mut out).unwrap();
+    out
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, bytes).unwrap();
+    gz.finish().unwrap()
+}
+
+#[test]
+fn ply_and_splat_round_trips() {
+    use splat_io::ply::{PlyFormat, PlyOptions, encode_ply, parse_ply};
+    let (scene, camera) = cloud();
+    let back = parse_ply(&encode_ply(&scene, PlyFormat::BinaryLittleEndian), PlyOptions::default()).unwrap();
+    let lossless =
+        Steps { position: 0.0, log_scale: 1e-6, opacity: 1e-6, dc: 0.0, sh1: 0.0, sh_rest: 0.0, angle: 1e-3 };
+    within(errors(&scene, &back), lossless).unwrap();
+    // .splat keeps the degree-0 colour only: compare with the scene at degree 0.
+    let flat = Scene { particles: scene.particles.clone(), sh_degree: 0 };
+    let mut back = splat_io::splat::parse_splat(&splat_io::splat::encode_splat(&flat)).unwrap();
+    for (b, p) in back.particles.iter_mut().zip(&flat.particles) {
+        b.sh[1..].copy_from_slice(&p.sh[1..]); // the format has no higher bands to compare
+    }
+    within(errors(&flat, &back), splat_steps()).unwrap();
+    let (error, bound) = image_check(&flat, &back, &camera, splat_steps());
+    eprintln!(".splat: image RMSE {error:.2e}, bound {bound:.2e}");
+    assert!(error <= bound);
+}
+
+/// Files written by other tools from `interop/source.ply` (`cargo xtask assets`).
+fn interop_dir() -> Option<PathBuf> {
+    let dir = splat_tests::root().join("target/interop");
+    if !dir.join("source.ply").exists() {
+        splat_tests::skip(
+            &splat_tests::current_test(),
+            &format!("{} has no files from other tools (run `cargo xtask assets`, needs Node.js)", dir.display()),
+        );
+        return None;
+    }
+    Some(dir)
+}
+
+#[test]
+fn files_written_by_other_tools_read_within_their_quantisation() {
+    let Some(dir) = interop_dir() else { return };
+    let source = splat_io::read_scene(&dir.join("source.ply")).unwrap();
+    let (_, camera) = cloud();
+    let files = [
+        ("spz-js-v2.spz", Some(spz_steps(2))),
+        ("splat-transform-v3.spz", Some(spz_steps(3))),
+        ("splat-transform-v4.spz", Some(spz_steps(4))),
+        ("splat-transform.compressed.ply", None),
+        ("spz-js.compressed.ply", None),
+    ];
+    for (name, steps) in files {
+        let read = splat_io::read_scene_with(&dir.join(name), Default::default())
+            .unwrap_or_else(|e| panic!("{name} does not read: {e}"));
+        // Compressed .ply writers reorder the splats (by Morton code) into their chunks.
+        let back = if read.format == splat_io::SceneFormat::CompressedPly {
+            in_source_order(&source, read.scene)
+        } else {
+            read.scene
+        };
+        let e = errors(&source, &back);
+        // Compressed .ply quantises within each 256-splat chunk's range: 11 bits of position
+        // and log scale, 10 bits of each rotation component, 8 bits of colour, opacity and SH
+        // over [−4, 4]. Its steps are the chunk ranges over those counts; the cloud's chunks
+        // span the whole ball, so these bounds hold for every chunk.
+        let steps = steps.unwrap_or(Steps {
+            position: 0.5 * 2.0 / 1023.0,
+            log_scale: 0.5 * (0.08f32 / 0.015).ln() / 1023.0,
+            opacity: 0.5 / 255.0,
+            dc: 0.5 / 255.0 / SH_C0 * 1.05,
+            sh1: 4.0 / 255.0 + 1e-3,
+            sh_rest: 4.0 / 255.0 + 1e-3,
+            angle: 0.004,
+        });
+        within(e, steps).unwrap_or_else(|m| panic!("{name}: {m} ({e:?})"));
+        let (error, bound) = image_check(&source, &back, &camera, steps);
+        eprintln!("{name}: {:?}, image RMSE {error:.2e}, bound {bound:.2e}; errors {e:?}", read.format);
+        assert!(error <= bound, "{name}: image RMSE {error:.3e} > bound {bound:.3e}");
+    }
+}
+
+/// `read`'s splats reordered to match `source`'s: each source splat takes the read splat nearest
+/// to it (the positions are distinct by far more than the quantisation step).
+fn in_source_order(source: &Scene, read: Scene) -> Scene {
+    let mut taken = vec![false; read.particles.len()];
+    let particles = source
+        .particles
+        .iter()
+        .map(|p| {
+            let nearest = (0..read.particles.len())
+                .filter(|&i| !taken[i])
+                .min_by(|&a, &b| {
+                    let d = |i: usize| (read.particles[i].mean - p.mean).length_squared();
+                    d(a).total_cmp(&d(b))
+                })
+                .expect("as many splats read as written");
+            taken[nearest] = true;
+            read.particles[nearest].clone()
+        })
+        .collect();
+    Scene { particles, sh_degree: read.sh_degree }
+}
+
+#[test]
+fn spz_errors_name_the_problem() {
+    let (scene, _) = cloud();
+    let v3 = encode_spz(&scene, SpzWriteOptions::default()).unwrap();
+    let cases: Vec<(Vec<u8>, &str)> = vec![
+        (b"ply\n".to_vec(), "not an spz file"),
+        (v3[..v3.len() / 2].to_vec(), "stream"),
+        (gzip(&[0u8; 16]), "bad magic"),
+        (
+            {
+                let mut raw = gunzip(&v3);
+                raw[4] = 9;
+                gzip(&raw)
+            },
+            "version 9",
+        ),
+        (
+            {
+                let mut raw = gunzip(&v3);
+                raw[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
+                gzip(&raw)
+            },
+            "truncated or the header's count",
+        ),
+        (
+            {
+                let mut raw = gunzip(&v3);
+                raw[12] = 4;
+                gzip(&raw)
+            },
+            "SH degree 4",
+        ),
+        (b"NGSP\x04\0\0\0".to_vec(), "shorter than the 32-byte"),
+    ];
+    for (bytes, expected) in cases {
+        let e = parse_spz(&bytes, SpzAxes::AsStored).expect_err(expected).to_string();
+        assert!(e.contains(expected), "'{e}' should mention '{expected}'");
+    }
+    let v4 = encode_spz(&scene, SpzWriteOptions { version: 4, axes: SpzAxes::AsStored }).unwrap();
+    let e = parse_spz(&v4[..v4.len() - 10], SpzAxes::AsStored).unwrap_err().to_string();
+    assert!(e.contains("runs past the end"), "{e}");
+    let particle = Particle::with_rgb(Vec3::splat(1e7), Vec3::ONE, Quat::IDENTITY, 0.5, Vec3::ONE);
+    let far = Scene { particles: vec![particle], sh_degree: 0 };
+    assert!(encode_spz(&far, SpzWriteOptions::default()).unwrap_err().to_string().contains("24-bit range"));
+}
+
+/// Three views of the cloud with distinct poses and focal lengths, principal point at the
+/// centre (what cameras.json can express), in the order of their names.
+fn views() -> Vec<(String, Camera)> {
+    let eyes = [Vec3::new(0.0, 0.6, 3.4), Vec3::new(2.5, -0.5, 2.0), Vec3::new(-1.0, 2.5, -2.2)];
+    eyes.iter()
+        .zip([40.0, 55.0, 35.0])
+        .enumerate()
+        .map(|(i, (&eye, fov))| {
+            let camera = Camera::look_at(eye, Vec3::ZERO, Vec3::new(0.0, 1.0, 0.1), fov, 64, 48).unwrap();
+            (format!("frame_{i:03}.jpg"), camera)
+        })
+        .collect()
+}
+
+/// COLMAP's binary model written from cameras.json values by the formulas of COLMAP's own
+/// documentation (independent of the reader): R = (camera-to-world)ᵀ, t = −R C, q = quat(R).
+fn write_colmap_bin(dir: &std::path::Path, entries: &[splat_io::cameras::CameraEntry], order: &[usize]) {
+    let mut cameras = Vec::new();
+    let mut images = Vec::new();
+    cameras.extend((entries.len() as u64).to_le_bytes());
+    images.extend((entries.len() as u64).to_le_bytes());
+    for &i in order {
+        let e = &entries[i];
+        let id = i as u32 + 1;
+        cameras.extend(id.to_le_bytes());
+        cameras.extend(1u32.to_le_bytes()); // PINHOLE
+        cameras.extend(u64::from(e.width).to_le_bytes());
+        cameras.extend(u64::from(e.height).to_le_bytes());
+        for v in [e.fx, e.fy, 0.5 * f64::from(e.width), 0.5 * f64::from(e.height)] {
+            cameras.extend(v.to_le_bytes());
+        }
+        let c2w = glam::DMat3::from_cols_array_2d(&e.rotation).transpose(); // rows as written
+        let w2c = c2w.transpose();
+        let q = glam::DQuat::from_mat3(&w2c);
+        let t = -(w2c * glam::DVec3::from(e.position));
+        images.extend(id.to_le_bytes());
+        for v in [q.w, q.x, q.y, q.z, t.x, t.y, t.z] {
+            images.extend(v.to_le_bytes());
+        }
+        images.extend(id.to_le_bytes());
+        images.extend(e.img_name.as_bytes());
+        images.push(0);
+        images.extend(2u64.to_le_bytes()); // two 2D points, skipped by the reader
+        images.extend([0u8; 48]);
+    }
+    std::fs::write(dir.join("cameras.bin"), cameras).unwrap();
+    std::fs::write(dir.join("images.bin"), images).unwrap();
+}
+
+fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("splat-formats-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn colmap_models_render_the_views_of_the_equivalent_cameras_json() {
+    let (scene, _) = cloud();
+    let views = views();
+    let dir = scratch_dir("colmap");
+    let cameras: Vec<Camera> = views.iter().map(|(_, c)| *c).collect();
+    let json = dir.join("cameras.json");
+    let entries: Vec<_> = views
+        .iter()
+        .enumerate()
+        .map(|(i, (name, c))| splat_io::cameras::CameraEntry::from_camera(i as i64, name, c))
+        .collect();
+    std::fs::write(&json, serde_json::to_string(&entries).unwrap()).unwrap();
+    let from_json = splat_io::cameras::read_named_cameras(&json).unwrap();
+    assert_eq!(from_json.len(), cameras.len());
+    // Binary, images listed out of name order; text, from the writer.
+    let bin = scratch_dir("colmap-bin");
+    write_colmap_bin(&bin, &entries, &[2, 0, 1]);
+    let txt = scratch_dir("colmap-txt");
+    let named: Vec<_> =
+        views.iter().map(|(name, camera)| splat_io::colmap::View { name: name.clone(), camera: *camera }).collect();
+    splat_io::colmap::write_colmap_txt(&txt, &named).unwrap();
+    for model in [bin.clone(), bin.join("images.bin"), txt.clone(), txt.join("cameras.txt")] {
+        let read = splat_io::colmap::read_colmap(&model).unwrap_or_else(|e| panic!("{}: {e}", model.display()));
+        for (i, (view, (name, camera))) in read.iter().zip(&from_json).enumerate() {
+            assert_eq!(&view.name, name, "{}: views sorted by name", model.display());
+            let a = image(&scene, camera);
+            let b = image(&scene, &view.camera);
+            let max = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            assert!(max < 1e-3, "{} view {i}: images differ by {max}", model.display());
+            assert!((view.camera.center() - camera.center()).length() < 1e-5);
+        }
+    }
+    // A hand-made model: identity rotation, t = (0, 0, 5): the centre is (0, 0, −5).
+    let hand = scratch_dir("colmap-hand");
+    std::fs::write(hand.join("cameras.txt"), "# comment\n7 SIMPLE_PINHOLE 64 48 50 32 24\n").unwrap();
+    std::fs::write(hand.join("images.txt"), "# two lines per image\n3 1 0 0 0 0 0 5 7 my image.png\n\n").unwrap();
+    let read = splat_io::colmap::read_colmap(&hand).unwrap();
+    assert_eq!(read[0].name, "my image.png");
+    assert!((read[0].camera.center() - Vec3::new(0.0, 0.0, -5.0)).length() < 1e-6);
+    assert_eq!((read[0].camera.fx, read[0].camera.fy, read[0].camera.cx), (50.0, 50.0, 32.0));
+    // Errors name the problem.
+    std::fs::write(hand.join("cameras.txt"), "7 OPENCV 64 48 50 50 32 24 0.1 0 0 0\n").unwrap();
+    let e = splat_io::colmap::read_colmap(&hand).unwrap_err().to_string();
+    assert!(e.contains("OPENCV is not supported") && e.contains("undistort"), "{e}");
+    let images = std::fs::read(bin.join("images.bin")).unwrap();
+    std::fs::write(bin.join("images.bin"), &images[..images.len() - 30]).unwrap();
+    let e = splat_io::colmap::read_colmap(&bin).unwrap_err().to_string();
+    assert!(e.contains("images.bin") && e.contains("truncated"), "{e}");
+}
+
+/// Every prefix (in steps) and many single-byte corruptions of valid files of each new reader
+/// give a value or an error, never a panic (the fuzz targets in fuzz/ explore further).
+#[test]
+fn new_readers_survive_truncation_and_corruption() {
+    let (scene, _) = cloud();
+    let small = Scene { particles: scene.particles[..40].to_vec(), sh_degree: 3 };
+    let mut files: Vec<(String, Vec<u8>)> = [2, 3, 4]
+        .map(|version| {
+            let bytes = encode_spz(&small, SpzWriteOptions { version, axes: SpzAxes::AsStored }).unwrap();
+            (format!("v{version}.spz"), bytes)
+        })
+        .to_vec();
+    // The raw (uncompressed) version 3 body behind a valid gzip: corruptions reach the decoder.
+    let raw = gunzip(&files[1].1);
+    let hand = scratch_dir("robust");
+    let named: Vec<_> = views().into_iter().map(|(name, camera)| splat_io::colmap::View { name, camera }).collect();
+    splat_io::colmap::write_colmap_txt(&hand, &named).unwrap();
+    let cameras_txt = std::fs::read(hand.join("cameras.txt")).unwrap();
+    let images_txt = std::fs::read(hand.join("images.txt")).unwrap();
+    let mut rng = SplitMix64::new(11);
+    let mut cases = 0;
+    for (name, bytes) in files.drain(..) {
+        for end in (0..bytes.len()).step_by(7) {
+            let _ = parse_spz(&bytes[..end], SpzAxes::AsStored);
+            cases += 1;
+        }
+        for _ in 0..300 {
+            let mut b = bytes.clone();
+            let i = (rng.next_f32() * b.len() as f32) as usize % b.len();
+            b[i] ^= 1 << (rng.next_f32() * 8.0) as u32;
+            let _ = parse_spz(&b, SpzAxes::Rub);
+            cases += 1;
+        }
+        eprintln!("{name}: survived");
+    }
+    for _ in 0..500 {
+        let mut b = raw.clone();
+        let i = (rng.next_f32() * 16.0) as usize; // the header
+        b[i] = (rng.next_f32() * 256.0) as u8;
+        let _ = parse_spz(&gzip(&b), SpzAxes::AsStored);
+        cases += 1;
+    }
+    for end in 0..cameras_txt.len() {
+        let _ = splat_io::colmap::parse_colmap(&cameras_txt[..end], &images_txt, false);
+        let _ = splat_io::colmap::parse_colmap(&cameras_txt, &images_txt[..end.min(images_txt.len())], false);
+        let _ = splat_io::colmap::parse_colmap(&images_txt[..end.min(images_txt.len())], &cameras_txt, true);
+        cases += 3;
+    }
+    if let Some(dir) = interop_dir() {
+        let bytes = std::fs::read(dir.join("splat-transform.compressed.ply")).unwrap();
+        let options = splat_io::ply::PlyOptions::default();
+        for end in (0..bytes.len()).step_by(331) {
+            let _ = splat_io::ply::parse_ply(&bytes[..end], options);
+            cases += 1;
+        }
+        for _ in 0..300 {
+            let mut b = bytes.clone();
+            let i = (rng.next_f32() * 4000.0) as usize % b.len(); // header and chunk bounds
+            b[i] = (rng.next_f32() * 256.0) as u8;
+            let _ = splat_io::ply::parse_ply(&b, options);
+            cases += 1;
+        }
+    }
+    eprintln!("{cases} damaged inputs read without a panic");
+}

@@ -1,0 +1,25 @@
+// Writes the files that splat-io's readers are tested on, with other implementations of the
+// formats: spz-js (spz version 2, compressed .ply) and PlayCanvas splat-transform (spz
+// versions 3 and 4, compressed .ply). Run by `cargo xtask assets` as
+//   node make.mjs OUT_DIR
+// in a folder where `npm ci` installed package-lock.json; OUT_DIR/source.ply must exist.
+import { readFileSync, writeFileSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
+import { join } from 'node:path';
+import { Readable } from 'node:stream';
+import { loadPly, serializeSpz, serializeCompressedPly } from 'spz-js';
+
+const out = process.argv[2];
+const source = join(out, 'source.ply');
+
+// spz-js: read the .ply, write spz version 2 and a compressed .ply.
+const stream = () => Readable.toWeb(Readable.from([readFileSync(source)]));
+writeFileSync(join(out, 'spz-js-v2.spz'), await serializeSpz(await loadPly(stream())));
+writeFileSync(join(out, 'spz-js.compressed.ply'), serializeCompressedPly(await loadPly(stream())));
+
+// splat-transform's command line: spz 3 and 4, compressed .ply.
+const cli = join('node_modules', '@playcanvas', 'splat-transform', 'bin', 'cli.mjs');
+const transform = (...args) => execFileSync(process.execPath, [cli, '-q', '-w', ...args], { stdio: 'inherit' });
+transform(source, '--spz-version', '3', join(out, 'splat-transform-v3.spz'));
+transform(source, '--spz-version', '4', join(out, 'splat-transform-v4.spz'));
+transform(source, join(out, 'splat-transform.compressed.ply'));
