@@ -36,19 +36,38 @@ impl GpuContext {
     /// first adapter whose name contains `WGPU_ADAPTER_NAME` (case-insensitive) when it is
     /// set, else the default adapter. A typed error, never a panic, when none matches.
     pub fn new() -> Result<Self, GpuError> {
-        pollster::block_on(Self::new_async())
+        pollster::block_on(async { Self::from_adapter(Self::adapter().await?).await })
     }
 
-    async fn new_async() -> Result<Self, GpuError> {
+    /// A context on a hardware GPU, or `None` when there is none: the choice of `--backend
+    /// auto`. Quick and quiet where no GPU can be: on Linux without a GPU device node
+    /// (`/dev/dri/renderD*`, `/dev/nvidia*`) no graphics API is initialised at all, unless
+    /// `WGPU_BACKEND` or `WGPU_ADAPTER_NAME` asks for one; elsewhere the adapter is probed and a
+    /// CPU adapter (lavapipe, llvmpipe, WARP) is turned down before any device is created.
+    pub fn hardware() -> Result<Option<Self>, GpuError> {
+        if !hardware_gpu_possible() {
+            return Ok(None);
+        }
+        pollster::block_on(async {
+            match Self::adapter().await {
+                Ok(adapter) if adapter.get_info().device_type != wgpu::DeviceType::Cpu => {
+                    Self::from_adapter(adapter).await.map(Some)
+                }
+                _ => Ok(None),
+            }
+        })
+    }
+
+    async fn adapter() -> Result<wgpu::Adapter, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+        match std::env::var("WGPU_ADAPTER_NAME") {
             Ok(name) => {
                 let wanted = name.to_lowercase();
                 let adapters = instance.enumerate_adapters(backends).await;
                 adapters.into_iter().find(|a| a.get_info().name.to_lowercase().contains(&wanted)).ok_or_else(|| {
                     GpuError::NoAdapter { detail: format!(" whose name contains '{name}' (WGPU_ADAPTER_NAME)") }
-                })?
+                })
             }
             Err(_) => instance
                 .request_adapter(&wgpu::RequestAdapterOptions {
@@ -57,8 +76,11 @@ impl GpuContext {
                     ..Default::default()
                 })
                 .await
-                .map_err(|e| GpuError::NoAdapter { detail: format!(" for backends {backends:?} ({e})") })?,
-        };
+                .map_err(|e| GpuError::NoAdapter { detail: format!(" for backends {backends:?} ({e})") }),
+        }
+    }
+
+    async fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, GpuError> {
         let info = adapter.get_info();
         let limits = adapter.limits();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
@@ -288,4 +310,20 @@ fn msaa_counts(adapter: &wgpu::Adapter, features: wgpu::Features) -> Vec<u32> {
                         .all(|&f| adapter.get_texture_format_features(f).flags.sample_count_supported(count))
         })
         .collect()
+}
+
+/// Whether a hardware GPU may be present: false only on Linux with no GPU device node and no
+/// `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` in the environment.
+fn hardware_gpu_possible() -> bool {
+    if !cfg!(target_os = "linux") || std::env::var_os("WGPU_BACKEND").is_some() {
+        return true;
+    }
+    if std::env::var_os("WGPU_ADAPTER_NAME").is_some() {
+        return true;
+    }
+    let has = |dir: &str, prefix: &str| {
+        std::fs::read_dir(dir)
+            .is_ok_and(|entries| entries.flatten().any(|e| e.file_name().to_string_lossy().starts_with(prefix)))
+    };
+    has("/dev/dri", "renderD") || has("/dev", "nvidia")
 }

@@ -8,7 +8,7 @@ use thiserror::Error;
 pub enum GpuError {
     /// No adapter matched.
     #[error(
-        "no GPU adapter found{detail}. Install a Vulkan driver (on Debian/Ubuntu: `apt-get install mesa-vulkan-drivers`, which provides the lavapipe CPU driver) or choose a backend with WGPU_BACKEND=vulkan|gl|metal|dx12 and an adapter with WGPU_ADAPTER_NAME"
+        "no GPU adapter found{detail}. Install a Vulkan driver (on Debian/Ubuntu: `apt-get install mesa-vulkan-drivers`, which provides the lavapipe CPU driver) or choose a backend with WGPU_BACKEND=vulkan|metal|dx12|gl (gl: build with --features gl) and an adapter with WGPU_ADAPTER_NAME"
     )]
     NoAdapter {
         /// What was asked for.
