@@ -14,7 +14,6 @@ use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
 use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene, scenes};
-use splat_io::ply::{PlyOptions, read_ply_with};
 use splat_io::world::World;
 use std::path::PathBuf;
 
@@ -313,13 +312,15 @@ pub struct Loaded {
 /// Scene, camera and shading options shared by `render`, `converge` and `bench`.
 #[derive(Args, Clone)]
 pub struct SceneArgs {
-    /// Scene file (.ply or .splat) or world file (.toml: splat sets, materials, lights, camera;
-    /// see the README). Without one, the built-in demo scene is used.
+    /// Scene file (.ply, compressed .ply, .splat or .spz) or world file (.toml: splat sets,
+    /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
-    /// INRIA cameras.json; without it the camera frames the scene (or the demo's own camera).
+    /// Cameras: an INRIA cameras.json, or a COLMAP model (a sparse/0 folder, or its
+    /// images.bin / images.txt; PINHOLE and SIMPLE_PINHOLE cameras, views sorted by image name
+    /// as 3DGS lists them). Without it the camera frames the scene (or the demo's own camera).
     #[arg(long)]
     pub camera: Option<PathBuf>,
-    /// Which entry of the cameras.json to use.
+    /// Which camera of --camera to use (0-based).
     #[arg(long, default_value_t = 0)]
     pub camera_index: usize,
     /// Image width; rescales the camera's intrinsics.
@@ -376,9 +377,59 @@ pub struct SceneArgs {
     /// Where rays are traced.
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
-    /// Skip unknown `.ply` vertex properties instead of refusing the file.
+    #[command(flatten)]
+    pub read: ReadArgs,
+}
+
+/// How scene files are read.
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub struct ReadArgs {
+    /// Refuse `.ply` vertex properties this reader does not know (by default they are skipped
+    /// with one warning line naming them: Mip-Splatting's filter_3D and the like).
     #[arg(long)]
+    pub strict: bool,
+    /// Axes of `.spz` data: as-stored (what splat-transform, spz-js and the spz library's
+    /// ply_to_spz write from a 3DGS .ply) or rub (right-up-back, converted to the 3DGS axes).
+    #[arg(long, value_enum, default_value = "as-stored")]
+    pub spz_axes: SpzAxesArg,
+    /// Accepted for compatibility: unknown properties are now skipped unless --strict.
+    #[arg(long, hide = true)]
     pub allow_unknown_properties: bool,
+}
+
+impl ReadArgs {
+    /// The reader's options.
+    pub fn options(&self) -> splat_io::ReadOptions {
+        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into() }
+    }
+}
+
+/// Axes of `.spz` data.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum SpzAxesArg {
+    /// The file's axes are the scene's (no conversion).
+    #[default]
+    AsStored,
+    /// Right-up-back: y and z flipped with respect to the 3DGS axes.
+    Rub,
+}
+
+impl From<SpzAxesArg> for splat_io::spz::SpzAxes {
+    fn from(a: SpzAxesArg) -> Self {
+        match a {
+            SpzAxesArg::AsStored => Self::AsStored,
+            SpzAxesArg::Rub => Self::Rub,
+        }
+    }
+}
+
+/// Every camera of a cameras.json or COLMAP model, with its image name.
+pub fn load_cameras(path: &std::path::Path) -> Result<Vec<(String, Camera)>> {
+    if splat_io::colmap::is_colmap(path) {
+        let views = splat_io::colmap::read_colmap(path)?;
+        return Ok(views.into_iter().map(|v| (v.name, v.camera)).collect());
+    }
+    Ok(splat_io::cameras::read_named_cameras(path)?)
 }
 
 impl SceneArgs {
@@ -398,7 +449,7 @@ impl SceneArgs {
         let is_world = |p: &std::path::Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
         let world = match &self.scene {
             Some(path) if is_world(path) => splat_io::world::read_world(path)?,
-            Some(path) => World::of(load_scene(path, self.allow_unknown_properties)?),
+            Some(path) => World::of(load_scene(path, self.read)?),
             None => {
                 let (scene, camera) = scenes::demo();
                 World { camera: Some(camera), ..World::of(scene) }
@@ -453,10 +504,10 @@ impl SceneArgs {
     fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
         let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
         let camera = if let Some(path) = &self.camera {
-            let cameras = splat_io::cameras::read_cameras(path)?;
+            let cameras = load_cameras(path)?;
             let n = cameras.len();
-            *cameras.get(self.camera_index).with_context(|| {
-                format!("{}: --camera-index {} but the file has {n} cameras", path.display(), self.camera_index)
+            cameras.get(self.camera_index).map(|(_, c)| *c).with_context(|| {
+                format!("--camera-index {} but {} has {n} cameras", self.camera_index, path.display())
             })?
         } else if let (Some(eye), Some(target)) = (self.eye, self.target) {
             Camera::look_at(eye, target, self.up, self.fov, w, h)?
@@ -465,6 +516,11 @@ impl SceneArgs {
         } else {
             Camera::framing(&scene.robust_bounds(0.02), self.up, w, h)?
         };
+        self.sized(camera)
+    }
+
+    /// `camera` at --width × --height (its own size where they are not given).
+    pub fn sized(&self, camera: Camera) -> Result<Camera> {
         let (w, h) = (self.width.unwrap_or(camera.width), self.height.unwrap_or(camera.height));
         if w == 0 || h == 0 {
             bail!("--width and --height must be positive");
@@ -485,10 +541,22 @@ impl SceneArgs {
     }
 }
 
-/// Load a scene by extension, honouring the `.ply` leniency option.
-pub fn load_scene(path: &std::path::Path, allow_unknown_properties: bool) -> Result<splat_core::Scene> {
-    let is_ply = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    Ok(if is_ply { read_ply_with(path, PlyOptions { allow_unknown_properties })? } else { splat_io::read_scene(path)? })
+/// Load a scene by extension; say in one line which unknown `.ply` properties were skipped.
+pub fn load_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_core::Scene> {
+    Ok(read_scene(path, read)?.scene)
+}
+
+/// [`load_scene`] with the format found.
+pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::SceneRead> {
+    let read = splat_io::read_scene_with(path, read.options())?;
+    if !read.skipped_properties.is_empty() {
+        eprintln!(
+            "warning: {}: skipped unknown vertex properties {} (--strict refuses them)",
+            path.display(),
+            read.skipped_properties.join(", ")
+        );
+    }
+    Ok(read)
 }
 
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
@@ -514,8 +582,6 @@ pub fn gpu_context(backend: BackendArg) -> Result<Option<splat_gpu::GpuContext>>
     match backend {
         BackendArg::Cpu => Ok(None),
         BackendArg::Gpu => Ok(Some(splat_gpu::GpuContext::new()?)),
-        BackendArg::Auto => {
-            Ok(splat_gpu::GpuContext::new().ok().filter(|c| c.info.device_type != splat_gpu::wgpu::DeviceType::Cpu))
-        }
+        BackendArg::Auto => Ok(splat_gpu::GpuContext::hardware().ok().flatten()),
     }
 }

@@ -3,6 +3,7 @@
 mod args;
 mod bench;
 mod converge;
+mod convert;
 mod info;
 mod render;
 mod stratify;
@@ -23,6 +24,8 @@ use std::process::ExitCode;
 ///   splat bench scene.splat                                 # rays/s per method
 ///   splat bench scene.splat --backend gpu --methods raster-sorted,stochastic-splat
 ///   splat stratify -o strat                                 # Laine–Karras Table 1 analogue
+///   splat render scene.ply --camera sparse/0 --all-cameras -o views/   # every COLMAP view
+///   splat convert point_cloud.ply scene.spz                 # .ply, .splat, .spz
 ///   splat info point_cloud.ply
 #[derive(Parser)]
 #[command(name = "splat", version, about, long_about, verbatim_doc_comment)]
@@ -35,6 +38,8 @@ struct Cli {
 enum Command {
     /// Render a scene (or the built-in demo scene) to an image.
     Render(Box<render::RenderArgs>),
+    /// Convert a scene between .ply, compressed .ply (read only), .splat and .spz.
+    Convert(convert::ConvertArgs),
     /// Print a scene's particle count, SH degree, bounds and opacity histogram.
     Info(info::InfoArgs),
     /// RMSE against the oracle (exact; raster-sorted for raster methods) at spp 1, 2, 4, …:
@@ -53,6 +58,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => render::run(*args),
         Command::Info(args) => info::run(args),
+        Command::Convert(args) => convert::run(args),
         Command::Converge(args) => converge::run(*args),
         Command::Bench(args) => bench::run(*args),
         Command::Stratify(args) => stratify::run(args),

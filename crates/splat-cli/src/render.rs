@@ -19,9 +19,17 @@ use std::time::Instant;
 pub struct RenderArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
-    /// Output image; the format follows the extension: .png (8-bit), .exr or .npy (f32).
+    /// Output image; the format follows the extension: .png (8-bit), .exr or .npy (f32). With
+    /// --all-cameras, the folder to write the views into.
     #[arg(short, long, default_value = "render.png")]
     pub output: PathBuf,
+    /// Render every camera of --camera (a cameras.json or COLMAP model) into the folder -o,
+    /// one image per view named after its image (.png unless --view-format says otherwise).
+    #[arg(long, requires = "camera")]
+    pub all_cameras: bool,
+    /// Image format of --all-cameras views.
+    #[arg(long, value_enum, default_value = "png", requires = "all_cameras")]
+    pub view_format: ViewFormat,
     /// Rendering method (default: exact; raster-sorted with --pipeline raster or hybrid).
     #[arg(long, value_enum)]
     pub method: Option<MethodArg>,
@@ -87,8 +95,22 @@ pub enum SamplerArg {
     Hash,
 }
 
+/// Image format of the --all-cameras views.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ViewFormat {
+    /// 8-bit PNG.
+    Png,
+    /// 32-bit float OpenEXR.
+    Exr,
+    /// 32-bit float NumPy array.
+    Npy,
+}
+
 /// Run `splat render`.
 pub fn run(args: RenderArgs) -> Result<()> {
+    if args.all_cameras {
+        return run_all_cameras(&args);
+    }
     let outputs =
         [Some(&args.output), args.alpha.as_ref(), args.depth.as_ref(), args.normal.as_ref(), args.variance.as_ref()];
     for path in outputs.into_iter().flatten() {
@@ -127,6 +149,71 @@ pub fn run(args: RenderArgs) -> Result<()> {
         args.output.display()
     );
     Ok(())
+}
+
+/// `splat render --all-cameras`: every view of --camera into the folder -o, one progress bar
+/// over the views, the GPU context (if any) made once.
+fn run_all_cameras(args: &RenderArgs) -> Result<()> {
+    if args.alpha.is_some() || args.depth.is_some() || args.normal.is_some() || args.variance.is_some() {
+        bail!("--all-cameras writes colour images only: drop --alpha, --depth, --normal and --variance");
+    }
+    if args.pipeline == Some(PipelineArg::Path) {
+        bail!("--all-cameras renders with the splat methods; render path-traced views one --camera-index at a time");
+    }
+    let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
+    let cameras = crate::args::load_cameras(path)?;
+    let mut world = args.scene.load_world(640, 480)?;
+    let cpu_algorithm = algorithm(args)?;
+    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
+    let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
+    let gpu = choose_gpu(args, &gpu_algorithm, &world)?;
+    let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
+    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+    let bar = indicatif::ProgressBar::new(cameras.len() as u64).with_style(
+        indicatif::ProgressStyle::with_template("{spinner} views [{bar:40}] {pos}/{len} {elapsed} (eta {eta}) {msg}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    let start = Instant::now();
+    let extension = match args.view_format {
+        ViewFormat::Png => "png",
+        ViewFormat::Exr => "exr",
+        ViewFormat::Npy => "npy",
+    };
+    for (i, (name, camera)) in cameras.iter().enumerate() {
+        world.camera = args.scene.sized(*camera)?;
+        bar.set_message(name.clone());
+        let out = match &gpu {
+            Some(ctx) => render_gpu(args, ctx, &world, &algorithm, &frames)?,
+            None => {
+                let Loaded { scene, camera, lighting, settings, meshes, .. } = &world;
+                args.scene
+                    .pool()?
+                    .install(|| algorithm.render_world(scene, meshes, camera, settings, lighting, &frames, &|_| {}))?
+            }
+        };
+        let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
+        write_image(&file, &out.mean)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    eprintln!(
+        "rendered {} views, {}, {} spp in {:.2} s → {}",
+        cameras.len(),
+        describe(args),
+        args.spp,
+        start.elapsed().as_secs_f64(),
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// File stem of view `index` named `name`: the image name without its extension and folders,
+/// or `view_0007` when the camera file names none.
+fn view_stem(name: &str, index: usize) -> String {
+    let stem = Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or("");
+    let clean: String = stem.chars().map(|c| if c.is_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
+    if clean.is_empty() { format!("view_{index:04}") } else { clean }
 }
 
 /// A rendering pipeline (vk_gaussian_splatting Lighting §5).

@@ -705,3 +705,181 @@ fn path_trace_a_world_with_meshes() {
     assert!(stderr(&o).contains("aperture"), "{}", stderr(&o));
     assert!(!never.exists());
 }
+
+fn npy(path: &std::path::Path) -> Vec<f32> {
+    splat_io::image::read_npy(path).unwrap().data().to_vec()
+}
+
+fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    (a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+/// `splat convert` between every writable format and back; the renders of the converted
+/// scenes stay within what each format's quantisation costs (tests/tests/formats.rs derives
+/// the bounds; here a ceiling well above the measured errors, and far below a wrong file's).
+#[test]
+fn convert_round_trips_every_format() {
+    let render = |scene: &str, out: &std::path::Path| {
+        let o = splat(&[
+            "render",
+            scene,
+            "--camera",
+            "fixtures/cloud.cameras.json",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--backend",
+            "cpu",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(out)
+    };
+    let reference = render("fixtures/cloud.ply", &scratch("cloud.npy"));
+    for (target, ceiling) in [("cloud.spz", 0.02), ("cloud-v2.spz", 0.03), ("cloud-v4.spz", 0.02), ("cloud.ply", 1e-5)]
+    {
+        let path = scratch(target);
+        let mut args = vec!["convert", "fixtures/cloud.ply", path.to_str().unwrap()];
+        match target {
+            "cloud-v2.spz" => args.extend(["--spz-version", "2"]),
+            "cloud-v4.spz" => args.extend(["--spz-version", "4"]),
+            _ => {}
+        }
+        let o = splat(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("converted 3000 splats (SH degree 3)"), "{}", stderr(&o));
+        let error = rmse(&reference, &render(path.to_str().unwrap(), &scratch(&format!("{target}.npy"))));
+        eprintln!("{target}: image RMSE {error:.2e} against the .ply");
+        assert!(error < ceiling, "{target}: image RMSE {error} ≥ {ceiling}");
+        let back = scratch(&format!("{target}.back.ply"));
+        assert!(splat(&["convert", path.to_str().unwrap(), back.to_str().unwrap()]).status.success());
+        assert!(splat_io::read_scene(&back).unwrap().particles.len() == 3000);
+    }
+    // .splat keeps the degree-0 colour and says so.
+    let flat = scratch("cloud.splat");
+    let o = splat(&["convert", "fixtures/cloud.ply", flat.to_str().unwrap()]);
+    assert!(o.status.success() && stderr(&o).contains("SH bands 1–3 are dropped"), "{}", stderr(&o));
+    // Refusals: a compressed .ply output, an unknown extension.
+    for out in ["x.compressed.ply", "x.obj"] {
+        let o = splat(&["convert", "fixtures/cloud.ply", scratch(out).to_str().unwrap()]);
+        assert!(!o.status.success() && stderr(&o).contains(".ply, .splat or .spz"), "{}", stderr(&o));
+    }
+    // Axes: a file written as RUB and read as stored renders a different (turned) scene.
+    let rub = scratch("rub.spz");
+    assert!(splat(&["convert", "fixtures/cloud.ply", rub.to_str().unwrap(), "--spz-axes", "rub"]).status.success());
+    let turned = render(rub.to_str().unwrap(), &scratch("rub.npy"));
+    assert!(rmse(&reference, &turned) > 0.05, "RUB data read unconverted must differ");
+}
+
+/// Unknown `.ply` properties are skipped with one warning naming them; `--strict` refuses.
+#[test]
+fn unknown_ply_properties_warn_or_refuse_with_strict() {
+    let scene = splat_io::ply::read_ply(&root().join("fixtures/layers.ply")).unwrap();
+    let mut bytes = splat_io::ply::encode_ply(&scene, splat_io::ply::PlyFormat::Ascii);
+    let header_end = bytes.windows(10).position(|w| w == b"end_header").unwrap();
+    bytes.splice(header_end..header_end, b"property float filter_3D\n".iter().copied());
+    let text = String::from_utf8(bytes).unwrap();
+    let (header, body) = text.split_once("end_header\n").unwrap();
+    let body: String = body.lines().map(|l| format!("{l} 0.5\n")).collect();
+    let path = scratch("mip.ply");
+    std::fs::write(&path, format!("{header}end_header\n{body}")).unwrap();
+    let o = splat(&["info", path.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let warnings: Vec<_> = stderr(&o).lines().filter(|l| l.contains("warning")).map(String::from).collect();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(warnings[0].contains("filter_3D") && warnings[0].contains("--strict"), "{warnings:?}");
+    let o = splat(&["info", path.to_str().unwrap(), "--strict"]);
+    assert!(!o.status.success() && stderr(&o).contains("unknown vertex property 'filter_3D'"), "{}", stderr(&o));
+}
+
+/// A COLMAP model renders the same view as the equivalent cameras.json, and `--all-cameras`
+/// writes one image per view, named after it.
+#[test]
+fn colmap_cameras_and_all_cameras() {
+    let json = root().join("fixtures/cloud.cameras.json");
+    let base = splat_io::cameras::read_cameras(&json).unwrap()[0];
+    let views: Vec<splat_io::colmap::View> = [0.0f32, 0.4, -0.7]
+        .iter()
+        .enumerate()
+        .map(|(i, &angle)| {
+            let turn = glam::Mat3::from_rotation_y(angle);
+            let camera = splat_core::Camera { rotation: base.rotation * turn, ..base };
+            splat_io::colmap::View { name: format!("img_{i}.jpg"), camera }
+        })
+        .collect();
+    let dir = scratch("sparse0");
+    std::fs::create_dir_all(&dir).unwrap();
+    splat_io::colmap::write_colmap_txt(&dir, &views).unwrap();
+    let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
+    let json = scratch("three.cameras.json");
+    splat_io::cameras::write_cameras(&json, &cameras).unwrap();
+    let render = |camera: &std::path::Path, out: &str, index: &str| {
+        let out = scratch(out);
+        let args = ["render", "fixtures/cloud.ply", "--camera", camera.to_str().unwrap(), "--camera-index", index];
+        let o = splat(
+            &[&args[..], &["--width", "48", "--height", "36", "--backend", "cpu", "-o", out.to_str().unwrap()]]
+                .concat(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(&out)
+    };
+    let (a, b) = (render(&dir, "colmap.npy", "2"), render(&json, "json.npy", "2"));
+    // Equal up to f32 rounding of the pose (quaternion here, rotation rows there); the control
+    // is the neighbouring view.
+    let neighbour = rmse(&a, &render(&json, "json1.npy", "1"));
+    assert!(rmse(&a, &b) < 1e-3 && neighbour > 1e-2, "COLMAP vs cameras.json {}, neighbour {neighbour}", rmse(&a, &b));
+    let out = scratch("views");
+    let o = splat(&[
+        "render",
+        "fixtures/cloud.ply",
+        "--camera",
+        dir.to_str().unwrap(),
+        "--all-cameras",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--backend",
+        "cpu",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("rendered 3 views"), "{}", stderr(&o));
+    for i in 0..3 {
+        assert!(out.join(format!("img_{i}.png")).exists(), "img_{i}.png missing");
+    }
+    let o = splat(&["render", "fixtures/cloud.ply", "--all-cameras", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("--camera"), "{}", stderr(&o));
+}
+
+/// `--backend auto` on a machine whose only adapters are CPU ones prints nothing of the
+/// graphics stack's and renders what `--backend cpu` renders.
+#[test]
+fn auto_backend_is_quiet_without_a_hardware_gpu() {
+    let run = |backend: &str, out: &std::path::Path| {
+        Command::new(env!("CARGO_BIN_EXE_splat"))
+            .args(["render", "--width", "32", "--height", "24", "--backend", backend, "-o", out.to_str().unwrap()])
+            .env_remove("WGPU_BACKEND")
+            .env_remove("WGPU_ADAPTER_NAME")
+            .env_remove("XDG_RUNTIME_DIR")
+            .current_dir(root())
+            .output()
+            .unwrap()
+    };
+    let (a, b) = (scratch("auto.png"), scratch("cpu.png"));
+    let (auto, cpu) = (run("auto", &a), run("cpu", &b));
+    assert!(auto.status.success() && cpu.status.success());
+    let hardware = std::path::Path::new("/dev/dri").exists() || std::path::Path::new("/dev/nvidia0").exists();
+    if hardware {
+        splat_tests::not_applicable(&splat_tests::current_test(), "this machine has a GPU device node");
+        return;
+    }
+    let lines = |o: &Output| stderr(o).lines().filter(|l| !l.starts_with("rendered")).count();
+    assert_eq!(lines(&auto), 0, "auto printed more than its summary:\n{}", stderr(&auto));
+    assert_eq!(lines(&cpu), 0);
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
