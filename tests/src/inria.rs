@@ -147,7 +147,7 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera) -> Option<Projected> {
         return None;
     }
     let dir = normalize(rel);
-    let rgb = color_from_sh(&p.sh.map(|v| v.to_array()), scene.sh_degree, dir);
+    let rgb = color_from_sh(&p.sh.to_array().map(|v| v.to_array()), scene.sh_degree, dir);
     Some(Projected { depth: t[2], id, mean, conic, radius, opacity: p.opacity, rgb })
 }
 

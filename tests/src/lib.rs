@@ -403,7 +403,7 @@ pub mod harness {
                     Fault::Radiance(k) => {
                         // Σ cᵢ Yᵢ + 0.5 → k (Σ cᵢ Yᵢ + 0.5): every coefficient × k, and the DC
                         // term gains (k − 1) 0.5 / C₀.
-                        p.sh.iter_mut().for_each(|c| *c *= k);
+                        p.sh = p.sh.to_array().map(|c| c * k).into();
                         p.sh[0] += glam::Vec3::splat((k - 1.0) * 0.5 / splat_core::sh::SH_C0);
                     }
                     Fault::Decision(_) => {}

@@ -56,7 +56,8 @@ impl EmbreePeer {
             return Err("the Embree peer implements kernel degree 2 with the mean hit distance only".into());
         }
         let particles = pack_particles(scene, settings, bounds);
-        let sh: Vec<f32> = scene.particles.iter().flat_map(|p| p.sh.iter().flat_map(|c| c.to_array())).collect();
+        let sh: Vec<f32> =
+            scene.particles.iter().flat_map(|p| p.sh.to_array().into_iter().flat_map(|c| c.to_array())).collect();
         let k = &settings.kernel;
         let b = settings.background;
         let packed_settings = [k.cutoff, k.alpha_clamp, k.alpha_cull, settings.t_min, settings.t_max, b.x, b.y, b.z];

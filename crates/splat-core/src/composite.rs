@@ -110,7 +110,7 @@ pub fn shade_hit(
     ShadedHit {
         t: hit.t,
         alpha: hit.alpha,
-        color: sh::eval(&particle.sh, scene.sh_degree, ray.dir),
+        color: sh::eval(particle.sh.as_slice(), scene.sh_degree, ray.dir),
         normal: particle_normal(p, ray, settings.normal_mode, settings.kernel.cutoff),
         index: hit.index,
     }

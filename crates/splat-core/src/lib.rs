@@ -56,5 +56,5 @@ pub use hit::{HitDistance, Ray};
 pub use image::Image;
 pub use kernel::KernelParams;
 pub use oracle::render_oracle;
-pub use particle::{Particle, ParticleError, Scene};
+pub use particle::{Particle, ParticleError, Scene, Sh};
 pub use settings::{RenderError, RenderSettings};

@@ -29,7 +29,112 @@ pub struct Particle {
     /// Opacity in [0, 1] (after the sigmoid).
     pub opacity: f32,
     /// SH coefficients, RGB per entry, `sh[0]` is the DC term. Entries past the scene's degree are 0.
-    pub sh: [Vec3; SH_MAX_COEFFS],
+    pub sh: Sh,
+}
+
+/// The SH coefficients of one particle, stored as the particle needs them: the DC term alone
+/// (inline, 16 bytes) when bands 1–3 are all zero — every particle of a degree-0 scene — else all
+/// 16 on the heap. Reading any index 0..16 works either way (absent coefficients are zero);
+/// writing a higher band moves a DC-only particle to the full form.
+#[derive(Clone, Debug)]
+pub enum Sh {
+    /// Only the DC term; bands 1–3 are zero.
+    Dc(Vec3),
+    /// All 16 coefficients.
+    Bands(Box<[Vec3; SH_MAX_COEFFS]>),
+}
+
+impl Sh {
+    /// The compact form of `coefficients`: [`Sh::Dc`] when bands 1–3 are zero.
+    pub fn from_array(coefficients: [Vec3; SH_MAX_COEFFS]) -> Self {
+        if coefficients[1..].iter().all(|c| *c == Vec3::ZERO) {
+            Self::Dc(coefficients[0])
+        } else {
+            Self::Bands(Box::new(coefficients))
+        }
+    }
+
+    /// The stored coefficients: 1 (DC only) or 16; those not stored are zero.
+    pub fn as_slice(&self) -> &[Vec3] {
+        match self {
+            Self::Dc(dc) => std::slice::from_ref(dc),
+            Self::Bands(all) => &all[..],
+        }
+    }
+
+    /// All 16 coefficients.
+    pub fn to_array(&self) -> [Vec3; SH_MAX_COEFFS] {
+        match self {
+            Self::Dc(dc) => {
+                let mut all = [Vec3::ZERO; SH_MAX_COEFFS];
+                all[0] = *dc;
+                all
+            }
+            Self::Bands(all) => **all,
+        }
+    }
+
+    /// Zero the coefficients from index `from` on (dropping SH bands), compacting when only the
+    /// DC term is left.
+    pub fn truncate(&mut self, from: usize) {
+        if let Self::Bands(all) = self {
+            all[from.min(SH_MAX_COEFFS)..].fill(Vec3::ZERO);
+            if from <= 1 || all[1..].iter().all(|c| *c == Vec3::ZERO) {
+                *self = Self::Dc(all[0]);
+            }
+        }
+    }
+}
+
+impl Default for Sh {
+    fn default() -> Self {
+        Self::Dc(Vec3::ZERO)
+    }
+}
+
+impl From<[Vec3; SH_MAX_COEFFS]> for Sh {
+    fn from(coefficients: [Vec3; SH_MAX_COEFFS]) -> Self {
+        Self::from_array(coefficients)
+    }
+}
+
+impl PartialEq for Sh {
+    /// Equal coefficients, whichever form holds them.
+    fn eq(&self, other: &Self) -> bool {
+        self.to_array() == other.to_array()
+    }
+}
+
+/// Zero, for reading a coefficient a DC-only particle does not store.
+const ZERO: Vec3 = Vec3::ZERO;
+
+impl std::ops::Index<usize> for Sh {
+    type Output = Vec3;
+
+    fn index(&self, k: usize) -> &Vec3 {
+        match self {
+            Self::Dc(dc) if k == 0 => dc,
+            Self::Dc(_) => {
+                assert!(k < SH_MAX_COEFFS, "SH index {k} out of range 0..16");
+                &ZERO
+            }
+            Self::Bands(all) => &all[k],
+        }
+    }
+}
+
+impl std::ops::IndexMut<usize> for Sh {
+    fn index_mut(&mut self, k: usize) -> &mut Vec3 {
+        if let (Self::Dc(dc), 1..) = (&*self, k) {
+            let mut all = [Vec3::ZERO; SH_MAX_COEFFS];
+            all[0] = *dc;
+            *self = Self::Bands(Box::new(all));
+        }
+        match self {
+            Self::Dc(dc) => dc,
+            Self::Bands(all) => &mut all[k],
+        }
+    }
 }
 
 /// Why a particle is not a valid Gaussian.
@@ -65,9 +170,7 @@ pub enum ParticleError {
 impl Particle {
     /// A particle with colour given as SH degree 0 from a display RGB colour (inverse of Eq. `sh`).
     pub fn with_rgb(mean: Vec3, scale: Vec3, rotation: Quat, opacity: f32, rgb: Vec3) -> Self {
-        let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
-        sh[0] = crate::sh::rgb_to_dc(rgb);
-        Self { mean, scale, rotation, opacity, sh }
+        Self { mean, scale, rotation, opacity, sh: Sh::Dc(crate::sh::rgb_to_dc(rgb)) }
     }
 
     /// Build a particle from raw parts, normalising the quaternion and validating every field.
@@ -78,7 +181,7 @@ impl Particle {
         opacity: f32,
         sh: [Vec3; SH_MAX_COEFFS],
     ) -> Result<Self, ParticleError> {
-        let p = Self { mean, scale, rotation: normalize_quat(rotation)?, opacity, sh };
+        let p = Self { mean, scale, rotation: normalize_quat(rotation)?, opacity, sh: Sh::from_array(sh) };
         p.validate()?;
         Ok(p)
     }
@@ -93,7 +196,7 @@ impl Particle {
                 }
             }
         }
-        for value in self.sh.iter().flat_map(|c| c.to_array()) {
+        for value in self.sh.as_slice().iter().flat_map(|c| c.to_array()) {
             if !value.is_finite() {
                 return Err(ParticleError::NonFinite { field: "sh", value });
             }
@@ -255,5 +358,34 @@ impl Scene {
             max[k] = axis[hi];
         }
         Aabb { min: Vec3::from(min), max: Vec3::from(max) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sh_stores_the_dc_term_alone_until_a_band_is_set() {
+        let mut coefficients = [Vec3::ZERO; SH_MAX_COEFFS];
+        coefficients[0] = Vec3::new(0.1, 0.2, 0.3);
+        let mut sh = Sh::from_array(coefficients);
+        assert!(matches!(sh, Sh::Dc(_)));
+        assert_eq!(sh.as_slice().len(), 1);
+        assert_eq!(sh[15], Vec3::ZERO);
+        sh[5] = Vec3::ONE;
+        assert!(matches!(sh, Sh::Bands(_)));
+        assert_eq!((sh[0], sh[5], sh.as_slice().len()), (coefficients[0], Vec3::ONE, 16));
+        // Equality looks at the coefficients, not the form.
+        let mut full = coefficients;
+        full[5] = Vec3::ONE;
+        assert_eq!(sh, Sh::Bands(Box::new(full)));
+        sh.truncate(4);
+        assert!(matches!(sh, Sh::Dc(_)), "only the DC term is left");
+        assert_eq!(sh, Sh::from_array(coefficients));
+        // A DC-only particle evaluates as a degree-3 one with zero bands.
+        let d = Vec3::new(0.3, -0.4, 0.866).normalize();
+        assert_eq!(crate::sh::eval(sh.as_slice(), 3, d), crate::sh::eval(&coefficients, 3, d));
+        assert_eq!(std::mem::size_of::<Particle>(), 64, "a degree-0 particle is 64 bytes");
     }
 }

@@ -85,7 +85,7 @@ pub fn cloud() -> (Scene, Camera) {
             for c in &mut sh[1..] {
                 *c = Vec3::new(rng.range(-0.15, 0.15), rng.range(-0.15, 0.15), rng.range(-0.15, 0.15));
             }
-            Particle { mean, scale, rotation, opacity, sh }
+            Particle { mean, scale, rotation, opacity, sh: sh.into() }
         })
         .collect();
     let scene = Scene { particles, sh_degree: 3 };

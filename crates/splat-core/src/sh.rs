@@ -14,8 +14,18 @@ pub const SH_C3: [f32; 7] =
     [-0.590_043_6, 2.890_611_4, -0.457_045_8, 0.373_176_34, -0.457_045_8, 1.445_305_7, -0.590_043_6];
 
 /// Colour of a particle seen along the unit direction `dir` (from the viewer toward the
-/// particle): Σ SH basis × coefficients + 0.5, clamped at 0. Coefficients past `degree` are ignored.
-pub fn eval(sh: &[Vec3; 16], degree: u8, dir: Vec3) -> Vec3 {
+/// particle): Σ SH basis × coefficients + 0.5, clamped at 0. Coefficients past `degree` are
+/// ignored, and so are bands that `sh` does not hold (a DC-only [`crate::particle::Sh`] is one
+/// coefficient long: its higher bands are zero).
+pub fn eval(sh: &[Vec3], degree: u8, dir: Vec3) -> Vec3 {
+    let held = match sh.len() {
+        0 => return Vec3::splat(0.5),
+        1..=3 => 0,
+        4..=8 => 1,
+        9..=15 => 2,
+        _ => 3,
+    };
+    let degree = degree.min(held);
     let mut c = SH_C0 * sh[0];
     if degree >= 1 {
         let (x, y, z) = (dir.x, dir.y, dir.z);

@@ -476,7 +476,7 @@ pub fn mesh_root(trace: &TraceScene) -> u32 {
 pub fn sh(scene: &Scene) -> Vec<[f32; 4]> {
     let per = sh_coeff_count(scene.sh_degree);
     let mut v: Vec<[f32; 4]> =
-        scene.particles.iter().flat_map(|p| p.sh[..per].iter().map(|c| [c.x, c.y, c.z, 0.0])).collect();
+        scene.particles.iter().flat_map(|p| (0..per).map(|k| p.sh[k]).map(|c| [c.x, c.y, c.z, 0.0])).collect();
     if v.is_empty() {
         v.push([0.0; 4]); // a binding cannot be empty
     }

@@ -299,7 +299,7 @@ fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
             let expected = [front, back]
                 .into_iter()
                 .find(|&id| accepted(id))
-                .map(|id| splat_core::sh::eval(&c.scene.particles[id as usize].sh, 0, Vec3::Z).to_array());
+                .map(|id| splat_core::sh::eval(c.scene.particles[id as usize].sh.as_slice(), 0, Vec3::Z).to_array());
             let p = (y * c.camera.width + x) as usize;
             let rgb = &g.mean.data()[3 * p..3 * p + 3];
             if let Some(e) = expected {

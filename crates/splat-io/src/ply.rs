@@ -509,7 +509,7 @@ fn stored_values(p: &Particle, sh_degree: u8) -> Vec<f32> {
     let per_channel = sh_coeff_count(sh_degree) - 1;
     let mut v = vec![p.mean.x, p.mean.y, p.mean.z, 0.0, 0.0, 0.0, p.sh[0].x, p.sh[0].y, p.sh[0].z];
     for channel in 0..3 {
-        v.extend(p.sh[1..=per_channel].iter().map(|c| c[channel]));
+        v.extend((1..=per_channel).map(|k| p.sh[k][channel]));
     }
     // Opacity 0 and 1 have infinite logits: store the nearest finite ones.
     let o = f64::from(p.opacity).clamp(1e-7, 1.0 - 1e-7);

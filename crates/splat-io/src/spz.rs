@@ -250,8 +250,10 @@ fn flip_rub(p: &mut Particle) {
     p.mean = Vec3::new(p.mean.x, -p.mean.y, -p.mean.z);
     let q = p.rotation;
     p.rotation = Quat::from_xyzw(q.x, -q.y, -q.z, q.w);
-    for (c, s) in p.sh[1..].iter_mut().zip(RUB_SH_FLIP) {
-        *c *= s;
+    if let splat_core::Sh::Bands(all) = &mut p.sh {
+        for (c, s) in all[1..].iter_mut().zip(RUB_SH_FLIP) {
+            *c *= s;
+        }
     }
 }
 
@@ -386,7 +388,7 @@ fn pack(scene: &Scene, h: Header, axes: SpzAxes) -> [Vec<u8>; 6] {
         } else {
             s[4].extend(pack_first_three(q));
         }
-        for (k, c) in p.sh[1..=rest].iter().enumerate() {
+        for (k, c) in (1..=rest).map(|k| p.sh[k]).enumerate() {
             let bits = if k < 3 { 5 } else { 4 };
             s[5].extend(c.to_array().map(|v| quantize_sh(v, bits)));
         }
@@ -475,8 +477,8 @@ mod tests {
         assert!(flipped.covariance().abs_diff_eq(expected, 1e-5));
         // Colour in a turned direction equals the original colour in the original direction.
         let d = Vec3::new(0.3, -0.5, 0.8).normalize();
-        let a = splat_core::sh::eval(&p.sh, 3, d);
-        let b = splat_core::sh::eval(&flipped.sh, 3, half_turn * d);
+        let a = splat_core::sh::eval(p.sh.as_slice(), 3, d);
+        let b = splat_core::sh::eval(flipped.sh.as_slice(), 3, half_turn * d);
         assert!((a - b).length() < 1e-5, "{a} vs {b}");
     }
 }

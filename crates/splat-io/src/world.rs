@@ -410,7 +410,7 @@ pub fn truncate_sh(scene: &mut Scene, degree: u8) {
     }
     let keep = sh_coeff_count(degree);
     for p in &mut scene.particles {
-        p.sh[keep..].fill(Vec3::ZERO);
+        p.sh.truncate(keep);
     }
     scene.sh_degree = degree;
 }
@@ -439,7 +439,7 @@ fn transform(scene: &mut Scene, set: &SplatsFile) -> Result<(), String> {
         p.rotation = (r * p.rotation).normalize();
         p.scale *= s;
         if let Some(rot) = &rotate_sh {
-            p.sh = rot.apply(&p.sh);
+            p.sh = rot.apply(&p.sh.to_array()).into();
         }
     }
     Ok(())
@@ -648,7 +648,7 @@ mod tests {
     #[test]
     fn sh_degree_cut_zeroes_the_upper_bands() {
         let mut scene = Scene { particles: vec![splat_core::scenes::layers().0.particles[0].clone()], sh_degree: 3 };
-        scene.particles[0].sh = [Vec3::ONE; 16];
+        scene.particles[0].sh = [Vec3::ONE; 16].into();
         truncate_sh(&mut scene, 1);
         assert_eq!(scene.sh_degree, 1);
         assert_eq!(scene.particles[0].sh[3], Vec3::ONE);

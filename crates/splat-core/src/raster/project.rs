@@ -143,7 +143,7 @@ pub fn project(
     };
     let (x0, x1) = clip(mean.x - rx, mean.x + rx, w)?;
     let (y0, y1) = clip(mean.y - ry, mean.y + ry, h)?;
-    let color = sh::eval(&p.sh, scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
+    let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
     let rect = [x0, y0, x1, y1];
     Some(Splat { id: index, mean, conic, depth: t.z, opacity: p.opacity, color, radius, extent, rect })
 }
