@@ -4,7 +4,7 @@
 //! | version | container | rotation |
 //! |---|---|---|
 //! | 2 | gzip around a 16-byte header and the attribute arrays | x, y, z of q (w ≥ 0), 8 bits each |
-//! | 3 | as 2 | "smallest three": index of the largest of w, x, y, z (2 bits), the other three as sign + 9 bits of \|c\|/√½ |
+//! | 3 | as 2 | "smallest three": index of the largest of x, y, z, w (2 bits), the other three as sign + 9 bits of \|c\|/√½ |
 //! | 4 | 32-byte plain header, a table of contents, one zstd stream per attribute | as 3 |
 //!
 //! The attributes, in file order, per splat: position (3 × 24-bit signed fixed point with
