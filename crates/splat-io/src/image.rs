@@ -142,6 +142,44 @@ pub fn encode_npy(image: &Image) -> Vec<u8> {
     out
 }
 
+/// Read an image, format chosen by extension: `.npy` and `.exr` as f32 (an EXR's R, G, B and,
+/// when present, A; else its first channel), `.png` as 8-bit values / 255.
+pub fn read_image(path: &Path) -> Result<Image, Error> {
+    match ImageFormat::from_path(path)? {
+        ImageFormat::Npy => read_npy(path),
+        ImageFormat::Exr => read_exr(path).map_err(|m| Error::new(path, ErrorKind::Image(m))),
+        ImageFormat::Png => {
+            let png = image::open(path).map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))?;
+            let rgba = png.color().has_alpha();
+            let (w, h) = (png.width(), png.height());
+            let (c, bytes) = if rgba { (4, png.into_rgba8().into_raw()) } else { (3, png.into_rgb8().into_raw()) };
+            let data = bytes.into_iter().map(|b| f32::from(b) / 255.0).collect();
+            Image::from_data(w, h, c, data).ok_or_else(|| Error::new(path, ErrorKind::Image("size mismatch".into())))
+        }
+    }
+}
+
+fn read_exr(path: &Path) -> Result<Image, String> {
+    use exr::prelude::*;
+    let read = read_first_flat_layer_from_file(path).map_err(|e| e.to_string())?;
+    let layer = &read.layer_data;
+    let (w, h) = (layer.size.0, layer.size.1);
+    let channels = &layer.channel_data.list;
+    let find = |name: &str| channels.iter().find(|c| c.name.eq(name));
+    let picked: Vec<_> = match (find("R"), find("G"), find("B")) {
+        (Some(r), Some(g), Some(b)) => [Some(r), Some(g), Some(b), find("A")].into_iter().flatten().collect(),
+        _ => channels.first().into_iter().collect(),
+    };
+    if picked.is_empty() {
+        return Err("the EXR layer has no channel".into());
+    }
+    let values: Vec<Vec<f32>> = picked.iter().map(|c| c.sample_data.values_as_f32().collect()).collect();
+    let n = w * h;
+    let data = (0..n).flat_map(|i| values.iter().map(move |v| v[i])).collect();
+    let size = |v: usize| u32::try_from(v).map_err(|_| "image too large".to_string());
+    splat_core::Image::from_data(size(w)?, size(h)?, picked.len() as u32, data).ok_or_else(|| "size mismatch".into())
+}
+
 /// Read a `.npy` written by [`encode_npy`] (or NumPy: `<f4`, C order, 2 or 3 dimensions).
 pub fn read_npy(path: &Path) -> Result<Image, Error> {
     let bytes = crate::read_file(path)?;
