@@ -242,8 +242,31 @@ fn plot(path: &std::path::Path, rows: &[Row], methods: &[String], caption: &str)
     let max_spp = rows.iter().map(|r| r.spp).max().unwrap_or(1).max(2);
     let lo = rows.iter().map(|r| r.rmse).filter(|&v| v > 0.0).fold(f64::INFINITY, f64::min).min(1.0);
     let hi = rows.iter().map(|r| r.rmse).fold(0.0f64, f64::max).max(lo * 10.0);
-    let root = BitMapBackend::new(path, (900, 620)).into_drawing_area();
-    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("plotting {}: {e}", path.display());
+    // Drawn into a buffer and encoded with `image` (plotters' own encoder would pull in a second
+    // `image` and `png`).
+    let (width, height) = (900u32, 620u32);
+    let mut pixels = vec![0u8; 3 * (width * height) as usize];
+    draw_plot(&mut pixels, (width, height), rows, methods, caption, lo, hi, max_spp)
+        .map_err(|e| anyhow::anyhow!("plotting {}: {e}", path.display()))?;
+    let png = image::RgbImage::from_raw(width, height, pixels).expect("3 bytes a pixel");
+    png.save(path).map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))
+}
+
+/// Draw the plot of [`plot`] into an RGB8 buffer of `size`.
+#[allow(clippy::too_many_arguments)]
+fn draw_plot(
+    pixels: &mut [u8],
+    size: (u32, u32),
+    rows: &[Row],
+    methods: &[String],
+    caption: &str,
+    lo: f64,
+    hi: f64,
+    max_spp: u32,
+) -> Result<(), String> {
+    use plotters::prelude::*;
+    let root = BitMapBackend::with_buffer(pixels, size).into_drawing_area();
+    let err = |e: &dyn std::fmt::Display| e.to_string();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(caption, ("sans-serif", 24))

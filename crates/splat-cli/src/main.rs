@@ -2,11 +2,13 @@
 
 mod args;
 mod bench;
+mod compare;
 mod converge;
 mod convert;
 mod info;
 mod render;
 mod stratify;
+mod ztest;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -26,6 +28,8 @@ use std::process::ExitCode;
 ///   splat stratify -o strat                                 # Laine–Karras Table 1 analogue
 ///   splat render scene.ply --camera sparse/0 --all-cameras -o views/   # every COLMAP view
 ///   splat convert point_cloud.ply scene.spz                 # .ply, .splat, .spz
+///   splat ztest mean.exr var.exr ref.exr --frames 256 --zmap z.png   # exit 0 pass, 1 reject
+///   splat compare ref.exr test.png --maps err        # RMSE, PSNR, SSIM, FLIP; err-*.png
 ///   splat info point_cloud.ply
 #[derive(Parser)]
 #[command(name = "splat", version, about, long_about, verbatim_doc_comment)]
@@ -48,6 +52,12 @@ enum Command {
     /// Rays per second of each ray-tracing method against an opaque closest-hit baseline, or the
     /// stages of the splatting path (--methods raster-sorted,stochastic-splat).
     Bench(Box<bench::BenchArgs>),
+    /// RMSE, PSNR, SSIM and ꟻLIP between two images (.png, .exr, .npy), with error maps.
+    Compare(compare::CompareArgs),
+    /// Per-pixel z-test of a mean image against a reference, with the variance of an
+    /// independent run: prints the statistics and PASS or REJECT; exit status 0 pass, 1 reject,
+    /// 2 bad input.
+    Ztest(ztest::ZtestArgs),
     /// Laine–Karras stratification gain: RMSE of stratified / Enderton at 4…64 samples per
     /// pixel on the layered fixtures, as a table and a side-by-side PNG.
     Stratify(stratify::StratifyArgs),
@@ -55,6 +65,16 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Command::Ztest(args) = &cli.command {
+        return match ztest::run(args) {
+            Ok(true) => ExitCode::SUCCESS,
+            Ok(false) => ExitCode::from(1),
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                ExitCode::from(2)
+            }
+        };
+    }
     let result = match cli.command {
         Command::Render(args) => render::run(*args),
         Command::Info(args) => info::run(args),
@@ -62,6 +82,8 @@ fn main() -> ExitCode {
         Command::Converge(args) => converge::run(*args),
         Command::Bench(args) => bench::run(*args),
         Command::Stratify(args) => stratify::run(args),
+        Command::Compare(args) => compare::run(args),
+        Command::Ztest(_) => unreachable!("handled above"),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

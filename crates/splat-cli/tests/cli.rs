@@ -883,3 +883,95 @@ fn auto_backend_is_quiet_without_a_hardware_gpu() {
     assert_eq!(lines(&cpu), 0);
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
 }
+
+/// `splat ztest` from the command line: `stochastic` against `exact` passes (exit 0); depth
+/// sampling (3DGRT's biased control) and the unbiased mean brightened by 2 % and by 1 % are
+/// rejected (exit 1); bad input exits 2.
+#[test]
+fn ztest_passes_stochastic_and_rejects_biased_means() {
+    let scene = ["fixtures/cloud.ply", "--camera", "fixtures/cloud.cameras.json", "--width", "48", "--height", "36"];
+    let render = |extra: &[&str], out: &std::path::Path| {
+        let o = splat(&[&["render"][..], &scene, &["--backend", "cpu", "-o", out.to_str().unwrap()], extra].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    let (reference, mean, var, run2) =
+        (scratch("zt-ref.npy"), scratch("zt-mean.npy"), scratch("zt-var.npy"), scratch("zt-run2.npy"));
+    render(&["--method", "exact"], &reference);
+    render(&["--method", "stochastic", "--spp", "256", "--seed", "1"], &mean);
+    render(&["--method", "stochastic", "--spp", "1024", "--seed", "2", "--variance", var.to_str().unwrap()], &run2);
+    let biased = scratch("zt-dsk.npy");
+    render(&["--method", "depth-sampling-k", "--spp", "256", "--seed", "1"], &biased);
+    let brighter = |k: f32, name: &str| {
+        let image = splat_io::image::read_npy(&mean).unwrap();
+        let data = image.data().iter().map(|v| v * k).collect();
+        let scaled = splat_core::Image::from_data(image.width(), image.height(), image.channels(), data).unwrap();
+        let path = scratch(name);
+        splat_io::image::write_image(&path, &scaled).unwrap();
+        path
+    };
+    let zmap = scratch("zt-map.png");
+    let ztest = |m: &std::path::Path| {
+        let args = [m, var.as_path(), reference.as_path()].map(|p| p.to_str().unwrap().to_string());
+        splat(&["ztest", &args[0], &args[1], &args[2], "--frames", "256", "--zmap", zmap.to_str().unwrap()])
+    };
+    let pass = ztest(&mean);
+    let text = String::from_utf8_lossy(&pass.stdout).into_owned();
+    assert_eq!(pass.status.code(), Some(0), "{text}{}", stderr(&pass));
+    assert!(text.contains("verdict    PASS"), "{text}");
+    assert!(image::open(&zmap).unwrap().width() >= 480, "the z-map is scaled up with its legend");
+    for (m, what) in
+        [(biased, "depth sampling"), (brighter(1.02, "zt-102.npy"), "× 1.02"), (brighter(1.01, "zt-101.npy"), "× 1.01")]
+    {
+        let o = ztest(&m);
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        eprintln!("{what}: {}", text.lines().last().unwrap_or_default());
+        assert_eq!(o.status.code(), Some(1), "{what} must be rejected:\n{text}");
+    }
+    let o = splat(&["ztest", mean.to_str().unwrap(), "nope.npy", reference.to_str().unwrap(), "--frames", "256"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let small = scratch("zt-small.npy");
+    splat_io::image::write_image(&small, &splat_core::Image::filled(4, 4, 3, 0.5)).unwrap();
+    let o = splat(&[
+        "ztest",
+        small.to_str().unwrap(),
+        var.to_str().unwrap(),
+        reference.to_str().unwrap(),
+        "--frames",
+        "256",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("48×36"), "{}", stderr(&o));
+}
+
+/// `splat compare`: identical images score RMSE 0, SSIM 1, ꟻLIP 0; a one-frame stochastic image
+/// against the exact one scores worse on all four; the maps are written; sizes must match.
+#[test]
+fn compare_prints_four_metrics_and_writes_maps() {
+    let scene = ["fixtures/cloud.ply", "--camera", "fixtures/cloud.cameras.json", "--width", "48", "--height", "36"];
+    let (exact, noisy) = (scratch("cmp-exact.exr"), scratch("cmp-noisy.png"));
+    for (method, out) in [("exact", &exact), ("stochastic", &noisy)] {
+        let o = splat(
+            &[&["render"][..], &scene, &["--method", method, "--backend", "cpu", "-o", out.to_str().unwrap()]].concat(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let metric = |o: &Output, name: &str| -> f64 {
+        let text = String::from_utf8_lossy(&o.stdout);
+        let line = text.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no {name} in {text}"));
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    let same = splat(&["compare", exact.to_str().unwrap(), exact.to_str().unwrap()]);
+    assert!(same.status.success(), "{}", stderr(&same));
+    assert_eq!((metric(&same, "RMSE"), metric(&same, "SSIM"), metric(&same, "FLIP")), (0.0, 1.0, 0.0));
+    let maps = scratch("cmp");
+    let o = splat(&["compare", exact.to_str().unwrap(), noisy.to_str().unwrap(), "--maps", maps.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(metric(&o, "RMSE") > 0.01 && metric(&o, "PSNR") < 40.0, "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(metric(&o, "SSIM") < 0.99 && metric(&o, "FLIP") > 0.01, "{}", String::from_utf8_lossy(&o.stdout));
+    for suffix in ["abs", "ssim", "flip"] {
+        let path = scratch(&format!("cmp-{suffix}.png"));
+        assert_eq!(image::open(&path).unwrap().width(), 48, "{suffix} map");
+    }
+    let o = splat(&["compare", exact.to_str().unwrap(), "fixtures/golden/layers-oracle.png"]);
+    assert!(!o.status.success() && stderr(&o).contains("differ in size"), "{}", stderr(&o));
+}
