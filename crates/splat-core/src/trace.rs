@@ -35,6 +35,7 @@ const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_SLOTS);
 
 /// A ray-tracing method.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum Method {
     /// Every hit through the BVH, sorted, Eq. 3.
     Exact,
@@ -136,7 +137,7 @@ impl Method {
 }
 
 /// The identity of a ray-tracing method on every backend: the GPU kernel switches on the same
-/// numbers (`METHOD_*` in `shaders/trace.wgsl`; a test reads them through naga and compares).
+/// numbers (`METHOD_*` in splat-gpu's `shaders/trace.wgsl`; a test reads them through naga and compares).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum MethodCode {

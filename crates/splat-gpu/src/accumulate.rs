@@ -7,7 +7,7 @@ use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
 /// WGSL of the accumulation kernel.
-pub const ACCUMULATE_WGSL: &str = include_str!("../../../shaders/accumulate.wgsl");
+pub const ACCUMULATE_WGSL: &str = include_str!("../shaders/accumulate.wgsl");
 
 /// Storage of the running mean.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -5,6 +5,7 @@ use thiserror::Error;
 
 /// Why the GPU path cannot run.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum GpuError {
     /// No adapter matched.
     #[error(

@@ -14,7 +14,7 @@ use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
 /// WGSL of the sort kernels.
-pub const SORT_WGSL: &str = include_str!("../../../shaders/sort.wgsl");
+pub const SORT_WGSL: &str = include_str!("../shaders/sort.wgsl");
 /// Keys per workgroup block.
 pub const BLOCK: u32 = 256;
 /// Bits sorted per pass.

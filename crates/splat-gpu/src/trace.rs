@@ -26,13 +26,13 @@ use std::time::{Duration, Instant};
 /// WGSL of the ray-tracing kernel (entry point `main`) and of the path tracer that calls its
 /// traversals (`path_main`, `shaders/path.wgsl`).
 pub const TRACE_WGSL: &str = concat!(
-    include_str!("../../../shaders/common.wgsl"),
-    include_str!("../../../shaders/sh.wgsl"),
-    include_str!("../../../shaders/lighting.wgsl"),
-    include_str!("../../../shaders/bvh.wgsl"),
-    include_str!("../../../shaders/mesh.wgsl"),
-    include_str!("../../../shaders/trace.wgsl"),
-    include_str!("../../../shaders/path.wgsl")
+    include_str!("../shaders/common.wgsl"),
+    include_str!("../shaders/sh.wgsl"),
+    include_str!("../shaders/lighting.wgsl"),
+    include_str!("../shaders/bvh.wgsl"),
+    include_str!("../shaders/mesh.wgsl"),
+    include_str!("../shaders/trace.wgsl"),
+    include_str!("../shaders/path.wgsl")
 );
 /// Dispatches encoded into one submission.
 pub const DISPATCHES_PER_SUBMIT: u32 = 64;
@@ -82,6 +82,7 @@ impl TryFrom<&Method> for MethodParams {
             Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, ..base },
             Method::DepthSampling { k } => MethodParams { k: k as u32, ..base },
             Method::Stochastic | Method::Opaque => base,
+            other => return Err(GpuError::Unsupported(format!("{other:?} has no GPU kernel"))),
         })
     }
 }

@@ -61,54 +61,54 @@ use wgpu::util::DeviceExt;
 
 /// WGSL of the projection and tile kernels.
 pub const RASTER_WGSL: &str = concat!(
-    include_str!("../../../../shaders/common.wgsl"),
-    include_str!("../../../../shaders/sh.wgsl"),
-    include_str!("../../../../shaders/raster_types.wgsl"),
-    include_str!("../../../../shaders/lighting.wgsl"),
-    include_str!("../../../../shaders/raster_lighting.wgsl"),
-    include_str!("../../../../shaders/raster.wgsl")
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/sh.wgsl"),
+    include_str!("../../shaders/raster_types.wgsl"),
+    include_str!("../../shaders/lighting.wgsl"),
+    include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/raster.wgsl")
 );
 /// WGSL of the splatting render pipeline.
 pub const SPLAT_WGSL: &str = concat!(
-    include_str!("../../../../shaders/common.wgsl"),
-    include_str!("../../../../shaders/raster_types.wgsl"),
-    include_str!("../../../../shaders/lighting.wgsl"),
-    include_str!("../../../../shaders/raster_lighting.wgsl"),
-    include_str!("../../../../shaders/splat.wgsl")
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/raster_types.wgsl"),
+    include_str!("../../shaders/lighting.wgsl"),
+    include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/splat.wgsl")
 );
 /// WGSL of the splatting render pipeline with the max-density-plane entry point, which needs
 /// sample-rate shading.
 pub const SPLAT_PLANE_WGSL: &str = concat!(
-    include_str!("../../../../shaders/common.wgsl"),
-    include_str!("../../../../shaders/raster_types.wgsl"),
-    include_str!("../../../../shaders/lighting.wgsl"),
-    include_str!("../../../../shaders/raster_lighting.wgsl"),
-    include_str!("../../../../shaders/splat.wgsl"),
-    include_str!("../../../../shaders/splat_plane.wgsl")
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/raster_types.wgsl"),
+    include_str!("../../shaders/lighting.wgsl"),
+    include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/splat.wgsl"),
+    include_str!("../../shaders/splat_plane.wgsl")
 );
 /// WGSL of the mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3).
 pub const MESH_PREPASS_WGSL: &str = concat!(
-    include_str!("../../../../shaders/common.wgsl"),
-    include_str!("../../../../shaders/raster_types.wgsl"),
-    include_str!("../../../../shaders/lighting.wgsl"),
-    include_str!("../../../../shaders/raster_lighting.wgsl"),
-    include_str!("../../../../shaders/bvh.wgsl"),
-    include_str!("../../../../shaders/mesh.wgsl"),
-    include_str!("../../../../shaders/mesh_prepass.wgsl")
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/raster_types.wgsl"),
+    include_str!("../../shaders/lighting.wgsl"),
+    include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/bvh.wgsl"),
+    include_str!("../../shaders/mesh.wgsl"),
+    include_str!("../../shaders/mesh_prepass.wgsl")
 );
 /// WGSL of the frame accumulation.
 pub const FOLD_WGSL: &str = concat!(
-    include_str!("../../../../shaders/common.wgsl"),
-    include_str!("../../../../shaders/raster_types.wgsl"),
-    include_str!("../../../../shaders/fold_target.wgsl"),
-    include_str!("../../../../shaders/fold.wgsl")
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/raster_types.wgsl"),
+    include_str!("../../shaders/fold_target.wgsl"),
+    include_str!("../../shaders/fold.wgsl")
 );
 /// WGSL of the frame accumulation from a multisampled target (resolving its samples).
 pub const FOLD_MSAA_WGSL: &str = concat!(
-    include_str!("../../../../shaders/common.wgsl"),
-    include_str!("../../../../shaders/raster_types.wgsl"),
-    include_str!("../../../../shaders/fold_target_msaa.wgsl"),
-    include_str!("../../../../shaders/fold.wgsl")
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/raster_types.wgsl"),
+    include_str!("../../shaders/fold_target_msaa.wgsl"),
+    include_str!("../../shaders/fold.wgsl")
 );
 /// Frames encoded into one submission (and uniform slots of per-frame parameters).
 const FRAMES_PER_SUBMIT: u32 = 64;
@@ -129,15 +129,16 @@ enum Draw {
 }
 
 impl Draw {
-    fn of(method: &RasterMethod) -> Self {
-        match method {
+    fn of(method: &RasterMethod) -> Result<Self, GpuError> {
+        Ok(match method {
             RasterMethod::Sorted { blend: Blend::Over } => Draw::Over,
             RasterMethod::Sorted { blend: Blend::Under } => Draw::Under,
             RasterMethod::StochasticSplat => Draw::Stochastic,
             RasterMethod::Enderton => Draw::Enderton,
             RasterMethod::Stratified { scramble: true } => Draw::Stratified,
             RasterMethod::Stratified { scramble: false } => Draw::StratifiedPlain,
-        }
+            other => return Err(GpuError::Unsupported(format!("{other:?} has no GPU raster path"))),
+        })
     }
 
     /// `params.mode` of the raster shaders (`MODE_*`, checked by a test).
@@ -346,7 +347,7 @@ impl<'a> GpuRasterizer<'a> {
     /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
         self.check_scene(method)?;
-        let draw = Draw::of(method);
+        let draw = Draw::of(method)?;
         if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
         }
@@ -409,7 +410,7 @@ impl<'a> GpuRasterizer<'a> {
     fn check_scene(&self, method: &RasterMethod) -> Result<(), GpuError> {
         Self::supports_scene(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
         let s = self.raster.samples;
-        if !Draw::of(method).is_rop() && !self.ctx.msaa_counts.contains(&s) {
+        if !Draw::of(method)?.is_rop() && !self.ctx.msaa_counts.contains(&s) {
             return Err(GpuError::Unsupported(format!(
                 "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter): use --backend cpu",
                 self.ctx.info.name, self.ctx.msaa_counts
@@ -430,7 +431,7 @@ impl<'a> GpuRasterizer<'a> {
         meshes: bool,
     ) -> Result<(), GpuError> {
         Self::supports(method, settings)?;
-        let (s, draw) = (settings.samples, Draw::of(method));
+        let (s, draw) = (settings.samples, Draw::of(method)?);
         let plane = settings.fragment_depth == FragmentDepth::MaxDensityPlane;
         let what = match (lit, meshes) {
             (true, true) => "lit splatting among meshes",
