@@ -21,6 +21,16 @@ pub struct ZtestArgs {
     /// Frames averaged in MEAN (its --spp).
     #[arg(long)]
     pub frames: u32,
+    /// The per-frame variance of the MEAN run itself (`--variance` of the same render), pooled
+    /// with VARIANCE by degrees of freedom, as the project's suites do: a heavy-tailed
+    /// estimator's rare event that moves the mean then also widens its standard error, while a
+    /// bias, which moves the mean without widening the variance, is still seen. Needs
+    /// --variance-frames.
+    #[arg(long, requires = "variance_frames")]
+    pub mean_variance: Option<PathBuf>,
+    /// Frames of the independent run behind VARIANCE (for --mean-variance).
+    #[arg(long)]
+    pub variance_frames: Option<u32>,
     /// Write the z-map (PNG): per pixel the z of its most extreme colour channel, blue below
     /// zero, red above, white at zero, full colour at |z| ≥ 4; black where nothing was tested.
     #[arg(long)]
@@ -34,7 +44,11 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
     }
     let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
     let (mean, variance, reference) = (read(&args.mean)?, read(&args.variance)?, read(&args.reference)?);
-    for (name, image) in [("variance", &variance), ("reference", &reference)] {
+    let mean_variance = args.mean_variance.as_deref().map(read).transpose()?;
+    for (name, image) in [("variance", &variance), ("reference", &reference)]
+        .into_iter()
+        .chain(mean_variance.as_ref().map(|m| ("mean-variance", m)))
+    {
         if (image.width(), image.height()) != (mean.width(), mean.height()) {
             bail!(
                 "the {name} image is {}×{}, the mean {}×{}",
@@ -51,6 +65,10 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
     if let Some(bad) = variance.data().iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
         bail!("the variance image holds {bad}: expected finite values ≥ 0");
     }
+    let variance = match (&mean_variance, args.variance_frames) {
+        (Some(own), Some(frames)) => pooled(own, args.frames, &variance, frames)?,
+        _ => variance,
+    };
     let tested = Channels::new(&mean, &variance, &reference);
     if tested.mean.len() < MIN_TESTED {
         bail!("only {} pixel-channels carry information (at least {MIN_TESTED} are needed)", tested.mean.len());
@@ -102,6 +120,24 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
         eprintln!("z-map → {}", path.display());
     }
     Ok(failures.is_empty())
+}
+
+/// ((F₁ − 1) v₁ + (F₂ − 1) v₂) / (F₁ + F₂ − 2): the two runs' per-frame variances pooled.
+fn pooled(own: &Image, own_frames: u32, other: &Image, other_frames: u32) -> Result<Image> {
+    if own.channels() != other.channels() {
+        bail!("the two variance images have {} and {} channels", own.channels(), other.channels());
+    }
+    if own_frames + other_frames < 3 {
+        bail!("pooling needs at least three frames in all");
+    }
+    let (a, b) = (f64::from(own_frames - 1), f64::from(other_frames.max(1) - 1));
+    let data = own
+        .data()
+        .iter()
+        .zip(other.data())
+        .map(|(&x, &y)| ((a * f64::from(x) + b * f64::from(y)) / (a + b)) as f32)
+        .collect();
+    Ok(Image::from_data(own.width(), own.height(), own.channels(), data).expect("same size"))
 }
 
 /// The colour channels (up to three) of every pixel that carry information: left out are

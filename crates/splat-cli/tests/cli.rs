@@ -897,7 +897,8 @@ fn ztest_passes_stochastic_and_rejects_biased_means() {
     let (reference, mean, var, run2) =
         (scratch("zt-ref.npy"), scratch("zt-mean.npy"), scratch("zt-var.npy"), scratch("zt-run2.npy"));
     render(&["--method", "exact"], &reference);
-    render(&["--method", "stochastic", "--spp", "256", "--seed", "1"], &mean);
+    let mean_var = scratch("zt-mean-var.npy");
+    render(&["--method", "stochastic", "--spp", "256", "--seed", "1", "--variance", mean_var.to_str().unwrap()], &mean);
     render(&["--method", "stochastic", "--spp", "1024", "--seed", "2", "--variance", var.to_str().unwrap()], &run2);
     let biased = scratch("zt-dsk.npy");
     render(&["--method", "depth-sampling-k", "--spp", "256", "--seed", "1"], &biased);
@@ -919,6 +920,21 @@ fn ztest_passes_stochastic_and_rejects_biased_means() {
     assert_eq!(pass.status.code(), Some(0), "{text}{}", stderr(&pass));
     assert!(text.contains("verdict    PASS"), "{text}");
     assert!(image::open(&zmap).unwrap().width() >= 480, "the z-map is scaled up with its legend");
+    // Pooled with the mean run's own variance, as the suites do.
+    let args = [&mean, &var, &reference, &mean_var].map(|p| p.to_str().unwrap().to_string());
+    let pooled = splat(&[
+        "ztest",
+        &args[0],
+        &args[1],
+        &args[2],
+        "--frames",
+        "256",
+        "--mean-variance",
+        &args[3],
+        "--variance-frames",
+        "1024",
+    ]);
+    assert_eq!(pooled.status.code(), Some(0), "{}", String::from_utf8_lossy(&pooled.stdout));
     for (m, what) in
         [(biased, "depth sampling"), (brighter(1.02, "zt-102.npy"), "× 1.02"), (brighter(1.01, "zt-101.npy"), "× 1.01")]
     {
