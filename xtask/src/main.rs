@@ -26,7 +26,8 @@ fn main() -> Result<()> {
             eprintln!(
                 "usage: cargo xtask <command>\n\n\
                  commands:\n  \
-                 test [ARGS]  run every test of the workspace (optimized build); ARGS go to cargo test\n  \
+                 test [ARGS]  run every test of the workspace (optimized build), then, without ARGS, the\n               \
+                 library examples and `cargo doc` with warnings as errors; ARGS go to cargo test\n  \
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
                  assets       fetch and verify the bonsai capture into target/assets/, and write\n               \
@@ -57,6 +58,50 @@ fn test(extra: &[String]) -> Result<()> {
     report_skips(&skips);
     if !status.success() {
         bail!("tests failed ({status})");
+    }
+    if extra.is_empty() {
+        run_examples()?;
+        check_docs()?;
+    }
+    Ok(())
+}
+
+/// Run every library example (built by `cargo test`); each checks its own result.
+fn run_examples() -> Result<()> {
+    let out = root().join("target/examples");
+    std::fs::create_dir_all(&out)?;
+    let path = |name: &str| out.join(name).display().to_string();
+    let examples: [(&str, &str, Vec<String>); 3] = [
+        ("splat-core", "render_ply", vec!["fixtures/cloud.ply".into(), path("render_ply.png")]),
+        ("splat-core", "ztest", vec![]),
+        ("splat-gpu", "trace_gpu", vec![path("trace_gpu.png")]),
+    ];
+    for (package, example, args) in examples {
+        eprintln!("example {package}/{example} …");
+        let status = Command::new(env!("CARGO"))
+            .current_dir(root())
+            .args(["run", "--quiet", "--release", "-p", package, "--example", example, "--"])
+            .args(&args)
+            .status()
+            .with_context(|| format!("running the example {example}"))?;
+        if !status.success() {
+            bail!("the example {package}/{example} failed ({status})");
+        }
+    }
+    Ok(())
+}
+
+/// Build the API documentation with warnings as errors (broken links, missing docs).
+fn check_docs() -> Result<()> {
+    eprintln!("cargo doc --workspace --no-deps (RUSTDOCFLAGS=-D warnings) …");
+    let status = Command::new(env!("CARGO"))
+        .current_dir(root())
+        .args(["doc", "--workspace", "--no-deps", "--quiet"])
+        .env("RUSTDOCFLAGS", "-D warnings")
+        .status()
+        .context("running cargo doc")?;
+    if !status.success() {
+        bail!("cargo doc found warnings ({status})");
     }
     Ok(())
 }

@@ -49,6 +49,10 @@ pub mod stats;
 pub mod tile;
 pub mod trace;
 
+/// The vector math of the public API (`Vec3`, `Quat`, `Mat3`), re-exported so that users need
+/// not match its version.
+pub use glam;
+
 pub use algorithm::Algorithm;
 pub use camera::Camera;
 pub use frame::{Frames, RenderOutput};

@@ -64,6 +64,7 @@ pub enum FragmentDepth {
 
 /// A rasterization method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
 pub enum RasterMethod {
     /// Global depth sort, then per-pixel blending: the raster oracle.
     Sorted {
