@@ -22,6 +22,7 @@ impl Error {
 
 /// What went wrong, with the element index or byte offset where it applies.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum ErrorKind {
     /// The operating system refused the read or write.
     #[error("{0}")]
