@@ -111,48 +111,48 @@ pub enum RngArg {
 #[derive(Args, Clone)]
 pub struct MethodOptions {
     /// Hits per pass (kbuffer, stochastic-pass) or accepted hits composited (depth-sampling-k).
-    #[arg(long, default_value_t = splat_core::trace::DEFAULT_K)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_K)]
     pub k: usize,
     /// Pass limit of kbuffer and stochastic-pass.
-    #[arg(long, default_value_t = splat_core::trace::DEFAULT_MAX_PASSES)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_MAX_PASSES)]
     pub max_passes: u32,
     /// kbuffer stops when transmittance falls to this (0: never; exact up to --max-passes).
-    #[arg(long, default_value_t = splat_core::trace::DEFAULT_MIN_TRANSMITTANCE)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_MIN_TRANSMITTANCE)]
     pub min_transmittance: f32,
     /// stochastic-n: samples per traversal (n, up to 64).
-    #[arg(long, default_value_t = 16)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = 16)]
     pub samples: u32,
     /// stochastic-n: traversals per frame (m).
-    #[arg(long, default_value_t = 1)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = 1)]
     pub passes: u32,
     /// Generator of the stochastic decisions.
-    #[arg(long, value_enum, default_value = "hash")]
+    #[arg(help_heading = "Method parameters", long, value_enum, default_value = "hash")]
     pub rng: RngArg,
     /// Raster methods: samples per pixel S (1, 2, 4, 8, 16, 32 or 64; the standard pattern has
     /// up to 16).
-    #[arg(long, default_value_t = 1)]
+    #[arg(help_heading = "Splatting", long, default_value_t = 1)]
     pub raster_samples: u32,
     /// Raster methods: where the samples lie (default: hammersley on the CPU, standard on the
     /// GPU, whose multisampling hardware has no other).
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Splatting", long, value_enum)]
     pub sample_pattern: Option<SamplePatternArg>,
     /// Raster methods: depth of each fragment.
-    #[arg(long, value_enum, default_value = "center")]
+    #[arg(help_heading = "Splatting", long, value_enum, default_value = "center")]
     pub fragment_depth: FragmentDepthArg,
     /// Raster methods: which pixels a splat can touch.
-    #[arg(long, value_enum, default_value = "3dgs")]
+    #[arg(help_heading = "Splatting", long, value_enum, default_value = "3dgs")]
     pub extent: ExtentArg,
     /// raster-sorted: stop a pixel before the splat that takes its transmittance below 1e-4, as
     /// the 3DGS rasterizer does (default off: the exact sum of Eq. 3; CPU only; the stochastic
     /// raster methods have no order to stop in and ignore it).
-    #[arg(long)]
+    #[arg(help_heading = "Splatting", long)]
     pub early_stop: bool,
     /// raster-sorted: blend order (default under, which also yields --depth and --normal).
-    #[arg(long, value_enum, default_value = "under")]
+    #[arg(help_heading = "Splatting", long, value_enum, default_value = "under")]
     pub blend: BlendArg,
     /// stratified: skip the multiply–XOR scramble (the correlated radical inverse that
     /// Laine–Karras warn about; biased, a negative control).
-    #[arg(long)]
+    #[arg(help_heading = "Splatting", long)]
     pub no_scramble: bool,
 }
 
@@ -318,64 +318,64 @@ pub struct SceneArgs {
     /// Cameras: an INRIA cameras.json, or a COLMAP model (a sparse/0 folder, or its
     /// images.bin / images.txt; PINHOLE and SIMPLE_PINHOLE cameras, views sorted by image name
     /// as 3DGS lists them). Without it the camera frames the scene (or the demo's own camera).
-    #[arg(long)]
+    #[arg(help_heading = "Camera", long)]
     pub camera: Option<PathBuf>,
     /// Which camera of --camera to use (0-based).
-    #[arg(long, default_value_t = 0)]
+    #[arg(help_heading = "Camera", long, default_value_t = 0)]
     pub camera_index: usize,
     /// Image width; rescales the camera's intrinsics.
-    #[arg(long)]
+    #[arg(help_heading = "Camera", long)]
     pub width: Option<u32>,
     /// Image height; rescales the camera's intrinsics.
-    #[arg(long)]
+    #[arg(help_heading = "Camera", long)]
     pub height: Option<u32>,
     /// Look-at camera position "x,y,z" (with --target; world up from --up).
-    #[arg(long, value_parser = parse_vec3, requires = "target")]
+    #[arg(help_heading = "Camera", long, value_parser = parse_vec3, requires = "target")]
     pub eye: Option<Vec3>,
     /// Look-at target "x,y,z".
-    #[arg(long, value_parser = parse_vec3, requires = "eye")]
+    #[arg(help_heading = "Camera", long, value_parser = parse_vec3, requires = "eye")]
     pub target: Option<Vec3>,
     /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0).
-    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0")]
+    #[arg(help_heading = "Camera", long, value_parser = parse_vec3, default_value = "0,1,0")]
     pub up: Vec3,
     /// Vertical field of view in degrees for --eye/--target.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(help_heading = "Camera", long, default_value_t = 50.0)]
     pub fov: f32,
     /// Background colour "r,g,b" behind the particles [default: the world's, else 0,0,0].
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(help_heading = "Scene and shading", long, value_parser = parse_vec3)]
     pub background: Option<Vec3>,
     /// Drop the SH bands above this degree (0–3), removing some baked lighting before relighting.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(..=3))]
+    #[arg(help_heading = "Scene and shading", long, value_parser = clap::value_parser!(u8).range(..=3))]
     pub sh_degree: Option<u8>,
     /// Lit worlds: integration of the sorted methods [default: the world's, else surface].
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Scene and shading", long, value_enum)]
     pub look: Option<LookArg>,
     /// Lit worlds: shadow rays of the ray-tracing methods [default: the world's, else none].
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Scene and shading", long, value_enum)]
     pub shadows: Option<ShadowsArg>,
     /// Hit distance convention.
-    #[arg(long, value_enum, default_value = "mean")]
+    #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "mean")]
     pub hit_distance: HitArg,
     /// Per-particle normal.
-    #[arg(long, value_enum, default_value = "plane")]
+    #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "plane")]
     pub normals: NormalArg,
     /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8.
-    #[arg(long, default_value_t = splat_core::kernel::DEFAULT_DEGREE)]
+    #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::kernel::DEFAULT_DEGREE)]
     pub kernel_degree: u32,
     /// Cutoff in standard deviations (Eq. 2).
-    #[arg(long, default_value_t = splat_core::kernel::DEFAULT_CUTOFF)]
+    #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::kernel::DEFAULT_CUTOFF)]
     pub cutoff: f32,
     /// Iso-opacity depth threshold on transmittance.
-    #[arg(long, default_value_t = splat_core::composite::DEFAULT_ISO_THRESHOLD)]
+    #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::composite::DEFAULT_ISO_THRESHOLD)]
     pub iso_threshold: f32,
     /// Most mirror and glass bounces of a ray among meshes (default: the world's, else 3).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=i64::from(splat_core::settings::MAX_BOUNCES)))]
+    #[arg(help_heading = "Scene and shading", long, value_parser = clap::value_parser!(u32).range(0..=i64::from(splat_core::settings::MAX_BOUNCES)))]
     pub max_bounces: Option<u32>,
     /// Worker threads (default: all cores). The image does not depend on it.
-    #[arg(long)]
+    #[arg(help_heading = "Machine", long)]
     pub threads: Option<usize>,
     /// Where rays are traced.
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(help_heading = "Machine", long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
     #[command(flatten)]
     pub read: ReadArgs,
@@ -383,6 +383,7 @@ pub struct SceneArgs {
 
 /// How scene files are read.
 #[derive(Args, Clone, Copy, Debug, Default)]
+#[command(next_help_heading = "Reading scene files")]
 pub struct ReadArgs {
     /// Refuse `.ply` vertex properties this reader does not know (by default they are skipped
     /// with one warning line naming them: Mip-Splatting's filter_3D and the like).

@@ -10,7 +10,7 @@ mod render;
 mod stratify;
 mod ztest;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
 
 /// Render 3D Gaussian splat scenes with exact and stochastic transparency, measure convergence
@@ -54,6 +54,13 @@ enum Command {
     Bench(Box<bench::BenchArgs>),
     /// RMSE, PSNR, SSIM and ꟻLIP between two images (.png, .exr, .npy), with error maps.
     Compare(compare::CompareArgs),
+    /// Print a shell completion script: `splat completions bash > ~/.local/share/bash-completion/completions/splat`
+    /// (zsh: a `_splat` file on $fpath; fish: ~/.config/fish/completions/splat.fish).
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
     /// Per-pixel z-test of a mean image against a reference, with the variance of an
     /// independent run: prints the statistics and PASS or REJECT; exit status 0 pass, 1 reject,
     /// 2 bad input.
@@ -83,6 +90,10 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(*args),
         Command::Stratify(args) => stratify::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Completions { shell } => {
+            clap_complete::generate(shell, &mut Cli::command(), "splat", &mut std::io::stdout());
+            Ok(())
+        }
         Command::Ztest(_) => unreachable!("handled above"),
     };
     match result {

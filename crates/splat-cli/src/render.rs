@@ -17,49 +17,49 @@ use std::time::Instant;
 /// Arguments of `splat render`.
 #[derive(Args)]
 pub struct RenderArgs {
-    #[command(flatten)]
-    pub scene: SceneArgs,
     /// Output image; the format follows the extension: .png (8-bit), .exr or .npy (f32). With
     /// --all-cameras, the folder to write the views into.
-    #[arg(short, long, default_value = "render.png")]
+    #[arg(help_heading = "Output", short, long, default_value = "render.png")]
     pub output: PathBuf,
     /// Render every camera of --camera (a cameras.json or COLMAP model) into the folder -o,
     /// one image per view named after its image (.png unless --view-format says otherwise).
-    #[arg(long, requires = "camera")]
+    #[arg(help_heading = "Output", long, requires = "camera")]
     pub all_cameras: bool,
     /// Image format of --all-cameras views.
-    #[arg(long, value_enum, default_value = "png", requires = "all_cameras")]
+    #[arg(help_heading = "Output", long, value_enum, default_value = "png", requires = "all_cameras")]
     pub view_format: ViewFormat,
+    /// Also write the per-frame variance of the radiance (.exr or .npy recommended).
+    #[arg(help_heading = "Output", long)]
+    pub variance: Option<PathBuf>,
+    /// Also write the overall opacity 1 − T (.png, .exr or .npy).
+    #[arg(help_heading = "Output", long)]
+    pub alpha: Option<PathBuf>,
+    /// Also write the iso-opacity depth (NaN where none; PNG is normalised near = bright).
+    #[arg(help_heading = "Output", long)]
+    pub depth: Option<PathBuf>,
+    /// Also write the integrated unit normal (PNG maps n to n/2 + 1/2).
+    #[arg(help_heading = "Output", long)]
+    pub normal: Option<PathBuf>,
     /// Rendering method (default: exact; raster-sorted with --pipeline raster or hybrid).
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Method", long, value_enum)]
     pub method: Option<MethodArg>,
     /// Pipeline for a world with meshes: rt ray traces splats and meshes (mirror and glass
     /// bounces), raster splats in three passes (mesh depth, splats front to back, meshes under
     /// them), hybrid rasterizes the first hit and ray traces shadows and bounces from it.
     /// Without it, --method decides.
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Method", long, value_enum)]
     pub pipeline: Option<PipelineArg>,
     /// Ray-tracing method of the hybrid pipeline's shadow and bounce rays.
-    #[arg(long, value_enum, default_value = "exact")]
+    #[arg(help_heading = "Method", long, value_enum, default_value = "exact")]
     pub secondary: MethodArg,
     /// Frames (samples per pixel) averaged; stochastic methods converge as 1/√spp.
-    #[arg(long, default_value_t = 1)]
+    #[arg(help_heading = "Method", long, default_value_t = 1)]
     pub spp: u32,
     /// Seed of the random stream: the same seed gives the same image, two seeds independent ones.
-    #[arg(long, default_value_t = 0)]
+    #[arg(help_heading = "Method", long, default_value_t = 0)]
     pub seed: u32,
-    /// Also write the per-frame variance of the radiance (.exr or .npy recommended).
-    #[arg(long)]
-    pub variance: Option<PathBuf>,
-    /// Also write the overall opacity 1 − T (.png, .exr or .npy).
-    #[arg(long)]
-    pub alpha: Option<PathBuf>,
-    /// Also write the iso-opacity depth (NaN where none; PNG is normalised near = bright).
-    #[arg(long)]
-    pub depth: Option<PathBuf>,
-    /// Also write the integrated unit normal (PNG maps n to n/2 + 1/2).
-    #[arg(long)]
-    pub normal: Option<PathBuf>,
+    #[command(flatten)]
+    pub scene: SceneArgs,
     #[command(flatten)]
     pub options: MethodOptions,
     #[command(flatten)]
@@ -68,6 +68,7 @@ pub struct RenderArgs {
 
 /// Options of the path tracer (`--pipeline path`).
 #[derive(Args)]
+#[command(next_help_heading = "Path tracer")]
 pub struct PathOptions {
     /// Path tracer: most bounces off meshes.
     #[arg(long, default_value_t = splat_core::path::DEFAULT_MAX_DEPTH)]

@@ -991,3 +991,21 @@ fn compare_prints_four_metrics_and_writes_maps() {
     let o = splat(&["compare", exact.to_str().unwrap(), "fixtures/golden/layers-oracle.png"]);
     assert!(!o.status.success() && stderr(&o).contains("differ in size"), "{}", stderr(&o));
 }
+
+/// Shell completions name every subcommand and option; `render --help` groups its options
+/// under headings, output and method first.
+#[test]
+fn completions_and_help_headings() {
+    for (shell, marker) in [("bash", "complete -F"), ("zsh", "#compdef splat"), ("fish", "complete -c splat")] {
+        let o = splat(&["completions", shell]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success() && text.contains(marker), "{shell}: {}", stderr(&o));
+        for word in ["render", "convert", "ztest", "compare", "spz-axes", "all-cameras"] {
+            assert!(text.contains(word), "{shell} completions lack {word}");
+        }
+    }
+    let help = String::from_utf8_lossy(&splat(&["render", "--help"]).stdout).into_owned();
+    let at = |h: &str| help.find(&format!("\n{h}:\n")).unwrap_or_else(|| panic!("no heading {h}:\n{help}"));
+    let order = ["Output", "Method", "Camera", "Scene and shading", "Machine", "Reading scene files", "Splatting"];
+    assert!(order.windows(2).all(|w| at(w[0]) < at(w[1])), "headings out of order:\n{help}");
+}
