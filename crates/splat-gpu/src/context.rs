@@ -6,7 +6,11 @@ use splat_core::Camera;
 use splat_core::image::Image;
 use wgpu::util::DeviceExt;
 
-/// A headless wgpu device.
+/// Storage buffers the ray-tracing kernel binds in its one stage.
+const MIN_STORAGE_BUFFERS_PER_STAGE: u32 = 15;
+
+/// A wgpu device and what the kernels need to know of it: headless ([`GpuContext::new`]) or
+/// a window's ([`GpuContext::from_device`]).
 pub struct GpuContext {
     /// The device.
     pub device: wgpu::Device,
@@ -81,44 +85,63 @@ impl GpuContext {
     }
 
     async fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, GpuError> {
+        let (device, queue) = adapter
+            .request_device(&Self::device_descriptor(&adapter))
+            .await
+            .map_err(|e| GpuError::Device { adapter: adapter.get_info().name, message: e.to_string() })?;
+        Self::from_device(&adapter, device, queue)
+    }
+
+    /// What to ask `adapter` for so that every kernel runs: the adapter's own limits (the
+    /// kernels bind more storage buffers per stage than wgpu's defaults allow) and, where it has
+    /// them, timestamp queries (benchmarks), blendable RGBA32F (sorted splatting) and its own
+    /// multisample counts (the MSAA rasterizer). A host that creates the device itself (a window
+    /// whose surface shares it) passes this to `request_device`, then calls
+    /// [`GpuContext::from_device`].
+    pub fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
+        wgpu::DeviceDescriptor {
+            label: Some("splat"),
+            required_features: adapter.features() & Self::wanted_features(),
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }
+    }
+
+    fn wanted_features() -> wgpu::Features {
+        wgpu::Features::TIMESTAMP_QUERY
+            | wgpu::Features::FLOAT32_BLENDABLE
+            | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES
+    }
+
+    /// A context on a device the caller already has (a window's, shared with its UI renderer),
+    /// created from `adapter`. The kernels need more storage buffers per stage than wgpu's
+    /// default limits: a device made with other limits than
+    /// [`GpuContext::device_descriptor`]'s is refused with [`GpuError::Device`] naming the limit.
+    pub fn from_device(adapter: &wgpu::Adapter, device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, GpuError> {
         let info = adapter.get_info();
-        let limits = adapter.limits();
-        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        // Timestamps for the benchmarks and blendable RGBA32F targets for sorted splatting, where
-        // the adapter has them.
-        // Timestamps for the benchmarks, blendable RGBA32F targets for sorted splatting, and the
-        // adapter's own multisample counts for the MSAA rasterizer, where the adapter has them.
-        let required_features = adapter.features()
-            & (wgpu::Features::TIMESTAMP_QUERY
-                | wgpu::Features::FLOAT32_BLENDABLE
-                | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
-        let msaa_counts = msaa_counts(&adapter, required_features);
+        let limits = device.limits();
+        if limits.max_storage_buffers_per_shader_stage < MIN_STORAGE_BUFFERS_PER_STAGE {
+            return Err(GpuError::Device {
+                adapter: info.name,
+                message: format!(
+                    "the device binds {} storage buffers per shader stage and the kernels need {MIN_STORAGE_BUFFERS_PER_STAGE}: create it with GpuContext::device_descriptor",
+                    limits.max_storage_buffers_per_shader_stage
+                ),
+            });
+        }
+        let features = device.features();
         let sample_rate_shading =
             adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::MULTISAMPLED_SHADING);
-        // The kernels bind five storage buffers per stage (downlevel defaults allow four):
-        // ask for what the adapter offers.
-        let required_limits = limits.clone();
-        let (device, queue) = adapter
-            .request_device(&wgpu::DeviceDescriptor {
-                label: Some("splat"),
-                required_features,
-                required_limits,
-                ..Default::default()
-            })
-            .await
-            .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
-        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        let uniform_alignment = u64::from(limits.min_uniform_buffer_offset_alignment);
         Ok(Self {
+            msaa_counts: msaa_counts(adapter, features),
+            timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
+            uniform_alignment: u64::from(limits.min_uniform_buffer_offset_alignment),
+            sample_rate_shading,
+            frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
             device,
             queue,
             info,
-            max_binding,
-            timestamps,
-            uniform_alignment,
-            msaa_counts,
-            sample_rate_shading,
-            frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
         })
     }
 
@@ -167,6 +190,16 @@ impl GpuContext {
             return Err(GpuError::SceneTooLarge { buffer, bytes, limit: self.max_binding, count });
         }
         Ok(())
+    }
+
+    /// An uninitialised buffer of `bytes` bytes.
+    pub(crate) fn buffer(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: bytes, usage, mapped_at_creation: false })
+    }
+
+    /// Bytes between consecutive [`crate::Params`] in a uniform buffer read at dynamic offsets.
+    pub(crate) fn uniform_stride(&self) -> u64 {
+        (std::mem::size_of::<crate::Params>() as u64).next_multiple_of(self.uniform_alignment)
     }
 
     /// A read-only storage buffer holding `contents`.

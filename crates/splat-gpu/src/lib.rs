@@ -8,13 +8,19 @@
 //! - [`GpuRasterizer`] ([`raster`]): sorted splatting and StochasticSplats in a render
 //!   pipeline, with the GPU radix [`sort`].
 //!
+//! For interactive viewers, [`ProgressiveTrace`] keeps a ray-traced view's accumulation on the
+//! device between steps and draws it into the caller's texture ([`display`]), and
+//! [`GpuContext::from_device`] runs the kernels on a device the caller made (a window's).
+//!
 //! Each backend decides in one place which methods it runs ([`GpuTracer::supports`],
 //! [`GpuRasterizer::supports`]).
 
 mod accumulate;
 mod context;
+pub mod display;
 mod error;
 mod layout;
+pub mod progressive;
 pub mod raster;
 pub mod sort;
 mod timing;
@@ -24,9 +30,11 @@ pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use context::GpuContext;
+pub use display::{Display, DisplayMode, PixelState};
 pub use error::GpuError;
 pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};
 pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
+pub use progressive::ProgressiveTrace;
 pub use sort::RadixSort;
 pub use trace::{
     DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MethodParams, PathPipeline, TRACE_WGSL,

@@ -309,6 +309,69 @@ impl<'a> GpuTracer<'a> {
         self.render_with(camera, &Method::Stochastic, &frames, None, Some((&pipeline.pipeline, &buffer)))
     }
 
+    /// The kernel's bind group over this scene's buffers, the per-pixel `targets`, the
+    /// dispatch parameters `uniform` (one [`Params`] per dynamic offset) and, where given, the
+    /// hybrid pipeline's first hits and the path tracer's parameters.
+    pub(crate) fn bind_group(
+        &self,
+        uniform: &wgpu::Buffer,
+        targets: &Targets,
+        first_hits: Option<&wgpu::Buffer>,
+        path: Option<&wgpu::Buffer>,
+    ) -> wgpu::BindGroup {
+        let params = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: uniform,
+            offset: 0,
+            size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
+        });
+        let buffers = [
+            &self.particles,
+            &self.nodes,
+            &self.sh,
+            &targets.mean,
+            &targets.m2,
+            &targets.pass_state,
+            &self.materials,
+            &self.lights,
+            &targets.pick,
+            &self.triangles,
+            &self.mesh_materials,
+            first_hits.unwrap_or(&self.no_first_hits),
+            path.unwrap_or(&self.no_path),
+            &self.sobol,
+            &self.emitters,
+            &self.emitter_density,
+        ];
+        let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(wgpu::BindGroupEntry { binding: 0, resource: params })
+            .chain(
+                buffers
+                    .iter()
+                    .zip(1..)
+                    .map(|(b, binding)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }),
+            )
+            .collect();
+        self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("trace"),
+            layout: &self.pipeline.layout,
+            entries: &entries,
+        })
+    }
+
+    /// The scene this tracer holds.
+    pub fn trace(&self) -> &TraceScene<'a> {
+        self.trace
+    }
+
+    /// The context it runs on.
+    pub fn context(&self) -> &'a GpuContext {
+        self.ctx
+    }
+
+    /// The compiled ray-tracing kernel.
+    pub(crate) fn kernel(&self) -> &wgpu::ComputePipeline {
+        &self.pipeline.pipeline
+    }
+
     fn render_with(
         &self,
         camera: &Camera,
@@ -363,7 +426,7 @@ impl<'a> GpuTracer<'a> {
 }
 
 /// Frame 0's depth, normal and picked particle of every pixel into `out`.
-fn set_picks(out: &mut RenderOutput, picks: &[GpuPick]) {
+pub(crate) fn set_picks(out: &mut RenderOutput, picks: &[GpuPick]) {
     let (w, h) = (out.depth.width(), out.depth.height());
     let depth = picks.iter().map(|p| if p.depth >= 0.0 { p.depth } else { f32::NAN }).collect();
     let normal = picks.iter().flat_map(|p| p.normal).collect();
@@ -395,72 +458,24 @@ struct Run<'a> {
 
 impl Run<'_> {
     fn storage(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
-        self.tracer.ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: bytes,
-            usage,
-            mapped_at_creation: false,
-        })
+        self.tracer.ctx.buffer(label, bytes, usage)
     }
 
     /// Render with `per_dispatch` frames a dispatch, or, with `by_pass`, one pass of one frame
     /// per dispatch (k-buffer and stochastic pass), the rays' state kept between dispatches.
     fn execute(&self, per_dispatch: u32, by_pass: bool) -> Result<Finished, GpuError> {
         let (ctx, camera, tracer) = (self.tracer.ctx, self.camera, self.tracer);
-        let pixels = camera.width as usize * camera.height as usize;
-        let out_bytes = (pixels * 16) as u64;
-        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let targets = Targets::new(ctx, camera.width, camera.height);
         let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
-        let (out_mean, out_var) = (self.storage("mean", out_bytes, rw), self.storage("m2", out_bytes, rw));
+        let (out_bytes, pick_bytes, state_bytes) = (targets.rgba_bytes(), targets.pick_bytes(), targets.state_bytes());
         let (read_mean, read_var) =
             (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
-        let pick_bytes = (pixels * std::mem::size_of::<GpuPick>()) as u64;
-        let (out_pick, read_pick) = (self.storage("pick", pick_bytes, rw), self.storage("read pick", pick_bytes, read));
-        let state_bytes = (pixels * std::mem::size_of::<PassState>()) as u64;
-        let pass_state = self.storage("pass state", state_bytes, rw);
+        let read_pick = self.storage("read pick", pick_bytes, read);
         let read_state = self.storage("read pass state", state_bytes, read);
-        let stride = (std::mem::size_of::<Params>() as u64).next_multiple_of(ctx.uniform_alignment);
-        let uniform = self.storage(
-            "params",
-            stride * u64::from(DISPATCHES_PER_SUBMIT),
-            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        );
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("trace"),
-            layout: &tracer.pipeline.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &uniform,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
-                    }),
-                },
-                wgpu::BindGroupEntry { binding: 1, resource: tracer.particles.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: tracer.nodes.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: tracer.sh.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: out_mean.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: out_var.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: pass_state.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 7, resource: tracer.materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 8, resource: tracer.lights.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 9, resource: out_pick.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 10, resource: tracer.triangles.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 11, resource: tracer.mesh_materials.as_entire_binding() },
-                wgpu::BindGroupEntry {
-                    binding: 12,
-                    resource: self.first_hits.unwrap_or(&tracer.no_first_hits).as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 13,
-                    resource: self.path.map_or(&tracer.no_path, |p| p.1).as_entire_binding(),
-                },
-                wgpu::BindGroupEntry { binding: 14, resource: tracer.sobol.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 15, resource: tracer.emitters.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 16, resource: tracer.emitter_density.as_entire_binding() },
-            ],
-        });
+        let (Targets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. }, stride) =
+            (&targets, ctx.uniform_stride());
+        let uniform = params_buffer(ctx);
+        let bind_group = tracer.bind_group(&uniform, &targets, self.first_hits, self.path.map(|p| p.1));
         let mut gpu_time = Duration::ZERO;
         let timer = ctx.timestamps.then(|| Timer::new(ctx));
         // Submit the dispatches of `params`, one batch per submission.
@@ -555,4 +570,57 @@ impl Run<'_> {
         };
         Ok(Finished { output, stats, busiest_pixel: busiest.1 })
     }
+}
+
+/// The per-pixel state a render writes: the running Welford mean (RGBA) and M2 (RGB, with the
+/// loop-iteration count in w), frame 0's pick and, between passes, each ray's [`PassState`].
+pub(crate) struct Targets {
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) mean: wgpu::Buffer,
+    pub(crate) m2: wgpu::Buffer,
+    pub(crate) pick: wgpu::Buffer,
+    pub(crate) pass_state: wgpu::Buffer,
+}
+
+impl Targets {
+    /// Buffers for a `width` × `height` image.
+    pub(crate) fn new(ctx: &GpuContext, width: u32, height: u32) -> Self {
+        let pixels = u64::from(width) * u64::from(height);
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let buffer = |label, bytes| ctx.buffer(label, bytes, rw);
+        Self {
+            width,
+            height,
+            mean: buffer("mean", pixels * 16),
+            m2: buffer("m2", pixels * 16),
+            pick: buffer("pick", pixels * std::mem::size_of::<GpuPick>() as u64),
+            pass_state: buffer("pass state", pixels * std::mem::size_of::<PassState>() as u64),
+        }
+    }
+
+    fn pixels(&self) -> u64 {
+        u64::from(self.width) * u64::from(self.height)
+    }
+
+    /// Bytes of the mean (and of the M2) buffer.
+    pub(crate) fn rgba_bytes(&self) -> u64 {
+        self.pixels() * 16
+    }
+
+    /// Bytes of the pick buffer.
+    pub(crate) fn pick_bytes(&self) -> u64 {
+        self.pixels() * std::mem::size_of::<GpuPick>() as u64
+    }
+
+    /// Bytes of the pass-state buffer.
+    pub(crate) fn state_bytes(&self) -> u64 {
+        self.pixels() * std::mem::size_of::<PassState>() as u64
+    }
+}
+
+/// The uniform buffer of one submission's [`Params`], one per dynamic offset.
+pub(crate) fn params_buffer(ctx: &GpuContext) -> wgpu::Buffer {
+    let usage = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+    ctx.buffer("params", ctx.uniform_stride() * u64::from(DISPATCHES_PER_SUBMIT), usage)
 }

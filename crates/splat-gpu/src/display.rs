@@ -1,0 +1,152 @@
+//! What a viewer shows of a render, as the CPU twin of `shaders/display.wgsl`: the mean colour,
+//! frame 0's depth or normal, or the per-frame standard deviation. Values are display-referred
+//! (3DGS colours are stored as they are shown), so a pixel's byte is `round(255 × v)`, as the
+//! PNG writer of `splat-io` makes it.
+
+use bytemuck::{Pod, Zeroable};
+
+/// Which image a view shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum DisplayMode {
+    /// The running mean of the radiance (Eq. 3 in expectation).
+    #[default]
+    Colour,
+    /// Frame 0's picked depth, near bright and far dark between [`Display::depth_near`] and
+    /// [`Display::depth_far`]; black where nothing was picked.
+    Depth,
+    /// Frame 0's unit normal n as (n + 1) / 2; black where nothing was hit.
+    Normal,
+    /// The per-frame standard deviation √(mean of the RGB variances) × [`Display::variance_scale`],
+    /// grey: where the estimator is noisy (zero after one frame).
+    Variance,
+}
+
+impl DisplayMode {
+    /// Every mode, in menu order.
+    pub const ALL: [DisplayMode; 4] = [DisplayMode::Colour, DisplayMode::Depth, DisplayMode::Normal, DisplayMode::Variance];
+
+    /// Its name in a menu.
+    pub fn name(self) -> &'static str {
+        match self {
+            DisplayMode::Colour => "colour",
+            DisplayMode::Depth => "depth",
+            DisplayMode::Normal => "normals",
+            DisplayMode::Variance => "variance",
+        }
+    }
+}
+
+/// A display transform: the mode and its ranges.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Display {
+    /// What to show.
+    pub mode: DisplayMode,
+    /// Depth shown white.
+    pub depth_near: f32,
+    /// Depth shown black.
+    pub depth_far: f32,
+    /// Standard deviation shown white is 1 / `variance_scale`.
+    pub variance_scale: f32,
+}
+
+impl Default for Display {
+    fn default() -> Self {
+        Self { mode: DisplayMode::Colour, depth_near: 0.0, depth_far: 10.0, variance_scale: 2.0 }
+    }
+}
+
+/// One pixel of a render as the display transform reads it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelState {
+    /// Mean RGB.
+    pub mean: [f32; 3],
+    /// Per-frame variance RGB (zero after one frame).
+    pub variance: [f32; 3],
+    /// Frame 0's depth (NaN where none).
+    pub depth: f32,
+    /// Frame 0's unit normal (zero where none).
+    pub normal: [f32; 3],
+}
+
+impl Display {
+    /// The displayed RGB of `p`, in [0, 1] (display.wgsl `shade`).
+    pub fn shade(&self, p: &PixelState) -> [f32; 3] {
+        let unit = |v: f32| v.clamp(0.0, 1.0);
+        match self.mode {
+            DisplayMode::Colour => p.mean.map(unit),
+            DisplayMode::Depth if p.depth.is_nan() || p.depth < 0.0 => [0.0; 3],
+            DisplayMode::Depth => {
+                let span = (self.depth_far - self.depth_near).max(f32::MIN_POSITIVE);
+                [1.0 - unit((p.depth - self.depth_near) / span); 3]
+            }
+            DisplayMode::Normal if p.normal == [0.0; 3] => [0.0; 3],
+            DisplayMode::Normal => p.normal.map(|n| unit(0.5 * n + 0.5)),
+            DisplayMode::Variance => {
+                let v = (p.variance.iter().sum::<f32>() / 3.0).max(0.0);
+                [unit(v.sqrt() * self.variance_scale); 3]
+            }
+        }
+    }
+
+    /// The RGBA8 bytes of `p` (alpha 255).
+    pub fn rgba8(&self, p: &PixelState) -> [u8; 4] {
+        let [r, g, b] = self.shade(p).map(|v| (v * 255.0).round() as u8);
+        [r, g, b, 255]
+    }
+
+    /// The uniform block of display.wgsl for `frames` frames of a `width` × `height` view,
+    /// drawn into a target of `format`.
+    pub(crate) fn uniform(&self, width: u32, height: u32, frames: u32, format: wgpu::TextureFormat) -> DisplayParams {
+        DisplayParams {
+            mode: self.mode as u32,
+            frames,
+            width,
+            height,
+            depth_near: self.depth_near,
+            depth_far: self.depth_far,
+            variance_scale: self.variance_scale,
+            srgb_target: u32::from(format.is_srgb()),
+        }
+    }
+}
+
+/// display.wgsl's `DisplayParams` (32 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub(crate) struct DisplayParams {
+    mode: u32,
+    frames: u32,
+    width: u32,
+    height: u32,
+    depth_near: f32,
+    depth_far: f32,
+    variance_scale: f32,
+    srgb_target: u32,
+}
+
+/// The WGSL of the display pass.
+pub(crate) const DISPLAY_WGSL: &str = include_str!("../shaders/display.wgsl");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pixel() -> PixelState {
+        PixelState { mean: [0.25, 1.5, -0.1], variance: [0.04, 0.04, 0.04], depth: 2.5, normal: [0.0, 0.0, -1.0] }
+    }
+
+    #[test]
+    fn each_mode_shows_its_quantity() {
+        let d = Display { depth_near: 1.0, depth_far: 4.0, variance_scale: 2.0, ..Display::default() };
+        let show = |mode| Display { mode, ..d }.shade(&pixel());
+        assert_eq!(show(DisplayMode::Colour), [0.25, 1.0, 0.0]);
+        assert_eq!(show(DisplayMode::Depth), [0.5; 3]);
+        assert_eq!(show(DisplayMode::Normal), [0.5, 0.5, 0.0]);
+        let sd = show(DisplayMode::Variance)[0];
+        assert!((sd - 0.4).abs() < 1e-6, "{sd}");
+        let none = PixelState { depth: f32::NAN, normal: [0.0; 3], ..pixel() };
+        assert_eq!(Display { mode: DisplayMode::Depth, ..d }.shade(&none), [0.0; 3]);
+        assert_eq!(Display { mode: DisplayMode::Normal, ..d }.shade(&none), [0.0; 3]);
+        assert_eq!(d.rgba8(&pixel()), [64, 255, 0, 255]);
+    }
+}
