@@ -47,6 +47,7 @@ fn root() -> PathBuf {
 fn test(extra: &[String]) -> Result<()> {
     ensure_vulkan_driver()?;
     ensure_embree()?;
+    ensure_xvfb()?;
     let mut cmd = Command::new(env!("CARGO"));
     cmd.current_dir(root()).args(["test", "--workspace", "--release"]).args(extra);
     if std::env::var_os("WGPU_BACKEND").is_none() {
@@ -147,6 +148,26 @@ const EMBREE_HEADER: &str = "/usr/include/embree3/rtcore.h";
 fn ensure_embree() -> Result<()> {
     let have = || Path::new(EMBREE_HEADER).exists();
     ensure_packages(have, &["libembree-dev"], "Embree 3", "the Embree peer's test will skip")
+}
+
+/// Xvfb and the X client libraries winit loads at run time (it links none of them), for the
+/// viewer's real-window test under `xvfb-run`.
+const X11_PACKAGES: [&str; 7] =
+    ["xvfb", "xauth", "libxkbcommon-x11-0", "libxcursor1", "libxi6", "libxrandr2", "libx11-xcb1"];
+
+/// Install [`X11_PACKAGES`] when they are missing and we run as root.
+fn ensure_xvfb() -> Result<()> {
+    let have = || {
+        let on_path = Command::new("sh").args(["-c", "command -v xvfb-run"]).output().is_ok_and(|o| o.status.success());
+        let query = Command::new("dpkg-query").args(["-W", "-f=${Status}\n"]).args(X11_PACKAGES).output();
+        // Where dpkg is not the package manager, xvfb-run on the PATH is all we can check.
+        let installed = query.map_or(true, |o| {
+            String::from_utf8_lossy(&o.stdout).lines().filter(|l| l.ends_with(" installed")).count()
+                == X11_PACKAGES.len()
+        });
+        on_path && installed
+    };
+    ensure_packages(have, &X11_PACKAGES, "Xvfb", "the viewer's window test will skip")
 }
 
 /// Make `have()` true by installing Debian `packages` with apt-get when we are root; otherwise

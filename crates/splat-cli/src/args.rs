@@ -426,11 +426,7 @@ impl From<SpzAxesArg> for splat_io::spz::SpzAxes {
 
 /// Every camera of a cameras.json or COLMAP model, with its image name.
 pub fn load_cameras(path: &std::path::Path) -> Result<Vec<(String, Camera)>> {
-    if splat_io::colmap::is_colmap(path) {
-        let views = splat_io::colmap::read_colmap(path)?;
-        return Ok(views.into_iter().map(|v| (v.name, v.camera)).collect());
-    }
-    Ok(splat_io::cameras::read_named_cameras(path)?)
+    Ok(splat_io::cameras::read_views(path)?)
 }
 
 impl SceneArgs {

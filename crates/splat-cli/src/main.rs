@@ -31,6 +31,7 @@ use std::process::ExitCode;
 ///   splat ztest mean.exr var.exr ref.exr --frames 256 --zmap z.png   # exit 0 pass, 1 reject
 ///   splat compare ref.exr test.png --maps err        # RMSE, PSNR, SSIM, FLIP; err-*.png
 ///   splat info point_cloud.ply
+///   splat view scene.ply --camera cameras.json            # interactive window
 #[derive(Parser)]
 #[command(name = "splat", version, about, long_about, verbatim_doc_comment)]
 struct Cli {
@@ -52,6 +53,9 @@ enum Command {
     /// Rays per second of each ray-tracing method against an opaque closest-hit baseline, or the
     /// stages of the splatting path (--methods raster-sorted,stochastic-splat).
     Bench(Box<bench::BenchArgs>),
+    /// Open a window on a scene: fly through it, switch methods, watch them converge (the
+    /// built-in demo scene without a file).
+    View(Box<splat_view::ViewArgs>),
     /// RMSE, PSNR, SSIM and ꟻLIP between two images (.png, .exr, .npy), with error maps.
     Compare(compare::CompareArgs),
     /// Print a shell completion script: `splat completions bash > ~/.local/share/bash-completion/completions/splat`
@@ -90,6 +94,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(*args),
         Command::Stratify(args) => stratify::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::View(args) => splat_view::run(&args),
         Command::Completions { shell } => {
             clap_complete::generate(shell, &mut Cli::command(), "splat", &mut std::io::stdout());
             Ok(())

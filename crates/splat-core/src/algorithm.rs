@@ -86,10 +86,10 @@ impl Algorithm {
                 "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
             )),
             Algorithm::Oracle => render_oracle(scene, camera, settings, progress),
-            Algorithm::Trace(method) => {
+            Algorithm::Trace(_) | Algorithm::Hybrid(..) => {
                 let trace =
                     TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
-                render_frames(&trace, camera, method, frames, progress)
+                self.render_on(&trace, camera, frames, progress)
             }
             Algorithm::Raster(method, raster) => {
                 let r = Rasterizer::new(scene, camera, *settings, *raster)?
@@ -97,12 +97,85 @@ impl Algorithm {
                     .with_meshes(meshes.clone());
                 render_raster(&r, method, frames, progress)
             }
+        }
+    }
+
+    /// Render `frames` on the CPU of the scene, settings, lighting and meshes of `trace`, whose
+    /// BVH a caller that renders many times (a viewer, frame after frame) builds once. The same
+    /// image as [`Algorithm::render_world`] of the same world.
+    pub fn render_on(
+        &self,
+        trace: &TraceScene,
+        camera: &Camera,
+        frames: &Frames,
+        progress: Progress,
+    ) -> Result<RenderOutput, RenderError> {
+        let (scene, settings) = (trace.scene(), *trace.settings());
+        match self {
+            Algorithm::Oracle => Algorithm::Oracle.render_world(
+                scene,
+                trace.meshes(),
+                camera,
+                &settings,
+                trace.lighting(),
+                frames,
+                progress,
+            ),
+            Algorithm::Trace(method) => render_frames(trace, camera, method, frames, progress),
+            Algorithm::Raster(method, raster) => {
+                let r = Rasterizer::new(scene, camera, settings, *raster)?
+                    .with_lighting(trace.lighting().clone())?
+                    .with_meshes(trace.meshes().clone());
+                render_raster(&r, method, frames, progress)
+            }
             Algorithm::Hybrid(method, raster, secondary) => {
-                let trace =
-                    TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
-                let r = Rasterizer::new(scene, camera, *settings, *raster)?.hybrid(&trace, *secondary)?;
+                let r = Rasterizer::new(scene, camera, settings, *raster)?.hybrid(trace, *secondary)?;
                 render_raster(&r, method, frames, progress)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raster::Blend;
+
+    #[test]
+    fn rendering_on_a_kept_trace_scene_is_rendering_the_world() {
+        let (scene, camera) = crate::scenes::cloud();
+        let camera = camera.rescaled(24, 18).unwrap();
+        let settings = RenderSettings::default();
+        let trace = TraceScene::new(&scene, settings).unwrap();
+        let frames = Frames { count: 3, ..Frames::default() };
+        let raster = RasterSettings::default();
+        for algorithm in [
+            Algorithm::Trace(Method::Stochastic),
+            Algorithm::Raster(RasterMethod::Sorted { blend: Blend::Over }, raster),
+            Algorithm::Raster(RasterMethod::StochasticSplat, raster),
+            Algorithm::Hybrid(RasterMethod::StochasticSplat, raster, Method::Stochastic),
+        ] {
+            let kept = algorithm.render_on(&trace, &camera, &frames, &|_| {}).unwrap();
+            let world = algorithm.render(&scene, &camera, &settings, &frames, &|_| {}).unwrap();
+            assert!(same(&kept, &world), "{algorithm:?}");
+        }
+        // Another seed is another image: the comparison can fail.
+        let other = Frames { seed: 1, ..frames };
+        let a = Algorithm::Trace(Method::Stochastic);
+        let (b, c) =
+            (a.render_on(&trace, &camera, &other, &|_| {}), a.render(&scene, &camera, &settings, &frames, &|_| {}));
+        assert!(!same(&b.unwrap(), &c.unwrap()));
+    }
+
+    /// Bit for bit the same images (NaN depths included) and picks.
+    fn same(a: &RenderOutput, b: &RenderOutput) -> bool {
+        let bits = |o: &RenderOutput| -> Vec<u32> {
+            [&o.mean, &o.variance, &o.alpha, &o.depth, &o.normal]
+                .iter()
+                .flat_map(|i| i.data())
+                .map(|v| v.to_bits())
+                .collect()
+        };
+        bits(a) == bits(b) && a.picked == b.picked
     }
 }

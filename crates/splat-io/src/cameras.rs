@@ -87,6 +87,16 @@ pub fn read_named_cameras(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     Ok(names.map_err(|e| Error::new(path, ErrorKind::Json(e)))?.zip(cameras).collect())
 }
 
+/// Every view of a `cameras.json` or a COLMAP model ([`crate::colmap::is_colmap`]), with its
+/// image name, in the file's (or, for COLMAP, the names') order.
+pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
+    if crate::colmap::is_colmap(path) {
+        let views = crate::colmap::read_colmap(path)?;
+        return Ok(views.into_iter().map(|v| (v.name, v.camera)).collect());
+    }
+    read_named_cameras(path)
+}
+
 /// Parse a `cameras.json`.
 pub fn parse_cameras(bytes: &[u8]) -> Result<Vec<Camera>, ErrorKind> {
     let entries: Vec<CameraEntry> = serde_json::from_slice(bytes)?;

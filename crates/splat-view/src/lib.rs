@@ -1,0 +1,134 @@
+//! `splat view`: an interactive window on transparent 3D Gaussian scenes, to fly through a
+//! capture, switch between the estimators of Sun et al. 2025 and the splatting methods, and
+//! watch them converge to the exact image (Eq. 3).
+//!
+//! The window (winit, wgpu and egui through eframe) posts jobs to a render thread
+//! ([`worker`]), which traces on the GPU with [`splat_gpu::ProgressiveTrace`] — the
+//! accumulation kept on the device and drawn straight into the window's texture — or renders
+//! on the CPU with the `splat-core` renderers where there is no hardware GPU.
+//!
+//! ```text
+//! splat view scene.ply --camera cameras.json
+//! ```
+
+pub mod accumulate;
+pub mod app;
+pub mod camera;
+pub mod load;
+pub mod settings;
+pub mod worker;
+
+pub use app::{BackendChoice, KEY_BINDINGS, Options, Viewer};
+
+use anyhow::{Context, Result};
+use eframe::egui_wgpu;
+use splat_core::glam::Vec3;
+use splat_gpu::GpuContext;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// The command line of `splat view`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ViewArgs {
+    /// Scene file (.ply, compressed .ply, .splat, .spz) or world file (.toml); the built-in
+    /// demo scene when omitted.
+    pub scene: Option<PathBuf>,
+    /// Views to step through (N / P): a cameras.json or a COLMAP model (sparse/0, or its
+    /// cameras and images files); the first view opens.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// The view of --camera to open with.
+    #[arg(long, default_value_t = 0)]
+    pub camera_index: usize,
+    /// Where frames render: auto takes a hardware GPU and the CPU renderers on a CPU adapter
+    /// such as lavapipe.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendChoice,
+    /// World up "x,y,z" for framing a scene without cameras (COLMAP captures: 0,-1,0).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0")]
+    pub up: Vec3,
+    /// Window width in points.
+    #[arg(long, default_value_t = 1280.0)]
+    pub width: f32,
+    /// Window height in points.
+    #[arg(long, default_value_t = 800.0)]
+    pub height: f32,
+    /// Frames after which the accumulation stops.
+    #[arg(long, default_value_t = 1024)]
+    pub max_frames: u32,
+    /// Render N frames of the first view, print a summary and close the window (smoke tests).
+    #[arg(long, value_name = "N")]
+    pub quit_after: Option<u32>,
+}
+
+fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f32>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| format!("'{s}': {e}"))?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) && v.iter().any(|c| *c != 0.0) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!("'{s}' is not three finite numbers x,y,z, not all zero")),
+    }
+}
+
+impl ViewArgs {
+    /// The options the window needs.
+    pub fn options(&self) -> Options {
+        Options {
+            backend: self.backend,
+            camera_index: self.camera_index,
+            up: self.up.normalize(),
+            quit_after: self.quit_after,
+            max_frames: self.quit_after.unwrap_or(u32::MAX).min(self.max_frames).max(1),
+        }
+    }
+}
+
+/// The wgpu setup of the window: the device asks for what the ray-tracing kernel needs
+/// ([`GpuContext::device_descriptor`]), so that the kernel runs on the window's device and
+/// draws into its textures.
+pub fn wgpu_configuration() -> egui_wgpu::WgpuConfiguration {
+    let mut setup = egui_wgpu::WgpuSetupCreateNew::without_display_handle();
+    setup.device_descriptor = Arc::new(GpuContext::device_descriptor);
+    egui_wgpu::WgpuConfiguration { wgpu_setup: egui_wgpu::WgpuSetup::CreateNew(setup), ..Default::default() }
+}
+
+/// Open the window on `args`' scene and run until it closes.
+pub fn run(args: &ViewArgs) -> Result<()> {
+    if args.width < 64.0 || args.height < 64.0 || !args.width.is_finite() || !args.height.is_finite() {
+        anyhow::bail!("--width and --height must be at least 64 points");
+    }
+    let loaded = load::load(args.scene.as_deref(), args.camera.as_deref())?;
+    if let Some(camera) = &args.camera
+        && args.camera_index >= loaded.info.views.len()
+    {
+        anyhow::bail!(
+            "--camera-index {} but {} has {} views",
+            args.camera_index,
+            camera.display(),
+            loaded.info.views.len()
+        );
+    }
+    let title = format!("splat view — {}", loaded.info.name);
+    let options = eframe::NativeOptions {
+        viewport: eframe::egui::ViewportBuilder::default()
+            .with_title(&title)
+            .with_inner_size([args.width, args.height]),
+        renderer: eframe::Renderer::Wgpu,
+        wgpu_options: wgpu_configuration(),
+        ..Default::default()
+    };
+    let view_options = args.options();
+    eframe::run_native(
+        "splat view",
+        options,
+        Box::new(move |cc| {
+            let render_state = cc.wgpu_render_state.clone().ok_or("eframe started without a wgpu renderer")?;
+            Ok(Box::new(Viewer::new(loaded, &view_options, render_state, cc.egui_ctx.clone())))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))
+    .context("could not open the window (splat view needs a desktop: X11 or Wayland; on a headless machine, xvfb-run)")
+}

@@ -1,0 +1,94 @@
+//! What `splat view` opens: a scene file, a world file or the built-in demo, with the views
+//! of a cameras.json or COLMAP model — read before any window opens, so that bad input is an
+//! error on the terminal, not an empty window.
+
+use crate::worker::World;
+use anyhow::{Context, Result};
+use splat_core::glam::Vec3;
+use splat_core::mesh::Meshes;
+use splat_core::particle::Aabb;
+use splat_core::{Camera, RenderSettings, scenes};
+use std::path::Path;
+
+/// A scene ready to view.
+pub struct Loaded {
+    /// What renders.
+    pub world: World,
+    /// What the window needs to know of it.
+    pub info: SceneInfo,
+}
+
+/// What the window knows of the scene.
+pub struct SceneInfo {
+    /// The settings the file gives (background, bounce limit) on the defaults.
+    pub render: RenderSettings,
+    /// The file's own camera (a world's `[camera]`, the demo's).
+    pub camera: Option<Camera>,
+    /// Named views to step through.
+    pub views: Vec<(String, Camera)>,
+    /// The central part of the scene (2 % quantiles of the means).
+    pub bounds: Aabb,
+    /// The scene's name for the window.
+    pub name: String,
+    /// Particles.
+    pub particles: usize,
+    /// SH degree.
+    pub sh_degree: u8,
+}
+
+/// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
+/// when `None`) and the views of `cameras`.
+pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
+    let is_world = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    let (world, name) = match scene {
+        Some(path) if is_world(path) => (splat_io::world::read_world(path)?, file_name(path)),
+        Some(path) => {
+            let read = splat_io::read_scene_with(path, splat_io::ReadOptions::default())?;
+            if !read.skipped_properties.is_empty() {
+                eprintln!(
+                    "warning: {}: skipped unknown vertex properties {}",
+                    path.display(),
+                    read.skipped_properties.join(", ")
+                );
+            }
+            (splat_io::world::World::of(read.scene), file_name(path))
+        }
+        None => {
+            let (scene, camera) = scenes::demo();
+            (splat_io::world::World { camera: Some(camera), ..splat_io::world::World::of(scene) }, "demo".into())
+        }
+    };
+    let views = match cameras {
+        Some(path) => splat_io::cameras::read_views(path)?,
+        None => Vec::new(),
+    };
+    if cameras.is_some() && views.is_empty() {
+        anyhow::bail!("{}: no cameras", cameras.unwrap_or(Path::new("")).display());
+    }
+    let splat_io::world::World { scene, lighting, camera, background, meshes, max_bounces, .. } = world;
+    let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}")).context("the world's meshes")?;
+    let defaults = RenderSettings::default();
+    let render = RenderSettings {
+        background: background.unwrap_or(defaults.background),
+        max_bounces: max_bounces.unwrap_or(defaults.max_bounces),
+        ..defaults
+    };
+    let bounds = scene.robust_bounds(0.02);
+    let (particles, sh_degree) = (scene.particles.len(), scene.sh_degree);
+    let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree };
+    Ok(Loaded { world: World { scene, lighting, meshes }, info })
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+impl SceneInfo {
+    /// Centre and radius of the central part of the scene.
+    pub fn sphere(&self) -> (Vec3, f32) {
+        if self.bounds.is_empty() || !self.bounds.min.is_finite() || !self.bounds.max.is_finite() {
+            return (Vec3::ZERO, 1.0);
+        }
+        (self.bounds.center(), (0.5 * (self.bounds.max - self.bounds.min).length()).max(1e-3))
+    }
+}

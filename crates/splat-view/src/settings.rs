@@ -1,0 +1,294 @@
+//! Every choice of the side panel, and how it becomes an [`Algorithm`], [`RenderSettings`] and
+//! [`Lighting`]. Kept apart from the window so that the mapping is tested without one.
+
+use splat_core::RenderSettings;
+use splat_core::algorithm::Algorithm;
+use splat_core::lighting::{Lighting, Look, Shadows};
+use splat_core::raster::{Blend, RasterMethod, RasterSettings};
+use splat_core::rng::RngScheme;
+use splat_core::trace::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, Method};
+#[cfg(test)]
+use splat_gpu::DisplayMode;
+use splat_gpu::{AccumulationFormat, Display};
+
+/// Which family renders (vk_gaussian_splatting's pipeline selector).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pipeline {
+    /// Ray tracing through the BVH.
+    RayTracing,
+    /// Splatting.
+    Raster,
+    /// Splatting for the first hit, ray tracing after it (vk_gaussian_splatting Lighting §5).
+    Hybrid,
+}
+
+impl Pipeline {
+    /// Every pipeline, in menu order.
+    pub const ALL: [Pipeline; 3] = [Pipeline::RayTracing, Pipeline::Raster, Pipeline::Hybrid];
+
+    /// Its menu name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Pipeline::RayTracing => "ray tracing",
+            Pipeline::Raster => "raster",
+            Pipeline::Hybrid => "hybrid",
+        }
+    }
+}
+
+/// A ray-tracing method without its parameters (those live in [`Settings`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TraceChoice {
+    /// Every hit sorted, Eq. 3 of Sun et al. 2025.
+    Exact,
+    /// The k-buffer multi-pass baseline.
+    KBuffer,
+    /// Algorithm 1: one accepted hit per traversal.
+    Stochastic,
+    /// §3.5: m traversals of n samples.
+    StochasticN,
+    /// The stochastic pass.
+    StochasticPass,
+    /// 3DGRT depth sampling, the biased control.
+    DepthSampling,
+}
+
+impl TraceChoice {
+    /// Every method, in menu order.
+    pub const ALL: [TraceChoice; 6] = [
+        TraceChoice::Exact,
+        TraceChoice::KBuffer,
+        TraceChoice::Stochastic,
+        TraceChoice::StochasticN,
+        TraceChoice::StochasticPass,
+        TraceChoice::DepthSampling,
+    ];
+
+    /// Its menu name (the CLI's `--method` name).
+    pub fn name(self) -> &'static str {
+        match self {
+            TraceChoice::Exact => "exact",
+            TraceChoice::KBuffer => "k-buffer",
+            TraceChoice::Stochastic => "stochastic",
+            TraceChoice::StochasticN => "stochastic-n",
+            TraceChoice::StochasticPass => "stochastic-pass",
+            TraceChoice::DepthSampling => "depth-sampling (biased)",
+        }
+    }
+}
+
+/// A splatting method without its sample count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RasterChoice {
+    /// Sorted, blended back to front.
+    SortedOver,
+    /// Sorted, blended front to back.
+    SortedUnder,
+    /// StochasticSplats: sorting-free, depth-tested stochastic discard.
+    StochasticSplat,
+    /// Enderton et al. 2010 stochastic transparency.
+    Enderton,
+    /// Laine & Karras 2011 stratified stochastic transparency.
+    Stratified,
+}
+
+impl RasterChoice {
+    /// Every method, in menu order.
+    pub const ALL: [RasterChoice; 5] = [
+        RasterChoice::SortedOver,
+        RasterChoice::SortedUnder,
+        RasterChoice::StochasticSplat,
+        RasterChoice::Enderton,
+        RasterChoice::Stratified,
+    ];
+
+    /// Its menu name.
+    pub fn name(self) -> &'static str {
+        match self {
+            RasterChoice::SortedOver => "sorted, back to front",
+            RasterChoice::SortedUnder => "sorted, front to back",
+            RasterChoice::StochasticSplat => "StochasticSplats",
+            RasterChoice::Enderton => "Enderton",
+            RasterChoice::Stratified => "Laine–Karras stratified",
+        }
+    }
+
+    fn method(self) -> RasterMethod {
+        match self {
+            RasterChoice::SortedOver => RasterMethod::Sorted { blend: Blend::Over },
+            RasterChoice::SortedUnder => RasterMethod::Sorted { blend: Blend::Under },
+            RasterChoice::StochasticSplat => RasterMethod::StochasticSplat,
+            RasterChoice::Enderton => RasterMethod::Enderton,
+            RasterChoice::Stratified => RasterMethod::Stratified { scramble: true },
+        }
+    }
+}
+
+/// Where frames are rendered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    /// The wgpu ray-tracing kernel, accumulating on the device.
+    Gpu,
+    /// The `splat-core` renderers on the CPU (rayon).
+    Cpu,
+}
+
+/// Everything the side panel sets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Which family renders.
+    pub pipeline: Pipeline,
+    /// The ray-tracing method (also the hybrid pipeline's secondary method).
+    pub trace: TraceChoice,
+    /// Hits per pass (k-buffer, stochastic pass, depth sampling): vk `PARTICLES_SPP`.
+    pub k: usize,
+    /// Pass limit.
+    pub max_passes: u32,
+    /// Early-out transmittance of the k-buffer.
+    pub min_transmittance: f32,
+    /// Traversals per frame of stochastic-n.
+    pub m: u32,
+    /// Samples per traversal of stochastic-n.
+    pub n: u32,
+    /// The splatting method.
+    pub raster: RasterChoice,
+    /// Samples per pixel of splatting.
+    pub raster_samples: u32,
+    /// Generator of the decisions.
+    pub rng: RngScheme,
+    /// Seed of the frames.
+    pub seed: u32,
+    /// Storage of the running mean (CPU accumulation; the GPU kernel keeps f32).
+    pub accumulation: AccumulationFormat,
+    /// The scene's settings.
+    pub render: RenderSettings,
+    /// Integration of sorted methods under lighting.
+    pub look: Look,
+    /// Visibility of the lights.
+    pub shadows: Shadows,
+    /// What the view shows.
+    pub display: Display,
+    /// Where frames are rendered.
+    pub backend: Backend,
+    /// Rendered pixels per window pixel (0.125 to 1).
+    pub scale: f32,
+    /// The accumulation stops after this many frames.
+    pub max_frames: u32,
+    /// Show the RMSE of the running mean against the exact image of the view.
+    pub rmse: bool,
+    /// Stop rendering (keep what is accumulated).
+    pub paused: bool,
+}
+
+impl Settings {
+    /// The defaults of the papers: Algorithm 1, vk's k = 18, 200 passes, 1 % transmittance.
+    pub fn new(render: RenderSettings, lighting: &Lighting, backend: Backend) -> Self {
+        Self {
+            pipeline: Pipeline::RayTracing,
+            trace: TraceChoice::Stochastic,
+            k: DEFAULT_K,
+            max_passes: DEFAULT_MAX_PASSES,
+            min_transmittance: DEFAULT_MIN_TRANSMITTANCE,
+            m: 1,
+            n: 4,
+            raster: RasterChoice::StochasticSplat,
+            raster_samples: 1,
+            rng: RngScheme::Hash,
+            seed: 0,
+            accumulation: AccumulationFormat::F32,
+            render,
+            look: lighting.look,
+            shadows: lighting.shadows,
+            display: Display::default(),
+            backend,
+            scale: if backend == Backend::Gpu { 1.0 } else { 0.5 },
+            max_frames: 1024,
+            rmse: false,
+            paused: false,
+        }
+    }
+
+    /// The ray-tracing method with its parameters.
+    pub fn method(&self) -> Method {
+        match self.trace {
+            TraceChoice::Exact => Method::Exact,
+            TraceChoice::KBuffer => {
+                Method::KBuffer { k: self.k, max_passes: self.max_passes, min_transmittance: self.min_transmittance }
+            }
+            TraceChoice::Stochastic => Method::Stochastic,
+            TraceChoice::StochasticN => Method::StochasticN { m: self.m, n: self.n },
+            TraceChoice::StochasticPass => Method::StochasticPass { k: self.k, max_passes: self.max_passes },
+            TraceChoice::DepthSampling => Method::DepthSampling { k: self.k },
+        }
+    }
+
+    /// The renderer the settings name.
+    pub fn algorithm(&self) -> Algorithm {
+        let raster = RasterSettings { samples: self.raster_samples, ..RasterSettings::default() };
+        match self.pipeline {
+            Pipeline::RayTracing => Algorithm::Trace(self.method()),
+            Pipeline::Raster => Algorithm::Raster(self.raster.method(), raster),
+            Pipeline::Hybrid => Algorithm::Hybrid(self.raster.method(), raster, self.method()),
+        }
+    }
+
+    /// `base` with the panel's look and shadows.
+    pub fn lighting(&self, base: &Lighting) -> Lighting {
+        Lighting { look: self.look, shadows: self.shadows, ..base.clone() }
+    }
+
+    /// Whether the GPU progressive tracer renders these settings (else the CPU does).
+    pub fn on_gpu(&self) -> bool {
+        self.backend == Backend::Gpu && self.pipeline == Pipeline::RayTracing
+    }
+
+    /// What a change of the scene's BVH or lighting depends on: a change rebuilds the scene.
+    pub fn scene_key(&self) -> (RenderSettings, Look, Shadows, Backend) {
+        (self.render, self.look, self.shadows, self.backend)
+    }
+
+    /// What the accumulated frames depend on besides the camera and the scene: a change
+    /// restarts the accumulation.
+    pub fn frames_key(&self) -> (Algorithm, RngScheme, u32, AccumulationFormat, bool) {
+        (self.algorithm(), self.rng, self.seed, self.accumulation, self.rmse)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_choice_is_a_valid_method_with_the_papers_defaults() {
+        let mut s = Settings::new(RenderSettings::default(), &Lighting::default(), Backend::Cpu);
+        for trace in TraceChoice::ALL {
+            s.trace = trace;
+            s.method().validate().unwrap_or_else(|e| panic!("{trace:?}: {e}"));
+        }
+        s.trace = TraceChoice::KBuffer;
+        assert_eq!(s.method(), Method::KBUFFER);
+        for pipeline in Pipeline::ALL {
+            s.pipeline = pipeline;
+            for raster in RasterChoice::ALL {
+                s.raster = raster;
+                assert_eq!(s.on_gpu(), false);
+                let _ = s.algorithm();
+            }
+        }
+        s.pipeline = Pipeline::RayTracing;
+        s.backend = Backend::Gpu;
+        assert!(s.on_gpu());
+    }
+
+    #[test]
+    fn a_display_change_keeps_the_frames_and_a_method_change_does_not() {
+        let s = Settings::new(RenderSettings::default(), &Lighting::default(), Backend::Cpu);
+        let display = Settings { display: Display { mode: DisplayMode::Depth, ..s.display }, ..s.clone() };
+        assert_eq!(display.frames_key(), s.frames_key());
+        assert_eq!(display.scene_key(), s.scene_key());
+        let method = Settings { trace: TraceChoice::Exact, ..s.clone() };
+        assert_ne!(method.frames_key(), s.frames_key());
+        let degree = Settings { render: RenderSettings { iso_threshold: 0.3, ..s.render }, ..s.clone() };
+        assert_ne!(degree.scene_key(), s.scene_key());
+    }
+}

@@ -1,0 +1,428 @@
+//! The render thread: it owns the scene and its BVH, takes the newest [`Job`] the window
+//! posts, folds frames into the view's accumulation and draws the result into the job's
+//! texture, so that the window stays responsive however long a frame takes.
+//!
+//! A job that changes the scene's settings (kernel, hit distance, normals, iso threshold,
+//! lighting, backend) rebuilds the BVH; one that changes the camera or what the frames are
+//! (method, parameters, generator, seed, accumulation) restarts the accumulation; one that
+//! changes only the display transform redraws what is accumulated.
+
+use crate::accumulate::CpuAccumulation;
+use crate::settings::Settings;
+use splat_core::algorithm::Algorithm;
+use splat_core::frame::{Frames, RenderOutput};
+use splat_core::lighting::Lighting;
+use splat_core::mesh::Meshes;
+use splat_core::rng::frame_key;
+use splat_core::trace::{Method, TraceScene};
+use splat_core::{Camera, Scene};
+use splat_gpu::{GpuContext, GpuTracer, ProgressiveTrace, TracePipeline, wgpu};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// What the window asks the render thread for.
+#[derive(Clone)]
+pub struct Job {
+    /// The view's camera (its size is the texture's).
+    pub camera: Camera,
+    /// The panel's choices.
+    pub settings: Settings,
+    /// Where the view is drawn: `camera`'s size, [`TEXTURE_FORMAT`].
+    pub target: wgpu::Texture,
+    /// A new generation restarts the accumulation of the same view ("restart").
+    pub generation: u64,
+}
+
+/// The format of the view's texture (display values stored as they are shown).
+pub const TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// How the render thread is doing, for the window's status lines.
+#[derive(Clone, Debug, Default)]
+pub struct Status {
+    /// The job the frames belong to.
+    pub job: u64,
+    /// Frames accumulated.
+    pub frames: u32,
+    /// Frames per second over the last second of rendering.
+    pub frames_per_second: f32,
+    /// RMSE of the running mean against the exact image of the view, when asked for.
+    pub rmse: Option<f64>,
+    /// Why the job cannot render.
+    pub error: Option<String>,
+    /// Whether the accumulation is finished (converged, at the frame limit or paused).
+    pub idle: bool,
+}
+
+/// The scene a viewer shows.
+pub struct World {
+    /// The particles.
+    pub scene: Scene,
+    /// Its materials, lights, shadows and look.
+    pub lighting: Lighting,
+    /// Its meshes.
+    pub meshes: Meshes,
+}
+
+/// The render thread and the channel to it.
+pub struct Worker {
+    shared: Arc<Shared>,
+    thread: Option<JoinHandle<()>>,
+}
+
+#[derive(Default)]
+struct Shared {
+    control: Mutex<Control>,
+    wake: Condvar,
+    status: Mutex<Status>,
+}
+
+#[derive(Default)]
+struct Control {
+    job: Option<(u64, Job)>,
+    quit: bool,
+}
+
+/// What the render thread does next.
+enum Next {
+    Quit,
+    Same,
+    New(u64, Box<Job>),
+}
+
+impl Shared {
+    /// The newest job if it is not `current`; with `wait`, block until there is one.
+    fn next(&self, current: u64, wait: bool) -> Next {
+        let mut control = self.control.lock().expect("the window never panics holding the lock");
+        loop {
+            if control.quit {
+                return Next::Quit;
+            }
+            match &control.job {
+                Some((id, job)) if *id != current => return Next::New(*id, Box::new(job.clone())),
+                _ if !wait => return Next::Same,
+                _ => control = self.wake.wait(control).expect("lock"),
+            }
+        }
+    }
+
+    fn publish(&self, status: Status) {
+        *self.status.lock().expect("lock") = status;
+    }
+}
+
+impl Worker {
+    /// Start the render thread on `world`: on `gpu` (the window's device) where the settings
+    /// ask for it, on the CPU otherwise; `queue` uploads the CPU's images;
+    /// `repaint` wakes the window when there is something new to show.
+    pub fn spawn(
+        world: World,
+        gpu: Option<GpuContext>,
+        queue: wgpu::Queue,
+        repaint: impl Fn() + Send + 'static,
+    ) -> Self {
+        let shared = Arc::new(Shared::default());
+        let thread = {
+            let shared = shared.clone();
+            let gpu = Gpu::new(gpu);
+            std::thread::Builder::new()
+                .name("splat view renderer".into())
+                .spawn(move || Renderer { world, gpu, queue, shared, repaint: Box::new(repaint) }.run())
+                .expect("the OS starts a thread")
+        };
+        Self { shared, thread: Some(thread) }
+    }
+
+    /// Ask for `job` (numbered `id`, increasing), replacing any job not yet taken.
+    pub fn submit(&self, id: u64, job: Job) {
+        self.shared.control.lock().expect("lock").job = Some((id, job));
+        self.shared.wake.notify_all();
+    }
+
+    /// The latest status.
+    pub fn status(&self) -> Status {
+        self.shared.status.lock().expect("lock").clone()
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.shared.control.lock().map(|mut c| c.quit = true).ok();
+        self.shared.wake.notify_all();
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// The GPU context and its compiled kernel, or why there is none.
+struct Gpu {
+    ctx: Option<GpuContext>,
+    pipeline: Result<TracePipeline, String>,
+}
+
+impl Gpu {
+    fn new(ctx: Option<GpuContext>) -> Self {
+        let pipeline = match &ctx {
+            Some(ctx) => TracePipeline::new(ctx).map_err(|e| e.to_string()),
+            None => Err("no GPU context".into()),
+        };
+        Self { ctx, pipeline }
+    }
+}
+
+struct Renderer {
+    world: World,
+    gpu: Gpu,
+    queue: wgpu::Queue,
+    shared: Arc<Shared>,
+    repaint: Box<dyn Fn() + Send>,
+}
+
+/// A view's accumulation on either backend.
+enum View<'t> {
+    Gpu { tracer: GpuTracer<'t>, progressive: ProgressiveTrace, per_step: u32 },
+    Cpu(CpuAccumulation),
+}
+
+/// Frames per second over a sliding second.
+struct Rate {
+    since: Instant,
+    frames: u32,
+    value: f32,
+}
+
+impl Rate {
+    fn new() -> Self {
+        Self { since: Instant::now(), frames: 0, value: 0.0 }
+    }
+
+    fn add(&mut self, frames: u32) -> f32 {
+        self.frames += frames;
+        let elapsed = self.since.elapsed().as_secs_f32();
+        if elapsed >= 0.5 {
+            self.value = self.frames as f32 / elapsed;
+            (self.since, self.frames) = (Instant::now(), 0);
+        }
+        self.value
+    }
+}
+
+impl Renderer {
+    fn run(self) {
+        let Next::New(mut id, mut job) = self.shared.next(0, true) else { return };
+        'scene: loop {
+            let lighting = job.settings.lighting(&self.world.lighting);
+            let trace = TraceScene::new(&self.world.scene, job.settings.render)
+                .and_then(|t| t.with_lighting(lighting))
+                .map(|t| t.with_meshes(self.world.meshes.clone()));
+            let mut view = match trace.as_ref().map_err(|e| e.to_string()).and_then(|t| self.view(t, &job)) {
+                Ok(view) => view,
+                Err(e) => {
+                    self.shared.publish(Status { job: id, error: Some(e), idle: true, ..Status::default() });
+                    (self.repaint)();
+                    match self.shared.next(id, true) {
+                        Next::New(new, next) => (id, job) = (new, next),
+                        _ => return,
+                    }
+                    continue 'scene;
+                }
+            };
+            let trace = trace.as_ref().expect("checked above");
+            let mut status = Status { job: id, ..Status::default() };
+            let mut rate = Rate::new();
+            let mut reference: Option<RenderOutput> = None;
+            loop {
+                let busy = !status.idle && status.error.is_none();
+                match self.shared.next(id, !busy) {
+                    Next::Quit => return,
+                    Next::New(new, next) => {
+                        let rebuild = next.settings.scene_key() != job.settings.scene_key();
+                        let restart = next.camera != job.camera
+                            || next.generation != job.generation
+                            || next.settings.frames_key() != job.settings.frames_key();
+                        (id, job) = (new, next);
+                        if rebuild {
+                            continue 'scene;
+                        }
+                        status.job = id;
+                        if restart {
+                            reference = None;
+                            rate = Rate::new();
+                            status = Status { job: id, ..Status::default() };
+                            if let Err(e) = self.restart(&mut view, &job) {
+                                status.error = Some(e);
+                            }
+                        }
+                        status.idle = job.settings.paused || self.finished(&view, trace, &job);
+                        self.present(&mut view, &job);
+                        self.shared.publish(status.clone());
+                        (self.repaint)();
+                        continue;
+                    }
+                    Next::Same => {}
+                }
+                match self.step(&mut view, trace, &job) {
+                    Ok(frames) => {
+                        status.frames = self.frames(&view);
+                        status.frames_per_second = rate.add(frames);
+                    }
+                    Err(e) => status.error = Some(e),
+                }
+                self.present(&mut view, &job);
+                if job.settings.rmse && status.error.is_none() {
+                    status.rmse =
+                        self.rmse(&view, trace, &job, &mut reference).map_err(|e| status.error = Some(e)).ok();
+                }
+                status.idle = job.settings.paused || self.finished(&view, trace, &job);
+                self.shared.publish(status.clone());
+                (self.repaint)();
+            }
+        }
+    }
+
+    /// A fresh view of `job` on the backend its settings name.
+    fn view<'t>(&'t self, trace: &'t TraceScene<'t>, job: &Job) -> Result<View<'t>, String> {
+        if !job.settings.on_gpu() {
+            return Ok(View::Cpu(CpuAccumulation::new(job.camera.width, job.camera.height)));
+        }
+        let (Some(ctx), Ok(pipeline)) = (&self.gpu.ctx, &self.gpu.pipeline) else {
+            return Err(match &self.gpu.pipeline {
+                Err(e) => format!("the GPU tracer cannot run: {e}"),
+                Ok(_) => "no GPU".into(),
+            });
+        };
+        let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
+        let progressive = ProgressiveTrace::new(&tracer, &job.camera, &job.settings.method(), &stream(&job.settings))
+            .map_err(|e| e.to_string())?;
+        Ok(View::Gpu { tracer, progressive, per_step: 1 })
+    }
+
+    fn restart(&self, view: &mut View, job: &Job) -> Result<(), String> {
+        match view {
+            View::Gpu { tracer, progressive, per_step } => {
+                *per_step = 1;
+                progressive.set_camera(tracer, &job.camera).map_err(|e| e.to_string())?;
+                progressive.set_frames(&stream(&job.settings)).map_err(|e| e.to_string())?;
+                progressive.set_method(&job.settings.method()).map_err(|e| e.to_string())
+            }
+            View::Cpu(acc) => {
+                *acc = CpuAccumulation::new(job.camera.width, job.camera.height);
+                Ok(())
+            }
+        }
+    }
+
+    fn frames(&self, view: &View) -> u32 {
+        match view {
+            View::Gpu { progressive, .. } => progressive.frames(),
+            View::Cpu(acc) => acc.frames(),
+        }
+    }
+
+    /// Whether more frames would change nothing or the limit is reached.
+    fn finished(&self, view: &View, trace: &TraceScene, job: &Job) -> bool {
+        let deterministic = !(job.settings.algorithm().is_stochastic() || trace.is_random());
+        let frames = self.frames(view);
+        frames >= job.settings.max_frames || deterministic && frames >= 1
+    }
+
+    /// Fold more frames in: on the GPU as many as keep a step near 20 ms, on the CPU one.
+    fn step(&self, view: &mut View, trace: &TraceScene, job: &Job) -> Result<u32, String> {
+        let left = job.settings.max_frames.saturating_sub(self.frames(view));
+        match view {
+            View::Gpu { tracer, progressive, per_step } => {
+                let start = Instant::now();
+                let done = progressive.step(tracer, (*per_step).min(left)).map_err(|e| e.to_string())?;
+                let ctx = tracer.context();
+                ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| e.to_string())?;
+                let took = start.elapsed();
+                if took < Duration::from_millis(10) {
+                    *per_step = (*per_step * 2).min(splat_gpu::FRAMES_PER_DISPATCH);
+                } else if took > Duration::from_millis(40) {
+                    *per_step = (*per_step / 2).max(1);
+                }
+                Ok(done)
+            }
+            View::Cpu(acc) => {
+                let frame = job.settings.algorithm().render_on(
+                    trace,
+                    &job.camera,
+                    &cpu_frame(&job.settings, acc.frames()),
+                    &|_| {},
+                );
+                acc.fold(&frame.map_err(|e| e.to_string())?, job.settings.accumulation);
+                Ok(1)
+            }
+        }
+    }
+
+    /// Draw what is accumulated into the job's texture.
+    fn present(&self, view: &mut View, job: &Job) {
+        let display = job.settings.display;
+        match view {
+            View::Gpu { tracer, progressive, .. } => {
+                let ctx = tracer.context();
+                let mut encoder = ctx.device.create_command_encoder(&Default::default());
+                let target = job.target.create_view(&Default::default());
+                if progressive.present(ctx, &mut encoder, &target, job.target.format(), &display).is_ok() {
+                    ctx.queue.submit([encoder.finish()]);
+                }
+            }
+            View::Cpu(acc) => {
+                let (w, h) = (job.target.width(), job.target.height());
+                if (w, h) != acc.size() {
+                    return;
+                }
+                self.queue.write_texture(
+                    job.target.as_image_copy(),
+                    &acc.rgba8(&display),
+                    wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * w), rows_per_image: Some(h) },
+                    job.target.size(),
+                );
+            }
+        }
+    }
+
+    /// The RMSE of the running mean against the exact image of the view, rendered once per
+    /// view on the same backend.
+    fn rmse(
+        &self,
+        view: &View,
+        trace: &TraceScene,
+        job: &Job,
+        reference: &mut Option<RenderOutput>,
+    ) -> Result<f64, String> {
+        let exact = Frames::default();
+        let (mean, reference) = match view {
+            View::Gpu { tracer, progressive, .. } => {
+                if reference.is_none() {
+                    *reference = Some(tracer.render(&job.camera, &Method::Exact, &exact).map_err(|e| e.to_string())?.0);
+                }
+                (progressive.read(tracer.context()).map_err(|e| e.to_string())?.mean, reference.as_ref())
+            }
+            View::Cpu(acc) => {
+                if reference.is_none() {
+                    let render = Algorithm::Trace(Method::Exact).render_on(trace, &job.camera, &exact, &|_| {});
+                    *reference = Some(render.map_err(|e| e.to_string())?);
+                }
+                (acc.mean_image(), reference.as_ref())
+            }
+        };
+        let reference = &reference.expect("set above").mean;
+        let squares: f64 = mean.data().iter().zip(reference.data()).map(|(a, b)| f64::from(a - b).powi(2)).sum();
+        Ok((squares / mean.data().len().max(1) as f64).sqrt())
+    }
+}
+
+/// The random stream of a job: the GPU view draws frame i with key i of the panel's seed, as
+/// a batch render of that seed does.
+fn stream(settings: &Settings) -> Frames {
+    Frames { count: 1, seed: settings.seed, rng: settings.rng, u_shift: 0.0 }
+}
+
+/// Frame `i` of a job on the CPU: a render of one frame whose seed is key i of the panel's
+/// seed, so that every frame draws its own decisions.
+fn cpu_frame(settings: &Settings, i: u32) -> Frames {
+    Frames { seed: frame_key(settings.seed, i), ..stream(settings) }
+}

@@ -1,0 +1,224 @@
+//! The viewer without a window: egui_kittest drives the real UI on the wgpu renderer
+//! (lavapipe here), the render thread renders, and the tests read the view's texture back.
+//! Switching the method changes the image, a camera move restarts the accumulation, the GPU
+//! view draws what a batch render of the same frames shows, and the panels render as the
+//! committed snapshot (the README's screenshot).
+
+use eframe::egui;
+use eframe::egui_wgpu::{self, RenderState, WgpuSetup};
+use egui_kittest::kittest::Queryable;
+use egui_kittest::wgpu::{WgpuTestRenderer, create_render_state, default_wgpu_setup};
+use egui_kittest::{Harness, SnapshotOptions};
+use splat_core::frame::Frames;
+use splat_core::trace::{Method, TraceScene};
+use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline, wgpu};
+use splat_view::worker::Status;
+use splat_view::{BackendChoice, Options, Viewer};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// The UI's render state on a device with the kernels' limits, or `None` (recorded as
+/// skipped, a failure under CI=true) without an adapter.
+fn render_state() -> Option<RenderState> {
+    let mut setup = default_wgpu_setup();
+    if let WgpuSetup::CreateNew(create) = &mut setup {
+        create.device_descriptor = Arc::new(GpuContext::device_descriptor);
+    }
+    let create = std::panic::AssertUnwindSafe(|| create_render_state(setup, egui_wgpu::RendererOptions::PREDICTABLE));
+    match std::panic::catch_unwind(create) {
+        Ok(state) => Some(state),
+        Err(_) => {
+            splat_tests::skip(&splat_tests::current_test(), "no wgpu adapter for the UI");
+            None
+        }
+    }
+}
+
+fn options(backend: BackendChoice, max_frames: u32) -> Options {
+    Options { backend, camera_index: 0, up: splat_core::glam::Vec3::Y, quit_after: None, max_frames }
+}
+
+/// A harness of a viewer of `scene` (and its cameras.json), or of the demo.
+fn harness(scene: Option<&str>, options: &Options) -> Option<(Harness<'static, Viewer>, RenderState)> {
+    let state = render_state()?;
+    let root = splat_tests::root();
+    let scene_path = scene.map(|s| root.join(format!("fixtures/{s}.ply")));
+    let cameras = scene.map(|s| root.join(format!("fixtures/{s}.cameras.json")));
+    let loaded = splat_view::load::load(scene_path.as_deref(), cameras.as_deref()).expect("the fixture loads");
+    let mut viewer = Viewer::new(loaded, options, state.clone(), egui::Context::default());
+    viewer.hide_rate = true;
+    let harness = Harness::builder()
+        .with_size(egui::vec2(1000.0, 640.0))
+        .renderer(WgpuTestRenderer::from_render_state(state.clone()))
+        .build_ui_state(|ui, viewer: &mut Viewer| viewer.show(ui), viewer);
+    Some((harness, state))
+}
+
+/// Step the UI until the render thread is done with the posted job (or has `frames`).
+fn settle(harness: &mut Harness<'static, Viewer>, frames: u32) -> Status {
+    let start = Instant::now();
+    loop {
+        harness.step();
+        if let Some(status) = harness.state().status()
+            && (status.idle || status.frames >= frames || status.error.is_some())
+        {
+            assert!(status.error.is_none(), "the render failed: {status:?}");
+            return status;
+        }
+        assert!(start.elapsed() < Duration::from_secs(120), "the render thread did not finish");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// The view's texture, RGBA8 rows.
+fn texels(state: &RenderState, viewer: &Viewer) -> (u32, u32, Vec<u8>) {
+    let texture = viewer.texture().expect("the view has a texture");
+    let (w, h) = (texture.width(), texture.height());
+    let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let buffer = state.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: u64::from(row * h),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = state.device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
+        texture.size(),
+    );
+    state.queue.submit([encoder.finish()]);
+    buffer.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("map"));
+    state.device.poll(wgpu::PollType::wait_indefinitely()).expect("poll");
+    let data = buffer.slice(..).get_mapped_range().expect("mapped");
+    let rows = data.chunks(row as usize).flat_map(|r| r[..4 * w as usize].to_vec()).collect();
+    (w, h, rows)
+}
+
+/// Mean absolute difference of two images' bytes, per channel value.
+fn mean_abs(a: &[u8], b: &[u8]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| f64::from(x.abs_diff(*y))).sum::<f64>() / a.len() as f64
+}
+
+/// A left-button drag from `from` to `to`.
+fn drag(h: &mut Harness<'static, Viewer>, from: egui::Pos2, to: egui::Pos2) {
+    h.drag_at(from);
+    h.step();
+    h.hover_at(to);
+    h.step();
+    h.drop_at(to);
+    h.step();
+}
+
+/// Choose `option` of the combo box labelled `combo`, as a user would.
+fn choose(harness: &mut Harness<'static, Viewer>, combo: &str, option: &str) {
+    harness.get_by_label(combo).click();
+    harness.run_steps(2);
+    harness.get_by_label(option).click();
+    harness.run_steps(2);
+}
+
+#[test]
+fn switching_the_method_changes_the_image() {
+    let Some((mut h, state)) = harness(Some("cloud"), &options(BackendChoice::Cpu, 4)) else { return };
+    let first = settle(&mut h, 4);
+    assert_eq!(first.frames, 4);
+    let (_, _, stochastic) = texels(&state, h.state());
+    // The same job again gives the same bytes: the comparison below can come out small.
+    h.state_mut().settings_mut().seed = 7;
+    settle(&mut h, 4);
+    h.state_mut().settings_mut().seed = 0;
+    settle(&mut h, 4);
+    let (_, _, again) = texels(&state, h.state());
+    assert_eq!(mean_abs(&stochastic, &again), 0.0, "the same seed and method gave another image");
+
+    choose(&mut h, "method", "depth-sampling (biased)");
+    assert_eq!(h.state().settings().method(), Method::DepthSampling { k: splat_core::trace::DEFAULT_K });
+    let status = settle(&mut h, 4);
+    assert!(status.job > first.job);
+    let (_, _, biased) = texels(&state, h.state());
+    let changed = mean_abs(&stochastic, &biased);
+    assert!(changed > 0.5, "depth sampling looks like Algorithm 1 (mean |Δ| {changed:.3} of 255)");
+
+    choose(&mut h, "method", "exact");
+    let exact = settle(&mut h, 4);
+    assert_eq!(exact.frames, 1, "a deterministic method is done after one frame");
+    assert!(exact.idle);
+}
+
+#[test]
+fn a_camera_move_restarts_the_accumulation() {
+    let Some((mut h, state)) = harness(Some("cloud"), &options(BackendChoice::Cpu, 3)) else { return };
+    assert_eq!(h.state().view(), Some(0), "the first view of the cameras.json opens");
+    assert_eq!(settle(&mut h, 3).frames, 3);
+    let camera = h.state().camera().expect("a job was posted");
+    // Paused, a drag across the view with the left button (an orbit) leaves no frame.
+    h.state_mut().settings_mut().paused = true;
+    settle(&mut h, 3);
+    drag(&mut h, egui::pos2(600.0, 300.0), egui::pos2(680.0, 330.0));
+    let paused = settle(&mut h, 3);
+    assert_eq!(h.state().view(), None, "the camera left the loaded view");
+    assert_ne!(h.state().camera(), Some(camera));
+    assert_eq!(paused.frames, 0, "the moved view kept frames of the old one");
+    h.state_mut().settings_mut().paused = false;
+    assert_eq!(settle(&mut h, 3).frames, 3);
+    let (_, _, before) = texels(&state, h.state());
+    // A second move, rendering: the same size, another image.
+    let job = h.state().status().unwrap().job;
+    drag(&mut h, egui::pos2(600.0, 300.0), egui::pos2(520.0, 280.0));
+    let moved = settle(&mut h, 3);
+    assert!(moved.job > job);
+    let (_, _, after) = texels(&state, h.state());
+    assert!(mean_abs(&before, &after) > 0.5, "the moved view shows the same image");
+    // N returns to the loaded view.
+    h.key_press(egui::Key::N);
+    h.step();
+    assert_eq!(h.state().view(), Some(0), "the cloud has one view: N wraps to it");
+}
+
+#[test]
+fn the_gpu_view_draws_the_frames_of_a_batch_render() {
+    let Some((mut h, state)) = harness(Some("cloud"), &options(BackendChoice::Gpu, 4)) else { return };
+    h.state_mut().settings_mut().scale = 0.25;
+    assert_eq!(settle(&mut h, 4).frames, 4);
+    let (w, hgt, view) = texels(&state, h.state());
+    let camera = h.state().camera().unwrap();
+    assert_eq!((camera.width, camera.height), (w, hgt));
+    let ctx = GpuContext::new().expect("an adapter, as the UI has one");
+    let pipeline = TracePipeline::new(&ctx).unwrap();
+    let root = splat_tests::root();
+    let scene = splat_io::read_scene(&root.join("fixtures/cloud.ply")).unwrap();
+    let trace = TraceScene::new(&scene, splat_core::RenderSettings::default()).unwrap();
+    let tracer = GpuTracer::new(&ctx, &pipeline, &trace).unwrap();
+    let batch = tracer.render(&camera, &Method::Stochastic, &Frames { count: 4, ..Frames::default() }).unwrap().0;
+    let display = Display::default();
+    let mut worst = 0u8;
+    for (p, texel) in view.chunks(4).enumerate() {
+        let (x, y) = (p as u32 % w, p as u32 / w);
+        let pixel = PixelState {
+            mean: batch.mean.pixel(x, y).try_into().unwrap(),
+            variance: [0.0; 3],
+            depth: f32::NAN,
+            normal: [0.0; 3],
+        };
+        let expected = display.rgba8(&pixel);
+        worst = worst.max(expected.iter().zip(texel).map(|(a, b)| a.abs_diff(*b)).max().unwrap());
+    }
+    assert!(worst <= 1, "the window's texture differs from the batch render by {worst}");
+    assert!(view.chunks(4).filter(|t| t[0] > 0).count() > view.len() / 40, "the view is nearly empty");
+}
+
+#[test]
+fn the_panels_render() {
+    let Some((mut h, _)) = harness(None, &options(BackendChoice::Cpu, 16)) else { return };
+    assert_eq!(settle(&mut h, 16).frames, 16);
+    for label in ["pipeline", "method", "random numbers", "accumulation", "kernel degree", "show", "RMSE vs exact"] {
+        assert!(h.get_all_by_label(label).next().is_some(), "the panel has no '{label}'");
+    }
+    h.run_steps(2);
+    h.snapshot_options("viewer", &SnapshotOptions::default());
+}
