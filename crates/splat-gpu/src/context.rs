@@ -194,7 +194,12 @@ impl GpuContext {
 
     /// An uninitialised buffer of `bytes` bytes.
     pub(crate) fn buffer(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
-        self.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: bytes, usage, mapped_at_creation: false })
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage,
+            mapped_at_creation: false,
+        })
     }
 
     /// Bytes between consecutive [`crate::Params`] in a uniform buffer read at dynamic offsets.

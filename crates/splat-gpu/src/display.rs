@@ -23,7 +23,8 @@ pub enum DisplayMode {
 
 impl DisplayMode {
     /// Every mode, in menu order.
-    pub const ALL: [DisplayMode; 4] = [DisplayMode::Colour, DisplayMode::Depth, DisplayMode::Normal, DisplayMode::Variance];
+    pub const ALL: [DisplayMode; 4] =
+        [DisplayMode::Colour, DisplayMode::Depth, DisplayMode::Normal, DisplayMode::Variance];
 
     /// Its name in a menu.
     pub fn name(self) -> &'static str {

@@ -33,8 +33,8 @@ pub use context::GpuContext;
 pub use display::{Display, DisplayMode, PixelState};
 pub use error::GpuError;
 pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};
-pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use progressive::ProgressiveTrace;
+pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use sort::RadixSort;
 pub use trace::{
     DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MethodParams, PathPipeline, TRACE_WGSL,

@@ -171,10 +171,13 @@ impl ProgressiveTrace {
             bytes[slot * stride..slot * stride + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
         }
         ctx.queue.write_buffer(&self.uniform, 0, &bytes);
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("progressive") });
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("progressive") });
         {
-            let mut pass = encoder
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("progressive"), timestamp_writes: None });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("progressive"),
+                timestamp_writes: None,
+            });
             pass.set_pipeline(tracer.kernel());
             for slot in 0..batch.len() {
                 pass.set_bind_group(0, &self.bind_group, &[(slot * stride) as u32]);
@@ -187,7 +190,8 @@ impl ProgressiveTrace {
     /// Refuse the state when its busiest pixel may have reached lavapipe's loop budget.
     fn check_loop_budget(&self, ctx: &GpuContext) -> Result<(), GpuError> {
         let m2 = ctx.read_f32(&self.targets.m2, self.pixels() * 4)?;
-        let (iterations, pixel) = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
+        let (iterations, pixel) =
+            m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
         let lanes = ctx.lanes();
         if u64::from(iterations) * u64::from(lanes) >= u64::from(LOOP_BUDGET) {
             let width = self.camera.width;

@@ -36,7 +36,10 @@ fn steps_accumulate_the_frames_of_a_batch_render_and_restart_on_a_move() {
     let whole = batch(&tracer, &camera, &method, 8);
     let same = max_diff(progressive.mean.data(), whole.mean.data());
     let variance = max_diff(progressive.variance.data(), whole.variance.data());
-    assert!(same < 1e-5 && variance < 1e-5, "8 frames in two steps differ from one render by {same} (variance {variance})");
+    assert!(
+        same < 1e-5 && variance < 1e-5,
+        "8 frames in two steps differ from one render by {same} (variance {variance})"
+    );
     // The comparison can fail: 8 frames are not 7.
     let seven = max_diff(progressive.mean.data(), batch(&tracer, &camera, &method, 7).mean.data());
     assert!(seven > 1e-3, "7 and 8 frames differ by only {seven}");
@@ -147,7 +150,8 @@ fn a_context_on_the_callers_device_runs_the_kernels_and_too_few_bindings_are_ref
         instance.request_adapter(&Default::default()).await
     })
     .expect("an adapter, as the shared context found one");
-    let device = |descriptor: &wgpu::DeviceDescriptor| pollster::block_on(adapter.request_device(descriptor)).expect("device");
+    let device =
+        |descriptor: &wgpu::DeviceDescriptor| pollster::block_on(adapter.request_device(descriptor)).expect("device");
     let (d, q) = device(&wgpu::DeviceDescriptor::default());
     let refused = GpuContext::from_device(&adapter, d, q).err().expect("default limits are too few").to_string();
     assert!(refused.contains("storage buffers per shader stage"), "{refused}");
