@@ -1009,3 +1009,16 @@ fn completions_and_help_headings() {
     let order = ["Output", "Method", "Camera", "Scene and shading", "Machine", "Reading scene files", "Splatting"];
     assert!(order.windows(2).all(|w| at(w[0]) < at(w[1])), "headings out of order:\n{help}");
 }
+
+#[test]
+fn view_is_a_subcommand_that_refuses_bad_input_before_opening_a_window() {
+    let help = splat(&["view", "--help"]);
+    assert!(help.status.success());
+    let text = String::from_utf8_lossy(&help.stdout);
+    for option in ["--camera", "--backend", "--quit-after", "--up"] {
+        assert!(text.contains(option), "splat view --help lacks {option}: {text}");
+    }
+    let missing = splat(&["view", "no-such.ply"]);
+    assert_eq!(missing.status.code(), Some(1));
+    assert!(stderr(&missing).contains("no-such.ply"), "{}", stderr(&missing));
+}

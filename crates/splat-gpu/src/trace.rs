@@ -536,7 +536,7 @@ impl Run<'_> {
                         .collect();
                     pass_index += batch.len() as u32;
                     submit(&batch)?;
-                    let states = ctx.read_through(&pass_state, 0, &read_state, state_bytes)?;
+                    let states = ctx.read_through(pass_state, 0, &read_state, state_bytes)?;
                     let words = std::mem::size_of::<PassState>() / 4;
                     let flags = std::mem::offset_of!(PassState, flags) / 4;
                     if states.chunks(words).all(|s| s[flags].to_bits() & 1 == 1) {
@@ -556,10 +556,10 @@ impl Run<'_> {
             }
             submit(&params)?;
         }
-        let mean = ctx.read_through(&out_mean, 0, &read_mean, out_bytes)?;
-        let m2 = ctx.read_through(&out_var, 0, &read_var, out_bytes)?;
+        let mean = ctx.read_through(out_mean, 0, &read_mean, out_bytes)?;
+        let m2 = ctx.read_through(out_var, 0, &read_var, out_bytes)?;
         let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
-        let picks = ctx.read_through(&out_pick, 0, &read_pick, pick_bytes)?;
+        let picks = ctx.read_through(out_pick, 0, &read_pick, pick_bytes)?;
         let (mut output, stats) = crate::output(camera, &mean, &m2, self.count, gpu_time, timer.is_some());
         set_picks(&mut output, bytemuck::cast_slice(&picks));
         let stats = GpuStats {

@@ -100,8 +100,7 @@ fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture) -> Vec<u8> {
     ctx.queue.submit([encoder.finish()]);
     staging.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("map"));
     ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("poll");
-    let data = staging.slice(..).get_mapped_range().expect("mapped").to_vec();
-    data
+    staging.slice(..).get_mapped_range().expect("mapped").to_vec()
 }
 
 #[test]

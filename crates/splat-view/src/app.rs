@@ -50,7 +50,7 @@ struct Target {
 
 /// The viewer's state.
 pub struct Viewer {
-    loaded: SceneInfo,
+    scene: SceneInfo,
     orbit: Orbit,
     /// The loaded view shown while the camera has not moved from it.
     view: Option<usize>,
@@ -78,10 +78,10 @@ impl Viewer {
         let adapter = render_state.adapter.get_info();
         let hardware = adapter.device_type != wgpu::DeviceType::Cpu;
         let gpu = match options.backend {
-            BackendChoice::Cpu => Err("--backend cpu".to_string()),
+            BackendChoice::Cpu => Err(None),
             _ => {
                 GpuContext::from_device(&render_state.adapter, render_state.device.clone(), render_state.queue.clone())
-                    .map_err(|e| e.to_string())
+                    .map_err(|e| Some(e.to_string()))
             }
         };
         let backend = match (&gpu, options.backend) {
@@ -90,7 +90,8 @@ impl Viewer {
             _ => Backend::Cpu,
         };
         let backend_note = match (&gpu, hardware) {
-            (Err(e), _) => format!("GPU tracer unavailable ({e}): tracing on the CPU"),
+            (Err(None), _) => "--backend cpu: rendering on the CPU".into(),
+            (Err(Some(e)), _) => format!("the GPU tracer cannot run here ({e}): rendering on the CPU"),
             (Ok(_), true) => format!("GPU: {}", adapter.name),
             (Ok(_), false) => {
                 format!("{} is a CPU Vulkan driver (slow): tracing on the CPU unless GPU is chosen", adapter.name)
@@ -103,7 +104,7 @@ impl Viewer {
         let (view, orbit) = initial_view(&info, options);
         let worker = Worker::spawn(world, gpu.ok(), render_state.queue.clone(), move || egui.request_repaint());
         Self {
-            loaded: info,
+            scene: info,
             orbit,
             view,
             settings,
@@ -195,7 +196,7 @@ impl Viewer {
         let scale = self.settings.scale * ppp;
         let pixels = |points: f32| ((points * scale).round() as u32).max(8);
         if let Some(i) = self.view {
-            let file = self.loaded.views.get(i).map(|v| v.1).or(self.loaded.camera);
+            let file = self.scene.views.get(i).map(|v| v.1).or(self.scene.camera);
             if let Some(file) = file {
                 let aspect = file.width as f32 / file.height as f32;
                 let size = if rect.width() / rect.height() > aspect {
@@ -261,7 +262,7 @@ impl Viewer {
 
     /// Depths shown white and black: the scene's central sphere seen from the camera.
     fn depth_range(&self, camera: &Camera) -> (f32, f32) {
-        let (center, radius) = self.loaded.sphere();
+        let (center, radius) = self.scene.sphere();
         let d = (center - camera.center()).length();
         ((d - radius).max(0.0), d + radius)
     }
@@ -301,7 +302,7 @@ impl Viewer {
             let down = [Key::W, Key::S, Key::A, Key::D, Key::E, Key::Q].map(|k| i.key_down(k));
             (i.stable_dt.min(0.1), i.modifiers.shift, down)
         });
-        let speed = self.loaded.sphere().1 * if fast { 2.0 } else { 0.5 } * dt;
+        let speed = self.scene.sphere().1 * if fast { 2.0 } else { 0.5 } * dt;
         let axis = |plus: bool, minus: bool| f32::from(u8::from(plus)) - f32::from(u8::from(minus));
         let (forward, right, up) = (axis(down[0], down[1]), axis(down[3], down[2]), axis(down[4], down[5]));
         if forward != 0.0 || right != 0.0 || up != 0.0 {
@@ -322,7 +323,7 @@ impl Viewer {
         }
         if home {
             (self.view, self.orbit) =
-                initial_view(&self.loaded, &Options { camera_index: usize::MAX, ..self.options() });
+                initial_view(&self.scene, &Options { camera_index: usize::MAX, ..self.options() });
         }
         if restart {
             self.restart += 1;
@@ -343,13 +344,13 @@ impl Viewer {
 
     /// Show the loaded view `by` steps after the current one (wrapping).
     fn step_view(&mut self, by: isize) {
-        let n = self.loaded.views.len();
+        let n = self.scene.views.len();
         if n == 0 {
             return;
         }
         let current = self.view.unwrap_or(0) as isize;
         let i = (current + by).rem_euclid(n as isize) as usize;
-        (self.view, self.orbit) = initial_view(&self.loaded, &Options { camera_index: i, ..self.options() });
+        (self.view, self.orbit) = initial_view(&self.scene, &Options { camera_index: i, ..self.options() });
     }
 
     /// Frames, rate, RMSE and errors over the top left of the view.
@@ -365,8 +366,8 @@ impl Viewer {
         if status.idle {
             line += if self.settings.paused { " · paused" } else { " · done" };
         }
-        let view = match (self.view, self.view.and_then(|i| self.loaded.views.get(i))) {
-            (Some(i), Some((name, _))) => format!("view {} of {}: {name}", i + 1, self.loaded.views.len()),
+        let view = match (self.view, self.view.and_then(|i| self.scene.views.get(i))) {
+            (Some(i), Some((name, _))) => format!("view {} of {}: {name}", i + 1, self.scene.views.len()),
             (Some(_), None) => "the scene's camera".into(),
             (None, _) => "free camera".into(),
         };
@@ -389,16 +390,15 @@ impl Viewer {
     /// The side panel.
     fn panel(&mut self, ui: &mut egui::Ui) {
         ui.heading("splat view");
-        ui.label(format!(
-            "{}: {} splats, SH degree {}",
-            self.loaded.name, self.loaded.particles, self.loaded.sh_degree
-        ));
+        ui.label(format!("{}: {} splats, SH degree {}", self.scene.name, self.scene.particles, self.scene.sh_degree));
         ui.separator();
         self.renderer_section(ui);
         ui.separator();
         self.method_section(ui);
         ui.separator();
         self.scene_section(ui);
+        ui.separator();
+        self.lighting_section(ui);
         ui.separator();
         self.display_section(ui);
         ui.separator();
@@ -490,6 +490,50 @@ impl Viewer {
         });
     }
 
+    /// The world's lights and each splat set's material, edited live (vk_gaussian_splatting's
+    /// material and light panels).
+    fn lighting_section(&mut self, ui: &mut egui::Ui) {
+        let s = &mut self.settings;
+        if s.materials.iter().all(|m| m.is_emissive()) && s.lights.is_empty() {
+            ui.label(egui::RichText::new("emissive scene: a world file (.toml) gives materials and lights").small());
+            return;
+        }
+        egui::CollapsingHeader::new("lights").default_open(true).show(ui, |ui| {
+            if s.lights.is_empty() {
+                ui.label(egui::RichText::new("none: a headlight at the camera").small());
+            }
+            for (i, light) in s.lights.iter_mut().enumerate() {
+                ui.horizontal(|ui| {
+                    ui.label(format!("{} {i}", light_kind(light)));
+                    rgb(ui, &mut light.color);
+                    ui.add(
+                        egui::DragValue::new(&mut light.intensity).range(0.0..=1e4).speed(0.05).prefix("intensity "),
+                    );
+                });
+                ui.add(egui::Slider::new(&mut light.radius, 0.0..=1.0).text(format!("radius {i}")));
+            }
+        });
+        egui::CollapsingHeader::new("materials").show(ui, |ui| {
+            for (i, m) in s.materials.iter_mut().enumerate() {
+                ui.label(format!("set {i}"));
+                ui.horizontal(|ui| {
+                    for (name, colour) in [
+                        ("emissive", &mut m.emissive),
+                        ("ambient", &mut m.ambient),
+                        ("diffuse", &mut m.diffuse),
+                        ("specular", &mut m.specular),
+                    ] {
+                        rgb(ui, colour);
+                        ui.label(name);
+                    }
+                });
+                ui.add(
+                    egui::Slider::new(&mut m.shininess, 1.0..=512.0).logarithmic(true).text(format!("shininess {i}")),
+                );
+            }
+        });
+    }
+
     fn display_section(&mut self, ui: &mut egui::Ui) {
         let s = &mut self.settings;
         combo(ui, "show", &mut s.display.mode, &DisplayMode::ALL, |m| m.name().to_string());
@@ -507,7 +551,7 @@ impl Viewer {
                 self.restart += 1;
             }
         });
-        if !self.loaded.views.is_empty() {
+        if !self.scene.views.is_empty() {
             ui.horizontal(|ui| {
                 if ui.button("previous view").clicked() {
                     self.step_view(-1);
@@ -539,6 +583,22 @@ pub const KEY_BINDINGS: &[&str] = &[
     "Space: pause",
     "1 2 3 4: colour, depth, normals, variance",
 ];
+
+/// A colour button editing `colour` (linear RGB, any non-negative value up to 1 per channel).
+fn rgb(ui: &mut egui::Ui, colour: &mut Vec3) {
+    let mut c = colour.to_array();
+    if ui.color_edit_button_rgb(&mut c).changed() {
+        *colour = Vec3::from_array(c);
+    }
+}
+
+fn light_kind(light: &splat_core::lighting::Light) -> &'static str {
+    match light.kind {
+        splat_core::lighting::LightKind::Point { .. } => "point",
+        splat_core::lighting::LightKind::Spot { .. } => "spot",
+        splat_core::lighting::LightKind::Directional { .. } => "directional",
+    }
+}
 
 /// A labelled combo box over `choices`.
 fn combo<T: PartialEq + Copy>(

@@ -3,7 +3,7 @@
 
 use splat_core::RenderSettings;
 use splat_core::algorithm::Algorithm;
-use splat_core::lighting::{Lighting, Look, Shadows};
+use splat_core::lighting::{Light, Lighting, Look, Material, Shadows};
 use splat_core::raster::{Blend, RasterMethod, RasterSettings};
 use splat_core::rng::RngScheme;
 use splat_core::trace::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, Method};
@@ -166,6 +166,10 @@ pub struct Settings {
     pub look: Look,
     /// Visibility of the lights.
     pub shadows: Shadows,
+    /// The lights (the world's, as edited).
+    pub lights: Vec<Light>,
+    /// The material of each splat set (the world's, as edited).
+    pub materials: Vec<Material>,
     /// What the view shows.
     pub display: Display,
     /// Where frames are rendered.
@@ -199,6 +203,8 @@ impl Settings {
             render,
             look: lighting.look,
             shadows: lighting.shadows,
+            lights: lighting.lights.clone(),
+            materials: lighting.sets.iter().map(|set| set.material).collect(),
             display: Display::default(),
             backend,
             scale: if backend == Backend::Gpu { 1.0 } else { 0.5 },
@@ -232,9 +238,13 @@ impl Settings {
         }
     }
 
-    /// `base` with the panel's look and shadows.
+    /// `base` with the panel's look, shadows, lights and materials.
     pub fn lighting(&self, base: &Lighting) -> Lighting {
-        Lighting { look: self.look, shadows: self.shadows, ..base.clone() }
+        let mut sets = base.sets.clone();
+        for (set, material) in sets.iter_mut().zip(&self.materials) {
+            set.material = *material;
+        }
+        Lighting { look: self.look, shadows: self.shadows, lights: self.lights.clone(), sets, ..base.clone() }
     }
 
     /// Whether the GPU progressive tracer renders these settings (else the CPU does).
@@ -242,9 +252,14 @@ impl Settings {
         self.backend == Backend::Gpu && self.pipeline == Pipeline::RayTracing
     }
 
-    /// What a change of the scene's BVH or lighting depends on: a change rebuilds the scene.
-    pub fn scene_key(&self) -> (RenderSettings, Look, Shadows, Backend) {
-        (self.render, self.look, self.shadows, self.backend)
+    /// What the scene's BVH and the kind of view depend on: a change rebuilds both.
+    pub fn scene_key(&self) -> (RenderSettings, bool) {
+        (self.render, self.on_gpu())
+    }
+
+    /// What the lighting depends on: a change relights the scene (its BVH stays) and restarts.
+    pub fn lighting_key(&self) -> (Look, Shadows, &[Light], &[Material]) {
+        (self.look, self.shadows, &self.lights, &self.materials)
     }
 
     /// What the accumulated frames depend on besides the camera and the scene: a change
@@ -271,7 +286,7 @@ mod tests {
             s.pipeline = pipeline;
             for raster in RasterChoice::ALL {
                 s.raster = raster;
-                assert_eq!(s.on_gpu(), false);
+                assert!(!s.on_gpu());
                 let _ = s.algorithm();
             }
         }
@@ -290,5 +305,12 @@ mod tests {
         assert_ne!(method.frames_key(), s.frames_key());
         let degree = Settings { render: RenderSettings { iso_threshold: 0.3, ..s.render }, ..s.clone() };
         assert_ne!(degree.scene_key(), s.scene_key());
+        let shadows = Settings { shadows: Shadows::Exact, ..s.clone() };
+        assert_eq!(shadows.scene_key(), s.scene_key());
+        assert_ne!(shadows.lighting_key(), s.lighting_key());
+        // On the GPU, leaving ray tracing changes the kind of view.
+        let gpu = Settings { backend: Backend::Gpu, ..s.clone() };
+        let raster = Settings { pipeline: Pipeline::Raster, ..gpu.clone() };
+        assert_ne!(raster.scene_key(), gpu.scene_key());
     }
 }

@@ -3,9 +3,10 @@
 //! texture, so that the window stays responsive however long a frame takes.
 //!
 //! A job that changes the scene's settings (kernel, hit distance, normals, iso threshold,
-//! lighting, backend) rebuilds the BVH; one that changes the camera or what the frames are
-//! (method, parameters, generator, seed, accumulation) restarts the accumulation; one that
-//! changes only the display transform redraws what is accumulated.
+//! backend) rebuilds the BVH; one that changes the lighting (look, shadows, lights, materials)
+//! relights the same BVH; one that changes the camera or what the frames are (method,
+//! parameters, generator, seed, accumulation) restarts the accumulation; one that changes only
+//! the display transform redraws what is accumulated.
 
 use crate::accumulate::CpuAccumulation;
 use crate::settings::Settings;
@@ -181,7 +182,7 @@ struct Renderer {
 
 /// A view's accumulation on either backend.
 enum View<'t> {
-    Gpu { tracer: GpuTracer<'t>, progressive: ProgressiveTrace, per_step: u32 },
+    Gpu { tracer: Box<GpuTracer<'t>>, progressive: Box<ProgressiveTrace>, per_step: u32 },
     Cpu(CpuAccumulation),
 }
 
@@ -208,76 +209,108 @@ impl Rate {
     }
 }
 
+/// Why a view's loop ended.
+enum Outcome {
+    /// The window closed.
+    Quit,
+    /// The scene's settings changed: build the BVH again.
+    Rebuild,
+    /// The lighting changed: the same BVH, lit anew.
+    Relight,
+}
+
 impl Renderer {
     fn run(self) {
         let Next::New(mut id, mut job) = self.shared.next(0, true) else { return };
-        'scene: loop {
-            let lighting = job.settings.lighting(&self.world.lighting);
+        loop {
             let trace = TraceScene::new(&self.world.scene, job.settings.render)
-                .and_then(|t| t.with_lighting(lighting))
                 .map(|t| t.with_meshes(self.world.meshes.clone()));
-            let mut view = match trace.as_ref().map_err(|e| e.to_string()).and_then(|t| self.view(t, &job)) {
-                Ok(view) => view,
-                Err(e) => {
-                    self.shared.publish(Status { job: id, error: Some(e), idle: true, ..Status::default() });
-                    (self.repaint)();
-                    match self.shared.next(id, true) {
-                        Next::New(new, next) => (id, job) = (new, next),
-                        _ => return,
+            let outcome = match trace {
+                Ok(mut trace) => loop {
+                    let lit = trace.with_lighting(job.settings.lighting(&self.world.lighting));
+                    match lit {
+                        Ok(lit) => trace = lit,
+                        Err(e) => break self.fail(&mut id, &mut job, e.to_string()),
                     }
-                    continue 'scene;
-                }
+                    match self.render(&trace, &mut id, &mut job) {
+                        Outcome::Relight => continue,
+                        other => break other,
+                    }
+                },
+                Err(e) => self.fail(&mut id, &mut job, e.to_string()),
             };
-            let trace = trace.as_ref().expect("checked above");
-            let mut status = Status { job: id, ..Status::default() };
-            let mut rate = Rate::new();
-            let mut reference: Option<RenderOutput> = None;
-            loop {
-                let busy = !status.idle && status.error.is_none();
-                match self.shared.next(id, !busy) {
-                    Next::Quit => return,
-                    Next::New(new, next) => {
-                        let rebuild = next.settings.scene_key() != job.settings.scene_key();
-                        let restart = next.camera != job.camera
-                            || next.generation != job.generation
-                            || next.settings.frames_key() != job.settings.frames_key();
-                        (id, job) = (new, next);
-                        if rebuild {
-                            continue 'scene;
-                        }
-                        status.job = id;
-                        if restart {
-                            reference = None;
-                            rate = Rate::new();
-                            status = Status { job: id, ..Status::default() };
-                            if let Err(e) = self.restart(&mut view, &job) {
-                                status.error = Some(e);
-                            }
-                        }
-                        status.idle = job.settings.paused || self.finished(&view, trace, &job);
-                        self.present(&mut view, &job);
-                        self.shared.publish(status.clone());
-                        (self.repaint)();
-                        continue;
+            if let Outcome::Quit = outcome {
+                return;
+            }
+        }
+    }
+
+    /// Report `error` for job `id` and wait for another job.
+    fn fail(&self, id: &mut u64, job: &mut Box<Job>, error: String) -> Outcome {
+        self.shared.publish(Status { job: *id, error: Some(error), idle: true, ..Status::default() });
+        (self.repaint)();
+        match self.shared.next(*id, true) {
+            Next::New(new, next) => {
+                (*id, *job) = (new, next);
+                Outcome::Rebuild
+            }
+            _ => Outcome::Quit,
+        }
+    }
+
+    /// Render views of `trace` until a job needs another scene or lighting, or the window
+    /// closes.
+    fn render(&self, trace: &TraceScene, id: &mut u64, job: &mut Box<Job>) -> Outcome {
+        let mut view = match self.view(trace, job) {
+            Ok(view) => view,
+            Err(e) => return self.fail(id, job, e),
+        };
+        let mut status = Status { job: *id, ..Status::default() };
+        let mut rate = Rate::new();
+        let mut reference: Option<RenderOutput> = None;
+        loop {
+            let busy = !status.idle && status.error.is_none();
+            match self.shared.next(*id, !busy) {
+                Next::Quit => return Outcome::Quit,
+                Next::New(new, next) => {
+                    let rebuild = next.settings.scene_key() != job.settings.scene_key();
+                    let relight = next.settings.lighting_key() != job.settings.lighting_key();
+                    let restart = next.camera != job.camera
+                        || next.generation != job.generation
+                        || next.settings.frames_key() != job.settings.frames_key();
+                    (*id, *job) = (new, next);
+                    if rebuild {
+                        return Outcome::Rebuild;
                     }
-                    Next::Same => {}
+                    if relight {
+                        return Outcome::Relight;
+                    }
+                    status.job = *id;
+                    if restart {
+                        reference = None;
+                        rate = Rate::new();
+                        status = Status { job: *id, ..Status::default() };
+                        if let Err(e) = self.restart(&mut view, job) {
+                            status.error = Some(e);
+                        }
+                    }
                 }
-                match self.step(&mut view, trace, &job) {
+                Next::Same => match self.step(&mut view, trace, job) {
                     Ok(frames) => {
                         status.frames = self.frames(&view);
                         status.frames_per_second = rate.add(frames);
+                        if job.settings.rmse {
+                            status.rmse =
+                                self.rmse(&view, trace, job, &mut reference).map_err(|e| status.error = Some(e)).ok();
+                        }
                     }
                     Err(e) => status.error = Some(e),
-                }
-                self.present(&mut view, &job);
-                if job.settings.rmse && status.error.is_none() {
-                    status.rmse =
-                        self.rmse(&view, trace, &job, &mut reference).map_err(|e| status.error = Some(e)).ok();
-                }
-                status.idle = job.settings.paused || self.finished(&view, trace, &job);
-                self.shared.publish(status.clone());
-                (self.repaint)();
+                },
             }
+            self.present(&mut view, job);
+            status.idle = job.settings.paused || self.finished(&view, trace, job);
+            self.shared.publish(status.clone());
+            (self.repaint)();
         }
     }
 
@@ -295,7 +328,7 @@ impl Renderer {
         let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
         let progressive = ProgressiveTrace::new(&tracer, &job.camera, &job.settings.method(), &stream(&job.settings))
             .map_err(|e| e.to_string())?;
-        Ok(View::Gpu { tracer, progressive, per_step: 1 })
+        Ok(View::Gpu { tracer: Box::new(tracer), progressive: Box::new(progressive), per_step: 1 })
     }
 
     fn restart(&self, view: &mut View, job: &Job) -> Result<(), String> {

@@ -38,12 +38,16 @@ fn options(backend: BackendChoice, max_frames: u32) -> Options {
     Options { backend, camera_index: 0, up: splat_core::glam::Vec3::Y, quit_after: None, max_frames }
 }
 
-/// A harness of a viewer of `scene` (and its cameras.json), or of the demo.
+/// A harness of a viewer of the fixture `scene` (`fixtures/NAME.ply` and its cameras.json,
+/// or a world file `fixtures/worlds/NAME.toml`), or of the demo.
 fn harness(scene: Option<&str>, options: &Options) -> Option<(Harness<'static, Viewer>, RenderState)> {
     let state = render_state()?;
-    let root = splat_tests::root();
-    let scene_path = scene.map(|s| root.join(format!("fixtures/{s}.ply")));
-    let cameras = scene.map(|s| root.join(format!("fixtures/{s}.cameras.json")));
+    let fixtures = splat_tests::root().join("fixtures");
+    let (scene_path, cameras) = match scene {
+        Some(world) if world.ends_with(".toml") => (Some(fixtures.join("worlds").join(world)), None),
+        Some(s) => (Some(fixtures.join(format!("{s}.ply"))), Some(fixtures.join(format!("{s}.cameras.json")))),
+        None => (None, None),
+    };
     let loaded = splat_view::load::load(scene_path.as_deref(), cameras.as_deref()).expect("the fixture loads");
     let mut viewer = Viewer::new(loaded, options, state.clone(), egui::Context::default());
     viewer.hide_rate = true;
@@ -210,6 +214,28 @@ fn the_gpu_view_draws_the_frames_of_a_batch_render() {
     }
     assert!(worst <= 1, "the window's texture differs from the batch render by {worst}");
     assert!(view.chunks(4).filter(|t| t[0] > 0).count() > view.len() / 40, "the view is nearly empty");
+}
+
+/// Mean of the view's bytes (its brightness).
+fn brightness(texels: &[u8]) -> f64 {
+    texels.iter().map(|&b| f64::from(b)).sum::<f64>() / texels.len() as f64
+}
+
+#[test]
+fn tuning_a_light_relights_the_view() {
+    let Some((mut h, state)) = harness(Some("demo-lit.toml"), &options(BackendChoice::Cpu, 2)) else { return };
+    assert!(!h.state().settings().lights.is_empty(), "the lit demo has lights");
+    assert!(h.get_all_by_label("lights").next().is_some(), "no lights section");
+    let lit = settle(&mut h, 2);
+    let (_, _, before) = texels(&state, h.state());
+    for light in &mut h.state_mut().settings_mut().lights {
+        light.intensity = 0.0;
+    }
+    let dark = settle(&mut h, 2);
+    assert!(dark.job > lit.job && dark.frames == 2);
+    let (_, _, after) = texels(&state, h.state());
+    let (b, a) = (brightness(&before), brightness(&after));
+    assert!(a < 0.9 * b, "switching the lights off left the view as bright ({a:.1} vs {b:.1})");
 }
 
 #[test]
