@@ -2,6 +2,7 @@
 // view reads its running Welford state and frame 0's pick and writes what the mode shows.
 // The CPU twin is display.rs `Display::shade`; values are display-referred, so into an sRGB
 // target the shader writes their linear equivalent and the stored byte is round(255 v).
+// `Pick` comes from pick.wgsl, prepended.
 
 struct DisplayParams {
     mode: u32,
@@ -12,15 +13,6 @@ struct DisplayParams {
     depth_far: f32,
     variance_scale: f32,
     srgb_target: u32,
-}
-
-struct Pick {
-    normal: vec3<f32>,
-    depth: f32,
-    picked: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 const MODE_COLOUR: u32 = 0u;

@@ -111,6 +111,45 @@ impl Display {
     }
 }
 
+/// The texels of an 8-bit RGBA `texture` (one with `COPY_SRC` usage), row after row without
+/// padding: what a view shows, for screenshots and tests. Waits for the queue.
+pub fn read_rgba8(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+) -> Result<Vec<u8>, crate::GpuError> {
+    let (w, h) = (texture.width(), texture.height());
+    if texture.format().block_copy_size(None) != Some(4) {
+        return Err(crate::GpuError::Unsupported(format!("{:?} is not 4 bytes a texel", texture.format())));
+    }
+    let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("texels"),
+        size: u64::from(row) * u64::from(h),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("texels") });
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
+        texture.size(),
+    );
+    queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    let failed = |e: String| crate::GpuError::Readback(e);
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| failed(e.to_string()))?;
+    rx.recv().map_err(|e| failed(e.to_string()))?.map_err(|e| failed(e.to_string()))?;
+    let data = buffer.slice(..).get_mapped_range().map_err(|e| failed(e.to_string()))?;
+    Ok(data.chunks(row as usize).flat_map(|r| r[..4 * w as usize].to_vec()).collect())
+}
+
 /// display.wgsl's `DisplayParams` (32 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -125,12 +164,35 @@ pub(crate) struct DisplayParams {
     srgb_target: u32,
 }
 
-/// The WGSL of the display pass.
-pub(crate) const DISPLAY_WGSL: &str = include_str!("../shaders/display.wgsl");
+/// The WGSL of the display pass (entry points `vs_main`, `fs_main`), with the `Pick` it shares
+/// with the ray-tracing kernel.
+pub const DISPLAY_WGSL: &str = concat!(include_str!("../shaders/pick.wgsl"), include_str!("../shaders/display.wgsl"));
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::layout::wgsl_check::{assert_constants, assert_mirrors, validate};
+
+    #[test]
+    fn the_display_pass_validates_and_mirrors_its_rust_twin() {
+        validate("display.wgsl", DISPLAY_WGSL);
+        assert_mirrors!(
+            DISPLAY_WGSL,
+            DisplayParams,
+            "DisplayParams",
+            [mode, frames, width, height, depth_near, depth_far, variance_scale, srgb_target]
+        );
+        assert_mirrors!(DISPLAY_WGSL, crate::layout::GpuPick, "Pick", [normal, depth, picked, pad0, pad1, pad2]);
+        assert_constants!(
+            DISPLAY_WGSL,
+            [
+                "MODE_COLOUR" = DisplayMode::Colour as u32,
+                "MODE_DEPTH" = DisplayMode::Depth as u32,
+                "MODE_NORMAL" = DisplayMode::Normal as u32,
+                "MODE_VARIANCE" = DisplayMode::Variance as u32,
+            ]
+        );
+    }
 
     fn pixel() -> PixelState {
         PixelState { mean: [0.25, 1.5, -0.1], variance: [0.04, 0.04, 0.04], depth: 2.5, normal: [0.0, 0.0, -1.0] }

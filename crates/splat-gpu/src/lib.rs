@@ -30,7 +30,7 @@ pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use context::GpuContext;
-pub use display::{Display, DisplayMode, PixelState};
+pub use display::{Display, DisplayMode, PixelState, read_rgba8};
 pub use error::GpuError;
 pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};
 pub use progressive::ProgressiveTrace;

@@ -31,6 +31,7 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../shaders/lighting.wgsl"),
     include_str!("../shaders/bvh.wgsl"),
     include_str!("../shaders/mesh.wgsl"),
+    include_str!("../shaders/pick.wgsl"),
     include_str!("../shaders/trace.wgsl"),
     include_str!("../shaders/path.wgsl")
 );

@@ -9,7 +9,7 @@ use common::{context, fixture, tracer};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Camera, RenderSettings};
-use splat_gpu::{Display, DisplayMode, GpuContext, PixelState, ProgressiveTrace, wgpu};
+use splat_gpu::{Display, DisplayMode, GpuContext, PixelState, ProgressiveTrace, read_rgba8, wgpu};
 
 /// The largest |a − b| over two images' values.
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -78,31 +78,6 @@ fn target(ctx: &GpuContext, camera: &Camera, format: wgpu::TextureFormat) -> wgp
     })
 }
 
-/// The RGBA8 texels of `texture` (width a multiple of 64 so rows need no padding).
-fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture) -> Vec<u8> {
-    let (w, h) = (texture.width(), texture.height());
-    let bytes = u64::from(4 * w * h);
-    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("texels"),
-        size: bytes,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &staging,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * w), rows_per_image: Some(h) },
-        },
-        texture.size(),
-    );
-    ctx.queue.submit([encoder.finish()]);
-    staging.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("map"));
-    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("poll");
-    staging.slice(..).get_mapped_range().expect("mapped").to_vec()
-}
-
 #[test]
 fn the_display_pass_draws_each_mode_as_its_cpu_twin() {
     let Some(ctx) = context() else { return };
@@ -120,7 +95,7 @@ fn the_display_pass_draws_each_mode_as_its_cpu_twin() {
             let view_of = texture.create_view(&Default::default());
             view.present(ctx, &mut encoder, &view_of, format, &display).unwrap();
             ctx.queue.submit([encoder.finish()]);
-            let texels = read_texture(ctx, &texture);
+            let texels = read_rgba8(&ctx.device, &ctx.queue, &texture).unwrap();
             let mut worst = 0u8;
             let mut shown = 0usize;
             for (p, texel) in texels.chunks(4).enumerate() {

@@ -77,29 +77,8 @@ fn settle(harness: &mut Harness<'static, Viewer>, frames: u32) -> Status {
 /// The view's texture, RGBA8 rows.
 fn texels(state: &RenderState, viewer: &Viewer) -> (u32, u32, Vec<u8>) {
     let texture = viewer.texture().expect("the view has a texture");
-    let (w, h) = (texture.width(), texture.height());
-    let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-    let buffer = state.device.create_buffer(&wgpu::BufferDescriptor {
-        label: None,
-        size: u64::from(row * h),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = state.device.create_command_encoder(&Default::default());
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
-        },
-        texture.size(),
-    );
-    state.queue.submit([encoder.finish()]);
-    buffer.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("map"));
-    state.device.poll(wgpu::PollType::wait_indefinitely()).expect("poll");
-    let data = buffer.slice(..).get_mapped_range().expect("mapped");
-    let rows = data.chunks(row as usize).flat_map(|r| r[..4 * w as usize].to_vec()).collect();
-    (w, h, rows)
+    let bytes = splat_gpu::read_rgba8(&state.device, &state.queue, texture).expect("readback");
+    (texture.width(), texture.height(), bytes)
 }
 
 /// Mean absolute difference of two images' bytes, per channel value.
