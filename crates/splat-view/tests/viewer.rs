@@ -11,7 +11,7 @@ use egui_kittest::wgpu::{WgpuTestRenderer, create_render_state, default_wgpu_set
 use egui_kittest::{Harness, SnapshotOptions};
 use splat_core::frame::Frames;
 use splat_core::trace::{Method, TraceScene};
-use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline, wgpu};
+use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline};
 use splat_view::worker::Status;
 use splat_view::{BackendChoice, Options, Viewer};
 use std::sync::Arc;
