@@ -63,3 +63,9 @@ impl Image {
         (y as usize * self.width as usize + x as usize) * self.channels as usize
     }
 }
+
+/// 8-bit value of a display-referred float: round(clamp(v, 0, 1) × 255), NaN → 0 (what the PNG
+/// writer stores and the GPU display pass shows).
+pub fn to_u8(v: f32) -> u8 {
+    if v.is_nan() { 0 } else { (v.clamp(0.0, 1.0) * 255.0).round() as u8 }
+}

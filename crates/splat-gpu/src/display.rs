@@ -1,7 +1,7 @@
 //! What a viewer shows of a render, as the CPU twin of `shaders/display.wgsl`: the mean colour,
 //! frame 0's depth or normal, or the per-frame standard deviation. Values are display-referred
-//! (3DGS colours are stored as they are shown), so a pixel's byte is `round(255 × v)`, as the
-//! PNG writer of `splat-io` makes it.
+//! (3DGS colours are stored as they are shown), so a pixel's byte is `round(255 × v)`: the PNG
+//! writer's [`splat_core::image::to_u8`].
 
 use bytemuck::{Pod, Zeroable};
 
@@ -91,7 +91,7 @@ impl Display {
 
     /// The RGBA8 bytes of `p` (alpha 255).
     pub fn rgba8(&self, p: &PixelState) -> [u8; 4] {
-        let [r, g, b] = self.shade(p).map(|v| (v * 255.0).round() as u8);
+        let [r, g, b] = self.shade(p).map(splat_core::image::to_u8);
         [r, g, b, 255]
     }
 

@@ -37,7 +37,9 @@
 
 use crate::display::{DISPLAY_WGSL, Display, DisplayParams};
 use crate::layout::{self, GpuPick, Params};
-use crate::trace::{DISPATCHES_PER_SUBMIT, LOOP_BUDGET, Targets, params_buffer};
+use crate::trace::{
+    DISPATCHES_PER_SUBMIT, LOOP_BUDGET, Targets, busiest_pixel, dispatch_batch, frame_params, params_buffer,
+};
 use crate::{GpuContext, GpuError, GpuTracer, MethodParams};
 use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
@@ -145,14 +147,16 @@ impl ProgressiveTrace {
         };
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
         let per_dispatch = if cpu_adapter { 1 } else { ctx.frames_per_dispatch };
-        let mut params = Vec::new();
-        let mut first = self.done;
-        while first < self.done + count {
-            let chunk = per_dispatch.min(self.done + count - first);
-            let p = layout::params(tracer.trace(), &self.camera, &self.params, &self.frames, first, chunk);
-            params.push(Params { mode: layout::MODE_FRAMES, ..p });
-            first += chunk;
-        }
+        let range = self.done..self.done + count;
+        let params = frame_params(
+            tracer.trace(),
+            &self.camera,
+            &self.params,
+            &self.frames,
+            layout::MODE_FRAMES,
+            range,
+            per_dispatch,
+        );
         for batch in params.chunks(DISPATCHES_PER_SUBMIT as usize) {
             self.submit(tracer, batch);
         }
@@ -165,12 +169,6 @@ impl ProgressiveTrace {
 
     fn submit(&self, tracer: &GpuTracer, batch: &[Params]) {
         let ctx = tracer.context();
-        let stride = ctx.uniform_stride() as usize;
-        let mut bytes = vec![0u8; stride * batch.len()];
-        for (slot, p) in batch.iter().enumerate() {
-            bytes[slot * stride..slot * stride + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
-        }
-        ctx.queue.write_buffer(&self.uniform, 0, &bytes);
         let mut encoder =
             ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("progressive") });
         {
@@ -179,10 +177,7 @@ impl ProgressiveTrace {
                 timestamp_writes: None,
             });
             pass.set_pipeline(tracer.kernel());
-            for slot in 0..batch.len() {
-                pass.set_bind_group(0, &self.bind_group, &[(slot * stride) as u32]);
-                pass.dispatch_workgroups(self.camera.width.div_ceil(8), self.camera.height.div_ceil(8), 1);
-            }
+            dispatch_batch(ctx, &mut pass, &self.uniform, &self.bind_group, batch, &self.camera);
         }
         ctx.queue.submit([encoder.finish()]);
     }
@@ -190,8 +185,7 @@ impl ProgressiveTrace {
     /// Refuse the state when its busiest pixel may have reached lavapipe's loop budget.
     fn check_loop_budget(&self, ctx: &GpuContext) -> Result<(), GpuError> {
         let m2 = ctx.read_f32(&self.targets.m2, self.pixels() * 4)?;
-        let (iterations, pixel) =
-            m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
+        let (iterations, pixel) = busiest_pixel(&m2);
         let lanes = ctx.lanes();
         if u64::from(iterations) * u64::from(lanes) >= u64::from(LOOP_BUDGET) {
             let width = self.camera.width;

@@ -473,8 +473,7 @@ impl Run<'_> {
             (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
         let read_pick = self.storage("read pick", pick_bytes, read);
         let read_state = self.storage("read pass state", state_bytes, read);
-        let (Targets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. }, stride) =
-            (&targets, ctx.uniform_stride());
+        let Targets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. } = &targets;
         let uniform = params_buffer(ctx);
         let bind_group = tracer.bind_group(&uniform, &targets, self.first_hits, self.path.map(|p| p.1));
         let mut gpu_time = Duration::ZERO;
@@ -482,12 +481,6 @@ impl Run<'_> {
         // Submit the dispatches of `params`, one batch per submission.
         let mut submit = |params: &[Params]| -> Result<(), GpuError> {
             for batch in params.chunks(DISPATCHES_PER_SUBMIT as usize) {
-                let mut params_bytes = vec![0u8; stride as usize * batch.len()];
-                for (slot, p) in batch.iter().enumerate() {
-                    let at = slot * stride as usize;
-                    params_bytes[at..at + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
-                }
-                ctx.queue.write_buffer(&uniform, 0, &params_bytes);
                 let mut encoder =
                     ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
                 {
@@ -499,10 +492,7 @@ impl Run<'_> {
                     let mut pass = encoder
                         .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
                     pass.set_pipeline(self.path.map_or(&tracer.pipeline.pipeline, |p| p.0));
-                    for slot in 0..batch.len() {
-                        pass.set_bind_group(0, &bind_group, &[(slot as u64 * stride) as u32]);
-                        pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
-                    }
+                    dispatch_batch(ctx, &mut pass, &uniform, &bind_group, batch, camera);
                 }
                 if let Some(t) = &timer {
                     t.resolve(&mut encoder);
@@ -546,20 +536,13 @@ impl Run<'_> {
                 }
             }
         } else {
-            let mut params = Vec::new();
-            let mut first = 0u32;
-            while first < self.count {
-                let chunk = per_dispatch.min(self.count - first);
-                let p = layout::params(tracer.trace, camera, &self.params, self.frames, first, chunk);
-                let mode = if self.first_hits.is_some() { layout::MODE_HYBRID } else { layout::MODE_FRAMES };
-                params.push(Params { mode, ..p });
-                first += chunk;
-            }
-            submit(&params)?;
+            let mode = if self.first_hits.is_some() { layout::MODE_HYBRID } else { layout::MODE_FRAMES };
+            let frames = 0..self.count;
+            submit(&frame_params(tracer.trace, camera, &self.params, self.frames, mode, frames, per_dispatch))?;
         }
         let mean = ctx.read_through(out_mean, 0, &read_mean, out_bytes)?;
         let m2 = ctx.read_through(out_var, 0, &read_var, out_bytes)?;
-        let busiest = m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0));
+        let busiest = busiest_pixel(&m2);
         let picks = ctx.read_through(out_pick, 0, &read_pick, pick_bytes)?;
         let (mut output, stats) = crate::output(camera, &mean, &m2, self.count, gpu_time, timer.is_some());
         set_picks(&mut output, bytemuck::cast_slice(&picks));
@@ -624,4 +607,51 @@ impl Targets {
 pub(crate) fn params_buffer(ctx: &GpuContext) -> wgpu::Buffer {
     let usage = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
     ctx.buffer("params", ctx.uniform_stride() * u64::from(DISPATCHES_PER_SUBMIT), usage)
+}
+
+/// The parameters of frames `frames` of a render in `mode`, `per_dispatch` frames a dispatch.
+pub(crate) fn frame_params(
+    trace: &TraceScene,
+    camera: &Camera,
+    method: &MethodParams,
+    frames: &Frames,
+    mode: u32,
+    range: std::ops::Range<u32>,
+    per_dispatch: u32,
+) -> Vec<Params> {
+    let mut params = Vec::new();
+    let mut first = range.start;
+    while first < range.end {
+        let chunk = per_dispatch.min(range.end - first);
+        params.push(Params { mode, ..layout::params(trace, camera, method, frames, first, chunk) });
+        first += chunk;
+    }
+    params
+}
+
+/// Write `batch` into `uniform`, one [`Params`] per dynamic offset, and encode one dispatch of
+/// `pass`'s kernel over `camera`'s pixels per entry (at most [`DISPATCHES_PER_SUBMIT`]).
+pub(crate) fn dispatch_batch(
+    ctx: &GpuContext,
+    pass: &mut wgpu::ComputePass,
+    uniform: &wgpu::Buffer,
+    bind_group: &wgpu::BindGroup,
+    batch: &[Params],
+    camera: &Camera,
+) {
+    let stride = ctx.uniform_stride() as usize;
+    let mut bytes = vec![0u8; stride * batch.len()];
+    for (slot, p) in batch.iter().enumerate() {
+        bytes[slot * stride..slot * stride + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
+    }
+    ctx.queue.write_buffer(uniform, 0, &bytes);
+    for slot in 0..batch.len() {
+        pass.set_bind_group(0, bind_group, &[(slot * stride) as u32]);
+        pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
+    }
+}
+
+/// The most loop iterations any pixel ran (M2's w channel) and that pixel's index.
+pub(crate) fn busiest_pixel(m2: &[f32]) -> (u32, u32) {
+    m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0))
 }

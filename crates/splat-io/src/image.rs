@@ -71,10 +71,7 @@ pub fn write_image_as(path: &Path, image: &Image, single: Single) -> Result<(), 
     }
 }
 
-/// 8-bit value of a display-referred float: round(clamp(v, 0, 1) × 255), NaN → 0.
-pub fn to_u8(v: f32) -> u8 {
-    if v.is_nan() { 0 } else { (v.clamp(0.0, 1.0) * 255.0).round() as u8 }
-}
+pub use splat_core::image::to_u8;
 
 /// The 8-bit pixels of an image with 1, 3 or 4 channels.
 pub fn to_rgba8(image: &Image) -> image::DynamicImage {

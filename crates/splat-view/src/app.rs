@@ -54,6 +54,9 @@ pub struct Viewer {
     orbit: Orbit,
     /// The loaded view shown while the camera has not moved from it.
     view: Option<usize>,
+    /// The view F returns to (`--camera-index`) and the world's up for framing.
+    home: usize,
+    up: Vec3,
     settings: Settings,
     /// Why the panel's GPU choice is what it is (adapter name, or why the CPU renders).
     backend_note: String,
@@ -101,12 +104,14 @@ impl Viewer {
         let Loaded { world, info } = loaded;
         let mut settings = Settings::new(info.render, &world.lighting, backend);
         settings.max_frames = options.max_frames;
-        let (view, orbit) = initial_view(&info, options);
+        let (view, orbit) = initial_view(&info, options.camera_index, options.up);
         let worker = Worker::spawn(world, gpu.ok(), render_state.queue.clone(), move || egui.request_repaint());
         Self {
             scene: info,
             orbit,
             view,
+            home: options.camera_index,
+            up: options.up,
             settings,
             backend_note,
             gpu_available,
@@ -322,8 +327,7 @@ impl Viewer {
             self.step_view(if next { 1 } else { -1 });
         }
         if home {
-            (self.view, self.orbit) =
-                initial_view(&self.scene, &Options { camera_index: usize::MAX, ..self.options() });
+            (self.view, self.orbit) = initial_view(&self.scene, self.home, self.up);
         }
         if restart {
             self.restart += 1;
@@ -338,10 +342,6 @@ impl Viewer {
         }
     }
 
-    fn options(&self) -> Options {
-        Options { backend: BackendChoice::Auto, camera_index: 0, up: self.orbit.up, quit_after: None, max_frames: 0 }
-    }
-
     /// Show the loaded view `by` steps after the current one (wrapping).
     fn step_view(&mut self, by: isize) {
         let n = self.scene.views.len();
@@ -350,7 +350,7 @@ impl Viewer {
         }
         let current = self.view.unwrap_or(0) as isize;
         let i = (current + by).rem_euclid(n as isize) as usize;
-        (self.view, self.orbit) = initial_view(&self.scene, &Options { camera_index: i, ..self.options() });
+        (self.view, self.orbit) = initial_view(&self.scene, i, self.up);
     }
 
     /// Frames, rate, RMSE and errors over the top left of the view.
@@ -616,17 +616,17 @@ fn combo<T: PartialEq + Copy>(
 }
 
 /// The first view: loaded view `camera_index` when there are loaded views (clamped), else
-/// the file's camera, else a framing of the scene; and the orbit about the scene's centre
-/// that starts there.
-fn initial_view(loaded: &SceneInfo, options: &Options) -> (Option<usize>, Orbit) {
+/// the file's camera, else a framing of the scene with world up `up`; and the orbit about the
+/// scene's centre that starts there.
+fn initial_view(loaded: &SceneInfo, camera_index: usize, up: Vec3) -> (Option<usize>, Orbit) {
     let (center, radius) = loaded.sphere();
     let (view, camera) = if loaded.views.is_empty() {
         let camera = loaded.camera.unwrap_or_else(|| {
-            Camera::framing(&loaded.bounds, options.up, 16, 10).expect("framing a finite box gives a camera")
+            Camera::framing(&loaded.bounds, up, 16, 10).expect("framing a finite box gives a camera")
         });
         (loaded.camera.map(|_| 0), camera)
     } else {
-        let i = options.camera_index.min(loaded.views.len() - 1);
+        let i = camera_index.min(loaded.views.len() - 1);
         (Some(i), loaded.views[i].1)
     };
     let distance = (center - camera.center()).dot(camera.forward()).max(0.1 * radius);

@@ -125,7 +125,10 @@ impl Worker {
         let shared = Arc::new(Shared::default());
         let thread = {
             let shared = shared.clone();
-            let gpu = Gpu::new(gpu);
+            let gpu: Gpu = gpu.ok_or_else(|| "no GPU context".to_string()).and_then(|ctx| {
+                let pipeline = TracePipeline::new(&ctx).map_err(|e| e.to_string())?;
+                Ok((ctx, pipeline))
+            });
             std::thread::Builder::new()
                 .name("splat view renderer".into())
                 .spawn(move || Renderer { world, gpu, queue, shared, repaint: Box::new(repaint) }.run())
@@ -157,20 +160,7 @@ impl Drop for Worker {
 }
 
 /// The GPU context and its compiled kernel, or why there is none.
-struct Gpu {
-    ctx: Option<GpuContext>,
-    pipeline: Result<TracePipeline, String>,
-}
-
-impl Gpu {
-    fn new(ctx: Option<GpuContext>) -> Self {
-        let pipeline = match &ctx {
-            Some(ctx) => TracePipeline::new(ctx).map_err(|e| e.to_string()),
-            None => Err("no GPU context".into()),
-        };
-        Self { ctx, pipeline }
-    }
-}
+type Gpu = Result<(GpuContext, TracePipeline), String>;
 
 struct Renderer {
     world: World,
@@ -319,12 +309,7 @@ impl Renderer {
         if !job.settings.on_gpu() {
             return Ok(View::Cpu(CpuAccumulation::new(job.camera.width, job.camera.height)));
         }
-        let (Some(ctx), Ok(pipeline)) = (&self.gpu.ctx, &self.gpu.pipeline) else {
-            return Err(match &self.gpu.pipeline {
-                Err(e) => format!("the GPU tracer cannot run: {e}"),
-                Ok(_) => "no GPU".into(),
-            });
-        };
+        let (ctx, pipeline) = self.gpu.as_ref().map_err(|e| format!("the GPU tracer cannot run: {e}"))?;
         let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
         let progressive = ProgressiveTrace::new(&tracer, &job.camera, &job.settings.method(), &stream(&job.settings))
             .map_err(|e| e.to_string())?;
@@ -442,9 +427,7 @@ impl Renderer {
                 (acc.mean_image(), reference.as_ref())
             }
         };
-        let reference = &reference.expect("set above").mean;
-        let squares: f64 = mean.data().iter().zip(reference.data()).map(|(a, b)| f64::from(a - b).powi(2)).sum();
-        Ok((squares / mean.data().len().max(1) as f64).sqrt())
+        Ok(splat_core::stats::rmse(mean.data(), reference.expect("set above").mean.data()))
     }
 }
 
