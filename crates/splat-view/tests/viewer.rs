@@ -9,6 +9,7 @@ use eframe::egui_wgpu::{self, RenderState, WgpuSetup};
 use egui_kittest::kittest::Queryable;
 use egui_kittest::wgpu::{WgpuTestRenderer, create_render_state, default_wgpu_setup};
 use egui_kittest::{Harness, SnapshotOptions};
+use splat_core::Camera;
 use splat_core::frame::Frames;
 use splat_core::trace::{Method, TraceScene};
 use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline};
@@ -48,7 +49,17 @@ fn harness(scene: Option<&str>, options: &Options) -> Option<(Harness<'static, V
         Some(s) => (Some(fixtures.join(format!("{s}.ply"))), Some(fixtures.join(format!("{s}.cameras.json")))),
         None => (None, None),
     };
-    let loaded = splat_view::load::load(scene_path.as_deref(), cameras.as_deref()).expect("the fixture loads");
+    harness_of(state, scene_path.as_deref(), cameras.as_deref(), options)
+}
+
+/// A harness of a viewer of the scene and cameras at these paths.
+fn harness_of(
+    state: RenderState,
+    scene: Option<&std::path::Path>,
+    cameras: Option<&std::path::Path>,
+    options: &Options,
+) -> Option<(Harness<'static, Viewer>, RenderState)> {
+    let loaded = splat_view::load::load(scene, cameras).expect("the fixture loads");
     let mut viewer = Viewer::new(loaded, options, state.clone(), egui::Context::default());
     viewer.hide_rate = true;
     let harness = Harness::builder()
@@ -161,6 +172,32 @@ fn a_camera_move_restarts_the_accumulation() {
     h.key_press(egui::Key::N);
     h.step();
     assert_eq!(h.state().view(), Some(0), "the cloud has one view: N wraps to it");
+    assert_eq!(h.state().camera(), Some(camera), "the loaded view is shown as it was");
+}
+
+#[test]
+fn n_and_p_step_through_the_views_and_f_returns_to_the_opening_one() {
+    let Some(state) = render_state() else { return };
+    let fixtures = splat_tests::root().join("fixtures");
+    let (_, camera) = splat_tests::harness::fixture("cloud", 64, 48);
+    let views: Vec<_> = (0..3).map(|i| Camera { cx: camera.cx + 4.0 * i as f32, ..camera }).collect();
+    let cameras = splat_tests::root().join("target/viewer-three-views.cameras.json");
+    splat_io::cameras::write_cameras(&cameras, &views).unwrap();
+    let options = Options { camera_index: 1, ..options(BackendChoice::Cpu, 1) };
+    let (mut h, _) = harness_of(state, Some(&fixtures.join("cloud.ply")), Some(&cameras), &options).unwrap();
+    assert_eq!(h.state().view(), Some(1), "--camera-index 1 opens the second view");
+    for (key, expected) in [(egui::Key::N, 2), (egui::Key::N, 0), (egui::Key::P, 2), (egui::Key::F, 1)] {
+        h.key_press(key);
+        h.step();
+        assert_eq!(h.state().view(), Some(expected), "after {key:?}");
+    }
+    h.key_press(egui::Key::N);
+    h.step();
+    drag(&mut h, egui::pos2(600.0, 300.0), egui::pos2(640.0, 360.0));
+    assert_eq!(h.state().view(), None, "a drag leaves the loaded views");
+    h.key_press(egui::Key::F);
+    h.step();
+    assert_eq!(h.state().view(), Some(1), "F returns to the opening view");
 }
 
 #[test]
