@@ -201,8 +201,10 @@ impl ProgressiveTrace {
     /// Encode the display pass: `display` of the state so far drawn into `target` (a view of a
     /// texture of `format` with `RENDER_ATTACHMENT` usage and the view's size, one texel per
     /// pixel). Any colour format renders; into an sRGB format the stored value is the display
-    /// value, as into a unorm one. The display parameters are written to the queue now, so the
-    /// last of several presents before a submission sets them for all.
+    /// value, as into a unorm one. Choose the format for whoever samples the texture: a UI
+    /// that treats sampled texels as gamma-encoded (egui-wgpu does) needs a unorm texture, as
+    /// the sampler decodes an sRGB one. The display parameters are written to the queue now,
+    /// so the last of several presents before a submission sets them for all.
     pub fn present(
         &mut self,
         ctx: &GpuContext,

@@ -64,6 +64,8 @@ pub struct Viewer {
     worker: Worker,
     render_state: egui_wgpu::RenderState,
     target: Option<Target>,
+    /// Where the view's texture was last drawn in the window, in points.
+    shown: Option<egui::Rect>,
     /// The last job posted: its number and what it asked for.
     posted: Option<(u64, Camera, Settings, u64)>,
     /// Bumped by "restart": a new accumulation of the same view.
@@ -118,6 +120,7 @@ impl Viewer {
             worker,
             render_state,
             target: None,
+            shown: None,
             posted: None,
             restart: 0,
             quit_after: options.quit_after,
@@ -156,6 +159,11 @@ impl Viewer {
         self.target.as_ref().map(|t| &t.texture)
     }
 
+    /// The rectangle of the window (in points) the view's texture was last drawn into.
+    pub fn image_rect(&self) -> Option<egui::Rect> {
+        self.shown
+    }
+
     /// Which loaded view is shown, `None` once the camera has moved.
     pub fn view(&self) -> Option<usize> {
         self.view
@@ -191,6 +199,7 @@ impl Viewer {
         ui.painter().rect_filled(rect, 0.0, egui::Color32::from_gray(16));
         let uv = egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0));
         ui.painter().image(target.id, shown, uv, egui::Color32::WHITE);
+        self.shown = Some(shown);
         self.post(camera);
         self.status_line(ui, rect);
     }
@@ -273,8 +282,8 @@ impl Viewer {
     }
 
     /// Mouse and keys: drag turns, right or middle drag pans, the wheel dollies, W A S D Q E
-    /// fly, N and P step through the loaded views, F frames the scene, R restarts, Space
-    /// pauses, 1–4 choose what is shown.
+    /// fly, N and P step through the loaded views, F returns to the opening view, R restarts,
+    /// Space pauses, 1–4 choose what is shown.
     fn navigate(&mut self, ui: &egui::Ui, response: &egui::Response, rect: egui::Rect) {
         let before = self.orbit;
         let delta = response.drag_delta();
@@ -578,7 +587,7 @@ pub const KEY_BINDINGS: &[&str] = &[
     "W A S D: fly forward, left, back, right",
     "Q E: fly down, up (Shift: faster)",
     "N / P: next / previous loaded view",
-    "F: frame the scene (first view)",
+    "F: back to the opening view (--camera-index, else the scene's framing)",
     "R: restart the accumulation",
     "Space: pause",
     "1 2 3 4: colour, depth, normals, variance",

@@ -66,6 +66,9 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
         anyhow::bail!("{}: no cameras", cameras.unwrap_or(Path::new("")).display());
     }
     let splat_io::world::World { scene, lighting, camera, background, meshes, max_bounces, .. } = world;
+    if scene.particles.is_empty() && meshes.is_empty() {
+        anyhow::bail!("{name} has no splats: nothing to show (`splat info` shows what the file holds)");
+    }
     let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}")).context("the world's meshes")?;
     let defaults = RenderSettings::default();
     let render = RenderSettings {

@@ -35,8 +35,12 @@ pub struct Job {
     pub generation: u64,
 }
 
-/// The format of the view's texture (display values stored as they are shown).
-pub const TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// The format of the view's texture: the display's sRGB-encoded bytes, stored as they are
+/// shown, in a texture that is *not* marked sRGB. egui-wgpu (0.37) treats every texture it
+/// samples as gamma-encoded (`tex_gamma = sample_texture(in)` in its `egui.wgsl`) and does its
+/// blending in gamma space; an `Rgba8UnormSrgb` texture would be decoded by the sampler once
+/// more, and the window would show about value^2.2 of what `splat render` writes.
+pub const TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
 /// How the render thread is doing, for the window's status lines.
 #[derive(Clone, Debug, Default)]
@@ -51,7 +55,8 @@ pub struct Status {
     pub rmse: Option<f64>,
     /// Why the job cannot render.
     pub error: Option<String>,
-    /// Whether the accumulation is finished (converged, at the frame limit or paused).
+    /// Whether the accumulation is finished (converged, at the frame limit, or paused with at
+    /// least one frame of the view to show).
     pub idle: bool,
 }
 
@@ -298,7 +303,10 @@ impl Renderer {
                 },
             }
             self.present(&mut view, job);
-            status.idle = job.settings.paused || self.finished(&view, trace, job);
+            // Paused, a view still gets its first frame: a camera moved while paused shows
+            // where it looks rather than a black texture.
+            let paused = job.settings.paused && self.frames(&view) >= 1;
+            status.idle = paused || self.finished(&view, trace, job);
             self.shared.publish(status.clone());
             (self.repaint)();
         }

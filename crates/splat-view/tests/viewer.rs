@@ -1,18 +1,20 @@
 //! The viewer without a window: egui_kittest drives the real UI on the wgpu renderer
 //! (lavapipe here), the render thread renders, and the tests read the view's texture back.
 //! Switching the method changes the image, a camera move restarts the accumulation, the GPU
-//! view draws what a batch render of the same frames shows, and the panels render as the
-//! committed snapshot (the README's screenshot).
+//! view draws what a batch render of the same frames shows, the window's pixels are those of
+//! `splat render`'s PNG of the same view, and the panels render as the committed snapshot (the
+//! README's screenshot).
 
 use eframe::egui;
 use eframe::egui_wgpu::{self, RenderState, WgpuSetup};
 use egui_kittest::kittest::Queryable;
 use egui_kittest::wgpu::{WgpuTestRenderer, create_render_state, default_wgpu_setup};
 use egui_kittest::{Harness, SnapshotOptions};
-use splat_core::Camera;
 use splat_core::frame::Frames;
 use splat_core::trace::{Method, TraceScene};
+use splat_core::{Algorithm, Camera};
 use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline};
+use splat_view::settings::TraceChoice;
 use splat_view::worker::Status;
 use splat_view::{BackendChoice, Options, Viewer};
 use std::sync::Arc;
@@ -150,14 +152,19 @@ fn a_camera_move_restarts_the_accumulation() {
     assert_eq!(h.state().view(), Some(0), "the first view of the cameras.json opens");
     assert_eq!(settle(&mut h, 3).frames, 3);
     let camera = h.state().camera().expect("a job was posted");
-    // Paused, a drag across the view with the left button (an orbit) leaves no frame.
+    // Paused, a drag across the view with the left button (an orbit) shows one frame of the
+    // new view: neither the old view's frames nor a black texture.
     h.state_mut().settings_mut().paused = true;
     settle(&mut h, 3);
+    let (_, _, old) = texels(&state, h.state());
     drag(&mut h, egui::pos2(600.0, 300.0), egui::pos2(680.0, 330.0));
     let paused = settle(&mut h, 3);
     assert_eq!(h.state().view(), None, "the camera left the loaded view");
     assert_ne!(h.state().camera(), Some(camera));
-    assert_eq!(paused.frames, 0, "the moved view kept frames of the old one");
+    assert_eq!(paused.frames, 1, "paused, the moved view shows exactly one frame of itself");
+    assert!(paused.idle, "paused after that frame");
+    let (_, _, shown) = texels(&state, h.state());
+    assert!(brightness(&shown) > 0.25 * brightness(&old), "the moved view is black while paused");
     h.state_mut().settings_mut().paused = false;
     assert_eq!(settle(&mut h, 3).frames, 3);
     let (_, _, before) = texels(&state, h.state());
@@ -263,4 +270,123 @@ fn the_panels_render() {
     }
     h.run_steps(2);
     h.snapshot_options("viewer", &SnapshotOptions::default());
+}
+
+/// What the window shows at pixel centre `(px, py)` (in pixels) of an RGBA8 image `w` × `h`
+/// drawn into `shown` (in pixels): egui-wgpu's predictable texture filtering, bilinear between
+/// texel centres and clamped to the edge, on the bytes as stored. egui treats them as
+/// gamma-encoded, which is what the PNG holds.
+fn shown_at(rgba: &[u8], (w, h): (u32, u32), shown: egui::Rect, px: u32, py: u32) -> [f64; 3] {
+    let u = (px as f32 + 0.5 - shown.min.x) / shown.width() * w as f32 - 0.5;
+    let v = (py as f32 + 0.5 - shown.min.y) / shown.height() * h as f32 - 0.5;
+    let (x0, y0) = (u.floor(), v.floor());
+    let (fx, fy) = (f64::from(u - x0), f64::from(v - y0));
+    let texel = |x: f32, y: f32, c: usize| {
+        let (x, y) = ((x as i64).clamp(0, i64::from(w) - 1), (y as i64).clamp(0, i64::from(h) - 1));
+        f64::from(rgba[4 * (y as usize * w as usize + x as usize) + c])
+    };
+    std::array::from_fn(|c| {
+        let top = texel(x0, y0, c) * (1.0 - fx) + texel(x0 + 1.0, y0, c) * fx;
+        let bottom = texel(x0, y0 + 1.0, c) * (1.0 - fx) + texel(x0 + 1.0, y0 + 1.0, c) * fx;
+        top * (1.0 - fy) + bottom * fy
+    })
+}
+
+/// `splat render`'s 8-bit PNG of the exact method at `camera` of the scene the viewer loaded
+/// from `scene` and `cameras`, as RGBA8 bytes: the CLI's render call and PNG writer, read back.
+fn png_of_splat_render(scene: Option<&std::path::Path>, camera: &Camera, name: &str) -> Vec<u8> {
+    let loaded = splat_view::load::load(scene, None).expect("the scene loads");
+    let world = &loaded.world;
+    let out = Algorithm::Trace(Method::Exact)
+        .render_world(
+            &world.scene,
+            &world.meshes,
+            camera,
+            &loaded.info.render,
+            &world.lighting,
+            &Frames::default(),
+            &|_| {},
+        )
+        .expect("the exact render");
+    let png = splat_tests::root().join(format!("target/viewer-{name}-splat-render.png"));
+    splat_io::image::write_image(&png, &out.mean).expect("the PNG is written");
+    let image = splat_io::image::read_image(&png).expect("the PNG reads back");
+    let mut rgba = Vec::with_capacity(4 * camera.width as usize * camera.height as usize);
+    for y in 0..camera.height {
+        for x in 0..camera.width {
+            let p = image.pixel(x, y);
+            rgba.extend([p[0], p[1], p[2], 1.0].map(splat_core::image::to_u8));
+        }
+    }
+    rgba
+}
+
+/// Differences, in 8-bit levels, between the window as rendered and the PNG of `splat render`
+/// where the view is drawn (the status text over its top left and a pixel along its edges left
+/// out): the largest and the share of channel values more than one level apart.
+fn window_against_splat_render(scene: Option<&str>, backend: BackendChoice) -> Option<(f64, f64)> {
+    let (mut h, _) = harness(scene, &options(backend, 1))?;
+    h.state_mut().settings_mut().trace = TraceChoice::Exact;
+    let status = settle(&mut h, 1);
+    assert_eq!(status.frames, 1, "exact is done after one frame");
+    h.run_steps(2);
+    let window = h.render().expect("the UI renders");
+    let camera = h.state().camera().expect("a job was posted");
+    let path = scene.map(|s| splat_tests::root().join("fixtures").join(format!("{s}.ply")));
+    let reference = png_of_splat_render(path.as_deref(), &camera, scene.unwrap_or("demo"));
+    let ppp = h.ctx.pixels_per_point();
+    let shown = h.state().image_rect().expect("the view was drawn");
+    let shown = egui::Rect::from_min_max((shown.min.to_vec2() * ppp).to_pos2(), (shown.max.to_vec2() * ppp).to_pos2());
+    let status_text = 64.0 * ppp;
+    let (mut worst, mut apart, mut count) = (0.0f64, 0usize, 0usize);
+    for py in (shown.min.y.ceil() as u32 + 1)..(shown.max.y.floor() as u32).saturating_sub(1) {
+        if (py as f32) < status_text {
+            continue;
+        }
+        for px in (shown.min.x.ceil() as u32 + 1)..(shown.max.x.floor() as u32).saturating_sub(1) {
+            let expected = shown_at(&reference, (camera.width, camera.height), shown, px, py);
+            let got = window.get_pixel(px, py).0;
+            for c in 0..3 {
+                let d = (f64::from(got[c]) - expected[c]).abs();
+                worst = worst.max(d);
+                apart += usize::from(d > 1.0);
+                count += 1;
+            }
+        }
+    }
+    assert!(count > 30_000, "only {count} channel values compared");
+    assert!(reference.chunks(4).filter(|p| p[0] > 16).count() > reference.len() / 80, "the view is nearly black");
+    Some((worst, apart as f64 / count as f64))
+}
+
+/// The window shows what `splat render` writes: on the demo and on the cloud fixture (a loaded
+/// view, letterboxed), the pixels of the rendered UI equal the PNG of the same view within one
+/// 8-bit level (the bilinear resampling and the framebuffer's rounding; measured: 0.5; exact
+/// renders, so no noise). With the view texture in an sRGB format, decoded once more by egui's
+/// sampler, every mid grey shows as about its 2.2th power and the test fails.
+#[test]
+fn the_window_shows_the_pixels_of_splat_render() {
+    for scene in [None, Some("cloud")] {
+        let Some((worst, apart)) = window_against_splat_render(scene, BackendChoice::Cpu) else { return };
+        let name = scene.unwrap_or("demo");
+        eprintln!("{name}: largest difference {worst:.2} levels, {:.4} % more than one", 100.0 * apart);
+        assert!(
+            worst <= 1.0,
+            "{name}: the window differs from splat render's PNG by up to {worst:.1} levels ({:.3} % more than one)",
+            100.0 * apart
+        );
+    }
+}
+
+/// The GPU view's display pass draws the same pixels (the exact method on the device, its
+/// rounding against the CPU's).
+#[test]
+fn the_gpu_window_shows_the_pixels_of_splat_render() {
+    let Some((worst, apart)) = window_against_splat_render(Some("cloud"), BackendChoice::Gpu) else { return };
+    eprintln!("GPU view: largest difference {worst:.2} levels, {:.4} % more than one", 100.0 * apart);
+    assert!(
+        worst <= 1.0,
+        "the GPU window differs from splat render's PNG by up to {worst:.1} levels ({:.3} % more than one)",
+        100.0 * apart
+    );
 }
