@@ -217,6 +217,38 @@ impl PixelFrames {
     }
 }
 
+/// A pixel's frames once folded: the f32 values the output images hold. A tile keeps these,
+/// not its [`PixelFrames`] (f64 accumulators and a whole first [`Sample`], three times the
+/// size), so that a render's peak memory stays near twice its output images.
+#[derive(Clone, Copy)]
+struct Finished {
+    mean: [f32; 4],
+    variance: [f32; 3],
+    depth: f32,
+    normal: [f32; 3],
+    picked: Option<u32>,
+}
+
+impl From<PixelFrames> for Finished {
+    fn from(p: PixelFrames) -> Self {
+        let first = p.first.unwrap_or(Sample::background(Vec3::ZERO));
+        let var = p.acc.map(|a| a.variance() as f32);
+        Self {
+            mean: p.acc.map(|a| a.mean as f32),
+            variance: [var[0], var[1], var[2]],
+            depth: first.depth.unwrap_or(f32::NAN),
+            normal: first.normal.to_array(),
+            picked: first.picked,
+        }
+    }
+}
+
+/// Bytes a pixel of a CPU render holds at its peak: its finished values in its tile and its
+/// share of the [`RenderOutput`] they are copied into (the images and the picks). Hosts use it
+/// to refuse a render that cannot fit before starting it.
+pub const BYTES_PER_PIXEL: u64 =
+    (std::mem::size_of::<Finished>() + 11 * std::mem::size_of::<f32>() + std::mem::size_of::<Option<u32>>()) as u64;
+
 /// The one frame loop: `pixel(state, x, y)` folds the frames of pixel (x, y), with `state` made
 /// once per tile by `tile_state(tile)` (scratch buffers, per-tile candidate lists). Tiles run in
 /// parallel; each pixel loops over its own frames, so the result does not depend on the thread
@@ -229,7 +261,8 @@ pub fn render_tiles<S>(
 ) -> RenderOutput {
     let tiles = map_tiles(camera, |tile| {
         let mut state = tile_state(tile);
-        let out: Vec<PixelFrames> = tile_coords(camera, tile).map(|(x, y)| pixel(&mut state, x, y)).collect();
+        let out: Vec<Finished> =
+            tile_coords(camera, tile).map(|(x, y)| Finished::from(pixel(&mut state, x, y))).collect();
         progress(out.len() as u64);
         out
     });
@@ -237,7 +270,7 @@ pub fn render_tiles<S>(
 }
 
 /// Scatter the tiles' pixels into the output images.
-fn assemble(camera: &Camera, tiles: &[Vec<PixelFrames>]) -> RenderOutput {
+fn assemble(camera: &Camera, tiles: &[Vec<Finished>]) -> RenderOutput {
     let (w, h) = (camera.width, camera.height);
     let image = |c| Image::filled(w, h, c, 0.0);
     let mut out = RenderOutput {
@@ -250,15 +283,12 @@ fn assemble(camera: &Camera, tiles: &[Vec<PixelFrames>]) -> RenderOutput {
     };
     for (tile, pixels) in tiles.iter().enumerate() {
         for ((x, y), p) in tile_coords(camera, tile as u32).zip(pixels) {
-            let mean = p.acc.map(|a| a.mean as f32);
-            let var = p.acc.map(|a| a.variance() as f32);
-            let first = p.first.unwrap_or(Sample::background(Vec3::ZERO));
-            out.mean.pixel_mut(x, y).copy_from_slice(&mean[..3]);
-            out.variance.pixel_mut(x, y).copy_from_slice(&var[..3]);
-            out.alpha.pixel_mut(x, y)[0] = mean[3];
-            out.depth.pixel_mut(x, y)[0] = first.depth.unwrap_or(f32::NAN);
-            out.normal.pixel_mut(x, y).copy_from_slice(&first.normal.to_array());
-            out.picked[(y * w + x) as usize] = first.picked;
+            out.mean.pixel_mut(x, y).copy_from_slice(&p.mean[..3]);
+            out.variance.pixel_mut(x, y).copy_from_slice(&p.variance);
+            out.alpha.pixel_mut(x, y)[0] = p.mean[3];
+            out.depth.pixel_mut(x, y)[0] = p.depth;
+            out.normal.pixel_mut(x, y).copy_from_slice(&p.normal);
+            out.picked[(y * w + x) as usize] = p.picked;
         }
     }
     out
