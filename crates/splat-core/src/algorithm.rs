@@ -37,6 +37,17 @@ impl Algorithm {
         }
     }
 
+    /// Whether frames differ with this `lighting` and, where `meshes`, meshes: a stochastic
+    /// method, or a traced sample whose lighting draws (stochastic shadows, area lights;
+    /// [`Lighting::draws_for`]). Rasterized splats cast no shadow rays.
+    pub fn is_random(&self, lighting: &Lighting, meshes: bool) -> bool {
+        match self {
+            Algorithm::Raster(m, _) => m.is_stochastic(),
+            Algorithm::Oracle => false,
+            _ => self.is_stochastic() || lighting.draws_for(meshes),
+        }
+    }
+
     /// Render `frames` on the CPU (one frame for a deterministic method), unlit. `progress`
     /// receives finished pixel counts.
     pub fn render(

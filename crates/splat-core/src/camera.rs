@@ -189,6 +189,19 @@ impl Camera {
         self.rotation.row(2)
     }
 
+    /// Up in world space: camera −y (the image's rows run down, as in OpenCV and COLMAP).
+    pub fn up(&self) -> Vec3 {
+        -self.rotation.row(1)
+    }
+
+    /// The world up a set of views agrees on: the mean of their [`Camera::up`], normalised;
+    /// `None` without views or when they cancel out. Captures are filmed mostly upright, so
+    /// this is the `up` to frame a capture with (about −y for COLMAP reconstructions).
+    pub fn mean_up(views: &[Camera]) -> Option<Vec3> {
+        let sum: Vec3 = views.iter().map(Camera::up).sum();
+        (sum.length() > 0.1 * views.len() as f32).then(|| sum.normalize())
+    }
+
     /// World point to camera space.
     pub fn to_camera(&self, world: Vec3) -> Vec3 {
         self.rotation * world + self.translation
@@ -251,6 +264,23 @@ mod tests {
         // A point to the right (+x, seen from +z) appears right of centre.
         let p = cam.project_camera(cam.to_camera(Vec3::new(1.0, 0.0, 0.0)));
         assert!(p.x > 32.0);
+    }
+
+    #[test]
+    fn mean_up_is_the_up_the_views_were_framed_with() {
+        let up = Vec3::new(0.1, -1.0, 0.2).normalize();
+        let views: Vec<_> = [Vec3::new(0.0, 0.0, 5.0), Vec3::new(4.0, -1.0, 2.0), Vec3::new(-3.0, 0.5, -4.0)]
+            .map(|eye| Camera::look_at(eye, Vec3::ZERO, up, 50.0, 64, 48).unwrap())
+            .to_vec();
+        // Each view's up is the world up made orthogonal to its forward axis; their mean tilts
+        // back towards it.
+        assert!(Camera::mean_up(&views).unwrap().dot(up) > 0.95);
+        for v in &views {
+            assert_relative_eq!(v.up().dot(v.forward()), 0.0, epsilon = 1e-5);
+            let above = v.project_camera(v.to_camera(v.center() + 5.0 * v.forward() + v.up()));
+            assert!(above.y < 24.0, "camera up is drawn above the centre row");
+        }
+        assert_eq!(Camera::mean_up(&[]), None);
     }
 
     #[test]

@@ -405,6 +405,12 @@ impl Lighting {
         self.shadows == Shadows::Stochastic || self.lights.iter().any(Light::is_area)
     }
 
+    /// Whether a traced sample is random even for a deterministic method: lit splats, or lit
+    /// meshes (`meshes`), whose lighting [`Lighting::draws`].
+    pub fn draws_for(&self, meshes: bool) -> bool {
+        (self.is_on() || meshes) && self.draws()
+    }
+
     /// Lit(x, n, v, c) of particle `id` hit at distance `t` along `ray` with unit normal `n`:
     /// `c` itself for an emissive set, the headlight when there are no lights. Light j is
     /// sampled at `sample(j, light)` and seen from x with visibility `visible(j, x, incident)`,

@@ -378,7 +378,7 @@ impl<'a> TraceScene<'a> {
     /// Whether a sample is random even for a deterministic method: lit splats or lit meshes
     /// with stochastic shadow rays or area lights.
     pub fn is_random(&self) -> bool {
-        (self.lighting.is_on() || !self.meshes.is_empty()) && self.lighting.draws()
+        self.lighting.draws_for(!self.meshes.is_empty())
     }
 
     /// The settings.

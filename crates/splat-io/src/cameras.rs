@@ -79,9 +79,14 @@ pub fn read_cameras(path: &Path) -> Result<Vec<Camera>, Error> {
     parse_cameras(&bytes).map_err(|kind| Error::new(path, kind))
 }
 
-/// Read every camera of a `cameras.json` with its `img_name`.
+/// Read every camera of a `cameras.json` with its `img_name`. A file that is not JSON at all
+/// (a scene given as `--camera`, a binary file) is [`ErrorKind::NotCameras`], naming what
+/// camera files are.
 pub fn read_named_cameras(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     let bytes = read_file(path)?;
+    if let Err(e) = serde_json::from_slice::<serde::de::IgnoredAny>(&bytes) {
+        return Err(Error::new(path, ErrorKind::NotCameras(e)));
+    }
     let names = serde_json::from_slice::<Vec<CameraEntry>>(&bytes).map(|e| e.into_iter().map(|e| e.img_name));
     let cameras = parse_cameras(&bytes).map_err(|kind| Error::new(path, kind))?;
     Ok(names.map_err(|e| Error::new(path, ErrorKind::Json(e)))?.zip(cameras).collect())

@@ -174,6 +174,11 @@ pub enum ErrorKind {
     /// The JSON is malformed.
     #[error("JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// A file given as cameras is neither a cameras.json nor a COLMAP model.
+    #[error(
+        "not a camera file: cameras are an INRIA cameras.json or a COLMAP model (a sparse/0 folder, or its images.bin / images.txt); as JSON: {0}"
+    )]
+    NotCameras(serde_json::Error),
     /// An image cannot be written or read.
     #[error("image: {0}")]
     Image(String),

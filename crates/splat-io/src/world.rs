@@ -267,41 +267,37 @@ pub fn read_world(path: &Path) -> Result<World, Error> {
     let text = String::from_utf8(crate::read_file(path)?)
         .map_err(|e| Error::new(path, ErrorKind::World(format!("not UTF-8 text: {e}"))))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    parse_world(&text, base).map_err(|e| match e {
-        Nested::Here(message) => Error::new(path, ErrorKind::World(message)),
-        Nested::File(error) => error,
-    })
+    parse_world(&text, base).map_err(|message| Error::new(path, ErrorKind::World(message)))
 }
 
-/// An error of the world file itself, or of a set file it names (which names its own path).
-enum Nested {
-    Here(String),
-    File(Error),
-}
-
-impl From<String> for Nested {
-    fn from(s: String) -> Self {
-        Nested::Here(s)
-    }
+/// A file a world entry names that could not be read: the entry's key and file as the world
+/// file spells them, then the reader's error (which names the resolved path).
+/// A missing file under `target/assets/` is the repository's pinned capture, which the fixture
+/// worlds name: the message says how to fetch it.
+fn named_file(file: &Path, error: Error) -> String {
+    let missing = matches!(&error.kind, ErrorKind::Io(e) if e.kind() == std::io::ErrorKind::NotFound);
+    let asset = missing
+        && file.components().any(|c| c.as_os_str() == "assets")
+        && file.components().any(|c| c.as_os_str() == "target");
+    let hint =
+        if asset { " (`cargo xtask assets` fetches the repository's real capture into target/assets)" } else { "" };
+    format!("file = {:?} cannot be read: {error}{hint}", file.display().to_string())
 }
 
 /// Parse world-file text; set files are resolved relative to `base`.
-fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
+fn parse_world(text: &str, base: &Path) -> Result<World, String> {
     let file: WorldFile = toml::from_str(text).map_err(|e| e.to_string())?;
     if file.splats.is_empty() {
-        return Err("no [[splats]] set: a world needs at least one".to_string().into());
+        return Err("no [[splats]] set: a world needs at least one".to_string());
     }
     let mut scene = Scene::default();
     let mut sets = Vec::new();
     let mut camera = None;
     for (i, set) in file.splats.iter().enumerate() {
         if let Some(d) = set.sh_degree.filter(|&d| d > 3) {
-            return Err(format!("splats[{i}]: sh_degree {d} is above 3").into());
+            return Err(format!("splats[{i}]: sh_degree {d} is above 3"));
         }
-        let (mut particles, builtin_camera) = load_set(set, base).map_err(|e| match e {
-            Nested::Here(m) => Nested::Here(format!("splats[{i}]: {m}")),
-            other => other,
-        })?;
+        let (mut particles, builtin_camera) = load_set(set, base).map_err(|m| format!("splats[{i}]: {m}"))?;
         if i == 0 {
             camera = builtin_camera;
         }
@@ -337,18 +333,14 @@ fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
     }
     let background = file.background.map(Vec3::from);
     if background.is_some_and(|b| !b.is_finite()) {
-        return Err("background is not finite".to_string().into());
+        return Err("background is not finite".to_string());
     }
     let mut meshes = Vec::new();
     for (i, m) in file.meshes.iter().enumerate() {
-        let in_mesh = |e: Nested| match e {
-            Nested::Here(m) => Nested::Here(format!("meshes[{i}]: {m}")),
-            other => other,
-        };
-        meshes.push(load_mesh(m, base).map_err(in_mesh)?);
+        meshes.push(load_mesh(m, base).map_err(|e| format!("meshes[{i}]: {e}"))?);
     }
     if let Some(b) = file.max_bounces.filter(|&b| b > splat_core::settings::MAX_BOUNCES) {
-        return Err(format!("max_bounces {b} is above {}", splat_core::settings::MAX_BOUNCES).into());
+        return Err(format!("max_bounces {b} is above {}", splat_core::settings::MAX_BOUNCES));
     }
     let environment = file.environment.as_ref().map(environment).transpose()?;
     let lens = file.camera.as_ref().and_then(|c| lens(c, camera.as_ref())).transpose()?;
@@ -356,24 +348,24 @@ fn parse_world(text: &str, base: &Path) -> Result<World, Nested> {
 }
 
 /// One mesh in world space with its material.
-fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), Nested> {
+fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), String> {
     let mesh = match (&m.file, m.shape) {
-        (Some(file), None) => crate::mesh::read_mesh(&base.join(file)).map_err(Nested::File)?,
+        (Some(file), None) => crate::mesh::read_mesh(&base.join(file)).map_err(|e| named_file(file, e))?,
         (None, Some(ShapeName::Plane)) => TriangleMesh::plane(),
         (None, Some(ShapeName::Cube)) => TriangleMesh::cube(),
         (None, Some(ShapeName::Sphere)) => {
             let segments = m.segments.unwrap_or(48);
             if !(3..=4096).contains(&segments) {
-                return Err(format!("segments {segments} is outside 3..=4096").into());
+                return Err(format!("segments {segments} is outside 3..=4096"));
             }
             TriangleMesh::sphere(segments, segments / 2)
         }
-        _ => return Err("give exactly one of shape = \"plane|cube|sphere\" or file = \"…\"".to_string().into()),
+        _ => return Err("give exactly one of shape = \"plane|cube|sphere\" or file = \"…\"".to_string()),
     };
     let (t, r) = translate_rotate(m.translate, m.rotate)?;
     let s = m.scale.map_or(Vec3::ONE, Colour::rgb);
     if !(s.is_finite() && s.min_element() > 0.0) {
-        return Err(format!("scale {s} must be finite and positive").into());
+        return Err(format!("scale {s} must be finite and positive"));
     }
     let mesh = mesh.transformed(glam::Affine3A::from_scale_rotation_translation(s, r, t));
     let defaults = MeshMaterial::default();
@@ -390,15 +382,15 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), 
 }
 
 /// The particles of one set and, for a built-in scene, its camera.
-fn load_set(set: &SplatsFile, base: &Path) -> Result<(Scene, Option<Camera>), Nested> {
+fn load_set(set: &SplatsFile, base: &Path) -> Result<(Scene, Option<Camera>), String> {
     match (&set.file, &set.builtin) {
-        (Some(file), None) => Ok((crate::read_scene(&base.join(file)).map_err(Nested::File)?, None)),
+        (Some(file), None) => Ok((crate::read_scene(&base.join(file)).map_err(|e| named_file(file, e))?, None)),
         (None, Some(name)) => {
             let (scene, camera) = splat_core::scenes::by_name(name)
                 .ok_or_else(|| format!("no built-in scene '{name}' (demo, layers, ramp, cloud, plates, cloth)"))?;
             Ok((scene, Some(camera)))
         }
-        _ => Err("give exactly one of file = \"…\" or builtin = \"…\"".to_string().into()),
+        _ => Err("give exactly one of file = \"…\" or builtin = \"…\"".to_string()),
     }
 }
 
@@ -560,10 +552,7 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<World, String> {
-        parse_world(text, Path::new(".")).map_err(|e| match e {
-            Nested::Here(m) => m,
-            Nested::File(e) => e.to_string(),
-        })
+        parse_world(text, Path::new("."))
     }
 
     #[test]
