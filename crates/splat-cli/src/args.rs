@@ -85,6 +85,16 @@ pub enum ExtentArg {
     Sqrt8,
 }
 
+impl ExtentArg {
+    /// The footprint in words, for reports.
+    pub fn describe(self) -> &'static str {
+        match self {
+            ExtentArg::ThreeDgs => "the 3DGS ⌈3√λmax⌉ box",
+            ExtentArg::Sqrt8 => "the √8σ ellipse",
+        }
+    }
+}
+
 /// Where rays are traced or splats rasterized.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BackendArg {
@@ -107,6 +117,9 @@ pub enum RngArg {
     Trig,
 }
 
+/// Samples per traversal of stochastic-n unless `--samples` says otherwise.
+pub const DEFAULT_SAMPLES: u32 = 16;
+
 /// Options of the methods, shared by `render`, `converge` and `bench`.
 #[derive(Args, Clone)]
 pub struct MethodOptions {
@@ -120,7 +133,7 @@ pub struct MethodOptions {
     #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_MIN_TRANSMITTANCE)]
     pub min_transmittance: f32,
     /// stochastic-n: samples per traversal (n, up to 64).
-    #[arg(help_heading = "Method parameters", long, default_value_t = 16)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = DEFAULT_SAMPLES)]
     pub samples: u32,
     /// stochastic-n: traversals per frame (m).
     #[arg(help_heading = "Method parameters", long, default_value_t = 1)]
@@ -147,7 +160,7 @@ pub struct MethodOptions {
     /// raster methods have no order to stop in and ignore it).
     #[arg(help_heading = "Splatting", long)]
     pub early_stop: bool,
-    /// raster-sorted: blend order (default under, which also yields --depth and --normal).
+    /// raster-sorted: blend order (under also yields --depth and --normal).
     #[arg(help_heading = "Splatting", long, value_enum, default_value = "under")]
     pub blend: BlendArg,
     /// stratified: skip the multiply–XOR scramble (the correlated radical inverse that
@@ -199,6 +212,45 @@ impl MethodOptions {
             MethodArg::Enderton => raster(RasterMethod::Enderton),
             MethodArg::Stratified => raster(RasterMethod::Stratified { scramble: !self.no_scramble }),
         }
+    }
+
+    /// The options given away from their defaults that `algorithm` does not read (each as its
+    /// flag): the method parameters of other methods, the splatting options without a
+    /// splatting pass.
+    pub fn unused(&self, algorithm: &Algorithm) -> Vec<&'static str> {
+        use splat_core::trace::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE};
+        let (trace, raster) = match algorithm {
+            Algorithm::Oracle => (None, None),
+            Algorithm::Trace(m) => (Some(*m), None),
+            Algorithm::Raster(r, _) => (None, Some(*r)),
+            Algorithm::Hybrid(r, _, m) => (Some(*m), Some(*r)),
+        };
+        let k = matches!(
+            trace,
+            Some(Method::KBuffer { .. } | Method::StochasticPass { .. } | Method::DepthSampling { .. })
+        );
+        let passes = matches!(trace, Some(Method::KBuffer { .. } | Method::StochasticPass { .. }));
+        let n = matches!(trace, Some(Method::StochasticN { .. }));
+        let sorted = matches!(raster, Some(RasterMethod::Sorted { .. }));
+        let given = [
+            ("--k", self.k != DEFAULT_K, k),
+            ("--max-passes", self.max_passes != DEFAULT_MAX_PASSES, passes),
+            (
+                "--min-transmittance",
+                self.min_transmittance != DEFAULT_MIN_TRANSMITTANCE,
+                matches!(trace, Some(Method::KBuffer { .. })),
+            ),
+            ("--samples", self.samples != DEFAULT_SAMPLES, n),
+            ("--passes", self.passes != 1, n),
+            ("--raster-samples", self.raster_samples != 1, raster.is_some()),
+            ("--sample-pattern", self.sample_pattern.is_some(), raster.is_some()),
+            ("--fragment-depth", self.fragment_depth != FragmentDepthArg::Center, raster.is_some()),
+            ("--extent", self.extent != ExtentArg::ThreeDgs, raster.is_some()),
+            ("--early-stop", self.early_stop, sorted),
+            ("--blend", self.blend != BlendArg::Under, sorted),
+            ("--no-scramble", self.no_scramble, matches!(raster, Some(RasterMethod::Stratified { .. }))),
+        ];
+        given.into_iter().filter(|&(_, set, read)| set && !read).map(|(flag, ..)| flag).collect()
     }
 
     /// The ray-tracing method for a CLI method; an error names any other.
@@ -323,11 +375,13 @@ pub struct SceneArgs {
     /// Which camera of --camera to use (0-based).
     #[arg(help_heading = "Camera", long, default_value_t = 0)]
     pub camera_index: usize,
-    /// Image width; rescales the camera's intrinsics.
-    #[arg(help_heading = "Camera", long)]
+    /// Image width in pixels (1 to 16384); rescales the camera's intrinsics [default: the
+    /// camera's, else the command's framing size: 640 for render].
+    #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
     pub width: Option<u32>,
-    /// Image height; rescales the camera's intrinsics.
-    #[arg(help_heading = "Camera", long)]
+    /// Image height in pixels (1 to 16384); rescales the camera's intrinsics [default: the
+    /// camera's, else the command's framing size: 480 for render].
+    #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
     pub height: Option<u32>,
     /// Look-at camera position "x,y,z" (with --target; world up from --up).
     #[arg(help_heading = "Camera", long, value_parser = parse_vec3, requires = "target")]
@@ -335,9 +389,10 @@ pub struct SceneArgs {
     /// Look-at target "x,y,z".
     #[arg(help_heading = "Camera", long, value_parser = parse_vec3, requires = "eye")]
     pub target: Option<Vec3>,
-    /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0).
-    #[arg(help_heading = "Camera", long, value_parser = parse_vec3, default_value = "0,1,0")]
-    pub up: Vec3,
+    /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0; `splat
+    /// info SCENE --camera CAMERAS` measures it) [default: 0,1,0].
+    #[arg(help_heading = "Camera", long, value_parser = parse_up)]
+    pub up: Option<Vec3>,
     /// Vertical field of view in degrees for --eye/--target.
     #[arg(help_heading = "Camera", long, default_value_t = 50.0)]
     pub fov: f32,
@@ -443,7 +498,6 @@ impl SceneArgs {
     /// Load the scene, world file or demo with its lighting, apply --sh-degree, --look,
     /// --shadows and --background, and choose the camera.
     pub fn load_world(&self, width: u32, height: u32) -> Result<Loaded> {
-        let is_world = |p: &std::path::Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
         let world = match &self.scene {
             Some(path) if is_world(path) => splat_io::world::read_world(path)?,
             Some(path) => World::of(load_scene(path, self.read)?),
@@ -453,6 +507,10 @@ impl SceneArgs {
             }
         };
         let World { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } = world;
+        if scene.particles.is_empty() && meshes.is_empty() {
+            let name = self.scene.as_deref().map_or("the scene".into(), |p| p.display().to_string());
+            bail!("{name} has no splats: nothing to render (`splat info` shows what the file holds)");
+        }
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
             splat_io::world::truncate_sh(&mut scene, degree);
@@ -507,11 +565,17 @@ impl SceneArgs {
                 format!("--camera-index {} but {} has {n} cameras", self.camera_index, path.display())
             })?
         } else if let (Some(eye), Some(target)) = (self.eye, self.target) {
-            Camera::look_at(eye, target, self.up, self.fov, w, h)?
+            Camera::look_at(eye, target, self.up.unwrap_or(Vec3::Y), self.fov, w, h)?
         } else if let Some(camera) = default_camera {
             camera
         } else {
-            Camera::framing(&scene.robust_bounds(0.02), self.up, w, h)?
+            if self.up.is_none() && self.scene.as_deref().is_some_and(|p| !is_world(p)) {
+                eprintln!(
+                    "note: no --camera: framing the scene from +z with +y up; captures trained from COLMAP data are \
+                     usually -y up (--up 0,-1,0; `splat info SCENE --camera CAMERAS` measures it)"
+                );
+            }
+            Camera::framing(&scene.robust_bounds(0.02), self.up.unwrap_or(Vec3::Y), w, h)?
         };
         self.sized(camera)
     }
@@ -554,6 +618,72 @@ pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::Sc
         );
     }
     Ok(read)
+}
+
+/// Refuse an output path whose folder does not exist, before any work: a render of minutes
+/// must not fail at its last step.
+pub fn check_output(path: &std::path::Path, flag: &str) -> Result<()> {
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    if !folder.is_dir() {
+        bail!("{flag} {}: the folder {} does not exist (create it first)", path.display(), folder.display());
+    }
+    if path.is_dir() {
+        bail!("{flag} {} is a folder: give a file name", path.display());
+    }
+    Ok(())
+}
+
+/// Bytes of memory the system can still give, from `/proc/meminfo` (`None` elsewhere).
+fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Refuse a render of `camera`'s size whose images cannot fit in the memory available, with
+/// the estimate: the frame loop's peak ([`splat_core::frame::BYTES_PER_PIXEL`]) and an 8-bit
+/// copy for writing, per pixel.
+pub fn check_memory(camera: &Camera) -> Result<()> {
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    let per_pixel = splat_core::frame::BYTES_PER_PIXEL + 4;
+    let need = pixels * per_pixel;
+    let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
+    match available_memory() {
+        Some(available) if need > available => bail!(
+            "a {}×{} render needs about {:.1} GiB ({per_pixel} bytes a pixel) and {:.1} GiB of memory is available: \
+             render a smaller image (--width, --height)",
+            camera.width,
+            camera.height,
+            gib(need),
+            gib(available)
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// Whether `path` is a world file (`.toml`).
+pub fn is_world(path: &std::path::Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+}
+
+/// The largest image side the commands accept: the camera's.
+pub const MAX_SIDE: u32 = splat_core::camera::MAX_IMAGE_SIDE;
+
+/// An image side in pixels: one message for every bad size (zero, negative, not a number).
+pub fn parse_side(s: &str) -> Result<u32, String> {
+    match s.trim().parse::<i64>() {
+        Ok(n) if (1..=i64::from(MAX_SIDE)).contains(&n) => Ok(n as u32),
+        _ => Err(format!("'{s}' is not an image size: give a whole number of pixels from 1 to {MAX_SIDE}")),
+    }
+}
+
+/// A world up: three finite numbers, not all zero.
+fn parse_up(s: &str) -> Result<Vec3, String> {
+    match parse_vec3(s)? {
+        v if v == Vec3::ZERO => Err(format!("'{s}' is not a direction: up needs a non-zero x,y,z")),
+        v => Ok(v),
+    }
 }
 
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {

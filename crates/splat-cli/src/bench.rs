@@ -19,6 +19,7 @@ pub struct BenchArgs {
     /// Naming raster-sorted or stochastic-splat benchmarks the splatting path instead: stage
     /// times, the sort's share and keys/s, and the stochastic/sorted frame ratio.
     #[arg(
+        help_heading = "Measurement",
         long,
         value_enum,
         value_delimiter = ',',
@@ -26,27 +27,27 @@ pub struct BenchArgs {
     )]
     pub methods: Vec<MethodArg>,
     /// Frames per method (each frame is one sample per pixel).
-    #[arg(long, default_value_t = 1)]
+    #[arg(help_heading = "Measurement", long, default_value_t = 1)]
     pub spp: u32,
     /// Timed repetitions per method; the fastest is reported.
-    #[arg(long, default_value_t = 3)]
+    #[arg(help_heading = "Measurement", long, default_value_t = 3)]
     pub repeat: u32,
     /// Instead of the methods, the rows of Sun et al. 2025 Tables 4–5: one frame of
     /// `stochastic-n` with m traversals × n samples each, m × n = 1024 (1024 × 1, 256 × 4,
     /// 64 × 16, 16 × 64; 4 × 256 exceeds the 64 samples a traversal holds and is refused), time
     /// as a speed-up over 1024 × 1 and RMSE against `exact`, on the backend chosen (1024
     /// samples a pixel: choose --width/--height to suit).
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Measurement", long, value_enum)]
     pub sweep: Option<Sweep>,
     /// With a lit world file: the frame time of each method unlit, lit without shadows and lit
     /// with each shadow kind (sorted, stochastic, exact transmittance), as ratios against the
     /// unlit frame measured in the same run (CPU).
-    #[arg(long)]
+    #[arg(help_heading = "Measurement", long)]
     pub lighting: bool,
     /// With a world file with meshes: the frame of each pipeline (raster three-pass, hybrid,
     /// ray tracing) with a deterministic and a stochastic method each, as ratios against
     /// raster-sorted measured in the same run (CPU; --raster-samples applies).
-    #[arg(long)]
+    #[arg(help_heading = "Measurement", long)]
     pub pipelines: bool,
     #[command(flatten)]
     pub options: MethodOptions,

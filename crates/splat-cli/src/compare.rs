@@ -60,7 +60,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
     let flip_mean = nv_flip::FlipPool::from_image(&flip).mean();
     println!("reference  {}", args.reference.display());
     println!("test       {}", args.test.display());
-    println!("RMSE       {rmse:.6e}   (RGB values, f32 inputs as they are)");
+    println!("RMSE       {rmse:.6e}   (RGB values: {})", value_scale(&args.reference, &args.test));
     println!("PSNR       {psnr:.2} dB (peak 1)");
     println!("SSIM       {:.6}   (8-bit, the lowest of the three channels)", ssim.score);
     println!("FLIP       {flip_mean:.6}   (LDR ꟻLIP mean, {} pixels per degree)", args.pixels_per_degree);
@@ -68,6 +68,17 @@ pub fn run(args: CompareArgs) -> Result<()> {
         write_maps(prefix, (w, h), &fa, &fb, &ssim, &flip)?;
     }
     Ok(())
+}
+
+/// How the inputs' values were read, for the RMSE line: 8-bit PNG values scaled to [0, 1],
+/// float files as they are stored.
+fn value_scale(a: &Path, b: &Path) -> &'static str {
+    let png = |p: &Path| matches!(splat_io::image::ImageFormat::from_path(p), Ok(splat_io::image::ImageFormat::Png));
+    match (png(a), png(b)) {
+        (true, true) => "8-bit PNG values / 255",
+        (false, false) => "float values as stored",
+        _ => "PNG values / 255, float values as stored",
+    }
 }
 
 fn write_maps(
@@ -106,5 +117,6 @@ fn write_maps(
     eprintln!("wrote {}", ssim_path.display());
     save(name("flip"), flip_map.to_vec())?;
     eprintln!("abs map: black 0, yellow {largest:.3e}");
+    eprintln!("ssim map: each channel's SSIM as its colour channel, black 0 (or less) to full 1 (identical)");
     Ok(())
 }

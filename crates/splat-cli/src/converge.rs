@@ -20,25 +20,25 @@ pub struct ConvergeArgs {
     pub scene: SceneArgs,
     /// Methods to measure, comma separated (default: stochastic, stochastic-n, stochastic-pass
     /// and depth-sampling-k; with --pipeline path: stochastic, stochastic-n and exact).
-    #[arg(long, value_enum, value_delimiter = ',')]
+    #[arg(help_heading = "Measurement", long, value_enum, value_delimiter = ',')]
     pub methods: Option<Vec<MethodArg>>,
     /// Largest spp (a power of two).
-    #[arg(long, default_value_t = 1024)]
+    #[arg(help_heading = "Measurement", long, default_value_t = 1024)]
     pub max_spp: u32,
     /// Output prefix: writes PREFIX.csv and PREFIX.png.
-    #[arg(short, long, default_value = "converge")]
+    #[arg(help_heading = "Measurement", short, long, default_value = "converge")]
     pub output: PathBuf,
     #[command(flatten)]
     pub options: MethodOptions,
     /// `path`: converge the path tracer's Gaussian estimators (stochastic, stochastic-n, exact)
     /// on a world file against a long exact-compositing path-traced reference.
-    #[arg(long, value_enum)]
+    #[arg(help_heading = "Measurement", long, value_enum)]
     pub pipeline: Option<crate::render::PipelineArg>,
     /// Path tracer: samples per pixel of the exact-compositing reference (hash sampler).
-    #[arg(long, default_value_t = 2048)]
+    #[arg(help_heading = "Measurement", long, default_value_t = 2048)]
     pub reference_spp: u32,
     /// Path tracer: the RMSE whose time to reach each method's table reports.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(help_heading = "Measurement", long, default_value_t = 0.01)]
     pub target_rmse: f64,
     #[command(flatten)]
     pub path: crate::render::PathOptions,
@@ -57,6 +57,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
     if args.scene.backend == BackendArg::Gpu {
         bail!("splat converge runs on the CPU tracer; the GPU kernels are compared with it by the test suite");
     }
+    crate::args::check_output(&args.output.with_extension("csv"), "-o")?;
     if !args.max_spp.is_power_of_two() {
         bail!("--max-spp must be a power of two, not {}", args.max_spp);
     }
@@ -81,9 +82,9 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         let under = RasterMethod::Sorted { blend: Blend::Under };
         let sorted = render_raster(&raster, &under, &Frames::default(), &|_| {})?;
         eprintln!(
-            "raster-sorted against ray-traced exact: RMSE {:.5} (the EWA projection and √8σ extent \
-             against ray-traced Eq. 3)",
-            rmse(sorted.mean.data(), exact.mean.data())
+            "raster-sorted against ray-traced exact: RMSE {:.5} (the EWA projection and {} against ray-traced Eq. 3)",
+            rmse(sorted.mean.data(), exact.mean.data()),
+            args.options.extent.describe()
         );
         Some((raster, sorted))
     } else {
@@ -275,10 +276,16 @@ fn draw_plot(
         .y_label_area_size(72)
         .build_cartesian_2d((1f64..f64::from(max_spp)).log_scale(), (lo * 0.5..hi * 2.0).log_scale())
         .map_err(|e| err(&e))?;
+    // One x label per power of two (at most 11), integers; y labels in scientific notation
+    // (plotters' default prints small values as long digit strings).
+    let x_labels = (max_spp.ilog2() as usize + 1).min(11);
     chart
         .configure_mesh()
         .x_desc("samples per pixel")
         .y_desc("RMSE")
+        .x_labels(x_labels)
+        .x_label_formatter(&|x| format!("{}", x.round() as u64))
+        .y_label_formatter(&|y| format!("{y:.0e}"))
         .label_style(("sans-serif", 15))
         .draw()
         .map_err(|e| err(&e))?;
@@ -302,8 +309,10 @@ fn draw_plot(
             .label("1/√spp")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.4)));
     }
+    // RMSE falls from the upper left: the lower left corner is empty.
     chart
         .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK.mix(0.3))
         .label_font(("sans-serif", 15))

@@ -9,6 +9,10 @@ use std::path::PathBuf;
 pub struct InfoArgs {
     /// Scene file: INRIA 3DGS `.ply`, compressed `.ply`, antimatter15 `.splat` or `.spz`.
     pub scene: PathBuf,
+    /// The capture's cameras (a cameras.json or COLMAP model): `info` then says which way is
+    /// up, the mean up of the views, as an `--up` for framing.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
     #[command(flatten)]
     pub read: crate::args::ReadArgs,
 }
@@ -41,6 +45,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| (lo.min(p.scale.min_element()), hi.max(p.scale.max_element())));
     out!("scale      {lo:.2e} … {hi:.2e}");
+    out!("{}", up_line(args.camera.as_deref())?);
     out!("opacity histogram:");
     let mut bins = [0usize; 10];
     for p in &scene.particles {
@@ -57,6 +62,34 @@ pub fn run(args: InfoArgs) -> Result<()> {
         );
     }
     print(&text)
+}
+
+/// Which way is up: the mean up of the capture's views when `cameras` are given, otherwise
+/// what trained captures usually use.
+fn up_line(cameras: Option<&std::path::Path>) -> Result<String> {
+    let Some(path) = cameras else {
+        return Ok("up         not measured (no --camera): captures trained from COLMAP data are usually \
+                   -y up; frame them with --up 0,-1,0"
+            .into());
+    };
+    let views: Vec<_> = crate::args::load_cameras(path)?.into_iter().map(|(_, c)| c).collect();
+    Ok(match splat_core::Camera::mean_up(&views) {
+        Some(up) => {
+            let axis = up.abs().max_position();
+            let sign = if up[axis] < 0.0 { "-" } else { "" };
+            let mut flag = [0; 3].map(|z: i32| z.to_string());
+            flag[axis] = format!("{sign}1");
+            format!(
+                "up         {:.2},{:.2},{:.2}, the mean of {} views: frame with --up {}",
+                up.x,
+                up.y,
+                up.z,
+                views.len(),
+                flag.join(",")
+            )
+        }
+        None => format!("up         the {} views disagree (no common up)", views.len()),
+    })
 }
 
 /// Write `text` to stdout; a closed pipe (`splat info … | head`) is not an error.

@@ -112,17 +112,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if args.all_cameras {
         return run_all_cameras(&args);
     }
-    let outputs =
-        [Some(&args.output), args.alpha.as_ref(), args.depth.as_ref(), args.normal.as_ref(), args.variance.as_ref()];
-    for path in outputs.into_iter().flatten() {
+    for (flag, path) in outputs(&args) {
         ImageFormat::from_path(path)?;
+        crate::args::check_output(path, flag)?;
     }
     let world = args.scene.load_world(640, 480)?;
+    crate::args::check_memory(&world.camera)?;
     if args.pipeline == Some(PipelineArg::Path) {
         return run_path(&args, &world);
     }
     let Loaded { scene, camera, lighting, settings, meshes, .. } = &world;
     let cpu_algorithm = algorithm(&args)?;
+    warn_unused(&args, &cpu_algorithm, &world);
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
     let gpu = choose_gpu(&args, &gpu_algorithm, &world)?;
@@ -141,15 +142,55 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     write_outputs(&args, &out)?;
     eprintln!(
-        "rendered {} particles at {}×{}, {}, {} spp in {seconds:.2} s → {}",
+        "rendered {} particles at {}×{}, {}, {} in {seconds:.2} s → {}",
         scene.particles.len(),
         camera.width,
         camera.height,
         describe(&args),
-        args.spp,
-        args.output.display()
+        frames_done(args.spp, algorithm.is_random(lighting, !meshes.is_empty())),
+        written(&args)
     );
     Ok(())
+}
+
+/// The images `splat render` writes, with their flags: colour first.
+fn outputs(args: &RenderArgs) -> Vec<(&'static str, &PathBuf)> {
+    let extra = [("--alpha", &args.alpha), ("--depth", &args.depth), ("--normal", &args.normal)];
+    let extra = extra.into_iter().chain([("--variance", &args.variance)]);
+    std::iter::once(("-o", &args.output)).chain(extra.filter_map(|(flag, p)| p.as_ref().map(|p| (flag, p)))).collect()
+}
+
+/// The files written, for the summary line.
+fn written(args: &RenderArgs) -> String {
+    outputs(args).iter().map(|(_, p)| p.display().to_string()).collect::<Vec<_>>().join(", ")
+}
+
+/// How many frames a render of `spp` averaged: one for a deterministic render, whatever
+/// `--spp` asked.
+fn frames_done(spp: u32, random: bool) -> String {
+    match (random, spp) {
+        (true, _) => format!("{spp} spp"),
+        (false, 1) => "1 frame (deterministic)".into(),
+        (false, _) => format!("1 frame (deterministic: --spp {spp} adds nothing)"),
+    }
+}
+
+/// Say which options given on the command line the chosen method does not read, one warning
+/// line each, so that nothing is ignored silently.
+fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) {
+    for flag in args.options.unused(algorithm) {
+        eprintln!("warning: {flag} does not apply to {}: ignored", describe(args));
+    }
+    if args.pipeline != Some(PipelineArg::Hybrid) && args.secondary != MethodArg::Exact {
+        eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
+    }
+    if world.environment.is_some() || world.lens.is_some() {
+        eprintln!(
+            "warning: the world sets up the path tracer ([environment] or a lens): rendering with {}; \
+             --pipeline path renders it path traced",
+            describe(args)
+        );
+    }
 }
 
 /// `splat render --all-cameras`: every view of --camera into the folder -o, one progress bar
@@ -163,6 +204,9 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
     }
     let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
     let cameras = crate::args::load_cameras(path)?;
+    for (_, camera) in &cameras {
+        crate::args::check_memory(&args.scene.sized(*camera)?)?;
+    }
     let mut world = args.scene.load_world(640, 480)?;
     let cpu_algorithm = algorithm(args)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
@@ -199,10 +243,10 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     eprintln!(
-        "rendered {} views, {}, {} spp in {:.2} s → {}",
+        "rendered {} views, {}, {} in {:.2} s → {}",
         cameras.len(),
         describe(args),
-        args.spp,
+        frames_done(args.spp, algorithm.is_random(&world.lighting, !world.meshes.is_empty())),
         start.elapsed().as_secs_f64(),
         args.output.display()
     );

@@ -105,6 +105,7 @@ pub fn run(args: StratifyArgs) -> Result<()> {
     };
     let stratified = RasterMethod::Stratified { scramble: true };
     let mut tiles: Vec<Vec<Image>> = Vec::new();
+    let (mut labels, mut rmses) = (Vec::new(), Vec::new());
     for name in &args.scenes {
         let (scene, camera) = scenes::by_name(name)
             .with_context(|| format!("unknown scene '{name}' (built-in: {})", scenes::NAMES.join(", ")))?;
@@ -121,6 +122,8 @@ pub fn run(args: StratifyArgs) -> Result<()> {
             row(name, samples, "cpu", pattern, ours, theirs);
             if IMAGE_SAMPLES.contains(&samples) {
                 tiles.push(vec![theirs_image, ours_image, reference]);
+                labels.push(format!("{name}, S = {samples}"));
+                rmses.push([theirs, ours]);
             }
             if let (Some(ctx), Some(pipes)) = (&ctx, &pipes)
                 && SamplePattern::Standard.has(samples)
@@ -132,7 +135,7 @@ pub fn run(args: StratifyArgs) -> Result<()> {
     }
     print!("{table}");
     let png = args.output.with_extension("png");
-    splat_io::image::write_image(&png, &mosaic(&tiles))?;
+    write_labelled(&png, &tiles, &labels, &rmses)?;
     eprintln!("wrote {} (columns: enderton, stratified, sorted; rows: S = 4, 16, 64 per scene)", png.display());
     Ok(())
 }
@@ -161,9 +164,62 @@ fn gpu_rmse(
     Ok((ours, theirs))
 }
 
-/// Images laid out in a grid (rows × columns) with a 4-pixel grey gutter.
+/// The gutter between the mosaic's images, in pixels.
+const GAP: u32 = 4;
+
+/// The mosaic as a PNG with its legend: the columns' names above, each row's scene and S to
+/// its left, and each method's frame RMSE against sorted splatting (in 8-bit levels, as the
+/// table) under it, so that the picture reads without the table.
+fn write_labelled(path: &std::path::Path, tiles: &[Vec<Image>], rows: &[String], rmses: &[[f64; 2]]) -> Result<()> {
+    use plotters::prelude::*;
+    let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    let body = mosaic(tiles);
+    let (tile_w, tile_h) = tiles.iter().flatten().fold((0, 0), |(w, h), i| (w.max(i.width()), h.max(i.height())));
+    let (left, top, below) = (130u32, 24u32, 16u32);
+    let (w, h) = (left + body.width(), top + body.height() + below);
+    let mut rgb = vec![255u8; 3 * (w * h) as usize];
+    for y in 0..body.height() {
+        for x in 0..body.width() {
+            let i = 3 * ((top + y) * w + left + x) as usize;
+            for (c, v) in body.pixel(x, y).iter().enumerate() {
+                rgb[i + c] = splat_core::image::to_u8(*v);
+            }
+        }
+    }
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let coloured = |s: &str, (x, y): (u32, u32), size: u32, colour: &RGBColor| {
+            root.draw_text(s, &("sans-serif", size).into_font().color(colour), (x as i32, y as i32))
+        };
+        let text = |s: &str, at, size| coloured(s, at, size, &BLACK);
+        let column_x = |c: u32| left + GAP + c * (tile_w + GAP);
+        let row_y = |r: u32| top + GAP + r * (tile_h + GAP);
+        for (c, name) in ["Enderton", "stratified", "sorted (reference)"].iter().enumerate() {
+            text(name, (column_x(c as u32), 4), 15).map_err(|e| anyhow::anyhow!("{e}"))?;
+        }
+        for (r, (label, rmse)) in rows.iter().zip(rmses).enumerate() {
+            let y = row_y(r as u32);
+            text(label, (6, y + tile_h / 2 - 8), 14).map_err(|e| anyhow::anyhow!("{e}"))?;
+            for (c, value) in rmse.iter().enumerate() {
+                let at = (column_x(c as u32) + 2, y + tile_h.saturating_sub(14));
+                coloured(&format!("RMSE {value:.2}"), at, 12, &WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
+            }
+        }
+        text(
+            "RMSE of one frame against sorted splatting, in 8-bit levels (0-255), over the frames",
+            (6, h - below + 1),
+            12,
+        )
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+        root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    let image = image::RgbImage::from_raw(w, h, rgb).expect("3 bytes a pixel");
+    image.save(path).map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))
+}
+
+/// Images laid out in a grid (rows × columns) with a [`GAP`]-pixel grey gutter.
 fn mosaic(rows: &[Vec<Image>]) -> Image {
-    let gap = 4;
+    let gap = GAP;
     let (w, h) = rows.iter().flatten().fold((0, 0), |(w, h), i| (w.max(i.width()), h.max(i.height())));
     let cols = rows.iter().map(Vec::len).max().unwrap_or(0) as u32;
     let mut out = Image::filled(cols * (w + gap) + gap, rows.len() as u32 * (h + gap) + gap, 3, 0.5);

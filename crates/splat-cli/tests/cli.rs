@@ -1022,3 +1022,166 @@ fn view_is_a_subcommand_that_refuses_bad_input_before_opening_a_window() {
     assert_eq!(missing.status.code(), Some(1));
     assert!(stderr(&missing).contains("no-such.ply"), "{}", stderr(&missing));
 }
+
+/// Run `splat` and return (success, stderr).
+fn said(args: &[&str]) -> (bool, String) {
+    let o = splat(args);
+    let text = stderr(&o);
+    assert!(!text.contains("panicked"), "{args:?} panicked:\n{text}");
+    (o.status.success(), text)
+}
+
+/// A new user's mistakes, each refused with one message that names the problem and the way
+/// out, before any rendering starts.
+#[test]
+fn a_new_users_mistakes_are_refused_with_clear_messages_before_any_work() {
+    let out = scratch("mistake.png");
+    let out = out.to_str().unwrap();
+    let size = "is not an image size: give a whole number of pixels from 1 to 16384";
+    for width in
+        [&["--width", "0"][..], &["--width=-5"], &["--width", "-5"], &["--width", "ten"], &["--width", "16385"]]
+    {
+        let (ok, text) = said(&[&["render", "fixtures/cloud.ply", "-o", out][..], width].concat());
+        assert!(!ok && text.contains(size), "{width:?}: {text}");
+    }
+    let (ok, text) = said(&["render", "fixtures/cloud.ply", "-o", "no-such-folder/x.png"]);
+    assert!(!ok && text.contains("the folder no-such-folder does not exist"), "{text}");
+    let (ok, text) = said(&["render", "fixtures/cloud.ply", "-o", out, "--depth", "no-such-folder/d.npy"]);
+    assert!(!ok && text.contains("--depth no-such-folder/d.npy"), "{text}");
+    // 16384² needs about 27 GiB: where less is available, refused at once with the estimate.
+    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        let line = m.lines().find(|l| l.starts_with("MemAvailable:"))?.to_owned();
+        line.split_whitespace().nth(1)?.parse::<u64>().ok()
+    });
+    match available {
+        Some(kib) if kib < 26 << 20 => {
+            let start = std::time::Instant::now();
+            let (ok, text) =
+                said(&["render", "fixtures/cloud.ply", "--width", "16384", "--height", "16384", "-o", out]);
+            assert!(!ok && text.contains("render needs about") && text.contains("bytes a pixel"), "{text}");
+            assert!(start.elapsed().as_secs() < 20, "the refusal came after {:?}", start.elapsed());
+        }
+        _ => splat_tests::not_applicable(&splat_tests::current_test(), "16384² fits in this machine's memory"),
+    }
+    let empty = scratch("empty.splat");
+    std::fs::write(&empty, b"").unwrap();
+    let (ok, text) = said(&["render", empty.to_str().unwrap(), "-o", out]);
+    assert!(!ok && text.contains("has no splats"), "{text}");
+    let (ok, text) = said(&["view", empty.to_str().unwrap()]);
+    assert!(!ok && text.contains("has no splats"), "the viewer opened an empty scene: {text}");
+    let (ok, text) = said(&["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.ply", "-o", out]);
+    assert!(!ok && text.contains("not a camera file") && text.contains("COLMAP"), "{text}");
+}
+
+/// A world file naming a file that is not there: the error names the world file, the entry
+/// and the missing file; under `target/assets/` it says how to fetch the capture.
+#[test]
+fn a_missing_world_entry_names_the_world_and_the_entry() {
+    let world = scratch("missing-entry.toml");
+    std::fs::write(
+        &world,
+        "[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nfile = \"pedestal.obj\"\n[[splats]]\nfile = \"target/assets/gone.splat\"\n",
+    )
+    .unwrap();
+    let (ok, text) = said(&["render", world.to_str().unwrap(), "-o", scratch("w.png").to_str().unwrap()]);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("missing-entry.toml") && text.contains("splats[1]: file = \"target/assets/gone.splat\""),
+        "{text}"
+    );
+    assert!(text.contains("cargo xtask assets"), "no hint for the repository's capture: {text}");
+    std::fs::write(&world, "[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nfile = \"pedestal.obj\"\n").unwrap();
+    let (ok, text) = said(&["render", world.to_str().unwrap(), "-o", scratch("w.png").to_str().unwrap()]);
+    assert!(!ok && text.contains("meshes[0]: file = \"pedestal.obj\" cannot be read"), "{text}");
+    assert!(!text.contains("cargo xtask assets"), "a user's own missing file gets the repository's hint: {text}");
+}
+
+/// Options the chosen method does not read are named in a warning; the summary names every
+/// file written and says a deterministic method rendered one frame.
+#[test]
+fn ignored_options_are_named_and_the_summary_says_what_was_done() {
+    let (out, alpha) = (scratch("summary.png"), scratch("summary-alpha.png"));
+    let scene = ["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.cameras.json", "--backend", "cpu"];
+    let files = ["-o", out.to_str().unwrap(), "--alpha", alpha.to_str().unwrap()];
+    let (ok, text) = said(&[&scene[..], &files, &["--raster-samples", "4", "--early-stop", "--spp", "8"]].concat());
+    assert!(ok, "{text}");
+    for flag in ["--raster-samples", "--early-stop"] {
+        assert!(text.contains(&format!("warning: {flag} does not apply to exact")), "{flag}: {text}");
+    }
+    assert!(text.contains("1 frame (deterministic: --spp 8 adds nothing)"), "{text}");
+    assert!(text.contains(&format!("{}, {}", out.display(), alpha.display())), "the summary omits --alpha: {text}");
+    let (ok, text) = said(&[&scene[..], &files, &["--method", "stochastic", "--spp", "2", "--k", "4"]].concat());
+    assert!(ok && text.contains("stochastic, 2 spp") && text.contains("warning: --k does not apply"), "{text}");
+    let (ok, text) = said(&[&scene[..], &files, &["--method", "kbuffer", "--k", "4"]].concat());
+    assert!(ok && !text.contains("warning"), "kbuffer reads --k: {text}");
+    let (ok, text) = said(&[&scene[..], &files, &["--method", "stochastic-splat", "--raster-samples", "4"]].concat());
+    assert!(ok && !text.contains("warning"), "stochastic-splat reads --raster-samples: {text}");
+    // A world set up for the path tracer, rendered without --pipeline path.
+    let world = scratch("path-world.toml");
+    std::fs::write(&world, "[environment]\ncolor = [0.2, 0.2, 0.2]\n[[splats]]\nbuiltin = \"demo\"\n").unwrap();
+    let small = ["--width", "32", "--height", "24", "-o", out.to_str().unwrap()];
+    let (ok, text) = said(&[&["render", world.to_str().unwrap()][..], &small].concat());
+    assert!(ok && text.contains("warning: the world sets up the path tracer"), "{text}");
+    let (ok, text) =
+        said(&[&["render", world.to_str().unwrap(), "--pipeline", "path", "--spp", "1"][..], &small].concat());
+    assert!(ok && !text.contains("warning"), "{text}");
+}
+
+/// `splat info` says which way is up: measured from the views with `--camera`, with advice
+/// without; the framing of a scene file without cameras says the same.
+#[test]
+fn info_and_framing_say_which_way_is_up() {
+    let views = scratch("upside-down.cameras.json");
+    let down = splat_core::glam::Vec3::new(0.0, -1.0, 0.0);
+    let cameras: Vec<_> = [(0.0, 4.0), (3.0, 2.0), (-2.0, 3.0)]
+        .map(|(x, z)| {
+            splat_core::Camera::look_at((x, -0.5, z).into(), splat_core::glam::Vec3::ZERO, down, 50.0, 64, 48).unwrap()
+        })
+        .to_vec();
+    splat_io::cameras::write_cameras(&views, &cameras).unwrap();
+    let o = splat(&["info", "fixtures/cloud.ply", "--camera", views.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && text.contains("the mean of 3 views: frame with --up 0,-1,0"), "{text}");
+    let o = splat(&["info", "fixtures/cloud.ply"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("usually -y up"));
+    let out = scratch("framed.png");
+    let (ok, text) =
+        said(&["render", "fixtures/cloud.ply", "--width", "32", "--height", "24", "-o", out.to_str().unwrap()]);
+    assert!(ok && text.contains("note: no --camera") && text.contains("--up 0,-1,0"), "{text}");
+    let (ok, text) = said(&[
+        "render",
+        "fixtures/cloud.ply",
+        "--up",
+        "0,-1,0",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok && !text.contains("note:"), "an explicit --up still gets the note: {text}");
+}
+
+/// Help text: each command's own options under their own heading, sizes with their defaults,
+/// defaults stated once.
+#[test]
+fn help_puts_options_under_their_own_headings() {
+    let help = |args: &[&str]| String::from_utf8_lossy(&splat(args).stdout).into_owned();
+    for (command, option) in [("converge", "--max-spp"), ("bench", "--repeat")] {
+        let text = help(&[command, "--help"]);
+        let heading =
+            text.find("\nMeasurement:\n").unwrap_or_else(|| panic!("{command}: no Measurement heading:\n{text}"));
+        let reading = text.find("\nReading scene files:\n").expect("reading heading");
+        let at = text.find(&format!("  {option}")).expect("the option");
+        assert!(
+            at > heading && (reading < heading || at < reading),
+            "{command}: {option} is not under Measurement:\n{text}"
+        );
+    }
+    let render = help(&["render", "--help"]);
+    assert!(render.contains("640 for render") && render.contains("480 for render"), "{render}");
+    let blend = render.find("      --blend <BLEND>").unwrap();
+    let blend = &render[blend..blend + render[blend..].find("\n      --").unwrap_or(400)];
+    assert_eq!(blend.to_lowercase().matches("default").count(), 1, "--blend states its default twice: {blend}");
+}
