@@ -1185,3 +1185,28 @@ fn help_puts_options_under_their_own_headings() {
     let blend = &render[blend..blend + render[blend..].find("\n      --").unwrap_or(400)];
     assert_eq!(blend.to_lowercase().matches("default").count(), 1, "--blend states its default twice: {blend}");
 }
+
+/// On a machine without a desktop session (`XDG_RUNTIME_DIR` unset), `--backend gpu` prints
+/// nothing of the graphics stack's: Mesa's device-select layer, loaded into every Vulkan
+/// process, would print "error: XDG_RUNTIME_DIR is invalid or not set" twice (seen with the
+/// switch taken out of `main`), and `splat` turns it off.
+#[test]
+fn the_gpu_backend_is_quiet_without_a_desktop_session() {
+    let out = scratch("quiet-gpu.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_splat"))
+        .args(["render", "--width", "32", "--height", "24", "--backend", "gpu", "-o", out.to_str().unwrap()])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .current_dir(root())
+        .output()
+        .unwrap();
+    if !o.status.success() {
+        return gpu_missing(&stderr(&o));
+    }
+    let noise: Vec<_> = stderr(&o)
+        .lines()
+        .filter(|l| !l.starts_with("rendering on") && !l.starts_with("rendered"))
+        .map(String::from)
+        .collect();
+    assert!(noise.is_empty(), "the GPU backend printed more than its two lines: {noise:?}");
+}

@@ -6,6 +6,19 @@ use splat_core::Camera;
 use splat_core::image::Image;
 use wgpu::util::DeviceExt;
 
+/// The environment variable that turns off Mesa's Vulkan device-select layer, where the
+/// layer can only complain: on a machine without a desktop session (`XDG_RUNTIME_DIR` unset)
+/// the layer, loaded into every Vulkan process, tries to reach a Wayland compositor and prints
+/// `error: XDG_RUNTIME_DIR is invalid or not set in the environment` for each instance. wgpu
+/// chooses the adapter itself, so the layer's ordering is not needed there. `None` when the
+/// session has a runtime folder or the user set the switch (`NODEVICE_SELECT`, the layer's
+/// own). A binary sets it at the start of `main`, before any thread starts, as
+/// [`std::env::set_var`] requires; a library cannot do that soundly, so none here does.
+pub fn device_select_switch() -> Option<(&'static str, &'static str)> {
+    let headless = std::env::var_os("XDG_RUNTIME_DIR").is_none();
+    (headless && std::env::var_os("NODEVICE_SELECT").is_none()).then_some(("NODEVICE_SELECT", "1"))
+}
+
 /// Storage buffers the ray-tracing kernel binds in its one stage.
 const MIN_STORAGE_BUFFERS_PER_STAGE: u32 = 15;
 
