@@ -499,7 +499,7 @@ impl SceneArgs {
     /// --shadows and --background, and choose the camera.
     pub fn load_world(&self, width: u32, height: u32) -> Result<Loaded> {
         let world = match &self.scene {
-            Some(path) if is_world(path) => splat_io::world::read_world(path)?,
+            Some(path) if splat_io::world::is_world_file(path) => splat_io::world::read_world(path)?,
             Some(path) => World::of(load_scene(path, self.read)?),
             None => {
                 let (scene, camera) = scenes::demo();
@@ -569,7 +569,7 @@ impl SceneArgs {
         } else if let Some(camera) = default_camera {
             camera
         } else {
-            if self.up.is_none() && self.scene.as_deref().is_some_and(|p| !is_world(p)) {
+            if self.up.is_none() && self.scene.as_deref().is_some_and(|p| !splat_io::world::is_world_file(p)) {
                 eprintln!(
                     "note: no --camera: framing the scene from +z with +y up; captures trained from COLMAP data are \
                      usually -y up (--up 0,-1,0; `splat info SCENE --camera CAMERAS` measures it)"
@@ -660,11 +660,6 @@ pub fn check_memory(camera: &Camera) -> Result<()> {
         ),
         _ => Ok(()),
     }
-}
-
-/// Whether `path` is a world file (`.toml`).
-pub fn is_world(path: &std::path::Path) -> bool {
-    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"))
 }
 
 /// The largest image side the commands accept: the camera's.

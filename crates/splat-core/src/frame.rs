@@ -243,11 +243,11 @@ impl From<PixelFrames> for Finished {
     }
 }
 
-/// Bytes a pixel of a CPU render holds at its peak: its finished values in its tile and its
-/// share of the [`RenderOutput`] they are copied into (the images and the picks). Hosts use it
-/// to refuse a render that cannot fit before starting it.
-pub const BYTES_PER_PIXEL: u64 =
-    (std::mem::size_of::<Finished>() + 11 * std::mem::size_of::<f32>() + std::mem::size_of::<Option<u32>>()) as u64;
+/// Bytes a pixel of a CPU render holds at its peak: its finished values in its tile, and the
+/// same values again in the [`RenderOutput`] they are copied into (its images and picks hold
+/// exactly a [`Finished`]'s fields). Hosts use it to refuse a render that cannot fit before
+/// starting it.
+pub const BYTES_PER_PIXEL: u64 = 2 * std::mem::size_of::<Finished>() as u64;
 
 /// The one frame loop: `pixel(state, x, y)` folds the frames of pixel (x, y), with `state` made
 /// once per tile by `tile_state(tile)` (scratch buffers, per-tile candidate lists). Tiles run in

@@ -262,6 +262,11 @@ struct LightFile {
     radius: Option<f32>,
 }
 
+/// Whether `path` names a world file (extension `.toml`, any case) rather than a scene file.
+pub fn is_world_file(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+}
+
 /// Read a world file (`.toml`); set files are resolved relative to its folder.
 pub fn read_world(path: &Path) -> Result<World, Error> {
     let text = String::from_utf8(crate::read_file(path)?)

@@ -39,9 +39,8 @@ pub struct SceneInfo {
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
 /// when `None`) and the views of `cameras`.
 pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
-    let is_world = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
     let (world, name) = match scene {
-        Some(path) if is_world(path) => (splat_io::world::read_world(path)?, file_name(path)),
+        Some(path) if splat_io::world::is_world_file(path) => (splat_io::world::read_world(path)?, file_name(path)),
         Some(path) => {
             let read = splat_io::read_scene_with(path, splat_io::ReadOptions::default())?;
             if !read.skipped_properties.is_empty() {
