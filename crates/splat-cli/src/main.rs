@@ -75,13 +75,11 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    if let Some((name, value)) = splat_gpu::device_select_switch() {
-        // SAFETY: the first statement of main, before any thread starts.
-        #[allow(unsafe_code)]
-        unsafe {
-            std::env::set_var(name, value)
-        };
-    }
+    // SAFETY: the first statement of main, before any thread starts.
+    #[allow(unsafe_code)]
+    unsafe {
+        splat_gpu::quiet_device_select()
+    };
     let cli = Cli::parse();
     if let Command::Ztest(args) = &cli.command {
         return match ztest::run(args) {

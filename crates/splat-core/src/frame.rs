@@ -245,7 +245,7 @@ impl From<PixelFrames> for Finished {
 
 /// Bytes a pixel of a CPU render holds at its peak: its finished values in its tile, and the
 /// same values again in the [`RenderOutput`] they are copied into (its images and picks hold
-/// exactly a [`Finished`]'s fields). Hosts use it to refuse a render that cannot fit before
+/// exactly the fields of a tile's finished pixel). Hosts use it to refuse a render that cannot fit before
 /// starting it.
 pub const BYTES_PER_PIXEL: u64 = 2 * std::mem::size_of::<Finished>() as u64;
 

@@ -9,6 +9,11 @@ use splat_core::{Frames, RenderSettings, scenes, stats::rmse};
 use splat_gpu::{GpuContext, GpuTracer, TracePipeline};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // SAFETY: the first statement of main, before any thread starts.
+    #[allow(unsafe_code)]
+    unsafe {
+        splat_gpu::quiet_device_select()
+    };
     let output = std::env::args().nth(1).unwrap_or_else(|| "trace_gpu.png".into());
     let (scene, camera) = scenes::cloud();
     let camera = camera.rescaled(64, 48)?;

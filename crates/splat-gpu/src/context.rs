@@ -6,17 +6,25 @@ use splat_core::Camera;
 use splat_core::image::Image;
 use wgpu::util::DeviceExt;
 
-/// The environment variable that turns off Mesa's Vulkan device-select layer, where the
-/// layer can only complain: on a machine without a desktop session (`XDG_RUNTIME_DIR` unset)
-/// the layer, loaded into every Vulkan process, tries to reach a Wayland compositor and prints
-/// `error: XDG_RUNTIME_DIR is invalid or not set in the environment` for each instance. wgpu
-/// chooses the adapter itself, so the layer's ordering is not needed there. `None` when the
-/// session has a runtime folder or the user set the switch (`NODEVICE_SELECT`, the layer's
-/// own). A binary sets it at the start of `main`, before any thread starts, as
-/// [`std::env::set_var`] requires; a library cannot do that soundly, so none here does.
-pub fn device_select_switch() -> Option<(&'static str, &'static str)> {
+/// Turns off Mesa's Vulkan device-select layer where the layer can only complain: on a machine
+/// without a desktop session (`XDG_RUNTIME_DIR` unset) the layer, loaded into every Vulkan
+/// process, tries to reach a Wayland compositor and prints `error: XDG_RUNTIME_DIR is invalid
+/// or not set in the environment` for each instance. wgpu chooses the adapter itself, so the
+/// layer's ordering is not needed there. Sets the layer's own switch `NODEVICE_SELECT=1` unless
+/// the session has a runtime folder or the user set the switch already.
+///
+/// # Safety
+///
+/// Call it at the start of `main`, before any other thread starts: it sets an environment
+/// variable, which [`std::env::set_var`] allows only while no other thread reads the
+/// environment. A library cannot promise that, so nothing in this crate calls it.
+#[allow(unsafe_code)]
+pub unsafe fn quiet_device_select() {
     let headless = std::env::var_os("XDG_RUNTIME_DIR").is_none();
-    (headless && std::env::var_os("NODEVICE_SELECT").is_none()).then_some(("NODEVICE_SELECT", "1"))
+    if headless && std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: the caller promises no other thread runs yet.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
 }
 
 /// Storage buffers the ray-tracing kernel binds in its one stage.

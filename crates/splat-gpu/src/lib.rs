@@ -29,7 +29,7 @@ pub mod trace;
 pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
-pub use context::{GpuContext, device_select_switch};
+pub use context::{GpuContext, quiet_device_select};
 pub use display::{Display, DisplayMode, PixelState, read_rgba8};
 pub use error::GpuError;
 pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};

@@ -12,13 +12,11 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
-    if let Some((name, value)) = splat_gpu::device_select_switch() {
-        // SAFETY: the first statement of main, before any thread starts.
-        #[allow(unsafe_code)]
-        unsafe {
-            std::env::set_var(name, value)
-        };
-    }
+    // SAFETY: the first statement of main, before any thread starts.
+    #[allow(unsafe_code)]
+    unsafe {
+        splat_gpu::quiet_device_select()
+    };
     match splat_view::run(&Cli::parse().args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
