@@ -48,14 +48,24 @@ fn test(extra: &[String]) -> Result<()> {
     ensure_vulkan_driver()?;
     ensure_embree()?;
     ensure_xvfb()?;
-    let mut cmd = Command::new(env!("CARGO"));
-    cmd.current_dir(root()).args(["test", "--workspace", "--release"]).args(extra);
-    if std::env::var_os("WGPU_BACKEND").is_none() {
-        cmd.env("WGPU_BACKEND", "vulkan");
-    }
     let skips = splat_tests::skip_log();
     let _ = std::fs::remove_file(&skips);
-    let status = cmd.status().context("running cargo test")?;
+    let status = if extra.is_empty() && has_nextest() {
+        // Every test in a process of its own, two at a time: the statistical suites' processes
+        // overlap instead of queueing binary after binary (lavapipe keeps one core of two busy
+        // on the small test images). cargo-nextest runs no doctests; cargo test runs those.
+        let run = test_command(&["nextest", "run", "--workspace", "--cargo-profile", "release", "--profile", "ci"]);
+        let tests = run_status(run, "cargo nextest run")?;
+        let docs = run_status(test_command(&["test", "--workspace", "--release", "--doc"]), "cargo test --doc")?;
+        if tests.success() { docs } else { tests }
+    } else {
+        if extra.is_empty() {
+            eprintln!("cargo-nextest is not installed: running the test binaries one after another with cargo test");
+        }
+        let mut cmd = test_command(&["test", "--workspace", "--release"]);
+        cmd.args(extra);
+        run_status(cmd, "cargo test")?
+    };
     report_skips(&skips);
     if !status.success() {
         bail!("tests failed ({status})");
@@ -65,6 +75,32 @@ fn test(extra: &[String]) -> Result<()> {
         check_docs()?;
     }
     Ok(())
+}
+
+/// `cargo ARGS` in the workspace, with the GPU tests on Vulkan unless `WGPU_BACKEND` says
+/// otherwise.
+fn test_command(args: &[&str]) -> Command {
+    let mut cmd = Command::new(env!("CARGO"));
+    cmd.current_dir(root()).args(args);
+    if std::env::var_os("WGPU_BACKEND").is_none() {
+        cmd.env("WGPU_BACKEND", "vulkan");
+    }
+    cmd
+}
+
+fn run_status(mut cmd: Command, what: &str) -> Result<std::process::ExitStatus> {
+    cmd.status().with_context(|| format!("running {what}"))
+}
+
+/// Whether `cargo nextest` runs here (the machines' images carry it; `cargo install
+/// cargo-nextest` elsewhere).
+fn has_nextest() -> bool {
+    Command::new(env!("CARGO"))
+        .args(["nextest", "--version"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
 }
 
 /// Run every library example (built by `cargo test`); each checks its own result.
