@@ -7,6 +7,7 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use embree_peer::{EmbreePeer, PeerBounds, PeerMethod, difference};
 use glam::Vec3;
+use splat_io::text::parse_vec3;
 use splat_core::frame::Frames;
 use splat_core::rng::frame_key;
 use splat_core::trace::{Method, TraceScene, render_frames};
@@ -26,7 +27,7 @@ struct Args {
     #[arg(long, value_parser = parse_vec3, default_value = "0,0.5,0")]
     target: Vec3,
     /// World up "x,y,z".
-    #[arg(long, value_parser = parse_vec3, default_value = "0,-1,0")]
+    #[arg(long, value_parser = splat_io::text::parse_direction, default_value = "0,-1,0")]
     up: Vec3,
     /// Vertical field of view in degrees.
     #[arg(long, default_value_t = 50.0)]
@@ -43,15 +44,6 @@ struct Args {
     /// Timed repetitions of each measurement; the fastest is reported.
     #[arg(long, default_value_t = 3)]
     repeat: u32,
-}
-
-fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v: Vec<f32> =
-        s.split(',').map(|c| c.trim().parse::<f32>().map_err(|e| format!("{s:?}: {e}"))).collect::<Result<_, _>>()?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
-        _ => Err(format!("{s:?}: expected three finite numbers \"x,y,z\"")),
-    }
 }
 
 /// The fastest of `repeat` runs of `f`, in seconds, with the last result.

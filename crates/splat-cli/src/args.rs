@@ -13,7 +13,8 @@ use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, Sam
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
-use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene, scenes};
+use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene};
+use splat_io::text::{parse_direction, parse_vec3};
 use splat_io::world::World;
 use std::path::PathBuf;
 
@@ -391,7 +392,7 @@ pub struct SceneArgs {
     pub target: Option<Vec3>,
     /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0; `splat
     /// info SCENE --camera CAMERAS` measures it) [default: 0,1,0].
-    #[arg(help_heading = "Camera", long, value_parser = parse_up)]
+    #[arg(help_heading = "Camera", long, value_parser = parse_direction)]
     pub up: Option<Vec3>,
     /// Vertical field of view in degrees for --eye/--target.
     #[arg(help_heading = "Camera", long, default_value_t = 50.0)]
@@ -498,19 +499,12 @@ impl SceneArgs {
     /// Load the scene, world file or demo with its lighting, apply --sh-degree, --look,
     /// --shadows and --background, and choose the camera.
     pub fn load_world(&self, width: u32, height: u32) -> Result<Loaded> {
-        let world = match &self.scene {
-            Some(path) if splat_io::world::is_world_file(path) => splat_io::world::read_world(path)?,
-            Some(path) => World::of(load_scene(path, self.read)?),
-            None => {
-                let (scene, camera) = scenes::demo();
-                World { camera: Some(camera), ..World::of(scene) }
-            }
-        };
-        let World { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } = world;
-        if scene.particles.is_empty() && meshes.is_empty() {
-            let name = self.scene.as_deref().map_or("the scene".into(), |p| p.display().to_string());
-            bail!("{name} has no splats: nothing to render (`splat info` shows what the file holds)");
+        let opened = splat_io::world::open_world(self.scene.as_deref(), self.read.options())?;
+        if let Some(path) = &self.scene {
+            warn_skipped_properties(path, &opened.skipped_properties);
         }
+        let World { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } =
+            opened.world;
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
             splat_io::world::truncate_sh(&mut scene, degree);
@@ -602,22 +596,23 @@ impl SceneArgs {
     }
 }
 
-/// Load a scene by extension; say in one line which unknown `.ply` properties were skipped.
-pub fn load_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_core::Scene> {
-    Ok(read_scene(path, read)?.scene)
-}
-
-/// [`load_scene`] with the format found.
+/// Read a scene by extension, with the format found; say in one line which unknown `.ply`
+/// properties were skipped.
 pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::SceneRead> {
     let read = splat_io::read_scene_with(path, read.options())?;
-    if !read.skipped_properties.is_empty() {
+    warn_skipped_properties(path, &read.skipped_properties);
+    Ok(read)
+}
+
+/// Say which unknown `.ply` properties the reader skipped.
+fn warn_skipped_properties(path: &std::path::Path, skipped: &[String]) {
+    if !skipped.is_empty() {
         eprintln!(
             "warning: {}: skipped unknown vertex properties {} (--strict refuses them)",
             path.display(),
-            read.skipped_properties.join(", ")
+            skipped.join(", ")
         );
     }
-    Ok(read)
 }
 
 /// Refuse an output path whose folder does not exist, before any work: a render of minutes
@@ -670,23 +665,6 @@ pub fn parse_side(s: &str) -> Result<u32, String> {
     match s.trim().parse::<i64>() {
         Ok(n) if (1..=i64::from(MAX_SIDE)).contains(&n) => Ok(n as u32),
         _ => Err(format!("'{s}' is not an image size: give a whole number of pixels from 1 to {MAX_SIDE}")),
-    }
-}
-
-/// A world up: three finite numbers, not all zero.
-fn parse_up(s: &str) -> Result<Vec3, String> {
-    match parse_vec3(s)? {
-        v if v == Vec3::ZERO => Err(format!("'{s}' is not a direction: up needs a non-zero x,y,z")),
-        v => Ok(v),
-    }
-}
-
-pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v: Vec<f32> =
-        s.split(',').map(|c| c.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("'{s}': {e}"))?;
-    match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
-        _ => Err(format!("'{s}' is not three finite numbers x,y,z")),
     }
 }
 

@@ -1066,9 +1066,9 @@ fn a_new_users_mistakes_are_refused_with_clear_messages_before_any_work() {
     let empty = scratch("empty.splat");
     std::fs::write(&empty, b"").unwrap();
     let (ok, text) = said(&["render", empty.to_str().unwrap(), "-o", out]);
-    assert!(!ok && text.contains("has no splats"), "{text}");
+    assert!(!ok && text.contains("holds no splats and no meshes"), "{text}");
     let (ok, text) = said(&["view", empty.to_str().unwrap()]);
-    assert!(!ok && text.contains("has no splats"), "the viewer opened an empty scene: {text}");
+    assert!(!ok && text.contains("holds no splats and no meshes"), "the viewer opened an empty scene: {text}");
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.ply", "-o", out]);
     assert!(!ok && text.contains("not a camera file") && text.contains("COLMAP"), "{text}");
 }

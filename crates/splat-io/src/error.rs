@@ -188,4 +188,7 @@ pub enum ErrorKind {
     /// A mesh file (OBJ, glTF) is malformed or holds no triangles.
     #[error("mesh: {0}")]
     Mesh(String),
+    /// The file reads but holds neither splats nor meshes.
+    #[error("holds no splats and no meshes: nothing to render")]
+    Empty,
 }

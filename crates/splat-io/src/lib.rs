@@ -7,6 +7,7 @@
 //! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
 //! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
 //! - Images: `.png` (8-bit), `.exr` (f32), `.npy` (f32, H × W × C), chosen by extension.
+//! - What a front end opens ([`world::open_world`]) and the `x,y,z` options it reads ([`text`]).
 //!
 //! Every reader returns a typed [`Error`] naming the file and, where it applies, the element
 //! index or byte offset and the problem; no input makes a reader panic.
@@ -26,6 +27,7 @@ pub mod mesh;
 pub mod ply;
 pub mod splat;
 pub mod spz;
+pub mod text;
 pub mod world;
 
 pub use error::{Error, ErrorKind};

@@ -267,6 +267,40 @@ pub fn is_world_file(path: &Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"))
 }
 
+/// What a front end opens ([`open_world`]).
+#[derive(Clone, Debug)]
+pub struct Opened {
+    /// The world: a world file's, a scene file's as one emissive set, or the demo's.
+    pub world: World,
+    /// Its name for titles and messages: the file name, or `demo`.
+    pub name: String,
+    /// `.ply` vertex properties the reader skipped as unknown (see [`crate::ReadOptions`]).
+    pub skipped_properties: Vec<String>,
+}
+
+/// Open what the user named: a world file (`.toml`), a scene file (`.ply`, compressed `.ply`,
+/// `.splat`, `.spz`) as a world of one emissive set, or, for `None`, the built-in demo with
+/// its camera. A world with neither splats nor meshes is refused ([`ErrorKind::Empty`]), so
+/// that no front end opens a window or starts a render on nothing.
+pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Opened, Error> {
+    let Some(path) = path else {
+        let (scene, camera) = splat_core::scenes::demo();
+        let world = World { camera: Some(camera), ..World::of(scene) };
+        return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new() });
+    };
+    let (world, skipped_properties) = if is_world_file(path) {
+        (read_world(path)?, Vec::new())
+    } else {
+        let read = crate::read_scene_with(path, options)?;
+        (World::of(read.scene), read.skipped_properties)
+    };
+    if world.scene.particles.is_empty() && world.meshes.is_empty() {
+        return Err(Error::new(path, ErrorKind::Empty));
+    }
+    let name = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
+    Ok(Opened { world, name, skipped_properties })
+}
+
 /// Read a world file (`.toml`); set files are resolved relative to its folder.
 pub fn read_world(path: &Path) -> Result<World, Error> {
     let text = String::from_utf8(crate::read_file(path)?)
@@ -600,6 +634,19 @@ mod tests {
             w.environment,
             Some(Environment::Gradient { horizon: Vec3::new(1.0, 0.5, 0.0), zenith: Vec3::splat(0.2), up: Vec3::Y })
         );
+    }
+
+    #[test]
+    fn open_world_names_the_demo_and_refuses_an_empty_file() {
+        let demo = open_world(None, crate::ReadOptions::default()).unwrap();
+        assert_eq!(demo.name, "demo");
+        assert!(demo.world.camera.is_some() && !demo.world.scene.particles.is_empty());
+        let empty = std::env::temp_dir().join(format!("splat-io-empty-{}.splat", std::process::id()));
+        std::fs::write(&empty, []).unwrap();
+        let err = open_world(Some(&empty), crate::ReadOptions::default()).unwrap_err();
+        std::fs::remove_file(&empty).unwrap();
+        assert!(matches!(err.kind, ErrorKind::Empty), "{err}");
+        assert!(err.to_string().contains("no splats and no meshes"), "{err}");
     }
 
     #[test]

@@ -45,7 +45,7 @@ pub struct ViewArgs {
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendChoice,
     /// World up "x,y,z" for framing a scene without cameras (COLMAP captures: 0,-1,0).
-    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0")]
+    #[arg(long, value_parser = splat_io::text::parse_direction, default_value = "0,1,0")]
     pub up: Vec3,
     /// Window width in points.
     #[arg(long, default_value_t = 1280.0)]
@@ -59,18 +59,6 @@ pub struct ViewArgs {
     /// Render N frames of the first view, print a summary and close the window (smoke tests).
     #[arg(long, value_name = "N")]
     pub quit_after: Option<u32>,
-}
-
-fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|c| c.trim().parse::<f32>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| format!("'{s}': {e}"))?;
-    match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) && v.iter().any(|c| *c != 0.0) => Ok(Vec3::new(*x, *y, *z)),
-        _ => Err(format!("'{s}' is not three finite numbers x,y,z, not all zero")),
-    }
 }
 
 impl ViewArgs {

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use splat_core::glam::Vec3;
 use splat_core::mesh::Meshes;
 use splat_core::particle::Aabb;
-use splat_core::{Camera, RenderSettings, scenes};
+use splat_core::{Camera, RenderSettings};
 use std::path::Path;
 
 /// A scene ready to view.
@@ -39,24 +39,15 @@ pub struct SceneInfo {
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
 /// when `None`) and the views of `cameras`.
 pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
-    let (world, name) = match scene {
-        Some(path) if splat_io::world::is_world_file(path) => (splat_io::world::read_world(path)?, file_name(path)),
-        Some(path) => {
-            let read = splat_io::read_scene_with(path, splat_io::ReadOptions::default())?;
-            if !read.skipped_properties.is_empty() {
-                eprintln!(
-                    "warning: {}: skipped unknown vertex properties {}",
-                    path.display(),
-                    read.skipped_properties.join(", ")
-                );
-            }
-            (splat_io::world::World::of(read.scene), file_name(path))
-        }
-        None => {
-            let (scene, camera) = scenes::demo();
-            (splat_io::world::World { camera: Some(camera), ..splat_io::world::World::of(scene) }, "demo".into())
-        }
-    };
+    let opened = splat_io::world::open_world(scene, splat_io::ReadOptions::default())?;
+    if let (Some(path), false) = (scene, opened.skipped_properties.is_empty()) {
+        eprintln!(
+            "warning: {}: skipped unknown vertex properties {}",
+            path.display(),
+            opened.skipped_properties.join(", ")
+        );
+    }
+    let (world, name) = (opened.world, opened.name);
     let views = match cameras {
         Some(path) => splat_io::cameras::read_views(path)?,
         None => Vec::new(),
@@ -65,9 +56,6 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
         anyhow::bail!("{}: no cameras", cameras.unwrap_or(Path::new("")).display());
     }
     let splat_io::world::World { scene, lighting, camera, background, meshes, max_bounces, .. } = world;
-    if scene.particles.is_empty() && meshes.is_empty() {
-        anyhow::bail!("{name} has no splats: nothing to show (`splat info` shows what the file holds)");
-    }
     let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}")).context("the world's meshes")?;
     let defaults = RenderSettings::default();
     let render = RenderSettings {
@@ -79,10 +67,6 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
     let (particles, sh_degree) = (scene.particles.len(), scene.sh_degree);
     let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree };
     Ok(Loaded { world: World { scene, lighting, meshes }, info })
-}
-
-fn file_name(path: &Path) -> String {
-    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 impl SceneInfo {
