@@ -7,11 +7,11 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use embree_peer::{EmbreePeer, PeerBounds, PeerMethod, difference};
 use glam::Vec3;
-use splat_io::text::parse_vec3;
 use splat_core::frame::Frames;
 use splat_core::rng::frame_key;
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, RenderSettings};
+use splat_io::text::parse_vec3;
 use std::path::PathBuf;
 use std::time::Instant;
 

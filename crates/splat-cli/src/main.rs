@@ -5,6 +5,7 @@ mod bench;
 mod compare;
 mod converge;
 mod convert;
+mod hint;
 mod info;
 mod render;
 mod stratify;
@@ -86,7 +87,7 @@ fn main() -> ExitCode {
             Ok(true) => ExitCode::SUCCESS,
             Ok(false) => ExitCode::from(1),
             Err(e) => {
-                eprintln!("error: {e:#}");
+                eprintln!("error: {e:#}{}", hint::flags(&e));
                 ExitCode::from(2)
             }
         };
@@ -109,7 +110,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {e:#}{}", hint::flags(&e));
             ExitCode::FAILURE
         }
     }

@@ -3,6 +3,45 @@
 use crate::trace::LOOP_BUDGET;
 use thiserror::Error;
 
+/// What lets a refused render run, in the library's words ([`Remedy::words`]); each front end
+/// says it in its own (the CLI names its flags, the viewer its controls), so no message of
+/// this crate names an option of one of them. Exhaustive on purpose: a new remedy makes every
+/// front end's match name it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Remedy {
+    /// The CPU backend (`splat-core`), which renders every method and setting.
+    Cpu,
+    /// Max-density-plane normals (`NormalMode::MaxDensityPlane`).
+    PlaneNormals,
+    /// Centre fragment depth (`FragmentDepth::Center`).
+    CenterDepth,
+    /// The adapter's standard sample positions (`SamplePattern::Standard`).
+    StandardPattern,
+    /// Rasterization without early stop (`RasterSettings::early_stop` off).
+    NoEarlyStop,
+}
+
+impl Remedy {
+    /// The remedy in the library's words.
+    pub fn words(self) -> &'static str {
+        match self {
+            Remedy::Cpu => "the CPU backend",
+            Remedy::PlaneNormals => "max-density-plane normals",
+            Remedy::CenterDepth => "centre fragment depth",
+            Remedy::StandardPattern => "the standard sample pattern",
+            Remedy::NoEarlyStop => "rasterization without early stop",
+        }
+    }
+}
+
+/// `: use A or B` for `remedies`, empty for none.
+fn remedy_words(remedies: &[Remedy]) -> String {
+    match remedies {
+        [] => String::new(),
+        _ => format!(": use {}", remedies.iter().map(|r| r.words()).collect::<Vec<_>>().join(" or ")),
+    }
+}
+
 /// Why the GPU path cannot run.
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -28,7 +67,7 @@ pub enum GpuError {
     Shader(String),
     /// A buffer exceeds the adapter's storage binding limit.
     #[error(
-        "the scene's {buffer} buffer needs {bytes} bytes but the adapter binds at most {limit} bytes per storage buffer ({count} particles); render it with --backend cpu or on an adapter with larger limits"
+        "the scene's {buffer} buffer needs {bytes} bytes but the adapter binds at most {limit} bytes per storage buffer ({count} particles): render it on the CPU backend or on an adapter with larger limits"
     )]
     SceneTooLarge {
         /// Which buffer.
@@ -43,6 +82,14 @@ pub enum GpuError {
     /// The method or its parameters cannot run on the GPU.
     #[error("{0}")]
     Unsupported(String),
+    /// The method or its parameters cannot run on the GPU, and what would let them.
+    #[error("{reason}{}", remedy_words(remedies))]
+    Refused {
+        /// What the GPU cannot do.
+        reason: String,
+        /// What lets the render run instead.
+        remedies: Vec<Remedy>,
+    },
     /// The scene or settings are invalid.
     #[error(transparent)]
     Render(#[from] splat_core::RenderError),
@@ -51,7 +98,7 @@ pub enum GpuError {
     Readback(String),
     /// A ray may need more loop iterations than lavapipe allows one invocation.
     #[error(
-        "pixel ({x}, {y}) ran {iterations} loop iterations in one frame; with {lanes} lanes in lockstep a loop of it may have reached lavapipe's limit of {LOOP_BUDGET} iterations, which silently cuts rays short. Use --backend cpu, a larger k (fewer passes), a smaller n, or a hardware GPU"
+        "pixel ({x}, {y}) ran {iterations} loop iterations in one frame; with {lanes} lanes in lockstep a loop of it may have reached lavapipe's limit of {LOOP_BUDGET} iterations, which silently cuts rays short. Render it on the CPU backend, with a larger k (fewer passes) or a smaller n, or on a hardware GPU"
     )]
     LoopBudget {
         /// Pixel column.
@@ -63,4 +110,21 @@ pub enum GpuError {
         /// Lanes in lockstep.
         lanes: u32,
     },
+}
+
+impl GpuError {
+    /// A refusal with what would let the render run.
+    pub fn refused(reason: impl Into<String>, remedies: &[Remedy]) -> Self {
+        Self::Refused { reason: reason.into(), remedies: remedies.to_vec() }
+    }
+
+    /// What would let the refused render run: the CPU backend for a scene above the binding
+    /// limit or a ray over lavapipe's loop budget, a refusal's own remedies, nothing otherwise.
+    pub fn remedies(&self) -> &[Remedy] {
+        match self {
+            Self::Refused { remedies, .. } => remedies,
+            Self::SceneTooLarge { .. } | Self::LoopBudget { .. } => &[Remedy::Cpu],
+            _ => &[],
+        }
+    }
 }

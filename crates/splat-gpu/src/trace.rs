@@ -17,7 +17,7 @@
 use crate::context::{compute_pipeline, storage_entry, uniform_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
 use crate::timing::Timer;
-use crate::{GpuContext, GpuError, GpuStats};
+use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{DEFAULT_K, Method, MethodCode, TraceScene};
@@ -202,9 +202,9 @@ impl<'a> GpuTracer<'a> {
     /// plane normal only).
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
         if trace.lighting().is_on() && trace.settings().normal_mode != splat_core::normal::NormalMode::MaxDensityPlane {
-            return Err(GpuError::Unsupported(
-                "lit GPU ray tracing computes max-density-plane normals only: use --normals plane or --backend cpu"
-                    .into(),
+            return Err(GpuError::refused(
+                "lit GPU ray tracing computes max-density-plane normals only",
+                &[Remedy::PlaneNormals, Remedy::Cpu],
             ));
         }
         let particles = layout::particles(trace);

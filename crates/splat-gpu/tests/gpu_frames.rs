@@ -349,7 +349,9 @@ fn rays_over_the_loop_budget_run_by_pass_or_are_refused_on_lavapipe() {
     let trace = TraceScene::new(&line, RenderSettings::default()).unwrap();
     let never = Frames { u_shift: -0.6, ..Frames::default() };
     match tracer(ctx, &trace).render(&camera, &Method::Stochastic, &never) {
-        Err(e @ GpuError::LoopBudget { .. }) => assert!(e.to_string().contains("--backend cpu"), "{e}"),
+        Err(e @ GpuError::LoopBudget { .. }) => {
+            assert!(e.to_string().contains("the CPU backend") && e.remedies() == [splat_gpu::Remedy::Cpu], "{e}")
+        }
         Err(e) => panic!("unexpected error {e}"),
         Ok((_, stats)) => panic!("accepted {} loop iterations with {} lanes", stats.loop_iterations, ctx.lanes()),
     }

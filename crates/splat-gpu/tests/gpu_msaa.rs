@@ -200,12 +200,12 @@ fn unsupported_sample_settings_are_refused_with_a_message() {
     let sorted = RasterMethod::Sorted { blend: Blend::Over };
     let hammersley = RasterSettings { samples: 4, ..RasterSettings::default() };
     let e = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &hammersley).err().unwrap().to_string();
-    assert!(e.contains("--sample-pattern standard"), "{e}");
+    assert!(e.contains("use the standard sample pattern or the CPU backend"), "{e}");
     let plane =
         GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(1, FragmentDepth::MaxDensityPlane))
             .unwrap();
     let e = plane.render(&sorted, &frames).unwrap_err().to_string();
-    assert!(e.contains("max-density plane") && e.contains("--backend cpu"), "{e}");
+    assert!(e.contains("max-density plane") && e.contains("the CPU backend"), "{e}");
     for s in [2, 8, 16] {
         let r =
             GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &standard(s, FragmentDepth::Center)).unwrap();
@@ -221,13 +221,13 @@ fn unsupported_sample_settings_are_refused_with_a_message() {
     let four = standard(4, FragmentDepth::Center);
     let r = GpuRasterizer::new(ctx, pipelines(ctx), &gpu_scene, &camera, &four).unwrap();
     let e = r.depth_pick().expect_err("depth pick at S = 4").to_string();
-    assert!(e.contains("one sample") && e.contains("--backend cpu"), "{e}");
+    assert!(e.contains("one sample") && e.contains("the CPU backend"), "{e}");
     let lighting = common::lighting(splat_core::lighting::Shadows::None, splat_core::lighting::Look::Surface);
     let lit = RasterScene::new_lit(ctx, &scene, &settings, &lighting).unwrap();
     let r = GpuRasterizer::new(ctx, pipelines(ctx), &lit, &camera, &four).unwrap();
     for method in [sorted, RasterMethod::StochasticSplat, RasterMethod::Enderton] {
         let e = r.render(&method, &frames).unwrap_err().to_string();
-        assert!(e.contains("lit") && e.contains("--backend cpu"), "{method:?}: {e}");
+        assert!(e.contains("lit") && e.contains("the CPU backend"), "{method:?}: {e}");
     }
 }
 

@@ -43,7 +43,7 @@ pub enum ErrorKind {
     },
     /// A property of the vertex element is not one this reader knows.
     #[error(
-        "PLY header line {line}: unknown vertex property '{name}' (refused in strict mode: drop --strict to skip it with a warning)"
+        "PLY header line {line}: unknown vertex property '{name}' (refused by the strict reader; the default one skips it with a warning)"
     )]
     UnknownProperty {
         /// 1-based header line.

@@ -44,7 +44,7 @@ pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene
 
 use crate::context::{compute_pipeline, storage_entry, uniform_entry};
 use crate::sort::{RadixSort, SortBuffers, groups};
-use crate::{GpuContext, GpuError, GpuStats};
+use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
@@ -411,10 +411,11 @@ impl<'a> GpuRasterizer<'a> {
         Self::supports_scene(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
         let s = self.raster.samples;
         if !Draw::of(method)?.is_rop() && !self.ctx.msaa_counts.contains(&s) {
-            return Err(GpuError::Unsupported(format!(
-                "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter): use --backend cpu",
+            let reason = format!(
+                "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter)",
                 self.ctx.info.name, self.ctx.msaa_counts
-            )));
+            );
+            return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
         Ok(())
     }
@@ -440,10 +441,11 @@ impl<'a> GpuRasterizer<'a> {
             (false, false) => return Ok(()),
         };
         if s > 1 || plane || draw.is_rop() {
-            return Err(GpuError::Unsupported(format!(
-                "{what} on the GPU goes with one sample per pixel, centre depth and raster-sorted or stochastic-splat (lights and the mesh pre-pass are evaluated once at the pixel centre), not {draw:?} at {s} samples and {:?} depth: use --backend cpu",
+            let reason = format!(
+                "{what} on the GPU goes with one sample per pixel, centre depth and raster-sorted or stochastic-splat (lights and the mesh pre-pass are evaluated once at the pixel centre), not {draw:?} at {s} samples and {:?} depth",
                 settings.fragment_depth
-            )));
+            );
+            return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
         Ok(())
     }
@@ -480,8 +482,9 @@ impl<'a> GpuRasterizer<'a> {
     pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
         check_settings(settings)?;
         if matches!(method, RasterMethod::Sorted { .. }) && settings.fragment_depth == FragmentDepth::MaxDensityPlane {
-            return Err(GpuError::Unsupported(
-                "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot: use --fragment-depth center or --backend cpu".into(),
+            return Err(GpuError::refused(
+                "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot",
+                &[Remedy::CenterDepth, Remedy::Cpu],
             ));
         }
         Ok(())
@@ -492,10 +495,11 @@ impl<'a> GpuRasterizer<'a> {
     /// centre depth.
     pub fn supports_tile_pass(settings: &RasterSettings) -> Result<(), GpuError> {
         if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
-            return Err(GpuError::Unsupported(format!(
-                "the GPU's iso-opacity depth, lit sorted splatting and hybrid first hit take one sample at the pixel centre and centre depth, not {} samples at {:?}: use --backend cpu",
+            let reason = format!(
+                "the GPU's iso-opacity depth, lit sorted splatting and hybrid first hit take one sample at the pixel centre and centre depth, not {} samples at {:?}",
                 settings.samples, settings.fragment_depth
-            )));
+            );
+            return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
         Ok(())
     }
@@ -609,16 +613,18 @@ impl<'a> GpuRasterizer<'a> {
 fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
     settings.validate()?;
     if settings.early_stop {
-        return Err(GpuError::Unsupported(
-            "--early-stop needs the transmittance before each fragment, which hardware blending does not give: use --backend cpu".into(),
+        return Err(GpuError::refused(
+            "early stop needs the transmittance before each fragment, which hardware blending does not give",
+            &[Remedy::NoEarlyStop, Remedy::Cpu],
         ));
     }
     if settings.samples > 1 && settings.sample_pattern != SamplePattern::Standard {
-        return Err(GpuError::Unsupported(format!(
-            "the GPU's {} samples per pixel lie at the hardware's standard positions, not the {} pattern: use --sample-pattern standard or --backend cpu",
+        let reason = format!(
+            "the GPU's {} samples per pixel lie at the hardware's standard positions, not the {} pattern",
             settings.samples,
             settings.sample_pattern.name()
-        )));
+        );
+        return Err(GpuError::refused(reason, &[Remedy::StandardPattern, Remedy::Cpu]));
     }
     Ok(())
 }

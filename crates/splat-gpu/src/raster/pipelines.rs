@@ -243,14 +243,13 @@ impl SamplePipelines {
             Draw::Over => &self.over,
             Draw::Under => &self.under,
             Draw::Stochastic if plane => self.stochastic_plane.as_ref().ok_or_else(|| {
-                GpuError::Unsupported(
-                    "the max-density-plane depth shades per sample, which this adapter cannot (wgpu's MULTISAMPLED_SHADING): use --backend cpu".into(),
+                GpuError::refused(
+                    "the max-density-plane depth shades per sample, which this adapter cannot (wgpu's MULTISAMPLED_SHADING)",
+                    &[Remedy::Cpu],
                 )
             })?,
             Draw::Stochastic if lit => self.stochastic_lit.as_ref().ok_or_else(|| {
-                GpuError::Unsupported(
-                    "lit StochasticSplats shades once per pixel, at one sample: use --backend cpu".into(),
-                )
+                GpuError::refused("lit StochasticSplats shades once per pixel, at one sample", &[Remedy::Cpu])
             })?,
             _ => &self.stochastic,
         })

@@ -155,9 +155,9 @@ impl RasterScene {
         validate_scene(scene, settings)?;
         lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
         if lighting.is_on() && settings.normal_mode != splat_core::normal::NormalMode::MaxDensityPlane {
-            return Err(GpuError::Unsupported(
-                "lit GPU rasterization computes max-density-plane normals only: use --normals plane or --backend cpu"
-                    .into(),
+            return Err(GpuError::refused(
+                "lit GPU rasterization computes max-density-plane normals only",
+                &[Remedy::PlaneNormals, Remedy::Cpu],
             ));
         }
         let count = scene.particles.len();
