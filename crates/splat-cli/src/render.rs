@@ -408,9 +408,7 @@ fn describe(args: &RenderArgs) -> String {
 fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<(), GpuError> {
     let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
     let lighting = &world.lighting;
-    if lighting.is_on() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
-        return unsupported("the GPU lights with max-density-plane normals only: use --normals plane or --backend cpu");
-    }
+    splat_gpu::supports_normals(lighting.is_on(), world.settings.normal_mode)?;
     match algorithm {
         Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
         Algorithm::Hybrid(method, raster, secondary) => {
@@ -424,12 +422,7 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
         }
         Algorithm::Trace(method) => {
             GpuTracer::supports(method)?;
-            if args.normal.is_some() && matches!(args.scene.normals, crate::args::NormalArg::Ellipsoid) {
-                return unsupported(
-                    "the GPU computes max-density-plane normals only: use --normals plane or --backend cpu",
-                );
-            }
-            Ok(())
+            splat_gpu::supports_normals(args.normal.is_some(), world.settings.normal_mode)
         }
         Algorithm::Raster(method, raster) => {
             GpuRasterizer::supports_scene(method, raster, lighting.is_on(), !world.meshes.is_empty())?;

@@ -128,3 +128,17 @@ impl GpuError {
         }
     }
 }
+
+/// The one rule of the GPU's normals: its kernels compute the max-density plane's normal only,
+/// so where normals are `used` (lighting, a normal image) the render needs
+/// [`NormalMode::MaxDensityPlane`](splat_core::normal::NormalMode::MaxDensityPlane). The
+/// tracer, the lit raster scene and the front ends' backend choice all ask here.
+pub fn supports_normals(used: bool, mode: splat_core::normal::NormalMode) -> Result<(), GpuError> {
+    if used && mode != splat_core::normal::NormalMode::MaxDensityPlane {
+        return Err(GpuError::refused(
+            "the GPU computes max-density-plane normals only, for lighting and for normal images",
+            &[Remedy::PlaneNormals, Remedy::Cpu],
+        ));
+    }
+    Ok(())
+}

@@ -17,7 +17,7 @@
 use crate::context::{compute_pipeline, storage_entry, uniform_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
 use crate::timing::Timer;
-use crate::{GpuContext, GpuError, GpuStats, Remedy};
+use crate::{GpuContext, GpuError, GpuStats};
 use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{DEFAULT_K, Method, MethodCode, TraceScene};
@@ -201,12 +201,7 @@ impl<'a> GpuTracer<'a> {
     /// binding limit, and lighting with kernel-ellipsoid normals (the kernel has the max-density
     /// plane normal only).
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
-        if trace.lighting().is_on() && trace.settings().normal_mode != splat_core::normal::NormalMode::MaxDensityPlane {
-            return Err(GpuError::refused(
-                "lit GPU ray tracing computes max-density-plane normals only",
-                &[Remedy::PlaneNormals, Remedy::Cpu],
-            ));
-        }
+        crate::supports_normals(trace.lighting().is_on(), trace.settings().normal_mode)?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());

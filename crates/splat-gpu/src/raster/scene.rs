@@ -154,12 +154,7 @@ impl RasterScene {
     ) -> Result<Self, GpuError> {
         validate_scene(scene, settings)?;
         lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
-        if lighting.is_on() && settings.normal_mode != splat_core::normal::NormalMode::MaxDensityPlane {
-            return Err(GpuError::refused(
-                "lit GPU rasterization computes max-density-plane normals only",
-                &[Remedy::PlaneNormals, Remedy::Cpu],
-            ));
-        }
+        crate::supports_normals(lighting.is_on(), settings.normal_mode)?;
         let count = scene.particles.len();
         let particles: Vec<RasterParticle> = scene
             .particles
