@@ -901,7 +901,17 @@ pub mod golden {
             ..RenderSettings::default()
         };
         let out = algorithm
-            .render_world(&world.scene, &meshes, &camera, &settings, &world.lighting, frames, &|_| {})
+            .render_world(
+                &splat_core::Shot {
+                    scene: &world.scene,
+                    meshes: &meshes,
+                    lighting: &world.lighting,
+                    camera: &camera,
+                    settings: &settings,
+                },
+                frames,
+                &|_| {},
+            )
             .expect("render");
         splat_io::image::to_rgba8(&out.mean).to_rgb8()
     }

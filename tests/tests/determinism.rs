@@ -4,7 +4,7 @@
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
 use splat_core::scenes;
 use splat_core::trace::{Method, TraceScene, render_frames};
-use splat_core::{Frames, RenderSettings, render_oracle};
+use splat_core::{Frames, RenderSettings, Shot, render_oracle};
 
 fn pool(threads: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
@@ -131,7 +131,14 @@ fn mesh_world_images_are_identical_across_thread_counts() {
             let frames = Frames { count: 2, seed, ..Frames::default() };
             let out = pool(threads).install(|| {
                 let settings = RenderSettings::default();
-                algorithm.render_world(&world.scene, &meshes, &camera, &settings, &world.lighting, &frames, &|_| {})
+                let shot = Shot {
+                    scene: &world.scene,
+                    meshes: &meshes,
+                    lighting: &world.lighting,
+                    camera: &camera,
+                    settings: &settings,
+                };
+                algorithm.render_world(&shot, &frames, &|_| {})
             });
             let out = out.unwrap();
             [out.mean, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect::<Vec<f32>>()

@@ -362,6 +362,19 @@ pub struct Loaded {
     pub lens: Option<splat_core::path::ThinLens>,
 }
 
+impl Loaded {
+    /// What one render of this world reads, on either backend.
+    pub fn shot(&self) -> splat_core::Shot<'_> {
+        splat_core::Shot {
+            scene: &self.scene,
+            meshes: &self.meshes,
+            lighting: &self.lighting,
+            camera: &self.camera,
+            settings: &self.settings,
+        }
+    }
+}
+
 /// Scene, camera and shading options shared by `render`, `converge` and `bench`.
 #[derive(Args, Clone)]
 pub struct SceneArgs {

@@ -220,10 +220,7 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
-            pool.install(|| {
-                let (l, s) = (&loaded.lighting, &loaded.settings);
-                algorithm.render_world(scene, &loaded.meshes, camera, s, l, &frames, &|_| {})
-            })?;
+            pool.install(|| algorithm.render_world(&loaded.shot(), &frames, &|_| {}))?;
             best = best.min(start.elapsed().as_secs_f64());
         }
         let base = *baseline.get_or_insert(best);

@@ -13,6 +13,8 @@ fn flag(remedy: Remedy) -> &'static str {
         Remedy::CenterDepth => "--fragment-depth center",
         Remedy::StandardPattern => "--sample-pattern standard",
         Remedy::NoEarlyStop => "no --early-stop",
+        Remedy::ExactMethod => "--method exact",
+        Remedy::SortedFirstHit => "--method raster-sorted",
     }
 }
 

@@ -9,7 +9,7 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
-use splat_gpu::{GpuContext, GpuError, GpuRasterizer, GpuTracer};
+use splat_gpu::{GpuContext, GpuTracer};
 use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -121,7 +121,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if args.pipeline == Some(PipelineArg::Path) {
         return run_path(&args, &world);
     }
-    let Loaded { scene, camera, lighting, settings, meshes, .. } = &world;
+    let Loaded { scene, camera, lighting, meshes, .. } = &world;
     let cpu_algorithm = algorithm(&args)?;
     warn_unused(&args, &cpu_algorithm, &world);
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
@@ -134,7 +134,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         Some(ctx) => render_gpu(&args, ctx, &world, &algorithm, &frames)?,
         None => {
             let progress = |n| bar.inc(n);
-            let render = || algorithm.render_world(scene, meshes, camera, settings, lighting, &frames, &progress);
+            let render = || algorithm.render_world(&world.shot(), &frames, &progress);
             args.scene.pool()?.install(render)?
         }
     };
@@ -230,12 +230,7 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
         bar.set_message(name.clone());
         let out = match &gpu {
             Some(ctx) => render_gpu(args, ctx, &world, &algorithm, &frames)?,
-            None => {
-                let Loaded { scene, camera, lighting, settings, meshes, .. } = &world;
-                args.scene
-                    .pool()?
-                    .install(|| algorithm.render_world(scene, meshes, camera, settings, lighting, &frames, &|_| {}))?
-            }
+            None => args.scene.pool()?.install(|| algorithm.render_world(&world.shot(), &frames, &|_| {}))?,
         };
         let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
         write_image(&file, &out.mean)?;
@@ -403,36 +398,9 @@ fn describe(args: &RenderArgs) -> String {
     }
 }
 
-/// Whether the GPU renders `algorithm` with the images `args` asks for (the backends' own
-/// `supports` decide the methods).
-fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<(), GpuError> {
-    let unsupported = |m: &str| Err(GpuError::Unsupported(m.into()));
-    let lighting = &world.lighting;
-    splat_gpu::supports_normals(lighting.is_on(), world.settings.normal_mode)?;
-    match algorithm {
-        Algorithm::Oracle => unsupported("the brute-force oracle runs on the CPU only: use --method exact on the GPU"),
-        Algorithm::Hybrid(method, raster, secondary) => {
-            if !matches!(method, splat_core::raster::RasterMethod::Sorted { .. }) {
-                return unsupported("the GPU hybrid rasterizes its first hit with raster-sorted: add --backend cpu");
-            }
-            GpuRasterizer::supports(method, raster)?;
-            GpuRasterizer::supports_tile_pass(raster)?;
-            GpuTracer::supports(secondary)?;
-            Ok(())
-        }
-        Algorithm::Trace(method) => {
-            GpuTracer::supports(method)?;
-            splat_gpu::supports_normals(args.normal.is_some(), world.settings.normal_mode)
-        }
-        Algorithm::Raster(method, raster) => {
-            GpuRasterizer::supports_scene(method, raster, lighting.is_on(), !world.meshes.is_empty())?;
-            let sorted = matches!(method, splat_core::raster::RasterMethod::Sorted { .. });
-            if (args.depth.is_some() || args.normal.is_some()) && !sorted {
-                return unsupported("on the GPU, --depth and --normal come from raster-sorted only: add --backend cpu");
-            }
-            Ok(())
-        }
-    }
+/// The images besides colour that `args` asks for.
+fn extras(args: &RenderArgs) -> splat_gpu::Extras {
+    splat_gpu::Extras { depth: args.depth.is_some(), normal: args.normal.is_some() }
 }
 
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
@@ -441,16 +409,17 @@ fn gpu_supports(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Res
 fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<Option<GpuContext>> {
     match args.scene.backend {
         BackendArg::Gpu => {
-            gpu_supports(args, algorithm, world)?;
+            splat_gpu::supports(algorithm, &world.shot(), extras(args))?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if gpu_supports(args, algorithm, world).is_ok() => crate::args::gpu_context(BackendArg::Auto),
+        BackendArg::Auto if splat_gpu::supports(algorithm, &world.shot(), extras(args)).is_ok() => {
+            crate::args::gpu_context(BackendArg::Auto)
+        }
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
 }
 
-/// Render on the GPU: the tracer for ray-tracing methods (lit or not), the rasterizer (and, for `--depth`,
-/// its compute tile rasterizer) for splatting methods.
+/// Render on the GPU ([`splat_gpu::render`]), saying on which adapter.
 fn render_gpu(
     args: &RenderArgs,
     ctx: &GpuContext,
@@ -459,43 +428,7 @@ fn render_gpu(
     frames: &Frames,
 ) -> Result<RenderOutput> {
     eprintln!("rendering on {}", ctx.describe());
-    let Loaded { scene, camera, lighting, settings, .. } = world;
-    match algorithm {
-        Algorithm::Trace(method) => {
-            let trace =
-                TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(world.meshes.clone());
-            let pipeline = splat_gpu::TracePipeline::new(ctx)?;
-            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
-            Ok(tracer.render(camera, method, frames)?.0)
-        }
-        Algorithm::Hybrid(_, raster_settings, secondary) => {
-            let trace =
-                TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(world.meshes.clone());
-            let pipeline = splat_gpu::TracePipeline::new(ctx)?;
-            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
-            let pipes = splat_gpu::RasterPipelines::new(ctx)?;
-            let gpu_scene =
-                splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, &world.meshes)?;
-            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
-            Ok(tracer.render_hybrid(&raster, camera, secondary, frames)?.0)
-        }
-        Algorithm::Raster(method, raster_settings) => {
-            let pipes = splat_gpu::RasterPipelines::new(ctx)?;
-            let gpu_scene =
-                splat_gpu::RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, &world.meshes)?;
-            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
-            let mut out = raster.render(method, frames)?.0;
-            // Lit sorted splatting already ran on the tile rasterizer, depth and normal included.
-            let picked = gpu_scene.is_lit() && matches!(method, splat_core::raster::RasterMethod::Sorted { .. });
-            if (args.depth.is_some() || args.normal.is_some()) && !picked {
-                let pick = raster.depth_pick()?;
-                out.depth = pick.depth_image();
-                out.normal = pick.normal;
-            }
-            Ok(out)
-        }
-        Algorithm::Oracle => bail!("the brute-force oracle runs on the CPU only"),
-    }
+    Ok(splat_gpu::render(ctx, algorithm, &world.shot(), extras(args), frames)?)
 }
 
 fn write_outputs(args: &RenderArgs, out: &RenderOutput) -> Result<()> {

@@ -11,6 +11,23 @@ use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster};
 use crate::settings::{RenderError, RenderSettings};
 use crate::trace::{Method, TraceScene, render_frames};
 
+/// One render's inputs: the splats and the meshes among them, their lighting, the camera and
+/// the settings. What both backends read: [`Algorithm::render_world`] on the CPU,
+/// `splat_gpu::render` on the GPU.
+#[derive(Clone, Copy)]
+pub struct Shot<'a> {
+    /// The splats.
+    pub scene: &'a Scene,
+    /// The meshes among them ([`Meshes::none`] for none).
+    pub meshes: &'a Meshes,
+    /// Materials, lights, shadows and look ([`Lighting::default`]: emissive).
+    pub lighting: &'a Lighting,
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Kernel, hit distance, normals, background, bounce limit.
+    pub settings: &'a RenderSettings,
+}
+
 /// A renderer of either family, with its parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Algorithm {
@@ -73,22 +90,14 @@ impl Algorithm {
         frames: &Frames,
         progress: Progress,
     ) -> Result<RenderOutput, RenderError> {
-        self.render_world(scene, &Meshes::none(), camera, settings, lighting, frames, progress)
+        let meshes = Meshes::none();
+        self.render_world(&Shot { scene, meshes: &meshes, lighting, camera, settings }, frames, progress)
     }
 
-    /// Render `frames` on the CPU of the splats among `meshes` ([`crate::mesh`]), lit by
-    /// `lighting`; without meshes this is exactly [`Algorithm::render_lit`].
-    #[allow(clippy::too_many_arguments)]
-    pub fn render_world(
-        &self,
-        scene: &Scene,
-        meshes: &Meshes,
-        camera: &Camera,
-        settings: &RenderSettings,
-        lighting: &Lighting,
-        frames: &Frames,
-        progress: Progress,
-    ) -> Result<RenderOutput, RenderError> {
+    /// Render `frames` on the CPU of the splats among the shot's meshes ([`crate::mesh`]), lit
+    /// by its lighting; without meshes this is exactly [`Algorithm::render_lit`].
+    pub fn render_world(&self, shot: &Shot, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
+        let Shot { scene, meshes, lighting, camera, settings } = *shot;
         match self {
             Algorithm::Oracle if !meshes.is_empty() => Err(RenderError::Settings(
                 "the brute-force oracle renders splats alone; render meshes with a ray-tracing method".into(),
@@ -123,15 +132,11 @@ impl Algorithm {
     ) -> Result<RenderOutput, RenderError> {
         let (scene, settings) = (trace.scene(), *trace.settings());
         match self {
-            Algorithm::Oracle => Algorithm::Oracle.render_world(
-                scene,
-                trace.meshes(),
-                camera,
-                &settings,
-                trace.lighting(),
-                frames,
-                progress,
-            ),
+            Algorithm::Oracle => {
+                let shot =
+                    Shot { scene, meshes: trace.meshes(), lighting: trace.lighting(), camera, settings: &settings };
+                Algorithm::Oracle.render_world(&shot, frames, progress)
+            }
             Algorithm::Trace(method) => render_frames(trace, camera, method, frames, progress),
             Algorithm::Raster(method, raster) => {
                 let r = Rasterizer::new(scene, camera, settings, *raster)?

@@ -53,7 +53,7 @@ pub mod trace;
 /// not match its version.
 pub use glam;
 
-pub use algorithm::Algorithm;
+pub use algorithm::{Algorithm, Shot};
 pub use camera::Camera;
 pub use frame::{Frames, RenderOutput};
 pub use hit::{HitDistance, Ray};

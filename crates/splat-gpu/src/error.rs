@@ -19,6 +19,10 @@ pub enum Remedy {
     StandardPattern,
     /// Rasterization without early stop (`RasterSettings::early_stop` off).
     NoEarlyStop,
+    /// The exact ray-tracing method, whose image equals the brute-force oracle's.
+    ExactMethod,
+    /// Sorted splatting for the hybrid's first hit.
+    SortedFirstHit,
 }
 
 impl Remedy {
@@ -30,6 +34,8 @@ impl Remedy {
             Remedy::CenterDepth => "centre fragment depth",
             Remedy::StandardPattern => "the standard sample pattern",
             Remedy::NoEarlyStop => "rasterization without early stop",
+            Remedy::ExactMethod => "the exact method (the same image)",
+            Remedy::SortedFirstHit => "raster-sorted for the first hit",
         }
     }
 }

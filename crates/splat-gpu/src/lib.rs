@@ -16,6 +16,7 @@
 //! [`GpuRasterizer::supports`]).
 
 mod accumulate;
+pub mod backend;
 mod context;
 pub mod display;
 mod error;
@@ -29,6 +30,7 @@ pub mod trace;
 pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
+pub use backend::{Extras, render, supports};
 pub use context::{GpuContext, quiet_device_select};
 pub use display::{Display, DisplayMode, PixelState, read_rgba8};
 pub use error::{GpuError, Remedy, supports_normals};

@@ -12,7 +12,7 @@ use egui_kittest::wgpu::{WgpuTestRenderer, create_render_state, default_wgpu_set
 use egui_kittest::{Harness, SnapshotOptions};
 use splat_core::frame::Frames;
 use splat_core::trace::{Method, TraceScene};
-use splat_core::{Algorithm, Camera};
+use splat_core::{Algorithm, Camera, Shot};
 use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline};
 use splat_view::settings::TraceChoice;
 use splat_view::worker::Status;
@@ -299,11 +299,13 @@ fn png_of_splat_render(scene: Option<&std::path::Path>, camera: &Camera, name: &
     let world = &loaded.world;
     let out = Algorithm::Trace(Method::Exact)
         .render_world(
-            &world.scene,
-            &world.meshes,
-            camera,
-            &loaded.info.render,
-            &world.lighting,
+            &Shot {
+                scene: &world.scene,
+                meshes: &world.meshes,
+                lighting: &world.lighting,
+                camera,
+                settings: &loaded.info.render,
+            },
             &Frames::default(),
             &|_| {},
         )

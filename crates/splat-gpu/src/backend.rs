@@ -1,0 +1,113 @@
+//! The GPU backend's entry point: whether it renders an [`Algorithm`] of a [`Shot`]
+//! ([`supports`]) and the render itself ([`render`]), so that a host renders a world on the GPU
+//! as it does on the CPU ([`Algorithm::render_world`]) without knowing which kernels run. The
+//! refusals carry their [`Remedy`](crate::Remedy); each front end words them.
+
+use crate::{GpuContext, GpuError, GpuRasterizer, GpuTracer, RasterPipelines, RasterScene, Remedy, TracePipeline};
+use splat_core::frame::{Frames, RenderOutput};
+use splat_core::raster::RasterMethod;
+use splat_core::trace::TraceScene;
+use splat_core::{Algorithm, Shot};
+
+/// The images a render is asked for besides colour, alpha and variance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Extras {
+    /// The depth image.
+    pub depth: bool,
+    /// The normal image.
+    pub normal: bool,
+}
+
+/// Whether the GPU renders `algorithm` of `shot` with `extras`, before anything is uploaded: the
+/// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`] and
+/// [`GpuRasterizer::supports_scene`], [`crate::supports_normals`]) and what the backend
+/// composes from them.
+pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
+    let lit = shot.lighting.is_on();
+    crate::supports_normals(lit, shot.settings.normal_mode)?;
+    match algorithm {
+        Algorithm::Oracle => Err(oracle_refused()),
+        Algorithm::Hybrid(method, raster, secondary) => {
+            if !matches!(method, RasterMethod::Sorted { .. }) {
+                return Err(GpuError::refused(
+                    "the GPU hybrid rasterizes its first hit with raster-sorted",
+                    &[Remedy::SortedFirstHit, Remedy::Cpu],
+                ));
+            }
+            GpuRasterizer::supports(method, raster)?;
+            GpuRasterizer::supports_tile_pass(raster)?;
+            GpuTracer::supports(secondary)
+        }
+        Algorithm::Trace(method) => {
+            GpuTracer::supports(method)?;
+            crate::supports_normals(extras.normal, shot.settings.normal_mode)
+        }
+        Algorithm::Raster(method, raster) => {
+            GpuRasterizer::supports_scene(method, raster, lit, !shot.meshes.is_empty())?;
+            let sorted = matches!(method, RasterMethod::Sorted { .. });
+            if (extras.depth || extras.normal) && !sorted {
+                return Err(GpuError::refused(
+                    "on the GPU, depth and normal images come from raster-sorted only",
+                    &[Remedy::Cpu],
+                ));
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Render `frames` of `algorithm` of `shot` on `ctx` (what [`supports`] accepts): the tracer for
+/// ray-tracing methods, lit or not; the rasterizer for splatting methods, with its compute tile
+/// rasterizer's depth pick where `extras` asks for depth or normals; both for the hybrid.
+pub fn render(
+    ctx: &GpuContext,
+    algorithm: &Algorithm,
+    shot: &Shot,
+    extras: Extras,
+    frames: &Frames,
+) -> Result<RenderOutput, GpuError> {
+    supports(algorithm, shot, extras)?;
+    let Shot { scene, meshes, lighting, camera, settings } = *shot;
+    let trace = || -> Result<TraceScene, GpuError> {
+        Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone()))
+    };
+    let raster_scene = || -> Result<RasterScene, GpuError> {
+        RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, meshes)
+    };
+    match algorithm {
+        Algorithm::Trace(method) => {
+            let trace = trace()?;
+            let pipeline = TracePipeline::new(ctx)?;
+            Ok(GpuTracer::new(ctx, &pipeline, &trace)?.render(camera, method, frames)?.0)
+        }
+        Algorithm::Hybrid(_, raster_settings, secondary) => {
+            let trace = trace()?;
+            let pipeline = TracePipeline::new(ctx)?;
+            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
+            let pipes = RasterPipelines::new(ctx)?;
+            let gpu_scene = raster_scene()?;
+            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
+            Ok(tracer.render_hybrid(&raster, camera, secondary, frames)?.0)
+        }
+        Algorithm::Raster(method, raster_settings) => {
+            let pipes = RasterPipelines::new(ctx)?;
+            let gpu_scene = raster_scene()?;
+            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
+            let mut out = raster.render(method, frames)?.0;
+            // Lit sorted splatting already ran on the tile rasterizer, depth and normal included.
+            let picked = gpu_scene.is_lit() && matches!(method, RasterMethod::Sorted { .. });
+            if (extras.depth || extras.normal) && !picked {
+                let pick = raster.depth_pick()?;
+                out.depth = pick.depth_image();
+                out.normal = pick.normal;
+            }
+            Ok(out)
+        }
+        Algorithm::Oracle => Err(oracle_refused()),
+    }
+}
+
+/// The brute-force oracle is the CPU's alone; the exact method renders the same image.
+fn oracle_refused() -> GpuError {
+    GpuError::refused("the brute-force oracle runs on the CPU only", &[Remedy::ExactMethod, Remedy::Cpu])
+}
