@@ -28,3 +28,17 @@ fn a_failing_z_test_writes_its_z_map() {
     std::fs::remove_file(&path).unwrap();
     test.assert_rejected(base);
 }
+
+/// The control's sequential test goes on to the full budget when its first stage does not
+/// reject, and there an unbiased estimator passes: it is not taken for a biased control.
+#[test]
+fn an_unbiased_estimator_fails_assert_rejected_at_both_stages() {
+    let (scene, camera) = fixture("layers", 40, 30);
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let test = StatTest::trace("harness-self-test stochastic", &trace, &camera, Method::Stochastic);
+    let base = Frames { count: 256, seed: 7, ..Frames::default() };
+    let failed = catch_unwind(AssertUnwindSafe(|| test.assert_rejected(base)));
+    let message = failed.expect_err("an unbiased estimator was rejected as a control");
+    let message = message.downcast_ref::<String>().cloned().unwrap_or_default();
+    assert!(message.contains("passes the z-test"), "{message}");
+}
