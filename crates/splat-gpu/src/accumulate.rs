@@ -158,3 +158,16 @@ impl Accumulator {
             .collect())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// The accumulation shader is valid WGSL for naga (a shader error fails `cargo test`),
+    /// with the one capability its f16 format needs: naga files `pack2x16float` /
+    /// `unpack2x16float` under `SHADER_FLOAT16_IN_FLOAT32`, which wgpu grants with the
+    /// downlevel flag `SHADER_F16_IN_F32` (every Vulkan, Metal and DX12 adapter; not every GL).
+    #[test]
+    fn accumulate_wgsl_validates() {
+        let f16 = naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32;
+        crate::layout::wgsl_check::validate_with("accumulate", super::ACCUMULATE_WGSL, f16);
+    }
+}

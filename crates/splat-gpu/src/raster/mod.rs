@@ -812,8 +812,13 @@ mod tests {
     /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).
     #[test]
     fn raster_wgsl_validates() {
-        let modules =
-            [("raster", RASTER_WGSL), ("splat", SPLAT_WGSL), ("fold", FOLD_WGSL), ("mesh pre-pass", MESH_PREPASS_WGSL)];
+        let modules = [
+            ("raster", RASTER_WGSL),
+            ("splat", SPLAT_WGSL),
+            ("fold", FOLD_WGSL),
+            ("fold (multisampled)", FOLD_MSAA_WGSL),
+            ("mesh pre-pass", MESH_PREPASS_WGSL),
+        ];
         for (name, source) in modules {
             validate(name, source);
         }
