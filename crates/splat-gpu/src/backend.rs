@@ -1,7 +1,7 @@
 //! The GPU backend's entry point: whether it renders an [`Algorithm`] of a [`Shot`]
 //! ([`supports`]) and the render itself ([`render`]), so that a host renders a world on the GPU
 //! as it does on the CPU ([`Algorithm::render_world`]) without knowing which kernels run. The
-//! refusals carry their [`Remedy`](crate::Remedy); each front end words them.
+//! refusals carry their [`Remedy`]; each front end words them.
 
 use crate::{GpuContext, GpuError, GpuRasterizer, GpuTracer, RasterPipelines, RasterScene, Remedy, TracePipeline};
 use splat_core::frame::{Frames, RenderOutput};
