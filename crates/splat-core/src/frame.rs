@@ -245,8 +245,8 @@ impl From<PixelFrames> for Finished {
 
 /// Bytes a pixel of a CPU render holds at its peak: its finished values in its tile, and the
 /// same values again in the [`RenderOutput`] they are copied into (its images and picks hold
-/// exactly the fields of a tile's finished pixel). Hosts use it to refuse a render that cannot fit before
-/// starting it.
+/// exactly the fields of a tile's finished pixel). Hosts use it to refuse a render that cannot
+/// fit before starting it.
 pub const BYTES_PER_PIXEL: u64 = 2 * std::mem::size_of::<Finished>() as u64;
 
 /// The one frame loop: `pixel(state, x, y)` folds the frames of pixel (x, y), with `state` made

@@ -1,6 +1,6 @@
 //! The real window: `splat-view` opens under Xvfb (a virtual X server), renders frames of a
-//! capture and closes by itself, printing nothing of the graphics stack's; bad input fails before any window, and without a desktop the
-//! error says how to get one.
+//! capture and closes by itself, printing nothing of the graphics stack's; bad input fails
+//! before any window, and without a desktop the error says how to get one.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
