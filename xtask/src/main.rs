@@ -1,19 +1,15 @@
 //! Project automation: `cargo xtask test | fixtures | bless`.
 
 use anyhow::{Context, Result, bail};
-use splat_core::scenes;
-use splat_io::ply::{PlyFormat, write_ply};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-use splat_tests::golden::FIXTURES;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("test") => test(&args[1..]),
-        Some("fixtures") => fixtures(),
-        Some("bless") => bless(),
+        Some("fixtures") => regenerate("fixtures"),
+        Some("bless") => regenerate("bless"),
         Some("assets") => {
             let bonsai = assets()?;
             println!("{}", bonsai.display());
@@ -48,7 +44,7 @@ fn test(extra: &[String]) -> Result<()> {
     ensure_vulkan_driver()?;
     ensure_embree()?;
     ensure_xvfb()?;
-    let skips = splat_tests::skip_log();
+    let skips = skip_log();
     let _ = std::fs::remove_file(&skips);
     let status = if extra.is_empty() && has_nextest() {
         // Every test in a process of its own, two at a time: the statistical suites' processes
@@ -77,11 +73,22 @@ fn test(extra: &[String]) -> Result<()> {
     Ok(())
 }
 
+/// Cargo's output folder: `CARGO_TARGET_DIR`, else `target/`.
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root().join("target"), PathBuf::from)
+}
+
+/// Where the tests record what they skipped (`splat_tests::skip`, told by the environment
+/// variable `SPLAT_SKIP_LOG`), for the summary printed after the run.
+fn skip_log() -> PathBuf {
+    root().join("target/skipped-tests.log")
+}
+
 /// `cargo ARGS` in the workspace, with the GPU tests on Vulkan unless `WGPU_BACKEND` says
-/// otherwise.
+/// otherwise, and skipped tests recorded in [`skip_log`].
 fn test_command(args: &[&str]) -> Command {
     let mut cmd = Command::new(env!("CARGO"));
-    cmd.current_dir(root()).args(args);
+    cmd.current_dir(root()).args(args).env("SPLAT_SKIP_LOG", skip_log());
     if std::env::var_os("WGPU_BACKEND").is_none() {
         cmd.env("WGPU_BACKEND", "vulkan");
     }
@@ -103,26 +110,36 @@ fn has_nextest() -> bool {
         .is_ok_and(|s| s.success())
 }
 
-/// Run every library example (built by `cargo test`); each checks its own result.
+/// Run every library example; each checks its own result. They are built for the whole
+/// workspace at once (`cargo build --workspace --examples`, which reuses the test build: `cargo
+/// run -p` would resolve one package's features and build its libraries a second time) and
+/// run from `target/release/examples/`.
 fn run_examples() -> Result<()> {
+    let built = Command::new(env!("CARGO"))
+        .current_dir(root())
+        .args(["build", "--quiet", "--release", "--workspace", "--examples"])
+        .status()
+        .context("building the examples")?;
+    if !built.success() {
+        bail!("building the examples failed ({built})");
+    }
     let out = root().join("target/examples");
     std::fs::create_dir_all(&out)?;
     let path = |name: &str| out.join(name).display().to_string();
-    let examples: [(&str, &str, Vec<String>); 3] = [
-        ("splat-core", "render_ply", vec!["fixtures/cloud.ply".into(), path("render_ply.png")]),
-        ("splat-core", "ztest", vec![]),
-        ("splat-gpu", "trace_gpu", vec![path("trace_gpu.png")]),
+    let examples: [(&str, Vec<String>); 3] = [
+        ("render_ply", vec!["fixtures/cloud.ply".into(), path("render_ply.png")]),
+        ("ztest", vec![]),
+        ("trace_gpu", vec![path("trace_gpu.png")]),
     ];
-    for (package, example, args) in examples {
-        eprintln!("example {package}/{example} …");
-        let status = Command::new(env!("CARGO"))
+    for (example, args) in examples {
+        eprintln!("example {example} …");
+        let status = Command::new(target_dir().join("release/examples").join(example))
             .current_dir(root())
-            .args(["run", "--quiet", "--release", "-p", package, "--example", example, "--"])
             .args(&args)
             .status()
             .with_context(|| format!("running the example {example}"))?;
         if !status.success() {
-            bail!("the example {package}/{example} failed ({status})");
+            bail!("the example {example} failed ({status})");
         }
     }
     Ok(())
@@ -131,11 +148,25 @@ fn run_examples() -> Result<()> {
 /// Build the API documentation of the library crates with warnings as errors (broken links,
 /// missing docs). The applications (`splat-cli`, `splat-view`) publish no API, and documenting
 /// them would check-build the window's stack (winit, egui) once more: minutes of CI on 2 cores.
+/// `--release` reuses the test build's proc macros and build scripts (57 s on a fresh 2-core
+/// machine after the test build, 176 s in the dev profile, which builds them again).
 fn check_docs() -> Result<()> {
-    eprintln!("cargo doc --workspace --exclude splat-cli --exclude splat-view --no-deps (RUSTDOCFLAGS=-D warnings) …");
+    eprintln!(
+        "cargo doc --release --workspace --exclude splat-cli --exclude splat-view --no-deps (RUSTDOCFLAGS=-D warnings) …"
+    );
     let status = Command::new(env!("CARGO"))
         .current_dir(root())
-        .args(["doc", "--workspace", "--exclude", "splat-cli", "--exclude", "splat-view", "--no-deps", "--quiet"])
+        .args([
+            "doc",
+            "--release",
+            "--workspace",
+            "--exclude",
+            "splat-cli",
+            "--exclude",
+            "splat-view",
+            "--no-deps",
+            "--quiet",
+        ])
         .env("RUSTDOCFLAGS", "-D warnings")
         .status()
         .context("running cargo doc")?;
@@ -272,47 +303,15 @@ fn power() -> Result<()> {
     Ok(())
 }
 
-/// Write every fixture scene and its camera.
-fn fixtures() -> Result<()> {
-    let dir = root().join("fixtures");
-    std::fs::create_dir_all(&dir)?;
-    for name in FIXTURES.iter().chain(&splat_tests::golden::STRATIFICATION_FIXTURES) {
-        let (scene, camera) = scenes::by_name(name).expect("fixture names are built-in scenes");
-        let ply = dir.join(format!("{name}.ply"));
-        write_ply(&ply, &scene, PlyFormat::BinaryLittleEndian)?;
-        splat_io::cameras::write_cameras(&dir.join(format!("{name}.cameras.json")), &[camera])?;
-        println!("wrote {} ({} particles, SH degree {})", ply.display(), scene.particles.len(), scene.sh_degree);
-    }
-    Ok(())
-}
-
-/// Render every golden case of every fixture into `fixtures/golden/FIXTURE-METHOD.png`.
-fn bless() -> Result<()> {
-    use splat_tests::golden;
-    std::fs::create_dir_all(root().join("fixtures/golden"))?;
-    for fixture in golden::FIXTURES {
-        for (suffix, case, frames) in golden::cases() {
-            let path = golden::path(fixture, suffix);
-            golden::render(fixture, &case, &frames)
-                .save(&path)
-                .with_context(|| format!("writing {}", path.display()))?;
-            println!("blessed {}", path.display());
-        }
-    }
-    for (suffix, case, frames) in golden::lit_cases() {
-        let path = golden::path("demo-lit", suffix);
-        golden::render_lit(&case, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
-        println!("blessed {}", path.display());
-    }
-    for (suffix, case, frames) in golden::mesh_cases() {
-        let path = golden::path("demo-meshes", suffix);
-        golden::render_meshes(&case, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
-        println!("blessed {}", path.display());
-    }
-    for (suffix, gaussians, frames) in golden::path_cases() {
-        let path = golden::path("demo-meshes", suffix);
-        golden::render_path(gaussians, &frames).save(&path).with_context(|| format!("writing {}", path.display()))?;
-        println!("blessed {}", path.display());
+/// `splat-tests`' `regenerate fixtures | bless`: the fixture scenes, or the golden images.
+fn regenerate(what: &str) -> Result<()> {
+    let status = Command::new(env!("CARGO"))
+        .current_dir(root())
+        .args(["run", "--release", "-p", "splat-tests", "--bin", "regenerate", "--", what])
+        .status()
+        .context("running cargo")?;
+    if !status.success() {
+        bail!("regenerate {what} failed ({status})");
     }
     Ok(())
 }
@@ -436,8 +435,8 @@ fn interop() -> Result<PathBuf> {
     for file in ["package.json", "package-lock.json", "make.mjs"] {
         std::fs::copy(root().join(INTEROP_SOURCES).join(file), npm_dir.join(file))?;
     }
-    let (scene, _) = scenes::cloud();
-    write_ply(&dir.join("source.ply"), &scene, PlyFormat::BinaryLittleEndian)?;
+    // The SH degree 3 cloud, as `cargo xtask fixtures` writes it.
+    std::fs::copy(root().join("fixtures/cloud.ply"), dir.join("source.ply"))?;
     let run = |program: &str, args: &[&str]| -> Result<()> {
         let status = Command::new(program)
             .args(args)
