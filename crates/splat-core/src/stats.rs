@@ -65,7 +65,8 @@ pub const SE_MIN: f64 = 1e-6;
 
 /// The standard error of a mean of `frames` frames from the per-frame variance `var` of an
 /// independent run: √(var / F); where that run never varied (var = 0), 1/F, since an event
-/// rarer than 1/(4F) could still be in the mean and one such event moves it by up to 1/F.
+/// too rare for the runs to have drawn could still be in the mean, and one such event moves
+/// it by up to 1/F.
 pub fn standard_error(var: f32, frames: u32) -> f64 {
     let f = f64::from(frames);
     if var > 0.0 { (f64::from(var) / f).sqrt().max(SE_MIN) } else { 1.0 / f }

@@ -66,7 +66,7 @@ fn base() -> Frames {
 }
 
 /// Each method passes the z-test on overlapping layers (every pixel has the four sheets' edges
-/// or overlaps; F = 256, variance from 1024 more frames); stratified without the scramble is
+/// or overlaps; F = 256, variance from 256 or 1024 more frames); stratified without the scramble is
 /// rejected; the power study of each method (docs/power.md; Enderton and stratified without the
 /// radiance rows): every 2 % error visible at this budget (opacity × 1.02 among them) is
 /// rejected. Lavapipe's cost sets the fixture: a frame of

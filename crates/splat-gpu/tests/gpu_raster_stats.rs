@@ -1,6 +1,6 @@
 //! Statistical proof of GPU StochasticSplats against the CPU raster oracle (sorted splatting,
 //! on lavapipe in CI): the per-pixel z-test of docs/architecture.md with F = 256 frames (variance
-//! from 1024 independent ones) and its biased control, and the convergence slope. A binary of
+//! from 256 or 1024 independent ones) and its biased control, and the convergence slope. A binary of
 //! its own, since lavapipe leaks memory per submission and each test binary is a process.
 
 mod common;
