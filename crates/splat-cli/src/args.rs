@@ -619,12 +619,8 @@ pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::Sc
 
 /// Say which unknown `.ply` properties the reader skipped.
 fn warn_skipped_properties(path: &std::path::Path, skipped: &[String]) {
-    if !skipped.is_empty() {
-        eprintln!(
-            "warning: {}: skipped unknown vertex properties {} (--strict refuses them)",
-            path.display(),
-            skipped.join(", ")
-        );
+    if let Some(warning) = splat_io::skipped_properties_warning(path, skipped) {
+        eprintln!("warning: {warning} (--strict refuses them)");
     }
 }
 

@@ -17,7 +17,7 @@
 use crate::context::{compute_pipeline, storage_entry, uniform_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
 use crate::timing::Timer;
-use crate::{GpuContext, GpuError, GpuStats};
+use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{DEFAULT_K, Method, MethodCode, TraceScene};
@@ -83,7 +83,7 @@ impl TryFrom<&Method> for MethodParams {
             Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, ..base },
             Method::DepthSampling { k } => MethodParams { k: k as u32, ..base },
             Method::Stochastic | Method::Opaque => base,
-            other => return Err(GpuError::Unsupported(format!("{other:?} has no GPU kernel"))),
+            other => return Err(GpuError::refused(format!("{other:?} has no GPU kernel"), &[Remedy::Cpu])),
         })
     }
 }
@@ -240,7 +240,7 @@ impl<'a> GpuTracer<'a> {
     pub fn supports(method: &Method) -> Result<(), GpuError> {
         method.validate()?;
         match method {
-            Method::Opaque => Err(GpuError::Unsupported("the opaque baseline runs on the CPU only".into())),
+            Method::Opaque => Err(GpuError::refused("the opaque baseline runs on the CPU only", &[Remedy::Cpu])),
             _ => Ok(()),
         }
     }
@@ -298,8 +298,9 @@ impl<'a> GpuTracer<'a> {
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         settings.validate()?;
-        let params = layout::path_params(settings, self.emitter_count)
-            .ok_or_else(|| GpuError::Unsupported("depth sampling in the path tracer runs on the CPU only".into()))?;
+        let params = layout::path_params(settings, self.emitter_count).ok_or_else(|| {
+            GpuError::refused("depth sampling in the path tracer runs on the CPU only", &[Remedy::Cpu])
+        })?;
         let buffer = self.ctx.upload_uniform("path", bytemuck::bytes_of(&params));
         let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..*frames };
         self.render_with(camera, &Method::Stochastic, &frames, None, Some((&pipeline.pipeline, &buffer)))

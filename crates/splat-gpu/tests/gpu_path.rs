@@ -78,7 +78,9 @@ fn depth_sampling_stays_on_the_cpu() {
     let gpu = tracer(ctx, &trace);
     let s = settings(GaussianEstimator::DepthSampling { k: 2 }, SamplerKind::Hash);
     match gpu.render_path(path_pipeline(ctx), &world.1, &s, &Frames::default()) {
-        Err(GpuError::Unsupported(m)) => assert!(m.contains("CPU only"), "{m}"),
+        Err(e @ GpuError::Refused { .. }) => {
+            assert!(e.to_string().contains("CPU only") && e.remedies() == [splat_gpu::Remedy::Cpu], "{e}")
+        }
         other => panic!("depth sampling was not refused: {:?}", other.map(|_| ())),
     }
 }

@@ -104,6 +104,14 @@ pub fn read_scene(path: &Path) -> Result<Scene, Error> {
     read_scene_with(path, ReadOptions::default()).map(|read| read.scene)
 }
 
+/// What to tell the user of the `.ply` vertex properties a reader skipped (`PATH: skipped
+/// unknown vertex properties a, b`), or `None` when it skipped none. Front ends add how to
+/// refuse them instead (the CLI's `--strict`).
+pub fn skipped_properties_warning(path: &Path, skipped: &[String]) -> Option<String> {
+    (!skipped.is_empty())
+        .then(|| format!("{}: skipped unknown vertex properties {}", path.display(), skipped.join(", ")))
+}
+
 /// Read a scene, choosing the format by extension, and report what was skipped.
 pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, Error> {
     let read = |format, scene| SceneRead { scene, format, skipped_properties: Vec::new() };

@@ -40,12 +40,8 @@ pub struct SceneInfo {
 /// when `None`) and the views of `cameras`.
 pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
     let opened = splat_io::world::open_world(scene, splat_io::ReadOptions::default())?;
-    if let (Some(path), false) = (scene, opened.skipped_properties.is_empty()) {
-        eprintln!(
-            "warning: {}: skipped unknown vertex properties {}",
-            path.display(),
-            opened.skipped_properties.join(", ")
-        );
+    if let Some(warning) = scene.and_then(|p| splat_io::skipped_properties_warning(p, &opened.skipped_properties)) {
+        eprintln!("warning: {warning}");
     }
     let (world, name) = (opened.world, opened.name);
     let views = match cameras {
