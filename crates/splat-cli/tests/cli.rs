@@ -860,6 +860,21 @@ fn colmap_cameras_and_all_cameras() {
     for i in 0..3 {
         assert!(out.join(format!("img_{i}.png")).exists(), "img_{i}.png missing");
     }
+    let one = scratch("one-view");
+    let o = splat(&[
+        "render",
+        "fixtures/cloud.ply",
+        "--camera",
+        "fixtures/cloud.cameras.json",
+        "--all-cameras",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "-o",
+        one.to_str().unwrap(),
+    ]);
+    assert!(o.status.success() && stderr(&o).contains("rendered 1 view,"), "{}", stderr(&o));
     let o = splat(&["render", "fixtures/cloud.ply", "--all-cameras", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("--camera"), "{}", stderr(&o));
 }
