@@ -1,0 +1,97 @@
+//! How close a frame's decisions came to flipping: for CPU = GPU comparisons, where a pixel
+//! may differ between backends only if one of its decisions had u within rounding of its
+//! threshold.
+
+use glam::Vec3;
+use splat_core::frame::Decide;
+use splat_core::raster::{RasterMethod, Rasterizer};
+use splat_core::rng::{RayRng, RngScheme, frame_key};
+use splat_core::trace::{Method, TraceScene};
+use splat_core::{Camera, Frames};
+use std::cell::Cell;
+
+/// Largest difference of one frame between the backends for the same decisions: f32
+/// compositing on the GPU against f64 on the CPU.
+pub const FLOAT_TOLERANCE: f32 = 1e-4;
+/// A decision may flip between the backends only where u lies this close to its threshold
+/// (the backends' alphas differ by f32 rounding of the same formula).
+pub const FLIP_GAP: f64 = 1e-5;
+
+/// A decision source that records the smallest |u − threshold| of the comparisons it
+/// made (particles against α, passes against O, references against α).
+pub struct Nearest<D> {
+    inner: D,
+    gap: Cell<f64>,
+}
+
+impl<D: Decide> Nearest<D> {
+    /// Wrap `inner`; the gap starts at infinity (no decision made).
+    pub fn new(inner: D) -> Self {
+        Self { inner, gap: Cell::new(f64::INFINITY) }
+    }
+
+    /// The smallest |u − threshold| so far.
+    pub fn gap(&self) -> f64 {
+        self.gap.get()
+    }
+
+    fn saw(&self, u: f64, threshold: f64) {
+        self.gap.set(self.gap.get().min((u - threshold).abs()));
+    }
+}
+
+impl<D: Decide> Decide for Nearest<D> {
+    fn needs_position(&self) -> bool {
+        self.inner.needs_position()
+    }
+    fn particle(&self, id: u32, slot: u32, hit: Vec3) -> f32 {
+        self.inner.particle(id, slot, hit)
+    }
+    fn pass(&self, pass: u32) -> f32 {
+        self.inner.pass(pass)
+    }
+    fn light_sample(&self, light: u32, slot: u32) -> glam::Vec2 {
+        self.inner.light_sample(light, slot)
+    }
+    fn accepts(&self, id: u32, u: f32, alpha: f32) -> bool {
+        self.saw(f64::from(u), f64::from(alpha));
+        self.inner.accepts(id, u, alpha)
+    }
+    fn accepts_pass(&self, u: f64, opacity: f64) -> bool {
+        self.saw(u, opacity);
+        self.inner.accepts_pass(u, opacity)
+    }
+    fn covers(&self, alpha: f32, reference: f32) -> bool {
+        self.saw(f64::from(reference), f64::from(alpha));
+        self.inner.covers(alpha, reference)
+    }
+}
+
+/// The smallest |u − threshold| among the decisions of the frames of `frames` at pixel
+/// (x, y) of the CPU ray tracer.
+pub fn trace_gap(trace: &TraceScene, camera: &Camera, method: &Method, frames: &Frames, x: u32, y: u32) -> f64 {
+    let ray = trace.clip(camera.pixel_ray(x, y));
+    (0..frames.count)
+        .map(|f| {
+            let rng = RayRng::new(x, y, frame_key(frames.seed, f), frames.rng).shifted(frames.u_shift);
+            let nearest = Nearest::new(rng);
+            trace.sample(method, &ray, &nearest);
+            nearest.gap()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The same for the CPU rasterizer.
+pub fn raster_gap(r: &Rasterizer, method: &RasterMethod, frames: &Frames, x: u32, y: u32) -> f64 {
+    let px = r.pixel(x, y);
+    let mut fragments = r.fragments(&px);
+    (0..frames.count)
+        .map(|f| {
+            let key = frame_key(frames.seed, f);
+            r.shuffle(&mut fragments, key);
+            let nearest = Nearest::new(RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift));
+            r.draw(method, &px, &fragments, &nearest, key);
+            nearest.gap()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
