@@ -11,13 +11,15 @@ pub enum DisplayMode {
     /// The running mean of the radiance (Eq. 3 in expectation).
     #[default]
     Colour,
-    /// Frame 0's picked depth, near bright and far dark between [`Display::depth_near`] and
-    /// [`Display::depth_far`]; black where nothing was picked.
+    /// Frame 0's picked depth, near bright and far dark between
+    /// [`DisplayTransform::depth_near`] and [`DisplayTransform::depth_far`]; black where
+    /// nothing was picked.
     Depth,
     /// Frame 0's unit normal n as (n + 1) / 2; black where nothing was hit.
     Normal,
-    /// The per-frame standard deviation √(mean of the RGB variances) × [`Display::variance_scale`],
-    /// grey: where the estimator is noisy (zero after one frame).
+    /// The per-frame standard deviation √(mean of the RGB variances) ×
+    /// [`DisplayTransform::variance_scale`], grey: where the estimator is noisy (zero after one
+    /// frame).
     Variance,
 }
 
@@ -39,7 +41,7 @@ impl DisplayMode {
 
 /// A display transform: the mode and its ranges.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Display {
+pub struct DisplayTransform {
     /// What to show.
     pub mode: DisplayMode,
     /// Depth shown white.
@@ -50,7 +52,7 @@ pub struct Display {
     pub variance_scale: f32,
 }
 
-impl Default for Display {
+impl Default for DisplayTransform {
     fn default() -> Self {
         Self { mode: DisplayMode::Colour, depth_near: 0.0, depth_far: 10.0, variance_scale: 2.0 }
     }
@@ -69,7 +71,7 @@ pub struct PixelState {
     pub normal: [f32; 3],
 }
 
-impl Display {
+impl DisplayTransform {
     /// The displayed RGB of `p`, in [0, 1] (display.wgsl `shade`).
     pub fn shade(&self, p: &PixelState) -> [f32; 3] {
         let unit = |v: f32| v.clamp(0.0, 1.0);
@@ -200,16 +202,17 @@ mod tests {
 
     #[test]
     fn each_mode_shows_its_quantity() {
-        let d = Display { depth_near: 1.0, depth_far: 4.0, variance_scale: 2.0, ..Display::default() };
-        let show = |mode| Display { mode, ..d }.shade(&pixel());
+        let d =
+            DisplayTransform { depth_near: 1.0, depth_far: 4.0, variance_scale: 2.0, ..DisplayTransform::default() };
+        let show = |mode| DisplayTransform { mode, ..d }.shade(&pixel());
         assert_eq!(show(DisplayMode::Colour), [0.25, 1.0, 0.0]);
         assert_eq!(show(DisplayMode::Depth), [0.5; 3]);
         assert_eq!(show(DisplayMode::Normal), [0.5, 0.5, 0.0]);
         let sd = show(DisplayMode::Variance)[0];
         assert!((sd - 0.4).abs() < 1e-6, "{sd}");
         let none = PixelState { depth: f32::NAN, normal: [0.0; 3], ..pixel() };
-        assert_eq!(Display { mode: DisplayMode::Depth, ..d }.shade(&none), [0.0; 3]);
-        assert_eq!(Display { mode: DisplayMode::Normal, ..d }.shade(&none), [0.0; 3]);
+        assert_eq!(DisplayTransform { mode: DisplayMode::Depth, ..d }.shade(&none), [0.0; 3]);
+        assert_eq!(DisplayTransform { mode: DisplayMode::Normal, ..d }.shade(&none), [0.0; 3]);
         assert_eq!(d.rgba8(&pixel()), [64, 255, 0, 255]);
     }
 }

@@ -1,6 +1,6 @@
 //! A progressive ray-traced view, for interactive viewers: the per-pixel Welford state stays
 //! on the device between steps, each [`ProgressiveTrace::step`] folds more frames into it, and
-//! [`ProgressiveTrace::present`] draws what the chosen [`Display`] shows into the caller's
+//! [`ProgressiveTrace::present`] draws what the chosen [`DisplayTransform`] shows into the caller's
 //! texture view, with no readback. A camera move keeps the buffers (only a new size
 //! reallocates) and restarts the accumulation; so does a new method.
 //!
@@ -9,7 +9,7 @@
 //!
 //! ```no_run
 //! use splat_core::{RenderSettings, frame::Frames, scenes, trace::{Method, TraceScene}};
-//! use splat_gpu::{Display, GpuContext, GpuTracer, ProgressiveTrace, TracePipeline};
+//! use splat_gpu::{DisplayTransform, GpuContext, GpuTracer, ProgressiveTrace, TracePipeline};
 //! let ctx = GpuContext::new()?;
 //! let pipeline = TracePipeline::new(&ctx)?;
 //! let (scene, camera) = scenes::cloud();
@@ -29,13 +29,13 @@
 //! });
 //! let target = texture.create_view(&Default::default());
 //! let mut encoder = ctx.device.create_command_encoder(&Default::default());
-//! view.present(&ctx, &mut encoder, &target, texture.format(), &Display::default())?;
+//! view.present(&ctx, &mut encoder, &target, texture.format(), &DisplayTransform::default())?;
 //! ctx.queue.submit([encoder.finish()]);
 //! # use splat_gpu::wgpu;
 //! # Ok::<(), splat_gpu::GpuError>(())
 //! ```
 
-use crate::display::{DISPLAY_WGSL, Display, DisplayParams};
+use crate::display::{DISPLAY_WGSL, DisplayParams, DisplayTransform};
 use crate::layout::{self, GpuPick, Params};
 use crate::trace::{
     DISPATCHES_PER_SUBMIT, LOOP_BUDGET, Targets, busiest_pixel, dispatch_batch, frame_params, params_buffer,
@@ -211,7 +211,7 @@ impl ProgressiveTrace {
         encoder: &mut wgpu::CommandEncoder,
         target: &wgpu::TextureView,
         format: wgpu::TextureFormat,
-        display: &Display,
+        display: &DisplayTransform,
     ) -> Result<(), GpuError> {
         let params = display.uniform(self.camera.width, self.camera.height, self.done, format);
         ctx.queue.write_buffer(&self.display.uniform, 0, bytemuck::bytes_of(&params));

@@ -9,7 +9,7 @@ use common::{context, fixture, tracer};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Camera, RenderSettings};
-use splat_gpu::{Display, DisplayMode, GpuContext, PixelState, ProgressiveTrace, read_rgba8, wgpu};
+use splat_gpu::{DisplayMode, DisplayTransform, GpuContext, PixelState, ProgressiveTrace, read_rgba8, wgpu};
 
 /// The largest |a − b| over two images' values.
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -89,7 +89,7 @@ fn the_display_pass_draws_each_mode_as_its_cpu_twin() {
     let state = view.read(ctx).unwrap();
     for format in [wgpu::TextureFormat::Rgba8Unorm, wgpu::TextureFormat::Rgba8UnormSrgb] {
         for mode in DisplayMode::ALL {
-            let display = Display { mode, depth_near: 2.0, depth_far: 8.0, variance_scale: 4.0 };
+            let display = DisplayTransform { mode, depth_near: 2.0, depth_far: 8.0, variance_scale: 4.0 };
             let texture = target(ctx, &camera, format);
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             let view_of = texture.create_view(&Default::default());

@@ -6,7 +6,7 @@
 
 use splat_core::frame::RenderOutput;
 use splat_core::image::Image;
-use splat_gpu::{AccumulationFormat, Display, PixelState};
+use splat_gpu::{AccumulationFormat, DisplayTransform, PixelState};
 
 /// The accumulated frames of a `width` × `height` view.
 pub struct CpuAccumulation {
@@ -65,7 +65,7 @@ impl CpuAccumulation {
     }
 
     /// What `display` shows, as RGBA8 rows.
-    pub fn rgba8(&self, display: &Display) -> Vec<u8> {
+    pub fn rgba8(&self, display: &DisplayTransform) -> Vec<u8> {
         let variance = |i: usize| if self.frames > 1 { self.m2[i] / (self.frames - 1) as f32 } else { 0.0 };
         let rgb = |v: &[f32], p: usize| [v[3 * p], v[3 * p + 1], v[3 * p + 2]];
         (0..self.depth.len())
@@ -108,7 +108,11 @@ mod tests {
         assert_eq!(acc.frames(), 3);
         assert!((acc.mean_image().data()[0] - 0.5).abs() < 1e-6);
         // Sample variance of 0.2, 0.4, 0.9 is 0.13: standard deviation 0.3606.
-        let d = Display { mode: splat_gpu::DisplayMode::Variance, variance_scale: 1.0, ..Display::default() };
+        let d = DisplayTransform {
+            mode: splat_gpu::DisplayMode::Variance,
+            variance_scale: 1.0,
+            ..DisplayTransform::default()
+        };
         assert_eq!(acc.rgba8(&d)[0], (0.13f32.sqrt() * 255.0).round() as u8);
     }
 

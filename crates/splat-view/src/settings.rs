@@ -9,7 +9,7 @@ use splat_core::rng::RngScheme;
 use splat_core::trace::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, Method};
 #[cfg(test)]
 use splat_gpu::DisplayMode;
-use splat_gpu::{AccumulationFormat, Display};
+use splat_gpu::{AccumulationFormat, DisplayTransform};
 
 /// Which family renders (vk_gaussian_splatting's pipeline selector).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -171,7 +171,7 @@ pub struct Settings {
     /// The material of each splat set (the world's, as edited).
     pub materials: Vec<Material>,
     /// What the view shows.
-    pub display: Display,
+    pub display: DisplayTransform,
     /// Where frames are rendered.
     pub backend: Backend,
     /// Rendered pixels per window pixel (0.125 to 1).
@@ -205,7 +205,7 @@ impl Settings {
             shadows: lighting.shadows,
             lights: lighting.lights.clone(),
             materials: lighting.sets.iter().map(|set| set.material).collect(),
-            display: Display::default(),
+            display: DisplayTransform::default(),
             backend,
             scale: if backend == Backend::Gpu { 1.0 } else { 0.5 },
             max_frames: 1024,
@@ -298,7 +298,7 @@ mod tests {
     #[test]
     fn a_display_change_keeps_the_frames_and_a_method_change_does_not() {
         let s = Settings::new(RenderSettings::default(), &Lighting::default(), Backend::Cpu);
-        let display = Settings { display: Display { mode: DisplayMode::Depth, ..s.display }, ..s.clone() };
+        let display = Settings { display: DisplayTransform { mode: DisplayMode::Depth, ..s.display }, ..s.clone() };
         assert_eq!(display.frames_key(), s.frames_key());
         assert_eq!(display.scene_key(), s.scene_key());
         let method = Settings { trace: TraceChoice::Exact, ..s.clone() };

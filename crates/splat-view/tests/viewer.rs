@@ -13,7 +13,7 @@ use egui_kittest::{Harness, SnapshotOptions};
 use splat_core::frame::Frames;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Algorithm, Camera, Shot};
-use splat_gpu::{Display, GpuContext, GpuTracer, PixelState, TracePipeline};
+use splat_gpu::{DisplayTransform, GpuContext, GpuTracer, PixelState, TracePipeline};
 use splat_view::settings::TraceChoice;
 use splat_view::worker::Status;
 use splat_view::{BackendChoice, Options, Viewer};
@@ -222,7 +222,7 @@ fn the_gpu_view_draws_the_frames_of_a_batch_render() {
     let trace = TraceScene::new(&scene, splat_core::RenderSettings::default()).unwrap();
     let tracer = GpuTracer::new(&ctx, &pipeline, &trace).unwrap();
     let batch = tracer.render(&camera, &Method::Stochastic, &Frames { count: 4, ..Frames::default() }).unwrap().0;
-    let display = Display::default();
+    let display = DisplayTransform::default();
     let mut worst = 0u8;
     for (p, texel) in view.chunks(4).enumerate() {
         let (x, y) = (p as u32 % w, p as u32 / w);
