@@ -38,7 +38,7 @@
 use crate::display::{DISPLAY_WGSL, DisplayParams, DisplayTransform};
 use crate::layout::{self, GpuPick, Params};
 use crate::trace::{
-    DISPATCHES_PER_SUBMIT, LOOP_BUDGET, Targets, busiest_pixel, dispatch_batch, frame_params, params_buffer,
+    DISPATCHES_PER_SUBMIT, LOOP_BUDGET, TraceTargets, busiest_pixel, dispatch_batch, frame_params, params_buffer,
 };
 use crate::{GpuContext, GpuError, GpuTracer, MethodParams};
 use splat_core::Camera;
@@ -47,7 +47,7 @@ use splat_core::trace::Method;
 
 /// A progressive ray-traced view of one [`GpuTracer`]'s scene (see the module documentation).
 pub struct ProgressiveTrace {
-    targets: Targets,
+    targets: TraceTargets,
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     camera: Camera,
@@ -65,7 +65,7 @@ impl ProgressiveTrace {
         camera.validate().map_err(splat_core::RenderError::from)?;
         frames.keys(true)?;
         let ctx = tracer.context();
-        let targets = Targets::new(ctx, camera.width, camera.height);
+        let targets = TraceTargets::new(ctx, camera.width, camera.height);
         let uniform = params_buffer(ctx);
         let bind_group = tracer.bind_group(&uniform, &targets, None, None);
         Ok(Self {
@@ -86,7 +86,7 @@ impl ProgressiveTrace {
     pub fn set_camera(&mut self, tracer: &GpuTracer, camera: &Camera) -> Result<(), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         if (camera.width, camera.height) != (self.targets.width, self.targets.height) {
-            self.targets = Targets::new(tracer.context(), camera.width, camera.height);
+            self.targets = TraceTargets::new(tracer.context(), camera.width, camera.height);
             self.bind_group = tracer.bind_group(&self.uniform, &self.targets, None, None);
         }
         self.camera = *camera;

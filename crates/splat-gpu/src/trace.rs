@@ -312,7 +312,7 @@ impl<'a> GpuTracer<'a> {
     pub(crate) fn bind_group(
         &self,
         uniform: &wgpu::Buffer,
-        targets: &Targets,
+        targets: &TraceTargets,
         first_hits: Option<&wgpu::Buffer>,
         path: Option<&wgpu::Buffer>,
     ) -> wgpu::BindGroup {
@@ -462,14 +462,14 @@ impl Run<'_> {
     /// per dispatch (k-buffer and stochastic pass), the rays' state kept between dispatches.
     fn execute(&self, per_dispatch: u32, by_pass: bool) -> Result<Finished, GpuError> {
         let (ctx, camera, tracer) = (self.tracer.ctx, self.camera, self.tracer);
-        let targets = Targets::new(ctx, camera.width, camera.height);
+        let targets = TraceTargets::new(ctx, camera.width, camera.height);
         let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
         let (out_bytes, pick_bytes, state_bytes) = (targets.rgba_bytes(), targets.pick_bytes(), targets.state_bytes());
         let (read_mean, read_var) =
             (self.storage("read mean", out_bytes, read), self.storage("read m2", out_bytes, read));
         let read_pick = self.storage("read pick", pick_bytes, read);
         let read_state = self.storage("read pass state", state_bytes, read);
-        let Targets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. } = &targets;
+        let TraceTargets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. } = &targets;
         let uniform = params_buffer(ctx);
         let bind_group = tracer.bind_group(&uniform, &targets, self.first_hits, self.path.map(|p| p.1));
         let mut gpu_time = Duration::ZERO;
@@ -554,7 +554,7 @@ impl Run<'_> {
 
 /// The per-pixel state a render writes: the running Welford mean (RGBA) and M2 (RGB, with the
 /// loop-iteration count in w), frame 0's pick and, between passes, each ray's [`PassState`].
-pub(crate) struct Targets {
+pub(crate) struct TraceTargets {
     pub(crate) width: u32,
     pub(crate) height: u32,
     pub(crate) mean: wgpu::Buffer,
@@ -563,7 +563,7 @@ pub(crate) struct Targets {
     pub(crate) pass_state: wgpu::Buffer,
 }
 
-impl Targets {
+impl TraceTargets {
     /// Buffers for a `width` × `height` image.
     pub(crate) fn new(ctx: &GpuContext, width: u32, height: u32) -> Self {
         let pixels = u64::from(width) * u64::from(height);

@@ -362,7 +362,7 @@ impl<'a> GpuRasterizer<'a> {
         let (w, h) = (self.camera.width, self.camera.height);
         let pixels = (w * h) as usize;
         let target_samples = if draw.is_rop() { 1 } else { self.raster.samples };
-        let targets = Targets::new(self.ctx, self.pipes, w, h, draw, target_samples);
+        let targets = RasterTargets::new(self.ctx, self.pipes, w, h, draw, target_samples);
         let out_bytes = (pixels * 16) as u64;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let make = |label| {
@@ -555,7 +555,7 @@ impl<'a> GpuRasterizer<'a> {
         &self,
         encoder: &mut wgpu::CommandEncoder,
         draw: Draw,
-        targets: &Targets,
+        targets: &RasterTargets,
         group: &wgpu::BindGroup,
         frame_offset: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites>,
@@ -653,12 +653,12 @@ fn frame_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> 
 
 /// Render targets of one draw: colour (written by the raster operations' kernel for Enderton
 /// and stratified), and depth for StochasticSplats; `samples` per pixel.
-struct Targets {
+struct RasterTargets {
     pub(super) color_view: wgpu::TextureView,
     pub(super) depth_view: Option<wgpu::TextureView>,
 }
 
-impl Targets {
+impl RasterTargets {
     fn new(ctx: &GpuContext, pipes: &RasterPipelines, width: u32, height: u32, draw: Draw, samples: u32) -> Self {
         let texture = |label, format, usage| {
             ctx.device

@@ -35,8 +35,8 @@ impl GpuRasterizer<'_> {
     /// draw at 1 spp; the fastest of `repeat` runs of each.
     pub fn profile(&self, repeat: u32) -> Result<RasterTimings, GpuError> {
         let (w, h) = (self.camera.width, self.camera.height);
-        let sorted_targets = Targets::new(self.ctx, self.pipes, w, h, Draw::Over, 1);
-        let stochastic_targets = Targets::new(self.ctx, self.pipes, w, h, Draw::Stochastic, 1);
+        let sorted_targets = RasterTargets::new(self.ctx, self.pipes, w, h, Draw::Over, 1);
+        let stochastic_targets = RasterTargets::new(self.ctx, self.pipes, w, h, Draw::Stochastic, 1);
         let slots = FrameSlots::new(self.ctx);
         slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0, 0.0);
         let group = self.draw_group(&slots.buffer);

@@ -39,7 +39,7 @@ fn iterations_per_fragment(samples: u32) -> u32 {
 impl RopPass {
     /// Allocate the shuffled order, the pair lists (as many pairs as the depth order makes) and
     /// the groups binding them, `targets.color_view` as the frame's target.
-    pub(super) fn new(r: &GpuRasterizer, targets: &Targets) -> Result<Self, GpuError> {
+    pub(super) fn new(r: &GpuRasterizer, targets: &RasterTargets) -> Result<Self, GpuError> {
         let (ctx, pipes, n) = (r.ctx, r.pipes, r.scene.count);
         let pair_count = r.pair_count()?;
         let (chunk_len, chunk_count) = r.raster_operation_chunks()?;
