@@ -109,33 +109,46 @@ impl<'a> StatTest<'a> {
     }
 
     fn z_tests(&self, base: Frames, expectation: Option<&RenderOutput>) -> (ZTest, Option<ZTest>, image::RgbImage) {
-        let f = base.count;
-        let mean = (self.sampler)(base);
-        let first = (self.sampler)(Frames { seed: base.seed + 1, ..base });
-        let stage = self.judge(&mean, &[(&mean, f), (&first, f)], f, expectation);
+        let (mean, stage) = self.first_stage(base, expectation);
         if stage.0.passes() || stage.0.global > GLOBAL_MAX {
             return stage;
         }
-        let long = VARIANCE_RUN * f;
-        eprintln!("{}: open with the variance of {f} frames ({:?}): {long} frames decide", self.name, stage.0);
+        let long = VARIANCE_RUN * base.count;
+        eprintln!(
+            "{}: open with the variance of {} frames ({:?}): {long} frames decide",
+            self.name, base.count, stage.0
+        );
         let second = (self.sampler)(Frames { count: long, seed: base.seed + 1, ..base });
-        self.judge(&mean, &[(&mean, f), (&second, long)], f, expectation)
+        self.judge(&mean, base.count, &second, long, expectation)
     }
 
-    /// The z-test of `mean` (of `frames` frames), and of `expectation`, with the variance
-    /// pooled from `runs`.
+    /// The mean run and the z-test's first stage: the variance of an independent run of as
+    /// many frames.
+    fn first_stage(
+        &self,
+        base: Frames,
+        expectation: Option<&RenderOutput>,
+    ) -> (RenderOutput, (ZTest, Option<ZTest>, image::RgbImage)) {
+        let mean = (self.sampler)(base);
+        let first = (self.sampler)(Frames { seed: base.seed + 1, ..base });
+        let stage = self.judge(&mean, base.count, &first, base.count, expectation);
+        (mean, stage)
+    }
+
+    /// The z-test of `mean` (of `frames` frames), and of `expectation`, with the variance of
+    /// `var` (of `var_frames` frames) pooled with the mean run's own.
     fn judge(
         &self,
         mean: &RenderOutput,
-        runs: &[(&RenderOutput, u32)],
         frames: u32,
+        var: &RenderOutput,
+        var_frames: u32,
         expectation: Option<&RenderOutput>,
     ) -> (ZTest, Option<ZTest>, image::RgbImage) {
-        let outputs: Vec<&RenderOutput> = std::iter::once(&self.oracle).chain(runs.iter().map(|r| r.0)).collect();
-        let mask = covered_channels(&outputs);
+        let mask = covered_channels(&[&self.oracle, mean, var]);
         let kept = |v: &[f32]| keep(v, &mask);
         let (m, r) = (mean.mean.data(), self.oracle.mean.data());
-        let v = &pooled_variance(runs);
+        let v = &pooled_variance(mean, frames, var, var_frames);
         let (kr, kv) = (kept(r), kept(v));
         let z = ZTest::new(&kept(m), &kr, &kv, frames, 3);
         let expected = expectation.map(|e| ZTest::new(&kept(e.mean.data()), &kr, &kv, frames, 3));
@@ -158,13 +171,15 @@ impl<'a> StatTest<'a> {
     /// (seed `base.seed + 2`, independent of the full run), which stops at a rejection by
     /// the global statistic alone (the plain bias of the image's mean, which a control wrong
     /// by a mile shows at any budget; the spread is not calibrated there: the unbiased
-    /// `stochastic` on `layers` has spread 4.9 at 32 frames, 0.3 at 256); else the full
-    /// budget decides, by every criterion, as before. Either way the z-test rejected the
+    /// `stochastic` on `layers` has spread 4.9 at 32 frames, 0.3 at 256), judged on the
+    /// z-test's first stage only (the variance of as many frames: the global statistic barely
+    /// moves with a longer variance run, so its second stage would not change this stop);
+    /// else the full budget decides, by every criterion, as before. Either way the z-test rejected the
     /// control; the power study's small faults always run at the full budget
     /// ([`assert_power`]).
     pub fn assert_rejected(&self, base: Frames) -> ZTest {
         let count = (base.count / CONTROL_FIRST_STAGE).max(32).min(base.count);
-        let first = self.z_test(Frames { count, seed: base.seed + 2, ..base });
+        let (_, (first, _, _)) = self.first_stage(Frames { count, seed: base.seed + 2, ..base }, None);
         eprintln!("{} (control, first stage, {count} frames): {first:?}", self.name);
         if first.n >= MIN_TESTED && first.global > GLOBAL_MAX {
             return first;
@@ -241,23 +256,21 @@ pub fn keep(v: &[f32], mask: &[bool]) -> Vec<f32> {
     v.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect()
 }
 
-/// The per-frame variance of runs (each an output and its frame count) pooled by degrees
-/// of freedom, Σ (Fᵢ − 1) vᵢ / Σ (Fᵢ − 1). The independent runs alone miss the rare events
-/// of a heavy-tailed estimator (a stochastic pass rejected, then a far pass with a large
-/// L / O): when the mean run meets one, its deviation is measured against a variance that
-/// never saw it, and a single pixel-channel reaches z ≈ 30. With the mean run in the pool,
-/// the event that moves the mean also widens its se (z ≈ √5 at most for one event in 5F
-/// frames), while a bias, which moves the mean without widening the variance, is still
-/// seen.
-pub fn pooled_variance(runs: &[(&RenderOutput, u32)]) -> Vec<f32> {
-    let weight = |frames: u32| f64::from(frames.max(1) - 1);
-    let total = runs.iter().map(|&(_, f)| weight(f)).sum::<f64>().max(1.0);
-    let pixels = runs.first().map_or(0, |(o, _)| o.variance.data().len());
-    (0..pixels)
-        .map(|i| {
-            let sum: f64 = runs.iter().map(|&(o, f)| weight(f) * f64::from(o.variance.data()[i])).sum();
-            (sum / total) as f32
-        })
+/// The per-frame variance of two runs pooled by degrees of freedom,
+/// ((F₁ − 1) v₁ + (F₂ − 1) v₂) / (F₁ + F₂ − 2). The independent run alone misses the rare
+/// events of a heavy-tailed estimator (a stochastic pass rejected, then a far pass with a
+/// large L / O): when the mean run meets one, its deviation is measured against a variance
+/// that never saw it, and a single pixel-channel reaches z ≈ 30. Pooled, the event that
+/// moves the mean also widens its se (z ≈ √5 at most for one event in 5F frames, √2 in 2F),
+/// while a bias, which moves the mean without widening the variance, is still seen.
+pub fn pooled_variance(a: &RenderOutput, fa: u32, b: &RenderOutput, fb: u32) -> Vec<f32> {
+    let (wa, wb) = (f64::from(fa.max(1) - 1), f64::from(fb.max(1) - 1));
+    let total = (wa + wb).max(1.0);
+    a.variance
+        .data()
+        .iter()
+        .zip(b.variance.data())
+        .map(|(&va, &vb)| ((wa * f64::from(va) + wb * f64::from(vb)) / total) as f32)
         .collect()
 }
 
