@@ -1,4 +1,4 @@
-//! Project automation: `cargo xtask test | fixtures | bless`.
+//! Project automation: `cargo xtask test | assets | bench | power | fixtures | bless`.
 
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
@@ -115,14 +115,7 @@ fn has_nextest() -> bool {
 /// run -p` would resolve one package's features and build its libraries a second time) and
 /// run from `target/release/examples/`.
 fn run_examples() -> Result<()> {
-    let built = Command::new(env!("CARGO"))
-        .current_dir(root())
-        .args(["build", "--quiet", "--release", "--workspace", "--examples"])
-        .status()
-        .context("building the examples")?;
-    if !built.success() {
-        bail!("building the examples failed ({built})");
-    }
+    cargo(&["build", "--quiet", "--release", "--workspace", "--examples"])?;
     let out = root().join("target/examples");
     std::fs::create_dir_all(&out)?;
     let path = |name: &str| out.join(name).display().to_string();
@@ -148,8 +141,9 @@ fn run_examples() -> Result<()> {
 /// Build the API documentation of the library crates with warnings as errors (broken links,
 /// missing docs). The applications (`splat-cli`, `splat-view`) publish no API, and documenting
 /// them would check-build the window's stack (winit, egui) once more: minutes of CI on 2 cores.
-/// `--release` reuses the test build's proc macros and build scripts (57 s on a fresh 2-core
-/// machine after the test build, 176 s in the dev profile, which builds them again).
+/// `--release` reuses the test build's proc macros and build scripts (on a fresh 2-core
+/// machine after the test build, documenting as far as one doc error took 57 s with it and
+/// 176 s in the dev profile, which builds them again).
 fn check_docs() -> Result<()> {
     eprintln!(
         "cargo doc --release --workspace --exclude splat-cli --exclude splat-view --no-deps (RUSTDOCFLAGS=-D warnings) …"
@@ -305,13 +299,14 @@ fn power() -> Result<()> {
 
 /// `splat-tests`' `regenerate fixtures | bless`: the fixture scenes, or the golden images.
 fn regenerate(what: &str) -> Result<()> {
-    let status = Command::new(env!("CARGO"))
-        .current_dir(root())
-        .args(["run", "--release", "-p", "splat-tests", "--bin", "regenerate", "--", what])
-        .status()
-        .context("running cargo")?;
+    cargo(&["run", "--release", "-p", "splat-tests", "--bin", "regenerate", "--", what])
+}
+
+/// `cargo ARGS` in the workspace; an error unless it succeeds.
+fn cargo(args: &[&str]) -> Result<()> {
+    let status = Command::new(env!("CARGO")).current_dir(root()).args(args).status().context("running cargo")?;
     if !status.success() {
-        bail!("regenerate {what} failed ({status})");
+        bail!("cargo {} failed ({status})", args.join(" "));
     }
     Ok(())
 }
@@ -324,13 +319,6 @@ fn regenerate(what: &str) -> Result<()> {
 fn bench() -> Result<()> {
     let bonsai = assets()?;
     ensure_embree()?;
-    let cargo = |args: &[&str]| -> Result<()> {
-        let status = Command::new(env!("CARGO")).current_dir(root()).args(args).status()?;
-        if !status.success() {
-            bail!("cargo {} failed ({status})", args.join(" "));
-        }
-        Ok(())
-    };
     cargo(&["bench", "-p", "splat-tests", "--bench", "trace"])?;
     cargo(&["bench", "-p", "splat-gpu", "--bench", "sort"])?;
     let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
