@@ -80,12 +80,11 @@ fn up_line(cameras: Option<&std::path::Path>) -> Result<String> {
             let mut flag = [0; 3].map(|z: i32| z.to_string());
             flag[axis] = format!("{sign}1");
             format!(
-                "up         {:.2},{:.2},{:.2}, the mean of {} view{}: frame with --up {}",
+                "up         {:.2},{:.2},{:.2}, the mean of {}: frame with --up {}",
                 up.x,
                 up.y,
                 up.z,
-                views.len(),
-                if views.len() == 1 { "" } else { "s" },
+                crate::counted(views.len(), "view"),
                 flag.join(",")
             )
         }

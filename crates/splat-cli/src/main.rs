@@ -75,6 +75,11 @@ enum Command {
     Stratify(stratify::StratifyArgs),
 }
 
+/// `n` and `noun`, plural unless `n` is 1: "1 view", "3 views".
+pub(crate) fn counted(n: usize, noun: &str) -> String {
+    if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
+}
+
 fn main() -> ExitCode {
     // SAFETY: the first statement of main, before any thread starts.
     #[allow(unsafe_code)]

@@ -238,9 +238,8 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     eprintln!(
-        "rendered {} view{}, {}, {} in {:.2} s → {}",
-        cameras.len(),
-        if cameras.len() == 1 { "" } else { "s" },
+        "rendered {}, {}, {} in {:.2} s → {}",
+        crate::counted(cameras.len(), "view"),
         describe(args),
         frames_done(args.spp, algorithm.is_random(&world.lighting, !world.meshes.is_empty())),
         start.elapsed().as_secs_f64(),
