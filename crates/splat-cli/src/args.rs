@@ -3,49 +3,28 @@
 //! scene loader and the progress bar.
 
 use anyhow::{Context, Result, bail};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
+use splat_core::catalogue::{self, Param};
 use splat_core::lighting::{Lighting, Look, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
-use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SamplePattern, SplatExtent};
+use splat_core::raster::{Blend, FragmentDepth, RasterSettings, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
-use splat_core::{Algorithm, Camera, HitDistance, KernelParams, RenderSettings, Scene};
+use splat_core::{Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene};
 use splat_io::text::{parse_direction, parse_vec3};
 use splat_io::world::World;
 use std::path::PathBuf;
 
-/// Rendering method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    /// Every hit along each ray through the BVH, sorted, composited by Eq. 3.
-    Exact,
-    /// The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3.
-    Oracle,
-    /// 3DGRT / vk multi-pass k-buffer: --k hits per pass, up to --max-passes passes.
-    Kbuffer,
-    /// Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray.
-    Stochastic,
-    /// Sun et al. §3.5: --passes traversals of --samples samples each per frame.
-    StochasticN,
-    /// vk stochastic pass: --k sorted hits a pass, accepted with probability 1 − T_pass.
-    StochasticPass,
-    /// 3DGRT stochastic depth sampling of the first --k accepted hits (biased; a control).
-    DepthSamplingK,
-    /// Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline.
-    Opaque,
-    /// 3DGS splatting: EWA projection, global depth sort, --blend over|under per sample (the
-    /// raster oracle; under also gives iso depth and normals).
-    RasterSorted,
-    /// StochasticSplats: no sort, depth-tested stochastic discard, --raster-samples per pixel.
-    StochasticSplat,
-    /// Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment.
-    Enderton,
-    /// Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting).
-    Stratified,
+/// The values of `--method` (and `--secondary`, `--methods`): every method of the
+/// [catalogue](splat_core::catalogue) by its name, its summary as help.
+pub fn method_parser() -> impl TypedValueParser<Value = MethodId> {
+    let values = MethodId::ALL.map(|m| PossibleValue::new(m.name()).help(m.entry().summary));
+    PossibleValuesParser::new(values).map(|name| MethodId::from_name(&name).expect("a name of the catalogue"))
 }
 
 /// Blend order of raster-sorted.
@@ -118,26 +97,23 @@ pub enum RngArg {
     Trig,
 }
 
-/// Samples per traversal of stochastic-n unless `--samples` says otherwise.
-pub const DEFAULT_SAMPLES: u32 = 16;
-
 /// Options of the methods, shared by `render`, `converge` and `bench`.
 #[derive(Args, Clone)]
 pub struct MethodOptions {
     /// Hits per pass (kbuffer, stochastic-pass) or accepted hits composited (depth-sampling-k).
-    #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_K)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_K)]
     pub k: usize,
     /// Pass limit of kbuffer and stochastic-pass.
-    #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_MAX_PASSES)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_MAX_PASSES)]
     pub max_passes: u32,
     /// kbuffer stops when transmittance falls to this (0: never; exact up to --max-passes).
-    #[arg(help_heading = "Method parameters", long, default_value_t = splat_core::trace::DEFAULT_MIN_TRANSMITTANCE)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_MIN_TRANSMITTANCE)]
     pub min_transmittance: f32,
     /// stochastic-n: samples per traversal (n, up to 64).
-    #[arg(help_heading = "Method parameters", long, default_value_t = DEFAULT_SAMPLES)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_N)]
     pub samples: u32,
     /// stochastic-n: traversals per frame (m).
-    #[arg(help_heading = "Method parameters", long, default_value_t = 1)]
+    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_M)]
     pub passes: u32,
     /// Generator of the stochastic decisions.
     #[arg(help_heading = "Method parameters", long, value_enum, default_value = "hash")]
@@ -170,92 +146,43 @@ pub struct MethodOptions {
     pub no_scramble: bool,
 }
 
-impl MethodArg {
-    /// Whether the method is one of the splatting (raster) family.
-    pub fn is_raster(self) -> bool {
-        matches!(
-            self,
-            MethodArg::RasterSorted | MethodArg::StochasticSplat | MethodArg::Enderton | MethodArg::Stratified
-        )
-    }
-
-    /// The method's name on the command line (`stochastic-n`, …).
-    pub fn name(self) -> String {
-        clap::ValueEnum::to_possible_value(&self).map(|v| v.get_name().to_string()).unwrap_or_default()
-    }
-}
-
 impl MethodOptions {
-    /// The library's algorithm for a CLI method, with these options' parameters.
-    pub fn resolve(&self, m: MethodArg) -> Algorithm {
-        let trace = Algorithm::Trace;
-        let raster = |method| Algorithm::Raster(method, self.raster_settings());
-        match m {
-            MethodArg::Oracle => Algorithm::Oracle,
-            MethodArg::Exact => trace(Method::Exact),
-            MethodArg::Kbuffer => trace(Method::KBuffer {
-                k: self.k,
-                max_passes: self.max_passes,
-                min_transmittance: self.min_transmittance,
-            }),
-            MethodArg::Stochastic => trace(Method::Stochastic),
-            MethodArg::StochasticN => trace(Method::StochasticN { m: self.passes, n: self.samples }),
-            MethodArg::StochasticPass => trace(Method::StochasticPass { k: self.k, max_passes: self.max_passes }),
-            MethodArg::DepthSamplingK => trace(Method::DepthSampling { k: self.k }),
-            MethodArg::Opaque => trace(Method::Opaque),
-            MethodArg::RasterSorted => raster(RasterMethod::Sorted {
-                blend: match self.blend {
-                    BlendArg::Over => Blend::Over,
-                    BlendArg::Under => Blend::Under,
-                },
-            }),
-            MethodArg::StochasticSplat => raster(RasterMethod::StochasticSplat),
-            MethodArg::Enderton => raster(RasterMethod::Enderton),
-            MethodArg::Stratified => raster(RasterMethod::Stratified { scramble: !self.no_scramble }),
+    /// The value of every method parameter these options give.
+    pub fn parameters(&self) -> Parameters {
+        Parameters {
+            k: self.k,
+            max_passes: self.max_passes,
+            min_transmittance: self.min_transmittance,
+            n: self.samples,
+            m: self.passes,
+            blend: match self.blend {
+                BlendArg::Over => Blend::Over,
+                BlendArg::Under => Blend::Under,
+            },
+            scramble: !self.no_scramble,
+            raster: self.raster_settings(),
         }
     }
 
-    /// The options given away from their defaults that `algorithm` does not read (each as its
-    /// flag): the method parameters of other methods, the splatting options without a
-    /// splatting pass.
-    pub fn unused(&self, algorithm: &Algorithm) -> Vec<&'static str> {
-        use splat_core::trace::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE};
-        let (trace, raster) = match algorithm {
-            Algorithm::Oracle => (None, None),
-            Algorithm::Trace(m) => (Some(*m), None),
-            Algorithm::Raster(r, _) => (None, Some(*r)),
-            Algorithm::Hybrid(r, _, m) => (Some(*m), Some(*r)),
-        };
-        let k = matches!(
-            trace,
-            Some(Method::KBuffer { .. } | Method::StochasticPass { .. } | Method::DepthSampling { .. })
-        );
-        let passes = matches!(trace, Some(Method::KBuffer { .. } | Method::StochasticPass { .. }));
-        let n = matches!(trace, Some(Method::StochasticN { .. }));
-        let sorted = matches!(raster, Some(RasterMethod::Sorted { .. }));
-        let given = [
-            ("--k", self.k != DEFAULT_K, k),
-            ("--max-passes", self.max_passes != DEFAULT_MAX_PASSES, passes),
-            (
-                "--min-transmittance",
-                self.min_transmittance != DEFAULT_MIN_TRANSMITTANCE,
-                matches!(trace, Some(Method::KBuffer { .. })),
-            ),
-            ("--samples", self.samples != DEFAULT_SAMPLES, n),
-            ("--passes", self.passes != 1, n),
-            ("--raster-samples", self.raster_samples != 1, raster.is_some()),
-            ("--sample-pattern", self.sample_pattern.is_some(), raster.is_some()),
-            ("--fragment-depth", self.fragment_depth != FragmentDepthArg::Center, raster.is_some()),
-            ("--extent", self.extent != ExtentArg::ThreeDgs, raster.is_some()),
-            ("--early-stop", self.early_stop, sorted),
-            ("--blend", self.blend != BlendArg::Under, sorted),
-            ("--no-scramble", self.no_scramble, matches!(raster, Some(RasterMethod::Stratified { .. }))),
-        ];
-        given.into_iter().filter(|&(_, set, read)| set && !read).map(|(flag, ..)| flag).collect()
+    /// The library's algorithm for a method, with these options' parameters.
+    pub fn resolve(&self, m: MethodId) -> Algorithm {
+        m.algorithm(&self.parameters())
+    }
+
+    /// The options given away from their defaults that `algorithm` does not read, each as its
+    /// flag: which parameters a method reads is the catalogue's word.
+    pub fn unused(&self, algorithm: &Algorithm) -> Vec<String> {
+        let (given, defaults) = (self.parameters(), Parameters::default());
+        Param::ALL
+            .into_iter()
+            .filter(|&p| given.differs(&defaults, p) || (p == Param::SamplePattern && self.sample_pattern.is_some()))
+            .filter(|&p| !algorithm.reads(p))
+            .map(|p| format!("--{}", p.info().flag))
+            .collect()
     }
 
     /// The ray-tracing method for a CLI method; an error names any other.
-    pub fn method(&self, m: MethodArg) -> Result<Method> {
+    pub fn method(&self, m: MethodId) -> Result<Method> {
         match self.resolve(m) {
             Algorithm::Trace(method) => Ok(method),
             _ => bail!("{} is not a ray-tracing method (it has no BVH to time)", m.name()),

@@ -3,11 +3,12 @@
 //! `stochastic-splat` among the methods, the splatting path instead (on the GPU stage by
 //! stage: projection, sort, sorted draw, StochasticSplats draw).
 
-use crate::args::{MethodArg, MethodOptions, SceneArgs};
+use crate::args::{MethodOptions, SceneArgs, method_parser};
 use anyhow::Result;
 use clap::Args;
-use splat_core::Frames;
+use splat_core::catalogue::Family;
 use splat_core::trace::{TraceScene, render_frames};
+use splat_core::{Frames, MethodId};
 use std::time::Instant;
 
 /// Arguments of `splat bench`.
@@ -21,11 +22,11 @@ pub struct BenchArgs {
     #[arg(
         help_heading = "Measurement",
         long,
-        value_enum,
+        value_parser = method_parser(),
         value_delimiter = ',',
         default_value = "stochastic,stochastic-n,stochastic-pass,kbuffer,exact"
     )]
-    pub methods: Vec<MethodArg>,
+    pub methods: Vec<MethodId>,
     /// Frames per method (each frame is one sample per pixel).
     #[arg(help_heading = "Measurement", long, default_value_t = 1)]
     pub spp: u32,
@@ -74,7 +75,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if args.pipelines {
         return run_pipelines(&args);
     }
-    let raster = args.methods.iter().any(|m| m.is_raster());
+    let raster = args.methods.iter().any(|m| m.entry().family == Family::Raster);
     let ctx = crate::args::gpu_context(args.scene.backend)?;
     if raster {
         return match &ctx {
@@ -102,8 +103,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
     );
     println!("| method | frame (ms) | Mrays/s | Mrays/s per core | cost vs opaque |");
     println!("|---|---:|---:|---:|---:|");
-    let mut methods = vec![MethodArg::Opaque];
-    methods.extend(args.methods.iter().copied().filter(|&m| m != MethodArg::Opaque));
+    let mut methods = vec![MethodId::Opaque];
+    methods.extend(args.methods.iter().copied().filter(|&m| m != MethodId::Opaque));
     let mut baseline = None;
     for m in methods {
         let method = args.options.method(m)?;
@@ -247,8 +248,8 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     );
     println!("| method | frame (ms) | Mrays/s | cost vs stochastic |");
     println!("|---|---:|---:|---:|");
-    let mut methods = vec![MethodArg::Stochastic];
-    methods.extend(args.methods.iter().copied().filter(|&m| m != MethodArg::Stochastic && m != MethodArg::Opaque));
+    let mut methods = vec![MethodId::Stochastic];
+    methods.extend(args.methods.iter().copied().filter(|&m| m != MethodId::Stochastic && m != MethodId::Opaque));
     let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
     let mut baseline = None;
     for m in methods {
@@ -286,7 +287,7 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let (scene, camera) = args.scene.load(1200, 800)?;
     let pipes = splat_gpu::RasterPipelines::new(ctx)?;
     let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &args.scene.settings())?;
-    let settings = match args.options.on_gpu(args.options.resolve(MethodArg::RasterSorted)) {
+    let settings = match args.options.on_gpu(args.options.resolve(MethodId::RasterSorted)) {
         splat_core::Algorithm::Raster(_, settings) => settings,
         _ => unreachable!("raster-sorted resolves to a raster algorithm"),
     };
@@ -341,8 +342,10 @@ fn raster_methods_gpu(
     settings: &splat_core::raster::RasterSettings,
 ) -> Result<()> {
     use splat_core::raster::{FragmentDepth, RasterSettings};
-    let mut methods = vec![MethodArg::RasterSorted];
-    methods.extend(args.methods.iter().copied().filter(|&m| m.is_raster() && m != MethodArg::RasterSorted));
+    let mut methods = vec![MethodId::RasterSorted];
+    methods.extend(
+        args.methods.iter().copied().filter(|&m| m.entry().family == Family::Raster && m != MethodId::RasterSorted),
+    );
     println!(
         "{} samples per pixel ({} pattern), {} frames per run, fastest of {} runs\n",
         settings.samples,
@@ -356,8 +359,8 @@ fn raster_methods_gpu(
     for m in methods {
         let splat_core::Algorithm::Raster(method, _) = args.options.resolve(m) else { continue };
         let depths: &[FragmentDepth] = match m {
-            MethodArg::RasterSorted => &[FragmentDepth::Center],
-            MethodArg::StochasticSplat => &[FragmentDepth::Center, FragmentDepth::MaxDensityPlane],
+            MethodId::RasterSorted => &[FragmentDepth::Center],
+            MethodId::StochasticSplat => &[FragmentDepth::Center, FragmentDepth::MaxDensityPlane],
             _ => &[settings.fragment_depth],
         };
         for &depth in depths {
@@ -409,8 +412,10 @@ fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
     );
     println!("| method | frame (ms) | cost vs raster-sorted |");
     println!("|---|---:|---:|");
-    let mut methods = vec![MethodArg::RasterSorted];
-    methods.extend(args.methods.iter().copied().filter(|&m| m.is_raster() && m != MethodArg::RasterSorted));
+    let mut methods = vec![MethodId::RasterSorted];
+    methods.extend(
+        args.methods.iter().copied().filter(|&m| m.entry().family == Family::Raster && m != MethodId::RasterSorted),
+    );
     let mut baseline = None;
     for m in methods {
         let splat_core::Algorithm::Raster(method, raster) = args.options.resolve(m) else { continue };

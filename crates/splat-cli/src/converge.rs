@@ -2,13 +2,13 @@
 //! `exact` for the ray-tracing methods, `raster-sorted` (same samples) for the raster methods —
 //! as CSV, a PNG plot and a Markdown table.
 
-use crate::args::{BackendArg, MethodArg, MethodOptions, SceneArgs, progress_bar};
+use crate::args::{BackendArg, MethodOptions, SceneArgs, method_parser, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
 use splat_core::stats::{log_log_slope, rmse};
 use splat_core::trace::{Method, TraceScene, render_frames};
-use splat_core::{Algorithm, Frames};
+use splat_core::{Algorithm, Frames, MethodId};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -20,8 +20,8 @@ pub struct ConvergeArgs {
     pub scene: SceneArgs,
     /// Methods to measure, comma separated (default: stochastic, stochastic-n, stochastic-pass
     /// and depth-sampling-k; with --pipeline path: stochastic, stochastic-n and exact).
-    #[arg(help_heading = "Measurement", long, value_enum, value_delimiter = ',')]
-    pub methods: Option<Vec<MethodArg>>,
+    #[arg(help_heading = "Measurement", long, value_parser = method_parser(), value_delimiter = ',')]
+    pub methods: Option<Vec<MethodId>>,
     /// Largest spp (a power of two).
     #[arg(help_heading = "Measurement", long, default_value_t = 1024)]
     pub max_spp: u32,
@@ -69,7 +69,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         None => {}
     }
     let methods = args.methods.clone().unwrap_or_else(|| {
-        vec![MethodArg::Stochastic, MethodArg::StochasticN, MethodArg::StochasticPass, MethodArg::DepthSamplingK]
+        vec![MethodId::Stochastic, MethodId::StochasticN, MethodId::StochasticPass, MethodId::DepthSampling]
     });
     let (scene, camera) = args.scene.load(160, 120)?;
     let settings = args.scene.settings();
@@ -111,7 +111,12 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
                 }
             };
             let seconds = start.elapsed().as_secs_f64();
-            rows.push(Row { method: m.name(), spp, rmse: rmse(out.mean.data(), reference.mean.data()), seconds });
+            rows.push(Row {
+                method: m.name().to_string(),
+                spp,
+                rmse: rmse(out.mean.data(), reference.mean.data()),
+                seconds,
+            });
         }
     }
     bar.finish_and_clear();
@@ -119,8 +124,8 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
 }
 
 /// Write PREFIX.csv and PREFIX.png and print the table of `rows`, then `extra`.
-fn report(args: &ConvergeArgs, rows: &[Row], methods: &[MethodArg], caption: &str, extra: &str) -> Result<()> {
-    let names: Vec<String> = methods.iter().map(|&m| m.name()).collect();
+fn report(args: &ConvergeArgs, rows: &[Row], methods: &[MethodId], caption: &str, extra: &str) -> Result<()> {
+    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
     let csv = args.output.with_extension("csv");
     std::fs::write(&csv, to_csv(rows)).with_context(|| format!("writing {}", csv.display()))?;
     let png = args.output.with_extension("png");
@@ -138,7 +143,7 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
     use splat_core::path::sampler::SamplerKind;
     use splat_core::path::{GaussianEstimator, PathSettings, PathTracer};
     let methods =
-        args.methods.clone().unwrap_or_else(|| vec![MethodArg::Stochastic, MethodArg::StochasticN, MethodArg::Exact]);
+        args.methods.clone().unwrap_or_else(|| vec![MethodId::Stochastic, MethodId::StochasticN, MethodId::Exact]);
     let estimators: Vec<GaussianEstimator> =
         methods.iter().map(|&m| crate::render::gaussian_estimator(m, &args.options)).collect::<Result<_>>()?;
     let world = args.scene.load_world(160, 120)?;
@@ -168,11 +173,16 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
             let start = Instant::now();
             let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
             let seconds = start.elapsed().as_secs_f64();
-            rows.push(Row { method: m.name(), spp, rmse: rmse(out.mean.data(), reference.mean.data()), seconds });
+            rows.push(Row {
+                method: m.name().to_string(),
+                spp,
+                rmse: rmse(out.mean.data(), reference.mean.data()),
+                seconds,
+            });
         }
     }
     bar.finish_and_clear();
-    let names: Vec<String> = methods.iter().map(|&m| m.name()).collect();
+    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
     let times = time_to_rmse(&rows, &names, args.target_rmse);
     report(args, &rows, &methods, "RMSE against the exact-compositing path tracer", &times)
 }

@@ -1,14 +1,14 @@
 //! `splat render`: one image of a scene, read as four steps: resolve the method, choose the
 //! backend, render, write.
 
-use crate::args::{BackendArg, Loaded, MethodArg, MethodOptions, SceneArgs, progress_bar};
+use crate::args::{BackendArg, Loaded, MethodOptions, SceneArgs, method_parser, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use splat_core::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
+use splat_core::{Algorithm, MethodId};
 use splat_gpu::{GpuContext, GpuTracer};
 use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
 use std::path::{Path, PathBuf};
@@ -41,8 +41,8 @@ pub struct RenderArgs {
     #[arg(help_heading = "Output", long)]
     pub normal: Option<PathBuf>,
     /// Rendering method (default: exact; raster-sorted with --pipeline raster or hybrid).
-    #[arg(help_heading = "Method", long, value_enum)]
-    pub method: Option<MethodArg>,
+    #[arg(help_heading = "Method", long, value_parser = method_parser())]
+    pub method: Option<MethodId>,
     /// Pipeline for a world with meshes: rt ray traces splats and meshes (mirror and glass
     /// bounces), raster splats in three passes (mesh depth, splats front to back, meshes under
     /// them), hybrid rasterizes the first hit and ray traces shadows and bounces from it.
@@ -50,8 +50,8 @@ pub struct RenderArgs {
     #[arg(help_heading = "Method", long, value_enum)]
     pub pipeline: Option<PipelineArg>,
     /// Ray-tracing method of the hybrid pipeline's shadow and bounce rays.
-    #[arg(help_heading = "Method", long, value_enum, default_value = "exact")]
-    pub secondary: MethodArg,
+    #[arg(help_heading = "Method", long, value_parser = method_parser(), default_value = "exact")]
+    pub secondary: MethodId,
     /// Frames (samples per pixel) averaged; stochastic methods converge as 1/√spp.
     #[arg(help_heading = "Method", long, default_value_t = 1)]
     pub spp: u32,
@@ -181,7 +181,7 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) {
     for flag in args.options.unused(algorithm) {
         eprintln!("warning: {flag} does not apply to {}: ignored", describe(args));
     }
-    if args.pipeline != Some(PipelineArg::Hybrid) && args.secondary != MethodArg::Exact {
+    if args.pipeline != Some(PipelineArg::Hybrid) && args.secondary != MethodId::Exact {
         eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
     }
     if world.environment.is_some() || world.lens.is_some() {
@@ -271,16 +271,10 @@ pub enum PipelineArg {
 }
 
 /// The Gaussian estimator of the path tracer that `--method` names.
-pub fn gaussian_estimator(method: MethodArg, options: &MethodOptions) -> Result<GaussianEstimator> {
-    Ok(match method {
-        MethodArg::Stochastic => GaussianEstimator::Stochastic,
-        MethodArg::StochasticN => GaussianEstimator::StochasticN { n: options.samples },
-        MethodArg::Exact => GaussianEstimator::Exact,
-        MethodArg::DepthSamplingK => GaussianEstimator::DepthSampling { k: options.k as u32 },
-        m => bail!(
-            "--method {} is not a Gaussian estimator of the path tracer: use stochastic, stochastic-n, exact or depth-sampling-k",
-            m.name()
-        ),
+pub fn gaussian_estimator(method: MethodId, options: &MethodOptions) -> Result<GaussianEstimator> {
+    GaussianEstimator::of(method, &options.parameters()).with_context(|| {
+        let names: Vec<&str> = GaussianEstimator::methods().map(MethodId::name).collect();
+        format!("--method {} is not a Gaussian estimator of the path tracer: use {}", method.name(), names.join(", "))
     })
 }
 
@@ -316,7 +310,7 @@ fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
     if args.depth.is_some() || args.normal.is_some() || args.alpha.is_some() {
         bail!("the path tracer writes colour and --variance only (no --depth, --normal or --alpha)");
     }
-    let gaussians = gaussian_estimator(args.method.unwrap_or(MethodArg::Stochastic), &args.options)?;
+    let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
     let settings = path_options_settings(&args.path, world, gaussians)?;
     let Loaded { scene, camera, lighting, settings: render_settings, meshes, .. } = world;
     let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
@@ -354,7 +348,7 @@ fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
         meshes.triangles().len(),
         camera.width,
         camera.height,
-        args.method.unwrap_or(MethodArg::Stochastic).name(),
+        args.method.unwrap_or(MethodId::Stochastic).name(),
         args.spp,
         args.output.display()
     );
@@ -362,10 +356,10 @@ fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
 }
 
 /// The method the options name, with the pipeline's default.
-fn method_arg(args: &RenderArgs) -> MethodArg {
+fn method_arg(args: &RenderArgs) -> MethodId {
     args.method.unwrap_or(match args.pipeline {
-        Some(PipelineArg::Raster | PipelineArg::Hybrid) => MethodArg::RasterSorted,
-        _ => MethodArg::Exact,
+        Some(PipelineArg::Raster | PipelineArg::Hybrid) => MethodId::RasterSorted,
+        _ => MethodId::Exact,
     })
 }
 
@@ -394,7 +388,7 @@ fn algorithm(args: &RenderArgs) -> Result<Algorithm> {
 fn describe(args: &RenderArgs) -> String {
     match args.pipeline {
         Some(PipelineArg::Hybrid) => format!("hybrid {} + {}", method_arg(args).name(), args.secondary.name()),
-        _ => method_arg(args).name(),
+        _ => method_arg(args).name().to_string(),
     }
 }
 

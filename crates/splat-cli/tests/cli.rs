@@ -175,20 +175,9 @@ fn info_reports_count_degree_and_histogram() {
 
 #[test]
 fn every_method_renders_with_variance_and_the_same_seed_repeats() {
-    for method in [
-        "exact",
-        "oracle",
-        "kbuffer",
-        "stochastic",
-        "stochastic-n",
-        "stochastic-pass",
-        "depth-sampling-k",
-        "opaque",
-        "raster-sorted",
-        "stochastic-splat",
-        "enderton",
-        "stratified",
-    ] {
+    // Every method of the catalogue, by the name `--method` takes.
+    for id in splat_core::MethodId::ALL {
+        let method = id.name();
         let out = scratch(&format!("m-{method}.npy"));
         let var = scratch(&format!("m-{method}-var.npy"));
         let args = |o: &PathBuf| {
@@ -229,8 +218,7 @@ fn every_method_renders_with_variance_and_the_same_seed_repeats() {
             "{method}: same seed, different image"
         );
         let variance = splat_io::image::read_npy(&var).unwrap();
-        let stochastic = !["exact", "oracle", "kbuffer", "opaque", "raster-sorted"].contains(&method);
-        assert_eq!(variance.data().iter().any(|&v| v > 0.0), stochastic, "{method}: variance image");
+        assert_eq!(variance.data().iter().any(|&v| v > 0.0), id.entry().stochastic, "{method}: variance image");
     }
 }
 

@@ -10,7 +10,7 @@
 //!   [`frame`] loop with its one output type, [`RenderOutput`];
 //! - three siblings on that floor: the brute-force [`oracle`], the ray-tracing estimators
 //!   ([`trace`], through the [`bvh`]) and the splatting estimators ([`raster`]), named together
-//!   by [`Algorithm`];
+//!   by [`Algorithm`], each method declared once in the [`catalogue`];
 //! - a Monte Carlo [`path`] tracer in which Gaussians sit beside meshes;
 //! - decisions ([`rng`]), statistics ([`stats`]) and built-in scenes ([`scenes`]).
 //!
@@ -27,6 +27,7 @@
 pub mod algorithm;
 pub mod bvh;
 pub mod camera;
+pub mod catalogue;
 pub mod composite;
 pub mod estimator;
 pub mod frame;
@@ -55,6 +56,7 @@ pub use glam;
 
 pub use algorithm::{Algorithm, Shot};
 pub use camera::Camera;
+pub use catalogue::{MethodId, Parameters};
 pub use frame::{Frames, RenderOutput};
 pub use hit::{HitDistance, Ray};
 pub use image::Image;

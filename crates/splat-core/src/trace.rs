@@ -9,6 +9,7 @@
 
 use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
+use crate::catalogue::{MethodId, Parameters};
 use crate::composite::{ShadedHit, depth_order, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
@@ -22,20 +23,12 @@ use crate::sh;
 use glam::{DVec3, Vec2, Vec3};
 use std::cell::OnceCell;
 
-/// Particles per pass of the k-buffer (vk `PARTICLES_SPP`).
-pub const DEFAULT_K: usize = 18;
-/// Maximum passes of the k-buffer and stochastic pass (vk `maxPasses`).
-pub const DEFAULT_MAX_PASSES: u32 = 200;
-/// The k-buffer stops when transmittance drops to this (vk `minTransmittance`).
-pub const DEFAULT_MIN_TRANSMITTANCE: f32 = 0.01;
-/// Largest k of a k-buffer and largest N of `stochastic-n` (fixed arrays on the stack).
-pub const MAX_SLOTS: usize = 64;
+pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_SLOTS};
 // The sorted shadow pass keeps its hits in a k-buffer.
 const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_SLOTS);
 
 /// A ray-tracing method.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[non_exhaustive]
 pub enum Method {
     /// Every hit through the BVH, sorted, Eq. 3.
     Exact,
@@ -87,87 +80,54 @@ impl Method {
     /// The stochastic pass with the vk defaults.
     pub const STOCHASTIC_PASS: Method = Method::StochasticPass { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES };
 
-    /// The method's identity, shared with the GPU kernel.
-    pub fn code(&self) -> MethodCode {
+    /// The method's entry in the [catalogue](crate::catalogue) (its name, its code in the GPU
+    /// kernel, its parameters).
+    pub fn id(&self) -> MethodId {
         match self {
-            Method::Exact => MethodCode::Exact,
-            Method::KBuffer { .. } => MethodCode::KBuffer,
-            Method::Stochastic => MethodCode::Stochastic,
-            Method::StochasticN { .. } => MethodCode::StochasticN,
-            Method::StochasticPass { .. } => MethodCode::StochasticPass,
-            Method::DepthSampling { .. } => MethodCode::DepthSampling,
-            Method::Opaque => MethodCode::Opaque,
+            Method::Exact => MethodId::Exact,
+            Method::KBuffer { .. } => MethodId::KBuffer,
+            Method::Stochastic => MethodId::Stochastic,
+            Method::StochasticN { .. } => MethodId::StochasticN,
+            Method::StochasticPass { .. } => MethodId::StochasticPass,
+            Method::DepthSampling { .. } => MethodId::DepthSampling,
+            Method::Opaque => MethodId::Opaque,
         }
     }
 
     /// Whether frames differ (the method draws random decisions).
     pub fn is_stochastic(&self) -> bool {
-        matches!(
-            self,
-            Method::Stochastic
-                | Method::StochasticN { .. }
-                | Method::StochasticPass { .. }
-                | Method::DepthSampling { .. }
-        )
+        self.id().entry().stochastic
     }
 
-    /// Check the method's parameters.
+    /// Check the method's parameters against the catalogue's [limits](crate::catalogue::Limits).
     pub fn validate(&self) -> Result<(), RenderError> {
-        let bad = |m: String| Err(RenderError::Settings(m));
-        match *self {
-            Method::KBuffer { k, .. } | Method::StochasticPass { k, .. } | Method::DepthSampling { k }
-                if !(1..=MAX_SLOTS).contains(&k) =>
-            {
-                bad(format!("k = {k} is outside 1..={MAX_SLOTS}"))
+        let (k, max_passes, min_transmittance) = match *self {
+            Method::KBuffer { k, max_passes, min_transmittance } => {
+                (Some(k), Some(max_passes), Some(min_transmittance))
             }
-            Method::StochasticN { n, m } if !(1..=MAX_SLOTS as u32).contains(&n) || m == 0 => {
-                bad(format!("stochastic-n needs 1 ≤ n ≤ {MAX_SLOTS} and m ≥ 1 (got m = {m}, n = {n})"))
+            Method::StochasticPass { k, max_passes } => (Some(k), Some(max_passes), None),
+            Method::DepthSampling { k } => (Some(k), None, None),
+            Method::StochasticN { m, n } => {
+                Parameters { m, n, ..Parameters::default() }.validate()?;
+                if u64::from(m) * u64::from(n) > u64::from(MAX_PRIMARY_SLOTS) {
+                    return Err(RenderError::Settings(format!(
+                        "stochastic-n draws m × n = {} samples a ray, more than {MAX_PRIMARY_SLOTS}",
+                        u64::from(m) * u64::from(n)
+                    )));
+                }
+                (None, None, None)
             }
-            Method::StochasticN { n, m } if u64::from(m) * u64::from(n) > u64::from(MAX_PRIMARY_SLOTS) => {
-                bad(format!("stochastic-n draws m × n = {} samples a ray, more than {MAX_PRIMARY_SLOTS}", m * n))
-            }
-            Method::KBuffer { max_passes, .. } | Method::StochasticPass { max_passes, .. }
-                if max_passes > MAX_PRIMARY_SLOTS =>
-            {
-                bad(format!("{max_passes} passes is more than {MAX_PRIMARY_SLOTS}"))
-            }
-            _ => Ok(()),
+            Method::Exact | Method::Stochastic | Method::Opaque => (None, None, None),
+        };
+        let d = Parameters::default();
+        Parameters {
+            k: k.unwrap_or(d.k),
+            max_passes: max_passes.unwrap_or(d.max_passes),
+            min_transmittance: min_transmittance.unwrap_or(d.min_transmittance),
+            ..d
         }
+        .validate()
     }
-}
-
-/// The identity of a ray-tracing method on every backend: the GPU kernel switches on the same
-/// numbers (`METHOD_*` in splat-gpu's `shaders/trace.wgsl`; a test reads them through naga and compares).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u32)]
-pub enum MethodCode {
-    /// [`Method::Exact`].
-    Exact = 0,
-    /// [`Method::KBuffer`].
-    KBuffer = 1,
-    /// [`Method::Stochastic`].
-    Stochastic = 2,
-    /// [`Method::StochasticN`].
-    StochasticN = 3,
-    /// [`Method::StochasticPass`].
-    StochasticPass = 4,
-    /// [`Method::DepthSampling`].
-    DepthSampling = 5,
-    /// [`Method::Opaque`].
-    Opaque = 6,
-}
-
-impl MethodCode {
-    /// Every code with the name of its WGSL constant, for the test that compares them.
-    pub const ALL: [(MethodCode, &'static str); 7] = [
-        (MethodCode::Exact, "METHOD_EXACT"),
-        (MethodCode::KBuffer, "METHOD_KBUFFER"),
-        (MethodCode::Stochastic, "METHOD_STOCHASTIC"),
-        (MethodCode::StochasticN, "METHOD_STOCHASTIC_N"),
-        (MethodCode::StochasticPass, "METHOD_STOCHASTIC_PASS"),
-        (MethodCode::DepthSampling, "METHOD_DEPTH_SAMPLING"),
-        (MethodCode::Opaque, "METHOD_OPAQUE"),
-    ];
 }
 
 /// A scene ready for ray tracing: BVH, particles in leaf order, settings.

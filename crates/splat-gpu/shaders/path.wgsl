@@ -9,13 +9,13 @@
 struct PathParams {
     max_depth: u32,
     roulette_depth: u32,
-    // PATH_STOCHASTIC, PATH_STOCHASTIC_N or PATH_EXACT.
+    // METHOD_STOCHASTIC, METHOD_STOCHASTIC_N or METHOD_EXACT.
     estimator: u32,
     // Instantiations of stochastic-n.
     n: u32,
-    // 0: Owen-scrambled Sobol, 1: the counter-based hash (sampler.rs `SamplerKind`).
+    // SAMPLER_SOBOL (Owen-scrambled) or SAMPLER_HASH (sampler.rs `SamplerKind`).
     sampler: u32,
-    // 0: constant, 1: gradient (path/mod.rs `Environment`).
+    // ENVIRONMENT_CONSTANT or ENVIRONMENT_GRADIENT (path/mod.rs `Environment`).
     environment: u32,
     // Emissive triangles.
     emitters: u32,
@@ -30,9 +30,6 @@ struct PathParams {
     pad1: u32,
 }
 
-const PATH_STOCHASTIC: u32 = 0u;
-const PATH_STOCHASTIC_N: u32 = 1u;
-const PATH_EXACT: u32 = 2u;
 
 @group(0) @binding(13) var<uniform> path: PathParams;
 // Sobol direction numbers, bit-reversed, 16 per dimension (sampler.rs `sobol_directions`).
@@ -57,6 +54,11 @@ var<private> path_bounce: u32;
 // The shadow kind of the current shadow ray (SHADOWS_STOCHASTIC or SHADOWS_EXACT).
 var<private> path_shadows: u32;
 
+// splat_gpu::layout::SAMPLER_* and ENVIRONMENT_* (a test compares them).
+const SAMPLER_SOBOL: u32 = 0u;
+const SAMPLER_HASH: u32 = 1u;
+const ENVIRONMENT_CONSTANT: u32 = 0u;
+const ENVIRONMENT_GRADIENT: u32 = 1u;
 const PATH_DIM_ID: u32 = 0xfffffff8u;
 const LIGHT_STREAM: u32 = 0xffffffefu;
 const DIMS_PER_BOUNCE: u32 = 8u;
@@ -127,7 +129,7 @@ fn sobol_sample(index: u32, dim: u32, seed: u32) -> f32 {
 // sampler.rs `PathSampler::new`.
 fn path_sampler_begin(x: u32, y: u32, seed: u32, index: u32) {
     path_index = index;
-    if (path.sampler == 0u) {
+    if (path.sampler == SAMPLER_SOBOL) {
         path_seed = xxhash32(vec3<u32>(x, y, seed ^ 0x50B01000u));
     } else {
         path_seed = xxhash32(vec3<u32>(x, y, frame_key(seed, index)));
@@ -136,7 +138,7 @@ fn path_sampler_begin(x: u32, y: u32, seed: u32, index: u32) {
 
 // sampler.rs `PathSampler::draw`: dimension `dim` of stream `stream`.
 fn path_draw(dim: u32, stream: u32) -> f32 {
-    if (path.sampler == 1u) {
+    if (path.sampler == SAMPLER_HASH) {
         return unit_f32(pcg(xxhash32(vec3<u32>(path_seed, stream, dim))));
     }
     let block = dim / SOBOL_DIMENSIONS;
@@ -154,7 +156,7 @@ fn path_dim2(dim: u32) -> vec2<f32> {
 
 // sampler.rs `PathSampler::particle`: the acceptance draw of particle `id` in `decision`.
 fn path_particle(id: u32, decision: u32) -> f32 {
-    if (path.sampler == 1u) {
+    if (path.sampler == SAMPLER_HASH) {
         return path_draw(decision, id);
     }
     let seed = xxhash32(vec3<u32>(path_seed, id, decision | ((path_index >> 16u) << 24u)));
@@ -397,7 +399,7 @@ fn bsdf_sample(b: Bsdf, wo: vec3<f32>, u_lobe: f32, u: vec2<f32>) -> BsdfSample 
 
 // `Environment::radiance`.
 fn environment(dir: vec3<f32>) -> vec3<f32> {
-    if (path.environment == 0u) {
+    if (path.environment == ENVIRONMENT_CONSTANT) {
         return path.env_a.xyz;
     }
     return mix(path.env_a.xyz, path.env_b.xyz, max(dot(dir, path.env_up.xyz), 0.0));
@@ -551,7 +553,7 @@ fn gaussian_radiance(leaf: u32, t: f32, ray: Ray, b: u32, exact: bool) -> vec3<f
 // of the path past them (w).
 fn path_gaussians(seg: Ray, b: u32) -> vec4<f32> {
     var radiance = vec3<f32>(0.0);
-    if (path.estimator == PATH_EXACT) {
+    if (path.estimator == METHOD_EXACT) {
         var t = 1.0;
         var after_t = seg.t_min;
         var after_id = NONE;
@@ -573,7 +575,7 @@ fn path_gaussians(seg: Ray, b: u32) -> vec4<f32> {
         }
         return vec4<f32>(radiance, t);
     }
-    let n = select(1u, path.n, path.estimator == PATH_STOCHASTIC_N);
+    let n = select(1u, path.n, path.estimator == METHOD_STOCHASTIC_N);
     stochastic_traverse(seg, 0u, n, decision(b, 0u));
     var empty = 0u;
     for (var s = 0u; s < n; s++) {

@@ -92,15 +92,20 @@ const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
 // The ray met at least one hit (the integrated normal is defined).
 const HIT: u32 = 4u;
-// The method identities of splat_core::trace::MethodCode (a test compares them).
+// The method codes of splat_core's catalogue (MethodId::code; a test finds one for every
+// method of the catalogue with a GPU kernel, named MethodId::wgsl_constant, and no other).
 const METHOD_EXACT: u32 = 0u;
 const METHOD_KBUFFER: u32 = 1u;
 const METHOD_STOCHASTIC: u32 = 2u;
 const METHOD_STOCHASTIC_N: u32 = 3u;
 const METHOD_STOCHASTIC_PASS: u32 = 4u;
-const METHOD_DEPTH_SAMPLING: u32 = 5u;
-const METHOD_OPAQUE: u32 = 6u; // CPU only: refused by GpuTracer::supports
+const METHOD_DEPTH_SAMPLING_K: u32 = 5u;
 const MAX_SLOTS: u32 = 64u;
+// params.rng_scheme (splat_gpu::layout::RNG_*) and params.hit_distance (HIT_*).
+const RNG_HASH: u32 = 0u;
+const RNG_TRIG: u32 = 1u;
+const HIT_MEAN: u32 = 0u;
+const HIT_CENTER: u32 = 1u;
 const PASS_ID: u32 = 0xffffffffu;
 const OFFSET_ID: u32 = 0xfffffffeu;
 const LIGHT_ID: u32 = 0xfffffffbu;
@@ -188,7 +193,7 @@ fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
 }
 
 fn unshifted_particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
-    if (params.rng_scheme == 0u) {
+    if (params.rng_scheme == RNG_HASH) {
         return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, id, slot))));
     }
     let o = vec3<f32>(
@@ -232,7 +237,7 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
     alpha = min(alpha, params.alpha_clamp);
     var t = -dot(oc, dc) / dd;
     var d2_hit = d2_min;
-    if (params.hit_distance == 1u) {
+    if (params.hit_distance == HIT_CENTER) {
         let dv = dot(ray.dir, ray.view);
         if (dv <= 0.0) {
             return miss;
@@ -397,7 +402,7 @@ fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
 // `TraceScene::stochastic_n`); returns t_max clipped at the farthest slot's hit.
 fn stochastic_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     let p = particles[leaf];
-    let early = params.rng_scheme == 0u;
+    let early = params.rng_scheme == RNG_HASH;
     if (early) {
         let bound = min(p.opacity, params.alpha_clamp);
         var any = false;
@@ -640,7 +645,7 @@ fn occluded_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
         return t_max;
     }
     let p = particles[leaf];
-    if (params.rng_scheme == 0u
+    if (params.rng_scheme == RNG_HASH
         && particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, vec3<f32>(0.0)) >= min(p.opacity, params.alpha_clamp)) {
         return t_max;
     }
@@ -798,7 +803,7 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
         return true;
     }
     let pass_method = params.method == METHOD_STOCHASTIC_PASS;
-    let sampling = params.method == METHOD_DEPTH_SAMPLING;
+    let sampling = params.method == METHOD_DEPTH_SAMPLING_K;
     next_k(ray, params.k, (*st).after_t, (*st).after_id, sampling, pixel_seed);
     if (pass_method && kb.len == 0u) {
         return true;
@@ -907,7 +912,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
                 shade = true;
             }
         }
-        if (segment_method == METHOD_DEPTH_SAMPLING) {
+        if (segment_method == METHOD_DEPTH_SAMPLING_K) {
             sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
         }
     }

@@ -109,5 +109,45 @@ pub fn render(
 
 /// The brute-force oracle is the CPU's alone; the exact method renders the same image.
 fn oracle_refused() -> GpuError {
-    GpuError::refused("the brute-force oracle runs on the CPU only", &[Remedy::ExactMethod, Remedy::Cpu])
+    GpuError::refused(
+        format!("the brute-force {} runs on the CPU only", splat_core::MethodId::Oracle.name()),
+        &[Remedy::ExactMethod, Remedy::Cpu],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat_core::catalogue::Family;
+    use splat_core::lighting::Lighting;
+    use splat_core::mesh::Meshes;
+    use splat_core::raster::{RasterSettings, SamplePattern};
+    use splat_core::{MethodId, Parameters, RenderSettings};
+
+    /// The backend takes exactly the catalogue's GPU methods (default parameters at the
+    /// hardware's sample pattern, an unlit scene), and refuses the others with the CPU as the
+    /// way out: the catalogue's `gpu` column cannot drift from the kernels' rules.
+    #[test]
+    fn the_gpu_runs_what_the_catalogue_says() {
+        let (scene, camera) = splat_core::scenes::layers();
+        let (meshes, lighting, settings) = (Meshes::none(), Lighting::default(), RenderSettings::default());
+        let shot = Shot { scene: &scene, meshes: &meshes, lighting: &lighting, camera: &camera, settings: &settings };
+        let standard = RasterSettings { sample_pattern: SamplePattern::Standard, ..RasterSettings::default() };
+        let p = Parameters { raster: standard, ..Parameters::default() };
+        for id in MethodId::ALL {
+            let verdict = supports(&id.algorithm(&p), &shot, Extras::default());
+            assert_eq!(verdict.is_ok(), id.entry().gpu, "{}: {verdict:?}", id.name());
+            if let Err(e) = verdict {
+                assert!(e.remedies().contains(&Remedy::Cpu), "{}: {e}", id.name());
+            }
+        }
+        // The hybrid's secondary rays: every GPU ray-tracing method.
+        let sorted = MethodId::RasterSorted.algorithm(&p);
+        let Algorithm::Raster(first, raster) = sorted else { unreachable!() };
+        for id in MethodId::of(Family::Trace) {
+            let Algorithm::Trace(secondary) = id.algorithm(&p) else { unreachable!() };
+            let verdict = supports(&Algorithm::Hybrid(first, raster, secondary), &shot, Extras::default());
+            assert_eq!(verdict.is_ok(), id.entry().gpu, "hybrid with {}: {verdict:?}", id.name());
+        }
+    }
 }

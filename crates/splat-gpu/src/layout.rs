@@ -32,6 +32,22 @@ pub const SHADOWS_SORTED: u32 = 1;
 pub const SHADOWS_STOCHASTIC: u32 = 2;
 /// `Params::shadows` of [`Shadows::Exact`].
 pub const SHADOWS_EXACT: u32 = 3;
+/// `Params::rng_scheme` of [`RngScheme::Hash`].
+pub const RNG_HASH: u32 = 0;
+/// `Params::rng_scheme` of [`RngScheme::Trig`].
+pub const RNG_TRIG: u32 = 1;
+/// `Params::hit_distance` of [`splat_core::HitDistance::Mean`].
+pub const HIT_MEAN: u32 = 0;
+/// `Params::hit_distance` of [`splat_core::HitDistance::Center`].
+pub const HIT_CENTER: u32 = 1;
+/// [`PathParams::sampler`] of Owen-scrambled Sobol points.
+pub const SAMPLER_SOBOL: u32 = 0;
+/// [`PathParams::sampler`] of the counter-based hash.
+pub const SAMPLER_HASH: u32 = 1;
+/// [`PathParams::environment`] of a constant colour.
+pub const ENVIRONMENT_CONSTANT: u32 = 0;
+/// [`PathParams::environment`] of a horizon–zenith gradient.
+pub const ENVIRONMENT_GRADIENT: u32 = 1;
 /// [`GpuLight::kind`] of a point light.
 pub const LIGHT_POINT: u32 = 0;
 /// [`GpuLight::kind`] of a spot light.
@@ -184,7 +200,7 @@ pub struct Params {
     pub size: [u32; 2],
     /// SH degree of the scene.
     pub sh_degree: u32,
-    /// Method identity ([`splat_core::trace::MethodCode`], `METHOD_*` in WGSL).
+    /// The method's code ([`splat_core::MethodId::code`], `METHOD_*` in WGSL).
     pub method: u32,
     /// Hits per pass.
     pub k: u32,
@@ -198,9 +214,9 @@ pub struct Params {
     pub seed: u32,
     /// Frames in this dispatch.
     pub frames: u32,
-    /// 0 hash, 1 trig.
+    /// [`RNG_HASH`] or [`RNG_TRIG`].
     pub rng_scheme: u32,
-    /// 0 mean, 1 center.
+    /// [`HIT_MEAN`] or [`HIT_CENTER`].
     pub hit_distance: u32,
     /// Kernel degree.
     pub kernel_degree: u32,
@@ -499,7 +515,7 @@ pub fn params(
         [v.x, v.y, v.z, 0.0]
     };
     let c = camera.center();
-    let MethodParams { code, k, max_passes, min_transmittance, n, m } = *method;
+    let MethodParams { id, k, max_passes, min_transmittance, n, m } = *method;
     Params {
         cam_row0: row(0),
         cam_row1: row(1),
@@ -509,7 +525,7 @@ pub fn params(
         background: [s.background.x, s.background.y, s.background.z, 0.0],
         size: [camera.width, camera.height],
         sh_degree: u32::from(trace.scene().sh_degree),
-        method: code as u32,
+        method: id.code(),
         k,
         max_passes,
         n,
@@ -517,12 +533,12 @@ pub fn params(
         seed: frames.seed,
         frames: chunk,
         rng_scheme: match frames.rng {
-            RngScheme::Hash => 0,
-            RngScheme::Trig => 1,
+            RngScheme::Hash => RNG_HASH,
+            RngScheme::Trig => RNG_TRIG,
         },
         hit_distance: match s.hit_distance {
-            splat_core::HitDistance::Mean => 0,
-            splat_core::HitDistance::Center => 1,
+            splat_core::HitDistance::Mean => HIT_MEAN,
+            splat_core::HitDistance::Center => HIT_CENTER,
         },
         kernel_degree: s.kernel.degree,
         cutoff: s.kernel.cutoff,
@@ -568,13 +584,6 @@ fn lighting_params(trace: &TraceScene) -> Params {
     }
 }
 
-/// `PATH_STOCHASTIC` in `shaders/path.wgsl`: Algorithm 1 at every segment.
-pub const PATH_STOCHASTIC: u32 = 0;
-/// `PATH_STOCHASTIC_N`: §3.5 at every segment.
-pub const PATH_STOCHASTIC_N: u32 = 1;
-/// `PATH_EXACT`: every hit composited at every segment.
-pub const PATH_EXACT: u32 = 2;
-
 /// `splat_core::path::PathSettings` as `shaders/path.wgsl` reads it (96 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -583,13 +592,13 @@ pub struct PathParams {
     pub max_depth: u32,
     /// Bounces before Russian roulette.
     pub roulette_depth: u32,
-    /// `PATH_*`.
+    /// The estimator's method code (`METHOD_*`, [`splat_core::MethodId::code`]).
     pub estimator: u32,
     /// Instantiations of stochastic-n.
     pub n: u32,
-    /// 0: Sobol, 1: hash.
+    /// [`SAMPLER_SOBOL`] or [`SAMPLER_HASH`].
     pub sampler: u32,
-    /// 0: constant, 1: gradient.
+    /// [`ENVIRONMENT_CONSTANT`] or [`ENVIRONMENT_GRADIENT`].
     pub environment: u32,
     /// Emissive triangles.
     pub emitters: u32,
@@ -616,16 +625,16 @@ pub struct PathParams {
 pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> Option<PathParams> {
     use splat_core::path::sampler::SamplerKind;
     use splat_core::path::{Environment, GaussianEstimator};
-    let (estimator, n) = match settings.gaussians {
-        GaussianEstimator::Stochastic => (PATH_STOCHASTIC, 1),
-        GaussianEstimator::StochasticN { n } => (PATH_STOCHASTIC_N, n),
-        GaussianEstimator::Exact => (PATH_EXACT, 1),
+    let n = match settings.gaussians {
+        GaussianEstimator::Stochastic | GaussianEstimator::Exact => 1,
+        GaussianEstimator::StochasticN { n } => n,
         GaussianEstimator::DepthSampling { .. } => return None,
     };
+    let estimator = settings.gaussians.id().code();
     let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
     let (environment, env_a, env_b, env_up) = match settings.environment {
-        Environment::Constant(c) => (0, v4(c), [0.0; 4], [0.0; 4]),
-        Environment::Gradient { horizon, zenith, up } => (1, v4(horizon), v4(zenith), v4(up)),
+        Environment::Constant(c) => (ENVIRONMENT_CONSTANT, v4(c), [0.0; 4], [0.0; 4]),
+        Environment::Gradient { horizon, zenith, up } => (ENVIRONMENT_GRADIENT, v4(horizon), v4(zenith), v4(up)),
     };
     let lens = settings.lens.unwrap_or(splat_core::path::ThinLens { aperture: 0.0, focus_distance: 1.0 });
     Some(PathParams {
@@ -634,8 +643,8 @@ pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> 
         estimator,
         n,
         sampler: match settings.sampler {
-            SamplerKind::Sobol => 0,
-            SamplerKind::Hash => 1,
+            SamplerKind::Sobol => SAMPLER_SOBOL,
+            SamplerKind::Hash => SAMPLER_HASH,
         },
         environment,
         emitters,
@@ -849,9 +858,23 @@ mod tests {
     #[test]
     fn trace_constants_equal_their_rust_twins() {
         use splat_core::{bvh, rng, sh, trace};
-        for (code, name) in trace::MethodCode::ALL {
-            assert_eq!(constant(crate::TRACE_WGSL, name), vec![f64::from(code as u32)], "{name}");
+        // A METHOD_* constant for every method of the catalogue the kernel runs, and no other.
+        let module = naga::front::wgsl::parse_str(crate::TRACE_WGSL).expect("parses");
+        let mut wgsl: Vec<String> = module
+            .constants
+            .iter()
+            .filter_map(|(_, c)| c.name.clone())
+            .filter(|name| name.starts_with("METHOD_"))
+            .collect();
+        let mut catalogue = Vec::new();
+        for id in splat_core::MethodId::of(splat_core::catalogue::Family::Trace).filter(|m| m.entry().gpu) {
+            let name = id.wgsl_constant();
+            assert_eq!(constant(crate::TRACE_WGSL, &name), vec![f64::from(id.code())], "{name}");
+            catalogue.push(name);
         }
+        wgsl.sort();
+        catalogue.sort();
+        assert_eq!(wgsl, catalogue, "the kernel's METHOD_* constants and the catalogue's GPU ray-tracing methods");
         assert_constants!(
             crate::TRACE_WGSL,
             [
@@ -886,9 +909,14 @@ mod tests {
                 "DIMS_PER_BOUNCE" = splat_core::path::sampler::Dim::PER_BOUNCE,
                 "SOBOL_DIMENSIONS" = splat_core::path::sampler::SOBOL_DIMENSIONS,
                 "MIN_ROUGHNESS" = splat_core::path::bsdf::MIN_ROUGHNESS,
-                "PATH_STOCHASTIC" = PATH_STOCHASTIC,
-                "PATH_STOCHASTIC_N" = PATH_STOCHASTIC_N,
-                "PATH_EXACT" = PATH_EXACT,
+                "RNG_HASH" = RNG_HASH,
+                "RNG_TRIG" = RNG_TRIG,
+                "HIT_MEAN" = HIT_MEAN,
+                "HIT_CENTER" = HIT_CENTER,
+                "SAMPLER_SOBOL" = SAMPLER_SOBOL,
+                "SAMPLER_HASH" = SAMPLER_HASH,
+                "ENVIRONMENT_CONSTANT" = ENVIRONMENT_CONSTANT,
+                "ENVIRONMENT_GRADIENT" = ENVIRONMENT_GRADIENT,
             ]
         );
         let f64s = |v: &[f32]| v.iter().map(|&c| f64::from(c)).collect::<Vec<_>>();

@@ -19,8 +19,9 @@ use crate::layout::{self, GpuPick, Params, PassState};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
+use splat_core::MethodId;
 use splat_core::frame::{Frames, RenderOutput};
-use splat_core::trace::{DEFAULT_K, Method, MethodCode, TraceScene};
+use splat_core::trace::{DEFAULT_K, Method, TraceScene};
 use std::time::{Duration, Instant};
 
 /// WGSL of the ray-tracing kernel (entry point `main`) and of the path tracer that calls its
@@ -51,8 +52,8 @@ pub const LOOP_BUDGET: u32 = 65_535;
 /// A method as the kernel reads it: its identity and every parameter, named.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MethodParams {
-    /// Which method (`params.method` in WGSL).
-    pub code: MethodCode,
+    /// Which method (`params.method` in WGSL is its [`MethodId::code`]).
+    pub id: MethodId,
     /// Hits per pass.
     pub k: u32,
     /// Pass limit.
@@ -72,8 +73,7 @@ impl TryFrom<&Method> for MethodParams {
     /// no pass limit (any k gives Eq. 3 then; 18 keeps each pass short).
     fn try_from(method: &Method) -> Result<Self, GpuError> {
         GpuTracer::supports(method)?;
-        let code = method.code();
-        let base = MethodParams { code, k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1 };
+        let base = MethodParams { id: method.id(), k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1 };
         Ok(match *method {
             Method::Exact => MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, ..base },
             Method::KBuffer { k, max_passes, min_transmittance } => {
@@ -83,7 +83,6 @@ impl TryFrom<&Method> for MethodParams {
             Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, ..base },
             Method::DepthSampling { k } => MethodParams { k: k as u32, ..base },
             Method::Stochastic | Method::Opaque => base,
-            other => return Err(GpuError::refused(format!("{other:?} has no GPU kernel"), &[Remedy::Cpu])),
         })
     }
 }
@@ -235,13 +234,15 @@ impl<'a> GpuTracer<'a> {
         })
     }
 
-    /// Whether the kernel runs `method` (the one place that decides it); the CPU backend runs
-    /// every method.
+    /// Whether the kernel runs `method`: what the catalogue says of it ([`splat_core::catalogue::Entry::gpu`]);
+    /// the CPU backend runs every method.
     pub fn supports(method: &Method) -> Result<(), GpuError> {
         method.validate()?;
-        match method {
-            Method::Opaque => Err(GpuError::refused("the opaque baseline runs on the CPU only", &[Remedy::Cpu])),
-            _ => Ok(()),
+        let entry = method.id().entry();
+        if entry.gpu {
+            Ok(())
+        } else {
+            Err(GpuError::refused(format!("{} runs on the CPU only", entry.name), &[Remedy::Cpu]))
         }
     }
 
@@ -403,10 +404,15 @@ impl<'a> GpuTracer<'a> {
         };
         // Multi-pass methods (and stochastic-n, slot by slot) that do not fit run again with one
         // pass per dispatch.
-        let multi_pass = matches!(
-            params.code,
-            MethodCode::Exact | MethodCode::KBuffer | MethodCode::StochasticN | MethodCode::StochasticPass
-        );
+        let multi_pass = match params.id {
+            MethodId::Exact | MethodId::KBuffer | MethodId::StochasticN | MethodId::StochasticPass => true,
+            MethodId::Stochastic | MethodId::DepthSampling | MethodId::Opaque => false,
+            MethodId::Oracle
+            | MethodId::RasterSorted
+            | MethodId::StochasticSplat
+            | MethodId::Enderton
+            | MethodId::Stratified => false,
+        };
         // Mirror and glass bounces run whole frames only: the state between passes is the
         // camera ray's.
         let bounces = self.trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
@@ -505,9 +511,9 @@ impl Run<'_> {
         };
         if by_pass {
             // stochastic-n runs one slot per dispatch: m × n "passes" of n = 1 slot.
-            let MethodParams { code, max_passes, n, m, .. } = self.params;
+            let MethodParams { id, max_passes, n, m, .. } = self.params;
             let (max_passes, slots, chunk) =
-                if code == MethodCode::StochasticN { (n * m, n * m, 1) } else { (max_passes, m, n) };
+                if id == MethodId::StochasticN { (n * m, n * m, 1) } else { (max_passes, m, n) };
             for frame in 0..self.count {
                 let mut pass_index = 0u32;
                 while pass_index < max_passes {

@@ -4,21 +4,27 @@
 mod common;
 
 use common::{context, fixture, gpu_run, lighting, trace_pipeline, tracer};
+use splat_core::catalogue::Family;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
-use splat_core::{Frames, RenderSettings};
+use splat_core::{Algorithm, Frames, MethodId, Parameters, RenderSettings};
 use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
 use splat_tests::flips::{FLIP_GAP, FLOAT_TOLERANCE};
 
+/// Every ray-tracing method of the catalogue that has a GPU kernel (a method added to the
+/// catalogue is tested here without a line more), with small parameters: k = 4 hits a pass
+/// (several passes for the k-buffer and the stochastic pass), 2 traversals of 3 samples.
 fn methods() -> Vec<(&'static str, Method)> {
-    vec![
-        ("exact", Method::Exact),
-        ("kbuffer", Method::KBUFFER),
-        ("stochastic", Method::Stochastic),
-        ("stochastic-n 2×3", Method::StochasticN { m: 2, n: 3 }),
-        ("stochastic-pass", Method::StochasticPass { k: 4, max_passes: 200 }),
-        ("depth-sampling-k", Method::DepthSampling { k: 2 }),
-    ]
+    let p = Parameters { k: 4, m: 2, n: 3, ..Parameters::default() };
+    let methods: Vec<_> = MethodId::of(Family::Trace)
+        .filter(|id| id.entry().gpu)
+        .map(|id| match id.algorithm(&p) {
+            Algorithm::Trace(method) => (id.name(), method),
+            other => panic!("{id:?} is in the ray-tracing family but builds {other:?}"),
+        })
+        .collect();
+    assert!(methods.len() >= 6, "the catalogue lists {} GPU ray-tracing methods", methods.len());
+    methods
 }
 
 /// One frame with a fixed seed makes the same decisions on both backends: every pixel agrees

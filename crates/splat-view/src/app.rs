@@ -4,16 +4,19 @@
 
 use crate::camera::Orbit;
 use crate::load::{Loaded, SceneInfo};
-use crate::settings::{Backend, Pipeline, RasterChoice, Settings, TraceChoice};
+use crate::settings::{Backend, Pipeline, Settings};
 use crate::worker::{Job, Status, TEXTURE_FORMAT, Worker};
 use eframe::egui::{self, Key, PointerButton, Sense};
 use eframe::egui_wgpu;
+use splat_core::catalogue::{Limits, Param};
 use splat_core::glam::Vec3;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::normal::NormalMode;
 use splat_core::raster::SAMPLE_COUNTS;
+use splat_core::raster::{Blend, FragmentDepth, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::{Camera, HitDistance};
+use splat_core::{MethodId, Parameters};
 use splat_gpu::{AccumulationFormat, DisplayMode, GpuContext, wgpu};
 
 /// Where the viewer renders when asked to choose.
@@ -435,27 +438,16 @@ impl Viewer {
     fn method_section(&mut self, ui: &mut egui::Ui) {
         let s = &mut self.settings;
         if s.pipeline != Pipeline::RayTracing {
-            combo(ui, "splatting", &mut s.raster, &RasterChoice::ALL, |r| r.name().to_string());
-            combo(ui, "samples per pixel", &mut s.raster_samples, &SAMPLE_COUNTS, |n| n.to_string());
+            method_combo(ui, "splatting", &mut s.raster, &Settings::raster_menu());
+            for &param in s.raster.entry().params {
+                parameter(ui, param, &mut s.params);
+            }
         }
         if s.pipeline != Pipeline::Raster {
             let label = if s.pipeline == Pipeline::Hybrid { "secondary method" } else { "method" };
-            combo(ui, label, &mut s.trace, &TraceChoice::ALL, |m| m.name().to_string());
-            match s.trace {
-                TraceChoice::KBuffer | TraceChoice::StochasticPass | TraceChoice::DepthSampling => {
-                    ui.add(egui::Slider::new(&mut s.k, 1..=splat_core::trace::MAX_SLOTS).text("k (PARTICLES_SPP)"));
-                }
-                TraceChoice::StochasticN => {
-                    ui.add(egui::Slider::new(&mut s.m, 1..=16).text("m traversals"));
-                    ui.add(egui::Slider::new(&mut s.n, 1..=splat_core::trace::MAX_SLOTS as u32).text("n samples"));
-                }
-                _ => {}
-            }
-            if matches!(s.trace, TraceChoice::KBuffer | TraceChoice::StochasticPass) {
-                ui.add(egui::Slider::new(&mut s.max_passes, 1..=1000).text("max passes"));
-            }
-            if s.trace == TraceChoice::KBuffer {
-                ui.add(egui::Slider::new(&mut s.min_transmittance, 0.0..=0.2).text("min transmittance"));
+            method_combo(ui, label, &mut s.trace, &Settings::trace_menu());
+            for &param in s.trace.entry().params {
+                parameter(ui, param, &mut s.params);
             }
         }
         combo(ui, "random numbers", &mut s.rng, &[RngScheme::Hash, RngScheme::Trig], |r| {
@@ -610,6 +602,66 @@ fn light_kind(light: &splat_core::lighting::Light) -> &'static str {
 }
 
 /// A labelled combo box over `choices`.
+/// A menu of the catalogue's methods by name, each with its summary on hover.
+fn method_combo(ui: &mut egui::Ui, label: &str, value: &mut MethodId, choices: &[MethodId]) {
+    egui::ComboBox::from_label(label).selected_text(value.name()).show_ui(ui, |ui| {
+        for &choice in choices {
+            ui.selectable_value(value, choice, choice.name()).on_hover_text(choice.entry().summary);
+        }
+    });
+}
+
+/// The widget of one method parameter: a slider over the catalogue's limits for a number, a
+/// menu for a choice, a check box for a switch.
+fn parameter(ui: &mut egui::Ui, param: Param, p: &mut Parameters) {
+    let info = param.info();
+    let range = info.limits.map_or(0.0..=1.0, |l: Limits| l.min..=l.slider_max);
+    // A slider over the limits; a count moves in whole steps.
+    let number = |ui: &mut egui::Ui, value: f64, count: bool| {
+        let mut v = value;
+        let slider = egui::Slider::new(&mut v, range.clone()).text(info.label);
+        ui.add(if count { slider.integer() } else { slider });
+        v
+    };
+    match param {
+        Param::K => p.k = number(ui, p.k as f64, true) as usize,
+        Param::MaxPasses => p.max_passes = number(ui, f64::from(p.max_passes), true) as u32,
+        Param::MinTransmittance => p.min_transmittance = number(ui, f64::from(p.min_transmittance), false) as f32,
+        Param::N => p.n = number(ui, f64::from(p.n), true) as u32,
+        Param::M => p.m = number(ui, f64::from(p.m), true) as u32,
+        Param::Blend => combo(ui, info.label, &mut p.blend, &[Blend::Over, Blend::Under], |b| match b {
+            Blend::Over => "back to front".into(),
+            Blend::Under => "front to back".into(),
+        }),
+        Param::EarlyStop => {
+            ui.checkbox(&mut p.raster.early_stop, info.label);
+        }
+        Param::Scramble => {
+            ui.checkbox(&mut p.scramble, info.label);
+        }
+        Param::RasterSamples => {
+            combo(ui, info.label, &mut p.raster.samples, &SAMPLE_COUNTS, |n| n.to_string());
+        }
+        Param::SamplePattern => {
+            let patterns = [SamplePattern::Hammersley, SamplePattern::Standard];
+            combo(ui, info.label, &mut p.raster.sample_pattern, &patterns, |s| format!("{s:?}").to_lowercase());
+        }
+        Param::FragmentDepth => {
+            let depths = [FragmentDepth::Center, FragmentDepth::MaxDensityPlane];
+            combo(ui, info.label, &mut p.raster.fragment_depth, &depths, |d| match d {
+                FragmentDepth::Center => "centre".into(),
+                FragmentDepth::MaxDensityPlane => "max-density plane".into(),
+            });
+        }
+        Param::Extent => {
+            combo(ui, info.label, &mut p.raster.extent, &[SplatExtent::ThreeDgs, SplatExtent::Sqrt8], |e| match e {
+                SplatExtent::ThreeDgs => "3DGS box".into(),
+                SplatExtent::Sqrt8 => "√8σ ellipse".into(),
+            })
+        }
+    }
+}
+
 fn combo<T: PartialEq + Copy>(
     ui: &mut egui::Ui,
     label: &str,

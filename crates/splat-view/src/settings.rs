@@ -3,10 +3,12 @@
 
 use splat_core::RenderSettings;
 use splat_core::algorithm::Algorithm;
+use splat_core::catalogue::Family;
 use splat_core::lighting::{Light, Lighting, Look, Material, Shadows};
-use splat_core::raster::{Blend, RasterMethod, RasterSettings};
+use splat_core::raster::{RasterMethod, RasterSettings};
 use splat_core::rng::RngScheme;
-use splat_core::trace::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, Method};
+use splat_core::trace::Method;
+use splat_core::{MethodId, Parameters};
 #[cfg(test)]
 use splat_gpu::DisplayMode;
 use splat_gpu::{AccumulationFormat, DisplayTransform};
@@ -36,94 +38,6 @@ impl Pipeline {
     }
 }
 
-/// A ray-tracing method without its parameters (those live in [`Settings`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TraceChoice {
-    /// Every hit sorted, Eq. 3 of Sun et al. 2025.
-    Exact,
-    /// The k-buffer multi-pass baseline.
-    KBuffer,
-    /// Algorithm 1: one accepted hit per traversal.
-    Stochastic,
-    /// §3.5: m traversals of n samples.
-    StochasticN,
-    /// The stochastic pass.
-    StochasticPass,
-    /// 3DGRT depth sampling, the biased control.
-    DepthSampling,
-}
-
-impl TraceChoice {
-    /// Every method, in menu order.
-    pub const ALL: [TraceChoice; 6] = [
-        TraceChoice::Exact,
-        TraceChoice::KBuffer,
-        TraceChoice::Stochastic,
-        TraceChoice::StochasticN,
-        TraceChoice::StochasticPass,
-        TraceChoice::DepthSampling,
-    ];
-
-    /// Its menu name (the CLI's `--method` name).
-    pub fn name(self) -> &'static str {
-        match self {
-            TraceChoice::Exact => "exact",
-            TraceChoice::KBuffer => "k-buffer",
-            TraceChoice::Stochastic => "stochastic",
-            TraceChoice::StochasticN => "stochastic-n",
-            TraceChoice::StochasticPass => "stochastic-pass",
-            TraceChoice::DepthSampling => "depth-sampling (biased)",
-        }
-    }
-}
-
-/// A splatting method without its sample count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RasterChoice {
-    /// Sorted, blended back to front.
-    SortedOver,
-    /// Sorted, blended front to back.
-    SortedUnder,
-    /// StochasticSplats: sorting-free, depth-tested stochastic discard.
-    StochasticSplat,
-    /// Enderton et al. 2010 stochastic transparency.
-    Enderton,
-    /// Laine & Karras 2011 stratified stochastic transparency.
-    Stratified,
-}
-
-impl RasterChoice {
-    /// Every method, in menu order.
-    pub const ALL: [RasterChoice; 5] = [
-        RasterChoice::SortedOver,
-        RasterChoice::SortedUnder,
-        RasterChoice::StochasticSplat,
-        RasterChoice::Enderton,
-        RasterChoice::Stratified,
-    ];
-
-    /// Its menu name.
-    pub fn name(self) -> &'static str {
-        match self {
-            RasterChoice::SortedOver => "sorted, back to front",
-            RasterChoice::SortedUnder => "sorted, front to back",
-            RasterChoice::StochasticSplat => "StochasticSplats",
-            RasterChoice::Enderton => "Enderton",
-            RasterChoice::Stratified => "Laine–Karras stratified",
-        }
-    }
-
-    fn method(self) -> RasterMethod {
-        match self {
-            RasterChoice::SortedOver => RasterMethod::Sorted { blend: Blend::Over },
-            RasterChoice::SortedUnder => RasterMethod::Sorted { blend: Blend::Under },
-            RasterChoice::StochasticSplat => RasterMethod::StochasticSplat,
-            RasterChoice::Enderton => RasterMethod::Enderton,
-            RasterChoice::Stratified => RasterMethod::Stratified { scramble: true },
-        }
-    }
-}
-
 /// Where frames are rendered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backend {
@@ -138,22 +52,13 @@ pub enum Backend {
 pub struct Settings {
     /// Which family renders.
     pub pipeline: Pipeline,
-    /// The ray-tracing method (also the hybrid pipeline's secondary method).
-    pub trace: TraceChoice,
-    /// Hits per pass (k-buffer, stochastic pass, depth sampling): vk `PARTICLES_SPP`.
-    pub k: usize,
-    /// Pass limit.
-    pub max_passes: u32,
-    /// Early-out transmittance of the k-buffer.
-    pub min_transmittance: f32,
-    /// Traversals per frame of stochastic-n.
-    pub m: u32,
-    /// Samples per traversal of stochastic-n.
-    pub n: u32,
-    /// The splatting method.
-    pub raster: RasterChoice,
-    /// Samples per pixel of splatting.
-    pub raster_samples: u32,
+    /// The ray-tracing method (also the hybrid pipeline's secondary method): one of the
+    /// catalogue's [`Family::Trace`] methods ([`Settings::trace_menu`]).
+    pub trace: MethodId,
+    /// The splatting method: one of the catalogue's [`Family::Raster`] methods.
+    pub raster: MethodId,
+    /// Every method parameter, kept while the user switches methods.
+    pub params: Parameters,
     /// Generator of the decisions.
     pub rng: RngScheme,
     /// Seed of the frames.
@@ -185,18 +90,13 @@ pub struct Settings {
 }
 
 impl Settings {
-    /// The defaults of the papers: Algorithm 1, vk's k = 18, 200 passes, 1 % transmittance.
+    /// Algorithm 1 and StochasticSplats, with the catalogue's defaults of the parameters.
     pub fn new(render: RenderSettings, lighting: &Lighting, backend: Backend) -> Self {
         Self {
             pipeline: Pipeline::RayTracing,
-            trace: TraceChoice::Stochastic,
-            k: DEFAULT_K,
-            max_passes: DEFAULT_MAX_PASSES,
-            min_transmittance: DEFAULT_MIN_TRANSMITTANCE,
-            m: 1,
-            n: 4,
-            raster: RasterChoice::StochasticSplat,
-            raster_samples: 1,
+            trace: MethodId::Stochastic,
+            raster: MethodId::StochasticSplat,
+            params: Parameters::default(),
             rng: RngScheme::Hash,
             seed: 0,
             accumulation: AccumulationFormat::F32,
@@ -214,27 +114,40 @@ impl Settings {
         }
     }
 
+    /// The ray-tracing methods of the menu: the catalogue's, without the CPU's cost baseline
+    /// (not an image anyone looks at).
+    pub fn trace_menu() -> Vec<MethodId> {
+        MethodId::of(Family::Trace).filter(|&m| m != MethodId::Opaque).collect()
+    }
+
+    /// The splatting methods of the menu: the catalogue's.
+    pub fn raster_menu() -> Vec<MethodId> {
+        MethodId::of(Family::Raster).collect()
+    }
+
     /// The ray-tracing method with its parameters.
     pub fn method(&self) -> Method {
-        match self.trace {
-            TraceChoice::Exact => Method::Exact,
-            TraceChoice::KBuffer => {
-                Method::KBuffer { k: self.k, max_passes: self.max_passes, min_transmittance: self.min_transmittance }
-            }
-            TraceChoice::Stochastic => Method::Stochastic,
-            TraceChoice::StochasticN => Method::StochasticN { m: self.m, n: self.n },
-            TraceChoice::StochasticPass => Method::StochasticPass { k: self.k, max_passes: self.max_passes },
-            TraceChoice::DepthSampling => Method::DepthSampling { k: self.k },
+        match self.trace.algorithm(&self.params) {
+            Algorithm::Trace(method) => method,
+            other => unreachable!("the ray-tracing menu holds {other:?}"),
+        }
+    }
+
+    /// The splatting method with its parameters and settings.
+    fn raster_method(&self) -> (RasterMethod, RasterSettings) {
+        match self.raster.algorithm(&self.params) {
+            Algorithm::Raster(method, settings) => (method, settings),
+            other => unreachable!("the splatting menu holds {other:?}"),
         }
     }
 
     /// The renderer the settings name.
     pub fn algorithm(&self) -> Algorithm {
-        let raster = RasterSettings { samples: self.raster_samples, ..RasterSettings::default() };
+        let (raster, settings) = self.raster_method();
         match self.pipeline {
             Pipeline::RayTracing => Algorithm::Trace(self.method()),
-            Pipeline::Raster => Algorithm::Raster(self.raster.method(), raster),
-            Pipeline::Hybrid => Algorithm::Hybrid(self.raster.method(), raster, self.method()),
+            Pipeline::Raster => Algorithm::Raster(raster, settings),
+            Pipeline::Hybrid => Algorithm::Hybrid(raster, settings, self.method()),
         }
     }
 
@@ -276,17 +189,19 @@ mod tests {
     #[test]
     fn every_choice_is_a_valid_method_with_the_papers_defaults() {
         let mut s = Settings::new(RenderSettings::default(), &Lighting::default(), Backend::Cpu);
-        for trace in TraceChoice::ALL {
+        for trace in Settings::trace_menu() {
             s.trace = trace;
             s.method().validate().unwrap_or_else(|e| panic!("{trace:?}: {e}"));
+            assert_eq!(s.method().id(), trace);
         }
-        s.trace = TraceChoice::KBuffer;
+        s.trace = MethodId::KBuffer;
         assert_eq!(s.method(), Method::KBUFFER);
         for pipeline in Pipeline::ALL {
             s.pipeline = pipeline;
-            for raster in RasterChoice::ALL {
+            for raster in Settings::raster_menu() {
                 s.raster = raster;
                 assert!(!s.on_gpu());
+                assert_eq!(s.raster_method().0.id(), raster);
                 let _ = s.algorithm();
             }
         }
@@ -301,7 +216,7 @@ mod tests {
         let display = Settings { display: DisplayTransform { mode: DisplayMode::Depth, ..s.display }, ..s.clone() };
         assert_eq!(display.frames_key(), s.frames_key());
         assert_eq!(display.scene_key(), s.scene_key());
-        let method = Settings { trace: TraceChoice::Exact, ..s.clone() };
+        let method = Settings { trace: MethodId::Exact, ..s.clone() };
         assert_ne!(method.frames_key(), s.frames_key());
         let degree = Settings { render: RenderSettings { iso_threshold: 0.3, ..s.render }, ..s.clone() };
         assert_ne!(degree.scene_key(), s.scene_key());

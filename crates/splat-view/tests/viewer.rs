@@ -10,11 +10,11 @@ use eframe::egui_wgpu::{self, RenderState, WgpuSetup};
 use egui_kittest::kittest::Queryable;
 use egui_kittest::wgpu::{WgpuTestRenderer, create_render_state, default_wgpu_setup};
 use egui_kittest::{Harness, SnapshotOptions};
+use splat_core::MethodId;
 use splat_core::frame::Frames;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Algorithm, Camera, Shot};
 use splat_gpu::{DisplayTransform, GpuContext, GpuTracer, PixelState, TracePipeline};
-use splat_view::settings::TraceChoice;
 use splat_view::worker::Status;
 use splat_view::{BackendChoice, Options, Viewer};
 use std::sync::Arc;
@@ -132,7 +132,7 @@ fn switching_the_method_changes_the_image() {
     let (_, _, again) = texels(&state, h.state());
     assert_eq!(mean_abs(&stochastic, &again), 0.0, "the same seed and method gave another image");
 
-    choose(&mut h, "method", "depth-sampling (biased)");
+    choose(&mut h, "method", "depth-sampling-k");
     assert_eq!(h.state().settings().method(), Method::DepthSampling { k: splat_core::trace::DEFAULT_K });
     let status = settle(&mut h, 4);
     assert!(status.job > first.job);
@@ -328,7 +328,7 @@ fn png_of_splat_render(scene: Option<&std::path::Path>, camera: &Camera, name: &
 /// out): the largest and the share of channel values more than one level apart.
 fn window_against_splat_render(scene: Option<&str>, backend: BackendChoice) -> Option<(f64, f64)> {
     let (mut h, _) = harness(scene, &options(backend, 1))?;
-    h.state_mut().settings_mut().trace = TraceChoice::Exact;
+    h.state_mut().settings_mut().trace = MethodId::Exact;
     let status = settle(&mut h, 1);
     assert_eq!(status.frames, 1, "exact is done after one frame");
     h.run_steps(2);

@@ -40,6 +40,7 @@ pub mod bsdf;
 pub mod sampler;
 
 use crate::camera::Camera;
+use crate::catalogue::{MethodId, Parameters};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, render_tiles};
 use crate::hit::Ray;
 use crate::lighting::{Incident, Light, Shadows};
@@ -69,6 +70,43 @@ pub enum GaussianEstimator {
         /// Accepted hits composited.
         k: u32,
     },
+}
+
+impl GaussianEstimator {
+    /// The estimator of the method `id` with `p`'s parameters; `None` for a method the path
+    /// tracer does not run at its segments.
+    pub fn of(id: MethodId, p: &Parameters) -> Option<GaussianEstimator> {
+        match id {
+            MethodId::Stochastic => Some(GaussianEstimator::Stochastic),
+            MethodId::StochasticN => Some(GaussianEstimator::StochasticN { n: p.n }),
+            MethodId::Exact => Some(GaussianEstimator::Exact),
+            MethodId::DepthSampling => Some(GaussianEstimator::DepthSampling { k: p.k as u32 }),
+            MethodId::KBuffer
+            | MethodId::StochasticPass
+            | MethodId::Opaque
+            | MethodId::Oracle
+            | MethodId::RasterSorted
+            | MethodId::StochasticSplat
+            | MethodId::Enderton
+            | MethodId::Stratified => None,
+        }
+    }
+
+    /// The methods the path tracer runs, in catalogue order.
+    pub fn methods() -> impl Iterator<Item = MethodId> {
+        MethodId::ALL.into_iter().filter(|&m| GaussianEstimator::of(m, &Parameters::default()).is_some())
+    }
+
+    /// Its method in the [catalogue](crate::catalogue): its name, and its code in the GPU
+    /// kernel (`METHOD_*`, which `path.wgsl` switches on too).
+    pub fn id(&self) -> MethodId {
+        match self {
+            GaussianEstimator::Stochastic => MethodId::Stochastic,
+            GaussianEstimator::StochasticN { .. } => MethodId::StochasticN,
+            GaussianEstimator::Exact => MethodId::Exact,
+            GaussianEstimator::DepthSampling { .. } => MethodId::DepthSampling,
+        }
+    }
 }
 
 /// The environment a path escapes to.

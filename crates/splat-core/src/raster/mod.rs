@@ -24,6 +24,7 @@ pub mod samples;
 mod tests;
 
 use crate::camera::Camera;
+use crate::catalogue::MethodId;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{PreparedParticle, Ray, to_canonical};
 use crate::lighting::{Lighting, Look};
@@ -64,7 +65,6 @@ pub enum FragmentDepth {
 
 /// A rasterization method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[non_exhaustive]
 pub enum RasterMethod {
     /// Global depth sort, then per-pixel blending: the raster oracle.
     Sorted {
@@ -86,9 +86,19 @@ pub enum RasterMethod {
 }
 
 impl RasterMethod {
+    /// The method's entry in the [catalogue](crate::catalogue).
+    pub fn id(&self) -> MethodId {
+        match self {
+            RasterMethod::Sorted { .. } => MethodId::RasterSorted,
+            RasterMethod::StochasticSplat => MethodId::StochasticSplat,
+            RasterMethod::Enderton => MethodId::Enderton,
+            RasterMethod::Stratified { .. } => MethodId::Stratified,
+        }
+    }
+
     /// Whether frames differ (the method draws random decisions).
     pub fn is_stochastic(&self) -> bool {
-        !matches!(self, RasterMethod::Sorted { .. })
+        self.id().entry().stochastic
     }
 }
 

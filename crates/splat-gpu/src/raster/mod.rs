@@ -129,16 +129,15 @@ enum Draw {
 }
 
 impl Draw {
-    fn of(method: &RasterMethod) -> Result<Self, GpuError> {
-        Ok(match method {
+    fn of(method: &RasterMethod) -> Self {
+        match method {
             RasterMethod::Sorted { blend: Blend::Over } => Draw::Over,
             RasterMethod::Sorted { blend: Blend::Under } => Draw::Under,
             RasterMethod::StochasticSplat => Draw::Stochastic,
             RasterMethod::Enderton => Draw::Enderton,
             RasterMethod::Stratified { scramble: true } => Draw::Stratified,
             RasterMethod::Stratified { scramble: false } => Draw::StratifiedPlain,
-            other => return Err(GpuError::Unsupported(format!("{other:?} has no GPU raster path"))),
-        })
+        }
     }
 
     /// `params.mode` of the raster shaders (`MODE_*`, checked by a test).
@@ -347,7 +346,7 @@ impl<'a> GpuRasterizer<'a> {
     /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
         self.check_scene(method)?;
-        let draw = Draw::of(method)?;
+        let draw = Draw::of(method);
         if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
         }
@@ -410,7 +409,7 @@ impl<'a> GpuRasterizer<'a> {
     fn check_scene(&self, method: &RasterMethod) -> Result<(), GpuError> {
         Self::supports_scene(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
         let s = self.raster.samples;
-        if !Draw::of(method)?.is_rop() && !self.ctx.msaa_counts.contains(&s) {
+        if !Draw::of(method).is_rop() && !self.ctx.msaa_counts.contains(&s) {
             let reason = format!(
                 "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter)",
                 self.ctx.info.name, self.ctx.msaa_counts
@@ -432,7 +431,7 @@ impl<'a> GpuRasterizer<'a> {
         meshes: bool,
     ) -> Result<(), GpuError> {
         Self::supports(method, settings)?;
-        let (s, draw) = (settings.samples, Draw::of(method)?);
+        let (s, draw) = (settings.samples, Draw::of(method));
         let plane = settings.fragment_depth == FragmentDepth::MaxDensityPlane;
         let what = match (lit, meshes) {
             (true, true) => "lit splatting among meshes",
@@ -481,6 +480,10 @@ impl<'a> GpuRasterizer<'a> {
     /// renders everything.
     pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
         check_settings(settings)?;
+        let entry = method.id().entry();
+        if !entry.gpu {
+            return Err(GpuError::refused(format!("{} runs on the CPU only", entry.name), &[Remedy::Cpu]));
+        }
         if matches!(method, RasterMethod::Sorted { .. }) && settings.fragment_depth == FragmentDepth::MaxDensityPlane {
             return Err(GpuError::refused(
                 "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot",

@@ -251,7 +251,10 @@ impl SamplePipelines {
             Draw::Stochastic if lit => self.stochastic_lit.as_ref().ok_or_else(|| {
                 GpuError::refused("lit StochasticSplats shades once per pixel, at one sample", &[Remedy::Cpu])
             })?,
-            _ => &self.stochastic,
+            Draw::Stochastic => &self.stochastic,
+            Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => {
+                return Err(GpuError::Unsupported(format!("{draw:?} runs in the compute ROP, not a render pipeline")));
+            }
         })
     }
 }
