@@ -28,38 +28,6 @@ pub const DEFAULT_M: u32 = 1;
 /// the GPU kernel's registers).
 pub const MAX_SLOTS: usize = 64;
 
-/// A rendering method without its parameters: what `--method` names and the viewer's menus
-/// list. The discriminant of a ray-tracing method is its code in the GPU kernel
-/// ([`MethodId::code`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u32)]
-pub enum MethodId {
-    /// [`Method::Exact`].
-    Exact = 0,
-    /// [`Method::KBuffer`].
-    KBuffer = 1,
-    /// [`Method::Stochastic`].
-    Stochastic = 2,
-    /// [`Method::StochasticN`].
-    StochasticN = 3,
-    /// [`Method::StochasticPass`].
-    StochasticPass = 4,
-    /// [`Method::DepthSampling`].
-    DepthSampling = 5,
-    /// [`Method::Opaque`].
-    Opaque = 6,
-    /// [`Algorithm::Oracle`].
-    Oracle = 7,
-    /// [`RasterMethod::Sorted`].
-    RasterSorted = 8,
-    /// [`RasterMethod::StochasticSplat`].
-    StochasticSplat = 9,
-    /// [`RasterMethod::Enderton`].
-    Enderton = 10,
-    /// [`RasterMethod::Stratified`].
-    Stratified = 11,
-}
-
 /// Which renderer family runs a method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Family {
@@ -202,125 +170,101 @@ pub struct Entry {
     pub gpu: bool,
 }
 
-/// Every method, in the order of [`MethodId`]'s discriminants (a test checks it).
-pub const CATALOGUE: &[Entry] = &{
-    use Family::{Oracle, Raster, Trace};
-    use Param::*;
-    const fn e(
-        id: MethodId,
-        name: &'static str,
-        summary: &'static str,
-        family: Family,
-        params: &'static [Param],
-        (stochastic, unbiased, gpu): (bool, bool, bool),
-    ) -> Entry {
-        Entry { id, name, summary, family, params, stochastic, unbiased, gpu }
-    }
-    const SORTED: [Param; 6] = [RasterSamples, SamplePattern, FragmentDepth, Extent, Blend, EarlyStop];
-    const STRATIFIED: [Param; 5] = [RasterSamples, SamplePattern, FragmentDepth, Extent, Scramble];
-    [
-        e(
-            MethodId::Exact,
-            "exact",
-            "Every hit along each ray through the BVH, sorted, composited by Eq. 3",
-            Trace,
-            &[],
-            (false, true, true),
-        ),
-        e(
-            MethodId::KBuffer,
-            "kbuffer",
-            "3DGRT / vk multi-pass k-buffer: k hits per pass, up to the pass limit",
-            Trace,
-            &[K, MaxPasses, MinTransmittance],
-            (false, true, true),
-        ),
-        e(
-            MethodId::Stochastic,
-            "stochastic",
-            "Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray",
-            Trace,
-            &[],
-            (true, true, true),
-        ),
-        e(
-            MethodId::StochasticN,
-            "stochastic-n",
-            "Sun et al. §3.5: m traversals of n samples each per frame",
-            Trace,
-            &[M, N],
-            (true, true, true),
-        ),
-        e(
-            MethodId::StochasticPass,
-            "stochastic-pass",
-            "vk stochastic pass: k sorted hits a pass, accepted with probability 1 − T_pass",
-            Trace,
-            &[K, MaxPasses],
-            (true, true, true),
-        ),
-        e(
-            MethodId::DepthSampling,
-            "depth-sampling-k",
-            "3DGRT stochastic depth sampling of the first k accepted hits (biased; a control)",
-            Trace,
-            &[K],
-            (true, false, true),
-        ),
-        e(
-            MethodId::Opaque,
-            "opaque",
-            "Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline",
-            Trace,
-            &[],
-            (false, false, false),
-        ),
-        e(
-            MethodId::Oracle,
-            "oracle",
-            "The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3",
-            Oracle,
-            &[],
-            (false, true, false),
-        ),
-        e(
-            MethodId::RasterSorted,
-            "raster-sorted",
-            "3DGS splatting: EWA projection, global depth sort, blended over or under per sample \
-             (the raster oracle; under also gives iso depth and normals)",
-            Raster,
-            &SORTED,
-            (false, true, true),
-        ),
-        e(
-            MethodId::StochasticSplat,
-            "stochastic-splat",
-            "StochasticSplats: no sort, depth-tested stochastic discard, S samples per pixel",
-            Raster,
-            &RASTER,
-            (true, true, true),
-        ),
-        e(
-            MethodId::Enderton,
-            "enderton",
-            "Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment",
-            Raster,
-            &RASTER,
-            (true, true, true),
-        ),
-        e(
-            MethodId::Stratified,
-            "stratified",
-            "Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting)",
-            Raster,
-            &STRATIFIED,
-            (true, true, true),
-        ),
-    ]
-};
+/// Declares [`MethodId`] and [`CATALOGUE`] from one row a method, so that a method cannot
+/// have an identity without an entry: `Variant = code { name, family, (stochastic, unbiased,
+/// gpu), params, summary }`.
+macro_rules! catalogue {
+    ($($id:ident = $code:literal {
+        $name:literal, $family:ident, ($stochastic:literal, $unbiased:literal, $gpu:literal), $params:expr,
+        $summary:literal $(,)?
+    }),* $(,)?) => {
+        /// A rendering method without its parameters: what `--method` names and the viewer's
+        /// menus list. The discriminant of a ray-tracing method is its code in the GPU kernel
+        /// ([`MethodId::code`]). Each variant is a row of [`CATALOGUE`], which says what it is.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        #[repr(u32)]
+        pub enum MethodId {
+            $(
+                #[doc = $summary]
+                $id = $code,
+            )*
+        }
 
-// Entry i is the method of discriminant i, so that [`MethodId::entry`] is an index: checked
-// when the crate compiles.
+        /// Every method, in the order of [`MethodId`]'s discriminants (checked when the crate
+        /// compiles, so that [`MethodId::entry`] is an index).
+        pub const CATALOGUE: &[Entry] = &[$(Entry {
+            id: MethodId::$id,
+            name: $name,
+            summary: $summary,
+            family: Family::$family,
+            params: $params,
+            stochastic: $stochastic,
+            unbiased: $unbiased,
+            gpu: $gpu,
+        }),*];
+    };
+}
+
+/// The parameters of sorted splatting.
+const SORTED: [Param; 6] =
+    [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Blend, Param::EarlyStop];
+/// The parameters of stratified transparency.
+const STRATIFIED: [Param; 5] =
+    [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Scramble];
+
+// Columns: name, family, (stochastic, unbiased, GPU kernel), parameters, summary.
+catalogue! {
+    Exact = 0 {
+        "exact", Trace, (false, true, true), &[],
+        "Every hit along each ray through the BVH, sorted, composited by Eq. 3",
+    },
+    KBuffer = 1 {
+        "kbuffer", Trace, (false, true, true), &[Param::K, Param::MaxPasses, Param::MinTransmittance],
+        "3DGRT / vk multi-pass k-buffer: k hits per pass, up to the pass limit",
+    },
+    Stochastic = 2 {
+        "stochastic", Trace, (true, true, true), &[],
+        "Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray",
+    },
+    StochasticN = 3 {
+        "stochastic-n", Trace, (true, true, true), &[Param::M, Param::N],
+        "Sun et al. §3.5: m traversals of n samples each per frame",
+    },
+    StochasticPass = 4 {
+        "stochastic-pass", Trace, (true, true, true), &[Param::K, Param::MaxPasses],
+        "vk stochastic pass: k sorted hits a pass, accepted with probability 1 − T_pass",
+    },
+    DepthSampling = 5 {
+        "depth-sampling-k", Trace, (true, false, true), &[Param::K],
+        "3DGRT stochastic depth sampling of the first k accepted hits (biased; a control)",
+    },
+    Opaque = 6 {
+        "opaque", Trace, (false, false, false), &[],
+        "Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline",
+    },
+    Oracle = 7 {
+        "oracle", Oracle, (false, true, false), &[],
+        "The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3",
+    },
+    RasterSorted = 8 {
+        "raster-sorted", Raster, (false, true, true), &SORTED,
+        "3DGS splatting: EWA projection, global depth sort, blended over or under per sample \
+         (the raster oracle; under also gives iso depth and normals)",
+    },
+    StochasticSplat = 9 {
+        "stochastic-splat", Raster, (true, true, true), &RASTER,
+        "StochasticSplats: no sort, depth-tested stochastic discard, S samples per pixel",
+    },
+    Enderton = 10 {
+        "enderton", Raster, (true, true, true), &RASTER,
+        "Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment",
+    },
+    Stratified = 11 {
+        "stratified", Raster, (true, true, true), &STRATIFIED,
+        "Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting)",
+    },
+}
+
 const _: () = {
     let mut i = 0;
     while i < CATALOGUE.len() {
