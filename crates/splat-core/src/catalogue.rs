@@ -472,6 +472,13 @@ mod tests {
         for id in MethodId::ALL {
             let algorithm = id.algorithm(&base);
             assert_eq!(algorithm.methods(), vec![id]);
+            if let Algorithm::Trace(method) = algorithm {
+                assert_eq!(method.identity(), (id, base), "{id:?}: identity is algorithm's inverse");
+                let read = id.algorithm(&other);
+                let Algorithm::Trace(read) = read else { unreachable!() };
+                assert_eq!(read.identity().0, id);
+                assert_eq!(id.algorithm(&read.identity().1), Algorithm::Trace(read), "{id:?}");
+            }
             assert_eq!(algorithm.is_stochastic(), id.entry().stochastic, "{id:?}");
             let family = match algorithm {
                 Algorithm::Oracle => Family::Oracle,

@@ -80,18 +80,26 @@ impl Method {
     /// The stochastic pass with the vk defaults.
     pub const STOCHASTIC_PASS: Method = Method::StochasticPass { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES };
 
-    /// The method's entry in the [catalogue](crate::catalogue) (its name, its code in the GPU
-    /// kernel, its parameters).
-    pub fn id(&self) -> MethodId {
-        match self {
-            Method::Exact => MethodId::Exact,
-            Method::KBuffer { .. } => MethodId::KBuffer,
-            Method::Stochastic => MethodId::Stochastic,
-            Method::StochasticN { .. } => MethodId::StochasticN,
-            Method::StochasticPass { .. } => MethodId::StochasticPass,
-            Method::DepthSampling { .. } => MethodId::DepthSampling,
-            Method::Opaque => MethodId::Opaque,
+    /// The method as the [catalogue](crate::catalogue) knows it: its entry, and its parameters
+    /// (the others at their defaults); the inverse of [`MethodId::algorithm`].
+    pub fn identity(&self) -> (MethodId, Parameters) {
+        let d = Parameters::default();
+        match *self {
+            Method::Exact => (MethodId::Exact, d),
+            Method::KBuffer { k, max_passes, min_transmittance } => {
+                (MethodId::KBuffer, Parameters { k, max_passes, min_transmittance, ..d })
+            }
+            Method::Stochastic => (MethodId::Stochastic, d),
+            Method::StochasticN { m, n } => (MethodId::StochasticN, Parameters { m, n, ..d }),
+            Method::StochasticPass { k, max_passes } => (MethodId::StochasticPass, Parameters { k, max_passes, ..d }),
+            Method::DepthSampling { k } => (MethodId::DepthSampling, Parameters { k, ..d }),
+            Method::Opaque => (MethodId::Opaque, d),
         }
+    }
+
+    /// The method's entry in the catalogue (its name, its code in the GPU kernel).
+    pub fn id(&self) -> MethodId {
+        self.identity().0
     }
 
     /// Whether frames differ (the method draws random decisions).
@@ -99,34 +107,18 @@ impl Method {
         self.id().entry().stochastic
     }
 
-    /// Check the method's parameters against the catalogue's [limits](crate::catalogue::Limits).
+    /// Check the method's parameters against the catalogue's [limits](crate::catalogue::Limits),
+    /// and that `stochastic-n`'s m × n samples fit the decision slots of a ray.
     pub fn validate(&self) -> Result<(), RenderError> {
-        let (k, max_passes, min_transmittance) = match *self {
-            Method::KBuffer { k, max_passes, min_transmittance } => {
-                (Some(k), Some(max_passes), Some(min_transmittance))
-            }
-            Method::StochasticPass { k, max_passes } => (Some(k), Some(max_passes), None),
-            Method::DepthSampling { k } => (Some(k), None, None),
-            Method::StochasticN { m, n } => {
-                Parameters { m, n, ..Parameters::default() }.validate()?;
-                if u64::from(m) * u64::from(n) > u64::from(MAX_PRIMARY_SLOTS) {
-                    return Err(RenderError::Settings(format!(
-                        "stochastic-n draws m × n = {} samples a ray, more than {MAX_PRIMARY_SLOTS}",
-                        u64::from(m) * u64::from(n)
-                    )));
-                }
-                (None, None, None)
-            }
-            Method::Exact | Method::Stochastic | Method::Opaque => (None, None, None),
-        };
-        let d = Parameters::default();
-        Parameters {
-            k: k.unwrap_or(d.k),
-            max_passes: max_passes.unwrap_or(d.max_passes),
-            min_transmittance: min_transmittance.unwrap_or(d.min_transmittance),
-            ..d
+        let (_, p) = self.identity();
+        p.validate()?;
+        let samples = u64::from(p.m) * u64::from(p.n);
+        if samples > u64::from(MAX_PRIMARY_SLOTS) {
+            return Err(RenderError::Settings(format!(
+                "stochastic-n draws m × n = {samples} samples a ray, more than {MAX_PRIMARY_SLOTS}"
+            )));
         }
-        .validate()
+        Ok(())
     }
 }
 

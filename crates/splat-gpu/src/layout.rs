@@ -515,7 +515,7 @@ pub fn params(
         [v.x, v.y, v.z, 0.0]
     };
     let c = camera.center();
-    let MethodParams { id, k, max_passes, min_transmittance, n, m } = *method;
+    let MethodParams { id, k, max_passes, min_transmittance, n, m, .. } = *method;
     Params {
         cam_row0: row(0),
         cam_row1: row(1),

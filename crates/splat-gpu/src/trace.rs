@@ -64,6 +64,10 @@ pub struct MethodParams {
     pub n: u32,
     /// Traversals per frame.
     pub m: u32,
+    /// Whether the kernel can run the method one pass (or, for `stochastic-n`, one slot) per
+    /// dispatch, its ray's state kept between dispatches, when whole frames exceed lavapipe's
+    /// loop budget.
+    pub by_pass: bool,
 }
 
 impl TryFrom<&Method> for MethodParams {
@@ -73,14 +77,15 @@ impl TryFrom<&Method> for MethodParams {
     /// no pass limit (any k gives Eq. 3 then; 18 keeps each pass short).
     fn try_from(method: &Method) -> Result<Self, GpuError> {
         GpuTracer::supports(method)?;
-        let base = MethodParams { id: method.id(), k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1 };
+        let id = method.id();
+        let base = MethodParams { id, k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1, by_pass: false };
         Ok(match *method {
-            Method::Exact => MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, ..base },
+            Method::Exact => MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, by_pass: true, ..base },
             Method::KBuffer { k, max_passes, min_transmittance } => {
-                MethodParams { k: k as u32, max_passes, min_transmittance, ..base }
+                MethodParams { k: k as u32, max_passes, min_transmittance, by_pass: true, ..base }
             }
-            Method::StochasticN { m, n } => MethodParams { n, m, ..base },
-            Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, ..base },
+            Method::StochasticN { m, n } => MethodParams { n, m, by_pass: true, ..base },
+            Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, by_pass: true, ..base },
             Method::DepthSampling { k } => MethodParams { k: k as u32, ..base },
             Method::Stochastic | Method::Opaque => base,
         })
@@ -402,21 +407,11 @@ impl<'a> GpuTracer<'a> {
         } else {
             run.execute(ctx.frames_per_dispatch, false)?
         };
-        // Multi-pass methods (and stochastic-n, slot by slot) that do not fit run again with one
-        // pass per dispatch.
-        let multi_pass = match params.id {
-            MethodId::Exact | MethodId::KBuffer | MethodId::StochasticN | MethodId::StochasticPass => true,
-            MethodId::Stochastic | MethodId::DepthSampling | MethodId::Opaque => false,
-            MethodId::Oracle
-            | MethodId::RasterSorted
-            | MethodId::StochasticSplat
-            | MethodId::Enderton
-            | MethodId::Stratified => false,
-        };
-        // Mirror and glass bounces run whole frames only: the state between passes is the
+        // Multi-pass methods (and stochastic-n, slot by slot: `MethodParams::by_pass`) that do
+        // not fit run again with one pass per dispatch. Mirror and glass bounces run whole frames only: the state between passes is the
         // camera ray's.
         let bounces = self.trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
-        if over(&out) && multi_pass && !bounces && first_hits.is_none() && path.is_none() {
+        if over(&out) && params.by_pass && !bounces && first_hits.is_none() && path.is_none() {
             out = run.execute(1, true)?;
         }
         if over(&out) {
