@@ -147,7 +147,10 @@ impl Draw {
 
     /// Whether the compute tile pass plays the pixel's raster operations (no render pipeline).
     fn is_rop(self) -> bool {
-        matches!(self, Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain)
+        match self {
+            Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => true,
+            Draw::Over | Draw::Under | Draw::Stochastic => false,
+        }
     }
 }
 
@@ -606,7 +609,9 @@ impl<'a> GpuRasterizer<'a> {
         pass.set_bind_group(0, group, &[frame_offset]);
         match draw {
             Draw::Over | Draw::Under => pass.draw_indirect(&self.draw_args, 0),
-            _ => pass.draw(0..6, 0..self.scene.count),
+            Draw::Stochastic | Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => {
+                pass.draw(0..6, 0..self.scene.count);
+            }
         }
         Ok(())
     }
