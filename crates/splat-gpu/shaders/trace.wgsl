@@ -1,7 +1,8 @@
 // Ray tracing of transparent 3D Gaussians through a BVH (bvh.wgsl), every method of
-// splat_core::trace. Each function mirrors its CPU twin in crates/splat-core/src/{hit,rng,
-// trace,frame}.rs; the decisions use the same counter-based hashes, so a GPU frame makes the
-// CPU frame's choices.
+// splat_core::trace, with stochastic.wgsl, kbuffer.wgsl and shadow.wgsl (the twins of
+// trace/{stochastic,kbuffer,shadow}.rs). Each function mirrors its CPU twin in
+// crates/splat-core/src/{hit,rng,trace/mod,frame}.rs; the decisions use the same counter-based
+// hashes, so a GPU frame makes the CPU frame's choices.
 
 // One particle in BVH leaf order (64 bytes), mirrored by splat_gpu::GpuParticle.
 struct Particle {
@@ -70,7 +71,7 @@ struct Params {
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
 // Eq. 3 so far, where the next pass starts, and for the surface look the integrated normal and
-// the iso-opacity depth with its particle (trace.rs `Integrator`).
+// the iso-opacity depth with its particle (trace/mod.rs `Integrator`).
 struct PassState {
     radiance: vec3<f32>,
     transmittance: f32,
@@ -116,7 +117,7 @@ const SHADOWS_NONE: u32 = 0u;
 const SHADOWS_SORTED: u32 = 1u;
 const SHADOWS_STOCHASTIC: u32 = 2u;
 const SHADOWS_EXACT: u32 = 3u;
-// trace.rs `SURFACE_OFFSET`, `BOUNCE_SHIFT`, `SHADOW_BOUNCE_SHIFT` and settings.rs `MAX_BOUNCES`.
+// trace/mod.rs `SURFACE_OFFSET`, `BOUNCE_SHIFT`, `SHADOW_BOUNCE_SHIFT` and settings.rs `MAX_BOUNCES`.
 const SURFACE_OFFSET: f32 = 1e-4;
 const BOUNCE_SHIFT: u32 = 20u;
 const SHADOW_BOUNCE_SHIFT: u32 = 26u;
@@ -174,7 +175,7 @@ fn trig_hash(p: vec3<f32>) -> f32 {
     return fract_(43758.547 * sin(12.9898 * (p.x + r) + 78.233 * (p.y + r)));
 }
 
-// The bounce number of the segment being traced (trace.rs `Bounce`): slot s of bounce d is
+// The bounce number of the segment being traced (trace/mod.rs `Bounce`): slot s of bounce d is
 // s + d·2²⁰, shadow slot s + d·2²⁶, pass p + d·2²⁰, so that every bounce decides anew.
 var<private> bounce: u32;
 
@@ -182,7 +183,7 @@ fn bounce_slot(slot: u32) -> u32 {
     return slot + (bounce << select(BOUNCE_SHIFT, SHADOW_BOUNCE_SHIFT, slot >= 0x80000000u));
 }
 
-// rng.rs `RayRng::particle` through trace.rs `Bounce`: u of particle `id` in sample `slot` of
+// rng.rs `RayRng::particle` through trace/mod.rs `Bounce`: u of particle `id` in sample `slot` of
 // the current bounce, lowered by the test hook.
 // In the path tracer (path.wgsl) the path's own decisions, slot being its decision number.
 fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
@@ -295,7 +296,7 @@ fn traverse(ray: Ray, visitor: u32) {
 // call site carries the bodies of all the visitors its `visit` can reach, and the shadow ray is
 // traced from inside the primary methods.
 //
-// Meshes block the light (trace.rs `visibility_from`): their BVH follows the splats' in the node
+// Meshes block the light (shadow.rs `visibility_from`): their BVH follows the splats' in the node
 // buffer, so the same loop walks it first (the splats' root waits on the stack, and a mesh hit
 // ends the walk before any splat could shorten t_max), with triangles at its leaves.
 fn traverse_shadow(ray: Ray) {
@@ -331,17 +332,13 @@ fn traverse_shadow(ray: Ray) {
     }
 }
 
-// ---- trace.rs: stochastic (Algorithm 1) and its N-sample extension (§3.5) ---------------------
+// ---- trace/mod.rs: the traversals' visitors ---------------------------------------------------
 
 var<private> iterations: u32;
 
-var<private> best_t: array<f32, MAX_SLOTS>;
-var<private> best_id: array<u32, MAX_SLOTS>;
-var<private> best_leaf: array<u32, MAX_SLOTS>;
-var<private> slot_u: array<f32, MAX_SLOTS>;
-
-// The visitors of `traverse` (bvh.wgsl), the closures that trace.rs hands to Bvh::traverse;
-// their inputs are set in the private variables below before the traversal.
+// The visitors of `traverse` (bvh.wgsl), the closures that trace/mod.rs hands to Bvh::traverse
+// (stochastic_visit in stochastic.wgsl, next_k_visit in kbuffer.wgsl; the shadow visitors in
+// shadow.wgsl); their inputs are set in the private variables below before the traversal.
 const VISIT_STOCHASTIC: u32 = 0u;
 const VISIT_NEXT_K: u32 = 1u;
 
@@ -388,307 +385,7 @@ struct VisitInputs {
 
 var<private> visit_in: VisitInputs;
 
-fn stochastic_traverse(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) {
-    for (var s = 0u; s < n; s++) {
-        iterations += 1u;
-        best_t[s] = FAR;
-        best_id[s] = NONE;
-    }
-    visit_in = VisitInputs(pixel_seed, n, first_slot, 0u, 0.0, NONE, false);
-    traverse(ray, VISIT_STOCHASTIC);
-}
-
-// One particle of Algorithm 1's traversal in each of the n slots (trace.rs
-// `TraceScene::stochastic_n`); returns t_max clipped at the farthest slot's hit.
-fn stochastic_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let p = particles[leaf];
-    let early = params.rng_scheme == RNG_HASH;
-    if (early) {
-        let bound = min(p.opacity, params.alpha_clamp);
-        var any = false;
-        for (var s = 0u; s < visit_in.n; s++) {
-            iterations += 1u;
-            slot_u[s] = particle_u(visit_in.pixel_seed, p.id, visit_in.first_slot + s, vec3<f32>(0.0));
-            any = any || slot_u[s] < bound;
-        }
-        if (!any) {
-            return t_max;
-        }
-    }
-    let h = intersect(p, ray);
-    if (!h.ok) {
-        return t_max;
-    }
-    var farthest = 0.0;
-    for (var s = 0u; s < visit_in.n; s++) {
-        iterations += 1u;
-        if (before(h.t, p.id, best_t[s], best_id[s])) {
-            var u = slot_u[s];
-            if (!early) {
-                u = particle_u(visit_in.pixel_seed, p.id, visit_in.first_slot + s, ray.origin + h.t * ray.dir);
-            }
-            if (u < h.alpha) {
-                best_t[s] = h.t;
-                best_id[s] = p.id;
-                best_leaf[s] = leaf;
-            }
-        }
-        farthest = max(farthest, best_t[s]);
-    }
-    return min(farthest, ray.t_max);
-}
-
-// ---- trace.rs: the k closest hits behind (after_t, after_id) ---------------------------------
-
-// Up to k hits kept sorted by (t, id) (trace.rs `KBuf`), with each hit's alpha and leaf.
-struct HitBuf {
-    t: array<f32, MAX_SLOTS>,
-    id: array<u32, MAX_SLOTS>,
-    alpha: array<f32, MAX_SLOTS>,
-    leaf: array<u32, MAX_SLOTS>,
-    len: u32,
-}
-
-// The primary ray's k-buffer, and the sorted shadow ray's (which may run while kb is read).
-var<private> kb: HitBuf;
-var<private> sb: HitBuf;
-
-// Keep the hit (t, id) in the sorted buffer `b` of capacity k when it is before the farthest
-// kept hit or the buffer is not full (trace.rs `KBuf::admits` and `KBuf::insert`: insertion
-// sort, dropping the farthest when full); returns t_max clipped at the farthest kept hit once
-// the buffer is full.
-fn hitbuf_insert(b: ptr<private, HitBuf>, k: u32, t: f32, id: u32, alpha: f32, leaf: u32, t_max: f32) -> f32 {
-    if ((*b).len == k && !before(t, id, (*b).t[k - 1u], (*b).id[k - 1u])) {
-        return t_max;
-    }
-    var i = select((*b).len, k - 1u, (*b).len == k);
-    if ((*b).len < k) {
-        (*b).len += 1u;
-    }
-    loop {
-        iterations += 1u;
-        if (i == 0u || !before(t, id, (*b).t[i - 1u], (*b).id[i - 1u])) {
-            break;
-        }
-        (*b).t[i] = (*b).t[i - 1u];
-        (*b).id[i] = (*b).id[i - 1u];
-        (*b).alpha[i] = (*b).alpha[i - 1u];
-        (*b).leaf[i] = (*b).leaf[i - 1u];
-        i -= 1u;
-    }
-    (*b).t[i] = t;
-    (*b).id[i] = id;
-    (*b).alpha[i] = alpha;
-    (*b).leaf[i] = leaf;
-    if ((*b).len == k) {
-        return (*b).t[k - 1u];
-    }
-    return t_max;
-}
-
-// Collect the k closest hits strictly behind (after_t, after_id) into kb; with `accepted`,
-// only hits accepted by roulette in slot 0 count (depth sampling).
-fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_seed: u32) {
-    kb.len = 0u;
-    visit_in = VisitInputs(pixel_seed, 1u, 0u, k, after_t, after_id, accepted);
-    traverse(ray, VISIT_NEXT_K);
-}
-
-// One particle of next_k's traversal: kept when it is behind the previous pass (and, for depth
-// sampling, accepted).
-fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let p = particles[leaf];
-    let k = visit_in.k;
-    let h = intersect(p, ray);
-    if (!h.ok || !before(visit_in.after_t, visit_in.after_id, h.t, p.id)) {
-        return t_max;
-    }
-    if (kb.len == k && !before(h.t, p.id, kb.t[k - 1u], kb.id[k - 1u])) {
-        return t_max;
-    }
-    if (visit_in.accepted && !(particle_u(visit_in.pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
-        return t_max;
-    }
-    return hitbuf_insert(&kb, k, h.t, p.id, h.alpha, leaf, t_max);
-}
-
-// ---- normal.rs, lighting.rs and the shadow rays of trace.rs ----------------------------------
-
-// normal.rs `particle_normal` of the particle in leaf `leaf` (lighting.wgsl `plane_normal`).
-fn particle_normal(leaf: u32, ray: Ray) -> vec3<f32> {
-    let p = particles[leaf];
-    return plane_normal(p.row0, p.row1, p.row2, p.mean, ray.origin, ray.dir);
-}
-
-// composite.rs `Composite::unit_normal` for a ray with hits: the integrated normal, or the
-// camera-facing −dir when it is degenerate.
-fn unit_normal(sum: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
-    let len = length(sum);
-    return select(-dir, sum / len, len > 1e-6);
-}
-
-// lighting.wgsl's loop counter: every loop body counts toward lavapipe's budget.
-fn count_iteration() {
-    iterations += 1u;
-}
-
-// rng.rs `RayRng::light_sample`.
-fn light_sample(pixel_seed: u32, light: u32, slot: u32) -> vec2<f32> {
-    let key = (bounce_slot(slot) << 7u) | (light << 1u);
-    return vec2<f32>(
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key)))),
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key | 1u)))),
-    );
-}
-
-// lighting.rs `shadow_slot`.
-fn shadow_slot(slot: u32, light: u32) -> u32 {
-    return 0x80000000u | (slot << 6u) | light;
-}
-
-// trace.rs `TraceScene::lit`: Lit(x, n, v, c) of particle `id` at distance t along the ray;
-// c itself when lighting is off or the particle's set only emits.
-fn lit(c: vec3<f32>, id: u32, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, slot: u32) -> vec3<f32> {
-    if (params.lit == 0u) {
-        return c;
-    }
-    return lit_material(material_of(id), c, t, n, ray, pixel_seed, slot, params.shadow_offset);
-}
-
-// lighting.rs `Lighting::shade_material`: Lit(x, n, v, c) with material m, each light's shadow
-// ray starting `offset` along it.
-fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, slot: u32, offset: f32) -> vec3<f32> {
-    if (m.emissive_only == 1u) {
-        return c;
-    }
-    let x = ray.origin + t * ray.dir;
-    let v = -ray.dir;
-    if (params.light_count == 0u) {
-        // lighting.rs `headlight`: from the eye, no falloff, no shadows.
-        return material_unlit(m, c) + material_direct(m, c, n, v, Incident(-ray.dir, t, vec3<f32>(1.0), true));
-    }
-    var sum = material_unlit(m, c);
-    for (var j = 0u; j < params.light_count; j++) {
-        iterations += 1u;
-        let light = lights[j];
-        var u = vec2<f32>(0.0);
-        if (light.radius > 0.0) {
-            u = light_sample(pixel_seed, j, slot);
-        }
-        let inc = light_incident(light, x, u);
-        if (!inc.ok) {
-            continue;
-        }
-        let direct = material_direct(m, c, n, v, inc);
-        if (any(direct != vec3<f32>(0.0))) {
-            sum += direct * visibility(x, offset, inc, pixel_seed, shadow_slot(slot, j));
-        }
-    }
-    return sum;
-}
-
-// The decisions of the current stochastic shadow ray and what the shadow visitors found.
-struct ShadowInputs {
-    pixel_seed: u32,
-    slot: u32,
-}
-
-var<private> shadow_in: ShadowInputs;
-var<private> shadow_t: f32;
-var<private> shadow_blocked: bool;
-var<private> shadow_mesh: bool;
-
-// trace.rs `TraceScene::shadow_visibility`: the shadow ray from x + offset l toward the light,
-// by the world's shadow kind (the path tracer's, path_shadows, in its pipeline); a mesh on the
-// way blocks it.
-fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
-    let shadow = Ray(x + offset * inc.l, inc.l, inc.l, params.t_min, min(inc.distance - offset, params.t_max));
-    let kind = shadow_kind();
-    if (shadow.t_max <= params.t_min || kind == SHADOWS_NONE) {
-        return vec3<f32>(1.0);
-    }
-    // One traversal call for every kind and the meshes (see traverse_shadow).
-    shadow_t = 1.0;
-    shadow_in = ShadowInputs(pixel_seed, slot);
-    shadow_blocked = false;
-    shadow_mesh = false;
-    sb.len = 0u;
-    traverse_shadow(shadow);
-    if (shadow_mesh) {
-        return vec3<f32>(0.0);
-    }
-    switch kind {
-        case SHADOWS_EXACT: {
-            return vec3<f32>(shadow_t);
-        }
-        case SHADOWS_STOCHASTIC: {
-            return select(vec3<f32>(1.0), vec3<f32>(0.0), shadow_blocked);
-        }
-        default: { // SHADOWS_SORTED
-            return sorted_shadow(shadow);
-        }
-    }
-}
-
-// trace.rs `TraceScene::transmittance`: Π(1 − αᵢ) over every hit.
-fn transmittance_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let h = intersect(particles[leaf], ray);
-    if (h.ok) {
-        shadow_t *= 1.0 - h.alpha;
-    }
-    return t_max;
-}
-
-// trace.rs `TraceScene::occluded`: Russian roulette on each hit, stopped at the first accept.
-fn occluded_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    if (shadow_blocked) {
-        return t_max;
-    }
-    let p = particles[leaf];
-    if (params.rng_scheme == RNG_HASH
-        && particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, vec3<f32>(0.0)) >= min(p.opacity, params.alpha_clamp)) {
-        return t_max;
-    }
-    let h = intersect(p, ray);
-    if (!h.ok) {
-        return t_max;
-    }
-    if (particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, ray.origin + h.t * ray.dir) < h.alpha) {
-        shadow_blocked = true;
-        return -1.0; // every node is now beyond t_max
-    }
-    return t_max;
-}
-
-// trace.rs `TraceScene::sorted_shadow`'s pass: the shadow_k nearest hits, into sb.
-fn shadow_sorted_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let p = particles[leaf];
-    let h = intersect(p, ray);
-    if (!h.ok) {
-        return t_max;
-    }
-    return hitbuf_insert(&sb, params.shadow_k, h.t, p.id, h.alpha, leaf, t_max);
-}
-
-// trace.rs `TraceScene::sorted_shadow`: T ← T ((1 − α) + colored α c) front to back over the
-// pass in sb, in shadow once every channel is below the threshold.
-fn sorted_shadow(ray: Ray) -> vec3<f32> {
-    var t = vec3<f32>(1.0);
-    for (var i = 0u; i < sb.len; i++) {
-        iterations += 1u;
-        var tint = vec3<f32>(0.0);
-        if (params.shadow_colored > 0.0) {
-            tint = sh_color(sb.id[i], ray.dir);
-        }
-        t *= vec3<f32>(1.0 - sb.alpha[i]) + params.shadow_colored * sb.alpha[i] * tint;
-        if (max(max(t.x, t.y), t.z) < params.shadow_threshold) {
-            return vec3<f32>(0.0);
-        }
-    }
-    return t;
-}
-
-// ---- trace.rs: the methods -------------------------------------------------------------------
+// ---- trace/mod.rs: the methods ----------------------------------------------------------------
 
 // A ray's state at the start of a frame: no radiance, T = 1, the first pass starting at t_min
 // (stochastic-n sums colour and coverage in radiance and transmittance instead).
@@ -717,7 +414,7 @@ fn volumetric() -> bool {
     return params.lit == 1u && params.look == LOOK_VOLUMETRIC;
 }
 
-// Eq. 3 front to back over the hits in kb, continuing the state (trace.rs
+// Eq. 3 front to back over the hits in kb, continuing the state (trace/mod.rs
 // `TraceScene::integrate`), with the integrated normal and the iso-opacity depth; with
 // `light_hits` (the volumetric look) each hit is lit before it is composited.
 fn integrate(st: ptr<function, PassState>, ray: Ray, pixel_seed: u32, light_hits: bool) {
@@ -751,32 +448,7 @@ fn advance(st: ptr<function, PassState>) -> bool {
     return false;
 }
 
-// Algorithm 1 in n slots of one traversal (trace.rs `TraceScene::stochastic_n`), each accepted
-// particle lit at its own position and normal; the pick is that of slot 0 of the frame. Returns
-// the mean of the accepted colours (misses count zero) and the accepted share.
-fn stochastic_n(ray: Ray, pixel_seed: u32, n: u32, first_slot: u32) -> vec4<f32> {
-    stochastic_traverse(ray, pixel_seed, n, first_slot);
-    var sum = vec4<f32>(0.0);
-    for (var s = 0u; s < n; s++) {
-        iterations += 1u;
-        if (best_id[s] == NONE) {
-            // What lies behind (background or mesh) is added in `finish`, once per frame.
-            if (first_slot + s == 0u) {
-                sample_pick = no_pick();
-            }
-        } else {
-            let normal = particle_normal(best_leaf[s], ray);
-            let c = lit(sh_color(best_id[s], ray.dir), best_id[s], best_t[s], normal, ray, pixel_seed, first_slot + s);
-            if (first_slot + s == 0u) {
-                sample_pick = Pick(normal, best_t[s], best_id[s], 0u, 0u, 0u);
-            }
-            sum += vec4<f32>(c, 1.0);
-        }
-    }
-    return sum / f32(n);
-}
-
-// One step of a frame (trace.rs `TraceScene::sample`, cut where a pass ends): a traversal of n
+// One step of a frame (trace/mod.rs `TraceScene::sample`, cut where a pass ends): a traversal of n
 // slots of stochastic-n; a pass of the k-buffer (exact is the k-buffer with no limit) or of the
 // stochastic pass; or depth sampling's one pass. True when the frame's sample is complete.
 //
@@ -820,7 +492,7 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
     }
     let opacity = 1.0 - acc.transmittance;
     if (pass_u(pixel_seed, pass_index) < opacity) {
-        // trace.rs `pass_sample`: colour L_pass / O at the pass's iso-depth, else its farthest
+        // kbuffer.rs `pass_sample`: colour L_pass / O at the pass's iso-depth, else its farthest
         // hit, with its normal; lit in `finish`.
         var t = acc.depth;
         var id = acc.picked;
@@ -838,7 +510,7 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
     return advance(st);
 }
 
-// ---- mesh.rs and trace.rs: what lies behind the splats ---------------------------------------
+// ---- mesh.rs and trace/mod.rs: what lies behind the splats ------------------------------------
 
 // The closest mesh along the pixel's camera ray (set in `main`; triangle NONE where none).
 var<private> surface: SurfaceHit;
@@ -847,15 +519,15 @@ var<private> surface: SurfaceHit;
 // none): the weight of the mesh's mirror and glass segments.
 var<private> behind_weight: f32;
 
-// trace.rs `surface_offset`.
+// trace/mod.rs `surface_offset`.
 fn surface_offset(x: vec3<f32>) -> f32 {
     return SURFACE_OFFSET * max(max(max(abs(x.x), abs(x.y)), abs(x.z)), 1.0);
 }
 
 // The sample of a finished frame and its pick: stochastic-n's average; the stochastic pass's
 // accepted pass (or what lies behind); the integrated hits over what lies behind for the others
-// (trace.rs `TraceScene::finish`), depth sampling reporting the depth of its first accepted hit.
-// What lies behind is the background or the lit mesh that clipped the ray (trace.rs `behind`),
+// (trace/mod.rs `TraceScene::finish`), depth sampling reporting the depth of its first accepted hit.
+// What lies behind is the background or the lit mesh that clipped the ray (trace/mod.rs `behind`),
 // computed here only, and only where the sample shows it. Lit once here where the method lights
 // once: the accepted pass, and the surface look (L lit at the iso-opacity depth with the
 // integrated normal and the picked particle's material, what lies behind where the threshold
@@ -1012,7 +684,7 @@ fn fold(index: u32, s: vec4<f32>, frame: u32) {
     }
 }
 
-// One straight piece of a light path waiting to be traced (trace.rs `secondary`): where it
+// One straight piece of a light path waiting to be traced (trace/mod.rs `secondary`): where it
 // starts, where it goes, its weight in the pixel's sample and its bounce number.
 struct Segment {
     origin: vec3<f32>,
@@ -1025,7 +697,7 @@ struct Segment {
 // reflected and the refracted ray), so MAX_BOUNCES + 1 entries hold the deepest path.
 var<private> segments: array<Segment, 16>;
 
-// trace.rs `surface_sample`'s bounces: the mirror share and Fresnel's share of the glass go to the
+// trace/mod.rs `surface_sample`'s bounces: the mirror share and Fresnel's share of the glass go to the
 // reflected ray, the rest of the glass to the refracted one (none under total internal
 // reflection), each one bounce deeper, weighted by the segment's weight and by what lies
 // behind's coefficient in its sample. Returns the new stack top.
@@ -1059,7 +731,7 @@ fn push_bounces(ray: Ray, seg: Segment, top: u32) -> u32 {
 
 // One invocation per pixel. MODE_FRAMES: frames first_frame .. first_frame + frames of the
 // render, each run to the end: the camera segment, then, among mirror and glass meshes, the
-// segments it spawns, each a whole sample of the method (trace.rs `trace_ray`), summed with their
+// segments it spawns, each a whole sample of the method (trace/mod.rs `trace_ray`), summed with their
 // weights. MODE_PASS: step `pass_index` of frame `first_frame` only (a k-buffer or stochastic
 // pass, or a chunk of params.n of the params.m slots of stochastic-n), the camera ray's state
 // kept in pass_state between dispatches, so that each dispatch runs one traversal per ray,
@@ -1102,7 +774,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
                 mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
             }
-            // trace.rs `trace_ray`: the closest mesh clips the ray.
+            // trace/mod.rs `trace_ray`: the closest mesh clips the ray.
             surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
             if (params.mesh_root != NONE) {
                 surface = mesh_traverse(params.mesh_root, mesh_ray, false);

@@ -929,4 +929,21 @@ mod tests {
     fn trace_wgsl_validates() {
         validate("trace", crate::TRACE_WGSL);
     }
+
+    /// docs/architecture.md's table of shaders and their CPU twins names every shader file:
+    /// a new shader (or a split one) cannot go undocumented.
+    #[test]
+    fn every_shader_has_a_row_in_the_twin_table() {
+        let crate_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let doc = std::fs::read_to_string(crate_dir.join("../../docs/architecture.md")).expect("the design document");
+        let table: Vec<&str> = doc.lines().filter(|l| l.starts_with("| `")).collect();
+        let mut missing = Vec::new();
+        for entry in std::fs::read_dir(crate_dir.join("shaders")).expect("the shaders") {
+            let name = entry.expect("a shader").file_name().to_string_lossy().into_owned();
+            if name.ends_with(".wgsl") && !table.iter().any(|row| row.contains(&format!("`{name}`"))) {
+                missing.push(name);
+            }
+        }
+        assert!(missing.is_empty(), "shaders without a row in docs/architecture.md's twin table: {missing:?}");
+    }
 }

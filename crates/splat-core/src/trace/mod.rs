@@ -6,14 +6,20 @@
 //! the decisions are the counter-based hashes of [`crate::rng::RayRng`]; in tests they can be
 //! set outcome by outcome, so that the expectation of the very code that renders is computed
 //! exactly by enumeration.
+//!
+//! This file holds the scene ([`TraceScene`]), the dispatch of a sample to its method, Eq. 3's
+//! integration and what lies behind the splats (meshes, bounces); the methods live beside it,
+//! each file with its GPU twin of the same name in `splat-gpu/shaders/`: `stochastic.rs`
+//! (Algorithm 1, §3.5), `kbuffer.rs` (the sorted hits of exact, the k-buffer, the stochastic
+//! pass and depth sampling) and `shadow.rs` (lighting a hit, the shadow rays).
 
 use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
 use crate::catalogue::{MethodId, Parameters};
-use crate::composite::{ShadedHit, depth_order, shade_hit};
+use crate::composite::{ShadedHit, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
-use crate::lighting::{Incident, Light, Lighting, Look, Shadows, shadow_slot};
+use crate::lighting::{Incident, Light, Lighting, Look, shadow_slot};
 use crate::mesh::{Meshes, SurfaceHit, fresnel, reflect, refract};
 use crate::par;
 use crate::particle::{Aabb, Scene};
@@ -22,6 +28,12 @@ use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
 use glam::{DVec3, Vec2, Vec3};
 use std::cell::OnceCell;
+
+mod kbuffer;
+mod shadow;
+mod stochastic;
+
+pub(crate) use kbuffer::{KBuf, Slot};
 
 pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_SLOTS};
 // The sorted shadow pass keeps its hits in a k-buffer.
@@ -155,68 +167,6 @@ pub fn bounding_radius(settings: &RenderSettings, opacity: f32) -> f32 {
     match settings.hit_distance {
         HitDistance::Mean => settings.kernel.visible_extent(opacity),
         HitDistance::Center => settings.kernel.cutoff,
-    }
-}
-
-/// A candidate hit in a k-buffer, ordered by (t, id).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Slot {
-    pub(crate) t: f32,
-    pub(crate) id: u32,
-    pub(crate) leaf: u32,
-    pub(crate) alpha: f32,
-}
-
-impl Slot {
-    pub(crate) const EMPTY: Slot = Slot { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
-
-    /// Whether the slot holds a hit.
-    pub(crate) fn is_hit(&self) -> bool {
-        self.id != u32::MAX
-    }
-}
-
-/// Up to `cap` hits kept sorted by (t, id).
-pub(crate) struct KBuf {
-    slots: [Slot; MAX_SLOTS],
-    len: usize,
-    cap: usize,
-}
-
-impl KBuf {
-    fn new(cap: usize) -> Self {
-        Self { slots: [Slot::EMPTY; MAX_SLOTS], len: 0, cap }
-    }
-
-    fn is_full(&self) -> bool {
-        self.len == self.cap
-    }
-
-    /// The last kept hit (the farthest).
-    fn last(&self) -> Slot {
-        if self.len == 0 { Slot::EMPTY } else { self.slots[self.len - 1] }
-    }
-
-    /// Whether a hit at (t, id) would be kept.
-    fn admits(&self, t: f32, id: u32) -> bool {
-        !self.is_full() || depth_before(t, id, self.last().t, self.last().id)
-    }
-
-    /// Insert, dropping the farthest when full (insertion sort, as the vk any-hit shader does).
-    fn insert(&mut self, s: Slot) {
-        let mut i = if self.is_full() { self.len - 1 } else { self.len };
-        if !self.is_full() {
-            self.len += 1;
-        }
-        while i > 0 && depth_before(s.t, s.id, self.slots[i - 1].t, self.slots[i - 1].id) {
-            self.slots[i] = self.slots[i - 1];
-            i -= 1;
-        }
-        self.slots[i] = s;
-    }
-
-    pub(crate) fn as_slice(&self) -> &[Slot] {
-        &self.slots[..self.len]
     }
 }
 
@@ -438,115 +388,6 @@ impl<'a> TraceScene<'a> {
         Sample { color: lit + acc.transmittance * behind.color, picked: Some(id), ..unlit }
     }
 
-    /// Lit(x, n, v, c) ([`Lighting::shade`]) for colour `c` of particle `id` at distance `t`
-    /// along `ray` with unit normal `n`, each light behind its shadow ray; area-light samples and
-    /// shadow-ray decisions are drawn for sample slot `slot`.
-    #[allow(clippy::too_many_arguments)]
-    fn lit(&self, c: Vec3, id: u32, t: f32, n: Vec3, ray: &Ray, decide: &impl Decide, slot: u32) -> Vec3 {
-        let sample =
-            |j: usize, light: &Light| if light.is_area() { decide.light_sample(j as u32, slot) } else { Vec2::ZERO };
-        let visible =
-            |j: usize, x: Vec3, incident: &Incident| self.visibility(x, incident, decide, shadow_slot(slot, j));
-        self.lighting.shade(c, id, ray, t, n, sample, visible)
-    }
-
-    /// Visibility of a light from `x` ([`Shadows`]): the shadow ray starts `shadow_offset` along
-    /// the light direction and ends at the light (vk_gaussian_splatting Lighting §4); `decide`
-    /// draws the stochastic shadow ray's decisions in slot `slot`. A mesh on the way blocks the
-    /// light.
-    pub fn visibility(&self, x: Vec3, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
-        self.visibility_from(x, self.lighting.shadow_offset, incident, decide, slot)
-    }
-
-    fn visibility_from(&self, x: Vec3, offset: f32, incident: &Incident, decide: &impl Decide, slot: u32) -> Vec3 {
-        self.shadow_visibility(x, offset, incident, decide, slot, self.lighting.shadows)
-    }
-
-    /// The visibility of a light from `x` by shadow kind `shadows`: the shadow ray starts
-    /// `offset` along the light direction and ends at the light; a mesh on the way blocks it.
-    /// How the world's shadow kind ([`TraceScene::visibility`]) and the path tracer see lights.
-    pub fn shadow_visibility(
-        &self,
-        x: Vec3,
-        offset: f32,
-        incident: &Incident,
-        decide: &impl Decide,
-        slot: u32,
-        shadows: Shadows,
-    ) -> Vec3 {
-        let shadow = Ray {
-            origin: x + offset * incident.l,
-            dir: incident.l,
-            view: incident.l,
-            t_min: self.settings.t_min,
-            t_max: (incident.distance - offset).min(self.settings.t_max),
-        };
-        if shadow.t_max <= shadow.t_min || shadows == Shadows::None {
-            return Vec3::ONE;
-        }
-        if self.meshes.occludes(&shadow) {
-            return Vec3::ZERO;
-        }
-        match shadows {
-            Shadows::None => Vec3::ONE,
-            Shadows::Exact => Vec3::splat(self.transmittance(&shadow) as f32),
-            Shadows::Stochastic => Vec3::splat(if self.occluded(&shadow, decide, slot) { 0.0 } else { 1.0 }),
-            Shadows::Sorted { k, threshold, colored } => self.sorted_shadow(&shadow, k, threshold, colored),
-        }
-    }
-
-    /// The exact transmittance Π(1 − αᵢ) over every hit of `ray` (f64; order does not matter).
-    pub fn transmittance(&self, ray: &Ray) -> f64 {
-        let mut t = 1.0f64;
-        let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, _| {
-            if let Some(h) = self.hit(leaf, ray) {
-                t *= 1.0 - f64::from(h.alpha);
-            }
-        });
-        t
-    }
-
-    /// The unbiased stochastic shadow ray: one traversal, each hit accepted by Russian roulette
-    /// (u < α, decisions of slot `slot`), stopped at the first accept. P(no accept) = Π(1 − αᵢ).
-    pub fn occluded(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> bool {
-        let early = !decide.needs_position();
-        let mut occluded = false;
-        let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
-            if occluded {
-                return;
-            }
-            let id = self.ids[leaf as usize];
-            if early && decide.particle(id, slot, Vec3::ZERO) >= self.alpha_bound[leaf as usize] {
-                return;
-            }
-            let Some(h) = self.hit(leaf, ray) else { return };
-            let u = decide.particle(id, slot, ray.at(h.t));
-            if decide.accepts(id, u, h.alpha) {
-                occluded = true;
-                *t_max = f32::NEG_INFINITY;
-            }
-        });
-        occluded
-    }
-
-    /// vk_gaussian_splatting's shadow ray (§4): the `k` nearest hits sorted, transmittance
-    /// T ← T ⊙ ((1 − α) + `colored` α c) front to back; in shadow (0) once every channel of T is
-    /// below `threshold`.
-    fn sorted_shadow(&self, ray: &Ray, k: usize, threshold: f32, colored: f32) -> Vec3 {
-        let buf = self.next_k(ray, k, (ray.t_min, u32::MAX), None);
-        let mut t = Vec3::ONE;
-        for s in buf.as_slice() {
-            let tint = if colored > 0.0 { self.shade(s.leaf, s.t, s.alpha, ray).color } else { Vec3::ZERO };
-            t *= Vec3::splat(1.0 - s.alpha) + colored * s.alpha * tint;
-            if t.max_element() < threshold {
-                return Vec3::ZERO;
-            }
-        }
-        t
-    }
-
     /// The shaded colour S of a mesh surface hit by the segment's ray ([`crate::mesh`]): the
     /// material's local share lit by the world's lights (shadow rays through meshes and splats),
     /// plus the mirror and glass shares from secondary rays traced by the same method one bounce
@@ -610,13 +451,6 @@ impl<'a> TraceScene<'a> {
         self.surface_sample(&seg, hit)
     }
 
-    /// Lit(x, n, v, c) of particle `id` at distance `t` along `ray` with unit normal `n`, each
-    /// light behind a shadow ray through splats and meshes (slot 0's decisions): how the hybrid
-    /// pipeline lights a rasterized pick.
-    pub fn light_pick(&self, c: Vec3, id: u32, t: f32, n: Vec3, ray: &Ray, decide: &impl Decide) -> Vec3 {
-        self.lit(c, id, t, n, ray, decide, 0)
-    }
-
     /// One sample of `method` for `ray` (already clipped to the settings' range).
     pub fn sample(&self, method: &Method, ray: &Ray, decide: &impl Decide) -> Sample {
         self.trace_ray(method, ray, Bounce::camera(decide), 0.0)
@@ -664,258 +498,6 @@ impl<'a> TraceScene<'a> {
             Method::DepthSampling { k } => self.depth_sampling(&seg, k),
             Method::Opaque => self.opaque(&seg),
         }
-    }
-
-    /// Exact: every hit along the ray through the BVH, sorted front to back, Eq. 3 (lit by the
-    /// look when lighting is on; `decide` draws only shadow rays and area-light samples).
-    fn exact<D: Decide>(&self, seg: &Segment<D>) -> Sample {
-        let mut acc = Integrator::START;
-        for s in &self.sorted_hits(&seg.ray) {
-            self.add(&mut acc, &self.shade(s.leaf, s.t, s.alpha, &seg.ray), seg);
-        }
-        self.finish(&acc, seg)
-    }
-
-    /// Every hit of `ray` through the BVH, sorted front to back by (t, id) (the order of
-    /// `composite::sort_front_to_back`), as small records: each is shaded once, in that order.
-    pub(crate) fn sorted_hits(&self, ray: &Ray) -> Vec<Slot> {
-        let mut found = Vec::with_capacity(64);
-        let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, _| {
-            if let Some(h) = self.hit(leaf, ray) {
-                found.push(Slot { t: h.t, id: h.index, leaf, alpha: h.alpha });
-            }
-        });
-        found.sort_unstable_by(|a, b| depth_order(a.t, a.id, b.t, b.id));
-        found
-    }
-
-    /// The k closest hits strictly behind (after_t, after_id), by (t, id); when `decide` is
-    /// given, only hits accepted in slot 0 count (depth sampling).
-    fn next_k(
-        &self,
-        ray: &Ray,
-        k: usize,
-        after: (f32, u32),
-        accepted: Option<&dyn Fn(u32, Vec3, f32) -> bool>,
-    ) -> KBuf {
-        let mut buf = KBuf::new(k);
-        let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
-            let Some(h) = self.hit(leaf, ray) else { return };
-            let id = self.ids[leaf as usize];
-            if !depth_before(after.0, after.1, h.t, id) || !buf.admits(h.t, id) {
-                return;
-            }
-            if let Some(accept) = accepted
-                && !accept(id, ray.at(h.t), h.alpha)
-            {
-                return;
-            }
-            buf.insert(Slot { t: h.t, id, leaf, alpha: h.alpha });
-            if buf.is_full() {
-                *t_max = buf.last().t;
-            }
-        });
-        buf
-    }
-
-    /// k-buffer multi-pass (3DGRT / vk baseline).
-    fn kbuffer<D: Decide>(&self, seg: &Segment<D>, k: usize, max_passes: u32, min_transmittance: f32) -> Sample {
-        let mut acc = Integrator::START;
-        let mut after = (seg.ray.t_min, u32::MAX);
-        for _ in 0..max_passes {
-            if acc.transmittance <= f64::from(min_transmittance) {
-                break;
-            }
-            let buf = self.next_k(&seg.ray, k, after, None);
-            self.integrate(&mut acc, &buf, seg);
-            if !buf.is_full() {
-                break;
-            }
-            after = (buf.last().t, buf.last().id);
-        }
-        self.finish(&acc, seg)
-    }
-
-    /// Algorithm 1: the closest hit accepted by Russian roulette (u < α), found in one
-    /// traversal that clips t_max at every accept; shaded once (Eq. 6).
-    ///
-    /// With a position-free generator u is drawn before the kernel: α ≤ min(opacity, clamp),
-    /// so u ≥ that bound rejects the hit without evaluating the exponential; the decision is
-    /// the same because u is a hash, not a stream.
-    fn stochastic<D: Decide>(&self, seg: &Segment<D>, slot: u32) -> Sample {
-        match self.first_accepted(&seg.ray, &seg.decide, slot) {
-            Some(best) => self.opaque_sample(best.leaf, best.t, seg, slot),
-            None => self.behind(seg),
-        }
-    }
-
-    /// Algorithm 1's traversal: the closest hit of `ray` accepted in slot `slot`, if any.
-    pub(crate) fn first_accepted(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> Option<Slot> {
-        let early = !decide.needs_position();
-        let mut best = Slot::EMPTY;
-        let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
-            let id = self.ids[leaf as usize];
-            let u = if early {
-                let u = decide.particle(id, slot, Vec3::ZERO);
-                if u >= self.alpha_bound[leaf as usize] {
-                    return;
-                }
-                u
-            } else {
-                0.0
-            };
-            let Some(h) = self.hit(leaf, ray) else { return };
-            if !depth_before(h.t, id, best.t, best.id) {
-                return;
-            }
-            let u = if early { u } else { decide.particle(id, slot, ray.at(h.t)) };
-            if decide.accepts(id, u, h.alpha) {
-                best = Slot { t: h.t, id, leaf, alpha: h.alpha };
-                *t_max = h.t;
-            }
-        });
-        best.is_hit().then_some(best)
-    }
-
-    /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
-    /// `first_slot..first_slot + n`; the traversal is clipped at the farthest slot's hit.
-    fn stochastic_n<D: Decide>(&self, seg: &Segment<D>, n: usize, first_slot: u32) -> Sample {
-        let best = self.first_accepted_n(&seg.ray, &seg.decide, first_slot, n);
-        let mut color = DVec3::ZERO;
-        let mut alpha = 0.0;
-        let mut first = self.background_sample();
-        for (slot, b) in (first_slot..).zip(&best[..n]) {
-            let s = if b.is_hit() { self.opaque_sample(b.leaf, b.t, seg, slot) } else { self.behind(seg) };
-            color += s.color;
-            alpha += s.alpha;
-            if slot == first_slot {
-                first = s;
-            }
-        }
-        Sample { color: color / n as f64, alpha: alpha / n as f64, ..first }
-    }
-
-    /// The traversal of §3.5: for each slot of `first_slot..first_slot + n`, the closest hit of
-    /// `ray` accepted in that slot ([`Slot::EMPTY`] where none is); the traversal is clipped at
-    /// the farthest slot's hit.
-    pub(crate) fn first_accepted_n(
-        &self,
-        ray: &Ray,
-        decide: &impl Decide,
-        first_slot: u32,
-        n: usize,
-    ) -> [Slot; MAX_SLOTS] {
-        let early = !decide.needs_position();
-        let mut best = [Slot::EMPTY; MAX_SLOTS];
-        let mut u = [0.0f32; MAX_SLOTS];
-        let mut t_max = ray.t_max;
-        let draw = decide.slot_draws(first_slot, n);
-        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
-            let id = self.ids[leaf as usize];
-            if early {
-                let bound = self.alpha_bound[leaf as usize];
-                draw(id, Vec3::ZERO, &mut u[..n]);
-                if u[..n].iter().all(|&us| us >= bound) {
-                    return;
-                }
-            }
-            let Some(h) = self.hit(leaf, ray) else { return };
-            let mut farthest = 0.0f32;
-            for (s, (b, &us)) in best[..n].iter_mut().zip(&u[..n]).enumerate() {
-                if depth_before(h.t, id, b.t, b.id) {
-                    let us = if early { us } else { decide.particle(id, first_slot + s as u32, ray.at(h.t)) };
-                    if decide.accepts(id, us, h.alpha) {
-                        *b = Slot { t: h.t, id, leaf, alpha: h.alpha };
-                    }
-                }
-                farthest = farthest.max(b.t);
-            }
-            *t_max = farthest.min(ray.t_max);
-        });
-        best
-    }
-
-    /// vk stochastic pass: each pass integrates its K sorted hits from T = 1; it is accepted
-    /// with probability O = 1 − T_pass and returns L_pass / O, else it is discarded and the
-    /// next pass starts behind it. E = Σⱼ (Πᵢ<ⱼ Tᵢ) Lⱼ + (Π Tⱼ) background: Eq. 3 exactly.
-    fn stochastic_pass<D: Decide>(&self, seg: &Segment<D>, k: usize, max_passes: u32) -> Sample {
-        let mut accepted = None;
-        self.passes(&seg.ray, k, max_passes, |pass, acc| {
-            let opacity = 1.0 - acc.transmittance;
-            if seg.decide.accepts_pass(f64::from(seg.decide.pass(pass)), opacity) {
-                accepted = Some(self.pass_sample(acc, seg));
-            }
-            accepted.is_none()
-        });
-        accepted.unwrap_or_else(|| self.behind(seg))
-    }
-
-    /// The exact expectation of the stochastic pass (its oracle when lit): Σⱼ (Πᵢ<ⱼ Tᵢ) Oⱼ Sⱼ +
-    /// (Π Tⱼ) behind, with Sⱼ the sample pass j returns when accepted and `behind` the
-    /// background or the mesh surface clipping the ray. Unlit Sⱼ = Lⱼ / Oⱼ and this is Eq. 3;
-    /// lit it is not, since the specular term is not proportional to the base colour. `decide`
-    /// draws only shadow rays, area-light samples and the decisions of secondary rays.
-    pub fn stochastic_pass_expectation(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> DVec3 {
-        let seg = self.segment(&Method::StochasticPass { k, max_passes }, ray, Bounce::camera(decide), 0.0);
-        let mut reach = 1.0f64;
-        let mut sum = DVec3::ZERO;
-        self.passes(&seg.ray, k, max_passes, |_, acc| {
-            let opacity = 1.0 - acc.transmittance;
-            if opacity > 0.0 {
-                sum += reach * opacity * self.pass_sample(acc, &seg).color;
-            }
-            reach *= acc.transmittance;
-            true
-        });
-        sum + reach * self.behind(&seg).color
-    }
-
-    /// The passes of K sorted hits along `ray`, each integrated from T = 1 and handed to
-    /// `visit(pass, integrator)` until it returns false, a pass is not full or `max_passes`.
-    fn passes(&self, ray: &Ray, k: usize, max_passes: u32, mut visit: impl FnMut(u32, &Integrator) -> bool) {
-        let mut after = (ray.t_min, u32::MAX);
-        for pass in 0..max_passes {
-            let buf = self.next_k(ray, k, after, None);
-            if buf.len == 0 {
-                return;
-            }
-            let mut acc = Integrator::START;
-            for s in buf.as_slice() {
-                let h = self.shade(s.leaf, s.t, s.alpha, ray);
-                acc.add(&h, h.color, self.settings.iso_threshold);
-            }
-            if !visit(pass, &acc) || !buf.is_full() {
-                return;
-            }
-            after = (buf.last().t, buf.last().id);
-        }
-    }
-
-    /// An accepted pass as one opaque sample: colour L_pass / O. Lit (vk_gaussian_splatting
-    /// Lighting §1.3, §2.3), that base colour is lit with the pass's integrated normal at its
-    /// iso-depth, or else at its farthest hit, with the material of the particle there.
-    fn pass_sample<D: Decide>(&self, acc: &Integrator, seg: &Segment<D>) -> Sample {
-        let (t, id) = acc.depth.or(acc.farthest).expect("a pass with hits has a farthest hit");
-        let normal = acc.unit_normal(seg.ray.dir);
-        let base = acc.radiance / (1.0 - acc.transmittance);
-        let color = if self.lighting.is_on() {
-            self.lit(base.as_vec3(), id, t, normal, &seg.ray, &seg.decide, 0).as_dvec3()
-        } else {
-            base
-        };
-        Sample { color, alpha: 1.0, depth: Some(t), normal, picked: None }
-    }
-
-    /// 3DGRT stochastic depth sampling: the k closest hits accepted by roulette (slot 0),
-    /// composited in order with their alphas (biased: α counts twice).
-    fn depth_sampling<D: Decide>(&self, seg: &Segment<D>, k: usize) -> Sample {
-        let buf = self.first_k_accepted(&seg.ray, &seg.decide, k, 0);
-        let mut acc = Integrator::START;
-        self.integrate(&mut acc, &buf, seg);
-        Sample { depth: buf.as_slice().first().map(|s| s.t), ..self.finish(&acc, seg) }
     }
 
     /// The k closest hits of `ray` accepted by roulette in slot `slot`, sorted.
