@@ -99,13 +99,7 @@ impl Algorithm {
     pub fn render_world(&self, shot: &Shot, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
         let Shot { scene, meshes, lighting, camera, settings } = *shot;
         match self {
-            Algorithm::Oracle if !meshes.is_empty() => Err(RenderError::Settings(
-                "the brute-force oracle renders splats alone; render meshes with a ray-tracing method".into(),
-            )),
-            Algorithm::Oracle if lighting.is_on() => Err(RenderError::Settings(
-                "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
-            )),
-            Algorithm::Oracle => render_oracle(scene, camera, settings, progress),
+            Algorithm::Oracle => oracle(shot, progress),
             Algorithm::Trace(_) | Algorithm::Hybrid(..) => {
                 let trace =
                     TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
@@ -135,7 +129,7 @@ impl Algorithm {
             Algorithm::Oracle => {
                 let shot =
                     Shot { scene, meshes: trace.meshes(), lighting: trace.lighting(), camera, settings: &settings };
-                Algorithm::Oracle.render_world(&shot, frames, progress)
+                oracle(&shot, progress)
             }
             Algorithm::Trace(method) => render_frames(trace, camera, method, frames, progress),
             Algorithm::Raster(method, raster) => {
@@ -150,6 +144,21 @@ impl Algorithm {
             }
         }
     }
+}
+
+/// The brute-force oracle of the shot: splats alone, unlit (it refuses meshes and lights).
+fn oracle(shot: &Shot, progress: Progress) -> Result<RenderOutput, RenderError> {
+    if !shot.meshes.is_empty() {
+        return Err(RenderError::Settings(
+            "the brute-force oracle renders splats alone; render meshes with a ray-tracing method".into(),
+        ));
+    }
+    if shot.lighting.is_on() {
+        return Err(RenderError::Settings(
+            "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
+        ));
+    }
+    render_oracle(shot.scene, shot.camera, shot.settings, progress)
 }
 
 #[cfg(test)]
