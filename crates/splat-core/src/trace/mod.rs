@@ -28,6 +28,7 @@ use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
 use glam::{DVec3, Vec2, Vec3};
 use std::cell::OnceCell;
+use std::sync::OnceLock;
 
 mod kbuffer;
 mod shadow;
@@ -140,8 +141,9 @@ pub struct TraceScene<'a> {
     settings: RenderSettings,
     /// The binary tree (what the GPU traverses).
     bvh: Bvh,
-    /// Its 4-wide collapse (what the CPU traverses): the same leaves.
-    wide: Bvh4,
+    /// Its 4-wide collapse (what the CPU traverses): the same leaves, collapsed when a CPU ray
+    /// first needs it, so that a scene traced on the GPU never builds it.
+    wide: OnceLock<Bvh4>,
     /// Prepared particles in BVH leaf order.
     prims: Vec<PreparedParticle>,
     /// Scene index of each leaf-order particle.
@@ -244,7 +246,7 @@ impl<'a> TraceScene<'a> {
         .into_iter()
         .unzip();
         let bvh = Bvh::build(&boxes);
-        let wide = Bvh4::from_binary(&bvh);
+        let wide = OnceLock::new();
         let prims = par::map(&bvh.order, |&i| PreparedParticle::new(&scene.particles[i as usize]));
         let ids = bvh.order.clone();
         let clamp = settings.kernel.alpha_clamp;
@@ -293,9 +295,9 @@ impl<'a> TraceScene<'a> {
         &self.bvh
     }
 
-    /// The 4-wide BVH the CPU traverses, collapsed from [`TraceScene::bvh`].
+    /// The 4-wide BVH the CPU traverses, collapsed from [`TraceScene::bvh`] on first use.
     pub fn wide_bvh(&self) -> &Bvh4 {
-        &self.wide
+        self.wide.get_or_init(|| Bvh4::from_binary(&self.bvh))
     }
 
     /// The scene.
@@ -511,7 +513,7 @@ impl<'a> TraceScene<'a> {
         let ray = &seg.ray;
         let mut best = Slot::EMPTY;
         let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
+        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let (o, d) = to_canonical(&self.prims[leaf as usize], ray);
             let Some(t) = sphere_entry(o, d, self.radius_sq[leaf as usize]) else { return };
             let id = self.ids[leaf as usize];
@@ -646,4 +648,24 @@ pub fn render_frames(
             })
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::RngScheme;
+
+    /// A scene prepared for the GPU (which walks the binary tree) never collapses the 4-wide
+    /// tree; the first CPU ray does.
+    #[test]
+    fn the_wide_tree_is_collapsed_when_a_cpu_ray_first_needs_it() {
+        let (scene, camera) = crate::scenes::cloud();
+        let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+        assert!(!trace.bvh().nodes.is_empty());
+        assert!(trace.wide.get().is_none(), "collapsed before any CPU ray");
+        let ray = trace.clip(camera.pixel_ray(camera.width / 2, camera.height / 2));
+        let sample = trace.sample(&Method::Exact, &ray, &RayRng::new(0, 0, 0, RngScheme::Hash));
+        assert!(trace.wide.get().is_some());
+        assert!(sample.alpha > 0.0, "the centre ray of the cloud meets splats");
+    }
 }

@@ -77,7 +77,7 @@ impl TraceScene<'_> {
     pub fn transmittance(&self, ray: &Ray) -> f64 {
         let mut t = 1.0f64;
         let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, _| {
+        self.wide_bvh().traverse(ray, &mut t_max, |leaf, _| {
             if let Some(h) = self.hit(leaf, ray) {
                 t *= 1.0 - f64::from(h.alpha);
             }
@@ -91,7 +91,7 @@ impl TraceScene<'_> {
         let early = !decide.needs_position();
         let mut occluded = false;
         let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |leaf, t_max| {
+        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             if occluded {
                 return;
             }
