@@ -214,9 +214,9 @@ pub struct Params {
     pub seed: u32,
     /// Frames in this dispatch.
     pub frames: u32,
-    /// [`RNG_HASH`] or [`RNG_TRIG`].
+    /// `RNG_HASH` or `RNG_TRIG`.
     pub rng_scheme: u32,
-    /// [`HIT_MEAN`] or [`HIT_CENTER`].
+    /// `HIT_MEAN` or `HIT_CENTER`.
     pub hit_distance: u32,
     /// Kernel degree.
     pub kernel_degree: u32,
@@ -596,9 +596,9 @@ pub struct PathParams {
     pub estimator: u32,
     /// Instantiations of stochastic-n.
     pub n: u32,
-    /// [`SAMPLER_SOBOL`] or [`SAMPLER_HASH`].
+    /// `SAMPLER_SOBOL` or `SAMPLER_HASH`.
     pub sampler: u32,
-    /// [`ENVIRONMENT_CONSTANT`] or [`ENVIRONMENT_GRADIENT`].
+    /// `ENVIRONMENT_CONSTANT` or `ENVIRONMENT_GRADIENT`.
     pub environment: u32,
     /// Emissive triangles.
     pub emitters: u32,
