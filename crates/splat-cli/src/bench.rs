@@ -159,7 +159,7 @@ fn run_lighting(args: &BenchArgs) -> Result<()> {
     println!("|---|{}", "---:|".repeat(names.len()));
     let traces = variants
         .iter()
-        .map(|(_, l)| Ok(TraceScene::new(scene, loaded.settings)?.with_lighting(l.clone())?))
+        .map(|(_, l)| Ok(TraceScene::new(scene, loaded.settings)?.with_lighting(l)?))
         .collect::<Result<Vec<_>>>()?;
     for &m in &args.methods {
         let method = args.options.method(m)?;

@@ -147,9 +147,8 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
     let estimators: Vec<GaussianEstimator> =
         methods.iter().map(|&m| crate::render::gaussian_estimator(m, &args.options)).collect::<Result<_>>()?;
     let world = args.scene.load_world(160, 120)?;
-    let trace = TraceScene::new(&world.scene, world.settings)?
-        .with_lighting(world.lighting.clone())?
-        .with_meshes(world.meshes.clone());
+    let trace =
+        TraceScene::new(&world.scene, world.settings)?.with_lighting(&world.lighting)?.with_meshes(&world.meshes);
     let camera = &world.camera;
     let base = crate::render::path_options_settings(&args.path, &world, GaussianEstimator::Exact)?;
     let pixels = u64::from(camera.width) * u64::from(camera.height);

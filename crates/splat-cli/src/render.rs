@@ -313,7 +313,7 @@ fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
     let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
     let settings = path_options_settings(&args.path, world, gaussians)?;
     let Loaded { scene, camera, lighting, settings: render_settings, meshes, .. } = world;
-    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
+    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
     let frames = Frames { count: args.spp, seed: args.seed, ..Frames::default() };
     let gpu = match args.scene.backend {
         BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,

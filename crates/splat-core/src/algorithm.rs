@@ -101,14 +101,12 @@ impl Algorithm {
         match self {
             Algorithm::Oracle => oracle(shot, progress),
             Algorithm::Trace(_) | Algorithm::Hybrid(..) => {
-                let trace =
-                    TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone());
+                let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes);
                 self.render_on(&trace, camera, frames, progress)
             }
             Algorithm::Raster(method, raster) => {
-                let r = Rasterizer::new(scene, camera, *settings, *raster)?
-                    .with_lighting(lighting.clone())?
-                    .with_meshes(meshes.clone());
+                let r =
+                    Rasterizer::new(scene, camera, *settings, *raster)?.with_lighting(lighting)?.with_meshes(meshes);
                 render_raster(&r, method, frames, progress)
             }
         }
@@ -134,8 +132,8 @@ impl Algorithm {
             Algorithm::Trace(method) => render_frames(trace, camera, method, frames, progress),
             Algorithm::Raster(method, raster) => {
                 let r = Rasterizer::new(scene, camera, settings, *raster)?
-                    .with_lighting(trace.lighting().clone())?
-                    .with_meshes(trace.meshes().clone());
+                    .with_lighting(trace.lighting())?
+                    .with_meshes(trace.meshes());
                 render_raster(&r, method, frames, progress)
             }
             Algorithm::Hybrid(method, raster, secondary) => {

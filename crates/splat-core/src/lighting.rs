@@ -534,6 +534,21 @@ pub fn shadow_slot(slot: u32, light: usize) -> u32 {
     0x8000_0000 | (slot << 6) | light as u32
 }
 
+/// A renderer keeps the lighting it is given, or borrows it
+/// (`TraceScene::with_lighting`, `Rasterizer::with_lighting`): a caller that renders many times
+/// lends it rather than cloning it for every render.
+impl<'a> From<&'a Lighting> for std::borrow::Cow<'a, Lighting> {
+    fn from(lighting: &'a Lighting) -> Self {
+        std::borrow::Cow::Borrowed(lighting)
+    }
+}
+
+impl From<Lighting> for std::borrow::Cow<'_, Lighting> {
+    fn from(lighting: Lighting) -> Self {
+        std::borrow::Cow::Owned(lighting)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -437,6 +437,20 @@ pub fn fresnel(cos_i: f32, eta: f32) -> f32 {
     0.5 * (r_s * r_s + r_p * r_p)
 }
 
+/// A renderer keeps the meshes it is given, or borrows them with their BVH
+/// (`TraceScene::with_meshes`, `Rasterizer::with_meshes`).
+impl<'a> From<&'a Meshes> for std::borrow::Cow<'a, Meshes> {
+    fn from(meshes: &'a Meshes) -> Self {
+        std::borrow::Cow::Borrowed(meshes)
+    }
+}
+
+impl From<Meshes> for std::borrow::Cow<'_, Meshes> {
+    fn from(meshes: Meshes) -> Self {
+        std::borrow::Cow::Owned(meshes)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -69,7 +69,7 @@ pub fn render(
     supports(algorithm, shot, extras)?;
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
-        Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting.clone())?.with_meshes(meshes.clone()))
+        Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes))
     };
     let raster_scene = || -> Result<RasterScene, GpuError> {
         RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, meshes)

@@ -218,8 +218,8 @@ impl Renderer {
     fn run(self) {
         let Next::New(mut id, mut job) = self.shared.next(0, true) else { return };
         loop {
-            let trace = TraceScene::new(&self.world.scene, job.settings.render)
-                .map(|t| t.with_meshes(self.world.meshes.clone()));
+            let trace =
+                TraceScene::new(&self.world.scene, job.settings.render).map(|t| t.with_meshes(&self.world.meshes));
             let outcome = match trace {
                 Ok(mut trace) => loop {
                     let lit = trace.with_lighting(job.settings.lighting(&self.world.lighting));

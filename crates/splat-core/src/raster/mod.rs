@@ -38,6 +38,7 @@ use crate::trace::{Method, TraceScene};
 use glam::{DVec3, Vec2, Vec3};
 pub use project::{Splat, SplatExtent, project};
 pub use samples::{MAX_SAMPLES, SAMPLE_COUNTS, STANDARD_COUNTS, SamplePattern, sample_positions};
+use std::borrow::Cow;
 
 /// Blend order of sorted splatting (vk_gaussian_splatting Lighting §1.5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -189,8 +190,8 @@ pub struct Rasterizer<'a> {
     bins: Vec<Vec<u32>>,
     offsets: Vec<Vec2>,
     hilbert_order: u32,
-    lighting: Lighting,
-    meshes: Meshes,
+    lighting: Cow<'a, Lighting>,
+    meshes: Cow<'a, Meshes>,
     /// The hybrid pipeline's ray tracer and the method of its secondary rays.
     hybrid: Option<(&'a TraceScene<'a>, Method)>,
 }
@@ -234,8 +235,8 @@ impl<'a> Rasterizer<'a> {
             bins,
             offsets: sample_positions(raster.samples, raster.sample_pattern),
             hilbert_order: hilbert_order(camera.width, camera.height),
-            lighting: Lighting::default(),
-            meshes: Meshes::none(),
+            lighting: Cow::Owned(Lighting::default()),
+            meshes: Cow::Owned(Meshes::none()),
             hybrid: None,
         })
     }
@@ -244,8 +245,8 @@ impl<'a> Rasterizer<'a> {
     /// depth pre-pass finds the nearest mesh of every sample, splat fragments behind it fail the
     /// depth test, and the mesh's forward-shaded colour (lit, no shadows, no bounces: its mirror
     /// and glass shares see the background) is blended under the splats with (1 − α_dst).
-    pub fn with_meshes(mut self, meshes: Meshes) -> Self {
-        self.meshes = meshes;
+    pub fn with_meshes(mut self, meshes: impl Into<Cow<'a, Meshes>>) -> Self {
+        self.meshes = meshes.into();
         self
     }
 
@@ -255,7 +256,7 @@ impl<'a> Rasterizer<'a> {
     /// meshes and lighting are the tracer's.
     pub fn hybrid(mut self, trace: &'a TraceScene<'a>, method: Method) -> Result<Self, RenderError> {
         method.validate()?;
-        self = self.with_lighting(trace.lighting().clone())?.with_meshes(trace.meshes().clone());
+        self = self.with_lighting(trace.lighting())?.with_meshes(trace.meshes());
         self.hybrid = Some((trace, method));
         Ok(self)
     }
@@ -294,7 +295,8 @@ impl<'a> Rasterizer<'a> {
 
     /// The same rasterizer lit by `lighting` (no shadows: the raster pipelines have none,
     /// vk_gaussian_splatting Lighting §3).
-    pub fn with_lighting(mut self, lighting: Lighting) -> Result<Self, RenderError> {
+    pub fn with_lighting(mut self, lighting: impl Into<Cow<'a, Lighting>>) -> Result<Self, RenderError> {
+        let lighting = lighting.into();
         lighting.validate(self.scene.particles.len()).map_err(RenderError::Settings)?;
         self.lighting = lighting;
         Ok(self)

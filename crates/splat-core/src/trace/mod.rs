@@ -27,6 +27,7 @@ use crate::rng::RayRng;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::sh;
 use glam::{DVec3, Vec2, Vec3};
+use std::borrow::Cow;
 use std::cell::OnceCell;
 use std::sync::OnceLock;
 
@@ -156,9 +157,9 @@ pub struct TraceScene<'a> {
     /// ellipsoid, [`bounding_radius`].
     radius_sq: Vec<f32>,
     /// Materials, lights and shadows ([`crate::lighting`]); off by default.
-    lighting: Lighting,
+    lighting: Cow<'a, Lighting>,
     /// Opaque meshes that clip every ray ([`crate::mesh`]); none by default.
-    meshes: Meshes,
+    meshes: Cow<'a, Meshes>,
 }
 
 /// The radius, in standard deviations, of the ellipsoid a particle is bounded by in the BVH: its
@@ -252,20 +253,21 @@ impl<'a> TraceScene<'a> {
         let clamp = settings.kernel.alpha_clamp;
         let alpha_bound = bvh.order.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
         let radius_sq = bvh.order.iter().map(|&i| radii[i as usize].powi(2)).collect();
-        let lighting = Lighting::default();
-        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq, lighting, meshes: Meshes::none() })
+        let (lighting, meshes) = (Cow::Owned(Lighting::default()), Cow::Owned(Meshes::none()));
+        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq, lighting, meshes })
     }
 
     /// The same scene lit by `lighting` (checked against the scene's particle count).
-    pub fn with_lighting(mut self, lighting: Lighting) -> Result<Self, RenderError> {
+    pub fn with_lighting(mut self, lighting: impl Into<Cow<'a, Lighting>>) -> Result<Self, RenderError> {
+        let lighting = lighting.into();
         lighting.validate(self.scene.particles.len()).map_err(RenderError::Settings)?;
         self.lighting = lighting;
         Ok(self)
     }
 
     /// The same scene among `meshes`, which clip every ray and shadow the splats.
-    pub fn with_meshes(mut self, meshes: Meshes) -> Self {
-        self.meshes = meshes;
+    pub fn with_meshes(mut self, meshes: impl Into<Cow<'a, Meshes>>) -> Self {
+        self.meshes = meshes.into();
         self
     }
 
