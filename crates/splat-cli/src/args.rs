@@ -8,16 +8,16 @@ use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::catalogue::{self, Param};
-use splat_core::lighting::{Lighting, Look, Shadows};
+use splat_core::lighting::{Look, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
 use splat_core::raster::{Blend, FragmentDepth, RasterSettings, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
-use splat_core::{Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene};
+use splat_core::{Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, World};
 use splat_io::text::{parse_direction, parse_vec3};
-use splat_io::world::World;
+use splat_io::world::WorldSpec;
 use std::path::PathBuf;
 
 /// The values of `--method` (and `--secondary`, `--methods`): every method of the
@@ -271,34 +271,25 @@ pub enum ShadowsArg {
     Exact,
 }
 
-/// A scene with its lighting, camera and render settings, ready to render.
-pub struct Loaded {
-    /// Particles of every set.
-    pub scene: Scene,
+/// A world staged for a command: what renders, with the options applied, the chosen camera and
+/// the render settings.
+pub struct Staged {
+    /// The splats, meshes and lighting (emissive splats alone for a bare scene file).
+    pub world: World,
     /// The camera.
     pub camera: Camera,
-    /// Materials, lights and shadows (emissive for a bare scene file).
-    pub lighting: Lighting,
     /// Render settings, with the world's background unless --background is given.
     pub settings: RenderSettings,
-    /// The world's meshes (none for a bare scene file).
-    pub meshes: Meshes,
     /// The world's environment for the path tracer, if it gives one.
     pub environment: Option<splat_core::path::Environment>,
     /// The world camera's thin lens, if it gives one.
     pub lens: Option<splat_core::path::ThinLens>,
 }
 
-impl Loaded {
+impl Staged {
     /// What one render of this world reads, on either backend.
     pub fn shot(&self) -> splat_core::Shot<'_> {
-        splat_core::Shot {
-            scene: &self.scene,
-            meshes: &self.meshes,
-            lighting: &self.lighting,
-            camera: &self.camera,
-            settings: &self.settings,
-        }
+        self.world.shot(&self.camera, &self.settings)
     }
 }
 
@@ -429,21 +420,21 @@ impl SceneArgs {
     /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
     /// a look-at or framing camera when none is given.
     pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera)> {
-        let loaded = self.load_world(width, height)?;
-        if loaded.lighting.is_on() {
+        let staged = self.load_world(width, height)?;
+        if staged.world.lighting.is_on() {
             bail!("this command renders unlit radiance; a lit world renders with `splat render`");
         }
-        Ok((loaded.scene, loaded.camera))
+        Ok((staged.world.scene, staged.camera))
     }
 
     /// Load the scene, world file or demo with its lighting, apply --sh-degree, --look,
     /// --shadows and --background, and choose the camera.
-    pub fn load_world(&self, width: u32, height: u32) -> Result<Loaded> {
+    pub fn load_world(&self, width: u32, height: u32) -> Result<Staged> {
         let opened = splat_io::world::open_world(self.scene.as_deref(), self.read.options())?;
         if let Some(path) = &self.scene {
             warn_skipped_properties(path, &opened.skipped_properties);
         }
-        let World { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } =
+        let WorldSpec { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } =
             opened.world;
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
@@ -469,7 +460,7 @@ impl SceneArgs {
             max_bounces: self.max_bounces.or(max_bounces).unwrap_or(DEFAULT_MAX_BOUNCES),
             ..self.settings()
         };
-        Ok(Loaded { scene, camera, lighting, settings, meshes, environment, lens })
+        Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment, lens })
     }
 
     /// The render settings these options describe.

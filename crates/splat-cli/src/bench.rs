@@ -132,16 +132,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
 /// shadow kind, through the same BVH, as ratios against the unlit frame of the same run.
 fn run_lighting(args: &BenchArgs) -> Result<()> {
     use splat_core::lighting::{Lighting, Shadows};
-    let loaded = args.scene.load_world(1200, 800)?;
-    if !loaded.lighting.is_on() {
+    let staged = args.scene.load_world(1200, 800)?;
+    if !staged.world.lighting.is_on() {
         anyhow::bail!("--lighting needs a lit world: a .toml whose splat sets have a non-emissive material");
     }
-    let (scene, camera) = (&loaded.scene, &loaded.camera);
+    let (scene, camera) = (&staged.world.scene, &staged.camera);
     let pool = args.scene.pool()?;
     println!(
         "{} particles, {} lights, {}×{} at {} spp, {} threads; frame time in ms (× the unlit frame)\n",
         scene.particles.len(),
-        loaded.lighting.lights.len(),
+        staged.world.lighting.lights.len(),
         camera.width,
         camera.height,
         args.spp,
@@ -149,17 +149,17 @@ fn run_lighting(args: &BenchArgs) -> Result<()> {
     );
     let variants = [
         ("unlit", Lighting::default()),
-        ("lit, no shadows", Lighting { shadows: Shadows::None, ..loaded.lighting.clone() }),
-        ("sorted shadows", Lighting { shadows: Shadows::SORTED, ..loaded.lighting.clone() }),
-        ("stochastic shadows", Lighting { shadows: Shadows::Stochastic, ..loaded.lighting.clone() }),
-        ("exact transmittance", Lighting { shadows: Shadows::Exact, ..loaded.lighting.clone() }),
+        ("lit, no shadows", Lighting { shadows: Shadows::None, ..staged.world.lighting.clone() }),
+        ("sorted shadows", Lighting { shadows: Shadows::SORTED, ..staged.world.lighting.clone() }),
+        ("stochastic shadows", Lighting { shadows: Shadows::Stochastic, ..staged.world.lighting.clone() }),
+        ("exact transmittance", Lighting { shadows: Shadows::Exact, ..staged.world.lighting.clone() }),
     ];
     let names: Vec<&str> = variants.iter().map(|v| v.0).collect();
     println!("| method | {} |", names.join(" | "));
     println!("|---|{}", "---:|".repeat(names.len()));
     let traces = variants
         .iter()
-        .map(|(_, l)| Ok(TraceScene::new(scene, loaded.settings)?.with_lighting(l)?))
+        .map(|(_, l)| Ok(TraceScene::new(scene, staged.settings)?.with_lighting(l)?))
         .collect::<Result<Vec<_>>>()?;
     for &m in &args.methods {
         let method = args.options.method(m)?;
@@ -187,11 +187,11 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
     use splat_core::Algorithm;
     use splat_core::raster::{Blend, RasterMethod};
     use splat_core::trace::Method;
-    let loaded = args.scene.load_world(640, 480)?;
-    if loaded.meshes.is_empty() {
+    let staged = args.scene.load_world(640, 480)?;
+    if staged.world.meshes.is_empty() {
         anyhow::bail!("--pipelines needs a world file with [[meshes]]");
     }
-    let (scene, camera) = (&loaded.scene, &loaded.camera);
+    let (scene, camera) = (&staged.world.scene, &staged.camera);
     let pool = args.scene.pool()?;
     let raster = args.options.raster_settings();
     let sorted = RasterMethod::Sorted { blend: Blend::Under };
@@ -206,7 +206,7 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
     println!(
         "{} particles, {} meshes' triangles, {}×{}, {} raster samples, {} spp, {} threads\n",
         scene.particles.len(),
-        loaded.meshes.triangles().len(),
+        staged.world.meshes.triangles().len(),
         camera.width,
         camera.height,
         raster.samples,
@@ -221,7 +221,7 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
-            pool.install(|| algorithm.render_world(&loaded.shot(), &frames, &|_| {}))?;
+            pool.install(|| algorithm.render_world(&staged.shot(), &frames, &|_| {}))?;
             best = best.min(start.elapsed().as_secs_f64());
         }
         let base = *baseline.get_or_insert(best);

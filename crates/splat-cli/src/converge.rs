@@ -146,11 +146,12 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
         args.methods.clone().unwrap_or_else(|| vec![MethodId::Stochastic, MethodId::StochasticN, MethodId::Exact]);
     let estimators: Vec<GaussianEstimator> =
         methods.iter().map(|&m| crate::render::gaussian_estimator(m, &args.options)).collect::<Result<_>>()?;
-    let world = args.scene.load_world(160, 120)?;
-    let trace =
-        TraceScene::new(&world.scene, world.settings)?.with_lighting(&world.lighting)?.with_meshes(&world.meshes);
-    let camera = &world.camera;
-    let base = crate::render::path_options_settings(&args.path, &world, GaussianEstimator::Exact)?;
+    let staged = args.scene.load_world(160, 120)?;
+    let trace = TraceScene::new(&staged.world.scene, staged.settings)?
+        .with_lighting(&staged.world.lighting)?
+        .with_meshes(&staged.world.meshes);
+    let camera = &staged.camera;
+    let base = crate::render::path_options_settings(&args.path, &staged, GaussianEstimator::Exact)?;
     let pixels = u64::from(camera.width) * u64::from(camera.height);
     let levels: Vec<u32> = (0..).map(|i| 1u32 << i).take_while(|&s| s <= args.max_spp).collect();
     let total =

@@ -1,14 +1,14 @@
 //! `splat render`: one image of a scene, read as four steps: resolve the method, choose the
 //! backend, render, write.
 
-use crate::args::{BackendArg, Loaded, MethodOptions, SceneArgs, method_parser, progress_bar};
+use crate::args::{BackendArg, MethodOptions, SceneArgs, Staged, method_parser, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
-use splat_core::{Algorithm, MethodId};
+use splat_core::{Algorithm, MethodId, World};
 use splat_gpu::{GpuContext, GpuTracer};
 use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
 use std::path::{Path, PathBuf};
@@ -116,25 +116,25 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ImageFormat::from_path(path)?;
         crate::args::check_output(path, flag)?;
     }
-    let world = args.scene.load_world(640, 480)?;
-    crate::args::check_memory(&world.camera)?;
+    let staged = args.scene.load_world(640, 480)?;
+    crate::args::check_memory(&staged.camera)?;
     if args.pipeline == Some(PipelineArg::Path) {
-        return run_path(&args, &world);
+        return run_path(&args, &staged);
     }
-    let Loaded { scene, camera, lighting, meshes, .. } = &world;
+    let Staged { world: World { scene, lighting, meshes }, camera, .. } = &staged;
     let cpu_algorithm = algorithm(&args)?;
-    warn_unused(&args, &cpu_algorithm, &world);
+    warn_unused(&args, &cpu_algorithm, &staged);
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(&args, &gpu_algorithm, &world)?;
+    let gpu = choose_gpu(&args, &gpu_algorithm, &staged)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
     let out = match &gpu {
-        Some(ctx) => render_gpu(&args, ctx, &world, &algorithm, &frames)?,
+        Some(ctx) => render_gpu(&args, ctx, &staged, &algorithm, &frames)?,
         None => {
             let progress = |n| bar.inc(n);
-            let render = || algorithm.render_world(&world.shot(), &frames, &progress);
+            let render = || algorithm.render_world(&staged.shot(), &frames, &progress);
             args.scene.pool()?.install(render)?
         }
     };
@@ -177,16 +177,16 @@ fn frames_done(spp: u32, random: bool) -> String {
 
 /// Say which options given on the command line the chosen method does not read, one warning
 /// line each, so that nothing is ignored silently.
-fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) {
+fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
     for flag in args.options.unused(algorithm) {
         eprintln!("warning: {flag} does not apply to {}: ignored", describe(args));
     }
     if args.pipeline != Some(PipelineArg::Hybrid) && args.secondary != MethodId::Exact {
         eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
     }
-    if world.environment.is_some() || world.lens.is_some() {
+    if staged.environment.is_some() || staged.lens.is_some() {
         eprintln!(
-            "warning: the world sets up the path tracer ([environment] or a lens): rendering with {}; \
+            "warning: the staged sets up the path tracer ([environment] or a lens): rendering with {}; \
              --pipeline path renders it path traced",
             describe(args)
         );
@@ -207,11 +207,11 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
     for (_, camera) in &cameras {
         crate::args::check_memory(&args.scene.sized(*camera)?)?;
     }
-    let mut world = args.scene.load_world(640, 480)?;
+    let mut staged = args.scene.load_world(640, 480)?;
     let cpu_algorithm = algorithm(args)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(args, &gpu_algorithm, &world)?;
+    let gpu = choose_gpu(args, &gpu_algorithm, &staged)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let bar = indicatif::ProgressBar::new(cameras.len() as u64).with_style(
@@ -226,11 +226,11 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
         ViewFormat::Npy => "npy",
     };
     for (i, (name, camera)) in cameras.iter().enumerate() {
-        world.camera = args.scene.sized(*camera)?;
+        staged.camera = args.scene.sized(*camera)?;
         bar.set_message(name.clone());
         let out = match &gpu {
-            Some(ctx) => render_gpu(args, ctx, &world, &algorithm, &frames)?,
-            None => args.scene.pool()?.install(|| algorithm.render_world(&world.shot(), &frames, &|_| {}))?,
+            Some(ctx) => render_gpu(args, ctx, &staged, &algorithm, &frames)?,
+            None => args.scene.pool()?.install(|| algorithm.render_world(&staged.shot(), &frames, &|_| {}))?,
         };
         let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
         write_image(&file, &out.mean)?;
@@ -241,7 +241,7 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
         "rendered {}, {}, {} in {:.2} s → {}",
         crate::counted(cameras.len(), "view"),
         describe(args),
-        frames_done(args.spp, algorithm.is_random(&world.lighting, !world.meshes.is_empty())),
+        frames_done(args.spp, algorithm.is_random(&staged.world.lighting, !staged.world.meshes.is_empty())),
         start.elapsed().as_secs_f64(),
         args.output.display()
     );
@@ -279,8 +279,8 @@ pub fn gaussian_estimator(method: MethodId, options: &MethodOptions) -> Result<G
 }
 
 /// The path tracer's settings from its options and the world, with `gaussians`.
-pub fn path_options_settings(o: &PathOptions, world: &Loaded, gaussians: GaussianEstimator) -> Result<PathSettings> {
-    let lens = match (o.aperture, world.lens) {
+pub fn path_options_settings(o: &PathOptions, staged: &Staged, gaussians: GaussianEstimator) -> Result<PathSettings> {
+    let lens = match (o.aperture, staged.lens) {
         (Some(aperture), lens) => {
             let focus_distance = o.focus_distance.or(lens.map(|l| l.focus_distance)).unwrap_or(1.0);
             Some(ThinLens { aperture, focus_distance })
@@ -298,7 +298,7 @@ pub fn path_options_settings(o: &PathOptions, world: &Loaded, gaussians: Gaussia
             SamplerArg::Sobol => SamplerKind::Sobol,
             SamplerArg::Hash => SamplerKind::Hash,
         },
-        environment: world.environment.unwrap_or(Environment::Constant(world.settings.background)),
+        environment: staged.environment.unwrap_or(Environment::Constant(staged.settings.background)),
         lens,
     };
     settings.validate()?;
@@ -306,13 +306,13 @@ pub fn path_options_settings(o: &PathOptions, world: &Loaded, gaussians: Gaussia
 }
 
 /// `splat render --pipeline path`: the Monte Carlo path tracer, on the CPU or the GPU.
-fn run_path(args: &RenderArgs, world: &Loaded) -> Result<()> {
+fn run_path(args: &RenderArgs, staged: &Staged) -> Result<()> {
     if args.depth.is_some() || args.normal.is_some() || args.alpha.is_some() {
         bail!("the path tracer writes colour and --variance only (no --depth, --normal or --alpha)");
     }
     let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
-    let settings = path_options_settings(&args.path, world, gaussians)?;
-    let Loaded { scene, camera, lighting, settings: render_settings, meshes, .. } = world;
+    let settings = path_options_settings(&args.path, staged, gaussians)?;
+    let Staged { world: World { scene, lighting, meshes }, camera, settings: render_settings, .. } = staged;
     let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
     let frames = Frames { count: args.spp, seed: args.seed, ..Frames::default() };
     let gpu = match args.scene.backend {
@@ -400,13 +400,13 @@ fn extras(args: &RenderArgs) -> splat_gpu::Extras {
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
 /// with the reason when the GPU cannot render this), `auto` takes a hardware GPU when one is
 /// found and it renders this, `cpu` never.
-fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Result<Option<GpuContext>> {
+fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) -> Result<Option<GpuContext>> {
     match args.scene.backend {
         BackendArg::Gpu => {
-            splat_gpu::supports(algorithm, &world.shot(), extras(args))?;
+            splat_gpu::supports(algorithm, &staged.shot(), extras(args))?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if splat_gpu::supports(algorithm, &world.shot(), extras(args)).is_ok() => {
+        BackendArg::Auto if splat_gpu::supports(algorithm, &staged.shot(), extras(args)).is_ok() => {
             crate::args::gpu_context(BackendArg::Auto)
         }
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
@@ -417,12 +417,12 @@ fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, world: &Loaded) -> Resul
 fn render_gpu(
     args: &RenderArgs,
     ctx: &GpuContext,
-    world: &Loaded,
+    staged: &Staged,
     algorithm: &Algorithm,
     frames: &Frames,
 ) -> Result<RenderOutput> {
     eprintln!("rendering on {}", ctx.describe());
-    Ok(splat_gpu::render(ctx, algorithm, &world.shot(), extras(args), frames)?)
+    Ok(splat_gpu::render(ctx, algorithm, &staged.shot(), extras(args), frames)?)
 }
 
 fn write_outputs(args: &RenderArgs, out: &RenderOutput) -> Result<()> {

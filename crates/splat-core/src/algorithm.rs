@@ -11,6 +11,37 @@ use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster};
 use crate::settings::{RenderError, RenderSettings};
 use crate::trace::{Method, TraceScene, render_frames};
 
+/// What renders: the splats, the meshes among them and their lighting, checked against one
+/// another. The one world type of every front end (the CLI's and the viewer's); a file's
+/// description of a world is `splat_io::world::WorldFile`.
+#[derive(Clone, Debug)]
+pub struct World {
+    /// The splats of every set, in one id space.
+    pub scene: Scene,
+    /// The meshes among them, with their BVH ([`Meshes::none`] for none).
+    pub meshes: Meshes,
+    /// Materials per splat set, lights, shadows and look ([`Lighting::default`]: emissive).
+    pub lighting: Lighting,
+}
+
+impl World {
+    /// A world of these parts, refused where the lighting names sets the scene does not hold.
+    pub fn new(scene: Scene, meshes: Meshes, lighting: Lighting) -> Result<Self, RenderError> {
+        lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
+        Ok(Self { scene, meshes, lighting })
+    }
+
+    /// Splats alone, emissive.
+    pub fn of(scene: Scene) -> Self {
+        Self { scene, meshes: Meshes::none(), lighting: Lighting::default() }
+    }
+
+    /// One render of this world through `camera` with `settings`.
+    pub fn shot<'a>(&'a self, camera: &'a Camera, settings: &'a RenderSettings) -> Shot<'a> {
+        Shot { scene: &self.scene, meshes: &self.meshes, lighting: &self.lighting, camera, settings }
+    }
+}
+
 /// One render's inputs: the splats and the meshes among them, their lighting, the camera and
 /// the settings. What both backends read: [`Algorithm::render_world`] on the CPU,
 /// `splat_gpu::render` on the GPU.

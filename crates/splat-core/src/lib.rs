@@ -54,7 +54,7 @@ pub mod trace;
 /// not match its version.
 pub use glam;
 
-pub use algorithm::{Algorithm, Shot};
+pub use algorithm::{Algorithm, Shot, World};
 pub use camera::Camera;
 pub use catalogue::{MethodId, Parameters};
 pub use frame::{Frames, RenderOutput};

@@ -71,10 +71,11 @@ use splat_core::sh::Rotation;
 use splat_core::{Camera, Scene};
 use std::path::{Path, PathBuf};
 
-/// A world read from a file: the particles of every set in one id space, their lighting, and
-/// the camera and background when the file gives them.
+/// A world as a file specifies it: the particles of every set in one id space, their lighting,
+/// the meshes as triangles, and the camera, background, bounce limit, environment and lens when
+/// the file gives them. [`WorldSpec::world`] builds what renders, a [`splat_core::World`].
 #[derive(Clone, Debug)]
-pub struct World {
+pub struct WorldSpec {
     /// All sets' particles, set after set.
     pub scene: Scene,
     /// Materials per set, lights, shadows, look.
@@ -94,7 +95,7 @@ pub struct World {
     pub lens: Option<ThinLens>,
 }
 
-impl World {
+impl WorldSpec {
     /// A world of one emissive set: how a bare `.ply` or `.splat` renders.
     pub fn of(scene: Scene) -> Self {
         Self {
@@ -271,7 +272,7 @@ pub fn is_world_file(path: &Path) -> bool {
 #[derive(Clone, Debug)]
 pub struct Opened {
     /// The world: a world file's, a scene file's as one emissive set, or the demo's.
-    pub world: World,
+    pub world: WorldSpec,
     /// Its name for titles and messages: the file name, or `demo`.
     pub name: String,
     /// `.ply` vertex properties the reader skipped as unknown (see [`crate::ReadOptions`]).
@@ -285,14 +286,14 @@ pub struct Opened {
 pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Opened, Error> {
     let Some(path) = path else {
         let (scene, camera) = splat_core::scenes::demo();
-        let world = World { camera: Some(camera), ..World::of(scene) };
+        let world = WorldSpec { camera: Some(camera), ..WorldSpec::of(scene) };
         return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new() });
     };
     let (world, skipped_properties) = if is_world_file(path) {
         (read_world(path)?, Vec::new())
     } else {
         let read = crate::read_scene_with(path, options)?;
-        (World::of(read.scene), read.skipped_properties)
+        (WorldSpec::of(read.scene), read.skipped_properties)
     };
     if world.scene.particles.is_empty() && world.meshes.is_empty() {
         return Err(Error::new(path, ErrorKind::Empty));
@@ -302,7 +303,7 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
 }
 
 /// Read a world file (`.toml`); set files are resolved relative to its folder.
-pub fn read_world(path: &Path) -> Result<World, Error> {
+pub fn read_world(path: &Path) -> Result<WorldSpec, Error> {
     let text = String::from_utf8(crate::read_file(path)?)
         .map_err(|e| Error::new(path, ErrorKind::World(format!("not UTF-8 text: {e}"))))?;
     let base = path.parent().unwrap_or(Path::new("."));
@@ -324,7 +325,7 @@ fn named_file(file: &Path, error: Error) -> String {
 }
 
 /// Parse world-file text; set files are resolved relative to `base`.
-fn parse_world(text: &str, base: &Path) -> Result<World, String> {
+fn parse_world(text: &str, base: &Path) -> Result<WorldSpec, String> {
     let file: WorldFile = toml::from_str(text).map_err(|e| e.to_string())?;
     if file.splats.is_empty() {
         return Err("no [[splats]] set: a world needs at least one".to_string());
@@ -383,7 +384,7 @@ fn parse_world(text: &str, base: &Path) -> Result<World, String> {
     }
     let environment = file.environment.as_ref().map(environment).transpose()?;
     let lens = file.camera.as_ref().and_then(|c| lens(c, camera.as_ref())).transpose()?;
-    Ok(World { scene, lighting, camera, background, meshes, max_bounces: file.max_bounces, environment, lens })
+    Ok(WorldSpec { scene, lighting, camera, background, meshes, max_bounces: file.max_bounces, environment, lens })
 }
 
 /// One mesh in world space with its material.
@@ -590,7 +591,7 @@ fn camera_from(c: &CameraFile) -> Result<Camera, String> {
 mod tests {
     use super::*;
 
-    fn parse(text: &str) -> Result<World, String> {
+    fn parse(text: &str) -> Result<WorldSpec, String> {
         parse_world(text, Path::new("."))
     }
 

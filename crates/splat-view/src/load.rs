@@ -2,12 +2,11 @@
 //! of a cameras.json or COLMAP model — read before any window opens, so that bad input is an
 //! error on the terminal, not an empty window.
 
-use crate::worker::World;
 use anyhow::{Context, Result};
 use splat_core::glam::Vec3;
 use splat_core::mesh::Meshes;
 use splat_core::particle::Aabb;
-use splat_core::{Camera, RenderSettings};
+use splat_core::{Camera, RenderSettings, World};
 use std::path::Path;
 
 /// A scene ready to view.
@@ -51,7 +50,7 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
     if cameras.is_some() && views.is_empty() {
         anyhow::bail!("{}: no cameras", cameras.unwrap_or(Path::new("")).display());
     }
-    let splat_io::world::World { scene, lighting, camera, background, meshes, max_bounces, .. } = world;
+    let splat_io::world::WorldSpec { scene, lighting, camera, background, meshes, max_bounces, .. } = world;
     let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}")).context("the world's meshes")?;
     let defaults = RenderSettings::default();
     let render = RenderSettings {
@@ -62,7 +61,7 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
     let bounds = scene.robust_bounds(0.02);
     let (particles, sh_degree) = (scene.particles.len(), scene.sh_degree);
     let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree };
-    Ok(Loaded { world: World { scene, lighting, meshes }, info })
+    Ok(Loaded { world: World::new(scene, meshes, lighting)?, info })
 }
 
 impl SceneInfo {

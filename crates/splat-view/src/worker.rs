@@ -12,11 +12,9 @@ use crate::accumulate::CpuAccumulation;
 use crate::settings::Settings;
 use splat_core::algorithm::Algorithm;
 use splat_core::frame::{Frames, RenderOutput};
-use splat_core::lighting::Lighting;
-use splat_core::mesh::Meshes;
 use splat_core::rng::frame_key;
 use splat_core::trace::{Method, TraceScene};
-use splat_core::{Camera, Scene};
+use splat_core::{Camera, World};
 use splat_gpu::{GpuContext, GpuTracer, ProgressiveTrace, TracePipeline, wgpu};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -58,16 +56,6 @@ pub struct Status {
     /// Whether the accumulation is finished (converged, at the frame limit, or paused with at
     /// least one frame of the view to show).
     pub idle: bool,
-}
-
-/// The scene a viewer shows.
-pub struct World {
-    /// The particles.
-    pub scene: Scene,
-    /// Its materials, lights, shadows and look.
-    pub lighting: Lighting,
-    /// Its meshes.
-    pub meshes: Meshes,
 }
 
 /// The render thread and the channel to it.
