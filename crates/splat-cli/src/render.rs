@@ -186,7 +186,7 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
     }
     if staged.environment.is_some() || staged.lens.is_some() {
         eprintln!(
-            "warning: the staged sets up the path tracer ([environment] or a lens): rendering with {}; \
+            "warning: the world sets up the path tracer ([environment] or a lens): rendering with {}; \
              --pipeline path renders it path traced",
             describe(args)
         );
