@@ -153,24 +153,65 @@ impl Algorithm {
         frames: &Frames,
         progress: Progress,
     ) -> Result<RenderOutput, RenderError> {
+        self.prepare(trace, camera)?.render(frames, progress)
+    }
+
+    /// This algorithm set up for one view of `trace` through `camera`: what does not change
+    /// from frame to frame while the camera holds still (a splatting method's projected,
+    /// depth-sorted and binned splats) is built once, here, and each
+    /// [`PreparedView::render`] draws frames of it.
+    pub fn prepare<'a>(&self, trace: &'a TraceScene<'a>, camera: &Camera) -> Result<PreparedView<'a>, RenderError> {
         let (scene, settings) = (trace.scene(), *trace.settings());
-        match self {
-            Algorithm::Oracle => {
-                let shot =
-                    Shot { scene, meshes: trace.meshes(), lighting: trace.lighting(), camera, settings: &settings };
-                oracle(&shot, progress)
-            }
-            Algorithm::Trace(method) => render_frames(trace, camera, method, frames, progress),
+        let prepared = match *self {
+            Algorithm::Oracle => Prepared::Oracle,
+            Algorithm::Trace(method) => Prepared::Trace(method),
             Algorithm::Raster(method, raster) => {
-                let r = Rasterizer::new(scene, camera, settings, *raster)?
+                let r = Rasterizer::new(scene, camera, settings, raster)?
                     .with_lighting(trace.lighting())?
                     .with_meshes(trace.meshes());
-                render_raster(&r, method, frames, progress)
+                Prepared::Raster(Box::new(r), method)
             }
             Algorithm::Hybrid(method, raster, secondary) => {
-                let r = Rasterizer::new(scene, camera, settings, *raster)?.hybrid(trace, *secondary)?;
-                render_raster(&r, method, frames, progress)
+                let r = Rasterizer::new(scene, camera, settings, raster)?.hybrid(trace, secondary)?;
+                Prepared::Raster(Box::new(r), method)
             }
+        };
+        Ok(PreparedView { trace, camera: *camera, prepared })
+    }
+}
+
+/// An [`Algorithm`] set up for one view of a kept [`TraceScene`] ([`Algorithm::prepare`]).
+pub struct PreparedView<'a> {
+    trace: &'a TraceScene<'a>,
+    camera: Camera,
+    prepared: Prepared<'a>,
+}
+
+/// What each family keeps between frames of one view.
+enum Prepared<'a> {
+    Oracle,
+    Trace(Method),
+    Raster(Box<Rasterizer<'a>>, RasterMethod),
+}
+
+impl PreparedView<'_> {
+    /// Render `frames` of the view on the CPU; the same image as [`Algorithm::render_on`].
+    pub fn render(&self, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
+        let (trace, camera) = (self.trace, &self.camera);
+        match &self.prepared {
+            Prepared::Oracle => {
+                let settings = *trace.settings();
+                let shot = Shot {
+                    scene: trace.scene(),
+                    meshes: trace.meshes(),
+                    lighting: trace.lighting(),
+                    camera,
+                    settings: &settings,
+                };
+                oracle(&shot, progress)
+            }
+            Prepared::Trace(method) => render_frames(trace, camera, method, frames, progress),
+            Prepared::Raster(r, method) => render_raster(r, method, frames, progress),
         }
     }
 }
@@ -212,6 +253,13 @@ mod tests {
             let kept = algorithm.render_on(&trace, &camera, &frames, &|_| {}).unwrap();
             let world = algorithm.render(&scene, &camera, &settings, &frames, &|_| {}).unwrap();
             assert!(same(&kept, &world), "{algorithm:?}");
+            // A prepared view draws the same frames, one call after another, from one projection.
+            let view = algorithm.prepare(&trace, &camera).unwrap();
+            for seed in [1, 2] {
+                let f = Frames { seed, ..frames };
+                let again = algorithm.render_on(&trace, &camera, &f, &|_| {}).unwrap();
+                assert!(same(&view.render(&f, &|_| {}).unwrap(), &again), "{algorithm:?} seed {seed}");
+            }
         }
         // Another seed is another image: the comparison can fail.
         let other = Frames { seed: 1, ..frames };

@@ -10,7 +10,7 @@
 
 use crate::accumulate::CpuAccumulation;
 use crate::settings::Settings;
-use splat_core::algorithm::Algorithm;
+use splat_core::algorithm::{Algorithm, PreparedView};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::rng::frame_key;
 use splat_core::trace::{Method, TraceScene};
@@ -165,8 +165,14 @@ struct Renderer {
 
 /// A view's accumulation on either backend.
 enum View<'t> {
-    Gpu { tracer: Box<GpuTracer<'t>>, progressive: Box<ProgressiveTrace>, per_step: u32 },
-    Cpu(CpuAccumulation),
+    Gpu {
+        tracer: Box<GpuTracer<'t>>,
+        progressive: Box<ProgressiveTrace>,
+        per_step: u32,
+    },
+    /// The CPU's running mean, and the algorithm prepared for the view (a splatting method's
+    /// projected and sorted splats, kept while the camera holds still).
+    Cpu(CpuAccumulation, Option<PreparedView<'t>>),
 }
 
 /// Frames per second over a sliding second.
@@ -303,7 +309,7 @@ impl Renderer {
     /// A fresh view of `job` on the backend its settings name.
     fn view<'t>(&'t self, trace: &'t TraceScene<'t>, job: &Job) -> Result<View<'t>, String> {
         if !job.settings.on_gpu() {
-            return Ok(View::Cpu(CpuAccumulation::new(job.camera.width, job.camera.height)));
+            return Ok(View::Cpu(CpuAccumulation::new(job.camera.width, job.camera.height), None));
         }
         let (ctx, pipeline) = self.gpu.as_ref().map_err(|e| format!("the GPU tracer cannot run: {e}"))?;
         let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
@@ -320,8 +326,9 @@ impl Renderer {
                 progressive.set_frames(&stream(&job.settings)).map_err(|e| e.to_string())?;
                 progressive.set_method(&job.settings.method()).map_err(|e| e.to_string())
             }
-            View::Cpu(acc) => {
+            View::Cpu(acc, prepared) => {
                 *acc = CpuAccumulation::new(job.camera.width, job.camera.height);
+                *prepared = None;
                 Ok(())
             }
         }
@@ -330,7 +337,7 @@ impl Renderer {
     fn frames(&self, view: &View) -> u32 {
         match view {
             View::Gpu { progressive, .. } => progressive.frames(),
-            View::Cpu(acc) => acc.frames(),
+            View::Cpu(acc, _) => acc.frames(),
         }
     }
 
@@ -342,7 +349,7 @@ impl Renderer {
     }
 
     /// Fold more frames in: on the GPU as many as keep a step near 20 ms, on the CPU one.
-    fn step(&self, view: &mut View, trace: &TraceScene, job: &Job) -> Result<u32, String> {
+    fn step<'t>(&self, view: &mut View<'t>, trace: &'t TraceScene<'t>, job: &Job) -> Result<u32, String> {
         let left = job.settings.max_frames.saturating_sub(self.frames(view));
         match view {
             View::Gpu { tracer, progressive, per_step } => {
@@ -358,13 +365,15 @@ impl Renderer {
                 }
                 Ok(done)
             }
-            View::Cpu(acc) => {
-                let frame = job.settings.algorithm().render_on(
-                    trace,
-                    &job.camera,
-                    &cpu_frame(&job.settings, acc.frames()),
-                    &|_| {},
-                );
+            View::Cpu(acc, prepared) => {
+                let view = match prepared {
+                    Some(view) => view,
+                    None => {
+                        let view = job.settings.algorithm().prepare(trace, &job.camera).map_err(|e| e.to_string())?;
+                        prepared.insert(view)
+                    }
+                };
+                let frame = view.render(&cpu_frame(&job.settings, acc.frames()), &|_| {});
                 acc.fold(&frame.map_err(|e| e.to_string())?, job.settings.accumulation);
                 Ok(1)
             }
@@ -383,7 +392,7 @@ impl Renderer {
                     ctx.queue.submit([encoder.finish()]);
                 }
             }
-            View::Cpu(acc) => {
+            View::Cpu(acc, _) => {
                 let (w, h) = (job.target.width(), job.target.height());
                 if (w, h) != acc.size() {
                     return;
@@ -415,7 +424,7 @@ impl Renderer {
                 }
                 (progressive.read(tracer.context()).map_err(|e| e.to_string())?.mean, reference.as_ref())
             }
-            View::Cpu(acc) => {
+            View::Cpu(acc, _) => {
                 if reference.is_none() {
                     let render = Algorithm::Trace(Method::Exact).render_on(trace, &job.camera, &exact, &|_| {});
                     *reference = Some(render.map_err(|e| e.to_string())?);
