@@ -73,7 +73,8 @@ use std::path::{Path, PathBuf};
 
 /// A world as a file specifies it: the particles of every set in one id space, their lighting,
 /// the meshes as triangles, and the camera, background, bounce limit, environment and lens when
-/// the file gives them. [`WorldSpec::world`] builds what renders, a [`splat_core::World`].
+/// the file gives them. A front end applies its options to it and builds what renders, a
+/// [`splat_core::World`] (the meshes' BVH with it).
 #[derive(Clone, Debug)]
 pub struct WorldSpec {
     /// All sets' particles, set after set.
