@@ -3,11 +3,12 @@
 //! of frames (any estimator, CPU or GPU, ray or raster); every statistical suite is a few lines
 //! on it.
 
+use splat_core::catalogue::Family;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
 use splat_core::stats::{GLOBAL_MAX, MIN_TESTED, ZTest, log_log_slope, rmse};
 use splat_core::trace::{Method, TraceScene, render_frames};
-use splat_core::{Camera, Scene};
+use splat_core::{Camera, MethodId, Scene};
 use std::ops::RangeInclusive;
 
 /// The log–log RMSE slope of an unbiased Monte Carlo estimator: −1/2 within the sampling
@@ -429,4 +430,17 @@ fn z_map(oracle: &RenderOutput, mean: &[f32], var: &[f32], frames: u32, mask: &[
             (128.0 + 32.0 * z).clamp(0.0, 255.0) as u8
         }))
     })
+}
+
+/// Fails unless `tested` holds every stochastic, unbiased method of `family` in the catalogue
+/// (`splat_core::catalogue`), naming the suite and the methods it misses: an estimator added to
+/// the catalogue joins each statistical suite of its family, or that suite's coverage test
+/// says where it is missing.
+pub fn assert_covers_the_catalogue(suite: &str, family: Family, tested: impl IntoIterator<Item = MethodId>) {
+    let tested: Vec<MethodId> = tested.into_iter().collect();
+    let missing: Vec<&str> = MethodId::of(family)
+        .filter(|m| m.entry().stochastic && m.entry().unbiased && !tested.contains(m))
+        .map(MethodId::name)
+        .collect();
+    assert!(missing.is_empty(), "{suite} does not test the catalogue's unbiased estimators {missing:?}");
 }

@@ -5,10 +5,11 @@
 //! fail the same test on overlapping layers, and every method with a 2 % error injected must
 //! fail it everywhere (the power study of docs/power.md).
 
+use splat_core::catalogue::Family;
 use splat_core::raster::{Blend, render_raster};
 use splat_core::raster::{FragmentDepth, RasterMethod, RasterSettings, Rasterizer};
 use splat_core::{Camera, Frames, RenderSettings, Scene};
-use splat_tests::harness::{FAULTS, MONTE_CARLO_SLOPE, StatTest, assert_power, fixture};
+use splat_tests::harness::{FAULTS, MONTE_CARLO_SLOPE, StatTest, assert_covers_the_catalogue, assert_power, fixture};
 
 /// Frames of the mean run (the variance run has 4×).
 const F: u32 = 256;
@@ -18,6 +19,12 @@ const UNBIASED: [(&str, RasterMethod); 3] = [
     ("enderton", RasterMethod::Enderton),
     ("stratified", RasterMethod::Stratified { scramble: true }),
 ];
+
+/// A new unbiased splatting estimator in the catalogue joins these z-tests.
+#[test]
+fn every_unbiased_estimator_of_the_catalogue_is_tested() {
+    assert_covers_the_catalogue("the CPU splatting z-tests", Family::Raster, UNBIASED.iter().map(|(_, m)| m.id()));
+}
 
 fn base() -> Frames {
     Frames { count: F, seed: 7, ..Frames::default() }

@@ -4,11 +4,12 @@
 //! test with the same budget, and so must every method with a 2 % error injected (the power
 //! study of docs/power.md).
 
+use splat_core::catalogue::Family;
 use splat_core::rng::RngScheme;
 use splat_core::trace::render_frames;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Camera, Frames, RenderSettings, Scene};
-use splat_tests::harness::{FAULTS, MONTE_CARLO_SLOPE, StatTest, assert_power, fixture};
+use splat_tests::harness::{FAULTS, MONTE_CARLO_SLOPE, StatTest, assert_covers_the_catalogue, assert_power, fixture};
 
 /// Frames of the mean run (the variance run has 4×).
 const F: u32 = 256;
@@ -22,6 +23,16 @@ fn unbiased_methods() -> Vec<(&'static str, Method)> {
         ("stochastic-n 2×4", Method::StochasticN { m: 2, n: 4 }),
         ("stochastic-pass", Method::StochasticPass { k: 4, max_passes: 200 }),
     ]
+}
+
+/// A new unbiased ray-tracing estimator in the catalogue joins these z-tests.
+#[test]
+fn every_unbiased_estimator_of_the_catalogue_is_tested() {
+    assert_covers_the_catalogue(
+        "the CPU ray-tracing z-tests",
+        Family::Trace,
+        unbiased_methods().iter().map(|(_, m)| m.id()),
+    );
 }
 
 fn check(fixture_name: &str, scene: &Scene, camera: &Camera) {

@@ -37,7 +37,9 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../shaders/stochastic.wgsl"),
     include_str!("../shaders/kbuffer.wgsl"),
     include_str!("../shaders/shadow.wgsl"),
-    include_str!("../shaders/path.wgsl")
+    include_str!("../shaders/path.wgsl"),
+    include_str!("../shaders/sampler.wgsl"),
+    include_str!("../shaders/bsdf.wgsl")
 );
 /// Dispatches encoded into one submission.
 pub const DISPATCHES_PER_SUBMIT: u32 = 64;

@@ -8,6 +8,7 @@
 mod common;
 
 use common::{context, fixture};
+use splat_core::catalogue::Family;
 use splat_core::frame::RenderOutput;
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SamplePattern, render_raster};
 use splat_core::{Camera, Frames, RenderSettings, Scene};
@@ -22,6 +23,13 @@ const UNBIASED: [(&str, RasterMethod); 3] = [
     ("enderton", RasterMethod::Enderton),
     ("stratified", RasterMethod::Stratified { scramble: true }),
 ];
+
+/// A new unbiased splatting estimator in the catalogue joins these GPU z-tests.
+#[test]
+fn every_unbiased_estimator_of_the_catalogue_is_tested() {
+    let tested = UNBIASED.iter().map(|(_, m)| m.id());
+    splat_tests::harness::assert_covers_the_catalogue("the GPU splatting z-tests", Family::Raster, tested);
+}
 
 fn pipelines(ctx: &GpuContext) -> &'static RasterPipelines {
     static PIPES: OnceLock<RasterPipelines> = OnceLock::new();

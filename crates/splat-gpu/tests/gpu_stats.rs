@@ -7,6 +7,20 @@
 mod common;
 
 use common::{context, fixture, z_tests_and_power};
+use splat_core::MethodId;
+use splat_core::catalogue::Family;
+
+/// A new unbiased ray-tracing estimator with a GPU kernel joins the GPU z-tests.
+#[test]
+fn every_unbiased_estimator_of_the_catalogue_is_tested() {
+    let tested = common::unbiased().into_iter().map(|(_, m)| m.id());
+    let cpu_only = MethodId::of(Family::Trace).filter(|m| !m.entry().gpu);
+    splat_tests::harness::assert_covers_the_catalogue(
+        "the GPU ray-tracing z-tests",
+        Family::Trace,
+        tested.chain(cpu_only),
+    );
+}
 
 #[test]
 fn gpu_methods_pass_the_z_test_on_layers() {

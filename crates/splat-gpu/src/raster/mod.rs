@@ -8,12 +8,18 @@
 //! 2. the global depth sort by (depth, id): the [`RadixSort`] of the depth keys with the
 //!    particle ids as values (stable, and the ids start in order, so equal depths stay in id
 //!    order like the CPU's `sort_by(depth, id)`);
-//! 3. sorted splatting in a render pipeline of instanced quads with the blend states of seed
-//!    003 §1.5 (back-to-front *over*, front-to-back *under* with premultiplied alpha), or
+//! 3. sorted splatting in a render pipeline of instanced quads with the blend states of the
+//!    vk_gaussian_splatting lighting page §1.5 (back-to-front *over*, front-to-back *under* with
+//!    premultiplied alpha), or
 //!    StochasticSplats (no sort, depth test and write, no blending, discard), frames folded
 //!    into a running Welford mean like the ray tracer's;
 //! 4. for the iso-opacity depth and the picked splat, a compute tile rasterizer
-//!    ([`GpuRasterizer::depth_pick`]), whose doc explains why.
+//!    ([`GpuRasterizer::depth_pick`], `shaders/depth_pick.wgsl` over the tile lists of
+//!    `shaders/binning.wgsl`), whose doc explains why; Enderton and Laine–Karras play each
+//!    pixel's raster operations in `shaders/rop.wgsl` over the same lists.
+//!
+//! Each of `raster.wgsl`, `binning.wgsl`, `depth_pick.wgsl` and `rop.wgsl` is the twin of the
+//! file of its name here (`mod.rs` for the projection), concatenated into [`RASTER_WGSL`].
 //!
 //! ```no_run
 //! use splat_core::{RenderSettings, frame::Frames, raster::{Blend, RasterMethod}, scenes};
@@ -66,7 +72,10 @@ pub const RASTER_WGSL: &str = concat!(
     include_str!("../../shaders/raster_types.wgsl"),
     include_str!("../../shaders/lighting.wgsl"),
     include_str!("../../shaders/raster_lighting.wgsl"),
-    include_str!("../../shaders/raster.wgsl")
+    include_str!("../../shaders/raster.wgsl"),
+    include_str!("../../shaders/binning.wgsl"),
+    include_str!("../../shaders/depth_pick.wgsl"),
+    include_str!("../../shaders/rop.wgsl")
 );
 /// WGSL of the splatting render pipeline.
 pub const SPLAT_WGSL: &str = concat!(
@@ -342,7 +351,7 @@ impl<'a> GpuRasterizer<'a> {
     /// pixel through the hardware's multisampling (a sample mask per fragment, the depth test
     /// per sample, the fold resolving the samples). Enderton and Laine–Karras run their raster
     /// operations in the compute tile pass ([`GpuRasterizer::render`]'s `tile_rop`, whose
-    /// comment in `shaders/raster.wgsl` says why). Lit, sorted splatting runs on the compute
+    /// comment in `shaders/rop.wgsl` says why). Lit, sorted splatting runs on the compute
     /// tile rasterizer ([`GpuRasterizer::depth_pick`]), which composites front to back with the
     /// transmittance at hand (as the CPU does when lit), integrates the normals and lights each
     /// pixel once (the surface look) or each fragment (the volumetric look); StochasticSplats

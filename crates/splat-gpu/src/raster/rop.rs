@@ -1,5 +1,5 @@
 //! Enderton and Laine–Karras on the GPU: the compute tile pass plays each pixel's raster
-//! operations in the frame's draw order (`shaders/raster.wgsl` `tile_rop`, whose comment says
+//! operations in the frame's draw order (`shaders/rop.wgsl` `tile_rop`, whose comment says
 //! why not a fragment shader).
 //!
 //! Per frame: the draw order of the CPU reference's [`splat_core::raster::Rasterizer::shuffle`]
