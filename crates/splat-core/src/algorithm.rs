@@ -199,17 +199,7 @@ impl PreparedView<'_> {
     pub fn render(&self, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
         let (trace, camera) = (self.trace, &self.camera);
         match &self.prepared {
-            Prepared::Oracle => {
-                let settings = *trace.settings();
-                let shot = Shot {
-                    scene: trace.scene(),
-                    meshes: trace.meshes(),
-                    lighting: trace.lighting(),
-                    camera,
-                    settings: &settings,
-                };
-                oracle(&shot, progress)
-            }
+            Prepared::Oracle => oracle(&trace.shot(camera), progress),
             Prepared::Trace(method) => render_frames(trace, camera, method, frames, progress),
             Prepared::Raster(r, method) => render_raster(r, method, frames, progress),
         }

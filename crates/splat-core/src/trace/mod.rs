@@ -292,6 +292,17 @@ impl<'a> TraceScene<'a> {
         &self.settings
     }
 
+    /// One render of this scene's world (splats, meshes, lighting, settings) through `camera`.
+    pub fn shot<'s>(&'s self, camera: &'s Camera) -> crate::Shot<'s> {
+        crate::Shot {
+            scene: self.scene,
+            meshes: &self.meshes,
+            lighting: &self.lighting,
+            camera,
+            settings: &self.settings,
+        }
+    }
+
     /// The binary BVH (the GPU's layout).
     pub fn bvh(&self) -> &Bvh {
         &self.bvh
