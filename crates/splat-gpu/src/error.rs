@@ -135,6 +135,18 @@ impl GpuError {
     }
 }
 
+/// Whether the GPU has a kernel for method `id`: the catalogue's `gpu` column
+/// ([`splat_core::catalogue::Entry::gpu`]), the CPU the way out where it has none. The tracer
+/// and the rasterizer ask here.
+pub(crate) fn supports_method(id: splat_core::MethodId) -> Result<(), GpuError> {
+    let entry = id.entry();
+    if entry.gpu {
+        Ok(())
+    } else {
+        Err(GpuError::refused(format!("{} runs on the CPU only", entry.name), &[Remedy::Cpu]))
+    }
+}
+
 /// The one rule of the GPU's normals: its kernels compute the max-density plane's normal only,
 /// so where normals are `used` (lighting, a normal image) the render needs
 /// [`NormalMode::MaxDensityPlane`](splat_core::normal::NormalMode::MaxDensityPlane). The

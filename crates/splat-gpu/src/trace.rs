@@ -244,16 +244,11 @@ impl<'a> GpuTracer<'a> {
         })
     }
 
-    /// Whether the kernel runs `method`: what the catalogue says of it ([`splat_core::catalogue::Entry::gpu`]);
-    /// the CPU backend runs every method.
+    /// Whether the kernel runs `method`: valid parameters, and a GPU kernel in the catalogue
+    /// (`supports_method`); the CPU backend runs every method.
     pub fn supports(method: &Method) -> Result<(), GpuError> {
         method.validate()?;
-        let entry = method.id().entry();
-        if entry.gpu {
-            Ok(())
-        } else {
-            Err(GpuError::refused(format!("{} runs on the CPU only", entry.name), &[Remedy::Cpu]))
-        }
+        crate::error::supports_method(method.id())
     }
 
     /// Render `frames.count` frames of `method` (one for a deterministic method) through pixel

@@ -492,10 +492,7 @@ impl<'a> GpuRasterizer<'a> {
     /// renders everything.
     pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
         check_settings(settings)?;
-        let entry = method.id().entry();
-        if !entry.gpu {
-            return Err(GpuError::refused(format!("{} runs on the CPU only", entry.name), &[Remedy::Cpu]));
-        }
+        crate::error::supports_method(method.id())?;
         if matches!(method, RasterMethod::Sorted { .. }) && settings.fragment_depth == FragmentDepth::MaxDensityPlane {
             return Err(GpuError::refused(
                 "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot",
