@@ -13,7 +13,7 @@ use crate::trace::{Method, TraceScene, render_frames};
 
 /// What renders: the splats, the meshes among them and their lighting, checked against one
 /// another. The one world type of every front end (the CLI's and the viewer's); a file's
-/// description of a world is `splat_io::world::WorldFile`.
+/// description of a world is `splat_io::world::WorldSpec`.
 #[derive(Clone, Debug)]
 pub struct World {
     /// The splats of every set, in one id space.
@@ -29,11 +29,6 @@ impl World {
     pub fn new(scene: Scene, meshes: Meshes, lighting: Lighting) -> Result<Self, RenderError> {
         lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
         Ok(Self { scene, meshes, lighting })
-    }
-
-    /// Splats alone, emissive.
-    pub fn of(scene: Scene) -> Self {
-        Self { scene, meshes: Meshes::none(), lighting: Lighting::default() }
     }
 
     /// One render of this world through `camera` with `settings`.
