@@ -46,7 +46,7 @@ pub struct ConvergeArgs {
 
 /// One measurement.
 struct Row {
-    method: String,
+    method: &'static str,
     spp: u32,
     rmse: f64,
     seconds: f64,
@@ -111,12 +111,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
                 }
             };
             let seconds = start.elapsed().as_secs_f64();
-            rows.push(Row {
-                method: m.name().to_string(),
-                spp,
-                rmse: rmse(out.mean.data(), reference.mean.data()),
-                seconds,
-            });
+            rows.push(Row { method: m.name(), spp, rmse: rmse(out.mean.data(), reference.mean.data()), seconds });
         }
     }
     bar.finish_and_clear();
@@ -125,7 +120,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
 
 /// Write PREFIX.csv and PREFIX.png and print the table of `rows`, then `extra`.
 fn report(args: &ConvergeArgs, rows: &[Row], methods: &[MethodId], caption: &str, extra: &str) -> Result<()> {
-    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
+    let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
     let csv = args.output.with_extension("csv");
     std::fs::write(&csv, to_csv(rows)).with_context(|| format!("writing {}", csv.display()))?;
     let png = args.output.with_extension("png");
@@ -173,30 +168,25 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
             let start = Instant::now();
             let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
             let seconds = start.elapsed().as_secs_f64();
-            rows.push(Row {
-                method: m.name().to_string(),
-                spp,
-                rmse: rmse(out.mean.data(), reference.mean.data()),
-                seconds,
-            });
+            rows.push(Row { method: m.name(), spp, rmse: rmse(out.mean.data(), reference.mean.data()), seconds });
         }
     }
     bar.finish_and_clear();
-    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
+    let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
     let times = time_to_rmse(&rows, &names, args.target_rmse);
     report(args, &rows, &methods, "RMSE against the exact-compositing path tracer", &times)
 }
 
 /// Each method's time to reach `target`: RMSE = c / √spp fitted at its largest spp, times its
 /// time per sample over all levels; as ratios against the first method.
-fn time_to_rmse(rows: &[Row], methods: &[String], target: f64) -> String {
+fn time_to_rmse(rows: &[Row], methods: &[&str], target: f64) -> String {
     let mut s = format!(
         "\n| method | ms/spp | RMSE·√spp | time to RMSE {target} (s) | vs {} |\n|---|---:|---:|---:|---:|\n",
         methods[0]
     );
     let mut first = None;
     for m in methods {
-        let of: Vec<&Row> = rows.iter().filter(|r| &r.method == m).collect();
+        let of: Vec<&Row> = rows.iter().filter(|r| r.method == *m).collect();
         let Some(last) = of.iter().max_by_key(|r| r.spp) else { continue };
         let per_spp = of.iter().map(|r| r.seconds).sum::<f64>() / of.iter().map(|r| f64::from(r.spp)).sum::<f64>();
         let c = last.rmse * f64::from(last.spp).sqrt();
@@ -217,7 +207,7 @@ fn to_csv(rows: &[Row]) -> String {
 }
 
 /// A table: one row per spp, RMSE and time per spp for each method, and the log–log slopes.
-fn to_markdown(rows: &[Row], methods: &[String]) -> String {
+fn to_markdown(rows: &[Row], methods: &[&str]) -> String {
     let mut s = String::from("| spp |");
     for m in methods {
         let _ = write!(s, " {m} RMSE | {m} ms/spp |");
@@ -231,7 +221,7 @@ fn to_markdown(rows: &[Row], methods: &[String]) -> String {
     for spp in spps {
         let _ = write!(s, "| {spp} |");
         for m in methods {
-            if let Some(r) = rows.iter().find(|r| &r.method == m && r.spp == spp) {
+            if let Some(r) = rows.iter().find(|r| r.method == *m && r.spp == spp) {
                 let _ = write!(s, " {:.5} | {:.1} |", r.rmse, 1e3 * r.seconds / f64::from(spp));
             }
         }
@@ -240,14 +230,14 @@ fn to_markdown(rows: &[Row], methods: &[String]) -> String {
     s += "| slope |";
     for m in methods {
         let (x, y): (Vec<f64>, Vec<f64>) =
-            rows.iter().filter(|r| &r.method == m).map(|r| (f64::from(r.spp), r.rmse.max(1e-12))).unzip();
+            rows.iter().filter(|r| r.method == *m).map(|r| (f64::from(r.spp), r.rmse.max(1e-12))).unzip();
         let _ = write!(s, " {:.3} | |", log_log_slope(&x, &y));
     }
     s + "\n"
 }
 
 /// Log–log plot of RMSE against spp, one line per method, with the 1/√spp reference.
-fn plot(path: &std::path::Path, rows: &[Row], methods: &[String], caption: &str) -> Result<()> {
+fn plot(path: &std::path::Path, rows: &[Row], methods: &[&str], caption: &str) -> Result<()> {
     use plotters::prelude::*;
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
     let max_spp = rows.iter().map(|r| r.spp).max().unwrap_or(1).max(2);
@@ -269,7 +259,7 @@ fn draw_plot(
     pixels: &mut [u8],
     size: (u32, u32),
     rows: &[Row],
-    methods: &[String],
+    methods: &[&str],
     caption: &str,
     lo: f64,
     hi: f64,
@@ -302,11 +292,11 @@ fn draw_plot(
     for (i, m) in methods.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
         let points: Vec<(f64, f64)> =
-            rows.iter().filter(|r| &r.method == m && r.rmse > 0.0).map(|r| (f64::from(r.spp), r.rmse)).collect();
+            rows.iter().filter(|r| r.method == *m && r.rmse > 0.0).map(|r| (f64::from(r.spp), r.rmse)).collect();
         chart
             .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
             .map_err(|e| err(&e))?
-            .label(m.as_str())
+            .label(*m)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
         chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|e| err(&e))?;
     }
