@@ -10,9 +10,9 @@
 //! [`crate::oracle`]); its identity lives here.
 
 use crate::algorithm::Algorithm;
-use crate::raster::{Blend, RasterMethod, RasterSettings};
+use crate::raster::{Blend, RasterSettings};
 use crate::settings::RenderError;
-use crate::trace::{MAX_PRIMARY_SLOTS, Method};
+use crate::trace::MAX_PRIMARY_SLOTS;
 
 /// Particles per pass of the k-buffer (vk `PARTICLES_SPP`).
 pub const DEFAULT_K: usize = 18;
@@ -91,9 +91,6 @@ pub struct ParamInfo {
     pub limits: Option<Limits>,
 }
 
-/// The parameters of splatting every raster method reads.
-const RASTER: [Param; 4] = [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent];
-
 impl Param {
     /// Every parameter.
     pub const ALL: [Param; 12] = [
@@ -170,29 +167,135 @@ pub struct Entry {
     pub gpu: bool,
 }
 
-/// Declares [`MethodId`] and [`CATALOGUE`] from one row a method, so that a method cannot
-/// have an identity without an entry: `Variant = code { name, family, (stochastic, unbiased,
-/// gpu), params, summary }`.
+/// Declares, from one row a method, its identity ([`MethodId`]), its [`Entry`] in
+/// [`CATALOGUE`], the variant that carries its parameters ([`Method`] for ray tracing,
+/// [`RasterMethod`] for splatting) and the two maps between them ([`MethodId::algorithm`],
+/// [`Method::identity`], [`RasterMethod::id`]), so that a method cannot have one without the
+/// others. A row is
+///
+/// ```text
+/// /// doc of the variant
+/// Id = code { name, (stochastic, unbiased, gpu), parameters read, summary } Variant { fields }
+/// ```
+///
+/// where a ray-tracing variant is named as its identity and a field is named as the
+/// [`Parameters`] field it takes its value from.
 macro_rules! catalogue {
-    ($($id:ident = $code:literal {
-        $name:literal, $family:ident, ($stochastic:literal, $unbiased:literal, $gpu:literal), $params:expr,
-        $summary:literal $(,)?
-    }),* $(,)?) => {
+    (
+        oracle {
+            $(#[doc = $odoc:literal])*
+            $oid:ident = $ocode:literal { $oname:literal, $oflags:tt, $oparams:expr, $osummary:literal $(,)? }
+        }
+        trace {$(
+            $(#[doc = $tdoc:literal])*
+            $tid:ident = $tcode:literal { $tname:literal, $tflags:tt, $tparams:expr, $tsummary:literal $(,)? }
+            $({ $($(#[doc = $tfdoc:literal])* $tfield:ident: $tty:ty),* $(,)? })?
+        ),* $(,)?}
+        raster {$(
+            $(#[doc = $rdoc:literal])*
+            $rid:ident = $rcode:literal { $rname:literal, $rflags:tt, $rparams:expr, $rsummary:literal $(,)? }
+            $rvariant:ident $({ $($(#[doc = $rfdoc:literal])* $rfield:ident: $rty:ty),* $(,)? })?
+        ),* $(,)?}
+    ) => {
         /// A rendering method without its parameters: what `--method` names and the viewer's
         /// menus list. The discriminant of a ray-tracing method is its code in the GPU kernel
         /// ([`MethodId::code`]). Each variant is a row of [`CATALOGUE`], which says what it is.
         #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
         #[repr(u32)]
         pub enum MethodId {
+            #[doc = $osummary]
+            $oid = $ocode,
             $(
-                #[doc = $summary]
-                $id = $code,
+                #[doc = $tsummary]
+                $tid = $tcode,
+            )*
+            $(
+                #[doc = $rsummary]
+                $rid = $rcode,
             )*
         }
 
         /// Every method, in the order of [`MethodId`]'s discriminants (checked when the crate
         /// compiles, so that [`MethodId::entry`] is an index).
-        pub const CATALOGUE: &[Entry] = &[$(Entry {
+        pub const CATALOGUE: &[Entry] = &{
+            let mut rows = [catalogue!(@entry $oid, $oname, Oracle, $oflags, $oparams, $osummary)
+                $(, catalogue!(@entry $tid, $tname, Trace, $tflags, $tparams, $tsummary))*
+                $(, catalogue!(@entry $rid, $rname, Raster, $rflags, $rparams, $rsummary))*];
+            // Sort by discriminant (an insertion sort: const code has no `sort`).
+            let mut i = 1;
+            while i < rows.len() {
+                let mut j = i;
+                while j > 0 && (rows[j - 1].id as u32) > (rows[j].id as u32) {
+                    let t = rows[j - 1];
+                    rows[j - 1] = rows[j];
+                    rows[j] = t;
+                    j -= 1;
+                }
+                i += 1;
+            }
+            rows
+        };
+
+        /// A ray-tracing method with its parameters (its row in the [catalogue](crate::catalogue)
+        /// says what it is; its function is in [`crate::trace`]).
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub enum Method {
+            $(
+                $(#[doc = $tdoc])*
+                $tid $({ $($(#[doc = $tfdoc])* $tfield: $tty),* })?,
+            )*
+        }
+
+        /// A splatting method with its parameters (its row in the [catalogue](crate::catalogue)
+        /// says what it is; its function is in [`crate::raster`]).
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum RasterMethod {
+            $(
+                $(#[doc = $rdoc])*
+                $rvariant $({ $($(#[doc = $rfdoc])* $rfield: $rty),* })?,
+            )*
+        }
+
+        impl MethodId {
+            /// The method with `p`'s values for the parameters it reads (the others at their
+            /// defaults: the early stop rides in [`RasterSettings`], which only sorted splatting
+            /// reads).
+            pub fn algorithm(self, p: &Parameters) -> Algorithm {
+                let early_stop = self.reads(Param::EarlyStop) && p.raster.early_stop;
+                let raster = |method| Algorithm::Raster(method, RasterSettings { early_stop, ..p.raster });
+                match self {
+                    MethodId::$oid => Algorithm::Oracle,
+                    $(MethodId::$tid => Algorithm::Trace(Method::$tid { $($($tfield: p.$tfield),*)? }),)*
+                    $(MethodId::$rid => raster(RasterMethod::$rvariant { $($($rfield: p.$rfield),*)? }),)*
+                }
+            }
+        }
+
+        impl Method {
+            /// The method as the [catalogue](crate::catalogue) knows it: its entry, and its
+            /// parameters (the others at their defaults); the inverse of [`MethodId::algorithm`].
+            pub fn identity(&self) -> (MethodId, Parameters) {
+                let defaults = Parameters::default();
+                match *self {
+                    $(Method::$tid { $($($tfield),*)? } => {
+                        (MethodId::$tid, Parameters { $($($tfield,)*)? ..defaults })
+                    })*
+                }
+            }
+        }
+
+        impl RasterMethod {
+            /// The method's entry in the [catalogue](crate::catalogue).
+            pub fn id(&self) -> MethodId {
+                match self {
+                    $(RasterMethod::$rvariant { .. } => MethodId::$rid,)*
+                }
+            }
+        }
+    };
+    (@entry $id:ident, $name:literal, $family:ident, ($stochastic:literal, $unbiased:literal, $gpu:literal),
+     $params:expr, $summary:literal) => {
+        Entry {
             id: MethodId::$id,
             name: $name,
             summary: $summary,
@@ -201,10 +304,12 @@ macro_rules! catalogue {
             stochastic: $stochastic,
             unbiased: $unbiased,
             gpu: $gpu,
-        }),*];
+        }
     };
 }
 
+/// The parameters of splatting every raster method reads.
+const RASTER: [Param; 4] = [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent];
 /// The parameters of sorted splatting.
 const SORTED: [Param; 6] =
     [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Blend, Param::EarlyStop];
@@ -212,57 +317,114 @@ const SORTED: [Param; 6] =
 const STRATIFIED: [Param; 5] =
     [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Scramble];
 
-// Columns: name, family, (stochastic, unbiased, GPU kernel), parameters, summary.
+// A row: the variant's doc, `Id = code { name, (stochastic, unbiased, GPU kernel), parameters,
+// summary }`, then the variant with its fields (each named as the `Parameters` field it reads).
 catalogue! {
-    Exact = 0 {
-        "exact", Trace, (false, true, true), &[],
-        "Every hit along each ray through the BVH, sorted, composited by Eq. 3",
-    },
-    KBuffer = 1 {
-        "kbuffer", Trace, (false, true, true), &[Param::K, Param::MaxPasses, Param::MinTransmittance],
-        "3DGRT / vk multi-pass k-buffer: k hits per pass, up to the pass limit",
-    },
-    Stochastic = 2 {
-        "stochastic", Trace, (true, true, true), &[],
-        "Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray",
-    },
-    StochasticN = 3 {
-        "stochastic-n", Trace, (true, true, true), &[Param::M, Param::N],
-        "Sun et al. §3.5: m traversals of n samples each per frame",
-    },
-    StochasticPass = 4 {
-        "stochastic-pass", Trace, (true, true, true), &[Param::K, Param::MaxPasses],
-        "vk stochastic pass: k sorted hits a pass, accepted with probability 1 − T_pass",
-    },
-    DepthSampling = 5 {
-        "depth-sampling-k", Trace, (true, false, true), &[Param::K],
-        "3DGRT stochastic depth sampling of the first k accepted hits (biased; a control)",
-    },
-    Opaque = 6 {
-        "opaque", Trace, (false, false, false), &[],
-        "Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline",
-    },
-    Oracle = 7 {
-        "oracle", Oracle, (false, true, false), &[],
-        "The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3",
-    },
-    RasterSorted = 8 {
-        "raster-sorted", Raster, (false, true, true), &SORTED,
-        "3DGS splatting: EWA projection, global depth sort, blended over or under per sample \
-         (the raster oracle; under also gives iso depth and normals)",
-    },
-    StochasticSplat = 9 {
-        "stochastic-splat", Raster, (true, true, true), &RASTER,
-        "StochasticSplats: no sort, depth-tested stochastic discard, S samples per pixel",
-    },
-    Enderton = 10 {
-        "enderton", Raster, (true, true, true), &RASTER,
-        "Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment",
-    },
-    Stratified = 11 {
-        "stratified", Raster, (true, true, true), &STRATIFIED,
-        "Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting)",
-    },
+    oracle {
+        Oracle = 7 {
+            "oracle", (false, true, false), &[],
+            "The brute-force oracle: every particle tested for every pixel (no BVH), Eq. 3",
+        }
+    }
+    trace {
+        /// Every hit through the BVH, sorted, Eq. 3.
+        Exact = 0 {
+            "exact", (false, true, true), &[],
+            "Every hit along each ray through the BVH, sorted, composited by Eq. 3",
+        },
+        /// 3DGRT / vk "all pass": k hits per pass kept sorted and integrated, the next pass
+        /// restarting behind the last hit, until `max_passes` or transmittance ≤
+        /// `min_transmittance`.
+        KBuffer = 1 {
+            "kbuffer", (false, true, true), &[Param::K, Param::MaxPasses, Param::MinTransmittance],
+            "3DGRT / vk multi-pass k-buffer: k hits per pass, up to the pass limit",
+        } {
+            /// Hits per pass.
+            k: usize,
+            /// Pass limit.
+            max_passes: u32,
+            /// Early-out transmittance (0 disables it; above 0 the result is truncated, not
+            /// exact).
+            min_transmittance: f32,
+        },
+        /// Algorithm 1: one traversal, Russian roulette on alpha, closest accepted hit, t_max
+        /// clipped on accept, one shading per ray.
+        Stochastic = 2 {
+            "stochastic", (true, true, true), &[],
+            "Sun et al. Algorithm 1: one traversal, one accepted hit, one shading per ray",
+        },
+        /// §3.5: `m` traversals per frame, each carrying `n` independent instantiations.
+        StochasticN = 3 {
+            "stochastic-n", (true, true, true), &[Param::M, Param::N],
+            "Sun et al. §3.5: m traversals of n samples each per frame",
+        } {
+            /// Traversals per frame.
+            m: u32,
+            /// Samples per traversal (≤ 64).
+            n: u32,
+        },
+        /// vk stochastic pass: k sorted hits per pass, the pass accepted with probability
+        /// 1 − T_pass and its radiance divided by it, else discarded.
+        StochasticPass = 4 {
+            "stochastic-pass", (true, true, true), &[Param::K, Param::MaxPasses],
+            "vk stochastic pass: k sorted hits a pass, accepted with probability 1 − T_pass",
+        } {
+            /// Hits per pass.
+            k: usize,
+            /// Pass limit.
+            max_passes: u32,
+        },
+        /// 3DGRT stochastic depth sampling: the first k accepted hits composited in order with
+        /// their alphas. Biased (Sun et al. §5, Fig. 7): the control the tests must reject.
+        DepthSampling = 5 {
+            "depth-sampling-k", (true, false, true), &[Param::K],
+            "3DGRT stochastic depth sampling of the first k accepted hits (biased; a control)",
+        } {
+            /// Accepted hits composited.
+            k: usize,
+        },
+        /// Every particle as an opaque ellipsoid, its bounding ellipsoid in the BVH
+        /// ([`bounding_radius`](crate::trace::bounding_radius): the cutoff, or nearer where a
+        /// faint particle is culled sooner): the closest entry is shaded. Not an estimator of
+        /// Eq. 3: the cost of a plain mesh-like ray through the same BVH, for benchmarks.
+        Opaque = 6 {
+            "opaque", (false, false, false), &[],
+            "Every particle as an opaque ellipsoid (closest hit): a mesh-like cost baseline",
+        },
+    }
+    raster {
+        /// Global depth sort, then per-pixel blending: the raster oracle.
+        RasterSorted = 8 {
+            "raster-sorted", (false, true, true), &SORTED,
+            "3DGS splatting: EWA projection, global depth sort, blended over or under per sample \
+             (the raster oracle; under also gives iso depth and normals)",
+        } Sorted {
+            /// Over (back to front) or under (front to back).
+            blend: Blend,
+        },
+        /// StochasticSplats / vk: no sort; a fragment is accepted when u < α (u hashed from
+        /// pixel, frame, splat id and sample), written opaque under a depth test, else
+        /// discarded.
+        StochasticSplat = 9 {
+            "stochastic-splat", (true, true, true), &RASTER,
+            "StochasticSplats: no sort, depth-tested stochastic discard, S samples per pixel",
+        } StochasticSplat,
+        /// Enderton et al. 2010 as Laine & Karras compare against: depth test first, then
+        /// R = ⌊α m + ξ⌋ of the m surviving covered samples, chosen at random, are written.
+        Enderton = 10 {
+            "enderton", (true, true, true), &RASTER,
+            "Enderton et al. stochastic transparency: ⌊αS + ξ⌋ random samples of S per fragment",
+        } Enderton,
+        /// Laine & Karras 2011, Figure 7: per-sample opacity references from CalcAlphaRef,
+        /// surface tracking by coverage bitmask, early depth test and sorting by stored depth.
+        Stratified = 11 {
+            "stratified", (true, true, true), &STRATIFIED,
+            "Laine–Karras stratified stochastic transparency (CalcAlphaRef, surface tracking, sorting)",
+        } Stratified {
+            /// The multiply–XOR scramble of Figure 4 (`false`: the biased negative control).
+            scramble: bool,
+        },
+    }
 }
 
 const _: () = {
@@ -319,30 +481,6 @@ impl MethodId {
     /// Every method of `family`, in catalogue order.
     pub fn of(family: Family) -> impl Iterator<Item = MethodId> {
         MethodId::ALL.into_iter().filter(move |m| m.entry().family == family)
-    }
-
-    /// The method with `p`'s values for the parameters it reads (the others at their defaults:
-    /// the early stop rides in [`RasterSettings`], which only sorted splatting reads).
-    pub fn algorithm(self, p: &Parameters) -> Algorithm {
-        let trace = Algorithm::Trace;
-        let early_stop = self.reads(Param::EarlyStop) && p.raster.early_stop;
-        let raster = |method| Algorithm::Raster(method, RasterSettings { early_stop, ..p.raster });
-        match self {
-            MethodId::Oracle => Algorithm::Oracle,
-            MethodId::Exact => trace(Method::Exact),
-            MethodId::KBuffer => {
-                trace(Method::KBuffer { k: p.k, max_passes: p.max_passes, min_transmittance: p.min_transmittance })
-            }
-            MethodId::Stochastic => trace(Method::Stochastic),
-            MethodId::StochasticN => trace(Method::StochasticN { m: p.m, n: p.n }),
-            MethodId::StochasticPass => trace(Method::StochasticPass { k: p.k, max_passes: p.max_passes }),
-            MethodId::DepthSampling => trace(Method::DepthSampling { k: p.k }),
-            MethodId::Opaque => trace(Method::Opaque),
-            MethodId::RasterSorted => raster(RasterMethod::Sorted { blend: p.blend }),
-            MethodId::StochasticSplat => raster(RasterMethod::StochasticSplat),
-            MethodId::Enderton => raster(RasterMethod::Enderton),
-            MethodId::Stratified => raster(RasterMethod::Stratified { scramble: p.scramble }),
-        }
     }
 }
 

@@ -20,6 +20,7 @@ use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
 use splat_core::MethodId;
+use splat_core::catalogue::Param;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{DEFAULT_K, Method, TraceScene};
 use std::time::{Duration, Instant};
@@ -78,22 +79,30 @@ pub struct MethodParams {
 impl TryFrom<&Method> for MethodParams {
     type Error = GpuError;
 
-    /// The kernel's parameters of a method; `exact` runs the k-buffer loop with no early-out and
-    /// no pass limit (any k gives Eq. 3 then; 18 keeps each pass short).
+    /// The kernel's parameters of a method: the values of the parameters it reads (the
+    /// catalogue's word), 1 (0 for the early-out) for the others; `exact` runs the k-buffer
+    /// loop with no early-out and no pass limit (any k gives Eq. 3 then; 18 keeps each pass
+    /// short).
     fn try_from(method: &Method) -> Result<Self, GpuError> {
         GpuTracer::supports(method)?;
-        let id = method.id();
-        let base = MethodParams { id, k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1, by_pass: false };
-        Ok(match *method {
-            Method::Exact => MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, by_pass: true, ..base },
-            Method::KBuffer { k, max_passes, min_transmittance } => {
-                MethodParams { k: k as u32, max_passes, min_transmittance, by_pass: true, ..base }
-            }
-            Method::StochasticN { m, n } => MethodParams { n, m, by_pass: true, ..base },
-            Method::StochasticPass { k, max_passes } => MethodParams { k: k as u32, max_passes, by_pass: true, ..base },
-            Method::DepthSampling { k } => MethodParams { k: k as u32, ..base },
-            Method::Stochastic | Method::Opaque => base,
-        })
+        let (id, p) = method.identity();
+        let read = |param, value: u32| if id.reads(param) { value } else { 1 };
+        let params = MethodParams {
+            id,
+            k: read(Param::K, p.k as u32),
+            max_passes: read(Param::MaxPasses, p.max_passes),
+            min_transmittance: if id.reads(Param::MinTransmittance) { p.min_transmittance } else { 0.0 },
+            n: read(Param::N, p.n),
+            m: read(Param::M, p.m),
+            // The kernel keeps the ray's state between dispatches for these; a method not
+            // listed runs whole frames (on lavapipe, one past the loop budget is refused).
+            by_pass: matches!(
+                id,
+                MethodId::Exact | MethodId::KBuffer | MethodId::StochasticN | MethodId::StochasticPass
+            ),
+        };
+        let exact = MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, ..params };
+        Ok(if id == MethodId::Exact { exact } else { params })
     }
 }
 
@@ -651,4 +660,34 @@ pub(crate) fn dispatch_batch(
 /// The most loop iterations any pixel ran (M2's w channel) and that pixel's index.
 pub(crate) fn busiest_pixel(m2: &[f32]) -> (u32, u32) {
     m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat_core::{Algorithm, Parameters};
+
+    /// The kernel reads each parameter a method reads and the neutral value of the others (a
+    /// k-buffer given n = 16 would run its passes in chunks of 16 slots).
+    #[test]
+    fn the_kernel_gets_the_parameters_each_method_reads() {
+        let p = Parameters { k: 5, max_passes: 7, min_transmittance: 0.25, n: 3, m: 2, ..Parameters::default() };
+        let base = |id| MethodParams { id, k: 1, max_passes: 1, min_transmittance: 0.0, n: 1, m: 1, by_pass: false };
+        let expected = |id| match id {
+            MethodId::Exact => MethodParams { k: 18, max_passes: u32::MAX, by_pass: true, ..base(id) },
+            MethodId::KBuffer => {
+                MethodParams { k: 5, max_passes: 7, min_transmittance: 0.25, by_pass: true, ..base(id) }
+            }
+            MethodId::StochasticN => MethodParams { n: 3, m: 2, by_pass: true, ..base(id) },
+            MethodId::StochasticPass => MethodParams { k: 5, max_passes: 7, by_pass: true, ..base(id) },
+            MethodId::DepthSampling => MethodParams { k: 5, ..base(id) },
+            _ => base(id),
+        };
+        for id in MethodId::ALL.into_iter().filter(|id| id.entry().gpu) {
+            let Algorithm::Trace(method) = id.algorithm(&p) else { continue };
+            assert_eq!(MethodParams::try_from(&method).unwrap(), expected(id), "{}", id.name());
+        }
+        let opaque = Method::Opaque;
+        assert!(MethodParams::try_from(&opaque).is_err(), "the catalogue has no GPU kernel for opaque");
+    }
 }

@@ -39,6 +39,7 @@
 pub mod bsdf;
 pub mod sampler;
 
+use crate::algorithm::Algorithm;
 use crate::camera::Camera;
 use crate::catalogue::{MethodId, Parameters};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, render_tiles};
@@ -46,7 +47,7 @@ use crate::hit::Ray;
 use crate::lighting::{Incident, Light, Shadows};
 use crate::mesh::SurfaceHit;
 use crate::settings::RenderError;
-use crate::trace::{MAX_SLOTS, Slot, TraceScene, surface_offset};
+use crate::trace::{MAX_SLOTS, Method, Slot, TraceScene, surface_offset};
 use bsdf::Bsdf;
 use glam::Vec3;
 use sampler::{Dim, PathDecide, PathSampler, SamplerKind, decision, shadow_decision};
@@ -73,28 +74,24 @@ pub enum GaussianEstimator {
 }
 
 impl GaussianEstimator {
-    /// The estimator of the method `id` with `p`'s parameters; `None` for a method the path
-    /// tracer does not run at its segments.
-    pub fn of(id: MethodId, p: &Parameters) -> Option<GaussianEstimator> {
-        match id {
-            MethodId::Stochastic => Some(GaussianEstimator::Stochastic),
-            MethodId::StochasticN => Some(GaussianEstimator::StochasticN { n: p.n }),
-            MethodId::Exact => Some(GaussianEstimator::Exact),
-            MethodId::DepthSampling => Some(GaussianEstimator::DepthSampling { k: p.k as u32 }),
-            MethodId::KBuffer
-            | MethodId::StochasticPass
-            | MethodId::Opaque
-            | MethodId::Oracle
-            | MethodId::RasterSorted
-            | MethodId::StochasticSplat
-            | MethodId::Enderton
-            | MethodId::Stratified => None,
+    /// The estimator of a ray-tracing method (`m` is ignored: a path segment is one
+    /// traversal); `None` for a method the path tracer does not run at its segments.
+    pub fn of(method: &Method) -> Option<GaussianEstimator> {
+        match *method {
+            Method::Stochastic => Some(GaussianEstimator::Stochastic),
+            Method::StochasticN { n, .. } => Some(GaussianEstimator::StochasticN { n }),
+            Method::Exact => Some(GaussianEstimator::Exact),
+            Method::DepthSampling { k } => Some(GaussianEstimator::DepthSampling { k: k as u32 }),
+            Method::KBuffer { .. } | Method::StochasticPass { .. } | Method::Opaque => None,
         }
     }
 
     /// The methods the path tracer runs, in catalogue order.
     pub fn methods() -> impl Iterator<Item = MethodId> {
-        MethodId::ALL.into_iter().filter(|&m| GaussianEstimator::of(m, &Parameters::default()).is_some())
+        MethodId::ALL.into_iter().filter(|&id| match id.algorithm(&Parameters::default()) {
+            Algorithm::Trace(method) => GaussianEstimator::of(&method).is_some(),
+            _ => false,
+        })
     }
 
     /// Its method in the [catalogue](crate::catalogue): its name, and its code in the GPU

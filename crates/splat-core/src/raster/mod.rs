@@ -24,7 +24,7 @@ pub mod samples;
 mod tests;
 
 use crate::camera::Camera;
-use crate::catalogue::MethodId;
+pub use crate::catalogue::RasterMethod;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{PreparedParticle, Ray, to_canonical};
 use crate::lighting::{Lighting, Look};
@@ -64,39 +64,7 @@ pub enum FragmentDepth {
     MaxDensityPlane,
 }
 
-/// A rasterization method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum RasterMethod {
-    /// Global depth sort, then per-pixel blending: the raster oracle.
-    Sorted {
-        /// Over (back to front) or under (front to back).
-        blend: Blend,
-    },
-    /// StochasticSplats / vk: no sort; a fragment is accepted when u < α (u hashed from pixel,
-    /// frame, splat id and sample), written opaque under a depth test, else discarded.
-    StochasticSplat,
-    /// Enderton et al. 2010 as Laine & Karras compare against: depth test first, then
-    /// R = ⌊α m + ξ⌋ of the m surviving covered samples, chosen at random, are written.
-    Enderton,
-    /// Laine & Karras 2011, Figure 7: per-sample opacity references from CalcAlphaRef, surface
-    /// tracking by coverage bitmask, early depth test and sorting by stored depth.
-    Stratified {
-        /// The multiply–XOR scramble of Figure 4 (`false`: the biased negative control).
-        scramble: bool,
-    },
-}
-
 impl RasterMethod {
-    /// The method's entry in the [catalogue](crate::catalogue).
-    pub fn id(&self) -> MethodId {
-        match self {
-            RasterMethod::Sorted { .. } => MethodId::RasterSorted,
-            RasterMethod::StochasticSplat => MethodId::StochasticSplat,
-            RasterMethod::Enderton => MethodId::Enderton,
-            RasterMethod::Stratified { .. } => MethodId::Stratified,
-        }
-    }
-
     /// Whether frames differ (the method draws random decisions).
     pub fn is_stochastic(&self) -> bool {
         self.id().entry().stochastic

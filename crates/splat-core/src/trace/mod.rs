@@ -15,7 +15,7 @@
 
 use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
-use crate::catalogue::{MethodId, Parameters};
+use crate::catalogue::MethodId;
 use crate::composite::{ShadedHit, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{Hit, HitDistance, PreparedParticle, Ray, intersect, sphere_entry, to_canonical};
@@ -37,55 +37,9 @@ mod stochastic;
 
 pub(crate) use kbuffer::{KBuf, Slot};
 
-pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_SLOTS};
+pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_SLOTS, Method};
 // The sorted shadow pass keeps its hits in a k-buffer.
 const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_SLOTS);
-
-/// A ray-tracing method.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Method {
-    /// Every hit through the BVH, sorted, Eq. 3.
-    Exact,
-    /// 3DGRT / vk "all pass": K hits per pass kept sorted and integrated, the next pass
-    /// restarting behind the last hit, until `max_passes` or transmittance ≤ `min_transmittance`.
-    KBuffer {
-        /// Hits per pass.
-        k: usize,
-        /// Pass limit.
-        max_passes: u32,
-        /// Early-out transmittance (0 disables it; above 0 the result is truncated, not exact).
-        min_transmittance: f32,
-    },
-    /// Algorithm 1: one traversal, Russian roulette on alpha, closest accepted hit, t_max
-    /// clipped on accept, one shading per ray.
-    Stochastic,
-    /// §3.5: `m` traversals per frame, each carrying `n` independent instantiations.
-    StochasticN {
-        /// Traversals per frame.
-        m: u32,
-        /// Samples per traversal (≤ 64).
-        n: u32,
-    },
-    /// vk stochastic pass: K sorted hits per pass, the pass accepted with probability
-    /// 1 − T_pass and its radiance divided by it, else discarded.
-    StochasticPass {
-        /// Hits per pass.
-        k: usize,
-        /// Pass limit.
-        max_passes: u32,
-    },
-    /// 3DGRT stochastic depth sampling: the first k accepted hits composited in order with
-    /// their alphas. Biased (Sun et al. §5, Fig. 7): the control the tests must reject.
-    DepthSampling {
-        /// Accepted hits composited.
-        k: usize,
-    },
-    /// Every particle as an opaque ellipsoid, its bounding ellipsoid in the BVH
-    /// ([`bounding_radius`]: the cutoff, or nearer where a faint particle is culled sooner): the
-    /// closest entry is shaded. Not an estimator of Eq. 3: the cost of a plain mesh-like ray
-    /// through the same BVH, for benchmarks.
-    Opaque,
-}
 
 impl Method {
     /// The k-buffer with the vk defaults.
@@ -93,23 +47,6 @@ impl Method {
         Method::KBuffer { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES, min_transmittance: DEFAULT_MIN_TRANSMITTANCE };
     /// The stochastic pass with the vk defaults.
     pub const STOCHASTIC_PASS: Method = Method::StochasticPass { k: DEFAULT_K, max_passes: DEFAULT_MAX_PASSES };
-
-    /// The method as the [catalogue](crate::catalogue) knows it: its entry, and its parameters
-    /// (the others at their defaults); the inverse of [`MethodId::algorithm`].
-    pub fn identity(&self) -> (MethodId, Parameters) {
-        let d = Parameters::default();
-        match *self {
-            Method::Exact => (MethodId::Exact, d),
-            Method::KBuffer { k, max_passes, min_transmittance } => {
-                (MethodId::KBuffer, Parameters { k, max_passes, min_transmittance, ..d })
-            }
-            Method::Stochastic => (MethodId::Stochastic, d),
-            Method::StochasticN { m, n } => (MethodId::StochasticN, Parameters { m, n, ..d }),
-            Method::StochasticPass { k, max_passes } => (MethodId::StochasticPass, Parameters { k, max_passes, ..d }),
-            Method::DepthSampling { k } => (MethodId::DepthSampling, Parameters { k, ..d }),
-            Method::Opaque => (MethodId::Opaque, d),
-        }
-    }
 
     /// The method's entry in the catalogue (its name, its code in the GPU kernel).
     pub fn id(&self) -> MethodId {

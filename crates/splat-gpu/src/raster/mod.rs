@@ -138,15 +138,17 @@ enum Draw {
 }
 
 impl Draw {
-    fn of(method: &RasterMethod) -> Self {
-        match method {
+    /// The shaders' draw of a method; `None` for a method they do not draw (the catalogue
+    /// marks it CPU-only, and [`GpuRasterizer::supports`] refuses it).
+    fn of(method: &RasterMethod) -> Option<Self> {
+        Some(match method {
             RasterMethod::Sorted { blend: Blend::Over } => Draw::Over,
             RasterMethod::Sorted { blend: Blend::Under } => Draw::Under,
             RasterMethod::StochasticSplat => Draw::Stochastic,
             RasterMethod::Enderton => Draw::Enderton,
             RasterMethod::Stratified { scramble: true } => Draw::Stratified,
             RasterMethod::Stratified { scramble: false } => Draw::StratifiedPlain,
-        }
+        })
     }
 
     /// `params.mode` of the raster shaders (`MODE_*`, checked by a test).
@@ -357,8 +359,7 @@ impl<'a> GpuRasterizer<'a> {
     /// pixel once (the surface look) or each fragment (the volumetric look); StochasticSplats
     /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
-        self.check_scene(method)?;
-        let draw = Draw::of(method);
+        let draw = self.check_scene(method)?;
         if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
         }
@@ -418,17 +419,17 @@ impl<'a> GpuRasterizer<'a> {
 
     /// What the scene and the adapter allow `method` at these settings ([`GpuRasterizer::supports_scene`]),
     /// and a render pipeline multisamples at the counts the adapter has.
-    fn check_scene(&self, method: &RasterMethod) -> Result<(), GpuError> {
-        Self::supports_scene(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
+    fn check_scene(&self, method: &RasterMethod) -> Result<Draw, GpuError> {
+        let draw = Self::scene_draw(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
         let s = self.raster.samples;
-        if !Draw::of(method).is_rop() && !self.ctx.msaa_counts.contains(&s) {
+        if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
             let reason = format!(
                 "{} multisamples the raster targets at {:?} samples per pixel, not {s} (Enderton and stratified run at 1, 2, 4, 8 or 16 on any adapter)",
                 self.ctx.info.name, self.ctx.msaa_counts
             );
             return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
-        Ok(())
+        Ok(draw)
     }
 
     /// Whether the GPU rasterizes `method` at `settings` in a scene that is `lit` or has
@@ -442,14 +443,25 @@ impl<'a> GpuRasterizer<'a> {
         lit: bool,
         meshes: bool,
     ) -> Result<(), GpuError> {
+        Self::scene_draw(method, settings, lit, meshes).map(drop)
+    }
+
+    /// The shaders' draw of `method` where [`GpuRasterizer::supports_scene`] accepts it.
+    fn scene_draw(method: &RasterMethod, settings: &RasterSettings, lit: bool, meshes: bool) -> Result<Draw, GpuError> {
         Self::supports(method, settings)?;
-        let (s, draw) = (settings.samples, Draw::of(method));
+        let name = method.id().name();
+        let draw = Draw::of(method).ok_or_else(|| {
+            GpuError::Unsupported(format!(
+                "the catalogue gives {name} a GPU kernel, but the raster shaders do not draw it"
+            ))
+        })?;
+        let s = settings.samples;
         let plane = settings.fragment_depth == FragmentDepth::MaxDensityPlane;
         let what = match (lit, meshes) {
             (true, true) => "lit splatting among meshes",
             (true, false) => "lit splatting",
             (false, true) => "splatting among meshes",
-            (false, false) => return Ok(()),
+            (false, false) => return Ok(draw),
         };
         if s > 1 || plane || draw.is_rop() {
             let reason = format!(
@@ -458,7 +470,7 @@ impl<'a> GpuRasterizer<'a> {
             );
             return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
-        Ok(())
+        Ok(draw)
     }
 
     /// One lit frame of sorted splatting from the compute tile rasterizer.
