@@ -109,12 +109,12 @@ pub struct MethodOptions {
     /// kbuffer stops when transmittance falls to this (0: never; exact up to --max-passes).
     #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_MIN_TRANSMITTANCE)]
     pub min_transmittance: f32,
-    /// stochastic-n: samples per traversal (n, up to 64).
-    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_N)]
-    pub samples: u32,
+    /// stochastic-n: samples per traversal (Sun et al. §3.5's N, up to 64).
+    #[arg(help_heading = "Method parameters", long, alias = "samples", default_value_t = catalogue::DEFAULT_N)]
+    pub samples_per_traversal: u32,
     /// stochastic-n: traversals per frame (m).
-    #[arg(help_heading = "Method parameters", long, default_value_t = catalogue::DEFAULT_M)]
-    pub passes: u32,
+    #[arg(help_heading = "Method parameters", long, alias = "passes", default_value_t = catalogue::DEFAULT_M)]
+    pub traversals: u32,
     /// Generator of the stochastic decisions.
     #[arg(help_heading = "Method parameters", long, value_enum, default_value = "hash")]
     pub rng: RngArg,
@@ -153,8 +153,8 @@ impl MethodOptions {
             k: self.k,
             max_passes: self.max_passes,
             min_transmittance: self.min_transmittance,
-            n: self.samples,
-            m: self.passes,
+            n: self.samples_per_traversal,
+            m: self.traversals,
             blend: match self.blend {
                 BlendArg::Over => Blend::Over,
                 BlendArg::Under => Blend::Under,

@@ -196,7 +196,7 @@ fn every_method_renders_with_variance_and_the_same_seed_repeats() {
                 "8".into(),
                 "--seed".into(),
                 "3".into(),
-                "--samples".into(),
+                "--samples-per-traversal".into(),
                 "4".into(),
                 "--raster-samples".into(),
                 "4".into(),
@@ -678,7 +678,7 @@ fn path_trace_a_world_with_meshes() {
         ("stochastic", &["--backend", "cpu"][..]),
         ("stochastic-again", &["--backend", "cpu"][..]),
         ("exact", &["--method", "exact", "--sampler", "hash"][..]),
-        ("lens", &["--method", "stochastic-n", "--samples", "4", "--aperture", "0.05", "--focus-distance", "4"][..]),
+        ("lens", &["--method", "stochastic-n", "--samples-per-traversal", "4", "--aperture", "0.05", "--focus-distance", "4"][..]),
     ] {
         let out = scratch(&format!("path-{name}.npy"));
         let o = run(extra, &out);

@@ -119,8 +119,8 @@ impl Param {
             Param::MinTransmittance => {
                 ("min-transmittance", "min transmittance", Some(Limits { min: 0.0, max: 1.0, slider_max: 0.2 }))
             }
-            Param::N => ("samples", "n samples", count(MAX_SLOTS as f64, MAX_SLOTS as f64)),
-            Param::M => ("passes", "m traversals", count(MAX_PRIMARY_SLOTS as f64, 16.0)),
+            Param::N => ("samples-per-traversal", "n samples per traversal", count(MAX_SLOTS as f64, MAX_SLOTS as f64)),
+            Param::M => ("traversals", "m traversals", count(MAX_PRIMARY_SLOTS as f64, 16.0)),
             Param::Blend => ("blend", "blend", None),
             Param::EarlyStop => ("early-stop", "early stop", None),
             Param::Scramble => ("no-scramble", "scramble", None),
