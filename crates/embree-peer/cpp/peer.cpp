@@ -121,7 +121,7 @@ struct Context {
     RTCIntersectContext ctx;
     const Peer* peer;
     Method method;
-    uint32_t pixel_seed;
+    uint32_t pixel_key;
     Vec3 origin, dir;
     float best_t;
     uint32_t best_id;
@@ -181,7 +181,7 @@ void intersect(const RTCIntersectFunctionNArguments* args) {
         }
         case STOCHASTIC: {
             // Algorithm 1 with the draw before the kernel, as splat does: alpha <= min(opacity, clamp).
-            float u = unit_f32(pcg(xxhash32(c->pixel_seed, id, 0)));
+            float u = unit_f32(pcg(xxhash32(c->pixel_key, id, 0)));
             if (u >= std::min(p.opacity, s.alpha_clamp)) return;
             if (!gaussian_hit(p, s, c->origin, c->dir, &t, &alpha)) return;
             if (!depth_before(t, id, c->best_t, c->best_id) || !(u < alpha)) return;
@@ -206,7 +206,7 @@ void trace_pixel(const Peer& peer, Method method, uint32_t frame_key, uint32_t p
     rtcInitIntersectContext(&c.ctx);
     c.peer = &peer;
     c.method = method;
-    c.pixel_seed = xxhash32(px, py, frame_key);
+    c.pixel_key = xxhash32(px, py, frame_key);
     c.origin = {ray[0], ray[1], ray[2]};
     c.dir = {ray[3], ray[4], ray[5]};
     c.best_t = INFINITY;

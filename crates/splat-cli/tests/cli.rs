@@ -678,7 +678,19 @@ fn path_trace_a_world_with_meshes() {
         ("stochastic", &["--backend", "cpu"][..]),
         ("stochastic-again", &["--backend", "cpu"][..]),
         ("exact", &["--method", "exact", "--sampler", "hash"][..]),
-        ("lens", &["--method", "stochastic-n", "--samples-per-traversal", "4", "--aperture", "0.05", "--focus-distance", "4"][..]),
+        (
+            "lens",
+            &[
+                "--method",
+                "stochastic-n",
+                "--samples-per-traversal",
+                "4",
+                "--aperture",
+                "0.05",
+                "--focus-distance",
+                "4",
+            ][..],
+        ),
     ] {
         let out = scratch(&format!("path-{name}.npy"));
         let o = run(extra, &out);

@@ -26,7 +26,7 @@ pub const DEFAULT_N: u32 = 16;
 pub const DEFAULT_M: u32 = 1;
 /// Largest k of a k-buffer and largest N of `stochastic-n` (fixed arrays on the stack and in
 /// the GPU kernel's registers).
-pub const MAX_SLOTS: usize = 64;
+pub const MAX_HITS: usize = 64;
 
 /// Which renderer family runs a method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -114,12 +114,12 @@ impl Param {
             Some(Limits { min: 1.0, max, slider_max })
         }
         let (flag, label, limits) = match self {
-            Param::K => ("k", "k (PARTICLES_SPP)", count(MAX_SLOTS as f64, MAX_SLOTS as f64)),
+            Param::K => ("k", "k (PARTICLES_SPP)", count(MAX_HITS as f64, MAX_HITS as f64)),
             Param::MaxPasses => ("max-passes", "max passes", count(MAX_PRIMARY_SLOTS as f64, 1000.0)),
             Param::MinTransmittance => {
                 ("min-transmittance", "min transmittance", Some(Limits { min: 0.0, max: 1.0, slider_max: 0.2 }))
             }
-            Param::N => ("samples-per-traversal", "n samples per traversal", count(MAX_SLOTS as f64, MAX_SLOTS as f64)),
+            Param::N => ("samples-per-traversal", "n samples per traversal", count(MAX_HITS as f64, MAX_HITS as f64)),
             Param::M => ("traversals", "m traversals", count(MAX_PRIMARY_SLOTS as f64, 16.0)),
             Param::Blend => ("blend", "blend", None),
             Param::EarlyStop => ("early-stop", "early stop", None),
@@ -662,8 +662,8 @@ mod tests {
     fn limits_refuse_what_the_methods_refuse() {
         for (p, bad) in [
             (Parameters { k: 0, ..Parameters::default() }, MethodId::KBuffer),
-            (Parameters { k: MAX_SLOTS + 1, ..Parameters::default() }, MethodId::DepthSampling),
-            (Parameters { n: MAX_SLOTS as u32 + 1, ..Parameters::default() }, MethodId::StochasticN),
+            (Parameters { k: MAX_HITS + 1, ..Parameters::default() }, MethodId::DepthSampling),
+            (Parameters { n: MAX_HITS as u32 + 1, ..Parameters::default() }, MethodId::StochasticN),
             (Parameters { m: 0, ..Parameters::default() }, MethodId::StochasticN),
             (Parameters { max_passes: MAX_PRIMARY_SLOTS + 1, ..Parameters::default() }, MethodId::StochasticPass),
         ] {

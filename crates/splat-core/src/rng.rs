@@ -183,7 +183,7 @@ pub fn frame_key(seed: u32, frame: u32) -> u32 {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RayRng {
     /// xxhash32(x, y, frame key).
-    pub pixel_seed: u32,
+    pub pixel_key: u32,
     /// Generator.
     pub scheme: RngScheme,
     /// Subtracted from every u ([`crate::Frames::u_shift`], a test hook; 0 otherwise).
@@ -193,7 +193,7 @@ pub struct RayRng {
 impl RayRng {
     /// Decisions for pixel (x, y) in the frame with key `frame_key`.
     pub fn new(x: u32, y: u32, frame_key: u32, scheme: RngScheme) -> Self {
-        Self { pixel_seed: xxhash32([x, y, frame_key]), scheme, u_shift: 0.0 }
+        Self { pixel_key: xxhash32([x, y, frame_key]), scheme, u_shift: 0.0 }
     }
 
     /// The same decisions with every u lowered by `u_shift` ([`crate::Frames::u_shift`]).
@@ -217,9 +217,9 @@ impl RayRng {
     #[inline(always)]
     fn particle_u(&self, id: u32, slot: u32, hit: glam::Vec3) -> f32 {
         match self.scheme {
-            RngScheme::Hash => unit_f32(pcg(xxhash32([self.pixel_seed, id, slot]))),
+            RngScheme::Hash => unit_f32(pcg(xxhash32([self.pixel_key, id, slot]))),
             RngScheme::Trig => {
-                let o = |k: u32| unit_f32(pcg(xxhash32([self.pixel_seed, OFFSET_ID, 3 * slot + k])));
+                let o = |k: u32| unit_f32(pcg(xxhash32([self.pixel_key, OFFSET_ID, 3 * slot + k])));
                 trig_hash(hit + glam::Vec3::new(o(0), o(1), o(2)))
             }
         }
@@ -234,7 +234,7 @@ impl RayRng {
         let mut heads = [0u32; MAX_SLOT_DRAWS];
         if self.scheme == RngScheme::Hash {
             for (s, h) in (first_slot..).zip(&mut heads[..n]) {
-                *h = xxhash32_head(self.pixel_seed, s);
+                *h = xxhash32_head(self.pixel_key, s);
             }
         }
         SlotDraws { rng: *self, first_slot, heads, n }
@@ -243,14 +243,14 @@ impl RayRng {
     /// A point of [0, 1)² on area light `light` for sample slot `slot` (not shifted by
     /// `u_shift`: it places a light sample, it decides nothing).
     pub fn light_sample(&self, light: u32, slot: u32) -> glam::Vec2 {
-        let u = |k: u32| unit_f32(pcg(xxhash32([self.pixel_seed, LIGHT_ID, (slot << 7) | (light << 1) | k])));
+        let u = |k: u32| unit_f32(pcg(xxhash32([self.pixel_key, LIGHT_ID, (slot << 7) | (light << 1) | k])));
         glam::Vec2::new(u(0), u(1))
     }
 
     /// u ∈ [0, 1) deciding whether pass `pass` is accepted (stochastic pass).
     #[inline]
     pub fn pass(&self, pass: u32) -> f32 {
-        unit_f32(pcg(xxhash32([self.pixel_seed, PASS_ID, pass]))) - self.u_shift
+        unit_f32(pcg(xxhash32([self.pixel_key, PASS_ID, pass]))) - self.u_shift
     }
 }
 

@@ -4,10 +4,10 @@
 
 // Up to k hits kept sorted by (t, id) (kbuffer.rs `KBuf`), with each hit's alpha and leaf.
 struct HitBuf {
-    t: array<f32, MAX_SLOTS>,
-    id: array<u32, MAX_SLOTS>,
-    alpha: array<f32, MAX_SLOTS>,
-    leaf: array<u32, MAX_SLOTS>,
+    t: array<f32, MAX_HITS>,
+    id: array<u32, MAX_HITS>,
+    alpha: array<f32, MAX_HITS>,
+    leaf: array<u32, MAX_HITS>,
     len: u32,
 }
 
@@ -50,9 +50,9 @@ fn hitbuf_insert(b: ptr<private, HitBuf>, k: u32, t: f32, id: u32, alpha: f32, l
 
 // Collect the k closest hits strictly behind (after_t, after_id) into kb; with `accepted`,
 // only hits accepted by roulette in slot 0 count (depth sampling).
-fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_seed: u32) {
+fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_key: u32) {
     kb.len = 0u;
-    visit_in = VisitInputs(pixel_seed, 1u, 0u, k, after_t, after_id, accepted);
+    visit_in = VisitInputs(pixel_key, 1u, 0u, k, after_t, after_id, accepted);
     traverse(ray, VISIT_NEXT_K);
 }
 
@@ -68,7 +68,7 @@ fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     if (kb.len == k && !before(h.t, p.id, kb.t[k - 1u], kb.id[k - 1u])) {
         return t_max;
     }
-    if (visit_in.accepted && !(particle_u(visit_in.pixel_seed, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
+    if (visit_in.accepted && !(particle_u(visit_in.pixel_key, p.id, 0u, ray.origin + h.t * ray.dir) < h.alpha)) {
         return t_max;
     }
     return hitbuf_insert(&kb, k, h.t, p.id, h.alpha, leaf, t_max);

@@ -213,7 +213,7 @@ fn path_gaussians(seg: Ray, b: u32) -> vec4<f32> {
         var after_id = NONE;
         loop {
             iterations += 1u;
-            next_k(seg, MAX_SLOTS, after_t, after_id, false, 0u);
+            next_k(seg, MAX_HITS, after_t, after_id, false, 0u);
             let len = kb.len;
             for (var i = 0u; i < len; i++) {
                 iterations += 1u;
@@ -221,7 +221,7 @@ fn path_gaussians(seg: Ray, b: u32) -> vec4<f32> {
                 radiance += t * alpha * gaussian_radiance(kb.leaf[i], kb.t[i], seg, b, true);
                 t *= 1.0 - alpha;
             }
-            if (len < MAX_SLOTS) {
+            if (len < MAX_HITS) {
                 break;
             }
             after_t = kb.t[len - 1u];

@@ -185,16 +185,16 @@ fn depth_before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {
 }
 
 // u ∈ [0, 1) of splat `id` in slot `slot` (rng.rs `RayRng::particle`, hash scheme).
-fn rop_u(pixel_seed: u32, id: u32, slot: u32) -> f32 {
-    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, id, slot)))) - rop_frame.u_shift;
+fn rop_u(pixel_key: u32, id: u32, slot: u32) -> f32 {
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, id, slot)))) - rop_frame.u_shift;
 }
 
 // raster/mod.rs `enderton`: R = ⌊α m + ξ⌋ of the m survivors, by a partial Fisher–Yates.
-fn enderton(rop: ptr<function, Rop>, m: u32, alpha: f32, id: u32, pixel_seed: u32) {
-    let xi = rop_u(pixel_seed, id, ENDERTON_XI_SLOT);
+fn enderton(rop: ptr<function, Rop>, m: u32, alpha: f32, id: u32, pixel_key: u32) {
+    let xi = rop_u(pixel_key, id, ENDERTON_XI_SLOT);
     let r = min(u32(floor(alpha * f32(m) + xi)), m);
     for (var j = 0u; j < r; j++) {
-        let u = rop_u(pixel_seed, id, ENDERTON_XI_SLOT + 1u + j);
+        let u = rop_u(pixel_key, id, ENDERTON_XI_SLOT + 1u + j);
         let pick = j + min(u32(u * f32(m - j)), m - j - 1u);
         let s = (*rop).alive[pick];
         let t = (*rop).alive_t[pick];
@@ -275,7 +275,7 @@ fn tile_rop(
     let spp = params.samples;
     let at = (px.y * params.size.x + px.x) * rop_words(spp);
     var rop = load_rop(at, spp, inside && rop_chunk.x > 0u);
-    let pixel_seed = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
+    let pixel_key = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
     let pixel_id = hilbert_index(params.hilbert_order, px.x, px.y);
     for (var start = range.x; start < range.y; start += BATCH) {
         load_batch(start, range.y, l);
@@ -295,7 +295,7 @@ fn tile_rop(
                 continue;
             }
             if (params.mode == MODE_ENDERTON) {
-                enderton(&rop, m, alpha, s.id, pixel_seed);
+                enderton(&rop, m, alpha, s.id, pixel_key);
             } else {
                 stratified(&rop, m, alive.y, alpha, s.id, pixel_id);
             }

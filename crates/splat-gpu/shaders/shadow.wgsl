@@ -21,11 +21,11 @@ fn count_iteration() {
 }
 
 // rng.rs `RayRng::light_sample`.
-fn light_sample(pixel_seed: u32, light: u32, slot: u32) -> vec2<f32> {
+fn light_sample(pixel_key: u32, light: u32, slot: u32) -> vec2<f32> {
     let key = (bounce_slot(slot) << 7u) | (light << 1u);
     return vec2<f32>(
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key)))),
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, LIGHT_ID, key | 1u)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, LIGHT_ID, key)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, LIGHT_ID, key | 1u)))),
     );
 }
 
@@ -36,16 +36,16 @@ fn shadow_slot(slot: u32, light: u32) -> u32 {
 
 // shadow.rs `TraceScene::lit`: Lit(x, n, v, c) of particle `id` at distance t along the ray;
 // c itself when lighting is off or the particle's set only emits.
-fn lit(c: vec3<f32>, id: u32, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, slot: u32) -> vec3<f32> {
+fn lit(c: vec3<f32>, id: u32, t: f32, n: vec3<f32>, ray: Ray, pixel_key: u32, slot: u32) -> vec3<f32> {
     if (params.lit == 0u) {
         return c;
     }
-    return lit_material(material_of(id), c, t, n, ray, pixel_seed, slot, params.shadow_offset);
+    return lit_material(material_of(id), c, t, n, ray, pixel_key, slot, params.shadow_offset);
 }
 
 // lighting.rs `Lighting::shade_material`: Lit(x, n, v, c) with material m, each light's shadow
 // ray starting `offset` along it.
-fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel_seed: u32, slot: u32, offset: f32) -> vec3<f32> {
+fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel_key: u32, slot: u32, offset: f32) -> vec3<f32> {
     if (m.emissive_only == 1u) {
         return c;
     }
@@ -61,7 +61,7 @@ fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel
         let light = lights[j];
         var u = vec2<f32>(0.0);
         if (light.radius > 0.0) {
-            u = light_sample(pixel_seed, j, slot);
+            u = light_sample(pixel_key, j, slot);
         }
         let inc = light_incident(light, x, u);
         if (!inc.ok) {
@@ -69,7 +69,7 @@ fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel
         }
         let direct = material_direct(m, c, n, v, inc);
         if (any(direct != vec3<f32>(0.0))) {
-            sum += direct * visibility(x, offset, inc, pixel_seed, shadow_slot(slot, j));
+            sum += direct * visibility(x, offset, inc, pixel_key, shadow_slot(slot, j));
         }
     }
     return sum;
@@ -77,7 +77,7 @@ fn lit_material(m: Material, c: vec3<f32>, t: f32, n: vec3<f32>, ray: Ray, pixel
 
 // The decisions of the current stochastic shadow ray and what the shadow visitors found.
 struct ShadowInputs {
-    pixel_seed: u32,
+    pixel_key: u32,
     slot: u32,
 }
 
@@ -89,7 +89,7 @@ var<private> shadow_mesh: bool;
 // shadow.rs `TraceScene::shadow_visibility`: the shadow ray from x + offset l toward the light,
 // by the world's shadow kind (the path tracer's, path_shadows, in its pipeline); a mesh on the
 // way blocks it.
-fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u32) -> vec3<f32> {
+fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_key: u32, slot: u32) -> vec3<f32> {
     let shadow = Ray(x + offset * inc.l, inc.l, inc.l, params.t_min, min(inc.distance - offset, params.t_max));
     let kind = shadow_kind();
     if (shadow.t_max <= params.t_min || kind == SHADOWS_NONE) {
@@ -97,7 +97,7 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_seed: u32, slot: u
     }
     // One traversal call for every kind and the meshes (see traverse_shadow).
     shadow_t = 1.0;
-    shadow_in = ShadowInputs(pixel_seed, slot);
+    shadow_in = ShadowInputs(pixel_key, slot);
     shadow_blocked = false;
     shadow_mesh = false;
     sb.len = 0u;
@@ -134,14 +134,14 @@ fn occluded_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     }
     let p = particles[leaf];
     if (params.rng_scheme == RNG_HASH
-        && particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, vec3<f32>(0.0)) >= min(p.opacity, params.alpha_clamp)) {
+        && particle_u(shadow_in.pixel_key, p.id, shadow_in.slot, vec3<f32>(0.0)) >= min(p.opacity, params.alpha_clamp)) {
         return t_max;
     }
     let h = intersect(p, ray);
     if (!h.ok) {
         return t_max;
     }
-    if (particle_u(shadow_in.pixel_seed, p.id, shadow_in.slot, ray.origin + h.t * ray.dir) < h.alpha) {
+    if (particle_u(shadow_in.pixel_key, p.id, shadow_in.slot, ray.origin + h.t * ray.dir) < h.alpha) {
         shadow_blocked = true;
         return -1.0; // every node is now beyond t_max
     }

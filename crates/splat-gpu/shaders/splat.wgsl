@@ -88,8 +88,8 @@ fn accepted_splat(in: VertexOut) -> Splat {
     let s = splats[in.splat];
     let alpha = splat_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
-    let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
-    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, 0u)))) - frame.u_shift;
+    let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
+    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, 0u)))) - frame.u_shift;
     if (!(u < alpha) || behind_mesh(s, in.position.xy, false)) {
         discard;
     }
@@ -162,10 +162,10 @@ fn fs_stochastic_msaa(in: VertexOut) -> Masked {
     let s = splats[in.splat];
     let alpha = fragment_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
-    let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
+    let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
     var mask = coverage(s, floor(in.position.xy));
     for (var i = 0u; i < params.samples; i++) {
-        let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, i)))) - frame.u_shift;
+        let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, i)))) - frame.u_shift;
         if (!(u < alpha)) {
             mask &= ~(1u << i);
         }

@@ -19,8 +19,8 @@ fn fs_stochastic_plane(in: VertexOut, @builtin(sample_index) i: u32) -> PlaneOut
     let p = corner + sample_offsets[i];
     let alpha = fragment_alpha(s, corner + vec2<f32>(0.5), params);
     let pixel = vec2<u32>(corner);
-    let pixel_seed = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
-    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, s.id, i)))) - frame.u_shift;
+    let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
+    let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, i)))) - frame.u_shift;
     if (alpha <= 0.0 || !covers(s, p, params) || !(u < alpha)) {
         discard;
     }

@@ -101,7 +101,7 @@ const METHOD_STOCHASTIC: u32 = 2u;
 const METHOD_STOCHASTIC_N: u32 = 3u;
 const METHOD_STOCHASTIC_PASS: u32 = 4u;
 const METHOD_DEPTH_SAMPLING_K: u32 = 5u;
-const MAX_SLOTS: u32 = 64u;
+const MAX_HITS: u32 = 64u;
 // params.rng_scheme (splat_gpu::layout::RNG_*) and params.hit_distance (HIT_*).
 const RNG_HASH: u32 = 0u;
 const RNG_TRIG: u32 = 1u;
@@ -186,27 +186,27 @@ fn bounce_slot(slot: u32) -> u32 {
 // rng.rs `RayRng::particle` through trace/mod.rs `Bounce`: u of particle `id` in sample `slot` of
 // the current bounce, lowered by the test hook.
 // In the path tracer (path.wgsl) the path's own decisions, slot being its decision number.
-fn particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
+fn particle_u(pixel_key: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
     if (PATH_MODE) {
         return path_particle(id, slot) - params.u_shift;
     }
-    return unshifted_particle_u(pixel_seed, id, bounce_slot(slot), hit) - params.u_shift;
+    return unshifted_particle_u(pixel_key, id, bounce_slot(slot), hit) - params.u_shift;
 }
 
-fn unshifted_particle_u(pixel_seed: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
+fn unshifted_particle_u(pixel_key: u32, id: u32, slot: u32, hit: vec3<f32>) -> f32 {
     if (params.rng_scheme == RNG_HASH) {
-        return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, id, slot))));
+        return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, id, slot))));
     }
     let o = vec3<f32>(
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, OFFSET_ID, 3u * slot)))),
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, OFFSET_ID, 3u * slot + 1u)))),
-        unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, OFFSET_ID, 3u * slot + 2u)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, OFFSET_ID, 3u * slot)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, OFFSET_ID, 3u * slot + 1u)))),
+        unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, OFFSET_ID, 3u * slot + 2u)))),
     );
     return trig_hash(hit + o);
 }
 
-fn pass_u(pixel_seed: u32, pass_index: u32) -> f32 {
-    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_seed, PASS_ID, bounce_slot(pass_index))))) - params.u_shift;
+fn pass_u(pixel_key: u32, pass_index: u32) -> f32 {
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, PASS_ID, bounce_slot(pass_index))))) - params.u_shift;
 }
 
 // ---- kernel.rs, hit.rs ----------------------------------------------------------------------
@@ -374,7 +374,7 @@ fn visit_shadow(ray: Ray, leaf: u32, t_max: f32) -> f32 {
 // first_slot + n; for next_k_visit the buffer size k, the hit (after_t, after_id) the hits must
 // lie behind, and whether only hits accepted in slot 0 count.
 struct VisitInputs {
-    pixel_seed: u32,
+    pixel_key: u32,
     n: u32,
     first_slot: u32,
     k: u32,
@@ -417,14 +417,14 @@ fn volumetric() -> bool {
 // Eq. 3 front to back over the hits in kb, continuing the state (trace/mod.rs
 // `TraceScene::integrate`), with the integrated normal and the iso-opacity depth; with
 // `light_hits` (the volumetric look) each hit is lit before it is composited.
-fn integrate(st: ptr<function, PassState>, ray: Ray, pixel_seed: u32, light_hits: bool) {
+fn integrate(st: ptr<function, PassState>, ray: Ray, pixel_key: u32, light_hits: bool) {
     for (var i = 0u; i < kb.len; i++) {
         iterations += 1u;
         var c = sh_color(kb.id[i], ray.dir);
         let alpha = kb.alpha[i];
         let n = particle_normal(kb.leaf[i], ray);
         if (light_hits) {
-            c = lit(c, kb.id[i], kb.t[i], n, ray, pixel_seed, 0u);
+            c = lit(c, kb.id[i], kb.t[i], n, ray, pixel_key, 0u);
         }
         (*st).normal += (*st).transmittance * alpha * n;
         (*st).flags |= HIT;
@@ -456,9 +456,9 @@ fn advance(st: ptr<function, PassState>) -> bool {
 // once each, and `finish` lights the rest in one place: GPU compilers inline every call, and
 // the lit shading with its shadow traversal would be copied at every call site (lavapipe took
 // minutes to compile the kernel with one call per method and mode).
-fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
+fn step(ray: Ray, pixel_key: u32, pass_index: u32, st: ptr<function, PassState>) -> bool {
     if (stochastic_slots()) {
-        let s = stochastic_n(ray, pixel_seed, params.n, pass_index * params.n);
+        let s = stochastic_n(ray, pixel_key, params.n, pass_index * params.n);
         (*st).radiance += s.xyz * f32(params.n);
         (*st).transmittance += s.w * f32(params.n);
         if (pass_index == 0u) {
@@ -476,7 +476,7 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
     }
     let pass_method = params.method == METHOD_STOCHASTIC_PASS;
     let sampling = params.method == METHOD_DEPTH_SAMPLING_K;
-    next_k(ray, params.k, (*st).after_t, (*st).after_id, sampling, pixel_seed);
+    next_k(ray, params.k, (*st).after_t, (*st).after_id, sampling, pixel_key);
     if (pass_method && kb.len == 0u) {
         return true;
     }
@@ -485,13 +485,13 @@ fn step(ray: Ray, pixel_seed: u32, pass_index: u32, st: ptr<function, PassState>
     if (pass_method) {
         acc = start_state(ray.t_min);
     }
-    integrate(&acc, ray, pixel_seed, volumetric() && !pass_method);
+    integrate(&acc, ray, pixel_key, volumetric() && !pass_method);
     if (!pass_method) {
         *st = acc;
         return sampling || advance(st);
     }
     let opacity = 1.0 - acc.transmittance;
-    if (pass_u(pixel_seed, pass_index) < opacity) {
+    if (pass_u(pixel_key, pass_index) < opacity) {
         // kbuffer.rs `pass_sample`: colour L_pass / O at the pass's iso-depth, else its farthest
         // hit, with its normal; lit in `finish`.
         var t = acc.depth;
@@ -532,7 +532,7 @@ fn surface_offset(x: vec3<f32>) -> f32 {
 // once: the accepted pass, and the surface look (L lit at the iso-opacity depth with the
 // integrated normal and the picked particle's material, what lies behind where the threshold
 // was never reached).
-fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
+fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
     let mesh = surface.triangle != NONE;
     let mesh_alpha = select(0.0, 1.0, mesh);
     var behind_pick = no_pick();
@@ -624,7 +624,7 @@ fn finish(st: PassState, ray: Ray, pixel_seed: u32) -> vec4<f32> {
             n = behind_pick.normal;
             offset = surface_offset(ray.origin + t * ray.dir);
         }
-        let lit = share * lit_material(m, c, t, n, ray, pixel_seed, 0u, offset);
+        let lit = share * lit_material(m, c, t, n, ray, pixel_key, 0u, offset);
         if (k == 0u) {
             out = vec4<f32>(lit, out.w);
         } else {
@@ -756,7 +756,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var f = 0u; f < frames; f++) {
         iterations += 1u;
         let frame = params.first_frame + f;
-        let pixel_seed = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
+        let pixel_key = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
         var total = vec4<f32>(0.0);
         var camera_pick = no_pick();
         var finished = false;
@@ -814,14 +814,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var done = rasterized;
                 for (var p = first; p < last && !rasterized; p++) {
                     iterations += 1u;
-                    if (step(ray, pixel_seed, p, &st)) {
+                    if (step(ray, pixel_key, p, &st)) {
                         done = true;
                         break;
                     }
                 }
                 if (done || last >= params.max_passes) {
                     st.flags |= DONE;
-                    let s = finish(st, ray, pixel_seed);
+                    let s = finish(st, ray, pixel_key);
                     total += vec4<f32>(seg.weight * s.xyz, select(0.0, s.w, seg.depth == 0u));
                     if (seg.depth == 0u) {
                         camera_pick = sample_pick;

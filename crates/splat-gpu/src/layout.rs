@@ -878,7 +878,7 @@ mod tests {
         assert_constants!(
             crate::TRACE_WGSL,
             [
-                "MAX_SLOTS" = trace::MAX_SLOTS,
+                "MAX_HITS" = trace::MAX_HITS,
                 "STACK_DEPTH" = bvh::STACK_DEPTH,
                 "PASS_ID" = rng::PASS_ID,
                 "OFFSET_ID" = rng::OFFSET_ID,

@@ -47,7 +47,7 @@ use crate::hit::Ray;
 use crate::lighting::{Incident, Light, Shadows};
 use crate::mesh::SurfaceHit;
 use crate::settings::RenderError;
-use crate::trace::{MAX_SLOTS, Method, Slot, TraceScene, surface_offset};
+use crate::trace::{Candidate, MAX_HITS, Method, TraceScene, surface_offset};
 use bsdf::Bsdf;
 use glam::Vec3;
 use sampler::{Dim, PathDecide, PathSampler, SamplerKind, decision, shadow_decision};
@@ -194,11 +194,11 @@ impl PathSettings {
             return bad(format!("max depth {} is above {MAX_DEPTH}", self.max_depth));
         }
         match self.gaussians {
-            GaussianEstimator::StochasticN { n } if !(1..=MAX_SLOTS as u32).contains(&n) => {
-                return bad(format!("stochastic-n needs 1 ≤ n ≤ {MAX_SLOTS} (got {n})"));
+            GaussianEstimator::StochasticN { n } if !(1..=MAX_HITS as u32).contains(&n) => {
+                return bad(format!("stochastic-n needs 1 ≤ n ≤ {MAX_HITS} (got {n})"));
             }
-            GaussianEstimator::DepthSampling { k } if !(1..=MAX_SLOTS as u32).contains(&k) => {
-                return bad(format!("depth sampling needs 1 ≤ k ≤ {MAX_SLOTS} (got {k})"));
+            GaussianEstimator::DepthSampling { k } if !(1..=MAX_HITS as u32).contains(&k) => {
+                return bad(format!("depth sampling needs 1 ≤ k ≤ {MAX_HITS} (got {k})"));
             }
             _ => {}
         }
@@ -470,7 +470,7 @@ impl<'a> PathTracer<'a> {
     /// The radiance Lᵢ a Gaussian hit sends back along the segment: its SH colour for an
     /// emissive set, else its set's material lit at the hit by every world light and one
     /// emitter sample, each behind a shadow ray (exact transmittance when `exact`).
-    fn gaussian_radiance(&self, hit: &Slot, seg: &Ray, bounce: u32, s: &PathSampler, exact: bool) -> Vec3 {
+    fn gaussian_radiance(&self, hit: &Candidate, seg: &Ray, bounce: u32, s: &PathSampler, exact: bool) -> Vec3 {
         let trace = self.trace;
         let lighting = trace.lighting();
         let h = trace.shade(hit.leaf, hit.t, hit.alpha, seg);

@@ -3,7 +3,7 @@
 //! sorted buffer they share ([`KBuf`]). The GPU twin is `shaders/kbuffer.wgsl` (the buffer and
 //! the traversal collecting the next k hits) with the passes in `trace.wgsl`'s `step`.
 
-use super::{Bounce, Integrator, MAX_SLOTS, Method, Segment, TraceScene};
+use super::{Bounce, Integrator, MAX_HITS, Method, Segment, TraceScene};
 use crate::composite::depth_order;
 use crate::frame::{Decide, Sample, depth_before};
 use crate::hit::Ray;
@@ -11,17 +11,17 @@ use glam::{DVec3, Vec3};
 
 /// A candidate hit in a k-buffer, ordered by (t, id).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Slot {
+pub(crate) struct Candidate {
     pub(crate) t: f32,
     pub(crate) id: u32,
     pub(crate) leaf: u32,
     pub(crate) alpha: f32,
 }
 
-impl Slot {
-    pub(crate) const EMPTY: Slot = Slot { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
+impl Candidate {
+    pub(crate) const EMPTY: Candidate = Candidate { t: f32::INFINITY, id: u32::MAX, leaf: 0, alpha: 0.0 };
 
-    /// Whether the slot holds a hit.
+    /// Whether it holds a hit (not [`Candidate::EMPTY`]).
     pub(crate) fn is_hit(&self) -> bool {
         self.id != u32::MAX
     }
@@ -29,14 +29,14 @@ impl Slot {
 
 /// Up to `cap` hits kept sorted by (t, id).
 pub(crate) struct KBuf {
-    slots: [Slot; MAX_SLOTS],
+    hits: [Candidate; MAX_HITS],
     len: usize,
     cap: usize,
 }
 
 impl KBuf {
     pub(crate) fn new(cap: usize) -> Self {
-        Self { slots: [Slot::EMPTY; MAX_SLOTS], len: 0, cap }
+        Self { hits: [Candidate::EMPTY; MAX_HITS], len: 0, cap }
     }
 
     pub(crate) fn is_full(&self) -> bool {
@@ -44,8 +44,8 @@ impl KBuf {
     }
 
     /// The last kept hit (the farthest).
-    pub(crate) fn last(&self) -> Slot {
-        if self.len == 0 { Slot::EMPTY } else { self.slots[self.len - 1] }
+    pub(crate) fn last(&self) -> Candidate {
+        if self.len == 0 { Candidate::EMPTY } else { self.hits[self.len - 1] }
     }
 
     /// Whether a hit at (t, id) would be kept.
@@ -54,20 +54,20 @@ impl KBuf {
     }
 
     /// Insert, dropping the farthest when full (insertion sort, as the vk any-hit shader does).
-    pub(crate) fn insert(&mut self, s: Slot) {
+    pub(crate) fn insert(&mut self, s: Candidate) {
         let mut i = if self.is_full() { self.len - 1 } else { self.len };
         if !self.is_full() {
             self.len += 1;
         }
-        while i > 0 && depth_before(s.t, s.id, self.slots[i - 1].t, self.slots[i - 1].id) {
-            self.slots[i] = self.slots[i - 1];
+        while i > 0 && depth_before(s.t, s.id, self.hits[i - 1].t, self.hits[i - 1].id) {
+            self.hits[i] = self.hits[i - 1];
             i -= 1;
         }
-        self.slots[i] = s;
+        self.hits[i] = s;
     }
 
-    pub(crate) fn as_slice(&self) -> &[Slot] {
-        &self.slots[..self.len]
+    pub(crate) fn as_slice(&self) -> &[Candidate] {
+        &self.hits[..self.len]
     }
 }
 
@@ -84,12 +84,12 @@ impl TraceScene<'_> {
 
     /// Every hit of `ray` through the BVH, sorted front to back by (t, id) (the order of
     /// `composite::sort_front_to_back`), as small records: each is shaded once, in that order.
-    pub(crate) fn sorted_hits(&self, ray: &Ray) -> Vec<Slot> {
+    pub(crate) fn sorted_hits(&self, ray: &Ray) -> Vec<Candidate> {
         let mut found = Vec::with_capacity(64);
         let mut t_max = ray.t_max;
         self.wide_bvh().traverse(ray, &mut t_max, |leaf, _| {
             if let Some(h) = self.hit(leaf, ray) {
-                found.push(Slot { t: h.t, id: h.index, leaf, alpha: h.alpha });
+                found.push(Candidate { t: h.t, id: h.index, leaf, alpha: h.alpha });
             }
         });
         found.sort_unstable_by(|a, b| depth_order(a.t, a.id, b.t, b.id));
@@ -118,7 +118,7 @@ impl TraceScene<'_> {
             {
                 return;
             }
-            buf.insert(Slot { t: h.t, id, leaf, alpha: h.alpha });
+            buf.insert(Candidate { t: h.t, id, leaf, alpha: h.alpha });
             if buf.is_full() {
                 *t_max = buf.last().t;
             }
@@ -242,12 +242,12 @@ mod tests {
     /// farthest kept hit.
     #[test]
     fn a_full_buffer_keeps_the_k_nearest_hits_in_depth_order() {
-        for (case, k) in [1usize, 3, 18, MAX_SLOTS].into_iter().enumerate() {
+        for (case, k) in [1usize, 3, 18, MAX_HITS].into_iter().enumerate() {
             // Depths on a coarse grid, so that ties are broken by id; ids distinct, as particles'.
-            let hits: Vec<Slot> = (0..200u32)
+            let hits: Vec<Candidate> = (0..200u32)
                 .map(|i| {
                     let t = (xxhash32([i, case as u32, 0]) % 50) as f32 * 0.25;
-                    Slot { t, id: (i * 7919) % 200, leaf: i, alpha: 0.5 }
+                    Candidate { t, id: (i * 7919) % 200, leaf: i, alpha: 0.5 }
                 })
                 .collect();
             let mut buf = KBuf::new(k);

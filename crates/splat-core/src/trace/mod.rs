@@ -35,11 +35,11 @@ mod kbuffer;
 mod shadow;
 mod stochastic;
 
-pub(crate) use kbuffer::{KBuf, Slot};
+pub(crate) use kbuffer::{Candidate, KBuf};
 
-pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_SLOTS, Method};
+pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_HITS, Method};
 // The sorted shadow pass keeps its hits in a k-buffer.
-const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_SLOTS);
+const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_HITS);
 
 impl Method {
     /// The k-buffer with the vk defaults.
@@ -461,14 +461,14 @@ impl<'a> TraceScene<'a> {
     /// Closest entry into any particle's bounding ellipsoid ([`bounding_radius`]), shaded opaque.
     fn opaque<D: Decide>(&self, seg: &Segment<D>) -> Sample {
         let ray = &seg.ray;
-        let mut best = Slot::EMPTY;
+        let mut best = Candidate::EMPTY;
         let mut t_max = ray.t_max;
         self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let (o, d) = to_canonical(&self.prims[leaf as usize], ray);
             let Some(t) = sphere_entry(o, d, self.radius_sq[leaf as usize]) else { return };
             let id = self.ids[leaf as usize];
             if t > ray.t_min && t < ray.t_max && depth_before(t, id, best.t, best.id) {
-                best = Slot { t, id, leaf, alpha: 1.0 };
+                best = Candidate { t, id, leaf, alpha: 1.0 };
                 *t_max = t;
             }
         });

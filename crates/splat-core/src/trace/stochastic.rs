@@ -2,7 +2,7 @@
 //! roulette on alpha, the closest accepted hit shaded once) and its N-samples-per-traversal
 //! extension (§3.5). The GPU twin is `shaders/stochastic.wgsl`.
 
-use super::{MAX_SLOTS, Segment, Slot, TraceScene};
+use super::{Candidate, MAX_HITS, Segment, TraceScene};
 use crate::frame::{Decide, Sample, depth_before};
 use crate::hit::Ray;
 use glam::{DVec3, Vec3};
@@ -22,9 +22,9 @@ impl TraceScene<'_> {
     }
 
     /// Algorithm 1's traversal: the closest hit of `ray` accepted in slot `slot`, if any.
-    pub(crate) fn first_accepted(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> Option<Slot> {
+    pub(crate) fn first_accepted(&self, ray: &Ray, decide: &impl Decide, slot: u32) -> Option<Candidate> {
         let early = !decide.needs_position();
-        let mut best = Slot::EMPTY;
+        let mut best = Candidate::EMPTY;
         let mut t_max = ray.t_max;
         self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let id = self.ids[leaf as usize];
@@ -43,7 +43,7 @@ impl TraceScene<'_> {
             }
             let u = if early { u } else { decide.particle(id, slot, ray.at(h.t)) };
             if decide.accepts(id, u, h.alpha) {
-                best = Slot { t: h.t, id, leaf, alpha: h.alpha };
+                best = Candidate { t: h.t, id, leaf, alpha: h.alpha };
                 *t_max = h.t;
             }
         });
@@ -69,7 +69,7 @@ impl TraceScene<'_> {
     }
 
     /// The traversal of §3.5: for each slot of `first_slot..first_slot + n`, the closest hit of
-    /// `ray` accepted in that slot ([`Slot::EMPTY`] where none is); the traversal is clipped at
+    /// `ray` accepted in that slot ([`Candidate::EMPTY`] where none is); the traversal is clipped at
     /// the farthest slot's hit.
     pub(crate) fn first_accepted_n(
         &self,
@@ -77,10 +77,10 @@ impl TraceScene<'_> {
         decide: &impl Decide,
         first_slot: u32,
         n: usize,
-    ) -> [Slot; MAX_SLOTS] {
+    ) -> [Candidate; MAX_HITS] {
         let early = !decide.needs_position();
-        let mut best = [Slot::EMPTY; MAX_SLOTS];
-        let mut u = [0.0f32; MAX_SLOTS];
+        let mut best = [Candidate::EMPTY; MAX_HITS];
+        let mut u = [0.0f32; MAX_HITS];
         let mut t_max = ray.t_max;
         let draw = decide.slot_draws(first_slot, n);
         self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
@@ -98,7 +98,7 @@ impl TraceScene<'_> {
                 if depth_before(h.t, id, b.t, b.id) {
                     let us = if early { us } else { decide.particle(id, first_slot + s as u32, ray.at(h.t)) };
                     if decide.accepts(id, us, h.alpha) {
-                        *b = Slot { t: h.t, id, leaf, alpha: h.alpha };
+                        *b = Candidate { t: h.t, id, leaf, alpha: h.alpha };
                     }
                 }
                 farthest = farthest.max(b.t);
