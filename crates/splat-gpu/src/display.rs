@@ -196,6 +196,12 @@ mod tests {
         );
     }
 
+    #[test]
+    fn the_display_layout_matches_the_shader() {
+        let entries = crate::progressive::DisplayPass::layout_entries();
+        crate::layout::wgsl_check::check_layout("display", DISPLAY_WGSL, naga::valid::Capabilities::empty(), &entries);
+    }
+
     fn pixel() -> PixelState {
         PixelState { mean: [0.25, 1.5, -0.1], variance: [0.04, 0.04, 0.04], depth: 2.5, normal: [0.0, 0.0, -1.0] }
     }

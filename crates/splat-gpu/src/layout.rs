@@ -670,11 +670,100 @@ pub(crate) mod wgsl_check {
 
     /// Parse and validate `source` with only the optional `capabilities`.
     pub(crate) fn validate_with(name: &str, source: &str, capabilities: naga::valid::Capabilities) {
+        parse_and_validate(name, source, capabilities);
+    }
+
+    fn parse_and_validate(
+        name: &str,
+        source: &str,
+        capabilities: naga::valid::Capabilities,
+    ) -> (naga::Module, naga::valid::ModuleInfo) {
         let module =
             naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
+        let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        (module, info)
+    }
+
+    /// Check a bind group layout written in Rust against the bindings the shader declares, as
+    /// naga reflects them (all in group 0): each binding has an entry of its kind (uniform,
+    /// read-only or read-write storage, a texture multisampled or not), visible to every stage
+    /// whose entry point uses it, a uniform's minimum size at least its WGSL type's; and each
+    /// entry is a binding of the shader. wgpu finds the same mistakes only when it creates the
+    /// pipeline, on an adapter.
+    pub(crate) fn check_layout(
+        name: &str,
+        source: &str,
+        capabilities: naga::valid::Capabilities,
+        entries: &[wgpu::BindGroupLayoutEntry],
+    ) {
+        use naga::{AddressSpace, ImageClass, ShaderStage, StorageAccess, TypeInner};
+        use wgpu::{BindingType, BufferBindingType};
+        let (module, info) = parse_and_validate(name, source, capabilities);
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let mut declared = Vec::new();
+        for (handle, var) in module.global_variables.iter() {
+            let Some(binding) = &var.binding else { continue };
+            let label = format!("{name}: binding {} ({})", binding.binding, var.name.as_deref().unwrap_or("?"));
+            assert_eq!(binding.group, 0, "{label} is not in group 0");
+            declared.push(binding.binding);
+            let entry = entries
+                .iter()
+                .find(|e| e.binding == binding.binding)
+                .unwrap_or_else(|| panic!("{label} has no entry in the layout"));
+            match (var.space, entry.ty) {
+                (
+                    AddressSpace::Uniform,
+                    BindingType::Buffer { ty: BufferBindingType::Uniform, min_binding_size, .. },
+                ) => {
+                    let size = u64::from(layouter[var.ty].size);
+                    let min = min_binding_size.map_or(0, |s| s.get());
+                    assert!(min >= size, "{label}: the layout's minimum size {min} is below the WGSL type's {size}");
+                }
+                (
+                    AddressSpace::Storage { access },
+                    BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, .. },
+                ) => {
+                    let shader = if access.contains(StorageAccess::STORE) { "read_write" } else { "read" };
+                    assert_eq!(read_only, !access.contains(StorageAccess::STORE), "{label}: the shader's is {shader}");
+                }
+                (AddressSpace::Handle, BindingType::Texture { multisampled, .. }) => match module.types[var.ty].inner {
+                    TypeInner::Image {
+                        class: ImageClass::Sampled { multi, .. } | ImageClass::Depth { multi }, ..
+                    } => {
+                        assert_eq!(multisampled, multi, "{label}: multisampled");
+                    }
+                    ref other => panic!("{label}: the layout has a texture, the shader {other:?}"),
+                },
+                (space, ty) => panic!("{label}: the shader declares {space:?}, the layout {ty:?}"),
+            }
+            for (i, entry_point) in module.entry_points.iter().enumerate() {
+                if info.get_entry_point(i)[handle].is_empty() {
+                    continue;
+                }
+                let stage = match entry_point.stage {
+                    ShaderStage::Vertex => wgpu::ShaderStages::VERTEX,
+                    ShaderStage::Fragment => wgpu::ShaderStages::FRAGMENT,
+                    ShaderStage::Compute => wgpu::ShaderStages::COMPUTE,
+                    other => panic!("{name}: no stage {other:?} in this crate"),
+                };
+                assert!(
+                    entry.visibility.contains(stage),
+                    "{label}: {} ({:?}) uses it, the layout hides it from that stage",
+                    entry_point.name,
+                    entry_point.stage
+                );
+            }
+        }
+        for entry in entries {
+            assert!(
+                declared.contains(&entry.binding),
+                "{name}: the layout's entry {} is no binding of the shader",
+                entry.binding
+            );
+        }
     }
 
     /// Size and (member name, offset) list of the WGSL struct `name` of `source`, as naga lays
@@ -851,6 +940,12 @@ mod tests {
             ]
         );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
+    }
+
+    #[test]
+    fn trace_layout_matches_the_shader() {
+        let entries = crate::trace::TracePipeline::layout_entries();
+        wgsl_check::check_layout("trace", crate::TRACE_WGSL, naga::valid::Capabilities::empty(), &entries);
     }
 
     /// Every constant the kernel shares with the core has the core's value: the method

@@ -255,7 +255,7 @@ impl ProgressiveTrace {
 }
 
 /// The display pipeline, compiled once per target format.
-struct DisplayPass {
+pub(crate) struct DisplayPass {
     module: wgpu::ShaderModule,
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
@@ -270,15 +270,9 @@ impl DisplayPass {
             label: Some("display.wgsl"),
             source: wgpu::ShaderSource::Wgsl(DISPLAY_WGSL.into()),
         });
-        let fragment = wgpu::ShaderStages::FRAGMENT;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("display"),
-            entries: &[
-                crate::context::uniform_entry(0, fragment, false, std::mem::size_of::<DisplayParams>()),
-                crate::context::storage_entry(1, fragment, true),
-                crate::context::storage_entry(2, fragment, true),
-                crate::context::storage_entry(3, fragment, true),
-            ],
+            entries: &Self::layout_entries(),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("display"),
@@ -288,6 +282,17 @@ impl DisplayPass {
         let usage = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let uniform = ctx.buffer("display", std::mem::size_of::<DisplayParams>() as u64, usage);
         Self { module, layout, pipeline_layout, uniform, pipelines: Vec::new() }
+    }
+
+    /// The display pass's bindings (checked against `display.wgsl`'s by a test).
+    pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 4] {
+        let fragment = wgpu::ShaderStages::FRAGMENT;
+        [
+            crate::context::uniform_entry(0, fragment, false, std::mem::size_of::<DisplayParams>()),
+            crate::context::storage_entry(1, fragment, true),
+            crate::context::storage_entry(2, fragment, true),
+            crate::context::storage_entry(3, fragment, true),
+        ]
     }
 
     fn pipeline(&mut self, ctx: &GpuContext, format: wgpu::TextureFormat) -> Result<&wgpu::RenderPipeline, GpuError> {

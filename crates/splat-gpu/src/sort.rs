@@ -118,18 +118,9 @@ impl RadixSort {
             label: Some("sort.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SORT_WGSL.into()),
         });
-        let uniform = crate::context::uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
-        let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sort"),
-            entries: &[
-                uniform,
-                storage(1, true),
-                storage(2, true),
-                storage(3, false),
-                storage(4, false),
-                storage(5, false),
-            ],
+            entries: &layout_entries(),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("sort"),
@@ -280,6 +271,13 @@ pub fn sort_pairs(
     Ok((keys, vals))
 }
 
+/// The sort's bindings (checked against `sort.wgsl`'s by a test).
+fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
+    let uniform = crate::context::uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
+    let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
+    [uniform, storage(1, true), storage(2, true), storage(3, false), storage(4, false), storage(5, false)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -315,5 +313,11 @@ mod tests {
     fn sort_wgsl_validates_without_subgroup_operations() {
         // Capabilities::empty() lacks SUBGROUP, so a subgroup builtin fails validation.
         crate::layout::wgsl_check::validate("sort", SORT_WGSL);
+    }
+
+    #[test]
+    fn sort_layout_matches_the_shader() {
+        let none = naga::valid::Capabilities::empty();
+        crate::layout::wgsl_check::check_layout("sort", SORT_WGSL, none, &super::layout_entries());
     }
 }

@@ -124,28 +124,9 @@ impl TracePipeline {
             label: Some("trace.wgsl"),
             source: wgpu::ShaderSource::Wgsl(TRACE_WGSL.into()),
         });
-        let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("trace"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
-                storage(1, true),
-                storage(2, true),
-                storage(3, true),
-                storage(4, false),
-                storage(5, false),
-                storage(6, false),
-                storage(7, true),
-                storage(8, true),
-                storage(9, false),
-                storage(10, true),
-                storage(11, true),
-                storage(12, true),
-                uniform_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
-                storage(14, true),
-                storage(15, true),
-                storage(16, true),
-            ],
+            entries: &Self::layout_entries(),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("trace"),
@@ -157,6 +138,31 @@ impl TracePipeline {
             return Err(GpuError::Shader(e.to_string()));
         }
         Ok(Self { pipeline, layout, module, pipeline_layout })
+    }
+
+    /// The kernel's bindings (checked against `trace.wgsl`'s by
+    /// `layout::tests::trace_layout_matches_the_shader`).
+    pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 17] {
+        let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
+        [
+            uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
+            storage(1, true),
+            storage(2, true),
+            storage(3, true),
+            storage(4, false),
+            storage(5, false),
+            storage(6, false),
+            storage(7, true),
+            storage(8, true),
+            storage(9, false),
+            storage(10, true),
+            storage(11, true),
+            storage(12, true),
+            uniform_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
+            storage(14, true),
+            storage(15, true),
+            storage(16, true),
+        ]
     }
 }
 

@@ -751,7 +751,7 @@ impl FrameSlots {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::layout::wgsl_check::{assert_constants, assert_mirrors, validate, validate_with};
+    use crate::layout::wgsl_check::{assert_constants, assert_mirrors, check_layout, validate, validate_with};
 
     /// Every constant the raster shaders share with the core has the core's value, and the
     /// draw modes equal the pipeline's [`Draw`] codes.
@@ -849,5 +849,18 @@ mod tests {
             validate(name, source);
         }
         validate_with("splat (plane)", SPLAT_PLANE_WGSL, naga::valid::Capabilities::MULTISAMPLED_SHADING);
+    }
+
+    /// The hand-written layouts of the splat draw and the fold match their shaders' bindings
+    /// (the compute passes of `raster.wgsl` and the mesh pre-pass take theirs from the shader).
+    #[test]
+    fn raster_layouts_match_their_shaders() {
+        use super::pipelines::{fold_layout_entries, splat_layout_entries};
+        use naga::valid::Capabilities;
+        let splat = splat_layout_entries();
+        check_layout("splat", SPLAT_WGSL, Capabilities::empty(), &splat);
+        check_layout("splat (plane)", SPLAT_PLANE_WGSL, Capabilities::MULTISAMPLED_SHADING, &splat);
+        check_layout("fold", FOLD_WGSL, Capabilities::empty(), &fold_layout_entries(false));
+        check_layout("fold (multisampled)", FOLD_MSAA_WGSL, Capabilities::empty(), &fold_layout_entries(true));
     }
 }

@@ -43,6 +43,46 @@ pub(crate) struct SamplePipelines {
 pub(super) const STOCHASTIC_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub(super) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// The bindings of the splat draw's vertex and fragment stages (checked against `splat.wgsl`'s
+/// by a test).
+pub(super) fn splat_layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
+    let draw_stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
+    [
+        uniform_entry(0, draw_stages, false, size_of::<RasterParams>()),
+        uniform_entry(1, draw_stages, true, size_of::<FrameParams>()),
+        storage_entry(2, draw_stages, true),
+        storage_entry(3, wgpu::ShaderStages::VERTEX, true),
+        storage_entry(4, wgpu::ShaderStages::VERTEX, true),
+        storage_entry(5, wgpu::ShaderStages::FRAGMENT, true),
+        storage_entry(6, wgpu::ShaderStages::FRAGMENT, true),
+        storage_entry(13, wgpu::ShaderStages::FRAGMENT, true),
+        storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
+        storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
+    ]
+}
+
+/// The bindings of the fold of the raster targets into the accumulation, from a `multisampled`
+/// colour target or not (checked against `fold.wgsl`'s by a test).
+pub(super) fn fold_layout_entries(multisampled: bool) -> [wgpu::BindGroupLayoutEntry; 6] {
+    [
+        uniform_entry(0, wgpu::ShaderStages::COMPUTE, false, size_of::<RasterParams>()),
+        uniform_entry(1, wgpu::ShaderStages::COMPUTE, true, size_of::<FrameParams>()),
+        wgpu::BindGroupLayoutEntry {
+            binding: 2,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled,
+            },
+            count: None,
+        },
+        storage_entry(3, wgpu::ShaderStages::COMPUTE, false),
+        storage_entry(4, wgpu::ShaderStages::COMPUTE, false),
+        storage_entry(5, wgpu::ShaderStages::COMPUTE, true),
+    ]
+}
+
 impl RasterPipelines {
     /// Compile every raster kernel; a typed error when the device rejects one.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
@@ -61,42 +101,14 @@ impl RasterPipelines {
         let fold = module("fold.wgsl", FOLD_WGSL);
         let fold_msaa = module("fold.wgsl (msaa)", FOLD_MSAA_WGSL);
         let mesh_prepass = module("mesh_prepass.wgsl", MESH_PREPASS_WGSL);
-        let draw_stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat"),
-            entries: &[
-                uniform_entry(0, draw_stages, false, size_of::<RasterParams>()),
-                uniform_entry(1, draw_stages, true, size_of::<FrameParams>()),
-                storage_entry(2, draw_stages, true),
-                storage_entry(3, wgpu::ShaderStages::VERTEX, true),
-                storage_entry(4, wgpu::ShaderStages::VERTEX, true),
-                storage_entry(5, wgpu::ShaderStages::FRAGMENT, true),
-                storage_entry(6, wgpu::ShaderStages::FRAGMENT, true),
-                storage_entry(13, wgpu::ShaderStages::FRAGMENT, true),
-                storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
-                storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
-            ],
+            entries: &splat_layout_entries(),
         });
         let fold_layout_of = |multisampled| {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("fold"),
-                entries: &[
-                    uniform_entry(0, wgpu::ShaderStages::COMPUTE, false, size_of::<RasterParams>()),
-                    uniform_entry(1, wgpu::ShaderStages::COMPUTE, true, size_of::<FrameParams>()),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 2,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                            view_dimension: wgpu::TextureViewDimension::D2,
-                            multisampled,
-                        },
-                        count: None,
-                    },
-                    storage_entry(3, wgpu::ShaderStages::COMPUTE, false),
-                    storage_entry(4, wgpu::ShaderStages::COMPUTE, false),
-                    storage_entry(5, wgpu::ShaderStages::COMPUTE, true),
-                ],
+                entries: &fold_layout_entries(multisampled),
             })
         };
         let (fold_layout, fold_msaa_layout) = (fold_layout_of(false), fold_layout_of(true));
