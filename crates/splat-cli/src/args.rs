@@ -373,7 +373,7 @@ pub struct SceneArgs {
 #[command(next_help_heading = "Reading scene files")]
 pub struct ReadArgs {
     /// Refuse `.ply` vertex properties this reader does not know (by default they are skipped
-    /// with one warning line naming them: Mip-Splatting's filter_3D and the like).
+    /// with one warning line naming them; Mip-Splatting's filter_3D is known and applied).
     #[arg(long)]
     pub strict: bool,
     /// Axes of `.spz` data: as-stored (what splat-transform, spz-js and the spz library's

@@ -33,6 +33,9 @@ pub fn run(args: InfoArgs) -> Result<()> {
     out!("format     {}", read.format.name());
     out!("particles  {n}");
     out!("SH degree  {}", scene.sh_degree);
+    if read.filter_3d {
+        out!("3D filter  Mip-Splatting's filter_3D, applied (scales and opacities as Mip-Splatting renders them)");
+    }
     if n == 0 {
         return print(&text);
     }

@@ -782,25 +782,56 @@ fn convert_round_trips_every_format() {
     assert!(rmse(&reference, &turned) > 0.05, "RUB data read unconverted must differ");
 }
 
+/// `fixtures/layers.ply` with one more vertex property `name`, of value `value` in every vertex.
+fn layers_with_property(name: &str, value: f32, file: &str) -> std::path::PathBuf {
+    let scene = splat_io::ply::read_ply(&root().join("fixtures/layers.ply")).unwrap();
+    let text = String::from_utf8(splat_io::ply::encode_ply(&scene, splat_io::ply::PlyFormat::Ascii)).unwrap();
+    let (header, body) = text.split_once("end_header\n").unwrap();
+    let body: String = body.lines().map(|l| format!("{l} {value}\n")).collect();
+    let path = scratch(file);
+    std::fs::write(&path, format!("{header}property float {name}\nend_header\n{body}")).unwrap();
+    path
+}
+
 /// Unknown `.ply` properties are skipped with one warning naming them; `--strict` refuses.
 #[test]
 fn unknown_ply_properties_warn_or_refuse_with_strict() {
-    let scene = splat_io::ply::read_ply(&root().join("fixtures/layers.ply")).unwrap();
-    let mut bytes = splat_io::ply::encode_ply(&scene, splat_io::ply::PlyFormat::Ascii);
-    let header_end = bytes.windows(10).position(|w| w == b"end_header").unwrap();
-    bytes.splice(header_end..header_end, b"property float filter_3D\n".iter().copied());
-    let text = String::from_utf8(bytes).unwrap();
-    let (header, body) = text.split_once("end_header\n").unwrap();
-    let body: String = body.lines().map(|l| format!("{l} 0.5\n")).collect();
-    let path = scratch("mip.ply");
-    std::fs::write(&path, format!("{header}end_header\n{body}")).unwrap();
+    let path = layers_with_property("semantic_id", 0.5, "semantic.ply");
     let o = splat(&["info", path.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let warnings: Vec<_> = stderr(&o).lines().filter(|l| l.contains("warning")).map(String::from).collect();
     assert_eq!(warnings.len(), 1, "{warnings:?}");
-    assert!(warnings[0].contains("filter_3D") && warnings[0].contains("--strict"), "{warnings:?}");
+    assert!(warnings[0].contains("semantic_id") && warnings[0].contains("--strict"), "{warnings:?}");
     let o = splat(&["info", path.to_str().unwrap(), "--strict"]);
-    assert!(!o.status.success() && stderr(&o).contains("unknown vertex property 'filter_3D'"), "{}", stderr(&o));
+    assert!(!o.status.success() && stderr(&o).contains("unknown vertex property 'semantic_id'"), "{}", stderr(&o));
+}
+
+/// A Mip-Splatting capture (`filter_3D`) is read with its 3D filter, without a warning, even
+/// with `--strict`; `splat info` says so, and the filter changes the render (a filter of 0.02
+/// against the layers' scales of about 0.1–0.3).
+#[test]
+fn mip_splatting_captures_render_with_their_3d_filter() {
+    let path = layers_with_property("filter_3D", 0.02, "mip.ply");
+    for strict in [false, true] {
+        let args = [&["info", path.to_str().unwrap()][..], if strict { &["--strict"] } else { &[] }].concat();
+        let o = splat(&args);
+        assert!(o.status.success() && !stderr(&o).contains("warning"), "{}", stderr(&o));
+        assert!(String::from_utf8_lossy(&o.stdout).contains("3D filter  Mip-Splatting's filter_3D, applied"));
+    }
+    let render = |scene: &str, out: &std::path::Path| {
+        let camera = "fixtures/layers.cameras.json";
+        let size = ["--width", "64", "--height", "48", "--backend", "cpu"];
+        let o = splat(&[&["render", scene, "--camera", camera, "-o", out.to_str().unwrap()][..], &size].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(out)
+    };
+    let none = layers_with_property("filter_3D", 0.0, "mip-none.ply");
+    let classic = render(root().join("fixtures/layers.ply").to_str().unwrap(), &scratch("mip-classic.npy"));
+    let unfiltered = render(none.to_str().unwrap(), &scratch("mip-none.npy"));
+    // (The ASCII copy rounds the values to text: a difference far below the filter's.)
+    assert!(rmse(&classic, &unfiltered) < 1e-6, "a zero filter is no filter");
+    let filtered = render(path.to_str().unwrap(), &scratch("mip.npy"));
+    assert!(rmse(&classic, &filtered) > 1e-3, "the filter must change the image");
 }
 
 /// A COLMAP model renders the same view as the equivalent cameras.json, and `--all-cameras`

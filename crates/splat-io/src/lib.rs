@@ -90,8 +90,11 @@ pub struct SceneRead {
     pub scene: Scene,
     /// The format found.
     pub format: SceneFormat,
-    /// `.ply` vertex properties skipped as unknown (e.g. Mip-Splatting's `filter_3D`).
+    /// `.ply` vertex properties skipped as unknown.
     pub skipped_properties: Vec<String>,
+    /// Whether the file carried Mip-Splatting's 3D smoothing filter (`filter_3D`), applied to
+    /// the scene read ([`ply`]).
+    pub filter_3d: bool,
 }
 
 fn extension(path: &Path) -> Option<String> {
@@ -114,14 +117,14 @@ pub fn skipped_properties_warning(path: &Path, skipped: &[String]) -> Option<Str
 
 /// Read a scene, choosing the format by extension, and report what was skipped.
 pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, Error> {
-    let read = |format, scene| SceneRead { scene, format, skipped_properties: Vec::new() };
+    let read = |format, scene| SceneRead { scene, format, skipped_properties: Vec::new(), filter_3d: false };
     match extension(path).as_deref() {
         Some("ply") => {
             let bytes = read_file(path)?;
             let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
             let ply = ply::parse_ply_report(&bytes, plain).map_err(|kind| Error::new(path, kind))?;
             let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
-            Ok(SceneRead { scene: ply.scene, format, skipped_properties: ply.skipped })
+            Ok(SceneRead { scene: ply.scene, format, skipped_properties: ply.skipped, filter_3d: ply.filter_3d })
         }
         Some("splat") => Ok(read(SceneFormat::Splat, splat::read_splat(path)?)),
         Some("spz") => Ok(read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?)),

@@ -6,6 +6,13 @@
 //! (quaternion w, x, y, z, not necessarily normalised). Activations are applied on reading:
 //! sigmoid, exp, normalisation.
 //!
+//! A Mip-Splatting capture adds `filter_3D`, the standard deviation σ_f of each Gaussian's 3D
+//! smoothing filter (Mip-Splatting, Yu et al. 2024): the reader convolves the Gaussian with it,
+//! Σ ← Σ + σ_f² I, whose axes keep the rotation with scales √(s_i² + σ_f²), and scales the
+//! opacity by √(det Σ / det(Σ + σ_f² I)) = ∏ s_i / √(s_i² + σ_f²), as Mip-Splatting's
+//! `get_scaling_with_3D_filter` and `get_opacity_with_3D_filter` do. The scene read is then
+//! the Gaussians Mip-Splatting renders, in every renderer and every writer.
+//!
 //! A file whose first element is `chunk` is a PlayCanvas compressed `.ply`, decoded by
 //! [`crate::compressed_ply`].
 
@@ -63,13 +70,15 @@ pub struct PlyRead {
     pub skipped: Vec<String>,
     /// Whether the file was a PlayCanvas compressed `.ply`.
     pub compressed: bool,
+    /// Whether it carried Mip-Splatting's `filter_3D`, applied to the scene read.
+    pub filter_3d: bool,
 }
 
 /// Parse the bytes of a `.ply`, reporting the properties it skipped.
 pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, ErrorKind> {
     if let Some((elements, body)) = crate::compressed_ply::sniff(bytes)? {
         let scene = crate::compressed_ply::parse(bytes, &elements, body)?;
-        return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true });
+        return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true, filter_3d: false });
     }
     let header = Header::parse(bytes, options)?;
     let body = &bytes[header.body_offset..];
@@ -118,7 +127,8 @@ pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, Er
         }
     }
     let skipped = header.properties.iter().filter(|p| p.unknown).map(|p| p.name.clone()).collect();
-    Ok(PlyRead { scene: Scene { particles, sh_degree: layout.sh_degree }, skipped, compressed: false })
+    let filter_3d = header.properties.iter().any(|p| p.slot == Slot::Filter3d);
+    Ok(PlyRead { scene: Scene { particles, sh_degree: layout.sh_degree }, skipped, compressed: false, filter_3d })
 }
 
 /// Vec capacity for `count` vertices that cannot exceed what the body could hold.
@@ -225,6 +235,8 @@ enum Slot {
     Opacity,
     Scale(usize),
     Rotation(usize),
+    /// Mip-Splatting's 3D smoothing filter σ_f.
+    Filter3d,
     Ignored,
 }
 
@@ -237,6 +249,7 @@ impl Slot {
             "z" => Self::Position(2),
             "nx" | "ny" | "nz" => Self::Ignored,
             "opacity" => Self::Opacity,
+            "filter_3D" | "filter_3d" => Self::Filter3d,
             _ => {
                 if let Some(i) = indexed("f_dc_", 3) {
                     Self::Dc(i)
@@ -407,6 +420,7 @@ impl Layout {
         let mut scale = [0.0f64; 3];
         let mut rotation = [0.0f64; 4];
         let mut opacity = 0.0f64;
+        let mut filter = 0.0f64;
         for (&v, p) in values.iter().zip(properties) {
             if p.slot == Slot::Ignored {
                 continue;
@@ -421,6 +435,7 @@ impl Layout {
                 Slot::Opacity => opacity = v,
                 Slot::Scale(i) => scale[i] = v,
                 Slot::Rotation(i) => rotation[i] = v,
+                Slot::Filter3d => filter = v,
                 Slot::Ignored => {}
             }
         }
@@ -445,7 +460,8 @@ impl Layout {
         for (k, c) in sh.iter_mut().enumerate().skip(1).take(per_channel) {
             *c = Vec3::new(rest[k - 1] as f32, rest[per_channel + k - 1] as f32, rest[2 * per_channel + k - 1] as f32);
         }
-        let opacity = (1.0 / (1.0 + (-opacity).exp())) as f32;
+        let opacity = 1.0 / (1.0 + (-opacity).exp());
+        let (linear_scale, opacity) = smoothed(linear_scale, opacity, filter);
         let particle =
             Particle::new(vec3(position), Vec3::from(linear_scale), q, opacity, sh).map_err(|error| match error {
                 ParticleError::ZeroQuaternion => ErrorKind::ZeroQuaternion { index },
@@ -453,6 +469,22 @@ impl Layout {
             })?;
         Ok(particle)
     }
+}
+
+/// The scales and opacity of a Gaussian of `scale` and `opacity` convolved with Mip-Splatting's
+/// 3D filter of standard deviation `sigma` (0: none): √(s_i² + σ²), and the opacity times
+/// ∏ s_i / √(s_i² + σ²), the ratio of the determinants' square roots.
+fn smoothed(scale: [f32; 3], opacity: f64, sigma: f64) -> ([f32; 3], f32) {
+    if sigma == 0.0 {
+        return (scale, opacity as f32);
+    }
+    let mut coefficient = 1.0;
+    let scale = scale.map(|s| {
+        let (s2, f2) = (f64::from(s) * f64::from(s), sigma * sigma);
+        coefficient *= (s2 / (s2 + f2)).sqrt();
+        (s2 + f2).sqrt() as f32
+    });
+    (scale, (opacity * coefficient) as f32)
 }
 
 fn vec3(v: [f64; 3]) -> Vec3 {

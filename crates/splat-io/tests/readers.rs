@@ -115,6 +115,61 @@ fn minimal_ascii_ply_applies_the_activations() {
     assert_eq!(p.rotation, Quat::IDENTITY);
 }
 
+/// Mip-Splatting's `filter_3D` (σ_f) is its 3D smoothing filter: the Gaussian Mip-Splatting
+/// renders has covariance Σ + σ_f² I and opacity α √(det Σ / det(Σ + σ_f² I)). The reference
+/// here is that matrix formula (rotation matrix, determinants), not the reader's per-axis form.
+/// Control: the same file read without the filter (the property renamed, so skipped) is off by
+/// far more than the tolerance.
+#[test]
+fn mip_splatting_filter_3d_is_applied_as_its_trainer_renders_it() {
+    let props: Vec<&str> = PROPS.iter().copied().chain(["filter_3D"]).collect();
+    // Anisotropic and rotated, so that every entry of Σ and its determinant matter.
+    let (log_scale, logit, q, sigma) = ([-2.0f64, -3.5, -1.2], 0.4f64, [0.8f64, 0.3, -0.4, 0.33], 0.05f64);
+    let values = [
+        0.1,
+        -0.2,
+        0.3,
+        0.5,
+        0.1,
+        -0.3,
+        logit,
+        log_scale[0],
+        log_scale[1],
+        log_scale[2],
+        q[0],
+        q[1],
+        q[2],
+        q[3],
+        sigma,
+    ];
+    let body: Vec<String> = values.iter().map(|v| format!("{v}")).collect();
+    let file = header(&props, 1, "ascii") + &body.join(" ") + "\n";
+    let read = splat_io::ply::parse_ply_report(file.as_bytes(), PlyOptions::default()).unwrap();
+    assert!(read.filter_3d && read.skipped.is_empty());
+
+    let n = (q.iter().map(|c| c * c).sum::<f64>()).sqrt();
+    let r = glam::DMat3::from_quat(glam::DQuat::from_xyzw(q[1] / n, q[2] / n, q[3] / n, q[0] / n));
+    let s2 = glam::DMat3::from_diagonal(glam::DVec3::from(log_scale.map(|l| (2.0 * l).exp())));
+    let sigma_3d = r * s2 * r.transpose();
+    let filtered = sigma_3d + glam::DMat3::from_diagonal(glam::DVec3::splat(sigma * sigma));
+    let alpha = 1.0 / (1.0 + (-logit).exp()) * (sigma_3d.determinant() / filtered.determinant()).sqrt();
+    let close = |p: &Particle| {
+        let c = p.covariance().as_dmat3();
+        let worst = (0..3)
+            .flat_map(|i| (0..3).map(move |j| (i, j)))
+            .map(|(i, j)| (c.col(i)[j] - filtered.col(i)[j]).abs())
+            .fold(0.0, f64::max);
+        (worst / filtered.col(0).max_element(), (f64::from(p.opacity) - alpha).abs() / alpha)
+    };
+    let (cov, opacity) = close(&read.scene.particles[0]);
+    assert!(cov < 1e-5 && opacity < 1e-5, "covariance off by {cov:.2e}, opacity by {opacity:.2e} (relative)");
+
+    let classic = file.replace("filter_3D", "filter_off");
+    let lenient = PlyOptions { allow_unknown_properties: true };
+    let (cov, opacity) = close(&parse_ply(classic.as_bytes(), lenient).unwrap().particles[0]);
+    assert!(cov > 1e-2 && opacity > 1e-2, "the control must be far off: {cov:.2e}, {opacity:.2e}");
+}
+
 #[test]
 fn unnormalised_quaternion_is_normalised() {
     let scene = parse_ply(&with(10, "3"), PlyOptions::default()).unwrap();
@@ -141,9 +196,9 @@ fn malformed_ply_errors_name_the_problem() {
     let missing = header(&PROPS[..13], 0, "ascii");
     assert!(matches!(err(missing.as_bytes()), ErrorKind::MissingProperty(ref p) if p == "rot_3"));
     let mut props = PROPS.to_vec();
-    props.push("filter_3D");
+    props.push("semantic_id");
     let unknown = header(&props, 0, "ascii");
-    assert!(matches!(err(unknown.as_bytes()), ErrorKind::UnknownProperty { ref name, .. } if name == "filter_3D"));
+    assert!(matches!(err(unknown.as_bytes()), ErrorKind::UnknownProperty { ref name, .. } if name == "semantic_id"));
     let lenient = PlyOptions { allow_unknown_properties: true };
     assert!(parse_ply(unknown.as_bytes(), lenient).is_ok());
     // Wrong f_rest count.
