@@ -272,11 +272,7 @@ pub enum PipelineArg {
 
 /// The Gaussian estimator of the path tracer that `--method` names.
 pub fn gaussian_estimator(method: MethodId, options: &MethodOptions) -> Result<GaussianEstimator> {
-    let estimator = match options.resolve(method) {
-        Algorithm::Trace(m) => GaussianEstimator::of(&m),
-        _ => None,
-    };
-    estimator.with_context(|| {
+    GaussianEstimator::of(method, &options.parameters()).with_context(|| {
         let names: Vec<&str> = GaussianEstimator::methods().map(MethodId::name).collect();
         format!("--method {} is not a Gaussian estimator of the path tracer: use {}", method.name(), names.join(", "))
     })

@@ -183,7 +183,6 @@ pub struct Entry {
 macro_rules! catalogue {
     (
         oracle {
-            $(#[doc = $odoc:literal])*
             $oid:ident = $ocode:literal { $oname:literal, $oflags:tt, $oparams:expr, $osummary:literal $(,)? }
         }
         trace {$(

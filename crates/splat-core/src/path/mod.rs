@@ -74,9 +74,18 @@ pub enum GaussianEstimator {
 }
 
 impl GaussianEstimator {
+    /// The estimator of the method `id` with `p`'s parameters; `None` for a method the path
+    /// tracer does not run at its segments.
+    pub fn of(id: MethodId, p: &Parameters) -> Option<GaussianEstimator> {
+        match id.algorithm(p) {
+            Algorithm::Trace(method) => GaussianEstimator::of_method(&method),
+            Algorithm::Oracle | Algorithm::Raster(..) | Algorithm::Hybrid(..) => None,
+        }
+    }
+
     /// The estimator of a ray-tracing method (`m` is ignored: a path segment is one
-    /// traversal); `None` for a method the path tracer does not run at its segments.
-    pub fn of(method: &Method) -> Option<GaussianEstimator> {
+    /// traversal).
+    fn of_method(method: &Method) -> Option<GaussianEstimator> {
         match *method {
             Method::Stochastic => Some(GaussianEstimator::Stochastic),
             Method::StochasticN { n, .. } => Some(GaussianEstimator::StochasticN { n }),
@@ -88,10 +97,7 @@ impl GaussianEstimator {
 
     /// The methods the path tracer runs, in catalogue order.
     pub fn methods() -> impl Iterator<Item = MethodId> {
-        MethodId::ALL.into_iter().filter(|&id| match id.algorithm(&Parameters::default()) {
-            Algorithm::Trace(method) => GaussianEstimator::of(&method).is_some(),
-            _ => false,
-        })
+        MethodId::ALL.into_iter().filter(|&id| GaussianEstimator::of(id, &Parameters::default()).is_some())
     }
 
     /// Its method in the [catalogue](crate::catalogue): its name, and its code in the GPU
