@@ -4,6 +4,13 @@
 //! sharing no code with `splat-core`'s splatting path. It is what `raster-sorted` with the
 //! default `3dgs` extent must reproduce.
 //!
+//! Two trainers change only `computeCov2D`'s low-pass ([`Forward`]): gsplat's `antialiased`
+//! mode (`add_blur`: + 0.3 px², opacity × √max(0, det_orig / det_blur)) and Mip-Splatting's 2D
+//! Mip filter (its rasterizer fork: + `kernel_size` 0.1 px², opacity × `coef`, with that fork's
+//! 1e-6 guards). Mip-Splatting's 3D smoothing filter is applied here from the raw `filter_3D`
+//! values, as its `GaussianModel` does (`get_scaling_with_3D_filter`,
+//! `get_opacity_with_3D_filter`), when [`Options::filter_3d`] gives them.
+//!
 //! Pixel coordinates follow this workspace (pixel i covers [i, i + 1), centre i + 0.5; 3DGS
 //! puts the centre at i and shifts the projected mean by −½ with it, so every offset d is the
 //! same). The footprint is the ⌈3 √λ_max⌉ box around the mean, each pixel of it evaluated down
@@ -11,13 +18,66 @@
 
 use splat_core::{Camera, Scene};
 
+/// Whose forward pass: the trainers differ in `computeCov2D`'s screen-space low-pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Forward {
+    /// diff-gaussian-rasterization: Σ₂ + 0.3 I.
+    #[default]
+    Inria,
+    /// gsplat with `rasterize_mode="antialiased"`: Σ₂ + `eps2d` I (0.3) with the opacity
+    /// compensated.
+    GsplatAntialiased {
+        /// `eps2d`, px² (0.3 in gsplat; other values make the tests' controls).
+        eps2d: f32,
+    },
+    /// Mip-Splatting's rasterizer: Σ₂ + `kernel_size` I (0.1) with the opacity × `coef`.
+    MipSplatting {
+        /// `kernel_size`, px² (0.1 in every published run).
+        kernel_size: f32,
+    },
+}
+
+impl Forward {
+    /// gsplat's antialiased mode as published.
+    pub const GSPLAT_ANTIALIASED: Forward = Forward::GsplatAntialiased { eps2d: 0.3 };
+    /// Mip-Splatting as published.
+    pub const MIP_SPLATTING: Forward = Forward::MipSplatting { kernel_size: 0.1 };
+
+    /// The filtered covariance (a, b, c) and the opacity factor, from Σ₂'s (a, b, c).
+    fn low_pass(self, a: f32, b: f32, c: f32) -> ([f32; 3], f32) {
+        match self {
+            Forward::Inria => ([a + 0.3, b, c + 0.3], 1.0),
+            Forward::GsplatAntialiased { eps2d } => {
+                let det_orig = a * c - b * b;
+                let (a, c) = (a + eps2d, c + eps2d);
+                let det_blur = a * c - b * b;
+                ([a, b, c], (det_orig / det_blur).max(0.0).sqrt())
+            }
+            Forward::MipSplatting { kernel_size } => {
+                let det_0 = (a * c - b * b).max(1e-6);
+                let det_1 = ((a + kernel_size) * (c + kernel_size) - b * b).max(1e-6);
+                let mut coef = (det_0 / (det_1 + 1e-6) + 1e-6).sqrt();
+                if det_0 <= 1e-6 || det_1 <= 1e-6 {
+                    coef = 0.0;
+                }
+                ([a + kernel_size, b, c + kernel_size], coef)
+            }
+        }
+    }
+}
+
 /// What the forward pass takes besides the scene and camera.
-#[derive(Clone, Copy, Debug)]
-pub struct Options {
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Options<'a> {
     /// Background colour.
     pub background: [f32; 3],
     /// Stop a pixel before the splat that would take T below 1e-4 (`renderCUDA`'s `done`).
     pub early_stop: bool,
+    /// Whose `computeCov2D`.
+    pub forward: Forward,
+    /// Mip-Splatting's `filter_3D` of each particle (σ_f, world units), applied to the scene's
+    /// raw scales and opacities; `None` for a scene without it.
+    pub filter_3d: Option<&'a [f32]>,
 }
 
 /// A splat after `preprocessCUDA`.
@@ -34,7 +94,7 @@ struct Projected {
 /// The image (row-major RGB) that the reference renders.
 pub fn render(scene: &Scene, camera: &Camera, options: &Options) -> Vec<[f32; 3]> {
     let mut splats: Vec<Projected> =
-        scene.particles.iter().enumerate().filter_map(|(id, _)| preprocess(scene, id, camera)).collect();
+        scene.particles.iter().enumerate().filter_map(|(id, _)| preprocess(scene, id, camera, options)).collect();
     // The (tile | depth) radix sort is stable over the splat index: depth, then id.
     splats.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.id.cmp(&b.id)));
     let (w, h) = (camera.width as usize, camera.height as usize);
@@ -98,8 +158,8 @@ fn transpose(a: &M3) -> M3 {
 }
 
 /// `preprocessCUDA` for particle `id`: near-plane cull, Σ from scale and rotation, the EWA 2D
-/// covariance with the 0.3 px² low-pass, conic, radius, screen box, SH colour.
-fn preprocess(scene: &Scene, id: usize, camera: &Camera) -> Option<Projected> {
+/// covariance with the trainer's low-pass, conic, radius, screen box, SH colour.
+fn preprocess(scene: &Scene, id: usize, camera: &Camera, options: &Options) -> Option<Projected> {
     let p = &scene.particles[id];
     let r_view = camera.rotation.to_cols_array_2d(); // columns
     let view = |i: usize, j: usize| r_view[j][i];
@@ -118,7 +178,16 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera) -> Option<Projected> {
         [2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x)],
         [2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y)],
     ];
-    let s = p.scale.to_array();
+    let mut s = p.scale.to_array();
+    let mut opacity = p.opacity;
+    if let Some(filter_3d) = options.filter_3d {
+        // get_scaling_with_3D_filter and get_opacity_with_3D_filter.
+        let f2 = filter_3d[id] * filter_3d[id];
+        let det1: f32 = s.iter().map(|v| v * v).product();
+        let det2: f32 = s.iter().map(|v| v * v + f2).product();
+        opacity *= (det1 / det2).sqrt();
+        s = s.map(|v| (v * v + f2).sqrt());
+    }
     let rs: M3 = [0, 1, 2].map(|i| [0, 1, 2].map(|j| rot[i][j] * s[j]));
     let sigma = mat_mul(&rs, &transpose(&rs));
     // computeCov2D, with 3DGS's clamp of x/z and y/z to 1.3 tan(fov / 2).
@@ -131,7 +200,7 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera) -> Option<Projected> {
     let w: M3 = [0, 1, 2].map(|i| [0, 1, 2].map(|k| view(i, k)));
     let jw = mat_mul(&j, &w);
     let cov = mat_mul(&mat_mul(&jw, &sigma), &transpose(&jw));
-    let (a, b, c) = (cov[0][0] + 0.3, cov[0][1], cov[1][1] + 0.3);
+    let ([a, b, c], coef) = options.forward.low_pass(cov[0][0], cov[0][1], cov[1][1]);
     let det = a * c - b * b;
     if det == 0.0 {
         return None;
@@ -148,7 +217,7 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera) -> Option<Projected> {
     }
     let dir = normalize(rel);
     let rgb = color_from_sh(&p.sh.to_array().map(|v| v.to_array()), scene.sh_degree, dir);
-    Some(Projected { depth: t[2], id, mean, conic, radius, opacity: p.opacity, rgb })
+    Some(Projected { depth: t[2], id, mean, conic, radius, opacity: opacity * coef, rgb })
 }
 
 fn normalize(v: [f32; 3]) -> [f32; 3] {

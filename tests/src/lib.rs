@@ -1,11 +1,13 @@
 //! Shared helpers of the end-to-end tests, a module a concern: [`mod@reference`] (an independent
 //! f64 implementation of the exact render, Eq. 3, written from the formulas rather than from
-//! `splat-core`), [`inria`] (a port of the INRIA rasterizer), [`harness`] (the statistical
+//! `splat-core`), [`inria`] (a port of the INRIA rasterizer and its trainers' variants),
+//! [`colmap_models`] (a port of COLMAP's camera models), [`harness`] (the statistical
 //! method: z-tests, power studies, convergence), [`flips`] (how close a frame's decisions came
 //! to their thresholds, for CPU = GPU comparisons), [`golden`] (the golden images),
 //! [`path_worlds`] (the path tracer's test worlds); here, what they share: the workspace root,
 //! golden-image comparison, loud skips, the bonsai capture and its standard view.
 
+pub mod colmap_models;
 pub mod inria;
 
 use std::path::{Path, PathBuf};
@@ -152,6 +154,7 @@ pub fn in_view(scene: &splat_core::Scene, camera: &splat_core::Camera) -> splat_
     splat_core::Scene {
         particles: ids.iter().map(|&i| scene.particles[i as usize].clone()).collect(),
         sh_degree: scene.sh_degree,
+        screen_filter: scene.screen_filter,
     }
 }
 

@@ -11,7 +11,7 @@
 use glam::{Quat, Vec3};
 use splat_core::rng::SplitMix64;
 use splat_core::sh::SH_C0;
-use splat_core::{Camera, Particle, RenderSettings, Scene, render_oracle, scenes};
+use splat_core::{Camera, Particle, RenderSettings, Scene, ScreenFilter, render_oracle, scenes};
 use splat_io::spz::{SpzAxes, SpzWriteOptions, encode_spz, parse_spz};
 use std::path::PathBuf;
 
@@ -148,7 +148,7 @@ fn perturbed(scene: &Scene, s: Steps, seed: u64) -> Scene {
             q
         })
         .collect();
-    Scene { particles, sh_degree: scene.sh_degree }
+    Scene { particles, ..Scene::new(Vec::new(), scene.sh_degree) }
 }
 
 /// Image RMSE of `back` against `scene`, and the bound: twice the RMSE of a within-step
@@ -228,7 +228,7 @@ fn ply_and_splat_round_trips() {
         Steps { position: 0.0, log_scale: 1e-6, opacity: 1e-6, dc: 0.0, sh1: 0.0, sh_rest: 0.0, angle: 1e-3 };
     within(errors(&scene, &back), lossless).unwrap();
     // .splat keeps the degree-0 colour only: compare with the scene at degree 0.
-    let flat = Scene { particles: scene.particles.clone(), sh_degree: 0 };
+    let flat = Scene::new(scene.particles.clone(), 0);
     let mut back = splat_io::splat::parse_splat(&splat_io::splat::encode_splat(&flat)).unwrap();
     for (b, p) in back.particles.iter_mut().zip(&flat.particles) {
         let mut all = p.sh.to_array(); // the format has no higher bands to compare
@@ -296,6 +296,35 @@ fn files_written_by_other_tools_read_within_their_quantisation() {
     }
 }
 
+/// splat-transform reads Postshot's `antialiased 1` and writes the mode in every format (Brush's
+/// `SplatRenderMode: mip`, the spz flag 0x1): each of its files reads as gsplat's antialiased
+/// mode, and the `.spz` writer here sets the flag byte as splat-transform does (the plain
+/// source, the control, reads as the 3DGS dilation and is written without it).
+#[test]
+fn the_antialiased_mode_is_read_and_written_as_splat_transform_does() {
+    let Some(dir) = interop_dir() else { return };
+    let read = |name: &str| splat_io::read_scene(&dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert_eq!(read("source.ply").screen_filter, ScreenFilter::Dilation);
+    for name in [
+        "antialiased.ply",
+        "splat-transform-antialiased.ply",
+        "splat-transform-antialiased.compressed.ply",
+        "splat-transform-antialiased-v3.spz",
+        "splat-transform-antialiased-v4.spz",
+    ] {
+        assert_eq!(read(name).screen_filter, ScreenFilter::Antialiased, "{name}");
+    }
+    let flags = |version: u32, bytes: &[u8]| if version == 4 { bytes[14] } else { gunzip(bytes)[14] };
+    let scene = read("antialiased.ply");
+    for version in [3, 4] {
+        let theirs = std::fs::read(dir.join(format!("splat-transform-antialiased-v{version}.spz"))).unwrap();
+        let options = SpzWriteOptions { version, axes: SpzAxes::AsStored };
+        assert_eq!(flags(version, &encode_spz(&scene, options).unwrap()), flags(version, &theirs), "v{version}");
+        let plain = Scene { screen_filter: ScreenFilter::Dilation, ..scene.clone() };
+        assert_eq!(flags(version, &encode_spz(&plain, options).unwrap()), 0, "v{version}");
+    }
+}
+
 /// `read`'s splats reordered to match `source`'s: each source splat takes the read splat nearest
 /// to it (the positions are distinct by far more than the quantisation step).
 fn in_source_order(source: &Scene, read: Scene) -> Scene {
@@ -315,7 +344,7 @@ fn in_source_order(source: &Scene, read: Scene) -> Scene {
             read.particles[nearest].clone()
         })
         .collect();
-    Scene { particles, sh_degree: read.sh_degree }
+    Scene { particles, ..read }
 }
 
 #[test]
@@ -360,7 +389,7 @@ fn spz_errors_name_the_problem() {
     let e = parse_spz(&v4[..v4.len() - 10], SpzAxes::AsStored).unwrap_err().to_string();
     assert!(e.contains("runs past the end"), "{e}");
     let particle = Particle::with_rgb(Vec3::splat(1e7), Vec3::ONE, Quat::IDENTITY, 0.5, Vec3::ONE);
-    let far = Scene { particles: vec![particle], sh_degree: 0 };
+    let far = Scene::new(vec![particle], 0);
     assert!(encode_spz(&far, SpzWriteOptions::default()).unwrap_err().to_string().contains("24-bit range"));
 }
 
@@ -461,9 +490,12 @@ fn colmap_models_render_the_views_of_the_equivalent_cameras_json() {
     assert!((read[0].camera.center() - Vec3::new(0.0, 0.0, -5.0)).length() < 1e-6);
     assert_eq!((read[0].camera.fx, read[0].camera.fy, read[0].camera.cx), (50.0, 50.0, 32.0));
     // Errors name the problem.
-    std::fs::write(hand.join("cameras.txt"), "7 OPENCV 64 48 50 50 32 24 0.1 0 0 0\n").unwrap();
+    std::fs::write(hand.join("cameras.txt"), "7 FOV 64 48 50 50 32 24 0.9\n").unwrap();
     let e = splat_io::colmap::read_colmap(&hand).unwrap_err().to_string();
-    assert!(e.contains("OPENCV is not supported") && e.contains("undistort"), "{e}");
+    assert!(e.contains("FOV is not supported") && e.contains("undistort"), "{e}");
+    std::fs::write(hand.join("cameras.txt"), "7 OPENCV 64 48 50 50 32 24 0.1\n").unwrap();
+    let e = splat_io::colmap::read_colmap(&hand).unwrap_err().to_string();
+    assert!(e.contains("OPENCV takes 8 parameters, not 5"), "{e}");
     let images = std::fs::read(bin.join("images.bin")).unwrap();
     std::fs::write(bin.join("images.bin"), &images[..images.len() - 30]).unwrap();
     let e = splat_io::colmap::read_colmap(&bin).unwrap_err().to_string();
@@ -475,7 +507,7 @@ fn colmap_models_render_the_views_of_the_equivalent_cameras_json() {
 #[test]
 fn new_readers_survive_truncation_and_corruption() {
     let (scene, _) = cloud();
-    let small = Scene { particles: scene.particles[..40].to_vec(), sh_degree: 3 };
+    let small = Scene::new(scene.particles[..40].to_vec(), 3);
     let mut files: Vec<(String, Vec<u8>)> = [2, 3, 4]
         .map(|version| {
             let bytes = encode_spz(&small, SpzWriteOptions { version, axes: SpzAxes::AsStored }).unwrap();

@@ -23,3 +23,15 @@ const transform = (...args) => execFileSync(process.execPath, [cli, '-q', '-w', 
 transform(source, '--spz-version', '3', join(out, 'splat-transform-v3.spz'));
 transform(source, '--spz-version', '4', join(out, 'splat-transform-v4.spz'));
 transform(source, join(out, 'splat-transform.compressed.ply'));
+
+// An antialiased capture as Postshot marks it (`comment antialiased 1`), and what splat-transform
+// writes of it: Brush's `SplatRenderMode: mip` in a .ply and a compressed .ply, the antialiased
+// flag (0x1) in spz 3 and 4.
+const plain = readFileSync(source);
+const at = plain.indexOf('element vertex');
+const antialiased = join(out, 'antialiased.ply');
+writeFileSync(antialiased, Buffer.concat([plain.subarray(0, at), Buffer.from('comment antialiased 1\n'), plain.subarray(at)]));
+transform(antialiased, join(out, 'splat-transform-antialiased.ply'));
+transform(antialiased, join(out, 'splat-transform-antialiased.compressed.ply'));
+transform(antialiased, '--spz-version', '3', join(out, 'splat-transform-antialiased-v3.spz'));
+transform(antialiased, '--spz-version', '4', join(out, 'splat-transform-antialiased-v4.spz'));

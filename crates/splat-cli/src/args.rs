@@ -15,7 +15,9 @@ use splat_core::raster::{Blend, FragmentDepth, RasterSettings, SamplePattern, Sp
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
-use splat_core::{Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, World};
+use splat_core::{
+    Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, ScreenFilter, World,
+};
 use splat_io::text::{parse_direction, parse_vec3};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
@@ -300,8 +302,9 @@ pub struct SceneArgs {
     /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
     /// Cameras: an INRIA cameras.json, or a COLMAP model (a sparse/0 folder, or its
-    /// images.bin / images.txt; PINHOLE and SIMPLE_PINHOLE cameras, views sorted by image name
-    /// as 3DGS lists them). Without it the camera frames the scene (or the demo's own camera).
+    /// images.bin / images.txt; views sorted by image name as 3DGS lists them; distorted,
+    /// fisheye and equirectangular models render through their lens with the ray-tracing
+    /// methods). Without it the camera frames the scene (or the demo's own camera).
     #[arg(help_heading = "Camera", long)]
     pub camera: Option<PathBuf>,
     /// Which camera of --camera to use (0-based).
@@ -383,13 +386,25 @@ pub struct ReadArgs {
     /// Accepted for compatibility: unknown properties are now skipped unless --strict.
     #[arg(long, hide = true)]
     pub allow_unknown_properties: bool,
+    /// The screen-space filter the capture was trained with, which the splatting methods apply
+    /// (default: the one its file names, by a `SplatRenderMode` or `antialiased` comment, a
+    /// `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
+    #[arg(long, value_parser = screen_filter_parser())]
+    pub screen_filter: Option<ScreenFilter>,
 }
 
 impl ReadArgs {
     /// The reader's options.
     pub fn options(&self) -> splat_io::ReadOptions {
-        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into() }
+        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into(), screen_filter: self.screen_filter }
     }
+}
+
+/// The values of `--screen-filter`: every [`ScreenFilter`] by its name, described.
+fn screen_filter_parser() -> impl TypedValueParser<Value = ScreenFilter> {
+    let values = ScreenFilter::ALL.map(|f| PossibleValue::new(f.name()).help(f.describe()));
+    PossibleValuesParser::new(values)
+        .map(|name| *ScreenFilter::ALL.iter().find(|f| f.name() == name).expect("a filter's name"))
 }
 
 /// Axes of `.spz` data.

@@ -34,6 +34,15 @@ pub fn run(args: ConvertArgs) -> Result<()> {
             scene.sh_degree
         );
     }
+    let recorded = format.records(scene.screen_filter);
+    if recorded != scene.screen_filter {
+        eprintln!(
+            "warning: {} cannot record {}: written as {}, so it renders differently",
+            format.name(),
+            scene.screen_filter.describe(),
+            recorded.describe()
+        );
+    }
     let spz = SpzWriteOptions { version: args.spz_version, axes: args.read.spz_axes.into() };
     splat_io::write_scene(&args.output, &scene, spz)?;
     let size = |p: &PathBuf| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);

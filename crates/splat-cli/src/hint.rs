@@ -1,7 +1,8 @@
 //! The command line's words for what the libraries say in theirs: a refused GPU render's
-//! remedies ([`splat_gpu::Remedy`]) and the strict PLY reader's refusal, as the flags that
-//! apply them.
+//! remedies ([`splat_gpu::Remedy`]), a lens the splatting methods cannot see through and the
+//! strict PLY reader's refusal, as the flags that apply them.
 
+use splat_core::camera::CameraError;
 use splat_gpu::{GpuError, Remedy};
 use splat_io::ErrorKind;
 
@@ -24,6 +25,9 @@ pub fn flags(error: &anyhow::Error) -> String {
         if let Some(gpu) = cause.downcast_ref::<GpuError>() {
             let flags: Vec<&str> = gpu.remedies().iter().map(|&r| flag(r)).collect();
             return (!flags.is_empty()).then(|| flags.join(" or "));
+        }
+        if let Some(splat_core::RenderError::Camera(CameraError::NotPinhole { .. })) = cause.downcast_ref() {
+            return Some("--method exact".to_string());
         }
         let io = cause.downcast_ref::<splat_io::Error>()?;
         matches!(io.kind, ErrorKind::UnknownProperty { .. }).then(|| "drop --strict".to_string())

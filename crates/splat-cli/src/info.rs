@@ -36,6 +36,12 @@ pub fn run(args: InfoArgs) -> Result<()> {
     if read.filter_3d {
         out!("3D filter  Mip-Splatting's filter_3D, applied (scales and opacities as Mip-Splatting renders them)");
     }
+    let filter = scene.screen_filter;
+    if filter == read.file_filter {
+        out!("2D filter  {}", filter.describe());
+    } else {
+        out!("2D filter  {} (--screen-filter; the file names {})", filter.describe(), read.file_filter.name());
+    }
     if n == 0 {
         return print(&text);
     }

@@ -8,7 +8,7 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
-use splat_core::{Algorithm, MethodId, World};
+use splat_core::{Algorithm, MethodId, ScreenFilter, World};
 use splat_gpu::{GpuContext, GpuTracer};
 use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
 use std::path::{Path, PathBuf};
@@ -183,6 +183,15 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
     }
     if args.pipeline != Some(PipelineArg::Hybrid) && args.secondary != MethodId::Exact {
         eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
+    }
+    let filter = staged.world.scene.screen_filter;
+    if filter != ScreenFilter::Dilation && !matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..)) {
+        eprintln!(
+            "note: the capture was trained with {}, a screen-space filter that the splatting methods apply; \
+             {} traces the particles themselves, without it",
+            filter.describe(),
+            describe(args)
+        );
     }
     if staged.environment.is_some() || staged.lens.is_some() {
         eprintln!(

@@ -834,6 +834,105 @@ fn mip_splatting_captures_render_with_their_3d_filter() {
     assert!(rmse(&classic, &filtered) > 1e-3, "the filter must change the image");
 }
 
+/// Each trainer's capture, as the trainer writes it, renders with `raster-sorted` as that
+/// trainer's forward pass does (`splat_tests::inria` with the trainer's `computeCov2D`, from the
+/// file's raw values): a Mip-Splatting `.ply` (its `filter_3D`), a gsplat / Brush `.ply`
+/// (`SplatRenderMode: mip`) and that file converted to `.spz` (the antialiased flag, carried by
+/// `splat convert`). `splat info` names each file's filter. The control: `--screen-filter 3dgs`
+/// renders the same files as the 3DGS rasterizer, and the parity tolerance rejects it. The ray
+/// tracer (`exact`), which renders the particles without a screen-space filter, is measured
+/// against each trainer's image for the record.
+#[test]
+fn each_trainers_capture_renders_as_its_trainer_does() {
+    use splat_core::ScreenFilter;
+    use splat_tests::inria::{self, Forward};
+    let cloud = root().join("fixtures/cloud.ply");
+    let raw = splat_io::ply::read_ply(&cloud).unwrap();
+    let text = String::from_utf8(splat_io::ply::encode_ply(&raw, splat_io::ply::PlyFormat::Ascii)).unwrap();
+    let (header, body) = text.split_once("end_header\n").unwrap();
+    // Mip-Splatting: σ_f of 0.01 against the cloud's scales of 0.015–0.08.
+    let mip = scratch("trainer-mip.ply");
+    let filtered: String = body.lines().map(|l| format!("{l} 0.01\n")).collect();
+    std::fs::write(&mip, format!("{header}property float filter_3D\nend_header\n{filtered}")).unwrap();
+    let gsplat = scratch("trainer-gsplat.ply");
+    let tagged = header.replacen("element vertex", "comment SplatRenderMode: mip\nelement vertex", 1);
+    std::fs::write(&gsplat, format!("{tagged}end_header\n{body}")).unwrap();
+    let spz = scratch("trainer-gsplat.spz");
+    let o = splat(&["convert", gsplat.to_str().unwrap(), spz.to_str().unwrap()]);
+    assert!(o.status.success() && !stderr(&o).contains("warning"), "{}", stderr(&o));
+
+    let camera = splat_io::cameras::read_cameras(&root().join("fixtures/cloud.cameras.json")).unwrap()[0];
+    let camera = camera.rescaled(64, 48).unwrap();
+    let render = |scene: &std::path::Path, extra: &[&str]| {
+        let out = scratch("trainer.npy");
+        let args = ["render", scene.to_str().unwrap(), "--camera", "fixtures/cloud.cameras.json", "--width", "64"];
+        let rest = ["--height", "48", "--backend", "cpu", "-o", out.to_str().unwrap()];
+        let o = splat(&[&args[..], &rest, extra].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        (npy(&out), stderr(&o))
+    };
+    let sigma = vec![0.01f32; raw.particles.len()];
+    let spz_scene = splat_io::read_scene(&spz).unwrap();
+    let cases = [
+        (&mip, &raw, Forward::MIP_SPLATTING, Some(sigma.as_slice()), ScreenFilter::Mip),
+        (&gsplat, &raw, Forward::GSPLAT_ANTIALIASED, None, ScreenFilter::Antialiased),
+        (&spz, &spz_scene, Forward::GSPLAT_ANTIALIASED, None, ScreenFilter::Antialiased),
+    ];
+    for (path, particles, forward, filter_3d, filter) in cases {
+        let name = path.file_name().unwrap().to_string_lossy();
+        let info = splat(&["info", path.to_str().unwrap()]);
+        assert!(String::from_utf8_lossy(&info.stdout).contains(&format!("2D filter  {}", filter.describe())));
+        let options = inria::Options { forward, filter_3d, ..Default::default() };
+        let reference: Vec<f32> = inria::render(particles, &camera, &options).concat();
+        let worst = |image: &[f32]| image.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        let (ours, _) = render(path, &["--method", "raster-sorted"]);
+        let (classic, _) = render(path, &["--method", "raster-sorted", "--screen-filter", "3dgs"]);
+        let (traced, note) = render(path, &["--method", "exact"]);
+        eprintln!(
+            "{name}: raster-sorted max {:.2e}; control --screen-filter 3dgs max {:.2e}, RMSE {:.2e}; \
+             exact (ray traced) RMSE {:.2e}",
+            worst(&ours),
+            worst(&classic),
+            rmse(&classic, &reference),
+            rmse(&traced, &reference)
+        );
+        assert!(worst(&ours) < 1e-4, "{name}: raster-sorted is {} from its trainer's image", worst(&ours));
+        assert!(worst(&classic) > 1e-2, "{name}: the 3DGS dilation passes for {filter:?}");
+        assert!(note.contains("traces the particles themselves, without it"), "{note}");
+    }
+}
+
+/// A capture's distorted COLMAP camera renders as it is, through its lens: `exact` traces each
+/// pixel's ray through the fisheye (what COLMAP's model projects back to the pixel is checked
+/// in tests/tests/camera_models.rs; here, that the CLI takes the model and that the lens
+/// changes the image against the pinhole of the same intrinsics), and the splatting methods,
+/// which project through a pinhole, refuse it with the remedy.
+#[test]
+fn distorted_colmap_cameras_render_through_their_lens() {
+    let dir = scratch("fisheye-model");
+    std::fs::create_dir_all(&dir).unwrap();
+    let images = "1 0.9961947 0.0871557 0 0 0 0 3.4 1 view.png\n\n";
+    std::fs::write(dir.join("images.txt"), images).unwrap();
+    let render = |cameras: &str, method: &str, name: &str| {
+        std::fs::write(dir.join("cameras.txt"), cameras).unwrap();
+        let out = scratch(name);
+        let args = ["render", "fixtures/cloud.ply", "--camera", dir.to_str().unwrap(), "--method", method];
+        let o = splat(&[&args[..], &["--backend", "cpu", "-o", out.to_str().unwrap()]].concat());
+        (o.status.success().then(|| npy(&out)), stderr(&o))
+    };
+    let fisheye = "1 OPENCV_FISHEYE 48 36 20 20 24 18 0.04 -0.01 0.002 -0.0003\n";
+    let (lens, e) = render(fisheye, "exact", "fisheye.npy");
+    let lens = lens.unwrap_or_else(|| panic!("{e}"));
+    let (pinhole, e) = render("1 PINHOLE 48 36 20 20 24 18\n", "exact", "pinhole.npy");
+    let pinhole = pinhole.unwrap_or_else(|| panic!("{e}"));
+    assert!(rmse(&lens, &pinhole) > 5e-3, "the fisheye renders as a pinhole ({})", rmse(&lens, &pinhole));
+    let (refused, e) = render(fisheye, "raster-sorted", "refused.npy");
+    assert!(
+        refused.is_none() && e.contains("cannot see through a fisheye lens") && e.contains("--method exact"),
+        "{e}"
+    );
+}
+
 /// A COLMAP model renders the same view as the equivalent cameras.json, and `--all-cameras`
 /// writes one image per view, named after it.
 #[test]

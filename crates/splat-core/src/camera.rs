@@ -1,6 +1,8 @@
-//! Pinhole camera in the OpenCV convention (x right, y down, z forward), as COLMAP and 3DGS use.
+//! Camera in the OpenCV convention (x right, y down, z forward), as COLMAP and 3DGS use: a
+//! pinhole, or one of COLMAP's distorted, fisheye and equirectangular lenses ([`Lens`]).
 
 use crate::hit::Ray;
+pub use crate::lens::{Distortion, Lens};
 use crate::particle::Aabb;
 use glam::{Mat3, Vec2, Vec3};
 use thiserror::Error;
@@ -24,12 +26,23 @@ pub enum CameraError {
     /// The pose is not a finite rigid transform.
     #[error("pose is invalid: {0}")]
     Pose(String),
+    /// A renderer that projects through the pinhole was given another lens.
+    #[error(
+        "{renderer} cannot see through {lens}, only through a pinhole: render it with a ray-tracing method (exact, for one), which traces each pixel's ray through the lens"
+    )]
+    NotPinhole {
+        /// Who refuses.
+        renderer: &'static str,
+        /// The lens, in words.
+        lens: &'static str,
+    },
 }
 
 /// Largest image side accepted (a 16K image; larger is certainly a mistake).
 pub const MAX_IMAGE_SIDE: u32 = 16_384;
 
-/// A pinhole camera: intrinsics in pixels and a world-to-camera rigid pose.
+/// A camera: intrinsics in pixels, a lens (the pinhole unless a camera model says otherwise)
+/// and a world-to-camera rigid pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     /// Image width in pixels.
@@ -48,6 +61,9 @@ pub struct Camera {
     pub rotation: Mat3,
     /// World-to-camera translation t.
     pub translation: Vec3,
+    /// How directions map to the image: the pinhole, or a COLMAP camera model's lens (the
+    /// distortion acts on normalised coordinates, so it does not change with the resolution).
+    pub lens: Lens,
 }
 
 impl Camera {
@@ -72,9 +88,28 @@ impl Camera {
             cy,
             rotation: world_to_camera_rotation,
             translation: world_to_camera_translation,
+            lens: Lens::Pinhole,
         };
         cam.validate()?;
         Ok(cam)
+    }
+
+    /// The same camera with `lens`, validated.
+    pub fn with_lens(self, lens: Lens) -> Result<Self, CameraError> {
+        let cam = Self { lens, ..self };
+        cam.validate()?;
+        Ok(cam)
+    }
+
+    /// Whether its lens is the pinhole, which the splatting methods and the oracle's culling
+    /// assume.
+    pub fn is_pinhole(&self) -> bool {
+        self.lens == Lens::Pinhole
+    }
+
+    /// Refuse any lens but the pinhole for `renderer`, which projects through it.
+    pub fn require_pinhole(&self, renderer: &'static str) -> Result<(), CameraError> {
+        if self.is_pinhole() { Ok(()) } else { Err(CameraError::NotPinhole { renderer, lens: self.lens.describe() }) }
     }
 
     /// A camera at `eye` looking at `target`, with `up` the world's up direction and `fov_y`
@@ -147,6 +182,9 @@ impl Camera {
                 return Err(CameraError::Intrinsics(format!("{name} = {v} must be finite")));
             }
         }
+        if !self.lens.is_finite() {
+            return Err(CameraError::Intrinsics(format!("a distortion coefficient is not finite: {:?}", self.lens)));
+        }
         if !self.rotation.is_finite() || !self.translation.is_finite() {
             return Err(CameraError::Pose("rotation or translation is not finite".into()));
         }
@@ -207,17 +245,49 @@ impl Camera {
         self.rotation * world + self.translation
     }
 
-    /// Camera-space point to continuous pixel coordinates (pixel i covers [i, i + 1)).
+    /// Camera-space point to continuous pixel coordinates (pixel i covers [i, i + 1)) through
+    /// the pinhole, whatever the lens: the splatting methods' projection, which refuse other
+    /// lenses ([`Camera::project`] is the lens's).
     pub fn project_camera(&self, p: Vec3) -> Vec2 {
         Vec2::new(self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy)
+    }
+
+    /// Camera-space point to continuous pixel coordinates through the lens (COLMAP's
+    /// `ImgFromCam`), in double precision; `None` where the lens does not see it.
+    pub fn project(&self, p: glam::DVec3) -> Option<glam::DVec2> {
+        if self.lens == Lens::Equirectangular {
+            let f = Lens::equirectangular_position(p)?;
+            return Some(f * glam::DVec2::new(f64::from(self.width), f64::from(self.height)));
+        }
+        let x = self.lens.project(p)?;
+        Some(glam::DVec2::new(
+            f64::from(self.fx) * x.x + f64::from(self.cx),
+            f64::from(self.fy) * x.y + f64::from(self.cy),
+        ))
+    }
+
+    /// The camera-space direction of continuous pixel position `p` (COLMAP's `CamFromImg`, to
+    /// the whole sphere): for the pinhole ((p_x − c_x) / f_x, (p_y − c_y) / f_y, 1); through
+    /// another lens a unit vector, the distortion inverted to [`crate::lens::UNDISTORT_TOLERANCE`].
+    pub fn direction(&self, p: Vec2) -> Vec3 {
+        let normalised = || {
+            let (x, y) = (f64::from(p.x - self.cx) / f64::from(self.fx), f64::from(p.y - self.cy) / f64::from(self.fy));
+            glam::DVec2::new(x, y)
+        };
+        match self.lens {
+            Lens::Pinhole => Vec3::new((p.x - self.cx) / self.fx, (p.y - self.cy) / self.fy, 1.0),
+            Lens::Equirectangular => {
+                let size = glam::DVec2::new(f64::from(self.width), f64::from(self.height));
+                Lens::equirectangular(p.as_dvec2() / size).as_vec3()
+            }
+            lens => lens.unproject(normalised()).0.as_vec3(),
+        }
     }
 
     /// The ray through pixel (x, y) at sub-pixel position `offset` ∈ [0, 1)²; (0.5, 0.5) is the
     /// pixel centre. The direction is unit length and the view direction is the camera's forward.
     pub fn ray(&self, x: u32, y: u32, offset: Vec2) -> Ray {
-        let u = x as f32 + offset.x;
-        let v = y as f32 + offset.y;
-        let d_cam = Vec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0);
+        let d_cam = self.direction(Vec2::new(x as f32 + offset.x, y as f32 + offset.y));
         let dir = (self.rotation.transpose() * d_cam).normalize();
         Ray { view: self.forward(), ..Ray::new(self.center(), dir) }
     }
@@ -237,9 +307,10 @@ impl Camera {
         if aperture <= 0.0 {
             return pinhole;
         }
-        let u = x as f32 + offset.x;
-        let v = y as f32 + offset.y;
-        let focus = focus_distance * Vec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0);
+        // The point in focus: at depth `focus_distance` along the axis, or at that distance
+        // along a ray that does not look forward (a fisheye's past 90°).
+        let d = self.direction(Vec2::new(x as f32 + offset.x, y as f32 + offset.y));
+        let focus = focus_distance * if d.z > 0.0 { d / d.z } else { d.normalize() };
         let on_lens = (aperture * crate::lighting::concentric_disk(lens)).extend(0.0);
         let to_world = self.rotation.transpose();
         let origin = to_world * (on_lens - self.translation);

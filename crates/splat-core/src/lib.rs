@@ -3,7 +3,7 @@
 //! Everything here is math, in layers (docs/architecture.md):
 //!
 //! - the particle and its response: [`particle`], [`kernel`], [`hit`], [`sh`], [`normal`],
-//!   [`camera`];
+//!   [`camera`], and the screen-space [`filter`] of a capture;
 //! - exact compositing, Eq. 3 of Sun et al. ([`composite`]) and the stochastic estimator of
 //!   Eqs. 4–6 with its exact expectations ([`estimator`]);
 //! - the floor every renderer stands on: [`settings`] and errors, screen [`tile`]s, and the
@@ -30,10 +30,12 @@ pub mod camera;
 pub mod catalogue;
 pub mod composite;
 pub mod estimator;
+pub mod filter;
 pub mod frame;
 pub mod hit;
 pub mod image;
 pub mod kernel;
+pub mod lens;
 pub mod lighting;
 pub mod mesh;
 pub mod normal;
@@ -57,6 +59,7 @@ pub use glam;
 pub use algorithm::{Algorithm, Shot, World};
 pub use camera::Camera;
 pub use catalogue::{MethodId, Parameters};
+pub use filter::ScreenFilter;
 pub use frame::{Frames, RenderOutput};
 pub use hit::{HitDistance, Ray};
 pub use image::Image;

@@ -90,6 +90,7 @@ pub fn render_oracle(
     progress: Progress,
 ) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
+    camera.require_pinhole("the oracle (its tile culling)")?;
     let oracle = Oracle::new(scene, *settings)?;
     let bins = TileBins::new(scene, camera, settings.kernel.cutoff);
     let tile_state = |tile| (bins.candidates(tile), Vec::new());

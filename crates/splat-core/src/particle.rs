@@ -4,6 +4,7 @@
 //! quaternion (w, x, y, z). Eq. 1 of Sun et al. writes Σ = Rᵀ S² R, the transposed convention;
 //! real assets are trained with 3DGS, so that is the one used here.
 
+use crate::filter::ScreenFilter;
 use glam::{Mat3, Quat, Vec3};
 use thiserror::Error;
 
@@ -320,16 +321,24 @@ impl Aabb {
     }
 }
 
-/// A set of particles sharing one SH degree.
+/// A set of particles sharing one SH degree and one screen-space filter.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scene {
     /// The particles.
     pub particles: Vec<Particle>,
     /// SH degree 0..=3 used for every particle's colour.
     pub sh_degree: u8,
+    /// The screen-space filter the capture was trained with, which the splatting renderers
+    /// apply ([`ScreenFilter`]; a file's mode, or a front end's override).
+    pub screen_filter: ScreenFilter,
 }
 
 impl Scene {
+    /// A scene of 3DGS particles (the 3DGS dilation).
+    pub fn new(particles: Vec<Particle>, sh_degree: u8) -> Self {
+        Self { particles, sh_degree, screen_filter: ScreenFilter::Dilation }
+    }
+
     /// Box of all particle means.
     pub fn mean_bounds(&self) -> Aabb {
         self.particles.iter().fold(Aabb::EMPTY, |b, p| b.union(Aabb { min: p.mean, max: p.mean }))

@@ -47,7 +47,7 @@ pub fn layers() -> (Scene, Camera) {
             Particle::with_rgb(mean, Vec3::new(0.7, 0.5, 0.01), rotation, opacity, rgb)
         })
         .collect();
-    let scene = Scene { particles, sh_degree: 0 };
+    let scene = Scene::new(particles, 0);
     (scene, camera(Vec3::new(0.5, 0.35, 3.2), Vec3::ZERO, 40.0, 160, 120))
 }
 
@@ -61,7 +61,7 @@ pub fn ramp() -> (Scene, Camera) {
             Particle::with_rgb(mean, Vec3::new(0.1, 0.25, 0.01), Quat::IDENTITY, f, Vec3::new(0.95, 0.9, 0.8))
         })
         .collect();
-    let scene = Scene { particles, sh_degree: 0 };
+    let scene = Scene::new(particles, 0);
     (scene, camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 30.0, 192, 64))
 }
 
@@ -88,7 +88,7 @@ pub fn cloud() -> (Scene, Camera) {
             Particle { mean, scale, rotation, opacity, sh: sh.into() }
         })
         .collect();
-    let scene = Scene { particles, sh_degree: 3 };
+    let scene = Scene::new(particles, 3);
     (scene, camera(Vec3::new(0.0, 0.6, 3.4), Vec3::ZERO, 40.0, 128, 96))
 }
 
@@ -113,7 +113,7 @@ pub fn plates() -> (Scene, Camera) {
             Particle::with_rgb(mean, Vec3::new(radius, radius, 0.004), rotation, 0.3, Vec3::splat(grey))
         })
         .collect();
-    let scene = Scene { particles, sh_degree: 0 };
+    let scene = Scene::new(particles, 0);
     (scene, camera(Vec3::new(0.0, 0.3, 3.6), Vec3::ZERO, 40.0, 200, 150))
 }
 
@@ -136,7 +136,7 @@ pub fn cloth() -> (Scene, Camera) {
             particles.push(Particle::with_rgb(mean, Vec3::new(0.11, 0.17, 0.004), rotation, 0.4, rgb));
         }
     }
-    let scene = Scene { particles, sh_degree: 0 };
+    let scene = Scene::new(particles, 0);
     (scene, camera(Vec3::new(1.2, 0.4, 3.2), Vec3::new(0.0, 0.0, 0.0), 38.0, 200, 150))
 }
 
@@ -174,7 +174,7 @@ pub fn demo() -> (Scene, Camera) {
     ] {
         particles.push(Particle::with_rgb(center, Vec3::splat(0.14), Quat::IDENTITY, 0.3, rgb));
     }
-    let scene = Scene { particles, sh_degree: 0 };
+    let scene = Scene::new(particles, 0);
     (scene, camera(Vec3::new(0.0, 1.9, 3.6), Vec3::new(0.0, 0.75, 0.0), 45.0, 640, 480))
 }
 

@@ -98,7 +98,7 @@ fn stack(opacities: &[f32], offsets: &[(f32, f32)], colors: &[[f32; 3]]) -> (Sce
             Particle::with_rgb(mean, Vec3::new(0.6, 0.6, 0.02), tilt, opacities[i], Vec3::from(colors[i]))
         })
         .collect();
-    (Scene { particles, sh_degree: 0 }, Ray::new(Vec3::new(0.0, 0.0, -1.0), Vec3::Z))
+    (Scene::new(particles, 0), Ray::new(Vec3::new(0.0, 0.0, -1.0), Vec3::Z))
 }
 
 fn settings() -> RenderSettings {
@@ -452,7 +452,7 @@ fn lit_enumerations_reject_wrong_rules_and_the_other_look() {
 fn one_flat_splat_under_a_directional_light_in_closed_form() {
     let c = Vec3::new(0.8, 0.5, 0.2);
     let disc = Particle::with_rgb(Vec3::ZERO, Vec3::new(1.0, 1.0, 1e-3), Quat::IDENTITY, 1.0, c);
-    let scene = Scene { particles: vec![disc], sh_degree: 0 };
+    let scene = Scene::new(vec![disc], 0);
     let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
     let theta = 50f32.to_radians();
     let (ke, ka, kd, ks, n, e) = (0.1f64, 0.05f64, 0.7f64, 0.3f64, 12.0f32, 2.0f64);

@@ -284,7 +284,9 @@ fn path_camera_ray(x: u32, y: u32) -> Ray {
     if (path.lens == 1u && path.aperture > 0.0) {
         let on_lens = vec3<f32>(path.aperture * concentric_disk(path_dim2(2u)), 0.0);
         ray.origin = params.cam_center.xyz + camera_to_world(on_lens);
-        ray.dir = normalize(camera_to_world(path.focus_distance * camera_dir(x, y, offset) - on_lens));
+        let d = camera_dir(x, y, offset);
+        let focus = path.focus_distance * select(normalize(d), d / d.z, d.z > 0.0);
+        ray.dir = normalize(camera_to_world(focus - on_lens));
     }
     return ray;
 }

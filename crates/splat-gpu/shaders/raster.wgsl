@@ -27,7 +27,6 @@ struct RasterParticle {
 @group(0) @binding(6) var<storage, read_write> draw_args: array<atomic<u32>, 4>;
 
 const NEAR: f32 = 0.2;
-const DILATION: f32 = 0.3;
 const TILE: u32 = 16u;
 
 fn flat_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
@@ -40,8 +39,9 @@ fn cull(i: u32) {
     order[i] = i;
 }
 
-// project.rs `project`: Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, the rect of the extent, the SH colour from the camera
-// centre, and the sort key; culled particles get the key NONE and sort behind all others.
+// project.rs `project`: Σ₂ = J W Σ Wᵀ Jᵀ, the screen filter (Σ′ = Σ₂ + s I, the opacity × ρ;
+// filter.rs `ScreenFilter::apply`), the rect of the extent, the SH colour from the camera centre,
+// and the sort key; culled particles get the key NONE and sort behind all others.
 @compute @workgroup_size(256, 1, 1)
 fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = flat_index(gid, groups);
@@ -74,12 +74,22 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     );
     let s0 = sigma * jw0;
     let s1 = sigma * jw1;
-    let a = dot(jw0, s0) + DILATION;
+    let a2 = dot(jw0, s0);
     let b = dot(jw0, s1);
-    let c = dot(jw1, s1) + DILATION;
+    let c2 = dot(jw1, s1);
+    let a = a2 + params.filter_variance;
+    let c = c2 + params.filter_variance;
     let det = a * c - b * b;
     if (!(det > 0.0) || det > 3.0e38) {
         return;
+    }
+    var opacity = p.opacity;
+    if (params.filter_compensates == 1u) {
+        let det2 = a2 * c2 - b * b;
+        opacity = select(0.0, sqrt(det2 / det), det2 > 0.0) * p.opacity;
+        if (opacity < params.alpha_cull) {
+            return;
+        }
     }
     let mean = vec2<f32>(fx * t.x / t.z + params.intrinsics.z, fy * t.y / t.z + params.intrinsics.w);
     let mid = 0.5 * (a + c);
@@ -108,7 +118,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     var s: Splat;
     s.mean = mean;
     s.depth = t.z;
-    s.opacity = p.opacity;
+    s.opacity = opacity;
     s.conic = vec3<f32>(c / det, -b / det, a / det);
     s.id = i;
     s.color = sh_eval(i, params.sh_degree, dir);

@@ -46,6 +46,11 @@ struct RasterParams {
     // The order of the Hilbert curve over the image (rng.rs `hilbert_order`): Laine–Karras's
     // pixel ids.
     hilbert_order: u32,
+    // The scene's screen filter (splat_core::ScreenFilter): Σ′ = Σ₂ + filter_variance I, and
+    // where filter_compensates is 1 the opacity × √(det Σ₂ / det Σ′).
+    filter_variance: f32,
+    filter_compensates: u32,
+    pad: vec2<u32>,
 }
 
 // What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).

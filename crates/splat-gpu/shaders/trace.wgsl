@@ -17,7 +17,7 @@ struct Particle {
     pad2: f32,
 }
 
-// Everything a dispatch needs (192 bytes), mirrored by splat_gpu::Params.
+// Everything a dispatch needs (240 bytes), mirrored by splat_gpu::Params.
 struct Params {
     cam_row0: vec4<f32>,
     cam_row1: vec4<f32>,
@@ -66,7 +66,9 @@ struct Params {
     mesh_root: u32,
     // settings.rs `max_bounces`: mirror and glass bounces after the camera ray.
     max_bounces: u32,
-    pad5: u32,
+    // The camera's lens (LENS_*) and its distortion (lens.wgsl).
+    lens: u32,
+    distortion: array<vec4<f32>, 3>,
 }
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
@@ -643,15 +645,6 @@ fn pixel_ray(x: u32, y: u32) -> Ray {
 // camera.rs `Camera::ray`: through pixel (x, y) at sub-pixel position `offset`.
 fn camera_ray(x: u32, y: u32, offset: vec2<f32>) -> Ray {
     return Ray(params.cam_center.xyz, normalize(camera_to_world(camera_dir(x, y, offset))), params.cam_row2.xyz, params.t_min, params.t_max);
-}
-
-// The camera-space direction through pixel (x, y) at `offset`, z = 1.
-fn camera_dir(x: u32, y: u32, offset: vec2<f32>) -> vec3<f32> {
-    return vec3<f32>(
-        (f32(x) + offset.x - params.intrinsics.z) / params.intrinsics.x,
-        (f32(y) + offset.y - params.intrinsics.w) / params.intrinsics.y,
-        1.0,
-    );
 }
 
 // Rᵀ v: a camera-space vector in world space.

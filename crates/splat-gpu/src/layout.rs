@@ -6,6 +6,7 @@ use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::Scene;
 use splat_core::bvh::{Bvh, BvhNode};
+use splat_core::camera::Lens;
 use splat_core::frame::Frames;
 use splat_core::lighting::{LightKind, Lighting, Look, Material, Shadows};
 use splat_core::mesh::Meshes;
@@ -180,7 +181,7 @@ pub struct GpuLight {
     pub pad1: u32,
 }
 
-/// Everything one dispatch needs (WGSL `Params`, 192 bytes).
+/// Everything one dispatch needs (WGSL `Params`, 240 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Params {
@@ -264,8 +265,10 @@ pub struct Params {
     pub mesh_root: u32,
     /// Most mirror and glass bounces (`RenderSettings::max_bounces`).
     pub max_bounces: u32,
-    /// Padding.
-    pub pad5: u32,
+    /// The camera's lens (`LENS_*`: pinhole, perspective, fisheye, equirectangular).
+    pub lens: u32,
+    /// Its distortion ([`splat_core::camera::Distortion`]): a₁…a₄; b₁…b₃ and 0; p₁, p₂, s₁, s₂.
+    pub distortion: [[f32; 4]; 3],
 }
 
 /// The hybrid pipeline's first hit of a pixel (WGSL `FirstHit`, 48 bytes), from the tile
@@ -551,8 +554,28 @@ pub fn params(
         mode: MODE_FRAMES,
         pass_index: 0,
         u_shift: frames.u_shift,
+        lens: lens_code(&camera.lens),
+        distortion: distortion(&camera.lens),
         ..lighting_params(trace)
     }
+}
+
+/// The code of a lens in the kernels (`LENS_*`).
+pub fn lens_code(lens: &Lens) -> u32 {
+    match lens {
+        Lens::Pinhole => 0,
+        Lens::Perspective(_) => 1,
+        Lens::Fisheye(_) => 2,
+        Lens::Equirectangular => 3,
+    }
+}
+
+/// [`Params::distortion`] of a lens (zero without one).
+fn distortion(lens: &Lens) -> [[f32; 4]; 3] {
+    let d = lens.distortion().copied().unwrap_or_default();
+    let [b1, b2, b3] = d.rational;
+    let ([p1, p2], [s1, s2]) = (d.tangential, d.prism);
+    [d.radial, [b1, b2, b3, 0.0], [p1, p2, s1, s2]]
 }
 
 /// The lighting fields of [`Params`] (the rest zero).
@@ -825,6 +848,7 @@ pub(crate) mod wgsl_check {
 mod tests {
     use super::wgsl_check::{assert_constants, assert_mirrors, constant, validate};
     use super::*;
+    use splat_core::camera::Distortion;
 
     /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
     /// struct of the same role, so the two cannot drift apart.
@@ -902,7 +926,8 @@ mod tests {
                 iso_threshold,
                 mesh_root,
                 max_bounces,
-                pad5
+                lens,
+                distortion
             ]
         );
         assert_mirrors!(
@@ -1007,6 +1032,12 @@ mod tests {
                 "RNG_HASH" = RNG_HASH,
                 "RNG_TRIG" = RNG_TRIG,
                 "HIT_MEAN" = HIT_MEAN,
+                "LENS_PINHOLE" = lens_code(&Lens::Pinhole),
+                "LENS_PERSPECTIVE" = lens_code(&Lens::Perspective(Distortion::default())),
+                "LENS_FISHEYE" = lens_code(&Lens::Fisheye(Distortion::default())),
+                "LENS_EQUIRECTANGULAR" = lens_code(&Lens::Equirectangular),
+                "UNDISTORT_STEPS" = splat_core::lens::UNDISTORT_STEPS,
+                "UNDISTORT_TOLERANCE_F32" = splat_core::lens::UNDISTORT_TOLERANCE_F32,
                 "HIT_CENTER" = HIT_CENTER,
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
                 "SAMPLER_HASH" = SAMPLER_HASH,

@@ -35,6 +35,7 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../shaders/mesh.wgsl"),
     include_str!("../shaders/pick.wgsl"),
     include_str!("../shaders/trace.wgsl"),
+    include_str!("../shaders/lens.wgsl"),
     include_str!("../shaders/stochastic.wgsl"),
     include_str!("../shaders/kbuffer.wgsl"),
     include_str!("../shaders/shadow.wgsl"),

@@ -10,7 +10,7 @@ use splat_core::RenderSettings;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SplatExtent, render_raster};
 use splat_core::rng::SplitMix64;
-use splat_core::{Camera, Scene};
+use splat_core::{Camera, Scene, ScreenFilter};
 use splat_gpu::sort::{cpu_radix_sort, depth_key, sort_pairs};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
 use std::sync::OnceLock;
@@ -269,10 +269,7 @@ fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
     };
     let (red, green, blue) = (Vec3::X, Vec3::Y, Vec3::Z);
     // Left: ids 0 (red) and 1 (green) at the same place. Right: id 2 (blue) behind id 3 (red).
-    let scene = Scene {
-        particles: vec![at(-0.6, 0.0, red), at(-0.6, 0.0, green), at(0.6, -0.2, blue), at(0.6, 0.2, red)],
-        sh_degree: 0,
-    };
+    let scene = Scene::new(vec![at(-0.6, 0.0, red), at(-0.6, 0.0, green), at(0.6, -0.2, blue), at(0.6, 0.2, red)], 0);
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 40.0, 48, 24).unwrap();
     let c = Case { scene, camera };
     let gpu_scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
@@ -359,7 +356,7 @@ fn bad_raster_input_is_refused_with_a_message() {
     let small = GpuContext::new().unwrap().with_binding_limit(4096);
     let e = RasterScene::new(&small, &c.scene, &RenderSettings::default()).err().expect("too large").to_string();
     assert!(e.contains("splat buffer") && e.contains("4096"), "{e}");
-    let empty = Scene { particles: Vec::new(), sh_degree: 0 };
+    let empty = Scene::new(Vec::new(), 0);
     let e = RasterScene::new(ctx, &empty, &RenderSettings::default()).err().expect("empty").to_string();
     assert!(e.contains("no particles"), "{e}");
     let mut nan = c.scene.clone();
@@ -382,7 +379,8 @@ fn bad_raster_input_is_refused_with_a_message() {
 /// GPU sorted splatting with the default extent is the INRIA 3DGS rasterizer: it equals the
 /// independent forward pass of `splat_tests::inria` (no early stop, which the GPU refuses) on a
 /// fixture of SH degree 0 and one of degree 3, to the blend format's tolerance; the √8σ extent
-/// is rejected by the same comparison.
+/// is rejected by the same comparison. With gsplat's antialiased mode or Mip-Splatting's 2D Mip
+/// filter as the scene's screen filter it equals that trainer's forward pass.
 #[test]
 fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
     let Some(ctx) = context() else { return };
@@ -390,7 +388,7 @@ fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
     let tolerance = if pipes.blend_format == splat_gpu::wgpu::TextureFormat::Rgba32Float { 1e-4 } else { 8e-3 };
     for name in ["layers", "cloud"] {
         let c = case(name, 128, 96);
-        let options = splat_tests::inria::Options { background: [0.0; 3], early_stop: false };
+        let options = splat_tests::inria::Options { background: [0.0; 3], ..Default::default() };
         let reference: Vec<f32> = splat_tests::inria::render(&c.scene, &c.camera, &options).concat();
         let scene = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
         let render = |extent| {
@@ -403,6 +401,30 @@ fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
         eprintln!("{name}: |GPU 3dgs − reference| {d:.2e}, |GPU √8σ − reference| {control:.2e}");
         assert!(d <= tolerance, "{name}: GPU sorted splatting differs from the 3DGS forward pass by {d}");
         assert!(control > 1e-2, "{name}: the √8σ extent passes as 3DGS ({control})");
+    }
+    // The other trainers' screen filters, on the cloud of few-pixel splats where they matter;
+    // the control is the 3DGS dilation on their captures.
+    let c = case("cloud", 128, 96);
+    let dilated = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
+    for (filter, forward) in [
+        (ScreenFilter::Antialiased, splat_tests::inria::Forward::GSPLAT_ANTIALIASED),
+        (ScreenFilter::Mip, splat_tests::inria::Forward::MIP_SPLATTING),
+    ] {
+        let options = splat_tests::inria::Options { background: [0.0; 3], forward, ..Default::default() };
+        let reference: Vec<f32> = splat_tests::inria::render(&c.scene, &c.camera, &options).concat();
+        let capture = Scene { screen_filter: filter, ..c.scene.clone() };
+        let render = |scene: &RasterScene| {
+            let gpu = GpuRasterizer::new(ctx, pipes, scene, &c.camera, &RasterSettings::default()).unwrap();
+            gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap().0
+        };
+        let d = max_abs_diff(
+            render(&RasterScene::new(ctx, &capture, &RenderSettings::default()).unwrap()).mean.data(),
+            &reference,
+        );
+        let control = max_abs_diff(render(&dilated).mean.data(), &reference);
+        eprintln!("cloud {filter:?}: |GPU − its trainer| {d:.2e}, |GPU 3DGS dilation − its trainer| {control:.2e}");
+        assert!(d <= tolerance, "cloud: the GPU's {filter:?} differs from its trainer's forward pass by {d}");
+        assert!(control > 1e-2, "cloud: the 3DGS dilation passes for {filter:?} ({control})");
     }
 }
 

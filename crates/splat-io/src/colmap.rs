@@ -1,5 +1,9 @@
 //! COLMAP sparse reconstructions: `cameras.bin` + `images.bin` or `cameras.txt` + `images.txt`
-//! (the `sparse/0` folder most 3DGS captures arrive with), PINHOLE and SIMPLE_PINHOLE cameras.
+//! (the `sparse/0` folder most 3DGS captures arrive with). Every camera model whose lens
+//! [`splat_core::camera::Lens`] models is read with it (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL,
+//! RADIAL, OPENCV, FULL_OPENCV, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE, OPENCV_FISHEYE,
+//! THIN_PRISM_FISHEYE, SIMPLE_FISHEYE, FISHEYE, EQUIRECTANGULAR); the others (FOV,
+//! RAD_TAN_THIN_PRISM_FISHEYE, the division models, EUCM) are refused by name.
 //!
 //! An image's pose is COLMAP's world-to-camera rotation q = (qw, qx, qy, qz) and translation
 //! t: x_cam = R(q) x_world + t, camera axes x right, y down, z forward — the convention of
@@ -9,6 +13,7 @@
 use crate::{Error, ErrorKind, read_file};
 use glam::{DQuat, DVec3, Mat3, Quat, Vec3};
 use splat_core::Camera;
+use splat_core::camera::{Distortion, Lens};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -30,6 +35,7 @@ struct Intrinsics {
     fy: f64,
     cx: f64,
     cy: f64,
+    lens: Lens,
 }
 
 /// A pose and the id of its camera.
@@ -117,14 +123,15 @@ fn views(intrinsics: &HashMap<u32, Intrinsics>, mut poses: Vec<Pose>) -> Result<
                 rotation,
                 translation,
             )
+            .and_then(|c| c.with_lens(k.lens))
             .map_err(|e| colmap_error(format!("image '{}': {e}", p.name)))?;
             Ok(View { name: p.name, camera })
         })
         .collect()
 }
 
-/// COLMAP's camera models with their parameter counts; only the pinhole ones are rendered.
-const MODELS: [(&str, usize); 11] = [
+/// COLMAP's camera models by id, with their parameter counts.
+const MODELS: [(&str, usize); 18] = [
     ("SIMPLE_PINHOLE", 3),
     ("PINHOLE", 4),
     ("SIMPLE_RADIAL", 4),
@@ -136,16 +143,71 @@ const MODELS: [(&str, usize); 11] = [
     ("SIMPLE_RADIAL_FISHEYE", 4),
     ("RADIAL_FISHEYE", 5),
     ("THIN_PRISM_FISHEYE", 12),
+    ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
+    ("SIMPLE_DIVISION", 4),
+    ("DIVISION", 5),
+    ("SIMPLE_FISHEYE", 3),
+    ("FISHEYE", 4),
+    ("EUCM", 6),
+    ("EQUIRECTANGULAR", 2),
 ];
 
+/// A perspective lens of radial, rational and tangential coefficients.
+fn perspective(radial: [f64; 4], rational: [f64; 3], tangential: [f64; 2]) -> Lens {
+    Lens::Perspective(Distortion {
+        radial: radial.map(|c| c as f32),
+        rational: rational.map(|c| c as f32),
+        tangential: tangential.map(|c| c as f32),
+        prism: [0.0; 2],
+    })
+}
+
+/// An equidistant fisheye lens of radial coefficients in θ.
+fn fisheye(radial: [f64; 4]) -> Lens {
+    Lens::Fisheye(Distortion { radial: radial.map(|c| c as f32), ..Distortion::default() })
+}
+
 fn intrinsics(id: u32, model: &str, width: u64, height: u64, params: &[f64]) -> Result<Intrinsics, ErrorKind> {
-    let (fx, fy, cx, cy) = match (model, params) {
-        ("SIMPLE_PINHOLE", &[f, cx, cy]) => (f, f, cx, cy),
-        ("PINHOLE", &[fx, fy, cx, cy]) => (fx, fy, cx, cy),
+    if let Some(&(_, count)) = MODELS.iter().find(|(name, count)| *name == model && *count != params.len()) {
+        return Err(colmap_error(format!("camera {id}: {model} takes {count} parameters, not {}", params.len())));
+    }
+    let (fx, fy, cx, cy, lens) = match (model, params) {
+        ("SIMPLE_PINHOLE", &[f, cx, cy]) => (f, f, cx, cy, Lens::Pinhole),
+        ("PINHOLE", &[fx, fy, cx, cy]) => (fx, fy, cx, cy, Lens::Pinhole),
+        ("SIMPLE_RADIAL", &[f, cx, cy, k]) => (f, f, cx, cy, perspective([k, 0.0, 0.0, 0.0], [0.0; 3], [0.0; 2])),
+        ("RADIAL", &[f, cx, cy, k1, k2]) => (f, f, cx, cy, perspective([k1, k2, 0.0, 0.0], [0.0; 3], [0.0; 2])),
+        ("OPENCV", &[fx, fy, cx, cy, k1, k2, p1, p2]) => {
+            (fx, fy, cx, cy, perspective([k1, k2, 0.0, 0.0], [0.0; 3], [p1, p2]))
+        }
+        ("FULL_OPENCV", &[fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6]) => {
+            (fx, fy, cx, cy, perspective([k1, k2, k3, 0.0], [k4, k5, k6], [p1, p2]))
+        }
+        ("SIMPLE_RADIAL_FISHEYE", &[f, cx, cy, k]) => (f, f, cx, cy, fisheye([k, 0.0, 0.0, 0.0])),
+        ("RADIAL_FISHEYE", &[f, cx, cy, k1, k2]) => (f, f, cx, cy, fisheye([k1, k2, 0.0, 0.0])),
+        ("OPENCV_FISHEYE", &[fx, fy, cx, cy, k1, k2, k3, k4]) => (fx, fy, cx, cy, fisheye([k1, k2, k3, k4])),
+        ("THIN_PRISM_FISHEYE", &[fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, sx1, sy1]) => {
+            let radial = [k1, k2, k3, k4].map(|c| c as f32);
+            let (tangential, prism) = ([p1 as f32, p2 as f32], [sx1 as f32, sy1 as f32]);
+            let lens = Lens::Fisheye(Distortion { radial, tangential, prism, ..Distortion::default() });
+            (fx, fy, cx, cy, lens)
+        }
+        ("SIMPLE_FISHEYE", &[f, cx, cy]) => (f, f, cx, cy, fisheye([0.0; 4])),
+        ("FISHEYE", &[fx, fy, cx, cy]) => (fx, fy, cx, cy, fisheye([0.0; 4])),
+        ("EQUIRECTANGULAR", &[w, h]) => {
+            if w != width as f64 || h != height as f64 {
+                return Err(colmap_error(format!(
+                    "camera {id}: an EQUIRECTANGULAR model of {w} × {h} for an image of {width} × {height} is not \
+                     supported (they must agree)"
+                )));
+            }
+            // Pixels per radian, so that the pinhole fields stay meaningful.
+            let f = w / std::f64::consts::TAU;
+            (f, f, 0.5 * w, 0.5 * h, Lens::Equirectangular)
+        }
         _ => {
             return Err(colmap_error(format!(
-                "camera {id}: model {model} is not supported (PINHOLE and SIMPLE_PINHOLE are; undistort the \
-                 images first, e.g. `colmap image_undistorter`, as 3DGS's convert.py does)"
+                "camera {id}: model {model} is not supported (the pinhole, radial, OpenCV, fisheye and \
+                 equirectangular models are; undistort the images first, e.g. `colmap image_undistorter`)"
             )));
         }
     };
@@ -155,7 +217,7 @@ fn intrinsics(id: u32, model: &str, width: u64, height: u64, params: &[f64]) -> 
     if ![fx, fy, cx, cy].iter().all(|v| v.is_finite()) || fx <= 0.0 || fy <= 0.0 {
         return Err(colmap_error(format!("camera {id}: focal lengths and principal point {params:?} are unusable")));
     }
-    Ok(Intrinsics { width: size(width, "width")?, height: size(height, "height")?, fx, fy, cx, cy })
+    Ok(Intrinsics { width: size(width, "width")?, height: size(height, "height")?, fx, fy, cx, cy, lens })
 }
 
 /// A little-endian reader that names what it was reading when the bytes run out.
@@ -237,6 +299,25 @@ fn parse_images_bin(data: &[u8]) -> Result<Vec<Pose>, ErrorKind> {
     Ok(out)
 }
 
+/// The COLMAP model that holds a camera's lens, with its parameters: PINHOLE, FULL_OPENCV,
+/// THIN_PRISM_FISHEYE or EQUIRECTANGULAR; an error for a distortion none of them holds.
+fn model_of(c: &Camera) -> Result<(&'static str, Vec<f32>), ErrorKind> {
+    let k = [c.fx, c.fy, c.cx, c.cy];
+    Ok(match c.lens {
+        Lens::Pinhole => ("PINHOLE", k.to_vec()),
+        Lens::Perspective(d) if d.radial[3] == 0.0 && d.prism == [0.0; 2] => {
+            let ([a1, a2, a3, _], [b1, b2, b3], [p1, p2]) = (d.radial, d.rational, d.tangential);
+            ("FULL_OPENCV", [&k[..], &[a1, a2, p1, p2, a3, b1, b2, b3]].concat())
+        }
+        Lens::Fisheye(d) if d.rational == [0.0; 3] => {
+            let ([a1, a2, a3, a4], [p1, p2], [s1, s2]) = (d.radial, d.tangential, d.prism);
+            ("THIN_PRISM_FISHEYE", [&k[..], &[a1, a2, p1, p2, a3, a4, s1, s2]].concat())
+        }
+        Lens::Equirectangular => ("EQUIRECTANGULAR", vec![c.width as f32, c.height as f32]),
+        lens => return Err(colmap_error(format!("no COLMAP camera model holds the lens {lens:?}"))),
+    })
+}
+
 /// Lines that are neither blank nor comments, with their 1-based numbers.
 fn content_lines(data: &[u8]) -> impl Iterator<Item = (usize, &str)> {
     std::str::from_utf8(data)
@@ -295,14 +376,16 @@ fn parse_images_txt(data: &[u8]) -> Result<Vec<Pose>, ErrorKind> {
     Ok(out)
 }
 
-/// Write a model as `cameras.txt` and `images.txt` into `dir` (one PINHOLE camera per view):
-/// for tests and for handing views to COLMAP-based tools.
+/// Write a model as `cameras.txt` and `images.txt` into `dir` (one camera per view, of the model
+/// that holds its lens): for tests and for handing views to COLMAP-based tools.
 pub fn write_colmap_txt(dir: &Path, views: &[View]) -> Result<(), Error> {
-    let mut cameras = String::from("# CAMERA_ID MODEL WIDTH HEIGHT fx fy cx cy\n");
+    let mut cameras = String::from("# CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]\n");
     let mut images = String::from("# IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, then POINTS2D\n");
     for (i, v) in views.iter().enumerate() {
         let c = &v.camera;
-        cameras += &format!("{} PINHOLE {} {} {} {} {} {}\n", i + 1, c.width, c.height, c.fx, c.fy, c.cx, c.cy);
+        let (model, params) = model_of(c).map_err(|kind| Error::new(dir, kind))?;
+        let params: Vec<String> = params.iter().map(f32::to_string).collect();
+        cameras += &format!("{} {model} {} {} {}\n", i + 1, c.width, c.height, params.join(" "));
         let q = Quat::from_mat3(&c.rotation).normalize();
         let t: Vec3 = c.translation;
         images +=

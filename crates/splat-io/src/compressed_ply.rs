@@ -283,5 +283,5 @@ pub(crate) fn parse(bytes: &[u8], elements: &[Element], body_offset: usize) -> R
                 .map_err(|error| ErrorKind::Particle { index: i as u64, error })?;
         particles.push(particle);
     }
-    Ok(Scene { particles, sh_degree })
+    Ok(Scene::new(particles, sh_degree))
 }

@@ -32,7 +32,7 @@ pub mod world;
 
 pub use error::{Error, ErrorKind};
 
-use splat_core::Scene;
+use splat_core::{Scene, ScreenFilter};
 use std::path::Path;
 
 /// The scene formats, by what the file holds.
@@ -63,6 +63,20 @@ impl SceneFormat {
         }
     }
 
+    /// The screen filter a file of this format records for a scene of `filter`: the filter
+    /// itself where the format can say it, else the nearest it can (`.spz` marks Mip-Splatting's
+    /// filter antialiased, the other compensated filter) or none (`.splat` has no mode: the
+    /// 3DGS dilation). A writer that records another filter than the scene's changes how the
+    /// capture renders, so front ends say so.
+    pub fn records(self, filter: ScreenFilter) -> ScreenFilter {
+        match (self, filter) {
+            (Self::Ply | Self::CompressedPly, filter) => filter,
+            (Self::Spz, ScreenFilter::Mip) => ScreenFilter::Antialiased,
+            (Self::Spz, filter) => filter,
+            (Self::Splat, _) => ScreenFilter::Dilation,
+        }
+    }
+
     /// Its name as users know it.
     pub fn name(self) -> &'static str {
         match self {
@@ -81,6 +95,9 @@ pub struct ReadOptions {
     pub strict: bool,
     /// The axes of `.spz` data.
     pub spz_axes: spz::SpzAxes,
+    /// The screen filter the capture was trained with, overriding what the file says (its
+    /// render-mode comment, its `filter_3D`, its `.spz` flag) or does not say.
+    pub screen_filter: Option<ScreenFilter>,
 }
 
 /// A scene read from a file, with what the reader made of it.
@@ -95,6 +112,10 @@ pub struct SceneRead {
     /// Whether the file carried Mip-Splatting's 3D smoothing filter (`filter_3D`), applied to
     /// the scene read ([`ply`]).
     pub filter_3d: bool,
+    /// The screen filter the file names (by its render-mode comment, `filter_3D` or `.spz`
+    /// flag; the 3DGS dilation where it names none). The scene's is this unless
+    /// [`ReadOptions::screen_filter`] overrides it.
+    pub file_filter: ScreenFilter,
 }
 
 fn extension(path: &Path) -> Option<String> {
@@ -117,19 +138,29 @@ pub fn skipped_properties_warning(path: &Path, skipped: &[String]) -> Option<Str
 
 /// Read a scene, choosing the format by extension, and report what was skipped.
 pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, Error> {
-    let read = |format, scene| SceneRead { scene, format, skipped_properties: Vec::new(), filter_3d: false };
-    match extension(path).as_deref() {
+    let read = |format, scene: Scene| SceneRead {
+        file_filter: scene.screen_filter,
+        scene,
+        format,
+        skipped_properties: Vec::new(),
+        filter_3d: false,
+    };
+    let mut read = match extension(path).as_deref() {
         Some("ply") => {
             let bytes = read_file(path)?;
             let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
             let ply = ply::parse_ply_report(&bytes, plain).map_err(|kind| Error::new(path, kind))?;
             let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
-            Ok(SceneRead { scene: ply.scene, format, skipped_properties: ply.skipped, filter_3d: ply.filter_3d })
+            SceneRead { skipped_properties: ply.skipped, filter_3d: ply.filter_3d, ..read(format, ply.scene) }
         }
-        Some("splat") => Ok(read(SceneFormat::Splat, splat::read_splat(path)?)),
-        Some("spz") => Ok(read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?)),
-        _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz" })),
+        Some("splat") => read(SceneFormat::Splat, splat::read_splat(path)?),
+        Some("spz") => read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?),
+        _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz" })),
+    };
+    if let Some(filter) = options.screen_filter {
+        read.scene.screen_filter = filter;
     }
+    Ok(read)
 }
 
 /// Write a scene in the format its extension names (`.ply`: binary little-endian f32;

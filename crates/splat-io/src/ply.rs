@@ -13,13 +13,24 @@
 //! `get_scaling_with_3D_filter` and `get_opacity_with_3D_filter` do. The scene read is then
 //! the Gaussians Mip-Splatting renders, in every renderer and every writer.
 //!
+//! The capture's screen-space filter ([`ScreenFilter`]) is read from the header: a file with
+//! `filter_3D` is Mip-Splatting's (its 2D Mip filter); otherwise the last render-mode comment
+//! decides, Brush's and gsplat's `comment SplatRenderMode: default | mip` (any case; `mip` is
+//! gsplat's antialiased mode, an unknown mode is the default) or Postshot's
+//! `comment antialiased 0 | 1`, as splat-transform reads them; without one, the 3DGS dilation.
+//! The writer records it as splat-transform and Brush write it: `SplatRenderMode: mip` for the
+//! antialiased mode, no comment for the default, and for Mip-Splatting's filter a `filter_3D`
+//! of zeros (the 3D filter is already folded into the scales and opacities), which
+//! Mip-Splatting's own loader reads too. A 2DGS capture (`SplatRenderMode: 2dgs`, or
+//! `scale_0`, `scale_1` without `scale_2`) is refused ([`ErrorKind::Surfels`]).
+//!
 //! A file whose first element is `chunk` is a PlayCanvas compressed `.ply`, decoded by
 //! [`crate::compressed_ply`].
 
 use crate::{Error, ErrorKind, read_file};
 use glam::{Quat, Vec3};
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
-use splat_core::{Particle, ParticleError, Scene};
+use splat_core::{Particle, ParticleError, Scene, ScreenFilter};
 use std::path::Path;
 
 /// Largest header accepted, in bytes; real headers are about 1.5 KiB.
@@ -76,11 +87,23 @@ pub struct PlyRead {
 
 /// Parse the bytes of a `.ply`, reporting the properties it skipped.
 pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, ErrorKind> {
+    let mode = Mode::of_header(bytes);
+    if mode == Some(Mode::Surfels) {
+        return Err(ErrorKind::Surfels("its header says SplatRenderMode: 2dgs"));
+    }
     if let Some((elements, body)) = crate::compressed_ply::sniff(bytes)? {
-        let scene = crate::compressed_ply::parse(bytes, &elements, body)?;
+        let screen_filter = match mode {
+            Some(Mode::Filter(filter)) => filter,
+            Some(Mode::Surfels) | None => ScreenFilter::Dilation,
+        };
+        let scene = Scene { screen_filter, ..crate::compressed_ply::parse(bytes, &elements, body)? };
         return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true, filter_3d: false });
     }
     let header = Header::parse(bytes, options)?;
+    let has = |slot: Slot| header.properties.iter().any(|p| p.slot == slot);
+    if has(Slot::Scale(0)) && has(Slot::Scale(1)) && !has(Slot::Scale(2)) {
+        return Err(ErrorKind::Surfels("two scales, scale_0 and scale_1, and no scale_2"));
+    }
     let body = &bytes[header.body_offset..];
     let count = header.count;
     let layout = Layout::new(&header.properties)?;
@@ -127,8 +150,62 @@ pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, Er
         }
     }
     let skipped = header.properties.iter().filter(|p| p.unknown).map(|p| p.name.clone()).collect();
-    let filter_3d = header.properties.iter().any(|p| p.slot == Slot::Filter3d);
-    Ok(PlyRead { scene: Scene { particles, sh_degree: layout.sh_degree }, skipped, compressed: false, filter_3d })
+    let filter_3d = has(Slot::Filter3d);
+    let screen_filter = match mode {
+        _ if filter_3d => ScreenFilter::Mip,
+        Some(Mode::Filter(filter)) => filter,
+        Some(Mode::Surfels) | None => ScreenFilter::Dilation,
+    };
+    let scene = Scene { screen_filter, ..Scene::new(particles, layout.sh_degree) };
+    Ok(PlyRead { scene, skipped, compressed: false, filter_3d })
+}
+
+/// A render mode a header comment names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    Filter(ScreenFilter),
+    /// 2D Gaussians (2DGS).
+    Surfels,
+}
+
+impl Mode {
+    /// The mode of a comment's text: Brush's and gsplat's `SplatRenderMode: default | mip | 2dgs`
+    /// (any case and spacing; an unknown mode is the default) or Postshot's `antialiased 0 | 1`;
+    /// `None` for any other comment.
+    fn of_comment(text: &str) -> Option<Mode> {
+        let text = text.trim().to_ascii_lowercase();
+        if let Some(mode) = text.strip_prefix("splatrendermode:") {
+            return Some(match mode.trim() {
+                "mip" => Mode::Filter(ScreenFilter::Antialiased),
+                "2dgs" => Mode::Surfels,
+                _ => Mode::Filter(ScreenFilter::Dilation),
+            });
+        }
+        match text.split_ascii_whitespace().collect::<Vec<_>>().as_slice() {
+            ["antialiased", "1"] => Some(Mode::Filter(ScreenFilter::Antialiased)),
+            ["antialiased", "0"] => Some(Mode::Filter(ScreenFilter::Dilation)),
+            _ => None,
+        }
+    }
+
+    /// The last render-mode comment of a `.ply` header (plain or compressed).
+    fn of_header(bytes: &[u8]) -> Option<Mode> {
+        let mut lines = Lines::new(bytes, 0);
+        let mut mode = None;
+        while let Some((_, text)) = lines.next().filter(|_| lines.offset <= MAX_HEADER) {
+            match text.trim_start().strip_prefix("comment") {
+                Some(comment) => mode = Mode::of_comment(comment).or(mode),
+                None if text.trim() == "end_header" => break,
+                None => {}
+            }
+        }
+        mode
+    }
+
+    /// The comment the writer records for a filter (Brush's spelling), if any.
+    fn comment(filter: ScreenFilter) -> Option<&'static str> {
+        (filter == ScreenFilter::Antialiased).then_some("SplatRenderMode: mip")
+    }
 }
 
 /// Vec capacity for `count` vertices that cannot exceed what the body could hold.
@@ -525,20 +602,24 @@ impl<'a> Lines<'a> {
     }
 }
 
-/// The PLY property names 3DGS writes, in its order, for an SH degree.
-fn property_names(sh_degree: u8) -> Vec<String> {
+/// The PLY property names 3DGS writes, in its order, for a scene, with Mip-Splatting's
+/// `filter_3D` last where the scene's filter is Mip-Splatting's.
+fn property_names(scene: &Scene) -> Vec<String> {
     let mut names: Vec<String> =
         ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].map(String::from).to_vec();
-    names.extend((0..3 * (sh_coeff_count(sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
+    names.extend((0..3 * (sh_coeff_count(scene.sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
     names.push("opacity".into());
     names.extend((0..3).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
+    if scene.screen_filter == ScreenFilter::Mip {
+        names.push("filter_3D".into());
+    }
     names
 }
 
 /// Stored (pre-activation) values of a particle, in [`property_names`] order.
-fn stored_values(p: &Particle, sh_degree: u8) -> Vec<f32> {
-    let per_channel = sh_coeff_count(sh_degree) - 1;
+fn stored_values(p: &Particle, scene: &Scene) -> Vec<f32> {
+    let per_channel = sh_coeff_count(scene.sh_degree) - 1;
     let mut v = vec![p.mean.x, p.mean.y, p.mean.z, 0.0, 0.0, 0.0, p.sh[0].x, p.sh[0].y, p.sh[0].z];
     for channel in 0..3 {
         v.extend((1..=per_channel).map(|k| p.sh[k][channel]));
@@ -548,26 +629,34 @@ fn stored_values(p: &Particle, sh_degree: u8) -> Vec<f32> {
     v.push((o / (1.0 - o)).ln() as f32);
     v.extend(p.scale.to_array().map(f32::ln));
     v.extend([p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z]);
+    if scene.screen_filter == ScreenFilter::Mip {
+        v.push(0.0); // filter_3D: already applied
+    }
     v
 }
 
-/// Encode a scene as a 3DGS `.ply` (all properties `float`). Opacities of exactly 0 or 1 are
-/// stored as logit(1e-7) and logit(1 − 1e-7), the nearest finite values.
+/// Encode a scene as a 3DGS `.ply` (all properties `float`), with its screen filter as the
+/// module documentation says. Opacities of exactly 0 or 1 are stored as logit(1e-7) and
+/// logit(1 − 1e-7), the nearest finite values.
 pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
-    let names = property_names(scene.sh_degree);
+    let names = property_names(scene);
     let format_name = match format {
         PlyFormat::Ascii => "ascii",
         PlyFormat::BinaryLittleEndian => "binary_little_endian",
         PlyFormat::BinaryBigEndian => "binary_big_endian",
     };
-    let mut out = format!("ply\nformat {format_name} 1.0\nelement vertex {}\n", scene.particles.len());
+    let mut out = format!("ply\nformat {format_name} 1.0\n");
+    if let Some(comment) = Mode::comment(scene.screen_filter) {
+        out += &format!("comment {comment}\n");
+    }
+    out += &format!("element vertex {}\n", scene.particles.len());
     for name in &names {
         out += &format!("property float {name}\n");
     }
     out += "end_header\n";
     let mut bytes = out.into_bytes();
     for p in &scene.particles {
-        let values = stored_values(p, scene.sh_degree);
+        let values = stored_values(p, scene);
         match format {
             PlyFormat::Ascii => {
                 let line: Vec<String> = values.iter().map(|v| v.to_string()).collect();

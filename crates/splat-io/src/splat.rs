@@ -41,7 +41,7 @@ pub fn parse_splat(bytes: &[u8]) -> Result<Scene, ErrorKind> {
         .enumerate()
         .map(|(i, record)| decode(i as u64, record))
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(Scene { particles, sh_degree: 0 })
+    Ok(Scene::new(particles, 0))
 }
 
 fn f32_at(record: &[u8], i: usize) -> f32 {

@@ -13,6 +13,12 @@
 //! 128, coefficient-major with the three channels inner; the writer rounds band 1 to 5 bits and
 //! bands 2–3 to 4 bits, the spz library's defaults).
 //!
+//! **Render mode.** Bit 0x1 of the header's flags byte (offset 14) marks an antialiased capture
+//! (gsplat's antialiased mode, [`ScreenFilter::Antialiased`]); the reader sets the scene's
+//! screen filter from it and the writer sets it for that filter. The format has no mark for
+//! Mip-Splatting's 2D Mip filter: the writer marks such a scene antialiased, the nearest
+//! filter it records ([`crate::SceneFormat::records`]).
+//!
 //! **Axes.** The spz README says spz stores right-up-back (RUB) axes, but the library's default
 //! options (`UNSPECIFIED`) convert nothing, and so do its `ply_to_spz`, PlayCanvas
 //! splat-transform 3.7 and spz-js 1.2: files made from a 3DGS `.ply` by these tools hold the
@@ -23,7 +29,7 @@
 use crate::{Error, ErrorKind, read_file};
 use glam::{Quat, Vec3};
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
-use splat_core::{Particle, Scene};
+use splat_core::{Particle, Scene, ScreenFilter};
 use std::io::Read;
 use std::path::Path;
 
@@ -37,6 +43,8 @@ const LEGACY_HEADER: usize = 16;
 const HEADER_V4: usize = 32;
 /// Largest SH degree the format stores (this reader keeps up to 3).
 const SPZ_MAX_DEGREE: u8 = 4;
+/// The header flag of an antialiased capture.
+const FLAG_ANTIALIASED: u8 = 0x1;
 
 /// Which axes the file's data are in.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -87,9 +95,16 @@ struct Header {
     count: u32,
     sh_degree: u8,
     fractional_bits: u8,
+    /// Bit 0x1: antialiased.
+    flags: u8,
 }
 
 impl Header {
+    /// The fields of the first 16 bytes of either header.
+    fn at(b: &[u8]) -> Self {
+        Header { version: u32_at(b, 4), count: u32_at(b, 8), sh_degree: b[12], fractional_bits: b[13], flags: b[14] }
+    }
+
     fn check(self) -> Result<Self, ErrorKind> {
         if !(2..=4).contains(&self.version) {
             return Err(spz_error(format!(
@@ -180,9 +195,7 @@ fn unpack_legacy(bytes: &[u8]) -> Result<Packed, ErrorKind> {
     if u32_at(&head, 0) != MAGIC {
         return Err(spz_error(format!("bad magic {:#010x} in the gzip stream (expected 'NGSP')", u32_at(&head, 0))));
     }
-    let header =
-        Header { version: u32_at(&head, 4), count: u32_at(&head, 8), sh_degree: head[12], fractional_bits: head[13] }
-            .check()?;
+    let header = Header::at(&head).check()?;
     if header.version == 4 {
         return Err(spz_error("version 4 inside a gzip stream: version 4 files start with a plain 'NGSP' header"));
     }
@@ -197,9 +210,7 @@ fn unpack_v4(bytes: &[u8]) -> Result<Packed, ErrorKind> {
     if bytes.len() < HEADER_V4 {
         return Err(spz_error(format!("{} bytes: shorter than the 32-byte version 4 header", bytes.len())));
     }
-    let header =
-        Header { version: u32_at(bytes, 4), count: u32_at(bytes, 8), sh_degree: bytes[12], fractional_bits: bytes[13] }
-            .check()?;
+    let header = Header::at(bytes).check()?;
     if header.version != 4 {
         return Err(spz_error(format!(
             "a plain 'NGSP' header says version {}: only version 4 is stored so",
@@ -288,7 +299,9 @@ fn decode(packed: &Packed, axes: SpzAxes) -> Result<Scene, ErrorKind> {
         }
         particles.push(p);
     }
-    Ok(Scene { particles, sh_degree: h.sh_degree })
+    let screen_filter =
+        if h.flags & FLAG_ANTIALIASED != 0 { ScreenFilter::Antialiased } else { ScreenFilter::Dilation };
+    Ok(Scene { screen_filter, ..Scene::new(particles, h.sh_degree) })
 }
 
 /// Version 2 rotation: x, y, z as (c + 1) × 127.5, w = √(1 − |xyz|²) ≥ 0.
@@ -361,8 +374,12 @@ pub fn encode_spz(scene: &Scene, options: SpzWriteOptions) -> Result<Vec<u8>, Er
     }
     let count = u32::try_from(scene.particles.len())
         .map_err(|_| spz_error(format!("{} splats exceed the format's 32-bit count", scene.particles.len())))?;
-    let header = Header { version: options.version, count, sh_degree: scene.sh_degree, fractional_bits: 0 };
-    let header = Header { fractional_bits: fractional_bits(scene)?, ..header };
+    let flags = match crate::SceneFormat::Spz.records(scene.screen_filter) {
+        ScreenFilter::Antialiased => FLAG_ANTIALIASED,
+        _ => 0,
+    };
+    let fractional_bits = fractional_bits(scene)?;
+    let header = Header { version: options.version, count, sh_degree: scene.sh_degree, fractional_bits, flags };
     let streams = pack(scene, header, options.axes);
     Ok(if options.version == 4 { container_v4(header, &streams) } else { container_legacy(header, &streams) })
 }
@@ -401,7 +418,7 @@ fn container_legacy(h: Header, streams: &[Vec<u8>; 6]) -> Vec<u8> {
     raw.extend(MAGIC.to_le_bytes());
     raw.extend(h.version.to_le_bytes());
     raw.extend(h.count.to_le_bytes());
-    raw.extend([h.sh_degree, h.fractional_bits, 0, 0]);
+    raw.extend([h.sh_degree, h.fractional_bits, h.flags, 0]);
     streams.iter().for_each(|s| raw.extend(s));
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     std::io::Write::write_all(&mut gz, &raw).expect("writing to memory");
@@ -418,7 +435,7 @@ fn container_v4(h: Header, streams: &[Vec<u8>; 6]) -> Vec<u8> {
     out.extend(MAGIC.to_le_bytes());
     out.extend(h.version.to_le_bytes());
     out.extend(h.count.to_le_bytes());
-    out.extend([h.sh_degree, h.fractional_bits, 0, present.len() as u8]);
+    out.extend([h.sh_degree, h.fractional_bits, h.flags, present.len() as u8]);
     out.extend((HEADER_V4 as u32).to_le_bytes());
     out.extend([0u8; 12]);
     for (raw, packed) in present.iter().zip(&compressed) {

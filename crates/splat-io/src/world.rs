@@ -68,7 +68,7 @@ use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
 use splat_core::path::{Environment, ThinLens};
 use splat_core::sh::Rotation;
-use splat_core::{Camera, Scene};
+use splat_core::{Camera, Scene, ScreenFilter};
 use std::path::{Path, PathBuf};
 
 /// A world as a file specifies it: the particles of every set in one id space, their lighting,
@@ -291,7 +291,7 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
         return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new() });
     };
     let (world, skipped_properties) = if is_world_file(path) {
-        (read_world(path)?, Vec::new())
+        (read_world_as(path, options.screen_filter)?, Vec::new())
     } else {
         let read = crate::read_scene_with(path, options)?;
         (WorldSpec::of(read.scene), read.skipped_properties)
@@ -305,10 +305,16 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
 
 /// Read a world file (`.toml`); set files are resolved relative to its folder.
 pub fn read_world(path: &Path) -> Result<WorldSpec, Error> {
+    read_world_as(path, None)
+}
+
+/// Read a world file whose splats render through `screen_filter`, whatever their files say
+/// (`None`: the filter their files name, which must agree).
+fn read_world_as(path: &Path, screen_filter: Option<ScreenFilter>) -> Result<WorldSpec, Error> {
     let text = String::from_utf8(crate::read_file(path)?)
         .map_err(|e| Error::new(path, ErrorKind::World(format!("not UTF-8 text: {e}"))))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    parse_world(&text, base).map_err(|message| Error::new(path, ErrorKind::World(message)))
+    parse_world(&text, base, screen_filter).map_err(|message| Error::new(path, ErrorKind::World(message)))
 }
 
 /// A file a world entry names that could not be read: the entry's key and file as the world
@@ -325,8 +331,9 @@ fn named_file(file: &Path, error: Error) -> String {
     format!("file = {:?} cannot be read: {error}{hint}", file.display().to_string())
 }
 
-/// Parse world-file text; set files are resolved relative to `base`.
-fn parse_world(text: &str, base: &Path) -> Result<WorldSpec, String> {
+/// Parse world-file text; set files are resolved relative to `base`; `screen_filter` as in
+/// [`read_world_as`].
+fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> Result<WorldSpec, String> {
     let file: WorldFile = toml::from_str(text).map_err(|e| e.to_string())?;
     if file.splats.is_empty() {
         return Err("no [[splats]] set: a world needs at least one".to_string());
@@ -341,6 +348,14 @@ fn parse_world(text: &str, base: &Path) -> Result<WorldSpec, String> {
         let (mut particles, builtin_camera) = load_set(set, base).map_err(|m| format!("splats[{i}]: {m}"))?;
         if i == 0 {
             camera = builtin_camera;
+            scene.screen_filter = screen_filter.unwrap_or(particles.screen_filter);
+        } else if screen_filter.is_none() && particles.screen_filter != scene.screen_filter {
+            return Err(format!(
+                "splats[{i}] was trained with {} but splats[0] with {}: a world's splats render through one \
+                 screen-space filter (choose one for all of them, or render the sets apart)",
+                particles.screen_filter.describe(),
+                scene.screen_filter.describe()
+            ));
         }
         if let Some(d) = set.sh_degree {
             truncate_sh(&mut particles, d);
@@ -593,7 +608,7 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<WorldSpec, String> {
-        parse_world(text, Path::new("."))
+        parse_world(text, Path::new("."), None)
     }
 
     #[test]
@@ -690,7 +705,7 @@ mod tests {
 
     #[test]
     fn sh_degree_cut_zeroes_the_upper_bands() {
-        let mut scene = Scene { particles: vec![splat_core::scenes::layers().0.particles[0].clone()], sh_degree: 3 };
+        let mut scene = Scene::new(vec![splat_core::scenes::layers().0.particles[0].clone()], 3);
         scene.particles[0].sh = [Vec3::ONE; 16].into();
         truncate_sh(&mut scene, 1);
         assert_eq!(scene.sh_degree, 1);

@@ -3,7 +3,7 @@
 use approx::assert_relative_eq;
 use glam::{Quat, Vec3};
 use proptest::prelude::*;
-use splat_core::{Particle, Scene, scenes};
+use splat_core::{Particle, Scene, ScreenFilter, scenes};
 use splat_io::ErrorKind;
 use splat_io::cameras::{parse_cameras, write_cameras};
 use splat_io::ply::{PlyFormat, PlyOptions, encode_ply, parse_ply};
@@ -297,7 +297,7 @@ proptest! {
     /// coefficients past degree 2 are zeroed by the writer's degree).
     #[test]
     fn ply_round_trip_property(ps in prop::collection::vec(particle(), 0..20)) {
-        let mut scene = Scene { particles: ps, sh_degree: 2 };
+        let mut scene = Scene::new(ps, 2);
         for p in &mut scene.particles {
             p.sh.truncate(9);
         }
@@ -305,5 +305,75 @@ proptest! {
             let back = parse_ply(&encode_ply(&scene, format), PlyOptions::default()).unwrap();
             assert_same_scene(&scene, &back, 1e-4);
         }
+    }
+}
+
+/// The minimal ASCII file with `comments` in its header.
+fn commented(comments: &[&str]) -> Vec<u8> {
+    let file = String::from_utf8(ascii(&GOOD)).unwrap();
+    let lines: String = comments.iter().map(|c| format!("comment {c}\n")).collect();
+    file.replacen("element vertex", &format!("{lines}element vertex"), 1).into_bytes()
+}
+
+fn filter_of(bytes: &[u8]) -> ScreenFilter {
+    parse_ply(bytes, PlyOptions::default()).unwrap().screen_filter
+}
+
+/// The render-mode comments in the wild, read as splat-transform reads them: Brush's and
+/// gsplat's `SplatRenderMode` in any case and spacing (`mip` is gsplat's antialiased mode, an
+/// unknown mode the default), Postshot's `antialiased 0|1`, the last one deciding; none at all
+/// is the 3DGS dilation; Mip-Splatting's `filter_3D` outranks any comment.
+#[test]
+fn the_render_mode_comments_of_every_trainer_are_read() {
+    let (dilation, antialiased) = (ScreenFilter::Dilation, ScreenFilter::Antialiased);
+    for (comments, expected) in [
+        (&[][..], dilation),
+        (&["Exported from Brush", "SH degree: 0"][..], dilation),
+        (&["SplatRenderMode: mip"][..], antialiased),
+        (&["  SPLATRENDERMODE:  MIP  "][..], antialiased),
+        (&["SplatRenderMode: default"][..], dilation),
+        (&["SplatRenderMode: banana"][..], dilation),
+        (&["antialiased 1"][..], antialiased),
+        (&["antialiased 0"][..], dilation),
+        (&["antialiased 1", "SplatRenderMode: default"][..], dilation),
+        (&["SplatRenderMode: default", "antialiased 1"][..], antialiased),
+    ] {
+        assert_eq!(filter_of(&commented(comments)), expected, "{comments:?}");
+    }
+    let mip = String::from_utf8(commented(&["SplatRenderMode: mip"])).unwrap();
+    let mip = mip.replace("property float rot_3\n", "property float rot_3\nproperty float filter_3D\n");
+    let mip = mip.replace("1 0 0 0\n", "1 0 0 0 0.01\n");
+    assert_eq!(filter_of(mip.as_bytes()), ScreenFilter::Mip, "filter_3D makes a Mip-Splatting capture");
+}
+
+/// A 2DGS capture is refused with the reason, whether its comment says so or its properties
+/// (two scales) do, rather than rendered as 3D Gaussians.
+#[test]
+fn a_2dgs_capture_is_refused_by_name() {
+    let e = err(&commented(&["SplatRenderMode: 2dgs"])).to_string();
+    assert!(e.contains("2DGS") && e.contains("SplatRenderMode: 2dgs"), "{e}");
+    let props: Vec<&str> = PROPS.iter().copied().filter(|&p| p != "scale_2").collect();
+    let values: Vec<&str> = GOOD.iter().enumerate().filter(|&(i, _)| i != 9).map(|(_, v)| *v).collect();
+    let e = err((header(&props, 1, "ascii") + &values.join(" ") + "\n").as_bytes()).to_string();
+    assert!(e.contains("2DGS") && e.contains("no scale_2"), "{e}");
+}
+
+/// Every filter survives the `.ply` writer and reader, with the particles: antialiased as
+/// Brush's comment, Mip-Splatting's as a `filter_3D` of zeros (its 3D filter is already in the
+/// particles, so reading it back changes none); the 3DGS dilation writes no comment.
+#[test]
+fn every_screen_filter_round_trips_through_ply() {
+    let (scene, _) = scenes::layers();
+    for filter in ScreenFilter::ALL {
+        let scene = Scene { screen_filter: filter, ..scene.clone() };
+        let bytes = encode_ply(&scene, PlyFormat::BinaryLittleEndian);
+        let header =
+            String::from_utf8_lossy(&bytes[..bytes.windows(10).position(|w| w == b"end_header").unwrap()]).into_owned();
+        assert_eq!(header.contains("comment SplatRenderMode: mip"), filter == ScreenFilter::Antialiased, "{header}");
+        assert_eq!(header.contains("property float filter_3D"), filter == ScreenFilter::Mip, "{header}");
+        assert_eq!(header.contains("comment"), filter == ScreenFilter::Antialiased, "{header}");
+        let back = parse_ply(&bytes, PlyOptions::default()).unwrap();
+        assert_eq!(back.screen_filter, filter);
+        assert_same_scene(&scene, &back, 1e-5);
     }
 }

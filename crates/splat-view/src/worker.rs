@@ -172,7 +172,7 @@ enum View<'t> {
     },
     /// The CPU's running mean, and the algorithm prepared for the view (a splatting method's
     /// projected and sorted splats, kept while the camera holds still).
-    Cpu(CpuAccumulation, Option<PreparedView<'t>>),
+    Cpu(CpuAccumulation, Option<Box<PreparedView<'t>>>),
 }
 
 /// Frames per second over a sliding second.
@@ -373,7 +373,7 @@ impl Renderer {
                     Some(view) => view,
                     None => {
                         let view = job.settings.algorithm().prepare(trace, &job.camera).map_err(|e| e.to_string())?;
-                        prepared.insert(view)
+                        prepared.insert(Box::new(view))
                     }
                 };
                 let frame = view.render(&cpu_frame(&job.settings, acc.frames()), &|_| {});

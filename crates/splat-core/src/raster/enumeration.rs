@@ -154,7 +154,7 @@ fn small_scene() -> (Scene, Camera) {
         })
         .collect();
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO, Vec3::Y, 14.0, 6, 6).unwrap();
-    (Scene { particles, sh_degree: 0 }, camera)
+    (Scene::new(particles, 0), camera)
 }
 
 /// E[frame] of `method` at every pixel equals sorted splatting to `tol`, on `samples` samples

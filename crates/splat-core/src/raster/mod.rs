@@ -186,6 +186,7 @@ impl<'a> Rasterizer<'a> {
     ) -> Result<Self, RenderError> {
         validate_scene(scene, &settings)?;
         camera.validate()?;
+        camera.require_pinhole("the splatting methods")?;
         raster.validate()?;
         let mut splats: Vec<Splat> = (0..scene.particles.len() as u32)
             .filter_map(|i| project(scene, i, camera, &settings.kernel, raster.extent))

@@ -7,8 +7,6 @@ use crate::particle::Scene;
 use crate::sh;
 use glam::{Mat3, Vec2, Vec3};
 
-/// Low-pass dilation added to the projected covariance, in px² (3DGS).
-pub const DILATION: f32 = 0.3;
 /// The `Sqrt8` extent reaches √8 σ: fragments whose Mahalanobis term A exceeds 8 are discarded.
 pub const EXTENT_SQ: f32 = 8.0;
 /// The `ThreeDgs` extent is a square of half-width ⌈3 √λ_max⌉ px around the centre (λ_max the
@@ -42,11 +40,11 @@ pub struct Splat {
     pub id: u32,
     /// Projected centre, pixels (pixel i covers [i, i + 1)).
     pub mean: Vec2,
-    /// Inverse of the dilated 2D covariance Σ′ as (a, b, c): A = a dx² + 2 b dx dy + c dy².
+    /// Inverse of the filtered 2D covariance Σ′ as (a, b, c): A = a dx² + 2 b dx dy + c dy².
     pub conic: Vec3,
     /// View-space depth z of the centre: the billboard depth and the global sort key.
     pub depth: f32,
-    /// Particle opacity.
+    /// The splat's opacity: the particle's, times the screen filter's compensation ρ.
     pub opacity: f32,
     /// SH colour seen along the direction from the camera centre to the particle centre.
     pub color: Vec3,
@@ -92,9 +90,10 @@ impl Splat {
 /// Project particle `index` of `scene` for `camera`; `None` when it is culled (behind the near
 /// plane, outside the image, or unable to reach the alpha cull anywhere).
 ///
-/// Σ′ = J W Σ Wᵀ Jᵀ + 0.3 I, with W the world-to-camera rotation and J the Jacobian of the
+/// Σ₂ = J W Σ Wᵀ Jᵀ, with W the world-to-camera rotation and J the Jacobian of the
 /// perspective projection at the centre t = (x, y, z): J = [[f_x/z, 0, −f_x x/z²],
-/// [0, f_y/z, −f_y y/z²]].
+/// [0, f_y/z, −f_y y/z²]]; then the scene's screen filter: Σ′ = Σ₂ + s I and the opacity
+/// ρ o ([`crate::ScreenFilter`]; s = 0.3 px² and ρ = 1 for 3DGS).
 pub fn project(
     scene: &Scene,
     index: u32,
@@ -103,6 +102,7 @@ pub fn project(
     extent: SplatExtent,
 ) -> Option<Splat> {
     let p = &scene.particles[index as usize];
+    // ρ ≤ 1, so a particle below the cull stays below it.
     if p.opacity < kernel.alpha_cull {
         return None;
     }
@@ -122,9 +122,13 @@ pub fn project(
     );
     let jw = j * camera.rotation;
     let cov = jw * p.covariance() * jw.transpose();
-    let (a, b, c) = (cov.x_axis.x + DILATION, cov.y_axis.x, cov.y_axis.y + DILATION);
+    let ([a, b, c], rho) = scene.screen_filter.apply(cov.x_axis.x, cov.y_axis.x, cov.y_axis.y);
     let det = a * c - b * b;
     if det.is_nan() || det <= 0.0 || !det.is_finite() {
+        return None;
+    }
+    let opacity = rho * p.opacity;
+    if opacity < kernel.alpha_cull {
         return None;
     }
     let conic = Vec3::new(c / det, -b / det, a / det);
@@ -145,12 +149,14 @@ pub fn project(
     let (y0, y1) = clip(mean.y - ry, mean.y + ry, h)?;
     let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
     let rect = [x0, y0, x1, y1];
-    Some(Splat { id: index, mean, conic, depth: t.z, opacity: p.opacity, color, radius, extent, rect })
+    Some(Splat { id: index, mean, conic, depth: t.z, opacity, color, radius, extent, rect })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ScreenFilter;
+    use crate::filter::DILATION;
     use crate::particle::Particle;
     use approx::assert_relative_eq;
     use glam::Quat;
@@ -164,7 +170,7 @@ mod tests {
     fn isotropic_particle_projects_to_the_expected_circle() {
         let cam = camera();
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.8, Vec3::ONE);
-        let scene = Scene { particles: vec![p], sh_degree: 0 };
+        let scene = Scene::new(vec![p], 0);
         let s = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::Sqrt8).unwrap();
         let sigma2 = (cam.fx * 0.1 / 4.0).powi(2) + DILATION;
         assert_relative_eq!(s.conic.x, 1.0 / sigma2, max_relative = 1e-4);
@@ -178,6 +184,25 @@ mod tests {
         assert!(s.alpha(s.mean + Vec2::new(2.9 * sigma2.sqrt(), 0.0), &KernelParams::default()).is_none());
     }
 
+    /// Each screen filter on a round splat of σ² px²: σ′² = σ² + s, and where the filter
+    /// compensates, opacity × √(det Σ₂ / det Σ′) = σ² / (σ² + s).
+    #[test]
+    fn each_screen_filter_widens_and_compensates_as_its_trainer() {
+        let cam = camera();
+        let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.02), Quat::IDENTITY, 0.8, Vec3::ONE);
+        let sigma2 = (cam.fx * 0.02 / 4.0).powi(2);
+        for (filter, s, rho) in [
+            (ScreenFilter::Dilation, 0.3, 1.0),
+            (ScreenFilter::Antialiased, 0.3, sigma2 / (sigma2 + 0.3)),
+            (ScreenFilter::Mip, 0.1, sigma2 / (sigma2 + 0.1)),
+        ] {
+            let scene = Scene { screen_filter: filter, ..Scene::new(vec![p.clone()], 0) };
+            let splat = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::ThreeDgs).unwrap();
+            assert_relative_eq!(splat.conic.x, 1.0 / (sigma2 + s), max_relative = 1e-4);
+            assert_relative_eq!(splat.opacity, 0.8 * rho, max_relative = 1e-4);
+        }
+    }
+
     /// The 2D covariance matches the finite-difference Jacobian of the projection applied to
     /// Σ (the linearisation EWA makes), for an anisotropic, rotated, off-axis particle.
     #[test]
@@ -185,7 +210,7 @@ mod tests {
         let cam = camera();
         let rot = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1);
         let p = Particle::with_rgb(Vec3::new(0.4, -0.3, 0.5), Vec3::new(0.2, 0.05, 0.1), rot, 0.5, Vec3::ONE);
-        let scene = Scene { particles: vec![p.clone()], sh_degree: 0 };
+        let scene = Scene::new(vec![p.clone()], 0);
         let s = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::Sqrt8).unwrap();
         let f = |x: Vec3| cam.project_camera(cam.to_camera(x));
         let eps = 1e-3;
@@ -209,10 +234,7 @@ mod tests {
     fn particles_behind_or_outside_are_culled() {
         let cam = camera();
         let at = |m: Vec3| Particle::with_rgb(m, Vec3::splat(0.05), Quat::IDENTITY, 0.8, Vec3::ONE);
-        let scene = Scene {
-            particles: vec![at(Vec3::new(0.0, 0.0, 5.0)), at(Vec3::new(30.0, 0.0, 0.0)), at(Vec3::ZERO)],
-            sh_degree: 0,
-        };
+        let scene = Scene::new(vec![at(Vec3::new(0.0, 0.0, 5.0)), at(Vec3::new(30.0, 0.0, 0.0)), at(Vec3::ZERO)], 0);
         let k = KernelParams::default();
         assert!(project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).is_none(), "behind the camera");
         assert!(project(&scene, 1, &cam, &k, SplatExtent::ThreeDgs).is_none(), "outside the image");
@@ -225,7 +247,7 @@ mod tests {
     fn the_3dgs_box_reaches_past_sqrt8_sigma() {
         let cam = camera();
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.99, Vec3::ONE);
-        let scene = Scene { particles: vec![p], sh_degree: 0 };
+        let scene = Scene::new(vec![p], 0);
         let k = KernelParams::default();
         let s = project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).unwrap();
         let sigma = (1.0 / s.conic.x).sqrt();

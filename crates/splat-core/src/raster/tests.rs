@@ -44,7 +44,7 @@ fn over_equals_under() {
 #[test]
 fn sorted_splatting_matches_the_ray_traced_oracle_where_ewa_is_exact() {
     let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.3), Quat::IDENTITY, 0.9, Vec3::new(1.0, 0.5, 0.2));
-    let scene = Scene { particles: vec![p], sh_degree: 0 };
+    let scene = Scene::new(vec![p], 0);
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 20.0), Vec3::ZERO, Vec3::Y, 10.0, 48, 48).unwrap();
     let mut settings = RenderSettings::default();
     settings.kernel.cutoff = project::EXTENT_SQ.sqrt();
@@ -79,7 +79,7 @@ fn one_pixel(opacities: &[f32], samples: u32) -> (Scene, Camera) {
             Particle::with_rgb(mean, Vec3::splat(1.0), Quat::IDENTITY, o, rgb)
         })
         .collect();
-    let scene = Scene { particles, sh_degree: 0 };
+    let scene = Scene::new(particles, 0);
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 2.0, 1, 1).unwrap();
     assert!(SAMPLE_COUNTS.contains(&samples));
     (scene, camera)

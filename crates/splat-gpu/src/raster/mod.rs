@@ -199,6 +199,7 @@ impl<'a> GpuRasterizer<'a> {
         raster: &RasterSettings,
     ) -> Result<Self, GpuError> {
         camera.validate().map_err(RenderError::from)?;
+        camera.require_pinhole("the splatting methods").map_err(RenderError::from)?;
         check_settings(raster)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -763,7 +764,6 @@ mod tests {
             [
                 "TILE" = TILE,
                 "NEAR" = project::NEAR,
-                "DILATION" = project::DILATION,
                 "EXTENT_SQ" = project::EXTENT_SQ,
                 "BOX_SIGMAS" = project::BOX_SIGMAS,
                 "EIGEN_FLOOR" = project::EIGEN_FLOOR,
@@ -829,7 +829,10 @@ mod tests {
                 meshes,
                 first_hit,
                 samples,
-                hilbert_order
+                hilbert_order,
+                filter_variance,
+                filter_compensates,
+                pad
             ]
         );
         assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, u_shift]);

@@ -44,7 +44,7 @@ pub struct GpuSplat {
     pub rect: [u32; 4],
 }
 
-/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 176 bytes).
+/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 208 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RasterParams {
@@ -102,6 +102,13 @@ pub struct RasterParams {
     pub samples: u32,
     /// Order of the Hilbert curve over the image (Laine–Karras pixel ids).
     pub hilbert_order: u32,
+    /// The scene's screen filter: the variance s added to Σ₂, px²
+    /// ([`splat_core::ScreenFilter::variance`]).
+    pub filter_variance: f32,
+    /// 1 when the filter scales the opacity by ρ = √(det Σ₂ / det Σ′).
+    pub filter_compensates: u32,
+    /// Padding.
+    pub pad: [u32; 2],
 }
 
 /// Per-frame uniforms (WGSL `FrameParams`).
@@ -126,6 +133,7 @@ pub struct RasterScene {
     pub(super) sh: wgpu::Buffer,
     pub(super) count: u32,
     pub(super) sh_degree: u32,
+    pub(super) screen_filter: splat_core::ScreenFilter,
     pub(super) settings: RenderSettings,
     pub(super) lighting: Lighting,
     pub(super) materials: wgpu::Buffer,
@@ -195,6 +203,7 @@ impl RasterScene {
             sh: ctx.upload("raster sh", bytemuck::cast_slice(&sh)),
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
+            screen_filter: scene.screen_filter,
             settings: *settings,
             materials: ctx.upload("raster materials", bytemuck::cast_slice(&crate::layout::materials(lighting))),
             lights: ctx.upload("raster lights", bytemuck::cast_slice(&crate::layout::lights(lighting))),
@@ -283,5 +292,8 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &Raste
         first_hit: 0,
         samples: raster.samples,
         hilbert_order: splat_core::rng::hilbert_order(camera.width, camera.height),
+        filter_variance: scene.screen_filter.variance(),
+        filter_compensates: u32::from(scene.screen_filter.compensates()),
+        pad: [0; 2],
     }
 }
