@@ -389,7 +389,7 @@ pub struct ReadArgs {
     /// The screen-space filter the capture was trained with, which the splatting methods apply
     /// (default: the one its file names, by a `SplatRenderMode` or `antialiased` comment, a
     /// `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
-    #[arg(long, value_parser = screen_filter_parser())]
+    #[arg(long, value_parser = splat_view::screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
 }
 
@@ -398,13 +398,6 @@ impl ReadArgs {
     pub fn options(&self) -> splat_io::ReadOptions {
         splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into(), screen_filter: self.screen_filter }
     }
-}
-
-/// The values of `--screen-filter`: every [`ScreenFilter`] by its name, described.
-fn screen_filter_parser() -> impl TypedValueParser<Value = ScreenFilter> {
-    let values = ScreenFilter::ALL.map(|f| PossibleValue::new(f.name()).help(f.describe()));
-    PossibleValuesParser::new(values)
-        .map(|name| *ScreenFilter::ALL.iter().find(|f| f.name() == name).expect("a filter's name"))
 }
 
 /// Axes of `.spz` data.

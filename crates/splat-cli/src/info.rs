@@ -36,6 +36,13 @@ pub fn run(args: InfoArgs) -> Result<()> {
     if read.filter_3d {
         out!("3D filter  Mip-Splatting's filter_3D, applied (scales and opacities as Mip-Splatting renders them)");
     }
+    if read.surfels {
+        out!(
+            "surfels    2D Gaussians (2DGS), read as Gaussians {:.0e} × their larger scale thick: the ray tracers \
+             evaluate them at their ray–splat intersection, splatting projects them as flat ellipses",
+            splat_core::particle::SURFEL_THICKNESS
+        );
+    }
     let filter = scene.screen_filter;
     if filter == read.file_filter {
         out!("2D filter  {}", filter.describe());

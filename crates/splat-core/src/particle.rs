@@ -321,6 +321,16 @@ impl Aabb {
     }
 }
 
+/// The third scale of a 2D Gaussian (a 2DGS surfel, Huang et al. 2024), relative to its larger
+/// in-plane scale. Along any ray that does not graze the surfel's plane, a 3D Gaussian this flat
+/// responds most where the ray crosses the plane, with the in-plane Gaussian's value there: its
+/// squared Mahalanobis distance of closest approach is the surfel's ray–splat intersection
+/// (2DGS §4.2) to a relative O(ε² cot² θ), θ the ray's angle to the plane. So every renderer
+/// that evaluates 3D Gaussians along rays renders surfels through the surfel equation, and the
+/// readers give 2DGS captures this thickness. Small enough to be invisible, large enough that
+/// the canonical transform (1/ε) stays well inside f32.
+pub const SURFEL_THICKNESS: f32 = 1e-5;
+
 /// A set of particles sharing one SH degree and one screen-space filter.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scene {

@@ -535,3 +535,23 @@ fn frames_through_each_lens_equal_the_cpu_frames() {
         assert!(control > 0.05, "{name}: the lens changes nothing ({control})");
     }
 }
+
+/// 2DGS surfels (Gaussians [`splat_core::particle::SURFEL_THICKNESS`] thick, seen obliquely): the
+/// GPU's f32 canonical transform, which scales the thin axis by 1e5, gives the CPU's `exact`
+/// frame to the compositing tolerance.
+#[test]
+fn surfels_render_on_the_gpu_as_on_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let (mut scene, camera) = fixture("layers", 40, 30);
+    for (i, p) in scene.particles.iter_mut().enumerate() {
+        p.rotation = (splat_core::glam::Quat::from_rotation_x(0.5 + 0.3 * i as f32) * p.rotation).normalize();
+        p.scale.z = splat_core::particle::SURFEL_THICKNESS * p.scale.x.max(p.scale.y);
+    }
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let frames = Frames { count: 1, seed: 5, ..Frames::default() };
+    let cpu = render_frames(&trace, &camera, &Method::Exact, &frames, &|_| {}).unwrap();
+    let gpu = gpu_run(&tracer(ctx, &trace), &camera, &Method::Exact, frames);
+    let d = max_difference(cpu.mean.data(), gpu.mean.data());
+    eprintln!("surfels: |GPU − CPU| {d:.1e}");
+    assert!(d <= FLOAT_TOLERANCE, "surfels differ between the backends by {d}");
+}

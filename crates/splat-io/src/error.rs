@@ -188,11 +188,6 @@ pub enum ErrorKind {
     /// A mesh file (OBJ, glTF) is malformed or holds no triangles.
     #[error("mesh: {0}")]
     Mesh(String),
-    /// The file is a capture of 2D Gaussians (2DGS surfels), which this version does not render.
-    #[error(
-        "a 2DGS capture ({0}): its 2D Gaussian surfels are evaluated on their own planes, which splat does not render yet; rendered as 3D Gaussians they would be silently wrong"
-    )]
-    Surfels(&'static str),
     /// The file reads but holds neither splats nor meshes.
     #[error("holds no splats and no meshes: nothing to render")]
     Empty,

@@ -112,6 +112,8 @@ pub struct SceneRead {
     /// Whether the file carried Mip-Splatting's 3D smoothing filter (`filter_3D`), applied to
     /// the scene read ([`ply`]).
     pub filter_3d: bool,
+    /// Whether the file held 2D Gaussians (2DGS surfels), read as flat Gaussians ([`ply`]).
+    pub surfels: bool,
     /// The screen filter the file names (by its render-mode comment, `filter_3D` or `.spz`
     /// flag; the 3DGS dilation where it names none). The scene's is this unless
     /// [`ReadOptions::screen_filter`] overrides it.
@@ -144,6 +146,7 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         format,
         skipped_properties: Vec::new(),
         filter_3d: false,
+        surfels: false,
     };
     let mut read = match extension(path).as_deref() {
         Some("ply") => {
@@ -151,7 +154,8 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
             let ply = ply::parse_ply_report(&bytes, plain).map_err(|kind| Error::new(path, kind))?;
             let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
-            SceneRead { skipped_properties: ply.skipped, filter_3d: ply.filter_3d, ..read(format, ply.scene) }
+            let (skipped_properties, filter_3d, surfels) = (ply.skipped, ply.filter_3d, ply.surfels);
+            SceneRead { skipped_properties, filter_3d, surfels, ..read(format, ply.scene) }
         }
         Some("splat") => read(SceneFormat::Splat, splat::read_splat(path)?),
         Some("spz") => read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?),

@@ -21,15 +21,19 @@
 //! The writer records it as splat-transform and Brush write it: `SplatRenderMode: mip` for the
 //! antialiased mode, no comment for the default, and for Mip-Splatting's filter a `filter_3D`
 //! of zeros (the 3D filter is already folded into the scales and opacities), which
-//! Mip-Splatting's own loader reads too. A 2DGS capture (`SplatRenderMode: 2dgs`, or
-//! `scale_0`, `scale_1` without `scale_2`) is refused ([`ErrorKind::Surfels`]).
+//! Mip-Splatting's own loader reads too.
+//!
+//! A 2DGS capture (2D Gaussians: `SplatRenderMode: 2dgs`, or `scale_0`, `scale_1` without
+//! `scale_2`) is read as flat 3D Gaussians whose third scale is
+//! [`splat_core::particle::SURFEL_THICKNESS`] × the larger of the two (any stored `scale_2` is
+//! ignored): the ray tracers then evaluate each surfel at its ray–splat intersection.
 //!
 //! A file whose first element is `chunk` is a PlayCanvas compressed `.ply`, decoded by
 //! [`crate::compressed_ply`].
 
 use crate::{Error, ErrorKind, read_file};
 use glam::{Quat, Vec3};
-use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_core::particle::{SH_MAX_COEFFS, SURFEL_THICKNESS, sh_coeff_count};
 use splat_core::{Particle, ParticleError, Scene, ScreenFilter};
 use std::path::Path;
 
@@ -83,30 +87,33 @@ pub struct PlyRead {
     pub compressed: bool,
     /// Whether it carried Mip-Splatting's `filter_3D`, applied to the scene read.
     pub filter_3d: bool,
+    /// Whether it was a 2DGS capture, read as surfels (see the module documentation).
+    pub surfels: bool,
 }
 
 /// Parse the bytes of a `.ply`, reporting the properties it skipped.
 pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, ErrorKind> {
     let mode = Mode::of_header(bytes);
-    if mode == Some(Mode::Surfels) {
-        return Err(ErrorKind::Surfels("its header says SplatRenderMode: 2dgs"));
-    }
     if let Some((elements, body)) = crate::compressed_ply::sniff(bytes)? {
         let screen_filter = match mode {
             Some(Mode::Filter(filter)) => filter,
             Some(Mode::Surfels) | None => ScreenFilter::Dilation,
         };
-        let scene = Scene { screen_filter, ..crate::compressed_ply::parse(bytes, &elements, body)? };
-        return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true, filter_3d: false });
+        let mut scene = Scene { screen_filter, ..crate::compressed_ply::parse(bytes, &elements, body)? };
+        let surfels = mode == Some(Mode::Surfels);
+        if surfels {
+            for p in &mut scene.particles {
+                p.scale.z = SURFEL_THICKNESS * p.scale.x.max(p.scale.y);
+            }
+        }
+        return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true, filter_3d: false, surfels });
     }
     let header = Header::parse(bytes, options)?;
     let has = |slot: Slot| header.properties.iter().any(|p| p.slot == slot);
-    if has(Slot::Scale(0)) && has(Slot::Scale(1)) && !has(Slot::Scale(2)) {
-        return Err(ErrorKind::Surfels("two scales, scale_0 and scale_1, and no scale_2"));
-    }
+    let surfels = mode == Some(Mode::Surfels) || (has(Slot::Scale(0)) && has(Slot::Scale(1)) && !has(Slot::Scale(2)));
     let body = &bytes[header.body_offset..];
     let count = header.count;
-    let layout = Layout::new(&header.properties)?;
+    let layout = Layout::new(&header.properties, surfels)?;
     let mut particles = Vec::with_capacity(capacity(count, body.len(), header.properties.len()));
     let mut values = vec![0.0f64; header.properties.len()];
     let mut emit = |index: u64, values: &[f64]| -> Result<(), ErrorKind> {
@@ -157,7 +164,7 @@ pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, Er
         Some(Mode::Surfels) | None => ScreenFilter::Dilation,
     };
     let scene = Scene { screen_filter, ..Scene::new(particles, layout.sh_degree) };
-    Ok(PlyRead { scene, skipped, compressed: false, filter_3d })
+    Ok(PlyRead { scene, skipped, compressed: false, filter_3d, surfels })
 }
 
 /// A render mode a header comment names.
@@ -444,10 +451,12 @@ impl Header {
 /// Where each particle field comes from, checked once per file.
 struct Layout {
     sh_degree: u8,
+    /// 2DGS surfels: two scales, the third [`SURFEL_THICKNESS`] × the larger.
+    surfels: bool,
 }
 
 impl Layout {
-    fn new(properties: &[Property]) -> Result<Self, ErrorKind> {
+    fn new(properties: &[Property], surfels: bool) -> Result<Self, ErrorKind> {
         let has = |slot: Slot| properties.iter().any(|p| p.slot == slot);
         let required = [
             ("x", Slot::Position(0)),
@@ -465,8 +474,10 @@ impl Layout {
             ("rot_2", Slot::Rotation(2)),
             ("rot_3", Slot::Rotation(3)),
         ];
+        // A surfel has no third scale to read.
+        let optional = |slot: Slot| surfels && slot == Slot::Scale(2);
         for (name, slot) in required {
-            if !has(slot) {
+            if !has(slot) && !optional(slot) {
                 return Err(ErrorKind::MissingProperty(name.into()));
             }
         }
@@ -486,7 +497,7 @@ impl Layout {
         if let Some(missing) = (0..rest).find(|&i| !has(Slot::Rest(i))) {
             return Err(ErrorKind::MissingProperty(format!("f_rest_{missing}")));
         }
-        Ok(Self { sh_degree })
+        Ok(Self { sh_degree, surfels })
     }
 
     /// Build one particle from its property values, applying the 3DGS activations.
@@ -538,6 +549,9 @@ impl Layout {
             *c = Vec3::new(rest[k - 1] as f32, rest[per_channel + k - 1] as f32, rest[2 * per_channel + k - 1] as f32);
         }
         let opacity = 1.0 / (1.0 + (-opacity).exp());
+        if self.surfels {
+            linear_scale[2] = SURFEL_THICKNESS * linear_scale[0].max(linear_scale[1]);
+        }
         let (linear_scale, opacity) = smoothed(linear_scale, opacity, filter);
         let particle =
             Particle::new(vec3(position), Vec3::from(linear_scale), q, opacity, sh).map_err(|error| match error {

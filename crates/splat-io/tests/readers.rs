@@ -346,16 +346,23 @@ fn the_render_mode_comments_of_every_trainer_are_read() {
     assert_eq!(filter_of(mip.as_bytes()), ScreenFilter::Mip, "filter_3D makes a Mip-Splatting capture");
 }
 
-/// A 2DGS capture is refused with the reason, whether its comment says so or its properties
-/// (two scales) do, rather than rendered as 3D Gaussians.
+/// A 2DGS capture, whether its properties (two scales) or its comment say so, is read as
+/// surfels: the third scale is the surfel thickness × the larger one, whatever a stored
+/// `scale_2` says; a 3DGS file keeps its third scale.
 #[test]
-fn a_2dgs_capture_is_refused_by_name() {
-    let e = err(&commented(&["SplatRenderMode: 2dgs"])).to_string();
-    assert!(e.contains("2DGS") && e.contains("SplatRenderMode: 2dgs"), "{e}");
+fn a_2dgs_capture_is_read_as_surfels() {
+    use splat_core::particle::SURFEL_THICKNESS;
+    let thin = |scene: &Scene| scene.particles[0].scale.z / scene.particles[0].scale.x.max(scene.particles[0].scale.y);
     let props: Vec<&str> = PROPS.iter().copied().filter(|&p| p != "scale_2").collect();
     let values: Vec<&str> = GOOD.iter().enumerate().filter(|&(i, _)| i != 9).map(|(_, v)| *v).collect();
-    let e = err((header(&props, 1, "ascii") + &values.join(" ") + "\n").as_bytes()).to_string();
-    assert!(e.contains("2DGS") && e.contains("no scale_2"), "{e}");
+    let two_scales =
+        parse_ply((header(&props, 1, "ascii") + &values.join(" ") + "\n").as_bytes(), PlyOptions::default());
+    let tagged = parse_ply(&commented(&["SplatRenderMode: 2dgs"]), PlyOptions::default());
+    for scene in [two_scales.unwrap(), tagged.unwrap()] {
+        assert!((thin(&scene) - SURFEL_THICKNESS).abs() < 1e-9, "{:?}", scene.particles[0].scale);
+        assert_relative_eq!(scene.particles[0].scale.x, (-1.0f32).exp());
+    }
+    assert_relative_eq!(thin(&parse_ply(&ascii(&GOOD), PlyOptions::default()).unwrap()), 1.0);
 }
 
 /// Every filter survives the `.ply` writer and reader, with the particles: antialiased as

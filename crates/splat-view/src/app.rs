@@ -402,7 +402,8 @@ impl Viewer {
     /// The side panel.
     fn panel(&mut self, ui: &mut egui::Ui) {
         ui.heading("splat view");
-        ui.label(format!("{}: {} splats, SH degree {}", self.scene.name, self.scene.particles, self.scene.sh_degree));
+        ui.label(format!("{}: {} splats, SH degree {}", self.scene.name, self.scene.particles, self.scene.sh_degree))
+            .on_hover_text(format!("splatting through {}", self.scene.screen_filter.describe()));
         ui.separator();
         self.renderer_section(ui);
         ui.separator();

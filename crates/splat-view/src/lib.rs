@@ -22,6 +22,7 @@ pub use app::{BackendChoice, KEY_BINDINGS, Options, Viewer};
 
 use anyhow::{Context, Result};
 use eframe::egui_wgpu;
+use splat_core::ScreenFilter;
 use splat_core::glam::Vec3;
 use splat_gpu::GpuContext;
 use std::path::PathBuf;
@@ -59,6 +60,19 @@ pub struct ViewArgs {
     /// Render N frames of the first view, print a summary and close the window (smoke tests).
     #[arg(long, value_name = "N")]
     pub quit_after: Option<u32>,
+    /// The screen-space filter the capture was trained with, which the splatting methods apply
+    /// (default: the one its file names; else 3dgs).
+    #[arg(long, value_parser = screen_filter_parser())]
+    pub screen_filter: Option<ScreenFilter>,
+}
+
+/// The values of `--screen-filter` (here and in the `splat` commands): every [`ScreenFilter`]
+/// by its name, described.
+pub fn screen_filter_parser() -> impl clap::builder::TypedValueParser<Value = ScreenFilter> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    let values = ScreenFilter::ALL.map(|f| PossibleValue::new(f.name()).help(f.describe()));
+    PossibleValuesParser::new(values)
+        .map(|name| *ScreenFilter::ALL.iter().find(|f| f.name() == name).expect("a filter's name"))
 }
 
 impl ViewArgs {
@@ -88,7 +102,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if args.width < 64.0 || args.height < 64.0 || !args.width.is_finite() || !args.height.is_finite() {
         anyhow::bail!("--width and --height must be at least 64 points");
     }
-    let loaded = load::load(args.scene.as_deref(), args.camera.as_deref())?;
+    let read = splat_io::ReadOptions { screen_filter: args.screen_filter, ..Default::default() };
+    let loaded = load::load(args.scene.as_deref(), args.camera.as_deref(), read)?;
     if let Some(camera) = &args.camera
         && args.camera_index >= loaded.info.views.len()
     {

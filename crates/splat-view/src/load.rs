@@ -33,12 +33,14 @@ pub struct SceneInfo {
     pub particles: usize,
     /// SH degree.
     pub sh_degree: u8,
+    /// The capture's screen-space filter.
+    pub screen_filter: splat_core::ScreenFilter,
 }
 
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
-/// when `None`) and the views of `cameras`.
-pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
-    let opened = splat_io::world::open_world(scene, splat_io::ReadOptions::default())?;
+/// when `None`) with the reader's `options`, and the views of `cameras`.
+pub fn load(scene: Option<&Path>, cameras: Option<&Path>, options: splat_io::ReadOptions) -> Result<Loaded> {
+    let opened = splat_io::world::open_world(scene, options)?;
     if let Some(warning) = scene.and_then(|p| splat_io::skipped_properties_warning(p, &opened.skipped_properties)) {
         eprintln!("warning: {warning}");
     }
@@ -59,8 +61,8 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>) -> Result<Loaded> {
         ..defaults
     };
     let bounds = scene.robust_bounds(0.02);
-    let (particles, sh_degree) = (scene.particles.len(), scene.sh_degree);
-    let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree };
+    let (particles, sh_degree, screen_filter) = (scene.particles.len(), scene.sh_degree, scene.screen_filter);
+    let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree, screen_filter };
     Ok(Loaded { world: World::new(scene, meshes, lighting)?, info })
 }
 
