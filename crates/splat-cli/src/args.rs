@@ -8,6 +8,7 @@ use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::catalogue::{self, Param};
+use splat_core::kernel;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
@@ -15,6 +16,7 @@ use splat_core::raster::{Blend, FragmentDepth, RasterSettings, SamplePattern, Sp
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
+use splat_core::trainer::Preset;
 use splat_core::{
     Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, ScreenFilter, World,
 };
@@ -349,12 +351,13 @@ pub struct SceneArgs {
     /// Per-particle normal.
     #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "plane")]
     pub normals: NormalArg,
-    /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8.
-    #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::kernel::DEFAULT_DEGREE)]
-    pub kernel_degree: u32,
-    /// Cutoff in standard deviations (Eq. 2).
-    #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::kernel::DEFAULT_CUTOFF)]
-    pub cutoff: f32,
+    /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8 [default: the
+    /// --preset's, else 2].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub kernel_degree: Option<u32>,
+    /// Cutoff in standard deviations (Eq. 2) [default: the --preset's, else 3].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub cutoff: Option<f32>,
     /// Iso-opacity depth threshold on transmittance.
     #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::composite::DEFAULT_ISO_THRESHOLD)]
     pub iso_threshold: f32,
@@ -387,16 +390,27 @@ pub struct ReadArgs {
     #[arg(long, hide = true)]
     pub allow_unknown_properties: bool,
     /// The screen-space filter the capture was trained with, which the splatting methods apply
-    /// (default: the one its file names, by a `SplatRenderMode` or `antialiased` comment, a
-    /// `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
+    /// (default: the --preset's, else the one its file names, by a `SplatRenderMode` or
+    /// `antialiased` comment, a `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
     #[arg(long, value_parser = splat_view::screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
+    /// The trainer of the capture: its screen filter, kernel degree and cutoff, unless given on
+    /// their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response).
+    #[arg(long, value_parser = preset_parser())]
+    pub preset: Option<Preset>,
+}
+
+/// The values of `--preset`: every [`Preset`] by its name, described.
+fn preset_parser() -> impl TypedValueParser<Value = Preset> {
+    let values = Preset::ALL.map(|p| PossibleValue::new(p.name()).help(p.describe()));
+    PossibleValuesParser::new(values).map(|name| *Preset::ALL.iter().find(|p| p.name() == name).expect("a name"))
 }
 
 impl ReadArgs {
     /// The reader's options.
     pub fn options(&self) -> splat_io::ReadOptions {
-        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into(), screen_filter: self.screen_filter }
+        let screen_filter = self.screen_filter.or(self.preset.and_then(Preset::screen_filter));
+        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into(), screen_filter }
     }
 }
 
@@ -473,8 +487,13 @@ impl SceneArgs {
 
     /// The render settings these options describe.
     pub fn settings(&self) -> RenderSettings {
+        let preset = self.read.preset;
         RenderSettings {
-            kernel: KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..KernelParams::default() },
+            kernel: KernelParams {
+                degree: self.kernel_degree.or(preset.map(Preset::kernel_degree)).unwrap_or(kernel::DEFAULT_DEGREE),
+                cutoff: self.cutoff.or(preset.map(Preset::cutoff)).unwrap_or(kernel::DEFAULT_CUTOFF),
+                ..KernelParams::default()
+            },
             hit_distance: match self.hit_distance {
                 HitArg::Mean => HitDistance::Mean,
                 HitArg::Center => HitDistance::Center,

@@ -43,11 +43,16 @@ pub fn run(args: InfoArgs) -> Result<()> {
             splat_core::particle::SURFEL_THICKNESS
         );
     }
+    if let Some(preset) = args.read.preset {
+        let settings =
+            splat_core::KernelParams { degree: preset.kernel_degree(), cutoff: preset.cutoff(), ..Default::default() };
+        out!("preset     {} (kernel degree {}, cutoff {:.4}σ)", preset.describe(), settings.degree, settings.cutoff);
+    }
     let filter = scene.screen_filter;
     if filter == read.file_filter {
         out!("2D filter  {}", filter.describe());
     } else {
-        out!("2D filter  {} (--screen-filter; the file names {})", filter.describe(), read.file_filter.name());
+        out!("2D filter  {} (by --screen-filter or --preset; the file names {})", filter.describe(), read.file_filter.name());
     }
     if n == 0 {
         return print(&text);

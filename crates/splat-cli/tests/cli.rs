@@ -1363,3 +1363,32 @@ fn the_gpu_backend_is_quiet_without_a_desktop_session() {
         .collect();
     assert!(noise.is_empty(), "the GPU backend printed more than its two lines: {noise:?}");
 }
+
+/// `--preset` sets what a trainer's renderer assumes: `3dgrt` renders as `--kernel-degree 4`
+/// with its cutoff given on its own (and not as the default Gaussian kernel), `gsplat-antialiased`
+/// sets the screen filter, and `splat info` prints the preset.
+#[test]
+fn presets_set_what_their_trainer_assumes() {
+    use splat_core::trainer::Preset;
+    let render = |extra: &[&str], name: &str| {
+        let out = scratch(name);
+        let args = ["render", "fixtures/layers.ply", "--camera", "fixtures/layers.cameras.json", "--width", "48"];
+        let o =
+            splat(&[&args[..], &["--height", "36", "--backend", "cpu", "-o", out.to_str().unwrap()], extra].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(&out)
+    };
+    let cutoff = format!("{}", Preset::ThreeDgrt.cutoff());
+    let preset = render(&["--preset", "3dgrt"], "preset-3dgrt.npy");
+    let by_hand = render(&["--kernel-degree", "4", "--cutoff", &cutoff], "preset-by-hand.npy");
+    let default = render(&[], "preset-default.npy");
+    assert_eq!(preset, by_hand, "--preset 3dgrt is --kernel-degree 4 --cutoff {cutoff}");
+    assert!(rmse(&preset, &default) > 1e-3, "the preset changes nothing");
+    let info = splat(&["info", "fixtures/layers.ply", "--preset", "gsplat-antialiased"]);
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(
+        text.contains("preset     gsplat antialiased") && text.contains("2D filter  gsplat's antialiased mode"),
+        "{text}"
+    );
+    assert!(text.contains("the file names 3dgs"), "{text}");
+}

@@ -12,7 +12,8 @@
 //!   ([`trace`], through the [`bvh`]) and the splatting estimators ([`raster`]), named together
 //!   by [`Algorithm`], each method declared once in the [`catalogue`];
 //! - a Monte Carlo [`path`] tracer in which Gaussians sit beside meshes;
-//! - decisions ([`rng`]), statistics ([`stats`]) and built-in scenes ([`scenes`]).
+//! - decisions ([`rng`]), statistics ([`stats`]) and built-in scenes ([`scenes`]);
+//! - each trainer's conventions as a [`trainer::Preset`].
 //!
 //! No I/O, no GPU.
 //!
@@ -51,6 +52,7 @@ pub mod sh;
 pub mod stats;
 pub mod tile;
 pub mod trace;
+pub mod trainer;
 
 /// The vector math of the public API (`Vec3`, `Quat`, `Mat3`), re-exported so that users need
 /// not match its version.

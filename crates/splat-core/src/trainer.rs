@@ -1,0 +1,115 @@
+//! The trainers whose captures splat renders as they render them, and what each one's renderer
+//! assumes of a capture that the file does not say: one home for a trainer's conventions (the
+//! CLI's `--preset`, `splat info`).
+//!
+//! | preset | screen filter | kernel | its renderer |
+//! |---|---|---|---|
+//! | `3dgs` | 0.3 px² dilation | degree 2 | the INRIA rasterizer |
+//! | `gsplat-antialiased` | antialiased | degree 2 | gsplat, `rasterize_mode="antialiased"` |
+//! | `mip-splatting` | 2D Mip filter | degree 2 | Mip-Splatting's rasterizer (its 3D filter is in the file) |
+//! | `3dgrt` | the file's | degree 4: exp(−4.5 (d/3)⁴) | 3DGRT's ray tracer (3dgrut `configs/render/3dgrt.yaml`) |
+//! | `3dgut` | the file's | degree 2 | 3DGUT (3dgrut `configs/render/3dgut.yaml`): particles evaluated in 3D along each ray |
+//!
+//! 3DGRT and 3DGUT evaluate each particle in 3D along the pixel's ray (their response at its
+//! maximum, alpha clamped to 0.99 and cut below 1/255, as here), but drop a hit whose response
+//! is below [`GRUT_MIN_RESPONSE`] (0.0113, just above e^−4.5 ≈ 0.0111): their presets set the
+//! cutoff to the Mahalanobis radius of that response ([`Preset::cutoff`], 2.994σ for degree 2,
+//! 2.997σ for 4). Their captures render faithfully with the ray-tracing methods, through any
+//! lens ([`crate::camera::Lens`]); the screen filter of 3DGUT's projector only culls, so the
+//! file's stays.
+
+use crate::filter::ScreenFilter;
+
+/// The smallest kernel response 3DGRT and 3DGUT keep (`particle_kernel_min_response`).
+pub const GRUT_MIN_RESPONSE: f32 = 0.0113;
+
+/// A trainer's preset (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Preset {
+    /// 3DGS (Kerbl et al. 2023), the INRIA trainer.
+    ThreeDgs,
+    /// gsplat with `rasterize_mode="antialiased"`.
+    GsplatAntialiased,
+    /// Mip-Splatting (Yu et al. 2024).
+    MipSplatting,
+    /// 3DGRT (Moenne-Loccoz et al. 2024).
+    ThreeDgrt,
+    /// 3DGUT (Wu et al. 2025).
+    ThreeDgut,
+}
+
+impl Preset {
+    /// Every preset.
+    pub const ALL: [Preset; 5] =
+        [Preset::ThreeDgs, Preset::GsplatAntialiased, Preset::MipSplatting, Preset::ThreeDgrt, Preset::ThreeDgut];
+
+    /// Its name on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Preset::ThreeDgs => "3dgs",
+            Preset::GsplatAntialiased => "gsplat-antialiased",
+            Preset::MipSplatting => "mip-splatting",
+            Preset::ThreeDgrt => "3dgrt",
+            Preset::ThreeDgut => "3dgut",
+        }
+    }
+
+    /// What it sets, in words.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Preset::ThreeDgs => "3DGS: the 0.3 px² dilation, Gaussian kernel",
+            Preset::GsplatAntialiased => "gsplat antialiased: the antialiased screen filter, Gaussian kernel",
+            Preset::MipSplatting => "Mip-Splatting: its 2D Mip filter, Gaussian kernel",
+            Preset::ThreeDgrt => "3DGRT: kernel degree 4; render with a ray-tracing method",
+            Preset::ThreeDgut => "3DGUT: Gaussian kernel; render with a ray-tracing method (3D evaluation)",
+        }
+    }
+
+    /// The screen filter its rasterizer applies, or `None` where its renderer has none of its
+    /// own and the file's stays.
+    pub const fn screen_filter(self) -> Option<ScreenFilter> {
+        match self {
+            Preset::ThreeDgs => Some(ScreenFilter::Dilation),
+            Preset::GsplatAntialiased => Some(ScreenFilter::Antialiased),
+            Preset::MipSplatting => Some(ScreenFilter::Mip),
+            Preset::ThreeDgrt | Preset::ThreeDgut => None,
+        }
+    }
+
+    /// The degree n of its particles' kernel exp(−4.5 (d/3)ⁿ) ([`crate::kernel`]).
+    pub const fn kernel_degree(self) -> u32 {
+        match self {
+            Preset::ThreeDgrt => 4,
+            _ => crate::kernel::DEFAULT_DEGREE,
+        }
+    }
+
+    /// The cutoff in standard deviations: 3 (3DGS's 3σ), or for 3DGRT and 3DGUT the radius where
+    /// the response falls to [`GRUT_MIN_RESPONSE`], 3 (ln(1 / r_min) / 4.5)^(1/n).
+    pub fn cutoff(self) -> f32 {
+        match self {
+            Preset::ThreeDgrt | Preset::ThreeDgut => {
+                let n = self.kernel_degree() as f32;
+                3.0 * ((1.0 / GRUT_MIN_RESPONSE).ln() / 4.5).powf(1.0 / n)
+            }
+            _ => crate::kernel::DEFAULT_CUTOFF,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernel::response;
+
+    /// The 3DGRT and 3DGUT cutoffs are where the response is the trainers' minimum.
+    #[test]
+    fn the_grut_cutoff_is_the_minimum_response() {
+        for preset in [Preset::ThreeDgrt, Preset::ThreeDgut] {
+            let c = preset.cutoff();
+            let r = response(c * c, preset.kernel_degree());
+            assert!((r - GRUT_MIN_RESPONSE).abs() < 1e-6, "{preset:?}: {r} at {c}");
+        }
+        assert_eq!(Preset::ThreeDgs.cutoff(), 3.0);
+    }
+}
