@@ -89,3 +89,73 @@ fn a_lens_without_distortion_is_the_pinhole() {
         assert!((a.dir - b.dir).length() < 1e-6, "{x}, {y}");
     }
 }
+
+/// 3DGUT's unscented transform (Wu et al. 2025; 3dgrut `gutProjector.cuh`,
+/// `unscentedParticleProjection` with α = 1, β = 2, κ = 0), written here from that code around
+/// the port of COLMAP's `ImgFromCam`: the projected mean and covariance (a, b, c) of a particle.
+fn ut_port(p: &splat_core::Particle, camera: &Camera, model: &str, params: &[f64]) -> Option<([f64; 2], [f64; 3])> {
+    let (alpha, beta, kappa, d) = (1.0f64, 2.0f64, 0.0f64, 3.0f64);
+    let lambda = alpha * alpha * (d + kappa) - d;
+    let delta = (alpha * alpha * (d + kappa)).sqrt();
+    let rot = glam::DMat3::from_quat(p.rotation.as_dquat());
+    let to_camera = |x: glam::DVec3| camera.rotation.as_dmat3() * x + camera.translation.as_dvec3();
+    let project = |x: glam::DVec3| img_from_cam(model, params, to_camera(x).to_array());
+    let mean = p.mean.as_dvec3();
+    let mut points = vec![project(mean)?];
+    for i in 0..3 {
+        let delta_i = delta * f64::from(p.scale[i]) * rot.col(i);
+        points.push(project(mean + delta_i)?);
+        points.push(project(mean - delta_i)?);
+    }
+    let weight_i = 1.0 / (2.0 * (d + lambda));
+    let mut centre = [0.0; 2];
+    for (k, q) in points.iter().enumerate() {
+        let w = if k == 0 { lambda / (d + lambda) } else { weight_i };
+        centre = [centre[0] + w * q[0], centre[1] + w * q[1]];
+    }
+    let mut cov = [0.0; 3];
+    for (k, q) in points.iter().enumerate() {
+        let w = if k == 0 { lambda / (d + lambda) + (1.0 - alpha * alpha + beta) } else { weight_i };
+        let (x, y) = (q[0] - centre[0], q[1] - centre[1]);
+        cov = [cov[0] + w * x * x, cov[1] + w * x * y, cov[2] + w * y * y];
+    }
+    Some((centre, cov))
+}
+
+/// Splatting through a distorted lens projects each particle by 3DGUT's unscented transform:
+/// `raster::project`'s mean and (filtered) covariance equal the port's for every particle of the
+/// cloud seen through each model, and the pinhole's EWA of the same particles is far off.
+#[test]
+fn splatting_projects_through_the_lens_by_the_unscented_transform() {
+    use splat_core::raster::{SplatExtent, project};
+    let (scene, _) = splat_tests::harness::fixture("cloud", WIDTH, HEIGHT);
+    let kernel = splat_core::KernelParams::default();
+    for (model, params) in typical(WIDTH, HEIGHT) {
+        let camera = read(model, &params);
+        let pinhole = Camera { lens: splat_core::camera::Lens::Pinhole, ..camera };
+        let (mut worst, mut ewa_worst, mut compared) = (0.0f64, 0.0f64, 0);
+        for (i, p) in scene.particles.iter().enumerate() {
+            let Some(splat) = project(&scene, i as u32, &camera, &kernel, SplatExtent::ThreeDgs) else { continue };
+            let Some((mean, [a, b, c])) = ut_port(p, &camera, model, &params) else { continue };
+            // The splat's conic is the inverse of Σ₂ + 0.3 I.
+            let (a, c) = (a + 0.3, c + 0.3);
+            let det = a * c - b * b;
+            let conic = [c / det, -b / det, a / det];
+            let ours = [splat.conic.x, splat.conic.y, splat.conic.z].map(f64::from);
+            let scale = conic[0].abs().max(conic[2].abs());
+            let error = (f64::from(splat.mean.x) - mean[0]).hypot(f64::from(splat.mean.y) - mean[1])
+                + (0..3).map(|k| (ours[k] - conic[k]).abs() / scale).fold(0.0, f64::max);
+            worst = worst.max(error);
+            if let Some(e) = project(&scene, i as u32, &pinhole, &kernel, SplatExtent::ThreeDgs) {
+                ewa_worst = ewa_worst.max((f64::from(e.mean.x) - mean[0]).hypot(f64::from(e.mean.y) - mean[1]));
+            }
+            compared += 1;
+        }
+        eprintln!(
+            "{model}: {compared} splats, max error {worst:.1e} (px + relative conic); pinhole EWA mean off by up to {ewa_worst:.1e} px"
+        );
+        assert!(compared > 100, "{model}: only {compared} splats compared");
+        assert!(worst < 1e-3, "{model}: the unscented projection is {worst} from the port");
+        assert!(ewa_worst > 0.1, "{model}: the pinhole projection passes for the lens ({ewa_worst} px)");
+    }
+}

@@ -52,7 +52,11 @@ pub fn run(args: InfoArgs) -> Result<()> {
     if filter == read.file_filter {
         out!("2D filter  {}", filter.describe());
     } else {
-        out!("2D filter  {} (by --screen-filter or --preset; the file names {})", filter.describe(), read.file_filter.name());
+        out!(
+            "2D filter  {} (by --screen-filter or --preset; the file names {})",
+            filter.describe(),
+            read.file_filter.name()
+        );
     }
     if n == 0 {
         return print(&text);

@@ -905,13 +905,15 @@ fn each_trainers_capture_renders_as_its_trainer_does() {
 /// A capture's distorted COLMAP camera renders as it is, through its lens: `exact` traces each
 /// pixel's ray through the fisheye (what COLMAP's model projects back to the pixel is checked
 /// in tests/tests/camera_models.rs; here, that the CLI takes the model and that the lens
-/// changes the image against the pinhole of the same intrinsics), and the splatting methods,
-/// which project through a pinhole, refuse it with the remedy.
+/// changes the image against the pinhole of the same intrinsics); `raster-sorted` splats
+/// through it by the unscented transform, nearer the ray-traced image than the pinhole's
+/// splatting is; the oracle, whose tile culling projects through a pinhole, refuses it with
+/// the remedy.
 #[test]
 fn distorted_colmap_cameras_render_through_their_lens() {
     let dir = scratch("fisheye-model");
     std::fs::create_dir_all(&dir).unwrap();
-    let images = "1 0.9961947 0.0871557 0 0 0 0 3.4 1 view.png\n\n";
+    let images = "1 0.9961947 0.0871557 0 0 0 0 2.2 1 view.png\n\n";
     std::fs::write(dir.join("images.txt"), images).unwrap();
     let render = |cameras: &str, method: &str, name: &str| {
         std::fs::write(dir.join("cameras.txt"), cameras).unwrap();
@@ -920,13 +922,25 @@ fn distorted_colmap_cameras_render_through_their_lens() {
         let o = splat(&[&args[..], &["--backend", "cpu", "-o", out.to_str().unwrap()]].concat());
         (o.status.success().then(|| npy(&out)), stderr(&o))
     };
-    let fisheye = "1 OPENCV_FISHEYE 48 36 20 20 24 18 0.04 -0.01 0.002 -0.0003\n";
+    let fisheye = "1 OPENCV_FISHEYE 96 72 40 40 48 36 0.04 -0.01 0.002 -0.0003\n";
     let (lens, e) = render(fisheye, "exact", "fisheye.npy");
     let lens = lens.unwrap_or_else(|| panic!("{e}"));
-    let (pinhole, e) = render("1 PINHOLE 48 36 20 20 24 18\n", "exact", "pinhole.npy");
+    let (pinhole, e) = render("1 PINHOLE 96 72 40 40 48 36\n", "exact", "pinhole.npy");
     let pinhole = pinhole.unwrap_or_else(|| panic!("{e}"));
     assert!(rmse(&lens, &pinhole) > 5e-3, "the fisheye renders as a pinhole ({})", rmse(&lens, &pinhole));
-    let (refused, e) = render(fisheye, "raster-sorted", "refused.npy");
+    let (splatted, e) = render(fisheye, "raster-sorted", "splatted.npy");
+    let splatted = splatted.unwrap_or_else(|| panic!("{e}"));
+    let (ewa, e) = render("1 PINHOLE 96 72 40 40 48 36\n", "raster-sorted", "ewa.npy");
+    let ewa = ewa.unwrap_or_else(|| panic!("{e}"));
+    // An OPENCV model without distortion splats by the unscented transform through the pinhole.
+    let (unscented, e) = render("1 OPENCV 96 72 40 40 48 36 0 0 0 0\n", "raster-sorted", "unscented.npy");
+    let unscented = unscented.unwrap_or_else(|| panic!("{e}"));
+    let (same_lens, other_lens) = (rmse(&unscented, &ewa), rmse(&splatted, &ewa));
+    eprintln!(
+        "raster-sorted: the unscented transform through a pinhole RMSE {same_lens:.2e} from EWA; through the fisheye {other_lens:.2e}"
+    );
+    assert!(same_lens < 0.2 * other_lens, "splatting ignores the lens ({same_lens} against {other_lens})");
+    let (refused, e) = render(fisheye, "oracle", "refused.npy");
     assert!(
         refused.is_none() && e.contains("cannot see through a fisheye lens") && e.contains("--method exact"),
         "{e}"

@@ -374,6 +374,10 @@ fn bad_raster_input_is_refused_with_a_message() {
     let early = RasterSettings { early_stop: true, ..RasterSettings::default() };
     let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &early).err().expect("early stop").to_string();
     assert!(e.contains("use rasterization without early stop or the CPU backend"), "{e}");
+    let fisheye = c.camera.with_lens(splat_core::camera::Lens::Fisheye(Default::default())).unwrap();
+    let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &fisheye, &RasterSettings::default()).err().expect("lens");
+    assert!(e.remedies().contains(&splat_gpu::Remedy::Cpu), "{e}");
+    assert!(e.to_string().contains("project through a pinhole, and this camera has a fisheye lens"), "{e}");
 }
 
 /// GPU sorted splatting with the default extent is the INRIA 3DGS rasterizer: it equals the

@@ -186,7 +186,6 @@ impl<'a> Rasterizer<'a> {
     ) -> Result<Self, RenderError> {
         validate_scene(scene, &settings)?;
         camera.validate()?;
-        camera.require_pinhole("the splatting methods")?;
         raster.validate()?;
         let mut splats: Vec<Splat> = (0..scene.particles.len() as u32)
             .filter_map(|i| project(scene, i, camera, &settings.kernel, raster.extent))
@@ -307,8 +306,13 @@ impl<'a> Rasterizer<'a> {
         let c = &self.camera;
         let positions: Vec<Vec2> = self.offsets.iter().map(|&o| Vec2::new(x as f32, y as f32) + o).collect();
         let rays: Vec<Ray> = self.offsets.iter().map(|&o| self.clip(c.ray(x, y, o))).collect();
-        let stretch =
-            positions.iter().map(|p| Vec3::new((p.x - c.cx) / c.fx, (p.y - c.cy) / c.fy, 1.0).length()).collect();
+        // Splat depths are view z through the pinhole (a point at depth z is at t = z |d_cam|)
+        // and distances through other lenses (t = depth along a unit ray).
+        let stretch = if c.is_pinhole() {
+            positions.iter().map(|p| Vec3::new((p.x - c.cx) / c.fx, (p.y - c.cy) / c.fy, 1.0).length()).collect()
+        } else {
+            vec![1.0; positions.len()]
+        };
         let surfaces = if self.meshes.is_empty() {
             vec![None; rays.len()]
         } else {

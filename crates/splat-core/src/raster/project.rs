@@ -94,6 +94,10 @@ impl Splat {
 /// perspective projection at the centre t = (x, y, z): J = [[f_x/z, 0, −f_x x/z²],
 /// [0, f_y/z, −f_y y/z²]]; then the scene's screen filter: Σ′ = Σ₂ + s I and the opacity
 /// ρ o ([`crate::ScreenFilter`]; s = 0.3 px² and ρ = 1 for 3DGS).
+///
+/// Through any other lens ([`crate::camera::Lens`]) the mean and Σ₂ come from 3DGUT's
+/// unscented transform instead ([`unscented`]), and the depth is the distance of the centre
+/// from the camera.
 pub fn project(
     scene: &Scene,
     index: u32,
@@ -106,23 +110,9 @@ pub fn project(
     if p.opacity < kernel.alpha_cull {
         return None;
     }
-    let t = camera.to_camera(p.mean);
-    if t.z.is_nan() || t.z <= NEAR {
-        return None;
-    }
+    let (mean, [a2, b2, c2], depth) = if camera.is_pinhole() { ewa(p, camera)? } else { unscented(p, camera)? };
     let (w, h) = (camera.width as f32, camera.height as f32);
-    let lim_x = FRUSTUM_GUARD * camera.cx.max(w - camera.cx) / camera.fx;
-    let lim_y = FRUSTUM_GUARD * camera.cy.max(h - camera.cy) / camera.fy;
-    let tx = (t.x / t.z).clamp(-lim_x, lim_x) * t.z;
-    let ty = (t.y / t.z).clamp(-lim_y, lim_y) * t.z;
-    let j = Mat3::from_cols(
-        Vec3::new(camera.fx / t.z, 0.0, 0.0),
-        Vec3::new(0.0, camera.fy / t.z, 0.0),
-        Vec3::new(-camera.fx * tx / (t.z * t.z), -camera.fy * ty / (t.z * t.z), 0.0),
-    );
-    let jw = j * camera.rotation;
-    let cov = jw * p.covariance() * jw.transpose();
-    let ([a, b, c], rho) = scene.screen_filter.apply(cov.x_axis.x, cov.y_axis.x, cov.y_axis.y);
+    let ([a, b, c], rho) = scene.screen_filter.apply(a2, b2, c2);
     let det = a * c - b * b;
     if det.is_nan() || det <= 0.0 || !det.is_finite() {
         return None;
@@ -132,7 +122,6 @@ pub fn project(
         return None;
     }
     let conic = Vec3::new(c / det, -b / det, a / det);
-    let mean = camera.project_camera(t);
     let mid = 0.5 * (a + c);
     let lambda_max = mid + (mid * mid - det).max(EIGEN_FLOOR).sqrt();
     let radius = (BOX_SIGMAS * lambda_max.sqrt()).ceil();
@@ -149,7 +138,73 @@ pub fn project(
     let (y0, y1) = clip(mean.y - ry, mean.y + ry, h)?;
     let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
     let rect = [x0, y0, x1, y1];
-    Some(Splat { id: index, mean, conic, depth: t.z, opacity, color, radius, extent, rect })
+    Some(Splat { id: index, mean, conic, depth, opacity, color, radius, extent, rect })
+}
+
+/// EWA through the pinhole: the projected centre, Σ₂ = J W Σ Wᵀ Jᵀ as (a, b, c) and the view
+/// depth z; `None` behind the near plane.
+fn ewa(p: &crate::particle::Particle, camera: &Camera) -> Option<(Vec2, [f32; 3], f32)> {
+    let t = camera.to_camera(p.mean);
+    if t.z.is_nan() || t.z <= NEAR {
+        return None;
+    }
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    let lim_x = FRUSTUM_GUARD * camera.cx.max(w - camera.cx) / camera.fx;
+    let lim_y = FRUSTUM_GUARD * camera.cy.max(h - camera.cy) / camera.fy;
+    let tx = (t.x / t.z).clamp(-lim_x, lim_x) * t.z;
+    let ty = (t.y / t.z).clamp(-lim_y, lim_y) * t.z;
+    let j = Mat3::from_cols(
+        Vec3::new(camera.fx / t.z, 0.0, 0.0),
+        Vec3::new(0.0, camera.fy / t.z, 0.0),
+        Vec3::new(-camera.fx * tx / (t.z * t.z), -camera.fy * ty / (t.z * t.z), 0.0),
+    );
+    let jw = j * camera.rotation;
+    let cov = jw * p.covariance() * jw.transpose();
+    Some((camera.project_camera(t), [cov.x_axis.x, cov.y_axis.x, cov.y_axis.y], t.z))
+}
+
+/// 3DGUT's unscented-transform parameters (Wu et al. 2025; 3dgrut `configs/render/3dgut.yaml`):
+/// α, β, κ for D = 3.
+pub const UT_ALPHA: f64 = 1.0;
+/// β (2: optimal for Gaussians).
+pub const UT_BETA: f64 = 2.0;
+/// κ.
+pub const UT_KAPPA: f64 = 0.0;
+
+/// The unscented transform of a particle through the camera's lens (3DGUT's
+/// `unscentedParticleProjection`): the 2D + 1 sigma points μ and μ ± √(D + λ) s_i r_i (r_i the
+/// columns of its rotation, λ = α² (D + κ) − D) projected by [`Camera::project`], their weighted
+/// mean (weights λ / (D + λ) and 1 / (2 (D + λ))) and covariance (the centre's weight plus
+/// 1 − α² + β), and the distance of the centre as depth. `None` nearer than the near plane or
+/// when a sigma point falls where the lens sees nothing (behind a perspective lens), where 3DGUT
+/// would still use the points it could project.
+pub fn unscented(p: &crate::particle::Particle, camera: &Camera) -> Option<(Vec2, [f32; 3], f32)> {
+    let depth = camera.to_camera(p.mean).length();
+    if depth.is_nan() || depth <= NEAR {
+        return None;
+    }
+    let d = 3.0;
+    let lambda = UT_ALPHA * UT_ALPHA * (d + UT_KAPPA) - d;
+    let delta = (d + lambda).sqrt();
+    let axes = glam::DMat3::from_quat(p.rotation.as_dquat());
+    let (rotation, translation) = (camera.rotation.as_dmat3(), camera.translation.as_dvec3());
+    let project = |x: glam::DVec3| camera.project(rotation * x + translation);
+    let mu = p.mean.as_dvec3();
+    let mut points = vec![project(mu)?];
+    for i in 0..3 {
+        let step = delta * f64::from(p.scale[i]) * axes.col(i);
+        points.push(project(mu + step)?);
+        points.push(project(mu - step)?);
+    }
+    let (w0, wi) = (lambda / (d + lambda), 1.0 / (2.0 * (d + lambda)));
+    let mean = w0 * points[0] + wi * points[1..].iter().sum::<glam::DVec2>();
+    let outer = |q: glam::DVec2| {
+        let e = q - mean;
+        glam::DVec3::new(e.x * e.x, e.x * e.y, e.y * e.y)
+    };
+    let cov = (w0 + 1.0 - UT_ALPHA * UT_ALPHA + UT_BETA) * outer(points[0])
+        + wi * points[1..].iter().map(|&q| outer(q)).sum::<glam::DVec3>();
+    Some((mean.as_vec2(), cov.as_vec3().to_array(), depth))
 }
 
 #[cfg(test)]

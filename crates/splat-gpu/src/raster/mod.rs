@@ -199,7 +199,16 @@ impl<'a> GpuRasterizer<'a> {
         raster: &RasterSettings,
     ) -> Result<Self, GpuError> {
         camera.validate().map_err(RenderError::from)?;
-        camera.require_pinhole("the splatting methods").map_err(RenderError::from)?;
+        if !camera.is_pinhole() {
+            return Err(GpuError::refused(
+                format!(
+                    "the GPU's splatting kernels project through a pinhole, and this camera has {} (the CPU's \
+                     splatting projects through it by the unscented transform, the ray tracers trace through it)",
+                    camera.lens.describe()
+                ),
+                &[Remedy::Cpu, Remedy::ExactMethod],
+            ));
+        }
         check_settings(raster)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
