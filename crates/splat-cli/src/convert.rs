@@ -34,6 +34,13 @@ pub fn run(args: ConvertArgs) -> Result<()> {
             scene.sh_degree
         );
     }
+    if scene.is_surfels() && format != SceneFormat::Ply {
+        eprintln!(
+            "warning: {} cannot record 2D Gaussians (2DGS): written as 3D Gaussians of their thickness, which renders \
+             the same with the ray-tracing methods",
+            format.name()
+        );
+    }
     let recorded = format.records(scene.screen_filter);
     if recorded != scene.screen_filter {
         eprintln!(

@@ -8,6 +8,7 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
 use splat_core::trace::TraceScene;
+use splat_core::trainer::Preset;
 use splat_core::{Algorithm, MethodId, ScreenFilter, World};
 use splat_gpu::{GpuContext, GpuTracer};
 use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
@@ -184,8 +185,25 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
     if args.pipeline != Some(PipelineArg::Hybrid) && args.secondary != MethodId::Exact {
         eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
     }
+    let splats = matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..));
+    if splats && staged.world.scene.is_surfels() {
+        eprintln!(
+            "note: the capture holds 2D Gaussians (2DGS), which {} projects as flat ellipses (EWA's affine \
+             approximation); the ray-tracing methods evaluate them at their ray–splat intersection",
+            describe(args)
+        );
+    }
+    let ray_evaluated = [Preset::ThreeDgrt, Preset::ThreeDgut];
+    if let Some(preset) = args.scene.read.preset.filter(|p| splats && ray_evaluated.contains(p)) {
+        eprintln!(
+            "note: {} evaluates its particles in 3D along each ray, which the ray-tracing methods do; {} \
+             approximates them by projected ellipses",
+            preset.name(),
+            describe(args)
+        );
+    }
     let filter = staged.world.scene.screen_filter;
-    if filter != ScreenFilter::Dilation && !matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..)) {
+    if filter != ScreenFilter::Dilation && !splats {
         eprintln!(
             "note: the capture was trained with {}, a screen-space filter that the splatting methods apply; \
              {} traces the particles themselves, without it",

@@ -1405,4 +1405,12 @@ fn presets_set_what_their_trainer_assumes() {
         "{text}"
     );
     assert!(text.contains("the file names 3dgs"), "{text}");
+    let args = ["render", "fixtures/layers.ply", "--preset", "3dgrt", "--method", "raster-sorted", "--width", "16"];
+    let out = scratch("preset-raster.npy");
+    let o = splat(&[&args[..], &["--height", "12", "--backend", "cpu", "-o", out.to_str().unwrap()]].concat());
+    assert!(
+        o.status.success() && stderr(&o).contains("3dgrt evaluates its particles in 3D along each ray"),
+        "{}",
+        stderr(&o)
+    );
 }

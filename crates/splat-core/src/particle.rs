@@ -187,6 +187,12 @@ impl Particle {
         Ok(p)
     }
 
+    /// Whether it is a 2D Gaussian as the readers make one: its third scale exactly
+    /// [`SURFEL_THICKNESS`] × the larger of the other two.
+    pub fn is_surfel(&self) -> bool {
+        self.scale.z == SURFEL_THICKNESS * self.scale.x.max(self.scale.y)
+    }
+
     /// Check that the particle is a finite, non-degenerate Gaussian with a unit quaternion.
     pub fn validate(&self) -> Result<(), ParticleError> {
         let vectors = [("mean", self.mean), ("scale", self.scale)];
@@ -347,6 +353,12 @@ impl Scene {
     /// A scene of 3DGS particles (the 3DGS dilation).
     pub fn new(particles: Vec<Particle>, sh_degree: u8) -> Self {
         Self { particles, sh_degree, screen_filter: ScreenFilter::Dilation }
+    }
+
+    /// Whether every particle is a 2D Gaussian ([`Particle::is_surfel`]): a 2DGS capture, which
+    /// the writers record as one where the format can.
+    pub fn is_surfels(&self) -> bool {
+        !self.particles.is_empty() && self.particles.iter().all(Particle::is_surfel)
     }
 
     /// Box of all particle means.

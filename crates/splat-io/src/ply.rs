@@ -26,7 +26,9 @@
 //! A 2DGS capture (2D Gaussians: `SplatRenderMode: 2dgs`, or `scale_0`, `scale_1` without
 //! `scale_2`) is read as flat 3D Gaussians whose third scale is
 //! [`splat_core::particle::SURFEL_THICKNESS`] × the larger of the two (any stored `scale_2` is
-//! ignored): the ray tracers then evaluate each surfel at its ray–splat intersection.
+//! ignored): the ray tracers then evaluate each surfel at its ray–splat intersection. A scene of
+//! such surfels is written back as 2DGS writes it, without `scale_2` and with Brush's
+//! `SplatRenderMode: 2dgs`.
 //!
 //! A file whose first element is `chunk` is a PlayCanvas compressed `.ply`, decoded by
 //! [`crate::compressed_ply`].
@@ -209,9 +211,13 @@ impl Mode {
         mode
     }
 
-    /// The comment the writer records for a filter (Brush's spelling), if any.
-    fn comment(filter: ScreenFilter) -> Option<&'static str> {
-        (filter == ScreenFilter::Antialiased).then_some("SplatRenderMode: mip")
+    /// The comment the writer records for a scene (Brush's spelling), if any: `2dgs` for
+    /// surfels, `mip` for the antialiased filter.
+    fn comment(scene: &Scene) -> Option<&'static str> {
+        if scene.is_surfels() {
+            return Some("SplatRenderMode: 2dgs");
+        }
+        (scene.screen_filter == ScreenFilter::Antialiased).then_some("SplatRenderMode: mip")
     }
 }
 
@@ -623,7 +629,7 @@ fn property_names(scene: &Scene) -> Vec<String> {
         ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].map(String::from).to_vec();
     names.extend((0..3 * (sh_coeff_count(scene.sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
     names.push("opacity".into());
-    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..if scene.is_surfels() { 2 } else { 3 }).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
     if scene.screen_filter == ScreenFilter::Mip {
         names.push("filter_3D".into());
@@ -641,7 +647,8 @@ fn stored_values(p: &Particle, scene: &Scene) -> Vec<f32> {
     // Opacity 0 and 1 have infinite logits: store the nearest finite ones.
     let o = f64::from(p.opacity).clamp(1e-7, 1.0 - 1e-7);
     v.push((o / (1.0 - o)).ln() as f32);
-    v.extend(p.scale.to_array().map(f32::ln));
+    let scales = if scene.is_surfels() { &p.scale.to_array()[..2] } else { &p.scale.to_array()[..] };
+    v.extend(scales.iter().map(|s| s.ln()));
     v.extend([p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z]);
     if scene.screen_filter == ScreenFilter::Mip {
         v.push(0.0); // filter_3D: already applied
@@ -660,7 +667,7 @@ pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
         PlyFormat::BinaryBigEndian => "binary_big_endian",
     };
     let mut out = format!("ply\nformat {format_name} 1.0\n");
-    if let Some(comment) = Mode::comment(scene.screen_filter) {
+    if let Some(comment) = Mode::comment(scene) {
         out += &format!("comment {comment}\n");
     }
     out += &format!("element vertex {}\n", scene.particles.len());

@@ -365,6 +365,29 @@ fn a_2dgs_capture_is_read_as_surfels() {
     assert_relative_eq!(thin(&parse_ply(&ascii(&GOOD), PlyOptions::default()).unwrap()), 1.0);
 }
 
+/// A 2DGS scene is written back as 2DGS writes it (two scales, `SplatRenderMode: 2dgs`) and
+/// reads back as the same surfels; one 3DGS particle among them makes the scene 3DGS again.
+#[test]
+fn surfels_round_trip_as_2dgs() {
+    let props: Vec<&str> = PROPS.iter().copied().filter(|&p| p != "scale_2").collect();
+    let values: Vec<&str> = GOOD.iter().enumerate().filter(|&(i, _)| i != 9).map(|(_, v)| *v).collect();
+    let line = values.join(" ") + "\n";
+    let file = header(&props, 2, "ascii") + &line + &line.replace("-1 -1 1", "-2 -1 1");
+    let scene = parse_ply(file.as_bytes(), PlyOptions::default()).unwrap();
+    assert!(scene.is_surfels());
+    let bytes = encode_ply(&scene, PlyFormat::BinaryLittleEndian);
+    let text =
+        String::from_utf8_lossy(&bytes[..bytes.windows(10).position(|w| w == b"end_header").unwrap()]).into_owned();
+    assert!(text.contains("comment SplatRenderMode: 2dgs") && !text.contains("scale_2"), "{text}");
+    let back = parse_ply(&bytes, PlyOptions::default()).unwrap();
+    assert!(back.is_surfels());
+    assert_same_scene(&scene, &back, 1e-6);
+    let mut mixed = scene.clone();
+    mixed.particles[1].scale.z = mixed.particles[1].scale.x;
+    let text = String::from_utf8(encode_ply(&mixed, PlyFormat::Ascii)).unwrap();
+    assert!(text.contains("scale_2") && !text.contains("2dgs"));
+}
+
 /// Every filter survives the `.ply` writer and reader, with the particles: antialiased as
 /// Brush's comment, Mip-Splatting's as a `filter_3D` of zeros (its 3D filter is already in the
 /// particles, so reading it back changes none); the 3DGS dilation writes no comment.
