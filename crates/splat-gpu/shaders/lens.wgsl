@@ -1,7 +1,9 @@
-// The camera's lens, the twin of crates/splat-core/src/lens.rs and `Camera::direction` in
-// camera.rs, in f32: COLMAP's camera models, a pixel's direction through the inverse of the
-// distortion (Newton's method with COLMAP's trust region). Part of the trace kernel
-// (splat_gpu::TRACE_WGSL); params.lens is one of these, params.distortion its coefficients.
+// The camera's lens, the twin of crates/splat-core/src/lens.rs and `Camera::direction` and
+// `Camera::project` in camera.rs, in f32: COLMAP's camera models, a pixel's direction through
+// the inverse of the distortion (Newton's method with COLMAP's trust region), and a point's
+// pixel through the lens. Part of the trace kernel (splat_gpu::TRACE_WGSL) and of the raster
+// kernels (splat_gpu::RASTER_WGSL and the splat and mesh pre-pass modules), whose `params`
+// both carry `size`, `intrinsics`, `lens` (one of these) and `distortion`.
 
 const LENS_PINHOLE: u32 = 0u;
 const LENS_PERSPECTIVE: u32 = 1u;
@@ -9,6 +11,8 @@ const LENS_FISHEYE: u32 = 2u;
 const LENS_EQUIRECTANGULAR: u32 = 3u;
 const UNDISTORT_STEPS: u32 = 100u;
 const UNDISTORT_TOLERANCE_F32: f32 = 1e-6;
+// π, under its own name: the trace kernel's PI lives in bsdf.wgsl, which the raster kernels lack.
+const HALF_TURN: f32 = 3.14159265358979;
 
 // lens.rs `Distortion::apply`: (du, dv) and the rows of the Jacobian of x + d(x).
 struct Distorted {
@@ -73,15 +77,19 @@ fn undistort(distorted: vec2<f32>) -> vec2<f32> {
     return x;
 }
 
-// camera.rs `Camera::direction`: the camera-space direction through pixel (x, y) at `offset`,
-// (u, v, 1) for the pinhole and a unit vector through the other lenses.
+// The camera-space direction through pixel (x, y) at `offset` (lens_dir).
 fn camera_dir(x: u32, y: u32, offset: vec2<f32>) -> vec3<f32> {
-    let p = vec2<f32>(f32(x) + offset.x, f32(y) + offset.y);
+    return lens_dir(vec2<f32>(f32(x) + offset.x, f32(y) + offset.y));
+}
+
+// camera.rs `Camera::direction`: the camera-space direction through continuous pixel position
+// p, (u, v, 1) for the pinhole and a unit vector through the other lenses.
+fn lens_dir(p: vec2<f32>) -> vec3<f32> {
     if (params.lens == LENS_EQUIRECTANGULAR) {
         // lens.rs `Lens::equirectangular`.
         let f = p / vec2<f32>(params.size);
-        let azimuth = 2.0 * PI * (f.x - 0.5);
-        let elevation = PI * (0.5 - f.y);
+        let azimuth = 2.0 * HALF_TURN * (f.x - 0.5);
+        let elevation = HALF_TURN * (0.5 - f.y);
         return vec3<f32>(cos(elevation) * sin(azimuth), -sin(elevation), cos(elevation) * cos(azimuth));
     }
     let xy = vec2<f32>((p.x - params.intrinsics.z) / params.intrinsics.x, (p.y - params.intrinsics.w) / params.intrinsics.y);
@@ -97,4 +105,35 @@ fn camera_dir(x: u32, y: u32, offset: vec2<f32>) -> vec3<f32> {
         return vec3<f32>(u * (sin(theta) / theta), cos(theta));
     }
     return vec3<f32>(0.0, 0.0, 1.0);
+}
+
+// camera.rs `Camera::project`: the pixel of camera-space point c through the lens in xy, and
+// in z 1 where the lens sees it, 0 where it does not (behind a perspective lens).
+fn lens_project(c: vec3<f32>) -> vec3<f32> {
+    if (params.lens == LENS_EQUIRECTANGULAR) {
+        // lens.rs `Lens::equirectangular_position`.
+        let horizontal = length(c.xz);
+        let azimuth = atan2(c.x, c.z);
+        let elevation = atan2(-c.y, horizontal);
+        let f = vec2<f32>(azimuth / (2.0 * HALF_TURN) + 0.5, 0.5 - elevation / HALF_TURN);
+        return vec3<f32>(f * vec2<f32>(params.size), select(0.0, 1.0, horizontal + abs(c.y) > 0.0));
+    }
+    var u = vec2<f32>(0.0);
+    if (params.lens == LENS_FISHEYE) {
+        let r = length(c.xy);
+        if (r > 0.0) {
+            u = c.xy * (atan2(r, c.z) / r);
+        } else if (!(c.z > 0.0)) {
+            return vec3<f32>(0.0);
+        }
+    } else {
+        if (!(c.z > 0.0)) {
+            return vec3<f32>(0.0);
+        }
+        u = c.xy / c.z;
+    }
+    if (params.lens != LENS_PINHOLE) {
+        u += distortion_at(u).d;
+    }
+    return vec3<f32>(params.intrinsics.xy * u + params.intrinsics.zw, 1.0);
 }

@@ -39,26 +39,25 @@ fn cull(i: u32) {
     order[i] = i;
 }
 
-// project.rs `project`: Σ₂ = J W Σ Wᵀ Jᵀ, the screen filter (Σ′ = Σ₂ + s I, the opacity × ρ;
-// filter.rs `ScreenFilter::apply`), the rect of the extent, the SH colour from the camera centre,
-// and the sort key; culled particles get the key NONE and sort behind all others.
-@compute @workgroup_size(256, 1, 1)
-fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = flat_index(gid, groups);
-    if (i >= params.count) {
-        return;
-    }
-    cull(i);
-    let p = particles[i];
-    if (p.opacity < params.alpha_cull) {
-        return;
-    }
+// A particle projected to the image: its mean, Σ₂ as (a, b, c), its depth, and whether it is
+// in front of the camera.
+struct Projected {
+    mean: vec2<f32>,
+    cov: vec3<f32>,
+    depth: f32,
+    visible: bool,
+}
+
+// project.rs `ewa`: through the pinhole, Σ₂ = J W Σ Wᵀ Jᵀ at the centre, depth z.
+fn ewa(p: RasterParticle) -> Projected {
+    var out: Projected;
+    out.visible = false;
     let r0 = params.cam_row0.xyz;
     let r1 = params.cam_row1.xyz;
     let r2 = params.cam_row2.xyz;
     let t = vec3<f32>(dot(r0, p.mean), dot(r1, p.mean), dot(r2, p.mean)) + params.cam_translation.xyz;
     if (!(t.z > NEAR)) {
-        return;
+        return out;
     }
     let fx = params.intrinsics.x;
     let fy = params.intrinsics.y;
@@ -74,9 +73,90 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     );
     let s0 = sigma * jw0;
     let s1 = sigma * jw1;
-    let a2 = dot(jw0, s0);
-    let b = dot(jw0, s1);
-    let c2 = dot(jw1, s1);
+    out.cov = vec3<f32>(dot(jw0, s0), dot(jw0, s1), dot(jw1, s1));
+    out.mean = vec2<f32>(fx * t.x / t.z + params.intrinsics.z, fy * t.y / t.z + params.intrinsics.w);
+    out.depth = t.z;
+    out.visible = true;
+    return out;
+}
+
+// project.rs `unscented` (3DGUT, α = 1, β = 2, κ = 0, so λ = 0): the sigma points μ ± √3 s_i r_i,
+// the columns s_i r_i those of R S, the inverse of particle i's canonical transform S⁻¹ Rᵀ
+// (rows in `canonical`), projected through the lens; mean weights 0 and 1/6, covariance
+// weights 2 and 1/6; depth the distance of the centre.
+fn unscented(i: u32, p: RasterParticle) -> Projected {
+    var out: Projected;
+    out.visible = false;
+    let to_camera = mat3x3<f32>(params.cam_row0.xyz, params.cam_row1.xyz, params.cam_row2.xyz);
+    // mat3x3 takes columns: these are the rows of R_cam, so transpose.
+    let world_to_camera = transpose(to_camera);
+    let centre = world_to_camera * p.mean + params.cam_translation.xyz;
+    out.depth = length(centre);
+    if (!(out.depth > NEAR)) {
+        return out;
+    }
+    let m0 = canonical[3u * i].xyz;
+    let m1 = canonical[3u * i + 1u].xyz;
+    let m2 = canonical[3u * i + 2u].xyz;
+    let det = dot(m0, cross(m1, m2));
+    let axes = mat3x3<f32>(cross(m1, m2), cross(m2, m0), cross(m0, m1)) * (sqrt(3.0) / det);
+    let p0 = lens_project(centre);
+    if (p0.z == 0.0) {
+        return out;
+    }
+    var points: array<vec2<f32>, 6>;
+    for (var k = 0u; k < 3u; k++) {
+        let step = world_to_camera * axes[k];
+        let plus = lens_project(centre + step);
+        let minus = lens_project(centre - step);
+        if (plus.z == 0.0 || minus.z == 0.0) {
+            return out;
+        }
+        points[2u * k] = plus.xy;
+        points[2u * k + 1u] = minus.xy;
+    }
+    var mean = vec2<f32>(0.0);
+    for (var k = 0u; k < 6u; k++) {
+        mean += points[k] / 6.0;
+    }
+    let e0 = p0.xy - mean;
+    var cov = 2.0 * vec3<f32>(e0.x * e0.x, e0.x * e0.y, e0.y * e0.y);
+    for (var k = 0u; k < 6u; k++) {
+        let e = points[k] - mean;
+        cov += vec3<f32>(e.x * e.x, e.x * e.y, e.y * e.y) / 6.0;
+    }
+    out.mean = mean;
+    out.cov = cov;
+    out.visible = true;
+    return out;
+}
+
+// project.rs `project`: Σ₂ = J W Σ Wᵀ Jᵀ, the screen filter (Σ′ = Σ₂ + s I, the opacity × ρ;
+// filter.rs `ScreenFilter::apply`), the rect of the extent, the SH colour from the camera centre,
+// and the sort key; culled particles get the key NONE and sort behind all others.
+@compute @workgroup_size(256, 1, 1)
+fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = flat_index(gid, groups);
+    if (i >= params.count) {
+        return;
+    }
+    cull(i);
+    let p = particles[i];
+    if (p.opacity < params.alpha_cull) {
+        return;
+    }
+    var projected: Projected;
+    if (params.lens == LENS_PINHOLE) {
+        projected = ewa(p);
+    } else {
+        projected = unscented(i, p);
+    }
+    if (!projected.visible) {
+        return;
+    }
+    let a2 = projected.cov.x;
+    let b = projected.cov.y;
+    let c2 = projected.cov.z;
     let a = a2 + params.filter_variance;
     let c = c2 + params.filter_variance;
     let det = a * c - b * b;
@@ -91,7 +171,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
             return;
         }
     }
-    let mean = vec2<f32>(fx * t.x / t.z + params.intrinsics.z, fy * t.y / t.z + params.intrinsics.w);
+    let mean = projected.mean;
     let mid = 0.5 * (a + c);
     let lambda_max = mid + sqrt(max(mid * mid - det, EIGEN_FLOOR));
     let radius = ceil(BOX_SIGMAS * sqrt(lambda_max));
@@ -107,17 +187,14 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     if (!(lo.x < hi.x && lo.y < hi.y)) {
         return;
     }
-    // R t is the world-to-camera rotation of the mean, so the camera centre is −Rᵀ t_cam.
-    let tr = params.cam_translation.xyz;
-    let center = -(tr.x * r0 + tr.y * r1 + tr.z * r2);
-    let v = p.mean - center;
+    let v = p.mean - camera_origin();
     var dir = vec3<f32>(0.0);
     if (dot(v, v) > 0.0) {
         dir = normalize(v);
     }
     var s: Splat;
     s.mean = mean;
-    s.depth = t.z;
+    s.depth = projected.depth;
     s.opacity = opacity;
     s.conic = vec3<f32>(c / det, -b / det, a / det);
     s.id = i;
@@ -125,6 +202,6 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.radius = radius;
     s.rect = vec4<u32>(vec2<u32>(lo), vec2<u32>(hi));
     splats[i] = s;
-    depth_keys[i] = bitcast<u32>(t.z);
+    depth_keys[i] = bitcast<u32>(projected.depth);
     atomicAdd(&draw_args[1], 1u);
 }

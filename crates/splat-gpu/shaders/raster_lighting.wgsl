@@ -18,15 +18,20 @@ fn camera_origin() -> vec3<f32> {
     return -(t.x * params.cam_row0.xyz + t.y * params.cam_row1.xyz + t.z * params.cam_row2.xyz);
 }
 
-// camera.rs `Camera::ray`: the unit direction through pixel position p.
+// camera.rs `Camera::ray`: the unit direction through pixel position p (through the lens).
 fn pixel_dir(p: vec2<f32>) -> vec3<f32> {
-    let d = vec3<f32>((p - params.intrinsics.zw) / params.intrinsics.xy, 1.0);
+    let d = lens_dir(p);
     return normalize(params.cam_row0.xyz * d.x + params.cam_row1.xyz * d.y + params.cam_row2.xyz * d.z);
 }
 
-// |d_cam| at pixel position p: a splat at view depth z lies at distance z |d_cam| along the ray.
+// raster/mod.rs `Rasterizer::pixel`'s stretch at pixel position p: through the pinhole |d_cam|
+// (a splat at view depth z lies at distance z |d_cam| along the ray); through another lens 1
+// (splat depths are distances).
 fn stretch(p: vec2<f32>) -> f32 {
-    return length(vec3<f32>((p - params.intrinsics.zw) / params.intrinsics.xy, 1.0));
+    if (params.lens == LENS_PINHOLE) {
+        return length(lens_dir(p));
+    }
+    return 1.0;
 }
 
 // The max-density-plane normal of particle `id` for the ray (origin, dir).

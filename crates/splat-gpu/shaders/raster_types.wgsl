@@ -50,7 +50,10 @@ struct RasterParams {
     // where filter_compensates is 1 the opacity × √(det Σ₂ / det Σ′).
     filter_variance: f32,
     filter_compensates: u32,
-    pad: vec2<u32>,
+    // The camera's lens (LENS_*) and its distortion (lens.wgsl).
+    lens: u32,
+    pad: u32,
+    distortion: array<vec4<f32>, 3>,
 }
 
 // What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).

@@ -571,7 +571,7 @@ pub fn lens_code(lens: &Lens) -> u32 {
 }
 
 /// [`Params::distortion`] of a lens (zero without one).
-fn distortion(lens: &Lens) -> [[f32; 4]; 3] {
+pub(crate) fn distortion(lens: &Lens) -> [[f32; 4]; 3] {
     let d = lens.distortion().copied().unwrap_or_default();
     let [b1, b2, b3] = d.rational;
     let ([p1, p2], [s1, s2]) = (d.tangential, d.prism);

@@ -72,6 +72,7 @@ pub const RASTER_WGSL: &str = concat!(
     include_str!("../../shaders/raster_types.wgsl"),
     include_str!("../../shaders/lighting.wgsl"),
     include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/raster.wgsl"),
     include_str!("../../shaders/binning.wgsl"),
     include_str!("../../shaders/depth_pick.wgsl"),
@@ -83,6 +84,7 @@ pub const SPLAT_WGSL: &str = concat!(
     include_str!("../../shaders/raster_types.wgsl"),
     include_str!("../../shaders/lighting.wgsl"),
     include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/splat.wgsl")
 );
 /// WGSL of the splatting render pipeline with the max-density-plane entry point, which needs
@@ -92,6 +94,7 @@ pub const SPLAT_PLANE_WGSL: &str = concat!(
     include_str!("../../shaders/raster_types.wgsl"),
     include_str!("../../shaders/lighting.wgsl"),
     include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/splat.wgsl"),
     include_str!("../../shaders/splat_plane.wgsl")
 );
@@ -101,6 +104,7 @@ pub const MESH_PREPASS_WGSL: &str = concat!(
     include_str!("../../shaders/raster_types.wgsl"),
     include_str!("../../shaders/lighting.wgsl"),
     include_str!("../../shaders/raster_lighting.wgsl"),
+    include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/bvh.wgsl"),
     include_str!("../../shaders/mesh.wgsl"),
     include_str!("../../shaders/mesh_prepass.wgsl")
@@ -199,16 +203,6 @@ impl<'a> GpuRasterizer<'a> {
         raster: &RasterSettings,
     ) -> Result<Self, GpuError> {
         camera.validate().map_err(RenderError::from)?;
-        if !camera.is_pinhole() {
-            return Err(GpuError::refused(
-                format!(
-                    "the GPU's splatting kernels project through a pinhole, and this camera has {} (the CPU's \
-                     splatting projects through it by the unscented transform, the ray tracers trace through it)",
-                    camera.lens.describe()
-                ),
-                &[Remedy::Cpu, Remedy::ExactMethod],
-            ));
-        }
         check_settings(raster)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -242,6 +236,7 @@ impl<'a> GpuRasterizer<'a> {
                 (4, &depth.keys),
                 (5, &depth.vals),
                 (6, &draw_args),
+                (15, &scene.canonical),
             ],
         );
         let pixels = if scene.has_meshes { (camera.width * camera.height) as u64 } else { 1 };
@@ -841,7 +836,9 @@ mod tests {
                 hilbert_order,
                 filter_variance,
                 filter_compensates,
-                pad
+                lens,
+                pad,
+                distortion
             ]
         );
         assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, u_shift]);

@@ -44,7 +44,7 @@ pub struct GpuSplat {
     pub rect: [u32; 4],
 }
 
-/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 208 bytes).
+/// Per-camera uniforms of the raster kernels (WGSL `RasterParams`, 256 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RasterParams {
@@ -107,8 +107,12 @@ pub struct RasterParams {
     pub filter_variance: f32,
     /// 1 when the filter scales the opacity by ρ = √(det Σ₂ / det Σ′).
     pub filter_compensates: u32,
+    /// The camera's lens (`LENS_*` of `lens.wgsl`).
+    pub lens: u32,
     /// Padding.
-    pub pad: [u32; 2],
+    pub pad: u32,
+    /// Its distortion, as the trace kernel's `Params::distortion`.
+    pub distortion: [[f32; 4]; 3],
 }
 
 /// Per-frame uniforms (WGSL `FrameParams`).
@@ -294,6 +298,8 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &Raste
         hilbert_order: splat_core::rng::hilbert_order(camera.width, camera.height),
         filter_variance: scene.screen_filter.variance(),
         filter_compensates: u32::from(scene.screen_filter.compensates()),
-        pad: [0; 2],
+        lens: crate::layout::lens_code(&camera.lens),
+        pad: 0,
+        distortion: crate::layout::distortion(&camera.lens),
     }
 }
