@@ -345,6 +345,19 @@ pub struct SceneArgs {
     /// Lit worlds: shadow rays of the ray-tracing methods [default: the world's, else none].
     #[arg(help_heading = "Scene and shading", long, value_enum)]
     pub shadows: Option<ShadowsArg>,
+    /// Sorted shadows: hits of the shadow pass [default: the world's, else 18].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub shadow_k: Option<usize>,
+    /// Sorted shadows: the transmittance below which a point is in shadow [default: the
+    /// world's, else 0.8].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub shadow_threshold: Option<f32>,
+    /// Sorted shadows: coloured-shadow strength in [0, 1] [default: the world's, else 0].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub shadow_colored: Option<f32>,
+    /// Lit worlds: how far along the normal shadow rays start [default: the world's, else 0.2].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub shadow_offset: Option<f32>,
     /// Hit distance convention.
     #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "mean")]
     pub hit_distance: HitArg,
@@ -469,13 +482,16 @@ impl SceneArgs {
             };
         }
         if let Some(shadows) = self.shadows {
-            lighting.shadows = match shadows {
-                ShadowsArg::None => Shadows::None,
-                ShadowsArg::Sorted => Shadows::SORTED,
-                ShadowsArg::Stochastic => Shadows::Stochastic,
-                ShadowsArg::Exact => Shadows::Exact,
+            lighting.shadows = match (shadows, lighting.shadows) {
+                (ShadowsArg::None, _) => Shadows::None,
+                // The world's sorted shadows keep their k, threshold and tint.
+                (ShadowsArg::Sorted, sorted @ Shadows::Sorted { .. }) => sorted,
+                (ShadowsArg::Sorted, _) => Shadows::SORTED,
+                (ShadowsArg::Stochastic, _) => Shadows::Stochastic,
+                (ShadowsArg::Exact, _) => Shadows::Exact,
             };
         }
+        self.apply_shadow_options(&mut lighting)?;
         let camera = self.choose_camera(&scene, camera, width, height)?;
         let settings = RenderSettings {
             background: self.background.or(background).unwrap_or(Vec3::ZERO),
@@ -483,6 +499,33 @@ impl SceneArgs {
             ..self.settings()
         };
         Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment, lens })
+    }
+
+    /// --shadow-k, --shadow-threshold and --shadow-colored on sorted shadows (refused on any
+    /// other kind, which reads none of them), --shadow-offset on any; `World::new` checks the
+    /// values with the rest of the lighting.
+    fn apply_shadow_options(&self, lighting: &mut splat_core::lighting::Lighting) -> Result<()> {
+        let sorted_options = [
+            ("--shadow-k", self.shadow_k.is_some()),
+            ("--shadow-threshold", self.shadow_threshold.is_some()),
+            ("--shadow-colored", self.shadow_colored.is_some()),
+        ];
+        match &mut lighting.shadows {
+            Shadows::Sorted { k, threshold, colored } => {
+                *k = self.shadow_k.unwrap_or(*k);
+                *threshold = self.shadow_threshold.unwrap_or(*threshold);
+                *colored = self.shadow_colored.unwrap_or(*colored);
+            }
+            other => {
+                if let Some((flag, _)) = sorted_options.iter().find(|(_, given)| *given) {
+                    bail!("{flag} sets sorted shadows, and the shadows are {other:?}: add --shadows sorted");
+                }
+            }
+        }
+        if let Some(offset) = self.shadow_offset {
+            lighting.shadow_offset = offset;
+        }
+        Ok(())
     }
 
     /// The render settings these options describe.

@@ -1414,3 +1414,32 @@ fn presets_set_what_their_trainer_assumes() {
         stderr(&o)
     );
 }
+
+/// `--shadows sorted` keeps a world's sorted-shadow settings (it used to reset k, threshold and
+/// tint to their defaults), the `--shadow-*` options change them, and the sorted ones are
+/// refused on shadows that do not read them.
+#[test]
+fn shadow_options_keep_the_worlds_and_change_what_they_name() {
+    let lit = std::fs::read_to_string(root().join("fixtures/worlds/demo-lit.toml")).unwrap();
+    let world = lit.replace("kind = \"stochastic\"", "kind = \"sorted\"\nk = 2\nthreshold = 0.5\ncolored = 0.6");
+    let path = scratch("sorted-shadows.toml");
+    std::fs::write(&path, world).unwrap();
+    let render = |extra: &[&str], name: &str| {
+        let out = scratch(name);
+        let args = ["render", path.to_str().unwrap(), "--width", "40", "--height", "30", "--backend", "cpu"];
+        let o = splat(&[&args[..], &["-o", out.to_str().unwrap()], extra].concat());
+        (o.status.success().then(|| npy(&out)), stderr(&o))
+    };
+    let (world, e) = render(&[], "shadows-world.npy");
+    let world = world.unwrap_or_else(|| panic!("{e}"));
+    let (named, e) = render(&["--shadows", "sorted"], "shadows-named.npy");
+    assert_eq!(named.unwrap_or_else(|| panic!("{e}")), world, "--shadows sorted resets the world's settings");
+    let (by_flags, e) = render(
+        &["--shadows", "sorted", "--shadow-k", "18", "--shadow-threshold", "0.8", "--shadow-colored", "0"],
+        "shadows-defaults.npy",
+    );
+    let by_flags = by_flags.unwrap_or_else(|| panic!("{e}"));
+    assert!(rmse(&by_flags, &world) > 1e-4, "the shadow options change nothing");
+    let (refused, e) = render(&["--shadows", "exact", "--shadow-k", "4"], "shadows-refused.npy");
+    assert!(refused.is_none() && e.contains("--shadow-k sets sorted shadows") && e.contains("--shadows sorted"), "{e}");
+}
