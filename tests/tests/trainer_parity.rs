@@ -138,33 +138,27 @@ fn a_two_percent_opacity_bias_is_rejected() {
 /// the columns of the surfel's rotation), α = min(0.99, o e^{−(u² + v²)/2}) within the 3σ disc
 /// and above 1/255, composited front to back by t.
 fn surfel_image(scene: &Scene, camera: &Camera) -> Vec<f32> {
-    composite(camera, |origin, dir| {
-        scene
-            .particles
-            .iter()
-            .filter_map(|p| {
-                let m = glam::DMat3::from_quat(p.rotation.as_dquat());
-                let (tu, tv, n) = (m.x_axis, m.y_axis, m.z_axis);
-                let mean = p.mean.as_dvec3();
-                let t = (mean - origin).dot(n) / dir.dot(n);
-                let at = origin + t * dir - mean;
-                let (u, v) = (at.dot(tu) / f64::from(p.scale.x), at.dot(tv) / f64::from(p.scale.y));
-                let rho2 = u * u + v * v;
-                let alpha = (f64::from(p.opacity) * (-0.5 * rho2).exp()).min(0.99);
-                (t > 0.0 && rho2 <= 9.0 && alpha >= 1.0 / 255.0).then_some((t, alpha, degree_zero_rgb(p)))
-            })
-            .collect()
+    composite(scene, camera, |p, origin, dir| {
+        let m = glam::DMat3::from_quat(p.rotation.as_dquat());
+        let (tu, tv, n) = (m.x_axis, m.y_axis, m.z_axis);
+        let mean = p.mean.as_dvec3();
+        let t = (mean - origin).dot(n) / dir.dot(n);
+        let at = origin + t * dir - mean;
+        let (u, v) = (at.dot(tu) / f64::from(p.scale.x), at.dot(tv) / f64::from(p.scale.y));
+        let rho2 = u * u + v * v;
+        let alpha = (f64::from(p.opacity) * (-0.5 * rho2).exp()).min(0.99);
+        (t > 0.0 && rho2 <= 9.0 && alpha >= 1.0 / 255.0).then_some((t, alpha))
     })
 }
 
-/// The colour of a particle's degree-0 SH term.
-fn degree_zero_rgb(p: &splat_core::Particle) -> glam::DVec3 {
-    (p.sh[0].as_dvec3() * f64::from(splat_core::sh::SH_C0) + glam::DVec3::splat(0.5)).max(glam::DVec3::ZERO)
-}
-
-/// The image of `camera`'s pixel-centre rays (in f64, from the intrinsics), each pixel the hits
-/// `hits(origin, direction)` gives as (t, α, colour) composited front to back by t (Eq. 3).
-fn composite(camera: &Camera, hits: impl Fn(glam::DVec3, glam::DVec3) -> Vec<(f64, f64, glam::DVec3)>) -> Vec<f32> {
+/// The image of `camera`'s pixel-centre rays (in f64, from the intrinsics): each pixel the hits
+/// `hit(particle, origin, direction)` gives as (t, α), each of its particle's degree-0 SH
+/// colour, composited front to back by t (Eq. 3).
+fn composite(
+    scene: &Scene,
+    camera: &Camera,
+    hit: impl Fn(&splat_core::Particle, glam::DVec3, glam::DVec3) -> Option<(f64, f64)>,
+) -> Vec<f32> {
     let r = camera.rotation.as_dmat3();
     let origin = camera.center().as_dvec3();
     let mut image = Vec::new();
@@ -175,7 +169,15 @@ fn composite(camera: &Camera, hits: impl Fn(glam::DVec3, glam::DVec3) -> Vec<(f6
                 (f64::from(y) + 0.5 - f64::from(camera.cy)) / f64::from(camera.fy),
                 1.0,
             );
-            let mut hits = hits(origin, (r.transpose() * d_cam).normalize());
+            let dir = (r.transpose() * d_cam).normalize();
+            let rgb = |p: &splat_core::Particle| {
+                (p.sh[0].as_dvec3() * f64::from(splat_core::sh::SH_C0) + glam::DVec3::splat(0.5)).max(glam::DVec3::ZERO)
+            };
+            let mut hits: Vec<(f64, f64, glam::DVec3)> = scene
+                .particles
+                .iter()
+                .filter_map(|p| hit(p, origin, dir).map(|(t, alpha)| (t, alpha, rgb(p))))
+                .collect();
             hits.sort_by(|a, b| a.0.total_cmp(&b.0));
             let (mut c, mut transmittance) = (glam::DVec3::ZERO, 1.0);
             for (_, alpha, rgb) in hits {
@@ -244,23 +246,17 @@ fn a_2dgs_capture_renders_as_the_surfel_equation() {
 /// exp(−4.5/3ⁿ · grayDistⁿᐟ²), α = min(0.99, response × density), kept when the response exceeds
 /// 0.0113 and α exceeds 1/255; hits at their point of maximum response, composited front to back.
 fn grt_image(scene: &Scene, camera: &Camera, degree: i32) -> Vec<f32> {
-    composite(camera, |origin, dir| {
-        scene
-            .particles
-            .iter()
-            .filter_map(|p| {
-                let rot = glam::DMat3::from_quat(p.rotation.as_dquat());
-                let inv_scale = glam::DVec3::ONE / p.scale.as_dvec3();
-                let gro = inv_scale * (rot.transpose() * (origin - p.mean.as_dvec3()));
-                let grdu = inv_scale * (rot.transpose() * dir);
-                let grd = grdu.normalize();
-                let gray_dist = grd.cross(gro).length_squared();
-                let gres = (-4.5 / 3f64.powi(degree) * gray_dist.powf(f64::from(degree) / 2.0)).exp();
-                let alpha = (gres * f64::from(p.opacity)).min(0.99);
-                let t = -gro.dot(grdu) / grdu.length_squared();
-                (t > 0.0 && gres > 0.0113 && alpha > 1.0 / 255.0).then_some((t, alpha, degree_zero_rgb(p)))
-            })
-            .collect()
+    composite(scene, camera, |p, origin, dir| {
+        let rot = glam::DMat3::from_quat(p.rotation.as_dquat());
+        let inv_scale = glam::DVec3::ONE / p.scale.as_dvec3();
+        let gro = inv_scale * (rot.transpose() * (origin - p.mean.as_dvec3()));
+        let grdu = inv_scale * (rot.transpose() * dir);
+        let grd = grdu.normalize();
+        let gray_dist = grd.cross(gro).length_squared();
+        let gres = (-4.5 / 3f64.powi(degree) * gray_dist.powf(f64::from(degree) / 2.0)).exp();
+        let alpha = (gres * f64::from(p.opacity)).min(0.99);
+        let t = -gro.dot(grdu) / grdu.length_squared();
+        (t > 0.0 && gres > 0.0113 && alpha > 1.0 / 255.0).then_some((t, alpha))
     })
 }
 

@@ -3,7 +3,7 @@
 //! scene loader and the progress bar.
 
 use anyhow::{Context, Result, bail};
-use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,8 +27,7 @@ use std::path::PathBuf;
 /// The values of `--method` (and `--secondary`, `--methods`): every method of the
 /// [catalogue](splat_core::catalogue) by its name, its summary as help.
 pub fn method_parser() -> impl TypedValueParser<Value = MethodId> {
-    let values = MethodId::ALL.map(|m| PossibleValue::new(m.name()).help(m.entry().summary));
-    PossibleValuesParser::new(values).map(|name| MethodId::from_name(&name).expect("a name of the catalogue"))
+    splat_view::choice_parser(&MethodId::ALL, MethodId::name, |m| m.entry().summary)
 }
 
 /// Blend order of raster-sorted.
@@ -415,8 +414,7 @@ pub struct ReadArgs {
 
 /// The values of `--preset`: every [`Preset`] by its name, described.
 fn preset_parser() -> impl TypedValueParser<Value = Preset> {
-    let values = Preset::ALL.map(|p| PossibleValue::new(p.name()).help(p.describe()));
-    PossibleValuesParser::new(values).map(|name| *Preset::ALL.iter().find(|p| p.name() == name).expect("a name"))
+    splat_view::choice_parser(&Preset::ALL, Preset::name, Preset::describe)
 }
 
 impl ReadArgs {

@@ -1,6 +1,6 @@
 //! The command line's words for what the libraries say in theirs: a refused GPU render's
-//! remedies ([`splat_gpu::Remedy`]), a lens the splatting methods cannot see through and the
-//! strict PLY reader's refusal, as the flags that apply them.
+//! remedies ([`splat_gpu::Remedy`]), a lens the oracle cannot see through and the strict PLY
+//! reader's refusal, as the flags that apply them.
 
 use splat_core::camera::CameraError;
 use splat_gpu::{GpuError, Remedy};

@@ -44,9 +44,12 @@ pub fn run(args: InfoArgs) -> Result<()> {
         );
     }
     if let Some(preset) = args.read.preset {
-        let settings =
-            splat_core::KernelParams { degree: preset.kernel_degree(), cutoff: preset.cutoff(), ..Default::default() };
-        out!("preset     {} (kernel degree {}, cutoff {:.4}σ)", preset.describe(), settings.degree, settings.cutoff);
+        out!(
+            "preset     {} (kernel degree {}, cutoff {:.4}σ)",
+            preset.describe(),
+            preset.kernel_degree(),
+            preset.cutoff()
+        );
     }
     let filter = scene.screen_filter;
     if filter == read.file_filter {

@@ -119,11 +119,6 @@ impl Distortion {
         }
         (x, false)
     }
-
-    /// Whether it distorts nothing.
-    pub fn is_none(&self) -> bool {
-        self.coefficients().all(|c| c == 0.0)
-    }
 }
 
 /// How a camera maps directions to its image (see the module documentation).

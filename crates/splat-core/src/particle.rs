@@ -190,7 +190,7 @@ impl Particle {
     /// Whether it is a 2D Gaussian as the readers make one: its third scale exactly
     /// [`SURFEL_THICKNESS`] × the larger of the other two.
     pub fn is_surfel(&self) -> bool {
-        self.scale.z == SURFEL_THICKNESS * self.scale.x.max(self.scale.y)
+        self.scale.z == surfel_thickness(self.scale.x, self.scale.y)
     }
 
     /// Check that the particle is a finite, non-degenerate Gaussian with a unit quaternion.
@@ -336,6 +336,12 @@ impl Aabb {
 /// readers give 2DGS captures this thickness. Small enough to be invisible, large enough that
 /// the canonical transform (1/ε) stays well inside f32.
 pub const SURFEL_THICKNESS: f32 = 1e-5;
+
+/// The third scale the readers give a surfel of in-plane scales `s0`, `s1`:
+/// [`SURFEL_THICKNESS`] × the larger.
+pub fn surfel_thickness(s0: f32, s1: f32) -> f32 {
+    SURFEL_THICKNESS * s0.max(s1)
+}
 
 /// A set of particles sharing one SH degree and one screen-space filter.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -87,9 +87,8 @@ fn ewa(p: RasterParticle) -> Projected {
 fn unscented(i: u32, p: RasterParticle) -> Projected {
     var out: Projected;
     out.visible = false;
-    let to_camera = mat3x3<f32>(params.cam_row0.xyz, params.cam_row1.xyz, params.cam_row2.xyz);
-    // mat3x3 takes columns: these are the rows of R_cam, so transpose.
-    let world_to_camera = transpose(to_camera);
+    // R, whose rows the params hold (mat3x3 takes columns).
+    let world_to_camera = transpose(mat3x3<f32>(params.cam_row0.xyz, params.cam_row1.xyz, params.cam_row2.xyz));
     let centre = world_to_camera * p.mean + params.cam_translation.xyz;
     out.depth = length(centre);
     if (!(out.depth > NEAR)) {
@@ -131,9 +130,10 @@ fn unscented(i: u32, p: RasterParticle) -> Projected {
     return out;
 }
 
-// project.rs `project`: Σ₂ = J W Σ Wᵀ Jᵀ, the screen filter (Σ′ = Σ₂ + s I, the opacity × ρ;
-// filter.rs `ScreenFilter::apply`), the rect of the extent, the SH colour from the camera centre,
-// and the sort key; culled particles get the key NONE and sort behind all others.
+// project.rs `project`: Σ₂ by `ewa` through the pinhole or `unscented` through another lens, the
+// screen filter (Σ′ = Σ₂ + s I, the opacity × ρ; filter.rs `ScreenFilter::apply`), the rect of
+// the extent, the SH colour from the camera centre, and the sort key; culled particles get the
+// key NONE and sort behind all others.
 @compute @workgroup_size(256, 1, 1)
 fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = flat_index(gid, groups);

@@ -545,7 +545,7 @@ fn surfels_render_on_the_gpu_as_on_the_cpu() {
     let (mut scene, camera) = fixture("layers", 40, 30);
     for (i, p) in scene.particles.iter_mut().enumerate() {
         p.rotation = (splat_core::glam::Quat::from_rotation_x(0.5 + 0.3 * i as f32) * p.rotation).normalize();
-        p.scale.z = splat_core::particle::SURFEL_THICKNESS * p.scale.x.max(p.scale.y);
+        p.scale.z = splat_core::particle::surfel_thickness(p.scale.x, p.scale.y);
     }
     let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
     let frames = Frames { count: 1, seed: 5, ..Frames::default() };

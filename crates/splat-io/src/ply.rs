@@ -35,7 +35,7 @@
 
 use crate::{Error, ErrorKind, read_file};
 use glam::{Quat, Vec3};
-use splat_core::particle::{SH_MAX_COEFFS, SURFEL_THICKNESS, sh_coeff_count};
+use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count, surfel_thickness};
 use splat_core::{Particle, ParticleError, Scene, ScreenFilter};
 use std::path::Path;
 
@@ -105,7 +105,7 @@ pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, Er
         let surfels = mode == Some(Mode::Surfels);
         if surfels {
             for p in &mut scene.particles {
-                p.scale.z = SURFEL_THICKNESS * p.scale.x.max(p.scale.y);
+                p.scale.z = surfel_thickness(p.scale.x, p.scale.y);
             }
         }
         return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true, filter_3d: false, surfels });
@@ -211,13 +211,13 @@ impl Mode {
         mode
     }
 
-    /// The comment the writer records for a scene (Brush's spelling), if any: `2dgs` for
-    /// surfels, `mip` for the antialiased filter.
-    fn comment(scene: &Scene) -> Option<&'static str> {
-        if scene.is_surfels() {
+    /// The comment the writer records (Brush's spelling), if any: `2dgs` for surfels, `mip`
+    /// for the antialiased filter.
+    fn comment(written: &Written, filter: ScreenFilter) -> Option<&'static str> {
+        if written.surfels {
             return Some("SplatRenderMode: 2dgs");
         }
-        (scene.screen_filter == ScreenFilter::Antialiased).then_some("SplatRenderMode: mip")
+        (filter == ScreenFilter::Antialiased).then_some("SplatRenderMode: mip")
     }
 }
 
@@ -457,7 +457,7 @@ impl Header {
 /// Where each particle field comes from, checked once per file.
 struct Layout {
     sh_degree: u8,
-    /// 2DGS surfels: two scales, the third [`SURFEL_THICKNESS`] × the larger.
+    /// 2DGS surfels: two scales, the third [`surfel_thickness`].
     surfels: bool,
 }
 
@@ -556,7 +556,7 @@ impl Layout {
         }
         let opacity = 1.0 / (1.0 + (-opacity).exp());
         if self.surfels {
-            linear_scale[2] = SURFEL_THICKNESS * linear_scale[0].max(linear_scale[1]);
+            linear_scale[2] = surfel_thickness(linear_scale[0], linear_scale[1]);
         }
         let (linear_scale, opacity) = smoothed(linear_scale, opacity, filter);
         let particle =
@@ -622,24 +622,45 @@ impl<'a> Lines<'a> {
     }
 }
 
-/// The PLY property names 3DGS writes, in its order, for a scene, with Mip-Splatting's
-/// `filter_3D` last where the scene's filter is Mip-Splatting's.
-fn property_names(scene: &Scene) -> Vec<String> {
+/// What the writer stores of a scene, decided once for the file.
+struct Written {
+    sh_degree: u8,
+    /// 2DGS surfels: two scales and no `scale_2`.
+    surfels: bool,
+    /// Mip-Splatting's filter: a `filter_3D` of zeros.
+    filter_3d: bool,
+}
+
+impl Written {
+    fn of(scene: &Scene) -> Self {
+        let (surfels, filter_3d) = (scene.is_surfels(), scene.screen_filter == ScreenFilter::Mip);
+        Self { sh_degree: scene.sh_degree, surfels, filter_3d }
+    }
+
+    /// The scales stored: two for surfels, else three.
+    fn scales(&self) -> usize {
+        if self.surfels { 2 } else { 3 }
+    }
+}
+
+/// The PLY property names 3DGS writes, in its order, with Mip-Splatting's `filter_3D` last
+/// where the scene's filter is Mip-Splatting's.
+fn property_names(written: &Written) -> Vec<String> {
     let mut names: Vec<String> =
         ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].map(String::from).to_vec();
-    names.extend((0..3 * (sh_coeff_count(scene.sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
+    names.extend((0..3 * (sh_coeff_count(written.sh_degree) - 1)).map(|i| format!("f_rest_{i}")));
     names.push("opacity".into());
-    names.extend((0..if scene.is_surfels() { 2 } else { 3 }).map(|i| format!("scale_{i}")));
+    names.extend((0..written.scales()).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
-    if scene.screen_filter == ScreenFilter::Mip {
+    if written.filter_3d {
         names.push("filter_3D".into());
     }
     names
 }
 
 /// Stored (pre-activation) values of a particle, in [`property_names`] order.
-fn stored_values(p: &Particle, scene: &Scene) -> Vec<f32> {
-    let per_channel = sh_coeff_count(scene.sh_degree) - 1;
+fn stored_values(p: &Particle, written: &Written) -> Vec<f32> {
+    let per_channel = sh_coeff_count(written.sh_degree) - 1;
     let mut v = vec![p.mean.x, p.mean.y, p.mean.z, 0.0, 0.0, 0.0, p.sh[0].x, p.sh[0].y, p.sh[0].z];
     for channel in 0..3 {
         v.extend((1..=per_channel).map(|k| p.sh[k][channel]));
@@ -647,10 +668,9 @@ fn stored_values(p: &Particle, scene: &Scene) -> Vec<f32> {
     // Opacity 0 and 1 have infinite logits: store the nearest finite ones.
     let o = f64::from(p.opacity).clamp(1e-7, 1.0 - 1e-7);
     v.push((o / (1.0 - o)).ln() as f32);
-    let scales = if scene.is_surfels() { &p.scale.to_array()[..2] } else { &p.scale.to_array()[..] };
-    v.extend(scales.iter().map(|s| s.ln()));
+    v.extend(p.scale.to_array()[..written.scales()].iter().map(|s| s.ln()));
     v.extend([p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z]);
-    if scene.screen_filter == ScreenFilter::Mip {
+    if written.filter_3d {
         v.push(0.0); // filter_3D: already applied
     }
     v
@@ -660,14 +680,15 @@ fn stored_values(p: &Particle, scene: &Scene) -> Vec<f32> {
 /// module documentation says. Opacities of exactly 0 or 1 are stored as logit(1e-7) and
 /// logit(1 − 1e-7), the nearest finite values.
 pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
-    let names = property_names(scene);
+    let written = Written::of(scene);
+    let names = property_names(&written);
     let format_name = match format {
         PlyFormat::Ascii => "ascii",
         PlyFormat::BinaryLittleEndian => "binary_little_endian",
         PlyFormat::BinaryBigEndian => "binary_big_endian",
     };
     let mut out = format!("ply\nformat {format_name} 1.0\n");
-    if let Some(comment) = Mode::comment(scene) {
+    if let Some(comment) = Mode::comment(&written, scene.screen_filter) {
         out += &format!("comment {comment}\n");
     }
     out += &format!("element vertex {}\n", scene.particles.len());
@@ -677,7 +698,7 @@ pub fn encode_ply(scene: &Scene, format: PlyFormat) -> Vec<u8> {
     out += "end_header\n";
     let mut bytes = out.into_bytes();
     for p in &scene.particles {
-        let values = stored_values(p, scene);
+        let values = stored_values(p, &written);
         match format {
             PlyFormat::Ascii => {
                 let line: Vec<String> = values.iter().map(|v| v.to_string()).collect();

@@ -69,10 +69,20 @@ pub struct ViewArgs {
 /// The values of `--screen-filter` (here and in the `splat` commands): every [`ScreenFilter`]
 /// by its name, described.
 pub fn screen_filter_parser() -> impl clap::builder::TypedValueParser<Value = ScreenFilter> {
+    choice_parser(&ScreenFilter::ALL, ScreenFilter::name, ScreenFilter::describe)
+}
+
+/// A parser of one of the values `all`, each given by its `name` and listed in `--help` with
+/// its `help`: the options whose values the libraries declare (`--screen-filter`, and the
+/// `splat` commands' `--preset` and `--method`).
+pub fn choice_parser<T: Copy + Send + Sync + 'static>(
+    all: &'static [T],
+    name: fn(T) -> &'static str,
+    help: fn(T) -> &'static str,
+) -> impl clap::builder::TypedValueParser<Value = T> {
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-    let values = ScreenFilter::ALL.map(|f| PossibleValue::new(f.name()).help(f.describe()));
-    PossibleValuesParser::new(values)
-        .map(|name| *ScreenFilter::ALL.iter().find(|f| f.name() == name).expect("a filter's name"))
+    let values = all.iter().map(|&v| PossibleValue::new(name(v)).help(help(v)));
+    PossibleValuesParser::new(values).map(move |n| *all.iter().find(|&&v| name(v) == n).expect("one of the values"))
 }
 
 impl ViewArgs {

@@ -308,11 +308,7 @@ impl<'a> Rasterizer<'a> {
         let rays: Vec<Ray> = self.offsets.iter().map(|&o| self.clip(c.ray(x, y, o))).collect();
         // Splat depths are view z through the pinhole (a point at depth z is at t = z |d_cam|)
         // and distances through other lenses (t = depth along a unit ray).
-        let stretch = if c.is_pinhole() {
-            positions.iter().map(|p| Vec3::new((p.x - c.cx) / c.fx, (p.y - c.cy) / c.fy, 1.0).length()).collect()
-        } else {
-            vec![1.0; positions.len()]
-        };
+        let stretch = positions.iter().map(|&p| if c.is_pinhole() { c.direction(p).length() } else { 1.0 }).collect();
         let surfaces = if self.meshes.is_empty() {
             vec![None; rays.len()]
         } else {

@@ -42,7 +42,8 @@ pub struct Splat {
     pub mean: Vec2,
     /// Inverse of the filtered 2D covariance Σ′ as (a, b, c): A = a dx² + 2 b dx dy + c dy².
     pub conic: Vec3,
-    /// View-space depth z of the centre: the billboard depth and the global sort key.
+    /// Depth of the centre: the billboard depth and the global sort key; view-space z through
+    /// the pinhole, the distance from the camera through another lens.
     pub depth: f32,
     /// The splat's opacity: the particle's, times the screen filter's compensation ρ.
     pub opacity: f32,
