@@ -17,6 +17,11 @@ pub const FLOAT_TOLERANCE: f32 = 1e-4;
 /// (the backends' alphas differ by f32 rounding of the same formula).
 pub const FLIP_GAP: f64 = 1e-5;
 
+/// Two fragments whose centre depths lie this close (relative, about 8 f32 ulps) may pass each
+/// other's depth test in either order on the two backends: each scales the depth by its own
+/// f32 |d| of the sample's ray.
+pub const DEPTH_TIE: f64 = 1e-6;
+
 /// A decision source that records the smallest |u − threshold| of the comparisons it
 /// made (particles against α, passes against O, references against α).
 pub struct Nearest<D> {
@@ -94,4 +99,13 @@ pub fn raster_gap(r: &Rasterizer, method: &RasterMethod, frames: &Frames, x: u32
             nearest.gap()
         })
         .fold(f64::INFINITY, f64::min)
+}
+
+/// The smallest relative gap between the centre depths of two fragments of pixel (x, y): below
+/// [`DEPTH_TIE`] their depth order may differ between the backends.
+pub fn raster_depth_gap(r: &Rasterizer, x: u32, y: u32) -> f64 {
+    let px = r.pixel(x, y);
+    let mut depths: Vec<f64> = r.fragments(&px).iter().map(|f| f64::from(r.splats()[f.splat as usize].depth)).collect();
+    depths.sort_by(f64::total_cmp);
+    depths.windows(2).map(|w| (w[1] - w[0]) / w[0].abs().max(f64::MIN_POSITIVE)).fold(f64::INFINITY, f64::min)
 }
