@@ -13,8 +13,11 @@
 //!
 //! Pixel coordinates follow this workspace (pixel i covers [i, i + 1), centre i + 0.5; 3DGS
 //! puts the centre at i and shifts the projected mean by −½ with it, so every offset d is the
-//! same). The footprint is the ⌈3 √λ_max⌉ box around the mean, each pixel of it evaluated down
-//! to α = 1/255.
+//! same). A splat reaches every pixel of the 16 × 16 tiles its bounds touch (`renderCUDA`
+//! tests a pixel against nothing but α ≥ 1/255): the INRIA rasterizer and Mip-Splatting's fork
+//! bound it by the ⌈3 √λ_max⌉ square and `getRect`; gsplat by its opacity-aware half-widths
+//! ⌈extend √Σ′_ii⌉, extend = min(3.33, √(2 ln(255 o))), and the tile range of `isect_tiles`
+//! (its AABB path; its AccuTile ellipse test drops only tiles where no pixel passes the cull).
 
 use splat_core::{Camera, Scene};
 
@@ -86,7 +89,8 @@ struct Projected {
     id: usize,
     mean: [f32; 2],
     conic: [f32; 3],
-    radius: f32,
+    /// The tiles [x0, x1) × [y0, y1) the splat is drawn in.
+    tiles: [i32; 4],
     opacity: f32,
     rgb: [f32; 3],
 }
@@ -100,21 +104,24 @@ pub fn render(scene: &Scene, camera: &Camera, options: &Options) -> Vec<[f32; 3]
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut out = vec![[0.0f32; 3]; w * h];
     for (i, pixel) in out.iter_mut().enumerate() {
-        let pixf = [(i % w) as f32 + 0.5, (i / w) as f32 + 0.5];
-        *pixel = render_pixel(&splats, pixf, options);
+        *pixel = render_pixel(&splats, (i % w) as i32, (i / w) as i32, options);
     }
     out
 }
 
-/// `renderCUDA` for one pixel: front to back, α = min(0.99, o e^power), skip α < 1/255.
-fn render_pixel(splats: &[Projected], pixf: [f32; 2], options: &Options) -> [f32; 3] {
+/// `renderCUDA` for pixel (x, y): the splats of its tile front to back, α = min(0.99, o e^power),
+/// skip α < 1/255.
+fn render_pixel(splats: &[Projected], x: i32, y: i32, options: &Options) -> [f32; 3] {
+    let pixf = [x as f32 + 0.5, y as f32 + 0.5];
+    let (tx, ty) = (x / 16, y / 16);
     let mut t = 1.0f32;
     let mut c = [0.0f32; 3];
     for s in splats {
-        let d = [s.mean[0] - pixf[0], s.mean[1] - pixf[1]];
-        if d[0].abs() > s.radius || d[1].abs() > s.radius {
+        let [x0, y0, x1, y1] = s.tiles;
+        if tx < x0 || tx >= x1 || ty < y0 || ty >= y1 {
             continue;
         }
+        let d = [s.mean[0] - pixf[0], s.mean[1] - pixf[1]];
         let power = -0.5 * (s.conic[0] * d[0] * d[0] + s.conic[2] * d[1] * d[1]) - s.conic[1] * d[0] * d[1];
         if power > 0.0 {
             continue;
@@ -158,7 +165,7 @@ fn transpose(a: &M3) -> M3 {
 }
 
 /// `preprocessCUDA` for particle `id`: near-plane cull, Σ from scale and rotation, the EWA 2D
-/// covariance with the trainer's low-pass, conic, radius, screen box, SH colour.
+/// covariance with the trainer's low-pass, conic, the tiles it is drawn in, SH colour.
 fn preprocess(scene: &Scene, id: usize, camera: &Camera, options: &Options) -> Option<Projected> {
     let p = &scene.particles[id];
     let r_view = camera.rotation.to_cols_array_2d(); // columns
@@ -206,18 +213,48 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera, options: &Options) -> O
         return None;
     }
     let conic = [c / det, -b / det, a / det];
+    let mean = [fx * t[0] / t[2] + camera.cx, fy * t[1] / t[2] + camera.cy];
+    let opacity = opacity * coef;
+    let grid = [camera.width.div_ceil(16) as i32, camera.height.div_ceil(16) as i32];
+    let tiles = match options.forward {
+        Forward::GsplatAntialiased { .. } => gsplat_tiles(mean, [a, c], opacity, grid)?,
+        Forward::Inria | Forward::MipSplatting { .. } => get_rect(mean, [a, b, c], grid)?,
+    };
+    let dir = normalize(rel);
+    let rgb = color_from_sh(&p.sh.to_array().map(|v| v.to_array()), scene.sh_degree, dir);
+    Some(Projected { depth: t[2], id, mean, conic, tiles, opacity, rgb })
+}
+
+/// `preprocessCUDA`'s radius ⌈3 √max(λ₁, λ₂)⌉ and `getRect`'s tiles around the mean in 3DGS's
+/// pixel coordinates (centre at i, so mean − ½ here), with its integer arithmetic; `None` when
+/// it touches no tile.
+fn get_rect(mean: [f32; 2], [a, b, c]: [f32; 3], grid: [i32; 2]) -> Option<[i32; 4]> {
+    let det = a * c - b * b;
     let mid = 0.5 * (a + c);
     let lambda1 = mid + (mid * mid - det).max(0.1).sqrt();
     let lambda2 = mid - (mid * mid - det).max(0.1).sqrt();
-    let radius = (3.0 * lambda1.max(lambda2).sqrt()).ceil();
-    let mean = [fx * t[0] / t[2] + camera.cx, fy * t[1] / t[2] + camera.cy];
-    let (wf, hf) = (camera.width as f32, camera.height as f32);
-    if mean[0] + radius < 0.0 || mean[1] + radius < 0.0 || mean[0] - radius > wf || mean[1] - radius > hf {
+    let radius = (3.0 * lambda1.max(lambda2).sqrt()).ceil() as i32;
+    let p = [mean[0] - 0.5, mean[1] - 0.5];
+    let lo = |k: usize| (((p[k] - radius as f32) / 16.0) as i32).clamp(0, grid[k]);
+    let hi = |k: usize| (((p[k] + radius as f32 + 15.0) / 16.0) as i32).clamp(0, grid[k]);
+    let rect = [lo(0), lo(1), hi(0), hi(1)];
+    ((rect[2] - rect[0]) * (rect[3] - rect[1]) != 0).then_some(rect)
+}
+
+/// gsplat's `projection_ewa_3dgs_fused` bounds (radius ⌈extend √Σ′_ii⌉ per axis) and
+/// `isect_tiles`' AABB tile range [⌊m/16 − r/16⌋, ⌈m/16 + r/16⌉); `None` when the splat is
+/// culled (opacity below 1/255, no tile).
+fn gsplat_tiles(mean: [f32; 2], [a, c]: [f32; 2], opacity: f32, grid: [i32; 2]) -> Option<[i32; 4]> {
+    const ALPHA_THRESHOLD: f32 = 1.0 / 255.0;
+    if opacity < ALPHA_THRESHOLD {
         return None;
     }
-    let dir = normalize(rel);
-    let rgb = color_from_sh(&p.sh.to_array().map(|v| v.to_array()), scene.sh_degree, dir);
-    Some(Projected { depth: t[2], id, mean, conic, radius, opacity: opacity * coef, rgb })
+    let extend = 3.33f32.min((2.0 * (opacity / ALPHA_THRESHOLD).ln()).sqrt());
+    let radius = [(extend * a.sqrt()).ceil(), (extend * c.sqrt()).ceil()];
+    let lo = |k: usize| ((mean[k] / 16.0 - radius[k] / 16.0).floor() as i32).clamp(0, grid[k]);
+    let hi = |k: usize| ((mean[k] / 16.0 + radius[k] / 16.0).ceil() as i32).clamp(0, grid[k]);
+    let rect = [lo(0), lo(1), hi(0), hi(1)];
+    (rect[0] < rect[2] && rect[1] < rect[3]).then_some(rect)
 }
 
 fn normalize(v: [f32; 3]) -> [f32; 3] {

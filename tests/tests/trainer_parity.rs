@@ -3,11 +3,14 @@
 //! (`splat_tests::inria`) to float tolerance, on a fixture of SH degree 0 and one of degree 3,
 //! with and without the reference's early stop; with a scene's screen filter set to gsplat's
 //! antialiased mode or Mip-Splatting's 2D Mip filter it equals the same pass with that trainer's
-//! `computeCov2D`. The controls: the √8σ extent, another trainer's filter, a filter variance
-//! 1 % off, and opacities 2 % high are each rejected by the same comparison.
+//! `computeCov2D` and, for gsplat, its footprint (every pixel above the alpha cull, where the
+//! INRIA rasterizer draws whole tiles). The controls: the √8σ extent, another trainer's filter
+//! or footprint, a filter variance 1 % off, and opacities 2 % high are each rejected by the
+//! same comparison.
 
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SplatExtent, render_raster};
 use splat_core::stats::rmse;
+use splat_core::trainer::Preset;
 use splat_core::{Camera, Frames, RenderSettings, Scene, ScreenFilter};
 use splat_tests::harness::fixture;
 use splat_tests::inria::{self, Forward};
@@ -39,12 +42,18 @@ fn trained(scene: &Scene, filter: ScreenFilter) -> Scene {
     Scene { screen_filter: filter, ..scene.clone() }
 }
 
-/// Each trainer's forward pass and the filter that names it.
-const TRAINERS: [(ScreenFilter, Forward); 3] = [
-    (ScreenFilter::Dilation, Forward::Inria),
-    (ScreenFilter::Antialiased, Forward::GSPLAT_ANTIALIASED),
-    (ScreenFilter::Mip, Forward::MIP_SPLATTING),
+/// Each trainer's forward pass and the preset that names it.
+const TRAINERS: [(Preset, Forward); 3] = [
+    (Preset::ThreeDgs, Forward::Inria),
+    (Preset::GsplatAntialiased, Forward::GSPLAT_ANTIALIASED),
+    (Preset::MipSplatting, Forward::MIP_SPLATTING),
 ];
+
+/// A trainer's screen filter and splat extent.
+fn of(preset: Preset) -> (ScreenFilter, RasterSettings) {
+    let filter = preset.screen_filter().expect("a rasterizing trainer");
+    (filter, RasterSettings { extent: preset.extent(), ..RasterSettings::default() })
+}
 
 #[test]
 fn raster_sorted_equals_the_3dgs_forward_pass() {
@@ -65,33 +74,44 @@ fn raster_sorted_equals_the_3dgs_forward_pass() {
     }
 }
 
-/// Each screen filter is its trainer's `computeCov2D`, and no other: a capture rendered
-/// through another trainer's filter, or through its own with the variance 1 % off, is
-/// rejected by the parity tolerance.
+/// Each trainer's preset (its screen filter and splat extent) is its trainer's `computeCov2D`
+/// and footprint, and no other: a capture rendered through another trainer's filter, through
+/// its own with the variance 1 % off, or with the other footprint (the 3DGS tiles for gsplat's
+/// alpha-cull bounds and back) is rejected by the parity tolerance.
 ///
 /// The filters differ only on splats of a few pixels (ρ = σ² / (σ² + s) for a round one), so the
 /// capture is the cloud (σ from 0.6 to 3 px at 128 × 96), also seen from twice as far (at
 /// 64 × 48, the zoomed-out view where Mip-Splatting's filter matters most).
 #[test]
-fn each_screen_filter_equals_its_trainers_forward_pass() {
+fn each_trainers_preset_equals_its_forward_pass() {
     for (width, height) in [(128, 96), (64, 48)] {
         let name = format!("cloud at {width} × {height}");
         let (scene, camera) = fixture("cloud", width, height);
-        let raster = RasterSettings::default();
-        for (filter, forward) in TRAINERS {
+        for (preset, forward) in TRAINERS {
+            let (filter, raster) = of(preset);
             let capture = trained(&scene, filter);
             let (worst, rmse) = against(&capture, &camera, raster, Blend::Under, &reference(forward));
-            eprintln!("{name} {filter:?}: max {worst:.2e}, RMSE {rmse:.2e}");
-            assert!(worst < MAX_TOLERANCE && rmse < RMSE_TOLERANCE, "{name} {filter:?}: max {worst}, RMSE {rmse}");
-            for (other, _) in TRAINERS.into_iter().filter(|&(f, _)| f != filter) {
+            eprintln!("{name} {preset:?}: max {worst:.2e}, RMSE {rmse:.2e}");
+            assert!(worst < MAX_TOLERANCE && rmse < RMSE_TOLERANCE, "{name} {preset:?}: max {worst}, RMSE {rmse}");
+            for (other, _) in TRAINERS.into_iter().filter(|&(p, _)| p != preset) {
+                let (other_filter, _) = of(other);
                 let (worst, rmse) =
-                    against(&trained(&scene, other), &camera, raster, Blend::Under, &reference(forward));
-                eprintln!("  control {other:?} on a {filter:?} capture: max {worst:.2e}, RMSE {rmse:.2e}");
-                assert!(worst > 1e-2 && rmse > 1e-3, "{name}: {other:?} passes for {filter:?}: max {worst}");
+                    against(&trained(&scene, other_filter), &camera, raster, Blend::Under, &reference(forward));
+                eprintln!("  control {other_filter:?} on a {preset:?} capture: max {worst:.2e}, RMSE {rmse:.2e}");
+                assert!(worst > 1e-2 && rmse > 1e-3, "{name}: {other_filter:?} passes for {preset:?}: max {worst}");
             }
+            let swapped = match raster.extent {
+                SplatExtent::AlphaCull => SplatExtent::ThreeDgs,
+                _ => SplatExtent::AlphaCull,
+            };
+            let control = RasterSettings { extent: swapped, ..raster };
+            let (worst, rmse) = against(&capture, &camera, control, Blend::Under, &reference(forward));
+            eprintln!("  control {swapped:?} footprint on a {preset:?} capture: max {worst:.2e}, RMSE {rmse:.2e}");
+            assert!(worst > MAX_TOLERANCE, "{name}: the {swapped:?} footprint passes for {preset:?}: max {worst}");
         }
         let off = [Forward::GsplatAntialiased { eps2d: 0.3 * 1.01 }, Forward::MipSplatting { kernel_size: 0.1 * 1.01 }];
-        for (filter, forward) in [ScreenFilter::Antialiased, ScreenFilter::Mip].into_iter().zip(off) {
+        for (preset, forward) in [Preset::GsplatAntialiased, Preset::MipSplatting].into_iter().zip(off) {
+            let (filter, raster) = of(preset);
             let (worst, _) = against(&trained(&scene, filter), &camera, raster, Blend::Under, &reference(forward));
             eprintln!("  control {forward:?}: max {worst:.2e}");
             assert!(worst > MAX_TOLERANCE, "{name}: a 1 % error in the filter variance passes ({worst})");

@@ -57,27 +57,6 @@ pub enum SamplePatternArg {
     Standard,
 }
 
-/// Footprint of a splat.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum ExtentArg {
-    /// The reference 3DGS rasterizer: the ⌈3√λmax⌉ box, the 1/255 alpha cull deciding the
-    /// footprint (what trained captures were optimised with).
-    #[value(name = "3dgs")]
-    ThreeDgs,
-    /// The √8σ ellipse of vk_gaussian_splatting and StochasticSplats.
-    Sqrt8,
-}
-
-impl ExtentArg {
-    /// The footprint in words, for reports.
-    pub fn describe(self) -> &'static str {
-        match self {
-            ExtentArg::ThreeDgs => "the 3DGS ⌈3√λmax⌉ box",
-            ExtentArg::Sqrt8 => "the √8σ ellipse",
-        }
-    }
-}
-
 /// Where rays are traced or splats rasterized.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BackendArg {
@@ -132,9 +111,11 @@ pub struct MethodOptions {
     /// Raster methods: depth of each fragment.
     #[arg(help_heading = "Splatting", long, value_enum, default_value = "center")]
     pub fragment_depth: FragmentDepthArg,
-    /// Raster methods: which pixels a splat can touch.
-    #[arg(help_heading = "Splatting", long, value_enum, default_value = "3dgs")]
-    pub extent: ExtentArg,
+    /// Raster methods: which pixels a splat can touch [default: the --preset's, else that of
+    /// the trainer whose screen filter the capture names: alpha-cull for gsplat's antialiased
+    /// mode, else 3dgs].
+    #[arg(help_heading = "Splatting", long, value_parser = extent_parser())]
+    pub extent: Option<SplatExtent>,
     /// raster-sorted: stop a pixel before the splat that takes its transmittance below 1e-4, as
     /// the 3DGS rasterizer does (default off: the exact sum of Eq. 3; CPU only; the stochastic
     /// raster methods have no order to stop in and ignore it).
@@ -149,7 +130,24 @@ pub struct MethodOptions {
     pub no_scramble: bool,
 }
 
+/// The values of `--extent`: every [`SplatExtent`] by its name, described.
+fn extent_parser() -> impl TypedValueParser<Value = SplatExtent> {
+    splat_view::choice_parser(&SplatExtent::ALL, SplatExtent::name, SplatExtent::describe)
+}
+
 impl MethodOptions {
+    /// Take the trainer's footprint where `--extent` was not given ([`Preset::extent`]).
+    pub fn apply_preset(&mut self, preset: Option<Preset>) {
+        self.extent = self.extent.or(preset.map(Preset::extent));
+    }
+
+    /// Where neither `--extent` nor `--preset` gave a footprint, take the one of the trainer
+    /// whose screen filter the capture names ([`Preset::of_filter`]): a gsplat-antialiased
+    /// capture is drawn with gsplat's bounds.
+    pub fn apply_capture(&mut self, scene: &Scene) {
+        self.extent = self.extent.or(Some(Preset::of_filter(scene.screen_filter).extent()));
+    }
+
     /// The value of every method parameter these options give.
     pub fn parameters(&self) -> Parameters {
         Parameters {
@@ -204,10 +202,7 @@ impl MethodOptions {
                 FragmentDepthArg::Center => FragmentDepth::Center,
                 FragmentDepthArg::Plane => FragmentDepth::MaxDensityPlane,
             },
-            extent: match self.extent {
-                ExtentArg::ThreeDgs => SplatExtent::ThreeDgs,
-                ExtentArg::Sqrt8 => SplatExtent::Sqrt8,
-            },
+            extent: self.extent.unwrap_or_default(),
             early_stop: self.early_stop,
         }
     }
@@ -406,8 +401,8 @@ pub struct ReadArgs {
     /// `antialiased` comment, a `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
     #[arg(long, value_parser = splat_view::screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
-    /// The trainer of the capture: its screen filter, kernel degree and cutoff, unless given on
-    /// their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response).
+    /// The trainer of the capture: its screen filter, splat extent, kernel degree and cutoff,
+    /// unless given on their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response).
     #[arg(long, value_parser = preset_parser())]
     pub preset: Option<Preset>,
 }

@@ -192,8 +192,10 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
         anyhow::bail!("--pipelines needs a world file with [[meshes]]");
     }
     let (scene, camera) = (&staged.world.scene, &staged.camera);
+    let mut options = args.options.clone();
+    options.apply_capture(scene);
     let pool = args.scene.pool()?;
-    let raster = args.options.raster_settings();
+    let raster = options.raster_settings();
     let sorted = RasterMethod::Sorted { blend: Blend::Under };
     let rows = [
         ("raster", "raster-sorted", Algorithm::Raster(sorted, raster)),
@@ -285,9 +287,11 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
 /// `--raster-samples`, against raster-sorted's in the same run ([`raster_methods_gpu`]).
 fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let (scene, camera) = args.scene.load(1200, 800)?;
+    let mut options = args.options.clone();
+    options.apply_capture(&scene);
     let pipes = splat_gpu::RasterPipelines::new(ctx)?;
     let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &args.scene.settings())?;
-    let settings = match args.options.on_gpu(args.options.resolve(MethodId::RasterSorted)) {
+    let settings = match options.on_gpu(options.resolve(MethodId::RasterSorted)) {
         splat_core::Algorithm::Raster(_, settings) => settings,
         _ => unreachable!("raster-sorted resolves to a raster algorithm"),
     };
@@ -397,9 +401,11 @@ fn raster_methods_gpu(
 fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
     use splat_core::raster::{Rasterizer, render_raster};
     let (scene, camera) = args.scene.load(1200, 800)?;
+    let mut options = args.options.clone();
+    options.apply_capture(&scene);
     let pool = args.scene.pool()?;
     let settings = args.scene.settings();
-    let raster = args.options.raster_settings();
+    let raster = options.raster_settings();
     println!(
         "{} particles, {}×{}, CPU reference, {} samples per pixel ({} pattern), {} threads, fastest of {} runs\n",
         scene.particles.len(),
@@ -418,7 +424,7 @@ fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
     );
     let mut baseline = None;
     for m in methods {
-        let splat_core::Algorithm::Raster(method, raster) = args.options.resolve(m) else { continue };
+        let splat_core::Algorithm::Raster(method, raster) = options.resolve(m) else { continue };
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();

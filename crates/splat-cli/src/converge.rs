@@ -53,7 +53,7 @@ struct Row {
 }
 
 /// Run `splat converge`.
-pub fn run(args: ConvergeArgs) -> Result<()> {
+pub fn run(mut args: ConvergeArgs) -> Result<()> {
     if args.scene.backend == BackendArg::Gpu {
         bail!("splat converge runs on the CPU tracer; the GPU kernels are compared with it by the test suite");
     }
@@ -72,6 +72,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         vec![MethodId::Stochastic, MethodId::StochasticN, MethodId::StochasticPass, MethodId::DepthSampling]
     });
     let (scene, camera) = args.scene.load(160, 120)?;
+    args.options.apply_capture(&scene);
     let settings = args.scene.settings();
     let trace = TraceScene::new(&scene, settings)?;
     let exact = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {})?;
@@ -84,7 +85,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         eprintln!(
             "raster-sorted against ray-traced exact: RMSE {:.5} (the EWA projection and {} against ray-traced Eq. 3)",
             rmse(sorted.mean.data(), exact.mean.data()),
-            args.options.extent.describe()
+            args.options.raster_settings().extent.describe()
         );
         Some((raster, sorted))
     } else {

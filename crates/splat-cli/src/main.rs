@@ -98,11 +98,20 @@ fn main() -> ExitCode {
         };
     }
     let result = match cli.command {
-        Command::Render(args) => render::run(*args),
+        Command::Render(mut args) => {
+            args.options.apply_preset(args.scene.read.preset);
+            render::run(*args)
+        }
         Command::Info(args) => info::run(args),
         Command::Convert(args) => convert::run(args),
-        Command::Converge(args) => converge::run(*args),
-        Command::Bench(args) => bench::run(*args),
+        Command::Converge(mut args) => {
+            args.options.apply_preset(args.scene.read.preset);
+            converge::run(*args)
+        }
+        Command::Bench(mut args) => {
+            args.options.apply_preset(args.scene.read.preset);
+            bench::run(*args)
+        }
         Command::Stratify(args) => stratify::run(args),
         Command::Compare(args) => compare::run(args),
         Command::View(args) => splat_view::run(&args),

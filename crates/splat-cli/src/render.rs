@@ -109,15 +109,17 @@ pub enum ViewFormat {
 }
 
 /// Run `splat render`.
-pub fn run(args: RenderArgs) -> Result<()> {
+pub fn run(mut args: RenderArgs) -> Result<()> {
     if args.all_cameras {
-        return run_all_cameras(&args);
+        return run_all_cameras(args);
     }
     for (flag, path) in outputs(&args) {
         ImageFormat::from_path(path)?;
         crate::args::check_output(path, flag)?;
     }
     let staged = args.scene.load_world(640, 480)?;
+    args.options.apply_capture(&staged.world.scene);
+    let args = args;
     crate::args::check_memory(&staged.camera)?;
     if args.pipeline == Some(PipelineArg::Path) {
         return run_path(&args, &staged);
@@ -222,7 +224,7 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
 
 /// `splat render --all-cameras`: every view of --camera into the folder -o, one progress bar
 /// over the views, the GPU context (if any) made once.
-fn run_all_cameras(args: &RenderArgs) -> Result<()> {
+fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     if args.alpha.is_some() || args.depth.is_some() || args.normal.is_some() || args.variance.is_some() {
         bail!("--all-cameras writes colour images only: drop --alpha, --depth, --normal and --variance");
     }
@@ -235,6 +237,8 @@ fn run_all_cameras(args: &RenderArgs) -> Result<()> {
         crate::args::check_memory(&args.scene.sized(*camera)?)?;
     }
     let mut staged = args.scene.load_world(640, 480)?;
+    args.options.apply_capture(&staged.world.scene);
+    let args = &args;
     let cpu_algorithm = algorithm(args)?;
     let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);

@@ -73,8 +73,15 @@ impl KernelParams {
     /// cutoff (3DGRT's adaptive bounds) shrinks the boxes of faint particles without changing
     /// a single hit: at opacity 0.05 the extent is 2.26σ, at 0.01 1.37σ.
     pub fn visible_extent(&self, opacity: f32) -> f32 {
+        self.visible_radius(opacity).min(self.cutoff)
+    }
+
+    /// [`KernelParams::visible_extent`] without the cutoff: the Mahalanobis radius beyond which
+    /// the alpha cull takes every hit of a particle of this opacity (infinite without a cull).
+    /// The splatting path, which has no cutoff, bounds gsplat's footprint by it.
+    pub fn visible_radius(&self, opacity: f32) -> f32 {
         if self.alpha_cull <= 0.0 {
-            return self.cutoff;
+            return f32::INFINITY;
         }
         if opacity.is_nan() || opacity < self.alpha_cull {
             return 0.0;
@@ -83,8 +90,7 @@ impl KernelParams {
         // response that rounds to 1 near the centre for high degrees).
         let x = ((f64::from(opacity) / f64::from(self.alpha_cull)).ln() + 1e-5) / 4.5;
         let d2 = 9.0 * if self.degree == 2 { x } else { x.powf(2.0 / f64::from(self.degree)) };
-        let widened = (d2 * 1.001).sqrt();
-        (widened as f32).min(self.cutoff)
+        (d2 * 1.001).sqrt() as f32
     }
 
     /// alpha = opacity × response, `None` when culled, clamped to [`KernelParams::alpha_clamp`].

@@ -2,13 +2,13 @@
 //! assumes of a capture that the file does not say: one home for a trainer's conventions (the
 //! CLI's `--preset`, `splat info`).
 //!
-//! | preset | screen filter | kernel | its renderer |
-//! |---|---|---|---|
-//! | `3dgs` | 0.3 px² dilation | degree 2 | the INRIA rasterizer |
-//! | `gsplat-antialiased` | antialiased | degree 2 | gsplat, `rasterize_mode="antialiased"` |
-//! | `mip-splatting` | 2D Mip filter | degree 2 | Mip-Splatting's rasterizer (its 3D filter is in the file) |
-//! | `3dgrt` | the file's | degree 4: exp(−4.5 (d/3)⁴) | 3DGRT's ray tracer (3dgrut `configs/render/3dgrt.yaml`) |
-//! | `3dgut` | the file's | degree 2 | 3DGUT (3dgrut `configs/render/3dgut.yaml`): particles evaluated in 3D along each ray |
+//! | preset | screen filter | splat extent | kernel | its renderer |
+//! |---|---|---|---|---|
+//! | `3dgs` | 0.3 px² dilation | 3DGS tiles | degree 2 | the INRIA rasterizer |
+//! | `gsplat-antialiased` | antialiased | alpha cull | degree 2 | gsplat, `rasterize_mode="antialiased"` |
+//! | `mip-splatting` | 2D Mip filter | 3DGS tiles | degree 2 | Mip-Splatting's rasterizer (its 3D filter is in the file) |
+//! | `3dgrt` | the file's | 3DGS tiles | degree 4: exp(−4.5 (d/3)⁴) | 3DGRT's ray tracer (3dgrut `configs/render/3dgrt.yaml`) |
+//! | `3dgut` | the file's | 3DGS tiles | degree 2 | 3DGUT (3dgrut `configs/render/3dgut.yaml`): particles evaluated in 3D along each ray |
 //!
 //! 3DGRT and 3DGUT evaluate each particle in 3D along the pixel's ray (their response at its
 //! maximum, alpha clamped to 0.99 and cut below 1/255, as here), but drop a hit whose response
@@ -19,6 +19,7 @@
 //! file's stays.
 
 use crate::filter::ScreenFilter;
+use crate::raster::SplatExtent;
 
 /// The smallest kernel response 3DGRT and 3DGUT keep (`particle_kernel_min_response`).
 pub const GRUT_MIN_RESPONSE: f32 = 0.0113;
@@ -73,6 +74,26 @@ impl Preset {
             Preset::GsplatAntialiased => Some(ScreenFilter::Antialiased),
             Preset::MipSplatting => Some(ScreenFilter::Mip),
             Preset::ThreeDgrt | Preset::ThreeDgut => None,
+        }
+    }
+
+    /// The rasterizing trainer whose screen filter `filter` is: the one a capture that names
+    /// its filter (and no preset) is rendered as.
+    pub const fn of_filter(filter: ScreenFilter) -> Preset {
+        match filter {
+            ScreenFilter::Dilation => Preset::ThreeDgs,
+            ScreenFilter::Antialiased => Preset::GsplatAntialiased,
+            ScreenFilter::Mip => Preset::MipSplatting,
+        }
+    }
+
+    /// Which pixels its rasterizer lets a splat touch: gsplat's opacity-aware bounds, else the
+    /// 3DGS rasterizer's tiles (Mip-Splatting's rasterizer is a fork of it; 3DGRT and 3DGUT
+    /// render with rays, where no extent applies).
+    pub const fn extent(self) -> SplatExtent {
+        match self {
+            Preset::GsplatAntialiased => SplatExtent::AlphaCull,
+            _ => SplatExtent::ThreeDgs,
         }
     }
 

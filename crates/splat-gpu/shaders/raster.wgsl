@@ -130,6 +130,28 @@ fn unscented(i: u32, p: RasterParticle) -> Projected {
     return out;
 }
 
+// project.rs `inria_tiles`: the pixels of the 3DGS rasterizer's tiles around its box of
+// half-width r = ⌈3 √λ_max⌉ centred at p = mean − ½ (its pixel coordinates), empty when none.
+fn inria_tiles(mean: vec2<f32>, a: f32, c: f32, det: f32) -> vec4<f32> {
+    let mid = 0.5 * (a + c);
+    let lambda_max = mid + sqrt(max(mid * mid - det, EIGEN_FLOOR));
+    let r = ceil(BOX_SIGMAS * sqrt(lambda_max));
+    let p = mean - vec2<f32>(0.5);
+    let size = vec2<f32>(params.size);
+    let grid = ceil(size / BLOCK);
+    let lo = clamp(floor((p - vec2<f32>(r)) / BLOCK), vec2<f32>(0.0), grid);
+    let hi = clamp(floor((p + vec2<f32>(r + BLOCK - 1.0)) / BLOCK), vec2<f32>(0.0), grid);
+    return vec4<f32>(lo * BLOCK, min(hi * BLOCK, size));
+}
+
+// project.rs `ellipse_box`: the pixels around the ellipse A ≤ bound of Σ′ = [[a, b], [b, c]],
+// clipped to the image.
+fn ellipse_box(mean: vec2<f32>, a: f32, c: f32, bound: f32) -> vec4<f32> {
+    let r = sqrt(bound * vec2<f32>(a, c));
+    let size = vec2<f32>(params.size);
+    return vec4<f32>(max(floor(mean - r), vec2<f32>(0.0)), min(ceil(mean + r), size));
+}
+
 // project.rs `project`: Σ₂ by `ewa` through the pinhole or `unscented` through another lens, the
 // screen filter (Σ′ = Σ₂ + s I, the opacity × ρ; filter.rs `ScreenFilter::apply`), the rect of
 // the extent, the SH colour from the camera centre, and the sort key; culled particles get the
@@ -172,19 +194,18 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         }
     }
     let mean = projected.mean;
-    let mid = 0.5 * (a + c);
-    let lambda_max = mid + sqrt(max(mid * mid - det, EIGEN_FLOOR));
-    let radius = ceil(BOX_SIGMAS * sqrt(lambda_max));
-    var rx = radius;
-    var ry = radius;
+    // Within the 3DGS tiles the alpha cull alone decides: the footprint is cut to the visible
+    // radius, the same pixels kept.
+    var bound = visible_radius_sq(opacity, params);
     if (params.extent == EXTENT_SQRT8) {
-        rx = sqrt(EXTENT_SQ * a);
-        ry = sqrt(EXTENT_SQ * c);
+        bound = EXTENT_SQ;
     }
-    let size = vec2<f32>(params.size);
-    let lo = max(floor(mean - vec2<f32>(rx, ry)), vec2<f32>(0.0));
-    let hi = min(ceil(mean + vec2<f32>(rx, ry)), size);
-    if (!(lo.x < hi.x && lo.y < hi.y)) {
+    var rect = ellipse_box(mean, a, c, bound);
+    if (params.extent == EXTENT_3DGS) {
+        let tiles = inria_tiles(mean, a, c, det);
+        rect = vec4<f32>(max(rect.xy, tiles.xy), min(rect.zw, tiles.zw));
+    }
+    if (!(rect.x < rect.z && rect.y < rect.w)) {
         return;
     }
     let v = p.mean - camera_origin();
@@ -199,8 +220,8 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.conic = vec3<f32>(c / det, -b / det, a / det);
     s.id = i;
     s.color = sh_eval(i, params.sh_degree, dir);
-    s.radius = radius;
-    s.rect = vec4<u32>(vec2<u32>(lo), vec2<u32>(hi));
+    s.bound = bound;
+    s.rect = vec4<u32>(rect);
     splats[i] = s;
     depth_keys[i] = bitcast<u32>(projected.depth);
     atomicAdd(&draw_args[1], 1u);

@@ -74,8 +74,9 @@ struct Splat {
     conic: vec3<f32>,
     id: u32,
     color: vec3<f32>,
-    // Half-width ⌈3 √λ_max⌉ of the 3DGS box, px.
-    radius: f32,
+    // The largest Mahalanobis term of the footprint: EXTENT_SQ, else the visible radius²
+    // (UNBOUNDED without an alpha cull).
+    bound: f32,
     rect: vec4<u32>,
 }
 
@@ -83,24 +84,39 @@ struct Splat {
 const MODE_OVER: u32 = 0u;
 const MODE_UNDER: u32 = 1u;
 const MODE_STOCHASTIC: u32 = 2u;
-// params.extent (splat_core::raster::SplatExtent): the 3DGS box of half-width ⌈3 √λ_max⌉
-// (BOX_SIGMAS, with 3DGS's floor EIGEN_FLOOR under the eigenvalue discriminant), or the √8σ
-// ellipse (fragments with a Mahalanobis term above EXTENT_SQ are discarded).
+// params.extent (splat_core::raster::SplatExtent): the 3DGS rasterizer's 16 × 16 tiles around
+// its box of half-width ⌈3 √λ_max⌉ (BOX_SIGMAS, with 3DGS's floor EIGEN_FLOOR under the
+// eigenvalue discriminant; BLOCK), the √8σ ellipse (fragments with a Mahalanobis term above
+// EXTENT_SQ are discarded), or gsplat's: every pixel above the alpha cull.
 const LOOK_SURFACE: u32 = 0u;
 const LOOK_VOLUMETRIC: u32 = 1u;
 const EXTENT_3DGS: u32 = 0u;
 const EXTENT_SQRT8: u32 = 1u;
+const EXTENT_ALPHA_CULL: u32 = 2u;
 const EXTENT_SQ: f32 = 8.0;
 const BOX_SIGMAS: f32 = 3.0;
 const EIGEN_FLOOR: f32 = 0.1;
+const BLOCK: f32 = 16.0;
+const UNBOUNDED: f32 = 3.40282347e38; // f32::MAX
 
-// project.rs `Splat::covers`: whether pixel position p lies in the splat's footprint.
+// project.rs `Splat::covers`: whether pixel position p lies in the splat's footprint, its rect
+// and its bounding ellipse.
 fn covers(s: Splat, p: vec2<f32>, params: RasterParams) -> bool {
-    if (params.extent == EXTENT_3DGS) {
-        let d = abs(p - s.mean);
-        return d.x <= s.radius && d.y <= s.radius;
+    let r = vec4<f32>(s.rect);
+    return all(p >= r.xy) && all(p < r.zw) && mahalanobis(s, p) <= s.bound;
+}
+
+// kernel.rs `KernelParams::visible_radius`, squared: the Mahalanobis term beyond which the
+// alpha cull takes every hit of opacity o.
+fn visible_radius_sq(o: f32, params: RasterParams) -> f32 {
+    if (params.alpha_cull <= 0.0) {
+        return UNBOUNDED;
     }
-    return mahalanobis(s, p) <= EXTENT_SQ;
+    if (!(o >= params.alpha_cull)) {
+        return 0.0;
+    }
+    let x = (log(o / params.alpha_cull) + 1e-5) / 4.5;
+    return 9.0 * pow(x, 2.0 / f32(params.kernel_degree)) * 1.001;
 }
 
 // A = dᵀ Σ′⁻¹ d at continuous pixel position p (raster/project.rs, Splat::mahalanobis).

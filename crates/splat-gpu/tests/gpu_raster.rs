@@ -10,7 +10,8 @@ use splat_core::RenderSettings;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SplatExtent, render_raster};
 use splat_core::rng::SplitMix64;
-use splat_core::{Camera, Scene, ScreenFilter};
+use splat_core::trainer::Preset;
+use splat_core::{Camera, Scene};
 use splat_gpu::sort::{cpu_radix_sort, depth_key, sort_pairs};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
 use std::sync::OnceLock;
@@ -93,8 +94,11 @@ fn projection_and_depth_order_equal_the_cpu() {
         assert_eq!(order, cpu_order, "{name}: depth order");
         for s in cpu.splats() {
             let g = &splats[s.id as usize];
-            assert_eq!(g.rect, s.rect, "{name} splat {}", s.id);
-            assert_eq!(g.radius, s.radius, "{name} splat {}: 3DGS box radius", s.id);
+            // The rect is cut to the visible radius (computed in f64 here, f32 there): an edge
+            // may fall a pixel apart, where the alpha cull takes the pixel on both.
+            let edges = g.rect.iter().zip(s.rect).all(|(&a, b)| a.abs_diff(b) <= 1);
+            assert!(edges, "{name} splat {}: rect {:?} vs {:?}", s.id, g.rect, s.rect);
+            assert!((g.bound - s.bound).abs() <= 1e-4 * s.bound, "{name} splat {}: bound", s.id);
             let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * (1.0 + b.abs());
             assert!(close(g.mean[0], s.mean.x) && close(g.mean[1], s.mean.y), "{name} {}: mean", s.id);
             assert!(close(g.depth, s.depth), "{name} {}: depth", s.id);
@@ -432,8 +436,8 @@ fn splatting_through_each_lens_equals_the_cpu() {
 /// GPU sorted splatting with the default extent is the INRIA 3DGS rasterizer: it equals the
 /// independent forward pass of `splat_tests::inria` (no early stop, which the GPU refuses) on a
 /// fixture of SH degree 0 and one of degree 3, to the blend format's tolerance; the √8σ extent
-/// is rejected by the same comparison. With gsplat's antialiased mode or Mip-Splatting's 2D Mip
-/// filter as the scene's screen filter it equals that trainer's forward pass.
+/// is rejected by the same comparison. With the gsplat-antialiased or Mip-Splatting preset's
+/// screen filter and extent it equals that trainer's forward pass.
 #[test]
 fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
     let Some(ctx) = context() else { return };
@@ -455,19 +459,20 @@ fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
         assert!(d <= tolerance, "{name}: GPU sorted splatting differs from the 3DGS forward pass by {d}");
         assert!(control > 1e-2, "{name}: the √8σ extent passes as 3DGS ({control})");
     }
-    // The other trainers' screen filters, on the cloud of few-pixel splats where they matter;
-    // the control is the 3DGS dilation on their captures.
+    // The other trainers' presets (screen filter and footprint), on the cloud of few-pixel
+    // splats where the filters matter; the control is the 3DGS dilation on their captures.
     let c = case("cloud", 128, 96);
     let dilated = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
-    for (filter, forward) in [
-        (ScreenFilter::Antialiased, splat_tests::inria::Forward::GSPLAT_ANTIALIASED),
-        (ScreenFilter::Mip, splat_tests::inria::Forward::MIP_SPLATTING),
+    for (preset, forward) in [
+        (Preset::GsplatAntialiased, splat_tests::inria::Forward::GSPLAT_ANTIALIASED),
+        (Preset::MipSplatting, splat_tests::inria::Forward::MIP_SPLATTING),
     ] {
         let options = splat_tests::inria::Options { background: [0.0; 3], forward, ..Default::default() };
         let reference: Vec<f32> = splat_tests::inria::render(&c.scene, &c.camera, &options).concat();
-        let capture = Scene { screen_filter: filter, ..c.scene.clone() };
+        let capture = Scene { screen_filter: preset.screen_filter().unwrap(), ..c.scene.clone() };
+        let raster = RasterSettings { extent: preset.extent(), ..RasterSettings::default() };
         let render = |scene: &RasterScene| {
-            let gpu = GpuRasterizer::new(ctx, pipes, scene, &c.camera, &RasterSettings::default()).unwrap();
+            let gpu = GpuRasterizer::new(ctx, pipes, scene, &c.camera, &raster).unwrap();
             gpu.render(&RasterMethod::Sorted { blend: Blend::Over }, &Frames::default()).unwrap().0
         };
         let d = max_abs_diff(
@@ -475,9 +480,9 @@ fn gpu_sorted_splatting_equals_the_3dgs_forward_pass() {
             &reference,
         );
         let control = max_abs_diff(render(&dilated).mean.data(), &reference);
-        eprintln!("cloud {filter:?}: |GPU − its trainer| {d:.2e}, |GPU 3DGS dilation − its trainer| {control:.2e}");
-        assert!(d <= tolerance, "cloud: the GPU's {filter:?} differs from its trainer's forward pass by {d}");
-        assert!(control > 1e-2, "cloud: the 3DGS dilation passes for {filter:?} ({control})");
+        eprintln!("cloud {preset:?}: |GPU − its trainer| {d:.2e}, |GPU 3DGS dilation − its trainer| {control:.2e}");
+        assert!(d <= tolerance, "cloud: the GPU's {preset:?} differs from its trainer's forward pass by {d}");
+        assert!(control > 1e-2, "cloud: the 3DGS dilation passes for {preset:?} ({control})");
     }
 }
 

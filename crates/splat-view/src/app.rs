@@ -654,12 +654,7 @@ fn parameter(ui: &mut egui::Ui, param: Param, p: &mut Parameters) {
                 FragmentDepth::MaxDensityPlane => "max-density plane".into(),
             });
         }
-        Param::Extent => {
-            combo(ui, info.label, &mut p.raster.extent, &[SplatExtent::ThreeDgs, SplatExtent::Sqrt8], |e| match e {
-                SplatExtent::ThreeDgs => "3DGS box".into(),
-                SplatExtent::Sqrt8 => "√8σ ellipse".into(),
-            })
-        }
+        Param::Extent => combo(ui, info.label, &mut p.raster.extent, &SplatExtent::ALL, |e| e.name().into()),
     }
 }
 

@@ -5,7 +5,8 @@
 //! A pixel is processed like a multisampled render target. Every splat that reaches the pixel
 //! makes one *fragment*: its alpha is evaluated once, at the pixel centre (the shading rate of
 //! MSAA), and its coverage is a bit per sample, set where the sample lies inside the splat's
-//! √8σ ellipse. Each covered sample has its own fragment depth along the sample's ray: the
+//! footprint ([`SplatExtent`]: the 3DGS rasterizer's tiles, the √8σ ellipse, or gsplat's
+//! alpha-cull bounds). Each covered sample has its own fragment depth along the sample's ray: the
 //! billboard through the centre ([`FragmentDepth::Center`], what 3DGS and vk use) or the point of
 //! maximum density ([`FragmentDepth::MaxDensityPlane`], StochasticSplats' pop-free variant).
 //! With one sample (the centre) this is exactly the 3DGS rasterizer.
@@ -129,7 +130,7 @@ pub struct Fragment {
     pub splat: u32,
     /// Alpha at the pixel centre.
     pub alpha: f32,
-    /// Bit s set when sample s is inside the splat's √8σ ellipse.
+    /// Bit s set when sample s is inside the splat's footprint ([`Splat::covers`]).
     pub covered: u64,
 }
 

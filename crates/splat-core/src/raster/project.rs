@@ -9,24 +9,59 @@ use glam::{Mat3, Vec2, Vec3};
 
 /// The `Sqrt8` extent reaches √8 σ: fragments whose Mahalanobis term A exceeds 8 are discarded.
 pub const EXTENT_SQ: f32 = 8.0;
-/// The `ThreeDgs` extent is a square of half-width ⌈3 √λ_max⌉ px around the centre (λ_max the
-/// larger eigenvalue of Σ′), as the 3DGS rasterizer's `preprocessCUDA` computes its radius.
+/// The `ThreeDgs` extent starts from a square of half-width ⌈3 √λ_max⌉ px around the centre
+/// (λ_max the larger eigenvalue of Σ′), as the 3DGS rasterizer's `preprocessCUDA` computes its
+/// radius.
 pub const BOX_SIGMAS: f32 = 3.0;
 /// 3DGS takes λ = mid ± √max(0.1, mid² − det): the floor under the discriminant.
 pub const EIGEN_FLOOR: f32 = 0.1;
+/// The side of the 3DGS rasterizer's tiles (`BLOCK_X`, `BLOCK_Y`), px: its footprint is made
+/// of whole tiles.
+pub const BLOCK: f32 = 16.0;
 
 /// Which pixels a splat can touch; within it, the alpha cull (1/255) decides.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum SplatExtent {
-    /// The reference 3DGS rasterizer (diff-gaussian-rasterization): every pixel within the
-    /// ⌈3 √λ_max⌉ box, so an opaque splat reaches 3.33σ along its minor axis where α ≥ 1/255.
-    /// What trained captures were optimised with: the default.
+    /// The reference 3DGS rasterizer (diff-gaussian-rasterization): every pixel of the 16 × 16
+    /// tiles that the ⌈3 √λ_max⌉ box around the centre touches (`getRect`; `renderCUDA` tests
+    /// no pixel against the box), so an opaque splat reaches past 3σ along its major axis
+    /// wherever its tiles do and α ≥ 1/255. What trained captures were optimised with: the
+    /// default. Cut to the visible radius ([`KernelParams::visible_radius`]), which changes no
+    /// pixel centre's alpha and covers a sample of a multisampled pixel where it is visible.
     #[default]
     ThreeDgs = 0,
     /// The √8σ ellipse (A ≤ 8) of vk_gaussian_splatting and StochasticSplats' quads.
     Sqrt8 = 1,
+    /// Every pixel whose alpha passes the cull: gsplat's footprint, whose opacity-aware bounds
+    /// (`extend` = √(2 ln(o / (1/255))) standard deviations, and its tile–ellipse test) hold
+    /// exactly those pixels.
+    AlphaCull = 2,
 }
+
+impl SplatExtent {
+    /// Every extent.
+    pub const ALL: [SplatExtent; 3] = [SplatExtent::ThreeDgs, SplatExtent::Sqrt8, SplatExtent::AlphaCull];
+
+    /// Its name on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SplatExtent::ThreeDgs => "3dgs",
+            SplatExtent::Sqrt8 => "sqrt8",
+            SplatExtent::AlphaCull => "alpha-cull",
+        }
+    }
+
+    /// The footprint in words.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            SplatExtent::ThreeDgs => "the 3DGS rasterizer's tiles around its ⌈3√λmax⌉ box",
+            SplatExtent::Sqrt8 => "the √8σ ellipse of vk_gaussian_splatting and StochasticSplats",
+            SplatExtent::AlphaCull => "every pixel above the 1/255 alpha cull, as gsplat",
+        }
+    }
+}
+
 /// Particles whose centre is nearer than this along the view axis are culled (3DGS).
 pub const NEAR: f32 = 0.2;
 /// 3DGS clamps x/z and y/z of a centre to 1.3 × the image's half-extent before the Jacobian,
@@ -49,11 +84,12 @@ pub struct Splat {
     pub opacity: f32,
     /// SH colour seen along the direction from the camera centre to the particle centre.
     pub color: Vec3,
-    /// Half-width ⌈3 √λ_max⌉ of the 3DGS box, px.
-    pub radius: f32,
-    /// The footprint: the 3DGS box or the √8σ ellipse.
-    pub extent: SplatExtent,
-    /// Pixel range [x0, x1) × [y0, y1) of the footprint, clipped to the image.
+    /// The largest Mahalanobis term A the footprint holds: 8 for the √8σ ellipse, else the
+    /// visible radius² ([`KernelParams::visible_radius`]), beyond which the cull takes every
+    /// alpha anyway.
+    pub bound: f32,
+    /// Pixel range [x0, x1) × [y0, y1) of the footprint, clipped to the image: the box of the
+    /// bounding ellipse, within the 3DGS tiles for that extent.
     pub rect: [u32; 4],
 }
 
@@ -65,16 +101,12 @@ impl Splat {
         self.conic.x * d.x * d.x + 2.0 * self.conic.y * d.x * d.y + self.conic.z * d.y * d.y
     }
 
-    /// Whether continuous pixel position `p` lies in the splat's footprint.
+    /// Whether continuous pixel position `p` lies in the splat's footprint: in its rect and
+    /// within its bounding ellipse.
     #[inline]
     pub fn covers(&self, p: Vec2) -> bool {
-        match self.extent {
-            SplatExtent::ThreeDgs => {
-                let d = (p - self.mean).abs();
-                d.x <= self.radius && d.y <= self.radius
-            }
-            SplatExtent::Sqrt8 => self.mahalanobis(p) <= EXTENT_SQ,
-        }
+        let [x0, y0, x1, y1] = self.rect.map(|v| v as f32);
+        p.x >= x0 && p.x < x1 && p.y >= y0 && p.y < y1 && self.mahalanobis(p) <= self.bound
     }
 
     /// alpha = opacity × response(A) at `p` (exp(−½A) for the degree-2 kernel), `None` outside
@@ -112,7 +144,6 @@ pub fn project(
         return None;
     }
     let (mean, [a2, b2, c2], depth) = if camera.is_pinhole() { ewa(p, camera)? } else { unscented(p, camera)? };
-    let (w, h) = (camera.width as f32, camera.height as f32);
     let ([a, b, c], rho) = scene.screen_filter.apply(a2, b2, c2);
     let det = a * c - b * b;
     if det.is_nan() || det <= 0.0 || !det.is_finite() {
@@ -123,23 +154,59 @@ pub fn project(
         return None;
     }
     let conic = Vec3::new(c / det, -b / det, a / det);
+    let (w, h) = (camera.width, camera.height);
+    let (bound, rect) = match extent {
+        SplatExtent::ThreeDgs => {
+            // Within the tiles the alpha cull alone decides, and it takes every pixel beyond the
+            // visible radius: cutting the footprint to it tests fewer pixels, keeps the same.
+            let r2 = kernel.visible_radius(opacity).powi(2);
+            let [x0, y0, x1, y1] = inria_tiles(mean, a, c, det, w, h)?;
+            let [u0, v0, u1, v1] = ellipse_box(mean, a, c, r2, w, h)?;
+            let rect = [x0.max(u0), y0.max(v0), x1.min(u1), y1.min(v1)];
+            (r2, (rect[0] < rect[2] && rect[1] < rect[3]).then_some(rect)?)
+        }
+        SplatExtent::Sqrt8 => (EXTENT_SQ, ellipse_box(mean, a, c, EXTENT_SQ, w, h)?),
+        SplatExtent::AlphaCull => {
+            let r2 = kernel.visible_radius(opacity).powi(2);
+            (r2, ellipse_box(mean, a, c, r2, w, h)?)
+        }
+    };
+    let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
+    Some(Splat { id: index, mean, conic, depth, opacity, color, bound, rect })
+}
+
+/// The pixels of the 3DGS rasterizer's footprint: its radius r = ⌈3 √λ_max⌉ with
+/// λ_max = mid + √max(0.1, mid² − det), and the tiles `getRect` gives the box around the centre
+/// p (in its pixel coordinates, where pixel i's centre is i: p = mean − ½),
+/// [⌊(p − r) / 16⌋, ⌊(p + r + 15) / 16⌋) clamped to the grid; `None` when that is empty (the
+/// rasterizer culls the splat).
+fn inria_tiles(mean: Vec2, a: f32, c: f32, det: f32, w: u32, h: u32) -> Option<[u32; 4]> {
     let mid = 0.5 * (a + c);
     let lambda_max = mid + (mid * mid - det).max(EIGEN_FLOOR).sqrt();
-    let radius = (BOX_SIGMAS * lambda_max.sqrt()).ceil();
-    let (rx, ry) = match extent {
-        SplatExtent::ThreeDgs => (radius, radius),
-        SplatExtent::Sqrt8 => ((EXTENT_SQ * a).sqrt(), (EXTENT_SQ * c).sqrt()),
+    let r = (BOX_SIGMAS * lambda_max.sqrt()).ceil();
+    let p = mean - Vec2::splat(0.5);
+    let tiles = |p: f32, size: u32| -> (u32, u32) {
+        let grid = size.div_ceil(BLOCK as u32) as f32;
+        let lo = ((p - r) / BLOCK).floor().clamp(0.0, grid);
+        let hi = ((p + r + BLOCK - 1.0) / BLOCK).floor().clamp(0.0, grid);
+        ((lo * BLOCK) as u32, ((hi * BLOCK) as u32).min(size))
     };
-    let clip = |lo: f32, hi: f32, max: f32| -> Option<(u32, u32)> {
+    let ((x0, x1), (y0, y1)) = (tiles(p.x, w), tiles(p.y, h));
+    (x0 < x1 && y0 < y1).then_some([x0, y0, x1, y1])
+}
+
+/// The pixels [x0, x1) × [y0, y1) around the ellipse A ≤ `bound` of Σ′ = [[a, b], [b, c]]
+/// (half-widths √(bound a) and √(bound c)), clipped to the image; `None` when empty.
+fn ellipse_box(mean: Vec2, a: f32, c: f32, bound: f32, w: u32, h: u32) -> Option<[u32; 4]> {
+    let clip = |lo: f32, hi: f32, max: u32| -> Option<(u32, u32)> {
         let lo = lo.floor().max(0.0);
-        let hi = hi.ceil().min(max);
+        let hi = hi.ceil().min(max as f32);
         (lo < hi).then_some((lo as u32, hi as u32))
     };
+    let (rx, ry) = ((bound * a).sqrt(), (bound * c).sqrt());
     let (x0, x1) = clip(mean.x - rx, mean.x + rx, w)?;
     let (y0, y1) = clip(mean.y - ry, mean.y + ry, h)?;
-    let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
-    let rect = [x0, y0, x1, y1];
-    Some(Splat { id: index, mean, conic, depth, opacity, color, radius, extent, rect })
+    Some([x0, y0, x1, y1])
 }
 
 /// EWA through the pinhole: the projected centre, Σ₂ = J W Σ Wᵀ Jᵀ as (a, b, c) and the view
@@ -297,22 +364,56 @@ mod tests {
         assert!(project(&scene, 2, &cam, &k, SplatExtent::ThreeDgs).is_some());
     }
 
-    /// The 3DGS box: half-width ⌈3 √λ_max⌉; a point inside the box beyond √8σ is covered (and
-    /// visible while α ≥ 1/255), a point outside the box is not, whatever its alpha.
+    /// The 3DGS footprint is whole 16 × 16 tiles: a pixel beyond the ⌈3 √λ_max⌉ box in a tile
+    /// the box touches is covered (and visible while α ≥ 1/255), a pixel of the next tile is
+    /// not, whatever its alpha. The controls, the box itself and the √8σ ellipse, are narrower.
     #[test]
-    fn the_3dgs_box_reaches_past_sqrt8_sigma() {
-        let cam = camera();
-        let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.99, Vec3::ONE);
+    fn the_3dgs_footprint_is_the_tiles_its_box_touches() {
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 50.0, 128, 96).unwrap();
+        let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.6), Quat::IDENTITY, 0.99, Vec3::ONE);
         let scene = Scene::new(vec![p], 0);
         let k = KernelParams::default();
         let s = project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).unwrap();
         let sigma = (1.0 / s.conic.x).sqrt();
-        assert_relative_eq!(s.radius, (3.0 * sigma).ceil(), epsilon = 1e-4);
-        let at = |d: f32| s.mean + Vec2::new(d * sigma, 0.0);
-        assert!(s.alpha(at(3.0), &k).is_some(), "3σ is inside the box and above the cull");
+        let r = (3.0 * sigma).ceil();
+        // The fixture: centre (64, 48), r = 47; in 3DGS's coordinates p = 63.5, so the tiles
+        // are ⌊(63.5 − 47) / 16⌋ = 1 to ⌊(63.5 + 47 + 15) / 16⌋ = 7 (exclusive), pixels [16, 112).
+        assert_eq!((s.mean, r), (Vec2::new(64.0, 48.0), 47.0), "the fixture's geometry");
+        assert_eq!(s.rect[0..3], [16, 0, 112]);
+        let at = |x: f32| Vec2::new(x, s.mean.y + 0.5);
+        for x in [111.5, 16.5] {
+            assert!((at(x) - s.mean).abs().x > r, "{x} lies past the box");
+            assert!(s.alpha(at(x), &k).is_some(), "{x}: in a tile the box touches, above the cull");
+        }
+        for x in [112.5, 15.5] {
+            assert!(k.alpha(s.opacity, k.response(s.mahalanobis(at(x)))).is_some(), "{x}: above the cull");
+            assert!(s.alpha(at(x), &k).is_none(), "{x}: a tile the box does not touch");
+        }
         let sqrt8 = project(&scene, 0, &cam, &k, SplatExtent::Sqrt8).unwrap();
-        assert!(sqrt8.alpha(at(3.0), &k).is_none(), "3σ is outside √8σ");
-        assert!(s.alpha(s.mean + Vec2::new(s.radius + 0.01, 0.0), &k).is_none(), "outside the box");
-        assert!(s.rect[2] - s.rect[0] > sqrt8.rect[2] - sqrt8.rect[0]);
+        assert!(sqrt8.alpha(at(111.5), &k).is_none(), "past √8σ");
+    }
+
+    /// The alpha-cull extent (gsplat) covers exactly the pixels whose alpha passes the cull:
+    /// for opacities from faint to opaque, along both axes of a rotated anisotropic splat.
+    #[test]
+    fn the_alpha_cull_extent_is_where_alpha_passes() {
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 50.0, 128, 96).unwrap();
+        let k = KernelParams::default();
+        for opacity in [0.01, 0.05, 0.3, 0.99] {
+            let rot = Quat::from_rotation_z(0.6);
+            let p = Particle::with_rgb(Vec3::ZERO, Vec3::new(0.3, 0.1, 0.1), rot, opacity, Vec3::ONE);
+            let scene = Scene::new(vec![p], 0);
+            let s = project(&scene, 0, &cam, &k, SplatExtent::AlphaCull).unwrap();
+            let mut covered = 0;
+            for y in 0..96 {
+                for x in 0..128 {
+                    let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    let passes = k.alpha(s.opacity, k.response(s.mahalanobis(q))).is_some();
+                    assert_eq!(s.alpha(q, &k).is_some(), passes, "opacity {opacity} at {q}");
+                    covered += usize::from(passes);
+                }
+            }
+            assert!(covered > 10, "opacity {opacity}: {covered} pixels");
+        }
     }
 }

@@ -801,7 +801,7 @@ mod tests {
     #[test]
     fn rust_structs_mirror_the_raster_wgsl_structs() {
         assert_mirrors!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
-        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, radius, rect]);
+        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, bound, rect]);
         assert_mirrors!(
             RASTER_WGSL,
             RasterParams,

@@ -38,8 +38,8 @@ pub struct GpuSplat {
     pub id: u32,
     /// SH colour.
     pub color: [f32; 3],
-    /// Half-width ⌈3 √λ_max⌉ of the 3DGS box, px.
-    pub radius: f32,
+    /// The largest Mahalanobis term of the footprint ([`splat_core::raster::Splat::bound`]).
+    pub bound: f32,
     /// Pixel rect [x0, y0, x1, y1); empty when the particle is culled.
     pub rect: [u32; 4],
 }
@@ -80,7 +80,8 @@ pub struct RasterParams {
     pub tiles: [u32; 2],
     /// 0 over, 1 under, 2 stochastic splat.
     pub mode: u32,
-    /// The splat extent ([`splat_core::raster::SplatExtent`] as u32: 0 3DGS box, 1 √8σ).
+    /// The splat extent ([`splat_core::raster::SplatExtent`] as u32: 0 3DGS tiles, 1 √8σ, 2
+    /// alpha cull).
     pub extent: u32,
     /// 1 when lighting is on ([`Lighting::is_on`]).
     pub lit: u32,
