@@ -1,5 +1,5 @@
 // The splatting render pipeline: one instanced quad per splat covering the rect of its extent
-// (the 3DGS box or the √8σ ellipse's bounds), and the
+// (the 3DGS tiles, gsplat's alpha-cull bounds or the √8σ ellipse's), and the
 // fragment stages of sorted blending (vk_gaussian_splatting Lighting §1.5) and StochasticSplats (vk_gaussian_splatting Stochastic transparency §1), each
 // the twin of a branch of crates/splat-core/src/raster/mod.rs (Rasterizer::sorted and
 // Rasterizer::stochastic_splat with one sample at the pixel centre).

@@ -105,7 +105,7 @@ fn compare(
 
 /// One frame of every raster method at S = 4 standard samples equals the CPU frame pixel for
 /// pixel (sample masks equal: the coverage is the written share of the samples), on three
-/// fixtures, two seeds and both footprints (the 3DGS box, the √8σ ellipse); Enderton and stratified also at S = 8 and 16 (compute, any adapter).
+/// fixtures, two seeds and two footprints (the 3DGS tiles, the √8σ ellipse); Enderton and stratified also at S = 8 and 16 (compute, any adapter).
 #[test]
 fn one_frame_at_standard_samples_equals_the_cpu_frame() {
     let Some(ctx) = context() else { return };

@@ -386,7 +386,7 @@ fn bad_raster_input_is_refused_with_a_message() {
 /// distorted perspective lens, a distorted fisheye and the equirectangular lens equals the
 /// CPU's image to the blend format's tolerance, except at a few pixels where the rounding moves
 /// a footprint's edge by a pixel (bounded: at most 1 % of pixels, each off by less than one
-/// splat's alpha at the 3DGS box's 3σ rim, opacity × e^−4.5 < 0.012); the control, the CPU
+/// splat's alpha past the 3DGS box's 3σ, opacity × e^−4.5 < 0.012); the control, the CPU
 /// through the pinhole of the same intrinsics, is far off.
 #[test]
 fn splatting_through_each_lens_equals_the_cpu() {
