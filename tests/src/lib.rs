@@ -175,3 +175,20 @@ pub fn bonsai_camera() -> splat_core::Camera {
 pub mod path_worlds;
 
 pub mod golden;
+
+/// `scene` as the text of an ASCII `.ply` that 2DGS writes: `scale_0` and `scale_1` without
+/// `scale_2` (so a reader takes its particles as surfels).
+pub fn two_dgs_ply(scene: &splat_core::Scene) -> String {
+    let text = String::from_utf8(splat_io::ply::encode_ply(scene, splat_io::ply::PlyFormat::Ascii)).expect("ASCII");
+    let (header, body) = text.split_once("end_header\n").expect("a header");
+    let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("property float ")).collect();
+    let drop = names.iter().position(|&n| n == "scale_2").expect("a scale_2 property");
+    let header = header.replace("property float scale_2\n", "");
+    let body: String = body
+        .lines()
+        .map(|l| {
+            l.split(' ').enumerate().filter(|&(i, _)| i != drop).map(|(_, v)| v).collect::<Vec<_>>().join(" ") + "\n"
+        })
+        .collect();
+    header + "end_header\n" + &body
+}

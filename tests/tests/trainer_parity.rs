@@ -8,7 +8,7 @@
 //! or footprint, a filter variance 1 % off, and opacities 2 % high are each rejected by the
 //! same comparison.
 
-use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, SplatExtent, render_raster};
+use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, Response, SplatExtent, render_raster};
 use splat_core::stats::rmse;
 use splat_core::trainer::Preset;
 use splat_core::{Camera, Frames, RenderSettings, Scene, ScreenFilter};
@@ -159,16 +159,22 @@ fn a_two_percent_opacity_bias_is_rejected() {
 /// and above 1/255, composited front to back by t.
 fn surfel_image(scene: &Scene, camera: &Camera) -> Vec<f32> {
     composite(scene, camera, |p, origin, dir| {
-        let m = glam::DMat3::from_quat(p.rotation.as_dquat());
-        let (tu, tv, n) = (m.x_axis, m.y_axis, m.z_axis);
-        let mean = p.mean.as_dvec3();
-        let t = (mean - origin).dot(n) / dir.dot(n);
-        let at = origin + t * dir - mean;
-        let (u, v) = (at.dot(tu) / f64::from(p.scale.x), at.dot(tv) / f64::from(p.scale.y));
-        let rho2 = u * u + v * v;
+        let (t, rho2) = surfel_hit(p, origin, dir);
         let alpha = (f64::from(p.opacity) * (-0.5 * rho2).exp()).min(0.99);
         (t > 0.0 && rho2 <= 9.0 && alpha >= 1.0 / 255.0).then_some((t, alpha))
     })
+}
+
+/// Where the ray o + t d meets a surfel's plane: t = (μ − o)·n / (d·n), and u² + v² there, with
+/// u = (x − μ)·t_u / s_u and v = (x − μ)·t_v / s_v (t_u, t_v, n the columns of its rotation).
+fn surfel_hit(p: &splat_core::Particle, origin: glam::DVec3, dir: glam::DVec3) -> (f64, f64) {
+    let m = glam::DMat3::from_quat(p.rotation.as_dquat());
+    let (tu, tv, n) = (m.x_axis, m.y_axis, m.z_axis);
+    let mean = p.mean.as_dvec3();
+    let t = (mean - origin).dot(n) / dir.dot(n);
+    let at = origin + t * dir - mean;
+    let (u, v) = (at.dot(tu) / f64::from(p.scale.x), at.dot(tv) / f64::from(p.scale.y));
+    (t, u * u + v * v)
 }
 
 /// The image of `camera`'s pixel-centre rays (in f64, from the intrinsics): each pixel the hits
@@ -210,6 +216,21 @@ fn composite(
     image
 }
 
+/// A 2DGS capture (a `.ply` with two scales, as the 2DGS trainer writes it, read back) of the
+/// layers' particles turned so that a `width` × `height` view meets the surfels obliquely; the
+/// same particles as 3D Gaussians (their third scale kept); the camera.
+fn surfel_capture(width: u32, height: u32) -> (Scene, Scene, Camera) {
+    let (gaussians, camera) = fixture("layers", width, height);
+    // The 2DGS file: the layers' particles written without scale_2, turned so that the view
+    // meets the surfels obliquely.
+    let mut turned = gaussians.clone();
+    for (i, p) in turned.particles.iter_mut().enumerate() {
+        p.rotation = (glam::Quat::from_rotation_x(0.5 + 0.3 * i as f32) * p.rotation).normalize();
+    }
+    let surfels = splat_io::ply::parse_ply(splat_tests::two_dgs_ply(&turned).as_bytes(), Default::default()).unwrap();
+    (surfels, turned, camera)
+}
+
 /// A 2DGS capture (a `.ply` with two scales, as the 2DGS trainer writes it) renders with the ray
 /// tracer as the surfel equation says, from any side and obliquely: `exact` on the read file
 /// equals [`surfel_image`] of the same surfels. The control: the same particles as 3D
@@ -218,25 +239,7 @@ fn composite(
 #[test]
 fn a_2dgs_capture_renders_as_the_surfel_equation() {
     use splat_core::trace::{Method, TraceScene, render_frames};
-    let (gaussians, camera) = fixture("layers", 96, 72);
-    // The 2DGS file: the layers' particles written without scale_2, turned so that the view
-    // meets the surfels obliquely.
-    let mut turned = gaussians.clone();
-    for (i, p) in turned.particles.iter_mut().enumerate() {
-        p.rotation = (glam::Quat::from_rotation_x(0.5 + 0.3 * i as f32) * p.rotation).normalize();
-    }
-    let text = String::from_utf8(splat_io::ply::encode_ply(&turned, splat_io::ply::PlyFormat::Ascii)).unwrap();
-    let (header, body) = text.split_once("end_header\n").unwrap();
-    let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("property float ")).collect();
-    let drop = names.iter().position(|&n| n == "scale_2").unwrap();
-    let header = header.replace("property float scale_2\n", "");
-    let body: String = body
-        .lines()
-        .map(|l| {
-            l.split(' ').enumerate().filter(|&(i, _)| i != drop).map(|(_, v)| v).collect::<Vec<_>>().join(" ") + "\n"
-        })
-        .collect();
-    let surfels = splat_io::ply::parse_ply((header + "end_header\n" + &body).as_bytes(), Default::default()).unwrap();
+    let (surfels, turned, camera) = surfel_capture(96, 72);
     let reference = surfel_image(&surfels, &camera);
     let traced = |scene: &Scene| {
         let trace = TraceScene::new(scene, RenderSettings::default()).unwrap();
@@ -260,6 +263,17 @@ fn a_2dgs_capture_renders_as_the_surfel_equation() {
     assert!(worst(&control) > 1e-2, "3D Gaussians pass as surfels ({})", worst(&control));
 }
 
+/// A ray in a particle's frame scaled by 1/s, as 3dgrut's `densityHit` takes it (gro, grdu):
+/// the squared distance of its line to the centre, grayDist = |normalize(grdu) × gro|², and the
+/// distance of the point of maximum response, t = −gro·grdu / |grdu|².
+fn grut_ray(p: &splat_core::Particle, origin: glam::DVec3, dir: glam::DVec3) -> (f64, f64) {
+    let rot = glam::DMat3::from_quat(p.rotation.as_dquat());
+    let inv_scale = glam::DVec3::ONE / p.scale.as_dvec3();
+    let gro = inv_scale * (rot.transpose() * (origin - p.mean.as_dvec3()));
+    let grdu = inv_scale * (rot.transpose() * dir);
+    (grdu.normalize().cross(gro).length_squared(), -gro.dot(grdu) / grdu.length_squared())
+}
+
 /// 3DGRT's `processHit` in f64 for the pixel centres of `camera` (3dgrut
 /// `threedgrt_tracer/.../gaussianParticles.cuh`): in the particle's frame scaled by 1/s, the
 /// squared distance of the ray's line to the centre, grayDist = |grd × gro|², the response
@@ -267,15 +281,9 @@ fn a_2dgs_capture_renders_as_the_surfel_equation() {
 /// 0.0113 and α exceeds 1/255; hits at their point of maximum response, composited front to back.
 fn grt_image(scene: &Scene, camera: &Camera, degree: i32) -> Vec<f32> {
     composite(scene, camera, |p, origin, dir| {
-        let rot = glam::DMat3::from_quat(p.rotation.as_dquat());
-        let inv_scale = glam::DVec3::ONE / p.scale.as_dvec3();
-        let gro = inv_scale * (rot.transpose() * (origin - p.mean.as_dvec3()));
-        let grdu = inv_scale * (rot.transpose() * dir);
-        let grd = grdu.normalize();
-        let gray_dist = grd.cross(gro).length_squared();
+        let (gray_dist, t) = grut_ray(p, origin, dir);
         let gres = (-4.5 / 3f64.powi(degree) * gray_dist.powf(f64::from(degree) / 2.0)).exp();
         let alpha = (gres * f64::from(p.opacity)).min(0.99);
-        let t = -gro.dot(grdu) / grdu.length_squared();
         (t > 0.0 && gres > 0.0113 && alpha > 1.0 / 255.0).then_some((t, alpha))
     })
 }
@@ -287,7 +295,6 @@ fn grt_image(scene: &Scene, camera: &Camera, degree: i32) -> Vec<f32> {
 #[test]
 fn the_3dgrt_preset_renders_as_3dgrt() {
     use splat_core::trace::{Method, TraceScene, render_frames};
-    use splat_core::trainer::Preset;
     let (scene, camera) = fixture("layers", 96, 72);
     let reference = grt_image(&scene, &camera, 4);
     let traced = |degree: u32, cutoff: f32| {
@@ -308,4 +315,114 @@ fn the_3dgrt_preset_renders_as_3dgrt() {
     assert!(worst(&ours) < MAX_TOLERANCE, "the 3dgrt preset is {} from 3DGRT", worst(&ours));
     assert!(worst(&control) > 1e-2, "the Gaussian kernel passes for 3DGRT's ({})", worst(&control));
     assert!(worst(&full_cutoff) > MAX_TOLERANCE, "the 3σ cutoff passes for 3DGRT's minimum response");
+}
+
+/// The image of `camera`'s pixel-centre rays with each particle's (α, hit) from `hit`, composited
+/// front to back in the global order of the particles' view depths (ties by index): what a
+/// rasterizer that evaluates in 3D (3DGUT's `GlobalZOrder`, 2DGS) blends.
+fn in_centre_depth_order(
+    scene: &Scene,
+    camera: &Camera,
+    hit: impl Fn(&splat_core::Particle, glam::DVec3, glam::DVec3) -> Option<f64>,
+) -> Vec<f32> {
+    let rotation = camera.rotation.as_dmat3();
+    let origin = camera.center().as_dvec3();
+    let view_z = |p: &splat_core::Particle| (rotation * (p.mean.as_dvec3() - origin)).z;
+    composite(scene, camera, |p, o, d| (view_z(p) > 0.2).then(|| hit(p, o, d)).flatten().map(|a| (view_z(p), a)))
+}
+
+/// 3DGUT's forward pass in f64 (3dgrut `configs/render/3dgut.yaml` with
+/// `gutKBufferRenderer.cuh` at k = 0 and `GlobalZOrder`): every particle evaluated on each
+/// pixel's ray as 3DGRT's `densityHit` does (the squared distance of the ray's line to the
+/// centre in the particle's frame scaled by 1/s, the response exp(−½ d²), kept above 0.0113,
+/// α = min(0.99, o × response) kept above 1/255, its hit distance positive), composited in the
+/// global order of the centres' view depths. No tile bound: every particle, every pixel.
+fn gut_image(scene: &Scene, camera: &Camera, opacity_scale: f64) -> Vec<f32> {
+    in_centre_depth_order(scene, camera, |p, origin, dir| {
+        let (gray_dist, t) = grut_ray(p, origin, dir);
+        let response = (-0.5 * gray_dist).exp();
+        let alpha = (response * f64::from(p.opacity) * opacity_scale).min(0.99);
+        (t > 0.0 && response > 0.0113 && alpha > 1.0 / 255.0).then_some(alpha)
+    })
+}
+
+/// `raster-sorted` of `scene` with a preset's kernel, extent and response.
+fn splatted(scene: &Scene, camera: &Camera, preset: Preset, response: Response) -> Vec<f32> {
+    let kernel =
+        splat_core::KernelParams { degree: preset.kernel_degree(), cutoff: preset.cutoff(), ..Default::default() };
+    let settings = RenderSettings { kernel, ..RenderSettings::default() };
+    let raster = RasterSettings { extent: preset.extent(), response, ..RasterSettings::default() };
+    let r = Rasterizer::new(scene, camera, settings, raster).unwrap();
+    let out = render_raster(&r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
+    out.mean.data().to_vec()
+}
+
+fn worst(image: &[f32], reference: &[f32]) -> f32 {
+    image.iter().zip(reference).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max)
+}
+
+/// A 3DGUT capture splats with `--preset 3dgut` as 3DGUT renders it: each particle evaluated in
+/// 3D along the pixel's ray, in the global depth order of the centres, equals [`gut_image`] (which
+/// bounds no particle by tiles). The controls: the projected 2D Gaussians of 3DGS
+/// (`--response projected`), and the reference with opacities 2 % high, are rejected.
+#[test]
+fn the_3dgut_preset_splats_as_3dgut() {
+    let (scene, camera) = fixture("layers", 96, 72);
+    let reference = gut_image(&scene, &camera, 1.0);
+    let ours = splatted(&scene, &camera, Preset::ThreeDgut, Preset::ThreeDgut.response());
+    let projected = splatted(&scene, &camera, Preset::ThreeDgut, Response::Projected);
+    let biased = gut_image(&scene, &camera, 1.02);
+    let (d, control, power) = (worst(&ours, &reference), worst(&projected, &reference), worst(&ours, &biased));
+    eprintln!("3DGUT: along the ray max {d:.1e}; projected max {control:.1e}; reference × 1.02 max {power:.1e}");
+    assert!(d < MAX_TOLERANCE, "the 3dgut preset splats {d} from 3DGUT");
+    assert!(control > MAX_TOLERANCE, "projected 2D Gaussians pass for 3DGUT ({control})");
+    assert!(power > MAX_TOLERANCE, "a 2 % opacity bias passes ({power})");
+}
+
+/// 2DGS's rasterizer (diff-surfel-rasterization `renderCUDA`) in f64: each pixel's ray meets each
+/// surfel's plane (ρ_3D = u² + v² there, as [`surfel_image`]), its low-pass ρ_2D = 2 ‖x − c‖²
+/// about the projected centre c (`FilterInvSquare`), α = min(0.99, o e^{−min(ρ_3D, ρ_2D)/2})
+/// above 1/255, no cutoff, composited in the global order of the centres' view depths;
+/// `low_pass: false` drops ρ_2D (the control).
+fn surfel_raster_image(scene: &Scene, camera: &Camera, low_pass: bool) -> Vec<f32> {
+    let rotation = camera.rotation.as_dmat3();
+    let origin = camera.center().as_dvec3();
+    let (fx, fy, cx, cy) = (f64::from(camera.fx), f64::from(camera.fy), f64::from(camera.cx), f64::from(camera.cy));
+    in_centre_depth_order(scene, camera, |p, o, dir| {
+        let (t, rho2) = surfel_hit(p, o, dir);
+        let rho_3d = if t > 0.0 { rho2 } else { f64::INFINITY };
+        let c = rotation * (p.mean.as_dvec3() - origin);
+        let centre = glam::DVec2::new(fx * c.x / c.z + cx, fy * c.y / c.z + cy);
+        let d_cam = rotation * dir;
+        let pixel = glam::DVec2::new(fx * d_cam.x / d_cam.z + cx, fy * d_cam.y / d_cam.z + cy);
+        let rho_2d = if low_pass { 2.0 * (pixel - centre).length_squared() } else { f64::INFINITY };
+        let alpha = (f64::from(p.opacity) * (-0.5 * rho_3d.min(rho_2d)).exp()).min(0.99);
+        (alpha >= 1.0 / 255.0).then_some(alpha)
+    })
+}
+
+/// A 2DGS capture splats as 2DGS's rasterizer renders it, without a flag (a file of 2D Gaussians
+/// takes `--response along-ray`; the 2dgs preset's kernel has no cutoff): equal to
+/// [`surfel_raster_image`] at 96 × 72 and zoomed out to 32 × 24, where surfels are a few pixels
+/// and the low-pass decides. The controls: the projected (EWA) ellipses, and (zoomed out, where
+/// it acts) 2DGS without its low-pass, are rejected.
+#[test]
+fn a_2dgs_capture_splats_as_2dgs() {
+    for (width, height) in [(96, 72), (32, 24)] {
+        let (surfels, _, camera) = surfel_capture(width, height);
+        let reference = surfel_raster_image(&surfels, &camera, true);
+        let ours = splatted(&surfels, &camera, Preset::TwoDgs, Preset::TwoDgs.response());
+        let projected = splatted(&surfels, &camera, Preset::TwoDgs, Response::Projected);
+        let unfiltered = surfel_raster_image(&surfels, &camera, false);
+        let (d, control, low_pass) =
+            (worst(&ours, &reference), worst(&projected, &reference), worst(&ours, &unfiltered));
+        eprintln!(
+            "2DGS at {width} × {height}: along the ray max {d:.1e}; projected max {control:.1e}; without the low-pass max {low_pass:.1e}"
+        );
+        assert!(d < MAX_TOLERANCE, "{width} × {height}: 2DGS splats {d} from its rasterizer");
+        assert!(control > MAX_TOLERANCE, "{width} × {height}: projected ellipses pass for 2DGS ({control})");
+        if width < 96 {
+            assert!(low_pass > MAX_TOLERANCE, "{width} × {height}: 2DGS without its low-pass passes ({low_pass})");
+        }
+    }
 }

@@ -12,7 +12,7 @@ use splat_core::kernel;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
-use splat_core::raster::{Blend, FragmentDepth, RasterSettings, SamplePattern, SplatExtent};
+use splat_core::raster::{Blend, FragmentDepth, RasterSettings, Response, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
@@ -116,6 +116,14 @@ pub struct MethodOptions {
     /// mode, else 3dgs].
     #[arg(help_heading = "Splatting", long, value_parser = extent_parser())]
     pub extent: Option<SplatExtent>,
+    /// Raster methods: how a fragment's alpha is evaluated (CPU) [default: the --preset's, else
+    /// along-ray for a capture of 2D Gaussians (2DGS), else projected].
+    #[arg(help_heading = "Splatting", long, value_parser = response_parser())]
+    pub response: Option<Response>,
+    /// What the capture's trainer implies where those flags are silent ([`MethodOptions::apply_preset`],
+    /// [`MethodOptions::apply_capture`]): not options the user gave.
+    #[arg(skip)]
+    pub implied: Implied,
     /// raster-sorted: stop a pixel before the splat that takes its transmittance below 1e-4, as
     /// the 3DGS rasterizer does (default off: the exact sum of Eq. 3; CPU only; the stochastic
     /// raster methods have no order to stop in and ignore it).
@@ -130,22 +138,39 @@ pub struct MethodOptions {
     pub no_scramble: bool,
 }
 
+/// The values of `--response`: every [`Response`] by its name, described.
+fn response_parser() -> impl TypedValueParser<Value = Response> {
+    splat_view::choice_parser(&Response::ALL, Response::name, Response::describe)
+}
+
 /// The values of `--extent`: every [`SplatExtent`] by its name, described.
 fn extent_parser() -> impl TypedValueParser<Value = SplatExtent> {
     splat_view::choice_parser(&SplatExtent::ALL, SplatExtent::name, SplatExtent::describe)
 }
 
+/// The splatting settings a capture's trainer implies.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Implied {
+    /// The trainer's splat extent.
+    pub extent: Option<SplatExtent>,
+    /// The trainer's splat response.
+    pub response: Option<Response>,
+}
+
 impl MethodOptions {
-    /// Take the trainer's footprint where `--extent` was not given ([`Preset::extent`]).
+    /// Imply the trainer's extent and response ([`Preset::extent`], [`Preset::response`]).
     pub fn apply_preset(&mut self, preset: Option<Preset>) {
-        self.extent = self.extent.or(preset.map(Preset::extent));
+        self.implied.extent = self.implied.extent.or(preset.map(Preset::extent));
+        self.implied.response = self.implied.response.or(preset.map(Preset::response));
     }
 
-    /// Where neither `--extent` nor `--preset` gave a footprint, take the one of the trainer
-    /// whose screen filter the capture names ([`Preset::of_filter`]): a gsplat-antialiased
-    /// capture is drawn with gsplat's bounds.
+    /// Where `--preset` implied no extent, imply the one of the trainer whose screen filter the
+    /// capture names ([`Preset::of_filter`]): a gsplat-antialiased capture is drawn with
+    /// gsplat's bounds; and a capture of 2D Gaussians is evaluated along the rays, as 2DGS does.
     pub fn apply_capture(&mut self, scene: &Scene) {
-        self.extent = self.extent.or(Some(Preset::of_filter(scene.screen_filter).extent()));
+        self.implied.extent = self.implied.extent.or(Some(Preset::of_filter(scene.screen_filter).extent()));
+        let surfels = scene.is_surfels().then_some(Preset::TwoDgs.response());
+        self.implied.response = self.implied.response.or(surfels);
     }
 
     /// The value of every method parameter these options give.
@@ -173,7 +198,8 @@ impl MethodOptions {
     /// The options given away from their defaults that `algorithm` does not read, each as its
     /// flag: which parameters a method reads is the catalogue's word.
     pub fn unused(&self, algorithm: &Algorithm) -> Vec<String> {
-        let (given, defaults) = (self.parameters(), Parameters::default());
+        let typed = Self { implied: Implied::default(), ..self.clone() };
+        let (given, defaults) = (typed.parameters(), Parameters::default());
         Param::ALL
             .into_iter()
             .filter(|&p| given.differs(&defaults, p) || (p == Param::SamplePattern && self.sample_pattern.is_some()))
@@ -202,7 +228,8 @@ impl MethodOptions {
                 FragmentDepthArg::Center => FragmentDepth::Center,
                 FragmentDepthArg::Plane => FragmentDepth::MaxDensityPlane,
             },
-            extent: self.extent.unwrap_or_default(),
+            extent: self.extent.or(self.implied.extent).unwrap_or_default(),
+            response: self.response.or(self.implied.response).unwrap_or_default(),
             early_stop: self.early_stop,
         }
     }
@@ -401,8 +428,8 @@ pub struct ReadArgs {
     /// `antialiased` comment, a `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
     #[arg(long, value_parser = splat_view::screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
-    /// The trainer of the capture: its screen filter, splat extent, kernel degree and cutoff,
-    /// unless given on their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response).
+    /// The trainer of the capture: its screen filter, splat extent and response, kernel degree
+    /// and cutoff, unless given on their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response).
     #[arg(long, value_parser = preset_parser())]
     pub preset: Option<Preset>,
 }

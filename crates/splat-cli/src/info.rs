@@ -39,16 +39,18 @@ pub fn run(args: InfoArgs) -> Result<()> {
     if read.surfels {
         out!(
             "surfels    2D Gaussians (2DGS), read as Gaussians {:.0e} × their larger scale thick: the ray tracers \
-             evaluate them at their ray–splat intersection, splatting projects them as flat ellipses",
+             and splatting (--response along-ray, its default for them) evaluate them at their ray–splat intersection",
             splat_core::particle::SURFEL_THICKNESS
         );
     }
     if let Some(preset) = args.read.preset {
         out!(
-            "preset     {} (kernel degree {}, cutoff {:.4}σ)",
+            "preset     {} (kernel degree {}, cutoff {:.4}σ, extent {}, response {})",
             preset.describe(),
             preset.kernel_degree(),
-            preset.cutoff()
+            preset.cutoff(),
+            preset.extent().name(),
+            preset.response().name()
         );
     }
     let filter = scene.screen_filter;

@@ -7,6 +7,7 @@ use clap::Args;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
+use splat_core::raster::Response;
 use splat_core::trace::TraceScene;
 use splat_core::trainer::Preset;
 use splat_core::{Algorithm, MethodId, ScreenFilter, World};
@@ -188,21 +189,30 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
         eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
     }
     let splats = matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..));
-    if splats && staged.world.scene.is_surfels() {
+    let projected = args.options.raster_settings().response == Response::Projected;
+    if splats && projected && staged.world.scene.is_surfels() {
         eprintln!(
             "note: the capture holds 2D Gaussians (2DGS), which {} projects as flat ellipses (EWA's affine \
-             approximation); the ray-tracing methods evaluate them at their ray–splat intersection",
+             approximation) with --response projected; along-ray evaluates them at their ray–splat intersection",
             describe(args)
         );
     }
-    let ray_evaluated = [Preset::ThreeDgrt, Preset::ThreeDgut];
+    let ray_evaluated = [Preset::ThreeDgrt, Preset::ThreeDgut, Preset::TwoDgs];
     if let Some(preset) = args.scene.read.preset.filter(|p| splats && ray_evaluated.contains(p)) {
-        eprintln!(
-            "note: {} evaluates its particles in 3D along each ray, which the ray-tracing methods do; {} \
-             approximates them by projected ellipses",
-            preset.name(),
-            describe(args)
-        );
+        if projected {
+            eprintln!(
+                "note: {} evaluates its particles along each ray, which --response along-ray and the ray-tracing \
+                 methods do; {} with --response projected approximates them by projected ellipses",
+                preset.name(),
+                describe(args)
+            );
+        } else if preset == Preset::ThreeDgrt {
+            eprintln!(
+                "note: 3DGRT composites each ray's hits in their own order, as the ray-tracing methods do; {} \
+                 composites them in the global depth order of their centres (3DGUT's)",
+                describe(args)
+            );
+        }
     }
     let filter = staged.world.scene.screen_filter;
     if filter != ScreenFilter::Dilation && !splats {

@@ -899,7 +899,34 @@ fn each_trainers_capture_renders_as_its_trainer_does() {
         assert!(worst(&ours) < 1e-4, "{name}: raster-sorted is {} from its trainer's image", worst(&ours));
         assert!(worst(&classic) > 1e-2, "{name}: the 3DGS dilation passes for {filter:?}");
         assert!(note.contains("traces the particles themselves, without it"), "{note}");
+        assert!(!note.contains("does not apply"), "what the trainer implies is no flag to warn of: {note}");
     }
+}
+
+/// A 2DGS capture splats as 2DGS does without a flag: `raster-sorted` on a file of 2D Gaussians
+/// evaluates each along the pixel's ray (equal to `--response along-ray`, far from `--response
+/// projected`, which the note names), and the GPU refuses that response, naming the CPU.
+#[test]
+fn a_2dgs_capture_splats_along_the_rays() {
+    let cloud = splat_io::ply::read_ply(&root().join("fixtures/cloud.ply")).unwrap();
+    let surfels = scratch("surfels-2dgs.ply");
+    std::fs::write(&surfels, splat_tests::two_dgs_ply(&cloud)).unwrap();
+    let render = |extra: &[&str]| {
+        let out = scratch("surfels-2dgs.npy");
+        let args = ["render", surfels.to_str().unwrap(), "--camera", "fixtures/cloud.cameras.json", "--width", "48"];
+        let rest = ["--height", "36", "--method", "raster-sorted", "-o", out.to_str().unwrap()];
+        let o = splat(&[&args[..], &rest, extra].concat());
+        (o.status.success(), npy(&out), stderr(&o))
+    };
+    let (ok, default, note) = render(&["--backend", "cpu"]);
+    assert!(ok && !note.contains("flat ellipses"), "{note}");
+    let (_, along, _) = render(&["--backend", "cpu", "--response", "along-ray"]);
+    let (_, projected, note) = render(&["--backend", "cpu", "--response", "projected"]);
+    assert_eq!(default, along, "a 2DGS file splats along the rays by default");
+    let off = default.iter().zip(&projected).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(off > 1e-2 && note.contains("flat ellipses"), "projected differs by {off}: {note}");
+    let (ok, _, e) = render(&["--backend", "gpu", "--response", "along-ray"]);
+    assert!(!ok && e.contains("CPU"), "{e}");
 }
 
 /// A capture's distorted COLMAP camera renders as it is, through its lens: `exact` traces each
@@ -1380,7 +1407,8 @@ fn the_gpu_backend_is_quiet_without_a_desktop_session() {
 
 /// `--preset` sets what a trainer's renderer assumes: `3dgrt` renders as `--kernel-degree 4`
 /// with its cutoff given on its own (and not as the default Gaussian kernel), `gsplat-antialiased`
-/// sets the screen filter, and `splat info` prints the preset.
+/// sets the screen filter, `splat info` prints the preset with its extent and response, and a
+/// splatting render says where it departs from the preset's renderer.
 #[test]
 fn presets_set_what_their_trainer_assumes() {
     use splat_core::trainer::Preset;
@@ -1405,14 +1433,20 @@ fn presets_set_what_their_trainer_assumes() {
         "{text}"
     );
     assert!(text.contains("the file names 3dgs"), "{text}");
-    let args = ["render", "fixtures/layers.ply", "--preset", "3dgrt", "--method", "raster-sorted", "--width", "16"];
-    let out = scratch("preset-raster.npy");
-    let o = splat(&[&args[..], &["--height", "12", "--backend", "cpu", "-o", out.to_str().unwrap()]].concat());
-    assert!(
-        o.status.success() && stderr(&o).contains("3dgrt evaluates its particles in 3D along each ray"),
-        "{}",
+    let splatted = |extra: &[&str]| {
+        let args = ["render", "fixtures/layers.ply", "--method", "raster-sorted", "--width", "16", "--height", "12"];
+        let out = scratch("preset-raster.npy");
+        let o = splat(&[&args[..], &["--backend", "cpu", "-o", out.to_str().unwrap()], extra].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
         stderr(&o)
-    );
+    };
+    let note = splatted(&["--preset", "3dgrt"]);
+    assert!(note.contains("3DGRT composites each ray's hits in their own order"), "{note}");
+    let note = splatted(&["--preset", "3dgut", "--response", "projected"]);
+    assert!(note.contains("3dgut evaluates its particles along each ray"), "{note}");
+    let info = splat(&["info", "fixtures/layers.ply", "--preset", "3dgut"]);
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(text.contains("response along-ray") && text.contains("extent 3dgs"), "{text}");
 }
 
 /// `--shadows sorted` keeps a world's sorted-shadow settings (it used to reset k, threshold and

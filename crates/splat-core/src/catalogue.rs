@@ -66,6 +66,8 @@ pub enum Param {
     FragmentDepth,
     /// Footprint of a splat ([`RasterSettings::extent`]).
     Extent,
+    /// How a fragment's alpha is evaluated ([`RasterSettings::response`]).
+    Response,
 }
 
 /// The inclusive limits of a numeric parameter, and the top of its slider in an interactive
@@ -93,7 +95,7 @@ pub struct ParamInfo {
 
 impl Param {
     /// Every parameter.
-    pub const ALL: [Param; 12] = [
+    pub const ALL: [Param; 13] = [
         Param::K,
         Param::MaxPasses,
         Param::MinTransmittance,
@@ -106,6 +108,7 @@ impl Param {
         Param::SamplePattern,
         Param::FragmentDepth,
         Param::Extent,
+        Param::Response,
     ];
 
     /// Its names and limits.
@@ -128,6 +131,7 @@ impl Param {
             Param::SamplePattern => ("sample-pattern", "sample pattern", None),
             Param::FragmentDepth => ("fragment-depth", "fragment depth", None),
             Param::Extent => ("extent", "extent", None),
+            Param::Response => ("response", "response", None),
         };
         ParamInfo { flag, label, limits }
     }
@@ -308,13 +312,21 @@ macro_rules! catalogue {
 }
 
 /// The parameters of splatting every raster method reads.
-const RASTER: [Param; 4] = [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent];
+const RASTER: [Param; 5] =
+    [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Response];
 /// The parameters of sorted splatting.
-const SORTED: [Param; 6] =
-    [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Blend, Param::EarlyStop];
+const SORTED: [Param; 7] = [
+    Param::RasterSamples,
+    Param::SamplePattern,
+    Param::FragmentDepth,
+    Param::Extent,
+    Param::Response,
+    Param::Blend,
+    Param::EarlyStop,
+];
 /// The parameters of stratified transparency.
-const STRATIFIED: [Param; 5] =
-    [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Scramble];
+const STRATIFIED: [Param; 6] =
+    [Param::RasterSamples, Param::SamplePattern, Param::FragmentDepth, Param::Extent, Param::Response, Param::Scramble];
 
 // A row: the variant's doc, `Id = code { name, (stochastic, unbiased, GPU kernel), parameters,
 // summary }`, then the variant with its fields (each named as the `Parameters` field it reads).
@@ -548,6 +560,7 @@ impl Parameters {
             Param::SamplePattern => a.raster.sample_pattern != b.raster.sample_pattern,
             Param::FragmentDepth => a.raster.fragment_depth != b.raster.fragment_depth,
             Param::Extent => a.raster.extent != b.raster.extent,
+            Param::Response => a.raster.response != b.raster.response,
         }
     }
 }
@@ -603,6 +616,7 @@ mod tests {
                 sample_pattern: crate::raster::SamplePattern::Standard,
                 fragment_depth: crate::raster::FragmentDepth::MaxDensityPlane,
                 extent: crate::raster::SplatExtent::Sqrt8,
+                response: crate::raster::Response::AlongRay,
                 early_stop: true,
             },
         };
@@ -653,6 +667,7 @@ mod tests {
             Param::SamplePattern => p.raster.sample_pattern = from.raster.sample_pattern,
             Param::FragmentDepth => p.raster.fragment_depth = from.raster.fragment_depth,
             Param::Extent => p.raster.extent = from.raster.extent,
+            Param::Response => p.raster.response = from.raster.response,
         }
         p
     }

@@ -2,24 +2,26 @@
 //! assumes of a capture that the file does not say: one home for a trainer's conventions (the
 //! CLI's `--preset`, `splat info`).
 //!
-//! | preset | screen filter | splat extent | kernel | its renderer |
-//! |---|---|---|---|---|
-//! | `3dgs` | 0.3 px² dilation | 3DGS tiles | degree 2 | the INRIA rasterizer |
-//! | `gsplat-antialiased` | antialiased | alpha cull | degree 2 | gsplat, `rasterize_mode="antialiased"` |
-//! | `mip-splatting` | 2D Mip filter | 3DGS tiles | degree 2 | Mip-Splatting's rasterizer (its 3D filter is in the file) |
-//! | `3dgrt` | the file's | 3DGS tiles | degree 4: exp(−4.5 (d/3)⁴) | 3DGRT's ray tracer (3dgrut `configs/render/3dgrt.yaml`) |
-//! | `3dgut` | the file's | 3DGS tiles | degree 2 | 3DGUT (3dgrut `configs/render/3dgut.yaml`): particles evaluated in 3D along each ray |
+//! | preset | screen filter | splat extent | splat response | kernel | its renderer |
+//! |---|---|---|---|---|---|
+//! | `3dgs` | 0.3 px² dilation | 3DGS tiles | projected | degree 2 | the INRIA rasterizer |
+//! | `gsplat-antialiased` | antialiased | alpha cull | projected | degree 2 | gsplat, `rasterize_mode="antialiased"` |
+//! | `mip-splatting` | 2D Mip filter | 3DGS tiles | projected | degree 2 | Mip-Splatting's rasterizer (its 3D filter is in the file) |
+//! | `3dgrt` | the file's | 3DGUT's tiles | along the ray | degree 4: exp(−4.5 (d/3)⁴) | 3DGRT's ray tracer (3dgrut `configs/render/3dgrt.yaml`) |
+//! | `3dgut` | the file's | 3DGUT's tiles | along the ray | degree 2 | 3DGUT (3dgrut `configs/render/3dgut.yaml`): particles evaluated in 3D along each ray, in global depth order |
+//! | `2dgs` | the file's | 3DGUT's tiles | along the ray | degree 2, no cutoff | 2DGS's rasterizer (diff-surfel-rasterization): the ray–splat intersection and its low-pass |
 //!
 //! 3DGRT and 3DGUT evaluate each particle in 3D along the pixel's ray (their response at its
 //! maximum, alpha clamped to 0.99 and cut below 1/255, as here), but drop a hit whose response
 //! is below [`GRUT_MIN_RESPONSE`] (0.0113, just above e^−4.5 ≈ 0.0111): their presets set the
 //! cutoff to the Mahalanobis radius of that response ([`Preset::cutoff`], 2.994σ for degree 2,
 //! 2.997σ for 4). Their captures render faithfully with the ray-tracing methods, through any
-//! lens ([`crate::camera::Lens`]); the screen filter of 3DGUT's projector only culls, so the
-//! file's stays.
+//! lens ([`crate::camera::Lens`]), and 3DGUT's with splatting too ([`Response::AlongRay`]); the
+//! screen filter of 3DGUT's projector only culls, so the file's stays.
 
 use crate::filter::ScreenFilter;
-use crate::raster::SplatExtent;
+use crate::kernel::KernelParams;
+use crate::raster::{Response, SplatExtent};
 
 /// The smallest kernel response 3DGRT and 3DGUT keep (`particle_kernel_min_response`).
 pub const GRUT_MIN_RESPONSE: f32 = 0.0113;
@@ -37,12 +39,20 @@ pub enum Preset {
     ThreeDgrt,
     /// 3DGUT (Wu et al. 2025).
     ThreeDgut,
+    /// 2DGS (Huang et al. 2024): surfels.
+    TwoDgs,
 }
 
 impl Preset {
     /// Every preset.
-    pub const ALL: [Preset; 5] =
-        [Preset::ThreeDgs, Preset::GsplatAntialiased, Preset::MipSplatting, Preset::ThreeDgrt, Preset::ThreeDgut];
+    pub const ALL: [Preset; 6] = [
+        Preset::ThreeDgs,
+        Preset::GsplatAntialiased,
+        Preset::MipSplatting,
+        Preset::ThreeDgrt,
+        Preset::ThreeDgut,
+        Preset::TwoDgs,
+    ];
 
     /// Its name on the command line.
     pub const fn name(self) -> &'static str {
@@ -52,6 +62,7 @@ impl Preset {
             Preset::MipSplatting => "mip-splatting",
             Preset::ThreeDgrt => "3dgrt",
             Preset::ThreeDgut => "3dgut",
+            Preset::TwoDgs => "2dgs",
         }
     }
 
@@ -62,7 +73,10 @@ impl Preset {
             Preset::GsplatAntialiased => "gsplat antialiased: the antialiased screen filter, Gaussian kernel",
             Preset::MipSplatting => "Mip-Splatting: its 2D Mip filter, Gaussian kernel",
             Preset::ThreeDgrt => "3DGRT: kernel degree 4; render with a ray-tracing method",
-            Preset::ThreeDgut => "3DGUT: Gaussian kernel; render with a ray-tracing method (3D evaluation)",
+            Preset::ThreeDgut => {
+                "3DGUT: Gaussian kernel, its minimum response; splatting evaluates each particle along the pixel's ray"
+            }
+            Preset::TwoDgs => "2DGS: surfels evaluated at their ray–splat intersection with 2DGS's low-pass, no cutoff",
         }
     }
 
@@ -73,7 +87,7 @@ impl Preset {
             Preset::ThreeDgs => Some(ScreenFilter::Dilation),
             Preset::GsplatAntialiased => Some(ScreenFilter::Antialiased),
             Preset::MipSplatting => Some(ScreenFilter::Mip),
-            Preset::ThreeDgrt | Preset::ThreeDgut => None,
+            Preset::ThreeDgrt | Preset::ThreeDgut | Preset::TwoDgs => None,
         }
     }
 
@@ -97,6 +111,15 @@ impl Preset {
         }
     }
 
+    /// How its rasterizer evaluates a fragment: along the pixel's ray for 3DGUT and 2DGS (and
+    /// 3DGRT, whose renderer is a ray tracer), else the projected 2D Gaussian.
+    pub const fn response(self) -> Response {
+        match self {
+            Preset::ThreeDgrt | Preset::ThreeDgut | Preset::TwoDgs => Response::AlongRay,
+            _ => Response::Projected,
+        }
+    }
+
     /// The degree n of its particles' kernel exp(−4.5 (d/3)ⁿ) ([`crate::kernel`]).
     pub const fn kernel_degree(self) -> u32 {
         match self {
@@ -113,6 +136,9 @@ impl Preset {
                 let n = self.kernel_degree() as f32;
                 3.0 * ((1.0 / GRUT_MIN_RESPONSE).ln() / 4.5).powf(1.0 / n)
             }
+            // 2DGS's rasterizer has no cutoff: only the alpha cull, which takes even an opaque
+            // surfel's response beyond its visible radius.
+            Preset::TwoDgs => KernelParams::default().visible_radius(1.0),
             _ => crate::kernel::DEFAULT_CUTOFF,
         }
     }

@@ -242,8 +242,8 @@ fn one_stochastic_frame_equals_the_cpu_frame() {
 }
 
 /// Settings the GPU does not rasterize are refused with a message, not rendered wrongly: the
-/// early stop, and the Hammersley pattern at S > 1 (the hardware's samples are the standard
-/// ones); tests/gpu_msaa.rs has the rest.
+/// early stop, the Hammersley pattern at S > 1 (the hardware's samples are the standard ones)
+/// and the response along the ray (3DGUT, 2DGS); tests/gpu_msaa.rs has the rest.
 #[test]
 fn cpu_only_raster_settings_are_refused() {
     let Some(ctx) = context() else { return };
@@ -258,6 +258,10 @@ fn cpu_only_raster_settings_are_refused() {
     let early = RasterSettings { early_stop: true, ..RasterSettings::default() };
     let e = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &early).err().expect("early stop").to_string();
     assert!(e.contains("early stop"), "{e}");
+    let along = RasterSettings { response: splat_core::raster::Response::AlongRay, ..RasterSettings::default() };
+    let e =
+        GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &along).err().expect("along the ray").to_string();
+    assert!(e.contains("along the pixel's ray") && e.contains("CPU"), "{e}");
 }
 
 /// Depth ties resolve as on the CPU, to the lower splat id (drawn first, kept by the `less`

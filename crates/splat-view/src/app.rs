@@ -13,7 +13,7 @@ use splat_core::glam::Vec3;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::normal::NormalMode;
 use splat_core::raster::SAMPLE_COUNTS;
-use splat_core::raster::{Blend, FragmentDepth, SamplePattern, SplatExtent};
+use splat_core::raster::{Blend, FragmentDepth, Response, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::{Camera, HitDistance};
 use splat_core::{MethodId, Parameters};
@@ -655,6 +655,7 @@ fn parameter(ui: &mut egui::Ui, param: Param, p: &mut Parameters) {
             });
         }
         Param::Extent => combo(ui, info.label, &mut p.raster.extent, &SplatExtent::ALL, |e| e.name().into()),
+        Param::Response => combo(ui, info.label, &mut p.raster.response, &Response::ALL, |r| r.name().into()),
     }
 }
 

@@ -27,11 +27,12 @@ mod tests;
 use crate::camera::Camera;
 pub use crate::catalogue::RasterMethod;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
-use crate::hit::{PreparedParticle, Ray, to_canonical};
+use crate::hit::{HitDistance, PreparedParticle, Ray, intersect, to_canonical};
+use crate::kernel::KernelParams;
 use crate::lighting::{Lighting, Look};
 use crate::mesh::{Meshes, SurfaceHit};
 use crate::normal::particle_normal;
-use crate::particle::Scene;
+use crate::particle::{Particle, Scene};
 use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::tile::{TILE, tile_count};
@@ -65,6 +66,51 @@ pub enum FragmentDepth {
     MaxDensityPlane,
 }
 
+/// How a fragment's alpha is evaluated at the pixel centre.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Response {
+    /// The projected 2D Gaussian (EWA, or the unscented transform through another lens, with
+    /// the scene's screen filter): 3DGS and the rasterizers descended from it.
+    #[default]
+    Projected,
+    /// The particle's maximum response along the pixel centre's ray, in 3D: 3DGUT (Wu et al.
+    /// 2025 §4: particles projected only to find their tiles, then evaluated as 3DGRT does,
+    /// 3dgrut's `densityHit`), with the particle's own opacity, kernel and cutoff (3DGUT's
+    /// minimum response through its preset) and the hit inside (t_min, t_max). A 2D Gaussian
+    /// meets the ray in its plane, so for a surfel this is 2DGS's ray–splat intersection
+    /// (Huang et al. 2024 §4.2) with 2DGS's low-pass: ρ = min(ρ_3D, ‖x − c‖² / [`SURFEL_LOW_PASS`]),
+    /// c the projected centre. Every pixel of the 16 × 16 tiles that the alpha-cull ellipse of
+    /// the projection touches is evaluated (3DGUT's tight opacity bounds), whatever the extent.
+    AlongRay,
+}
+
+/// The variance of 2DGS's screen-space low-pass, px²: its `FilterSize` √2/2 (its
+/// `FilterInvSquare` is 2).
+pub const SURFEL_LOW_PASS: f32 = 0.5;
+
+impl Response {
+    /// Every response.
+    pub const ALL: [Response; 2] = [Response::Projected, Response::AlongRay];
+
+    /// Its name on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Response::Projected => "projected",
+            Response::AlongRay => "along-ray",
+        }
+    }
+
+    /// What it evaluates, in words.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Response::Projected => "the projected 2D Gaussian at the pixel centre (3DGS)",
+            Response::AlongRay => {
+                "the particle's maximum response along the pixel's ray (3DGUT; for 2D Gaussians, 2DGS's ray–splat intersection)"
+            }
+        }
+    }
+}
+
 impl RasterMethod {
     /// Whether frames differ (the method draws random decisions).
     pub fn is_stochastic(&self) -> bool {
@@ -84,6 +130,8 @@ pub struct RasterSettings {
     pub fragment_depth: FragmentDepth,
     /// Which pixels a splat can touch.
     pub extent: SplatExtent,
+    /// How a fragment's alpha is evaluated.
+    pub response: Response,
     /// Sorted splatting stops a sample before the fragment that would take its transmittance
     /// below [`EARLY_STOP_T`], as the 3DGS rasterizer does (`false`: the exact sum of Eq. 3).
     pub early_stop: bool,
@@ -99,6 +147,7 @@ impl Default for RasterSettings {
             sample_pattern: SamplePattern::Hammersley,
             fragment_depth: FragmentDepth::Center,
             extent: SplatExtent::ThreeDgs,
+            response: Response::Projected,
             early_stop: false,
         }
     }
@@ -141,6 +190,8 @@ pub struct PixelSamples {
     /// Pixel row.
     pub y: u32,
     rays: Vec<Ray>,
+    /// The ray through the pixel centre, where alphas are evaluated.
+    centre: Ray,
     /// |d_cam| of each sample's ray: a point at view depth z is at t = z |d_cam|.
     stretch: Vec<f32>,
     positions: Vec<Vec2>,
@@ -190,6 +241,10 @@ impl<'a> Rasterizer<'a> {
         raster.validate()?;
         let mut splats: Vec<Splat> = (0..scene.particles.len() as u32)
             .filter_map(|i| project(scene, i, camera, &settings.kernel, raster.extent))
+            .filter_map(|s| match raster.response {
+                Response::Projected => Some(s),
+                Response::AlongRay => along_ray_footprint(s, &scene.particles[s.id as usize], camera, &settings.kernel),
+            })
             .collect();
         splats.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.id.cmp(&b.id)));
         let prepared = splats.iter().map(|s| PreparedParticle::new(&scene.particles[s.id as usize])).collect();
@@ -315,7 +370,8 @@ impl<'a> Rasterizer<'a> {
         } else {
             rays.iter().map(|r| self.meshes.closest(r)).collect()
         };
-        PixelSamples { x, y, rays, stretch, positions, surfaces }
+        let centre = self.clip(c.pixel_ray(x, y));
+        PixelSamples { x, y, rays, centre, stretch, positions, surfaces }
     }
 
     fn clip(&self, ray: Ray) -> Ray {
@@ -336,12 +392,33 @@ impl<'a> Rasterizer<'a> {
                 if px.x < x0 || px.x >= x1 || px.y < y0 || px.y >= y1 {
                     return None;
                 }
-                let alpha = kernel.alpha(s.opacity, kernel.response(s.mahalanobis(centre)))?;
+                let alpha = match self.raster.response {
+                    Response::Projected => kernel.alpha(s.opacity, kernel.response(s.mahalanobis(centre)))?,
+                    Response::AlongRay => self.alpha_along_ray(k, &px.centre, centre)?,
+                };
                 let covered =
                     px.positions.iter().enumerate().filter(|(_, p)| s.covers(**p)).fold(0u64, |m, (i, _)| m | 1 << i);
                 (covered != 0).then_some(Fragment { splat: k, alpha, covered })
             })
             .collect()
+    }
+
+    /// [`Response::AlongRay`]: the alpha of splat `k` (index into [`Rasterizer::splats`]) on
+    /// the pixel-centre ray `ray` through pixel position `centre`: the ray tracers' hit
+    /// ([`crate::hit::intersect`] at the point of maximum response), and for a surfel the larger
+    /// of that and 2DGS's low-pass response.
+    fn alpha_along_ray(&self, k: u32, ray: &Ray, centre: Vec2) -> Option<f32> {
+        let (kernel, s) = (&self.settings.kernel, &self.splats[k as usize]);
+        let p = &self.prepared[k as usize];
+        let in_3d = intersect(p, s.id, ray, kernel, HitDistance::Mean).map(|h| h.alpha);
+        if !self.scene.particles[s.id as usize].is_surfel() {
+            return in_3d;
+        }
+        let low_pass = kernel.alpha(p.opacity, kernel.response((centre - s.mean).length_squared() / SURFEL_LOW_PASS));
+        match (in_3d, low_pass) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// Depth of fragment `f` at sample `s`: distance along the sample's ray.
@@ -683,6 +760,56 @@ fn bits(mask: u64) -> impl Iterator<Item = usize> {
             s
         })
     })
+}
+
+/// The footprint of a particle evaluated along rays ([`Response::AlongRay`]): every pixel of
+/// the 16 × 16 tiles that the box of its visible region touches, within which the alpha alone
+/// decides. A Gaussian's box is that of its projection's alpha-cull ellipse (3DGUT's tight
+/// opacity bounds on the 0.3 px²-dilated projection, by the particle's own opacity); a surfel's
+/// is the box of its visible disc projected through the lens (as 2DGS bounds the exact conic,
+/// here from 64 points of the rim), widened by 2DGS's low-pass.
+fn along_ray_footprint(mut s: Splat, p: &Particle, camera: &Camera, kernel: &KernelParams) -> Option<Splat> {
+    let r2 = kernel.visible_radius(p.opacity).powi(2);
+    let (lo, hi) = if p.is_surfel() {
+        let low_pass = Vec2::splat((r2 * SURFEL_LOW_PASS).sqrt());
+        let (lo, hi) = surfel_box(p, r2.sqrt(), camera)?;
+        (lo - low_pass, hi + low_pass)
+    } else {
+        let det = s.conic.x * s.conic.z - s.conic.y * s.conic.y;
+        let half = Vec2::new((r2 * s.conic.z / det).sqrt(), (r2 * s.conic.x / det).sqrt());
+        (s.mean - half, s.mean + half)
+    };
+    let tile = project::BLOCK;
+    let size = Vec2::new(camera.width as f32, camera.height as f32);
+    let lo = ((lo / tile).floor() * tile).max(Vec2::ZERO);
+    let hi = ((hi / tile).ceil() * tile).min(size);
+    if !(lo.x < hi.x && lo.y < hi.y) {
+        return None;
+    }
+    s.rect = [lo.x as u32, lo.y as u32, hi.x as u32, hi.y as u32];
+    s.bound = f32::MAX;
+    s.opacity = p.opacity;
+    Some(s)
+}
+
+/// The image box of a surfel's disc of `r` standard deviations: 64 points of its rim projected
+/// through the camera's lens, padded by 1 % of the box and a pixel for the chords between them;
+/// the whole image when a point has no projection (behind a perspective lens).
+fn surfel_box(p: &Particle, r: f32, camera: &Camera) -> Option<(Vec2, Vec2)> {
+    const RIM: usize = 64;
+    let axes = glam::DMat3::from_quat(p.rotation.as_dquat());
+    let (tu, tv) = (axes.x_axis * f64::from(p.scale.x * r), axes.y_axis * f64::from(p.scale.y * r));
+    let (rotation, translation) = (camera.rotation.as_dmat3(), camera.translation.as_dvec3());
+    let whole = (Vec2::ZERO, Vec2::new(camera.width as f32, camera.height as f32));
+    let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+    for i in 0..RIM {
+        let theta = std::f64::consts::TAU * i as f64 / RIM as f64;
+        let x = p.mean.as_dvec3() + theta.cos() * tu + theta.sin() * tv;
+        let Some(q) = camera.project(rotation * x + translation) else { return Some(whole) };
+        (lo, hi) = (lo.min(q.as_vec2()), hi.max(q.as_vec2()));
+    }
+    let pad = 0.01 * (hi - lo) + Vec2::ONE;
+    Some((lo - pad, hi + pad))
 }
 
 /// Splat indices per tile, in global depth order.

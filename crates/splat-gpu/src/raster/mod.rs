@@ -59,7 +59,9 @@ use splat_core::lighting::{Lighting, Look};
 use splat_core::mesh::Meshes;
 use splat_core::particle::Scene;
 use splat_core::raster::project::FRUSTUM_GUARD;
-use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, SamplePattern, sample_positions};
+use splat_core::raster::{
+    Blend, FragmentDepth, RasterMethod, RasterSettings, Response, SamplePattern, sample_positions,
+};
 use splat_core::settings::{RenderError, RenderSettings, validate_scene};
 use splat_core::tile::TILE;
 use std::time::{Duration, Instant};
@@ -640,13 +642,20 @@ impl<'a> GpuRasterizer<'a> {
     }
 }
 
-/// The raster settings the GPU renders: one centre sample, centre depth, no early stop.
+/// The raster settings the GPU renders: no early stop, the standard pattern, the projected
+/// response.
 fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
     settings.validate()?;
     if settings.early_stop {
         return Err(GpuError::refused(
             "early stop needs the transmittance before each fragment, which hardware blending does not give",
             &[Remedy::NoEarlyStop, Remedy::Cpu],
+        ));
+    }
+    if settings.response == Response::AlongRay {
+        return Err(GpuError::refused(
+            "the GPU rasterizer evaluates the projected 2D Gaussians; evaluating each particle along the pixel's ray (3DGUT, 2DGS) runs on the CPU",
+            &[Remedy::Cpu],
         ));
     }
     if settings.samples > 1 && settings.sample_pattern != SamplePattern::Standard {
