@@ -382,3 +382,41 @@ fn hybrid_shadows_at_the_picks_are_the_ray_tracers() {
     assert!(err < 1e-5, "largest difference {err}");
     assert!(lit > 20 && partial > 20 && dark > 5, "lit {lit}, partly shadowed {partial}, in the mesh's shadow {dark}");
 }
+
+/// The hybrid pipeline shadows every splat it lights (vk_gaussian_splatting Lighting §5), not
+/// only the surface look's pick: with a light straight down and an opaque quad above every
+/// splat, the volumetric look of raster-sorted and a StochasticSplats frame at S = 4 each equal
+/// the same render with the light switched off (diffuse only, so a shadowed splat is black),
+/// and differ from it without shadows. The quad is emissive, its colour the same either way.
+#[test]
+fn hybrid_lights_every_fragment_with_shadows() {
+    let (scene, camera) = fixture("layers", 32, 24);
+    let settings = RenderSettings::default();
+    let top = scene.particles.iter().map(|p| p.mean.y + 3.0 * p.scale.max_element()).fold(f32::MIN, f32::max);
+    let lid = Meshes::new(&[(quad(Vec3::new(0.0, top + 0.5, 0.0), Vec3::Y, 8.0), emissive(Vec3::splat(0.2)))]).unwrap();
+    let diffuse = Material { ambient: Vec3::ZERO, diffuse: Vec3::ONE, ..Material::DIFFUSE };
+    let world = |intensity: f32, shadows: Shadows| {
+        let light =
+            Light { kind: LightKind::Directional { direction: Vec3::NEG_Y }, color: Vec3::ONE, intensity, radius: 0.0 };
+        let lighting = Lighting { look: Look::Volumetric, ..Lighting::single(diffuse, vec![light], shadows) };
+        TraceScene::new(&scene, settings).unwrap().with_lighting(lighting).unwrap().with_meshes(lid.clone())
+    };
+    let four = RasterSettings { samples: 4, ..RasterSettings::default() };
+    for (name, method, raster) in [
+        ("raster-sorted, volumetric", UNDER, RasterSettings::default()),
+        ("stochastic-splat at S = 4", RasterMethod::StochasticSplat, four),
+    ] {
+        let render = |trace: &TraceScene| {
+            let r = Rasterizer::new(&scene, &camera, settings, raster).unwrap().hybrid(trace, Method::Exact).unwrap();
+            let frames = Frames { count: 1, seed: 5, ..Frames::default() };
+            render_raster(&r, &method, &frames, &|_| {}).unwrap().mean.data().to_vec()
+        };
+        let dark = render(&world(0.0, Shadows::Exact));
+        let shadowed = render(&world(2.0, Shadows::Exact));
+        let unshadowed = render(&world(2.0, Shadows::None));
+        let (d, control) = (max_abs_diff(&shadowed, &dark), max_abs_diff(&unshadowed, &dark));
+        eprintln!("{name}: shadowed vs dark max {d:.1e}; unshadowed vs dark max {control:.1e}");
+        assert!(d < 1e-6, "{name}: the lid's shadow lets {d} through");
+        assert!(control > 0.05, "{name}: the light does nothing ({control})");
+    }
+}

@@ -34,6 +34,7 @@ pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<()
                     &[Remedy::SortedFirstHit, Remedy::Cpu],
                 ));
             }
+            crate::trace::supports_hybrid_lighting(shot.lighting)?;
             GpuRasterizer::supports(method, raster)?;
             GpuRasterizer::supports_tile_pass(raster)?;
             GpuTracer::supports(secondary)

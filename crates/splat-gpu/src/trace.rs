@@ -221,6 +221,21 @@ pub struct GpuTracer<'a> {
     emitter_count: u32,
 }
 
+/// The hybrid's lighting the GPU renders: in the volumetric look every fragment is lit in the
+/// tile pass, which casts no shadow rays and samples no area light, where the CPU's
+/// `Rasterizer::hybrid` lights each fragment as the ray tracer does; so that look is refused
+/// (the surface look lights the pick with the tracer on both).
+pub fn supports_hybrid_lighting(lighting: &splat_core::lighting::Lighting) -> Result<(), GpuError> {
+    if lighting.is_on() && lighting.look == splat_core::lighting::Look::Volumetric {
+        return Err(GpuError::refused(
+            "the GPU hybrid lights the volumetric look's fragments in its tile pass, without the ray tracer's \
+             shadow rays and light samples (the surface look lights the pick with them)",
+            &[Remedy::Cpu],
+        ));
+    }
+    Ok(())
+}
+
 impl<'a> GpuTracer<'a> {
     /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
     /// binding limit, and lighting with kernel-ellipsoid normals (the kernel has the max-density
@@ -300,6 +315,7 @@ impl<'a> GpuTracer<'a> {
         method: &Method,
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
+        supports_hybrid_lighting(self.trace.lighting())?;
         let hits = raster.first_hits()?;
         if hits.len() != (camera.width * camera.height) as usize {
             return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));

@@ -332,14 +332,19 @@ impl<'a> Rasterizer<'a> {
     }
 
     /// The colour of splat `splat` written at depth `t` of sample `s`: its SH colour, lit at
-    /// that point with its normal when lighting is on.
-    fn lit_color(&self, px: &PixelSamples, splat: u32, s: usize, t: f32) -> DVec3 {
+    /// that point with its normal when lighting is on: without shadows in the raster pipeline
+    /// (vk_gaussian_splatting Lighting §3), with the ray tracer's shadow rays in the hybrid one
+    /// (§5: after the raster first hit, lighting and shadows as in pure ray tracing).
+    fn lit_color(&self, px: &PixelSamples, splat: u32, s: usize, t: f32, decide: &impl Decide) -> DVec3 {
         let c = self.splats[splat as usize].color;
         if !self.lighting.is_on() {
             return c.as_dvec3();
         }
-        let id = self.splats[splat as usize].id;
-        self.lighting.shade_unshadowed(c, id, &px.rays[s], t, self.normal(px, splat)).as_dvec3()
+        let (id, ray, n) = (self.splats[splat as usize].id, &px.rays[s], self.normal(px, splat));
+        match &self.hybrid {
+            Some((trace, _)) => trace.light_pick(c, id, t, n, ray, decide).as_dvec3(),
+            None => self.lighting.shade_unshadowed(c, id, ray, t, n).as_dvec3(),
+        }
     }
 
     /// The projected splats in global depth order.
@@ -438,9 +443,9 @@ impl<'a> Rasterizer<'a> {
     }
 
     /// The colour a fragment blends at sample `s` and depth `t`: lit first in the volumetric look.
-    fn color(&self, px: &PixelSamples, f: &Fragment, s: usize, t: f32) -> DVec3 {
+    fn color(&self, px: &PixelSamples, f: &Fragment, s: usize, t: f32, decide: &impl Decide) -> DVec3 {
         if self.volumetric() {
-            self.lit_color(px, f.splat, s, t)
+            self.lit_color(px, f.splat, s, t, decide)
         } else {
             self.splats[f.splat as usize].color.as_dvec3()
         }
@@ -519,7 +524,7 @@ impl<'a> Rasterizer<'a> {
                     let mut c = bg;
                     for &(t, _, i) in order.iter().rev() {
                         let a = f64::from(fragments[i].alpha);
-                        c = a * self.color(px, &fragments[i], s, t) + (1.0 - a) * c;
+                        c = a * self.color(px, &fragments[i], s, t, decide) + (1.0 - a) * c;
                         transmittance *= 1.0 - a;
                     }
                     c
@@ -529,7 +534,7 @@ impl<'a> Rasterizer<'a> {
                     for &(t, id, i) in &order {
                         let f = &fragments[i];
                         let w = transmittance * f64::from(f.alpha);
-                        c += w * self.color(px, f, s, t);
+                        c += w * self.color(px, f, s, t, decide);
                         transmittance *= 1.0 - f64::from(f.alpha);
                         if s == 0 {
                             normal += w * self.normal(px, f.splat).as_dvec3();
@@ -689,7 +694,7 @@ impl<'a> Rasterizer<'a> {
                     written += 1;
                 }
                 k => {
-                    color += self.lit_color(px, k, s, buf.t[s]);
+                    color += self.lit_color(px, k, s, buf.t[s], decide);
                     written += 1;
                 }
             }
