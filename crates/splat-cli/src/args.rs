@@ -14,7 +14,6 @@ use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
 use splat_core::raster::{Blend, FragmentDepth, RasterSettings, Response, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
-use splat_core::settings::DEFAULT_MAX_BOUNCES;
 use splat_core::trace::Method;
 use splat_core::trainer::Preset;
 use splat_core::{
@@ -392,9 +391,14 @@ pub struct SceneArgs {
     /// Cutoff in standard deviations (Eq. 2) [default: the --preset's, else 3].
     #[arg(help_heading = "Scene and shading", long)]
     pub cutoff: Option<f32>,
-    /// Iso-opacity depth threshold on transmittance.
-    #[arg(help_heading = "Scene and shading", long, default_value_t = splat_core::composite::DEFAULT_ISO_THRESHOLD)]
-    pub iso_threshold: f32,
+    /// The ray tracers' iso-opacity depth threshold on transmittance [default: the world's,
+    /// else 0.7].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub iso_threshold: Option<f32>,
+    /// Splatting's iso-opacity depth threshold, a value of its own (vk_gaussian_splatting's
+    /// rasterization panel) [default: the world's, else 0.7].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub raster_iso_threshold: Option<f32>,
     /// Most mirror and glass bounces of a ray among meshes (default: the world's, else 3).
     #[arg(help_heading = "Scene and shading", long, value_parser = clap::value_parser!(u32).range(0..=i64::from(splat_core::settings::MAX_BOUNCES)))]
     pub max_bounces: Option<u32>,
@@ -489,8 +493,8 @@ impl SceneArgs {
         if let Some(path) = &self.scene {
             warn_skipped_properties(path, &opened.skipped_properties);
         }
-        let WorldSpec { mut scene, mut lighting, camera, background, meshes, max_bounces, environment, lens } =
-            opened.world;
+        let settings = self.settings_over(opened.world.settings(RenderSettings::default()));
+        let WorldSpec { mut scene, mut lighting, camera, meshes, environment, lens, .. } = opened.world;
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
             splat_io::world::truncate_sh(&mut scene, degree);
@@ -513,11 +517,6 @@ impl SceneArgs {
         }
         self.apply_shadow_options(&mut lighting)?;
         let camera = self.choose_camera(&scene, camera, width, height)?;
-        let settings = RenderSettings {
-            background: self.background.or(background).unwrap_or(Vec3::ZERO),
-            max_bounces: self.max_bounces.or(max_bounces).unwrap_or(DEFAULT_MAX_BOUNCES),
-            ..self.settings()
-        };
         Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment, lens })
     }
 
@@ -550,6 +549,11 @@ impl SceneArgs {
 
     /// The render settings these options describe.
     pub fn settings(&self) -> RenderSettings {
+        self.settings_over(RenderSettings::default())
+    }
+
+    /// `base` (the defaults, or what a world file sets) under these options.
+    fn settings_over(&self, base: RenderSettings) -> RenderSettings {
         let preset = self.read.preset;
         RenderSettings {
             kernel: KernelParams {
@@ -565,9 +569,11 @@ impl SceneArgs {
                 NormalArg::Plane => NormalMode::MaxDensityPlane,
                 NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
             },
-            background: self.background.unwrap_or(Vec3::ZERO),
-            iso_threshold: self.iso_threshold,
-            ..RenderSettings::default()
+            background: self.background.unwrap_or(base.background),
+            max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
+            iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
+            raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
+            ..base
         }
     }
 

@@ -903,6 +903,39 @@ fn each_trainers_capture_renders_as_its_trainer_does() {
     }
 }
 
+/// The ray tracers and splatting pick a pixel's surface at thresholds of their own
+/// (vk_gaussian_splatting Lighting §1.1: "two separate values"), each a world key and a flag:
+/// the world's `raster_iso_threshold` moves raster-sorted's depth and not exact's, its
+/// `iso_threshold` exact's and not raster-sorted's, and `--raster-iso-threshold` overrides the
+/// world's.
+#[test]
+fn ray_tracing_and_splatting_have_their_own_iso_thresholds() {
+    let world = |keys: &str, name: &str| {
+        let path = scratch(name);
+        std::fs::write(&path, format!("{keys}[[splats]]\nbuiltin = \"demo\"\n")).unwrap();
+        path
+    };
+    let depth = |path: &std::path::Path, method: &str, extra: &[&str]| {
+        let (out, depth) = (scratch("iso.npy"), scratch("iso-depth.npy"));
+        let args = ["render", path.to_str().unwrap(), "--method", method, "--width", "32", "--height", "24"];
+        let rest = ["--backend", "cpu", "-o", out.to_str().unwrap(), "--depth", depth.to_str().unwrap()];
+        let o = splat(&[&args[..], &rest, extra].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(&depth)
+    };
+    let plain = world("", "iso-plain.toml");
+    let raster_key = world("raster_iso_threshold = 0.2\n", "iso-raster.toml");
+    let ray_key = world("iso_threshold = 0.2\n", "iso-ray.toml");
+    let moved = |a: &[f32], b: &[f32]| a.iter().zip(b).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
+    let (raster, exact) = (depth(&plain, "raster-sorted", &[]), depth(&plain, "exact", &[]));
+    assert!(moved(&depth(&raster_key, "raster-sorted", &[]), &raster) > 20, "raster_iso_threshold moves nothing");
+    assert_eq!(moved(&depth(&raster_key, "exact", &[]), &exact), 0, "raster_iso_threshold moves exact");
+    assert!(moved(&depth(&ray_key, "exact", &[]), &exact) > 20, "iso_threshold moves nothing");
+    assert_eq!(moved(&depth(&ray_key, "raster-sorted", &[]), &raster), 0, "iso_threshold moves raster-sorted");
+    let overridden = depth(&raster_key, "raster-sorted", &["--raster-iso-threshold", "0.7"]);
+    assert_eq!(moved(&overridden, &raster), 0, "--raster-iso-threshold does not override the world");
+}
+
 /// A 2DGS capture splats as 2DGS does without a flag: `raster-sorted` on a file of 2D Gaussians
 /// evaluates each along the pixel's ray (equal to `--response along-ray`, far from `--response
 /// projected`, which the note names), and the GPU refuses that response, naming the CPU.

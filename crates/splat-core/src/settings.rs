@@ -21,8 +21,12 @@ pub struct RenderSettings {
     pub normal_mode: NormalMode,
     /// Colour behind the particles.
     pub background: Vec3,
-    /// Iso-opacity depth threshold on transmittance (vk_gaussian_splatting Lighting §1.1).
+    /// Iso-opacity depth threshold on transmittance of the ray tracers (vk_gaussian_splatting
+    /// Lighting §1.1: the ray tracing panel's Depth Iso Threshold).
     pub iso_threshold: f32,
+    /// The same threshold of splatting: a separate value, "since the two rendering approaches
+    /// may lead to different per-particle hit distances" (§1.1; the rasterization panel's).
+    pub raster_iso_threshold: f32,
     /// Ray start t_min.
     pub t_min: f32,
     /// Ray end t_max.
@@ -46,6 +50,7 @@ impl Default for RenderSettings {
             normal_mode: NormalMode::MaxDensityPlane,
             background: Vec3::ZERO,
             iso_threshold: DEFAULT_ISO_THRESHOLD,
+            raster_iso_threshold: DEFAULT_ISO_THRESHOLD,
             t_min: DEFAULT_T_MIN,
             t_max: DEFAULT_T_MAX,
             max_bounces: DEFAULT_MAX_BOUNCES,
@@ -84,6 +89,12 @@ impl RenderSettings {
         }
         if !(0.0..=1.0).contains(&self.iso_threshold) {
             return Err(RenderError::Settings(format!("iso threshold {} is outside [0, 1]", self.iso_threshold)));
+        }
+        if !(0.0..=1.0).contains(&self.raster_iso_threshold) {
+            return Err(RenderError::Settings(format!(
+                "raster iso threshold {} is outside [0, 1]",
+                self.raster_iso_threshold
+            )));
         }
         if !(self.t_min.is_finite() && self.t_min >= 0.0 && self.t_max > self.t_min) {
             return Err(RenderError::Settings(format!(

@@ -58,11 +58,14 @@
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
 //! without one is fully emissive, a mesh without one matte (ambient 0.1, diffuse 0.9). Particle
 //! ids run over the sets in file order. `max_bounces` (top level, default 3) limits mirror and
-//! glass bounces.
+//! glass bounces. `iso_threshold` and `raster_iso_threshold` (top level, default 0.7 each) are the
+//! transmittance at which the ray tracers and splatting pick a pixel's surface
+//! (vk_gaussian_splatting Lighting §1.1: two values, one per panel).
 
 use crate::{Error, ErrorKind};
 use glam::{EulerRot, Quat, Vec3};
 use serde::Deserialize;
+use splat_core::RenderSettings;
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, SplatSet};
 use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
@@ -90,6 +93,10 @@ pub struct WorldSpec {
     pub meshes: Vec<(TriangleMesh, MeshMaterial)>,
     /// The file's bounce limit.
     pub max_bounces: Option<u32>,
+    /// The file's iso-opacity threshold of the ray tracers.
+    pub iso_threshold: Option<f32>,
+    /// The file's iso-opacity threshold of splatting.
+    pub raster_iso_threshold: Option<f32>,
     /// The path tracer's environment (`[environment]`), if the file gives one.
     pub environment: Option<Environment>,
     /// The camera's thin lens (`aperture` and `focus_distance` in `[camera]`), if any.
@@ -97,6 +104,17 @@ pub struct WorldSpec {
 }
 
 impl WorldSpec {
+    /// `base` with what the file sets: its background, bounce limit and iso thresholds.
+    pub fn settings(&self, base: RenderSettings) -> RenderSettings {
+        RenderSettings {
+            background: self.background.unwrap_or(base.background),
+            max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
+            iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
+            raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
+            ..base
+        }
+    }
+
     /// A world of one emissive set: how a bare `.ply` or `.splat` renders.
     pub fn of(scene: Scene) -> Self {
         Self {
@@ -106,6 +124,8 @@ impl WorldSpec {
             background: None,
             meshes: Vec::new(),
             max_bounces: None,
+            iso_threshold: None,
+            raster_iso_threshold: None,
             environment: None,
             lens: None,
         }
@@ -126,6 +146,8 @@ struct WorldFile {
     #[serde(default)]
     meshes: Vec<MeshFile>,
     max_bounces: Option<u32>,
+    iso_threshold: Option<f32>,
+    raster_iso_threshold: Option<f32>,
     environment: Option<EnvironmentFile>,
 }
 
@@ -398,9 +420,25 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
     if let Some(b) = file.max_bounces.filter(|&b| b > splat_core::settings::MAX_BOUNCES) {
         return Err(format!("max_bounces {b} is above {}", splat_core::settings::MAX_BOUNCES));
     }
+    for (key, value) in [("iso_threshold", file.iso_threshold), ("raster_iso_threshold", file.raster_iso_threshold)] {
+        if let Some(v) = value.filter(|v| !(0.0..=1.0).contains(v)) {
+            return Err(format!("{key} {v} is outside [0, 1] (a transmittance)"));
+        }
+    }
     let environment = file.environment.as_ref().map(environment).transpose()?;
     let lens = file.camera.as_ref().and_then(|c| lens(c, camera.as_ref())).transpose()?;
-    Ok(WorldSpec { scene, lighting, camera, background, meshes, max_bounces: file.max_bounces, environment, lens })
+    Ok(WorldSpec {
+        scene,
+        lighting,
+        camera,
+        background,
+        meshes,
+        max_bounces: file.max_bounces,
+        iso_threshold: file.iso_threshold,
+        raster_iso_threshold: file.raster_iso_threshold,
+        environment,
+        lens,
+    })
 }
 
 /// One mesh in world space with its material.
@@ -688,6 +726,7 @@ mod tests {
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"sphere\"\nsegments = 1", "segments 1"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cone\"", "unknown variant"),
             ("max_bounces = 99\n[[splats]]\nbuiltin = \"demo\"", "max_bounces 99"),
+            ("raster_iso_threshold = 1.5\n[[splats]]\nbuiltin = \"demo\"", "raster_iso_threshold 1.5 is outside"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nroughness = 2", "roughness 2"),
             ("[environment]\ncolor = 1\nhorizon = 1\n[[splats]]\nbuiltin = \"demo\"", "either color, or horizon"),
             ("[environment]\ncolor = -1\n[[splats]]\nbuiltin = \"demo\"", "environment colour"),

@@ -474,7 +474,8 @@ impl Viewer {
             format!("{h:?}").to_lowercase()
         });
         ui.add(egui::Slider::new(&mut r.kernel.degree, 1..=8).text("kernel degree"));
-        ui.add(egui::Slider::new(&mut r.iso_threshold, 0.01..=0.99).text("iso threshold"));
+        ui.add(egui::Slider::new(&mut r.iso_threshold, 0.01..=0.99).text("iso (rays)"));
+        ui.add(egui::Slider::new(&mut r.raster_iso_threshold, 0.01..=0.99).text("iso (splats)"));
         combo(ui, "normals", &mut r.normal_mode, &[NormalMode::MaxDensityPlane, NormalMode::KernelEllipsoid], |n| {
             match n {
                 NormalMode::MaxDensityPlane => "max-density plane".into(),

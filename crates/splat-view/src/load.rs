@@ -52,14 +52,9 @@ pub fn load(scene: Option<&Path>, cameras: Option<&Path>, options: splat_io::Rea
     if cameras.is_some() && views.is_empty() {
         anyhow::bail!("{}: no cameras", cameras.unwrap_or(Path::new("")).display());
     }
-    let splat_io::world::WorldSpec { scene, lighting, camera, background, meshes, max_bounces, .. } = world;
+    let render = world.settings(RenderSettings::default());
+    let splat_io::world::WorldSpec { scene, lighting, camera, meshes, .. } = world;
     let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}")).context("the world's meshes")?;
-    let defaults = RenderSettings::default();
-    let render = RenderSettings {
-        background: background.unwrap_or(defaults.background),
-        max_bounces: max_bounces.unwrap_or(defaults.max_bounces),
-        ..defaults
-    };
     let bounds = scene.robust_bounds(0.02);
     let (particles, sh_degree, screen_filter) = (scene.particles.len(), scene.sh_degree, scene.screen_filter);
     let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree, screen_filter };

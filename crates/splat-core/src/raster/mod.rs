@@ -493,7 +493,7 @@ impl<'a> Rasterizer<'a> {
     fn sorted(&self, px: &PixelSamples, fragments: &[Fragment], blend: Blend, decide: &impl Decide) -> Sample {
         let blend = if self.lighting.is_on() { Blend::Under } else { blend };
         let surface_look = self.lighting.is_on() && !self.volumetric();
-        let iso = f64::from(self.settings.iso_threshold);
+        let iso = f64::from(self.settings.raster_iso_threshold);
         let mut out = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
         let mut order: Vec<(f32, u32, usize)> = Vec::with_capacity(fragments.len());
         let mut normal = DVec3::ZERO;

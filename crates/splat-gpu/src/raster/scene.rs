@@ -72,7 +72,8 @@ pub struct RasterParams {
     pub alpha_clamp: f32,
     /// Alpha cull.
     pub alpha_cull: f32,
-    /// Iso-opacity threshold on the transmittance.
+    /// Iso-opacity threshold on the transmittance: splatting's
+    /// ([`RenderSettings::raster_iso_threshold`]).
     pub iso_threshold: f32,
     /// Frustum guard limits on |x/z|, |y/z|.
     pub guard: [f32; 2],
@@ -276,7 +277,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &Raste
         kernel_degree: s.kernel.degree,
         alpha_clamp: s.kernel.alpha_clamp,
         alpha_cull: s.kernel.alpha_cull,
-        iso_threshold: s.iso_threshold,
+        iso_threshold: s.raster_iso_threshold,
         guard: [
             FRUSTUM_GUARD * camera.cx.max(w - camera.cx) / camera.fx,
             FRUSTUM_GUARD * camera.cy.max(h - camera.cy) / camera.fy,
