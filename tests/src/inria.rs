@@ -174,7 +174,12 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera, options: &Options) -> O
     let center = camera.center().to_array();
     let rel = [0, 1, 2].map(|k| world[k] - center[k]);
     let t: [f32; 3] = [0, 1, 2].map(|i| (0..3).map(|j| view(i, j) * rel[j]).sum());
-    if t[2] <= 0.2 {
+    // `in_frustum` culls p_view.z <= 0.2; gsplat culls mean_c.z < near_plane (0.01).
+    let culled = match options.forward {
+        Forward::GsplatAntialiased { .. } => t[2] < 0.01,
+        Forward::Inria | Forward::MipSplatting { .. } => t[2] <= 0.2,
+    };
+    if culled {
         return None;
     }
     // computeCov3D: Σ = Mᵀ M with M = S R (glm's layout), i.e. R S² Rᵀ.

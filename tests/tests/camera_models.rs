@@ -129,7 +129,7 @@ fn ut_port(p: &splat_core::Particle, camera: &Camera, model: &str, params: &[f64
 fn splatting_projects_through_the_lens_by_the_unscented_transform() {
     use splat_core::raster::{SplatExtent, project};
     let (scene, _) = splat_tests::harness::fixture("cloud", WIDTH, HEIGHT);
-    let kernel = splat_core::KernelParams::default();
+    let kernel = splat_core::RenderSettings::default();
     for (model, params) in typical(WIDTH, HEIGHT) {
         let camera = read(model, &params);
         let pinhole = Camera { lens: splat_core::camera::Lens::Pinhole, ..camera };

@@ -119,6 +119,50 @@ fn each_trainers_preset_equals_its_forward_pass() {
     }
 }
 
+/// Each trainer's near plane: a small particle 0.1 in front of the camera is culled by the
+/// INRIA rasterizer (`in_frustum`, 0.2) and drawn by gsplat (`near_plane` 0.01); with each
+/// preset's settings raster-sorted equals that trainer's pass, and gsplat's pass drawn with the
+/// 3DGS near plane (the control) is rejected.
+#[test]
+fn each_trainers_near_plane() {
+    let (mut scene, camera) = fixture("cloud", 128, 96);
+    let near = camera.center() + 0.1 * camera.forward();
+    scene.particles.push(splat_core::Particle::with_rgb(
+        near,
+        glam::Vec3::splat(0.0008),
+        glam::Quat::IDENTITY,
+        0.9,
+        glam::Vec3::new(1.0, 0.2, 0.1),
+    ));
+    for (preset, forward) in
+        [(Preset::ThreeDgs, Forward::Inria), (Preset::GsplatAntialiased, Forward::GSPLAT_ANTIALIASED)]
+    {
+        let (filter, raster) = of(preset);
+        let capture = trained(&scene, filter);
+        let reference: Vec<f32> = inria::render(&capture, &camera, &reference(forward)).concat();
+        let render = |near: f32| {
+            let settings =
+                RenderSettings { near, background: glam::Vec3::new(0.1, 0.2, 0.3), ..RenderSettings::default() };
+            let r = Rasterizer::new(&capture, &camera, settings, raster).unwrap();
+            render_raster(&r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap()
+        };
+        let ours = render(preset.near());
+        let d = worst(ours.mean.data(), &reference);
+        eprintln!("{preset:?}: near plane {}, max {d:.1e}", preset.near());
+        assert!(d < MAX_TOLERANCE, "{preset:?}: {d} from its trainer's pass with the near particle");
+    }
+    let (filter, raster) = of(Preset::GsplatAntialiased);
+    let capture = trained(&scene, filter);
+    let reference: Vec<f32> = inria::render(&capture, &camera, &reference(Forward::GSPLAT_ANTIALIASED)).concat();
+    let settings = RenderSettings { background: glam::Vec3::new(0.1, 0.2, 0.3), ..RenderSettings::default() };
+    let r = Rasterizer::new(&capture, &camera, settings, raster).unwrap();
+    let control =
+        render_raster(&r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
+    let d = worst(control.mean.data(), &reference);
+    eprintln!("control: gsplat's capture at the 3DGS near plane, max {d:.1e}");
+    assert!(d > 1e-2, "the 3DGS near plane passes for gsplat ({d})");
+}
+
 /// The control: the √8σ quads of vk_gaussian_splatting miss the rims of the reference's box.
 #[test]
 fn the_sqrt8_extent_is_not_the_3dgs_forward_pass() {

@@ -569,6 +569,7 @@ impl SceneArgs {
                 NormalArg::Plane => NormalMode::MaxDensityPlane,
                 NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
             },
+            near: preset.map(Preset::near).unwrap_or(base.near),
             background: self.background.unwrap_or(base.background),
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),

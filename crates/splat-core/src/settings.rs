@@ -27,6 +27,11 @@ pub struct RenderSettings {
     /// The same threshold of splatting: a separate value, "since the two rendering approaches
     /// may lead to different per-particle hit distances" (§1.1; the rasterization panel's).
     pub raster_iso_threshold: f32,
+    /// Splatting's near plane: a particle whose centre is nearer along the view axis (through
+    /// another lens, nearer the camera) is culled. 3DGS's `in_frustum` takes 0.2
+    /// ([`crate::raster::project::NEAR`], the default), gsplat its `near_plane` 0.01
+    /// ([`crate::trainer::Preset::near`]).
+    pub near: f32,
     /// Ray start t_min.
     pub t_min: f32,
     /// Ray end t_max.
@@ -51,6 +56,7 @@ impl Default for RenderSettings {
             background: Vec3::ZERO,
             iso_threshold: DEFAULT_ISO_THRESHOLD,
             raster_iso_threshold: DEFAULT_ISO_THRESHOLD,
+            near: crate::raster::project::NEAR,
             t_min: DEFAULT_T_MIN,
             t_max: DEFAULT_T_MAX,
             max_bounces: DEFAULT_MAX_BOUNCES,
@@ -89,6 +95,9 @@ impl RenderSettings {
         }
         if !(0.0..=1.0).contains(&self.iso_threshold) {
             return Err(RenderError::Settings(format!("iso threshold {} is outside [0, 1]", self.iso_threshold)));
+        }
+        if !(self.near.is_finite() && self.near > 0.0) {
+            return Err(RenderError::Settings(format!("near plane {} must be a positive distance", self.near)));
         }
         if !(0.0..=1.0).contains(&self.raster_iso_threshold) {
             return Err(RenderError::Settings(format!(

@@ -11,6 +11,9 @@
 //! | `3dgut` | the file's | 3DGUT's tiles | along the ray | degree 2 | 3DGUT (3dgrut `configs/render/3dgut.yaml`): particles evaluated in 3D along each ray, in global depth order |
 //! | `2dgs` | the file's | 3DGUT's tiles | along the ray | degree 2, no cutoff | 2DGS's rasterizer (diff-surfel-rasterization): the ray–splat intersection and its low-pass |
 //!
+//! gsplat's rasterizer also culls centres nearer than 0.01 ([`Preset::near`]), where the 3DGS
+//! rasterizer culls at 0.2.
+//!
 //! 3DGRT and 3DGUT evaluate each particle in 3D along the pixel's ray (their response at its
 //! maximum, alpha clamped to 0.99 and cut below 1/255, as here), but drop a hit whose response
 //! is below [`GRUT_MIN_RESPONSE`] (0.0113, just above e^−4.5 ≈ 0.0111): their presets set the
@@ -22,6 +25,9 @@
 use crate::filter::ScreenFilter;
 use crate::kernel::KernelParams;
 use crate::raster::{Response, SplatExtent};
+
+/// gsplat's default near plane (`rasterization(near_plane=0.01)`).
+pub const GSPLAT_NEAR: f32 = 0.01;
 
 /// The smallest kernel response 3DGRT and 3DGUT keep (`particle_kernel_min_response`).
 pub const GRUT_MIN_RESPONSE: f32 = 0.0113;
@@ -117,6 +123,15 @@ impl Preset {
         match self {
             Preset::ThreeDgrt | Preset::ThreeDgut | Preset::TwoDgs => Response::AlongRay,
             _ => Response::Projected,
+        }
+    }
+
+    /// The near plane of its rasterizer ([`crate::RenderSettings::near`]): gsplat's `near_plane`
+    /// 0.01, else the 3DGS rasterizer's 0.2 (Mip-Splatting's fork keeps it).
+    pub const fn near(self) -> f32 {
+        match self {
+            Preset::GsplatAntialiased => GSPLAT_NEAR,
+            _ => crate::raster::project::NEAR,
         }
     }
 

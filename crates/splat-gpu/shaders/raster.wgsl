@@ -26,7 +26,6 @@ struct RasterParticle {
 // Indirect draw arguments (vertex count, instance count = visible splats, 0, 0).
 @group(0) @binding(6) var<storage, read_write> draw_args: array<atomic<u32>, 4>;
 
-const NEAR: f32 = 0.2;
 const TILE: u32 = 16u;
 
 fn flat_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
@@ -56,7 +55,7 @@ fn ewa(p: RasterParticle) -> Projected {
     let r1 = params.cam_row1.xyz;
     let r2 = params.cam_row2.xyz;
     let t = vec3<f32>(dot(r0, p.mean), dot(r1, p.mean), dot(r2, p.mean)) + params.cam_translation.xyz;
-    if (!(t.z > NEAR)) {
+    if (!(t.z > params.near)) {
         return out;
     }
     let fx = params.intrinsics.x;
@@ -91,7 +90,7 @@ fn unscented(i: u32, p: RasterParticle) -> Projected {
     let world_to_camera = transpose(mat3x3<f32>(params.cam_row0.xyz, params.cam_row1.xyz, params.cam_row2.xyz));
     let centre = world_to_camera * p.mean + params.cam_translation.xyz;
     out.depth = length(centre);
-    if (!(out.depth > NEAR)) {
+    if (!(out.depth > params.near)) {
         return out;
     }
     let m0 = canonical[3u * i].xyz;

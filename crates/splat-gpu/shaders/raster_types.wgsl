@@ -52,7 +52,8 @@ struct RasterParams {
     filter_compensates: u32,
     // The camera's lens (LENS_*) and its distortion (lens.wgsl).
     lens: u32,
-    pad: u32,
+    // Splatting's near plane (RenderSettings::near): nearer centres are culled.
+    near: f32,
     distortion: array<vec4<f32>, 3>,
 }
 

@@ -79,6 +79,32 @@ fn cpu_raster(c: &Case) -> Rasterizer<'_> {
     Rasterizer::new(&c.scene, &c.camera, RenderSettings::default(), RasterSettings::default()).unwrap()
 }
 
+/// The near plane reaches the GPU's projection: a particle 0.1 in front of the camera is
+/// projected at gsplat's near plane (0.01) and culled at 3DGS's (0.2), as on the CPU.
+#[test]
+fn the_near_plane_culls_as_on_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let mut c = case("cloud", 64, 48);
+    let near = c.camera.center() + 0.1 * c.camera.forward();
+    let id = c.scene.particles.len() as u32;
+    c.scene.particles.push(splat_core::Particle::with_rgb(
+        near,
+        glam::Vec3::splat(0.0008),
+        glam::Quat::IDENTITY,
+        0.9,
+        glam::Vec3::ONE,
+    ));
+    for (plane, drawn) in [(Preset::GsplatAntialiased.near(), true), (Preset::ThreeDgs.near(), false)] {
+        let settings = RenderSettings { near: plane, ..RenderSettings::default() };
+        let cpu = Rasterizer::new(&c.scene, &c.camera, settings, RasterSettings::default()).unwrap();
+        let scene = RasterScene::new(ctx, &c.scene, &settings).unwrap();
+        let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default()).unwrap();
+        let on_cpu = cpu.splats().iter().any(|s| s.id == id);
+        let on_gpu = gpu.order().unwrap().contains(&id);
+        assert_eq!((on_cpu, on_gpu), (drawn, drawn), "near plane {plane}: CPU {on_cpu}, GPU {on_gpu}");
+    }
+}
+
 /// The GPU projection equals the CPU's splat by splat, and its depth order is the CPU's.
 #[test]
 fn projection_and_depth_order_equal_the_cpu() {

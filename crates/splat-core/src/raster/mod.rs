@@ -240,7 +240,7 @@ impl<'a> Rasterizer<'a> {
         camera.validate()?;
         raster.validate()?;
         let mut splats: Vec<Splat> = (0..scene.particles.len() as u32)
-            .filter_map(|i| project(scene, i, camera, &settings.kernel, raster.extent))
+            .filter_map(|i| project(scene, i, camera, &settings, raster.extent))
             .filter_map(|s| match raster.response {
                 Response::Projected => Some(s),
                 Response::AlongRay => along_ray_footprint(s, &scene.particles[s.id as usize], camera, &settings.kernel),

@@ -4,6 +4,7 @@
 use crate::camera::Camera;
 use crate::kernel::KernelParams;
 use crate::particle::Scene;
+use crate::settings::RenderSettings;
 use crate::sh;
 use glam::{Mat3, Vec2, Vec3};
 
@@ -62,7 +63,8 @@ impl SplatExtent {
     }
 }
 
-/// Particles whose centre is nearer than this along the view axis are culled (3DGS).
+/// The 3DGS rasterizer's near plane (`in_frustum`): particles whose centre is nearer along the
+/// view axis are culled. The default of [`crate::RenderSettings::near`].
 pub const NEAR: f32 = 0.2;
 /// 3DGS clamps x/z and y/z of a centre to 1.3 × the image's half-extent before the Jacobian,
 /// so that splats far outside the frustum do not get absurd footprints.
@@ -135,15 +137,17 @@ pub fn project(
     scene: &Scene,
     index: u32,
     camera: &Camera,
-    kernel: &KernelParams,
+    settings: &RenderSettings,
     extent: SplatExtent,
 ) -> Option<Splat> {
-    let p = &scene.particles[index as usize];
+    let (p, kernel) = (&scene.particles[index as usize], &settings.kernel);
     // ρ ≤ 1, so a particle below the cull stays below it.
     if p.opacity < kernel.alpha_cull {
         return None;
     }
-    let (mean, [a2, b2, c2], depth) = if camera.is_pinhole() { ewa(p, camera)? } else { unscented(p, camera)? };
+    let near = settings.near;
+    let (mean, [a2, b2, c2], depth) =
+        if camera.is_pinhole() { ewa(p, camera, near)? } else { unscented(p, camera, near)? };
     let ([a, b, c], rho) = scene.screen_filter.apply(a2, b2, c2);
     let det = a * c - b * b;
     if det.is_nan() || det <= 0.0 || !det.is_finite() {
@@ -210,10 +214,10 @@ fn ellipse_box(mean: Vec2, a: f32, c: f32, bound: f32, w: u32, h: u32) -> Option
 }
 
 /// EWA through the pinhole: the projected centre, Σ₂ = J W Σ Wᵀ Jᵀ as (a, b, c) and the view
-/// depth z; `None` behind the near plane.
-fn ewa(p: &crate::particle::Particle, camera: &Camera) -> Option<(Vec2, [f32; 3], f32)> {
+/// depth z; `None` behind the near plane `near`.
+fn ewa(p: &crate::particle::Particle, camera: &Camera, near: f32) -> Option<(Vec2, [f32; 3], f32)> {
     let t = camera.to_camera(p.mean);
-    if t.z.is_nan() || t.z <= NEAR {
+    if t.z.is_nan() || t.z <= near {
         return None;
     }
     let (w, h) = (camera.width as f32, camera.height as f32);
@@ -246,9 +250,9 @@ pub const UT_KAPPA: f64 = 0.0;
 /// 1 − α² + β), and the distance of the centre as depth. `None` nearer than the near plane or
 /// when a sigma point falls where the lens sees nothing (behind a perspective lens), where 3DGUT
 /// would still use the points it could project.
-pub fn unscented(p: &crate::particle::Particle, camera: &Camera) -> Option<(Vec2, [f32; 3], f32)> {
+pub fn unscented(p: &crate::particle::Particle, camera: &Camera, near: f32) -> Option<(Vec2, [f32; 3], f32)> {
     let depth = camera.to_camera(p.mean).length();
-    if depth.is_nan() || depth <= NEAR {
+    if depth.is_nan() || depth <= near {
         return None;
     }
     let d = 3.0;
@@ -294,7 +298,7 @@ mod tests {
         let cam = camera();
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.8, Vec3::ONE);
         let scene = Scene::new(vec![p], 0);
-        let s = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::Sqrt8).unwrap();
+        let s = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::Sqrt8).unwrap();
         let sigma2 = (cam.fx * 0.1 / 4.0).powi(2) + DILATION;
         assert_relative_eq!(s.conic.x, 1.0 / sigma2, max_relative = 1e-4);
         assert_relative_eq!(s.conic.z, 1.0 / sigma2, max_relative = 1e-4);
@@ -320,7 +324,7 @@ mod tests {
             (ScreenFilter::Mip, 0.1, sigma2 / (sigma2 + 0.1)),
         ] {
             let scene = Scene { screen_filter: filter, ..Scene::new(vec![p.clone()], 0) };
-            let splat = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::ThreeDgs).unwrap();
+            let splat = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::ThreeDgs).unwrap();
             assert_relative_eq!(splat.conic.x, 1.0 / (sigma2 + s), max_relative = 1e-4);
             assert_relative_eq!(splat.opacity, 0.8 * rho, max_relative = 1e-4);
         }
@@ -334,7 +338,7 @@ mod tests {
         let rot = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1);
         let p = Particle::with_rgb(Vec3::new(0.4, -0.3, 0.5), Vec3::new(0.2, 0.05, 0.1), rot, 0.5, Vec3::ONE);
         let scene = Scene::new(vec![p.clone()], 0);
-        let s = project(&scene, 0, &cam, &KernelParams::default(), SplatExtent::Sqrt8).unwrap();
+        let s = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::Sqrt8).unwrap();
         let f = |x: Vec3| cam.project_camera(cam.to_camera(x));
         let eps = 1e-3;
         let cols: Vec<Vec2> = [Vec3::X, Vec3::Y, Vec3::Z]
@@ -353,15 +357,28 @@ mod tests {
         assert_relative_eq!(s.conic.z, a / det, max_relative = 2e-3);
     }
 
+    /// Behind the camera, outside the image or nearer than the near plane: culled; a particle
+    /// 0.1 in front of the camera is culled at 3DGS's 0.2 and kept at gsplat's 0.01.
     #[test]
-    fn particles_behind_or_outside_are_culled() {
+    fn particles_behind_outside_or_too_near_are_culled() {
         let cam = camera();
-        let at = |m: Vec3| Particle::with_rgb(m, Vec3::splat(0.05), Quat::IDENTITY, 0.8, Vec3::ONE);
-        let scene = Scene::new(vec![at(Vec3::new(0.0, 0.0, 5.0)), at(Vec3::new(30.0, 0.0, 0.0)), at(Vec3::ZERO)], 0);
-        let k = KernelParams::default();
-        assert!(project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).is_none(), "behind the camera");
-        assert!(project(&scene, 1, &cam, &k, SplatExtent::ThreeDgs).is_none(), "outside the image");
-        assert!(project(&scene, 2, &cam, &k, SplatExtent::ThreeDgs).is_some());
+        let at = |m: Vec3| Particle::with_rgb(m, Vec3::splat(0.001), Quat::IDENTITY, 0.8, Vec3::ONE);
+        let scene = Scene::new(
+            vec![
+                at(Vec3::new(0.0, 0.0, 5.0)),
+                at(Vec3::new(30.0, 0.0, 0.0)),
+                at(Vec3::ZERO),
+                at(Vec3::new(0.0, 0.0, 3.9)),
+            ],
+            0,
+        );
+        let settings = RenderSettings::default();
+        assert!(project(&scene, 0, &cam, &settings, SplatExtent::ThreeDgs).is_none(), "behind the camera");
+        assert!(project(&scene, 1, &cam, &settings, SplatExtent::ThreeDgs).is_none(), "outside the image");
+        assert!(project(&scene, 2, &cam, &settings, SplatExtent::ThreeDgs).is_some());
+        assert!(project(&scene, 3, &cam, &settings, SplatExtent::ThreeDgs).is_none(), "nearer than 0.2");
+        let gsplat = RenderSettings { near: crate::trainer::GSPLAT_NEAR, ..settings };
+        assert!(project(&scene, 3, &cam, &gsplat, SplatExtent::ThreeDgs).is_some(), "farther than 0.01");
     }
 
     /// The 3DGS footprint is whole 16 × 16 tiles: a pixel beyond the ⌈3 √λ_max⌉ box in a tile
@@ -372,8 +389,8 @@ mod tests {
         let cam = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 50.0, 128, 96).unwrap();
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.6), Quat::IDENTITY, 0.99, Vec3::ONE);
         let scene = Scene::new(vec![p], 0);
-        let k = KernelParams::default();
-        let s = project(&scene, 0, &cam, &k, SplatExtent::ThreeDgs).unwrap();
+        let (settings, k) = (RenderSettings::default(), KernelParams::default());
+        let s = project(&scene, 0, &cam, &settings, SplatExtent::ThreeDgs).unwrap();
         let sigma = (1.0 / s.conic.x).sqrt();
         let r = (3.0 * sigma).ceil();
         // The fixture: centre (64, 48), r = 47; in 3DGS's coordinates p = 63.5, so the tiles
@@ -389,7 +406,7 @@ mod tests {
             assert!(k.alpha(s.opacity, k.response(s.mahalanobis(at(x)))).is_some(), "{x}: above the cull");
             assert!(s.alpha(at(x), &k).is_none(), "{x}: a tile the box does not touch");
         }
-        let sqrt8 = project(&scene, 0, &cam, &k, SplatExtent::Sqrt8).unwrap();
+        let sqrt8 = project(&scene, 0, &cam, &settings, SplatExtent::Sqrt8).unwrap();
         assert!(sqrt8.alpha(at(111.5), &k).is_none(), "past √8σ");
     }
 
@@ -398,12 +415,12 @@ mod tests {
     #[test]
     fn the_alpha_cull_extent_is_where_alpha_passes() {
         let cam = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 50.0, 128, 96).unwrap();
-        let k = KernelParams::default();
+        let (settings, k) = (RenderSettings::default(), KernelParams::default());
         for opacity in [0.01, 0.05, 0.3, 0.99] {
             let rot = Quat::from_rotation_z(0.6);
             let p = Particle::with_rgb(Vec3::ZERO, Vec3::new(0.3, 0.1, 0.1), rot, opacity, Vec3::ONE);
             let scene = Scene::new(vec![p], 0);
-            let s = project(&scene, 0, &cam, &k, SplatExtent::AlphaCull).unwrap();
+            let s = project(&scene, 0, &cam, &settings, SplatExtent::AlphaCull).unwrap();
             let mut covered = 0;
             for y in 0..96 {
                 for x in 0..128 {

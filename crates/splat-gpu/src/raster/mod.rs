@@ -776,7 +776,6 @@ mod tests {
             RASTER_WGSL,
             [
                 "TILE" = TILE,
-                "NEAR" = project::NEAR,
                 "EXTENT_SQ" = project::EXTENT_SQ,
                 "BOX_SIGMAS" = project::BOX_SIGMAS,
                 "EIGEN_FLOOR" = project::EIGEN_FLOOR,
@@ -846,7 +845,7 @@ mod tests {
                 filter_variance,
                 filter_compensates,
                 lens,
-                pad,
+                near,
                 distortion
             ]
         );

@@ -111,8 +111,8 @@ pub struct RasterParams {
     pub filter_compensates: u32,
     /// The camera's lens (`LENS_*` of `lens.wgsl`).
     pub lens: u32,
-    /// Padding.
-    pub pad: u32,
+    /// The near plane ([`RenderSettings::near`]).
+    pub near: f32,
     /// Its distortion, as the trace kernel's `Params::distortion`.
     pub distortion: [[f32; 4]; 3],
 }
@@ -301,7 +301,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &Raste
         filter_variance: scene.screen_filter.variance(),
         filter_compensates: u32::from(scene.screen_filter.compensates()),
         lens: crate::layout::lens_code(&camera.lens),
-        pad: 0,
+        near: s.near,
         distortion: crate::layout::distortion(&camera.lens),
     }
 }
