@@ -127,7 +127,7 @@ fn ut_port(p: &splat_core::Particle, camera: &Camera, model: &str, params: &[f64
 /// cloud seen through each model, and the pinhole's EWA of the same particles is far off.
 #[test]
 fn splatting_projects_through_the_lens_by_the_unscented_transform() {
-    use splat_core::raster::{SplatExtent, project};
+    use splat_core::raster::{Response, SplatExtent, project};
     let (scene, _) = splat_tests::harness::fixture("cloud", WIDTH, HEIGHT);
     let kernel = splat_core::RenderSettings::default();
     for (model, params) in typical(WIDTH, HEIGHT) {
@@ -135,7 +135,10 @@ fn splatting_projects_through_the_lens_by_the_unscented_transform() {
         let pinhole = Camera { lens: splat_core::camera::Lens::Pinhole, ..camera };
         let (mut worst, mut ewa_worst, mut compared) = (0.0f64, 0.0f64, 0);
         for (i, p) in scene.particles.iter().enumerate() {
-            let Some(splat) = project(&scene, i as u32, &camera, &kernel, SplatExtent::ThreeDgs) else { continue };
+            let Some(splat) = project(&scene, i as u32, &camera, &kernel, SplatExtent::ThreeDgs, Response::Projected)
+            else {
+                continue;
+            };
             let Some((mean, [a, b, c])) = ut_port(p, &camera, model, &params) else { continue };
             // The splat's conic is the inverse of Σ₂ + 0.3 I.
             let (a, c) = (a + 0.3, c + 0.3);
@@ -146,7 +149,7 @@ fn splatting_projects_through_the_lens_by_the_unscented_transform() {
             let error = (f64::from(splat.mean.x) - mean[0]).hypot(f64::from(splat.mean.y) - mean[1])
                 + (0..3).map(|k| (ours[k] - conic[k]).abs() / scale).fold(0.0, f64::max);
             worst = worst.max(error);
-            if let Some(e) = project(&scene, i as u32, &pinhole, &kernel, SplatExtent::ThreeDgs) {
+            if let Some(e) = project(&scene, i as u32, &pinhole, &kernel, SplatExtent::ThreeDgs, Response::Projected) {
                 ewa_worst = ewa_worst.max((f64::from(e.mean.x) - mean[0]).hypot(f64::from(e.mean.y) - mean[1]));
             }
             compared += 1;

@@ -28,11 +28,10 @@ use crate::camera::Camera;
 pub use crate::catalogue::RasterMethod;
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
 use crate::hit::{HitDistance, PreparedParticle, Ray, intersect, to_canonical};
-use crate::kernel::KernelParams;
 use crate::lighting::{Lighting, Look};
 use crate::mesh::{Meshes, SurfaceHit};
 use crate::normal::particle_normal;
-use crate::particle::{Particle, Scene};
+use crate::particle::Scene;
 use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::tile::{TILE, tile_count};
@@ -240,11 +239,7 @@ impl<'a> Rasterizer<'a> {
         camera.validate()?;
         raster.validate()?;
         let mut splats: Vec<Splat> = (0..scene.particles.len() as u32)
-            .filter_map(|i| project(scene, i, camera, &settings, raster.extent))
-            .filter_map(|s| match raster.response {
-                Response::Projected => Some(s),
-                Response::AlongRay => along_ray_footprint(s, &scene.particles[s.id as usize], camera, &settings.kernel),
-            })
+            .filter_map(|i| project(scene, i, camera, &settings, raster.extent, raster.response))
             .collect();
         splats.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.id.cmp(&b.id)));
         let prepared = splats.iter().map(|s| PreparedParticle::new(&scene.particles[s.id as usize])).collect();
@@ -765,56 +760,6 @@ fn bits(mask: u64) -> impl Iterator<Item = usize> {
             s
         })
     })
-}
-
-/// The footprint of a particle evaluated along rays ([`Response::AlongRay`]): every pixel of
-/// the 16 × 16 tiles that the box of its visible region touches, within which the alpha alone
-/// decides. A Gaussian's box is that of its projection's alpha-cull ellipse (3DGUT's tight
-/// opacity bounds on the 0.3 px²-dilated projection, by the particle's own opacity); a surfel's
-/// is the box of its visible disc projected through the lens (as 2DGS bounds the exact conic,
-/// here from 64 points of the rim), widened by 2DGS's low-pass.
-fn along_ray_footprint(mut s: Splat, p: &Particle, camera: &Camera, kernel: &KernelParams) -> Option<Splat> {
-    let r2 = kernel.visible_radius(p.opacity).powi(2);
-    let (lo, hi) = if p.is_surfel() {
-        let low_pass = Vec2::splat((r2 * SURFEL_LOW_PASS).sqrt());
-        let (lo, hi) = surfel_box(p, r2.sqrt(), camera)?;
-        (lo - low_pass, hi + low_pass)
-    } else {
-        let det = s.conic.x * s.conic.z - s.conic.y * s.conic.y;
-        let half = Vec2::new((r2 * s.conic.z / det).sqrt(), (r2 * s.conic.x / det).sqrt());
-        (s.mean - half, s.mean + half)
-    };
-    let tile = project::BLOCK;
-    let size = Vec2::new(camera.width as f32, camera.height as f32);
-    let lo = ((lo / tile).floor() * tile).max(Vec2::ZERO);
-    let hi = ((hi / tile).ceil() * tile).min(size);
-    if !(lo.x < hi.x && lo.y < hi.y) {
-        return None;
-    }
-    s.rect = [lo.x as u32, lo.y as u32, hi.x as u32, hi.y as u32];
-    s.bound = f32::MAX;
-    s.opacity = p.opacity;
-    Some(s)
-}
-
-/// The image box of a surfel's disc of `r` standard deviations: 64 points of its rim projected
-/// through the camera's lens, padded by 1 % of the box and a pixel for the chords between them;
-/// the whole image when a point has no projection (behind a perspective lens).
-fn surfel_box(p: &Particle, r: f32, camera: &Camera) -> Option<(Vec2, Vec2)> {
-    const RIM: usize = 64;
-    let axes = glam::DMat3::from_quat(p.rotation.as_dquat());
-    let (tu, tv) = (axes.x_axis * f64::from(p.scale.x * r), axes.y_axis * f64::from(p.scale.y * r));
-    let (rotation, translation) = (camera.rotation.as_dmat3(), camera.translation.as_dvec3());
-    let whole = (Vec2::ZERO, Vec2::new(camera.width as f32, camera.height as f32));
-    let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
-    for i in 0..RIM {
-        let theta = std::f64::consts::TAU * i as f64 / RIM as f64;
-        let x = p.mean.as_dvec3() + theta.cos() * tu + theta.sin() * tv;
-        let Some(q) = camera.project(rotation * x + translation) else { return Some(whole) };
-        (lo, hi) = (lo.min(q.as_vec2()), hi.max(q.as_vec2()));
-    }
-    let pad = 0.01 * (hi - lo) + Vec2::ONE;
-    Some((lo - pad, hi + pad))
 }
 
 /// Splat indices per tile, in global depth order.

@@ -1,9 +1,10 @@
 //! EWA splatting: each particle projected to a 2D Gaussian on the image (Zwicker et al. 2002,
 //! as the 3DGS rasterizer does it), with view-dependent colour and frustum and alpha culling.
 
+use super::{Response, SURFEL_LOW_PASS};
 use crate::camera::Camera;
 use crate::kernel::KernelParams;
-use crate::particle::Scene;
+use crate::particle::{Particle, Scene};
 use crate::settings::RenderSettings;
 use crate::sh;
 use glam::{Mat3, Vec2, Vec3};
@@ -133,12 +134,18 @@ impl Splat {
 /// Through any other lens ([`crate::camera::Lens`]) the mean and Σ₂ come from 3DGUT's
 /// unscented transform instead ([`unscented`]), and the depth is the distance of the centre
 /// from the camera.
+///
+/// With [`Response::AlongRay`] the projection only bounds the particle: its footprint is
+/// every pixel of the 16 × 16 tiles around its visible region (the alpha-cull ellipse, or a
+/// surfel's projected disc widened by 2DGS's low-pass) whatever `extent`, and its opacity its
+/// own, uncompensated.
 pub fn project(
     scene: &Scene,
     index: u32,
     camera: &Camera,
     settings: &RenderSettings,
     extent: SplatExtent,
+    response: Response,
 ) -> Option<Splat> {
     let (p, kernel) = (&scene.particles[index as usize], &settings.kernel);
     // ρ ≤ 1, so a particle below the cull stays below it.
@@ -153,27 +160,28 @@ pub fn project(
     if det.is_nan() || det <= 0.0 || !det.is_finite() {
         return None;
     }
-    let opacity = rho * p.opacity;
+    let opacity = match response {
+        Response::Projected => rho * p.opacity,
+        Response::AlongRay => p.opacity,
+    };
     if opacity < kernel.alpha_cull {
         return None;
     }
     let conic = Vec3::new(c / det, -b / det, a / det);
     let (w, h) = (camera.width, camera.height);
-    let (bound, rect) = match extent {
-        SplatExtent::ThreeDgs => {
+    let r2 = kernel.visible_radius(opacity).powi(2);
+    let (bound, rect) = match (response, extent) {
+        (Response::AlongRay, _) => (f32::MAX, along_ray_tiles(p, mean, a, c, r2, camera)?),
+        (Response::Projected, SplatExtent::ThreeDgs) => {
             // Within the tiles the alpha cull alone decides, and it takes every pixel beyond the
             // visible radius: cutting the footprint to it tests fewer pixels, keeps the same.
-            let r2 = kernel.visible_radius(opacity).powi(2);
             let [x0, y0, x1, y1] = inria_tiles(mean, a, c, det, w, h)?;
             let [u0, v0, u1, v1] = ellipse_box(mean, a, c, r2, w, h)?;
             let rect = [x0.max(u0), y0.max(v0), x1.min(u1), y1.min(v1)];
             (r2, (rect[0] < rect[2] && rect[1] < rect[3]).then_some(rect)?)
         }
-        SplatExtent::Sqrt8 => (EXTENT_SQ, ellipse_box(mean, a, c, EXTENT_SQ, w, h)?),
-        SplatExtent::AlphaCull => {
-            let r2 = kernel.visible_radius(opacity).powi(2);
-            (r2, ellipse_box(mean, a, c, r2, w, h)?)
-        }
+        (Response::Projected, SplatExtent::Sqrt8) => (EXTENT_SQ, ellipse_box(mean, a, c, EXTENT_SQ, w, h)?),
+        (Response::Projected, SplatExtent::AlphaCull) => (r2, ellipse_box(mean, a, c, r2, w, h)?),
     };
     let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
     Some(Splat { id: index, mean, conic, depth, opacity, color, bound, rect })
@@ -199,6 +207,47 @@ fn inria_tiles(mean: Vec2, a: f32, c: f32, det: f32, w: u32, h: u32) -> Option<[
     (x0 < x1 && y0 < y1).then_some([x0, y0, x1, y1])
 }
 
+/// The footprint of a particle evaluated along rays ([`Response::AlongRay`]): every pixel of
+/// the 16 × 16 tiles that the box of its visible region touches, within which the alpha alone
+/// decides. A Gaussian's box is that of its projection's alpha-cull ellipse A ≤ `r2` on
+/// Σ′ = [[a, ·], [·, c]] (3DGUT's tight opacity bounds on the 0.3 px²-dilated projection); a
+/// surfel's is the box of its visible disc projected through the lens (as 2DGS bounds the exact
+/// conic, here from 64 points of the rim), widened by 2DGS's low-pass.
+fn along_ray_tiles(p: &Particle, mean: Vec2, a: f32, c: f32, r2: f32, camera: &Camera) -> Option<[u32; 4]> {
+    let (lo, hi) = if p.is_surfel() {
+        let low_pass = Vec2::splat((r2 * SURFEL_LOW_PASS).sqrt());
+        let (lo, hi) = surfel_box(p, r2.sqrt(), camera);
+        (lo - low_pass, hi + low_pass)
+    } else {
+        let half = Vec2::new((r2 * a).sqrt(), (r2 * c).sqrt());
+        (mean - half, mean + half)
+    };
+    let size = Vec2::new(camera.width as f32, camera.height as f32);
+    let lo = ((lo / BLOCK).floor() * BLOCK).max(Vec2::ZERO);
+    let hi = ((hi / BLOCK).ceil() * BLOCK).min(size);
+    (lo.x < hi.x && lo.y < hi.y).then_some([lo.x as u32, lo.y as u32, hi.x as u32, hi.y as u32])
+}
+
+/// The image box of a surfel's disc of `r` standard deviations: 64 points of its rim projected
+/// through the camera's lens, padded by 1 % of the box and a pixel for the chords between them;
+/// the whole image when a point has no projection (behind a perspective lens).
+fn surfel_box(p: &Particle, r: f32, camera: &Camera) -> (Vec2, Vec2) {
+    const RIM: usize = 64;
+    let axes = glam::DMat3::from_quat(p.rotation.as_dquat());
+    let (tu, tv) = (axes.x_axis * f64::from(p.scale.x * r), axes.y_axis * f64::from(p.scale.y * r));
+    let (rotation, translation) = (camera.rotation.as_dmat3(), camera.translation.as_dvec3());
+    let whole = (Vec2::ZERO, Vec2::new(camera.width as f32, camera.height as f32));
+    let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+    for i in 0..RIM {
+        let theta = std::f64::consts::TAU * i as f64 / RIM as f64;
+        let x = p.mean.as_dvec3() + theta.cos() * tu + theta.sin() * tv;
+        let Some(q) = camera.project(rotation * x + translation) else { return whole };
+        (lo, hi) = (lo.min(q.as_vec2()), hi.max(q.as_vec2()));
+    }
+    let pad = 0.01 * (hi - lo) + Vec2::ONE;
+    (lo - pad, hi + pad)
+}
+
 /// The pixels [x0, x1) × [y0, y1) around the ellipse A ≤ `bound` of Σ′ = [[a, b], [b, c]]
 /// (half-widths √(bound a) and √(bound c)), clipped to the image; `None` when empty.
 fn ellipse_box(mean: Vec2, a: f32, c: f32, bound: f32, w: u32, h: u32) -> Option<[u32; 4]> {
@@ -215,7 +264,7 @@ fn ellipse_box(mean: Vec2, a: f32, c: f32, bound: f32, w: u32, h: u32) -> Option
 
 /// EWA through the pinhole: the projected centre, Σ₂ = J W Σ Wᵀ Jᵀ as (a, b, c) and the view
 /// depth z; `None` behind the near plane `near`.
-fn ewa(p: &crate::particle::Particle, camera: &Camera, near: f32) -> Option<(Vec2, [f32; 3], f32)> {
+fn ewa(p: &Particle, camera: &Camera, near: f32) -> Option<(Vec2, [f32; 3], f32)> {
     let t = camera.to_camera(p.mean);
     if t.z.is_nan() || t.z <= near {
         return None;
@@ -250,7 +299,7 @@ pub const UT_KAPPA: f64 = 0.0;
 /// 1 − α² + β), and the distance of the centre as depth. `None` nearer than the near plane or
 /// when a sigma point falls where the lens sees nothing (behind a perspective lens), where 3DGUT
 /// would still use the points it could project.
-pub fn unscented(p: &crate::particle::Particle, camera: &Camera, near: f32) -> Option<(Vec2, [f32; 3], f32)> {
+pub fn unscented(p: &Particle, camera: &Camera, near: f32) -> Option<(Vec2, [f32; 3], f32)> {
     let depth = camera.to_camera(p.mean).length();
     if depth.is_nan() || depth <= near {
         return None;
@@ -298,7 +347,7 @@ mod tests {
         let cam = camera();
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.1), Quat::IDENTITY, 0.8, Vec3::ONE);
         let scene = Scene::new(vec![p], 0);
-        let s = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::Sqrt8).unwrap();
+        let s = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::Sqrt8, Response::Projected).unwrap();
         let sigma2 = (cam.fx * 0.1 / 4.0).powi(2) + DILATION;
         assert_relative_eq!(s.conic.x, 1.0 / sigma2, max_relative = 1e-4);
         assert_relative_eq!(s.conic.z, 1.0 / sigma2, max_relative = 1e-4);
@@ -324,7 +373,9 @@ mod tests {
             (ScreenFilter::Mip, 0.1, sigma2 / (sigma2 + 0.1)),
         ] {
             let scene = Scene { screen_filter: filter, ..Scene::new(vec![p.clone()], 0) };
-            let splat = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::ThreeDgs).unwrap();
+            let splat =
+                project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::ThreeDgs, Response::Projected)
+                    .unwrap();
             assert_relative_eq!(splat.conic.x, 1.0 / (sigma2 + s), max_relative = 1e-4);
             assert_relative_eq!(splat.opacity, 0.8 * rho, max_relative = 1e-4);
         }
@@ -338,7 +389,7 @@ mod tests {
         let rot = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1);
         let p = Particle::with_rgb(Vec3::new(0.4, -0.3, 0.5), Vec3::new(0.2, 0.05, 0.1), rot, 0.5, Vec3::ONE);
         let scene = Scene::new(vec![p.clone()], 0);
-        let s = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::Sqrt8).unwrap();
+        let s = project(&scene, 0, &cam, &RenderSettings::default(), SplatExtent::Sqrt8, Response::Projected).unwrap();
         let f = |x: Vec3| cam.project_camera(cam.to_camera(x));
         let eps = 1e-3;
         let cols: Vec<Vec2> = [Vec3::X, Vec3::Y, Vec3::Z]
@@ -373,12 +424,24 @@ mod tests {
             0,
         );
         let settings = RenderSettings::default();
-        assert!(project(&scene, 0, &cam, &settings, SplatExtent::ThreeDgs).is_none(), "behind the camera");
-        assert!(project(&scene, 1, &cam, &settings, SplatExtent::ThreeDgs).is_none(), "outside the image");
-        assert!(project(&scene, 2, &cam, &settings, SplatExtent::ThreeDgs).is_some());
-        assert!(project(&scene, 3, &cam, &settings, SplatExtent::ThreeDgs).is_none(), "nearer than 0.2");
+        assert!(
+            project(&scene, 0, &cam, &settings, SplatExtent::ThreeDgs, Response::Projected).is_none(),
+            "behind the camera"
+        );
+        assert!(
+            project(&scene, 1, &cam, &settings, SplatExtent::ThreeDgs, Response::Projected).is_none(),
+            "outside the image"
+        );
+        assert!(project(&scene, 2, &cam, &settings, SplatExtent::ThreeDgs, Response::Projected).is_some());
+        assert!(
+            project(&scene, 3, &cam, &settings, SplatExtent::ThreeDgs, Response::Projected).is_none(),
+            "nearer than 0.2"
+        );
         let gsplat = RenderSettings { near: crate::trainer::GSPLAT_NEAR, ..settings };
-        assert!(project(&scene, 3, &cam, &gsplat, SplatExtent::ThreeDgs).is_some(), "farther than 0.01");
+        assert!(
+            project(&scene, 3, &cam, &gsplat, SplatExtent::ThreeDgs, Response::Projected).is_some(),
+            "farther than 0.01"
+        );
     }
 
     /// The 3DGS footprint is whole 16 × 16 tiles: a pixel beyond the ⌈3 √λ_max⌉ box in a tile
@@ -390,7 +453,7 @@ mod tests {
         let p = Particle::with_rgb(Vec3::ZERO, Vec3::splat(0.6), Quat::IDENTITY, 0.99, Vec3::ONE);
         let scene = Scene::new(vec![p], 0);
         let (settings, k) = (RenderSettings::default(), KernelParams::default());
-        let s = project(&scene, 0, &cam, &settings, SplatExtent::ThreeDgs).unwrap();
+        let s = project(&scene, 0, &cam, &settings, SplatExtent::ThreeDgs, Response::Projected).unwrap();
         let sigma = (1.0 / s.conic.x).sqrt();
         let r = (3.0 * sigma).ceil();
         // The fixture: centre (64, 48), r = 47; in 3DGS's coordinates p = 63.5, so the tiles
@@ -406,7 +469,7 @@ mod tests {
             assert!(k.alpha(s.opacity, k.response(s.mahalanobis(at(x)))).is_some(), "{x}: above the cull");
             assert!(s.alpha(at(x), &k).is_none(), "{x}: a tile the box does not touch");
         }
-        let sqrt8 = project(&scene, 0, &cam, &settings, SplatExtent::Sqrt8).unwrap();
+        let sqrt8 = project(&scene, 0, &cam, &settings, SplatExtent::Sqrt8, Response::Projected).unwrap();
         assert!(sqrt8.alpha(at(111.5), &k).is_none(), "past √8σ");
     }
 
@@ -420,7 +483,7 @@ mod tests {
             let rot = Quat::from_rotation_z(0.6);
             let p = Particle::with_rgb(Vec3::ZERO, Vec3::new(0.3, 0.1, 0.1), rot, opacity, Vec3::ONE);
             let scene = Scene::new(vec![p], 0);
-            let s = project(&scene, 0, &cam, &settings, SplatExtent::AlphaCull).unwrap();
+            let s = project(&scene, 0, &cam, &settings, SplatExtent::AlphaCull, Response::Projected).unwrap();
             let mut covered = 0;
             for y in 0..96 {
                 for x in 0..128 {
