@@ -16,8 +16,16 @@ fn sphere(center: Vec3, radius: f32) -> TriangleMesh {
 
 /// One of these worlds ready to trace: its Gaussians lit and among its meshes.
 pub fn trace_scene(world: &(Scene, Camera, Meshes, Lighting)) -> splat_core::trace::TraceScene<'_> {
+    trace_scene_with(world, splat_core::RenderSettings::default())
+}
+
+/// [`trace_scene`] with `settings` (a lens, say).
+pub fn trace_scene_with(
+    world: &(Scene, Camera, Meshes, Lighting),
+    settings: splat_core::RenderSettings,
+) -> splat_core::trace::TraceScene<'_> {
     let (scene, _, meshes, lighting) = world;
-    splat_core::trace::TraceScene::new(scene, splat_core::RenderSettings::default())
+    splat_core::trace::TraceScene::new(scene, settings)
         .and_then(|t| t.with_lighting(lighting.clone()))
         .expect("a valid world")
         .with_meshes(meshes.clone())

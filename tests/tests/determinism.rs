@@ -12,7 +12,9 @@ fn pool(threads: usize) -> rayon::ThreadPool {
 
 fn exact_with_threads(threads: usize) -> Vec<f32> {
     let (scene, camera) = scenes::cloud();
-    let out = pool(threads).install(|| render_oracle(&scene, &camera, &RenderSettings::default(), &|_| {}).unwrap());
+    let out = pool(threads).install(|| {
+        render_oracle(&scene, &camera, &RenderSettings::default(), &splat_core::Frames::default(), &|_| {}).unwrap()
+    });
     [out.mean, out.alpha, out.depth, out.normal].iter().flat_map(|i| i.data().to_vec()).collect()
 }
 

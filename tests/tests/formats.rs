@@ -118,7 +118,11 @@ fn cloud() -> (Scene, Camera) {
 }
 
 fn image(scene: &Scene, camera: &Camera) -> Vec<f32> {
-    render_oracle(scene, camera, &RenderSettings::default(), &|_| {}).unwrap().mean.data().to_vec()
+    render_oracle(scene, camera, &RenderSettings::default(), &splat_core::Frames::default(), &|_| {})
+        .unwrap()
+        .mean
+        .data()
+        .to_vec()
 }
 
 fn rmse(a: &[f32], b: &[f32]) -> f64 {

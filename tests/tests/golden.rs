@@ -12,7 +12,7 @@ fn render_fixture(name: &str, settings: &RenderSettings) -> image::RgbImage {
     let dir = root().join("fixtures");
     let scene = splat_io::ply::read_ply(&dir.join(format!("{name}.ply"))).unwrap();
     let camera = splat_io::cameras::read_cameras(&dir.join(format!("{name}.cameras.json"))).unwrap()[0];
-    let out = render_oracle(&scene, &camera, settings, &|_| {}).unwrap();
+    let out = render_oracle(&scene, &camera, settings, &splat_core::Frames::default(), &|_| {}).unwrap();
     to_rgba8(&out.mean).to_rgb8()
 }
 

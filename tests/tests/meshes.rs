@@ -63,7 +63,7 @@ fn a_splat_layer_over_a_mesh_quad_is_c_splats_plus_t_times_c_mesh() {
     let (scene, camera) = fixture("layers", 32, 24);
     let settings = RenderSettings::default();
     let c_mesh = Vec3::new(0.2, 0.5, 0.9);
-    let oracle = render_oracle(&scene, &camera, &settings, &|_| {}).unwrap();
+    let oracle = render_oracle(&scene, &camera, &settings, &splat_core::Frames::default(), &|_| {}).unwrap();
     let expected: Vec<f32> = (0..oracle.alpha.data().len())
         .flat_map(|i| {
             let t = 1.0 - oracle.alpha.data()[i];

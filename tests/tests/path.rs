@@ -5,11 +5,12 @@
 //! rate, Sobol runs that average to the same image, and one image whatever the thread count.
 
 use glam::Vec3;
+use splat_core::camera_sampling::{CameraSampling, ThinLens};
 use splat_core::frame::RenderOutput;
 use splat_core::lighting::{Light, LightKind, Lighting, Material, Shadows};
 use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
 use splat_core::path::sampler::SamplerKind;
-use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
+use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
 use splat_core::stats::{ZTest, log_log_slope, rmse};
 use splat_core::trace::TraceScene;
 use splat_core::{Camera, Frames, RenderSettings, Scene};
@@ -261,11 +262,12 @@ fn sobol_paths_are_unbiased_and_converge_faster_than_hashed_ones() {
 #[test]
 fn path_traced_images_do_not_depend_on_the_thread_count() {
     let world = glass_world();
-    let trace = trace_scene(&world);
-    let settings = PathSettings {
-        lens: Some(ThinLens { aperture: 0.08, focus_distance: 3.0 }),
-        ..world_settings(GaussianEstimator::StochasticN { n: 3 })
-    };
+    let lens = Some(ThinLens { aperture: 0.08, focus_distance: 3.0 });
+    let trace = splat_tests::path_worlds::trace_scene_with(
+        &world,
+        RenderSettings { sampling: CameraSampling { lens, ..Default::default() }, ..Default::default() },
+    );
+    let settings = world_settings(GaussianEstimator::StochasticN { n: 3 });
     let frames = Frames { count: 16, seed: 3, ..Frames::default() };
     let on = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();

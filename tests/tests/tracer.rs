@@ -8,7 +8,7 @@ use splat_core::{Frames, RenderSettings};
 
 fn compare(scene: &Scene, camera: &Camera) {
     let settings = RenderSettings { background: glam::Vec3::new(0.05, 0.1, 0.2), ..Default::default() };
-    let oracle = render_oracle(scene, camera, &settings, &|_| {}).unwrap();
+    let oracle = render_oracle(scene, camera, &settings, &splat_core::Frames::default(), &|_| {}).unwrap();
     let trace = TraceScene::new(scene, settings).unwrap();
     let exact = render_frames(&trace, camera, &Method::Exact, &Frames::default(), &|_| {}).unwrap();
     let kbuffer = Method::KBuffer { k: 7, max_passes: 100_000, min_transmittance: 0.0 };

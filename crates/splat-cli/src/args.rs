@@ -7,6 +7,7 @@ use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
+use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
 use splat_core::catalogue::{self, Param};
 use splat_core::kernel;
 use splat_core::lighting::{Look, Shadows};
@@ -140,6 +141,19 @@ pub struct MethodOptions {
 /// The values of `--response`: every [`Response`] by its name, described.
 fn response_parser() -> impl TypedValueParser<Value = Response> {
     splat_view::choice_parser(&Response::ALL, Response::name, Response::describe)
+}
+
+/// The values of `--pixel-filter`: every [`PixelFilter`] by its name.
+fn pixel_filter_parser() -> impl TypedValueParser<Value = PixelFilter> {
+    splat_view::choice_parser(&PixelFilter::ALL, PixelFilter::name, PixelFilter::describe)
+}
+
+/// A pixel "x,y": two whole numbers.
+fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
+    match s.split(',').map(|c| c.trim().parse::<u32>()).collect::<Result<Vec<_>, _>>().as_deref() {
+        Ok([x, y]) => Ok((*x, *y)),
+        _ => Err(format!("'{s}' is not a pixel: give two whole numbers x,y")),
+    }
 }
 
 /// The values of `--extent`: every [`SplatExtent`] by its name, described.
@@ -306,8 +320,6 @@ pub struct Staged {
     pub settings: RenderSettings,
     /// The world's environment for the path tracer, if it gives one.
     pub environment: Option<splat_core::path::Environment>,
-    /// The world camera's thin lens, if it gives one.
-    pub lens: Option<splat_core::path::ThinLens>,
 }
 
 impl Staged {
@@ -353,6 +365,23 @@ pub struct SceneArgs {
     /// Vertical field of view in degrees for --eye/--target.
     #[arg(help_heading = "Camera", long, default_value_t = 50.0)]
     pub fov: f32,
+    /// Where each frame's rays pass through the pixel: its centre, or a point drawn per frame
+    /// from a Sobol sequence (a box filter: edges anti-aliased over the frames; Sun et al.
+    /// §4.2). The path tracer always samples the box.
+    #[arg(help_heading = "Camera", long, value_parser = pixel_filter_parser(), default_value = "center")]
+    pub pixel_filter: PixelFilter,
+    /// Thin-lens radius in world units: depth of field, integrated over the frames by every
+    /// pipeline (overrides the world's camera) [default: the world's, else none].
+    #[arg(help_heading = "Camera", long)]
+    pub aperture: Option<f32>,
+    /// Distance of the plane in focus along the view [default: the world's, else what the
+    /// centre pixel shows (auto-focus)].
+    #[arg(help_heading = "Camera", long, conflicts_with = "focus_at")]
+    pub focus_distance: Option<f32>,
+    /// Auto-focus on what pixel "x,y" shows: its iso-opacity depth (vk_gaussian_splatting
+    /// Lighting §1.5).
+    #[arg(help_heading = "Camera", long, value_parser = parse_pixel)]
+    pub focus_at: Option<(u32, u32)>,
     /// Background colour "r,g,b" behind the particles [default: the world's, else 0,0,0].
     #[arg(help_heading = "Scene and shading", long, value_parser = parse_vec3)]
     pub background: Option<Vec3>,
@@ -478,12 +507,12 @@ pub fn load_cameras(path: &std::path::Path) -> Result<Vec<(String, Camera)>> {
 impl SceneArgs {
     /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
     /// a look-at or framing camera when none is given.
-    pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera)> {
+    pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera, RenderSettings)> {
         let staged = self.load_world(width, height)?;
         if staged.world.lighting.is_on() {
             bail!("this command renders unlit radiance; a lit world renders with `splat render`");
         }
-        Ok((staged.world.scene, staged.camera))
+        Ok((staged.world.scene, staged.camera, staged.settings))
     }
 
     /// Load the scene, world file or demo with its lighting, apply --sh-degree, --look,
@@ -493,7 +522,7 @@ impl SceneArgs {
         if let Some(path) = &self.scene {
             warn_skipped_properties(path, &opened.skipped_properties);
         }
-        let settings = self.settings_over(opened.world.settings(RenderSettings::default()));
+        let mut settings = self.settings_over(opened.world.settings(RenderSettings::default()));
         let WorldSpec { mut scene, mut lighting, camera, meshes, environment, lens, .. } = opened.world;
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
@@ -517,7 +546,46 @@ impl SceneArgs {
         }
         self.apply_shadow_options(&mut lighting)?;
         let camera = self.choose_camera(&scene, camera, width, height)?;
-        Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment, lens })
+        settings.sampling.lens = self.lens(lens, &scene, &camera, &settings)?;
+        Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment })
+    }
+
+    /// The thin lens: --aperture over the world's, in focus at --focus-distance, else at what
+    /// --focus-at's pixel shows, else at the world's distance, else at what the centre pixel
+    /// shows (auto-focus on the splats; a pixel whose ray crosses none is refused).
+    fn lens(
+        &self,
+        world: Option<ThinLens>,
+        scene: &Scene,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<Option<ThinLens>> {
+        let Some(aperture) = self.aperture.or(world.map(|l| l.aperture)) else {
+            if self.focus_distance.is_some() || self.focus_at.is_some() {
+                bail!("--focus-distance and --focus-at place the plane in focus of a lens: add --aperture");
+            }
+            return Ok(None);
+        };
+        let world_distance = world.map(|l| l.focus_distance).filter(|_| self.focus_at.is_none());
+        let focus_distance = match self.focus_distance.or(world_distance) {
+            Some(d) => d,
+            None => {
+                let (x, y) = self.focus_at.unwrap_or((camera.width / 2, camera.height / 2));
+                if x >= camera.width || y >= camera.height {
+                    bail!("--focus-at {x},{y} is outside the {}×{} image", camera.width, camera.height);
+                }
+                let oracle = splat_core::oracle::Oracle::new(scene, *settings)?;
+                oracle.focus_distance(camera, x, y).with_context(|| {
+                    format!(
+                        "auto-focus: the ray through pixel {x},{y} crosses no surface of the splats; \
+                         give --focus-distance or --focus-at a pixel that shows the scene"
+                    )
+                })?
+            }
+        };
+        let lens = ThinLens { aperture, focus_distance };
+        splat_core::camera_sampling::CameraSampling { lens: Some(lens), ..Default::default() }.validate()?;
+        Ok(Some(lens))
     }
 
     /// --shadow-k, --shadow-threshold and --shadow-colored on sorted shadows (refused on any
@@ -547,11 +615,6 @@ impl SceneArgs {
         Ok(())
     }
 
-    /// The render settings these options describe.
-    pub fn settings(&self) -> RenderSettings {
-        self.settings_over(RenderSettings::default())
-    }
-
     /// `base` (the defaults, or what a world file sets) under these options.
     fn settings_over(&self, base: RenderSettings) -> RenderSettings {
         let preset = self.read.preset;
@@ -574,6 +637,7 @@ impl SceneArgs {
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
             raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
+            sampling: CameraSampling { filter: self.pixel_filter, ..base.sampling },
             ..base
         }
     }

@@ -86,11 +86,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if let Some(ctx) = ctx {
         return run_gpu(&args, &ctx);
     }
-    let (scene, camera) = args.scene.load(1200, 800)?;
+    let (scene, camera, settings) = args.scene.load(1200, 800)?;
     let pool = args.scene.pool()?;
     let threads = pool.current_num_threads();
     let build = Instant::now();
-    let trace = TraceScene::new(&scene, args.scene.settings())?;
+    let trace = TraceScene::new(&scene, settings)?;
     let build_s = build.elapsed().as_secs_f64();
     let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
     println!(
@@ -235,8 +235,8 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
 /// Frame times of every method on the GPU, as ratios against `stochastic` measured in the same
 /// run (wall time around submit and poll; the opaque baseline exists on the CPU only).
 fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
-    let (scene, camera) = args.scene.load(1200, 800)?;
-    let trace = TraceScene::new(&scene, args.scene.settings())?;
+    let (scene, camera, settings) = args.scene.load(1200, 800)?;
+    let trace = TraceScene::new(&scene, settings)?;
     let pipeline = splat_gpu::TracePipeline::new(ctx)?;
     let tracer = splat_gpu::GpuTracer::new(ctx, &pipeline, &trace)?;
     println!(
@@ -286,11 +286,11 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
 /// ratios to the sorted frame); then the frame of every raster method named, at
 /// `--raster-samples`, against raster-sorted's in the same run ([`raster_methods_gpu`]).
 fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
-    let (scene, camera) = args.scene.load(1200, 800)?;
+    let (scene, camera, settings) = args.scene.load(1200, 800)?;
     let mut options = args.options.clone();
     options.apply_capture(&scene);
     let pipes = splat_gpu::RasterPipelines::new(ctx)?;
-    let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &args.scene.settings())?;
+    let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &settings)?;
     let settings = match options.on_gpu(options.resolve(MethodId::RasterSorted)) {
         splat_core::Algorithm::Raster(_, settings) => settings,
         _ => unreachable!("raster-sorted resolves to a raster algorithm"),
@@ -400,11 +400,10 @@ fn raster_methods_gpu(
 /// settings of the options, as ratios in one run.
 fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
     use splat_core::raster::{Rasterizer, render_raster};
-    let (scene, camera) = args.scene.load(1200, 800)?;
+    let (scene, camera, settings) = args.scene.load(1200, 800)?;
     let mut options = args.options.clone();
     options.apply_capture(&scene);
     let pool = args.scene.pool()?;
-    let settings = args.scene.settings();
     let raster = options.raster_settings();
     println!(
         "{} particles, {}×{}, CPU reference, {} samples per pixel ({} pattern), {} threads, fastest of {} runs\n",
@@ -445,8 +444,7 @@ fn run_raster_cpu(args: &BenchArgs) -> Result<()> {
 /// compared with `exact`, on the CPU or the GPU as `--backend` says.
 fn run_mn_sweep(args: &BenchArgs) -> Result<()> {
     use splat_core::trace::Method;
-    let (scene, camera) = args.scene.load(1200, 800)?;
-    let settings = args.scene.settings();
+    let (scene, camera, settings) = args.scene.load(1200, 800)?;
     let pool = args.scene.pool()?;
     let trace = TraceScene::new(&scene, settings)?;
     let ctx = crate::args::gpu_context(args.scene.backend)?;

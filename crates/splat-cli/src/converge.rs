@@ -71,9 +71,8 @@ pub fn run(mut args: ConvergeArgs) -> Result<()> {
     let methods = args.methods.clone().unwrap_or_else(|| {
         vec![MethodId::Stochastic, MethodId::StochasticN, MethodId::StochasticPass, MethodId::DepthSampling]
     });
-    let (scene, camera) = args.scene.load(160, 120)?;
+    let (scene, camera, settings) = args.scene.load(160, 120)?;
     args.options.apply_capture(&scene);
-    let settings = args.scene.settings();
     let trace = TraceScene::new(&scene, settings)?;
     let exact = render_frames(&trace, &camera, &Method::Exact, &Frames::default(), &|_| {})?;
     // The raster oracle, projected and rendered only when a raster method is measured.

@@ -6,7 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
-use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
+use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
 use splat_core::raster::Response;
 use splat_core::trace::TraceScene;
 use splat_core::trainer::Preset;
@@ -81,12 +81,6 @@ pub struct PathOptions {
     /// Path tracer: Owen-scrambled Sobol (one sequence per pixel) or the counter-based hash.
     #[arg(long, value_enum, default_value = "sobol")]
     pub sampler: SamplerArg,
-    /// Path tracer: thin-lens radius (depth of field; overrides the world's camera).
-    #[arg(long)]
-    pub aperture: Option<f32>,
-    /// Path tracer: distance of the plane in focus (default: the world's, else eye to target).
-    #[arg(long)]
-    pub focus_distance: Option<f32>,
 }
 
 /// The path tracer's generator.
@@ -151,7 +145,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         camera.width,
         camera.height,
         describe(&args),
-        frames_done(args.spp, algorithm.is_random(lighting, !meshes.is_empty())),
+        frames_done(args.spp, algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling)),
         written(&args)
     );
     Ok(())
@@ -223,9 +217,9 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
             describe(args)
         );
     }
-    if staged.environment.is_some() || staged.lens.is_some() {
+    if staged.environment.is_some() {
         eprintln!(
-            "warning: the world sets up the path tracer ([environment] or a lens): rendering with {}; \
+            "warning: the world sets up the path tracer ([environment]): rendering with {}; \
              --pipeline path renders it path traced",
             describe(args)
         );
@@ -282,7 +276,10 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         "rendered {}, {}, {} in {:.2} s → {}",
         crate::counted(cameras.len(), "view"),
         describe(args),
-        frames_done(args.spp, algorithm.is_random(&staged.world.lighting, !staged.world.meshes.is_empty())),
+        frames_done(
+            args.spp,
+            algorithm.is_random(&staged.world.lighting, !staged.world.meshes.is_empty(), &staged.settings.sampling),
+        ),
         start.elapsed().as_secs_f64(),
         args.output.display()
     );
@@ -321,16 +318,6 @@ pub fn gaussian_estimator(method: MethodId, options: &MethodOptions) -> Result<G
 
 /// The path tracer's settings from its options and the world, with `gaussians`.
 pub fn path_options_settings(o: &PathOptions, staged: &Staged, gaussians: GaussianEstimator) -> Result<PathSettings> {
-    let lens = match (o.aperture, staged.lens) {
-        (Some(aperture), lens) => {
-            let focus_distance = o.focus_distance.or(lens.map(|l| l.focus_distance)).unwrap_or(1.0);
-            Some(ThinLens { aperture, focus_distance })
-        }
-        (None, Some(lens)) => {
-            Some(ThinLens { focus_distance: o.focus_distance.unwrap_or(lens.focus_distance), ..lens })
-        }
-        (None, None) => None,
-    };
     let settings = PathSettings {
         max_depth: o.max_depth,
         roulette_depth: o.roulette_depth,
@@ -340,7 +327,6 @@ pub fn path_options_settings(o: &PathOptions, staged: &Staged, gaussians: Gaussi
             SamplerArg::Hash => SamplerKind::Hash,
         },
         environment: staged.environment.unwrap_or(Environment::Constant(staged.settings.background)),
-        lens,
     };
     settings.validate()?;
     Ok(settings)

@@ -1510,3 +1510,54 @@ fn shadow_options_keep_the_worlds_and_change_what_they_name() {
     let (refused, e) = render(&["--shadows", "exact", "--shadow-k", "4"], "shadows-refused.npy");
     assert!(refused.is_none() && e.contains("--shadow-k sets sorted shadows") && e.contains("--shadows sorted"), "{e}");
 }
+
+/// `--pixel-filter box`, `--aperture` and auto-focus (`--focus-at`) on the ray tracer, the oracle
+/// and splatting: a deterministic method then renders every frame, the same seed repeats, the
+/// lens changes the image; a focus without a lens, a pixel outside the image and the GPU
+/// rasterizer (which projects once per render) are refused with the reason.
+#[test]
+fn depth_of_field_and_the_box_filter_on_every_pipeline() {
+    let run = |extra: &[&str], out: &std::path::Path| {
+        let mut args = vec!["render", "--width", "48", "--height", "36", "--spp", "8", "--backend", "cpu", "-o"];
+        args.push(out.to_str().unwrap());
+        args.extend_from_slice(extra);
+        splat(&args)
+    };
+    let lens = ["--pixel-filter", "box", "--aperture", "0.1", "--focus-at", "24,18"];
+    for method in ["exact", "oracle", "raster-sorted", "stochastic-splat"] {
+        let (a, b, pinhole) = (
+            scratch(&format!("dof-{method}-a.npy")),
+            scratch(&format!("dof-{method}-b.npy")),
+            scratch(&format!("dof-{method}-p.npy")),
+        );
+        let o = run(&[&["--method", method][..], &lens].concat(), &a);
+        assert!(o.status.success(), "{method}: {}", stderr(&o));
+        assert!(stderr(&o).contains("8 spp"), "{method} renders every frame: {}", stderr(&o));
+        assert!(run(&[&["--method", method][..], &lens].concat(), &b).status.success());
+        assert!(run(&["--method", method], &pinhole).status.success());
+        assert_eq!(npy(&a), npy(&b), "{method}: the same seed gave two images");
+        let d = rmse(&npy(&a), &npy(&pinhole));
+        assert!(d > 5e-3, "{method}: the lens and the filter change nothing (RMSE {d})");
+    }
+    let never = scratch("dof-never.npy");
+    let o = run(&["--focus-at", "24,18"], &never);
+    assert!(stderr(&o).contains("add --aperture"), "{}", stderr(&o));
+    let o = run(&["--aperture", "0.1", "--focus-at", "480,18"], &never);
+    assert!(stderr(&o).contains("outside the 48×36 image"), "{}", stderr(&o));
+    let gpu = splat(&[
+        "render",
+        "--pipeline",
+        "raster",
+        "--method",
+        "raster-sorted",
+        "--aperture",
+        "0.1",
+        "--backend",
+        "gpu",
+        "-o",
+        never.to_str().unwrap(),
+    ]);
+    let e = stderr(&gpu);
+    assert!(e.contains("--pixel-filter center without --aperture") || e.contains("mesa-vulkan-drivers"), "{e}");
+    assert!(!never.exists());
+}

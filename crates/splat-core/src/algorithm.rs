@@ -2,12 +2,13 @@
 //! The one name that the CLI, the golden images and the GPU backend dispatch on.
 
 use crate::camera::Camera;
+use crate::camera_sampling::CameraSampling;
 use crate::frame::{Frames, Progress, RenderOutput};
 use crate::lighting::Lighting;
 use crate::mesh::Meshes;
 use crate::oracle::render_oracle;
 use crate::particle::Scene;
-use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster};
+use crate::raster::{RasterMethod, RasterSettings, Rasterizer, render_raster, render_raster_frames};
 use crate::settings::{RenderError, RenderSettings};
 use crate::trace::{Method, TraceScene, render_frames};
 
@@ -80,15 +81,17 @@ impl Algorithm {
         }
     }
 
-    /// Whether frames differ with this `lighting` and, where `meshes`, meshes: a stochastic
-    /// method, or a traced sample whose lighting draws (stochastic shadows, area lights;
-    /// [`Lighting::draws_for`]). Rasterized splats cast no shadow rays.
-    pub fn is_random(&self, lighting: &Lighting, meshes: bool) -> bool {
-        match self {
-            Algorithm::Raster(m, _) => m.is_stochastic(),
-            Algorithm::Oracle => false,
-            _ => self.is_stochastic() || lighting.draws_for(meshes),
-        }
+    /// Whether frames differ with this `lighting` and, where `meshes`, meshes, and this camera
+    /// `sampling`: a stochastic method, a traced sample whose lighting draws (stochastic
+    /// shadows, area lights; [`Lighting::draws_for`]; rasterized splats cast no shadow rays),
+    /// or a camera drawn per frame.
+    pub fn is_random(&self, lighting: &Lighting, meshes: bool, sampling: &CameraSampling) -> bool {
+        sampling.is_random()
+            || match self {
+                Algorithm::Raster(m, _) => m.is_stochastic(),
+                Algorithm::Oracle => false,
+                _ => self.is_stochastic() || lighting.draws_for(meshes),
+            }
     }
 
     /// Render `frames` on the CPU (one frame for a deterministic method), unlit. `progress`
@@ -125,15 +128,16 @@ impl Algorithm {
     pub fn render_world(&self, shot: &Shot, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
         let Shot { scene, meshes, lighting, camera, settings } = *shot;
         match self {
-            Algorithm::Oracle => oracle(shot, progress),
+            Algorithm::Oracle => oracle(shot, frames, progress),
             Algorithm::Trace(_) | Algorithm::Hybrid(..) => {
                 let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes);
                 self.render_on(&trace, camera, frames, progress)
             }
             Algorithm::Raster(method, raster) => {
-                let r =
-                    Rasterizer::new(scene, camera, *settings, *raster)?.with_lighting(lighting)?.with_meshes(meshes);
-                render_raster(&r, method, frames, progress)
+                let build = |camera: &Camera| {
+                    Ok(Rasterizer::new(scene, camera, *settings, *raster)?.with_lighting(lighting)?.with_meshes(meshes))
+                };
+                render_raster_frames(camera, &settings.sampling, method, frames, progress, build)
             }
         }
     }
@@ -156,22 +160,34 @@ impl Algorithm {
     /// depth-sorted and binned splats) is built once, here, and each
     /// [`PreparedView::render`] draws frames of it.
     pub fn prepare<'a>(&self, trace: &'a TraceScene<'a>, camera: &Camera) -> Result<PreparedView<'a>, RenderError> {
-        let (scene, settings) = (trace.scene(), *trace.settings());
         let prepared = match *self {
             Algorithm::Oracle => Prepared::Oracle,
             Algorithm::Trace(method) => Prepared::Trace(method),
-            Algorithm::Raster(method, raster) => {
-                let r = Rasterizer::new(scene, camera, settings, raster)?
-                    .with_lighting(trace.lighting())?
-                    .with_meshes(trace.meshes());
-                Prepared::Raster(Box::new(r), method)
+            Algorithm::Raster(method, _) | Algorithm::Hybrid(method, ..) if trace.settings().sampling.is_random() => {
+                Prepared::MovingRaster(*self, method)
             }
-            Algorithm::Hybrid(method, raster, secondary) => {
-                let r = Rasterizer::new(scene, camera, settings, raster)?.hybrid(trace, secondary)?;
-                Prepared::Raster(Box::new(r), method)
+            Algorithm::Raster(method, _) | Algorithm::Hybrid(method, ..) => {
+                Prepared::Raster(Box::new(self.rasterizer(trace, camera)?), method)
             }
         };
         Ok(PreparedView { trace, camera: *camera, prepared })
+    }
+
+    /// The rasterizer of a splatting or hybrid algorithm for one view of `trace` (its splats
+    /// projected through `camera`); an error for the others.
+    fn rasterizer<'a>(&self, trace: &'a TraceScene<'a>, camera: &Camera) -> Result<Rasterizer<'a>, RenderError> {
+        let (scene, settings) = (trace.scene(), *trace.settings());
+        match *self {
+            Algorithm::Raster(_, raster) => Ok(Rasterizer::new(scene, camera, settings, raster)?
+                .with_lighting(trace.lighting())?
+                .with_meshes(trace.meshes())),
+            Algorithm::Hybrid(_, raster, secondary) => {
+                Rasterizer::new(scene, camera, settings, raster)?.hybrid(trace, secondary)
+            }
+            Algorithm::Oracle | Algorithm::Trace(_) => {
+                Err(RenderError::Settings(format!("{self:?} does not rasterize")))
+            }
+        }
     }
 }
 
@@ -187,6 +203,8 @@ enum Prepared<'a> {
     Oracle,
     Trace(Method),
     Raster(Box<Rasterizer<'a>>, RasterMethod),
+    /// Splatting through a camera drawn per frame: a rasterizer per frame.
+    MovingRaster(Algorithm, RasterMethod),
 }
 
 impl PreparedView<'_> {
@@ -194,15 +212,19 @@ impl PreparedView<'_> {
     pub fn render(&self, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
         let (trace, camera) = (self.trace, &self.camera);
         match &self.prepared {
-            Prepared::Oracle => oracle(&trace.shot(camera), progress),
+            Prepared::Oracle => oracle(&trace.shot(camera), frames, progress),
             Prepared::Trace(method) => render_frames(trace, camera, method, frames, progress),
             Prepared::Raster(r, method) => render_raster(r, method, frames, progress),
+            Prepared::MovingRaster(algorithm, method) => {
+                let sampling = &trace.settings().sampling;
+                render_raster_frames(camera, sampling, method, frames, progress, |c| algorithm.rasterizer(trace, c))
+            }
         }
     }
 }
 
 /// The brute-force oracle of the shot: splats alone, unlit (it refuses meshes and lights).
-fn oracle(shot: &Shot, progress: Progress) -> Result<RenderOutput, RenderError> {
+fn oracle(shot: &Shot, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
     if !shot.meshes.is_empty() {
         return Err(RenderError::Settings(
             "the brute-force oracle renders splats alone; render meshes with a ray-tracing method".into(),
@@ -213,7 +235,7 @@ fn oracle(shot: &Shot, progress: Progress) -> Result<RenderOutput, RenderError> 
             "the brute-force oracle renders unlit radiance; render lit references with the exact method".into(),
         ));
     }
-    render_oracle(shot.scene, shot.camera, shot.settings, progress)
+    render_oracle(shot.scene, shot.camera, shot.settings, frames, progress)
 }
 
 #[cfg(test)]

@@ -269,6 +269,45 @@ pub fn render_tiles<S>(
     assemble(camera, &tiles)
 }
 
+/// The frame loop of a camera that moves from frame to frame where a renderer projects
+/// through it (splatting, the oracle's tile culling: [`crate::camera_sampling`]): `frame(f,
+/// key)` renders frame f, of key `key`, as a whole one-frame image through that frame's camera,
+/// and the images are folded pixel by pixel into f64 Welford accumulators, as [`PixelFrames`]
+/// folds a pixel's frames (the depth, normal and picks are frame 0's). Each frame is the same
+/// pure function of (pixel, key) as in the pixel-major loop, so the image does not depend on
+/// the thread count either. `progress` receives the pixels' share of each finished frame.
+pub fn fold_frames(
+    camera: &Camera,
+    keys: &[u32],
+    progress: Progress,
+    mut frame: impl FnMut(u32, u32) -> Result<RenderOutput, RenderError>,
+) -> Result<RenderOutput, RenderError> {
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    let mut acc = vec![[Welford::default(); 4]; pixels as usize];
+    let mut first = None;
+    for (f, &key) in keys.iter().enumerate() {
+        let out = frame(f as u32, key)?;
+        for (i, a) in acc.iter_mut().enumerate() {
+            let c = &out.mean.data()[3 * i..3 * i + 3];
+            for (w, v) in a.iter_mut().zip([c[0], c[1], c[2], out.alpha.data()[i]]) {
+                w.push(f64::from(v));
+            }
+        }
+        first.get_or_insert(out);
+        let done = |f: u64| pixels * f / keys.len() as u64;
+        progress(done(f as u64 + 1) - done(f as u64));
+    }
+    let mut out = first.ok_or_else(|| RenderError::Settings("at least one frame is needed".into()))?;
+    for (i, a) in acc.iter().enumerate() {
+        for (c, w) in a[..3].iter().enumerate() {
+            out.mean.data_mut()[3 * i + c] = w.mean as f32;
+            out.variance.data_mut()[3 * i + c] = w.variance() as f32;
+        }
+        out.alpha.data_mut()[i] = a[3].mean as f32;
+    }
+    Ok(out)
+}
+
 /// Scatter the tiles' pixels into the output images.
 fn assemble(camera: &Camera, tiles: &[Vec<Finished>]) -> RenderOutput {
     let (w, h) = (camera.width, camera.height);

@@ -46,6 +46,11 @@ impl Image {
         &self.data
     }
 
+    /// All values, mutable.
+    pub fn data_mut(&mut self) -> &mut [f32] {
+        &mut self.data
+    }
+
     /// The values of pixel (x, y).
     pub fn pixel(&self, x: u32, y: u32) -> &[f32] {
         let i = self.index(x, y);

@@ -3,7 +3,8 @@
 //! Everything here is math, in layers (docs/architecture.md):
 //!
 //! - the particle and its response: [`particle`], [`kernel`], [`hit`], [`sh`], [`normal`],
-//!   [`camera`], and the screen-space [`filter`] of a capture;
+//!   [`camera`] with each frame's [`camera_sampling`] (pixel filter, thin lens), and the
+//!   screen-space [`filter`] of a capture;
 //! - exact compositing, Eq. 3 of Sun et al. ([`composite`]) and the stochastic estimator of
 //!   Eqs. 4–6 with its exact expectations ([`estimator`]);
 //! - the floor every renderer stands on: [`settings`] and errors, screen [`tile`]s, and the
@@ -28,6 +29,7 @@
 pub mod algorithm;
 pub mod bvh;
 pub mod camera;
+pub mod camera_sampling;
 pub mod catalogue;
 pub mod composite;
 pub mod estimator;

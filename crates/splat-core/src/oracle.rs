@@ -5,8 +5,9 @@
 //! result (a test checks it against the brute-force [`oracle_ray`]).
 
 use crate::camera::Camera;
+use crate::camera_sampling::frame_sample;
 use crate::composite::{Composite, ShadedHit, composite, shade_hit, sort_front_to_back};
-use crate::frame::{PixelFrames, Progress, RenderOutput, Sample, render_tiles};
+use crate::frame::{Frames, PixelFrames, Progress, RenderOutput, Sample, fold_frames, render_tiles};
 use crate::hit::{PreparedParticle, Ray, intersect};
 use crate::particle::Scene;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
@@ -72,6 +73,18 @@ impl<'a> Oracle<'a> {
     }
 }
 
+impl Oracle<'_> {
+    /// Auto-focus (vk_gaussian_splatting Lighting §1.5: the picked surface sets the plane in
+    /// focus): the depth along `camera`'s axis of the iso-opacity hit of the ray through the
+    /// centre of pixel (x, y), every particle tested; `None` where the ray's transmittance
+    /// never falls to the iso threshold.
+    pub fn focus_distance(&self, camera: &Camera, x: u32, y: u32) -> Option<f32> {
+        let ray = self.clip(camera.pixel_ray(x, y));
+        let c = self.trace(&ray, 0..self.prepared.len() as u32, &mut Vec::new());
+        c.depth.map(|t| t * ray.dir.dot(camera.forward()))
+    }
+}
+
 /// The oracle for one ray: every particle of the scene tested by brute force, hits sorted
 /// front to back and composited by Eq. 3 in f64. The ray's own range is replaced by the
 /// settings' (t_min, t_max).
@@ -81,20 +94,38 @@ pub fn oracle_ray(scene: &Scene, ray: Ray, settings: &RenderSettings) -> Result<
     Ok(oracle.trace(&oracle.clip(ray), 0..n, &mut Vec::new()))
 }
 
-/// Render every pixel with the oracle (rays through pixel centres): one frame, variance 0.
-/// `progress` is called with the number of pixels finished since its last call.
+/// Render every pixel with the oracle: through pixel centres and a pinhole, one frame,
+/// variance 0; under a camera drawn per frame (the settings' [`crate::camera_sampling`]),
+/// `frames.count` frames through each frame's camera (the filtered oracle: exact for the very
+/// frames a stochastic render of the same seed draws). `progress` is called with the number of
+/// pixels finished since its last call.
 pub fn render_oracle(
     scene: &Scene,
     camera: &Camera,
     settings: &RenderSettings,
+    frames: &Frames,
     progress: Progress,
 ) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
     camera.require_pinhole("the oracle (its tile culling)")?;
     let oracle = Oracle::new(scene, *settings)?;
+    let sampling = settings.sampling;
+    if !sampling.is_random() {
+        return Ok(oracle_frame(&oracle, scene, camera, progress));
+    }
+    let keys = frames.keys(true)?;
+    fold_frames(camera, &keys, progress, |f, _| {
+        let frame_camera = sampling.pinhole(camera, &frame_sample(frames.seed, f))?;
+        Ok(oracle_frame(&oracle, scene, &frame_camera, &|_| {}))
+    })
+}
+
+/// One frame of the oracle through a pinhole `camera`, every pixel through its centre.
+fn oracle_frame(oracle: &Oracle, scene: &Scene, camera: &Camera, progress: Progress) -> RenderOutput {
+    let settings = oracle.settings();
     let bins = TileBins::new(scene, camera, settings.kernel.cutoff);
     let tile_state = |tile| (bins.candidates(tile), Vec::new());
-    Ok(render_tiles(camera, progress, tile_state, |(candidates, scratch), x, y| {
+    render_tiles(camera, progress, tile_state, |(candidates, scratch), x, y| {
         let ray = oracle.clip(camera.pixel_ray(x, y));
         let c = oracle.trace(&ray, candidates.iter().copied(), scratch);
         let sample = Sample {
@@ -105,7 +136,7 @@ pub fn render_oracle(
             picked: None,
         };
         PixelFrames::over(&[0], |_| sample)
-    }))
+    })
 }
 
 /// Particles binned into screen tiles by the projection of their bounding boxes.
@@ -189,7 +220,7 @@ mod tests {
         let oracle = Oracle::new(&scene, settings).unwrap();
         let all = 0..scene.particles.len() as u32;
         for camera in [camera.rescaled(40, 30).unwrap(), inside] {
-            let out = render_oracle(&scene, &camera, &settings, &|_| {}).unwrap();
+            let out = render_oracle(&scene, &camera, &settings, &Frames::default(), &|_| {}).unwrap();
             for y in 0..camera.height {
                 for x in 0..camera.width {
                     let ray = oracle.clip(camera.pixel_ray(x, y));
@@ -206,12 +237,36 @@ mod tests {
     fn invalid_settings_are_refused() {
         let (scene, camera) = scenes::layers();
         let bad = RenderSettings { iso_threshold: 2.0, ..Default::default() };
-        assert!(matches!(render_oracle(&scene, &camera, &bad, &|_| {}), Err(RenderError::Settings(_))));
+        assert!(matches!(
+            render_oracle(&scene, &camera, &bad, &Frames::default(), &|_| {}),
+            Err(RenderError::Settings(_))
+        ));
         let mut broken = scene.clone();
         broken.particles[1].scale.y = 0.0;
         assert!(matches!(
-            render_oracle(&broken, &camera, &RenderSettings::default(), &|_| {}),
+            render_oracle(&broken, &camera, &RenderSettings::default(), &Frames::default(), &|_| {}),
             Err(RenderError::Particle { index: 1, .. })
         ));
+    }
+
+    #[test]
+    fn auto_focus_is_the_picked_depth_along_the_axis() {
+        let (scene, camera) = scenes::layers();
+        let settings = RenderSettings::default();
+        let out = render_oracle(&scene, &camera, &settings, &Frames::default(), &|_| {}).unwrap();
+        let oracle = Oracle::new(&scene, settings).unwrap();
+        let mut focused = 0;
+        for (x, y) in [(80, 60), (30, 40), (120, 90), (0, 0)] {
+            let t = out.depth.pixel(x, y)[0];
+            let cos = camera.pixel_ray(x, y).dir.dot(camera.forward());
+            match oracle.focus_distance(&camera, x, y) {
+                Some(d) => {
+                    assert!((d - t * cos).abs() < 1e-5, "({x}, {y}): focus {d}, depth {t} × cos {cos}");
+                    focused += 1;
+                }
+                None => assert!(t.is_nan(), "({x}, {y}) shows a surface at {t} but has no focus"),
+            }
+        }
+        assert!(focused >= 2, "the layers' centre pixels show a surface");
     }
 }

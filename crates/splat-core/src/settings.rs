@@ -2,6 +2,7 @@
 //! decide an image ([`RenderSettings`]) and why a render cannot start ([`RenderError`]).
 
 use crate::camera::CameraError;
+use crate::camera_sampling::CameraSampling;
 use crate::composite::DEFAULT_ISO_THRESHOLD;
 use crate::hit::{DEFAULT_T_MAX, DEFAULT_T_MIN, HitDistance};
 use crate::kernel::KernelParams;
@@ -39,6 +40,9 @@ pub struct RenderSettings {
     /// Most mirror and glass bounces after the camera ray ([`crate::mesh`]); a ray that would
     /// bounce once more takes black.
     pub max_bounces: u32,
+    /// Where each frame's camera rays pass through the pixel and the lens (a box filter, depth
+    /// of field); the pixel centre and a pinhole by default.
+    pub sampling: CameraSampling,
 }
 
 /// Default bounce limit (the title figure of the vk_gaussian_splatting lighting documentation
@@ -60,6 +64,7 @@ impl Default for RenderSettings {
             t_min: DEFAULT_T_MIN,
             t_max: DEFAULT_T_MAX,
             max_bounces: DEFAULT_MAX_BOUNCES,
+            sampling: CameraSampling::default(),
         }
     }
 }
@@ -117,7 +122,7 @@ impl RenderSettings {
                 self.max_bounces
             )));
         }
-        Ok(())
+        self.sampling.validate()
     }
 }
 

@@ -19,15 +19,10 @@ struct PathParams {
     environment: u32,
     // Emissive triangles.
     emitters: u32,
-    // 1 with a thin lens.
-    lens: u32,
+    pad0: u32,
     env_a: vec4<f32>,
     env_b: vec4<f32>,
     env_up: vec4<f32>,
-    aperture: f32,
-    focus_distance: f32,
-    pad0: u32,
-    pad1: u32,
 }
 
 @group(0) @binding(13) var<uniform> path: PathParams;
@@ -277,18 +272,10 @@ fn direct_at_surface(x: vec3<f32>, face: vec3<f32>, fr: Frame, wo: vec3<f32>, bs
     return sum;
 }
 
-// `PathTracer::camera_ray`: a random point in the pixel and, with a lens, on the lens.
+// `PathTracer::camera_ray`: a random point in the pixel and, with the settings' lens, on the
+// lens, from the path's own Sobol dimensions.
 fn path_camera_ray(x: u32, y: u32) -> Ray {
-    let offset = path_dim2(0u);
-    var ray = camera_ray(x, y, offset);
-    if (path.lens == 1u && path.aperture > 0.0) {
-        let on_lens = vec3<f32>(path.aperture * concentric_disk(path_dim2(2u)), 0.0);
-        ray.origin = params.cam_center.xyz + camera_to_world(on_lens);
-        let d = camera_dir(x, y, offset);
-        let focus = path.focus_distance * select(normalize(d), d / d.z, d.z > 0.0);
-        ray.dir = normalize(camera_to_world(focus - on_lens));
-    }
-    return ray;
+    return lens_ray(x, y, path_dim2(0u), path_dim2(2u));
 }
 
 // `PathTracer::radiance`: one path.

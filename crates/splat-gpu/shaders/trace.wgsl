@@ -69,6 +69,11 @@ struct Params {
     // The camera's lens (LENS_*) and its distortion (lens.wgsl).
     lens: u32,
     distortion: array<vec4<f32>, 3>,
+    // camera_sampling.rs: FILTER_CENTER or FILTER_BOX, and the thin lens (aperture 0: none).
+    pixel_filter: u32,
+    aperture: f32,
+    focus_distance: f32,
+    pad_sampling: u32,
 }
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
@@ -109,6 +114,10 @@ const RNG_HASH: u32 = 0u;
 const RNG_TRIG: u32 = 1u;
 const HIT_MEAN: u32 = 0u;
 const HIT_CENTER: u32 = 1u;
+// params.pixel_filter (splat_gpu::layout::FILTER_*) and camera_sampling.rs's FRAME_SOBOL_SALT.
+const FILTER_CENTER: u32 = 0u;
+const FILTER_BOX: u32 = 1u;
+const FRAME_SOBOL_SALT: u32 = 0xca3e5a3fu;
 const PASS_ID: u32 = 0xffffffffu;
 const OFFSET_ID: u32 = 0xfffffffeu;
 const LIGHT_ID: u32 = 0xfffffffbu;
@@ -647,6 +656,38 @@ fn camera_ray(x: u32, y: u32, offset: vec2<f32>) -> Ray {
     return Ray(params.cam_center.xyz, normalize(camera_to_world(camera_dir(x, y, offset))), params.cam_row2.xyz, params.t_min, params.t_max);
 }
 
+// camera.rs `Camera::lens_ray` with the settings' lens: from the point `lens` of the lens of
+// radius params.aperture toward where the pinhole ray through `offset` meets the plane in focus.
+fn lens_ray(x: u32, y: u32, offset: vec2<f32>, lens: vec2<f32>) -> Ray {
+    var ray = camera_ray(x, y, offset);
+    if (params.aperture > 0.0) {
+        let on_lens = vec3<f32>(params.aperture * concentric_disk(lens), 0.0);
+        ray.origin = params.cam_center.xyz + camera_to_world(on_lens);
+        let d = camera_dir(x, y, offset);
+        let focus = params.focus_distance * select(normalize(d), d / d.z, d.z > 0.0);
+        ray.dir = normalize(camera_to_world(focus - on_lens));
+    }
+    return ray;
+}
+
+// camera_sampling.rs `frame_sample`: point `frame` of the run's 4-D Owen-scrambled Sobol
+// sequence (pixel offset in xy, lens point in zw).
+fn frame_sample(frame: u32) -> vec4<f32> {
+    let scramble = xxhash32(vec3<u32>(params.seed, frame >> 16u, FRAME_SOBOL_SALT));
+    let i = frame & 0xffffu;
+    return vec4<f32>(sobol_sample(i, 0u, scramble), sobol_sample(i, 1u, scramble), sobol_sample(i, 2u, scramble), sobol_sample(i, 3u, scramble));
+}
+
+// camera_sampling.rs `CameraSampling::ray`: the camera ray of pixel (x, y) in frame `frame`.
+fn frame_ray(x: u32, y: u32, frame: u32) -> Ray {
+    if (params.pixel_filter == FILTER_CENTER && params.aperture <= 0.0) {
+        return pixel_ray(x, y);
+    }
+    let s = frame_sample(frame);
+    let offset = select(vec2<f32>(0.5), s.xy, params.pixel_filter == FILTER_BOX);
+    return lens_ray(x, y, offset, s.zw);
+}
+
 // Rᵀ v: a camera-space vector in world space.
 fn camera_to_world(v: vec3<f32>) -> vec3<f32> {
     return params.cam_row0.xyz * v.x + params.cam_row1.xyz * v.y + params.cam_row2.xyz * v.z;
@@ -737,7 +778,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * params.size.x + gid.x;
-    let camera = pixel_ray(gid.x, gid.y);
     iterations = 0u;
     let by_pass = params.mode == MODE_PASS;
     let hybrid = params.mode == MODE_HYBRID;
@@ -749,6 +789,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var f = 0u; f < frames; f++) {
         iterations += 1u;
         let frame = params.first_frame + f;
+        let camera = frame_ray(gid.x, gid.y, frame);
         let pixel_key = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
         var total = vec4<f32>(0.0);
         var camera_pick = no_pick();

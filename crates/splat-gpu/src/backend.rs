@@ -25,6 +25,14 @@ pub struct Extras {
 pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
     let lit = shot.lighting.is_on();
     crate::supports_normals(lit, shot.settings.normal_mode)?;
+    let splatting = matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..));
+    if splatting && shot.settings.sampling.is_random() {
+        return Err(GpuError::refused(
+            "the GPU rasterizer projects the splats once per render, and a box pixel filter or a thin lens \
+             moves the camera every frame (the CPU projects each frame again)",
+            &[Remedy::StillCamera, Remedy::Cpu],
+        ));
+    }
     match algorithm {
         Algorithm::Oracle => Err(oracle_refused()),
         Algorithm::Hybrid(method, raster, secondary) => {

@@ -23,6 +23,8 @@ pub enum Remedy {
     ExactMethod,
     /// Sorted splatting for the hybrid's first hit.
     SortedFirstHit,
+    /// Rays through pixel centres and a pinhole (`PixelFilter::Center`, no lens).
+    StillCamera,
 }
 
 impl Remedy {
@@ -36,6 +38,7 @@ impl Remedy {
             Remedy::NoEarlyStop => "rasterization without early stop",
             Remedy::ExactMethod => "the exact method (the same image)",
             Remedy::SortedFirstHit => "raster-sorted for the first hit",
+            Remedy::StillCamera => "the pixel-centre filter without a lens",
         }
     }
 }

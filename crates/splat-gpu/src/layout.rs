@@ -7,6 +7,7 @@ use splat_core::Camera;
 use splat_core::Scene;
 use splat_core::bvh::{Bvh, BvhNode};
 use splat_core::camera::Lens;
+use splat_core::camera_sampling::PixelFilter;
 use splat_core::frame::Frames;
 use splat_core::lighting::{LightKind, Lighting, Look, Material, Shadows};
 use splat_core::mesh::Meshes;
@@ -269,7 +270,20 @@ pub struct Params {
     pub lens: u32,
     /// Its distortion ([`splat_core::camera::Distortion`]): a₁…a₄; b₁…b₃ and 0; p₁, p₂, s₁, s₂.
     pub distortion: [[f32; 4]; 3],
+    /// `FILTER_CENTER` or `FILTER_BOX` ([`splat_core::camera_sampling::PixelFilter`]).
+    pub pixel_filter: u32,
+    /// The thin lens's radius (0: a pinhole).
+    pub aperture: f32,
+    /// Its distance in focus (1 without a lens).
+    pub focus_distance: f32,
+    /// Padding.
+    pub pad_sampling: u32,
 }
+
+/// [`Params::pixel_filter`] of [`splat_core::camera_sampling::PixelFilter::Center`].
+pub const FILTER_CENTER: u32 = 0;
+/// [`Params::pixel_filter`] of [`splat_core::camera_sampling::PixelFilter::Box`].
+pub const FILTER_BOX: u32 = 1;
 
 /// The hybrid pipeline's first hit of a pixel (WGSL `FirstHit`, 48 bytes), from the tile
 /// rasterizer ([`crate::GpuRasterizer::first_hits`]).
@@ -556,6 +570,12 @@ pub fn params(
         u_shift: frames.u_shift,
         lens: lens_code(&camera.lens),
         distortion: distortion(&camera.lens),
+        pixel_filter: match s.sampling.filter {
+            PixelFilter::Center => FILTER_CENTER,
+            PixelFilter::Box => FILTER_BOX,
+        },
+        aperture: s.sampling.aperture(),
+        focus_distance: s.sampling.lens.map_or(1.0, |l| l.focus_distance),
         ..lighting_params(trace)
     }
 }
@@ -607,7 +627,8 @@ fn lighting_params(trace: &TraceScene) -> Params {
     }
 }
 
-/// `splat_core::path::PathSettings` as `shaders/path.wgsl` reads it (96 bytes).
+/// `splat_core::path::PathSettings` as `shaders/path.wgsl` reads it (80 bytes; the lens is
+/// [`Params`]'s, as the settings' is the path tracer's).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PathParams {
@@ -625,22 +646,14 @@ pub struct PathParams {
     pub environment: u32,
     /// Emissive triangles.
     pub emitters: u32,
-    /// 1 with a thin lens.
-    pub lens: u32,
+    /// Padding.
+    pub pad0: u32,
     /// Constant colour or horizon.
     pub env_a: [f32; 4],
     /// Zenith.
     pub env_b: [f32; 4],
     /// Up.
     pub env_up: [f32; 4],
-    /// Lens radius.
-    pub aperture: f32,
-    /// Distance in focus.
-    pub focus_distance: f32,
-    /// Padding.
-    pub pad0: u32,
-    /// Padding.
-    pub pad1: u32,
 }
 
 /// The kernel's parameters of `settings` with `emitters` emissive triangles; `None` for an
@@ -659,7 +672,6 @@ pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> 
         Environment::Constant(c) => (ENVIRONMENT_CONSTANT, v4(c), [0.0; 4], [0.0; 4]),
         Environment::Gradient { horizon, zenith, up } => (ENVIRONMENT_GRADIENT, v4(horizon), v4(zenith), v4(up)),
     };
-    let lens = settings.lens.unwrap_or(splat_core::path::ThinLens { aperture: 0.0, focus_distance: 1.0 });
     Some(PathParams {
         max_depth: settings.max_depth,
         roulette_depth: settings.roulette_depth,
@@ -671,14 +683,10 @@ pub fn path_params(settings: &splat_core::path::PathSettings, emitters: u32) -> 
         },
         environment,
         emitters,
-        lens: u32::from(settings.lens.is_some()),
+        pad0: 0,
         env_a,
         env_b,
         env_up,
-        aperture: lens.aperture,
-        focus_distance: lens.focus_distance,
-        pad0: 0,
-        pad1: 0,
     })
 }
 
@@ -927,7 +935,11 @@ mod tests {
                 mesh_root,
                 max_bounces,
                 lens,
-                distortion
+                distortion,
+                pixel_filter,
+                aperture,
+                focus_distance,
+                pad_sampling
             ]
         );
         assert_mirrors!(
@@ -946,23 +958,7 @@ mod tests {
             crate::TRACE_WGSL,
             PathParams,
             "PathParams",
-            [
-                max_depth,
-                roulette_depth,
-                estimator,
-                n,
-                sampler,
-                environment,
-                emitters,
-                lens,
-                env_a,
-                env_b,
-                env_up,
-                aperture,
-                focus_distance,
-                pad0,
-                pad1
-            ]
+            [max_depth, roulette_depth, estimator, n, sampler, environment, emitters, pad0, env_a, env_b, env_up]
         );
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
     }
@@ -1040,6 +1036,9 @@ mod tests {
                 "UNDISTORT_TOLERANCE_F32" = splat_core::lens::UNDISTORT_TOLERANCE_F32,
                 "HIT_CENTER" = HIT_CENTER,
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
+                "FILTER_CENTER" = FILTER_CENTER,
+                "FILTER_BOX" = FILTER_BOX,
+                "FRAME_SOBOL_SALT" = splat_core::camera_sampling::FRAME_SOBOL_SALT,
                 "SAMPLER_HASH" = SAMPLER_HASH,
                 "ENVIRONMENT_CONSTANT" = ENVIRONMENT_CONSTANT,
                 "ENVIRONMENT_GRADIENT" = ENVIRONMENT_GRADIENT,

@@ -547,6 +547,61 @@ fn frames_through_each_lens_equal_the_cpu_frames() {
     }
 }
 
+/// Frames drawn through a box pixel filter and a thin lens (`camera_sampling.rs`, its WGSL twin
+/// `frame_ray`): the GPU's rays are the CPU's, frame by frame (the same Sobol point of the
+/// run's sequence, the same lens point), so four frames of `exact` through a pinhole and through
+/// a fisheye agree to the compositing tolerance; the control, the same frames through pixel
+/// centres and a pinhole, is far off at the edges of the cloud.
+#[test]
+fn frames_through_a_sampled_pixel_and_lens_equal_the_cpu_frames() {
+    use splat_core::camera::{Distortion, Lens};
+    use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
+    let Some(ctx) = context() else { return };
+    let (scene, pinhole) = fixture("cloud", 40, 30);
+    let sampling =
+        CameraSampling { filter: PixelFilter::Box, lens: Some(ThinLens { aperture: 0.15, focus_distance: 2.5 }) };
+    let settings = RenderSettings { sampling, ..RenderSettings::default() };
+    let trace = TraceScene::new(&scene, settings).unwrap();
+    let still = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let tracer = tracer(ctx, &trace);
+    let frames = Frames { count: 4, seed: 5, ..Frames::default() };
+    let fisheye = Distortion { radial: [0.04, -0.01, 0.002, -3e-4], ..Distortion::default() };
+    for (name, camera) in [("pinhole", pinhole), ("fisheye", pinhole.with_lens(Lens::Fisheye(fisheye)).unwrap())] {
+        for method in [Method::Exact, Method::Stochastic] {
+            let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
+            let gpu = gpu_run(&tracer, &camera, &method, frames);
+            let d = max_difference(cpu.mean.data(), gpu.mean.data());
+            let centres = render_frames(&still, &camera, &method, &frames, &|_| {}).unwrap();
+            let control = max_difference(centres.mean.data(), gpu.mean.data());
+            let over = cpu.mean.data().iter().zip(gpu.mean.data()).filter(|(a, b)| (*a - *b).abs() > FLOAT_TOLERANCE);
+            let over = over.count() / 3;
+            eprintln!(
+                "{name} {method:?}: |GPU − CPU| {d:.1e} ({over} pixels over {FLOAT_TOLERANCE}), through centres {control:.1e}"
+            );
+            if method == Method::Exact {
+                // A hit whose α lies within f32 rounding of the 1/255 cull (the lens moves the
+                // ray origin, rounded differently on each backend) can be kept by one and
+                // dropped by the other: its frame then moves by at most 1/255, the mean of
+                // four frames by a quarter of that. One pixel in a hundred may do so.
+                let cull_flip = settings.kernel.alpha_cull / frames.count as f32;
+                assert!(d <= cull_flip, "{name}: the GPU's sampled rays differ from the CPU's by {d}");
+                assert!(over * 100 <= (camera.width * camera.height) as usize, "{name}: {over} pixels differ");
+            } else {
+                // A stochastic frame may flip where a decision falls within f32 rounding of its
+                // threshold; the mean stays within a few such flips of four frames.
+                let mean = mean_difference(cpu.mean.data(), gpu.mean.data());
+                assert!(mean < 2e-3, "{name} {method:?}: mean |GPU − CPU| {mean}");
+            }
+            assert!(control > 0.05, "{name}: the sampled camera changes nothing ({control})");
+        }
+    }
+}
+
+/// Mean absolute difference of two images.
+fn mean_difference(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| f64::from((x - y).abs())).sum::<f64>() / a.len() as f64
+}
+
 /// 2DGS surfels (Gaussians [`splat_core::particle::SURFEL_THICKNESS`] thick, seen obliquely): the
 /// GPU's f32 canonical transform, which scales the thin axis by 1e5, gives the CPU's `exact`
 /// frame to the compositing tolerance.

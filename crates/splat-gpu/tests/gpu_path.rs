@@ -5,11 +5,12 @@
 mod common;
 
 use common::{context, trace_pipeline, tracer};
+use splat_core::camera_sampling::{CameraSampling, ThinLens};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
-use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer, ThinLens};
+use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
 use splat_gpu::{GpuError, PathPipeline};
-use splat_tests::path_worlds::{glass_world, lit_world, trace_scene};
+use splat_tests::path_worlds::{glass_world, lit_world, trace_scene, trace_scene_with};
 use std::sync::OnceLock;
 
 fn path_pipeline(ctx: &'static splat_gpu::GpuContext) -> &'static PathPipeline {
@@ -27,7 +28,6 @@ fn settings(gaussians: GaussianEstimator, sampler: SamplerKind) -> PathSettings 
             zenith: glam::Vec3::new(0.2, 0.3, 0.5),
             up: glam::Vec3::Y,
         },
-        lens: Some(ThinLens { aperture: 0.03, focus_distance: 3.0 }),
         ..PathSettings::default()
     }
 }
@@ -50,7 +50,13 @@ fn differences(a: &RenderOutput, b: &RenderOutput) -> (usize, f64) {
 fn gpu_paths_are_the_cpu_paths() {
     let Some(ctx) = context() else { return };
     for (name, world) in [("lit layers", lit_world()), ("glass", glass_world())] {
-        let (trace, camera) = (trace_scene(&world), &world.1);
+        // Through a thin lens: the settings' lens is the path tracer's.
+        let lens = Some(ThinLens { aperture: 0.03, focus_distance: 3.0 });
+        let with_lens = splat_core::RenderSettings {
+            sampling: CameraSampling { lens, ..Default::default() },
+            ..Default::default()
+        };
+        let (trace, camera) = (trace_scene_with(&world, with_lens), &world.1);
         let gpu = tracer(ctx, &trace);
         for sampler in [SamplerKind::Sobol, SamplerKind::Hash] {
             for gaussians in

@@ -15,7 +15,7 @@
 //! fov = 45                          # vertical, degrees; up = [0, 1, 0] unless given
 //! width = 640
 //! height = 480
-//! aperture = 0.03                   # thin-lens radius (path tracer; 0 or absent: pinhole)
+//! aperture = 0.03                   # thin-lens radius, every pipeline (0 or absent: pinhole)
 //! focus_distance = 3.5              # plane in focus (default: eye to target along the view)
 //!
 //! [environment]                     # where paths escape (path tracer; default: the background)
@@ -66,10 +66,11 @@ use crate::{Error, ErrorKind};
 use glam::{EulerRot, Quat, Vec3};
 use serde::Deserialize;
 use splat_core::RenderSettings;
+use splat_core::camera_sampling::ThinLens;
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, SplatSet};
 use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
-use splat_core::path::{Environment, ThinLens};
+use splat_core::path::Environment;
 use splat_core::sh::Rotation;
 use splat_core::{Camera, Scene, ScreenFilter};
 use std::path::{Path, PathBuf};

@@ -41,6 +41,7 @@ pub mod sampler;
 
 use crate::algorithm::Algorithm;
 use crate::camera::Camera;
+use crate::camera_sampling::{CameraSampling, FrameSample, PixelFilter};
 use crate::catalogue::{MethodId, Parameters};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, render_tiles};
 use crate::hit::Ray;
@@ -148,15 +149,6 @@ impl Environment {
     }
 }
 
-/// A thin lens: depth of field around the plane in focus.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ThinLens {
-    /// Lens radius in world units (0: a pinhole).
-    pub aperture: f32,
-    /// Distance of the plane in focus along the camera axis.
-    pub focus_distance: f32,
-}
-
 /// Default path length limit (bounces off meshes).
 pub const DEFAULT_MAX_DEPTH: u32 = 8;
 /// Largest path length limit.
@@ -175,8 +167,6 @@ pub struct PathSettings {
     pub sampler: SamplerKind,
     /// Radiance where a path escapes.
     pub environment: Environment,
-    /// Depth of field, if any.
-    pub lens: Option<ThinLens>,
 }
 
 impl Default for PathSettings {
@@ -187,7 +177,6 @@ impl Default for PathSettings {
             gaussians: GaussianEstimator::Stochastic,
             sampler: SamplerKind::Sobol,
             environment: Environment::Constant(Vec3::ZERO),
-            lens: None,
         }
     }
 }
@@ -209,14 +198,6 @@ impl PathSettings {
             _ => {}
         }
         self.environment.validate().map_err(RenderError::Settings)?;
-        if let Some(l) = self.lens
-            && !(l.aperture.is_finite() && l.aperture >= 0.0 && l.focus_distance.is_finite() && l.focus_distance > 0.0)
-        {
-            return bad(format!(
-                "lens aperture {} must be finite and ≥ 0 and focus distance {} finite and > 0",
-                l.aperture, l.focus_distance
-            ));
-        }
         Ok(())
     }
 }
@@ -341,15 +322,13 @@ impl<'a> PathTracer<'a> {
         &self.settings
     }
 
-    /// The camera ray of sample `s` through pixel (x, y): a random position in the pixel and,
-    /// with a lens, on the lens.
+    /// The camera ray of sample `s` through pixel (x, y): a random position in the pixel (a
+    /// box filter, whatever the settings' filter) and, with the settings' lens, on the lens;
+    /// the path's own Sobol dimensions, one sequence per pixel.
     pub fn camera_ray(&self, camera: &Camera, x: u32, y: u32, s: &PathSampler) -> Ray {
-        let offset = s.get2(Dim::Pixel.index());
-        let ray = match self.settings.lens {
-            Some(l) => camera.lens_ray(x, y, offset, l.aperture, l.focus_distance, s.get2(Dim::Lens.index())),
-            None => camera.ray(x, y, offset),
-        };
-        self.trace.clip(ray)
+        let sampling = CameraSampling { filter: PixelFilter::Box, ..self.trace.settings().sampling };
+        let sample = FrameSample { pixel: s.get2(Dim::Pixel.index()), lens: s.get2(Dim::Lens.index()) };
+        self.trace.clip(sampling.ray(camera, x, y, &sample))
     }
 
     /// The radiance of one path starting with `ray`.

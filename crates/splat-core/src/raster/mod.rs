@@ -25,8 +25,11 @@ pub mod samples;
 mod tests;
 
 use crate::camera::Camera;
+use crate::camera_sampling::{CameraSampling, frame_sample};
 pub use crate::catalogue::RasterMethod;
-use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
+use crate::frame::{
+    Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, fold_frames, render_tiles,
+};
 use crate::hit::{HitDistance, PreparedParticle, Ray, intersect, to_canonical};
 use crate::lighting::{Lighting, Look};
 use crate::mesh::{Meshes, SurfaceHit};
@@ -779,37 +782,69 @@ fn bin_tiles(camera: &Camera, splats: &[Splat]) -> Vec<Vec<u32>> {
 }
 
 /// Render `frames.count` frames of `method` (one for sorted splatting) on the frame loop of
-/// [`crate::frame`]. Every decision is a hash, so the result does not depend on the thread
-/// count. `progress` receives finished pixel counts.
+/// [`crate::frame`], through the rasterizer's camera every frame. Every decision is a hash, so
+/// the result does not depend on the thread count. `progress` receives finished pixel counts.
 pub fn render_raster(
     raster: &Rasterizer,
     method: &RasterMethod,
     frames: &Frames,
     progress: Progress,
 ) -> Result<RenderOutput, RenderError> {
+    let keys = raster_keys(frames, raster.is_random(method))?;
+    Ok(render_keys(raster, method, &keys, frames.u_shift, progress))
+}
+
+/// The frame keys of a splatting render (its decisions are hashes only).
+fn raster_keys(frames: &Frames, random: bool) -> Result<Vec<u32>, RenderError> {
     if frames.rng != RngScheme::Hash {
         return Err(RenderError::Settings("the raster methods draw their decisions with the hash generator".into()));
     }
-    let keys = frames.keys(raster.is_random(method))?;
-    Ok(render_tiles(
+    frames.keys(random)
+}
+
+/// The frames of keys `keys` through the rasterizer's camera.
+fn render_keys(
+    raster: &Rasterizer,
+    method: &RasterMethod,
+    keys: &[u32],
+    u_shift: f32,
+    progress: Progress,
+) -> RenderOutput {
+    render_tiles(
         &raster.camera,
         progress,
         |_| (),
         |_, x, y| {
             let px = raster.pixel(x, y);
             let mut fragments = raster.fragments(&px);
-            PixelFrames::over(&keys, |key| {
+            PixelFrames::over(keys, |key| {
                 if method.is_stochastic() {
                     raster.shuffle(&mut fragments, key);
                 }
-                raster.draw(
-                    method,
-                    &px,
-                    &fragments,
-                    &RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift),
-                    key,
-                )
+                raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash).shifted(u_shift), key)
             })
         },
-    ))
+    )
+}
+
+/// Splatting under the settings' [`crate::camera_sampling`]: through a still camera, the
+/// rasterizer `build(camera)` draws every frame; through a camera drawn per frame, frame f is
+/// drawn by `build` of that frame's pinhole camera (its splats projected again) and the frames
+/// are folded by [`fold_frames`]. Either way frame f has the key of frame f.
+pub fn render_raster_frames<'a>(
+    camera: &Camera,
+    sampling: &CameraSampling,
+    method: &RasterMethod,
+    frames: &Frames,
+    progress: Progress,
+    build: impl Fn(&Camera) -> Result<Rasterizer<'a>, RenderError>,
+) -> Result<RenderOutput, RenderError> {
+    if !sampling.is_random() {
+        return render_raster(&build(camera)?, method, frames, progress);
+    }
+    let keys = raster_keys(frames, true)?;
+    fold_frames(camera, &keys, progress, |f, key| {
+        let raster = build(&sampling.pinhole(camera, &frame_sample(frames.seed, f))?)?;
+        Ok(render_keys(&raster, method, &[key], frames.u_shift, &|_| {}))
+    })
 }

@@ -51,7 +51,7 @@ fn sorted_splatting_matches_the_ray_traced_oracle_where_ewa_is_exact() {
     let sqrt8 = RasterSettings { extent: SplatExtent::Sqrt8, ..RasterSettings::default() };
     let r = Rasterizer::new(&scene, &camera, settings, sqrt8).unwrap();
     let raster = render(&r, &sorted(Blend::Under), 1);
-    let exact = crate::oracle::render_oracle(&scene, &camera, &settings, &|_| {}).unwrap();
+    let exact = crate::oracle::render_oracle(&scene, &camera, &settings, &Frames::default(), &|_| {}).unwrap();
     // Inside the footprint (away from the √8σ rim, where the dilated and undilated ellipses
     // cut different pixels) the alphas differ by the dilation's effect only: σ′² = σ² + 0.3 with
     // σ ≈ 4.1 px widens the Gaussian by k = 1.78 %, and max over x of o (e^(−x/(1+k)) − e^(−x))

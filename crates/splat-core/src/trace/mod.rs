@@ -15,6 +15,7 @@
 
 use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
+use crate::camera_sampling::{FrameSample, frame_sample};
 use crate::catalogue::MethodId;
 use crate::composite::{ShadedHit, shade_hit};
 use crate::frame::{Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, render_tiles};
@@ -219,9 +220,10 @@ impl<'a> TraceScene<'a> {
     }
 
     /// Whether a sample is random even for a deterministic method: lit splats or lit meshes
-    /// with stochastic shadow rays or area lights.
+    /// with stochastic shadow rays or area lights, or a camera drawn per frame
+    /// ([`crate::camera_sampling`]).
     pub fn is_random(&self) -> bool {
-        self.lighting.draws_for(!self.meshes.is_empty())
+        self.lighting.draws_for(!self.meshes.is_empty()) || self.settings.sampling.is_random()
     }
 
     /// The settings.
@@ -575,8 +577,10 @@ impl<D: Decide> Decide for Bounce<'_, D> {
     }
 }
 
-/// Render `frames.count` frames of `method` (one for a deterministic method) through pixel
-/// centres on the frame loop of [`crate::frame`]. `progress` receives finished pixel counts.
+/// Render `frames.count` frames of `method` (one for a deterministic method under a still
+/// camera) on the frame loop of [`crate::frame`], each frame's rays drawn by the settings'
+/// [`crate::camera_sampling`] (pixel centres and a pinhole by default). `progress` receives
+/// finished pixel counts.
 pub fn render_frames(
     trace: &TraceScene,
     camera: &Camera,
@@ -586,16 +590,21 @@ pub fn render_frames(
 ) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
     method.validate()?;
+    let sampling = trace.settings().sampling;
     let keys = frames.keys(method.is_stochastic() || trace.is_random())?;
+    let samples: Vec<FrameSample> = (0..keys.len() as u32).map(|f| frame_sample(frames.seed, f)).collect();
     Ok(render_tiles(
         camera,
         progress,
         |_| (),
         |_, x, y| {
-            let ray = trace.clip(camera.pixel_ray(x, y));
-            PixelFrames::over(&keys, |key| {
-                trace.sample(method, &ray, &RayRng::new(x, y, key, frames.rng).shifted(frames.u_shift))
-            })
+            let still = trace.clip(camera.pixel_ray(x, y));
+            let mut pixel = PixelFrames::default();
+            for (key, s) in keys.iter().zip(&samples) {
+                let ray = if sampling.is_random() { trace.clip(sampling.ray(camera, x, y, s)) } else { still };
+                pixel.push(&trace.sample(method, &ray, &RayRng::new(x, y, *key, frames.rng).shifted(frames.u_shift)));
+            }
+            pixel
         },
     ))
 }
