@@ -143,6 +143,11 @@ fn response_parser() -> impl TypedValueParser<Value = Response> {
     splat_view::choice_parser(&Response::ALL, Response::name, Response::describe)
 }
 
+/// The values of `--hit-distance`: every [`HitDistance`] by its name, described.
+fn hit_distance_parser() -> impl TypedValueParser<Value = HitDistance> {
+    splat_view::choice_parser(&HitDistance::ALL, HitDistance::name, HitDistance::describe)
+}
+
 /// The values of `--pixel-filter`: every [`PixelFilter`] by its name.
 fn pixel_filter_parser() -> impl TypedValueParser<Value = PixelFilter> {
     splat_view::choice_parser(&PixelFilter::ALL, PixelFilter::name, PixelFilter::describe)
@@ -267,15 +272,6 @@ impl MethodOptions {
             RngArg::Trig => RngScheme::Trig,
         }
     }
-}
-
-/// Hit distance convention (Sun et al. §4.1).
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum HitArg {
-    /// Maximum density along the ray (3DGRT).
-    Mean,
-    /// Particle centre projected on the camera's view direction (3DGS rasterizer depth).
-    Center,
 }
 
 /// Per-particle normal (vk_gaussian_splatting Lighting §2.4).
@@ -407,9 +403,10 @@ pub struct SceneArgs {
     /// Lit worlds: how far along the normal shadow rays start [default: the world's, else 0.2].
     #[arg(help_heading = "Scene and shading", long)]
     pub shadow_offset: Option<f32>,
-    /// Hit distance convention.
-    #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "mean")]
-    pub hit_distance: HitArg,
+    /// Hit distance of the ray tracers: where along the ray a particle is hit, for sorting and
+    /// picking (Sun et al. §4.1, vk_gaussian_splatting Lighting §1.4).
+    #[arg(help_heading = "Scene and shading", long, value_parser = hit_distance_parser(), default_value = "mean")]
+    pub hit_distance: HitDistance,
     /// Per-particle normal.
     #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "plane")]
     pub normals: NormalArg,
@@ -624,10 +621,7 @@ impl SceneArgs {
                 cutoff: self.cutoff.or(preset.map(Preset::cutoff)).unwrap_or(kernel::DEFAULT_CUTOFF),
                 ..KernelParams::default()
             },
-            hit_distance: match self.hit_distance {
-                HitArg::Mean => HitDistance::Mean,
-                HitArg::Center => HitDistance::Center,
-            },
+            hit_distance: self.hit_distance,
             normal_mode: match self.normals {
                 NormalArg::Plane => NormalMode::MaxDensityPlane,
                 NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,

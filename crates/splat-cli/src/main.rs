@@ -6,6 +6,7 @@ mod compare;
 mod converge;
 mod convert;
 mod hint;
+mod hits;
 mod info;
 mod render;
 mod stratify;
@@ -73,6 +74,9 @@ enum Command {
     /// Laine–Karras stratification gain: RMSE of stratified / Enderton at 4…64 samples per
     /// pixel on the layered fixtures, as a table and a side-by-side PNG.
     Stratify(stratify::StratifyArgs),
+    /// The surface each hit distance convention picks (vk_gaussian_splatting Lighting §1.4.3):
+    /// icosahedron, maximum density, centre and the rasterizer's billboard, side by side.
+    HitDistance(Box<hits::HitDistanceArgs>),
 }
 
 /// `n` and `noun`, plural unless `n` is 1: "1 view", "3 views".
@@ -113,6 +117,7 @@ fn main() -> ExitCode {
             bench::run(*args)
         }
         Command::Stratify(args) => stratify::run(args),
+        Command::HitDistance(args) => hits::run(*args),
         Command::Compare(args) => compare::run(args),
         Command::View(args) => splat_view::run(&args),
         Command::Completions { shell } => {

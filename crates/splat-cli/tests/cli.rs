@@ -1561,3 +1561,31 @@ fn depth_of_field_and_the_box_filter_on_every_pipeline() {
     assert!(e.contains("--pixel-filter center without --aperture") || e.contains("mesa-vulkan-drivers"), "{e}");
     assert!(!never.exists());
 }
+
+/// `splat hit-distance` (vk_gaussian_splatting Lighting §1.4.3): a table row per surface and the
+/// four depth images side by side; the icosahedron's surface differs from the maximum density's.
+#[test]
+fn hit_distance_compares_the_picked_surfaces() {
+    let prefix = scratch("hits");
+    let o = splat(&[
+        "hit-distance",
+        "fixtures/cloud.ply",
+        "--camera",
+        "fixtures/cloud.cameras.json",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "-o",
+        prefix.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout).into_owned();
+    for row in ["ray tracing, icosahedron", "ray tracing, mean", "ray tracing, center", "rasterization, billboard"] {
+        assert!(table.contains(&format!("| {row} |")), "{table}");
+    }
+    let ico = table.lines().find(|l| l.contains("icosahedron")).unwrap();
+    assert!(!ico.contains("| 0.000 % |"), "the proxy moves the surface: {ico}");
+    let image = splat_io::image::read_image(&prefix.with_extension("png")).unwrap();
+    assert_eq!((image.width(), image.height()), (4 * 48, 36));
+}

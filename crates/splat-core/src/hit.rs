@@ -21,6 +21,98 @@ pub enum HitDistance {
     /// μ orthogonal to [`Ray::view`], t = (μ − o)·v / (d·v). For camera rays v is the camera's
     /// forward axis, so this is the rasterizer's billboard depth (vk_gaussian_splatting Lighting §1.4.2).
     Center,
+    /// The front face of the particle's icosahedron proxy (vk_gaussian_splatting Lighting
+    /// §1.4.1, 3DGRT's `computeGaussianEnclosingIcosaHedron`): the regular icosahedron whose
+    /// inscribed sphere is the particle's visible extent in canonical space, entered where the
+    /// ray meets its first face after t_min (its back face when the ray starts inside). Which
+    /// particles are hit, and their α, are the mean convention's (3DGRT evaluates the response
+    /// at the maximum density point); only t, the sorting and picking distance, changes.
+    Icosahedron,
+}
+
+impl HitDistance {
+    /// Every convention, in the order the front ends list them.
+    pub const ALL: [HitDistance; 3] = [HitDistance::Mean, HitDistance::Center, HitDistance::Icosahedron];
+
+    /// Its name on the command line and in the viewer.
+    pub fn name(self) -> &'static str {
+        match self {
+            HitDistance::Mean => "mean",
+            HitDistance::Center => "center",
+            HitDistance::Icosahedron => "icosahedron",
+        }
+    }
+
+    /// One line on what it is (the CLI's help).
+    pub fn describe(self) -> &'static str {
+        match self {
+            HitDistance::Mean => "the maximum density along the ray (3DGRT, vk's AABB parametric mode)",
+            HitDistance::Center => "the particle centre projected on the view direction (the 3DGS rasterizer's depth)",
+            HitDistance::Icosahedron => "the front face of the icosahedron proxy (3DGRT's and vk's mesh mode)",
+        }
+    }
+}
+
+/// The 20 face planes of the regular icosahedron with vertices the cyclic permutations of
+/// (±1, ±φ, 0) (3DGRT's vertex list): unit normals n along the vertices of the dual
+/// dodecahedron, (±1, ±1, ±1) and the cyclic permutations of (0, ±φ, ±1/φ), each of length √3.
+/// Scaled to inradius ρ, the solid is {x : nᵢ·x ≤ ρ for every i}.
+pub const ICOSAHEDRON_NORMALS: [[f32; 3]; 20] = {
+    const A: f32 = 0.577_350_26; // 1/√3
+    const B: f32 = 0.934_172_36; // φ/√3
+    const C: f32 = 0.356_822_1; // 1/(φ√3)
+    [
+        [A, A, A],
+        [A, A, -A],
+        [A, -A, A],
+        [A, -A, -A],
+        [-A, A, A],
+        [-A, A, -A],
+        [-A, -A, A],
+        [-A, -A, -A],
+        [0.0, B, C],
+        [0.0, B, -C],
+        [0.0, -B, C],
+        [0.0, -B, -C],
+        [C, 0.0, B],
+        [-C, 0.0, B],
+        [C, 0.0, -B],
+        [-C, 0.0, -B],
+        [B, C, 0.0],
+        [B, -C, 0.0],
+        [-B, C, 0.0],
+        [-B, -C, 0.0],
+    ]
+};
+
+/// Circumradius of the icosahedron of unit inradius, √3 √(10 + 2√5) / (2φ²) = 1.2584 (3DGRT's
+/// vertices (±1, ±φ, 0) of length √(1 + φ²) times its `icosaVrtScale` √3/φ²). The ellipsoid of
+/// this radius times the inradius holds the proxy, so the BVH bounds the particle by it.
+pub const ICOSAHEDRON_CIRCUMRADIUS: f32 = 1.258_408_8;
+
+/// The first crossing after `t_min` of the ray o + t d (canonical space) with the surface of the
+/// icosahedron of inradius `rho` ([`ICOSAHEDRON_NORMALS`]): its entry, or its exit when the
+/// entry lies at or before t_min; `None` when the ray misses it or crosses it only before t_min.
+/// The slab method over the 20 face planes (Kay and Kajiya 1986).
+pub fn icosahedron_crossing(o: Vec3, d: Vec3, rho: f32, t_min: f32) -> Option<f32> {
+    let (mut enter, mut exit) = (f32::NEG_INFINITY, f32::INFINITY);
+    for n in ICOSAHEDRON_NORMALS {
+        let n = Vec3::from_array(n);
+        let (num, den) = (rho - n.dot(o), n.dot(d));
+        if den == 0.0 {
+            if num < 0.0 {
+                return None;
+            }
+        } else if den < 0.0 {
+            enter = enter.max(num / den);
+        } else {
+            exit = exit.min(num / den);
+        }
+    }
+    if enter > exit {
+        return None;
+    }
+    if enter > t_min { Some(enter) } else { (exit > t_min).then_some(exit) }
 }
 
 /// A ray o + t d with its valid range (t_min, t_max).
@@ -118,13 +210,14 @@ pub fn intersect(
     // With the mean convention the hit is the closest point, so a line outside the cutoff
     // ellipsoid is rejected before the exponential (most box hits of flat splats are; the
     // result is the same, only sooner).
-    if convention == HitDistance::Mean && d2_min > s2 {
+    if convention != HitDistance::Center && d2_min > s2 {
         return None;
     }
     let alpha = kernel.alpha(p.opacity, kernel.response(d2_min))?;
     let t_mean = -o_c.dot(d_c) / dd;
     let t = match convention {
         HitDistance::Mean => t_mean,
+        HitDistance::Icosahedron => icosahedron_crossing(o_c, d_c, kernel.visible_extent(p.opacity), ray.t_min)?,
         HitDistance::Center => {
             let dv = ray.dir.dot(ray.view);
             if dv <= 0.0 {
@@ -137,7 +230,7 @@ pub fn intersect(
         return None;
     }
     let d2_hit = match convention {
-        HitDistance::Mean => d2_min,
+        HitDistance::Mean | HitDistance::Icosahedron => d2_min,
         HitDistance::Center => (o_c + t * d_c).length_squared(),
     };
     if d2_hit > s2 {
@@ -255,5 +348,137 @@ mod tests {
             }
         }
         assert!(hits > 1000 && misses > 1000, "{hits} hits, {misses} misses");
+    }
+
+    /// 3DGRT's icosahedron as it builds it (`particlePrimitives.cu`: 12 vertices, 20
+    /// triangles, vertices scaled by `icosaVrtScale` for an inscribed unit sphere), intersected
+    /// triangle by triangle (Möller–Trumbore, both faces): an independent port that the slab
+    /// method over [`ICOSAHEDRON_NORMALS`] must reproduce, entry and exit, on random rays.
+    #[test]
+    fn the_proxy_is_3dgrt_icosahedron() {
+        let phi = 1.618_033_988_749_895_f64;
+        let scale = 0.5 * 1.323_169_076_499_215_f64;
+        let v: Vec<glam::DVec3> = [
+            (-1.0, phi, 0.0),
+            (1.0, phi, 0.0),
+            (0.0, 1.0, -phi),
+            (-phi, 0.0, -1.0),
+            (-phi, 0.0, 1.0),
+            (0.0, 1.0, phi),
+            (phi, 0.0, 1.0),
+            (0.0, -1.0, phi),
+            (-1.0, -phi, 0.0),
+            (0.0, -1.0, -phi),
+            (phi, 0.0, -1.0),
+            (1.0, -phi, 0.0),
+        ]
+        .iter()
+        .map(|&(x, y, z)| glam::DVec3::new(x, y, z) * scale)
+        .collect();
+        let tris = [
+            [0, 1, 2],
+            [0, 2, 3],
+            [0, 3, 4],
+            [0, 4, 5],
+            [0, 5, 1],
+            [6, 1, 5],
+            [6, 5, 7],
+            [6, 7, 11],
+            [6, 11, 10],
+            [6, 10, 1],
+            [8, 4, 3],
+            [8, 3, 9],
+            [8, 9, 11],
+            [8, 11, 7],
+            [8, 7, 4],
+            [9, 3, 2],
+            [9, 2, 10],
+            [9, 10, 11],
+            [5, 4, 7],
+            [1, 10, 2],
+        ];
+        // Every vertex at the circumradius; every face at distance 1 from the centre.
+        for p in &v {
+            assert!((p.length() - f64::from(ICOSAHEDRON_CIRCUMRADIUS)).abs() < 1e-6, "{p}");
+        }
+        let crossings = |o: glam::DVec3, d: glam::DVec3| -> Vec<f64> {
+            let mut ts: Vec<f64> = tris
+                .iter()
+                .filter_map(|t| {
+                    let (a, b, c) = (v[t[0]], v[t[1]], v[t[2]]);
+                    let (e1, e2) = (b - a, c - a);
+                    let p = d.cross(e2);
+                    let det = e1.dot(p);
+                    if det.abs() < 1e-12 {
+                        return None;
+                    }
+                    let s = o - a;
+                    let u = s.dot(p) / det;
+                    let q = s.cross(e1);
+                    let w = d.dot(q) / det;
+                    (u >= 0.0 && w >= 0.0 && u + w <= 1.0).then(|| e2.dot(q) / det)
+                })
+                .collect();
+            ts.sort_by(f64::total_cmp);
+            ts
+        };
+        let mut rng = SplitMix64::new(5);
+        let (mut hits, mut inside) = (0, 0);
+        for _ in 0..4000 {
+            let o = Vec3::new(rng.range(-2.5, 2.5), rng.range(-2.5, 2.5), rng.range(-2.5, 2.5));
+            let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            let rho = rng.range(0.5, 2.0);
+            let ts = crossings(o.as_dvec3() / f64::from(rho), d.as_dvec3() / f64::from(rho));
+            // The first crossing after t_min = 0 (edges and vertices give a crossing twice).
+            let expected = ts.iter().find(|&&t| t > 1e-9).copied();
+            let got = icosahedron_crossing(o, d, rho, 0.0);
+            match (expected, got) {
+                (Some(e), Some(g)) => {
+                    assert!((e - f64::from(g)).abs() < 2e-4 * e.abs().max(1.0), "o {o} d {d} ρ {rho}: {e} ≠ {g}");
+                    hits += 1;
+                    inside += usize::from(ts[0] <= 0.0);
+                }
+                (None, None) => {}
+                // A ray grazing an edge or vertex within f32 rounding may count on one side only.
+                (e, g) => {
+                    let near = e.or(g.map(f64::from)).unwrap();
+                    let x = o.as_dvec3() + near * d.as_dvec3();
+                    let depth = ICOSAHEDRON_NORMALS
+                        .iter()
+                        .map(|n| glam::DVec3::from_array(n.map(f64::from)).dot(x) - f64::from(rho))
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    assert!(depth.abs() < 1e-4, "o {o} d {d} ρ {rho}: {e:?} against {g:?}");
+                }
+            }
+        }
+        assert!(hits > 600 && inside > 100, "{hits} rays hit, {inside} from inside");
+    }
+
+    /// The proxy's crossing changes t only: the hit and its α are the mean convention's, and t
+    /// lies before the maximum density point, on the proxy around the visible ellipsoid.
+    #[test]
+    fn the_icosahedron_changes_the_distance_only() {
+        let p = particle(Vec3::new(0.3, 1.2, 0.5), Quat::from_rotation_y(0.7), 0.6);
+        let kernel = KernelParams::default();
+        let mut rng = SplitMix64::new(9);
+        let mut hits = 0;
+        for _ in 0..2000 {
+            let origin = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), -6.0);
+            let dir = (Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), 0.0) - origin).normalize();
+            let ray = Ray::new(origin, dir);
+            let mean = intersect(&p, 0, &ray, &kernel, HitDistance::Mean);
+            let ico = intersect(&p, 0, &ray, &kernel, HitDistance::Icosahedron);
+            assert_eq!(mean.is_some(), ico.is_some());
+            if let (Some(m), Some(i)) = (mean, ico) {
+                assert_eq!(m.alpha, i.alpha);
+                assert!(i.t < m.t, "the proxy's front face {} lies before the maximum density {}", i.t, m.t);
+                let (o, d) = to_canonical(&p, &ray);
+                let r = (o + i.t * d).length();
+                let rho = kernel.visible_extent(p.opacity);
+                assert!(r >= rho * 0.999 && r <= rho * ICOSAHEDRON_CIRCUMRADIUS * 1.001, "|x_c| {r} for ρ {rho}");
+                hits += 1;
+            }
+        }
+        assert!(hits > 200, "{hits} hits");
     }
 }

@@ -12,7 +12,8 @@ struct Particle {
     row0: vec3<f32>,
     id: u32,
     row1: vec3<f32>,
-    pad1: f32,
+    // Visible extent (kernel.rs `visible_extent`): the icosahedron proxy's inradius.
+    extent: f32,
     row2: vec3<f32>,
     pad2: f32,
 }
@@ -114,6 +115,7 @@ const RNG_HASH: u32 = 0u;
 const RNG_TRIG: u32 = 1u;
 const HIT_MEAN: u32 = 0u;
 const HIT_CENTER: u32 = 1u;
+const HIT_ICOSAHEDRON: u32 = 2u;
 // params.pixel_filter (splat_gpu::layout::FILTER_*) and camera_sampling.rs's FRAME_SOBOL_SALT.
 const FILTER_CENTER: u32 = 0u;
 const FILTER_BOX: u32 = 1u;
@@ -257,6 +259,8 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
         t = dot(p.mean - ray.origin, ray.view) / dv;
         let q = oc + t * dc;
         d2_hit = dot(q, q);
+    } else if (params.hit_distance == HIT_ICOSAHEDRON) {
+        t = icosahedron_crossing(oc, dc, p.extent, ray.t_min);
     }
     if (!(t > ray.t_min && t < ray.t_max)) {
         return miss;
@@ -265,6 +269,46 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
         return miss;
     }
     return Hit(t, alpha, true);
+}
+
+// hit.rs ICOSAHEDRON_NORMALS: the face planes of the proxy, n·x ≤ ρ.
+const ICO_A: f32 = 0.57735026;
+const ICO_B: f32 = 0.93417236;
+const ICO_C: f32 = 0.35682209;
+const ICOSAHEDRON_NORMALS = array<vec3<f32>, 20>(
+    vec3<f32>(ICO_A, ICO_A, ICO_A), vec3<f32>(ICO_A, ICO_A, -ICO_A), vec3<f32>(ICO_A, -ICO_A, ICO_A),
+    vec3<f32>(ICO_A, -ICO_A, -ICO_A), vec3<f32>(-ICO_A, ICO_A, ICO_A), vec3<f32>(-ICO_A, ICO_A, -ICO_A),
+    vec3<f32>(-ICO_A, -ICO_A, ICO_A), vec3<f32>(-ICO_A, -ICO_A, -ICO_A),
+    vec3<f32>(0.0, ICO_B, ICO_C), vec3<f32>(0.0, ICO_B, -ICO_C), vec3<f32>(0.0, -ICO_B, ICO_C), vec3<f32>(0.0, -ICO_B, -ICO_C),
+    vec3<f32>(ICO_C, 0.0, ICO_B), vec3<f32>(-ICO_C, 0.0, ICO_B), vec3<f32>(ICO_C, 0.0, -ICO_B), vec3<f32>(-ICO_C, 0.0, -ICO_B),
+    vec3<f32>(ICO_B, ICO_C, 0.0), vec3<f32>(ICO_B, -ICO_C, 0.0), vec3<f32>(-ICO_B, ICO_C, 0.0), vec3<f32>(-ICO_B, -ICO_C, 0.0),
+);
+
+// hit.rs `icosahedron_crossing`: the first crossing after t_min of o + t d with the icosahedron
+// of inradius rho (its entry, else its exit); -1 (a miss, never in range) when there is none.
+fn icosahedron_crossing(o: vec3<f32>, d: vec3<f32>, rho: f32, t_min: f32) -> f32 {
+    var enter = -3.4e38;
+    var exit = 3.4e38;
+    var missed = false;
+    for (var i = 0u; i < 20u; i++) {
+        let n = ICOSAHEDRON_NORMALS[i];
+        let num = rho - dot(n, o);
+        let den = dot(n, d);
+        if (den == 0.0) {
+            missed = missed || num < 0.0;
+        } else if (den < 0.0) {
+            enter = max(enter, num / den);
+        } else {
+            exit = min(exit, num / den);
+        }
+    }
+    if (missed || enter > exit) {
+        return -1.0;
+    }
+    if (enter > t_min) {
+        return enter;
+    }
+    return select(-1.0, exit, exit > t_min);
 }
 
 fn before(t: f32, id: u32, other_t: f32, other_id: u32) -> bool {

@@ -42,6 +42,8 @@ pub const RNG_TRIG: u32 = 1;
 pub const HIT_MEAN: u32 = 0;
 /// `Params::hit_distance` of [`splat_core::HitDistance::Center`].
 pub const HIT_CENTER: u32 = 1;
+/// `Params::hit_distance` of [`splat_core::HitDistance::Icosahedron`].
+pub const HIT_ICOSAHEDRON: u32 = 2;
 /// [`PathParams::sampler`] of Owen-scrambled Sobol points.
 pub const SAMPLER_SOBOL: u32 = 0;
 /// [`PathParams::sampler`] of the counter-based hash.
@@ -71,8 +73,9 @@ pub struct GpuParticle {
     pub id: u32,
     /// Row 1 of M.
     pub row1: [f32; 3],
-    /// Padding.
-    pub pad1: f32,
+    /// Visible extent in standard deviations ([`splat_core::KernelParams::visible_extent`]):
+    /// the inradius of the icosahedron proxy.
+    pub extent: f32,
     /// Row 2 of M.
     pub row2: [f32; 3],
     /// Padding.
@@ -218,7 +221,7 @@ pub struct Params {
     pub frames: u32,
     /// `RNG_HASH` or `RNG_TRIG`.
     pub rng_scheme: u32,
-    /// `HIT_MEAN` or `HIT_CENTER`.
+    /// `HIT_MEAN`, `HIT_CENTER` or `HIT_ICOSAHEDRON`.
     pub hit_distance: u32,
     /// Kernel degree.
     pub kernel_degree: u32,
@@ -460,6 +463,7 @@ pub fn lights(lighting: &Lighting) -> Vec<GpuLight> {
 
 /// The leaf-order particles of a scene.
 pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
+    let kernel = trace.settings().kernel;
     trace
         .leaf_particles()
         .iter()
@@ -472,7 +476,7 @@ pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
                 row0: rows[0].to_array(),
                 id,
                 row1: rows[1].to_array(),
-                pad1: 0.0,
+                extent: kernel.visible_extent(p.opacity),
                 row2: rows[2].to_array(),
                 pad2: 0.0,
             }
@@ -556,6 +560,7 @@ pub fn params(
         hit_distance: match s.hit_distance {
             splat_core::HitDistance::Mean => HIT_MEAN,
             splat_core::HitDistance::Center => HIT_CENTER,
+            splat_core::HitDistance::Icosahedron => HIT_ICOSAHEDRON,
         },
         kernel_degree: s.kernel.degree,
         cutoff: s.kernel.cutoff,
@@ -862,7 +867,12 @@ mod tests {
     /// struct of the same role, so the two cannot drift apart.
     #[test]
     fn rust_structs_mirror_the_wgsl_structs() {
-        assert_mirrors!(crate::TRACE_WGSL, GpuParticle, "Particle", [mean, opacity, row0, id, row1, pad1, row2, pad2]);
+        assert_mirrors!(
+            crate::TRACE_WGSL,
+            GpuParticle,
+            "Particle",
+            [mean, opacity, row0, id, row1, extent, row2, pad2]
+        );
         assert_mirrors!(crate::TRACE_WGSL, GpuNode, "Node", [min, first, max, count]);
         assert_mirrors!(
             crate::TRACE_WGSL,
@@ -1035,6 +1045,7 @@ mod tests {
                 "UNDISTORT_STEPS" = splat_core::lens::UNDISTORT_STEPS,
                 "UNDISTORT_TOLERANCE_F32" = splat_core::lens::UNDISTORT_TOLERANCE_F32,
                 "HIT_CENTER" = HIT_CENTER,
+                "HIT_ICOSAHEDRON" = HIT_ICOSAHEDRON,
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,

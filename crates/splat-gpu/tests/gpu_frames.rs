@@ -547,6 +547,41 @@ fn frames_through_each_lens_equal_the_cpu_frames() {
     }
 }
 
+/// Each hit distance convention (vk_gaussian_splatting Lighting §1.4: the maximum density, the
+/// billboard through the centre, the icosahedron proxy's front face) on the GPU gives the CPU's
+/// frame: `exact` and the k-buffer (whose passes depend on the order the distances give) to
+/// the compositing tolerance, and the picked depth to 10⁻⁴ relative; the conventions' depths
+/// differ from each other by far more.
+#[test]
+fn each_hit_distance_gives_the_cpu_frame() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("cloud", 40, 30);
+    let frames = Frames { count: 1, seed: 2, ..Frames::default() };
+    let mut depths = Vec::new();
+    for hit_distance in splat_core::HitDistance::ALL {
+        let trace = TraceScene::new(&scene, RenderSettings { hit_distance, ..RenderSettings::default() }).unwrap();
+        let tracer = tracer(ctx, &trace);
+        for method in [Method::Exact, Method::KBuffer { k: 4, max_passes: 100, min_transmittance: 0.0 }] {
+            let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
+            let gpu = gpu_run(&tracer, &camera, &method, frames);
+            let d = max_difference(cpu.mean.data(), gpu.mean.data());
+            let depth = cpu.depth.data().iter().zip(gpu.depth.data()).fold(0.0f32, |m, (a, b)| {
+                if a.is_nan() && b.is_nan() { m } else { m.max((a - b).abs() / a.abs().max(1.0)) }
+            });
+            eprintln!("{} {method:?}: |GPU − CPU| {d:.1e}, depth {depth:.1e}", hit_distance.name());
+            assert!(d <= FLOAT_TOLERANCE, "{}: {method:?} differs by {d}", hit_distance.name());
+            assert!(depth <= 1e-4, "{}: {method:?} depth differs by {depth}", hit_distance.name());
+            if method == Method::Exact {
+                depths.push(cpu.depth);
+            }
+        }
+    }
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let apart = max_difference(depths[i].data(), depths[j].data());
+        assert!(apart > 1e-2, "conventions {i} and {j} pick the same depths ({apart})");
+    }
+}
+
 /// Frames drawn through a box pixel filter and a thin lens (`camera_sampling.rs`, its WGSL twin
 /// `frame_ray`): the GPU's rays are the CPU's, frame by frame (the same Sobol point of the
 /// run's sequence, the same lens point), so four frames of `exact` through a pinhole and through

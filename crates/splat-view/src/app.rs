@@ -470,9 +470,7 @@ impl Viewer {
 
     fn scene_section(&mut self, ui: &mut egui::Ui) {
         let r = &mut self.settings.render;
-        combo(ui, "hit distance", &mut r.hit_distance, &[HitDistance::Mean, HitDistance::Center], |h| {
-            format!("{h:?}").to_lowercase()
-        });
+        combo(ui, "hit distance", &mut r.hit_distance, &HitDistance::ALL, |h| h.name().to_string());
         ui.add(egui::Slider::new(&mut r.kernel.degree, 1..=8).text("kernel degree"));
         ui.add(egui::Slider::new(&mut r.iso_threshold, 0.01..=0.99).text("iso (rays)"));
         ui.add(egui::Slider::new(&mut r.raster_iso_threshold, 0.01..=0.99).text("iso (splats)"));

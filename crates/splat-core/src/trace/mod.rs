@@ -103,11 +103,14 @@ pub struct TraceScene<'a> {
 /// The radius, in standard deviations, of the ellipsoid a particle is bounded by in the BVH: its
 /// visible extent ([`crate::kernel::KernelParams::visible_extent`]) where hits are taken at
 /// the maximum density along the ray, which lies inside it whenever the hit is kept; the cutoff
-/// with [`HitDistance::Center`], whose hit point may lie anywhere inside the cutoff ellipsoid.
+/// with [`HitDistance::Center`], whose hit point may lie anywhere inside the cutoff ellipsoid;
+/// the sphere around the icosahedron proxy of [`HitDistance::Icosahedron`], whose crossing
+/// may lie anywhere on the proxy.
 pub fn bounding_radius(settings: &RenderSettings, opacity: f32) -> f32 {
     match settings.hit_distance {
         HitDistance::Mean => settings.kernel.visible_extent(opacity),
         HitDistance::Center => settings.kernel.cutoff,
+        HitDistance::Icosahedron => settings.kernel.visible_extent(opacity) * crate::hit::ICOSAHEDRON_CIRCUMRADIUS,
     }
 }
 
