@@ -292,6 +292,16 @@ impl Camera {
         Ray { view: self.forward(), ..Ray::new(self.center(), dir) }
     }
 
+    /// The smallest cosine between a ray through the image and the view axis: the least over
+    /// the image border's corners and edge midpoints (where a pinhole's and a COLMAP lens's
+    /// rays lie farthest off axis).
+    pub fn min_view_cos(&self) -> f32 {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let border =
+            [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h), (0.5 * w, 0.0), (0.5 * w, h), (0.0, 0.5 * h), (w, 0.5 * h)];
+        border.iter().map(|&(x, y)| self.direction(Vec2::new(x, y)).normalize().z).fold(1.0, f32::min)
+    }
+
     /// The ray through the centre of pixel (x, y).
     pub fn pixel_ray(&self, x: u32, y: u32) -> Ray {
         self.ray(x, y, Vec2::splat(0.5))

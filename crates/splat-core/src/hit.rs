@@ -20,6 +20,9 @@ pub enum HitDistance {
     /// The particle centre projected on the view direction: the ray point on the plane through
     /// μ orthogonal to [`Ray::view`], t = (μ − o)·v / (d·v). For camera rays v is the camera's
     /// forward axis, so this is the rasterizer's billboard depth (vk_gaussian_splatting Lighting §1.4.2).
+    /// Sun et al. §4.1 change only the distance: which particles are hit, and their α, are the
+    /// mean convention's (Algorithm 1, lines 2–9). Defined for rays within 60° of the view axis
+    /// ([`CENTER_VIEW_COS_MIN`]), which bounds how far from μ the point can lie.
     Center,
     /// The front face of the particle's icosahedron proxy (vk_gaussian_splatting Lighting
     /// §1.4.1, 3DGRT's `computeGaussianEnclosingIcosaHedron`): the regular icosahedron whose
@@ -29,6 +32,13 @@ pub enum HitDistance {
     /// at the maximum density point); only t, the sorting and picking distance, changes.
     Icosahedron,
 }
+
+/// The smallest cosine between a ray and its view axis at which [`HitDistance::Center`] takes a
+/// hit (60°). A kept hit's ray passes through the visible ellipsoid, at a point q within R (its
+/// largest semi-axis) of μ; the plane point q + s d, s = (μ − q)·v / (d·v), lies within R / cos
+/// of q, so the BVH grows every particle's box by 2R under that convention
+/// ([`crate::trace::bounding_box`]).
+pub const CENTER_VIEW_COS_MIN: f32 = 0.5;
 
 impl HitDistance {
     /// Every convention, in the order the front ends list them.
@@ -206,11 +216,9 @@ pub fn intersect(
     // Squared distance of the line to the canonical origin: ‖o_c × d_c‖² / ‖d_c‖², the
     // minimum of ‖o_c + t d_c‖² over t, computed without cancellation.
     let d2_min = o_c.cross(d_c).length_squared() / dd;
-    let s2 = kernel.cutoff * kernel.cutoff;
-    // With the mean convention the hit is the closest point, so a line outside the cutoff
-    // ellipsoid is rejected before the exponential (most box hits of flat splats are; the
-    // result is the same, only sooner).
-    if convention != HitDistance::Center && d2_min > s2 {
+    // Eq. 2 at the maximum density point, whatever the convention: a line outside the cutoff
+    // ellipsoid is rejected before the exponential (most box hits of flat splats are).
+    if d2_min > kernel.cutoff * kernel.cutoff {
         return None;
     }
     let alpha = kernel.alpha(p.opacity, kernel.response(d2_min))?;
@@ -220,20 +228,13 @@ pub fn intersect(
         HitDistance::Icosahedron => icosahedron_crossing(o_c, d_c, kernel.visible_extent(p.opacity), ray.t_min)?,
         HitDistance::Center => {
             let dv = ray.dir.dot(ray.view);
-            if dv <= 0.0 {
+            if dv < CENTER_VIEW_COS_MIN {
                 return None;
             }
             (p.mean - ray.origin).dot(ray.view) / dv
         }
     };
     if !(t > ray.t_min && t < ray.t_max) {
-        return None;
-    }
-    let d2_hit = match convention {
-        HitDistance::Mean | HitDistance::Icosahedron => d2_min,
-        HitDistance::Center => (o_c + t * d_c).length_squared(),
-    };
-    if d2_hit > s2 {
         return None;
     }
     Some(Hit { t, alpha, index })
@@ -480,5 +481,46 @@ mod tests {
             }
         }
         assert!(hits > 200, "{hits} hits");
+    }
+
+    /// Sun et al. §4.1 change only the distance: the centre convention hits exactly the
+    /// particles the mean convention hits, with their α, including oblique rays whose point on
+    /// the centre's plane lies outside the cutoff ellipsoid (which the convention used to cull);
+    /// t is the plane's.
+    #[test]
+    fn the_centre_convention_keeps_the_mean_conventions_hits() {
+        let p = particle(Vec3::new(0.05, 1.0, 0.4), Quat::from_rotation_x(1.1), 0.9);
+        let kernel = KernelParams::default();
+        let mut rng = SplitMix64::new(4);
+        let (mut hits, mut outside) = (0, 0);
+        for _ in 0..4000 {
+            let origin = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), -4.0);
+            let dir =
+                (Vec3::new(rng.range(-0.3, 0.3), rng.range(-1.5, 1.5), rng.range(-0.5, 0.5)) - origin).normalize();
+            let ray = Ray { view: Vec3::Z, ..Ray::new(origin, dir) };
+            let mean = intersect(&p, 0, &ray, &kernel, HitDistance::Mean);
+            let center = intersect(&p, 0, &ray, &kernel, HitDistance::Center);
+            assert!(dir.z >= CENTER_VIEW_COS_MIN, "a ray within the convention's cone");
+            assert_eq!(mean.map(|h| h.alpha), center.map(|h| h.alpha), "ray {ray:?}");
+            if let Some(c) = center {
+                assert!(((origin + c.t * dir).z - p.mean.z).abs() < 1e-4, "on the centre's plane");
+                let (o, d) = to_canonical(&p, &ray);
+                outside += usize::from((o + c.t * d).length() > kernel.cutoff);
+                hits += 1;
+            }
+        }
+        assert!(hits > 300 && outside > 20, "{hits} hits, {outside} with the plane point outside the cutoff");
+    }
+
+    #[test]
+    fn a_camera_wider_than_the_centre_convention_is_refused() {
+        let (_, camera) = crate::scenes::cloud();
+        let wide = crate::Camera { fx: 0.2 * camera.fx, fy: 0.2 * camera.fy, ..camera };
+        let settings = crate::RenderSettings { hit_distance: HitDistance::Center, ..Default::default() };
+        assert!(crate::trace::check_camera(&settings, &camera).is_ok());
+        let e = crate::trace::check_camera(&settings, &wide).unwrap_err().to_string();
+        assert!(e.contains("within 60° of the view axis") && e.contains("mean hit distance"), "{e}");
+        let mean = crate::RenderSettings::default();
+        assert!(crate::trace::check_camera(&mean, &wide).is_ok());
     }
 }

@@ -116,6 +116,8 @@ const RNG_TRIG: u32 = 1u;
 const HIT_MEAN: u32 = 0u;
 const HIT_CENTER: u32 = 1u;
 const HIT_ICOSAHEDRON: u32 = 2u;
+// hit.rs CENTER_VIEW_COS_MIN: the centre convention takes rays within 60° of the view axis.
+const CENTER_VIEW_COS_MIN: f32 = 0.5;
 // params.pixel_filter (splat_gpu::layout::FILTER_*) and camera_sampling.rs's FRAME_SOBOL_SALT.
 const FILTER_CENTER: u32 = 0u;
 const FILTER_BOX: u32 = 1u;
@@ -249,23 +251,21 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
         return miss;
     }
     alpha = min(alpha, params.alpha_clamp);
+    // Eq. 2 at the maximum density point, whatever the convention (hit.rs `intersect`).
+    if (d2_min > params.cutoff * params.cutoff) {
+        return miss;
+    }
     var t = -dot(oc, dc) / dd;
-    var d2_hit = d2_min;
     if (params.hit_distance == HIT_CENTER) {
         let dv = dot(ray.dir, ray.view);
-        if (dv <= 0.0) {
+        if (dv < CENTER_VIEW_COS_MIN) {
             return miss;
         }
         t = dot(p.mean - ray.origin, ray.view) / dv;
-        let q = oc + t * dc;
-        d2_hit = dot(q, q);
     } else if (params.hit_distance == HIT_ICOSAHEDRON) {
         t = icosahedron_crossing(oc, dc, p.extent, ray.t_min);
     }
     if (!(t > ray.t_min && t < ray.t_max)) {
-        return miss;
-    }
-    if (d2_hit > params.cutoff * params.cutoff) {
         return miss;
     }
     return Hit(t, alpha, true);

@@ -1046,6 +1046,7 @@ mod tests {
                 "UNDISTORT_TOLERANCE_F32" = splat_core::lens::UNDISTORT_TOLERANCE_F32,
                 "HIT_CENTER" = HIT_CENTER,
                 "HIT_ICOSAHEDRON" = HIT_ICOSAHEDRON,
+                "CENTER_VIEW_COS_MIN" = splat_core::hit::CENTER_VIEW_COS_MIN,
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,

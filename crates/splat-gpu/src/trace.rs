@@ -416,6 +416,7 @@ impl<'a> GpuTracer<'a> {
         path: Option<(&wgpu::ComputePipeline, &wgpu::Buffer)>,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
+        splat_core::trace::check_camera(self.trace.settings(), camera)?;
         let params = MethodParams::try_from(method)?;
         let count = frames.keys(method.is_stochastic() || self.trace.is_random())?.len() as u32;
         let ctx = self.ctx;

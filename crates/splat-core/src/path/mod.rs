@@ -567,6 +567,7 @@ impl<'a> PathTracer<'a> {
     /// variance; alpha 1). `progress` receives finished pixel counts.
     pub fn render(&self, camera: &Camera, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
         camera.validate()?;
+        crate::trace::check_camera(self.trace.settings(), camera)?;
         frames.keys(true)?;
         Ok(render_tiles(
             camera,

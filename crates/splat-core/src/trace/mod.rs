@@ -100,18 +100,49 @@ pub struct TraceScene<'a> {
     meshes: Cow<'a, Meshes>,
 }
 
-/// The radius, in standard deviations, of the ellipsoid a particle is bounded by in the BVH: its
-/// visible extent ([`crate::kernel::KernelParams::visible_extent`]) where hits are taken at
-/// the maximum density along the ray, which lies inside it whenever the hit is kept; the cutoff
-/// with [`HitDistance::Center`], whose hit point may lie anywhere inside the cutoff ellipsoid;
-/// the sphere around the icosahedron proxy of [`HitDistance::Icosahedron`], whose crossing
-/// may lie anywhere on the proxy.
+/// The radius, in standard deviations, of the ellipsoid that holds every hit point of a
+/// particle: its visible extent ([`crate::kernel::KernelParams::visible_extent`]) where hits are
+/// taken at the maximum density along the ray, which lies inside it whenever the hit is kept
+/// (and where the [`HitDistance::Center`] convention, which keeps the same hits, finds the
+/// point its ray passes nearest the centre); the sphere around the icosahedron proxy of
+/// [`HitDistance::Icosahedron`], whose crossing may lie anywhere on the proxy.
 pub fn bounding_radius(settings: &RenderSettings, opacity: f32) -> f32 {
+    let visible = settings.kernel.visible_extent(opacity);
     match settings.hit_distance {
-        HitDistance::Mean => settings.kernel.visible_extent(opacity),
-        HitDistance::Center => settings.kernel.cutoff,
-        HitDistance::Icosahedron => settings.kernel.visible_extent(opacity) * crate::hit::ICOSAHEDRON_CIRCUMRADIUS,
+        HitDistance::Mean | HitDistance::Center => visible,
+        HitDistance::Icosahedron => visible * crate::hit::ICOSAHEDRON_CIRCUMRADIUS,
     }
+}
+
+/// The box the BVH bounds a particle by: that of its [`bounding_radius`] ellipsoid, grown under
+/// [`HitDistance::Center`] by R / [`crate::hit::CENTER_VIEW_COS_MIN`] (R its largest semi-axis
+/// there) to hold the plane point of every kept hit.
+pub fn bounding_box(settings: &RenderSettings, p: &crate::particle::Particle) -> Aabb {
+    let radius = bounding_radius(settings, p.opacity);
+    let b = p.aabb(radius).padded();
+    match settings.hit_distance {
+        HitDistance::Center => {
+            let grow = Vec3::splat(radius * p.scale.max_element() / crate::hit::CENTER_VIEW_COS_MIN);
+            Aabb { min: b.min - grow, max: b.max + grow }.padded()
+        }
+        HitDistance::Mean | HitDistance::Icosahedron => b,
+    }
+}
+
+/// Refuse a camera that sees rays farther off its axis than `settings`' hit distance
+/// convention takes ([`crate::hit::CENTER_VIEW_COS_MIN`] under [`HitDistance::Center`]), before
+/// any work: those rays would miss every particle.
+pub fn check_camera(settings: &RenderSettings, camera: &Camera) -> Result<(), RenderError> {
+    let cos = camera.min_view_cos();
+    if settings.hit_distance == HitDistance::Center && cos < crate::hit::CENTER_VIEW_COS_MIN {
+        return Err(RenderError::Settings(format!(
+            "the centre hit distance takes rays within {:.0}° of the view axis, and this camera sees {:.0}° off \
+             axis: use the mean hit distance, or a narrower camera",
+            crate::hit::CENTER_VIEW_COS_MIN.acos().to_degrees(),
+            cos.clamp(-1.0, 1.0).acos().to_degrees()
+        )));
+    }
+    Ok(())
 }
 
 /// Front-to-back integration state (Eq. 3), in f64.
@@ -181,12 +212,10 @@ impl<'a> TraceScene<'a> {
                 scene.particles.len()
             )));
         }
-        let (radii, boxes): (Vec<f32>, Vec<Aabb>) = par::map(&scene.particles, |p| {
-            let radius = bounding_radius(&settings, p.opacity);
-            (radius, p.aabb(radius).padded())
-        })
-        .into_iter()
-        .unzip();
+        let (radii, boxes): (Vec<f32>, Vec<Aabb>) =
+            par::map(&scene.particles, |p| (bounding_radius(&settings, p.opacity), bounding_box(&settings, p)))
+                .into_iter()
+                .unzip();
         let bvh = Bvh::build(&boxes);
         let wide = OnceLock::new();
         let prims = par::map(&bvh.order, |&i| PreparedParticle::new(&scene.particles[i as usize]));
@@ -593,6 +622,7 @@ pub fn render_frames(
 ) -> Result<RenderOutput, RenderError> {
     camera.validate()?;
     method.validate()?;
+    check_camera(trace.settings(), camera)?;
     let sampling = trace.settings().sampling;
     let keys = frames.keys(method.is_stochastic() || trace.is_random())?;
     let samples: Vec<FrameSample> = (0..keys.len() as u32).map(|f| frame_sample(frames.seed, f)).collect();
