@@ -9,8 +9,18 @@ use glam::{DVec3, Vec3};
 
 /// Default iso-opacity threshold on transmittance (vk `depthIsoThreshold`).
 pub const DEFAULT_ISO_THRESHOLD: f32 = 0.7;
-/// An integrated normal shorter than this is degenerate and replaced by the camera-facing one.
+/// An integrated normal shorter than this is degenerate and replaced by the camera-facing one
+/// ([`integrated_normal`]; `DEGENERATE_NORMAL` in the ray-tracing and raster shaders).
 pub const DEGENERATE_NORMAL: f64 = 1e-6;
+
+/// The one rule for the integrated normal Σ nᵢ αᵢ Tᵢ of a ray or pixel that met at least one
+/// particle, ray tracing and splatting alike (vk_gaussian_splatting Lighting §2.3): its
+/// direction, or the camera-facing −d where it is shorter than [`DEGENERATE_NORMAL`] (normals
+/// that cancel, or weights that vanish). Where nothing was met the normal is zero instead.
+pub fn integrated_normal(sum: DVec3, ray_dir: Vec3) -> Vec3 {
+    let len = sum.length();
+    if len > DEGENERATE_NORMAL { (sum / len).as_vec3() } else { -ray_dir }
+}
 
 /// A hit with everything shading needs: distance, alpha, colour and unit normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,8 +80,7 @@ impl Composite {
         if self.hits == 0 {
             return Vec3::ZERO;
         }
-        let len = self.normal.length();
-        if len > DEGENERATE_NORMAL { (self.normal / len).as_vec3() } else { -ray_dir }
+        integrated_normal(self.normal, ray_dir)
     }
 }
 
@@ -150,5 +159,19 @@ mod tests {
         let c = composite(&[a, b], 0.7);
         assert_eq!(c.unit_normal(Vec3::Z), -Vec3::Z);
         assert_eq!(composite(&[], 0.7).unit_normal(Vec3::Z), Vec3::ZERO);
+    }
+
+    /// The one degenerate-normal rule of ray tracing and splatting (and their shaders'
+    /// `DEGENERATE_NORMAL`): a sum longer than the threshold gives its direction, a shorter
+    /// one — normals that cancel exactly, or nearly — the camera-facing −d. Splatting used to
+    /// keep an exactly cancelled sum at zero (as if nothing was drawn) and to normalise any
+    /// other, however short.
+    #[test]
+    fn one_rule_for_degenerate_normals() {
+        let d = Vec3::new(0.0, 0.0, 1.0);
+        assert_eq!(integrated_normal(DVec3::new(0.0, 2.0, 0.0), d), Vec3::Y);
+        assert_eq!(integrated_normal(DVec3::ZERO, d), -d);
+        assert_eq!(integrated_normal(DVec3::new(0.0, 1e-9, 0.0), d), -d);
+        assert_eq!(integrated_normal(DVec3::new(0.0, 2.0 * DEGENERATE_NORMAL, 0.0), d), Vec3::Y);
     }
 }

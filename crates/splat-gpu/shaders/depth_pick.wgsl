@@ -42,6 +42,7 @@ fn tile_blend(
     let dir = pixel_dir(centre);
     let to_t = stretch(centre);
     var normal = vec3<f32>(0.0);
+    var drawn = false;
     // What lies behind (raster/mod.rs `Rasterizer::behind`): the background, or the pixel's
     // mesh, which hides the fragments at or behind it (the depth test of the splat pass).
     var back = vec4<f32>(params.background.xyz, FAR_DEPTH);
@@ -64,6 +65,7 @@ fn tile_blend(
                         c = shade_unshadowed(s.color, s.id, origin, dir, s.depth * to_t, n);
                     }
                     normal += transmittance * alpha * n;
+                    drawn = true;
                     color += transmittance * alpha * c;
                     transmittance *= 1.0 - alpha;
                     if (picked == NONE && transmittance < params.iso_threshold) {
@@ -82,10 +84,11 @@ fn tile_blend(
         // raster/mod.rs `sorted`: the integrated normal normalised, −dir when degenerate; the
         // depth as a distance along the pixel-centre ray, t = z |d_cam|, where T fell below the
         // threshold, else the mesh's (depth consolidation, vk_gaussian_splatting Lighting §1.5.3).
-        var n = normal;
-        if (any(n != vec3<f32>(0.0))) {
-            let rcp = 1.0 / length(n);
-            n = select(-dir, n * rcp, rcp > 0.0 && rcp < 3.0e38);
+        // composite.rs `integrated_normal`: zero where no fragment was drawn.
+        var n = vec3<f32>(0.0);
+        if (drawn) {
+            let len = length(normal);
+            n = select(-dir, normal / len, len > DEGENERATE_NORMAL);
         }
         var t = -1.0;
         if (params.first_hit == 1u) {

@@ -2,6 +2,9 @@
 // the material of a splat set, the incident light of one light sample and the Blinn–Phong
 // shading Lit(x, n, v, c) = (k_e + k_a) c + Σ_l V_l E_l [k_d c max(0, n·l) + k_s max(0, n·h)^s].
 
+// composite.rs DEGENERATE_NORMAL: an integrated normal shorter than this faces the camera.
+const DEGENERATE_NORMAL: f32 = 1e-6;
+
 // One splat set's material and first particle id (64 bytes), mirrored by splat_gpu::GpuMaterial.
 struct Material {
     emissive: vec3<f32>,

@@ -8,11 +8,11 @@ fn particle_normal(leaf: u32, ray: Ray) -> vec3<f32> {
     return plane_normal(p.row0, p.row1, p.row2, p.mean, ray.origin, ray.dir);
 }
 
-// composite.rs `Composite::unit_normal` for a ray with hits: the integrated normal, or the
-// camera-facing −dir when it is degenerate.
+// composite.rs `integrated_normal` for a ray with hits: the integrated normal, or the
+// camera-facing −dir when it is shorter than DEGENERATE_NORMAL.
 fn unit_normal(sum: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
     let len = length(sum);
-    return select(-dir, sum / len, len > 1e-6);
+    return select(-dir, sum / len, len > DEGENERATE_NORMAL);
 }
 
 // lighting.wgsl's loop counter: every loop body counts toward lavapipe's budget.

@@ -1047,6 +1047,7 @@ mod tests {
                 "HIT_CENTER" = HIT_CENTER,
                 "HIT_ICOSAHEDRON" = HIT_ICOSAHEDRON,
                 "CENTER_VIEW_COS_MIN" = splat_core::hit::CENTER_VIEW_COS_MIN,
+                "DEGENERATE_NORMAL" = splat_core::composite::DEGENERATE_NORMAL as f32,
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,

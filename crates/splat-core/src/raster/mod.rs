@@ -495,6 +495,7 @@ impl<'a> Rasterizer<'a> {
         let mut out = Sample { color: DVec3::ZERO, alpha: 0.0, depth: None, normal: Vec3::ZERO, picked: None };
         let mut order: Vec<(f32, u32, usize)> = Vec::with_capacity(fragments.len());
         let mut normal = DVec3::ZERO;
+        let mut drawn = false;
         // Σ_s T_s behind_s and Σ_s behind_s, for the surface look.
         let (mut seen_behind, mut behind_sum) = (DVec3::ZERO, DVec3::ZERO);
         for s in 0..self.offsets.len() {
@@ -536,6 +537,7 @@ impl<'a> Rasterizer<'a> {
                         transmittance *= 1.0 - f64::from(f.alpha);
                         if s == 0 {
                             normal += w * self.normal(px, f.splat).as_dvec3();
+                            drawn = true;
                             if out.depth.is_none() && transmittance < iso {
                                 (out.depth, out.picked) = (Some(t), Some(id));
                             }
@@ -553,8 +555,8 @@ impl<'a> Rasterizer<'a> {
         let n = self.offsets.len() as f64;
         out.color /= n;
         out.alpha /= n;
-        if normal != DVec3::ZERO {
-            out.normal = normal.as_vec3().try_normalize().unwrap_or(-px.rays[0].dir);
+        if drawn {
+            out.normal = crate::composite::integrated_normal(normal, px.rays[0].dir);
         }
         if let (None, Some(hit)) = (out.depth, &px.surfaces[0]) {
             (out.depth, out.normal) = (Some(hit.t), hit.facing(px.rays[0].dir).1);

@@ -783,6 +783,7 @@ mod tests {
                 "EXTENT_SQRT8" = project::SplatExtent::Sqrt8 as u32,
                 "NONE" = NONE,
                 "SH_C0" = splat_core::sh::SH_C0,
+                "DEGENERATE_NORMAL" = splat_core::composite::DEGENERATE_NORMAL as f32,
                 "LOOK_SURFACE" = crate::layout::LOOK_SURFACE,
                 "LOOK_VOLUMETRIC" = crate::layout::LOOK_VOLUMETRIC,
                 "LIGHT_SPOT" = crate::layout::LIGHT_SPOT,
