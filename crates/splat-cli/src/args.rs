@@ -9,6 +9,7 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
 use splat_core::catalogue::{self, Param};
+use splat_core::frame::{AccumulationFormat, Frames};
 use splat_core::kernel;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::mesh::Meshes;
@@ -100,6 +101,10 @@ pub struct MethodOptions {
     /// Generator of the stochastic decisions.
     #[arg(help_heading = "Method parameters", long, value_enum, default_value = "hash")]
     pub rng: RngArg,
+    /// How the running mean is stored between frames (vk_gaussian_splatting's accumulation
+    /// formats; the per-frame variance keeps full precision).
+    #[arg(help_heading = "Method parameters", long, value_parser = accumulation_parser(), default_value = "f32")]
+    pub accumulation: AccumulationFormat,
     /// Raster methods: samples per pixel S (1, 2, 4, 8, 16, 32 or 64; the standard pattern has
     /// up to 16).
     #[arg(help_heading = "Splatting", long, default_value_t = 1)]
@@ -141,6 +146,11 @@ pub struct MethodOptions {
 /// The values of `--response`: every [`Response`] by its name, described.
 fn response_parser() -> impl TypedValueParser<Value = Response> {
     splat_view::choice_parser(&Response::ALL, Response::name, Response::describe)
+}
+
+/// The values of `--accumulation`: every [`AccumulationFormat`] by its name, described.
+fn accumulation_parser() -> impl TypedValueParser<Value = AccumulationFormat> {
+    splat_view::choice_parser(&AccumulationFormat::ALL, AccumulationFormat::name, AccumulationFormat::describe)
 }
 
 /// The values of `--hit-distance`: every [`HitDistance`] by its name, described.
@@ -271,6 +281,11 @@ impl MethodOptions {
             RngArg::Hash => RngScheme::Hash,
             RngArg::Trig => RngScheme::Trig,
         }
+    }
+
+    /// `count` frames from `seed`, drawn and stored as these options say.
+    pub fn frames(&self, count: u32, seed: u32) -> Frames {
+        Frames { count, seed, rng: self.rng(), accumulation: self.accumulation, ..Frames::default() }
     }
 }
 

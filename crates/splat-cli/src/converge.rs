@@ -98,7 +98,7 @@ pub fn run(mut args: ConvergeArgs) -> Result<()> {
     for &m in &methods {
         let method = args.options.resolve(m);
         for &spp in &levels {
-            let frames = Frames { count: spp, seed: spp, rng: args.options.rng(), ..Frames::default() };
+            let frames = args.options.frames(spp, spp);
             let progress = |n| bar.inc(n * u64::from(spp));
             let start = Instant::now();
             let (out, reference) = match method {
@@ -163,7 +163,7 @@ fn run_path(args: &ConvergeArgs) -> Result<()> {
     for (&m, &gaussians) in methods.iter().zip(&estimators) {
         let tracer = PathTracer::new(&trace, PathSettings { gaussians, ..base })?;
         for &spp in &levels {
-            let frames = Frames { count: spp, seed: spp, ..Frames::default() };
+            let frames = Frames { count: spp, seed: spp, accumulation: args.options.accumulation, ..Frames::default() };
             let progress = |n| bar.inc(n * u64::from(spp));
             let start = Instant::now();
             let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;

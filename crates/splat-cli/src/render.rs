@@ -122,7 +122,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     let Staged { world: World { scene, lighting, meshes }, camera, .. } = &staged;
     let cpu_algorithm = algorithm(&args)?;
     warn_unused(&args, &cpu_algorithm, &staged);
-    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
+    let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
     let gpu = choose_gpu(&args, &gpu_algorithm, &staged)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
@@ -244,7 +244,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     args.options.apply_capture(&staged.world.scene);
     let args = &args;
     let cpu_algorithm = algorithm(args)?;
-    let frames = Frames { count: args.spp, seed: args.seed, rng: args.options.rng(), ..Frames::default() };
+    let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
     let gpu = choose_gpu(args, &gpu_algorithm, &staged)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
@@ -341,7 +341,8 @@ fn run_path(args: &RenderArgs, staged: &Staged) -> Result<()> {
     let settings = path_options_settings(&args.path, staged, gaussians)?;
     let Staged { world: World { scene, lighting, meshes }, camera, settings: render_settings, .. } = staged;
     let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
-    let frames = Frames { count: args.spp, seed: args.seed, ..Frames::default() };
+    let frames =
+        Frames { count: args.spp, seed: args.seed, accumulation: args.options.accumulation, ..Frames::default() };
     let gpu = match args.scene.backend {
         BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
         BackendArg::Auto if !matches!(gaussians, GaussianEstimator::DepthSampling { .. }) => {

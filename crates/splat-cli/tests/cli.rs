@@ -1589,3 +1589,40 @@ fn hit_distance_compares_the_picked_surfaces() {
     let image = splat_io::image::read_image(&prefix.with_extension("png")).unwrap();
     assert_eq!((image.width(), image.height()), (4 * 48, 36));
 }
+
+/// `--accumulation` stores the running mean as vk_gaussian_splatting's formats do: each format
+/// gives its own image of the same frames, and an unknown one is refused with the list.
+#[test]
+fn the_accumulation_format_is_an_option_of_render() {
+    let render = |format: &str| {
+        let out = scratch(&format!("acc-{format}.npy"));
+        let o = splat(&[
+            "render",
+            "--method",
+            "stochastic",
+            "--spp",
+            "64",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--backend",
+            "cpu",
+            "--accumulation",
+            format,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{format}: {}", stderr(&o));
+        npy(&out)
+    };
+    let (full, half, byte) = (render("f32"), render("f16"), render("unorm8"));
+    assert!(
+        rmse(&full, &half) > 0.0 && rmse(&full, &byte) > rmse(&full, &half),
+        "{} {}",
+        rmse(&full, &half),
+        rmse(&full, &byte)
+    );
+    let o = splat(&["render", "--accumulation", "f8", "-o", scratch("never-acc.png").to_str().unwrap()]);
+    assert!(stderr(&o).contains("f16") && stderr(&o).contains("unorm8"), "{}", stderr(&o));
+}

@@ -19,6 +19,60 @@ use glam::{DVec3, Vec2, Vec3};
 /// Receives the number of pixels finished since its last call (a progress bar, or `&|_| {}`).
 pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
 
+/// How the running mean of the frames is stored between frames (vk_gaussian_splatting keeps it
+/// in its output image: FP16 by default, with the advice to switch to FP32 past 150–200
+/// frames, and UINT8 for speed without accumulation). The per-frame variance is kept in full
+/// precision whatever the format: it is the project's statistic, not the display's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum AccumulationFormat {
+    /// Full precision: f64 on the CPU, f32 on the GPU (the default, the reference).
+    #[default]
+    F32,
+    /// The mean rounded to half precision after every frame (WGSL `pack2x16float`).
+    F16,
+    /// The mean rounded to 8-bit unorm after every frame, clamped to [0, 1] (`pack4x8unorm`).
+    Unorm8,
+}
+
+impl AccumulationFormat {
+    /// Every format, in the order the front ends list them.
+    pub const ALL: [AccumulationFormat; 3] =
+        [AccumulationFormat::F32, AccumulationFormat::F16, AccumulationFormat::Unorm8];
+
+    /// Its name on the command line and in the viewer.
+    pub fn name(self) -> &'static str {
+        match self {
+            AccumulationFormat::F32 => "f32",
+            AccumulationFormat::F16 => "f16",
+            AccumulationFormat::Unorm8 => "unorm8",
+        }
+    }
+
+    /// One line on what it does (the CLI's help).
+    pub fn describe(self) -> &'static str {
+        match self {
+            AccumulationFormat::F32 => "full precision (f64 on the CPU, f32 on the GPU)",
+            AccumulationFormat::F16 => "half precision, vk_gaussian_splatting's default: drifts past ~150–200 frames",
+            AccumulationFormat::Unorm8 => "8-bit unorm, clamped to [0, 1]: stalls once 1/(n + 1) of a step rounds away",
+        }
+    }
+
+    /// Its code in the kernels (`ACCUMULATION_*` in `common.wgsl`).
+    pub fn code(self) -> u32 {
+        self as u32
+    }
+
+    /// `v` as this format stores it: itself (F32), rounded to the nearest f16, or to the
+    /// nearest of 256 levels in [0, 1].
+    pub fn store(self, v: f64) -> f64 {
+        match self {
+            AccumulationFormat::F32 => v,
+            AccumulationFormat::F16 => f64::from(half::f16::from_f64(v)),
+            AccumulationFormat::Unorm8 => (v.clamp(0.0, 1.0) * 255.0 + 0.5).floor() / 255.0,
+        }
+    }
+}
+
 /// How frames are drawn: how many, from which seed, with which generator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frames {
@@ -33,11 +87,13 @@ pub struct Frames {
     /// (a decision rule off by that much). Zero, the default, in every real render; the
     /// statistical suites set it to show that they catch a small error in a decision.
     pub u_shift: f32,
+    /// How the running mean is stored between frames.
+    pub accumulation: AccumulationFormat,
 }
 
 impl Default for Frames {
     fn default() -> Self {
-        Self { count: 1, seed: 0, rng: RngScheme::Hash, u_shift: 0.0 }
+        Self { count: 1, seed: 0, rng: RngScheme::Hash, u_shift: 0.0, accumulation: AccumulationFormat::F32 }
     }
 }
 
@@ -190,18 +246,25 @@ impl RenderOutput {
     }
 }
 
-/// The frames of one pixel: f64 Welford mean and variance of colour and coverage, and the
-/// depth, normal and pick of the first frame (picks are never averaged).
+/// The frames of one pixel: f64 Welford mean and variance of colour and coverage, the mean
+/// stored in its [`AccumulationFormat`] after every frame, and the depth, normal and pick of
+/// the first frame (picks are never averaged).
 #[derive(Default)]
 pub struct PixelFrames {
     acc: [Welford; 4],
     first: Option<Sample>,
+    format: AccumulationFormat,
 }
 
 impl PixelFrames {
+    /// No frames yet; the mean will be stored in `format`.
+    pub fn new(format: AccumulationFormat) -> Self {
+        Self { format, ..Self::default() }
+    }
+
     /// Fold the sample of every frame key: `sample(key)` is one frame of the pixel.
-    pub fn over(keys: &[u32], mut sample: impl FnMut(u32) -> Sample) -> Self {
-        let mut pixel = Self::default();
+    pub fn over(keys: &[u32], format: AccumulationFormat, mut sample: impl FnMut(u32) -> Sample) -> Self {
+        let mut pixel = Self::new(format);
         for &key in keys {
             pixel.push(&sample(key));
         }
@@ -211,10 +274,17 @@ impl PixelFrames {
     /// Add one frame's sample.
     pub fn push(&mut self, s: &Sample) {
         for (a, v) in self.acc.iter_mut().zip([s.color.x, s.color.y, s.color.z, s.alpha]) {
-            a.push(v);
+            push_stored(a, v, self.format);
         }
         self.first.get_or_insert(*s);
     }
+}
+
+/// Welford's step, then the mean as `format` stores it (the M2 update reads the stored mean,
+/// as a GPU's would).
+fn push_stored(a: &mut Welford, v: f64, format: AccumulationFormat) {
+    a.push(v);
+    a.mean = format.store(a.mean);
 }
 
 /// A pixel's frames once folded: the f32 values the output images hold. A tile keeps these,
@@ -272,13 +342,14 @@ pub fn render_tiles<S>(
 /// The frame loop of a camera that moves from frame to frame where a renderer projects
 /// through it (splatting, the oracle's tile culling: [`crate::camera_sampling`]): `frame(f,
 /// key)` renders frame f, of key `key`, as a whole one-frame image through that frame's camera,
-/// and the images are folded pixel by pixel into f64 Welford accumulators, as [`PixelFrames`]
-/// folds a pixel's frames (the depth, normal and picks are frame 0's). Each frame is the same
+/// and the images are folded pixel by pixel into f64 Welford accumulators stored in `format`,
+/// as [`PixelFrames`] folds a pixel's frames (the depth, normal and picks are frame 0's). Each frame is the same
 /// pure function of (pixel, key) as in the pixel-major loop, so the image does not depend on
 /// the thread count either. `progress` receives the pixels' share of each finished frame.
 pub fn fold_frames(
     camera: &Camera,
     keys: &[u32],
+    format: AccumulationFormat,
     progress: Progress,
     mut frame: impl FnMut(u32, u32) -> Result<RenderOutput, RenderError>,
 ) -> Result<RenderOutput, RenderError> {
@@ -290,7 +361,7 @@ pub fn fold_frames(
         for (i, a) in acc.iter_mut().enumerate() {
             let c = &out.mean.data()[3 * i..3 * i + 3];
             for (w, v) in a.iter_mut().zip([c[0], c[1], c[2], out.alpha.data()[i]]) {
-                w.push(f64::from(v));
+                push_stored(w, f64::from(v), format);
             }
         }
         first.get_or_insert(out);

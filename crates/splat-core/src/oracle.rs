@@ -7,7 +7,9 @@
 use crate::camera::Camera;
 use crate::camera_sampling::frame_sample;
 use crate::composite::{Composite, ShadedHit, composite, shade_hit, sort_front_to_back};
-use crate::frame::{Frames, PixelFrames, Progress, RenderOutput, Sample, fold_frames, render_tiles};
+use crate::frame::{
+    AccumulationFormat, Frames, PixelFrames, Progress, RenderOutput, Sample, fold_frames, render_tiles,
+};
 use crate::hit::{PreparedParticle, Ray, intersect};
 use crate::particle::Scene;
 use crate::settings::{RenderError, RenderSettings, validate_scene};
@@ -114,7 +116,7 @@ pub fn render_oracle(
         return Ok(oracle_frame(&oracle, scene, camera, progress));
     }
     let keys = frames.keys(true)?;
-    fold_frames(camera, &keys, progress, |f, _| {
+    fold_frames(camera, &keys, frames.accumulation, progress, |f, _| {
         let frame_camera = sampling.pinhole(camera, &frame_sample(frames.seed, f))?;
         Ok(oracle_frame(&oracle, scene, &frame_camera, &|_| {}))
     })
@@ -135,7 +137,7 @@ fn oracle_frame(oracle: &Oracle, scene: &Scene, camera: &Camera, progress: Progr
             normal: c.unit_normal(ray.dir),
             picked: None,
         };
-        PixelFrames::over(&[0], |_| sample)
+        PixelFrames::over(&[0], AccumulationFormat::F32, |_| sample)
     })
 }
 

@@ -25,6 +25,22 @@ fn unit_f32(bits: u32) -> f32 {
     return f32(bits >> 8u) * (1.0 / 16777216.0);
 }
 
+// frame.rs `AccumulationFormat::code` and `store`: the running mean as it is kept between
+// frames (full precision, half precision, or 8-bit unorm).
+const ACCUMULATION_F32: u32 = 0u;
+const ACCUMULATION_F16: u32 = 1u;
+const ACCUMULATION_UNORM8: u32 = 2u;
+
+fn stored(v: vec4<f32>, format: u32) -> vec4<f32> {
+    if (format == ACCUMULATION_F16) {
+        return vec4<f32>(unpack2x16float(pack2x16float(v.xy)), unpack2x16float(pack2x16float(v.zw)));
+    }
+    if (format == ACCUMULATION_UNORM8) {
+        return unpack4x8unorm(pack4x8unorm(v));
+    }
+    return v;
+}
+
 fn frame_key(seed: u32, frame: u32) -> u32 {
     return xxhash32(vec3<u32>(frame, seed, 0x5EEDF4A3u));
 }

@@ -39,6 +39,6 @@ fn fold(@builtin(global_invocation_id) gid: vec3<u32>) {
     let delta = s - mean;
     mean += delta / f32(frame.index + 1u);
     m2 += delta * (s - mean);
-    out_mean[index] = mean;
+    out_mean[index] = stored(mean, frame.accumulation);
     out_var[index] = m2;
 }

@@ -61,7 +61,8 @@ struct RasterParams {
 struct FrameParams {
     key: u32,
     index: u32,
-    pad0: u32,
+    // frame.rs AccumulationFormat (ACCUMULATION_*): how the running mean is stored.
+    accumulation: u32,
     // splat_core::Frames::u_shift, a test hook: every u is drawn as u − u_shift (0 in renders).
     u_shift: f32,
 }

@@ -74,7 +74,8 @@ struct Params {
     pixel_filter: u32,
     aperture: f32,
     focus_distance: f32,
-    pad_sampling: u32,
+    // frame.rs AccumulationFormat (ACCUMULATION_*): how the running mean is stored.
+    accumulation: u32,
 }
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
@@ -738,11 +739,12 @@ fn camera_to_world(v: vec3<f32>) -> vec3<f32> {
 }
 
 // frame.rs `PixelFrames::push` in f32: fold sample `s` of frame `frame` into a running mean
-// and M2 (Welford).
+// and M2 (Welford), the mean then stored in params.accumulation's format.
 fn welford(mean: ptr<function, vec4<f32>>, m2: ptr<function, vec4<f32>>, s: vec4<f32>, frame: u32) {
     let delta = s - *mean;
     *mean += delta / f32(frame + 1u);
     *m2 += delta * (s - *mean);
+    *mean = stored(*mean, params.accumulation);
 }
 
 // Fold frame `frame`'s sample into the pixel's running Welford state (mean in out_mean, M2

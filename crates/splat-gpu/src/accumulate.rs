@@ -9,17 +9,7 @@ use bytemuck::{Pod, Zeroable};
 /// WGSL of the accumulation kernel.
 pub const ACCUMULATE_WGSL: &str = include_str!("../shaders/accumulate.wgsl");
 
-/// Storage of the running mean.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum AccumulationFormat {
-    /// 32-bit float per channel (the default).
-    #[default]
-    F32,
-    /// 16-bit float per channel (`pack2x16float`).
-    F16,
-    /// 8-bit unorm per channel (`pack4x8unorm`): values clamp to [0, 1].
-    Unorm8,
-}
+pub use splat_core::frame::AccumulationFormat;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -87,16 +77,7 @@ impl Accumulator {
             return Err(GpuError::Unsupported(format!("frame has {} pixels, expected {}", frame.len(), self.pixels)));
         }
         ctx.queue.write_buffer(&self.frame_in, 0, bytemuck::cast_slice(frame));
-        let params = AccParams {
-            count: self.pixels as u32,
-            frame: self.frames,
-            format: match self.format {
-                AccumulationFormat::F32 => 0,
-                AccumulationFormat::F16 => 1,
-                AccumulationFormat::Unorm8 => 2,
-            },
-            pad: 0,
-        };
+        let params = AccParams { count: self.pixels as u32, frame: self.frames, format: self.format.code(), pad: 0 };
         let uniform = ctx.upload_uniform("acc params", bytemuck::bytes_of(&params));
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("accumulate"),

@@ -279,8 +279,8 @@ pub struct Params {
     pub aperture: f32,
     /// Its distance in focus (1 without a lens).
     pub focus_distance: f32,
-    /// Padding.
-    pub pad_sampling: u32,
+    /// How the running mean is stored ([`splat_core::frame::AccumulationFormat::code`]).
+    pub accumulation: u32,
 }
 
 /// [`Params::pixel_filter`] of [`splat_core::camera_sampling::PixelFilter::Center`].
@@ -581,6 +581,7 @@ pub fn params(
         },
         aperture: s.sampling.aperture(),
         focus_distance: s.sampling.lens.map_or(1.0, |l| l.focus_distance),
+        accumulation: frames.accumulation.code(),
         ..lighting_params(trace)
     }
 }
@@ -949,7 +950,7 @@ mod tests {
                 pixel_filter,
                 aperture,
                 focus_distance,
-                pad_sampling
+                accumulation
             ]
         );
         assert_mirrors!(
@@ -1052,6 +1053,9 @@ mod tests {
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,
                 "FRAME_SOBOL_SALT" = splat_core::camera_sampling::FRAME_SOBOL_SALT,
+                "ACCUMULATION_F32" = splat_core::frame::AccumulationFormat::F32.code(),
+                "ACCUMULATION_F16" = splat_core::frame::AccumulationFormat::F16.code(),
+                "ACCUMULATION_UNORM8" = splat_core::frame::AccumulationFormat::Unorm8.code(),
                 "SAMPLER_HASH" = SAMPLER_HASH,
                 "ENVIRONMENT_CONSTANT" = ENVIRONMENT_CONSTANT,
                 "ENVIRONMENT_GRADIENT" = ENVIRONMENT_GRADIENT,

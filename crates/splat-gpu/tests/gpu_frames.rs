@@ -318,6 +318,45 @@ fn f16_accumulation_drifts_and_f32_does_not() {
     assert!(last[1] > 1.0 / 255.0, "f16 error stays below one 8-bit step: {report:?}");
 }
 
+/// The kernels store the running mean as `Frames::accumulation` says, as the CPU does: 64
+/// frames of `stochastic` (the ray-tracing kernel's fold) and of StochasticSplats (the raster
+/// fold) in f16 and 8-bit unorm agree with the CPU's frames stored the same way, to within the
+/// f16 or 8-bit step plus the rare decision that falls within f32 rounding of its threshold;
+/// each format is far from the full-precision mean of the same frames (the control).
+#[test]
+fn the_kernels_store_the_running_mean_as_the_cpu_does() {
+    use splat_core::frame::AccumulationFormat;
+    use splat_core::raster::{RasterMethod, RasterSettings};
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("cloud", 32, 24);
+    let (settings, lighting, meshes) =
+        (RenderSettings::default(), splat_core::lighting::Lighting::default(), splat_core::mesh::Meshes::none());
+    let shot =
+        splat_core::Shot { scene: &scene, meshes: &meshes, lighting: &lighting, camera: &camera, settings: &settings };
+    let raster =
+        RasterSettings { sample_pattern: splat_core::raster::SamplePattern::Standard, ..RasterSettings::default() };
+    for algorithm in [Algorithm::Trace(Method::Stochastic), Algorithm::Raster(RasterMethod::StochasticSplat, raster)] {
+        let run = |accumulation| {
+            let frames = Frames { count: 64, seed: 4, accumulation, ..Frames::default() };
+            let cpu = algorithm.render_world(&shot, &frames, &|_| {}).unwrap();
+            let gpu = splat_gpu::render(ctx, &algorithm, &shot, splat_gpu::Extras::default(), &frames).unwrap();
+            (cpu, gpu)
+        };
+        let (full_cpu, _) = run(AccumulationFormat::F32);
+        for (format, step) in [(AccumulationFormat::F16, 1.0 / 1024.0), (AccumulationFormat::Unorm8, 1.0 / 255.0)] {
+            let (cpu, gpu) = run(format);
+            let mean = mean_difference(cpu.mean.data(), gpu.mean.data());
+            let control = mean_difference(full_cpu.mean.data(), gpu.mean.data());
+            eprintln!(
+                "{algorithm:?} {}: mean |GPU − CPU| {mean:.2e}, against full precision {control:.2e}",
+                format.name()
+            );
+            assert!(mean < 0.25 * step, "{algorithm:?} {}: {mean}", format.name());
+            assert!(control > 2.0 * mean, "{algorithm:?} {}: the format changes nothing ({control})", format.name());
+        }
+    }
+}
+
 /// On lavapipe a multi-pass ray too long for one invocation (a k-buffer of one hit a pass
 /// re-traverses the cloud's dense core once per hit; 64 samples per traversal) runs one pass
 /// (one slot) per dispatch, its state kept in a buffer, and still equals the CPU; a single

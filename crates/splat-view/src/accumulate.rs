@@ -49,8 +49,9 @@ impl CpuAccumulation {
         let n = self.frames as f32 + 1.0;
         for ((mean, m2), &x) in self.mean.iter_mut().zip(&mut self.m2).zip(frame.mean.data()) {
             let delta = x - *mean;
-            *mean = store(*mean + delta / n, format);
+            *mean += delta / n;
             *m2 += delta * (x - *mean);
+            *mean = store(*mean, format);
         }
         if self.frames == 0 {
             self.depth.copy_from_slice(frame.depth.data());
@@ -81,13 +82,9 @@ impl CpuAccumulation {
     }
 }
 
-/// `v` as `format` stores it.
+/// `v` as `format` stores it ([`AccumulationFormat::store`]; f32 keeps f32 here, as on the GPU).
 fn store(v: f32, format: AccumulationFormat) -> f32 {
-    match format {
-        AccumulationFormat::F32 => v,
-        AccumulationFormat::F16 => half::f16::from_f32(v).to_f32(),
-        AccumulationFormat::Unorm8 => (v.clamp(0.0, 1.0) * 255.0).round() / 255.0,
-    }
+    format.store(f64::from(v)) as f32
 }
 
 #[cfg(test)]

@@ -455,17 +455,7 @@ impl Viewer {
             format!("{r:?}").to_lowercase()
         });
         ui.add(egui::DragValue::new(&mut s.seed).prefix("seed "));
-        ui.add_enabled_ui(!s.on_gpu(), |ui| {
-            combo(
-                ui,
-                "accumulation",
-                &mut s.accumulation,
-                &[AccumulationFormat::F32, AccumulationFormat::F16, AccumulationFormat::Unorm8],
-                |f| format!("{f:?}").to_lowercase(),
-            )
-        })
-        .response
-        .on_disabled_hover_text("the GPU tracer accumulates in f32");
+        combo(ui, "accumulation", &mut s.accumulation, &AccumulationFormat::ALL, |f| f.name().to_string());
     }
 
     fn scene_section(&mut self, ui: &mut egui::Ui) {

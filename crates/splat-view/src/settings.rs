@@ -63,7 +63,7 @@ pub struct Settings {
     pub rng: RngScheme,
     /// Seed of the frames.
     pub seed: u32,
-    /// Storage of the running mean (CPU accumulation; the GPU kernel keeps f32).
+    /// Storage of the running mean (on either backend).
     pub accumulation: AccumulationFormat,
     /// The scene's settings.
     pub render: RenderSettings,

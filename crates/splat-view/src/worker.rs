@@ -442,11 +442,13 @@ impl Renderer {
 /// The random stream of a job: the GPU view draws frame i with key i of the panel's seed, as
 /// a batch render of that seed does.
 fn stream(settings: &Settings) -> Frames {
-    Frames { count: 1, seed: settings.seed, rng: settings.rng, u_shift: 0.0 }
+    Frames { count: 1, seed: settings.seed, rng: settings.rng, u_shift: 0.0, accumulation: settings.accumulation }
 }
 
 /// Frame `i` of a job on the CPU: a render of one frame whose seed is key i of the panel's
 /// seed, so that every frame draws its own decisions.
 fn cpu_frame(settings: &Settings, i: u32) -> Frames {
-    Frames { seed: frame_key(settings.seed, i), ..stream(settings) }
+    // One frame at full precision: the view's accumulation stores the running mean.
+    let accumulation = splat_core::frame::AccumulationFormat::F32;
+    Frames { seed: frame_key(settings.seed, i), accumulation, ..stream(settings) }
 }

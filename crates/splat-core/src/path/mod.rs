@@ -574,7 +574,7 @@ impl<'a> PathTracer<'a> {
             progress,
             |_| (),
             |_, x, y| {
-                let mut pixel = PixelFrames::default();
+                let mut pixel = PixelFrames::new(frames.accumulation);
                 for index in 0..frames.count {
                     let s = PathSampler::new(self.settings.sampler, x, y, frames.seed, index).shifted(frames.u_shift);
                     let l = self.radiance(self.camera_ray(camera, x, y, &s), &s);

@@ -28,7 +28,8 @@ use crate::camera::Camera;
 use crate::camera_sampling::{CameraSampling, frame_sample};
 pub use crate::catalogue::RasterMethod;
 use crate::frame::{
-    Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, fold_frames, render_tiles,
+    AccumulationFormat, Decide, Frames, PixelFrames, Progress, RenderOutput, Sample, depth_before, fold_frames,
+    render_tiles,
 };
 use crate::hit::{HitDistance, PreparedParticle, Ray, intersect, to_canonical};
 use crate::lighting::{Lighting, Look};
@@ -793,7 +794,7 @@ pub fn render_raster(
     progress: Progress,
 ) -> Result<RenderOutput, RenderError> {
     let keys = raster_keys(frames, raster.is_random(method))?;
-    Ok(render_keys(raster, method, &keys, frames.u_shift, progress))
+    Ok(render_keys(raster, method, &keys, frames, progress))
 }
 
 /// The frame keys of a splatting render (its decisions are hashes only).
@@ -804,12 +805,13 @@ fn raster_keys(frames: &Frames, random: bool) -> Result<Vec<u32>, RenderError> {
     frames.keys(random)
 }
 
-/// The frames of keys `keys` through the rasterizer's camera.
+/// The frames of keys `keys` through the rasterizer's camera (the decisions' shift and the
+/// mean's storage from `frames`).
 fn render_keys(
     raster: &Rasterizer,
     method: &RasterMethod,
     keys: &[u32],
-    u_shift: f32,
+    frames: &Frames,
     progress: Progress,
 ) -> RenderOutput {
     render_tiles(
@@ -819,11 +821,12 @@ fn render_keys(
         |_, x, y| {
             let px = raster.pixel(x, y);
             let mut fragments = raster.fragments(&px);
-            PixelFrames::over(keys, |key| {
+            PixelFrames::over(keys, frames.accumulation, |key| {
                 if method.is_stochastic() {
                     raster.shuffle(&mut fragments, key);
                 }
-                raster.draw(method, &px, &fragments, &RayRng::new(x, y, key, RngScheme::Hash).shifted(u_shift), key)
+                let rng = RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift);
+                raster.draw(method, &px, &fragments, &rng, key)
             })
         },
     )
@@ -845,8 +848,9 @@ pub fn render_raster_frames<'a>(
         return render_raster(&build(camera)?, method, frames, progress);
     }
     let keys = raster_keys(frames, true)?;
-    fold_frames(camera, &keys, progress, |f, key| {
+    fold_frames(camera, &keys, frames.accumulation, progress, |f, key| {
         let raster = build(&sampling.pinhole(camera, &frame_sample(frames.seed, f))?)?;
-        Ok(render_keys(&raster, method, &[key], frames.u_shift, &|_| {}))
+        let one = Frames { accumulation: AccumulationFormat::F32, ..*frames };
+        Ok(render_keys(&raster, method, &[key], &one, &|_| {}))
     })
 }

@@ -632,7 +632,7 @@ pub fn render_frames(
         |_| (),
         |_, x, y| {
             let still = trace.clip(camera.pixel_ray(x, y));
-            let mut pixel = PixelFrames::default();
+            let mut pixel = PixelFrames::new(frames.accumulation);
             for (key, s) in keys.iter().zip(&samples) {
                 let ray = if sampling.is_random() { trace.clip(sampling.ray(camera, x, y, s)) } else { still };
                 pixel.push(&trace.sample(method, &ray, &RayRng::new(x, y, *key, frames.rng).shifted(frames.u_shift)));

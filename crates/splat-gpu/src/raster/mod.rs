@@ -401,7 +401,7 @@ impl<'a> GpuRasterizer<'a> {
         let mut gpu_time = Duration::ZERO;
         for (batch_index, batch) in keys.chunks(FRAMES_PER_SUBMIT as usize).enumerate() {
             let first = batch_index as u32 * FRAMES_PER_SUBMIT;
-            slots.write(self.ctx, batch, first, frames.u_shift);
+            slots.write(self.ctx, batch, first, frames);
             let mut encoder = self.encoder("raster frames");
             for slot in 0..batch.len() as u32 {
                 let offset = slots.offset(slot);
@@ -747,10 +747,11 @@ impl FrameSlots {
         Self { buffer, stride }
     }
 
-    fn write(&self, ctx: &GpuContext, keys: &[u32], first: u32, u_shift: f32) {
+    fn write(&self, ctx: &GpuContext, keys: &[u32], first: u32, frames: &Frames) {
         let mut bytes = vec![0u8; (self.stride as usize) * keys.len()];
         for (slot, &key) in keys.iter().enumerate() {
-            let p = FrameParams { key, index: first + slot as u32, pad0: 0, u_shift };
+            let (index, accumulation, u_shift) = (first + slot as u32, frames.accumulation.code(), frames.u_shift);
+            let p = FrameParams { key, index, accumulation, u_shift };
             let at = slot * self.stride as usize;
             bytes[at..at + size_of::<FrameParams>()].copy_from_slice(bytemuck::bytes_of(&p));
         }
@@ -783,6 +784,8 @@ mod tests {
                 "EXTENT_SQRT8" = project::SplatExtent::Sqrt8 as u32,
                 "NONE" = NONE,
                 "SH_C0" = splat_core::sh::SH_C0,
+                "ACCUMULATION_F16" = splat_core::frame::AccumulationFormat::F16.code(),
+                "ACCUMULATION_UNORM8" = splat_core::frame::AccumulationFormat::Unorm8.code(),
                 "DEGENERATE_NORMAL" = splat_core::composite::DEGENERATE_NORMAL as f32,
                 "LOOK_SURFACE" = crate::layout::LOOK_SURFACE,
                 "LOOK_VOLUMETRIC" = crate::layout::LOOK_VOLUMETRIC,
@@ -850,7 +853,7 @@ mod tests {
                 distortion
             ]
         );
-        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, pad0, u_shift]);
+        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, accumulation, u_shift]);
     }
 
     /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).

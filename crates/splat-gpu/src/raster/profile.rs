@@ -38,7 +38,7 @@ impl GpuRasterizer<'_> {
         let sorted_targets = RasterTargets::new(self.ctx, self.pipes, w, h, Draw::Over, 1);
         let stochastic_targets = RasterTargets::new(self.ctx, self.pipes, w, h, Draw::Stochastic, 1);
         let slots = FrameSlots::new(self.ctx);
-        slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0, 0.0);
+        slots.write(self.ctx, &[splat_core::rng::frame_key(1, 0)], 0, &splat_core::Frames::default());
         let group = self.draw_group(&slots.buffer);
         let timer = self.ctx.timestamps.then(|| crate::timing::Timer::new(self.ctx));
         let mut best = [Duration::MAX; 4];

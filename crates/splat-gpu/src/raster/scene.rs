@@ -125,8 +125,8 @@ pub struct FrameParams {
     pub key: u32,
     /// Index of the frame in the running mean.
     pub index: u32,
-    /// Padding.
-    pub pad0: u32,
+    /// How the running mean is stored ([`splat_core::frame::AccumulationFormat::code`]).
+    pub accumulation: u32,
     /// [`splat_core::Frames::u_shift`], subtracted from every u (a test hook; 0 in renders).
     pub u_shift: f32,
 }
