@@ -1514,7 +1514,7 @@ fn shadow_options_keep_the_worlds_and_change_what_they_name() {
 /// `--pixel-filter box`, `--aperture` and auto-focus (`--focus-at`) on the ray tracer, the oracle
 /// and splatting: a deterministic method then renders every frame, the same seed repeats, the
 /// lens changes the image; a focus without a lens, a pixel outside the image and the GPU
-/// rasterizer (which projects once per render) are refused with the reason.
+/// hybrid (which continues one camera's first hits) are refused with the reason.
 #[test]
 fn depth_of_field_and_the_box_filter_on_every_pipeline() {
     let run = |extra: &[&str], out: &std::path::Path| {
@@ -1547,7 +1547,7 @@ fn depth_of_field_and_the_box_filter_on_every_pipeline() {
     let gpu = splat(&[
         "render",
         "--pipeline",
-        "raster",
+        "hybrid",
         "--method",
         "raster-sorted",
         "--aperture",

@@ -346,13 +346,13 @@ pub fn render_tiles<S>(
 /// as [`PixelFrames`] folds a pixel's frames (the depth, normal and picks are frame 0's). Each frame is the same
 /// pure function of (pixel, key) as in the pixel-major loop, so the image does not depend on
 /// the thread count either. `progress` receives the pixels' share of each finished frame.
-pub fn fold_frames(
+pub fn fold_frames<E: From<RenderError>>(
     camera: &Camera,
     keys: &[u32],
     format: AccumulationFormat,
     progress: Progress,
-    mut frame: impl FnMut(u32, u32) -> Result<RenderOutput, RenderError>,
-) -> Result<RenderOutput, RenderError> {
+    mut frame: impl FnMut(u32, u32) -> Result<RenderOutput, E>,
+) -> Result<RenderOutput, E> {
     let pixels = u64::from(camera.width) * u64::from(camera.height);
     let mut acc = vec![[Welford::default(); 4]; pixels as usize];
     let mut first = None;

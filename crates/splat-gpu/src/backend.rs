@@ -25,11 +25,10 @@ pub struct Extras {
 pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
     let lit = shot.lighting.is_on();
     crate::supports_normals(lit, shot.settings.normal_mode)?;
-    let splatting = matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..));
-    if splatting && shot.settings.sampling.is_random() {
+    if matches!(algorithm, Algorithm::Hybrid(..)) && shot.settings.sampling.is_random() {
         return Err(GpuError::refused(
-            "the GPU rasterizer projects the splats once per render, and a box pixel filter or a thin lens \
-             moves the camera every frame (the CPU projects each frame again)",
+            "the GPU hybrid continues the tile rasterizer's first hits of one camera in the ray-tracing \
+             kernel, and a box pixel filter or a thin lens moves the camera every frame",
             &[Remedy::StillCamera, Remedy::Cpu],
         ));
     }
@@ -97,6 +96,28 @@ pub fn render(
             let gpu_scene = raster_scene()?;
             let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
             Ok(tracer.render_hybrid(&raster, camera, secondary, frames)?.0)
+        }
+        Algorithm::Raster(method, raster_settings) if settings.sampling.is_random() => {
+            // A camera drawn per frame (splat_core::camera_sampling): each frame projected
+            // through its own pinhole camera, folded as the CPU folds them.
+            let pipes = RasterPipelines::new(ctx)?;
+            let gpu_scene = raster_scene()?;
+            let keys = frames.keys(true)?;
+            let one = Frames { accumulation: splat_core::frame::AccumulationFormat::F32, ..*frames };
+            splat_core::frame::fold_frames(camera, &keys, frames.accumulation, &|_| {}, |f, key| {
+                let sample = splat_core::camera_sampling::frame_sample(frames.seed, f);
+                let frame_camera = settings.sampling.pinhole(camera, &sample)?;
+                let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, &frame_camera, raster_settings)?;
+                let mut out = raster.render_keys(method, &[key], &one)?.0;
+                // Frame 0's depth and normal, as every render keeps them.
+                let picked = gpu_scene.is_lit() && matches!(method, RasterMethod::Sorted { .. });
+                if f == 0 && (extras.depth || extras.normal) && !picked {
+                    let pick = raster.depth_pick()?;
+                    out.depth = pick.depth_image();
+                    out.normal = pick.normal;
+                }
+                Ok(out)
+            })
         }
         Algorithm::Raster(method, raster_settings) => {
             let pipes = RasterPipelines::new(ctx)?;

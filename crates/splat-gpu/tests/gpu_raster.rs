@@ -682,3 +682,58 @@ fn three_pass_compositing_among_meshes_equals_the_cpu() {
         assert!(mesh_depths > pixels / 10, "{look:?}: only {mesh_depths} pixels take the mesh's depth");
     }
 }
+
+/// Splatting through a camera drawn per frame (a box pixel filter and a thin lens,
+/// `splat_core::camera_sampling`) on the GPU: each frame projected through its own pinhole
+/// camera and folded as the CPU folds them. Sorted splatting equals the CPU's to the blending
+/// tolerance, StochasticSplats' mean to a few decisions within f32 rounding of their threshold,
+/// and frame 0's depth pick is the CPU's; the control, the still camera, is far off.
+#[test]
+fn a_camera_drawn_per_frame_splats_as_on_the_cpu() {
+    use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
+    use splat_core::lighting::Lighting;
+    use splat_core::mesh::Meshes;
+    let Some(ctx) = context() else { return };
+    let pipes = pipelines(ctx);
+    let tolerance = if pipes.blend_format == splat_gpu::wgpu::TextureFormat::Rgba32Float { 1e-4 } else { 8e-3 };
+    let (scene, camera) = fixture("layers", 48, 36);
+    let sampling =
+        CameraSampling { filter: PixelFilter::Box, lens: Some(ThinLens { aperture: 0.3, focus_distance: 2.0 }) };
+    let settings = RenderSettings { sampling, ..RenderSettings::default() };
+    let (lighting, meshes) = (Lighting::default(), Meshes::none());
+    let shot =
+        splat_core::Shot { scene: &scene, meshes: &meshes, lighting: &lighting, camera: &camera, settings: &settings };
+    let still = RenderSettings::default();
+    let still_shot = splat_core::Shot { settings: &still, ..shot };
+    let raster =
+        RasterSettings { sample_pattern: splat_core::raster::SamplePattern::Standard, ..RasterSettings::default() };
+    let frames = Frames { count: 8, seed: 6, ..Frames::default() };
+    for method in [RasterMethod::Sorted { blend: Blend::Under }, RasterMethod::StochasticSplat] {
+        let algorithm = splat_core::Algorithm::Raster(method, raster);
+        let extras = splat_gpu::Extras { depth: !method.is_stochastic(), normal: false };
+        let cpu = algorithm.render_world(&shot, &frames, &|_| {}).unwrap();
+        let gpu = splat_gpu::render(ctx, &algorithm, &shot, extras, &frames).unwrap();
+        let control = algorithm.render_world(&still_shot, &frames, &|_| {}).unwrap();
+        let d = max_abs_diff(cpu.mean.data(), gpu.mean.data());
+        let mean = cpu.mean.data().iter().zip(gpu.mean.data()).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>()
+            / cpu.mean.data().len() as f64;
+        let far = max_abs_diff(control.mean.data(), gpu.mean.data());
+        eprintln!("{method:?}: max |GPU − CPU| {d:.2e}, mean {mean:.2e}, still camera {far:.2e}");
+        if method.is_stochastic() {
+            assert!(mean < 2e-3, "{method:?}: mean |GPU − CPU| {mean}");
+        } else {
+            assert!(d <= tolerance, "{method:?}: {d}");
+            // Where both pick a depth it agrees; where one does, so does the other.
+            let (mut picked, mut worst) = (0, 0.0f32);
+            for (a, b) in cpu.depth.data().iter().zip(gpu.depth.data()) {
+                assert_eq!(a.is_nan(), b.is_nan(), "{method:?}: frame 0's depth {a} against {b}");
+                if !a.is_nan() {
+                    picked += 1;
+                    worst = worst.max((a - b).abs());
+                }
+            }
+            assert!(picked > 100 && worst < 1e-3, "{method:?}: {picked} depths, off by {worst}");
+        }
+        assert!(far > 1e-2, "{method:?}: the sampled camera changes nothing ({far})");
+    }
+}

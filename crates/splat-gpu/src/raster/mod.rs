@@ -366,6 +366,19 @@ impl<'a> GpuRasterizer<'a> {
     /// pixel once (the surface look) or each fragment (the volumetric look); StochasticSplats
     /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
+        let keys = frames.keys(method.is_stochastic())?;
+        self.render_keys(method, &keys, frames)
+    }
+
+    /// The frames of keys `keys` (frame i of the running mean drawn with `keys[i]`), the
+    /// decisions' shift and the mean's storage from `frames`: [`GpuRasterizer::render`], or one
+    /// frame of a camera drawn per frame ([`crate::render`]).
+    pub fn render_keys(
+        &self,
+        method: &RasterMethod,
+        keys: &[u32],
+        frames: &Frames,
+    ) -> Result<(RenderOutput, GpuStats), GpuError> {
         let draw = self.check_scene(method)?;
         if self.scene.is_lit() && matches!(draw, Draw::Over | Draw::Under) {
             return self.render_lit_sorted(frames);
@@ -375,7 +388,6 @@ impl<'a> GpuRasterizer<'a> {
                 "the raster methods draw their decisions with the hash generator".into(),
             ));
         }
-        let keys = frames.keys(method.is_stochastic())?;
         let count = keys.len() as u32;
         self.set_mode(draw);
         let (w, h) = (self.camera.width, self.camera.height);
