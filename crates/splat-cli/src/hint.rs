@@ -10,7 +10,6 @@ use splat_io::ErrorKind;
 fn flag(remedy: Remedy) -> &'static str {
     match remedy {
         Remedy::Cpu => "--backend cpu",
-        Remedy::PlaneNormals => "--normals plane",
         Remedy::CenterDepth => "--fragment-depth center",
         Remedy::StandardPattern => "--sample-pattern standard",
         Remedy::NoEarlyStop => "no --early-stop",
@@ -42,8 +41,11 @@ mod tests {
 
     #[test]
     fn a_refusal_gets_the_flags_of_its_remedies() {
-        let refused = GpuError::refused("no", &[Remedy::PlaneNormals, Remedy::Cpu]);
-        assert_eq!(flags(&anyhow::Error::new(refused).context("rendering")), " (--normals plane or --backend cpu)");
+        let refused = GpuError::refused("no", &[Remedy::CenterDepth, Remedy::Cpu]);
+        assert_eq!(
+            flags(&anyhow::Error::new(refused).context("rendering")),
+            " (--fragment-depth center or --backend cpu)"
+        );
         let other = GpuError::Unsupported("no".into());
         assert_eq!(flags(&anyhow::Error::new(other)), "");
         let strict = splat_io::Error::new("a.ply", ErrorKind::UnknownProperty { line: 3, name: "filter_3D".into() });

@@ -619,14 +619,6 @@ fn render_meshes_with_each_pipeline() {
     assert!(!o.status.success(), "the GPU hybrid accepted enderton");
     let e = stderr(&o);
     assert!(e.contains("first hit with raster-sorted") || e.contains("mesa-vulkan-drivers"), "{e}");
-    // The GPU's one normals rule, refused before any upload, in the library's words and then
-    // in the flags that lift it.
-    for pipeline in ["rt", "raster"] {
-        let args = ["render", world, "--pipeline", pipeline, "--normals", "ellipsoid", "--backend", "gpu", "-o"];
-        let e = stderr(&splat(&[&args[..], &[never.to_str().unwrap()]].concat()));
-        let words = "max-density-plane normals only, for lighting and for normal images: use max-density-plane normals or the CPU backend (--normals plane or --backend cpu)";
-        assert!(e.contains(words), "{pipeline}: {e}");
-    }
     // The GPU renders the same images for ray tracing (mirror and glass bounces included),
     // StochasticSplats and lit sorted splatting among the meshes, and the hybrid (mean
     // difference: a stochastic decision within f32 rounding of its threshold may flip a pixel).

@@ -44,12 +44,32 @@ struct Incident {
     ok: bool,
 }
 
-// normal.rs `particle_normal` in its max-density-plane mode: n ∝ Mᵀ M (o − μ) for the rows of
-// the canonical transform M = S⁻¹ Rᵀ, oriented toward the ray origin (−dir when degenerate).
-fn plane_normal(row0: vec3<f32>, row1: vec3<f32>, row2: vec3<f32>, mean: vec3<f32>, origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+// normal.rs NormalMode: NORMAL_PLANE (max-density plane) or NORMAL_ELLIPSOID (kernel ellipsoid).
+const NORMAL_PLANE: u32 = 0u;
+const NORMAL_ELLIPSOID: u32 = 1u;
+
+// normal.rs `particle_normal`: n ∝ Mᵀ x_c for the rows of the canonical transform
+// M = S⁻¹ Rᵀ, at x_c = o_c (the max-density plane), or for NORMAL_ELLIPSOID where the ray enters
+// the cutoff sphere |x_c| = s (o_c when it starts inside or misses it; hit.rs `sphere_entry`'s
+// stable discriminant); oriented toward the ray origin (−dir when degenerate).
+fn particle_normal_of(row0: vec3<f32>, row1: vec3<f32>, row2: vec3<f32>, mean: vec3<f32>, origin: vec3<f32>, dir: vec3<f32>, mode: u32, cutoff: f32) -> vec3<f32> {
     let rel = origin - mean;
     let oc = vec3<f32>(dot(row0, rel), dot(row1, rel), dot(row2, rel));
-    let m = row0 * oc.x + row1 * oc.y + row2 * oc.z;
+    var xc = oc;
+    let s2 = cutoff * cutoff;
+    if (mode == NORMAL_ELLIPSOID && dot(oc, oc) > s2) {
+        let dc = vec3<f32>(dot(row0, dir), dot(row1, dir), dot(row2, dir));
+        let a = dot(dc, dc);
+        let cr = cross(oc, dc);
+        let disc = a * s2 - dot(cr, cr);
+        if (disc >= 0.0) {
+            let t = (-dot(oc, dc) - sqrt(disc)) / a;
+            if (t > 0.0) {
+                xc = oc + t * dc;
+            }
+        }
+    }
+    let m = row0 * xc.x + row1 * xc.y + row2 * xc.z;
     let rcp = 1.0 / sqrt(dot(m, m));
     var n = -dir;
     if (rcp > 0.0 && rcp < 3.0e38) {

@@ -34,12 +34,13 @@ fn stretch(p: vec2<f32>) -> f32 {
     return 1.0;
 }
 
-// The max-density-plane normal of particle `id` for the ray (origin, dir).
+// normal.rs `particle_normal` of particle `id` for the ray (origin, dir), in the settings' mode.
 fn splat_normal(id: u32, origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
     let r0 = canonical[3u * id];
     let r1 = canonical[3u * id + 1u];
     let r2 = canonical[3u * id + 2u];
-    return plane_normal(r0.xyz, r1.xyz, r2.xyz, vec3<f32>(r0.w, r1.w, r2.w), origin, dir);
+    let mean = vec3<f32>(r0.w, r1.w, r2.w);
+    return particle_normal_of(r0.xyz, r1.xyz, r2.xyz, mean, origin, dir, params.normal_mode, params.cutoff);
 }
 
 // raster/mod.rs `lit_color`: the splat's colour, lit at its billboard depth along the ray

@@ -55,6 +55,11 @@ struct RasterParams {
     // Splatting's near plane (RenderSettings::near): nearer centres are culled.
     near: f32,
     distortion: array<vec4<f32>, 3>,
+    // normal.rs NormalMode (NORMAL_*) and the cutoff of its ellipsoid (Eq. 2).
+    normal_mode: u32,
+    cutoff: f32,
+    pad_n0: u32,
+    pad_n1: u32,
 }
 
 // What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).

@@ -2,10 +2,10 @@
 // trace/shadow.rs: sorted, stochastic and exact shadows, meshes blocking the light. Part of
 // the trace kernel (splat_gpu::TRACE_WGSL).
 
-// normal.rs `particle_normal` of the particle in leaf `leaf` (lighting.wgsl `plane_normal`).
+// normal.rs `particle_normal` of the particle in leaf `leaf` (lighting.wgsl `particle_normal_of`).
 fn particle_normal(leaf: u32, ray: Ray) -> vec3<f32> {
     let p = particles[leaf];
-    return plane_normal(p.row0, p.row1, p.row2, p.mean, ray.origin, ray.dir);
+    return particle_normal_of(p.row0, p.row1, p.row2, p.mean, ray.origin, ray.dir, params.normal_mode, params.cutoff);
 }
 
 // composite.rs `integrated_normal` for a ray with hits: the integrated normal, or the

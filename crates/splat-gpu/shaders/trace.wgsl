@@ -76,6 +76,11 @@ struct Params {
     focus_distance: f32,
     // frame.rs AccumulationFormat (ACCUMULATION_*): how the running mean is stored.
     accumulation: u32,
+    // normal.rs NormalMode (NORMAL_*).
+    normal_mode: u32,
+    pad_n0: u32,
+    pad_n1: u32,
+    pad_n2: u32,
 }
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:

@@ -20,11 +20,9 @@ pub struct Extras {
 
 /// Whether the GPU renders `algorithm` of `shot` with `extras`, before anything is uploaded: the
 /// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`] and
-/// [`GpuRasterizer::supports_scene`], [`crate::supports_normals`]) and what the backend
-/// composes from them.
+/// [`GpuRasterizer::supports_scene`]) and what the backend composes from them.
 pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
     let lit = shot.lighting.is_on();
-    crate::supports_normals(lit, shot.settings.normal_mode)?;
     if matches!(algorithm, Algorithm::Hybrid(..)) && shot.settings.sampling.is_random() {
         return Err(GpuError::refused(
             "the GPU hybrid continues the tile rasterizer's first hits of one camera in the ray-tracing \
@@ -46,10 +44,7 @@ pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<()
             GpuRasterizer::supports_tile_pass(raster)?;
             GpuTracer::supports(secondary)
         }
-        Algorithm::Trace(method) => {
-            GpuTracer::supports(method)?;
-            crate::supports_normals(extras.normal, shot.settings.normal_mode)
-        }
+        Algorithm::Trace(method) => GpuTracer::supports(method),
         Algorithm::Raster(method, raster) => {
             GpuRasterizer::supports_scene(method, raster, lit, !shot.meshes.is_empty())?;
             let sorted = matches!(method, RasterMethod::Sorted { .. });

@@ -11,8 +11,6 @@ use thiserror::Error;
 pub enum Remedy {
     /// The CPU backend (`splat-core`), which renders every method and setting.
     Cpu,
-    /// Max-density-plane normals (`NormalMode::MaxDensityPlane`).
-    PlaneNormals,
     /// Centre fragment depth (`FragmentDepth::Center`).
     CenterDepth,
     /// The adapter's standard sample positions (`SamplePattern::Standard`).
@@ -32,7 +30,6 @@ impl Remedy {
     pub fn words(self) -> &'static str {
         match self {
             Remedy::Cpu => "the CPU backend",
-            Remedy::PlaneNormals => "max-density-plane normals",
             Remedy::CenterDepth => "centre fragment depth",
             Remedy::StandardPattern => "the standard sample pattern",
             Remedy::NoEarlyStop => "rasterization without early stop",
@@ -148,18 +145,4 @@ pub(crate) fn supports_method(id: splat_core::MethodId) -> Result<(), GpuError> 
     } else {
         Err(GpuError::refused(format!("{} runs on the CPU only", entry.name), &[Remedy::Cpu]))
     }
-}
-
-/// The one rule of the GPU's normals: its kernels compute the max-density plane's normal only,
-/// so where normals are `used` (lighting, a normal image) the render needs
-/// [`NormalMode::MaxDensityPlane`](splat_core::normal::NormalMode::MaxDensityPlane). The
-/// tracer, the lit raster scene and the front ends' backend choice all ask here.
-pub fn supports_normals(used: bool, mode: splat_core::normal::NormalMode) -> Result<(), GpuError> {
-    if used && mode != splat_core::normal::NormalMode::MaxDensityPlane {
-        return Err(GpuError::refused(
-            "the GPU computes max-density-plane normals only, for lighting and for normal images",
-            &[Remedy::PlaneNormals, Remedy::Cpu],
-        ));
-    }
-    Ok(())
 }

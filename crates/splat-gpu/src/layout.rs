@@ -281,6 +281,22 @@ pub struct Params {
     pub focus_distance: f32,
     /// How the running mean is stored ([`splat_core::frame::AccumulationFormat::code`]).
     pub accumulation: u32,
+    /// Per-particle normal ([`normal_code`]).
+    pub normal_mode: u32,
+    /// Padding.
+    pub pad_n0: u32,
+    /// Padding.
+    pub pad_n1: u32,
+    /// Padding.
+    pub pad_n2: u32,
+}
+
+/// The code of a normal mode in the kernels (`NORMAL_*` in `lighting.wgsl`).
+pub fn normal_code(mode: splat_core::normal::NormalMode) -> u32 {
+    match mode {
+        splat_core::normal::NormalMode::MaxDensityPlane => 0,
+        splat_core::normal::NormalMode::KernelEllipsoid => 1,
+    }
 }
 
 /// [`Params::pixel_filter`] of [`splat_core::camera_sampling::PixelFilter::Center`].
@@ -582,6 +598,7 @@ pub fn params(
         aperture: s.sampling.aperture(),
         focus_distance: s.sampling.lens.map_or(1.0, |l| l.focus_distance),
         accumulation: frames.accumulation.code(),
+        normal_mode: normal_code(s.normal_mode),
         ..lighting_params(trace)
     }
 }
@@ -950,7 +967,11 @@ mod tests {
                 pixel_filter,
                 aperture,
                 focus_distance,
-                accumulation
+                accumulation,
+                normal_mode,
+                pad_n0,
+                pad_n1,
+                pad_n2
             ]
         );
         assert_mirrors!(
@@ -1049,6 +1070,8 @@ mod tests {
                 "HIT_ICOSAHEDRON" = HIT_ICOSAHEDRON,
                 "CENTER_VIEW_COS_MIN" = splat_core::hit::CENTER_VIEW_COS_MIN,
                 "DEGENERATE_NORMAL" = splat_core::composite::DEGENERATE_NORMAL as f32,
+                "NORMAL_PLANE" = normal_code(splat_core::normal::NormalMode::MaxDensityPlane),
+                "NORMAL_ELLIPSOID" = normal_code(splat_core::normal::NormalMode::KernelEllipsoid),
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,

@@ -33,7 +33,7 @@ pub use accumulate::{AccumulationFormat, Accumulator};
 pub use backend::{Extras, render, supports};
 pub use context::{GpuContext, quiet_device_select};
 pub use display::{DisplayMode, DisplayTransform, PixelState, read_rgba8};
-pub use error::{GpuError, Remedy, supports_normals};
+pub use error::{GpuError, Remedy};
 pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};
 pub use progressive::ProgressiveTrace;
 pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};

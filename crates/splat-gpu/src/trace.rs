@@ -238,10 +238,8 @@ pub fn supports_hybrid_lighting(lighting: &splat_core::lighting::Lighting) -> Re
 
 impl<'a> GpuTracer<'a> {
     /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
-    /// binding limit, and lighting with kernel-ellipsoid normals (the kernel has the max-density
-    /// plane normal only).
+    /// binding limit.
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
-        crate::supports_normals(trace.lighting().is_on(), trace.settings().normal_mode)?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());

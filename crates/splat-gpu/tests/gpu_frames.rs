@@ -113,7 +113,8 @@ fn one_lit_frame_equals_the_cpu_frame() {
 }
 
 /// The GPU tracer reports frame 0's depth, normal and picked particle as the CPU does, unlit and
-/// lit, for every method: at each pixel the same pick, the depth within 10⁻⁴ (relative) or
+/// lit (with max-density-plane and kernel-ellipsoid normals, vk_gaussian_splatting Lighting
+/// §2.4), for every method: at each pixel the same pick, the depth within 10⁻⁴ (relative) or
 /// absent on both, the normal within 10⁻³; a pixel may differ only where a stochastic decision
 /// lay within [`FLIP_GAP`] of its threshold or, for at most 1 % of pixels, where the f32 and f64
 /// transmittances fall on either side of the iso threshold.
@@ -126,9 +127,22 @@ fn depth_normal_and_picks_equal_the_cpu() {
         .unwrap()
         .with_lighting(lighting(Shadows::None, Look::Surface))
         .unwrap();
-    for (label, trace) in [("unlit", &unlit), ("lit", &lit)] {
+    let ellipsoid =
+        RenderSettings { normal_mode: splat_core::normal::NormalMode::KernelEllipsoid, ..RenderSettings::default() };
+    let lit_ellipsoid =
+        TraceScene::new(&scene, ellipsoid).unwrap().with_lighting(lighting(Shadows::None, Look::Surface)).unwrap();
+    // The ellipsoid's normals are other normals: the control of its case.
+    let normals =
+        |t: &TraceScene| render_frames(t, &camera, &Method::Exact, &Frames::default(), &|_| {}).unwrap().normal;
+    let apart = max_difference(normals(&lit).data(), normals(&lit_ellipsoid).data());
+    assert!(apart > 0.1, "the kernel ellipsoid's normals are the plane's ({apart})");
+    for (label, trace) in [("unlit", &unlit), ("lit", &lit), ("lit, ellipsoid normals", &lit_ellipsoid)] {
         let tracer = tracer(ctx, trace);
-        for (name, method) in methods() {
+        // The normal mode changes the normal only: two methods suffice for the ellipsoid.
+        let only = |name: &str| {
+            trace.settings().normal_mode != ellipsoid.normal_mode || ["exact", "stochastic"].contains(&name)
+        };
+        for (name, method) in methods().into_iter().filter(|(name, _)| only(name)) {
             let frames = Frames { count: 1, seed: 11, ..Frames::default() };
             let cpu = render_frames(trace, &camera, &method, &frames, &|_| {}).unwrap();
             let gpu = gpu_run(&tracer, &camera, &method, frames);

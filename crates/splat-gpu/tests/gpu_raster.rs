@@ -219,6 +219,25 @@ fn depth_pick_equals_the_cpu() {
         assert!(cpu.normal.data().iter().any(|&n| n.abs() > 0.5), "{name}: no normals to compare");
         assert!(max_abs_diff(gpu.color.data(), cpu.mean.data()) <= 2e-4, "{name}: colour");
     }
+    // Kernel-ellipsoid normals (vk_gaussian_splatting Lighting §2.4) integrate as the CPU's, and
+    // differ from the plane's (the control).
+    let c = case("cloud", 70, 50);
+    let ellipsoid =
+        RenderSettings { normal_mode: splat_core::normal::NormalMode::KernelEllipsoid, ..RenderSettings::default() };
+    let cpu = Rasterizer::new(&c.scene, &c.camera, ellipsoid, RasterSettings::default()).unwrap();
+    let cpu = render_raster(&cpu, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
+    let plane =
+        render_raster(&cpu_raster(&c), &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})
+            .unwrap();
+    let scene = RasterScene::new(ctx, &c.scene, &ellipsoid).unwrap();
+    let gpu = GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &RasterSettings::default())
+        .unwrap()
+        .depth_pick()
+        .unwrap();
+    let (normals, apart) =
+        (max_abs_diff(gpu.normal.data(), cpu.normal.data()), max_abs_diff(plane.normal.data(), cpu.normal.data()));
+    eprintln!("ellipsoid normals: |GPU − CPU| {normals:.1e}, |plane − ellipsoid| {apart:.1e}");
+    assert!(normals <= 1e-3 && apart > 0.1, "ellipsoid normals: {normals}, apart from the plane's by {apart}");
 }
 
 /// One StochasticSplats frame with a fixed seed makes the CPU frame's decisions: identical

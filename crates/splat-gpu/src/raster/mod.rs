@@ -799,6 +799,8 @@ mod tests {
                 "ACCUMULATION_F16" = splat_core::frame::AccumulationFormat::F16.code(),
                 "ACCUMULATION_UNORM8" = splat_core::frame::AccumulationFormat::Unorm8.code(),
                 "DEGENERATE_NORMAL" = splat_core::composite::DEGENERATE_NORMAL as f32,
+                "NORMAL_PLANE" = crate::layout::normal_code(splat_core::normal::NormalMode::MaxDensityPlane),
+                "NORMAL_ELLIPSOID" = crate::layout::normal_code(splat_core::normal::NormalMode::KernelEllipsoid),
                 "LOOK_SURFACE" = crate::layout::LOOK_SURFACE,
                 "LOOK_VOLUMETRIC" = crate::layout::LOOK_VOLUMETRIC,
                 "LIGHT_SPOT" = crate::layout::LIGHT_SPOT,
@@ -862,7 +864,11 @@ mod tests {
                 filter_compensates,
                 lens,
                 near,
-                distortion
+                distortion,
+                normal_mode,
+                cutoff,
+                pad_n0,
+                pad_n1
             ]
         );
         assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, accumulation, u_shift]);

@@ -115,6 +115,14 @@ pub struct RasterParams {
     pub near: f32,
     /// Its distortion, as the trace kernel's `Params::distortion`.
     pub distortion: [[f32; 4]; 3],
+    /// Per-particle normal ([`crate::layout::normal_code`]).
+    pub normal_mode: u32,
+    /// The cutoff of the ellipsoid normals (Eq. 2).
+    pub cutoff: f32,
+    /// Padding.
+    pub pad_n0: u32,
+    /// Padding.
+    pub pad_n1: u32,
 }
 
 /// Per-frame uniforms (WGSL `FrameParams`).
@@ -159,7 +167,7 @@ impl RasterScene {
     }
 
     /// Validate and upload `scene` lit by `lighting` (no shadows: the raster pipelines have
-    /// none, vk_gaussian_splatting Lighting §3); max-density-plane normals only.
+    /// none, vk_gaussian_splatting Lighting §3).
     pub fn new_lit(
         ctx: &GpuContext,
         scene: &Scene,
@@ -168,7 +176,6 @@ impl RasterScene {
     ) -> Result<Self, GpuError> {
         validate_scene(scene, settings)?;
         lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
-        crate::supports_normals(lighting.is_on(), settings.normal_mode)?;
         let count = scene.particles.len();
         let particles: Vec<RasterParticle> = scene
             .particles
@@ -303,5 +310,9 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &Raste
         lens: crate::layout::lens_code(&camera.lens),
         near: s.near,
         distortion: crate::layout::distortion(&camera.lens),
+        normal_mode: crate::layout::normal_code(s.normal_mode),
+        cutoff: s.kernel.cutoff,
+        pad_n0: 0,
+        pad_n1: 0,
     }
 }
