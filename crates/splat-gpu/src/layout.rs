@@ -281,7 +281,7 @@ pub struct Params {
     pub focus_distance: f32,
     /// How the running mean is stored ([`splat_core::frame::AccumulationFormat::code`]).
     pub accumulation: u32,
-    /// Per-particle normal ([`normal_code`]).
+    /// Per-particle normal (`NORMAL_*` in `lighting.wgsl`).
     pub normal_mode: u32,
     /// Padding.
     pub pad_n0: u32,

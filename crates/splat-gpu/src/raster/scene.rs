@@ -115,7 +115,7 @@ pub struct RasterParams {
     pub near: f32,
     /// Its distortion, as the trace kernel's `Params::distortion`.
     pub distortion: [[f32; 4]; 3],
-    /// Per-particle normal ([`crate::layout::normal_code`]).
+    /// Per-particle normal (`NORMAL_*` in `lighting.wgsl`).
     pub normal_mode: u32,
     /// The cutoff of the ellipsoid normals (Eq. 2).
     pub cutoff: f32,
