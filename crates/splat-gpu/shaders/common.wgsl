@@ -33,12 +33,41 @@ const ACCUMULATION_UNORM8: u32 = 2u;
 
 fn stored(v: vec4<f32>, format: u32) -> vec4<f32> {
     if (format == ACCUMULATION_F16) {
-        return vec4<f32>(unpack2x16float(pack2x16float(v.xy)), unpack2x16float(pack2x16float(v.zw)));
+        return vec4<f32>(round_f16(v.x), round_f16(v.y), round_f16(v.z), round_f16(v.w));
     }
     if (format == ACCUMULATION_UNORM8) {
-        return unpack4x8unorm(pack4x8unorm(v));
+        return floor(0.5 + 255.0 * clamp(v, vec4<f32>(0.0), vec4<f32>(1.0))) / 255.0;
     }
     return v;
+}
+
+// The f16 nearest to x (ties to even; past the largest finite f16, 65504, infinity), as an f32:
+// the low bits of the f32 that f16 lacks are rounded away on the bit pattern, so that no kernel
+// needs the optional f16 packing capability (pack2x16float).
+fn round_f16(x: f32) -> f32 {
+    let b = bitcast<u32>(x);
+    let sign = b & 0x80000000u;
+    let a = b & 0x7fffffffu;
+    if (a >= 0x7f800000u) {
+        return x;
+    }
+    if (a >= 0x477ff000u) {
+        return bitcast<f32>(sign | 0x7f800000u);
+    }
+    let e = i32(a >> 23u) - 127;
+    if (e < -24) {
+        // Below the smallest subnormal 2^-24: 0, or 2^-24 above its half.
+        return bitcast<f32>(sign | select(0u, 0x33800000u, a > 0x33000000u));
+    }
+    // f16 keeps 10 mantissa bits where normal (e ≥ −14), fewer below.
+    let shift = 13u + u32(max(-14 - e, 0));
+    let unit = 1u << shift;
+    let rem = a & (unit - 1u);
+    var r = a - rem;
+    if (rem > (unit >> 1u) || (rem == (unit >> 1u) && (r & unit) != 0u)) {
+        r += unit;
+    }
+    return bitcast<f32>(sign | r);
 }
 
 fn frame_key(seed: u32, frame: u32) -> u32 {

@@ -357,7 +357,10 @@ fn the_kernels_store_the_running_mean_as_the_cpu_does() {
             (cpu, gpu)
         };
         let (full_cpu, _) = run(AccumulationFormat::F32);
-        for (format, step) in [(AccumulationFormat::F16, 1.0 / 1024.0), (AccumulationFormat::Unorm8, 1.0 / 255.0)] {
+        // f16: the kernels' bit-pattern rounding (common.wgsl `round_f16`) is the CPU's, so a
+        // bound far below what truncation instead of rounding would leave (~10⁻⁴); 8 bits: a
+        // quarter step, ties rounded in f32 on the GPU and f64 on the CPU.
+        for (format, bound) in [(AccumulationFormat::F16, 1e-5), (AccumulationFormat::Unorm8, 0.25 / 255.0)] {
             let (cpu, gpu) = run(format);
             let mean = mean_difference(cpu.mean.data(), gpu.mean.data());
             let control = mean_difference(full_cpu.mean.data(), gpu.mean.data());
@@ -365,7 +368,7 @@ fn the_kernels_store_the_running_mean_as_the_cpu_does() {
                 "{algorithm:?} {}: mean |GPU − CPU| {mean:.2e}, against full precision {control:.2e}",
                 format.name()
             );
-            assert!(mean < 0.25 * step, "{algorithm:?} {}: {mean}", format.name());
+            assert!(mean < bound, "{algorithm:?} {}: {mean}", format.name());
             assert!(control > 2.0 * mean, "{algorithm:?} {}: the format changes nothing ({control})", format.name());
         }
     }
