@@ -277,18 +277,30 @@ fn intersect(p: Particle, ray: Ray) -> Hit {
     return Hit(t, alpha, true);
 }
 
-// hit.rs ICOSAHEDRON_NORMALS: the face planes of the proxy, n·x ≤ ρ.
+// hit.rs ICOSAHEDRON_NORMALS, face i of the proxy (n·x ≤ ρ), computed rather than indexed in a
+// constant array (which the compilers copy into private memory at every call): i < 8 the
+// (±a, ±a, ±a) in the CPU's order, then the cyclic permutations (0, ±b, ±c), (±c, 0, ±b),
+// (±b, ±c, 0).
 const ICO_A: f32 = 0.57735026;
 const ICO_B: f32 = 0.93417236;
-const ICO_C: f32 = 0.35682209;
-const ICOSAHEDRON_NORMALS = array<vec3<f32>, 20>(
-    vec3<f32>(ICO_A, ICO_A, ICO_A), vec3<f32>(ICO_A, ICO_A, -ICO_A), vec3<f32>(ICO_A, -ICO_A, ICO_A),
-    vec3<f32>(ICO_A, -ICO_A, -ICO_A), vec3<f32>(-ICO_A, ICO_A, ICO_A), vec3<f32>(-ICO_A, ICO_A, -ICO_A),
-    vec3<f32>(-ICO_A, -ICO_A, ICO_A), vec3<f32>(-ICO_A, -ICO_A, -ICO_A),
-    vec3<f32>(0.0, ICO_B, ICO_C), vec3<f32>(0.0, ICO_B, -ICO_C), vec3<f32>(0.0, -ICO_B, ICO_C), vec3<f32>(0.0, -ICO_B, -ICO_C),
-    vec3<f32>(ICO_C, 0.0, ICO_B), vec3<f32>(-ICO_C, 0.0, ICO_B), vec3<f32>(ICO_C, 0.0, -ICO_B), vec3<f32>(-ICO_C, 0.0, -ICO_B),
-    vec3<f32>(ICO_B, ICO_C, 0.0), vec3<f32>(ICO_B, -ICO_C, 0.0), vec3<f32>(-ICO_B, ICO_C, 0.0), vec3<f32>(-ICO_B, -ICO_C, 0.0),
-);
+const ICO_C: f32 = 0.3568221;
+
+fn icosahedron_normal(i: u32) -> vec3<f32> {
+    if (i < 8u) {
+        let s = vec3<f32>(select(1.0, -1.0, (i & 4u) != 0u), select(1.0, -1.0, (i & 2u) != 0u), select(1.0, -1.0, (i & 1u) != 0u));
+        return ICO_A * s;
+    }
+    let j = i - 8u;
+    let s1 = select(1.0, -1.0, (j & 2u) != 0u);
+    let s2 = select(1.0, -1.0, (j & 1u) != 0u);
+    let b = ICO_B * s1;
+    let c = ICO_C * s2;
+    switch j / 4u {
+        case 0u: { return vec3<f32>(0.0, b, c); }
+        case 1u: { return vec3<f32>(c, 0.0, b); }
+        default: { return vec3<f32>(b, c, 0.0); }
+    }
+}
 
 // hit.rs `icosahedron_crossing`: the first crossing after t_min of o + t d with the icosahedron
 // of inradius rho (its entry, else its exit); -1 (a miss, never in range) when there is none.
@@ -297,7 +309,7 @@ fn icosahedron_crossing(o: vec3<f32>, d: vec3<f32>, rho: f32, t_min: f32) -> f32
     var exit = 3.4e38;
     var missed = false;
     for (var i = 0u; i < 20u; i++) {
-        let n = ICOSAHEDRON_NORMALS[i];
+        let n = icosahedron_normal(i);
         let num = rho - dot(n, o);
         let den = dot(n, d);
         if (den == 0.0) {
