@@ -149,8 +149,8 @@ fn z_test_through_a_box_filter_and_a_thin_lens() {
 /// mean stored in f16 and in 8-bit unorm departs from the full-precision mean of the very same
 /// frames, and the departure is compared with the noise of the mean (the RMS standard error
 /// √(var / F)). f16 stays within the noise for the first hundreds of frames and passes it
-/// between 256 and 2048 (measured: at 1024); 8-bit passes it sooner (at 128); full precision
-/// never moves.
+/// by 1024 (measured: 6.78e-3 against 6.48e-3 there; at 2048, 1.8e-2 against 4.6e-3); 8-bit
+/// passes it sooner (at 128); full precision never moves.
 #[test]
 fn accumulation_formats_drift_as_vk_warns() {
     use splat_core::frame::AccumulationFormat;
@@ -162,7 +162,7 @@ fn accumulation_formats_drift_as_vk_warns() {
     };
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let mut first_past = [None; 3];
-    for count in [16u32, 64, 128, 256, 512, 1024, 2048] {
+    for count in [16u32, 64, 128, 256, 512, 1024] {
         let full = render(count, AccumulationFormat::F32);
         let noise: Vec<f64> = full.variance.data().iter().map(|&v| (f64::from(v) / f64::from(count)).sqrt()).collect();
         let noise = rms(&noise);
@@ -180,6 +180,6 @@ fn accumulation_formats_drift_as_vk_warns() {
     }
     eprintln!("first frame count past the noise (f32, f16, unorm8): {first_past:?}");
     assert_eq!(first_past[0], None, "full precision drifted");
-    assert!(first_past[1].is_some_and(|n| (256..=2048).contains(&n)), "f16: {first_past:?}");
+    assert!(first_past[1].is_some_and(|n| (256..=1024).contains(&n)), "f16: {first_past:?}");
     assert!(first_past[2].is_some_and(|n| n < first_past[1].unwrap()), "unorm8: {first_past:?}");
 }

@@ -1618,3 +1618,30 @@ fn the_accumulation_format_is_an_option_of_render() {
     let o = splat(&["render", "--accumulation", "f8", "-o", scratch("never-acc.png").to_str().unwrap()]);
     assert!(stderr(&o).contains("f16") && stderr(&o).contains("unorm8"), "{}", stderr(&o));
 }
+
+/// A look-at vector whose first number is negative is a value, not a flag (clap took
+/// `--eye -3,-1,2.5` for an unknown option `-3`).
+#[test]
+fn camera_vectors_may_start_with_a_minus() {
+    let out = scratch("minus.png");
+    let o = splat(&[
+        "render",
+        "--eye",
+        "-3,-1,2.5",
+        "--target",
+        "-0.1,0,0",
+        "--up",
+        "-0,1,0",
+        "--width",
+        "8",
+        "--height",
+        "6",
+        "--backend",
+        "cpu",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = splat(&["render", "--eye", "--target", "0,0,0", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("--target"), "{}", stderr(&o));
+}
