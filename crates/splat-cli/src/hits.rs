@@ -35,9 +35,10 @@ struct Picked {
 /// The picked depth of every convention, the table, the image.
 pub fn run(args: HitDistanceArgs) -> Result<()> {
     let (scene, camera, settings) = args.scene.load(640, 480)?;
+    let pool = args.scene.pool()?;
     let depth = |algorithm: Algorithm, settings: RenderSettings| -> Result<Image> {
         let render = || algorithm.render(&scene, &camera, &settings, &Frames::default(), &|_| {});
-        Ok(args.scene.pool()?.install(render)?.depth)
+        Ok(pool.install(render)?.depth)
     };
     let mut picked = Vec::new();
     for hit_distance in [HitDistance::Icosahedron, HitDistance::Mean, HitDistance::Center] {

@@ -133,8 +133,11 @@ pub fn bounding_box(settings: &RenderSettings, p: &crate::particle::Particle) ->
 /// convention takes ([`crate::hit::CENTER_VIEW_COS_MIN`] under [`HitDistance::Center`]), before
 /// any work: those rays would miss every particle.
 pub fn check_camera(settings: &RenderSettings, camera: &Camera) -> Result<(), RenderError> {
+    if settings.hit_distance != HitDistance::Center {
+        return Ok(());
+    }
     let cos = camera.min_view_cos();
-    if settings.hit_distance == HitDistance::Center && cos < crate::hit::CENTER_VIEW_COS_MIN {
+    if cos < crate::hit::CENTER_VIEW_COS_MIN {
         return Err(RenderError::Settings(format!(
             "the centre hit distance takes rays within {:.0}° of the view axis, and this camera sees {:.0}° off \
              axis: use the mean hit distance, or a narrower camera",
