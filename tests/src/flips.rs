@@ -88,17 +88,21 @@ pub fn trace_gap(trace: &TraceScene, camera: &Camera, method: &Method, frames: &
 
 /// The same for the CPU rasterizer.
 pub fn raster_gap(r: &Rasterizer, method: &RasterMethod, frames: &Frames, x: u32, y: u32) -> f64 {
+    (0..frames.count)
+        .map(|f| raster_frame_gap(r, method, frame_key(frames.seed, f), frames.u_shift, x, y))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The smallest |u − threshold| among the decisions at pixel (x, y) of the one frame of key
+/// `key` (decisions shifted by `u_shift`) of the CPU rasterizer `r`: for a camera drawn per
+/// frame, `r` is the rasterizer of that frame's camera.
+pub fn raster_frame_gap(r: &Rasterizer, method: &RasterMethod, key: u32, u_shift: f32, x: u32, y: u32) -> f64 {
     let px = r.pixel(x, y);
     let mut fragments = r.fragments(&px);
-    (0..frames.count)
-        .map(|f| {
-            let key = frame_key(frames.seed, f);
-            r.shuffle(&mut fragments, key);
-            let nearest = Nearest::new(RayRng::new(x, y, key, RngScheme::Hash).shifted(frames.u_shift));
-            r.draw(method, &px, &fragments, &nearest, key);
-            nearest.gap()
-        })
-        .fold(f64::INFINITY, f64::min)
+    r.shuffle(&mut fragments, key);
+    let nearest = Nearest::new(RayRng::new(x, y, key, RngScheme::Hash).shifted(u_shift));
+    r.draw(method, &px, &fragments, &nearest, key);
+    nearest.gap()
 }
 
 /// The smallest relative gap between the centre depths of two fragments of pixel (x, y): below

@@ -15,7 +15,6 @@ fn flag(remedy: Remedy) -> &'static str {
         Remedy::NoEarlyStop => "no --early-stop",
         Remedy::ExactMethod => "--method exact",
         Remedy::SortedFirstHit => "--method raster-sorted",
-        Remedy::StillCamera => "--pixel-filter center without --aperture",
     }
 }
 

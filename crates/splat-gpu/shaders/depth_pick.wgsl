@@ -12,6 +12,13 @@
 @group(0) @binding(17) var<storage, read> behind: array<vec4<f32>>;
 @group(0) @binding(18) var<storage, read> behind_normal: array<vec4<f32>>;
 
+// StochasticSplats' decision for splat s at pixel px of frame params.frame_key: u < α, with u
+// drawn as splat.wgsl `accepted_splat` draws it (raster/mod.rs `stochastic_splat`, slot 0).
+fn accepted(s: Splat, px: vec2<u32>, alpha: f32) -> bool {
+    let pixel_key = xxhash32(vec3<u32>(px.x, px.y, params.frame_key));
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, 0u)))) - params.u_shift < alpha;
+}
+
 // One workgroup per 16 × 16 tile, one invocation per pixel, walking the tile's splats in depth
 // order in batches loaded cooperatively into workgroup memory (the 3DGS rasterizer's loop).
 //
@@ -57,7 +64,12 @@ fn tile_blend(
             let s = batch[j];
             let in_rect = all(px >= s.rect.xy) && all(px < s.rect.zw);
             if (inside && in_rect && s.depth * to_t < back.w) {
-                let alpha = splat_alpha(s, centre, params);
+                var alpha = splat_alpha(s, centre, params);
+                if (params.first_hit == FIRST_HIT_ACCEPTED) {
+                    // StochasticSplats (splat.wgsl `accepted_splat`): the fragment is written
+                    // opaque where u < α; in depth order the first accepted is the closest.
+                    alpha = select(0.0, 1.0, picked == NONE && accepted(s, px, alpha));
+                }
                 if (alpha > 0.0) {
                     var c = s.color;
                     let n = splat_normal(s.id, origin, dir);
@@ -68,7 +80,8 @@ fn tile_blend(
                     drawn = true;
                     color += transmittance * alpha * c;
                     transmittance *= 1.0 - alpha;
-                    if (picked == NONE && transmittance < params.iso_threshold) {
+                    let written = params.first_hit == FIRST_HIT_ACCEPTED;
+                    if (picked == NONE && (written || transmittance < params.iso_threshold)) {
                         picked = s.id;
                         depth = s.depth;
                     }
@@ -91,7 +104,7 @@ fn tile_blend(
             n = select(-dir, normal / len, len > DEGENERATE_NORMAL);
         }
         var t = -1.0;
-        if (params.first_hit == 1u) {
+        if (params.first_hit != 0u) {
             // The hybrid pipeline lights and continues from this in the ray tracer.
             out_color[index] = vec4<f32>(color, transmittance);
             out_normal[index] = vec4<f32>(n, 0.0);

@@ -38,8 +38,9 @@ struct RasterParams {
     // 1 when the scene has meshes: the splats are depth tested against the mesh pre-pass and
     // the fold blends its colour under them.
     meshes: u32,
-    // 1 when the tile rasterizer writes the hybrid pipeline's first hit (splat_gpu::GpuFirstHit:
-    // L and T before lighting and what lies behind, the picked depth or −1) instead of a pixel.
+    // FIRST_HIT_SORTED or FIRST_HIT_ACCEPTED when the tile rasterizer writes the hybrid
+    // pipeline's first hit (splat_gpu::GpuFirstHit: L and T before lighting and what lies
+    // behind, the picked depth or −1) instead of a pixel; 0 otherwise.
     first_hit: u32,
     // Samples per pixel S (raster/samples.rs), at the positions of the sample-offset buffer.
     samples: u32,
@@ -58,8 +59,10 @@ struct RasterParams {
     // normal.rs NormalMode (NORMAL_*) and the cutoff of its ellipsoid (Eq. 2).
     normal_mode: u32,
     cutoff: f32,
-    pad_n0: u32,
-    pad_n1: u32,
+    // The frame key and u_shift of a StochasticSplats first hit (FrameParams' fields, which the
+    // tile pass does not bind).
+    frame_key: u32,
+    u_shift: f32,
 }
 
 // What changes from frame to frame (16 bytes, one dynamic-offset slot per frame).
@@ -95,6 +98,10 @@ const MODE_STOCHASTIC: u32 = 2u;
 // its box of half-width ⌈3 √λ_max⌉ (BOX_SIGMAS, with 3DGS's floor EIGEN_FLOOR under the
 // eigenvalue discriminant; BLOCK), the √8σ ellipse (fragments with a Mahalanobis term above
 // EXTENT_SQ are discarded), or gsplat's: every pixel above the alpha cull.
+// params.first_hit: the tile pass writes sorted splatting's first hit (Eq. 3 in front of the
+// meshes) or StochasticSplats' (the closest accepted fragment).
+const FIRST_HIT_SORTED: u32 = 1u;
+const FIRST_HIT_ACCEPTED: u32 = 2u;
 const LOOK_SURFACE: u32 = 0u;
 const LOOK_VOLUMETRIC: u32 = 1u;
 const EXTENT_3DGS: u32 = 0u;

@@ -78,7 +78,9 @@ struct Params {
     accumulation: u32,
     // normal.rs NormalMode (NORMAL_*).
     normal_mode: u32,
-    pad_n0: u32,
+    // In MODE_HYBRID, the first hit the tile rasterizer wrote: FIRST_HIT_ACCEPTED for
+    // StochasticSplats' closest accepted fragment, else sorted splatting's.
+    first_hit: u32,
     pad_n1: u32,
     pad_n2: u32,
 }
@@ -103,6 +105,8 @@ const MODE_PASS: u32 = 1u;
 // Whole frames whose camera segment is the rasterized first hit in hybrid_in (the hybrid
 // pipeline, vk_gaussian_splatting Lighting §5).
 const MODE_HYBRID: u32 = 2u;
+// params.first_hit (splat_gpu::layout::FIRST_HIT_ACCEPTED).
+const FIRST_HIT_ACCEPTED: u32 = 2u;
 const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
 // The ray met at least one hit (the integrated normal is defined).
@@ -893,8 +897,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let rasterized = hybrid && seg.depth == 0u;
             if (rasterized) {
                 // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
-                // ray tracer lights the pick with shadows and continues at the mesh.
-                segment_method = METHOD_EXACT;
+                // ray tracer lights the pick with shadows and continues at the mesh. A
+                // StochasticSplats first hit (`Rasterizer::stochastic_splat`) is one opaque
+                // fragment or none: finished as an accepted pass or a missed one, the fragment
+                // lit as the pick in either look.
+                let accepted = params.first_hit == FIRST_HIT_ACCEPTED;
+                segment_method = select(METHOD_EXACT, METHOD_STOCHASTIC_PASS, accepted);
                 let h = hybrid_in[index];
                 st.radiance = h.radiance;
                 st.transmittance = h.transmittance;
@@ -905,6 +913,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (h.picked != NONE) {
                     st.picked = h.picked;
                     st.depth = h.depth;
+                    if (accepted) {
+                        st.flags |= ACCEPTED;
+                    }
                 }
             }
             if ((st.flags & DONE) == 0u) {

@@ -23,23 +23,19 @@ pub struct Extras {
 /// [`GpuRasterizer::supports_scene`]) and what the backend composes from them.
 pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
     let lit = shot.lighting.is_on();
-    if matches!(algorithm, Algorithm::Hybrid(..)) && shot.settings.sampling.is_random() {
-        return Err(GpuError::refused(
-            "the GPU hybrid continues the tile rasterizer's first hits of one camera in the ray-tracing \
-             kernel, and a box pixel filter or a thin lens moves the camera every frame",
-            &[Remedy::StillCamera, Remedy::Cpu],
-        ));
-    }
     match algorithm {
         Algorithm::Oracle => Err(oracle_refused()),
         Algorithm::Hybrid(method, raster, secondary) => {
-            if !matches!(method, RasterMethod::Sorted { .. }) {
+            if !matches!(method, RasterMethod::Sorted { .. } | RasterMethod::StochasticSplat) {
                 return Err(GpuError::refused(
-                    "the GPU hybrid rasterizes its first hit with raster-sorted",
+                    format!(
+                        "the GPU hybrid rasterizes its first hit with raster-sorted or stochastic-splat, not {}",
+                        method.id().name()
+                    ),
                     &[Remedy::SortedFirstHit, Remedy::Cpu],
                 ));
             }
-            crate::trace::supports_hybrid_lighting(shot.lighting)?;
+            crate::trace::supports_hybrid_lighting(shot.lighting, method)?;
             GpuRasterizer::supports(method, raster)?;
             GpuRasterizer::supports_tile_pass(raster)?;
             GpuTracer::supports(secondary)
@@ -83,14 +79,14 @@ pub fn render(
             let pipeline = TracePipeline::new(ctx)?;
             Ok(GpuTracer::new(ctx, &pipeline, &trace)?.render(camera, method, frames)?.0)
         }
-        Algorithm::Hybrid(_, raster_settings, secondary) => {
+        Algorithm::Hybrid(first, raster_settings, secondary) => {
             let trace = trace()?;
             let pipeline = TracePipeline::new(ctx)?;
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
             let pipes = RasterPipelines::new(ctx)?;
             let gpu_scene = raster_scene()?;
-            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
-            Ok(tracer.render_hybrid(&raster, camera, secondary, frames)?.0)
+            let raster = |c: &splat_core::Camera| GpuRasterizer::new(ctx, &pipes, &gpu_scene, c, raster_settings);
+            Ok(tracer.render_hybrid(&raster, camera, first, secondary, frames)?.0)
         }
         Algorithm::Raster(method, raster_settings) if settings.sampling.is_random() => {
             // A camera drawn per frame (splat_core::camera_sampling): each frame projected

@@ -19,10 +19,8 @@ pub enum Remedy {
     NoEarlyStop,
     /// The exact ray-tracing method, whose image equals the brute-force oracle's.
     ExactMethod,
-    /// Sorted splatting for the hybrid's first hit.
+    /// Sorted splatting (or StochasticSplats) for the hybrid's first hit.
     SortedFirstHit,
-    /// Rays through pixel centres and a pinhole (`PixelFilter::Center`, no lens).
-    StillCamera,
 }
 
 impl Remedy {
@@ -34,8 +32,7 @@ impl Remedy {
             Remedy::StandardPattern => "the standard sample pattern",
             Remedy::NoEarlyStop => "rasterization without early stop",
             Remedy::ExactMethod => "the exact method (the same image)",
-            Remedy::SortedFirstHit => "raster-sorted for the first hit",
-            Remedy::StillCamera => "the pixel-centre filter without a lens",
+            Remedy::SortedFirstHit => "raster-sorted or stochastic-splat for the first hit",
         }
     }
 }

@@ -22,6 +22,12 @@ pub const MODE_PASS: u32 = 1;
 /// `Params::mode`: whole frames whose camera segment is the rasterized first hit
 /// ([`GpuFirstHit`], the hybrid pipeline).
 pub const MODE_HYBRID: u32 = 2;
+/// The hybrid pipeline's first hit from sorted splatting: Eq. 3 in front of the meshes, with
+/// the iso-opacity pick (`Params::first_hit`, `RasterParams::first_hit`).
+pub const FIRST_HIT_SORTED: u32 = 1;
+/// The hybrid pipeline's first hit from StochasticSplats: the closest accepted fragment,
+/// written opaque and lit as the pick in either look.
+pub const FIRST_HIT_ACCEPTED: u32 = 2;
 /// `Params::look` of [`Look::Surface`].
 pub const LOOK_SURFACE: u32 = 0;
 /// `Params::look` of [`Look::Volumetric`].
@@ -283,8 +289,9 @@ pub struct Params {
     pub accumulation: u32,
     /// Per-particle normal (`NORMAL_*` in `lighting.wgsl`).
     pub normal_mode: u32,
-    /// Padding.
-    pub pad_n0: u32,
+    /// In [`MODE_HYBRID`], [`FIRST_HIT_ACCEPTED`] where the tile rasterizer wrote
+    /// StochasticSplats' first hit (else it wrote sorted splatting's).
+    pub first_hit: u32,
     /// Padding.
     pub pad_n1: u32,
     /// Padding.
@@ -969,7 +976,7 @@ mod tests {
                 focus_distance,
                 accumulation,
                 normal_mode,
-                pad_n0,
+                first_hit,
                 pad_n1,
                 pad_n2
             ]
@@ -1075,6 +1082,7 @@ mod tests {
                 "SAMPLER_SOBOL" = SAMPLER_SOBOL,
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,
+                "FIRST_HIT_ACCEPTED" = FIRST_HIT_ACCEPTED,
                 "FRAME_SOBOL_SALT" = splat_core::camera_sampling::FRAME_SOBOL_SALT,
                 "ACCUMULATION_F32" = splat_core::frame::AccumulationFormat::F32.code(),
                 "ACCUMULATION_F16" = splat_core::frame::AccumulationFormat::F16.code(),

@@ -22,6 +22,7 @@ use splat_core::Camera;
 use splat_core::MethodId;
 use splat_core::catalogue::Param;
 use splat_core::frame::{Frames, RenderOutput};
+use splat_core::raster::RasterMethod;
 use splat_core::trace::{DEFAULT_K, Method, TraceScene};
 use std::time::{Duration, Instant};
 
@@ -221,12 +222,17 @@ pub struct GpuTracer<'a> {
     emitter_count: u32,
 }
 
-/// The hybrid's lighting the GPU renders: in the volumetric look every fragment is lit in the
-/// tile pass, which casts no shadow rays and samples no area light, where the CPU's
-/// `Rasterizer::hybrid` lights each fragment as the ray tracer does; so that look is refused
-/// (the surface look lights the pick with the tracer on both).
-pub fn supports_hybrid_lighting(lighting: &splat_core::lighting::Lighting) -> Result<(), GpuError> {
-    if lighting.is_on() && lighting.look == splat_core::lighting::Look::Volumetric {
+/// The hybrid's lighting the GPU renders with the first hit `first`: sorted splatting's
+/// volumetric look lights every fragment in the tile pass, which casts no shadow rays and
+/// samples no area light, where the CPU's `Rasterizer::hybrid` lights each fragment as the ray
+/// tracer does; so that look is refused for it (the surface look lights the pick with the
+/// tracer on both, and StochasticSplats' one opaque fragment is the pick in either look).
+pub fn supports_hybrid_lighting(
+    lighting: &splat_core::lighting::Lighting,
+    first: &RasterMethod,
+) -> Result<(), GpuError> {
+    let sorted = matches!(first, RasterMethod::Sorted { .. });
+    if sorted && lighting.is_on() && lighting.look == splat_core::lighting::Look::Volumetric {
         return Err(GpuError::refused(
             "the GPU hybrid lights the volumetric look's fragments in its tile pass, without the ray tracer's \
              shadow rays and light samples (the surface look lights the pick with them)",
@@ -234,6 +240,19 @@ pub fn supports_hybrid_lighting(lighting: &splat_core::lighting::Lighting) -> Re
         ));
     }
     Ok(())
+}
+
+/// Frame f's pinhole camera and the first hits rasterized through it.
+type FrameFirstHits<'a> = dyn Fn(u32) -> Result<(Camera, wgpu::Buffer), GpuError> + 'a;
+
+/// The hybrid pipeline's rasterized first hits ([`GpuTracer::render_hybrid`]).
+#[derive(Clone, Copy)]
+enum FirstHits<'a> {
+    /// One rasterization for every frame: sorted splatting through a still camera.
+    Still(&'a wgpu::Buffer),
+    /// One rasterization per frame; `accepted` for StochasticSplats' closest accepted fragment
+    /// ([`layout::FIRST_HIT_ACCEPTED`]).
+    PerFrame { hits: &'a FrameFirstHits<'a>, accepted: bool },
 }
 
 impl<'a> GpuTracer<'a> {
@@ -301,25 +320,53 @@ impl<'a> GpuTracer<'a> {
     }
 
     /// The hybrid pipeline (vk_gaussian_splatting Lighting §5; the twin of
-    /// `splat_core::raster::Rasterizer::hybrid` with sorted splatting at one sample per pixel):
-    /// `raster` (the same scene, meshes and lighting, for `camera`) rasterizes the first hit of
-    /// every pixel on the compute tile rasterizer, and this tracer continues from it: the pick
-    /// lit with shadow rays, the mesh behind the splats shaded with shadows and its mirror and
-    /// glass bounces traced by `method`.
-    pub fn render_hybrid(
+    /// `splat_core::raster::Rasterizer::hybrid` at one sample per pixel): the first hit of
+    /// every pixel is rasterized by `first` (sorted splatting, or StochasticSplats, the
+    /// stochastic transparency page's own case) on the compute tile rasterizer of
+    /// `raster(camera)` (the same scene, meshes and lighting), and this tracer continues from
+    /// it: the pick lit with shadow rays, the mesh behind the splats shaded with shadows and
+    /// its mirror and glass bounces traced by `method`.
+    ///
+    /// Sorted splatting through a still camera is rasterized once for every frame.
+    /// StochasticSplats decides again each frame, and a camera drawn per frame (a box pixel
+    /// filter or a thin lens, [`splat_core::camera_sampling`]) rasterizes frame f through its
+    /// own pinhole camera, as the CPU's `render_raster_frames` does; the kernel folds each frame
+    /// into the same running mean.
+    pub fn render_hybrid<'r>(
         &self,
-        raster: &crate::GpuRasterizer,
+        raster: &dyn Fn(&Camera) -> Result<crate::GpuRasterizer<'r>, GpuError>,
         camera: &Camera,
+        first: &RasterMethod,
         method: &Method,
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
-        supports_hybrid_lighting(self.trace.lighting())?;
-        let hits = raster.first_hits()?;
-        if hits.len() != (camera.width * camera.height) as usize {
-            return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
+        supports_hybrid_lighting(self.trace.lighting(), first)?;
+        let sampling = self.trace.settings().sampling;
+        let upload = |frame_camera: &Camera, hits: Vec<layout::GpuFirstHit>| {
+            if hits.len() != (frame_camera.width * frame_camera.height) as usize {
+                return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
+            }
+            Ok(self.ctx.upload("first hits", bytemuck::cast_slice(&hits)))
+        };
+        if !sampling.is_random() && !first.is_stochastic() {
+            let buffer = upload(camera, raster(camera)?.first_hits(first, 0, 0.0)?)?;
+            return self.render_with(camera, method, frames, Some(FirstHits::Still(&buffer)), None);
         }
-        let buffer = self.ctx.upload("first hits", bytemuck::cast_slice(&hits));
-        self.render_with(camera, method, frames, Some(&buffer), None)
+        let still = if sampling.is_random() { None } else { Some(raster(camera)?) };
+        let per_frame = |f: u32| -> Result<(Camera, wgpu::Buffer), GpuError> {
+            let key = splat_core::rng::frame_key(frames.seed, f);
+            let (frame_camera, hits) = match &still {
+                Some(r) => (*camera, r.first_hits(first, key, frames.u_shift)?),
+                None => {
+                    let sample = splat_core::camera_sampling::frame_sample(frames.seed, f);
+                    let frame_camera = sampling.pinhole(camera, &sample)?;
+                    (frame_camera, raster(&frame_camera)?.first_hits(first, key, frames.u_shift)?)
+                }
+            };
+            Ok((frame_camera, upload(&frame_camera, hits)?))
+        };
+        let hits = FirstHits::PerFrame { hits: &per_frame, accepted: first.is_stochastic() };
+        self.render_with(camera, method, frames, Some(hits), None)
     }
 
     /// The Monte Carlo path tracer (the twin of [`splat_core::path::PathTracer::render`]):
@@ -410,19 +457,23 @@ impl<'a> GpuTracer<'a> {
         camera: &Camera,
         method: &Method,
         frames: &Frames,
-        first_hits: Option<&wgpu::Buffer>,
+        first_hits: Option<FirstHits>,
         path: Option<(&wgpu::ComputePipeline, &wgpu::Buffer)>,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         splat_core::trace::check_camera(self.trace.settings(), camera)?;
         let params = MethodParams::try_from(method)?;
-        let count = frames.keys(method.is_stochastic() || self.trace.is_random())?.len() as u32;
+        let per_frame = matches!(first_hits, Some(FirstHits::PerFrame { .. }));
+        let count = frames.keys(method.is_stochastic() || self.trace.is_random() || per_frame)?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
         let run = Run { tracer: self, camera, params, frames, count, first_hits, path };
         let lanes = u64::from(ctx.lanes());
         let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
-        let mut out = if cpu_adapter {
+        let mut out = if per_frame {
+            // A dispatch per frame (its first hits rasterized before it).
+            run.execute(1, false)?
+        } else if cpu_adapter {
             // Frame 0 alone first: it is the whole render of one frame, shows a ray too long
             // for one invocation before any other frame is spent, and measures how many frames
             // a dispatch can batch within ¾ of the budget.
@@ -480,7 +531,7 @@ struct Run<'a> {
     frames: &'a Frames,
     count: u32,
     /// The hybrid pipeline's rasterized first hits, if this is a hybrid render.
-    first_hits: Option<&'a wgpu::Buffer>,
+    first_hits: Option<FirstHits<'a>>,
     /// The path tracer's pipeline and parameters, if this is a path-traced render.
     path: Option<(&'a wgpu::ComputePipeline, &'a wgpu::Buffer)>,
 }
@@ -503,11 +554,15 @@ impl Run<'_> {
         let read_state = self.storage("read pass state", state_bytes, read);
         let TraceTargets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. } = &targets;
         let uniform = params_buffer(ctx);
-        let bind_group = tracer.bind_group(&uniform, &targets, self.first_hits, self.path.map(|p| p.1));
+        let still_hits = match self.first_hits {
+            Some(FirstHits::Still(buffer)) => Some(buffer),
+            _ => None,
+        };
+        let bind_group = tracer.bind_group(&uniform, &targets, still_hits, self.path.map(|p| p.1));
         let mut gpu_time = Duration::ZERO;
         let timer = ctx.timestamps.then(|| Timer::new(ctx));
         // Submit the dispatches of `params`, one batch per submission.
-        let mut submit = |params: &[Params]| -> Result<(), GpuError> {
+        let mut submit = |bind_group: &wgpu::BindGroup, params: &[Params]| -> Result<(), GpuError> {
             for batch in params.chunks(DISPATCHES_PER_SUBMIT as usize) {
                 let mut encoder =
                     ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
@@ -520,7 +575,7 @@ impl Run<'_> {
                     let mut pass = encoder
                         .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
                     pass.set_pipeline(self.path.map_or(&tracer.pipeline.pipeline, |p| p.0));
-                    dispatch_batch(ctx, &mut pass, &uniform, &bind_group, batch, camera);
+                    dispatch_batch(ctx, &mut pass, &uniform, bind_group, batch, camera);
                 }
                 if let Some(t) = &timer {
                     t.resolve(&mut encoder);
@@ -554,7 +609,7 @@ impl Run<'_> {
                         })
                         .collect();
                     pass_index += batch.len() as u32;
-                    submit(&batch)?;
+                    submit(&bind_group, &batch)?;
                     let states = ctx.read_through(pass_state, 0, &read_state, state_bytes)?;
                     let words = std::mem::size_of::<PassState>() / 4;
                     let flags = std::mem::offset_of!(PassState, flags) / 4;
@@ -563,10 +618,23 @@ impl Run<'_> {
                     }
                 }
             }
+        } else if let Some(FirstHits::PerFrame { hits, accepted }) = self.first_hits {
+            for frame in 0..self.count {
+                // Frame f through its own pinhole camera, whose pixel centres are the frame's rays.
+                let (frame_camera, buffer) = hits(frame)?;
+                let group = tracer.bind_group(&uniform, &targets, Some(&buffer), None);
+                let params = layout::params(tracer.trace, &frame_camera, &self.params, self.frames, frame, 1);
+                let first_hit = if accepted { layout::FIRST_HIT_ACCEPTED } else { layout::FIRST_HIT_SORTED };
+                let still = Params { pixel_filter: layout::FILTER_CENTER, aperture: 0.0, ..params };
+                submit(&group, &[Params { mode: layout::MODE_HYBRID, first_hit, ..still }])?;
+            }
         } else {
             let mode = if self.first_hits.is_some() { layout::MODE_HYBRID } else { layout::MODE_FRAMES };
             let frames = 0..self.count;
-            submit(&frame_params(tracer.trace, camera, &self.params, self.frames, mode, frames, per_dispatch))?;
+            submit(
+                &bind_group,
+                &frame_params(tracer.trace, camera, &self.params, self.frames, mode, frames, per_dispatch),
+            )?;
         }
         let mean = ctx.read_through(out_mean, 0, &read_mean, out_bytes)?;
         let m2 = ctx.read_through(out_var, 0, &read_var, out_bytes)?;

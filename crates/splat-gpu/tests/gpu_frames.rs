@@ -5,6 +5,7 @@ mod common;
 
 use common::{context, fixture, gpu_run, lighting, trace_pipeline, tracer};
 use splat_core::catalogue::Family;
+use splat_core::frame::RenderOutput;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Algorithm, Frames, MethodId, Parameters, RenderSettings};
@@ -480,21 +481,12 @@ fn batching_frames_per_dispatch_report() {
     }
 }
 
-/// The hybrid pipeline on the GPU (the tile rasterizer's first hit, then the tracer's shadow
-/// rays at the pick and its segments from the mesh) equals the CPU's `Rasterizer::hybrid` with
-/// sorted splatting: colour, depth, normal and pick, among a glass sphere, a half mirror and a
-/// lit wall, in the surface look, with stochastic and exact secondary rays; the shadows change
-/// the image (the hybrid differs from plain lit rasterization) far beyond the tolerance. The
-/// volumetric look, which the CPU lights fragment by fragment with the tracer, is refused.
-#[test]
-fn hybrid_frame_equals_the_cpu_frame() {
+/// Meshes for the hybrid tests: a lit wall behind the layers, a glass sphere and a half mirror.
+fn hybrid_meshes() -> splat_core::mesh::Meshes {
     use glam::Vec3;
     use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
-    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
-    let Some(ctx) = context() else { return };
-    let (scene, camera) = fixture("layers", 32, 24);
     let place = splat_tests::placed;
-    let meshes = Meshes::new(&[
+    Meshes::new(&[
         (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), MeshMaterial::default()),
         (
             place(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3)),
@@ -505,7 +497,20 @@ fn hybrid_frame_equals_the_cpu_frame() {
             MeshMaterial { mirror: 0.5, ..MeshMaterial::default() },
         ),
     ])
-    .unwrap();
+    .unwrap()
+}
+
+/// The hybrid pipeline (vk_gaussian_splatting Lighting §5) makes the CPU's frame from rasterized
+/// sorted splatting: colour, depth, normal and pick, among a glass sphere, a half mirror and a
+/// lit wall, in the surface look, with stochastic and exact secondary rays; the shadows change
+/// the image (the hybrid differs from plain lit rasterization) far beyond the tolerance. The
+/// volumetric look, which the CPU lights fragment by fragment with the tracer, is refused.
+#[test]
+fn hybrid_frame_equals_the_cpu_frame() {
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 32, 24);
+    let meshes = hybrid_meshes();
     let pipes = splat_gpu::RasterPipelines::new(ctx).unwrap();
     let under = RasterMethod::Sorted { blend: Blend::Under };
     let raster = RasterSettings::default();
@@ -534,20 +539,11 @@ fn hybrid_frame_equals_the_cpu_frame() {
             .unwrap()
             .with_meshes(ctx, &meshes)
             .unwrap();
-        let rasterizer = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &raster).unwrap();
+        let rasterizer = |c: &splat_core::Camera| splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, c, &raster);
         let tracer = tracer(ctx, &trace);
-        let gpu = tracer.render_hybrid(&rasterizer, &camera, &secondary, &frames).unwrap().0;
-        let pixels = (camera.width * camera.height) as usize;
-        let bad: Vec<usize> = (0..pixels)
-            .filter(|&p| {
-                let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
-                let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
-                let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
-                let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
-                colour.is_nan() || colour > LIT_TOLERANCE || !depth || normal > 1e-3 || cpu.picked[p] != gpu.picked[p]
-            })
-            .collect();
-        eprintln!("hybrid {shadows:?} {look:?} {secondary:?}: {} of {pixels} pixels differ", bad.len());
+        let gpu = tracer.render_hybrid(&rasterizer, &camera, &under, &secondary, &frames).unwrap().0;
+        let bad = hybrid_pixels_apart(&cpu, &gpu, |_| false);
+        eprintln!("hybrid {shadows:?} {look:?} {secondary:?}: {} pixels differ", bad.len());
         assert!(bad.is_empty(), "{shadows:?} {look:?} {secondary:?}: pixels {bad:?}");
     }
     // The volumetric look: the CPU lights every fragment as the ray tracer does, the GPU's tile
@@ -557,12 +553,111 @@ fn hybrid_frame_equals_the_cpu_frame() {
         let trace =
             TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lighting.clone()).unwrap();
         let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, &scene, &RenderSettings::default(), &lighting).unwrap();
-        let rasterizer = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &raster).unwrap();
-        let result = tracer(ctx, &trace).render_hybrid(&rasterizer, &camera, &Method::Stochastic, &Frames::default());
+        let rasterizer = |c: &splat_core::Camera| splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, c, &raster);
+        let result =
+            tracer(ctx, &trace).render_hybrid(&rasterizer, &camera, &under, &Method::Stochastic, &Frames::default());
         let Err(e) = result else { panic!("{shadows:?}: the volumetric hybrid rendered on the GPU") };
         let e = e.to_string();
         assert!(e.contains("shadow rays") && e.contains("CPU"), "{shadows:?}: {e}");
     }
+}
+
+/// The pixels (index) where the hybrid's GPU image leaves the CPU's: colour beyond
+/// [`LIT_TOLERANCE`], depth, normal or pick, unless `flip(pixel)` says a decision of the pixel lay
+/// within f32 rounding of its threshold.
+fn hybrid_pixels_apart(cpu: &RenderOutput, gpu: &RenderOutput, flip: impl Fn(usize) -> bool) -> Vec<usize> {
+    let pixels = cpu.picked.len();
+    (0..pixels)
+        .filter(|&p| {
+            let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
+            let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
+            let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
+            let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
+            colour.is_nan() || colour > LIT_TOLERANCE || !depth || normal > 1e-3 || cpu.picked[p] != gpu.picked[p]
+        })
+        .filter(|&p| !flip(p))
+        .collect()
+}
+
+/// The GPU hybrid's other first hit and its moving camera (vk_gaussian_splatting stochastic
+/// transparency page; Sun et al. §4.2's camera rays drawn per frame), through
+/// `splat_gpu::render` against the CPU's `Algorithm::render_world`, among the meshes of
+/// [`hybrid_frame_equals_the_cpu_frame`], lit with exact shadows:
+///
+/// - StochasticSplats' closest accepted fragment as the first hit, three frames (each decided
+///   again), in both looks (its one opaque fragment is lit as the pick either way);
+/// - sorted splatting and StochasticSplats through a box pixel filter and a thin lens, three
+///   frames, each rasterized through its own pinhole camera.
+///
+/// Every pixel agrees (colour, frame 0's depth, normal and pick) except where a StochasticSplats
+/// decision of one of its frames lay within f32 rounding of its threshold (checked through the
+/// CPU rasterizer of that frame's camera). Controls: the stochastic first hit differs from the
+/// sorted one, and the moving camera from the still one, far beyond the tolerance.
+#[test]
+fn the_hybrid_takes_stochastic_first_hits_and_a_camera_drawn_per_frame() {
+    use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens, frame_sample};
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer};
+    use splat_tests::flips::raster_frame_gap;
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("layers", 32, 24);
+    let meshes = hybrid_meshes();
+    let raster = RasterSettings::default();
+    let (sorted, accepted) = (RasterMethod::Sorted { blend: Blend::Under }, RasterMethod::StochasticSplat);
+    let moving =
+        CameraSampling { filter: PixelFilter::Box, lens: Some(ThinLens { aperture: 0.15, focus_distance: 3.0 }) };
+    let frames = Frames { count: 3, seed: 9, ..Frames::default() };
+    let render = |first: RasterMethod, look: Look, sampling: CameraSampling| {
+        let lighting = lighting(Shadows::Exact, look);
+        let settings = RenderSettings { sampling, ..RenderSettings::default() };
+        let shot = splat_core::Shot {
+            scene: &scene,
+            meshes: &meshes,
+            lighting: &lighting,
+            camera: &camera,
+            settings: &settings,
+        };
+        let algorithm = Algorithm::Hybrid(first, raster, Method::Exact);
+        let cpu = algorithm.render_world(&shot, &frames, &|_| {}).unwrap();
+        let gpu = splat_gpu::render(ctx, &algorithm, &shot, splat_gpu::Extras::default(), &frames).unwrap();
+        // A pixel may differ where a decision of one of its frames lay at its threshold.
+        let trace = TraceScene::new(&scene, settings)
+            .unwrap()
+            .with_lighting(lighting.clone())
+            .unwrap()
+            .with_meshes(meshes.clone());
+        let flip = |p: usize| {
+            let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+            first.is_stochastic()
+                && (0..frames.count).any(|f| {
+                    let c = if sampling.is_random() {
+                        sampling.pinhole(&camera, &frame_sample(frames.seed, f)).unwrap()
+                    } else {
+                        camera
+                    };
+                    let r =
+                        Rasterizer::new(&scene, &c, settings, raster).unwrap().hybrid(&trace, Method::Exact).unwrap();
+                    let key = splat_core::rng::frame_key(frames.seed, f);
+                    raster_frame_gap(&r, &first, key, frames.u_shift, x, y) < FLIP_GAP
+                })
+        };
+        let bad = hybrid_pixels_apart(&cpu, &gpu, flip);
+        let name = format!("{} first hit, {look:?} look, camera {sampling:?}", first.id().name());
+        eprintln!("hybrid with {name}: {} pixels apart", bad.len());
+        assert!(bad.is_empty(), "hybrid with {name}: pixels {bad:?}");
+        gpu
+    };
+    let still = CameraSampling::default();
+    let sorted_still = render(sorted, Look::Surface, still);
+    let accepted_still = render(accepted, Look::Surface, still);
+    render(accepted, Look::Volumetric, still);
+    let sorted_moving = render(sorted, Look::Surface, moving);
+    render(accepted, Look::Surface, moving);
+    let first_hits = max_difference(sorted_still.mean.data(), accepted_still.mean.data());
+    let camera_moves = max_difference(sorted_still.mean.data(), sorted_moving.mean.data());
+    eprintln!(
+        "controls: stochastic against sorted first hit {first_hits:.3}, moving against still camera {camera_moves:.3}"
+    );
+    assert!(first_hits > 0.1 && camera_moves > 0.05, "controls: {first_hits}, {camera_moves}");
 }
 
 /// Through each lens family (a distorted perspective lens with every kind of coefficient, a

@@ -1,7 +1,7 @@
 //! Iso-opacity depth and picked splat of every pixel: the compute tile rasterizer.
 
 use super::*;
-use crate::layout::GpuFirstHit;
+use crate::layout::{FIRST_HIT_ACCEPTED, FIRST_HIT_SORTED, GpuFirstHit};
 
 /// Iso-opacity depth and picked splat of every pixel, with the front-to-back colour they come
 /// from (the GPU twin of sorted splatting with [`Blend::Under`]).
@@ -55,7 +55,8 @@ impl GpuRasterizer<'_> {
     /// Here each pixel is owned by one invocation that visits its fragments in the global
     /// (depth, id) order of the CPU reference, so the result is exact and deterministic.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
-        let TilePass { color, pick, normal, pairs } = self.tile_pass(false)?;
+        let TilePass { color, pick, normal, pairs } =
+            self.tile_pass(RasterParams { mode: Draw::Under.mode(), ..self.params })?;
         let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
         let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
         Ok(DepthPick {
@@ -70,12 +71,40 @@ impl GpuRasterizer<'_> {
     }
 
     /// The hybrid pipeline's first hit of every pixel (vk_gaussian_splatting Lighting §5), by the
-    /// same tile pass: the splats' radiance and transmittance in front of the meshes (lit per
-    /// fragment in the volumetric look, before lighting in the surface look), the integrated
-    /// normal, and the picked depth and splat, which the ray tracer then lights with shadows and
-    /// continues from at the mesh ([`crate::GpuTracer::render_hybrid`]).
-    pub fn first_hits(&self) -> Result<Vec<GpuFirstHit>, GpuError> {
-        let TilePass { color, pick, normal, .. } = self.tile_pass(true)?;
+    /// same tile pass, for the first-hit `method`:
+    ///
+    /// - sorted splatting: the splats' radiance and transmittance in front of the meshes (lit per
+    ///   fragment in the volumetric look, before lighting in the surface look), the integrated
+    ///   normal, and the picked depth and splat;
+    /// - StochasticSplats (the stochastic transparency page's hybrid case): the closest fragment
+    ///   accepted in frame `frame_key` (u < α, with every u drawn as u − `u_shift`, as
+    ///   [`splat_core::Frames::u_shift`]), written opaque: its unlit colour, T = 0, its normal,
+    ///   depth and id; T = 1 where none is accepted.
+    ///
+    /// The ray tracer then lights the pick with shadows and continues from it at the mesh
+    /// ([`crate::GpuTracer::render_hybrid`]).
+    pub fn first_hits(
+        &self,
+        method: &RasterMethod,
+        frame_key: u32,
+        u_shift: f32,
+    ) -> Result<Vec<GpuFirstHit>, GpuError> {
+        let first_hit = match method {
+            RasterMethod::Sorted { .. } => FIRST_HIT_SORTED,
+            RasterMethod::StochasticSplat => FIRST_HIT_ACCEPTED,
+            _ => {
+                let reason = format!(
+                    "the GPU hybrid's first hit is raster-sorted or stochastic-splat, not {}",
+                    method.id().name()
+                );
+                return Err(GpuError::refused(reason, &[Remedy::SortedFirstHit, Remedy::Cpu]));
+            }
+        };
+        // The accepted fragment is lit as the pick, whatever the look: not here, by the ray
+        // tracer, with shadows.
+        let look = if first_hit == FIRST_HIT_ACCEPTED { crate::layout::LOOK_SURFACE } else { self.params.look };
+        let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, look, ..self.params };
+        let TilePass { color, pick, normal, .. } = self.tile_pass(params)?;
         Ok((0..pick.len() / 2)
             .map(|i| GpuFirstHit {
                 radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
@@ -88,10 +117,10 @@ impl GpuRasterizer<'_> {
             .collect())
     }
 
-    /// One tile pass: per pixel RGBA colour, (depth bits, pick) and normal, and the pair count.
-    fn tile_pass(&self, first_hit: bool) -> Result<TilePass, GpuError> {
+    /// One tile pass under `params`: per pixel RGBA colour, (depth bits, pick) and normal, and
+    /// the pair count.
+    fn tile_pass(&self, params: RasterParams) -> Result<TilePass, GpuError> {
         Self::supports_tile_pass(&self.raster)?;
-        let params = RasterParams { mode: Draw::Under.mode(), first_hit: u32::from(first_hit), ..self.params };
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let (ctx, pipes) = (self.ctx, self.pipes);
         let [tiles_x, tiles_y] = self.params.tiles;

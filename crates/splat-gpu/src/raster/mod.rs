@@ -811,6 +811,8 @@ mod tests {
                 "MODE_ENDERTON" = Draw::Enderton.mode(),
                 "MODE_STRATIFIED" = Draw::Stratified.mode(),
                 "MODE_STRATIFIED_PLAIN" = Draw::StratifiedPlain.mode(),
+                "FIRST_HIT_SORTED" = crate::layout::FIRST_HIT_SORTED,
+                "FIRST_HIT_ACCEPTED" = crate::layout::FIRST_HIT_ACCEPTED,
             ]
         );
         assert_constants!(
@@ -867,8 +869,8 @@ mod tests {
                 distortion,
                 normal_mode,
                 cutoff,
-                pad_n0,
-                pad_n1
+                frame_key,
+                u_shift
             ]
         );
         assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, accumulation, u_shift]);

@@ -98,7 +98,8 @@ pub struct RasterParams {
     pub t_max: f32,
     /// 1 when the scene has meshes ([`RasterScene::with_meshes`]).
     pub meshes: u32,
-    /// 1 when the tile rasterizer writes the hybrid pipeline's first hit.
+    /// Which first hit the tile rasterizer writes for the hybrid pipeline (`FIRST_HIT_*`), 0
+    /// for a pixel.
     pub first_hit: u32,
     /// Samples per pixel S.
     pub samples: u32,
@@ -119,10 +120,10 @@ pub struct RasterParams {
     pub normal_mode: u32,
     /// The cutoff of the ellipsoid normals (Eq. 2).
     pub cutoff: f32,
-    /// Padding.
-    pub pad_n0: u32,
-    /// Padding.
-    pub pad_n1: u32,
+    /// The frame key of a StochasticSplats first hit ([`splat_core::rng::frame_key`]).
+    pub frame_key: u32,
+    /// Its [`splat_core::Frames::u_shift`].
+    pub u_shift: f32,
 }
 
 /// Per-frame uniforms (WGSL `FrameParams`).
@@ -312,7 +313,7 @@ pub(super) fn raster_params(scene: &RasterScene, camera: &Camera, raster: &Raste
         distortion: crate::layout::distortion(&camera.lens),
         normal_mode: crate::layout::normal_code(s.normal_mode),
         cutoff: s.kernel.cutoff,
-        pad_n0: 0,
-        pad_n1: 0,
+        frame_key: 0,
+        u_shift: 0.0,
     }
 }
