@@ -441,7 +441,7 @@ fn gpu_raster_backend_matches_cpu_backend() {
             if name == "cpu" && !samples.is_empty() {
                 e.extend(["--sample-pattern".into(), "standard".into()]);
             }
-            if method == "raster-sorted" && samples.is_empty() {
+            if method == "raster-sorted" {
                 e.extend(["--depth".to_string(), depth(name).to_str().unwrap().to_string()]);
             }
             e
@@ -466,7 +466,7 @@ fn gpu_raster_backend_matches_cpu_backend() {
         };
         let d = worst(&read(&cpu_out), &read(&gpu_out));
         assert!(d < 1e-4, "{method} {samples:?}: GPU and CPU backends differ by {d}");
-        if method == "raster-sorted" && samples.is_empty() {
+        if method == "raster-sorted" {
             let d = worst(&read(&depth("cpu")), &read(&depth("gpu")));
             assert!(d < 1e-3, "iso-depth differs by {d}");
         }
@@ -478,7 +478,6 @@ fn gpu_raster_backend_matches_cpu_backend() {
             "--sample-pattern standard",
         ),
         ("raster-sorted", vec!["--fragment-depth", "plane"], "max-density plane"),
-        ("raster-sorted", vec!["--raster-samples", "4", "--depth", "/tmp/never.npy"], "one sample at the pixel centre"),
         ("stochastic-splat", vec!["--depth", "/tmp/never.npy"], "come from raster-sorted only"),
     ] {
         let o = render("gpu", method, &scratch("refused.npy"), &extra);

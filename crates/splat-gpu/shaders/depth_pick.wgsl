@@ -40,62 +40,83 @@ fn tile_blend(
     let inside = px.x < params.size.x && px.y < params.size.y;
     let centre = vec2<f32>(px) + vec2<f32>(0.5);
     let range = tile_pairs(tile, l);
-    var transmittance = 1.0;
-    var color = vec3<f32>(0.0);
+    let origin = camera_origin();
+    // raster/mod.rs `sorted` composites each of the S samples (its coverage and depth at the
+    // sample, its alpha at the centre: MSAA's shading rate) and takes the integrated normal
+    // Σ nᵢ αᵢ Tᵢ, the pick and its depth from sample 0, along whose ray every normal is taken.
+    let p0 = vec2<f32>(px) + rop_offsets[0];
+    let dir = pixel_dir(p0);
+    let to_t = stretch(p0);
     var depth = 0.0;
     var picked = NONE;
-    // The pixel-centre ray, and the integrated normal Σ nᵢ αᵢ Tᵢ.
-    let origin = camera_origin();
-    let dir = pixel_dir(centre);
-    let to_t = stretch(centre);
     var normal = vec3<f32>(0.0);
     var drawn = false;
     // What lies behind (raster/mod.rs `Rasterizer::behind`): the background, or the pixel's
-    // mesh, which hides the fragments at or behind it (the depth test of the splat pass).
+    // mesh, which hides the fragments at or behind it (the depth test of the splat pass; meshes
+    // go with one sample).
     var back = vec4<f32>(params.background.xyz, FAR_DEPTH);
     if (inside && params.meshes == 1u) {
         back = behind[px.y * params.size.x + px.x];
     }
     let mesh = back.w < FAR_DEPTH;
-    for (var start = range.x; start < range.y; start += BATCH) {
-        load_batch(start, range.y, l);
-        let n = min(BATCH, range.y - start);
-        for (var j = 0u; j < n; j++) {
-            let s = batch[j];
-            let in_rect = all(px >= s.rect.xy) && all(px < s.rect.zw);
-            if (inside && in_rect && s.depth * to_t < back.w) {
-                var alpha = splat_alpha(s, centre, params);
-                if (params.first_hit == FIRST_HIT_ACCEPTED) {
-                    // StochasticSplats (splat.wgsl `accepted_splat`): the fragment is written
-                    // opaque where u < α; in depth order the first accepted is the closest.
-                    alpha = select(0.0, 1.0, picked == NONE && accepted(s, px, alpha));
-                }
-                if (alpha > 0.0) {
-                    var c = s.color;
-                    let n = splat_normal(s.id, origin, dir);
-                    if (params.lit == 1u && params.look == LOOK_VOLUMETRIC) {
-                        c = shade_unshadowed(s.color, s.id, origin, dir, s.depth * to_t, n);
+    // Every fragment lit in the volumetric look, but for StochasticSplats' first hit, which the
+    // ray tracer lights as the pick in either look.
+    let volumetric = params.lit == 1u && params.look == LOOK_VOLUMETRIC && params.first_hit != FIRST_HIT_ACCEPTED;
+    // The means over the samples of the composite L_s and of the transmittance T_s.
+    var color = vec3<f32>(0.0);
+    var transmittance = 0.0;
+    for (var k = 0u; k < params.samples; k++) {
+        let p = vec2<f32>(px) + rop_offsets[k];
+        let dir_k = pixel_dir(p);
+        let to_t_k = stretch(p);
+        var t_k = 1.0;
+        var l_k = vec3<f32>(0.0);
+        for (var start = range.x; start < range.y; start += BATCH) {
+            load_batch(start, range.y, l);
+            let n = min(BATCH, range.y - start);
+            for (var j = 0u; j < n; j++) {
+                let s = batch[j];
+                let in_rect = all(px >= s.rect.xy) && all(px < s.rect.zw);
+                if (inside && in_rect && s.depth * to_t_k < back.w) {
+                    var alpha = select(0.0, fragment_alpha(s, centre, params), covers(s, p, params));
+                    if (params.first_hit == FIRST_HIT_ACCEPTED) {
+                        // StochasticSplats (splat.wgsl `accepted_splat`): the fragment is written
+                        // opaque where u < α; in depth order the first accepted is the closest.
+                        alpha = select(0.0, 1.0, picked == NONE && accepted(s, px, alpha));
                     }
-                    normal += transmittance * alpha * n;
-                    drawn = true;
-                    color += transmittance * alpha * c;
-                    transmittance *= 1.0 - alpha;
-                    let written = params.first_hit == FIRST_HIT_ACCEPTED;
-                    if (picked == NONE && (written || transmittance < params.iso_threshold)) {
-                        picked = s.id;
-                        depth = s.depth;
+                    if (alpha > 0.0) {
+                        var c = s.color;
+                        if (k == 0u || volumetric) {
+                            let nrm = splat_normal(s.id, origin, dir);
+                            if (volumetric) {
+                                c = shade_unshadowed(s.color, s.id, origin, dir_k, s.depth * to_t_k, nrm);
+                            }
+                            if (k == 0u) {
+                                normal += t_k * alpha * nrm;
+                                drawn = true;
+                            }
+                        }
+                        l_k += t_k * alpha * c;
+                        t_k *= 1.0 - alpha;
+                        let written = params.first_hit == FIRST_HIT_ACCEPTED;
+                        if (k == 0u && picked == NONE && (written || t_k < params.iso_threshold)) {
+                            picked = s.id;
+                            depth = s.depth;
+                        }
                     }
                 }
             }
+            workgroupBarrier();
         }
-        workgroupBarrier();
+        color += l_k / f32(params.samples);
+        transmittance += t_k / f32(params.samples);
     }
     if (inside) {
         let index = px.y * params.size.x + px.x;
         let covered = select(0.0, 1.0, mesh);
         var out = vec4<f32>(color + transmittance * back.xyz, 1.0 - transmittance + transmittance * covered);
         // raster/mod.rs `sorted`: the integrated normal normalised, −dir when degenerate; the
-        // depth as a distance along the pixel-centre ray, t = z |d_cam|, where T fell below the
+        // depth as a distance along sample 0's ray, t = z |d_cam|, where T fell below the
         // threshold, else the mesh's (depth consolidation, vk_gaussian_splatting Lighting §1.5.3).
         // composite.rs `integrated_normal`: zero where no fragment was drawn.
         var n = vec3<f32>(0.0);

@@ -30,6 +30,8 @@
 const ORDER_ID: u32 = 4294967293u;
 const SURFACE_ID: u32 = 4294967292u;
 const ENDERTON_XI_SLOT: u32 = 64u;
+// What a sample holds where a mesh was drawn (raster/mod.rs MESH).
+const MESH: u32 = 4294967294u;
 const MODE_ENDERTON: u32 = 3u;
 const MODE_STRATIFIED: u32 = 4u;
 const MODE_STRATIFIED_PLAIN: u32 = 5u;
@@ -144,16 +146,28 @@ fn store_rop(rop: ptr<function, Rop>, at: u32, spp: u32) {
     rop_state[at + 2u * spp + 1u] = (*rop).surface;
 }
 
-// raster/mod.rs `resolve`: the mean of the samples (colour, written share), the background
-// where none was written.
-fn resolve_rop(rop: ptr<function, Rop>, spp: u32) -> vec4<f32> {
+// raster/mod.rs `resolve`: the mean of the samples (colour, written share) of the pixel at
+// `corner`. A written sample shows its splat's colour, lit where the scene is (`lit_color`
+// without a hybrid: at the sample's depth along the sample's own ray, with the splat's normal
+// along sample 0's ray, no shadows); an empty one the background. Among meshes (one sample, at
+// the pixel centre) an empty sample and the mesh's add nothing here: the fold blends the
+// pre-pass's colour, the background where no mesh is, under the splats' coverage.
+fn resolve_rop(rop: ptr<function, Rop>, spp: u32, corner: vec2<f32>) -> vec4<f32> {
+    let origin = camera_origin();
+    let ray0 = pixel_dir(corner + rop_offsets[0]);
     var color = vec3<f32>(0.0);
     var written = 0u;
     for (var i = 0u; i < spp; i++) {
-        if ((*rop).id[i] == NONE) {
-            color += params.background.xyz;
+        let id = (*rop).id[i];
+        if (id == NONE || id == MESH) {
+            color += select(params.background.xyz, vec3<f32>(0.0), params.meshes == 1u);
         } else {
-            color += splats[(*rop).id[i]].color;
+            var c = splats[id].color;
+            if (params.lit == 1u) {
+                let n = splat_normal(id, origin, ray0);
+                c = shade_unshadowed(c, id, origin, pixel_dir(corner + rop_offsets[i]), (*rop).t[i], n);
+            }
+            color += c;
             written++;
         }
     }
@@ -275,6 +289,15 @@ fn tile_rop(
     let spp = params.samples;
     let at = (px.y * params.size.x + px.x) * rop_words(spp);
     var rop = load_rop(at, spp, inside && rop_chunk.x > 0u);
+    if (inside && params.meshes == 1u && rop_chunk.x == 0u) {
+        // raster/mod.rs `sample_buffer`: the pixel's one sample starts with the mesh's depth, so
+        // fragments behind it fail the depth test.
+        let t_mesh = behind[px.y * params.size.x + px.x].w;
+        if (t_mesh < FAR_DEPTH) {
+            rop.t[0] = t_mesh;
+            rop.id[0] = MESH;
+        }
+    }
     let pixel_key = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
     let pixel_id = hilbert_index(params.hilbert_order, px.x, px.y);
     for (var start = range.x; start < range.y; start += BATCH) {
@@ -305,6 +328,6 @@ fn tile_rop(
     if (inside && rop_chunk.x + 1u < rop_chunk.z) {
         store_rop(&rop, at, spp);
     } else if (inside) {
-        textureStore(rop_target, vec2<i32>(px), resolve_rop(&rop, spp));
+        textureStore(rop_target, vec2<i32>(px), resolve_rop(&rop, spp, corner));
     }
 }

@@ -22,7 +22,6 @@ pub struct Extras {
 /// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`] and
 /// [`GpuRasterizer::supports_scene`]) and what the backend composes from them.
 pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
-    let lit = shot.lighting.is_on();
     match algorithm {
         Algorithm::Oracle => Err(oracle_refused()),
         Algorithm::Hybrid(method, raster, secondary) => {
@@ -42,7 +41,7 @@ pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<()
         }
         Algorithm::Trace(method) => GpuTracer::supports(method),
         Algorithm::Raster(method, raster) => {
-            GpuRasterizer::supports_scene(method, raster, lit, !shot.meshes.is_empty())?;
+            GpuRasterizer::supports_scene(method, raster, !shot.meshes.is_empty())?;
             let sorted = matches!(method, RasterMethod::Sorted { .. });
             if (extras.depth || extras.normal) && !sorted {
                 return Err(GpuError::refused(

@@ -228,7 +228,7 @@ pub const SURFACE_ID: u32 = u32::MAX - 3;
 pub const ENDERTON_XI_SLOT: u32 = MAX_SAMPLES;
 /// What a sample buffer holds where a mesh was drawn (as splat index and as id; every particle
 /// id is below it, so a splat at the mesh's exact depth stays in front).
-const MESH: u32 = u32::MAX - 1;
+pub const MESH: u32 = u32::MAX - 1;
 
 impl<'a> Rasterizer<'a> {
     /// Validate, project every particle (EWA), sort the splats by (centre depth, id) and bin

@@ -54,7 +54,12 @@ impl GpuRasterizer<'_> {
     /// vk_gaussian_splatting uses); wgpu has none, and without it the read-modify-write races.
     /// Here each pixel is owned by one invocation that visits its fragments in the global
     /// (depth, id) order of the CPU reference, so the result is exact and deterministic.
+    ///
+    /// At S samples per pixel each sample is composited (the fragment's alpha at the pixel
+    /// centre, its coverage and depth at the sample) and the colour is their mean; the depth,
+    /// normal and pick are sample 0's, as the CPU reference takes them.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
+        Self::supports_depth_pick(&self.raster)?;
         let TilePass { color, pick, normal, pairs } =
             self.tile_pass(RasterParams { mode: Draw::Under.mode(), ..self.params })?;
         let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
@@ -100,10 +105,8 @@ impl GpuRasterizer<'_> {
                 return Err(GpuError::refused(reason, &[Remedy::SortedFirstHit, Remedy::Cpu]));
             }
         };
-        // The accepted fragment is lit as the pick, whatever the look: not here, by the ray
-        // tracer, with shadows.
-        let look = if first_hit == FIRST_HIT_ACCEPTED { crate::layout::LOOK_SURFACE } else { self.params.look };
-        let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, look, ..self.params };
+        let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, ..self.params };
+        Self::supports_tile_pass(&self.raster)?;
         let TilePass { color, pick, normal, .. } = self.tile_pass(params)?;
         Ok((0..pick.len() / 2)
             .map(|i| GpuFirstHit {
@@ -120,7 +123,6 @@ impl GpuRasterizer<'_> {
     /// One tile pass under `params`: per pixel RGBA colour, (depth bits, pick) and normal, and
     /// the pair count.
     fn tile_pass(&self, params: RasterParams) -> Result<TilePass, GpuError> {
-        Self::supports_tile_pass(&self.raster)?;
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let (ctx, pipes) = (self.ctx, self.pipes);
         let [tiles_x, tiles_y] = self.params.tiles;
@@ -158,6 +160,7 @@ impl GpuRasterizer<'_> {
                 (16, &out_normal),
                 (17, &self.behind),
                 (18, &self.behind_normal),
+                (20, &self.sample_offsets),
             ],
         );
         let mut encoder = self.encoder("tile lists");

@@ -439,7 +439,7 @@ impl<'a> GpuRasterizer<'a> {
     /// What the scene and the adapter allow `method` at these settings ([`GpuRasterizer::supports_scene`]),
     /// and a render pipeline multisamples at the counts the adapter has.
     fn check_scene(&self, method: &RasterMethod) -> Result<Draw, GpuError> {
-        let draw = Self::scene_draw(method, &self.raster, self.scene.is_lit(), self.scene.has_meshes)?;
+        let draw = Self::scene_draw(method, &self.raster, self.scene.has_meshes)?;
         let s = self.raster.samples;
         if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
             let reason = format!(
@@ -451,22 +451,17 @@ impl<'a> GpuRasterizer<'a> {
         Ok(draw)
     }
 
-    /// Whether the GPU rasterizes `method` at `settings` in a scene that is `lit` or has
-    /// `meshes`: the mesh pre-pass and the lighting have one sample at the pixel centre, so
-    /// meshes and lights go with one sample at centre depth, and with sorted splatting or
-    /// StochasticSplats (the compute raster operations of Enderton and stratified are unlit and
-    /// mesh-free).
-    pub fn supports_scene(
-        method: &RasterMethod,
-        settings: &RasterSettings,
-        lit: bool,
-        meshes: bool,
-    ) -> Result<(), GpuError> {
-        Self::scene_draw(method, settings, lit, meshes).map(drop)
+    /// Whether the GPU rasterizes `method` at `settings` in a scene with `meshes` or not. Lit, every method lights each sample along its own ray at any sample count:
+    /// sorted splatting in the tile pass (sample by sample), StochasticSplats shaded per sample
+    /// (where the device can), Enderton and stratified in the compute raster operations. The
+    /// mesh pre-pass casts one ray per pixel, through its centre, so meshes go with one sample
+    /// (and StochasticSplats' depth test against the mesh reads the centre depth).
+    pub fn supports_scene(method: &RasterMethod, settings: &RasterSettings, meshes: bool) -> Result<(), GpuError> {
+        Self::scene_draw(method, settings, meshes).map(drop)
     }
 
     /// The shaders' draw of `method` where [`GpuRasterizer::supports_scene`] accepts it.
-    fn scene_draw(method: &RasterMethod, settings: &RasterSettings, lit: bool, meshes: bool) -> Result<Draw, GpuError> {
+    fn scene_draw(method: &RasterMethod, settings: &RasterSettings, meshes: bool) -> Result<Draw, GpuError> {
         Self::supports(method, settings)?;
         let name = method.id().name();
         let draw = Draw::of(method).ok_or_else(|| {
@@ -474,22 +469,22 @@ impl<'a> GpuRasterizer<'a> {
                 "the catalogue gives {name} a GPU kernel, but the raster shaders do not draw it"
             ))
         })?;
-        let s = settings.samples;
-        let plane = settings.fragment_depth == FragmentDepth::MaxDensityPlane;
-        let what = match (lit, meshes) {
-            (true, true) => "lit splatting among meshes",
-            (true, false) => "lit splatting",
-            (false, true) => "splatting among meshes",
-            (false, false) => return Ok(draw),
+        let (s, depth) = (settings.samples, settings.fragment_depth);
+        let refusal = if meshes && s > 1 {
+            Some(format!(
+                "splatting among meshes on the GPU goes with one sample per pixel, not {s} (the mesh pre-pass casts one ray per pixel, through its centre)"
+            ))
+        } else if meshes && draw == Draw::Stochastic && depth != FragmentDepth::Center {
+            Some(format!(
+                "{name} among meshes on the GPU goes with centre depth, not {depth:?} (its depth test against the mesh reads the centre depth)"
+            ))
+        } else {
+            None
         };
-        if s > 1 || plane || draw.is_rop() {
-            let reason = format!(
-                "{what} on the GPU goes with one sample per pixel, centre depth and raster-sorted or stochastic-splat (lights and the mesh pre-pass are evaluated once at the pixel centre), not {draw:?} at {s} samples and {:?} depth",
-                settings.fragment_depth
-            );
-            return Err(GpuError::refused(reason, &[Remedy::Cpu]));
+        match refusal {
+            Some(reason) => Err(GpuError::refused(reason, &[Remedy::Cpu])),
+            None => Ok(draw),
         }
-        Ok(draw)
     }
 
     /// One lit frame of sorted splatting from the compute tile rasterizer.
@@ -533,16 +528,30 @@ impl<'a> GpuRasterizer<'a> {
         Ok(())
     }
 
-    /// Whether the compute tile rasterizer (the iso-opacity depth pick, lit sorted splatting, the
-    /// hybrid's first hit) takes `settings`: it composites one sample at the pixel centre, at
-    /// centre depth.
+    /// Whether the tile rasterizer's first hits of the hybrid pipeline take `settings`: one
+    /// sample per pixel at centre depth (the ray-tracing kernel continues one camera ray per
+    /// pixel; the CPU's hybrid continues each of S samples).
     pub fn supports_tile_pass(settings: &RasterSettings) -> Result<(), GpuError> {
         if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
             let reason = format!(
-                "the GPU's iso-opacity depth, lit sorted splatting and hybrid first hit take one sample at the pixel centre and centre depth, not {} samples at {:?}",
+                "the GPU hybrid continues one ray per pixel from its first hits, at the pixel centre and centre depth, not {} samples at {:?}",
                 settings.samples, settings.fragment_depth
             );
             return Err(GpuError::refused(reason, &[Remedy::Cpu]));
+        }
+        Ok(())
+    }
+
+    /// Whether the tile rasterizer's iso-opacity depth pick ([`GpuRasterizer::depth_pick`]) takes
+    /// `settings`: at any sample count (the pick is sample 0's), at centre depth (the tile
+    /// lists hold the splats in centre-depth order).
+    pub fn supports_depth_pick(settings: &RasterSettings) -> Result<(), GpuError> {
+        if settings.fragment_depth != FragmentDepth::Center {
+            let reason = format!(
+                "the GPU's iso-opacity depth walks the splats in centre-depth order, not at {:?} depth",
+                settings.fragment_depth
+            );
+            return Err(GpuError::refused(reason, &[Remedy::CenterDepth, Remedy::Cpu]));
         }
         Ok(())
     }
@@ -807,6 +816,7 @@ mod tests {
                 "ORDER_ID" = splat_core::raster::ORDER_ID,
                 "SURFACE_ID" = splat_core::raster::SURFACE_ID,
                 "ENDERTON_XI_SLOT" = splat_core::raster::ENDERTON_XI_SLOT,
+                "MESH" = splat_core::raster::MESH,
                 "ROP_SAMPLES" = splat_core::raster::STANDARD_COUNTS[4],
                 "MODE_ENDERTON" = Draw::Enderton.mode(),
                 "MODE_STRATIFIED" = Draw::Stratified.mode(),

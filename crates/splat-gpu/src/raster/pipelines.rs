@@ -37,6 +37,9 @@ pub(crate) struct SamplePipelines {
     pub(super) stochastic: wgpu::RenderPipeline,
     pub(super) stochastic_lit: Option<wgpu::RenderPipeline>,
     pub(super) stochastic_plane: Option<wgpu::RenderPipeline>,
+    /// Lit StochasticSplats shaded per sample, at centre and plane depth, where the device
+    /// shades per sample (at one sample only the plane's: `stochastic_lit` takes the centre).
+    pub(super) stochastic_lit_sample: [Option<wgpu::RenderPipeline>; 2],
 }
 
 /// Colour target of a stochastic frame (written, never blended).
@@ -195,7 +198,7 @@ impl SamplePipelines {
         blend_format: wgpu::TextureFormat,
         samples: u32,
     ) -> Self {
-        let render_from = |module, entry, format, blend: Option<wgpu::BlendState>, depth: bool| {
+        let render_with = |module, entry, format, blend: Option<wgpu::BlendState>, depth: bool, constants: &[_]| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(entry),
                 layout: Some(layout),
@@ -217,14 +220,21 @@ impl SamplePipelines {
                 fragment: Some(wgpu::FragmentState {
                     module,
                     entry_point: Some(entry),
-                    compilation_options: Default::default(),
+                    compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
                     targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
                 }),
                 multiview_mask: None,
                 cache: None,
             })
         };
+        let render_from = |module, entry, format, blend, depth| render_with(module, entry, format, blend, depth, &[]);
         let render = |entry, format, blend, depth| render_from(splat, entry, format, blend, depth);
+        let lit_sample = |plane_depth: bool| {
+            let constants = [("LIT_PLANE_DEPTH", f64::from(u8::from(plane_depth)))];
+            let entry = "fs_stochastic_lit_sample";
+            let wanted = samples > 1 || plane_depth;
+            plane.filter(|_| wanted).map(|m| render_with(m, entry, STOCHASTIC_FORMAT, None, true, &constants))
+        };
         let component =
             |src, dst| wgpu::BlendComponent { src_factor: src, dst_factor: dst, operation: wgpu::BlendOperation::Add };
         use wgpu::BlendFactor::{One, OneMinusDstAlpha, OneMinusSrcAlpha, SrcAlpha};
@@ -245,24 +255,32 @@ impl SamplePipelines {
             stochastic: render(stochastic, STOCHASTIC_FORMAT, None, true),
             stochastic_lit: (samples == 1).then(|| render("fs_stochastic_lit", STOCHASTIC_FORMAT, None, true)),
             stochastic_plane: plane.map(|m| render_from(m, "fs_stochastic_plane", STOCHASTIC_FORMAT, None, true)),
+            stochastic_lit_sample: [lit_sample(false), lit_sample(true)],
         }
     }
 
-    /// The pipeline that draws `draw` (lit: StochasticSplats' shaded variant; plane: the
-    /// max-density-plane depth).
+    /// The pipeline that draws `draw` (lit: StochasticSplats' shaded variant, per sample where
+    /// the samples' colours differ; plane: the max-density-plane depth).
     pub(super) fn get(&self, draw: Draw, lit: bool, plane: bool) -> Result<&wgpu::RenderPipeline, GpuError> {
+        fn per_sample<'p>(
+            pipeline: Option<&'p wgpu::RenderPipeline>,
+            what: &str,
+        ) -> Result<&'p wgpu::RenderPipeline, GpuError> {
+            pipeline.ok_or_else(|| {
+                GpuError::refused(
+                    format!("{what} shades per sample, which this adapter cannot (wgpu's MULTISAMPLED_SHADING)"),
+                    &[Remedy::Cpu],
+                )
+            })
+        }
         Ok(match draw {
             Draw::Over => &self.over,
             Draw::Under => &self.under,
-            Draw::Stochastic if plane => self.stochastic_plane.as_ref().ok_or_else(|| {
-                GpuError::refused(
-                    "the max-density-plane depth shades per sample, which this adapter cannot (wgpu's MULTISAMPLED_SHADING)",
-                    &[Remedy::Cpu],
-                )
-            })?,
-            Draw::Stochastic if lit => self.stochastic_lit.as_ref().ok_or_else(|| {
-                GpuError::refused("lit StochasticSplats shades once per pixel, at one sample", &[Remedy::Cpu])
-            })?,
+            Draw::Stochastic if lit => match &self.stochastic_lit {
+                Some(centre) if !plane => centre,
+                _ => per_sample(self.stochastic_lit_sample[usize::from(plane)].as_ref(), "lit StochasticSplats")?,
+            },
+            Draw::Stochastic if plane => per_sample(self.stochastic_plane.as_ref(), "the max-density-plane depth")?,
             Draw::Stochastic => &self.stochastic,
             Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => {
                 return Err(GpuError::Unsupported(format!("{draw:?} runs in the compute ROP, not a render pipeline")));
