@@ -24,9 +24,13 @@ pub const DEFAULT_MIN_TRANSMITTANCE: f32 = 0.01;
 pub const DEFAULT_N: u32 = 16;
 /// Traversals per frame of `stochastic-n` (§3.5's m).
 pub const DEFAULT_M: u32 = 1;
-/// Largest k of a k-buffer and largest N of `stochastic-n` (fixed arrays on the stack and in
-/// the GPU kernel's registers).
+/// Largest k of a k-buffer, and the most samples one traversal of the GPU kernel holds (fixed
+/// arrays on the stack and in the GPU kernel's registers).
 pub const MAX_HITS: usize = 64;
+/// Largest n of `stochastic-n` (Sun et al. Table 5's 4 × 256): the CPU holds n slots in one
+/// traversal; the GPU kernel, which holds [`MAX_HITS`], runs n > 64 as traversals of a divisor
+/// of n (the same slots, so the same image; `splat_gpu::MethodParams`).
+pub const MAX_SAMPLES_PER_TRAVERSAL: usize = 256;
 
 /// Which renderer family runs a method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -122,7 +126,11 @@ impl Param {
             Param::MinTransmittance => {
                 ("min-transmittance", "min transmittance", Some(Limits { min: 0.0, max: 1.0, slider_max: 0.2 }))
             }
-            Param::N => ("samples-per-traversal", "n samples per traversal", count(MAX_HITS as f64, MAX_HITS as f64)),
+            Param::N => (
+                "samples-per-traversal",
+                "n samples per traversal",
+                count(MAX_SAMPLES_PER_TRAVERSAL as f64, MAX_SAMPLES_PER_TRAVERSAL as f64),
+            ),
             Param::M => ("traversals", "m traversals", count(MAX_PRIMARY_SLOTS as f64, 16.0)),
             Param::Blend => ("blend", "blend", None),
             Param::EarlyStop => ("early-stop", "early stop", None),
@@ -677,7 +685,7 @@ mod tests {
         for (p, bad) in [
             (Parameters { k: 0, ..Parameters::default() }, MethodId::KBuffer),
             (Parameters { k: MAX_HITS + 1, ..Parameters::default() }, MethodId::DepthSampling),
-            (Parameters { n: MAX_HITS as u32 + 1, ..Parameters::default() }, MethodId::StochasticN),
+            (Parameters { n: MAX_SAMPLES_PER_TRAVERSAL as u32 + 1, ..Parameters::default() }, MethodId::StochasticN),
             (Parameters { m: 0, ..Parameters::default() }, MethodId::StochasticN),
             (Parameters { max_passes: MAX_PRIMARY_SLOTS + 1, ..Parameters::default() }, MethodId::StochasticPass),
         ] {

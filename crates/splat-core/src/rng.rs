@@ -138,7 +138,8 @@ pub const PASS_ID: u32 = u32::MAX;
 pub const OFFSET_ID: u32 = u32::MAX - 1;
 /// Particle id reserved for area-light samples (ids − 2 and − 3 are the rasterizer's).
 pub const LIGHT_ID: u32 = u32::MAX - 4;
-/// Most slots one [`SlotDraws`] holds (the largest n of `stochastic-n`).
+/// Most slots whose hash heads one [`SlotDraws`] prepares (the GPU kernel's largest n); a
+/// traversal of more draws each slot whole.
 pub const MAX_SLOT_DRAWS: usize = 64;
 
 /// The draws of one pixel's slots, prepared once per traversal ([`RayRng::slot_draws`]).
@@ -156,7 +157,7 @@ impl SlotDraws {
     #[inline(always)]
     pub fn draw(&self, id: u32, hit: glam::Vec3, out: &mut [f32]) {
         let out = &mut out[..self.n];
-        if self.rng.scheme != RngScheme::Hash {
+        if self.rng.scheme != RngScheme::Hash || self.n > MAX_SLOT_DRAWS {
             for (s, u) in (self.first_slot..).zip(out.iter_mut()) {
                 *u = self.rng.particle(id, s, hit);
             }
@@ -225,14 +226,14 @@ impl RayRng {
         }
     }
 
-    /// The draws of the slots `first_slot..first_slot + n` (n ≤ [`MAX_SLOT_DRAWS`]) with the
-    /// first round of the hash, which depends on the pixel and the slot only, done once: what
-    /// one traversal of `stochastic-n` asks for every particle it visits.
+    /// The draws of the slots `first_slot..first_slot + n` with the first round of the hash,
+    /// which depends on the pixel and the slot only, done once where n ≤ [`MAX_SLOT_DRAWS`]
+    /// (beyond, each slot is drawn whole, the same numbers): what one traversal of
+    /// `stochastic-n` asks for every particle it visits.
     #[inline(always)]
     pub fn slot_draws(&self, first_slot: u32, n: usize) -> SlotDraws {
-        assert!(n <= MAX_SLOT_DRAWS, "{n} slots exceed {MAX_SLOT_DRAWS}");
         let mut heads = [0u32; MAX_SLOT_DRAWS];
-        if self.scheme == RngScheme::Hash {
+        if self.scheme == RngScheme::Hash && n <= MAX_SLOT_DRAWS {
             for (s, h) in (first_slot..).zip(&mut heads[..n]) {
                 *h = xxhash32_head(self.pixel_key, s);
             }
@@ -460,10 +461,13 @@ mod hash_tests {
         for scheme in [RngScheme::Hash, RngScheme::Trig] {
             let rng = RayRng::new(3, 4, frame_key(1, 2), scheme).shifted(0.01);
             let hit = glam::Vec3::new(0.1, 0.2, 0.3);
-            let mut out = [0.0f32; 64];
-            rng.slot_draws(5, 64).draw(77, hit, &mut out);
-            for (s, u) in (5..).zip(out) {
-                assert_eq!(u.to_bits(), rng.particle(77, s, hit).to_bits());
+            // Prepared heads (64 slots) and whole draws past them (256).
+            for n in [64, 256] {
+                let mut out = vec![0.0f32; n];
+                rng.slot_draws(5, n).draw(77, hit, &mut out);
+                for (s, u) in (5..).zip(out) {
+                    assert_eq!(u.to_bits(), rng.particle(77, s, hit).to_bits());
+                }
             }
         }
     }

@@ -23,7 +23,7 @@ use splat_core::MethodId;
 use splat_core::catalogue::Param;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::raster::RasterMethod;
-use splat_core::trace::{DEFAULT_K, Method, TraceScene};
+use splat_core::trace::{DEFAULT_K, MAX_HITS, Method, TraceScene};
 use std::time::{Duration, Instant};
 
 /// WGSL of the ray-tracing kernel (entry point `main`) and of the path tracer that calls its
@@ -89,13 +89,14 @@ impl TryFrom<&Method> for MethodParams {
         GpuTracer::supports(method)?;
         let (id, p) = method.identity();
         let read = |param, value: u32| if id.reads(param) { value } else { 1 };
+        let (m, n) = kernel_traversals(read(Param::M, p.m), read(Param::N, p.n));
         let params = MethodParams {
             id,
             k: read(Param::K, p.k as u32),
             max_passes: read(Param::MaxPasses, p.max_passes),
             min_transmittance: if id.reads(Param::MinTransmittance) { p.min_transmittance } else { 0.0 },
-            n: read(Param::N, p.n),
-            m: read(Param::M, p.m),
+            n,
+            m,
             // The kernel keeps the ray's state between dispatches for these; a method not
             // listed runs whole frames (on lavapipe, one past the loop budget is refused).
             by_pass: matches!(
@@ -106,6 +107,19 @@ impl TryFrom<&Method> for MethodParams {
         let exact = MethodParams { k: DEFAULT_K as u32, max_passes: u32::MAX, ..params };
         Ok(if id == MethodId::Exact { exact } else { params })
     }
+}
+
+/// `stochastic-n`'s m traversals of n samples as the kernel runs them: a traversal holds at
+/// most [`MAX_HITS`] slots, so n beyond runs as traversals of the largest divisor c of n that
+/// fits, (m·n/c, c). Slot j·n + i is the same slot in either grouping and each slot's closest
+/// accepted hit does not depend on which traversal finds it, so the image is the same; only
+/// the traversals' cost differs (Sun et al. Table 5's 4 × 256 runs as 16 × 64 on the GPU).
+fn kernel_traversals(m: u32, n: u32) -> (u32, u32) {
+    if n as usize <= MAX_HITS {
+        return (m, n);
+    }
+    let c = (1..=MAX_HITS as u32).rev().find(|c| n % c == 0).unwrap_or(1);
+    (m * (n / c), c)
 }
 
 /// The compiled ray-tracing kernel and its bind group layout.
@@ -779,5 +793,10 @@ mod tests {
         }
         let opaque = Method::Opaque;
         assert!(MethodParams::try_from(&opaque).is_err(), "the catalogue has no GPU kernel for opaque");
+        // More samples than a traversal of the kernel holds: traversals of a divisor of n.
+        for ((m, n), kernel) in [((4, 256), (16, 64)), ((1, 100), (2, 50)), ((2, 67), (134, 1)), ((8, 64), (8, 64))] {
+            let p = MethodParams::try_from(&Method::StochasticN { m, n }).unwrap();
+            assert_eq!((p.m, p.n), kernel, "{m} × {n}");
+        }
     }
 }

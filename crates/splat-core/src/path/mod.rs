@@ -419,7 +419,7 @@ impl<'a> PathTracer<'a> {
                 None => 1.0,
             },
             GaussianEstimator::StochasticN { n } => {
-                let best = trace.first_accepted_n(seg, &decide, decision(bounce, 0), n as usize);
+                let best = trace.first_accepted_n::<MAX_HITS>(seg, &decide, decision(bounce, 0), n as usize);
                 let mut empty = 0;
                 for hit in &best[..n as usize] {
                     if hit.is_hit() {

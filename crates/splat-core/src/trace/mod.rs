@@ -38,7 +38,9 @@ mod stochastic;
 
 pub(crate) use kbuffer::{Candidate, KBuf};
 
-pub use crate::catalogue::{DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_HITS, Method};
+pub use crate::catalogue::{
+    DEFAULT_K, DEFAULT_MAX_PASSES, DEFAULT_MIN_TRANSMITTANCE, MAX_HITS, MAX_SAMPLES_PER_TRAVERSAL, Method,
+};
 // The sorted shadow pass keeps its hits in a k-buffer.
 const _: () = assert!(crate::lighting::MAX_SHADOW_K <= MAX_HITS);
 

@@ -2,7 +2,7 @@
 //! roulette on alpha, the closest accepted hit shaded once) and its N-samples-per-traversal
 //! extension (§3.5). The GPU twin is `shaders/stochastic.wgsl`.
 
-use super::{Candidate, MAX_HITS, Segment, TraceScene};
+use super::{Candidate, MAX_HITS, MAX_SAMPLES_PER_TRAVERSAL, Segment, TraceScene};
 use crate::frame::{Decide, Sample, depth_before};
 use crate::hit::Ray;
 use glam::{DVec3, Vec3};
@@ -53,11 +53,23 @@ impl TraceScene<'_> {
     /// §3.5: `n` independent instantiations of Algorithm 1 in one traversal, slots
     /// `first_slot..first_slot + n`; the traversal is clipped at the farthest slot's hit.
     pub(super) fn stochastic_n<D: Decide>(&self, seg: &Segment<D>, n: usize, first_slot: u32) -> Sample {
-        let best = self.first_accepted_n(&seg.ray, &seg.decide, first_slot, n);
+        if n <= MAX_HITS {
+            let best = self.first_accepted_n::<MAX_HITS>(&seg.ray, &seg.decide, first_slot, n);
+            self.shade_slots(seg, &best[..n], first_slot)
+        } else {
+            let best = self.first_accepted_n::<MAX_SAMPLES_PER_TRAVERSAL>(&seg.ray, &seg.decide, first_slot, n);
+            self.shade_slots(seg, &best[..n], first_slot)
+        }
+    }
+
+    /// Each slot's closest accepted hit (`best[i]` of slot `first_slot + i`) shaded, or what
+    /// lies behind where none was; their mean, with the first slot's depth, normal and pick.
+    fn shade_slots<D: Decide>(&self, seg: &Segment<D>, best: &[Candidate], first_slot: u32) -> Sample {
+        let n = best.len();
         let mut color = DVec3::ZERO;
         let mut alpha = 0.0;
         let mut first = self.background_sample();
-        for (slot, b) in (first_slot..).zip(&best[..n]) {
+        for (slot, b) in (first_slot..).zip(best) {
             let s = if b.is_hit() { self.opaque_sample(b.leaf, b.t, seg, slot) } else { self.behind(seg) };
             color += s.color;
             alpha += s.alpha;
@@ -68,19 +80,20 @@ impl TraceScene<'_> {
         Sample { color: color / n as f64, alpha: alpha / n as f64, ..first }
     }
 
-    /// The traversal of §3.5: for each slot of `first_slot..first_slot + n`, the closest hit of
-    /// `ray` accepted in that slot ([`Candidate::EMPTY`] where none is); the traversal is clipped at
-    /// the farthest slot's hit.
-    pub(crate) fn first_accepted_n(
+    /// The traversal of §3.5: for each slot of `first_slot..first_slot + n` (n ≤ `N`, the
+    /// slots the stack holds), the closest hit of `ray` accepted in that slot
+    /// ([`Candidate::EMPTY`] where none is); the traversal is clipped at the farthest slot's hit.
+    pub(crate) fn first_accepted_n<const N: usize>(
         &self,
         ray: &Ray,
         decide: &impl Decide,
         first_slot: u32,
         n: usize,
-    ) -> [Candidate; MAX_HITS] {
+    ) -> [Candidate; N] {
+        assert!(n <= N, "{n} samples in a traversal of {N} slots");
         let early = !decide.needs_position();
-        let mut best = [Candidate::EMPTY; MAX_HITS];
-        let mut u = [0.0f32; MAX_HITS];
+        let mut best = [Candidate::EMPTY; N];
+        let mut u = [0.0f32; N];
         let mut t_max = ray.t_max;
         let draw = decide.slot_draws(first_slot, n);
         self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
