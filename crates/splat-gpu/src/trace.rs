@@ -118,7 +118,7 @@ fn kernel_traversals(m: u32, n: u32) -> (u32, u32) {
     if n as usize <= MAX_HITS {
         return (m, n);
     }
-    let c = (1..=MAX_HITS as u32).rev().find(|c| n % c == 0).unwrap_or(1);
+    let c = (1..=MAX_HITS as u32).rev().find(|&c| n.is_multiple_of(c)).unwrap_or(1);
     (m * (n / c), c)
 }
 
