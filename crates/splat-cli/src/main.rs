@@ -9,6 +9,7 @@ mod hint;
 mod hits;
 mod info;
 mod render;
+mod reproduce;
 mod stratify;
 mod ztest;
 
@@ -77,6 +78,9 @@ enum Command {
     /// The surface each hit distance convention picks (vk_gaussian_splatting Lighting §1.4.3):
     /// icosahedron, maximum density, centre and the rasterizer's billboard, side by side.
     HitDistance(Box<hits::HitDistanceArgs>),
+    /// The sources' tables and figures by name (`--list`), each regenerated through these
+    /// commands and written beside the published numbers (`--quick`: the demo scene, seconds).
+    Reproduce(reproduce::ReproduceArgs),
 }
 
 /// `n` and `noun`, plural unless `n` is 1: "1 view", "3 views".
@@ -118,6 +122,7 @@ fn main() -> ExitCode {
         }
         Command::Stratify(args) => stratify::run(args),
         Command::HitDistance(args) => hits::run(*args),
+        Command::Reproduce(args) => reproduce::run(args),
         Command::Compare(args) => compare::run(args),
         Command::View(args) => splat_view::run(&args),
         Command::Completions { shell } => {

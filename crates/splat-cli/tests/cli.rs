@@ -1647,3 +1647,40 @@ fn camera_vectors_may_start_with_a_minus() {
     let o = splat(&["render", "--eye", "--target", "0,0,0", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("--target"), "{}", stderr(&o));
 }
+
+/// `splat reproduce --quick` runs every experiment of the sources through the CLI's own commands
+/// on the demo scene and writes each report beside the published numbers; `--list` names them,
+/// an unknown name is refused with the list, and a full run without the capture says how to
+/// fetch it before any work.
+#[test]
+fn reproduce_runs_every_experiment_of_the_sources() {
+    let list = splat(&["reproduce", "--list"]);
+    assert!(list.status.success(), "{}", stderr(&list));
+    let names: Vec<String> = String::from_utf8_lossy(&list.stdout)
+        .lines()
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .collect();
+    for expected in
+        ["sun-tables-1-3", "sun-tables-4-5", "sun-figure-3", "sun-figure-6", "lk-table-1", "vk-hit-distance"]
+    {
+        assert!(names.iter().any(|n| n == expected), "{expected} missing from {names:?}");
+    }
+    let out = scratch("reproduction");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = splat(&["reproduce", "--quick", "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let index = std::fs::read_to_string(out.join("reproduction.md")).unwrap();
+    for name in &names {
+        assert!(index.contains(&format!("[{name}]({name}.md)")), "{name} missing from the index:\n{index}");
+        let report = std::fs::read_to_string(out.join(format!("{name}.md"))).unwrap();
+        for section in ["## Published", "## What differs", "## Here", "`splat "] {
+            assert!(report.contains(section), "{name}: no {section}:\n{report}");
+        }
+    }
+    let figure = std::fs::read_to_string(out.join("sun-figure-3.md")).unwrap();
+    assert!(figure.contains("PSNR") && figure.contains("![ours-center.png](sun-figure-3/ours-center.png)"), "{figure}");
+    let o = splat(&["reproduce", "table-9", "--quick", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("sun-tables-4-5"), "{}", stderr(&o));
+    let o = splat(&["reproduce", "--capture", "/nonexistent.splat", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("cargo xtask assets"), "{}", stderr(&o));
+}
