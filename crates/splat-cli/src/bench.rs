@@ -92,7 +92,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let build = Instant::now();
     let trace = TraceScene::new(&scene, settings)?;
     let build_s = build.elapsed().as_secs_f64();
-    let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
+    let pixels = f64::from(camera.width) * f64::from(camera.height);
     println!(
         "{} particles, BVH built in {build_s:.2} s ({} nodes), {}×{} at {} spp, {threads} threads\n",
         scene.particles.len(),
@@ -109,23 +109,27 @@ pub fn run(args: BenchArgs) -> Result<()> {
     for m in methods {
         let method = args.options.method(m)?;
         let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng(), ..Frames::default() };
+        let rendered = rendered_frames(&splat_core::Algorithm::Trace(method), &trace.shot(&camera), &frames);
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
             pool.install(|| render_frames(&trace, &camera, &method, &frames, &|_| {}))?;
-            best = best.min(start.elapsed().as_secs_f64());
+            best = best.min(start.elapsed().as_secs_f64() / rendered);
         }
         let base = *baseline.get_or_insert(best);
         let name = m.name();
-        let mrays = rays / best / 1e6;
-        println!(
-            "| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |",
-            1e3 * best / f64::from(args.spp),
-            mrays / threads as f64,
-            best / base
-        );
+        let mrays = pixels / best / 1e6;
+        println!("| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |", 1e3 * best, mrays / threads as f64, best / base);
     }
     Ok(())
+}
+
+/// The frames a render of `frames` of `algorithm` in `shot` draws: all of them where frames
+/// differ ([`splat_core::Algorithm::is_random`]), one otherwise; frame times and ray rates
+/// divide by it.
+fn rendered_frames(algorithm: &splat_core::Algorithm, shot: &splat_core::Shot, frames: &Frames) -> f64 {
+    let random = algorithm.is_random(shot.lighting, !shot.meshes.is_empty(), &shot.settings.sampling);
+    if random { f64::from(frames.count) } else { 1.0 }
 }
 
 /// The cost of lighting: each method's frame unlit, lit without shadows and lit with each
@@ -167,14 +171,15 @@ fn run_lighting(args: &BenchArgs) -> Result<()> {
         let mut cells = Vec::new();
         let mut unlit = None;
         for trace in &traces {
+            let rendered = rendered_frames(&splat_core::Algorithm::Trace(method), &trace.shot(camera), &frames);
             let mut best = f64::INFINITY;
             for _ in 0..args.repeat.max(1) {
                 let start = Instant::now();
                 pool.install(|| render_frames(trace, camera, &method, &frames, &|_| {}))?;
-                best = best.min(start.elapsed().as_secs_f64());
+                best = best.min(start.elapsed().as_secs_f64() / rendered);
             }
             let base = *unlit.get_or_insert(best);
-            cells.push(format!("{:.1} ({:.2}×)", 1e3 * best / f64::from(args.spp), best / base));
+            cells.push(format!("{:.1} ({:.2}×)", 1e3 * best, best / base));
         }
         println!("| {} | {} |", m.name(), cells.join(" | "));
     }
@@ -220,14 +225,15 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
     let frames = Frames { count: args.spp, seed: 1, ..Frames::default() };
     let mut baseline = None;
     for (pipeline, name, algorithm) in rows {
+        let rendered = rendered_frames(&algorithm, &staged.shot(), &frames);
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
             pool.install(|| algorithm.render_world(&staged.shot(), &frames, &|_| {}))?;
-            best = best.min(start.elapsed().as_secs_f64());
+            best = best.min(start.elapsed().as_secs_f64() / rendered);
         }
         let base = *baseline.get_or_insert(best);
-        println!("| {pipeline} | {name} | {:.1} | {:.2}× |", 1e3 * best / f64::from(args.spp), best / base);
+        println!("| {pipeline} | {name} | {:.1} | {:.2}× |", 1e3 * best, best / base);
     }
     Ok(())
 }
@@ -252,16 +258,17 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     println!("|---|---:|---:|---:|");
     let mut methods = vec![MethodId::Stochastic];
     methods.extend(args.methods.iter().copied().filter(|&m| m != MethodId::Stochastic && m != MethodId::Opaque));
-    let rays = f64::from(camera.width) * f64::from(camera.height) * f64::from(args.spp);
+    let pixels = f64::from(camera.width) * f64::from(camera.height);
     let mut baseline = None;
     for m in methods {
         let method = args.options.method(m)?;
         let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng(), ..Frames::default() };
+        let rendered = rendered_frames(&splat_core::Algorithm::Trace(method), &tracer.trace().shot(&camera), &frames);
         let name = m.name();
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             match tracer.render(&camera, &method, &frames) {
-                Ok((_, stats)) => best = best.min(stats.gpu_time.as_secs_f64()),
+                Ok((_, stats)) => best = best.min(stats.gpu_time.as_secs_f64() / rendered),
                 Err(e) => {
                     println!("| {name} | refused: {e} | | |");
                     break;
@@ -270,12 +277,7 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         }
         if best.is_finite() {
             let base = *baseline.get_or_insert(best);
-            println!(
-                "| {name} | {:.1} | {:.3} | {:.2}× |",
-                1e3 * best / f64::from(args.spp),
-                rays / best / 1e6,
-                best / base
-            );
+            println!("| {name} | {:.1} | {:.3} | {:.2}× |", 1e3 * best, pixels / best / 1e6, best / base);
         }
     }
     Ok(())
@@ -533,4 +535,47 @@ fn run_mn_sweep(args: &BenchArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat_core::Algorithm;
+    use splat_core::lighting::{Light, LightKind, Lighting, Material, Shadows, SplatSet};
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings};
+    use splat_core::trace::Method;
+
+    /// Frame times divide by the frames a render draws: one for a deterministic method (the
+    /// opaque baseline, exact, sorted splatting), every frame for a stochastic one or where the
+    /// lighting draws (stochastic shadows), so that an N-spp run compares frames with frames.
+    #[test]
+    fn frame_times_divide_by_the_frames_drawn() {
+        let (scene, camera) = splat_core::scenes::layers();
+        let settings = splat_core::RenderSettings::default();
+        let frames = Frames { count: 8, ..Frames::default() };
+        let trace = TraceScene::new(&scene, settings).unwrap();
+        let sorted = Algorithm::Raster(RasterMethod::Sorted { blend: Blend::Under }, RasterSettings::default());
+        for (algorithm, expected) in [
+            (Algorithm::Trace(Method::Opaque), 1.0),
+            (Algorithm::Trace(Method::Exact), 1.0),
+            (Algorithm::Trace(Method::Stochastic), 8.0),
+            (sorted, 1.0),
+        ] {
+            assert_eq!(rendered_frames(&algorithm, &trace.shot(&camera), &frames), expected, "{algorithm:?}");
+        }
+        // Diffuse splats under a directional light, shadowed by stochastic shadow rays.
+        let shadowed = Lighting {
+            sets: vec![SplatSet { first: 0, material: Material::DIFFUSE }],
+            lights: vec![Light {
+                kind: LightKind::Directional { direction: glam::Vec3::new(0.0, -1.0, -1.0).normalize() },
+                color: glam::Vec3::ONE,
+                intensity: 1.0,
+                radius: 0.0,
+            }],
+            shadows: Shadows::Stochastic,
+            ..Lighting::default()
+        };
+        let lit = TraceScene::new(&scene, settings).unwrap().with_lighting(&shadowed).unwrap();
+        assert_eq!(rendered_frames(&Algorithm::Trace(Method::Exact), &lit.shot(&camera), &frames), 8.0);
+    }
 }
