@@ -91,6 +91,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let threads = pool.current_num_threads();
     let build = Instant::now();
     let trace = TraceScene::new(&scene, settings)?;
+    // The 4-wide collapse the CPU walks is built on first use: here, as part of the build, not
+    // inside the first method's timed frame.
+    pool.install(|| trace.wide_bvh());
     let build_s = build.elapsed().as_secs_f64();
     let pixels = f64::from(camera.width) * f64::from(camera.height);
     println!(

@@ -6,7 +6,7 @@ use crate::args::{BackendArg, MethodOptions, SceneArgs, method_parser, progress_
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::raster::{Blend, RasterMethod, Rasterizer, render_raster};
-use splat_core::stats::{log_log_slope, rmse};
+use splat_core::stats::{log_log_fit, rmse};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Algorithm, Frames, MethodId};
 use std::fmt::Write as _;
@@ -206,7 +206,8 @@ fn to_csv(rows: &[Row]) -> String {
     s
 }
 
-/// A table: one row per spp, RMSE and time per spp for each method, and the log–log slopes.
+/// A table: one row per spp, RMSE and time per spp for each method, and the log–log slopes
+/// with the standard error of the fit.
 fn to_markdown(rows: &[Row], methods: &[&str]) -> String {
     let mut s = String::from("| spp |");
     for m in methods {
@@ -231,7 +232,8 @@ fn to_markdown(rows: &[Row], methods: &[&str]) -> String {
     for m in methods {
         let (x, y): (Vec<f64>, Vec<f64>) =
             rows.iter().filter(|r| r.method == *m).map(|r| (f64::from(r.spp), r.rmse.max(1e-12))).unzip();
-        let _ = write!(s, " {:.3} | |", log_log_slope(&x, &y));
+        let (slope, stderr) = log_log_fit(&x, &y);
+        let _ = write!(s, " {slope:.3} ± {stderr:.3} | |");
     }
     s + "\n"
 }

@@ -151,12 +151,22 @@ pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
 
 /// Least-squares slope of log(y) against log(x).
 pub fn log_log_slope(x: &[f64], y: &[f64]) -> f64 {
+    log_log_fit(x, y).0
+}
+
+/// Least-squares slope b of log(y) = a + b log(x) and its standard error
+/// √(Σ rᵢ² / (n − 2) / Σ (log xᵢ − mean)²) from the residuals rᵢ (NaN with fewer than three
+/// points): how well the points fit a line, not the sampling error of each point.
+pub fn log_log_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
     let (lx, ly): (Vec<f64>, Vec<f64>) = x.iter().zip(y).map(|(a, b)| (a.ln(), b.ln())).unzip();
     let n = lx.len() as f64;
     let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
     let cov: f64 = lx.iter().zip(&ly).map(|(a, b)| (a - mx) * (b - my)).sum();
     let var: f64 = lx.iter().map(|a| (a - mx).powi(2)).sum();
-    cov / var
+    let slope = cov / var;
+    let residuals: f64 = lx.iter().zip(&ly).map(|(a, b)| (b - my - slope * (a - mx)).powi(2)).sum();
+    let stderr = if lx.len() > 2 { (residuals / (n - 2.0) / var).sqrt() } else { f64::NAN };
+    (slope, stderr)
 }
 
 #[cfg(test)]
@@ -179,6 +189,16 @@ mod tests {
         let x = [1.0, 2.0, 4.0, 8.0];
         let y: Vec<f64> = x.iter().map(|v: &f64| 3.0 * v.powf(-0.5)).collect();
         assert!((log_log_slope(&x, &y) + 0.5).abs() < 1e-12);
+        // Points off the line: the slope's standard error by hand (residuals ±0.1 in ln y).
+        let x = [1.0f64, 2.0, 4.0, 8.0];
+        let y: Vec<f64> =
+            x.iter().zip([0.1, -0.1, -0.1, 0.1]).map(|(v, r)| (3.0 * v.powf(-0.5)).ln() + r).map(f64::exp).collect();
+        let (slope, se) = log_log_fit(&x, &y);
+        // ln x = 0, l, 2l, 3l (l = ln 2): Σ (ln x − 1.5 l)² = 5 l²; the fitted residuals are ±0.1
+        // (the perturbation is orthogonal to a line), so se = √(0.04 / 2 / (5 l²)).
+        let l = std::f64::consts::LN_2;
+        assert!((slope + 0.5).abs() < 1e-12, "{slope}");
+        assert!((se - (0.04f64 / 2.0 / (5.0 * l * l)).sqrt()).abs() < 1e-12, "{se}");
     }
 
     /// Simulated Bernoulli estimators on 40 × 30 pixels at F = 256 (docs/architecture.md): the
