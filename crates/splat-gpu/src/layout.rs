@@ -289,7 +289,7 @@ pub struct Params {
     pub accumulation: u32,
     /// Per-particle normal (`NORMAL_*` in `lighting.wgsl`).
     pub normal_mode: u32,
-    /// In [`MODE_HYBRID`], [`FIRST_HIT_ACCEPTED`] where the tile rasterizer wrote
+    /// In `MODE_HYBRID`, `FIRST_HIT_ACCEPTED` where the tile rasterizer wrote
     /// StochasticSplats' first hit (else it wrote sorted splatting's).
     pub first_hit: u32,
     /// Padding.
