@@ -1660,9 +1660,15 @@ fn reproduce_runs_every_experiment_of_the_sources() {
         .lines()
         .filter_map(|l| l.split_whitespace().next().map(str::to_string))
         .collect();
-    for expected in
-        ["sun-tables-1-3", "sun-tables-4-5", "sun-figure-3", "sun-figure-6", "lk-table-1", "vk-hit-distance"]
-    {
+    for expected in [
+        "sun-tables-1-3",
+        "sun-tables-4-5",
+        "sun-figure-3",
+        "sun-figure-6",
+        "sun-figure-7",
+        "lk-table-1",
+        "vk-hit-distance",
+    ] {
         assert!(names.iter().any(|n| n == expected), "{expected} missing from {names:?}");
     }
     let out = scratch("reproduction");
