@@ -14,7 +14,6 @@ fn flag(remedy: Remedy) -> &'static str {
         Remedy::StandardPattern => "--sample-pattern standard",
         Remedy::NoEarlyStop => "no --early-stop",
         Remedy::ExactMethod => "--method exact",
-        Remedy::SortedFirstHit => "--method raster-sorted",
     }
 }
 

@@ -325,9 +325,36 @@ fn tile_rop(
         }
         workgroupBarrier();
     }
-    if (inside && rop_chunk.x + 1u < rop_chunk.z) {
+    // The state goes on to the next chunk, or, for the hybrid's first hit, to `rop_first_hit`.
+    if (inside && (rop_chunk.x + 1u < rop_chunk.z || params.first_hit != 0u)) {
         store_rop(&rop, at, spp);
     } else if (inside) {
         textureStore(rop_target, vec2<i32>(px), resolve_rop(&rop, spp, corner));
     }
+}
+
+// The hybrid pipeline's first hit from the raster operations' one sample (raster/mod.rs
+// `resolve` of Enderton or stratified in `Rasterizer::hybrid`): the written splat, opaque, with
+// its unlit colour, T = 0, its normal along the pixel-centre ray, its depth and id; T = 1 where a
+// mesh or nothing holds the sample (the ray tracer continues to the mesh or the background).
+// The tile pass's first-hit buffers (depth_pick.wgsl), filled as FIRST_HIT_ACCEPTED fills them.
+@compute @workgroup_size(8, 8, 1)
+fn rop_first_hit(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) {
+        return;
+    }
+    let index = gid.y * params.size.x + gid.x;
+    let at = index * rop_words(1u);
+    let t = bitcast<f32>(rop_state[at]);
+    let id = rop_state[at + 1u];
+    if (id == NONE || id == MESH) {
+        out_color[index] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        out_normal[index] = vec4<f32>(0.0);
+        out_pick[index] = vec2<u32>(bitcast<u32>(-1.0), NONE);
+        return;
+    }
+    let dir = pixel_dir(vec2<f32>(gid.xy) + vec2<f32>(0.5));
+    out_color[index] = vec4<f32>(splats[id].color, 0.0);
+    out_normal[index] = vec4<f32>(splat_normal(id, camera_origin(), dir), 0.0);
+    out_pick[index] = vec2<u32>(bitcast<u32>(t), id);
 }

@@ -25,15 +25,6 @@ pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<()
     match algorithm {
         Algorithm::Oracle => Err(oracle_refused()),
         Algorithm::Hybrid(method, raster, secondary) => {
-            if !matches!(method, RasterMethod::Sorted { .. } | RasterMethod::StochasticSplat) {
-                return Err(GpuError::refused(
-                    format!(
-                        "the GPU hybrid rasterizes its first hit with raster-sorted or stochastic-splat, not {}",
-                        method.id().name()
-                    ),
-                    &[Remedy::SortedFirstHit, Remedy::Cpu],
-                ));
-            }
             crate::trace::supports_hybrid_lighting(shot.lighting, method)?;
             GpuRasterizer::supports(method, raster)?;
             GpuRasterizer::supports_tile_pass(raster)?;

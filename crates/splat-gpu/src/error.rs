@@ -19,8 +19,6 @@ pub enum Remedy {
     NoEarlyStop,
     /// The exact ray-tracing method, whose image equals the brute-force oracle's.
     ExactMethod,
-    /// Sorted splatting (or StochasticSplats) for the hybrid's first hit.
-    SortedFirstHit,
 }
 
 impl Remedy {
@@ -32,7 +30,6 @@ impl Remedy {
             Remedy::StandardPattern => "the standard sample pattern",
             Remedy::NoEarlyStop => "rasterization without early stop",
             Remedy::ExactMethod => "the exact method (the same image)",
-            Remedy::SortedFirstHit => "raster-sorted or stochastic-splat for the first hit",
         }
     }
 }

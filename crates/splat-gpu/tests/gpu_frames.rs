@@ -585,7 +585,8 @@ fn hybrid_pixels_apart(cpu: &RenderOutput, gpu: &RenderOutput, flip: impl Fn(usi
 /// [`hybrid_frame_equals_the_cpu_frame`], lit with exact shadows:
 ///
 /// - StochasticSplats' closest accepted fragment as the first hit, three frames (each decided
-///   again), in both looks (its one opaque fragment is lit as the pick either way);
+///   again), in both looks (its one opaque fragment is lit as the pick either way), and the
+///   sample Enderton's and stratified raster operations write;
 /// - sorted splatting and StochasticSplats through a box pixel filter and a thin lens, three
 ///   frames, each rasterized through its own pinhole camera.
 ///
@@ -650,6 +651,9 @@ fn the_hybrid_takes_stochastic_first_hits_and_a_camera_drawn_per_frame() {
     let sorted_still = render(sorted, Look::Surface, still);
     let accepted_still = render(accepted, Look::Surface, still);
     render(accepted, Look::Volumetric, still);
+    // Enderton's and Laine–Karras's raster operations at one sample write one splat too.
+    render(RasterMethod::Enderton, Look::Surface, still);
+    render(RasterMethod::Stratified { scramble: true }, Look::Surface, still);
     let sorted_moving = render(sorted, Look::Surface, moving);
     render(accepted, Look::Surface, moving);
     let first_hits = max_difference(sorted_still.mean.data(), accepted_still.mean.data());

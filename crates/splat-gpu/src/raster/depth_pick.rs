@@ -31,6 +31,21 @@ impl DepthPick {
     }
 }
 
+/// The first hits of the per-pixel (colour with T in w, (depth bits, pick), normal) a first-hit
+/// pass read back.
+fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32]) -> Vec<GpuFirstHit> {
+    (0..pick.len() / 2)
+        .map(|i| GpuFirstHit {
+            radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
+            transmittance: color[4 * i + 3],
+            normal: [normal[4 * i], normal[4 * i + 1], normal[4 * i + 2]],
+            depth: f32::from_bits(pick[2 * i]),
+            picked: pick[2 * i + 1],
+            ..GpuFirstHit::default()
+        })
+        .collect()
+}
+
 /// What one tile pass reads back: per pixel RGBA colour, (depth bits, pick) and normal, and
 /// the (tile, splat) pair count.
 struct TilePass {
@@ -84,7 +99,9 @@ impl GpuRasterizer<'_> {
     /// - StochasticSplats (the stochastic transparency page's hybrid case): the closest fragment
     ///   accepted in frame `frame_key` (u < α, with every u drawn as u − `u_shift`, as
     ///   [`splat_core::Frames::u_shift`]), written opaque: its unlit colour, T = 0, its normal,
-    ///   depth and id; T = 1 where none is accepted.
+    ///   depth and id; T = 1 where none is accepted;
+    /// - Enderton and stratified: the splat their raster operations write to the pixel's one
+    ///   sample in that frame, the same way.
     ///
     /// The ray tracer then lights the pick with shadows and continues from it at the mesh
     /// ([`crate::GpuTracer::render_hybrid`]).
@@ -94,30 +111,18 @@ impl GpuRasterizer<'_> {
         frame_key: u32,
         u_shift: f32,
     ) -> Result<Vec<GpuFirstHit>, GpuError> {
+        Self::supports_tile_pass(&self.raster)?;
         let first_hit = match method {
             RasterMethod::Sorted { .. } => FIRST_HIT_SORTED,
             RasterMethod::StochasticSplat => FIRST_HIT_ACCEPTED,
-            _ => {
-                let reason = format!(
-                    "the GPU hybrid's first hit is raster-sorted or stochastic-splat, not {}",
-                    method.id().name()
-                );
-                return Err(GpuError::refused(reason, &[Remedy::SortedFirstHit, Remedy::Cpu]));
+            RasterMethod::Enderton | RasterMethod::Stratified { .. } => {
+                let (color, pick, normal) = self.rop_first_hits(method, frame_key, u_shift)?;
+                return Ok(first_hits_of(&color, &pick, &normal));
             }
         };
         let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, ..self.params };
-        Self::supports_tile_pass(&self.raster)?;
         let TilePass { color, pick, normal, .. } = self.tile_pass(params)?;
-        Ok((0..pick.len() / 2)
-            .map(|i| GpuFirstHit {
-                radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
-                transmittance: color[4 * i + 3],
-                normal: [normal[4 * i], normal[4 * i + 1], normal[4 * i + 2]],
-                depth: f32::from_bits(pick[2 * i]),
-                picked: pick[2 * i + 1],
-                ..GpuFirstHit::default()
-            })
-            .collect())
+        Ok(first_hits_of(&color, &pick, &normal))
     }
 
     /// One tile pass under `params`: per pixel RGBA colour, (depth bits, pick) and normal, and

@@ -409,7 +409,7 @@ impl<'a> GpuRasterizer<'a> {
         let draw_group = self.draw_group(&slots.buffer);
         let fold_group = self.fold_group(&slots.buffer, &targets.color_view, &mean, &m2, target_samples > 1);
         let fold = if target_samples > 1 { &self.pipes.fold_msaa } else { &self.pipes.fold };
-        let rop = draw.is_rop().then(|| rop::RopPass::new(self, &targets)).transpose()?;
+        let rop = draw.is_rop().then(|| rop::RopPass::new(self, &targets, false)).transpose()?;
         let mut gpu_time = Duration::ZERO;
         for (batch_index, batch) in keys.chunks(FRAMES_PER_SUBMIT as usize).enumerate() {
             let first = batch_index as u32 * FRAMES_PER_SUBMIT;

@@ -13,6 +13,8 @@ pub struct RasterPipelines {
     pub(super) shuffle_keys: wgpu::ComputePipeline,
     /// The per-pixel raster operations of Enderton and Laine–Karras (centre, plane depth).
     pub(super) tile_rop: [wgpu::ComputePipeline; 2],
+    /// Their written sample as the hybrid's first hit.
+    pub(super) rop_first_hit: wgpu::ComputePipeline,
     pub(super) mesh_prepass: wgpu::ComputePipeline,
     pub(super) splat_module: wgpu::ShaderModule,
     /// The same with the max-density-plane entry point, where the device shades per sample.
@@ -147,6 +149,7 @@ impl RasterPipelines {
             tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
             shuffle_keys: compute_pipeline(device, &raster, None, "shuffle_keys"),
             tile_rop: [rop(0.0), rop(1.0)],
+            rop_first_hit: compute_pipeline(device, &raster, None, "rop_first_hit"),
             mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
             fold: compute_pipeline(device, &fold, Some(&pipeline_layout("fold", &fold_layout)), "fold"),
             fold_msaa: compute_pipeline(

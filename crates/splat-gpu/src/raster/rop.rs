@@ -27,6 +27,8 @@ pub(super) struct RopPass {
     chunk: wgpu::Buffer,
     chunks: wgpu::Buffer,
     chunk_count: u32,
+    /// Each pixel's state between chunks (2 S + 2 words), kept whole for the hybrid's first hit.
+    state: wgpu::Buffer,
 }
 
 /// Most loop iterations one fragment of the raster operations can cost at S samples (its
@@ -38,8 +40,9 @@ fn iterations_per_fragment(samples: u32) -> u32 {
 
 impl RopPass {
     /// Allocate the shuffled order, the pair lists (as many pairs as the depth order makes) and
-    /// the groups binding them, `targets.color_view` as the frame's target.
-    pub(super) fn new(r: &GpuRasterizer, targets: &RasterTargets) -> Result<Self, GpuError> {
+    /// the groups binding them, `targets.color_view` as the frame's target; with `keep_state`
+    /// every pixel's final state too (the hybrid's first hit reads it).
+    pub(super) fn new(r: &GpuRasterizer, targets: &RasterTargets, keep_state: bool) -> Result<Self, GpuError> {
         let (ctx, pipes, n) = (r.ctx, r.pipes, r.scene.count);
         let pair_count = r.pair_count()?;
         let (chunk_len, chunk_count) = r.raster_operation_chunks()?;
@@ -56,7 +59,7 @@ impl RopPass {
             mapped_at_creation: false,
         });
         let pixels = u64::from(r.camera.width * r.camera.height);
-        let words = if chunk_count > 1 { pixels * u64::from(2 * r.raster.samples + 2) } else { 1 };
+        let words = if chunk_count > 1 || keep_state { pixels * u64::from(2 * r.raster.samples + 2) } else { 1 };
         let state = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rop state"),
             size: words * 4,
@@ -97,7 +100,7 @@ impl RopPass {
                 wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
             ],
         });
-        Ok(Self { shuffle, lists, frame, keys_group, rop_group, chunk, chunks, chunk_count })
+        Ok(Self { shuffle, lists, frame, keys_group, rop_group, chunk, chunks, chunk_count, state })
     }
 
     /// Encode frame `slot` of `slots`: its parameters into place, the shuffled order, the tile
@@ -137,6 +140,66 @@ impl RopPass {
 }
 
 impl GpuRasterizer<'_> {
+    /// The hybrid's first hit of every pixel from Enderton's or stratified raster operations at
+    /// one sample, in the frame of key `frame_key` (decisions shifted by `u_shift`): one ROP frame
+    /// that keeps its state, then `rop_first_hit` (rop.wgsl) turns each pixel's written sample
+    /// into the tile pass's first-hit buffers: per pixel (colour, T), (depth bits, pick), normal.
+    pub(super) fn rop_first_hits(
+        &self,
+        method: &RasterMethod,
+        frame_key: u32,
+        u_shift: f32,
+    ) -> Result<(Vec<f32>, Vec<u32>, Vec<f32>), GpuError> {
+        let draw = self.check_scene(method)?;
+        let params = RasterParams { mode: draw.mode(), first_hit: crate::layout::FIRST_HIT_ACCEPTED, ..self.params };
+        self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+        let (ctx, (w, h)) = (self.ctx, (self.camera.width, self.camera.height));
+        let targets = RasterTargets::new(ctx, self.pipes, w, h, draw, 1);
+        let rop = RopPass::new(self, &targets, true)?;
+        let slots = FrameSlots::new(ctx);
+        slots.write(ctx, &[frame_key], 0, &Frames { u_shift, ..Frames::default() });
+        let pixels = (w * h) as usize;
+        let buffer = |label, bytes: usize| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let (color, pick, normal) = (
+            buffer("rop first hit colour", pixels * 16),
+            buffer("rop first hit", pixels * 8),
+            buffer("rop first hit normal", pixels * 16),
+        );
+        let group = bind(
+            ctx,
+            &self.pipes.rop_first_hit,
+            &[
+                (0, &self.params_buffer),
+                (3, &self.splats),
+                (11, &color),
+                (12, &pick),
+                (15, &self.scene.canonical),
+                (16, &normal),
+                (22, &rop.state),
+            ],
+        );
+        let mut encoder = self.encoder("rop first hits");
+        rop.encode(self, &mut encoder, &slots, 0)?;
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("rop first hit"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipes.rop_first_hit);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        }
+        self.submit(encoder)?;
+        Ok((ctx.read_f32(&color, pixels * 4)?, ctx.read_u32(&pick, pixels * 2)?, ctx.read_f32(&normal, pixels * 4)?))
+    }
+
     /// The most splats any tile's list holds (the same in every draw order), counted from the
     /// projected rects.
     fn longest_tile_list(&self) -> Result<u32, GpuError> {
