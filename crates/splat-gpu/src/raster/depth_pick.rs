@@ -33,7 +33,7 @@ impl DepthPick {
 
 /// The first hits of the per-pixel (colour with T in w, (depth bits, pick), normal) a first-hit
 /// pass read back.
-fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32]) -> Vec<GpuFirstHit> {
+pub(super) fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32]) -> Vec<GpuFirstHit> {
     (0..pick.len() / 2)
         .map(|i| GpuFirstHit {
             radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
@@ -116,8 +116,7 @@ impl GpuRasterizer<'_> {
             RasterMethod::Sorted { .. } => FIRST_HIT_SORTED,
             RasterMethod::StochasticSplat => FIRST_HIT_ACCEPTED,
             RasterMethod::Enderton | RasterMethod::Stratified { .. } => {
-                let (color, pick, normal) = self.rop_first_hits(method, frame_key, u_shift)?;
-                return Ok(first_hits_of(&color, &pick, &normal));
+                return self.rop_first_hits(method, frame_key, u_shift);
             }
         };
         let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, ..self.params };

@@ -143,13 +143,13 @@ impl GpuRasterizer<'_> {
     /// The hybrid's first hit of every pixel from Enderton's or stratified raster operations at
     /// one sample, in the frame of key `frame_key` (decisions shifted by `u_shift`): one ROP frame
     /// that keeps its state, then `rop_first_hit` (rop.wgsl) turns each pixel's written sample
-    /// into the tile pass's first-hit buffers: per pixel (colour, T), (depth bits, pick), normal.
+    /// into the tile pass's first-hit buffers.
     pub(super) fn rop_first_hits(
         &self,
         method: &RasterMethod,
         frame_key: u32,
         u_shift: f32,
-    ) -> Result<(Vec<f32>, Vec<u32>, Vec<f32>), GpuError> {
+    ) -> Result<Vec<crate::layout::GpuFirstHit>, GpuError> {
         let draw = self.check_scene(method)?;
         let params = RasterParams { mode: draw.mode(), first_hit: crate::layout::FIRST_HIT_ACCEPTED, ..self.params };
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
@@ -197,7 +197,9 @@ impl GpuRasterizer<'_> {
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
         self.submit(encoder)?;
-        Ok((ctx.read_f32(&color, pixels * 4)?, ctx.read_u32(&pick, pixels * 2)?, ctx.read_f32(&normal, pixels * 4)?))
+        let (color, pick, normal) =
+            (ctx.read_f32(&color, pixels * 4)?, ctx.read_u32(&pick, pixels * 2)?, ctx.read_f32(&normal, pixels * 4)?);
+        Ok(super::depth_pick::first_hits_of(&color, &pick, &normal))
     }
 
     /// The most splats any tile's list holds (the same in every draw order), counted from the
