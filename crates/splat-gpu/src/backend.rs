@@ -27,7 +27,7 @@ pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<()
         Algorithm::Hybrid(method, raster, secondary) => {
             crate::trace::supports_hybrid_lighting(shot.lighting, method)?;
             GpuRasterizer::supports(method, raster)?;
-            GpuRasterizer::supports_tile_pass(raster)?;
+            GpuRasterizer::supports_first_hits(raster)?;
             GpuTracer::supports(secondary)
         }
         Algorithm::Trace(method) => GpuTracer::supports(method),

@@ -264,8 +264,8 @@ type FrameFirstHits<'a> = dyn Fn(u32) -> Result<(Camera, wgpu::Buffer), GpuError
 enum FirstHits<'a> {
     /// One rasterization for every frame: sorted splatting through a still camera.
     Still(&'a wgpu::Buffer),
-    /// One rasterization per frame; `accepted` for StochasticSplats' closest accepted fragment
-    /// ([`layout::FIRST_HIT_ACCEPTED`]).
+    /// One rasterization per frame; `accepted` for a stochastic method's one written splat
+    /// ([`layout::FIRST_HIT_ACCEPTED`]), else sorted splatting's composite.
     PerFrame { hits: &'a FrameFirstHits<'a>, accepted: bool },
 }
 
@@ -335,14 +335,14 @@ impl<'a> GpuTracer<'a> {
 
     /// The hybrid pipeline (vk_gaussian_splatting Lighting §5; the twin of
     /// `splat_core::raster::Rasterizer::hybrid` at one sample per pixel): the first hit of
-    /// every pixel is rasterized by `first` (sorted splatting, or StochasticSplats, the
-    /// stochastic transparency page's own case) on the compute tile rasterizer of
-    /// `raster(camera)` (the same scene, meshes and lighting), and this tracer continues from
-    /// it: the pick lit with shadow rays, the mesh behind the splats shaded with shadows and
-    /// its mirror and glass bounces traced by `method`.
+    /// every pixel is rasterized by `first` (sorted splatting; StochasticSplats, the stochastic
+    /// transparency page's own case; Enderton or stratified) by `raster(camera)` (the same
+    /// scene, meshes and lighting; [`crate::GpuRasterizer::first_hits`]), and this tracer
+    /// continues from it: the pick lit with shadow rays, the mesh behind the splats shaded with
+    /// shadows and its mirror and glass bounces traced by `method`.
     ///
-    /// Sorted splatting through a still camera is rasterized once for every frame.
-    /// StochasticSplats decides again each frame, and a camera drawn per frame (a box pixel
+    /// Sorted splatting through a still camera is rasterized once for every frame. The
+    /// stochastic methods decide again each frame, and a camera drawn per frame (a box pixel
     /// filter or a thin lens, [`splat_core::camera_sampling`]) rasterizes frame f through its
     /// own pinhole camera, as the CPU's `render_raster_frames` does; the kernel folds each frame
     /// into the same running mean.

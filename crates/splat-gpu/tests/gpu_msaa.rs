@@ -62,23 +62,10 @@ struct Compared {
     worst: f32,
 }
 
-/// One frame (seed `seed`) of `method` at `raster` on both backends, the CPU's samples at
-/// `cpu_pattern`.
-fn compare_with(
-    ctx: &GpuContext,
-    scene: &Scene,
-    camera: &Camera,
-    method: &RasterMethod,
-    raster: RasterSettings,
-    cpu_pattern: SamplePattern,
-    seed: u32,
-) -> Compared {
-    compare_lit(ctx, scene, camera, method, raster, cpu_pattern, seed, &Lighting::default())
-}
-
-/// [`compare_with`] lit by `lighting`.
+/// One frame (seed `seed`) of `method` at `raster` lit by `lighting` on both backends, the
+/// CPU's samples at `cpu_pattern`.
 #[allow(clippy::too_many_arguments)]
-fn compare_lit(
+fn compare_with(
     ctx: &GpuContext,
     scene: &Scene,
     camera: &Camera,
@@ -116,7 +103,7 @@ fn compare(
     raster: RasterSettings,
     seed: u32,
 ) -> Compared {
-    compare_with(ctx, scene, camera, method, raster, raster.sample_pattern, seed)
+    compare_with(ctx, scene, camera, method, raster, raster.sample_pattern, seed, &Lighting::default())
 }
 
 /// One frame of every raster method at S = 4 standard samples equals the CPU frame pixel for
@@ -192,7 +179,7 @@ fn lit_frames_equal_the_cpu_at_every_sample_count() {
                 continue;
             }
             let c =
-                compare_lit(ctx, &scene, &camera, &method, standard(s, depth), SamplePattern::Standard, 3, &lighting);
+                compare_with(ctx, &scene, &camera, &method, standard(s, depth), SamplePattern::Standard, 3, &lighting);
             eprintln!(
                 "lit {method:?} {look:?} S = {s} {depth:?}: {} of {} written pixels differ by a near decision",
                 c.near, c.written
@@ -219,7 +206,7 @@ fn other_sample_positions_are_told_apart() {
     let (scene, camera) = fixture("cloud", 64, 48);
     for method in METHODS {
         let raster = RasterSettings { extent: SplatExtent::Sqrt8, ..standard(4, FragmentDepth::Center) };
-        let c = compare_with(ctx, &scene, &camera, &method, raster, SamplePattern::Hammersley, 3);
+        let c = compare_with(ctx, &scene, &camera, &method, raster, SamplePattern::Hammersley, 3, &Lighting::default());
         eprintln!("{method:?}: {} pixels differ from the CPU at Hammersley positions", c.bad.len() + c.near);
         assert!(c.bad.len() > 20, "{method:?}: only {} pixels differ", c.bad.len());
     }

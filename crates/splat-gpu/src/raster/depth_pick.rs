@@ -111,7 +111,7 @@ impl GpuRasterizer<'_> {
         frame_key: u32,
         u_shift: f32,
     ) -> Result<Vec<GpuFirstHit>, GpuError> {
-        Self::supports_tile_pass(&self.raster)?;
+        Self::supports_first_hits(&self.raster)?;
         let first_hit = match method {
             RasterMethod::Sorted { .. } => FIRST_HIT_SORTED,
             RasterMethod::StochasticSplat => FIRST_HIT_ACCEPTED,

@@ -451,11 +451,12 @@ impl<'a> GpuRasterizer<'a> {
         Ok(draw)
     }
 
-    /// Whether the GPU rasterizes `method` at `settings` in a scene with `meshes` or not. Lit, every method lights each sample along its own ray at any sample count:
-    /// sorted splatting in the tile pass (sample by sample), StochasticSplats shaded per sample
-    /// (where the device can), Enderton and stratified in the compute raster operations. The
-    /// mesh pre-pass casts one ray per pixel, through its centre, so meshes go with one sample
-    /// (and StochasticSplats' depth test against the mesh reads the centre depth).
+    /// Whether the GPU rasterizes `method` at `settings` in a scene with `meshes` or not. Lit,
+    /// every method lights each sample along its own ray at any sample count: sorted splatting
+    /// in the tile pass (sample by sample), StochasticSplats shaded per sample (where the device
+    /// can), Enderton and stratified in the compute raster operations. The mesh pre-pass casts
+    /// one ray per pixel, through its centre, so meshes go with one sample (and StochasticSplats'
+    /// depth test against the mesh reads the centre depth).
     pub fn supports_scene(method: &RasterMethod, settings: &RasterSettings, meshes: bool) -> Result<(), GpuError> {
         Self::scene_draw(method, settings, meshes).map(drop)
     }
@@ -528,10 +529,10 @@ impl<'a> GpuRasterizer<'a> {
         Ok(())
     }
 
-    /// Whether the tile rasterizer's first hits of the hybrid pipeline take `settings`: one
-    /// sample per pixel at centre depth (the ray-tracing kernel continues one camera ray per
+    /// Whether the hybrid pipeline's first hits ([`GpuRasterizer::first_hits`]) take `settings`:
+    /// one sample per pixel at centre depth (the ray-tracing kernel continues one camera ray per
     /// pixel; the CPU's hybrid continues each of S samples).
-    pub fn supports_tile_pass(settings: &RasterSettings) -> Result<(), GpuError> {
+    pub fn supports_first_hits(settings: &RasterSettings) -> Result<(), GpuError> {
         if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
             let reason = format!(
                 "the GPU hybrid continues one ray per pixel from its first hits, at the pixel centre and centre depth, not {} samples at {:?}",
