@@ -12,11 +12,20 @@
 @group(0) @binding(17) var<storage, read> behind: array<vec4<f32>>;
 @group(0) @binding(18) var<storage, read> behind_normal: array<vec4<f32>>;
 
-// StochasticSplats' decision for splat s at pixel px of frame params.frame_key: u < α, with u
-// drawn as splat.wgsl `accepted_splat` draws it (raster/mod.rs `stochastic_splat`, slot 0).
-fn accepted(s: Splat, px: vec2<u32>, alpha: f32) -> bool {
+// StochasticSplats' decision for splat s at sample k of pixel px in frame params.frame_key:
+// u < α, with u drawn as splat.wgsl `accepted_splat` draws it (raster/mod.rs
+// `stochastic_splat`, slot = sample k).
+fn accepted(s: Splat, px: vec2<u32>, alpha: f32, k: u32) -> bool {
     let pixel_key = xxhash32(vec3<u32>(px.x, px.y, params.frame_key));
-    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, 0u)))) - params.u_shift < alpha;
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, k)))) - params.u_shift < alpha;
+}
+
+// Entry `at` of the hybrid's first hits (splat_gpu::GpuFirstHit, sample k of pixel p at p S + k):
+// radiance and transmittance, normal, depth along the sample's ray (−1: none) and splat.
+fn write_first_hit(at: u32, radiance: vec3<f32>, transmittance: f32, n: vec3<f32>, t: f32, picked: u32) {
+    out_color[at] = vec4<f32>(radiance, transmittance);
+    out_normal[at] = vec4<f32>(n, 0.0);
+    out_pick[at] = vec2<u32>(bitcast<u32>(select(-1.0, t, picked != NONE)), picked);
 }
 
 // One workgroup per 16 × 16 tile, one invocation per pixel, walking the tile's splats in depth
@@ -51,26 +60,44 @@ fn tile_blend(
     var picked = NONE;
     var normal = vec3<f32>(0.0);
     var drawn = false;
-    // What lies behind (raster/mod.rs `Rasterizer::behind`): the background, or the pixel's
-    // mesh, which hides the fragments at or behind it (the depth test of the splat pass; meshes
-    // go with one sample).
-    var back = vec4<f32>(params.background.xyz, FAR_DEPTH);
-    if (inside && params.meshes == 1u) {
-        back = behind[px.y * params.size.x + px.x];
-    }
-    let mesh = back.w < FAR_DEPTH;
+    let index = px.y * params.size.x + px.x;
     // Every fragment lit in the volumetric look, but for StochasticSplats' first hit, which the
     // ray tracer lights as the pick in either look.
-    let volumetric = params.lit == 1u && params.look == LOOK_VOLUMETRIC && params.first_hit != FIRST_HIT_ACCEPTED;
-    // The means over the samples of the composite L_s and of the transmittance T_s.
+    let written = params.first_hit == FIRST_HIT_ACCEPTED;
+    let volumetric = params.lit == 1u && params.look == LOOK_VOLUMETRIC && !written;
+    let lit_surface = params.lit == 1u && params.look == LOOK_SURFACE;
+    // Sample 0's composite L_0 and transmittance T_0 (sorted splatting's first hit).
+    var l0 = vec3<f32>(0.0);
+    var t0 = 1.0;
+    // The means over the samples of the composite L_s, of the transmittance T_s, of what lies
+    // behind B_s, of T_s B_s and of the samples' mesh coverage.
     var color = vec3<f32>(0.0);
     var transmittance = 0.0;
+    var back_mean = vec3<f32>(0.0);
+    var seen_back = vec3<f32>(0.0);
+    var covered = 0.0;
+    // Whether any sample, and sample 0, sees a mesh.
+    var any_mesh = false;
+    var mesh0 = false;
     for (var k = 0u; k < params.samples; k++) {
+        // What lies behind sample k (raster/mod.rs `Rasterizer::behind`): the background, or
+        // its mesh, which hides the fragments at or behind it (the depth test of the splat pass).
+        var back = vec4<f32>(params.background.xyz, FAR_DEPTH);
+        if (inside && params.meshes == 1u) {
+            back = behind[index * params.samples + k];
+        }
+        let mesh = back.w < FAR_DEPTH;
+        any_mesh = any_mesh || mesh;
+        mesh0 = mesh0 || (k == 0u && mesh);
         let p = vec2<f32>(px) + rop_offsets[k];
         let dir_k = pixel_dir(p);
         let to_t_k = stretch(p);
         var t_k = 1.0;
         var l_k = vec3<f32>(0.0);
+        // StochasticSplats' written fragment at sample k: its splat, normal and depth.
+        var hit_k = NONE;
+        var n_k = vec3<f32>(0.0);
+        var depth_k = 0.0;
         for (var start = range.x; start < range.y; start += BATCH) {
             load_batch(start, range.y, l);
             let n = min(BATCH, range.y - start);
@@ -79,14 +106,14 @@ fn tile_blend(
                 let in_rect = all(px >= s.rect.xy) && all(px < s.rect.zw);
                 if (inside && in_rect && s.depth * to_t_k < back.w) {
                     var alpha = select(0.0, fragment_alpha(s, centre, params), covers(s, p, params));
-                    if (params.first_hit == FIRST_HIT_ACCEPTED) {
+                    if (written) {
                         // StochasticSplats (splat.wgsl `accepted_splat`): the fragment is written
-                        // opaque where u < α; in depth order the first accepted is the closest.
-                        alpha = select(0.0, 1.0, picked == NONE && accepted(s, px, alpha));
+                        // opaque where u_k < α; in depth order the first accepted is the closest.
+                        alpha = select(0.0, 1.0, hit_k == NONE && accepted(s, px, alpha, k));
                     }
                     if (alpha > 0.0) {
                         var c = s.color;
-                        if (k == 0u || volumetric) {
+                        if (k == 0u || volumetric || written) {
                             let nrm = splat_normal(s.id, origin, dir);
                             if (volumetric) {
                                 c = shade_unshadowed(s.color, s.id, origin, dir_k, s.depth * to_t_k, nrm);
@@ -95,10 +122,14 @@ fn tile_blend(
                                 normal += t_k * alpha * nrm;
                                 drawn = true;
                             }
+                            if (written) {
+                                hit_k = s.id;
+                                n_k = nrm;
+                                depth_k = s.depth * to_t_k;
+                            }
                         }
                         l_k += t_k * alpha * c;
                         t_k *= 1.0 - alpha;
-                        let written = params.first_hit == FIRST_HIT_ACCEPTED;
                         if (k == 0u && picked == NONE && (written || t_k < params.iso_threshold)) {
                             picked = s.id;
                             depth = s.depth;
@@ -108,13 +139,27 @@ fn tile_blend(
             }
             workgroupBarrier();
         }
-        color += l_k / f32(params.samples);
-        transmittance += t_k / f32(params.samples);
+        if (inside && written) {
+            write_first_hit(index * params.samples + k, l_k, t_k, n_k, depth_k, hit_k);
+        } else if (inside && params.first_hit == FIRST_HIT_SORTED && k > 0u) {
+            // Sorted splatting: sample k's composite and transmittance, its radiance in sample
+            // 0's mean in the surface look; the pick and normal are sample 0's.
+            let l = select(l_k, vec3<f32>(0.0), lit_surface);
+            write_first_hit(index * params.samples + k, l, t_k, vec3<f32>(0.0), -1.0, NONE);
+        }
+        if (k == 0u) {
+            l0 = l_k;
+            t0 = t_k;
+        }
+        let share = 1.0 / f32(params.samples);
+        color += share * l_k;
+        transmittance += share * t_k;
+        back_mean += share * back.xyz;
+        seen_back += share * t_k * back.xyz;
+        covered += share * t_k * select(0.0, 1.0, mesh);
     }
     if (inside) {
-        let index = px.y * params.size.x + px.x;
-        let covered = select(0.0, 1.0, mesh);
-        var out = vec4<f32>(color + transmittance * back.xyz, 1.0 - transmittance + transmittance * covered);
+        var out = vec4<f32>(color + seen_back, 1.0 - transmittance + covered);
         // raster/mod.rs `sorted`: the integrated normal normalised, −dir when degenerate; the
         // depth as a distance along sample 0's ray, t = z |d_cam|, where T fell below the
         // threshold, else the mesh's (depth consolidation, vk_gaussian_splatting Lighting §1.5.3).
@@ -125,29 +170,36 @@ fn tile_blend(
             n = select(-dir, normal / len, len > DEGENERATE_NORMAL);
         }
         var t = -1.0;
+        if (params.first_hit == FIRST_HIT_SORTED) {
+            // The hybrid pipeline lights and continues from these in the ray tracer: sample 0
+            // carries the pick and the integrated normal, and in the surface look the mean
+            // radiance, which the tracer lights once (raster/mod.rs `light_surface`).
+            write_first_hit(index * params.samples, select(l0, color, lit_surface), t0, n, depth * to_t, picked);
+        }
         if (params.first_hit != 0u) {
-            // The hybrid pipeline lights and continues from this in the ray tracer.
-            out_color[index] = vec4<f32>(color, transmittance);
-            out_normal[index] = vec4<f32>(n, 0.0);
-            out_pick[index] = vec2<u32>(bitcast<u32>(select(-1.0, depth * to_t, picked != NONE)), picked);
             return;
         }
         if (picked != NONE) {
             t = depth * to_t;
-        } else if (mesh) {
-            t = back.w;
-            n = behind_normal[index].xyz;
+        } else if (mesh0) {
+            t = behind[index * params.samples].w;
+            n = behind_normal[index * params.samples].xyz;
         }
         if (params.lit == 1u && params.look == LOOK_SURFACE) {
             // raster/mod.rs `light_surface`: L lit once at the picked depth with the integrated
-            // normal and the picked splat's material; what lies behind (the mesh's normal and
-            // depth, or the background and no normal) where T stayed above the threshold.
+            // normal and the picked splat's material, plus the mean of T_s B_s; where T stayed
+            // above the threshold, what lies behind: the mean of B_s covering the samples'
+            // mesh share, with sample 0's mesh normal and depth (none without a mesh).
             if (picked == NONE) {
-                out = vec4<f32>(back.xyz, covered);
-                n = select(vec3<f32>(0.0), n, mesh);
+                var meshes = 0.0;
+                for (var k = 0u; k < params.samples; k++) {
+                    meshes += select(0.0, 1.0, params.meshes == 1u && behind[index * params.samples + k].w < FAR_DEPTH);
+                }
+                out = vec4<f32>(back_mean, meshes / f32(params.samples));
+                n = select(vec3<f32>(0.0), n, any_mesh);
             } else {
                 let lit = shade_unshadowed(color, picked, origin, dir, depth * to_t, n);
-                out = vec4<f32>(lit + transmittance * back.xyz, out.w);
+                out = vec4<f32>(lit + seen_back, out.w);
             }
         }
         out_color[index] = out;

@@ -1,10 +1,10 @@
 // The raster pipeline's mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3), the twin of
-// the CPU reference's `Rasterizer::pixel` ray cast and `Rasterizer::behind`: per pixel, the
-// nearest mesh along the ray through the pixel centre, its distance (the splats' depth test) and
-// its forward-shaded colour (lit with every light visible and sampled at its centre, no bounces:
-// the mirror and glass shares see the background), or the background at distance FAR. The splat
+// the CPU reference's `Rasterizer::pixel` ray casts and `Rasterizer::behind`: per sample of each
+// pixel, the nearest mesh along the sample's ray, its distance (the splats' depth test) and its
+// forward-shaded colour (lit with every light visible and sampled at its centre, no bounces: the
+// mirror and glass shares see the background), or the background at distance FAR. The splat
 // fragments read the distance (splat.wgsl), the fold blends the colour under them with the
-// remaining transmittance (fold.wgsl).
+// sample's remaining transmittance (fold.wgsl). Sample i of pixel p is entry p S + i.
 
 @group(0) @binding(0) var<uniform> params: RasterParams;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
@@ -14,6 +14,8 @@
 // The mesh's shading normal turned toward the ray (zero without a mesh), for the depth
 // consolidation of the tile rasterizer.
 @group(0) @binding(5) var<storage, read_write> behind_normal: array<vec4<f32>>;
+// Sub-pixel position of sample i in [0, 1)² (params.samples of them).
+@group(0) @binding(6) var<storage, read> sample_offsets: array<vec2<f32>>;
 
 // bvh.wgsl's loop counter (no budget is checked here).
 var<private> iterations: u32;
@@ -23,18 +25,21 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {
         return;
     }
-    let index = gid.y * params.size.x + gid.x;
-    let p = vec2<f32>(gid.xy) + vec2<f32>(0.5);
-    let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_min, params.t_max);
-    let hit = mesh_traverse(0u, ray, false);
-    if (hit.triangle == NONE) {
-        behind[index] = vec4<f32>(params.background.xyz, FAR);
-        behind_normal[index] = vec4<f32>(0.0);
-        return;
+    let pixel = gid.y * params.size.x + gid.x;
+    for (var i = 0u; i < params.samples; i++) {
+        let index = pixel * params.samples + i;
+        let p = vec2<f32>(gid.xy) + sample_offsets[i];
+        let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_min, params.t_max);
+        let hit = mesh_traverse(0u, ray, false);
+        if (hit.triangle == NONE) {
+            behind[index] = vec4<f32>(params.background.xyz, FAR);
+            behind_normal[index] = vec4<f32>(0.0);
+            continue;
+        }
+        let m = mesh_materials[triangles[hit.triangle].mesh];
+        let n = surface_normal(hit, ray);
+        behind_normal[index] = vec4<f32>(n, 0.0);
+        let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, n);
+        behind[index] = vec4<f32>(local_share(m) * lit + (m.mirror + m.transmission) * params.background.xyz, hit.t);
     }
-    let m = mesh_materials[triangles[hit.triangle].mesh];
-    let n = surface_normal(hit, ray);
-    behind_normal[index] = vec4<f32>(n, 0.0);
-    let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, n);
-    behind[index] = vec4<f32>(local_share(m) * lit + (m.mirror + m.transmission) * params.background.xyz, hit.t);
 }

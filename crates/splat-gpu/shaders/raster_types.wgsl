@@ -94,6 +94,11 @@ struct Splat {
 const MODE_OVER: u32 = 0u;
 const MODE_UNDER: u32 = 1u;
 const MODE_STOCHASTIC: u32 = 2u;
+// The raster operations of the compute tile pass (rop.wgsl), whose target holds each pixel's
+// resolved samples, what lies behind them included.
+const MODE_ENDERTON: u32 = 3u;
+const MODE_STRATIFIED: u32 = 4u;
+const MODE_STRATIFIED_PLAIN: u32 = 5u;
 // params.extent (splat_core::raster::SplatExtent): the 3DGS rasterizer's 16 × 16 tiles around
 // its box of half-width ⌈3 √λ_max⌉ (BOX_SIGMAS, with 3DGS's floor EIGEN_FLOOR under the
 // eigenvalue discriminant; BLOCK), the √8σ ellipse (fragments with a Mahalanobis term above

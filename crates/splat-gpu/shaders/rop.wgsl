@@ -32,9 +32,6 @@ const SURFACE_ID: u32 = 4294967292u;
 const ENDERTON_XI_SLOT: u32 = 64u;
 // What a sample holds where a mesh was drawn (raster/mod.rs MESH).
 const MESH: u32 = 4294967294u;
-const MODE_ENDERTON: u32 = 3u;
-const MODE_STRATIFIED: u32 = 4u;
-const MODE_STRATIFIED_PLAIN: u32 = 5u;
 // Most samples the ROP kernel holds per pixel (the standard pattern's largest).
 const ROP_SAMPLES: u32 = 16u;
 const EMPTY_DEPTH: f32 = 3.4028235e38;
@@ -147,20 +144,22 @@ fn store_rop(rop: ptr<function, Rop>, at: u32, spp: u32) {
 }
 
 // raster/mod.rs `resolve`: the mean of the samples (colour, written share) of the pixel at
-// `corner`. A written sample shows its splat's colour, lit where the scene is (`lit_color`
-// without a hybrid: at the sample's depth along the sample's own ray, with the splat's normal
-// along sample 0's ray, no shadows); an empty one the background. Among meshes (one sample, at
-// the pixel centre) an empty sample and the mesh's add nothing here: the fold blends the
-// pre-pass's colour, the background where no mesh is, under the splats' coverage.
-fn resolve_rop(rop: ptr<function, Rop>, spp: u32, corner: vec2<f32>) -> vec4<f32> {
+// `corner`, entry `pixel` of the image. A written sample shows its splat's colour, lit where the
+// scene is (`lit_color` without a hybrid: at the sample's depth along the sample's own ray, with
+// the splat's normal along sample 0's ray, no shadows); a sample holding its mesh shows the
+// pre-pass's colour and counts as written; an empty one shows the background.
+fn resolve_rop(rop: ptr<function, Rop>, spp: u32, corner: vec2<f32>, pixel: u32) -> vec4<f32> {
     let origin = camera_origin();
     let ray0 = pixel_dir(corner + rop_offsets[0]);
     var color = vec3<f32>(0.0);
     var written = 0u;
     for (var i = 0u; i < spp; i++) {
         let id = (*rop).id[i];
-        if (id == NONE || id == MESH) {
-            color += select(params.background.xyz, vec3<f32>(0.0), params.meshes == 1u);
+        if (id == NONE) {
+            color += params.background.xyz;
+        } else if (id == MESH) {
+            color += behind[pixel * spp + i].xyz;
+            written++;
         } else {
             var c = splats[id].color;
             if (params.lit == 1u) {
@@ -287,15 +286,18 @@ fn tile_rop(
     let first = min(tile_list.x + rop_chunk.x * rop_chunk.y, tile_list.y);
     let range = vec2<u32>(first, min(tile_list.y, first + rop_chunk.y));
     let spp = params.samples;
-    let at = (px.y * params.size.x + px.x) * rop_words(spp);
+    let pixel = px.y * params.size.x + px.x;
+    let at = pixel * rop_words(spp);
     var rop = load_rop(at, spp, inside && rop_chunk.x > 0u);
     if (inside && params.meshes == 1u && rop_chunk.x == 0u) {
-        // raster/mod.rs `sample_buffer`: the pixel's one sample starts with the mesh's depth, so
-        // fragments behind it fail the depth test.
-        let t_mesh = behind[px.y * params.size.x + px.x].w;
-        if (t_mesh < FAR_DEPTH) {
-            rop.t[0] = t_mesh;
-            rop.id[0] = MESH;
+        // raster/mod.rs `sample_buffer`: each sample starts with its mesh's depth, so fragments
+        // behind it fail the depth test.
+        for (var i = 0u; i < spp; i++) {
+            let t_mesh = behind[pixel * spp + i].w;
+            if (t_mesh < FAR_DEPTH) {
+                rop.t[i] = t_mesh;
+                rop.id[i] = MESH;
+            }
         }
     }
     let pixel_key = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
@@ -329,32 +331,37 @@ fn tile_rop(
     if (inside && (rop_chunk.x + 1u < rop_chunk.z || params.first_hit != 0u)) {
         store_rop(&rop, at, spp);
     } else if (inside) {
-        textureStore(rop_target, vec2<i32>(px), resolve_rop(&rop, spp, corner));
+        textureStore(rop_target, vec2<i32>(px), resolve_rop(&rop, spp, corner, pixel));
     }
 }
 
-// The hybrid pipeline's first hit from the raster operations' one sample (raster/mod.rs
-// `resolve` of Enderton or stratified in `Rasterizer::hybrid`): the written splat, opaque, with
-// its unlit colour, T = 0, its normal along the pixel-centre ray, its depth and id; T = 1 where a
-// mesh or nothing holds the sample (the ray tracer continues to the mesh or the background).
-// The tile pass's first-hit buffers (depth_pick.wgsl), filled as FIRST_HIT_ACCEPTED fills them.
+// The hybrid pipeline's first hits from the raster operations' samples (raster/mod.rs
+// `resolve` of Enderton or stratified in `Rasterizer::hybrid`): each written splat, opaque, with
+// its unlit colour, T = 0, its normal along sample 0's ray, its depth along the sample's ray and
+// its id; T = 1 where a mesh or nothing holds the sample (the ray tracer continues to the mesh or
+// the background). Sample i of pixel p goes to entry p S + i of the tile pass's first-hit
+// buffers (depth_pick.wgsl), filled as FIRST_HIT_ACCEPTED fills them.
 @compute @workgroup_size(8, 8, 1)
 fn rop_first_hit(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {
         return;
     }
-    let index = gid.y * params.size.x + gid.x;
-    let at = index * rop_words(1u);
-    let t = bitcast<f32>(rop_state[at]);
-    let id = rop_state[at + 1u];
-    if (id == NONE || id == MESH) {
-        out_color[index] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
-        out_normal[index] = vec4<f32>(0.0);
-        out_pick[index] = vec2<u32>(bitcast<u32>(-1.0), NONE);
-        return;
+    let pixel = gid.y * params.size.x + gid.x;
+    let spp = params.samples;
+    let at = pixel * rop_words(spp);
+    let dir = pixel_dir(vec2<f32>(gid.xy) + rop_offsets[0]);
+    for (var i = 0u; i < spp; i++) {
+        let index = pixel * spp + i;
+        let t = bitcast<f32>(rop_state[at + i]);
+        let id = rop_state[at + spp + i];
+        if (id == NONE || id == MESH) {
+            out_color[index] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+            out_normal[index] = vec4<f32>(0.0);
+            out_pick[index] = vec2<u32>(bitcast<u32>(-1.0), NONE);
+        } else {
+            out_color[index] = vec4<f32>(splats[id].color, 0.0);
+            out_normal[index] = vec4<f32>(splat_normal(id, camera_origin(), dir), 0.0);
+            out_pick[index] = vec2<u32>(bitcast<u32>(t), id);
+        }
     }
-    let dir = pixel_dir(vec2<f32>(gid.xy) + vec2<f32>(0.5));
-    out_color[index] = vec4<f32>(splats[id].color, 0.0);
-    out_normal[index] = vec4<f32>(splat_normal(id, camera_origin(), dir), 0.0);
-    out_pick[index] = vec2<u32>(bitcast<u32>(t), id);
 }

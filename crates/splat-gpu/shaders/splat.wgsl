@@ -9,21 +9,24 @@
 @group(0) @binding(2) var<storage, read> splats: array<Splat>;
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;
-// Per pixel the mesh pre-pass's colour and distance (mesh_prepass.wgsl), read where
-// params.meshes is 1.
+// Per sample of each pixel (entry pixel × S + i) the mesh pre-pass's colour and distance
+// (mesh_prepass.wgsl), read where params.meshes is 1.
 @group(0) @binding(5) var<storage, read> behind: array<vec4<f32>>;
 
 // The depth test against the meshes (raster/mod.rs `Rasterizer::sorted` keeps fragments with
-// t < t_mesh, the stochastic methods' sample buffers those with t ≤ t_mesh): whether splat s's
-// fragment at pixel position p lies behind the pixel's mesh, at distance z |d_cam|.
-fn behind_mesh(s: Splat, p: vec2<f32>, at_mesh: bool) -> bool {
+// t < t_mesh, the stochastic methods' sample buffers those with t ≤ t_mesh): whether a fragment
+// at distance t of sample i of `pixel` lies behind the sample's mesh.
+fn behind_mesh(pixel: vec2<u32>, i: u32, t: f32, at_mesh: bool) -> bool {
     if (params.meshes == 0u) {
         return false;
     }
-    let pixel = vec2<u32>(p);
-    let t_mesh = behind[pixel.y * params.size.x + pixel.x].w;
-    let t = s.depth * stretch(p);
+    let t_mesh = behind[(pixel.y * params.size.x + pixel.x) * params.samples + i].w;
     return t > t_mesh || (at_mesh && t == t_mesh);
+}
+
+// The same for splat s's one-sample fragment at pixel position p, at centre depth z |d_cam|.
+fn centre_behind_mesh(s: Splat, p: vec2<f32>, at_mesh: bool) -> bool {
+    return behind_mesh(vec2<u32>(p), 0u, s.depth * stretch(p), at_mesh);
 }
 
 // View depth z maps to the depth buffer as z · 2⁻¹⁰⁰: a power of two, so the map is exact and
@@ -68,7 +71,7 @@ fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32
 fn fs_sorted(in: VertexOut) -> @location(0) vec4<f32> {
     let s = splats[in.splat];
     let alpha = splat_alpha(s, in.position.xy, params);
-    if (alpha <= 0.0 || behind_mesh(s, in.position.xy, true)) {
+    if (alpha <= 0.0 || centre_behind_mesh(s, in.position.xy, true)) {
         discard;
     }
     if (params.mode == MODE_UNDER) {
@@ -90,7 +93,7 @@ fn accepted_splat(in: VertexOut) -> Splat {
     let pixel = vec2<u32>(in.position.xy);
     let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
     let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, 0u)))) - frame.u_shift;
-    if (!(u < alpha) || behind_mesh(s, in.position.xy, false)) {
+    if (!(u < alpha) || centre_behind_mesh(s, in.position.xy, false)) {
         discard;
     }
     return s;
@@ -129,11 +132,13 @@ struct Masked {
     @builtin(sample_mask) mask: u32,
 }
 
-// Bit i set where sample i of the pixel at corner `pixel` lies in splat s's footprint.
-fn coverage(s: Splat, pixel: vec2<f32>) -> u32 {
+// Bit i set where sample i of the pixel at corner `pixel` lies in splat s's footprint, in front
+// of the sample's mesh (`behind_mesh` at the centre depth along the sample's ray).
+fn coverage(s: Splat, pixel: vec2<f32>, at_mesh: bool) -> u32 {
     var mask = 0u;
     for (var i = 0u; i < params.samples; i++) {
-        if (covers(s, pixel + sample_offsets[i], params)) {
+        let p = pixel + sample_offsets[i];
+        if (covers(s, p, params) && !behind_mesh(vec2<u32>(pixel), i, s.depth * stretch(p), at_mesh)) {
             mask |= 1u << i;
         }
     }
@@ -145,7 +150,7 @@ fn coverage(s: Splat, pixel: vec2<f32>) -> u32 {
 fn fs_sorted_msaa(in: VertexOut) -> Masked {
     let s = splats[in.splat];
     let alpha = fragment_alpha(s, in.position.xy, params);
-    let mask = coverage(s, floor(in.position.xy));
+    let mask = coverage(s, floor(in.position.xy), true);
     if (alpha <= 0.0 || mask == 0u) {
         discard;
     }
@@ -163,7 +168,7 @@ fn fs_stochastic_msaa(in: VertexOut) -> Masked {
     let alpha = fragment_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
     let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
-    var mask = coverage(s, floor(in.position.xy));
+    var mask = coverage(s, floor(in.position.xy), false);
     for (var i = 0u; i < params.samples; i++) {
         let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, i)))) - frame.u_shift;
         if (!(u < alpha)) {

@@ -12,28 +12,41 @@ struct PlaneOut {
     @builtin(frag_depth) depth: f32,
 }
 
+// A fragment written at sample i: its splat and its distance t along the sample's ray.
+struct Written {
+    s: Splat,
+    t: f32,
+}
+
 // StochasticSplats' decision at sample i of the fragment's pixel (raster/mod.rs
-// `stochastic_splat`, slot = i): its splat where the sample is covered and u_i < α (the alpha
-// at the pixel centre), else the fragment is discarded.
-fn accepted_sample(in: VertexOut, i: u32) -> Splat {
+// `stochastic_splat`, slot = i): its splat where the sample is covered, u_i < α (the alpha at
+// the pixel centre) and the fragment, at the max-density plane (`plane`) or the centre depth,
+// lies in front of the sample's mesh; else the fragment is discarded.
+fn accepted_sample(in: VertexOut, i: u32, plane: bool) -> Written {
     let s = splats[in.splat];
     let corner = floor(in.position.xy);
     let alpha = fragment_alpha(s, corner + vec2<f32>(0.5), params);
     let pixel = vec2<u32>(corner);
     let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
     let u = unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, s.id, i)))) - frame.u_shift;
-    if (alpha <= 0.0 || !covers(s, corner + sample_offsets[i], params) || !(u < alpha)) {
+    let p = corner + sample_offsets[i];
+    if (alpha <= 0.0 || !covers(s, p, params) || !(u < alpha)) {
         discard;
     }
-    return s;
+    var t = s.depth * stretch(p);
+    if (plane) {
+        t = plane_depth(s.id, camera_origin(), pixel_dir(p));
+    }
+    if (behind_mesh(pixel, i, t, false)) {
+        discard;
+    }
+    return Written(s, t);
 }
 
 @fragment
 fn fs_stochastic_plane(in: VertexOut, @builtin(sample_index) i: u32) -> PlaneOut {
-    let s = accepted_sample(in, i);
-    let p = floor(in.position.xy) + sample_offsets[i];
-    let t = plane_depth(s.id, camera_origin(), pixel_dir(p));
-    return PlaneOut(vec4<f32>(s.color, 1.0), t * DEPTH_SCALE);
+    let w = accepted_sample(in, i, true);
+    return PlaneOut(vec4<f32>(w.s.color, 1.0), w.t * DEPTH_SCALE);
 }
 
 // ---- lit StochasticSplats, sample by sample ----------------------------------------------------
@@ -48,15 +61,10 @@ override LIT_PLANE_DEPTH: u32 = 0u;
 
 @fragment
 fn fs_stochastic_lit_sample(in: VertexOut, @builtin(sample_index) i: u32) -> PlaneOut {
-    let s = accepted_sample(in, i);
+    let w = accepted_sample(in, i, LIT_PLANE_DEPTH == 1u);
     let corner = floor(in.position.xy);
-    let p = corner + sample_offsets[i];
     let origin = camera_origin();
-    let dir = pixel_dir(p);
-    var t = s.depth * stretch(p);
-    if (LIT_PLANE_DEPTH == 1u) {
-        t = plane_depth(s.id, origin, dir);
-    }
-    let n = splat_normal(s.id, origin, pixel_dir(corner + sample_offsets[0]));
-    return PlaneOut(vec4<f32>(shade_unshadowed(s.color, s.id, origin, dir, t, n), 1.0), t * DEPTH_SCALE);
+    let dir = pixel_dir(corner + sample_offsets[i]);
+    let n = splat_normal(w.s.id, origin, pixel_dir(corner + sample_offsets[0]));
+    return PlaneOut(vec4<f32>(shade_unshadowed(w.s.color, w.s.id, origin, dir, w.t, n), 1.0), w.t * DEPTH_SCALE);
 }

@@ -81,7 +81,8 @@ struct Params {
     // In MODE_HYBRID, the first hit the tile rasterizer wrote: FIRST_HIT_ACCEPTED for
     // StochasticSplats' closest accepted fragment, else sorted splatting's.
     first_hit: u32,
-    pad_n1: u32,
+    // In MODE_HYBRID, the rasterizer's samples per pixel S: S first hits a pixel.
+    raster_samples: u32,
     pad_n2: u32,
 }
 
@@ -111,6 +112,9 @@ const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
 // The ray met at least one hit (the integrated normal is defined).
 const HIT: u32 = 4u;
+// A hybrid sample of a pixel whose surface-look pick lies in sample 0: it adds only its
+// transmittance times what lies behind it.
+const BEHIND_ONLY: u32 = 8u;
 // The method codes of splat_core's catalogue (MethodId::code; a test finds one for every
 // method of the catalogue with a GPU kernel, named MethodId::wgsl_constant, and no other).
 const METHOD_EXACT: u32 = 0u;
@@ -167,10 +171,11 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(11) var<storage, read> mesh_materials: array<MeshMaterial>;
 @group(0) @binding(12) var<storage, read> hybrid_in: array<FirstHit>;
 
-// The hybrid pipeline's first hit of a pixel, from the rasterizer (48 bytes), mirrored by
-// splat_gpu::GpuFirstHit: the splats' radiance L and transmittance T in front of the meshes
-// (lit per fragment in the volumetric look, raw in the surface look), the integrated unit
-// normal (zero where no fragment), and the iso-opacity depth and splat (picked NONE: none).
+// The hybrid pipeline's first hit of one sample of a pixel (sample i of pixel p at p S + i),
+// from the rasterizer (48 bytes), mirrored by splat_gpu::GpuFirstHit: the splats' radiance L and
+// transmittance T in front of the meshes (lit per fragment in the volumetric look, raw in the
+// surface look), the integrated unit normal (zero where no fragment), the iso-opacity depth
+// and splat (picked NONE: none), and the sample's position in the pixel.
 struct FirstHit {
     radiance: vec3<f32>,
     transmittance: f32,
@@ -178,8 +183,7 @@ struct FirstHit {
     depth: f32,
     picked: u32,
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    offset: vec2<f32>,
 }
 
 // The pick of the sample the last call of `sample` (or the pass method's last state) made.
@@ -595,6 +599,8 @@ var<private> surface: SurfaceHit;
 // methods, the share of missing slots for stochastic-n, 1 for a stochastic pass that accepted
 // none): the weight of the mesh's mirror and glass segments.
 var<private> behind_weight: f32;
+// The lit pick in the sample `finish` returned (zero where it lit none).
+var<private> lit_pick: vec3<f32>;
 
 // trace/mod.rs `surface_offset`.
 fn surface_offset(x: vec3<f32>) -> f32 {
@@ -651,7 +657,7 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
         } else if (mesh) {
             sample_pick = behind_pick;
         }
-        if (params.lit == 1u && !volumetric()) {
+        if (params.lit == 1u && !volumetric() && (st.flags & BEHIND_ONLY) == 0u) {
             if (st.picked == NONE) {
                 sample_pick = behind_pick;
                 out = vec4<f32>(0.0, 0.0, 0.0, mesh_alpha);
@@ -668,6 +674,7 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
     // Lit(…) of the pick (k = 0) and of the mesh's local share (k = 1), where the sample shows
     // them: one inlined copy of the lighting and its shadow traversal for both.
     var behind = params.background.xyz;
+    lit_pick = vec3<f32>(0.0);
     // Two iterations a call, not counted: `iterations` bounds each loop statement's total by the
     // busiest lane's, and the batches of frames per dispatch shrink with every count a frame adds.
     for (var k = 0u; k < 2u; k++) {
@@ -704,6 +711,7 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
         let lit = share * lit_material(m, c, t, n, ray, pixel_key, 0u, offset);
         if (k == 0u) {
             out = vec4<f32>(lit, out.w);
+            lit_pick = lit;
         } else {
             behind = lit;
         }
@@ -853,108 +861,134 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         most = out_var[index].w;
     }
     let frames = select(params.frames, 1u, by_pass);
+    // The hybrid continues each of the rasterizer's S samples, its camera ray through the
+    // sample's position, weighted 1/S (raster/mod.rs: the pixel is the mean of its samples).
+    let samples = select(1u, params.raster_samples, hybrid);
+    let weight = 1.0 / f32(samples);
+    // raster/mod.rs `light_surface`: the surface look lights sorted splatting's mean radiance
+    // once, at sample 0's pick, and adds each sample's T_s × what lies behind it (no pick:
+    // what lies behind it, whole). Sample 0's first hit then carries the mean radiance and the
+    // pick, whose light counts whole, and the others add only what lies behind them.
+    let lit_once = hybrid && params.first_hit != FIRST_HIT_ACCEPTED && params.lit == 1u && !volumetric();
+    let pixel_picked = lit_once && hybrid_in[index * samples].picked != NONE;
     for (var f = 0u; f < frames; f++) {
         iterations += 1u;
         let frame = params.first_frame + f;
-        let camera = frame_ray(gid.x, gid.y, frame);
         let pixel_key = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
         var total = vec4<f32>(0.0);
         var camera_pick = no_pick();
         var finished = false;
-        // The camera segment first, then the pending ones: the stack (a dynamically indexed
-        // private array, slow on CPU adapters) is touched only where a mesh bounces.
-        var seg = Segment(camera.origin, 1.0, camera.dir, 0u);
-        var top = 0u;
-        loop {
-            bounce = seg.depth;
-            // The camera ray from t_min; a secondary ray from the surface point on (its line
-            // continues the mirrored or refracted one), meshes from surface_offset on.
-            var ray = camera;
-            var mesh_ray = camera;
-            if (seg.depth > 0u) {
-                ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
-                mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
+        for (var sample = 0u; sample < samples; sample++) {
+            iterations += select(0u, 1u, sample > 0u);
+            let hit_index = index * samples + sample;
+            var camera = frame_ray(gid.x, gid.y, frame);
+            if (hybrid) {
+                camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
             }
-            // trace/mod.rs `trace_ray`: the closest mesh clips the ray.
-            surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
-            if (params.mesh_root != NONE) {
-                surface = mesh_traverse(params.mesh_root, mesh_ray, false);
-                if (surface.triangle != NONE) {
-                    ray.t_max = surface.t;
+            // The camera segment first, then the pending ones: the stack (a dynamically indexed
+            // private array, slow on CPU adapters) is touched only where a mesh bounces.
+            var seg = Segment(camera.origin, weight, camera.dir, 0u);
+            var top = 0u;
+            loop {
+                bounce = seg.depth;
+                // The camera ray from t_min; a secondary ray from the surface point on (its line
+                // continues the mirrored or refracted one), meshes from surface_offset on.
+                var ray = camera;
+                var mesh_ray = camera;
+                if (seg.depth > 0u) {
+                    ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
+                    mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
                 }
-            }
-            var st = start_state(ray.t_min);
-            var first = 0u;
-            var last = max(params.max_passes, params.m);
-            if (by_pass) {
-                first = params.pass_index;
-                last = params.pass_index + 1u;
-                if (params.pass_index > 0u) {
-                    st = pass_state[index];
-                }
-            }
-            segment_method = params.method;
-            let rasterized = hybrid && seg.depth == 0u;
-            if (rasterized) {
-                // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
-                // ray tracer lights the pick with shadows and continues at the mesh. A
-                // StochasticSplats first hit (`Rasterizer::stochastic_splat`) is one opaque
-                // fragment or none: finished as an accepted pass or a missed one, the fragment
-                // lit as the pick in either look.
-                let accepted = params.first_hit == FIRST_HIT_ACCEPTED;
-                segment_method = select(METHOD_EXACT, METHOD_STOCHASTIC_PASS, accepted);
-                let h = hybrid_in[index];
-                st.radiance = h.radiance;
-                st.transmittance = h.transmittance;
-                st.normal = h.normal;
-                if (any(h.normal != vec3<f32>(0.0))) {
-                    st.flags |= HIT;
-                }
-                if (h.picked != NONE) {
-                    st.picked = h.picked;
-                    st.depth = h.depth;
-                    if (accepted) {
-                        st.flags |= ACCEPTED;
+                // trace/mod.rs `trace_ray`: the closest mesh clips the ray.
+                surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
+                if (params.mesh_root != NONE) {
+                    surface = mesh_traverse(params.mesh_root, mesh_ray, false);
+                    if (surface.triangle != NONE) {
+                        ray.t_max = surface.t;
                     }
                 }
-            }
-            if ((st.flags & DONE) == 0u) {
-                var done = rasterized;
-                for (var p = first; p < last && !rasterized; p++) {
-                    iterations += 1u;
-                    if (step(ray, pixel_key, p, &st)) {
-                        done = true;
-                        break;
+                var st = start_state(ray.t_min);
+                var first = 0u;
+                var last = max(params.max_passes, params.m);
+                if (by_pass) {
+                    first = params.pass_index;
+                    last = params.pass_index + 1u;
+                    if (params.pass_index > 0u) {
+                        st = pass_state[index];
                     }
                 }
-                if (done || last >= params.max_passes) {
-                    st.flags |= DONE;
-                    let s = finish(st, ray, pixel_key);
-                    total += vec4<f32>(seg.weight * s.xyz, select(0.0, s.w, seg.depth == 0u));
-                    if (seg.depth == 0u) {
-                        camera_pick = sample_pick;
-                        if (rasterized) {
-                            camera_pick.picked = st.picked; // the rasterizer reports its pick
+                segment_method = params.method;
+                let rasterized = hybrid && seg.depth == 0u;
+                if (rasterized) {
+                    // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
+                    // ray tracer lights the pick with shadows and continues at the mesh. A
+                    // StochasticSplats first hit (`Rasterizer::stochastic_splat`) is one opaque
+                    // fragment or none: finished as an accepted pass or a missed one, the fragment
+                    // lit as the pick in either look.
+                    let accepted = params.first_hit == FIRST_HIT_ACCEPTED;
+                    segment_method = select(METHOD_EXACT, METHOD_STOCHASTIC_PASS, accepted);
+                    let h = hybrid_in[hit_index];
+                    if (pixel_picked && sample > 0u) {
+                        st.flags |= BEHIND_ONLY;
+                    }
+                    st.radiance = h.radiance;
+                    st.transmittance = h.transmittance;
+                    st.normal = h.normal;
+                    if (any(h.normal != vec3<f32>(0.0))) {
+                        st.flags |= HIT;
+                    }
+                    if (h.picked != NONE) {
+                        st.picked = h.picked;
+                        st.depth = h.depth;
+                        if (accepted) {
+                            st.flags |= ACCEPTED;
                         }
-                        finished = true;
-                    }
-                    let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
-                    if (bounces && !by_pass && behind_weight > 0.0) {
-                        top = push_bounces(ray, seg, top);
                     }
                 }
+                if ((st.flags & DONE) == 0u) {
+                    var done = rasterized;
+                    for (var p = first; p < last && !rasterized; p++) {
+                        iterations += 1u;
+                        if (step(ray, pixel_key, p, &st)) {
+                            done = true;
+                            break;
+                        }
+                    }
+                    if (done || last >= params.max_passes) {
+                        st.flags |= DONE;
+                        let s = finish(st, ray, pixel_key);
+                        total += vec4<f32>(seg.weight * s.xyz, select(0.0, seg.weight * s.w, seg.depth == 0u));
+                        if (lit_once && rasterized) {
+                            // Sample 0's lit pick counts whole, not 1/S.
+                            total += vec4<f32>((1.0 - seg.weight) * lit_pick, 0.0);
+                        }
+                        if (seg.depth == 0u) {
+                            if (sample == 0u) {
+                                camera_pick = sample_pick;
+                                if (rasterized) {
+                                    camera_pick.picked = st.picked; // the rasterizer reports its pick
+                                }
+                            }
+                            finished = true;
+                        }
+                        let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
+                        if (bounces && !by_pass && behind_weight > 0.0) {
+                            top = push_bounces(ray, seg, top);
+                        }
+                    }
+                }
+                if (by_pass) {
+                    pass_state[index] = st;
+                }
+                if (top == 0u) {
+                    break;
+                }
+                // The camera segment is the frame (counted by the frame loop); every other segment
+                // counts itself, so frames without meshes batch as many per dispatch as before.
+                iterations += 1u;
+                top -= 1u;
+                seg = segments[top];
             }
-            if (by_pass) {
-                pass_state[index] = st;
-            }
-            if (top == 0u) {
-                break;
-            }
-            // The camera segment is the frame (counted by the frame loop); every other segment
-            // counts itself, so frames without meshes batch as many per dispatch as before.
-            iterations += 1u;
-            top -= 1u;
-            seg = segments[top];
         }
         if (finished) {
             sample_pick = camera_pick;

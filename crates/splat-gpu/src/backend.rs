@@ -19,8 +19,8 @@ pub struct Extras {
 }
 
 /// Whether the GPU renders `algorithm` of `shot` with `extras`, before anything is uploaded: the
-/// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`] and
-/// [`GpuRasterizer::supports_scene`]) and what the backend composes from them.
+/// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`]) and what the
+/// backend composes from them.
 pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
     match algorithm {
         Algorithm::Oracle => Err(oracle_refused()),
@@ -32,7 +32,7 @@ pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<()
         }
         Algorithm::Trace(method) => GpuTracer::supports(method),
         Algorithm::Raster(method, raster) => {
-            GpuRasterizer::supports_scene(method, raster, !shot.meshes.is_empty())?;
+            GpuRasterizer::supports(method, raster)?;
             let sorted = matches!(method, RasterMethod::Sorted { .. });
             if (extras.depth || extras.normal) && !sorted {
                 return Err(GpuError::refused(

@@ -292,8 +292,8 @@ pub struct Params {
     /// In `MODE_HYBRID`, `FIRST_HIT_ACCEPTED` where the tile rasterizer wrote
     /// StochasticSplats' first hit (else it wrote sorted splatting's).
     pub first_hit: u32,
-    /// Padding.
-    pub pad_n1: u32,
+    /// In `MODE_HYBRID`, the rasterizer's samples per pixel S: S first hits a pixel.
+    pub raster_samples: u32,
     /// Padding.
     pub pad_n2: u32,
 }
@@ -311,8 +311,9 @@ pub const FILTER_CENTER: u32 = 0;
 /// [`Params::pixel_filter`] of [`splat_core::camera_sampling::PixelFilter::Box`].
 pub const FILTER_BOX: u32 = 1;
 
-/// The hybrid pipeline's first hit of a pixel (WGSL `FirstHit`, 48 bytes), from the tile
-/// rasterizer ([`crate::GpuRasterizer::first_hits`]).
+/// The hybrid pipeline's first hit of one sample of a pixel (WGSL `FirstHit`, 48 bytes), from
+/// the rasterizer ([`crate::GpuRasterizer::first_hits`]): S of them a pixel, sample i of pixel p
+/// at p S + i.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuFirstHit {
@@ -322,16 +323,14 @@ pub struct GpuFirstHit {
     pub transmittance: f32,
     /// Integrated unit normal (zero where no fragment).
     pub normal: [f32; 3],
-    /// Iso-opacity depth along the pixel-centre ray (−1: none).
+    /// Iso-opacity depth along the sample's ray (−1: none).
     pub depth: f32,
     /// The splat that set it (`u32::MAX`: none).
     pub picked: u32,
     /// Padding.
     pub pad0: u32,
-    /// Padding.
-    pub pad1: u32,
-    /// Padding.
-    pub pad2: u32,
+    /// The sample's position in its pixel, in [0, 1)² (its camera ray's).
+    pub offset: [f32; 2],
 }
 
 /// [`Params::mesh_root`] of a scene without meshes (WGSL `NONE`).
@@ -903,7 +902,7 @@ mod tests {
             crate::TRACE_WGSL,
             GpuFirstHit,
             "FirstHit",
-            [radiance, transmittance, normal, depth, picked, pad0, pad1, pad2]
+            [radiance, transmittance, normal, depth, picked, pad0, offset]
         );
         assert_mirrors!(
             crate::TRACE_WGSL,
@@ -977,7 +976,7 @@ mod tests {
                 accumulation,
                 normal_mode,
                 first_hit,
-                pad_n1,
+                raster_samples,
                 pad_n2
             ]
         );

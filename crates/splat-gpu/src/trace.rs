@@ -256,15 +256,16 @@ pub fn supports_hybrid_lighting(
     Ok(())
 }
 
-/// Frame f's pinhole camera and the first hits rasterized through it.
-type FrameFirstHits<'a> = dyn Fn(u32) -> Result<(Camera, wgpu::Buffer), GpuError> + 'a;
+/// Frame f's pinhole camera and the first hits rasterized through it, and how many a pixel.
+type FrameFirstHits<'a> = dyn Fn(u32) -> Result<(Camera, wgpu::Buffer, u32), GpuError> + 'a;
 
-/// The hybrid pipeline's rasterized first hits ([`GpuTracer::render_hybrid`]).
+/// The hybrid pipeline's rasterized first hits ([`GpuTracer::render_hybrid`]), `samples` of
+/// them a pixel.
 #[derive(Clone, Copy)]
 enum FirstHits<'a> {
     /// One rasterization for every frame: sorted splatting through a still camera.
-    Still(&'a wgpu::Buffer),
-    /// One rasterization per frame; `accepted` for a stochastic method's one written splat
+    Still { hits: &'a wgpu::Buffer, samples: u32 },
+    /// One rasterization per frame; `accepted` for a stochastic method's written splats
     /// ([`layout::FIRST_HIT_ACCEPTED`]), else sorted splatting's composite.
     PerFrame { hits: &'a FrameFirstHits<'a>, accepted: bool },
 }
@@ -334,8 +335,8 @@ impl<'a> GpuTracer<'a> {
     }
 
     /// The hybrid pipeline (vk_gaussian_splatting Lighting §5; the twin of
-    /// `splat_core::raster::Rasterizer::hybrid` at one sample per pixel): the first hit of
-    /// every pixel is rasterized by `first` (sorted splatting; StochasticSplats, the stochastic
+    /// `splat_core::raster::Rasterizer::hybrid`): the first hit of every sample of every pixel
+    /// (the rasterizer's S) is rasterized by `first` (sorted splatting; StochasticSplats, the stochastic
     /// transparency page's own case; Enderton or stratified) by `raster(camera)` (the same
     /// scene, meshes and lighting; [`crate::GpuRasterizer::first_hits`]), and this tracer
     /// continues from it: the pick lit with shadow rays, the mesh behind the splats shaded with
@@ -356,18 +357,21 @@ impl<'a> GpuTracer<'a> {
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         supports_hybrid_lighting(self.trace.lighting(), first)?;
         let sampling = self.trace.settings().sampling;
+        // The first hits on the device, and how many a pixel (the rasterizer's samples).
         let upload = |frame_camera: &Camera, hits: Vec<layout::GpuFirstHit>| {
-            if hits.len() != (frame_camera.width * frame_camera.height) as usize {
+            let pixels = (frame_camera.width * frame_camera.height) as usize;
+            if hits.is_empty() || !hits.len().is_multiple_of(pixels) {
                 return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
             }
-            Ok(self.ctx.upload("first hits", bytemuck::cast_slice(&hits)))
+            Ok((self.ctx.upload("first hits", bytemuck::cast_slice(&hits)), (hits.len() / pixels) as u32))
         };
         if !sampling.is_random() && !first.is_stochastic() {
-            let buffer = upload(camera, raster(camera)?.first_hits(first, 0, 0.0)?)?;
-            return self.render_with(camera, method, frames, Some(FirstHits::Still(&buffer)), None);
+            let (buffer, samples) = upload(camera, raster(camera)?.first_hits(first, 0, 0.0)?)?;
+            let hits = FirstHits::Still { hits: &buffer, samples };
+            return self.render_with(camera, method, frames, Some(hits), None);
         }
         let still = if sampling.is_random() { None } else { Some(raster(camera)?) };
-        let per_frame = |f: u32| -> Result<(Camera, wgpu::Buffer), GpuError> {
+        let per_frame = |f: u32| -> Result<(Camera, wgpu::Buffer, u32), GpuError> {
             let key = splat_core::rng::frame_key(frames.seed, f);
             let (frame_camera, hits) = match &still {
                 Some(r) => (*camera, r.first_hits(first, key, frames.u_shift)?),
@@ -377,7 +381,8 @@ impl<'a> GpuTracer<'a> {
                     (frame_camera, raster(&frame_camera)?.first_hits(first, key, frames.u_shift)?)
                 }
             };
-            Ok((frame_camera, upload(&frame_camera, hits)?))
+            let (buffer, samples) = upload(&frame_camera, hits)?;
+            Ok((frame_camera, buffer, samples))
         };
         let hits = FirstHits::PerFrame { hits: &per_frame, accepted: first.is_stochastic() };
         self.render_with(camera, method, frames, Some(hits), None)
@@ -569,7 +574,7 @@ impl Run<'_> {
         let TraceTargets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. } = &targets;
         let uniform = params_buffer(ctx);
         let still_hits = match self.first_hits {
-            Some(FirstHits::Still(buffer)) => Some(buffer),
+            Some(FirstHits::Still { hits, .. }) => Some(hits),
             _ => None,
         };
         let bind_group = tracer.bind_group(&uniform, &targets, still_hits, self.path.map(|p| p.1));
@@ -635,20 +640,22 @@ impl Run<'_> {
         } else if let Some(FirstHits::PerFrame { hits, accepted }) = self.first_hits {
             for frame in 0..self.count {
                 // Frame f through its own pinhole camera, whose pixel centres are the frame's rays.
-                let (frame_camera, buffer) = hits(frame)?;
+                let (frame_camera, buffer, samples) = hits(frame)?;
                 let group = tracer.bind_group(&uniform, &targets, Some(&buffer), None);
                 let params = layout::params(tracer.trace, &frame_camera, &self.params, self.frames, frame, 1);
                 let first_hit = if accepted { layout::FIRST_HIT_ACCEPTED } else { layout::FIRST_HIT_SORTED };
                 let still = Params { pixel_filter: layout::FILTER_CENTER, aperture: 0.0, ..params };
-                submit(&group, &[Params { mode: layout::MODE_HYBRID, first_hit, ..still }])?;
+                submit(&group, &[Params { mode: layout::MODE_HYBRID, first_hit, raster_samples: samples, ..still }])?;
             }
         } else {
-            let mode = if self.first_hits.is_some() { layout::MODE_HYBRID } else { layout::MODE_FRAMES };
+            let (mode, raster_samples) = match self.first_hits {
+                Some(FirstHits::Still { samples, .. }) => (layout::MODE_HYBRID, samples),
+                _ => (layout::MODE_FRAMES, 1),
+            };
             let frames = 0..self.count;
-            submit(
-                &bind_group,
-                &frame_params(tracer.trace, camera, &self.params, self.frames, mode, frames, per_dispatch),
-            )?;
+            let params = frame_params(tracer.trace, camera, &self.params, self.frames, mode, frames, per_dispatch);
+            let params: Vec<Params> = params.into_iter().map(|p| Params { raster_samples, ..p }).collect();
+            submit(&bind_group, &params)?;
         }
         let mean = ctx.read_through(out_mean, 0, &read_mean, out_bytes)?;
         let m2 = ctx.read_through(out_var, 0, &read_var, out_bytes)?;

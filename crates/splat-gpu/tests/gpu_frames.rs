@@ -579,10 +579,61 @@ fn hybrid_pixels_apart(cpu: &RenderOutput, gpu: &RenderOutput, flip: impl Fn(usi
         .collect()
 }
 
+/// One hybrid render of `first` among [`hybrid_meshes`] through `splat_gpu::render` against the
+/// CPU's `Algorithm::render_world` (exact secondary rays): every pixel agrees (colour, frame 0's
+/// depth, normal and pick) except where a stochastic decision of one of its frames lay within
+/// f32 rounding of its threshold (checked through the CPU rasterizer of that frame's camera).
+/// Returns the GPU's image.
+fn hybrid_agrees(
+    ctx: &splat_gpu::GpuContext,
+    first: splat_core::raster::RasterMethod,
+    raster: splat_core::raster::RasterSettings,
+    lighting: &splat_core::lighting::Lighting,
+    sampling: splat_core::camera_sampling::CameraSampling,
+) -> RenderOutput {
+    use splat_core::camera_sampling::frame_sample;
+    use splat_core::raster::Rasterizer;
+    use splat_tests::flips::raster_frame_gap;
+    let (scene, camera) = fixture("layers", 32, 24);
+    let meshes = hybrid_meshes();
+    let frames = Frames { count: 3, seed: 9, ..Frames::default() };
+    let settings = RenderSettings { sampling, ..RenderSettings::default() };
+    let shot = splat_core::Shot { scene: &scene, meshes: &meshes, lighting, camera: &camera, settings: &settings };
+    let algorithm = Algorithm::Hybrid(first, raster, Method::Exact);
+    let cpu = algorithm.render_world(&shot, &frames, &|_| {}).unwrap();
+    let gpu = splat_gpu::render(ctx, &algorithm, &shot, splat_gpu::Extras::default(), &frames).unwrap();
+    let trace =
+        TraceScene::new(&scene, settings).unwrap().with_lighting(lighting.clone()).unwrap().with_meshes(meshes.clone());
+    let flip = |p: usize| {
+        let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+        first.is_stochastic()
+            && (0..frames.count).any(|f| {
+                let c = if sampling.is_random() {
+                    sampling.pinhole(&camera, &frame_sample(frames.seed, f)).unwrap()
+                } else {
+                    camera
+                };
+                let r = Rasterizer::new(&scene, &c, settings, raster).unwrap().hybrid(&trace, Method::Exact).unwrap();
+                let key = splat_core::rng::frame_key(frames.seed, f);
+                raster_frame_gap(&r, &first, key, frames.u_shift, x, y) < FLIP_GAP
+            })
+    };
+    let bad = hybrid_pixels_apart(&cpu, &gpu, flip);
+    let name = format!(
+        "{} first hit at S = {}, lit {} {:?} look, camera {sampling:?}",
+        first.id().name(),
+        raster.samples,
+        lighting.is_on(),
+        lighting.look
+    );
+    eprintln!("hybrid with {name}: {} pixels apart", bad.len());
+    assert!(bad.is_empty(), "hybrid with {name}: pixels {bad:?}");
+    gpu
+}
+
 /// The GPU hybrid's other first hit and its moving camera (vk_gaussian_splatting stochastic
-/// transparency page; Sun et al. §4.2's camera rays drawn per frame), through
-/// `splat_gpu::render` against the CPU's `Algorithm::render_world`, among the meshes of
-/// [`hybrid_frame_equals_the_cpu_frame`], lit with exact shadows:
+/// transparency page; Sun et al. §4.2's camera rays drawn per frame), [`hybrid_agrees`] with the
+/// CPU among the meshes of [`hybrid_frame_equals_the_cpu_frame`], lit with exact shadows:
 ///
 /// - StochasticSplats' closest accepted fragment as the first hit, three frames (each decided
 ///   again), in both looks (its one opaque fragment is lit as the pick either way), and the
@@ -590,63 +641,18 @@ fn hybrid_pixels_apart(cpu: &RenderOutput, gpu: &RenderOutput, flip: impl Fn(usi
 /// - sorted splatting and StochasticSplats through a box pixel filter and a thin lens, three
 ///   frames, each rasterized through its own pinhole camera.
 ///
-/// Every pixel agrees (colour, frame 0's depth, normal and pick) except where a StochasticSplats
-/// decision of one of its frames lay within f32 rounding of its threshold (checked through the
-/// CPU rasterizer of that frame's camera). Controls: the stochastic first hit differs from the
-/// sorted one, and the moving camera from the still one, far beyond the tolerance.
+/// Controls: the stochastic first hit differs from the sorted one, and the moving camera from
+/// the still one, far beyond the tolerance.
 #[test]
 fn the_hybrid_takes_stochastic_first_hits_and_a_camera_drawn_per_frame() {
-    use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens, frame_sample};
-    use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer};
-    use splat_tests::flips::raster_frame_gap;
+    use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings};
     let Some(ctx) = context() else { return };
-    let (scene, camera) = fixture("layers", 32, 24);
-    let meshes = hybrid_meshes();
     let raster = RasterSettings::default();
     let (sorted, accepted) = (RasterMethod::Sorted { blend: Blend::Under }, RasterMethod::StochasticSplat);
     let moving =
         CameraSampling { filter: PixelFilter::Box, lens: Some(ThinLens { aperture: 0.15, focus_distance: 3.0 }) };
-    let frames = Frames { count: 3, seed: 9, ..Frames::default() };
-    let render = |first: RasterMethod, look: Look, sampling: CameraSampling| {
-        let lighting = lighting(Shadows::Exact, look);
-        let settings = RenderSettings { sampling, ..RenderSettings::default() };
-        let shot = splat_core::Shot {
-            scene: &scene,
-            meshes: &meshes,
-            lighting: &lighting,
-            camera: &camera,
-            settings: &settings,
-        };
-        let algorithm = Algorithm::Hybrid(first, raster, Method::Exact);
-        let cpu = algorithm.render_world(&shot, &frames, &|_| {}).unwrap();
-        let gpu = splat_gpu::render(ctx, &algorithm, &shot, splat_gpu::Extras::default(), &frames).unwrap();
-        // A pixel may differ where a decision of one of its frames lay at its threshold.
-        let trace = TraceScene::new(&scene, settings)
-            .unwrap()
-            .with_lighting(lighting.clone())
-            .unwrap()
-            .with_meshes(meshes.clone());
-        let flip = |p: usize| {
-            let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
-            first.is_stochastic()
-                && (0..frames.count).any(|f| {
-                    let c = if sampling.is_random() {
-                        sampling.pinhole(&camera, &frame_sample(frames.seed, f)).unwrap()
-                    } else {
-                        camera
-                    };
-                    let r =
-                        Rasterizer::new(&scene, &c, settings, raster).unwrap().hybrid(&trace, Method::Exact).unwrap();
-                    let key = splat_core::rng::frame_key(frames.seed, f);
-                    raster_frame_gap(&r, &first, key, frames.u_shift, x, y) < FLIP_GAP
-                })
-        };
-        let bad = hybrid_pixels_apart(&cpu, &gpu, flip);
-        let name = format!("{} first hit, {look:?} look, camera {sampling:?}", first.id().name());
-        eprintln!("hybrid with {name}: {} pixels apart", bad.len());
-        assert!(bad.is_empty(), "hybrid with {name}: pixels {bad:?}");
-        gpu
-    };
+    let render = |first, look, sampling| hybrid_agrees(ctx, first, raster, &lighting(Shadows::Exact, look), sampling);
     let still = CameraSampling::default();
     let sorted_still = render(sorted, Look::Surface, still);
     let accepted_still = render(accepted, Look::Surface, still);
@@ -662,6 +668,35 @@ fn the_hybrid_takes_stochastic_first_hits_and_a_camera_drawn_per_frame() {
         "controls: stochastic against sorted first hit {first_hits:.3}, moving against still camera {camera_moves:.3}"
     );
     assert!(first_hits > 0.1 && camera_moves > 0.05, "controls: {first_hits}, {camera_moves}");
+}
+
+/// The hybrid at four samples per pixel ([`hybrid_agrees`]): the ray tracer continues each
+/// sample's own camera ray from its first hit (raster/mod.rs: the pixel is the mean of its
+/// samples). Sorted splatting unlit (each sample's composite over what it sees behind) and in
+/// the surface look (the mean radiance lit once at sample 0's pick, each sample adding its
+/// transmittance times what lies behind it), StochasticSplats in both looks and Enderton and
+/// stratified (each sample's written splat lit as its pick), through a still camera and one
+/// drawn per frame. Control: the image differs from the one-sample hybrid's far beyond the
+/// tolerance.
+#[test]
+fn the_hybrid_continues_every_sample_of_the_pixel() {
+    use splat_core::camera_sampling::{CameraSampling, PixelFilter};
+    use splat_core::raster::{Blend, RasterMethod, RasterSettings, SamplePattern};
+    let Some(ctx) = context() else { return };
+    let four = RasterSettings { samples: 4, sample_pattern: SamplePattern::Standard, ..RasterSettings::default() };
+    let (sorted, accepted) = (RasterMethod::Sorted { blend: Blend::Under }, RasterMethod::StochasticSplat);
+    let (still, moving) = (CameraSampling::default(), CameraSampling { filter: PixelFilter::Box, lens: None });
+    let surface = lighting(Shadows::Exact, Look::Surface);
+    let at_four = hybrid_agrees(ctx, sorted, four, &surface, still);
+    hybrid_agrees(ctx, sorted, four, &splat_core::lighting::Lighting::default(), still);
+    hybrid_agrees(ctx, accepted, four, &surface, still);
+    hybrid_agrees(ctx, accepted, four, &lighting(Shadows::Exact, Look::Volumetric), moving);
+    hybrid_agrees(ctx, RasterMethod::Enderton, four, &surface, still);
+    hybrid_agrees(ctx, RasterMethod::Stratified { scramble: true }, four, &surface, moving);
+    let at_one = hybrid_agrees(ctx, sorted, RasterSettings::default(), &surface, still);
+    let samples = max_difference(at_one.mean.data(), at_four.mean.data());
+    eprintln!("control: four samples against one {samples:.3}");
+    assert!(samples > 0.05, "control: {samples}");
 }
 
 /// Through each lens family (a distorted perspective lens with every kind of coefficient, a

@@ -31,9 +31,9 @@ impl DepthPick {
     }
 }
 
-/// The first hits of the per-pixel (colour with T in w, (depth bits, pick), normal) a first-hit
-/// pass read back.
-pub(super) fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32]) -> Vec<GpuFirstHit> {
+/// The first hits of the per-sample (colour with T in w, (depth bits, pick), normal) a first-hit
+/// pass read back, sample i of pixel p at p S + i, at the sub-pixel positions `offsets` (S).
+pub(super) fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32], offsets: &[glam::Vec2]) -> Vec<GpuFirstHit> {
     (0..pick.len() / 2)
         .map(|i| GpuFirstHit {
             radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
@@ -41,6 +41,7 @@ pub(super) fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32]) -> Vec<
             normal: [normal[4 * i], normal[4 * i + 1], normal[4 * i + 2]],
             depth: f32::from_bits(pick[2 * i]),
             picked: pick[2 * i + 1],
+            offset: offsets[i % offsets.len()].to_array(),
             ..GpuFirstHit::default()
         })
         .collect()
@@ -90,21 +91,23 @@ impl GpuRasterizer<'_> {
         })
     }
 
-    /// The hybrid pipeline's first hit of every pixel (vk_gaussian_splatting Lighting §5), by the
-    /// same tile pass, for the first-hit `method`:
+    /// The hybrid pipeline's first hit of every sample of every pixel (vk_gaussian_splatting
+    /// Lighting §5; S a pixel, sample i of pixel p at p S + i, with its sub-pixel position), by
+    /// the same tile pass, for the first-hit `method`:
     ///
-    /// - sorted splatting: the splats' radiance and transmittance in front of the meshes (lit per
-    ///   fragment in the volumetric look, before lighting in the surface look), the integrated
-    ///   normal, and the picked depth and splat;
-    /// - StochasticSplats (the stochastic transparency page's hybrid case): the closest fragment
-    ///   accepted in frame `frame_key` (u < α, with every u drawn as u − `u_shift`, as
-    ///   [`splat_core::Frames::u_shift`]), written opaque: its unlit colour, T = 0, its normal,
-    ///   depth and id; T = 1 where none is accepted;
-    /// - Enderton and stratified: the splat their raster operations write to the pixel's one
-    ///   sample in that frame, the same way.
+    /// - sorted splatting: each sample's radiance and transmittance in front of its mesh (lit
+    ///   per fragment in the volumetric look), and in sample 0 the integrated normal, the picked
+    ///   depth and splat, and in the surface look the mean radiance of the samples, before
+    ///   lighting (the tracer lights it once, as `Rasterizer::light_surface` does);
+    /// - StochasticSplats (the stochastic transparency page's hybrid case): each sample's
+    ///   closest fragment accepted in frame `frame_key` (u < α with the sample's own u, every u
+    ///   drawn as u − `u_shift`, as [`splat_core::Frames::u_shift`]), written opaque: its unlit
+    ///   colour, T = 0, its normal, depth and id; T = 1 where none is accepted;
+    /// - Enderton and stratified: the splat their raster operations write to each sample in
+    ///   that frame, the same way.
     ///
-    /// The ray tracer then lights the pick with shadows and continues from it at the mesh
-    /// ([`crate::GpuTracer::render_hybrid`]).
+    /// The ray tracer then lights the picks with shadows and continues from each sample's ray
+    /// at its mesh ([`crate::GpuTracer::render_hybrid`]).
     pub fn first_hits(
         &self,
         method: &RasterMethod,
@@ -121,11 +124,11 @@ impl GpuRasterizer<'_> {
         };
         let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, ..self.params };
         let TilePass { color, pick, normal, .. } = self.tile_pass(params)?;
-        Ok(first_hits_of(&color, &pick, &normal))
+        Ok(first_hits_of(&color, &pick, &normal, &self.offsets()))
     }
 
-    /// One tile pass under `params`: per pixel RGBA colour, (depth bits, pick) and normal, and
-    /// the pair count.
+    /// One tile pass under `params`: per pixel (per sample for a first-hit pass) RGBA colour,
+    /// (depth bits, pick) and normal, and the pair count.
     fn tile_pass(&self, params: RasterParams) -> Result<TilePass, GpuError> {
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let (ctx, pipes) = (self.ctx, self.pipes);
@@ -134,7 +137,8 @@ impl GpuRasterizer<'_> {
         let pairs = self.pair_count()?;
         // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
         let lists = TileLists::new(self, &self.depth.vals, &self.depth, pairs)?;
-        let pixels = (self.camera.width * self.camera.height) as usize;
+        let per_pixel = if params.first_hit != 0 { self.raster.samples } else { 1 };
+        let pixels = (self.camera.width * self.camera.height * per_pixel) as usize;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let buffer = |label, bytes: usize| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {

@@ -183,9 +183,9 @@ pub struct GpuRasterizer<'a> {
     pub(super) depth: SortBuffers,
     pub(super) draw_args: wgpu::Buffer,
     pub(super) compute_group: wgpu::BindGroup,
-    /// The mesh pre-pass's colour and distance per pixel (one unused entry without meshes).
+    /// The mesh pre-pass's colour and distance per sample (one unused entry without meshes).
     pub(super) behind: wgpu::Buffer,
-    /// The mesh pre-pass's normal per pixel (one unused entry without meshes).
+    /// The mesh pre-pass's normal per sample (one unused entry without meshes).
     pub(super) behind_normal: wgpu::Buffer,
     /// Samples, their pattern, fragment depth and extent.
     pub(super) raster: RasterSettings,
@@ -206,6 +206,7 @@ impl<'a> GpuRasterizer<'a> {
     ) -> Result<Self, GpuError> {
         camera.validate().map_err(RenderError::from)?;
         check_settings(raster)?;
+        let entries = mesh_prepass_entries(ctx, scene, camera, raster)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splats"),
@@ -241,11 +242,10 @@ impl<'a> GpuRasterizer<'a> {
                 (15, &scene.canonical),
             ],
         );
-        let pixels = if scene.has_meshes { (camera.width * camera.height) as u64 } else { 1 };
         let pre_pass = |label| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: pixels * 16,
+                size: entries * 16,
                 usage: rw,
                 mapped_at_creation: false,
             })
@@ -279,12 +279,17 @@ impl<'a> GpuRasterizer<'a> {
         Ok(raster)
     }
 
+    /// The sub-pixel position of each sample ([`sample_positions`]; the `sample_offsets` buffer).
+    pub(super) fn offsets(&self) -> Vec<glam::Vec2> {
+        sample_positions(self.raster.samples, self.raster.sample_pattern)
+    }
+
     /// The same scene and camera at other raster settings (projected and sorted anew).
     pub fn with_settings(&self, raster: &RasterSettings) -> Result<GpuRasterizer<'a>, GpuError> {
         Self::new(self.ctx, self.pipes, self.scene, &self.camera, raster)
     }
 
-    /// The mesh pre-pass, once per camera: each pixel's nearest mesh and its forward-shaded
+    /// The mesh pre-pass, once per camera: each sample's nearest mesh and its forward-shaded
     /// colour (`shaders/mesh_prepass.wgsl`).
     fn encode_mesh_prepass(&self, encoder: &mut wgpu::CommandEncoder) {
         if !self.scene.has_meshes {
@@ -301,6 +306,7 @@ impl<'a> GpuRasterizer<'a> {
                 (3, &s.mesh_materials),
                 (4, &self.behind),
                 (5, &self.behind_normal),
+                (6, &self.sample_offsets),
                 (14, &s.lights),
             ],
         );
@@ -436,10 +442,16 @@ impl<'a> GpuRasterizer<'a> {
         Ok(crate::output(&self.camera, &mean, &m2, count, gpu_time, false))
     }
 
-    /// What the scene and the adapter allow `method` at these settings ([`GpuRasterizer::supports_scene`]),
-    /// and a render pipeline multisamples at the counts the adapter has.
+    /// The shaders' draw of `method` where [`GpuRasterizer::supports`] accepts it at these
+    /// settings and a render pipeline multisamples at the counts the adapter has.
     fn check_scene(&self, method: &RasterMethod) -> Result<Draw, GpuError> {
-        let draw = Self::scene_draw(method, &self.raster, self.scene.has_meshes)?;
+        Self::supports(method, &self.raster)?;
+        let draw = Draw::of(method).ok_or_else(|| {
+            GpuError::Unsupported(format!(
+                "the catalogue gives {} a GPU kernel, but the raster shaders do not draw it",
+                method.id().name()
+            ))
+        })?;
         let s = self.raster.samples;
         if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
             let reason = format!(
@@ -449,43 +461,6 @@ impl<'a> GpuRasterizer<'a> {
             return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
         Ok(draw)
-    }
-
-    /// Whether the GPU rasterizes `method` at `settings` in a scene with `meshes` or not. Lit,
-    /// every method lights each sample along its own ray at any sample count: sorted splatting
-    /// in the tile pass (sample by sample), StochasticSplats shaded per sample (where the device
-    /// can), Enderton and stratified in the compute raster operations. The mesh pre-pass casts
-    /// one ray per pixel, through its centre, so meshes go with one sample (and StochasticSplats'
-    /// depth test against the mesh reads the centre depth).
-    pub fn supports_scene(method: &RasterMethod, settings: &RasterSettings, meshes: bool) -> Result<(), GpuError> {
-        Self::scene_draw(method, settings, meshes).map(drop)
-    }
-
-    /// The shaders' draw of `method` where [`GpuRasterizer::supports_scene`] accepts it.
-    fn scene_draw(method: &RasterMethod, settings: &RasterSettings, meshes: bool) -> Result<Draw, GpuError> {
-        Self::supports(method, settings)?;
-        let name = method.id().name();
-        let draw = Draw::of(method).ok_or_else(|| {
-            GpuError::Unsupported(format!(
-                "the catalogue gives {name} a GPU kernel, but the raster shaders do not draw it"
-            ))
-        })?;
-        let (s, depth) = (settings.samples, settings.fragment_depth);
-        let refusal = if meshes && s > 1 {
-            Some(format!(
-                "splatting among meshes on the GPU goes with one sample per pixel, not {s} (the mesh pre-pass casts one ray per pixel, through its centre)"
-            ))
-        } else if meshes && draw == Draw::Stochastic && depth != FragmentDepth::Center {
-            Some(format!(
-                "{name} among meshes on the GPU goes with centre depth, not {depth:?} (its depth test against the mesh reads the centre depth)"
-            ))
-        } else {
-            None
-        };
-        match refusal {
-            Some(reason) => Err(GpuError::refused(reason, &[Remedy::Cpu])),
-            None => Ok(draw),
-        }
     }
 
     /// One lit frame of sorted splatting from the compute tile rasterizer.
@@ -530,15 +505,15 @@ impl<'a> GpuRasterizer<'a> {
     }
 
     /// Whether the hybrid pipeline's first hits ([`GpuRasterizer::first_hits`]) take `settings`:
-    /// one sample per pixel at centre depth (the ray-tracing kernel continues one camera ray per
-    /// pixel; the CPU's hybrid continues each of S samples).
+    /// at any sample count (the ray-tracing kernel continues each sample's ray), at centre depth
+    /// (the tile pass walks the splats in centre-depth order).
     pub fn supports_first_hits(settings: &RasterSettings) -> Result<(), GpuError> {
-        if settings.samples != 1 || settings.fragment_depth != FragmentDepth::Center {
+        if settings.fragment_depth != FragmentDepth::Center {
             let reason = format!(
-                "the GPU hybrid continues one ray per pixel from its first hits, at the pixel centre and centre depth, not {} samples at {:?}",
-                settings.samples, settings.fragment_depth
+                "the GPU hybrid's first hits walk the splats in centre-depth order, not at {:?} depth",
+                settings.fragment_depth
             );
-            return Err(GpuError::refused(reason, &[Remedy::Cpu]));
+            return Err(GpuError::refused(reason, &[Remedy::CenterDepth, Remedy::Cpu]));
         }
         Ok(())
     }
@@ -689,6 +664,29 @@ fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
         return Err(GpuError::refused(reason, &[Remedy::StandardPattern, Remedy::Cpu]));
     }
     Ok(())
+}
+
+/// Entries of the mesh pre-pass's buffers: one per sample of every pixel among meshes (one
+/// unused entry without), refused above the adapter's binding limit.
+fn mesh_prepass_entries(
+    ctx: &GpuContext,
+    scene: &RasterScene,
+    camera: &Camera,
+    raster: &RasterSettings,
+) -> Result<u64, GpuError> {
+    if !scene.has_meshes {
+        return Ok(1);
+    }
+    let entries = u64::from(camera.width) * u64::from(camera.height) * u64::from(raster.samples);
+    let bytes = entries * 16;
+    if bytes > ctx.max_binding {
+        let reason = format!(
+            "the mesh pre-pass holds 16 bytes for each of the {} × {} × {} samples, {bytes} bytes, but the adapter binds at most {} bytes per storage buffer (fewer samples per pixel or a smaller image would fit)",
+            camera.width, camera.height, raster.samples, ctx.max_binding
+        );
+        return Err(GpuError::refused(reason, &[Remedy::Cpu]));
+    }
+    Ok(entries)
 }
 
 /// A bind group for an auto-layout compute pipeline: just the bindings its entry point uses.

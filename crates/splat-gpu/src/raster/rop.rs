@@ -140,10 +140,10 @@ impl RopPass {
 }
 
 impl GpuRasterizer<'_> {
-    /// The hybrid's first hit of every pixel from Enderton's or stratified raster operations at
-    /// one sample, in the frame of key `frame_key` (decisions shifted by `u_shift`): one ROP frame
-    /// that keeps its state, then `rop_first_hit` (rop.wgsl) turns each pixel's written sample
-    /// into the tile pass's first-hit buffers.
+    /// The hybrid's first hit of every sample from Enderton's or stratified raster operations,
+    /// in the frame of key `frame_key` (decisions shifted by `u_shift`): one ROP frame that keeps
+    /// its state, then `rop_first_hit` (rop.wgsl) turns each written sample into the tile pass's
+    /// first-hit buffers.
     pub(super) fn rop_first_hits(
         &self,
         method: &RasterMethod,
@@ -158,7 +158,7 @@ impl GpuRasterizer<'_> {
         let rop = RopPass::new(self, &targets, true)?;
         let slots = FrameSlots::new(ctx);
         slots.write(ctx, &[frame_key], 0, &Frames { u_shift, ..Frames::default() });
-        let pixels = (w * h) as usize;
+        let pixels = (w * h * self.raster.samples) as usize;
         let buffer = |label, bytes: usize| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -182,6 +182,7 @@ impl GpuRasterizer<'_> {
                 (12, &pick),
                 (15, &self.scene.canonical),
                 (16, &normal),
+                (20, &self.sample_offsets),
                 (22, &rop.state),
             ],
         );
@@ -199,7 +200,7 @@ impl GpuRasterizer<'_> {
         self.submit(encoder)?;
         let (color, pick, normal) =
             (ctx.read_f32(&color, pixels * 4)?, ctx.read_u32(&pick, pixels * 2)?, ctx.read_f32(&normal, pixels * 4)?);
-        Ok(super::depth_pick::first_hits_of(&color, &pick, &normal))
+        Ok(super::depth_pick::first_hits_of(&color, &pick, &normal, &self.offsets()))
     }
 
     /// The most splats any tile's list holds (the same in every draw order), counted from the
