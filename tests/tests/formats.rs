@@ -316,6 +316,138 @@ fn spz_v4_is_the_reference_writers_file() {
     assert!(v4.len() < v3.len(), "v4 ({} bytes) is no smaller than v3 ({})", v4.len(), v3.len());
 }
 
+/// glTF with `KHR_gaussian_splatting` as splat-transform writes it from the interop source: the
+/// reader turns the data from glTF's +Y-up axes (a half turn about z) and takes linear scales
+/// and opacities after the sigmoid, and gets the source's splats back to f32 rounding (the
+/// reference converts with exp and sigmoid in f64; measured: every attribute equal, the
+/// rotations within the 2e-3 rad that f32's acos resolves near 1). The writer's file holds the reference's attributes, accessor for accessor, the
+/// same values to f32 rounding. Controls: the reference's raw positions are the source's with x
+/// and y negated (so a reader that skipped the turn would fail), and its scales are not logs.
+#[test]
+fn gltf_splats_read_and_write_as_splat_transform_does() {
+    let Some(dir) = interop_dir() else { return };
+    let source = splat_io::read_scene(&dir.join("source.ply")).unwrap();
+    let read = splat_io::read_scene_with(&dir.join("splat-transform.glb"), Default::default()).unwrap();
+    assert_eq!(read.format, splat_io::SceneFormat::Gltf);
+    let e = errors(&source, &read.scene);
+    eprintln!("splat-transform.glb against the source: {e:?}");
+    let f32_rounding =
+        Steps { position: 1e-6, log_scale: 1e-6, opacity: 1e-6, dc: 0.0, sh1: 1e-6, sh_rest: 1e-6, angle: 2e-3 };
+    within(e, f32_rounding).unwrap_or_else(|m| panic!("splat-transform.glb: {m} ({e:?})"));
+    // Both files' attributes, accessor by accessor, as f32 (or bytes for COLOR_0).
+    let attributes = |bytes: &[u8]| -> std::collections::BTreeMap<String, (String, u64, Vec<f64>)> {
+        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+        let bin = &bytes[20 + json_len + 8..];
+        let primitive = &doc["meshes"][0]["primitives"][0];
+        assert_eq!(primitive["extensions"]["KHR_gaussian_splatting"]["kernel"], "ellipse");
+        primitive["attributes"]
+            .as_object()
+            .unwrap()
+            .iter()
+            .map(|(name, index)| {
+                let a = &doc["accessors"][index.as_u64().unwrap() as usize];
+                let view = &doc["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+                let start = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+                let data = &bin[start..start + view["byteLength"].as_u64().unwrap() as usize];
+                let component = a["componentType"].as_u64().unwrap();
+                let values = match component {
+                    5126 => data.chunks(4).map(|c| f64::from(f32::from_le_bytes(c.try_into().unwrap()))).collect(),
+                    _ => data.iter().map(|&b| f64::from(b)).collect(),
+                };
+                (name.clone(), (a["type"].as_str().unwrap().to_string(), component, values))
+            })
+            .collect()
+    };
+    let theirs = attributes(&std::fs::read(dir.join("splat-transform.glb")).unwrap());
+    let ours = attributes(
+        &splat_io::gltf_splats::encode_gltf_splats(&source, splat_io::gltf_splats::GltfContainer::Glb).unwrap(),
+    );
+    assert_eq!(
+        ours.keys().collect::<Vec<_>>(),
+        theirs.keys().collect::<Vec<_>>(),
+        "the attributes differ from the reference's"
+    );
+    for (name, (kind, component, values)) in &ours {
+        let (their_kind, their_component, their_values) = &theirs[name];
+        assert_eq!((kind, component), (their_kind, their_component), "{name}");
+        assert_eq!(values.len(), their_values.len(), "{name}");
+        // A quaternion and its negative are one rotation: compare up to the sign of each.
+        let worst = values
+            .chunks(if name.ends_with("ROTATION") { 4 } else { 1 })
+            .zip(their_values.chunks(if name.ends_with("ROTATION") { 4 } else { 1 }))
+            .map(|(a, b)| {
+                let d = |s: f64| a.iter().zip(b).map(|(x, y)| (x - s * y).abs()).fold(0.0, f64::max);
+                d(1.0).min(d(-1.0))
+            })
+            .fold(0.0, f64::max);
+        // COLOR_0 is 8-bit: a value at a rounding boundary may round either way.
+        let bound = if name == "COLOR_0" { 1.0 } else { 2e-6 };
+        eprintln!("{name}: largest difference from the reference {worst:.2e}");
+        assert!(worst <= bound, "{name}: {worst} from the reference's values");
+    }
+    // Controls: the reference stores turned positions and linear scales.
+    let raw = &theirs["POSITION"].2;
+    let p0 = source.particles[0].mean;
+    assert!((raw[0] + f64::from(p0.x)).abs() < 1e-6 && (raw[1] + f64::from(p0.y)).abs() < 1e-6, "not turned");
+    assert!((raw[2] - f64::from(p0.z)).abs() < 1e-6);
+    assert!(p0.x.abs() > 1e-3 && p0.y.abs() > 1e-3, "the control needs a splat off the z axis");
+    let scale = &theirs["KHR_gaussian_splatting:SCALE"].2;
+    assert!((scale[0] - f64::from(source.particles[0].scale.x)).abs() < 1e-6, "scales are not linear");
+}
+
+/// One `.glb` holds a world's splats and its meshes: the splat reader takes the
+/// `KHR_gaussian_splatting` primitive, the mesh reader the triangles beside it, and a world
+/// opened from the file has both.
+#[test]
+fn a_gltf_file_holds_splats_and_meshes_together() {
+    let (scene, _) = cloud();
+    let small = Scene::new(scene.particles[..30].to_vec(), 3);
+    let gltf =
+        splat_io::gltf_splats::encode_gltf_splats(&small, splat_io::gltf_splats::GltfContainer::Embedded).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&gltf).unwrap();
+    // A floor quad (two triangles) in a second buffer, a file beside the .gltf, placed by a
+    // second node.
+    let corners: [f32; 12] = [-2.0, -1.0, -2.0, 2.0, -1.0, -2.0, 2.0, -1.0, 2.0, -2.0, -1.0, 2.0];
+    let indices: [u16; 6] = [0, 1, 2, 0, 2, 3];
+    let mut bytes: Vec<u8> = corners.iter().flat_map(|f| f.to_le_bytes()).collect();
+    bytes.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
+    let folder = scratch_dir("gltf-world");
+    std::fs::write(folder.join("floor.bin"), &bytes).unwrap();
+    doc["buffers"].as_array_mut().unwrap().push(serde_json::json!({ "byteLength": bytes.len(), "uri": "floor.bin" }));
+    let views = doc["bufferViews"].as_array().unwrap().len();
+    let accessors = doc["accessors"].as_array().unwrap().len();
+    doc["bufferViews"].as_array_mut().unwrap().extend([
+        serde_json::json!({ "buffer": 1, "byteOffset": 0, "byteLength": 48 }),
+        serde_json::json!({ "buffer": 1, "byteOffset": 48, "byteLength": 12 }),
+    ]);
+    doc["accessors"].as_array_mut().unwrap().extend([
+        serde_json::json!({ "bufferView": views, "componentType": 5126, "count": 4, "type": "VEC3",
+                            "min": [-2.0, -1.0, -2.0], "max": [2.0, -1.0, 2.0] }),
+        serde_json::json!({ "bufferView": views + 1, "componentType": 5123, "count": 6, "type": "SCALAR" }),
+    ]);
+    doc["meshes"].as_array_mut().unwrap().push(serde_json::json!({
+        "primitives": [{ "attributes": { "POSITION": accessors }, "indices": accessors + 1 }]
+    }));
+    doc["nodes"].as_array_mut().unwrap().push(serde_json::json!({ "mesh": 1 }));
+    doc["scenes"][0]["nodes"] = serde_json::json!([0, 1]);
+    let path = folder.join("world.gltf");
+    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let opened = splat_io::world::open_world(Some(&path), Default::default()).unwrap();
+    assert_eq!(opened.world.scene.particles.len(), 30);
+    assert_eq!(opened.world.scene.sh_degree, 3);
+    assert_eq!(opened.world.meshes.len(), 1);
+    assert_eq!(opened.world.meshes[0].0.triangles.len(), 2);
+    let mesh = splat_io::mesh::read_mesh(&path).unwrap();
+    assert_eq!(mesh.triangles.len(), 2, "the mesh reader skips the splats and keeps the floor");
+    // Without the floor the file is splats only; the mesh reader then finds no triangles.
+    let splats_only = folder.join("splats.gltf");
+    std::fs::write(&splats_only, &gltf).unwrap();
+    assert!(splat_io::world::open_world(Some(&splats_only), Default::default()).unwrap().world.meshes.is_empty());
+    let e = splat_io::mesh::read_mesh(&splats_only).unwrap_err().to_string();
+    assert!(e.contains("no triangles"), "{e}");
+}
+
 /// splat-transform reads Postshot's `antialiased 1` and writes the mode in every format (Brush's
 /// `SplatRenderMode: mip`, the spz flag 0x1): each of its files reads as gsplat's antialiased
 /// mode, and the `.spz` writer here sets the flag byte as splat-transform does (the plain
@@ -556,6 +688,16 @@ fn new_readers_survive_truncation_and_corruption() {
             cases += 1;
         }
         eprintln!("{name}: survived");
+    }
+    // glTF splats: every prefix (the reader's unit test) and corruptions of the JSON chunk and the
+    // binary data of a .glb.
+    let glb = splat_io::gltf_splats::encode_gltf_splats(&small, splat_io::gltf_splats::GltfContainer::Glb).unwrap();
+    for _ in 0..600 {
+        let mut b = glb.clone();
+        let i = (rng.next_f32() * b.len() as f32) as usize % b.len();
+        b[i] = (rng.next_f32() * 256.0) as u8;
+        let _ = splat_io::gltf_splats::parse_gltf_splats(&b, std::path::Path::new("/nonexistent"));
+        cases += 1;
     }
     for _ in 0..500 {
         let mut b = raw.clone();

@@ -1,6 +1,6 @@
 // Writes the files that splat-io's readers are tested on, with other implementations of the
 // formats: spz-js (spz version 2, compressed .ply) and PlayCanvas splat-transform (spz
-// versions 3 and 4, compressed .ply). Run by `cargo xtask assets` as
+// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting). Run by `cargo xtask assets` as
 //   node make.mjs OUT_DIR
 // in a folder where `npm ci` installed package-lock.json; OUT_DIR/source.ply must exist.
 import { readFileSync, writeFileSync } from 'node:fs';
@@ -23,6 +23,9 @@ const transform = (...args) => execFileSync(process.execPath, [cli, '-q', '-w', 
 transform(source, '--spz-version', '3', join(out, 'splat-transform-v3.spz'));
 transform(source, '--spz-version', '4', join(out, 'splat-transform-v4.spz'));
 transform(source, join(out, 'splat-transform.compressed.ply'));
+// glTF with KHR_gaussian_splatting (.glb): linear scale, opacity after the sigmoid, the data
+// turned a half turn about z into glTF's +Y-up axes.
+transform(source, join(out, 'splat-transform.glb'));
 
 // An antialiased capture as Postshot marks it (`comment antialiased 1`), and what splat-transform
 // writes of it: Brush's `SplatRenderMode: mip` in a .ply and a compressed .ply, the antialiased

@@ -409,7 +409,7 @@ fn assets() -> Result<PathBuf> {
 const INTEROP_SOURCES: &str = "xtask/interop";
 
 /// Write `target/interop/`: `source.ply` (the SH degree 3 cloud scene) and what other
-/// implementations make of it (spz versions 2–4, compressed .ply), for the reader tests in
+/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb), for the reader tests in
 /// tests/tests/formats.rs. Installs Node.js (Debian's nodejs, npm) when missing and root.
 fn interop() -> Result<PathBuf> {
     let dir = root().join("target/interop");

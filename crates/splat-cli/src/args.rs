@@ -343,7 +343,8 @@ impl Staged {
 /// Scene, camera and shading options shared by `render`, `converge` and `bench`.
 #[derive(Args, Clone)]
 pub struct SceneArgs {
-    /// Scene file (.ply, compressed .ply, .splat or .spz) or world file (.toml: splat sets,
+    /// Scene file (.ply, compressed .ply, .splat, .spz, or .glb / .gltf with
+    /// KHR_gaussian_splatting and any meshes beside the splats) or world file (.toml: splat sets,
     /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
     /// Cameras: an INRIA cameras.json, or a COLMAP model (a sparse/0 folder, or its

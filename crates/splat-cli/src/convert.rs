@@ -10,10 +10,12 @@ use std::path::PathBuf;
 /// Arguments of `splat convert`.
 #[derive(Args)]
 pub struct ConvertArgs {
-    /// Input scene: .ply (3DGS or PlayCanvas compressed), .splat or .spz (versions 2–4).
+    /// Input scene: .ply (3DGS or PlayCanvas compressed), .splat, .spz (versions 2–4) or glTF
+    /// .glb / .gltf (KHR_gaussian_splatting).
     pub input: PathBuf,
     /// Output scene, format by extension: .ply (f32, lossless), .splat (8-bit degree-0 colour,
-    /// no view dependence) or .spz (quantised, about 10× smaller than .ply).
+    /// no view dependence), .spz (quantised, about 10× smaller than .ply) or .glb / .gltf
+    /// (KHR_gaussian_splatting, f32, lossless; glTF's +Y-up axes).
     pub output: PathBuf,
     /// Version of a .spz output: 2 (8-bit rotations), 3 (smallest-three rotations, gzip) or
     /// 4 (zstd streams; readers from 2025 on).

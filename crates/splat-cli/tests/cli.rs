@@ -771,7 +771,7 @@ fn convert_round_trips_every_format() {
     // Refusals: a compressed .ply output, an unknown extension.
     for out in ["x.compressed.ply", "x.obj"] {
         let o = splat(&["convert", "fixtures/cloud.ply", scratch(out).to_str().unwrap()]);
-        assert!(!o.status.success() && stderr(&o).contains(".ply, .splat or .spz"), "{}", stderr(&o));
+        assert!(!o.status.success() && stderr(&o).contains(".ply, .splat, .spz, .glb or .gltf"), "{}", stderr(&o));
     }
     // Axes: a file written as RUB and read as stored renders a different (turned) scene.
     let rub = scratch("rub.spz");

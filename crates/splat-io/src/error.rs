@@ -185,6 +185,10 @@ pub enum ErrorKind {
     /// A world file is malformed or names something invalid.
     #[error("world: {0}")]
     World(String),
+    /// A glTF file's `KHR_gaussian_splatting` splats are malformed or use what this reader
+    /// does not decode.
+    #[error("glTF: {0}")]
+    Gltf(String),
     /// A mesh file (OBJ, glTF) is malformed or holds no triangles.
     #[error("mesh: {0}")]
     Mesh(String),

@@ -1,8 +1,8 @@
 //! `splat-io`: reading and writing scenes, cameras and images for `splat`.
 //!
 //! - Scenes (read and write unless noted): INRIA 3DGS `.ply` (binary and ASCII), PlayCanvas
-//!   compressed `.ply` (read), antimatter15 `.splat`, Niantic `.spz` (versions 2–4); see
-//!   [`SceneFormat`].
+//!   compressed `.ply` (read), antimatter15 `.splat`, Niantic `.spz` (versions 2–4), glTF
+//!   `.glb` / `.gltf` with `KHR_gaussian_splatting` ([`gltf_splats`]); see [`SceneFormat`].
 //! - Cameras: INRIA `cameras.json`, COLMAP `cameras`/`images` `.bin` and `.txt` ([`colmap`]).
 //! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
 //! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
@@ -22,6 +22,7 @@ pub mod cameras;
 pub mod colmap;
 pub mod compressed_ply;
 mod error;
+pub mod gltf_splats;
 pub mod image;
 pub mod mesh;
 pub mod ply;
@@ -46,34 +47,41 @@ pub enum SceneFormat {
     Splat,
     /// Niantic `.spz`: quantised, gzip (versions 2, 3) or zstd (version 4).
     Spz,
+    /// glTF 2.0 `.glb` / `.gltf` with `KHR_gaussian_splatting`: f32 attributes, SH up to
+    /// degree 3, lossless ([`gltf_splats`]).
+    Gltf,
 }
 
 impl SceneFormat {
-    /// The format an output path asks for, by extension (`.ply`, `.splat`, `.spz`).
+    /// The format an output path asks for, by extension (`.ply`, `.splat`, `.spz`, `.glb`,
+    /// `.gltf`).
     pub fn for_output(path: &Path) -> Result<Self, Error> {
         match extension(path).as_deref() {
             Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => Err(Error::new(
                 path,
-                ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz (compressed .ply is read only)" },
+                ErrorKind::UnknownExtension {
+                    expected: ".ply, .splat, .spz, .glb or .gltf (compressed .ply is read only)",
+                },
             )),
             Some("ply") => Ok(Self::Ply),
             Some("splat") => Ok(Self::Splat),
             Some("spz") => Ok(Self::Spz),
-            _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz" })),
+            Some("glb" | "gltf") => Ok(Self::Gltf),
+            _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat, .spz, .glb or .gltf" })),
         }
     }
 
     /// The screen filter a file of this format records for a scene of `filter`: the filter
     /// itself where the format can say it, else the nearest it can (`.spz` marks Mip-Splatting's
-    /// filter antialiased, the other compensated filter) or none (`.splat` has no mode: the
-    /// 3DGS dilation). A writer that records another filter than the scene's changes how the
+    /// filter antialiased, the other compensated filter) or none (`.splat` and glTF have no
+    /// mode: the 3DGS dilation, the extension's `ellipse` kernel). A writer that records another filter than the scene's changes how the
     /// capture renders, so front ends say so.
     pub fn records(self, filter: ScreenFilter) -> ScreenFilter {
         match (self, filter) {
             (Self::Ply | Self::CompressedPly, filter) => filter,
             (Self::Spz, ScreenFilter::Mip) => ScreenFilter::Antialiased,
             (Self::Spz, filter) => filter,
-            (Self::Splat, _) => ScreenFilter::Dilation,
+            (Self::Splat | Self::Gltf, _) => ScreenFilter::Dilation,
         }
     }
 
@@ -84,6 +92,7 @@ impl SceneFormat {
             Self::CompressedPly => "compressed .ply",
             Self::Splat => ".splat",
             Self::Spz => ".spz",
+            Self::Gltf => "glTF (KHR_gaussian_splatting)",
         }
     }
 }
@@ -124,8 +133,8 @@ fn extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
 }
 
-/// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`
-/// or `.spz`) with default options: unknown `.ply` properties are skipped.
+/// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`,
+/// `.spz`, `.glb` or `.gltf`) with default options: unknown `.ply` properties are skipped.
 pub fn read_scene(path: &Path) -> Result<Scene, Error> {
     read_scene_with(path, ReadOptions::default()).map(|read| read.scene)
 }
@@ -159,7 +168,11 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         }
         Some("splat") => read(SceneFormat::Splat, splat::read_splat(path)?),
         Some("spz") => read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?),
-        _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat or .spz" })),
+        Some("glb" | "gltf") => read(SceneFormat::Gltf, gltf_splats::read_gltf_splats(path)?),
+        _ => {
+            let expected = ".ply, .splat, .spz, .glb or .gltf";
+            return Err(Error::new(path, ErrorKind::UnknownExtension { expected }));
+        }
     };
     if let Some(filter) = options.screen_filter {
         read.scene.screen_filter = filter;
@@ -168,13 +181,14 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
 }
 
 /// Write a scene in the format its extension names (`.ply`: binary little-endian f32;
-/// `.splat`; `.spz` with `spz` options).
+/// `.splat`; `.spz` with `spz` options; `.glb` / `.gltf` with `KHR_gaussian_splatting`).
 pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Result<SceneFormat, Error> {
     let format = SceneFormat::for_output(path)?;
     match format {
         SceneFormat::Ply => ply::write_ply(path, scene, ply::PlyFormat::BinaryLittleEndian)?,
         SceneFormat::Splat => splat::write_splat(path, scene)?,
         SceneFormat::Spz => spz::write_spz(path, scene, spz)?,
+        SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
         SceneFormat::CompressedPly => unreachable!("for_output refuses it"),
     }
     Ok(format)

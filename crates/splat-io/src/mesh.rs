@@ -58,7 +58,32 @@ pub fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, String> {
 /// `base`.
 pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<TriangleMesh, String> {
     let raw = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| format!("glTF: {e}"))?;
-    let json = raw.document.into_json();
+    let mut json = raw.document.into_json();
+    // Primitives with attributes gltf-json cannot name are the splats of KHR_gaussian_splatting
+    // (read by crate::gltf_splats): the triangles beside them are this reader's.
+    for mesh in &mut json.meshes {
+        mesh.primitives.retain(|p| p.attributes.keys().all(|k| matches!(k, gltf::json::validation::Checked::Valid(_))));
+    }
+    // A mesh left without primitives goes, and the nodes that placed it place nothing.
+    let mut kept = 0;
+    let renumber: Vec<Option<u32>> = json
+        .meshes
+        .iter()
+        .map(|m| {
+            (!m.primitives.is_empty()).then(|| {
+                kept += 1;
+                kept - 1
+            })
+        })
+        .collect();
+    json.meshes.retain(|m| !m.primitives.is_empty());
+    for node in &mut json.nodes {
+        node.mesh = match node.mesh {
+            // An index past the meshes stays, for the validation to name.
+            Some(m) if m.value() < renumber.len() => renumber[m.value()].map(gltf::json::Index::new),
+            other => other,
+        };
+    }
     // gltf-json 1.4's validation indexes a primitive's POSITION accessor unchecked: check first.
     let accessors = json.accessors.len();
     for (i, mesh) in json.meshes.iter().enumerate() {
@@ -147,7 +172,7 @@ fn append_gltf_mesh(mesh: &mut TriangleMesh, m: &gltf::Mesh, world: Mat4, buffer
 }
 
 /// The bytes of a buffer URI: a base64 `data:` URI, or a file relative to `base`.
-fn buffer_from_uri(uri: &str, base: &Path) -> Result<Vec<u8>, String> {
+pub(crate) fn buffer_from_uri(uri: &str, base: &Path) -> Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, data) = rest.split_once(";base64,").ok_or("glTF data URI is not base64")?;
         return base64_decode(data).ok_or_else(|| "glTF data URI holds invalid base64".into());
@@ -160,7 +185,7 @@ fn buffer_from_uri(uri: &str, base: &Path) -> Result<Vec<u8>, String> {
 }
 
 /// Standard base64 (RFC 4648 §4), padding optional.
-fn base64_decode(text: &str) -> Option<Vec<u8>> {
+pub(crate) fn base64_decode(text: &str) -> Option<Vec<u8>> {
     let value = |c: u8| match c {
         b'A'..=b'Z' => Some(c - b'A'),
         b'a'..=b'z' => Some(c - b'a' + 26),
