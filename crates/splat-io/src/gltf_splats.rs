@@ -762,6 +762,56 @@ mod tests {
         assert!(e.contains("node 1") && e.contains("uniform scale"), "{e}");
     }
 
+    /// Quantised attributes (the extension's normalized integer rotations and opacities),
+    /// interleaved in one strided buffer view, read with glTF's normalisation.
+    #[test]
+    fn quantised_interleaved_attributes_are_dequantised() {
+        let s = scene(0);
+        let mut doc: Value = serde_json::from_slice(&encode_gltf_splats(&s, GltfContainer::Embedded).unwrap()).unwrap();
+        // Per splat 12 bytes: rotation as 4 × i16 normalized, opacity as u8 normalized, 3 pad.
+        let snorm = |x: f32| (x * 32767.0).round() as i16;
+        let mut bytes = Vec::new();
+        for p in &s.particles {
+            let mut g = p.clone();
+            half_turn(&mut g);
+            for c in g.rotation.to_array() {
+                bytes.extend(snorm(c).to_le_bytes());
+            }
+            bytes.extend([(p.opacity * 255.0).round() as u8, 0, 0, 0]);
+        }
+        let uri = format!("data:application/octet-stream;base64,{}", base64_encode(&bytes));
+        doc["buffers"].as_array_mut().unwrap().push(json!({ "byteLength": bytes.len(), "uri": uri }));
+        let view = doc["bufferViews"].as_array().unwrap().len();
+        doc["bufferViews"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({ "buffer": 1, "byteLength": bytes.len(), "byteStride": 12 }));
+        let first = doc["accessors"].as_array().unwrap().len();
+        doc["accessors"].as_array_mut().unwrap().extend([
+            json!({ "bufferView": view, "componentType": SHORT, "normalized": true, "count": s.particles.len(), "type": "VEC4" }),
+            json!({ "bufferView": view, "byteOffset": 8, "componentType": UNSIGNED_BYTE, "normalized": true, "count": s.particles.len(), "type": "SCALAR" }),
+        ]);
+        let attributes = &mut doc["meshes"][0]["primitives"][0]["attributes"];
+        attributes[format!("{EXTENSION}:ROTATION")] = json!(first);
+        attributes[format!("{EXTENSION}:OPACITY")] = json!(first + 1);
+        let read = parse_gltf_splats(&serde_json::to_vec(&doc).unwrap(), Path::new(".")).unwrap();
+        for (p, q) in s.particles.iter().zip(&read.particles) {
+            assert!((p.opacity - q.opacity).abs() <= 0.5 / 255.0 + 1e-7, "{} {}", p.opacity, q.opacity);
+            assert!(p.rotation.dot(q.rotation).abs() > 1.0 - 1e-4, "{:?} {:?}", p.rotation, q.rotation);
+            assert_eq!(p.mean, q.mean);
+        }
+        // The stride is honoured: without it the elements run together and the values differ.
+        doc["bufferViews"][view]["byteStride"] = Value::Null;
+        let packed = parse_gltf_splats(&serde_json::to_vec(&doc).unwrap(), Path::new("."));
+        assert!(
+            packed.map_or(true, |r| r
+                .particles
+                .iter()
+                .zip(&s.particles)
+                .any(|(q, p)| (q.opacity - p.opacity).abs() > 0.01))
+        );
+    }
+
     #[test]
     fn malformed_documents_are_refused_with_the_problem_named() {
         let bytes = encode_gltf_splats(&scene(1), GltfContainer::Embedded).unwrap();
