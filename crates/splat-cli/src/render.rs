@@ -124,7 +124,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     warn_unused(&args, &cpu_algorithm, &staged);
     let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(&args, &gpu_algorithm, &staged)?;
+    let gpu = choose_gpu(&args, &gpu_algorithm)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
@@ -246,7 +246,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     let cpu_algorithm = algorithm(args)?;
     let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(args, &gpu_algorithm, &staged)?;
+    let gpu = choose_gpu(args, &gpu_algorithm)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let bar = indicatif::ProgressBar::new(cameras.len() as u64).with_style(
@@ -428,13 +428,13 @@ fn extras(args: &RenderArgs) -> splat_gpu::Extras {
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
 /// with the reason when the GPU cannot render this), `auto` takes a hardware GPU when one is
 /// found and it renders this, `cpu` never.
-fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) -> Result<Option<GpuContext>> {
+fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm) -> Result<Option<GpuContext>> {
     match args.scene.backend {
         BackendArg::Gpu => {
-            splat_gpu::supports(algorithm, &staged.shot(), extras(args))?;
+            splat_gpu::supports(algorithm, extras(args))?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if splat_gpu::supports(algorithm, &staged.shot(), extras(args)).is_ok() => {
+        BackendArg::Auto if splat_gpu::supports(algorithm, extras(args)).is_ok() => {
             crate::args::gpu_context(BackendArg::Auto)
         }
         BackendArg::Auto | BackendArg::Cpu => Ok(None),

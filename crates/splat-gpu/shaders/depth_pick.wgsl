@@ -12,6 +12,11 @@
 @group(0) @binding(17) var<storage, read> behind: array<vec4<f32>>;
 @group(0) @binding(18) var<storage, read> behind_normal: array<vec4<f32>>;
 
+// FIRST_HIT_FRAGMENTS: where each sample's fragments start (entry pixel × S + k), from the
+// counts of the FIRST_HIT_COUNT pass, and the fragments.
+@group(0) @binding(24) var<storage, read> fragment_start: array<u32>;
+@group(0) @binding(25) var<storage, read_write> fragments: array<Fragment>;
+
 // StochasticSplats' decision for splat s at sample k of pixel px in frame params.frame_key:
 // u < α, with u drawn as splat.wgsl `accepted_splat` draws it (raster/mod.rs
 // `stochastic_splat`, slot = sample k).
@@ -64,7 +69,10 @@ fn tile_blend(
     // Every fragment lit in the volumetric look, but for StochasticSplats' first hit, which the
     // ray tracer lights as the pick in either look.
     let written = params.first_hit == FIRST_HIT_ACCEPTED;
-    let volumetric = params.lit == 1u && params.look == LOOK_VOLUMETRIC && !written;
+    // The hybrid's volumetric look with a sorted first hit: the fragments are counted, then
+    // listed for the ray tracer, which lights each with its shadow rays.
+    let listed = params.first_hit == FIRST_HIT_COUNT || params.first_hit == FIRST_HIT_FRAGMENTS;
+    let volumetric = params.lit == 1u && params.look == LOOK_VOLUMETRIC && params.first_hit == 0u;
     let lit_surface = params.lit == 1u && params.look == LOOK_SURFACE;
     // Sample 0's composite L_0 and transmittance T_0 (sorted splatting's first hit).
     var l0 = vec3<f32>(0.0);
@@ -98,6 +106,11 @@ fn tile_blend(
         var hit_k = NONE;
         var n_k = vec3<f32>(0.0);
         var depth_k = 0.0;
+        // FIRST_HIT_COUNT: the sample's fragments so far; FIRST_HIT_FRAGMENTS: where the next goes.
+        var listed_k = 0u;
+        if (inside && params.first_hit == FIRST_HIT_FRAGMENTS) {
+            listed_k = fragment_start[index * params.samples + k];
+        }
         for (var start = range.x; start < range.y; start += BATCH) {
             load_batch(start, range.y, l);
             let n = min(BATCH, range.y - start);
@@ -113,8 +126,15 @@ fn tile_blend(
                     }
                     if (alpha > 0.0) {
                         var c = s.color;
-                        if (k == 0u || volumetric || written) {
+                        if (k == 0u || volumetric || written || listed) {
                             let nrm = splat_normal(s.id, origin, dir);
+                            if (params.first_hit == FIRST_HIT_FRAGMENTS) {
+                                let t = s.depth * to_t_k;
+                                fragments[listed_k] = Fragment(s.color, t_k * alpha, nrm, t, s.id, 0u, 0u, 0u);
+                            }
+                            if (listed) {
+                                listed_k++;
+                            }
                             if (volumetric) {
                                 c = shade_unshadowed(s.color, s.id, origin, dir_k, s.depth * to_t_k, nrm);
                             }
@@ -139,9 +159,12 @@ fn tile_blend(
             }
             workgroupBarrier();
         }
-        if (inside && written) {
+        let sorted = params.first_hit == FIRST_HIT_SORTED || params.first_hit == FIRST_HIT_FRAGMENTS;
+        if (inside && params.first_hit == FIRST_HIT_COUNT) {
+            out_pick[index * params.samples + k] = vec2<u32>(listed_k, 0u);
+        } else if (inside && written) {
             write_first_hit(index * params.samples + k, l_k, t_k, n_k, depth_k, hit_k);
-        } else if (inside && params.first_hit == FIRST_HIT_SORTED && k > 0u) {
+        } else if (inside && sorted && k > 0u) {
             // Sorted splatting: sample k's composite and transmittance, its radiance in sample
             // 0's mean in the surface look; the pick and normal are sample 0's.
             let l = select(l_k, vec3<f32>(0.0), lit_surface);
@@ -170,7 +193,7 @@ fn tile_blend(
             n = select(-dir, normal / len, len > DEGENERATE_NORMAL);
         }
         var t = -1.0;
-        if (params.first_hit == FIRST_HIT_SORTED) {
+        if (params.first_hit == FIRST_HIT_SORTED || params.first_hit == FIRST_HIT_FRAGMENTS) {
             // The hybrid pipeline lights and continues from these in the ray tracer: sample 0
             // carries the pick and the integrated normal, and in the surface look the mean
             // radiance, which the tracer lights once (raster/mod.rs `light_surface`).

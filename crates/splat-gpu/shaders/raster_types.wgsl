@@ -107,6 +107,10 @@ const MODE_STRATIFIED_PLAIN: u32 = 5u;
 // meshes) or StochasticSplats' (the closest accepted fragment).
 const FIRST_HIT_SORTED: u32 = 1u;
 const FIRST_HIT_ACCEPTED: u32 = 2u;
+// The volumetric look's first hit from sorted splatting: a pass that counts each sample's
+// fragments, then one that writes them for the ray tracer to light (splat_gpu::GpuFragment).
+const FIRST_HIT_COUNT: u32 = 3u;
+const FIRST_HIT_FRAGMENTS: u32 = 4u;
 const LOOK_SURFACE: u32 = 0u;
 const LOOK_VOLUMETRIC: u32 = 1u;
 const EXTENT_3DGS: u32 = 0u;

@@ -106,8 +106,9 @@ const MODE_PASS: u32 = 1u;
 // Whole frames whose camera segment is the rasterized first hit in hybrid_in (the hybrid
 // pipeline, vk_gaussian_splatting Lighting §5).
 const MODE_HYBRID: u32 = 2u;
-// params.first_hit (splat_gpu::layout::FIRST_HIT_ACCEPTED).
+// params.first_hit (splat_gpu::layout::FIRST_HIT_*).
 const FIRST_HIT_ACCEPTED: u32 = 2u;
+const FIRST_HIT_FRAGMENTS: u32 = 4u;
 const DONE: u32 = 1u;
 const ACCEPTED: u32 = 2u;
 // The ray met at least one hit (the integrated normal is defined).
@@ -170,6 +171,8 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(10) var<storage, read> triangles: array<Triangle>;
 @group(0) @binding(11) var<storage, read> mesh_materials: array<MeshMaterial>;
 @group(0) @binding(12) var<storage, read> hybrid_in: array<FirstHit>;
+// The fragments of the volumetric look's first hits (FIRST_HIT_FRAGMENTS).
+@group(0) @binding(17) var<storage, read> hybrid_fragments: array<Fragment>;
 
 // The hybrid pipeline's first hit of one sample of a pixel (sample i of pixel p at p S + i),
 // from the rasterizer (48 bytes), mirrored by splat_gpu::GpuFirstHit: the splats' radiance L and
@@ -184,6 +187,9 @@ struct FirstHit {
     picked: u32,
     pad0: u32,
     offset: vec2<f32>,
+    // With FIRST_HIT_FRAGMENTS, the sample's fragments in hybrid_fragments: first, count.
+    fragments: vec2<u32>,
+    pad1: vec2<u32>,
 }
 
 // The pick of the sample the last call of `sample` (or the pass method's last state) made.
@@ -601,6 +607,9 @@ var<private> surface: SurfaceHit;
 var<private> behind_weight: f32;
 // The lit pick in the sample `finish` returned (zero where it lit none).
 var<private> lit_pick: vec3<f32>;
+// The rasterized fragments `finish` lights for the segment (first, count in hybrid_fragments;
+// none but for the volumetric look's hybrid camera segments).
+var<private> segment_fragments: vec2<u32>;
 
 // trace/mod.rs `surface_offset`.
 fn surface_offset(x: vec3<f32>) -> f32 {
@@ -671,13 +680,16 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
             sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
         }
     }
-    // Lit(…) of the pick (k = 0) and of the mesh's local share (k = 1), where the sample shows
-    // them: one inlined copy of the lighting and its shadow traversal for both.
+    // Lit(…) of the pick (k = 0), of the mesh's local share (k = 1) and of the volumetric
+    // look's rasterized fragments (k ≥ 2: raster/mod.rs `sorted` with `lit_color` in the
+    // hybrid, each along the sample's ray, weighted Tᵢ αᵢ and added in order), where the sample
+    // shows them: one inlined copy of the lighting and its shadow traversal for all.
     var behind = params.background.xyz;
     lit_pick = vec3<f32>(0.0);
-    // Two iterations a call, not counted: `iterations` bounds each loop statement's total by the
-    // busiest lane's, and the batches of frames per dispatch shrink with every count a frame adds.
-    for (var k = 0u; k < 2u; k++) {
+    // The first two iterations of a call are not counted: `iterations` bounds each loop
+    // statement's total by the busiest lane's, and the batches of frames per dispatch shrink
+    // with every count a frame adds; each fragment counts.
+    for (var k = 0u; k < 2u + segment_fragments.y; k++) {
         var m: Material;
         var c: vec3<f32>;
         var t: f32;
@@ -692,6 +704,14 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
             c = st.radiance;
             t = st.depth;
             n = sample_pick.normal;
+        } else if (k >= 2u) {
+            iterations += 1u;
+            let g = hybrid_fragments[segment_fragments.x + k - 2u];
+            m = material_of(g.id);
+            c = g.color;
+            t = g.t;
+            n = g.normal;
+            share = g.weight;
         } else {
             if (!mesh || !(behind_weight > 0.0)) {
                 continue;
@@ -712,6 +732,8 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
         if (k == 0u) {
             out = vec4<f32>(lit, out.w);
             lit_pick = lit;
+        } else if (k >= 2u) {
+            out = vec4<f32>(out.xyz + lit, out.w);
         } else {
             behind = lit;
         }
@@ -918,6 +940,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     }
                 }
                 segment_method = params.method;
+                segment_fragments = vec2<u32>(0u);
                 let rasterized = hybrid && seg.depth == 0u;
                 if (rasterized) {
                     // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
@@ -932,6 +955,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         st.flags |= BEHIND_ONLY;
                     }
                     st.radiance = h.radiance;
+                    if (params.first_hit == FIRST_HIT_FRAGMENTS) {
+                        // The volumetric look: `finish` lights the fragments with the tracer's
+                        // shadow rays (trace `light_pick`) and sums them.
+                        st.radiance = vec3<f32>(0.0);
+                        segment_fragments = h.fragments;
+                    }
                     st.transmittance = h.transmittance;
                     st.normal = h.normal;
                     if (any(h.normal != vec3<f32>(0.0))) {

@@ -18,14 +18,13 @@ pub struct Extras {
     pub normal: bool,
 }
 
-/// Whether the GPU renders `algorithm` of `shot` with `extras`, before anything is uploaded: the
+/// Whether the GPU renders `algorithm` with `extras`, before anything is uploaded: the
 /// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`]) and what the
 /// backend composes from them.
-pub fn supports(algorithm: &Algorithm, shot: &Shot, extras: Extras) -> Result<(), GpuError> {
+pub fn supports(algorithm: &Algorithm, extras: Extras) -> Result<(), GpuError> {
     match algorithm {
         Algorithm::Oracle => Err(oracle_refused()),
         Algorithm::Hybrid(method, raster, secondary) => {
-            crate::trace::supports_hybrid_lighting(shot.lighting, method)?;
             GpuRasterizer::supports(method, raster)?;
             GpuRasterizer::supports_first_hits(raster)?;
             GpuTracer::supports(secondary)
@@ -55,7 +54,7 @@ pub fn render(
     extras: Extras,
     frames: &Frames,
 ) -> Result<RenderOutput, GpuError> {
-    supports(algorithm, shot, extras)?;
+    supports(algorithm, extras)?;
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
         Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes))
@@ -130,23 +129,18 @@ fn oracle_refused() -> GpuError {
 mod tests {
     use super::*;
     use splat_core::catalogue::Family;
-    use splat_core::lighting::Lighting;
-    use splat_core::mesh::Meshes;
     use splat_core::raster::{RasterSettings, SamplePattern};
-    use splat_core::{MethodId, Parameters, RenderSettings};
+    use splat_core::{MethodId, Parameters};
 
     /// The backend takes exactly the catalogue's GPU methods (default parameters at the
     /// hardware's sample pattern, an unlit scene), and refuses the others with the CPU as the
     /// way out: the catalogue's `gpu` column cannot drift from the kernels' rules.
     #[test]
     fn the_gpu_runs_what_the_catalogue_says() {
-        let (scene, camera) = splat_core::scenes::layers();
-        let (meshes, lighting, settings) = (Meshes::none(), Lighting::default(), RenderSettings::default());
-        let shot = Shot { scene: &scene, meshes: &meshes, lighting: &lighting, camera: &camera, settings: &settings };
         let standard = RasterSettings { sample_pattern: SamplePattern::Standard, ..RasterSettings::default() };
         let p = Parameters { raster: standard, ..Parameters::default() };
         for id in MethodId::ALL {
-            let verdict = supports(&id.algorithm(&p), &shot, Extras::default());
+            let verdict = supports(&id.algorithm(&p), Extras::default());
             assert_eq!(verdict.is_ok(), id.entry().gpu, "{}: {verdict:?}", id.name());
             if let Err(e) = verdict {
                 assert!(e.remedies().contains(&Remedy::Cpu), "{}: {e}", id.name());
@@ -157,7 +151,7 @@ mod tests {
         let Algorithm::Raster(first, raster) = sorted else { unreachable!() };
         for id in MethodId::of(Family::Trace) {
             let Algorithm::Trace(secondary) = id.algorithm(&p) else { unreachable!() };
-            let verdict = supports(&Algorithm::Hybrid(first, raster, secondary), &shot, Extras::default());
+            let verdict = supports(&Algorithm::Hybrid(first, raster, secondary), Extras::default());
             assert_eq!(verdict.is_ok(), id.entry().gpu, "hybrid with {}: {verdict:?}", id.name());
         }
     }

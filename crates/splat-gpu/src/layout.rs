@@ -28,6 +28,13 @@ pub const FIRST_HIT_SORTED: u32 = 1;
 /// The hybrid pipeline's first hit from StochasticSplats: the closest accepted fragment,
 /// written opaque and lit as the pick in either look.
 pub const FIRST_HIT_ACCEPTED: u32 = 2;
+/// `RasterParams::first_hit` of the tile pass that counts each sample's fragments in front of
+/// the meshes, for the hybrid's volumetric look with a sorted first hit.
+pub const FIRST_HIT_COUNT: u32 = 3;
+/// The hybrid pipeline's first hit from sorted splatting in the volumetric look: each sample's
+/// fragments ([`GpuFragment`]) with their weights Tᵢ αᵢ, which the ray tracer lights one by one
+/// with its shadow rays (`Params::first_hit`, `RasterParams::first_hit`).
+pub const FIRST_HIT_FRAGMENTS: u32 = 4;
 /// `Params::look` of [`Look::Surface`].
 pub const LOOK_SURFACE: u32 = 0;
 /// `Params::look` of [`Look::Volumetric`].
@@ -311,13 +318,14 @@ pub const FILTER_CENTER: u32 = 0;
 /// [`Params::pixel_filter`] of [`splat_core::camera_sampling::PixelFilter::Box`].
 pub const FILTER_BOX: u32 = 1;
 
-/// The hybrid pipeline's first hit of one sample of a pixel (WGSL `FirstHit`, 48 bytes), from
+/// The hybrid pipeline's first hit of one sample of a pixel (WGSL `FirstHit`, 64 bytes), from
 /// the rasterizer ([`crate::GpuRasterizer::first_hits`]): S of them a pixel, sample i of pixel p
 /// at p S + i.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuFirstHit {
-    /// The splats' radiance L in front of the meshes.
+    /// The splats' radiance L in front of the meshes (unused with `FIRST_HIT_FRAGMENTS`: the
+    /// ray tracer lights the fragments).
     pub radiance: [f32; 3],
     /// Their transmittance T.
     pub transmittance: f32,
@@ -331,6 +339,34 @@ pub struct GpuFirstHit {
     pub pad0: u32,
     /// The sample's position in its pixel, in [0, 1)² (its camera ray's).
     pub offset: [f32; 2],
+    /// With `FIRST_HIT_FRAGMENTS`, the sample's fragments: index of the first and count.
+    pub fragments: [u32; 2],
+    /// Padding.
+    pub pad1: [u32; 2],
+}
+
+/// One fragment of a hybrid sample in the volumetric look (WGSL `Fragment`, 48 bytes): what the
+/// ray tracer lights (`raster/mod.rs` `Rasterizer::color` through `lit_color`) and its weight in
+/// the sample's composite.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuFragment {
+    /// The splat's colour.
+    pub color: [f32; 3],
+    /// Its weight Tᵢ αᵢ in Eq. 3.
+    pub weight: f32,
+    /// The splat's unit normal along sample 0's ray.
+    pub normal: [f32; 3],
+    /// Its distance along the sample's ray.
+    pub t: f32,
+    /// The splat's particle id.
+    pub id: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
 }
 
 /// [`Params::mesh_root`] of a scene without meshes (WGSL `NONE`).
@@ -902,8 +938,9 @@ mod tests {
             crate::TRACE_WGSL,
             GpuFirstHit,
             "FirstHit",
-            [radiance, transmittance, normal, depth, picked, pad0, offset]
+            [radiance, transmittance, normal, depth, picked, pad0, offset, fragments, pad1]
         );
+        assert_mirrors!(crate::TRACE_WGSL, GpuFragment, "Fragment", [color, weight, normal, t, id, pad0, pad1, pad2]);
         assert_mirrors!(
             crate::TRACE_WGSL,
             PassState,
@@ -1082,6 +1119,7 @@ mod tests {
                 "FILTER_CENTER" = FILTER_CENTER,
                 "FILTER_BOX" = FILTER_BOX,
                 "FIRST_HIT_ACCEPTED" = FIRST_HIT_ACCEPTED,
+                "FIRST_HIT_FRAGMENTS" = FIRST_HIT_FRAGMENTS,
                 "FRAME_SOBOL_SALT" = splat_core::camera_sampling::FRAME_SOBOL_SALT,
                 "ACCUMULATION_F32" = splat_core::frame::AccumulationFormat::F32.code(),
                 "ACCUMULATION_F16" = splat_core::frame::AccumulationFormat::F16.code(),

@@ -34,9 +34,9 @@ pub use backend::{Extras, render, supports};
 pub use context::{GpuContext, quiet_device_select};
 pub use display::{DisplayMode, DisplayTransform, PixelState, read_rgba8};
 pub use error::{GpuError, Remedy};
-pub use layout::{GpuFirstHit, GpuParticle, Params, PassState, PathParams};
+pub use layout::{GpuFirstHit, GpuFragment, GpuParticle, Params, PassState, PathParams};
 pub use progressive::ProgressiveTrace;
-pub use raster::{DepthPick, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
+pub use raster::{DepthPick, FirstHits, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use sort::RadixSort;
 pub use trace::{
     DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MethodParams, PathPipeline, TRACE_WGSL,

@@ -35,6 +35,7 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../shaders/bvh.wgsl"),
     include_str!("../shaders/mesh.wgsl"),
     include_str!("../shaders/pick.wgsl"),
+    include_str!("../shaders/hybrid_fragment.wgsl"),
     include_str!("../shaders/trace.wgsl"),
     include_str!("../shaders/lens.wgsl"),
     include_str!("../shaders/stochastic.wgsl"),
@@ -158,7 +159,7 @@ impl TracePipeline {
 
     /// The kernel's bindings (checked against `trace.wgsl`'s by
     /// `layout::tests::trace_layout_matches_the_shader`).
-    pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 17] {
+    pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 18] {
         let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
         [
             uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
@@ -178,6 +179,7 @@ impl TracePipeline {
             storage(14, true),
             storage(15, true),
             storage(16, true),
+            storage(17, true),
         ]
     }
 }
@@ -225,6 +227,8 @@ pub struct GpuTracer<'a> {
     mesh_materials: wgpu::Buffer,
     /// Binding 12 when no first hits are given (one unused entry).
     no_first_hits: wgpu::Buffer,
+    /// A one-entry fragment list for renders without the volumetric look's first hits.
+    no_fragments: wgpu::Buffer,
     /// Binding 13 outside path-traced renders.
     no_path: wgpu::Buffer,
     /// The Sobol direction numbers (binding 14).
@@ -236,38 +240,26 @@ pub struct GpuTracer<'a> {
     emitter_count: u32,
 }
 
-/// The hybrid's lighting the GPU renders with the first hit `first`: sorted splatting's
-/// volumetric look lights every fragment in the tile pass, which casts no shadow rays and
-/// samples no area light, where the CPU's `Rasterizer::hybrid` lights each fragment as the ray
-/// tracer does; so that look is refused for it (the surface look lights the pick with the
-/// tracer on both, and StochasticSplats' one opaque fragment is the pick in either look).
-pub fn supports_hybrid_lighting(
-    lighting: &splat_core::lighting::Lighting,
-    first: &RasterMethod,
-) -> Result<(), GpuError> {
-    let sorted = matches!(first, RasterMethod::Sorted { .. });
-    if sorted && lighting.is_on() && lighting.look == splat_core::lighting::Look::Volumetric {
-        return Err(GpuError::refused(
-            "the GPU hybrid lights the volumetric look's fragments in its tile pass, without the ray tracer's \
-             shadow rays and light samples (the surface look lights the pick with them)",
-            &[Remedy::Cpu],
-        ));
-    }
-    Ok(())
+/// Rasterized first hits on the device ([`crate::FirstHits`]): the hits, `samples` of them a
+/// pixel, their fragments (one unused entry but in the volumetric look) and which first hit
+/// they are (`Params::first_hit`).
+pub(crate) struct DeviceFirstHits {
+    hits: wgpu::Buffer,
+    fragments: wgpu::Buffer,
+    samples: u32,
+    kind: u32,
 }
 
-/// Frame f's pinhole camera and the first hits rasterized through it, and how many a pixel.
-type FrameFirstHits<'a> = dyn Fn(u32) -> Result<(Camera, wgpu::Buffer, u32), GpuError> + 'a;
+/// Frame f's pinhole camera and the first hits rasterized through it.
+type FrameFirstHits<'a> = dyn Fn(u32) -> Result<(Camera, DeviceFirstHits), GpuError> + 'a;
 
-/// The hybrid pipeline's rasterized first hits ([`GpuTracer::render_hybrid`]), `samples` of
-/// them a pixel.
+/// The hybrid pipeline's rasterized first hits ([`GpuTracer::render_hybrid`]).
 #[derive(Clone, Copy)]
 enum FirstHits<'a> {
     /// One rasterization for every frame: sorted splatting through a still camera.
-    Still { hits: &'a wgpu::Buffer, samples: u32 },
-    /// One rasterization per frame; `accepted` for a stochastic method's written splats
-    /// ([`layout::FIRST_HIT_ACCEPTED`]), else sorted splatting's composite.
-    PerFrame { hits: &'a FrameFirstHits<'a>, accepted: bool },
+    Still(&'a DeviceFirstHits),
+    /// One rasterization per frame.
+    PerFrame(&'a FrameFirstHits<'a>),
 }
 
 impl<'a> GpuTracer<'a> {
@@ -304,6 +296,7 @@ impl<'a> GpuTracer<'a> {
             triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace.meshes()))),
             mesh_materials: ctx.upload("mesh materials", bytemuck::cast_slice(&layout::mesh_materials(trace.meshes()))),
             no_first_hits: ctx.upload("no first hits", bytemuck::cast_slice(&[layout::GpuFirstHit::default()])),
+            no_fragments: ctx.upload("no fragments", bytemuck::cast_slice(&[layout::GpuFragment::default()])),
         })
     }
 
@@ -355,23 +348,28 @@ impl<'a> GpuTracer<'a> {
         method: &Method,
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
-        supports_hybrid_lighting(self.trace.lighting(), first)?;
         let sampling = self.trace.settings().sampling;
         // The first hits on the device, and how many a pixel (the rasterizer's samples).
-        let upload = |frame_camera: &Camera, hits: Vec<layout::GpuFirstHit>| {
+        let upload = |frame_camera: &Camera, first: crate::FirstHits| {
             let pixels = (frame_camera.width * frame_camera.height) as usize;
-            if hits.is_empty() || !hits.len().is_multiple_of(pixels) {
+            if first.hits.is_empty() || !first.hits.len().is_multiple_of(pixels) {
                 return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
             }
-            Ok((self.ctx.upload("first hits", bytemuck::cast_slice(&hits)), (hits.len() / pixels) as u32))
+            let fragments =
+                if first.fragments.is_empty() { vec![layout::GpuFragment::default()] } else { first.fragments };
+            Ok(DeviceFirstHits {
+                hits: self.ctx.upload("first hits", bytemuck::cast_slice(&first.hits)),
+                fragments: self.ctx.upload("first-hit fragments", bytemuck::cast_slice(&fragments)),
+                samples: (first.hits.len() / pixels) as u32,
+                kind: first.kind,
+            })
         };
         if !sampling.is_random() && !first.is_stochastic() {
-            let (buffer, samples) = upload(camera, raster(camera)?.first_hits(first, 0, 0.0)?)?;
-            let hits = FirstHits::Still { hits: &buffer, samples };
-            return self.render_with(camera, method, frames, Some(hits), None);
+            let hits = upload(camera, raster(camera)?.first_hits(first, 0, 0.0)?)?;
+            return self.render_with(camera, method, frames, Some(FirstHits::Still(&hits)), None);
         }
         let still = if sampling.is_random() { None } else { Some(raster(camera)?) };
-        let per_frame = |f: u32| -> Result<(Camera, wgpu::Buffer, u32), GpuError> {
+        let per_frame = |f: u32| -> Result<(Camera, DeviceFirstHits), GpuError> {
             let key = splat_core::rng::frame_key(frames.seed, f);
             let (frame_camera, hits) = match &still {
                 Some(r) => (*camera, r.first_hits(first, key, frames.u_shift)?),
@@ -381,11 +379,9 @@ impl<'a> GpuTracer<'a> {
                     (frame_camera, raster(&frame_camera)?.first_hits(first, key, frames.u_shift)?)
                 }
             };
-            let (buffer, samples) = upload(&frame_camera, hits)?;
-            Ok((frame_camera, buffer, samples))
+            Ok((frame_camera, upload(&frame_camera, hits)?))
         };
-        let hits = FirstHits::PerFrame { hits: &per_frame, accepted: first.is_stochastic() };
-        self.render_with(camera, method, frames, Some(hits), None)
+        self.render_with(camera, method, frames, Some(FirstHits::PerFrame(&per_frame)), None)
     }
 
     /// The Monte Carlo path tracer (the twin of [`splat_core::path::PathTracer::render`]):
@@ -415,7 +411,7 @@ impl<'a> GpuTracer<'a> {
         &self,
         uniform: &wgpu::Buffer,
         targets: &TraceTargets,
-        first_hits: Option<&wgpu::Buffer>,
+        first_hits: Option<&DeviceFirstHits>,
         path: Option<&wgpu::Buffer>,
     ) -> wgpu::BindGroup {
         let params = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -435,11 +431,12 @@ impl<'a> GpuTracer<'a> {
             &targets.pick,
             &self.triangles,
             &self.mesh_materials,
-            first_hits.unwrap_or(&self.no_first_hits),
+            first_hits.map_or(&self.no_first_hits, |f| &f.hits),
             path.unwrap_or(&self.no_path),
             &self.sobol,
             &self.emitters,
             &self.emitter_density,
+            first_hits.map_or(&self.no_fragments, |f| &f.fragments),
         ];
         let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(wgpu::BindGroupEntry { binding: 0, resource: params })
             .chain(
@@ -482,7 +479,7 @@ impl<'a> GpuTracer<'a> {
         camera.validate().map_err(splat_core::RenderError::from)?;
         splat_core::trace::check_camera(self.trace.settings(), camera)?;
         let params = MethodParams::try_from(method)?;
-        let per_frame = matches!(first_hits, Some(FirstHits::PerFrame { .. }));
+        let per_frame = matches!(first_hits, Some(FirstHits::PerFrame(_)));
         let count = frames.keys(method.is_stochastic() || self.trace.is_random() || per_frame)?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
@@ -574,7 +571,7 @@ impl Run<'_> {
         let TraceTargets { mean: out_mean, m2: out_var, pick: out_pick, pass_state, .. } = &targets;
         let uniform = params_buffer(ctx);
         let still_hits = match self.first_hits {
-            Some(FirstHits::Still { hits, .. }) => Some(hits),
+            Some(FirstHits::Still(hits)) => Some(hits),
             _ => None,
         };
         let bind_group = tracer.bind_group(&uniform, &targets, still_hits, self.path.map(|p| p.1));
@@ -637,24 +634,24 @@ impl Run<'_> {
                     }
                 }
             }
-        } else if let Some(FirstHits::PerFrame { hits, accepted }) = self.first_hits {
+        } else if let Some(FirstHits::PerFrame(hits)) = self.first_hits {
             for frame in 0..self.count {
                 // Frame f through its own pinhole camera, whose pixel centres are the frame's rays.
-                let (frame_camera, buffer, samples) = hits(frame)?;
-                let group = tracer.bind_group(&uniform, &targets, Some(&buffer), None);
+                let (frame_camera, first) = hits(frame)?;
+                let group = tracer.bind_group(&uniform, &targets, Some(&first), None);
                 let params = layout::params(tracer.trace, &frame_camera, &self.params, self.frames, frame, 1);
-                let first_hit = if accepted { layout::FIRST_HIT_ACCEPTED } else { layout::FIRST_HIT_SORTED };
                 let still = Params { pixel_filter: layout::FILTER_CENTER, aperture: 0.0, ..params };
-                submit(&group, &[Params { mode: layout::MODE_HYBRID, first_hit, raster_samples: samples, ..still }])?;
+                let (first_hit, raster_samples) = (first.kind, first.samples);
+                submit(&group, &[Params { mode: layout::MODE_HYBRID, first_hit, raster_samples, ..still }])?;
             }
         } else {
-            let (mode, raster_samples) = match self.first_hits {
-                Some(FirstHits::Still { samples, .. }) => (layout::MODE_HYBRID, samples),
-                _ => (layout::MODE_FRAMES, 1),
+            let (mode, first_hit, raster_samples) = match self.first_hits {
+                Some(FirstHits::Still(first)) => (layout::MODE_HYBRID, first.kind, first.samples),
+                _ => (layout::MODE_FRAMES, 0, 1),
             };
             let frames = 0..self.count;
             let params = frame_params(tracer.trace, camera, &self.params, self.frames, mode, frames, per_dispatch);
-            let params: Vec<Params> = params.into_iter().map(|p| Params { raster_samples, ..p }).collect();
+            let params: Vec<Params> = params.into_iter().map(|p| Params { first_hit, raster_samples, ..p }).collect();
             submit(&bind_group, &params)?;
         }
         let mean = ctx.read_through(out_mean, 0, &read_mean, out_bytes)?;

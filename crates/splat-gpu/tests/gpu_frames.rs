@@ -502,9 +502,10 @@ fn hybrid_meshes() -> splat_core::mesh::Meshes {
 
 /// The hybrid pipeline (vk_gaussian_splatting Lighting §5) makes the CPU's frame from rasterized
 /// sorted splatting: colour, depth, normal and pick, among a glass sphere, a half mirror and a
-/// lit wall, in the surface look, with stochastic and exact secondary rays; the shadows change
-/// the image (the hybrid differs from plain lit rasterization) far beyond the tolerance. The
-/// volumetric look, which the CPU lights fragment by fragment with the tracer, is refused.
+/// lit wall, in both looks (the volumetric one lights every fragment with the tracer's shadow
+/// rays, the rasterizer listing each sample's fragments for it), with stochastic and exact
+/// shadows and secondary rays; the shadows change the image (the hybrid differs from plain lit
+/// rasterization) far beyond the tolerance.
 #[test]
 fn hybrid_frame_equals_the_cpu_frame() {
     use splat_core::raster::{Blend, RasterMethod, RasterSettings, Rasterizer, render_raster};
@@ -514,8 +515,12 @@ fn hybrid_frame_equals_the_cpu_frame() {
     let pipes = splat_gpu::RasterPipelines::new(ctx).unwrap();
     let under = RasterMethod::Sorted { blend: Blend::Under };
     let raster = RasterSettings::default();
-    let cases =
-        [(Shadows::Stochastic, Look::Surface, Method::Stochastic), (Shadows::Exact, Look::Surface, Method::Exact)];
+    let cases = [
+        (Shadows::Stochastic, Look::Surface, Method::Stochastic),
+        (Shadows::Exact, Look::Surface, Method::Exact),
+        (Shadows::Stochastic, Look::Volumetric, Method::Stochastic),
+        (Shadows::Exact, Look::Volumetric, Method::Exact),
+    ];
     for (shadows, look, secondary) in cases {
         let lighting = lighting(shadows, look);
         let settings = RenderSettings::default();
@@ -546,20 +551,6 @@ fn hybrid_frame_equals_the_cpu_frame() {
         eprintln!("hybrid {shadows:?} {look:?} {secondary:?}: {} pixels differ", bad.len());
         assert!(bad.is_empty(), "{shadows:?} {look:?} {secondary:?}: pixels {bad:?}");
     }
-    // The volumetric look: the CPU lights every fragment as the ray tracer does, the GPU's tile
-    // pass cannot, and says so, with shadows or without.
-    for shadows in [Shadows::Stochastic, Shadows::None] {
-        let lighting = lighting(shadows, Look::Volumetric);
-        let trace =
-            TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lighting.clone()).unwrap();
-        let gpu_scene = splat_gpu::RasterScene::new_lit(ctx, &scene, &RenderSettings::default(), &lighting).unwrap();
-        let rasterizer = |c: &splat_core::Camera| splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, c, &raster);
-        let result =
-            tracer(ctx, &trace).render_hybrid(&rasterizer, &camera, &under, &Method::Stochastic, &Frames::default());
-        let Err(e) = result else { panic!("{shadows:?}: the volumetric hybrid rendered on the GPU") };
-        let e = e.to_string();
-        assert!(e.contains("shadow rays") && e.contains("CPU"), "{shadows:?}: {e}");
-    }
 }
 
 /// The pixels (index) where the hybrid's GPU image leaves the CPU's: colour beyond
@@ -570,20 +561,27 @@ fn hybrid_pixels_apart(cpu: &RenderOutput, gpu: &RenderOutput, flip: impl Fn(usi
     (0..pixels)
         .filter(|&p| {
             let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
-            let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
-            let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
-            let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
-            colour.is_nan() || colour > LIT_TOLERANCE || !depth || normal > 1e-3 || cpu.picked[p] != gpu.picked[p]
+            colour.is_nan() || colour > LIT_TOLERANCE || !same_surface(cpu, gpu, p)
         })
         .filter(|&p| !flip(p))
         .collect()
 }
 
+/// Whether pixel `p` of the two images has the same depth (10⁻⁴ relative, or none on both),
+/// normal (10⁻³) and pick.
+fn same_surface(cpu: &RenderOutput, gpu: &RenderOutput, p: usize) -> bool {
+    let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
+    let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
+    let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
+    depth && normal <= 1e-3 && cpu.picked[p] == gpu.picked[p]
+}
+
 /// One hybrid render of `first` among [`hybrid_meshes`] through `splat_gpu::render` against the
 /// CPU's `Algorithm::render_world` (exact secondary rays): every pixel agrees (colour, frame 0's
 /// depth, normal and pick) except where a stochastic decision of one of its frames lay within
-/// f32 rounding of its threshold (checked through the CPU rasterizer of that frame's camera).
-/// Returns the GPU's image.
+/// f32 rounding of its threshold (checked through the CPU rasterizer of that frame's camera) or,
+/// with exact shadows, for at most 1 % of the pixels, by a shadow ray's hit at the kernel's
+/// cull. Returns the GPU's image.
 fn hybrid_agrees(
     ctx: &splat_gpu::GpuContext,
     first: splat_core::raster::RasterMethod,
@@ -626,7 +624,17 @@ fn hybrid_agrees(
         lighting.is_on(),
         lighting.look
     );
-    eprintln!("hybrid with {name}: {} pixels apart", bad.len());
+    // Exact shadows are continuous but for the kernel's cull (α ≥ 1/255 at a shadow ray's
+    // hit): a hit at the cull may count on one backend only, moving the pixel by at most
+    // ALPHA_CULL × its light; at most 1 % of the pixels may differ by that alone.
+    let exact = lighting.shadows == Shadows::Exact;
+    let culled = |p: &usize| {
+        let (c, g) = (&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
+        max_difference(c, g) <= splat_core::kernel::ALPHA_CULL && same_surface(&cpu, &gpu, *p)
+    };
+    let (at_cull, bad): (Vec<usize>, Vec<usize>) = bad.into_iter().partition(|p| exact && culled(p));
+    eprintln!("hybrid with {name}: {} pixels apart, {} by a shadow hit at the cull", bad.len(), at_cull.len());
+    assert!(at_cull.len() <= (cpu.picked.len() / 100).max(1), "hybrid with {name}: {at_cull:?} differ by the cull");
     assert!(bad.is_empty(), "hybrid with {name}: pixels {bad:?}");
     gpu
 }
@@ -672,9 +680,10 @@ fn the_hybrid_takes_stochastic_first_hits_and_a_camera_drawn_per_frame() {
 
 /// The hybrid at four samples per pixel ([`hybrid_agrees`]): the ray tracer continues each
 /// sample's own camera ray from its first hit (raster/mod.rs: the pixel is the mean of its
-/// samples). Sorted splatting unlit (each sample's composite over what it sees behind) and in
-/// the surface look (the mean radiance lit once at sample 0's pick, each sample adding its
-/// transmittance times what lies behind it), StochasticSplats in both looks and Enderton and
+/// samples). Sorted splatting unlit (each sample's composite over what it sees behind), in the
+/// surface look (the mean radiance lit once at sample 0's pick, each sample adding its
+/// transmittance times what lies behind it) and in the volumetric look (each sample's fragments
+/// lit with shadow rays), StochasticSplats in both looks and Enderton and
 /// stratified (each sample's written splat lit as its pick), through a still camera and one
 /// drawn per frame. Control: the image differs from the one-sample hybrid's far beyond the
 /// tolerance.
@@ -689,6 +698,7 @@ fn the_hybrid_continues_every_sample_of_the_pixel() {
     let surface = lighting(Shadows::Exact, Look::Surface);
     let at_four = hybrid_agrees(ctx, sorted, four, &surface, still);
     hybrid_agrees(ctx, sorted, four, &splat_core::lighting::Lighting::default(), still);
+    hybrid_agrees(ctx, sorted, four, &lighting(Shadows::Exact, Look::Volumetric), moving);
     hybrid_agrees(ctx, accepted, four, &surface, still);
     hybrid_agrees(ctx, accepted, four, &lighting(Shadows::Exact, Look::Volumetric), moving);
     hybrid_agrees(ctx, RasterMethod::Enderton, four, &surface, still);

@@ -313,8 +313,7 @@ impl Renderer {
         }
         let (ctx, pipeline) = self.gpu.as_ref().map_err(|e| format!("the GPU tracer cannot run: {e}"))?;
         // The backend's rules, as the CLI asks them, before anything is uploaded.
-        splat_gpu::supports(&job.settings.algorithm(), &trace.shot(&job.camera), splat_gpu::Extras::default())
-            .map_err(|e| e.to_string())?;
+        splat_gpu::supports(&job.settings.algorithm(), splat_gpu::Extras::default()).map_err(|e| e.to_string())?;
         let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
         let progressive = ProgressiveTrace::new(&tracer, &job.camera, &job.settings.method(), &stream(&job.settings))
             .map_err(|e| e.to_string())?;

@@ -1,7 +1,9 @@
 //! Iso-opacity depth and picked splat of every pixel: the compute tile rasterizer.
 
 use super::*;
-use crate::layout::{FIRST_HIT_ACCEPTED, FIRST_HIT_SORTED, GpuFirstHit};
+use crate::layout::{
+    FIRST_HIT_ACCEPTED, FIRST_HIT_COUNT, FIRST_HIT_FRAGMENTS, FIRST_HIT_SORTED, GpuFirstHit, GpuFragment,
+};
 
 /// Iso-opacity depth and picked splat of every pixel, with the front-to-back colour they come
 /// from (the GPU twin of sorted splatting with [`Blend::Under`]).
@@ -29,6 +31,18 @@ impl DepthPick {
         let data = self.depth.iter().map(|d| d.unwrap_or(f32::NAN)).collect();
         Image::from_data(w, h, 1, data).expect("one depth per pixel")
     }
+}
+
+/// The hybrid pipeline's first hits as the rasterizer gives them to the ray tracer.
+#[derive(Clone, Debug, Default)]
+pub struct FirstHits {
+    /// S a pixel, sample i of pixel p at p S + i.
+    pub hits: Vec<GpuFirstHit>,
+    /// The volumetric look's fragments (`FIRST_HIT_FRAGMENTS`), each hit's
+    /// `fragments` range of them; empty otherwise.
+    pub fragments: Vec<GpuFragment>,
+    /// The ray tracer's `Params::first_hit`: which first hit these are (`FIRST_HIT_*`).
+    pub kind: u32,
 }
 
 /// The first hits of the per-sample (colour with T in w, (depth bits, pick), normal) a first-hit
@@ -77,7 +91,7 @@ impl GpuRasterizer<'_> {
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
         Self::supports_depth_pick(&self.raster)?;
         let TilePass { color, pick, normal, pairs } =
-            self.tile_pass(RasterParams { mode: Draw::Under.mode(), ..self.params })?;
+            self.tile_pass(RasterParams { mode: Draw::Under.mode(), ..self.params }, None)?;
         let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
         let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
         Ok(DepthPick {
@@ -95,10 +109,12 @@ impl GpuRasterizer<'_> {
     /// Lighting §5; S a pixel, sample i of pixel p at p S + i, with its sub-pixel position), by
     /// the same tile pass, for the first-hit `method`:
     ///
-    /// - sorted splatting: each sample's radiance and transmittance in front of its mesh (lit
-    ///   per fragment in the volumetric look), and in sample 0 the integrated normal, the picked
-    ///   depth and splat, and in the surface look the mean radiance of the samples, before
-    ///   lighting (the tracer lights it once, as `Rasterizer::light_surface` does);
+    /// - sorted splatting: each sample's radiance and transmittance in front of its mesh, and
+    ///   in sample 0 the integrated normal, the picked depth and splat, and in the surface look
+    ///   the mean radiance of the samples, before lighting (the tracer lights it once, as
+    ///   `Rasterizer::light_surface` does); in the volumetric look, each sample's fragments
+    ///   with their weights Tᵢ αᵢ instead of its radiance, which the tracer lights one by one
+    ///   with its shadow rays, as `Rasterizer::hybrid` lights every fragment;
     /// - StochasticSplats (the stochastic transparency page's hybrid case): each sample's
     ///   closest fragment accepted in frame `frame_key` (u < α with the sample's own u, every u
     ///   drawn as u − `u_shift`, as [`splat_core::Frames::u_shift`]), written opaque: its unlit
@@ -108,28 +124,68 @@ impl GpuRasterizer<'_> {
     ///
     /// The ray tracer then lights the picks with shadows and continues from each sample's ray
     /// at its mesh ([`crate::GpuTracer::render_hybrid`]).
-    pub fn first_hits(
-        &self,
-        method: &RasterMethod,
-        frame_key: u32,
-        u_shift: f32,
-    ) -> Result<Vec<GpuFirstHit>, GpuError> {
+    pub fn first_hits(&self, method: &RasterMethod, frame_key: u32, u_shift: f32) -> Result<FirstHits, GpuError> {
         Self::supports_first_hits(&self.raster)?;
+        let volumetric = self.params.lit == 1 && self.params.look == crate::layout::LOOK_VOLUMETRIC;
         let first_hit = match method {
+            RasterMethod::Sorted { .. } if volumetric => return self.fragment_first_hits(),
             RasterMethod::Sorted { .. } => FIRST_HIT_SORTED,
             RasterMethod::StochasticSplat => FIRST_HIT_ACCEPTED,
             RasterMethod::Enderton | RasterMethod::Stratified { .. } => {
-                return self.rop_first_hits(method, frame_key, u_shift);
+                let hits = self.rop_first_hits(method, frame_key, u_shift)?;
+                return Ok(FirstHits { hits, fragments: Vec::new(), kind: FIRST_HIT_ACCEPTED });
             }
         };
         let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, ..self.params };
-        let TilePass { color, pick, normal, .. } = self.tile_pass(params)?;
-        Ok(first_hits_of(&color, &pick, &normal, &self.offsets()))
+        let TilePass { color, pick, normal, .. } = self.tile_pass(params, None)?;
+        let hits = first_hits_of(&color, &pick, &normal, &self.offsets());
+        Ok(FirstHits { hits, fragments: Vec::new(), kind: first_hit })
+    }
+
+    /// Sorted splatting's first hits in the volumetric look: one tile pass counts each sample's
+    /// fragments in front of its mesh, their starts are the counts' running sum, and a second
+    /// pass writes them (splat colour, weight Tᵢ αᵢ, normal, distance, id) beside the hits.
+    fn fragment_first_hits(&self) -> Result<FirstHits, GpuError> {
+        let counted =
+            self.tile_pass(RasterParams { mode: Draw::Under.mode(), first_hit: FIRST_HIT_COUNT, ..self.params }, None)?;
+        let counts: Vec<u32> = counted.pick.chunks(2).map(|p| p[0]).collect();
+        let mut start = Vec::with_capacity(counts.len());
+        let mut total = 0u64;
+        for &c in &counts {
+            start.push(total as u32);
+            total += u64::from(c);
+        }
+        let bytes = total.max(1) * size_of::<GpuFragment>() as u64;
+        if bytes > self.ctx.max_binding || total > u64::from(u32::MAX) {
+            let reason = format!(
+                "the volumetric look's first hits hold {total} fragments ({bytes} bytes) for the ray tracer to light, but the adapter binds at most {} bytes per storage buffer (a smaller image or fewer samples would fit)",
+                self.ctx.max_binding
+            );
+            return Err(GpuError::refused(reason, &[Remedy::Cpu]));
+        }
+        let starts = self.ctx.upload("fragment starts", bytemuck::cast_slice(&start));
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let fragments = self.ctx.buffer("fragments", bytes, rw);
+        let params = RasterParams { mode: Draw::Under.mode(), first_hit: FIRST_HIT_FRAGMENTS, ..self.params };
+        let TilePass { color, pick, normal, .. } = self.tile_pass(params, Some((&starts, &fragments)))?;
+        let mut hits = first_hits_of(&color, &pick, &normal, &self.offsets());
+        for ((hit, &s), &c) in hits.iter_mut().zip(&start).zip(&counts) {
+            hit.fragments = [s, c];
+        }
+        let words = (total as usize) * size_of::<GpuFragment>() / 4;
+        let fragments =
+            if total == 0 { Vec::new() } else { bytemuck::cast_slice(&self.ctx.read_u32(&fragments, words)?).to_vec() };
+        Ok(FirstHits { hits, fragments, kind: FIRST_HIT_FRAGMENTS })
     }
 
     /// One tile pass under `params`: per pixel (per sample for a first-hit pass) RGBA colour,
-    /// (depth bits, pick) and normal, and the pair count.
-    fn tile_pass(&self, params: RasterParams) -> Result<TilePass, GpuError> {
+    /// (depth bits, pick) and normal, and the pair count; `fragments` (their starts and the
+    /// list) for a [`FIRST_HIT_FRAGMENTS`] pass.
+    fn tile_pass(
+        &self,
+        params: RasterParams,
+        fragments: Option<(&wgpu::Buffer, &wgpu::Buffer)>,
+    ) -> Result<TilePass, GpuError> {
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let (ctx, pipes) = (self.ctx, self.pipes);
         let [tiles_x, tiles_y] = self.params.tiles;
@@ -151,6 +207,8 @@ impl GpuRasterizer<'_> {
         let out_color = buffer("depth pick colour", pixels * 16);
         let out_pick = buffer("depth pick", pixels * 8);
         let out_normal = buffer("depth pick normal", pixels * 16);
+        let none = (buffer("no fragment starts", 4), buffer("no fragments", size_of::<GpuFragment>()));
+        let (starts, list) = fragments.unwrap_or((&none.0, &none.1));
         let blend_group = bind(
             ctx,
             &pipes.tile_blend,
@@ -169,6 +227,8 @@ impl GpuRasterizer<'_> {
                 (17, &self.behind),
                 (18, &self.behind_normal),
                 (20, &self.sample_offsets),
+                (24, starts),
+                (25, list),
             ],
         );
         let mut encoder = self.encoder("tile lists");

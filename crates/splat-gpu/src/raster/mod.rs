@@ -41,7 +41,7 @@ mod rop;
 mod scene;
 
 use binning::TileLists;
-pub use depth_pick::DepthPick;
+pub use depth_pick::{DepthPick, FirstHits};
 pub use pipelines::RasterPipelines;
 use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT};
 pub use profile::RasterTimings;
@@ -77,6 +77,7 @@ pub const RASTER_WGSL: &str = concat!(
     include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/raster.wgsl"),
     include_str!("../../shaders/binning.wgsl"),
+    include_str!("../../shaders/hybrid_fragment.wgsl"),
     include_str!("../../shaders/depth_pick.wgsl"),
     include_str!("../../shaders/rop.wgsl")
 );
@@ -822,6 +823,8 @@ mod tests {
                 "MODE_STRATIFIED_PLAIN" = Draw::StratifiedPlain.mode(),
                 "FIRST_HIT_SORTED" = crate::layout::FIRST_HIT_SORTED,
                 "FIRST_HIT_ACCEPTED" = crate::layout::FIRST_HIT_ACCEPTED,
+                "FIRST_HIT_COUNT" = crate::layout::FIRST_HIT_COUNT,
+                "FIRST_HIT_FRAGMENTS" = crate::layout::FIRST_HIT_FRAGMENTS,
             ]
         );
         assert_constants!(
@@ -839,6 +842,12 @@ mod tests {
     fn rust_structs_mirror_the_raster_wgsl_structs() {
         assert_mirrors!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
         assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, bound, rect]);
+        assert_mirrors!(
+            RASTER_WGSL,
+            crate::layout::GpuFragment,
+            "Fragment",
+            [color, weight, normal, t, id, pad0, pad1, pad2]
+        );
         assert_mirrors!(
             RASTER_WGSL,
             RasterParams,
