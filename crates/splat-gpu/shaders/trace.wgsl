@@ -607,9 +607,11 @@ var<private> surface: SurfaceHit;
 var<private> behind_weight: f32;
 // The lit pick in the sample `finish` returned (zero where it lit none).
 var<private> lit_pick: vec3<f32>;
-// The rasterized fragments `finish` lights for the segment (first, count in hybrid_fragments;
-// none but for the volumetric look's hybrid camera segments).
-var<private> segment_fragments: vec2<u32>;
+// Whether the pipeline is the hybrid's (splat_gpu::TracePipeline::hybrid sets it): the kernel
+// then continues the rasterizer's S samples and lights the volumetric look's fragments. A
+// pipeline-overridable constant: every other render runs a kernel whose hybrid branches are
+// constant false.
+override HYBRID_MODE: bool = false;
 
 // trace/mod.rs `surface_offset`.
 fn surface_offset(x: vec3<f32>) -> f32 {
@@ -680,16 +682,15 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
             sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
         }
     }
-    // Lit(…) of the pick (k = 0), of the mesh's local share (k = 1) and of the volumetric
-    // look's rasterized fragments (k ≥ 2: raster/mod.rs `sorted` with `lit_color` in the
-    // hybrid, each along the sample's ray, weighted Tᵢ αᵢ and added in order), where the sample
-    // shows them: one inlined copy of the lighting and its shadow traversal for all.
+    // Lit(…) of the pick (k = 0) and of the mesh's local share (k = 1), where the sample shows
+    // them: one inlined copy of the lighting and its shadow traversal for both.
     var behind = params.background.xyz;
     lit_pick = vec3<f32>(0.0);
-    // The first two iterations of a call are not counted: `iterations` bounds each loop
-    // statement's total by the busiest lane's, and the batches of frames per dispatch shrink
-    // with every count a frame adds; each fragment counts.
-    for (var k = 0u; k < 2u + segment_fragments.y; k++) {
+    // Two iterations a call, not counted: `iterations` bounds each loop statement's total by the
+    // busiest lane's, and the batches of frames per dispatch shrink with every count a frame adds.
+    // A constant count: a count known only at run time (the hybrid's fragments lit here too)
+    // made lavapipe run every ray-tracing render about 8 % slower.
+    for (var k = 0u; k < 2u; k++) {
         var m: Material;
         var c: vec3<f32>;
         var t: f32;
@@ -704,14 +705,6 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
             c = st.radiance;
             t = st.depth;
             n = sample_pick.normal;
-        } else if (k >= 2u) {
-            iterations += 1u;
-            let g = hybrid_fragments[segment_fragments.x + k - 2u];
-            m = material_of(g.id);
-            c = g.color;
-            t = g.t;
-            n = g.normal;
-            share = g.weight;
         } else {
             if (!mesh || !(behind_weight > 0.0)) {
                 continue;
@@ -732,8 +725,6 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
         if (k == 0u) {
             out = vec4<f32>(lit, out.w);
             lit_pick = lit;
-        } else if (k >= 2u) {
-            out = vec4<f32>(out.xyz + lit, out.w);
         } else {
             behind = lit;
         }
@@ -877,7 +868,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let index = gid.y * params.size.x + gid.x;
     iterations = 0u;
     let by_pass = params.mode == MODE_PASS;
-    let hybrid = params.mode == MODE_HYBRID;
+    let hybrid = HYBRID_MODE && params.mode == MODE_HYBRID;
     var most = 0.0;
     if (params.first_frame > 0u || params.pass_index > 0u) {
         most = out_var[index].w;
@@ -900,124 +891,137 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var total = vec4<f32>(0.0);
         var camera_pick = no_pick();
         var finished = false;
-        for (var sample = 0u; sample < samples; sample++) {
-            iterations += select(0u, 1u, sample > 0u);
-            let hit_index = index * samples + sample;
-            var camera = frame_ray(gid.x, gid.y, frame);
-            if (hybrid) {
-                camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
+        // The camera segment first, then the pending ones: the stack (a dynamically indexed
+        // private array, slow on CPU adapters) is touched only where a mesh bounces. The hybrid
+        // goes on to each of the rasterizer's samples in turn, in the same loop (a loop around
+        // it made lavapipe run every ray-tracing render about 40 % slower).
+        var sample = 0u;
+        var hit_index = index * samples;
+        var camera = frame_ray(gid.x, gid.y, frame);
+        if (hybrid) {
+            camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
+        }
+        var seg = Segment(camera.origin, weight, camera.dir, 0u);
+        var top = 0u;
+        loop {
+            bounce = seg.depth;
+            // The camera ray from t_min; a secondary ray from the surface point on (its line
+            // continues the mirrored or refracted one), meshes from surface_offset on.
+            var ray = camera;
+            var mesh_ray = camera;
+            if (seg.depth > 0u) {
+                ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
+                mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
             }
-            // The camera segment first, then the pending ones: the stack (a dynamically indexed
-            // private array, slow on CPU adapters) is touched only where a mesh bounces.
-            var seg = Segment(camera.origin, weight, camera.dir, 0u);
-            var top = 0u;
-            loop {
-                bounce = seg.depth;
-                // The camera ray from t_min; a secondary ray from the surface point on (its line
-                // continues the mirrored or refracted one), meshes from surface_offset on.
-                var ray = camera;
-                var mesh_ray = camera;
-                if (seg.depth > 0u) {
-                    ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
-                    mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
+            // trace/mod.rs `trace_ray`: the closest mesh clips the ray.
+            surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
+            if (params.mesh_root != NONE) {
+                surface = mesh_traverse(params.mesh_root, mesh_ray, false);
+                if (surface.triangle != NONE) {
+                    ray.t_max = surface.t;
                 }
-                // trace/mod.rs `trace_ray`: the closest mesh clips the ray.
-                surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
-                if (params.mesh_root != NONE) {
-                    surface = mesh_traverse(params.mesh_root, mesh_ray, false);
-                    if (surface.triangle != NONE) {
-                        ray.t_max = surface.t;
-                    }
+            }
+            var st = start_state(ray.t_min);
+            var first = 0u;
+            var last = max(params.max_passes, params.m);
+            if (by_pass) {
+                first = params.pass_index;
+                last = params.pass_index + 1u;
+                if (params.pass_index > 0u) {
+                    st = pass_state[index];
                 }
-                var st = start_state(ray.t_min);
-                var first = 0u;
-                var last = max(params.max_passes, params.m);
-                if (by_pass) {
-                    first = params.pass_index;
-                    last = params.pass_index + 1u;
-                    if (params.pass_index > 0u) {
-                        st = pass_state[index];
-                    }
+            }
+            segment_method = params.method;
+            let rasterized = hybrid && seg.depth == 0u;
+            if (rasterized) {
+                // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
+                // ray tracer lights the pick with shadows and continues at the mesh. A
+                // StochasticSplats first hit (`Rasterizer::stochastic_splat`) is one opaque
+                // fragment or none: finished as an accepted pass or a missed one, the fragment
+                // lit as the pick in either look.
+                let accepted = params.first_hit == FIRST_HIT_ACCEPTED;
+                segment_method = select(METHOD_EXACT, METHOD_STOCHASTIC_PASS, accepted);
+                let h = hybrid_in[hit_index];
+                if (pixel_picked && sample > 0u) {
+                    st.flags |= BEHIND_ONLY;
                 }
-                segment_method = params.method;
-                segment_fragments = vec2<u32>(0u);
-                let rasterized = hybrid && seg.depth == 0u;
-                if (rasterized) {
-                    // raster/mod.rs `Rasterizer::sorted` gave the splats in front of the mesh; the
-                    // ray tracer lights the pick with shadows and continues at the mesh. A
-                    // StochasticSplats first hit (`Rasterizer::stochastic_splat`) is one opaque
-                    // fragment or none: finished as an accepted pass or a missed one, the fragment
-                    // lit as the pick in either look.
-                    let accepted = params.first_hit == FIRST_HIT_ACCEPTED;
-                    segment_method = select(METHOD_EXACT, METHOD_STOCHASTIC_PASS, accepted);
-                    let h = hybrid_in[hit_index];
-                    if (pixel_picked && sample > 0u) {
-                        st.flags |= BEHIND_ONLY;
-                    }
-                    st.radiance = h.radiance;
-                    if (params.first_hit == FIRST_HIT_FRAGMENTS) {
-                        // The volumetric look: `finish` lights the fragments with the tracer's
-                        // shadow rays (trace `light_pick`) and sums them.
-                        st.radiance = vec3<f32>(0.0);
-                        segment_fragments = h.fragments;
-                    }
-                    st.transmittance = h.transmittance;
-                    st.normal = h.normal;
-                    if (any(h.normal != vec3<f32>(0.0))) {
-                        st.flags |= HIT;
-                    }
-                    if (h.picked != NONE) {
-                        st.picked = h.picked;
-                        st.depth = h.depth;
-                        if (accepted) {
-                            st.flags |= ACCEPTED;
-                        }
-                    }
-                }
-                if ((st.flags & DONE) == 0u) {
-                    var done = rasterized;
-                    for (var p = first; p < last && !rasterized; p++) {
+                st.radiance = h.radiance;
+                if (HYBRID_MODE && params.first_hit == FIRST_HIT_FRAGMENTS) {
+                    // The volumetric look (raster/mod.rs `sorted` with `lit_color` in the
+                    // hybrid): each fragment lit along the sample's ray with the tracer's shadow
+                    // rays (trace `light_pick`), weighted Tᵢ αᵢ, summed in order.
+                    st.radiance = vec3<f32>(0.0);
+                    for (var i = 0u; i < h.fragments.y; i++) {
                         iterations += 1u;
-                        if (step(ray, pixel_key, p, &st)) {
-                            done = true;
-                            break;
-                        }
+                        let g = hybrid_fragments[h.fragments.x + i];
+                        st.radiance += g.weight * lit(g.color, g.id, g.t, g.normal, camera, pixel_key, 0u);
                     }
-                    if (done || last >= params.max_passes) {
-                        st.flags |= DONE;
-                        let s = finish(st, ray, pixel_key);
-                        total += vec4<f32>(seg.weight * s.xyz, select(0.0, seg.weight * s.w, seg.depth == 0u));
-                        if (lit_once && rasterized) {
-                            // Sample 0's lit pick counts whole, not 1/S.
-                            total += vec4<f32>((1.0 - seg.weight) * lit_pick, 0.0);
-                        }
-                        if (seg.depth == 0u) {
-                            if (sample == 0u) {
-                                camera_pick = sample_pick;
-                                if (rasterized) {
-                                    camera_pick.picked = st.picked; // the rasterizer reports its pick
-                                }
+                }
+                st.transmittance = h.transmittance;
+                st.normal = h.normal;
+                if (any(h.normal != vec3<f32>(0.0))) {
+                    st.flags |= HIT;
+                }
+                if (h.picked != NONE) {
+                    st.picked = h.picked;
+                    st.depth = h.depth;
+                    if (accepted) {
+                        st.flags |= ACCEPTED;
+                    }
+                }
+            }
+            if ((st.flags & DONE) == 0u) {
+                var done = rasterized;
+                for (var p = first; p < last && !rasterized; p++) {
+                    iterations += 1u;
+                    if (step(ray, pixel_key, p, &st)) {
+                        done = true;
+                        break;
+                    }
+                }
+                if (done || last >= params.max_passes) {
+                    st.flags |= DONE;
+                    let s = finish(st, ray, pixel_key);
+                    total += vec4<f32>(seg.weight * s.xyz, select(0.0, seg.weight * s.w, seg.depth == 0u));
+                    if (lit_once && rasterized) {
+                        // Sample 0's lit pick counts whole, not 1/S.
+                        total += vec4<f32>((1.0 - seg.weight) * lit_pick, 0.0);
+                    }
+                    if (seg.depth == 0u) {
+                        if (sample == 0u) {
+                            camera_pick = sample_pick;
+                            if (rasterized) {
+                                camera_pick.picked = st.picked; // the rasterizer reports its pick
                             }
-                            finished = true;
                         }
-                        let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
-                        if (bounces && !by_pass && behind_weight > 0.0) {
-                            top = push_bounces(ray, seg, top);
-                        }
+                        finished = true;
+                    }
+                    let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
+                    if (bounces && !by_pass && behind_weight > 0.0) {
+                        top = push_bounces(ray, seg, top);
                     }
                 }
-                if (by_pass) {
-                    pass_state[index] = st;
-                }
-                if (top == 0u) {
+            }
+            if (by_pass) {
+                pass_state[index] = st;
+            }
+            if (top == 0u) {
+                sample += 1u;
+                if (sample >= samples) {
                     break;
                 }
-                // The camera segment is the frame (counted by the frame loop); every other segment
-                // counts itself, so frames without meshes batch as many per dispatch as before.
+                // The next sample's camera segment (counted as a segment is).
                 iterations += 1u;
-                top -= 1u;
-                seg = segments[top];
+                hit_index = index * samples + sample;
+                camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
+                seg = Segment(camera.origin, weight, camera.dir, 0u);
+                continue;
             }
+            // The camera segment is the frame (counted by the frame loop); every other segment
+            // counts itself, so frames without meshes batch as many per dispatch as before.
+            iterations += 1u;
+            top -= 1u;
+            seg = segments[top];
         }
         if (finished) {
             sample_pick = camera_pick;

@@ -129,6 +129,8 @@ pub struct TracePipeline {
     pub(crate) layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
     pipeline_layout: wgpu::PipelineLayout,
+    /// The kernel with `HYBRID_MODE` on, compiled on the first hybrid render.
+    hybrid: std::sync::OnceLock<wgpu::ComputePipeline>,
 }
 
 impl TracePipeline {
@@ -154,7 +156,31 @@ impl TracePipeline {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        Ok(Self { pipeline, layout, module, pipeline_layout })
+        Ok(Self { pipeline, layout, module, pipeline_layout, hybrid: std::sync::OnceLock::new() })
+    }
+
+    /// The hybrid pipeline's kernel (`HYBRID_MODE`: the rasterizer's samples continued, the
+    /// volumetric look's fragments lit), compiled on first use.
+    fn hybrid(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
+        if let Some(p) = self.hybrid.get() {
+            return Ok(p);
+        }
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("main (hybrid)"),
+            layout: Some(&self.pipeline_layout),
+            module: &self.module,
+            entry_point: Some("main"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("HYBRID_MODE", 1.0)],
+                ..Default::default()
+            },
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(self.hybrid.get_or_init(|| pipeline))
     }
 
     /// The kernel's bindings (checked against `trace.wgsl`'s by
@@ -483,7 +509,12 @@ impl<'a> GpuTracer<'a> {
         let count = frames.keys(method.is_stochastic() || self.trace.is_random() || per_frame)?.len() as u32;
         let ctx = self.ctx;
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
-        let run = Run { tracer: self, camera, params, frames, count, first_hits, path };
+        let kernel = match (path, first_hits) {
+            (Some((pipeline, _)), _) => pipeline,
+            (None, Some(_)) => self.pipeline.hybrid(ctx)?,
+            (None, None) => &self.pipeline.pipeline,
+        };
+        let run = Run { tracer: self, camera, params, frames, count, first_hits, path, kernel };
         let lanes = u64::from(ctx.lanes());
         let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
         let mut out = if per_frame {
@@ -550,6 +581,8 @@ struct Run<'a> {
     first_hits: Option<FirstHits<'a>>,
     /// The path tracer's pipeline and parameters, if this is a path-traced render.
     path: Option<(&'a wgpu::ComputePipeline, &'a wgpu::Buffer)>,
+    /// The kernel that runs: the path tracer's, the hybrid's or the ray tracer's.
+    kernel: &'a wgpu::ComputePipeline,
 }
 
 impl Run<'_> {
@@ -590,7 +623,7 @@ impl Run<'_> {
                     });
                     let mut pass = encoder
                         .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("trace"), timestamp_writes });
-                    pass.set_pipeline(self.path.map_or(&tracer.pipeline.pipeline, |p| p.0));
+                    pass.set_pipeline(self.kernel);
                     dispatch_batch(ctx, &mut pass, &uniform, bind_group, batch, camera);
                 }
                 if let Some(t) = &timer {
