@@ -165,22 +165,26 @@ impl TracePipeline {
         if let Some(p) = self.hybrid.get() {
             return Ok(p);
         }
+        let pipeline = self.specialised(ctx, "main", "HYBRID_MODE")?;
+        Ok(self.hybrid.get_or_init(|| pipeline))
+    }
+
+    /// Entry point `entry` of the kernel's module on its layout, with the pipeline-overridable
+    /// constant `mode` set; shader and pipeline errors as [`GpuError::Shader`].
+    fn specialised(&self, ctx: &GpuContext, entry: &str, mode: &str) -> Result<wgpu::ComputePipeline, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("main (hybrid)"),
+            label: Some(mode),
             layout: Some(&self.pipeline_layout),
             module: &self.module,
-            entry_point: Some("main"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &[("HYBRID_MODE", 1.0)],
-                ..Default::default()
-            },
+            entry_point: Some(entry),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &[(mode, 1.0)], ..Default::default() },
             cache: None,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        Ok(self.hybrid.get_or_init(|| pipeline))
+        Ok(pipeline)
     }
 
     /// The kernel's bindings (checked against `trace.wgsl`'s by
@@ -219,22 +223,7 @@ pub struct PathPipeline {
 impl PathPipeline {
     /// Compile `path_main` against `trace`'s module and layout.
     pub fn new(ctx: &GpuContext, trace: &TracePipeline) -> Result<Self, GpuError> {
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("path_main"),
-            layout: Some(&trace.pipeline_layout),
-            module: &trace.module,
-            entry_point: Some("path_main"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &[("PATH_MODE", 1.0)],
-                ..Default::default()
-            },
-            cache: None,
-        });
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
-        Ok(Self { pipeline })
+        Ok(Self { pipeline: trace.specialised(ctx, "path_main", "PATH_MODE")? })
     }
 }
 
