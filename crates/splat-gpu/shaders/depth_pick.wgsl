@@ -74,18 +74,20 @@ fn tile_blend(
     let listed = params.first_hit == FIRST_HIT_COUNT || params.first_hit == FIRST_HIT_FRAGMENTS;
     let volumetric = params.lit == 1u && params.look == LOOK_VOLUMETRIC && params.first_hit == 0u;
     let lit_surface = params.lit == 1u && params.look == LOOK_SURFACE;
+    let sorted = params.first_hit == FIRST_HIT_SORTED || params.first_hit == FIRST_HIT_FRAGMENTS;
     // Sample 0's composite L_0 and transmittance T_0 (sorted splatting's first hit).
     var l0 = vec3<f32>(0.0);
     var t0 = 1.0;
     // The means over the samples of the composite L_s, of the transmittance T_s, of what lies
-    // behind B_s, of T_s B_s and of the samples' mesh coverage.
+    // behind B_s, of T_s B_s, of the mesh coverage T_s M_s seen through the splats and of the
+    // samples' mesh share M_s.
     var color = vec3<f32>(0.0);
     var transmittance = 0.0;
     var back_mean = vec3<f32>(0.0);
     var seen_back = vec3<f32>(0.0);
     var covered = 0.0;
-    // Whether any sample, and sample 0, sees a mesh.
-    var any_mesh = false;
+    var mesh_share = 0.0;
+    // Whether sample 0 sees a mesh.
     var mesh0 = false;
     for (var k = 0u; k < params.samples; k++) {
         // What lies behind sample k (raster/mod.rs `Rasterizer::behind`): the background, or
@@ -95,7 +97,6 @@ fn tile_blend(
             back = behind[index * params.samples + k];
         }
         let mesh = back.w < FAR_DEPTH;
-        any_mesh = any_mesh || mesh;
         mesh0 = mesh0 || (k == 0u && mesh);
         let p = vec2<f32>(px) + rop_offsets[k];
         let dir_k = pixel_dir(p);
@@ -159,7 +160,6 @@ fn tile_blend(
             }
             workgroupBarrier();
         }
-        let sorted = params.first_hit == FIRST_HIT_SORTED || params.first_hit == FIRST_HIT_FRAGMENTS;
         if (inside && params.first_hit == FIRST_HIT_COUNT) {
             out_pick[index * params.samples + k] = vec2<u32>(listed_k, 0u);
         } else if (inside && written) {
@@ -180,6 +180,7 @@ fn tile_blend(
         back_mean += share * back.xyz;
         seen_back += share * t_k * back.xyz;
         covered += share * t_k * select(0.0, 1.0, mesh);
+        mesh_share += share * select(0.0, 1.0, mesh);
     }
     if (inside) {
         var out = vec4<f32>(color + seen_back, 1.0 - transmittance + covered);
@@ -193,7 +194,7 @@ fn tile_blend(
             n = select(-dir, normal / len, len > DEGENERATE_NORMAL);
         }
         var t = -1.0;
-        if (params.first_hit == FIRST_HIT_SORTED || params.first_hit == FIRST_HIT_FRAGMENTS) {
+        if (sorted) {
             // The hybrid pipeline lights and continues from these in the ray tracer: sample 0
             // carries the pick and the integrated normal, and in the surface look the mean
             // radiance, which the tracer lights once (raster/mod.rs `light_surface`).
@@ -214,12 +215,8 @@ fn tile_blend(
             // above the threshold, what lies behind: the mean of B_s covering the samples'
             // mesh share, with sample 0's mesh normal and depth (none without a mesh).
             if (picked == NONE) {
-                var meshes = 0.0;
-                for (var k = 0u; k < params.samples; k++) {
-                    meshes += select(0.0, 1.0, params.meshes == 1u && behind[index * params.samples + k].w < FAR_DEPTH);
-                }
-                out = vec4<f32>(back_mean, meshes / f32(params.samples));
-                n = select(vec3<f32>(0.0), n, any_mesh);
+                out = vec4<f32>(back_mean, mesh_share);
+                n = select(vec3<f32>(0.0), n, mesh_share > 0.0);
             } else {
                 let lit = shade_unshadowed(color, picked, origin, dir, depth * to_t, n);
                 out = vec4<f32>(lit + seen_back, out.w);

@@ -355,13 +355,9 @@ fn rop_first_hit(@builtin(global_invocation_id) gid: vec3<u32>) {
         let t = bitcast<f32>(rop_state[at + i]);
         let id = rop_state[at + spp + i];
         if (id == NONE || id == MESH) {
-            out_color[index] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
-            out_normal[index] = vec4<f32>(0.0);
-            out_pick[index] = vec2<u32>(bitcast<u32>(-1.0), NONE);
+            write_first_hit(index, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), -1.0, NONE);
         } else {
-            out_color[index] = vec4<f32>(splats[id].color, 0.0);
-            out_normal[index] = vec4<f32>(splat_normal(id, camera_origin(), dir), 0.0);
-            out_pick[index] = vec2<u32>(bitcast<u32>(t), id);
+            write_first_hit(index, splats[id].color, 0.0, splat_normal(id, camera_origin(), dir), t, id);
         }
     }
 }

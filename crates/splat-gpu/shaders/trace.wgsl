@@ -175,7 +175,7 @@ const LOOP_BUDGET: u32 = 65535u;
 @group(0) @binding(17) var<storage, read> hybrid_fragments: array<Fragment>;
 
 // The hybrid pipeline's first hit of one sample of a pixel (sample i of pixel p at p S + i),
-// from the rasterizer (48 bytes), mirrored by splat_gpu::GpuFirstHit: the splats' radiance L and
+// from the rasterizer (64 bytes), mirrored by splat_gpu::GpuFirstHit: the splats' radiance L and
 // transmittance T in front of the meshes (lit per fragment in the volumetric look, raw in the
 // surface look), the integrated unit normal (zero where no fragment), the iso-opacity depth
 // and splat (picked NONE: none), and the sample's position in the pixel.

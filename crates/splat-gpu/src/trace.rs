@@ -242,7 +242,7 @@ pub struct GpuTracer<'a> {
     mesh_materials: wgpu::Buffer,
     /// Binding 12 when no first hits are given (one unused entry).
     no_first_hits: wgpu::Buffer,
-    /// A one-entry fragment list for renders without the volumetric look's first hits.
+    /// Binding 17 without the volumetric look's first hits (one unused entry).
     no_fragments: wgpu::Buffer,
     /// Binding 13 outside path-traced renders.
     no_path: wgpu::Buffer,
@@ -256,11 +256,11 @@ pub struct GpuTracer<'a> {
 }
 
 /// Rasterized first hits on the device ([`crate::FirstHits`]): the hits, `samples` of them a
-/// pixel, their fragments (one unused entry but in the volumetric look) and which first hit
-/// they are (`Params::first_hit`).
+/// pixel, their fragments (the volumetric look's only) and which first hit they are
+/// (`Params::first_hit`).
 pub(crate) struct DeviceFirstHits {
     hits: wgpu::Buffer,
-    fragments: wgpu::Buffer,
+    fragments: Option<wgpu::Buffer>,
     samples: u32,
     kind: u32,
 }
@@ -370,11 +370,11 @@ impl<'a> GpuTracer<'a> {
             if first.hits.is_empty() || !first.hits.len().is_multiple_of(pixels) {
                 return Err(GpuError::Unsupported("the rasterizer's camera is not the tracer's".into()));
             }
-            let fragments =
-                if first.fragments.is_empty() { vec![layout::GpuFragment::default()] } else { first.fragments };
+            let fragments = (!first.fragments.is_empty())
+                .then(|| self.ctx.upload("first-hit fragments", bytemuck::cast_slice(&first.fragments)));
             Ok(DeviceFirstHits {
                 hits: self.ctx.upload("first hits", bytemuck::cast_slice(&first.hits)),
-                fragments: self.ctx.upload("first-hit fragments", bytemuck::cast_slice(&fragments)),
+                fragments,
                 samples: (first.hits.len() / pixels) as u32,
                 kind: first.kind,
             })
@@ -451,7 +451,7 @@ impl<'a> GpuTracer<'a> {
             &self.sobol,
             &self.emitters,
             &self.emitter_density,
-            first_hits.map_or(&self.no_fragments, |f| &f.fragments),
+            first_hits.and_then(|f| f.fragments.as_ref()).unwrap_or(&self.no_fragments),
         ];
         let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(wgpu::BindGroupEntry { binding: 0, resource: params })
             .chain(
@@ -503,6 +503,7 @@ impl<'a> GpuTracer<'a> {
             (None, Some(_)) => self.pipeline.hybrid(ctx)?,
             (None, None) => &self.pipeline.pipeline,
         };
+        let path = path.map(|(_, buffer)| buffer);
         let run = Run { tracer: self, camera, params, frames, count, first_hits, path, kernel };
         let lanes = u64::from(ctx.lanes());
         let over = |f: &Finished| cpu_adapter && u64::from(f.stats.loop_iterations) * lanes >= u64::from(LOOP_BUDGET);
@@ -568,8 +569,8 @@ struct Run<'a> {
     count: u32,
     /// The hybrid pipeline's rasterized first hits, if this is a hybrid render.
     first_hits: Option<FirstHits<'a>>,
-    /// The path tracer's pipeline and parameters, if this is a path-traced render.
-    path: Option<(&'a wgpu::ComputePipeline, &'a wgpu::Buffer)>,
+    /// The path tracer's parameters, if this is a path-traced render.
+    path: Option<&'a wgpu::Buffer>,
     /// The kernel that runs: the path tracer's, the hybrid's or the ray tracer's.
     kernel: &'a wgpu::ComputePipeline,
 }
@@ -596,7 +597,7 @@ impl Run<'_> {
             Some(FirstHits::Still(hits)) => Some(hits),
             _ => None,
         };
-        let bind_group = tracer.bind_group(&uniform, &targets, still_hits, self.path.map(|p| p.1));
+        let bind_group = tracer.bind_group(&uniform, &targets, still_hits, self.path);
         let mut gpu_time = Duration::ZERO;
         let timer = ctx.timestamps.then(|| Timer::new(ctx));
         // Submit the dispatches of `params`, one batch per submission.

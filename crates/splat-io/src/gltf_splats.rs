@@ -60,16 +60,6 @@ fn gltf_error(message: impl Into<String>) -> ErrorKind {
     ErrorKind::Gltf(message.into())
 }
 
-/// Whether the bytes of a `.glb` or `.gltf` hold `KHR_gaussian_splatting` primitives (a cheap
-/// look at the JSON; malformed files answer false and are refused by the reader they go to).
-pub fn has_splats(bytes: &[u8]) -> bool {
-    split_container(bytes).is_ok_and(|(json, _)| {
-        json["meshes"].as_array().is_some_and(|meshes| {
-            meshes.iter().any(|m| m["primitives"].as_array().is_some_and(|p| p.iter().any(is_splat_primitive)))
-        })
-    })
-}
-
 fn is_splat_primitive(primitive: &Value) -> bool {
     primitive["extensions"].get(EXTENSION).is_some()
 }
@@ -82,8 +72,18 @@ pub fn read_gltf_splats(path: &Path) -> Result<Scene, Error> {
 }
 
 /// Parse the splats of a glTF document (`.glb` or `.gltf` bytes; external buffers relative to
-/// `base`), in the project's (`.ply`) axes.
+/// `base`), in the project's (`.ply`) axes; a document without any is refused.
 pub fn parse_gltf_splats(bytes: &[u8], base: &Path) -> Result<Scene, ErrorKind> {
+    let scene = splats_in(bytes, base)?;
+    if scene.particles.is_empty() {
+        return Err(gltf_error(format!("no mesh primitive of the default scene carries {EXTENSION}")));
+    }
+    Ok(scene)
+}
+
+/// The splats of a glTF document as [`parse_gltf_splats`] reads them, none where it has no
+/// `KHR_gaussian_splatting` primitive (a world of meshes only, [`crate::world`]).
+pub(crate) fn splats_in(bytes: &[u8], base: &Path) -> Result<Scene, ErrorKind> {
     let (json, bin) = split_container(bytes).map_err(gltf_error)?;
     check_required(&json).map_err(gltf_error)?;
     let buffers = load_buffers(&json, bin, base).map_err(gltf_error)?;
@@ -99,9 +99,6 @@ pub fn parse_gltf_splats(bytes: &[u8], base: &Path) -> Result<Scene, ErrorKind> 
             sh_degree = sh_degree.max(degree);
             particles.extend(splats);
         }
-    }
-    if particles.is_empty() {
-        return Err(gltf_error(format!("no mesh primitive of the default scene carries {EXTENSION}")));
     }
     Ok(Scene::new(particles, sh_degree))
 }
@@ -519,7 +516,7 @@ pub enum GltfContainer {
 
 /// Write `scene` as glTF with `KHR_gaussian_splatting` (`.glb`, or `.gltf` by extension).
 pub fn write_gltf_splats(path: &Path, scene: &Scene) -> Result<(), Error> {
-    let is_gltf = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
+    let is_gltf = crate::extension(path).as_deref() == Some("gltf");
     let container = if is_gltf { GltfContainer::Embedded } else { GltfContainer::Glb };
     let bytes = encode_gltf_splats(scene, container).map_err(|kind| Error::new(path, kind))?;
     std::fs::write(path, bytes).map_err(|e| Error::new(path, ErrorKind::Io(e)))

@@ -315,7 +315,7 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
     };
     let (world, skipped_properties) = if is_world_file(path) {
         (read_world_as(path, options.screen_filter)?, Vec::new())
-    } else if is_gltf(path) {
+    } else if matches!(crate::extension(path).as_deref(), Some("glb" | "gltf")) {
         (read_gltf_world(path, options)?, Vec::new())
     } else {
         let read = crate::read_scene_with(path, options)?;
@@ -328,24 +328,13 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
     Ok(Opened { world, name, skipped_properties })
 }
 
-/// Whether `path` names a glTF file (`.glb`, `.gltf`).
-fn is_gltf(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
-}
-
 /// A glTF file as a world: its `KHR_gaussian_splatting` splats ([`crate::gltf_splats`]) and
 /// its triangles as one matte mesh ([`crate::mesh::parse_gltf`], which skips the splats), either
 /// of which may be absent; glTF materials are not read (a world file gives meshes theirs).
 fn read_gltf_world(path: &Path, options: crate::ReadOptions) -> Result<WorldSpec, Error> {
     let bytes = crate::read_file(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let mut scene = if crate::gltf_splats::has_splats(&bytes) {
-        crate::gltf_splats::parse_gltf_splats(&bytes, base).map_err(|kind| Error::new(path, kind))?
-    } else {
-        Scene::new(Vec::new(), 0)
-    };
+    let mut scene = crate::gltf_splats::splats_in(&bytes, base).map_err(|kind| Error::new(path, kind))?;
     if let Some(filter) = options.screen_filter {
         scene.screen_filter = filter;
     }

@@ -45,28 +45,69 @@ pub struct FirstHits {
     pub kind: u32,
 }
 
-/// The first hits of the per-sample (colour with T in w, (depth bits, pick), normal) a first-hit
-/// pass read back, sample i of pixel p at p S + i, at the sub-pixel positions `offsets` (S).
-pub(super) fn first_hits_of(color: &[f32], pick: &[u32], normal: &[f32], offsets: &[glam::Vec2]) -> Vec<GpuFirstHit> {
-    (0..pick.len() / 2)
-        .map(|i| GpuFirstHit {
-            radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
-            transmittance: color[4 * i + 3],
-            normal: [normal[4 * i], normal[4 * i + 1], normal[4 * i + 2]],
-            depth: f32::from_bits(pick[2 * i]),
-            picked: pick[2 * i + 1],
-            offset: offsets[i % offsets.len()].to_array(),
-            ..GpuFirstHit::default()
-        })
-        .collect()
-}
-
-/// What one tile pass reads back: per pixel RGBA colour, (depth bits, pick) and normal, and
-/// the (tile, splat) pair count.
-struct TilePass {
+/// [`HitBuffers`] read back: per entry RGBA colour, (depth bits, pick) and normal.
+pub(super) struct Hits {
     color: Vec<f32>,
     pick: Vec<u32>,
     normal: Vec<f32>,
+}
+
+impl Hits {
+    /// The first hits of a first-hit pass (colour with T in w), sample i of pixel p at p S + i,
+    /// at the sub-pixel positions `offsets` (S).
+    pub(super) fn first_hits(&self, offsets: &[glam::Vec2]) -> Vec<GpuFirstHit> {
+        let Self { color, pick, normal } = self;
+        (0..pick.len() / 2)
+            .map(|i| GpuFirstHit {
+                radiance: [color[4 * i], color[4 * i + 1], color[4 * i + 2]],
+                transmittance: color[4 * i + 3],
+                normal: [normal[4 * i], normal[4 * i + 1], normal[4 * i + 2]],
+                depth: f32::from_bits(pick[2 * i]),
+                picked: pick[2 * i + 1],
+                offset: offsets[i % offsets.len()].to_array(),
+                ..GpuFirstHit::default()
+            })
+            .collect()
+    }
+}
+
+/// The buffers a tile pass or `rop_first_hit` writes, `entries` of each (a pixel's, or a
+/// first-hit pass's sample's): RGBA colour (T in w for a first hit), (depth bits, pick) and
+/// normal (bindings 11, 12 and 16 of the raster kernels).
+pub(super) struct HitBuffers {
+    pub(super) color: wgpu::Buffer,
+    pub(super) pick: wgpu::Buffer,
+    pub(super) normal: wgpu::Buffer,
+    entries: usize,
+}
+
+impl HitBuffers {
+    pub(super) fn new(ctx: &GpuContext, entries: usize) -> Self {
+        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let (rgba, pair) = (entries as u64 * 16, entries as u64 * 8);
+        Self {
+            color: ctx.buffer("hit colour", rgba, rw),
+            pick: ctx.buffer("hit pick", pair, rw),
+            normal: ctx.buffer("hit normal", rgba, rw),
+            entries,
+        }
+    }
+
+    /// Colour, (depth bits, pick) and normal, read back.
+    pub(super) fn read(&self, ctx: &GpuContext) -> Result<Hits, GpuError> {
+        let n = self.entries;
+        Ok(Hits {
+            color: ctx.read_f32(&self.color, n * 4)?,
+            pick: ctx.read_u32(&self.pick, n * 2)?,
+            normal: ctx.read_f32(&self.normal, n * 4)?,
+        })
+    }
+}
+
+/// What one tile pass reads back: per pixel (per sample for a first-hit pass) its [`Hits`], and
+/// the (tile, splat) pair count.
+struct TilePass {
+    hits: Hits,
     pairs: u32,
 }
 
@@ -90,7 +131,7 @@ impl GpuRasterizer<'_> {
     /// normal and pick are sample 0's, as the CPU reference takes them.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
         Self::supports_depth_pick(&self.raster)?;
-        let TilePass { color, pick, normal, pairs } =
+        let TilePass { hits: Hits { color, pick, normal }, pairs } =
             self.tile_pass(RasterParams { mode: Draw::Under.mode(), ..self.params }, None)?;
         let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
         let picked: Vec<Option<u32>> = pick.chunks(2).map(|p| (p[1] != NONE).then_some(p[1])).collect();
@@ -137,8 +178,7 @@ impl GpuRasterizer<'_> {
             }
         };
         let params = RasterParams { mode: Draw::Under.mode(), first_hit, frame_key, u_shift, ..self.params };
-        let TilePass { color, pick, normal, .. } = self.tile_pass(params, None)?;
-        let hits = first_hits_of(&color, &pick, &normal, &self.offsets());
+        let hits = self.tile_pass(params, None)?.hits.first_hits(&self.offsets());
         Ok(FirstHits { hits, fragments: Vec::new(), kind: first_hit })
     }
 
@@ -148,7 +188,7 @@ impl GpuRasterizer<'_> {
     fn fragment_first_hits(&self) -> Result<FirstHits, GpuError> {
         let counted =
             self.tile_pass(RasterParams { mode: Draw::Under.mode(), first_hit: FIRST_HIT_COUNT, ..self.params }, None)?;
-        let counts: Vec<u32> = counted.pick.chunks(2).map(|p| p[0]).collect();
+        let counts: Vec<u32> = counted.hits.pick.chunks(2).map(|p| p[0]).collect();
         let mut start = Vec::with_capacity(counts.len());
         let mut total = 0u64;
         for &c in &counts {
@@ -167,8 +207,7 @@ impl GpuRasterizer<'_> {
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let fragments = self.ctx.buffer("fragments", bytes, rw);
         let params = RasterParams { mode: Draw::Under.mode(), first_hit: FIRST_HIT_FRAGMENTS, ..self.params };
-        let TilePass { color, pick, normal, .. } = self.tile_pass(params, Some((&starts, &fragments)))?;
-        let mut hits = first_hits_of(&color, &pick, &normal, &self.offsets());
+        let mut hits = self.tile_pass(params, Some((&starts, &fragments)))?.hits.first_hits(&self.offsets());
         for ((hit, &s), &c) in hits.iter_mut().zip(&start).zip(&counts) {
             hit.fragments = [s, c];
         }
@@ -194,20 +233,12 @@ impl GpuRasterizer<'_> {
         // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
         let lists = TileLists::new(self, &self.depth.vals, &self.depth, pairs)?;
         let per_pixel = if params.first_hit != 0 { self.raster.samples } else { 1 };
-        let pixels = (self.camera.width * self.camera.height * per_pixel) as usize;
-        let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let buffer = |label, bytes: usize| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: bytes as u64,
-                usage: rw,
-                mapped_at_creation: false,
-            })
-        };
-        let out_color = buffer("depth pick colour", pixels * 16);
-        let out_pick = buffer("depth pick", pixels * 8);
-        let out_normal = buffer("depth pick normal", pixels * 16);
-        let none = (buffer("no fragment starts", 4), buffer("no fragments", size_of::<GpuFragment>()));
+        let out = HitBuffers::new(ctx, (self.camera.width * self.camera.height * per_pixel) as usize);
+        let storage = wgpu::BufferUsages::STORAGE;
+        let none = (
+            ctx.buffer("no fragment starts", 4, storage),
+            ctx.buffer("no fragments", size_of::<GpuFragment>() as u64, storage),
+        );
         let (starts, list) = fragments.unwrap_or((&none.0, &none.1));
         let blend_group = bind(
             ctx,
@@ -218,12 +249,12 @@ impl GpuRasterizer<'_> {
                 (5, &self.depth.vals),
                 (9, &lists.pairs.vals),
                 (10, &lists.ranges),
-                (11, &out_color),
-                (12, &out_pick),
+                (11, &out.color),
+                (12, &out.pick),
                 (13, &self.scene.materials),
                 (14, &self.scene.lights),
                 (15, &self.scene.canonical),
-                (16, &out_normal),
+                (16, &out.normal),
                 (17, &self.behind),
                 (18, &self.behind_normal),
                 (20, &self.sample_offsets),
@@ -241,9 +272,6 @@ impl GpuRasterizer<'_> {
             pass.dispatch_workgroups(tiles_x, tiles_y, 1);
         }
         self.submit(encoder)?;
-        let color = ctx.read_f32(&out_color, pixels * 4)?;
-        let pick = ctx.read_u32(&out_pick, pixels * 2)?;
-        let normal = ctx.read_f32(&out_normal, pixels * 4)?;
-        Ok(TilePass { color, pick, normal, pairs })
+        Ok(TilePass { hits: out.read(ctx)?, pairs })
     }
 }

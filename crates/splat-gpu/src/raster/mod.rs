@@ -509,28 +509,14 @@ impl<'a> GpuRasterizer<'a> {
     /// at any sample count (the ray-tracing kernel continues each sample's ray), at centre depth
     /// (the tile pass walks the splats in centre-depth order).
     pub fn supports_first_hits(settings: &RasterSettings) -> Result<(), GpuError> {
-        if settings.fragment_depth != FragmentDepth::Center {
-            let reason = format!(
-                "the GPU hybrid's first hits walk the splats in centre-depth order, not at {:?} depth",
-                settings.fragment_depth
-            );
-            return Err(GpuError::refused(reason, &[Remedy::CenterDepth, Remedy::Cpu]));
-        }
-        Ok(())
+        centre_depth_order(settings, "the GPU hybrid's first hits walk")
     }
 
     /// Whether the tile rasterizer's iso-opacity depth pick ([`GpuRasterizer::depth_pick`]) takes
     /// `settings`: at any sample count (the pick is sample 0's), at centre depth (the tile
     /// lists hold the splats in centre-depth order).
     pub fn supports_depth_pick(settings: &RasterSettings) -> Result<(), GpuError> {
-        if settings.fragment_depth != FragmentDepth::Center {
-            let reason = format!(
-                "the GPU's iso-opacity depth walks the splats in centre-depth order, not at {:?} depth",
-                settings.fragment_depth
-            );
-            return Err(GpuError::refused(reason, &[Remedy::CenterDepth, Remedy::Cpu]));
-        }
-        Ok(())
+        centre_depth_order(settings, "the GPU's iso-opacity depth walks")
     }
 
     fn set_mode(&self, draw: Draw) {
@@ -663,6 +649,16 @@ fn check_settings(settings: &RasterSettings) -> Result<(), GpuError> {
             settings.sample_pattern.name()
         );
         return Err(GpuError::refused(reason, &[Remedy::StandardPattern, Remedy::Cpu]));
+    }
+    Ok(())
+}
+
+/// The tile pass's rule: its lists hold the splats in centre-depth order, so what walks them
+/// (`walker`, as the refusal says it) takes `settings` at centre depth only.
+fn centre_depth_order(settings: &RasterSettings, walker: &str) -> Result<(), GpuError> {
+    if settings.fragment_depth != FragmentDepth::Center {
+        let reason = format!("{walker} the splats in centre-depth order, not at {:?} depth", settings.fragment_depth);
+        return Err(GpuError::refused(reason, &[Remedy::CenterDepth, Remedy::Cpu]));
     }
     Ok(())
 }

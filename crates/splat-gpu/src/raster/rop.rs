@@ -158,30 +158,17 @@ impl GpuRasterizer<'_> {
         let rop = RopPass::new(self, &targets, true)?;
         let slots = FrameSlots::new(ctx);
         slots.write(ctx, &[frame_key], 0, &Frames { u_shift, ..Frames::default() });
-        let pixels = (w * h * self.raster.samples) as usize;
-        let buffer = |label, bytes: usize| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: bytes as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            })
-        };
-        let (color, pick, normal) = (
-            buffer("rop first hit colour", pixels * 16),
-            buffer("rop first hit", pixels * 8),
-            buffer("rop first hit normal", pixels * 16),
-        );
+        let out = super::depth_pick::HitBuffers::new(ctx, (w * h * self.raster.samples) as usize);
         let group = bind(
             ctx,
             &self.pipes.rop_first_hit,
             &[
                 (0, &self.params_buffer),
                 (3, &self.splats),
-                (11, &color),
-                (12, &pick),
+                (11, &out.color),
+                (12, &out.pick),
                 (15, &self.scene.canonical),
-                (16, &normal),
+                (16, &out.normal),
                 (20, &self.sample_offsets),
                 (22, &rop.state),
             ],
@@ -198,9 +185,7 @@ impl GpuRasterizer<'_> {
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
         self.submit(encoder)?;
-        let (color, pick, normal) =
-            (ctx.read_f32(&color, pixels * 4)?, ctx.read_u32(&pick, pixels * 2)?, ctx.read_f32(&normal, pixels * 4)?);
-        Ok(super::depth_pick::first_hits_of(&color, &pick, &normal, &self.offsets()))
+        Ok(out.read(ctx)?.first_hits(&self.offsets()))
     }
 
     /// The most splats any tile's list holds (the same in every draw order), counted from the
