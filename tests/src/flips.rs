@@ -109,7 +109,8 @@ pub fn raster_frame_gap(r: &Rasterizer, method: &RasterMethod, key: u32, u_shift
 /// [`DEPTH_TIE`] their depth order may differ between the backends.
 pub fn raster_depth_gap(r: &Rasterizer, x: u32, y: u32) -> f64 {
     let px = r.pixel(x, y);
-    let mut depths: Vec<f64> = r.fragments(&px).iter().map(|f| f64::from(r.splats()[f.splat as usize].depth)).collect();
+    let mut depths: Vec<f64> =
+        r.fragments(&px).iter().map(|f| f64::from(r.splats()[f.source as usize].depth)).collect();
     depths.sort_by(f64::total_cmp);
     depths.windows(2).map(|w| (w[1] - w[0]) / w[0].abs().max(f64::MIN_POSITIVE)).fold(f64::INFINITY, f64::min)
 }

@@ -30,6 +30,22 @@ pub fn assert_unbiased_and_shift_rejected(
     StatTest::new(format!("{name} u < α + {shift}"), oracle.clone(), biased).assert_rejected(base);
 }
 
+/// The three stochastic raster methods (StochasticSplats, Enderton et al., Laine–Karras) of
+/// rasterizer `r` against its sorted splatting, each by
+/// [`assert_unbiased_and_shift_rejected`] at `base` with decisions lowered by `shift`.
+pub fn assert_raster_methods_unbiased(label: &str, r: &Rasterizer, base: Frames, shift: f32) {
+    let oracle = render_raster(r, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {}).unwrap();
+    let methods = [
+        ("stochastic-splat", RasterMethod::StochasticSplat),
+        ("enderton", RasterMethod::Enderton),
+        ("stratified", RasterMethod::Stratified { scramble: true }),
+    ];
+    for (name, method) in methods {
+        let run = |f: Frames| render_raster(r, &method, &f, &|_| {}).unwrap();
+        assert_unbiased_and_shift_rejected(&format!("{label} {name}"), &oracle, base, shift, run);
+    }
+}
+
 /// A built-in fixture scene and its camera at `width` × `height`.
 pub fn fixture(name: &str, width: u32, height: u32) -> (Scene, Camera) {
     let (scene, camera) = splat_core::scenes::by_name(name).expect("a built-in scene");

@@ -259,6 +259,7 @@ impl MethodOptions {
             extent: self.extent.or(self.implied.extent).unwrap_or_default(),
             response: self.response.or(self.implied.response).unwrap_or_default(),
             early_stop: self.early_stop,
+            lk_variant: splat_core::raster::LkVariant::Paper,
         }
     }
 

@@ -626,6 +626,7 @@ mod tests {
                 extent: crate::raster::SplatExtent::Sqrt8,
                 response: crate::raster::Response::AlongRay,
                 early_stop: true,
+                lk_variant: crate::raster::LkVariant::Paper,
             },
         };
         for id in MethodId::ALL {

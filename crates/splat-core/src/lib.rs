@@ -40,6 +40,7 @@ pub mod image;
 pub mod kernel;
 pub mod lens;
 pub mod lighting;
+pub mod lk_scenes;
 pub mod mesh;
 pub mod normal;
 pub mod oracle;

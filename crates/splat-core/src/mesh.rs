@@ -29,14 +29,18 @@ use crate::lighting::Material;
 use crate::particle::Aabb;
 use glam::{Affine3A, Mat3, Vec3};
 
-/// A triangle mesh: positions, optional per-vertex normals (empty for flat shading) and
-/// counter-clockwise triangles (seen from outside).
+/// A triangle mesh: positions, optional per-vertex normals (empty for flat shading), optional
+/// per-vertex opacities (an opacity texture sampled at the vertices, interpolated across each
+/// triangle) and counter-clockwise triangles (seen from outside).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriangleMesh {
     /// Vertex positions.
     pub positions: Vec<Vec3>,
     /// Per-vertex unit normals, one per position, or empty for face normals.
     pub normals: Vec<Vec3>,
+    /// Per-vertex opacities in [0, 1], one per position, or empty for 1; multiplied by the
+    /// material's [`MeshMaterial::opacity`].
+    pub opacities: Vec<f32>,
     /// Vertex indices of each triangle.
     pub triangles: Vec<[u32; 3]>,
 }
@@ -55,6 +59,14 @@ impl TriangleMesh {
                 return Err(format!("vertex {i} has a non-finite normal {}", self.normals[i]));
             }
         }
+        if !self.opacities.is_empty() {
+            if self.opacities.len() != self.positions.len() {
+                return Err(format!("{} opacities for {} vertices", self.opacities.len(), self.positions.len()));
+            }
+            if let Some(i) = self.opacities.iter().position(|a| !(0.0..=1.0).contains(a)) {
+                return Err(format!("vertex {i} has opacity {}, outside [0, 1]", self.opacities[i]));
+            }
+        }
         let n = self.positions.len() as u32;
         if let Some((i, t)) = self.triangles.iter().enumerate().find(|(_, t)| t.iter().any(|&v| v >= n)) {
             return Err(format!("triangle {i} indexes vertex {} of {n}", t.iter().max().unwrap()));
@@ -70,7 +82,7 @@ impl TriangleMesh {
             Vec3::new(1.0, 0.0, 1.0),
             Vec3::new(1.0, 0.0, -1.0),
         ];
-        Self { normals: vec![Vec3::Y; 4], positions, triangles: vec![[0, 1, 2], [0, 2, 3]] }
+        Self { normals: vec![Vec3::Y; 4], positions, triangles: vec![[0, 1, 2], [0, 2, 3]], ..Self::default() }
     }
 
     /// The cube [−1, 1]³, four vertices per face so that faces stay flat.
@@ -132,6 +144,7 @@ impl TriangleMesh {
         Self {
             positions: self.positions.iter().map(|&p| m.transform_point3(p)).collect(),
             normals: self.normals.iter().map(|&n| (normal_map * n).normalize_or_zero()).collect(),
+            opacities: self.opacities.clone(),
             triangles,
         }
     }
@@ -160,6 +173,10 @@ pub struct MeshMaterial {
     /// GGX roughness of the mirror and glass shares in the path tracer ([`crate::path`]; 0 is
     /// perfectly smooth). The ray-tracing and raster pipelines treat both shares as smooth.
     pub roughness: f32,
+    /// Opacity α ∈ (0, 1] of the surface (times the mesh's per-vertex opacities): a transparent
+    /// surface is one more layer of Eq. 3, α S over what lies behind it with weight 1 − α
+    /// (Laine & Karras 2011's primitives of constant opacity). 1: opaque.
+    pub opacity: f32,
 }
 
 impl Default for MeshMaterial {
@@ -172,6 +189,7 @@ impl Default for MeshMaterial {
             transmission: 0.0,
             ior: 1.5,
             roughness: 0.0,
+            opacity: 1.0,
         }
     }
 }
@@ -195,6 +213,9 @@ impl MeshMaterial {
         }
         if !(0.0..=1.0).contains(&self.roughness) {
             return Err(format!("roughness {} must lie in [0, 1]", self.roughness));
+        }
+        if !(self.opacity > 0.0 && self.opacity <= 1.0) {
+            return Err(format!("opacity {} must lie in (0, 1]", self.opacity));
         }
         Ok(())
     }
@@ -221,14 +242,60 @@ pub struct PreparedTriangle {
     pub e2: Vec3,
     /// Vertex normals (all three the face normal for flat meshes).
     pub normals: [Vec3; 3],
+    /// Vertex opacities: the mesh's per-vertex opacities times its material's.
+    pub alphas: [f32; 3],
     /// Index of its mesh (its material).
     pub mesh: u32,
+    /// Its place in the order the meshes list their triangles (the draw order of the
+    /// stochastic raster methods, and the id that keys a transparent triangle's decisions).
+    pub order: u32,
 }
 
 impl PreparedTriangle {
     /// The unit face normal, (e₁ × e₂)/|e₁ × e₂|: outward for counter-clockwise triangles.
     pub fn face_normal(&self) -> Vec3 {
         self.e1.cross(self.e2).normalize_or_zero()
+    }
+
+    /// Whether any part of it lets light through (an opacity below 1).
+    pub fn is_transparent(&self) -> bool {
+        self.alphas.iter().any(|&a| a < 1.0)
+    }
+
+    /// The opacity at barycentrics (b₁, b₂), clamped to [0, 1] (a point outside the triangle
+    /// extrapolates the interpolation, as a rasterizer's attribute at a pixel centre does); a
+    /// constant opacity exactly, so that an opaque triangle stays opaque.
+    pub fn alpha_at(&self, b1: f32, b2: f32) -> f32 {
+        let [a0, a1, a2] = self.alphas;
+        if a0 == a1 && a1 == a2 {
+            return a0; // exactly, where the interpolation's rounding would leave 1 − 6·10⁻⁸
+        }
+        ((1.0 - b1 - b2) * a0 + b1 * a1 + b2 * a2).clamp(0.0, 1.0)
+    }
+
+    /// The barycentrics (b₁, b₂) where the ray's line meets the triangle's plane, inside the
+    /// triangle or not; `None` when the ray runs parallel to it.
+    pub fn plane_barycentrics(&self, ray: &Ray) -> Option<(f32, f32)> {
+        let p = ray.dir.cross(self.e2);
+        let det = self.e1.dot(p);
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let s = ray.origin - self.p0;
+        Some((s.dot(p) / det, ray.dir.dot(s.cross(self.e1)) / det))
+    }
+
+    /// [`PreparedTriangle::intersect`] with each edge shared by two triangles counted once: a
+    /// crossing within [`EDGE_SLACK`] of an edge belongs to the triangle that runs along that
+    /// edge in its canonical direction. What a transparent surface needs (the slack alone would
+    /// count a ray through the edge twice, two layers where there is one); an opaque surface
+    /// takes the closest hit and needs no rule.
+    #[inline]
+    pub fn crosses(&self, ray: &Ray) -> Option<(f32, f32, f32)> {
+        let (t, b1, b2) = self.intersect(ray)?;
+        // The edge opposite each vertex: p₁ → p₂, p₂ → p₀, p₀ → p₁.
+        let edges = [(1.0 - b1 - b2, self.e2 - self.e1), (b1, -self.e2), (b2, self.e1)];
+        edges.iter().all(|&(b, edge)| b > EDGE_SLACK || canonical(edge)).then_some((t, b1, b2))
     }
 
     /// Möller–Trumbore: (t, b₁, b₂) where the ray crosses the triangle within (t_min, t_max).
@@ -255,6 +322,19 @@ impl PreparedTriangle {
     }
 }
 
+/// Whether edge direction `d` is the canonical one of its two (its first non-zero coordinate
+/// positive): the two triangles sharing an edge run along it in opposite directions, so exactly
+/// one of them sees it canonical.
+fn canonical(d: Vec3) -> bool {
+    if d.x != 0.0 {
+        d.x > 0.0
+    } else if d.y != 0.0 {
+        d.y > 0.0
+    } else {
+        d.z > 0.0
+    }
+}
+
 /// Where a ray meets a mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceHit {
@@ -268,6 +348,8 @@ pub struct SurfaceHit {
     pub face_normal: Vec3,
     /// Unit interpolated shading normal, outward.
     pub normal: Vec3,
+    /// Opacity at the hit ([`PreparedTriangle::alpha_at`]).
+    pub alpha: f32,
 }
 
 impl SurfaceHit {
@@ -287,6 +369,8 @@ impl SurfaceHit {
 pub struct Meshes {
     triangles: Vec<PreparedTriangle>,
     materials: Vec<MeshMaterial>,
+    /// Whether any triangle is transparent.
+    transparent: bool,
     bvh: Bvh,
     wide: Bvh4,
 }
@@ -318,7 +402,10 @@ impl Meshes {
                 } else {
                     [a, b, c].map(|v| mesh.normals[v as usize].try_normalize().unwrap_or(face))
                 };
-                prepared.push(PreparedTriangle { p0: p[0], e1, e2, normals, mesh: i as u32 });
+                let alphas =
+                    [a, b, c].map(|v| material.opacity * mesh.opacities.get(v as usize).copied().unwrap_or(1.0));
+                let order = prepared.len() as u32;
+                prepared.push(PreparedTriangle { p0: p[0], e1, e2, normals, alphas, mesh: i as u32, order });
             }
         }
         if prepared.len() > MAX_TRIANGLES {
@@ -333,13 +420,20 @@ impl Meshes {
             .collect();
         let bvh = Bvh::build(&boxes);
         let wide = Bvh4::from_binary(&bvh);
-        let triangles = bvh.order.iter().map(|&i| prepared[i as usize]).collect();
-        Ok(Self { triangles, materials: meshes.iter().map(|m| m.1).collect(), bvh, wide })
+        let triangles: Vec<PreparedTriangle> = bvh.order.iter().map(|&i| prepared[i as usize]).collect();
+        let transparent = triangles.iter().any(PreparedTriangle::is_transparent);
+        Ok(Self { triangles, materials: meshes.iter().map(|m| m.1).collect(), transparent, bvh, wide })
     }
 
     /// Whether there are no triangles.
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
+    }
+
+    /// Whether any triangle lets light through ([`MeshMaterial::opacity`] or a per-vertex
+    /// opacity below 1).
+    pub fn has_transparent(&self) -> bool {
+        self.transparent
     }
 
     /// Triangles in BVH leaf order (what a GPU uploads beside [`Meshes::bvh`]).
@@ -362,40 +456,87 @@ impl Meshes {
         &self.materials[mesh as usize]
     }
 
-    /// The closest triangle the ray crosses within (t_min, t_max); ties go to the lower
-    /// leaf-order index, so the answer does not depend on traversal order.
+    /// The closest triangle the ray crosses within (t_min, t_max), transparent or not; ties go
+    /// to the lower leaf-order index, so the answer does not depend on traversal order.
     pub fn closest(&self, ray: &Ray) -> Option<SurfaceHit> {
+        self.closest_where(ray, |_| true)
+    }
+
+    /// The closest opaque triangle (what the raster pipeline's depth pre-pass draws; the
+    /// transparent ones are fragments, [`Meshes::transparent_hits`]).
+    pub fn closest_opaque(&self, ray: &Ray) -> Option<SurfaceHit> {
+        if !self.transparent {
+            return self.closest(ray);
+        }
+        self.closest_where(ray, |tri| !tri.is_transparent())
+    }
+
+    fn closest_where(&self, ray: &Ray, keep: impl Fn(&PreparedTriangle) -> bool) -> Option<SurfaceHit> {
         let mut best: Option<(f32, u32, f32, f32)> = None;
         let mut t_max = ray.t_max;
         self.wide.traverse(ray, &mut t_max, |k, t_max| {
+            let tri = &self.triangles[k as usize];
             let clipped = Ray { t_max: t_max.next_up(), ..*ray };
-            let Some((t, b1, b2)) = self.triangles[k as usize].intersect(&clipped) else { return };
+            let Some((t, b1, b2)) = tri.intersect(&clipped).filter(|_| keep(tri)) else { return };
             if best.is_none_or(|(bt, bk, _, _)| t < bt || (t == bt && k < bk)) {
                 best = Some((t, k, b1, b2));
                 *t_max = t;
             }
         });
-        best.map(|(t, k, b1, b2)| {
-            let tri = &self.triangles[k as usize];
-            let [n0, n1, n2] = tri.normals;
-            let face_normal = tri.face_normal();
-            let normal = ((1.0 - b1 - b2) * n0 + b1 * n1 + b2 * n2).try_normalize().unwrap_or(face_normal);
-            SurfaceHit { t, triangle: k, mesh: tri.mesh, face_normal, normal }
-        })
+        best.map(|(t, k, b1, b2)| self.hit(k, t, b1, b2))
     }
 
-    /// Whether any triangle lies on the ray within (t_min, t_max) (meshes are opaque to shadow
-    /// rays, glass included).
-    pub fn occludes(&self, ray: &Ray) -> bool {
-        let mut hit = false;
+    /// The hit of leaf-order triangle `k` at distance `t` and barycentrics (b₁, b₂).
+    fn hit(&self, k: u32, t: f32, b1: f32, b2: f32) -> SurfaceHit {
+        let tri = &self.triangles[k as usize];
+        let [n0, n1, n2] = tri.normals;
+        let face_normal = tri.face_normal();
+        let normal = ((1.0 - b1 - b2) * n0 + b1 * n1 + b2 * n2).try_normalize().unwrap_or(face_normal);
+        SurfaceHit { t, triangle: k, mesh: tri.mesh, face_normal, normal, alpha: tri.alpha_at(b1, b2) }
+    }
+
+    /// Where the ray crosses leaf-order triangle `k` within (t_min, t_max), if it does (within
+    /// the edge slack: wherever [`Meshes::transparent_hits`] finds it, and a little more).
+    pub fn hit_triangle(&self, k: u32, ray: &Ray) -> Option<SurfaceHit> {
+        let (t, b1, b2) = self.triangles[k as usize].intersect(ray)?;
+        Some(self.hit(k, t, b1, b2))
+    }
+
+    /// The leaf-order index of every transparent triangle the ray crosses within
+    /// (t_min, t_max), in no particular order, into `out` (cleared first).
+    pub fn transparent_hits(&self, ray: &Ray, out: &mut Vec<u32>) {
+        out.clear();
+        if !self.transparent {
+            return;
+        }
+        let mut t_max = ray.t_max;
+        self.wide.traverse(ray, &mut t_max, |k, _| {
+            let tri = &self.triangles[k as usize];
+            if tri.is_transparent() && tri.crosses(ray).is_some() {
+                out.push(k);
+            }
+        });
+    }
+
+    /// The light a shadow ray carries past the meshes within (t_min, t_max): Π (1 − αᵢ) over
+    /// the triangles it crosses, 0 at the first opaque one (glass blocks shadow rays, as opaque
+    /// surfaces do; only an opacity below 1 lets light through).
+    pub fn transmittance(&self, ray: &Ray) -> f32 {
+        let mut transmittance = 1.0f32;
         let mut t_max = ray.t_max;
         self.wide.traverse(ray, &mut t_max, |k, t_max| {
-            if !hit && self.triangles[k as usize].intersect(ray).is_some() {
-                hit = true;
+            if transmittance == 0.0 {
+                return;
+            }
+            let tri = &self.triangles[k as usize];
+            let crossing = if tri.is_transparent() { tri.crosses(ray) } else { tri.intersect(ray) };
+            let Some((_, b1, b2)) = crossing else { return };
+            transmittance *= 1.0 - tri.alpha_at(b1, b2);
+            if transmittance == 0.0 {
                 *t_max = f32::NEG_INFINITY;
             }
         });
-        hit
+        transmittance
     }
 }
 
@@ -481,9 +622,25 @@ mod tests {
         let hit = meshes.closest(&Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::Z)).unwrap();
         assert_relative_eq!(hit.t, 4.5, epsilon = 1e-5);
         assert!(hit.normal.abs_diff_eq(-Vec3::Z, 1e-6));
-        assert!(meshes.occludes(&Ray::new(Vec3::ZERO, Vec3::Z)));
-        assert!(!meshes.occludes(&Ray { t_max: 4.4, ..Ray::new(Vec3::ZERO, Vec3::Z) }));
+        assert_eq!(meshes.transmittance(&Ray::new(Vec3::ZERO, Vec3::Z)), 0.0);
+        assert_eq!(meshes.transmittance(&Ray { t_max: 4.4, ..Ray::new(Vec3::ZERO, Vec3::Z) }), 1.0);
         assert!(meshes.closest(&Ray::new(Vec3::new(0.6, 0.0, 0.0), Vec3::Z)).is_none());
+    }
+
+    /// A ray through the edge two triangles share crosses exactly one of them (`crosses`), where
+    /// the slack of `intersect` finds both: a transparent quad would be two layers along its
+    /// diagonal.
+    #[test]
+    fn a_shared_edge_is_crossed_once() {
+        let meshes =
+            Meshes::new(&[(TriangleMesh::plane(), MeshMaterial { opacity: 0.5, ..MeshMaterial::default() })]).unwrap();
+        for p in [Vec3::new(0.3, 1.0, 0.3), Vec3::new(-0.7, 1.0, -0.7), Vec3::new(0.0, 1.0, 0.0)] {
+            let ray = Ray::new(p, -Vec3::Y);
+            let tris = meshes.triangles();
+            assert_eq!(tris.iter().filter(|t| t.crosses(&ray).is_some()).count(), 1, "through {p}");
+            assert_eq!(tris.iter().filter(|t| t.intersect(&ray).is_some()).count(), 2, "the slack's double hit at {p}");
+            assert_relative_eq!(meshes.transmittance(&ray), 0.5);
+        }
     }
 
     #[test]

@@ -279,6 +279,34 @@ pub fn calc_alpha_ref(sample_id: u32, pixel_id: u32, surface_id: u32, samples_pe
     unit_f32(x)
 }
 
+/// Laine & Karras 2011, Figure 3b: the opacity reference value of the Sobol sequence in place
+/// of CalcAlphaRef's scramble. The index is formed as Figure 4 forms it (sample + pixel ·
+/// samples, bits reversed, plus the surface id, reversed back), and mapped through the
+/// generator matrix of Sobol's second dimension (direction numbers vⱼ₊₁ = vⱼ ⊕ (vⱼ ≫ 1), the
+/// polynomial x + 1): each output bit is the parity of the index ANDed with a bit-specific
+/// constant. Every aligned power-of-two span stays stratified, but spans of different surfaces
+/// are linear images of each other: the correlation the figure shows.
+pub fn sobol_alpha_ref(sample_id: u32, pixel_id: u32, surface_id: u32, samples_per_pixel: u32) -> f32 {
+    let x = sample_id.wrapping_add(pixel_id.wrapping_mul(samples_per_pixel));
+    let index = x.reverse_bits().wrapping_add(surface_id).reverse_bits();
+    let (mut v, mut out) = (0x8000_0000u32, 0u32);
+    for j in 0..32 {
+        if index >> j & 1 == 1 {
+            out ^= v;
+        }
+        v ^= v >> 1;
+    }
+    unit_f32(out)
+}
+
+/// Index of cell (x, y) along the Morton (Z) curve: the bits of x and y interleaved (x in the
+/// even bits). Laine & Karras §3.1's control: every aligned 2ᵏ × 2ᵏ block gets the same
+/// structure.
+pub fn morton_index(x: u32, y: u32) -> u32 {
+    let spread = |v: u32| (0..16).fold(0u32, |m, i| m | ((v >> i & 1) << (2 * i)));
+    spread(x) | spread(y) << 1
+}
+
 /// Index of cell (x, y) along the Hilbert curve filling the 2^order × 2^order grid: cells with
 /// consecutive indices are edge neighbours (Laine & Karras §3.1: a Morton curve gives every
 /// aligned block the same structure; the Hilbert curve does not).
@@ -373,6 +401,43 @@ mod lk_tests {
         };
         assert!(corr(false) > 0.99, "plain radical inverse: {}", corr(false));
         assert!(corr(true).abs() < 0.05, "scrambled: {}", corr(true));
+    }
+
+    /// Figure 3b's Sobol sequence keeps every pixel's span stratified, for any surface id (its
+    /// first digits depend on the index's low bits alone, through a unit triangular matrix),
+    /// and its first values are those of Sobol's second dimension in the index's natural order
+    /// (not Gray code): 0, 1/2, 3/4, 1/4, 5/8, 1/8.
+    #[test]
+    fn sobol_alpha_refs_are_stratified_sobol_points() {
+        let first: Vec<f32> = (0..6).map(|n| sobol_alpha_ref(n, 0, 0, 64)).collect();
+        assert_eq!(first, [0.0, 0.5, 0.75, 0.25, 0.625, 0.125]);
+        for (pixel, surface) in [(0, 0), (5, 1), (77, 123_456_789)] {
+            let mut strata = [false; 16];
+            for n in 0..16 {
+                let k = (sobol_alpha_ref(n, pixel, surface, 16) * 16.0) as usize;
+                assert!(!strata[k], "pixel {pixel}, surface {surface}: stratum {k} twice");
+                strata[k] = true;
+            }
+        }
+    }
+
+    /// The Morton index interleaves x (even bits) and y (odd bits): a bijection of each
+    /// 2ᵏ × 2ᵏ block onto 0..4ᵏ, every aligned 2 × 2 block numbered alike.
+    #[test]
+    fn morton_index_interleaves_bits() {
+        assert_eq!(
+            [(0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (0, 2)].map(|(x, y)| morton_index(x, y)),
+            [0, 1, 2, 3, 4, 8]
+        );
+        let mut seen = [false; 64];
+        for y in 0..8 {
+            for x in 0..8 {
+                let i = morton_index(x, y) as usize;
+                assert!(!seen[i]);
+                seen[i] = true;
+                assert_eq!(i % 4, (x % 2 + 2 * (y % 2)) as usize);
+            }
+        }
     }
 }
 

@@ -23,7 +23,7 @@ fn random_rotation(rng: &mut SplitMix64) -> Quat {
 }
 
 /// Colour of hue h ∈ [0, 1) at full saturation and value `v`.
-fn hue(h: f32, v: f32) -> Vec3 {
+pub(crate) fn hue(h: f32, v: f32) -> Vec3 {
     let k = |n: f32| {
         let k = (n + 6.0 * h) % 6.0;
         v * (1.0 - (k.min(4.0 - k).clamp(0.0, 1.0)))

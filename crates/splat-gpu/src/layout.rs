@@ -441,6 +441,18 @@ fn gpu_material(m: &Material, first: u32) -> GpuMaterial {
     }
 }
 
+/// Refuse transparent mesh materials (an opacity below 1): the GPU kernels treat every triangle
+/// as an opaque surface, and would draw a transparent one as opaque.
+pub fn check_opaque(meshes: &Meshes) -> Result<(), crate::GpuError> {
+    if meshes.has_transparent() {
+        return Err(crate::GpuError::refused(
+            "transparent mesh materials (an opacity below 1) render on the CPU only",
+            &[crate::Remedy::Cpu],
+        ));
+    }
+    Ok(())
+}
+
 /// The triangles of the trace scene's meshes in their BVH's leaf order (one unused entry when
 /// there are none: a binding cannot be empty).
 pub fn triangles(meshes: &Meshes) -> Vec<GpuTriangle> {
@@ -922,6 +934,18 @@ mod tests {
     use super::wgsl_check::{assert_constants, assert_mirrors, constant, validate};
     use super::*;
     use splat_core::camera::Distortion;
+
+    /// The kernels draw every triangle opaque: a transparent mesh is refused before any upload,
+    /// naming the CPU as the remedy; opaque meshes pass.
+    #[test]
+    fn transparent_meshes_are_refused() {
+        use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
+        let mesh =
+            |opacity| Meshes::new(&[(TriangleMesh::plane(), MeshMaterial { opacity, ..MeshMaterial::default() })]);
+        assert!(check_opaque(&mesh(1.0).unwrap()).is_ok());
+        let refused = check_opaque(&mesh(0.5).unwrap()).unwrap_err();
+        assert!(refused.to_string().contains("CPU only"), "{refused}");
+    }
 
     /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
     /// struct of the same role, so the two cannot drift apart.

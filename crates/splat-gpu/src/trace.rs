@@ -281,6 +281,7 @@ impl<'a> GpuTracer<'a> {
     /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
     /// binding limit.
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
+        layout::check_opaque(trace.meshes())?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());

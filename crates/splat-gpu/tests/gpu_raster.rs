@@ -369,7 +369,7 @@ fn stochastic_depth_ties_keep_the_lower_id_like_the_cpu() {
             let frags = r.fragments(&px);
             let rng = RayRng::new(x, y, frame_key(seed, 0), RngScheme::Hash);
             let accepted = |id: u32| {
-                let f = frags.iter().find(|f| r.splats()[f.splat as usize].id == id).unwrap();
+                let f = frags.iter().find(|f| r.splats()[f.source as usize].id == id).unwrap();
                 rng.particle(id, 0, Vec3::ZERO) < f.alpha
             };
             let expected = [front, back]

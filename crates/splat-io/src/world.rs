@@ -41,7 +41,7 @@
 //! intensity = 12
 //! radius = 0.05                     # soft shadows
 //!
-//! [[meshes]]                        # opaque triangles that clip rays (splat_core::mesh)
+//! [[meshes]]                        # triangles beside the splats (splat_core::mesh)
 //! shape = "sphere"                  # plane | cube | sphere, or file = "pedestal.obj" / ".gltf" / ".glb"
 //! segments = 48                     # sphere tessellation (around; half as many rings)
 //! translate = [0.8, 0.5, 0.6]
@@ -53,6 +53,7 @@
 //! ior = 1.5
 //! mirror = 0.0                      # perfect mirror share
 //! roughness = 0.0                   # GGX roughness of mirror and glass (path tracer only)
+//! opacity = 1.0                     # α in (0, 1]: below 1 a transparent layer (CPU only)
 //! ```
 //!
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
@@ -186,6 +187,7 @@ struct MeshFile {
     transmission: Option<f32>,
     ior: Option<f32>,
     roughness: Option<f32>,
+    opacity: Option<f32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -492,6 +494,7 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), 
         transmission: m.transmission.unwrap_or(0.0),
         ior: m.ior.unwrap_or(defaults.ior),
         roughness: m.roughness.unwrap_or(0.0),
+        opacity: m.opacity.unwrap_or(1.0),
     };
     material.validate()?;
     Ok((mesh, material))
@@ -750,6 +753,7 @@ mod tests {
             ("max_bounces = 99\n[[splats]]\nbuiltin = \"demo\"", "max_bounces 99"),
             ("raster_iso_threshold = 1.5\n[[splats]]\nbuiltin = \"demo\"", "raster_iso_threshold 1.5 is outside"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nroughness = 2", "roughness 2"),
+            ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nopacity = 0", "opacity 0"),
             ("[environment]\ncolor = 1\nhorizon = 1\n[[splats]]\nbuiltin = \"demo\"", "either color, or horizon"),
             ("[environment]\ncolor = -1\n[[splats]]\nbuiltin = \"demo\"", "environment colour"),
             ("[environment]\nhorizon = 1\nzenith = 1\nup = [0, 0, 0]\n[[splats]]\nbuiltin = \"demo\"", "up must be"),

@@ -314,6 +314,12 @@ impl<'a> PathTracer<'a> {
     /// A path tracer for `trace` (validated settings).
     pub fn new(trace: &'a TraceScene<'a>, settings: PathSettings) -> Result<Self, RenderError> {
         settings.validate()?;
+        if trace.meshes().has_transparent() {
+            return Err(RenderError::Settings(
+                "the path tracer has no transparent mesh materials (an opacity below 1): the ray-tracing and raster pipelines render them"
+                    .into(),
+            ));
+        }
         Ok(Self { trace, settings, emitters: Emitters::new(trace) })
     }
 

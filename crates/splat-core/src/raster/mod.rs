@@ -36,7 +36,9 @@ use crate::lighting::{Lighting, Look};
 use crate::mesh::{Meshes, SurfaceHit};
 use crate::normal::particle_normal;
 use crate::particle::Scene;
-use crate::rng::{RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, xxhash32};
+use crate::rng::{
+    RayRng, RngScheme, calc_alpha_ref, hilbert_index, hilbert_order, morton_index, sobol_alpha_ref, xxhash32,
+};
 use crate::settings::{RenderError, RenderSettings, validate_scene};
 use crate::tile::{TILE, tile_count};
 use crate::trace::{Method, TraceScene};
@@ -138,6 +140,39 @@ pub struct RasterSettings {
     /// Sorted splatting stops a sample before the fragment that would take its transmittance
     /// below [`EARLY_STOP_T`], as the 3DGS rasterizer does (`false`: the exact sum of Eq. 3).
     pub early_stop: bool,
+    /// Laine–Karras stratification as published, or one of the paper's controls.
+    pub lk_variant: LkVariant,
+}
+
+/// Laine & Karras 2011's stratified transparency as published ([`LkVariant::Paper`]) or with
+/// one of the ingredients the paper shows the need for taken away (CPU only).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum LkVariant {
+    /// Figure 7 with CalcAlphaRef (Figure 4) and the Hilbert pixel index (§3.1).
+    #[default]
+    Paper,
+    /// Figure 6a: no sorting of the covered samples by stored depth (line 9 skipped).
+    Unsorted,
+    /// §3.1's control: pixel indices along the Morton (Z) curve instead of the Hilbert curve.
+    Morton,
+    /// Figure 3b: the Sobol sequence (a parity hash, [`crate::rng::sobol_alpha_ref`]) in place of
+    /// the multiply–XOR scramble.
+    Sobol,
+}
+
+impl LkVariant {
+    /// Every variant.
+    pub const ALL: [LkVariant; 4] = [LkVariant::Paper, LkVariant::Unsorted, LkVariant::Morton, LkVariant::Sobol];
+
+    /// Its name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            LkVariant::Paper => "paper",
+            LkVariant::Unsorted => "unsorted",
+            LkVariant::Morton => "morton",
+            LkVariant::Sobol => "sobol",
+        }
+    }
 }
 
 /// The transmittance below which the 3DGS rasterizer stops compositing a pixel.
@@ -152,6 +187,7 @@ impl Default for RasterSettings {
             extent: SplatExtent::ThreeDgs,
             response: Response::Projected,
             early_stop: false,
+            lk_variant: LkVariant::Paper,
         }
     }
 }
@@ -175,15 +211,28 @@ impl RasterSettings {
     }
 }
 
-/// One splat's fragment in one pixel.
+/// One splat's or one transparent triangle's fragment in one pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fragment {
-    /// Index of the splat in [`Rasterizer::splats`] (global depth order).
-    pub splat: u32,
+    /// What drew it: the index of a splat in [`Rasterizer::splats`] (global depth order), or
+    /// [`TRIANGLE`] | the leaf-order index of a transparent triangle of the meshes.
+    pub source: u32,
     /// Alpha at the pixel centre.
     pub alpha: f32,
-    /// Bit s set when sample s is inside the splat's footprint ([`Splat::covers`]).
+    /// Bit s set when sample s is inside the splat's footprint ([`Splat::covers`]) or its ray
+    /// crosses the triangle.
     pub covered: u64,
+}
+
+/// The bit of [`Fragment::source`] (and of a transparent triangle's id) that marks a triangle:
+/// splat indices and ids stay below it (a scene with transparent meshes is refused from 2³¹
+/// particles on), triangle indices below [`crate::mesh::MAX_TRIANGLES`] = 2²⁹.
+pub const TRIANGLE: u32 = 1 << 31;
+
+/// The triangle of fragment source `source`, if it is one.
+#[inline]
+fn triangle_of(source: u32) -> Option<u32> {
+    (source & TRIANGLE != 0 && source < MESH).then_some(source & !TRIANGLE)
 }
 
 /// The geometry of one pixel's samples.
@@ -294,6 +343,13 @@ impl<'a> Rasterizer<'a> {
     /// or the mesh forward-shaded (raster) or ray traced (hybrid).
     fn behind(&self, px: &PixelSamples, s: usize, decide: &impl Decide) -> DVec3 {
         let Some(hit) = &px.surfaces[s] else { return self.settings.background.as_dvec3() };
+        self.surface_color(px, s, hit, decide)
+    }
+
+    /// The shaded colour S of mesh surface `hit` on sample `s`'s ray: forward-shaded (raster:
+    /// lit without shadows, its mirror and glass shares seeing the background) or ray traced
+    /// (hybrid).
+    fn surface_color(&self, px: &PixelSamples, s: usize, hit: &SurfaceHit, decide: &impl Decide) -> DVec3 {
         let ray = &px.rays[s];
         if let Some((trace, method)) = &self.hybrid {
             return trace.surface(method, ray, hit, decide).color;
@@ -325,21 +381,48 @@ impl<'a> Rasterizer<'a> {
         Ok(self)
     }
 
+    /// Refuse what the rasterizer would draw wrong among transparent meshes: sorted splatting's
+    /// surface look lights the splats' blended radiance once, at one picked particle, and has no
+    /// place for the already shaded colour of a transparent triangle between them (the
+    /// volumetric look and unlit splats composite it as a fragment); and particle ids must stay
+    /// below the [`TRIANGLE`] bit that marks triangle ids.
+    pub fn check_meshes(&self) -> Result<(), RenderError> {
+        if !self.meshes.has_transparent() {
+            return Ok(());
+        }
+        if self.lighting.is_on() && !self.volumetric() {
+            return Err(RenderError::Settings("transparent meshes among lit splats need the volumetric look".into()));
+        }
+        if self.scene.particles.len() >= TRIANGLE as usize {
+            return Err(RenderError::Settings(format!(
+                "{} particles among transparent meshes: at most {} fit beside the triangles' ids",
+                self.scene.particles.len(),
+                TRIANGLE
+            )));
+        }
+        Ok(())
+    }
+
     /// Whether every fragment is lit before blending ([`Look::Volumetric`]).
     fn volumetric(&self) -> bool {
         self.lighting.is_on() && self.lighting.look == Look::Volumetric
     }
 
-    /// The colour of splat `splat` written at depth `t` of sample `s`: its SH colour, lit at
-    /// that point with its normal when lighting is on: without shadows in the raster pipeline
-    /// (vk_gaussian_splatting Lighting §3), with the ray tracer's shadow rays in the hybrid one
-    /// (§5: after the raster first hit, lighting and shadows as in pure ray tracing).
-    fn lit_color(&self, px: &PixelSamples, splat: u32, s: usize, t: f32, decide: &impl Decide) -> DVec3 {
-        let c = self.splats[splat as usize].color;
+    /// The colour of fragment source `source` written at depth `t` of sample `s`: a splat's SH
+    /// colour, lit at that point with its normal when lighting is on: without shadows in the
+    /// raster pipeline (vk_gaussian_splatting Lighting §3), with the ray tracer's shadow rays in
+    /// the hybrid one (§5: after the raster first hit, lighting and shadows as in pure ray
+    /// tracing); a transparent triangle's shaded surface colour S ([`Rasterizer::surface_color`]).
+    fn lit_color(&self, px: &PixelSamples, source: u32, s: usize, t: f32, decide: &impl Decide) -> DVec3 {
+        if let Some(k) = triangle_of(source) {
+            let hit = self.meshes.hit_triangle(k, &px.rays[s]);
+            return hit.map_or(DVec3::ZERO, |hit| self.surface_color(px, s, &hit, decide));
+        }
+        let c = self.splats[source as usize].color;
         if !self.lighting.is_on() {
             return c.as_dvec3();
         }
-        let (id, ray, n) = (self.splats[splat as usize].id, &px.rays[s], self.normal(px, splat));
+        let (id, ray, n) = (self.splats[source as usize].id, &px.rays[s], self.normal(px, source));
         match &self.hybrid {
             Some((trace, _)) => trace.light_pick(c, id, t, n, ray, decide).as_dvec3(),
             None => self.lighting.shade_unshadowed(c, id, ray, t, n).as_dvec3(),
@@ -372,7 +455,7 @@ impl<'a> Rasterizer<'a> {
         let surfaces = if self.meshes.is_empty() {
             vec![None; rays.len()]
         } else {
-            rays.iter().map(|r| self.meshes.closest(r)).collect()
+            rays.iter().map(|r| self.meshes.closest_opaque(r)).collect()
         };
         let centre = self.clip(c.pixel_ray(x, y));
         PixelSamples { x, y, rays, centre, stretch, positions, surfaces }
@@ -402,7 +485,37 @@ impl<'a> Rasterizer<'a> {
                 };
                 let covered =
                     px.positions.iter().enumerate().filter(|(_, p)| s.covers(**p)).fold(0u64, |m, (i, _)| m | 1 << i);
-                (covered != 0).then_some(Fragment { splat: k, alpha, covered })
+                (covered != 0).then_some(Fragment { source: k, alpha, covered })
+            })
+            .chain(self.triangle_fragments(px))
+            .collect()
+    }
+
+    /// The fragments of the transparent triangles in pixel `px`, in the order the meshes list
+    /// their triangles: a triangle covers the samples whose rays cross it (the mesh pre-pass's
+    /// ray cast), its alpha is its opacity where the pixel centre's ray meets its plane.
+    fn triangle_fragments(&self, px: &PixelSamples) -> Vec<Fragment> {
+        if !self.meshes.has_transparent() {
+            return Vec::new();
+        }
+        let (mut hits, mut covered) = (Vec::new(), Vec::<(u32, u64)>::new());
+        for (s, ray) in px.rays.iter().enumerate() {
+            self.meshes.transparent_hits(ray, &mut hits);
+            for &k in &hits {
+                match covered.iter_mut().find(|(j, _)| *j == k) {
+                    Some((_, mask)) => *mask |= 1 << s,
+                    None => covered.push((k, 1 << s)),
+                }
+            }
+        }
+        let triangles = self.meshes.triangles();
+        covered.sort_by_key(|&(k, _)| triangles[k as usize].order);
+        covered
+            .into_iter()
+            .filter_map(|(k, covered)| {
+                let tri = &triangles[k as usize];
+                let alpha = tri.plane_barycentrics(&px.centre).map_or(tri.alphas[0], |(b1, b2)| tri.alpha_at(b1, b2));
+                (alpha > 0.0).then_some(Fragment { source: TRIANGLE | k, alpha, covered })
             })
             .collect()
     }
@@ -428,39 +541,63 @@ impl<'a> Rasterizer<'a> {
     /// Depth of fragment `f` at sample `s`: distance along the sample's ray.
     #[inline]
     fn depth(&self, px: &PixelSamples, f: &Fragment, s: usize) -> f32 {
+        if let Some(k) = triangle_of(f.source) {
+            return self.meshes.hit_triangle(k, &px.rays[s]).map_or(f32::INFINITY, |h| h.t);
+        }
         match self.raster.fragment_depth {
-            FragmentDepth::Center => self.splats[f.splat as usize].depth * px.stretch[s],
+            FragmentDepth::Center => self.splats[f.source as usize].depth * px.stretch[s],
             FragmentDepth::MaxDensityPlane => {
-                let (o, d) = to_canonical(&self.prepared[f.splat as usize], &px.rays[s]);
+                let (o, d) = to_canonical(&self.prepared[f.source as usize], &px.rays[s]);
                 -o.dot(d) / d.length_squared()
             }
         }
     }
 
+    /// The id that orders a fragment among equal depths and keys its decisions: the particle's
+    /// id, or [`TRIANGLE`] | the triangle's place in the meshes' order.
     fn id(&self, f: &Fragment) -> u32 {
-        self.splats[f.splat as usize].id
-    }
-
-    /// The colour a fragment blends at sample `s` and depth `t`: lit first in the volumetric look.
-    fn color(&self, px: &PixelSamples, f: &Fragment, s: usize, t: f32, decide: &impl Decide) -> DVec3 {
-        if self.volumetric() {
-            self.lit_color(px, f.splat, s, t, decide)
-        } else {
-            self.splats[f.splat as usize].color.as_dvec3()
+        match triangle_of(f.source) {
+            Some(k) => TRIANGLE | self.meshes.triangles()[k as usize].order,
+            None => self.splats[f.source as usize].id,
         }
     }
 
-    /// Unit normal of splat `splat` (index into [`Rasterizer::splats`]) along sample 0's ray.
-    fn normal(&self, px: &PixelSamples, splat: u32) -> Vec3 {
-        let s = &self.settings;
-        particle_normal(&self.prepared[splat as usize], &px.rays[0], s.normal_mode, s.kernel.cutoff)
+    /// The particle a fragment source picks (none for a triangle).
+    fn picked(&self, source: u32) -> Option<u32> {
+        triangle_of(source).is_none().then(|| self.splats[source as usize].id)
     }
 
-    /// The draw order of a stochastic frame: the fragments ordered by a hash of (splat id,
-    /// frame), one random permutation of the splats shared by every pixel of the frame.
+    /// The colour a fragment blends at sample `s` and depth `t`: lit first in the volumetric
+    /// look; a triangle's is its surface's shaded colour S.
+    fn color(&self, px: &PixelSamples, f: &Fragment, s: usize, t: f32, decide: &impl Decide) -> DVec3 {
+        if self.volumetric() || triangle_of(f.source).is_some() {
+            self.lit_color(px, f.source, s, t, decide)
+        } else {
+            self.splats[f.source as usize].color.as_dvec3()
+        }
+    }
+
+    /// Unit normal of fragment source `source` along sample 0's ray: the splat's, or the
+    /// triangle's shading normal facing the ray.
+    fn normal(&self, px: &PixelSamples, source: u32) -> Vec3 {
+        let ray = &px.rays[0];
+        if let Some(k) = triangle_of(source) {
+            return self.meshes.hit_triangle(k, ray).map_or(Vec3::ZERO, |h| h.facing(ray.dir).1);
+        }
+        let s = &self.settings;
+        particle_normal(&self.prepared[source as usize], ray, s.normal_mode, s.kernel.cutoff)
+    }
+
+    /// The draw order of a stochastic frame: the transparent triangles first, in the order the
+    /// meshes list them (the submission order of Laine & Karras's renderer, which its surface
+    /// tracking follows), then the splats ordered by a hash of (splat id, frame), one random
+    /// permutation of the splats shared by every pixel of the frame.
     pub fn shuffle(&self, fragments: &mut [Fragment], frame_key: u32) {
         let seed = xxhash32([frame_key, ORDER_ID, 0]);
-        fragments.sort_by_cached_key(|f| (xxhash32([self.id(f), seed, 0]), self.id(f)));
+        fragments.sort_by_cached_key(|f| {
+            let id = self.id(f);
+            if triangle_of(f.source).is_some() { (false, id, id) } else { (true, xxhash32([id, seed, 0]), id) }
+        });
     }
 
     /// One frame of `method` at pixel `px` from its fragments (in draw order: the global sort
@@ -512,7 +649,7 @@ impl<'a> Rasterizer<'a> {
                     .map(|(i, f)| (self.depth(px, f, s), self.id(f), i))
                     .filter(|&(t, _, _)| t < t_mesh),
             );
-            if self.raster.fragment_depth == FragmentDepth::MaxDensityPlane {
+            if self.raster.fragment_depth == FragmentDepth::MaxDensityPlane || self.meshes.has_transparent() {
                 order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             }
             if self.raster.early_stop {
@@ -531,16 +668,16 @@ impl<'a> Rasterizer<'a> {
                 }
                 Blend::Under => {
                     let mut c = DVec3::ZERO;
-                    for &(t, id, i) in &order {
+                    for &(t, _, i) in &order {
                         let f = &fragments[i];
                         let w = transmittance * f64::from(f.alpha);
                         c += w * self.color(px, f, s, t, decide);
                         transmittance *= 1.0 - f64::from(f.alpha);
                         if s == 0 {
-                            normal += w * self.normal(px, f.splat).as_dvec3();
+                            normal += w * self.normal(px, f.source).as_dvec3();
                             drawn = true;
                             if out.depth.is_none() && transmittance < iso {
-                                (out.depth, out.picked) = (Some(t), Some(id));
+                                (out.depth, out.picked) = (Some(t), self.picked(f.source));
                             }
                         }
                     }
@@ -604,7 +741,7 @@ impl<'a> Rasterizer<'a> {
             for s in bits(f.covered) {
                 let t = self.depth(px, f, s);
                 if buf.passes(s, t, id) && decide.accepts(id, decide.particle(id, s as u32, Vec3::ZERO), f.alpha) {
-                    buf.write(s, t, id, f.splat);
+                    buf.write(s, t, id, f.source);
                 }
             }
         }
@@ -628,7 +765,7 @@ impl<'a> Rasterizer<'a> {
                 let pick = j + ((u * (m - j) as f32) as usize).min(m - j - 1);
                 alive.swap(j, pick);
                 let (s, t) = alive[j];
-                buf.write(s, t, id, f.splat);
+                buf.write(s, t, id, f.source);
             }
         }
         buf
@@ -652,7 +789,15 @@ impl<'a> Rasterizer<'a> {
         scramble: bool,
     ) -> SampleBuffer {
         let spp = self.offsets.len() as u32;
-        let pixel_id = hilbert_index(self.hilbert_order, px.x, px.y);
+        let variant = self.raster.lk_variant;
+        let pixel_id = match variant {
+            LkVariant::Morton => morton_index(px.x, px.y),
+            _ => hilbert_index(self.hilbert_order, px.x, px.y),
+        };
+        let alpha_ref = |n, surface_id| match variant {
+            LkVariant::Sobol => sobol_alpha_ref(n, pixel_id, surface_id, spp),
+            _ => calc_alpha_ref(n, pixel_id, surface_id, spp, scramble),
+        };
         let mut buf = self.sample_buffer(px);
         let mut covered = 0u64;
         let mut surface_id = xxhash32([frame_key, SURFACE_ID, 0]);
@@ -668,12 +813,14 @@ impl<'a> Rasterizer<'a> {
                 covered = 0;
             }
             // Line 9: order by the depth previously stored at each sample (ties by sample).
-            alive.sort_by(|a, b| buf.cmp_stored(a.0, b.0));
+            if variant != LkVariant::Unsorted {
+                alive.sort_by(|a, b| buf.cmp_stored(a.0, b.0));
+            }
             // Lines 8, 10–17: opacity test against the reference values, in that order, the
             // surface's sequence continuing where it stopped (n starts at the bits set).
             for (n, &(s, t)) in (covered.count_ones()..).zip(&alive) {
-                if decide.covers(f.alpha, calc_alpha_ref(n, pixel_id, surface_id, spp, scramble)) {
-                    buf.write(s, t, id, f.splat);
+                if decide.covers(f.alpha, alpha_ref(n, surface_id)) {
+                    buf.write(s, t, id, f.source);
                 }
             }
             // Line 18.
@@ -704,7 +851,7 @@ impl<'a> Rasterizer<'a> {
         let (depth, normal, picked) = match buf.splat[0] {
             u32::MAX => (None, Vec3::ZERO, None),
             MESH => (Some(buf.t[0]), px.surfaces[0].map_or(Vec3::ZERO, |h| h.facing(px.rays[0].dir).1), None),
-            k => (Some(buf.t[0]), self.normal(px, k), Some(self.splats[k as usize].id)),
+            k => (Some(buf.t[0]), self.normal(px, k), self.picked(k)),
         };
         Sample { color: color / n, alpha: written as f64 / n, depth, normal, picked }
     }
@@ -793,6 +940,7 @@ pub fn render_raster(
     frames: &Frames,
     progress: Progress,
 ) -> Result<RenderOutput, RenderError> {
+    raster.check_meshes()?;
     let keys = raster_keys(frames, raster.is_random(method))?;
     Ok(render_keys(raster, method, &keys, frames, progress))
 }
@@ -850,6 +998,7 @@ pub fn render_raster_frames<'a>(
     let keys = raster_keys(frames, true)?;
     fold_frames(camera, &keys, frames.accumulation, progress, |f, key| {
         let raster = build(&sampling.pinhole(camera, &frame_sample(frames.seed, f))?)?;
+        raster.check_meshes()?;
         let one = Frames { accumulation: AccumulationFormat::F32, ..*frames };
         Ok(render_keys(&raster, method, &[key], &one, &|_| {}))
     })

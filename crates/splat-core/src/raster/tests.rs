@@ -105,7 +105,7 @@ fn stratified_covers_exact_sample_counts() {
             let rng = RayRng::new(0, 0, key, RngScheme::Hash);
             let buf = r.stratified(&px, order, &rng, key, true);
             let count = |k: u32| (0..16).filter(|&s| buf.splat[s] == k).count();
-            let (n, f) = (near_to_far[0].splat, near_to_far[1].splat);
+            let (n, f) = (near_to_far[0].source, near_to_far[1].source);
             assert_eq!((count(n), count(f)), (8, 4), "frame {key}");
             let e = r.enderton(&px, order, &rng);
             enderton_far.push((0..16).filter(|&s| e.splat[s] == f).count());

@@ -169,7 +169,8 @@ impl TraceScene<'_> {
     /// (Π Tⱼ) behind, with Sⱼ the sample pass j returns when accepted and `behind` the
     /// background or the mesh surface clipping the ray. Unlit Sⱼ = Lⱼ / Oⱼ and this is Eq. 3;
     /// lit it is not, since the specular term is not proportional to the base colour. `decide`
-    /// draws only shadow rays, area-light samples and the decisions of secondary rays.
+    /// draws only shadow rays, area-light samples and the decisions of secondary rays — and of
+    /// the ray continued past a transparent mesh, whose radiance `behind` samples once.
     pub fn stochastic_pass_expectation(&self, ray: &Ray, decide: &impl Decide, k: usize, max_passes: u32) -> DVec3 {
         let seg = self.segment(&Method::StochasticPass { k, max_passes }, ray, Bounce::camera(decide), 0.0);
         let mut reach = 1.0f64;

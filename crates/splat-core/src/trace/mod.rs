@@ -379,11 +379,34 @@ impl<'a> TraceScene<'a> {
         Sample { color: lit + acc.transmittance * behind.color, picked: Some(id), ..unlit }
     }
 
+    /// What lies behind the splats of a segment clipped by mesh surface `hit`: its shaded colour
+    /// S ([`TraceScene::shade_surface`]), and for a transparent surface (opacity α < 1) one more
+    /// layer of Eq. 3, α S + (1 − α) × the radiance of the same ray continued past it (the same
+    /// method and bounce: a layer is no bounce). Depth and normal are the surface's where α alone
+    /// takes the transmittance below the iso threshold, else those of what lies behind.
+    fn surface_sample<D: Decide>(&self, seg: &Segment<D>, hit: &SurfaceHit) -> Sample {
+        let surface = self.shade_surface(seg, hit);
+        if hit.alpha >= 1.0 {
+            return surface;
+        }
+        let x = seg.ray.at(hit.t);
+        let past = Ray { t_min: hit.t, t_max: self.settings.t_max, ..seg.ray };
+        let mesh_t_min = hit.t + surface_offset(x) / seg.ray.dir.length();
+        let behind = self.trace_ray(&seg.method, &past, seg.decide.past_layer(), mesh_t_min);
+        let alpha = f64::from(hit.alpha);
+        let surface_first = 1.0 - hit.alpha < self.settings.iso_threshold || behind.depth.is_none();
+        Sample {
+            color: alpha * surface.color + (1.0 - alpha) * behind.color,
+            alpha: alpha + (1.0 - alpha) * behind.alpha,
+            ..if surface_first { surface } else { behind }
+        }
+    }
+
     /// The shaded colour S of a mesh surface hit by the segment's ray ([`crate::mesh`]): the
     /// material's local share lit by the world's lights (shadow rays through meshes and splats),
     /// plus the mirror and glass shares from secondary rays traced by the same method one bounce
     /// deeper, while the bounce limit allows. Depth and normal are the surface's.
-    fn surface_sample<D: Decide>(&self, seg: &Segment<D>, hit: &SurfaceHit) -> Sample {
+    fn shade_surface<D: Decide>(&self, seg: &Segment<D>, hit: &SurfaceHit) -> Sample {
         let material = self.meshes.material(hit.mesh);
         let d = seg.ray.dir;
         let (_, n, outside) = hit.facing(d);
@@ -428,9 +451,10 @@ impl<'a> TraceScene<'a> {
         self.trace_ray(method, &ray, decide, surface_offset(x)).color.as_vec3()
     }
 
-    /// The shaded colour of mesh surface `hit` on `ray` as the ray tracer sees it: lit with
+    /// The shaded colour S of mesh surface `hit` on `ray` as the ray tracer sees it: lit with
     /// shadow rays, mirror and glass bounces traced by `method` (the hybrid pipeline's
-    /// continuation of a rasterized first hit, vk_gaussian_splatting Lighting §5).
+    /// continuation of a rasterized first hit, vk_gaussian_splatting Lighting §5). A
+    /// transparent surface's S alone: the rasterizer composites it as a fragment.
     pub fn surface(&self, method: &Method, ray: &Ray, hit: &SurfaceHit, decide: &impl Decide) -> Sample {
         let seg = Segment {
             ray: Ray { t_max: hit.t, ..*ray },
@@ -439,7 +463,7 @@ impl<'a> TraceScene<'a> {
             decide: Bounce::camera(decide),
             behind: OnceCell::new(),
         };
-        self.surface_sample(&seg, hit)
+        self.shade_surface(&seg, hit)
     }
 
     /// One sample of `method` for `ray` (already clipped to the settings' range).
@@ -548,15 +572,25 @@ pub const BOUNCE_SHIFT: u32 = 20;
 pub const SHADOW_BOUNCE_SHIFT: u32 = 26;
 /// Largest slot (and pass) a method may draw in, so that bounces get slots of their own.
 pub const MAX_PRIMARY_SLOTS: u32 = 1 << BOUNCE_SHIFT;
+/// Bit of a pass number where a ray's transparent layer starts (above the bounce number,
+/// d ≤ [`crate::settings::MAX_BOUNCES`] < 16).
+const LAYER_PASS_SHIFT: u32 = 24;
 
 /// The decisions of a ray `depth` bounces after the camera ray: slot s of bounce d is slot
 /// s + d·2²⁰ (shadow slots s + d·2²⁶, passes likewise), so that every bounce decides
 /// independently of the rays before it (a particle seen directly and in a mirror is accepted
 /// or not independently in each, as the expectation over the path needs). At depth 0 the
 /// decisions are the camera ray's, bit for bit.
+///
+/// A ray continued past a transparent surface keeps its bounce: each particle lies in one
+/// layer only, so decisions keyed by particle stay independent. The stochastic pass's
+/// decisions are keyed by pass number alone, and the layer behind is reached only when every
+/// pass in front was rejected, so layer l draws its passes at pass + l·2²⁴ (bits 24–31: the
+/// passes of layers l and l + 256 coincide, a ray's 256th transparent surface).
 struct Bounce<'d, D> {
     inner: &'d D,
     depth: u32,
+    layer: u32,
 }
 
 // By hand: a derive would ask D: Copy, and only the reference is copied.
@@ -569,11 +603,16 @@ impl<D> Copy for Bounce<'_, D> {}
 
 impl<'d, D: Decide> Bounce<'d, D> {
     fn camera(inner: &'d D) -> Self {
-        Self { inner, depth: 0 }
+        Self { inner, depth: 0, layer: 0 }
     }
 
     fn deeper(&self) -> Self {
-        Self { depth: self.depth + 1, ..*self }
+        Self { depth: self.depth + 1, layer: 0, ..*self }
+    }
+
+    /// The decisions of the same ray continued past a transparent surface.
+    fn past_layer(&self) -> Self {
+        Self { layer: self.layer.wrapping_add(1), ..*self }
     }
 
     #[inline(always)]
@@ -597,7 +636,7 @@ impl<D: Decide> Decide for Bounce<'_, D> {
         self.inner.slot_draws(self.slot(first_slot), n)
     }
     fn pass(&self, pass: u32) -> f32 {
-        self.inner.pass(self.slot(pass))
+        self.inner.pass(self.slot(pass).wrapping_add(self.layer << LAYER_PASS_SHIFT))
     }
     fn light_sample(&self, light: u32, slot: u32) -> Vec2 {
         self.inner.light_sample(light, self.slot(slot))

@@ -41,7 +41,8 @@ impl TraceScene<'_> {
     }
 
     /// The visibility of a light from `x` by shadow kind `shadows`: the shadow ray starts
-    /// `offset` along the light direction and ends at the light; a mesh on the way blocks it.
+    /// `offset` along the light direction and ends at the light; the meshes on the way let
+    /// Π (1 − α) through ([`crate::mesh::Meshes::transmittance`]: an opaque one blocks it).
     /// How the world's shadow kind ([`TraceScene::visibility`]) and the path tracer see lights.
     pub fn shadow_visibility(
         &self,
@@ -62,15 +63,17 @@ impl TraceScene<'_> {
         if shadow.t_max <= shadow.t_min || shadows == Shadows::None {
             return Vec3::ONE;
         }
-        if self.meshes.occludes(&shadow) {
+        let meshes = self.meshes.transmittance(&shadow);
+        if meshes == 0.0 {
             return Vec3::ZERO;
         }
-        match shadows {
-            Shadows::None => Vec3::ONE,
-            Shadows::Exact => Vec3::splat(self.transmittance(&shadow) as f32),
-            Shadows::Stochastic => Vec3::splat(if self.occluded(&shadow, decide, slot) { 0.0 } else { 1.0 }),
-            Shadows::Sorted { k, threshold, colored } => self.sorted_shadow(&shadow, k, threshold, colored),
-        }
+        meshes
+            * match shadows {
+                Shadows::None => Vec3::ONE,
+                Shadows::Exact => Vec3::splat(self.transmittance(&shadow) as f32),
+                Shadows::Stochastic => Vec3::splat(if self.occluded(&shadow, decide, slot) { 0.0 } else { 1.0 }),
+                Shadows::Sorted { k, threshold, colored } => self.sorted_shadow(&shadow, k, threshold, colored),
+            }
     }
 
     /// The exact transmittance Π(1 − αᵢ) over every hit of `ray` (f64; order does not matter).

@@ -496,6 +496,12 @@ impl<'a> GpuRasterizer<'a> {
     pub fn supports(method: &RasterMethod, settings: &RasterSettings) -> Result<(), GpuError> {
         check_settings(settings)?;
         crate::error::supports_method(method.id())?;
+        if settings.lk_variant != splat_core::raster::LkVariant::Paper {
+            return Err(GpuError::refused(
+                format!("the Laine–Karras control '{}' runs on the CPU only", settings.lk_variant.name()),
+                &[Remedy::Cpu],
+            ));
+        }
         if matches!(method, RasterMethod::Sorted { .. }) && settings.fragment_depth == FragmentDepth::MaxDensityPlane {
             return Err(GpuError::refused(
                 "raster-sorted at the max-density plane sorts each sample's fragments apart, which hardware blending cannot",

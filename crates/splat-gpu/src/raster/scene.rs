@@ -239,6 +239,7 @@ impl RasterScene {
         if meshes.is_empty() {
             return Ok(self);
         }
+        crate::layout::check_opaque(meshes)?;
         let nodes = crate::layout::bvh_nodes(meshes.bvh(), 0);
         let triangles = crate::layout::triangles(meshes);
         let count = meshes.triangles().len();
