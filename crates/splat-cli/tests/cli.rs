@@ -315,14 +315,18 @@ fn raster_over_equals_under_and_bad_options_are_named() {
     let trig = splat(&["render", "--method", "stochastic-splat", "--rng", "trig", "-o", "x.png"]);
     assert!(!trig.status.success() && stderr(&trig).contains("hash generator"), "{}", stderr(&trig));
     let prefix = scratch("strat");
-    let o = splat(&["stratify", "--scenes", "cloth", "--frames", "2", "-o", prefix.to_str().unwrap()]);
+    let args = ["stratify", "--scenes", "cloth", "--detail", "1", "--variants", "paper,unsorted", "--frames", "2"];
+    let o = splat(&[&args[..], &["-o", prefix.to_str().unwrap()]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     let table = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(table.lines().filter(|l| l.starts_with("| cloth |")).count(), 5, "{table}");
+    assert_eq!(table.lines().filter(|l| l.starts_with("| cloth |")).count(), 10, "{table}");
+    assert!(table.contains("| cloth | 64 | cpu | hammersley | unsorted |"), "{table}");
     assert!(image::open(prefix.with_extension("png")).is_ok());
     stratify_on_the_gpu_equals_the_cpu(&prefix);
     let unknown = splat(&["stratify", "--scenes", "teapot"]);
     assert!(!unknown.status.success() && stderr(&unknown).contains("unknown scene 'teapot'"));
+    let unknown = splat(&["stratify", "--variants", "halton"]);
+    assert!(!unknown.status.success() && stderr(&unknown).contains("unknown variant 'halton'"), "{}", stderr(&unknown));
 }
 
 /// `splat stratify --backend gpu`: the GPU's rows at S = 4, 8, 16 beside the CPU's, the same
@@ -1667,6 +1671,12 @@ fn reproduce_runs_every_experiment_of_the_sources() {
         "sun-figure-6",
         "sun-figure-7",
         "lk-table-1",
+        "lk-triangle-size",
+        "lk-figure-1",
+        "lk-figure-3b",
+        "lk-figure-6",
+        "lk-figure-8",
+        "lk-morton",
         "vk-hit-distance",
     ] {
         assert!(names.iter().any(|n| n == expected), "{expected} missing from {names:?}");
