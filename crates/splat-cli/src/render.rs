@@ -5,6 +5,7 @@ use crate::args::{BackendArg, MethodOptions, SceneArgs, Staged, method_parser, p
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::frame::{Frames, RenderOutput};
+use splat_core::mesh::Meshes;
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
 use splat_core::raster::Response;
@@ -124,7 +125,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     warn_unused(&args, &cpu_algorithm, &staged);
     let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(&args, &gpu_algorithm)?;
+    let gpu = choose_gpu(&args, &gpu_algorithm, meshes)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
@@ -246,7 +247,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     let cpu_algorithm = algorithm(args)?;
     let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(args, &gpu_algorithm)?;
+    let gpu = choose_gpu(args, &gpu_algorithm, &staged.world.meshes)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let bar = indicatif::ProgressBar::new(cameras.len() as u64).with_style(
@@ -426,17 +427,19 @@ fn extras(args: &RenderArgs) -> splat_gpu::Extras {
 }
 
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
-/// with the reason when the GPU cannot render this), `auto` takes a hardware GPU when one is
-/// found and it renders this, `cpu` never.
-fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm) -> Result<Option<GpuContext>> {
+/// with the reason when the GPU cannot render this algorithm among these meshes), `auto` takes
+/// a hardware GPU when one is found and it renders this, `cpu` never.
+fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, meshes: &Meshes) -> Result<Option<GpuContext>> {
+    let supported = || -> Result<(), splat_gpu::GpuError> {
+        splat_gpu::supports(algorithm, extras(args))?;
+        splat_gpu::supports_meshes(meshes)
+    };
     match args.scene.backend {
         BackendArg::Gpu => {
-            splat_gpu::supports(algorithm, extras(args))?;
+            supported()?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if splat_gpu::supports(algorithm, extras(args)).is_ok() => {
-            crate::args::gpu_context(BackendArg::Auto)
-        }
+        BackendArg::Auto if supported().is_ok() => crate::args::gpu_context(BackendArg::Auto),
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
 }

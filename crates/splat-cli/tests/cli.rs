@@ -663,6 +663,46 @@ fn render_meshes_with_each_pipeline() {
     assert!(stderr(&o).contains("nowhere.obj"), "{}", stderr(&o));
 }
 
+/// A world with a transparent mesh (`opacity` below 1) renders on the CPU by ray tracing and
+/// by splatting, differently from the same world with the mesh opaque; the GPU backend and the
+/// path tracer refuse it with the reason, before any work.
+#[test]
+fn transparent_meshes_render_on_the_cpu_and_are_refused_elsewhere() {
+    let world = |opacity: &str| {
+        let path = scratch(&format!("transparent-{opacity}.toml"));
+        let toml = format!(
+            "[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"plane\"\nrotate = [90.0, 0.0, 0.0]\nscale = 3.0\ncolor = [0.9, 0.2, 0.1]\nopacity = {opacity}\n"
+        );
+        std::fs::write(&path, toml).unwrap();
+        path
+    };
+    let render = |world: &PathBuf, extra: &[&str]| {
+        let out = scratch("transparent.npy");
+        let args = [
+            &["render", world.to_str().unwrap(), "--width", "24", "--height", "16"],
+            extra,
+            &["-o", out.to_str().unwrap()],
+        ]
+        .concat();
+        let o = splat(&args);
+        (o.status.success().then(|| splat_io::image::read_npy(&out).unwrap()), stderr(&o))
+    };
+    let (half, opaque) = (world("0.5"), world("1.0"));
+    for pipeline in
+        [&["--pipeline", "rt", "--method", "exact"][..], &["--pipeline", "raster", "--method", "raster-sorted"]]
+    {
+        let ((a, e), (b, f)) = (render(&half, pipeline), render(&opaque, pipeline));
+        let (a, b) =
+            (a.unwrap_or_else(|| panic!("{pipeline:?}: {e}")), b.unwrap_or_else(|| panic!("{pipeline:?}: {f}")));
+        let differ = a.data().iter().zip(b.data()).filter(|(x, y)| (*x - *y).abs() > 1e-3).count();
+        assert!(differ > 0, "{pipeline:?}: the transparent plane renders as the opaque one ({e})");
+    }
+    let (refused, e) = render(&half, &["--backend", "gpu", "--method", "exact"]);
+    assert!(refused.is_none() && e.contains("transparent mesh"), "{e}");
+    let (refused, e) = render(&half, &["--pipeline", "path", "--spp", "1"]);
+    assert!(refused.is_none() && e.contains("transparent mesh"), "{e}");
+}
+
 /// `--pipeline path` path traces a world with meshes (Gaussian estimators by `--method`, both
 /// samplers, a thin lens), the same seed gives the same image, and what it cannot do is refused
 /// with the reason.

@@ -44,6 +44,12 @@ pub fn supports(algorithm: &Algorithm, extras: Extras) -> Result<(), GpuError> {
     }
 }
 
+/// Whether the GPU draws the world's `meshes`: opaque ones only
+/// ([`crate::layout::check_opaque`]), checked before anything is uploaded.
+pub fn supports_meshes(meshes: &splat_core::mesh::Meshes) -> Result<(), GpuError> {
+    crate::layout::check_opaque(meshes)
+}
+
 /// Render `frames` of `algorithm` of `shot` on `ctx` (what [`supports`] accepts): the tracer for
 /// ray-tracing methods, lit or not; the rasterizer for splatting methods, with its compute tile
 /// rasterizer's depth pick where `extras` asks for depth or normals; both for the hybrid.
@@ -55,6 +61,7 @@ pub fn render(
     frames: &Frames,
 ) -> Result<RenderOutput, GpuError> {
     supports(algorithm, extras)?;
+    supports_meshes(shot.meshes)?;
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
         Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes))

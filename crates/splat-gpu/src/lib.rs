@@ -30,7 +30,7 @@ pub mod trace;
 pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
-pub use backend::{Extras, render, supports};
+pub use backend::{Extras, render, supports, supports_meshes};
 pub use context::{GpuContext, quiet_device_select};
 pub use display::{DisplayMode, DisplayTransform, PixelState, read_rgba8};
 pub use error::{GpuError, Remedy};
