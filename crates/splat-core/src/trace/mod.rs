@@ -392,7 +392,11 @@ impl<'a> TraceScene<'a> {
         let x = seg.ray.at(hit.t);
         let past = Ray { t_min: hit.t, t_max: self.settings.t_max, ..seg.ray };
         let mesh_t_min = hit.t + surface_offset(x) / seg.ray.dir.length();
-        let behind = self.trace_ray(&seg.method, &past, seg.decide.past_layer(), mesh_t_min);
+        // One recursion a layer: a ray through thousands of layers grows the stack on the heap
+        // rather than overflowing it.
+        let behind = stacker::maybe_grow(LAYER_RED_ZONE, LAYER_STACK, || {
+            self.trace_ray(&seg.method, &past, seg.decide.past_layer(), mesh_t_min)
+        });
         let alpha = f64::from(hit.alpha);
         let surface_first = 1.0 - hit.alpha < self.settings.iso_threshold || behind.depth.is_none();
         Sample {
@@ -572,6 +576,11 @@ pub const BOUNCE_SHIFT: u32 = 20;
 pub const SHADOW_BOUNCE_SHIFT: u32 = 26;
 /// Largest slot (and pass) a method may draw in, so that bounces get slots of their own.
 pub const MAX_PRIMARY_SLOTS: u32 = 1 << BOUNCE_SHIFT;
+/// Stack a ray continued past a transparent surface must have left, or it continues on a new
+/// stack segment of [`LAYER_STACK`] bytes (`stacker`).
+const LAYER_RED_ZONE: usize = 256 * 1024;
+const LAYER_STACK: usize = 1024 * 1024;
+
 /// Bit of a pass number where a ray's transparent layer starts (above the bounce number,
 /// d ≤ [`crate::settings::MAX_BOUNCES`] < 16).
 const LAYER_PASS_SHIFT: u32 = 24;
