@@ -425,7 +425,8 @@ fn transparent(color: Vec3, opacity: f32) -> MeshMaterial {
 }
 
 /// Two transparent quads in front of an opaque one, all facing the camera: every pixel of
-/// `exact`, the k-buffer and sorted splatting (over and under, S = 1 and 4) is Eq. 3 over the
+/// `exact`, the k-buffer, sorted splatting (over and under, S = 1 and 4) and the hybrid
+/// (sorted first hit, `exact` secondary) is Eq. 3 over the
 /// three layers, α₁ c₁ + (1 − α₁) α₂ c₂ + (1 − α₁)(1 − α₂) c₃, where α₂ ramps across the
 /// middle quad with its per-vertex opacities (the pixel's value is read at the centre ray's
 /// opacity, which the ray tracer interpolates as the rasterizer does). Shadow rays through the
@@ -474,6 +475,9 @@ fn transparent_quads_are_layers_of_eq_3() {
                 &render_raster(&r, &blend, &Frames::default(), &|_| {}).unwrap(),
             );
         }
+        // The hybrid: the transparent quads are raster fragments shaded by the ray tracer.
+        let hybrid = rasterizer(&scene, &camera, settings, samples).hybrid(&trace, Method::Exact).unwrap();
+        check(&format!("hybrid S = {samples}"), &render_raster(&hybrid, &UNDER, &Frames::default(), &|_| {}).unwrap());
     }
     // What cannot draw them right says so: sorted splatting's lit surface look, the path tracer.
     let lit = Lighting { look: Look::Surface, ..Lighting::single(Material::DIFFUSE, Vec::new(), Shadows::None) };

@@ -44,8 +44,8 @@ pub fn supports(algorithm: &Algorithm, extras: Extras) -> Result<(), GpuError> {
     }
 }
 
-/// Whether the GPU draws the world's `meshes`: opaque ones only
-/// ([`crate::layout::check_opaque`]), checked before anything is uploaded.
+/// Whether the GPU draws the world's `meshes`: opaque ones only (the kernels draw every
+/// triangle as an opaque surface), checked before anything is uploaded.
 pub fn supports_meshes(meshes: &splat_core::mesh::Meshes) -> Result<(), GpuError> {
     crate::layout::check_opaque(meshes)
 }
