@@ -10,6 +10,7 @@ use crate::lighting::{Lighting, Material};
 use crate::mesh::{MeshMaterial, Meshes, TriangleMesh};
 use crate::particle::Scene;
 use crate::rng::SplitMix64;
+use crate::scenes::{camera, point_in_unit_ball};
 use glam::{Affine3A, Quat, Vec3};
 
 /// Subdivision of the motor's and the cloth's surfaces at [`by_name`]: triangles of about a sixth
@@ -49,10 +50,6 @@ pub fn by_name_at(name: &str, detail: u32) -> Option<MeshScene> {
         "smoke" => smoke(),
         _ => return None,
     })
-}
-
-fn camera(eye: Vec3, target: Vec3, fov_y: f32, width: u32, height: u32) -> Camera {
-    Camera::look_at(eye, target, Vec3::Y, fov_y, width, height).expect("built-in camera is valid")
 }
 
 fn build(meshes: &[(TriangleMesh, MeshMaterial)], camera: Camera, lighting: Lighting) -> MeshScene {
@@ -233,12 +230,7 @@ pub fn smoke() -> MeshScene {
     let eye = Vec3::new(0.0, 0.0, 3.2);
     let mut meshes = Vec::new();
     for _ in 0..64 {
-        let centre = loop {
-            let p = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
-            if p.length_squared() <= 1.0 {
-                break 0.8 * p;
-            }
-        };
+        let centre = 0.8 * point_in_unit_ball(&mut rng);
         let size = rng.range(0.3, 0.7);
         let (u, v) = (eye - centre).normalize().any_orthonormal_pair();
         let mut puff = grid(6, 6, |s, t| centre + size * ((2.0 * s - 1.0) * u + (2.0 * t - 1.0) * v));

@@ -7,7 +7,7 @@ use crate::rng::SplitMix64;
 use crate::sh::rgb_to_dc;
 use glam::{Quat, Vec3, Vec4};
 
-fn camera(eye: Vec3, target: Vec3, fov_y: f32, width: u32, height: u32) -> Camera {
+pub(crate) fn camera(eye: Vec3, target: Vec3, fov_y: f32, width: u32, height: u32) -> Camera {
     Camera::look_at(eye, target, Vec3::Y, fov_y, width, height).expect("built-in camera is valid")
 }
 
@@ -18,6 +18,16 @@ fn random_rotation(rng: &mut SplitMix64) -> Quat {
         let len2 = v.length_squared();
         if len2 > 1e-4 && len2 <= 1.0 {
             return Quat::from_vec4(v / len2.sqrt());
+        }
+    }
+}
+
+/// A uniformly distributed point of the unit ball (by rejection from the cube).
+pub(crate) fn point_in_unit_ball(rng: &mut SplitMix64) -> Vec3 {
+    loop {
+        let p = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        if p.length_squared() <= 1.0 {
+            return p;
         }
     }
 }
@@ -70,12 +80,7 @@ pub fn cloud() -> (Scene, Camera) {
     let mut rng = SplitMix64::new(0x5EED_C10D);
     let particles = (0..3000)
         .map(|_| {
-            let mean = loop {
-                let p = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
-                if p.length_squared() <= 1.0 {
-                    break p;
-                }
-            };
+            let mean = point_in_unit_ball(&mut rng);
             let mut log_scale = || rng.range(0.015f32.ln(), 0.08f32.ln()).exp();
             let scale = Vec3::new(log_scale(), log_scale(), log_scale());
             let rotation = random_rotation(&mut rng);
