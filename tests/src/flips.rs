@@ -105,12 +105,41 @@ pub fn raster_frame_gap(r: &Rasterizer, method: &RasterMethod, key: u32, u_shift
     nearest.gap()
 }
 
-/// The smallest relative gap between the centre depths of two fragments of pixel (x, y): below
-/// [`DEPTH_TIE`] their depth order may differ between the backends.
+/// The smallest relative gap between two depths that Laine & Karras's line 9 (the survivors
+/// sorted by the depth each sample holds) may compare at pixel (x, y): a sample's opaque mesh
+/// against another's, or against a fragment's depth at any sample. Below [`DEPTH_TIE`] the
+/// backends' f32 ray casts may order the samples differently (the same survivors, other
+/// reference values).
+pub fn raster_stored_depth_gap(r: &Rasterizer, x: u32, y: u32) -> f64 {
+    let px = r.pixel(x, y);
+    let meshes: Vec<f64> = (0..px.len()).filter_map(|s| px.surface(s)).map(|h| f64::from(h.t)).collect();
+    let fragments = r.fragments(&px);
+    let depths: Vec<f64> = fragments
+        .iter()
+        .flat_map(|f| (0..px.len()).filter(|s| f.covered >> s & 1 == 1).map(|s| f64::from(r.depth(&px, f, s))))
+        .collect();
+    let gap = |a: f64, b: f64| (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
+    let mut least = f64::INFINITY;
+    for (i, &m) in meshes.iter().enumerate() {
+        for &other in meshes[i + 1..].iter().chain(&depths) {
+            least = least.min(gap(m, other));
+        }
+    }
+    least
+}
+
+/// The smallest relative gap between the depths of two fragments (splats or transparent
+/// triangles) at one sample of pixel (x, y): below [`DEPTH_TIE`] their depth order may differ
+/// between the backends (at centre depth a splat's gaps are those of the centre depths).
 pub fn raster_depth_gap(r: &Rasterizer, x: u32, y: u32) -> f64 {
     let px = r.pixel(x, y);
-    let mut depths: Vec<f64> =
-        r.fragments(&px).iter().map(|f| f64::from(r.splats()[f.source as usize].depth)).collect();
-    depths.sort_by(f64::total_cmp);
-    depths.windows(2).map(|w| (w[1] - w[0]) / w[0].abs().max(f64::MIN_POSITIVE)).fold(f64::INFINITY, f64::min)
+    let fragments = r.fragments(&px);
+    (0..64)
+        .map(|s| {
+            let covering = fragments.iter().filter(|f| f.covered >> s & 1 == 1);
+            let mut depths: Vec<f64> = covering.map(|f| f64::from(r.depth(&px, f, s))).collect();
+            depths.sort_by(f64::total_cmp);
+            depths.windows(2).map(|w| (w[1] - w[0]) / w[0].abs().max(f64::MIN_POSITIVE)).fold(f64::INFINITY, f64::min)
+        })
+        .fold(f64::INFINITY, f64::min)
 }

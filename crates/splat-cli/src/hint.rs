@@ -14,6 +14,7 @@ fn flag(remedy: Remedy) -> &'static str {
         Remedy::StandardPattern => "--sample-pattern standard",
         Remedy::NoEarlyStop => "no --early-stop",
         Remedy::ExactMethod => "--method exact",
+        Remedy::RasterOperations => "--method enderton",
     }
 }
 

@@ -432,7 +432,7 @@ fn extras(args: &RenderArgs) -> splat_gpu::Extras {
 fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, meshes: &Meshes) -> Result<Option<GpuContext>> {
     let supported = || -> Result<(), splat_gpu::GpuError> {
         splat_gpu::supports(algorithm, extras(args))?;
-        splat_gpu::supports_meshes(meshes)
+        splat_gpu::supports_meshes(algorithm, meshes)
     };
     match args.scene.backend {
         BackendArg::Gpu => {

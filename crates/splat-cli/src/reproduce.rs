@@ -33,7 +33,8 @@ pub struct ReproduceArgs {
     /// repository's world files by their paths from the repository root: run from there.
     #[arg(long, default_value = "target/assets/bonsai-7k-mini.splat")]
     pub capture: PathBuf,
-    /// The backend of the timing experiments (Sun et al. Tables 1, 3, 4–5).
+    /// The backend of the timing experiments (Sun et al. Tables 1, 3, 4–5); gpu also adds the
+    /// GPU's rows (S = 4, 8, 16) to Laine & Karras's Table 1.
     #[arg(long, value_enum, default_value = "cpu")]
     pub backend: crate::args::BackendArg,
 }
@@ -234,8 +235,9 @@ sampling error both methods share. The gain depends on how many fragments a surf
 `lk-triangle-size` measures it.",
         commands: |s| {
             let (frames, samples, detail) = if s.quick { ("2", "4", "2") } else { ("16", "4,8,16,32,64", "32") };
+            let gpu = if s.backend == "gpu" { "gpu" } else { "cpu" };
             vec![stratify(
-                &["--scenes", "motor,cloth", "--samples", samples, "--detail", detail],
+                &["--scenes", "motor,cloth", "--samples", samples, "--detail", detail, "--backend", gpu],
                 frames,
                 s.file("table-1"),
             )]

@@ -4,7 +4,7 @@
 //! cloth, Figures 1, 3b and 8) or on the splat fixtures, with a side-by-side image. `--variants`
 //! adds the paper's controls (no sample sorting, Morton pixel order, the Sobol sequence) as more
 //! stratified columns. With `--backend gpu` the GPU's rows (S = 4, 8, 16 at the standard sample
-//! pattern) stand beside the CPU's for the splat scenes.
+//! pattern) stand beside the CPU's.
 
 use crate::args::SamplePatternArg;
 use anyhow::{Context, Result, bail};
@@ -253,11 +253,7 @@ pub fn run(args: StratifyArgs) -> Result<()> {
             if let (Some(ctx), Some(pipes)) = (&ctx, &pipes)
                 && SamplePattern::Standard.has(samples)
             {
-                if m.meshes.has_transparent() {
-                    eprintln!("{name}: no GPU row (transparent triangles render on the CPU only)");
-                    continue;
-                }
-                let (ours, theirs) = gpu_rmse(ctx, pipes, &m.scene, &m.camera, settings, samples, args.frames)?;
+                let (ours, theirs) = gpu_rmse(ctx, pipes, &m, settings, samples, args.frames)?;
                 row(name, samples, "gpu", SamplePattern::Standard, LkVariant::Paper, ours, theirs);
             }
         }
@@ -284,23 +280,25 @@ pub fn run(args: StratifyArgs) -> Result<()> {
     Ok(())
 }
 
-/// The GPU's stratified and Enderton frame RMSE at `samples` standard samples, against the CPU's
-/// sorted splatting with the same samples.
+/// The GPU's stratified and Enderton frame RMSE at `samples` standard samples on scene `m`
+/// (its transparent triangles drawn by the raster operations), against the CPU's sorted
+/// splatting with the same samples.
 fn gpu_rmse(
     ctx: &splat_gpu::GpuContext,
     pipes: &splat_gpu::RasterPipelines,
-    scene: &splat_core::Scene,
-    camera: &splat_core::Camera,
+    m: &Measured,
     settings: RenderSettings,
     samples: u32,
     frames: u32,
 ) -> Result<(FrameRmse, FrameRmse)> {
     let raster = RasterSettings { samples, sample_pattern: SamplePattern::Standard, ..RasterSettings::default() };
-    let cpu = Rasterizer::new(scene, camera, settings, raster)?;
+    let cpu =
+        Rasterizer::new(&m.scene, &m.camera, settings, raster)?.with_meshes(&m.meshes).with_lighting(&m.lighting)?;
     let reference =
         render_raster(&cpu, &RasterMethod::Sorted { blend: Blend::Under }, &Frames::default(), &|_| {})?.mean;
-    let gpu_scene = splat_gpu::RasterScene::new(ctx, scene, &settings)?;
-    let gpu = splat_gpu::GpuRasterizer::new(ctx, pipes, &gpu_scene, camera, &raster)?;
+    let gpu_scene =
+        splat_gpu::RasterScene::new_lit(ctx, &m.scene, &settings, &m.lighting)?.with_meshes(ctx, &m.meshes)?;
+    let gpu = splat_gpu::GpuRasterizer::new(ctx, pipes, &gpu_scene, &m.camera, &raster)?;
     let gpu = &gpu;
     let gpu_frame = |method| move |seed| Ok(gpu.render(&method, &one(seed))?.0.mean);
     let (ours, _) = frame_rmse(gpu_frame(RasterMethod::Stratified { scramble: true }), &reference, frames, 1)?;

@@ -330,24 +330,26 @@ fn raster_over_equals_under_and_bad_options_are_named() {
 }
 
 /// `splat stratify --backend gpu`: the GPU's rows at S = 4, 8, 16 beside the CPU's, the same
-/// RMSE when the CPU takes the standard pattern too (the same decisions).
+/// RMSE when the CPU takes the standard pattern too (the same decisions), on splats (the plates)
+/// and on transparent triangles (Figure 3b's stack).
 fn stratify_on_the_gpu_equals_the_cpu(prefix: &std::path::Path) {
-    let args = ["stratify", "--scenes", "plates", "--frames", "2", "--sample-pattern", "standard", "--backend", "gpu"];
+    let args =
+        ["stratify", "--scenes", "plates,stack", "--frames", "2", "--sample-pattern", "standard", "--backend", "gpu"];
     let o = splat(&[&args[..], &["-o", prefix.to_str().unwrap()]].concat());
     if !o.status.success() {
         gpu_missing(&stderr(&o));
         return;
     }
     let table = String::from_utf8_lossy(&o.stdout);
-    for s in [4, 8, 16] {
+    for (scene, s) in ["plates", "stack"].into_iter().flat_map(|scene| [4, 8, 16].map(|s| (scene, s))) {
         let cells = |backend: &str| {
-            let row = table.lines().find(|l| l.starts_with(&format!("| plates | {s} | {backend} | standard |")));
-            row.unwrap_or_else(|| panic!("no {backend} row at S = {s}:\n{table}"))
+            let row = table.lines().find(|l| l.starts_with(&format!("| {scene} | {s} | {backend} | standard |")));
+            row.unwrap_or_else(|| panic!("no {scene} {backend} row at S = {s}:\n{table}"))
                 .split('|')
                 .skip(5)
                 .collect::<String>()
         };
-        assert_eq!(cells("cpu"), cells("gpu"), "S = {s}:\n{table}");
+        assert_eq!(cells("cpu"), cells("gpu"), "{scene} S = {s}:\n{table}");
     }
     assert!(table.contains("| plates | 64 | cpu | hammersley |"), "{table}");
 }
@@ -664,8 +666,10 @@ fn render_meshes_with_each_pipeline() {
 }
 
 /// A world with a transparent mesh (`opacity` below 1) renders on the CPU by ray tracing and
-/// by splatting, differently from the same world with the mesh opaque; the GPU backend and the
-/// path tracer refuse it with the reason, before any work.
+/// by splatting, differently from the same world with the mesh opaque; on the GPU Enderton's
+/// raster operations draw it as the CPU does (the same seed, the standard sample pattern); the
+/// GPU ray tracer, GPU sorted splatting and the path tracer refuse it with the reason and the
+/// flags that would draw it, before any work.
 #[test]
 fn transparent_meshes_render_on_the_cpu_and_are_refused_elsewhere() {
     let world = |opacity: &str| {
@@ -701,6 +705,16 @@ fn transparent_meshes_render_on_the_cpu_and_are_refused_elsewhere() {
     assert!(refused.is_none() && e.contains("transparent mesh"), "{e}");
     let (refused, e) = render(&half, &["--pipeline", "path", "--spp", "1"]);
     assert!(refused.is_none() && e.contains("transparent mesh"), "{e}");
+    let (refused, e) = render(&half, &["--backend", "gpu", "--pipeline", "raster", "--method", "raster-sorted"]);
+    assert!(refused.is_none() && e.contains("(--method enderton or --backend cpu)"), "{e}");
+    let enderton = ["--pipeline", "raster", "--method", "enderton", "--raster-samples", "4"];
+    let standard = ["--sample-pattern", "standard", "--spp", "4", "--seed", "3"];
+    let (cpu, e) = render(&half, &[&enderton[..], &standard, &["--backend", "cpu"]].concat());
+    let cpu = cpu.unwrap_or_else(|| panic!("{e}"));
+    let (gpu, e) = render(&half, &[&enderton[..], &standard, &["--backend", "gpu"]].concat());
+    let Some(gpu) = gpu else { return gpu_missing(&e) };
+    let worst = cpu.data().iter().zip(gpu.data()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "Enderton among a transparent plane: the GPU differs from the CPU by {worst}");
 }
 
 /// `--pipeline path` path traces a world with meshes (Gaussian estimators by `--method`, both

@@ -13,16 +13,6 @@ struct Node {
     count: u32,
 }
 
-// hit.rs `Ray`: hits count within (t_min, t_max); `view` is the camera's forward axis for
-// camera rays (the `Center` hit distance), the ray's own direction otherwise.
-struct Ray {
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    view: vec3<f32>,
-    t_min: f32,
-    t_max: f32,
-}
-
 const STACK_DEPTH: u32 = 64u;
 const FAR: f32 = 3.0e38;
 

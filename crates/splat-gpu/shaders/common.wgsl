@@ -90,3 +90,13 @@ fn kernel_response(d2: f32, degree: u32) -> f32 {
 
 // No index: no particle, splat, triangle or node (u32::MAX).
 const NONE: u32 = 0xffffffffu;
+
+// hit.rs `Ray`: hits count within (t_min, t_max); `view` is the camera's forward axis for
+// camera rays (the `Center` hit distance), the ray's own direction otherwise.
+struct Ray {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    view: vec3<f32>,
+    t_min: f32,
+    t_max: f32,
+}

@@ -1,6 +1,7 @@
 // The raster pipeline's mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3), the twin of
 // the CPU reference's `Rasterizer::pixel` ray casts and `Rasterizer::behind`: per sample of each
-// pixel, the nearest mesh along the sample's ray, its distance (the splats' depth test) and its
+// pixel, the nearest opaque mesh along the sample's ray (a transparent triangle is a fragment
+// of the raster operations, rop.wgsl), its distance (the splats' depth test) and its
 // forward-shaded colour (lit with every light visible and sampled at its centre, no bounces: the
 // mirror and glass shares see the background), or the background at distance FAR. The splat
 // fragments read the distance (splat.wgsl), the fold blends the colour under them with the
@@ -30,7 +31,7 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
         let index = pixel * params.samples + i;
         let p = vec2<f32>(gid.xy) + sample_offsets[i];
         let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_min, params.t_max);
-        let hit = mesh_traverse(0u, ray, false);
+        let hit = mesh_traverse(0u, ray, true);
         if (hit.triangle == NONE) {
             behind[index] = vec4<f32>(params.background.xyz, FAR);
             behind_normal[index] = vec4<f32>(0.0);

@@ -21,10 +21,21 @@
 // Each pixel's raster-operation state between the chunks of its tile list: depth bits and id
 // of every sample, the surface's coverage and id (2 S + 2 words).
 @group(0) @binding(22) var<storage, read_write> rop_state: array<u32>;
-// This dispatch's chunk of every tile's list: (index, length, count). lavapipe stops a shader
-// invocation's loops after 65,535 iterations in all, so the host cuts the lists into chunks
-// that stay below it (one chunk on other adapters).
+// This dispatch's chunk of every tile's lists: (index, length, count, triangle chunks). The
+// transparent triangles' lists come first (chunks 0 .. w), then the splats' (chunks w .. z).
+// lavapipe stops a shader invocation's loops after 65,535 iterations in all, so the host cuts
+// the lists into chunks that stay below it (one chunk of each on other adapters).
 @group(0) @binding(23) var<uniform> rop_chunk: vec4<u32>;
+// Every triangle of the meshes in the meshes' order (entry o: the triangle of place o), and
+// their materials: a transparent triangle is a fragment of the raster operations (raster/mod.rs
+// `triangle_fragments`), drawn before the splats in that order.
+@group(0) @binding(26) var<storage, read> rop_triangles: array<Triangle>;
+@group(0) @binding(27) var<storage, read> rop_materials: array<MeshMaterial>;
+// Each tile's transparent triangles (splat_gpu raster/rop.rs `TriangleLists`): words 2 t and
+// 2 t + 1 bound tile t's entries, which follow the header, three words each: a place in the
+// meshes' order (ascending) and the pixel rect the triangle may reach, x0 | x1 << 16 and
+// y0 | y1 << 16, inclusive.
+@group(0) @binding(28) var<storage, read> rop_triangle_lists: array<u32>;
 
 // Reserved ids of the hashes (raster/mod.rs ORDER_ID, SURFACE_ID) and Enderton's ξ slot.
 const ORDER_ID: u32 = 4294967293u;
@@ -32,6 +43,9 @@ const SURFACE_ID: u32 = 4294967292u;
 const ENDERTON_XI_SLOT: u32 = 64u;
 // What a sample holds where a mesh was drawn (raster/mod.rs MESH).
 const MESH: u32 = 4294967294u;
+// The bit of a transparent triangle's id, its place in the meshes' order below it (raster/mod.rs
+// TRIANGLE).
+const TRIANGLE: u32 = 2147483648u;
 // Most samples the ROP kernel holds per pixel (the standard pattern's largest).
 const ROP_SAMPLES: u32 = 16u;
 const EMPTY_DEPTH: f32 = 3.4028235e38;
@@ -160,6 +174,9 @@ fn resolve_rop(rop: ptr<function, Rop>, spp: u32, corner: vec2<f32>, pixel: u32)
         } else if (id == MESH) {
             color += behind[pixel * spp + i].xyz;
             written++;
+        } else if ((id & TRIANGLE) != 0u) {
+            color += triangle_color(id & ~TRIANGLE, sample_ray(corner, i));
+            written++;
         } else {
             var c = splats[id].color;
             if (params.lit == 1u) {
@@ -171,6 +188,59 @@ fn resolve_rop(rop: ptr<function, Rop>, spp: u32, corner: vec2<f32>, pixel: u32)
         }
     }
     return vec4<f32>(color, f32(written)) / f32(spp);
+}
+
+// The ray through sample i of the pixel at `corner` (the mesh pre-pass's, raster/mod.rs
+// `Rasterizer::pixel`).
+fn sample_ray(corner: vec2<f32>, i: u32) -> Ray {
+    return Ray(camera_origin(), pixel_dir(corner + rop_offsets[i]), params.cam_row2.xyz, params.t_min, params.t_max);
+}
+
+// raster/mod.rs `surface_color` of the triangle of place `o` on `ray` (forward-shaded: lit
+// without shadows, its mirror and glass shares seeing the background); black where the ray
+// misses it.
+fn triangle_color(o: u32, ray: Ray) -> vec3<f32> {
+    let tri = rop_triangles[o];
+    let h = triangle_intersect(tri, ray);
+    if (h.x < 0.0 || !(h.x < ray.t_max)) {
+        return vec3<f32>(0.0);
+    }
+    let m = rop_materials[tri.mesh];
+    let n = facing_normal(tri, h.y, h.z, ray.dir);
+    let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, h.x, n);
+    return local_share(m) * lit + (m.mirror + m.transmission) * params.background.xyz;
+}
+
+// raster/mod.rs `triangle_fragments` and `surviving` for the transparent triangle of place `o`:
+// the samples of the pixel at `corner` whose rays cross it (each shared edge once) in front of
+// what they hold, with their depths, into rop.alive[..m]; returns (m, their mask, its alpha at
+// the ray through the pixel's centre, as bits; 0 where it draws nothing).
+fn triangle_surviving(rop: ptr<function, Rop>, o: u32, corner: vec2<f32>, spp: u32) -> vec3<u32> {
+    let tri = rop_triangles[o];
+    let id = TRIANGLE | o;
+    var m = 0u;
+    var mask = 0u;
+    var crossed = false;
+    for (var i = 0u; i < spp; i++) {
+        let h = triangle_crosses(tri, sample_ray(corner, i));
+        if (h.x < 0.0) {
+            continue;
+        }
+        crossed = true;
+        if (depth_before(h.x, id, (*rop).t[i], (*rop).id[i])) {
+            (*rop).alive[m] = i;
+            (*rop).alive_t[m] = h.x;
+            m++;
+            mask |= 1u << i;
+        }
+    }
+    var alpha = 0.0;
+    if (crossed) {
+        let centre = Ray(camera_origin(), pixel_dir(corner + vec2<f32>(0.5)), params.cam_row2.xyz, params.t_min, params.t_max);
+        let b = plane_barycentrics(tri, centre);
+        alpha = select(tri.alpha0, alpha_at(tri, b.x, b.y), b.z > 0.0);
+    }
+    return vec3<u32>(m, mask, bitcast<u32>(alpha));
 }
 
 // Lines 1–3 of Figure 7 (and Enderton's depth test): the samples of the pixel at `corner` that
@@ -270,6 +340,16 @@ fn stratified(rop: ptr<function, Rop>, m: u32, mask: u32, alpha: f32, id: u32, p
     (*rop).covered |= mask;
 }
 
+// The raster operations of one fragment of id `id` whose m surviving samples (bits `mask`) are
+// in rop.alive: Enderton's or stratified's.
+fn draw_fragment(rop: ptr<function, Rop>, m: u32, mask: u32, alpha: f32, id: u32, pixel_key: u32, pixel_id: u32) {
+    if (params.mode == MODE_ENDERTON) {
+        enderton(rop, m, alpha, id, pixel_key);
+    } else {
+        stratified(rop, m, mask, alpha, id, pixel_id);
+    }
+}
+
 @compute @workgroup_size(16, 16, 1)
 fn tile_rop(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -281,10 +361,19 @@ fn tile_rop(
     let inside = px.x < params.size.x && px.y < params.size.y;
     let corner = vec2<f32>(px);
     let centre = corner + vec2<f32>(0.5);
-    let tile_list = tile_pairs(tile, l);
-    // This chunk of the tile's list.
-    let first = min(tile_list.x + rop_chunk.x * rop_chunk.y, tile_list.y);
-    let range = vec2<u32>(first, min(tile_list.y, first + rop_chunk.y));
+    // This chunk of the tile's triangle list or of its splat list (an empty range for the other).
+    let triangle_chunk = rop_chunk.x < rop_chunk.w;
+    var triangles = vec2<u32>(0u);
+    var range = vec2<u32>(0u);
+    if (triangle_chunk) {
+        let list = vec2<u32>(rop_triangle_lists[2u * tile], rop_triangle_lists[2u * tile + 1u]);
+        let first = min(list.x + rop_chunk.x * rop_chunk.y, list.y);
+        triangles = vec2<u32>(first, min(list.y, first + rop_chunk.y));
+    } else {
+        let tile_list = tile_pairs(tile, l);
+        let first = min(tile_list.x + (rop_chunk.x - rop_chunk.w) * rop_chunk.y, tile_list.y);
+        range = vec2<u32>(first, min(tile_list.y, first + rop_chunk.y));
+    }
     let spp = params.samples;
     let pixel = px.y * params.size.x + px.x;
     let at = pixel * rop_words(spp);
@@ -302,6 +391,23 @@ fn tile_rop(
     }
     let pixel_key = xxhash32(vec3<u32>(px.x, px.y, rop_frame.key));
     let pixel_id = hilbert_index(params.hilbert_order, px.x, px.y);
+    // The transparent triangles first, in the meshes' order (raster/mod.rs `shuffle`).
+    let entries = 2u * params.tiles.x * params.tiles.y;
+    for (var k = triangles.x; k < triangles.y && inside; k++) {
+        let at = entries + 3u * k;
+        let xs = rop_triangle_lists[at + 1u];
+        let ys = rop_triangle_lists[at + 2u];
+        if (px.x < (xs & 0xffffu) || px.x > (xs >> 16u) || px.y < (ys & 0xffffu) || px.y > (ys >> 16u)) {
+            continue;
+        }
+        let o = rop_triangle_lists[at];
+        let alive = triangle_surviving(&rop, o, corner, spp);
+        let alpha = bitcast<f32>(alive.z);
+        if (alive.x == 0u || !(alpha > 0.0)) {
+            continue;
+        }
+        draw_fragment(&rop, alive.x, alive.y, alpha, TRIANGLE | o, pixel_key, pixel_id);
+    }
     for (var start = range.x; start < range.y; start += BATCH) {
         load_batch(start, range.y, l);
         let n = min(BATCH, range.y - start);
@@ -319,11 +425,7 @@ fn tile_rop(
             if (m == 0u) {
                 continue;
             }
-            if (params.mode == MODE_ENDERTON) {
-                enderton(&rop, m, alpha, s.id, pixel_key);
-            } else {
-                stratified(&rop, m, alive.y, alpha, s.id, pixel_id);
-            }
+            draw_fragment(&rop, m, alive.y, alpha, s.id, pixel_key, pixel_id);
         }
         workgroupBarrier();
     }

@@ -44,10 +44,18 @@ pub fn supports(algorithm: &Algorithm, extras: Extras) -> Result<(), GpuError> {
     }
 }
 
-/// Whether the GPU draws the world's `meshes`: opaque ones only (the kernels draw every
-/// triangle as an opaque surface), checked before anything is uploaded.
-pub fn supports_meshes(meshes: &splat_core::mesh::Meshes) -> Result<(), GpuError> {
-    crate::layout::check_opaque(meshes)
+/// Whether the GPU draws the world's `meshes` in `algorithm`, checked before anything is
+/// uploaded: opaque meshes in every pipeline, transparent triangles (an opacity below 1) in the
+/// raster operations of Enderton and Laine–Karras only (the other kernels draw every triangle
+/// as an opaque surface, or blend splats only).
+pub fn supports_meshes(algorithm: &Algorithm, meshes: &splat_core::mesh::Meshes) -> Result<(), GpuError> {
+    let what = match algorithm {
+        Algorithm::Raster(RasterMethod::Enderton | RasterMethod::Stratified { .. }, _) => return Ok(()),
+        Algorithm::Raster(method, _) => format!("{} on the GPU", method.id().name()),
+        Algorithm::Trace(_) | Algorithm::Oracle => "the GPU ray tracer".to_string(),
+        Algorithm::Hybrid(..) => "the GPU hybrid".to_string(),
+    };
+    crate::layout::check_opaque(meshes, &what)
 }
 
 /// Render `frames` of `algorithm` of `shot` on `ctx` (what [`supports`] accepts): the tracer for
@@ -61,7 +69,7 @@ pub fn render(
     frames: &Frames,
 ) -> Result<RenderOutput, GpuError> {
     supports(algorithm, extras)?;
-    supports_meshes(shot.meshes)?;
+    supports_meshes(algorithm, shot.meshes)?;
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
         Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes))

@@ -19,6 +19,8 @@ pub enum Remedy {
     NoEarlyStop,
     /// The exact ray-tracing method, whose image equals the brute-force oracle's.
     ExactMethod,
+    /// Enderton's or Laine–Karras's raster operations, which draw transparent triangles.
+    RasterOperations,
 }
 
 impl Remedy {
@@ -30,6 +32,9 @@ impl Remedy {
             Remedy::StandardPattern => "the standard sample pattern",
             Remedy::NoEarlyStop => "rasterization without early stop",
             Remedy::ExactMethod => "the exact method (the same image)",
+            Remedy::RasterOperations => {
+                "Enderton or stratified splatting (their raster operations draw transparent triangles)"
+            }
         }
     }
 }

@@ -383,24 +383,24 @@ pub struct GpuTriangle {
     pub mesh: u32,
     /// p₁ − p₀.
     pub e1: [f32; 3],
-    /// Padding.
-    pub pad0: u32,
+    /// Opacity α₀ at p₀.
+    pub alpha0: f32,
     /// p₂ − p₀.
     pub e2: [f32; 3],
-    /// Padding.
-    pub pad1: u32,
+    /// Opacity α₁ at p₁.
+    pub alpha1: f32,
     /// Vertex normal at p₀.
     pub n0: [f32; 3],
-    /// Padding.
-    pub pad2: u32,
+    /// Opacity α₂ at p₂.
+    pub alpha2: f32,
     /// Vertex normal at p₁.
     pub n1: [f32; 3],
-    /// Padding.
-    pub pad3: u32,
+    /// Its place in the meshes' order (the id keying a transparent triangle's decisions).
+    pub order: u32,
     /// Vertex normal at p₂.
     pub n2: [f32; 3],
     /// Padding.
-    pub pad4: u32,
+    pub pad: u32,
 }
 
 /// One mesh's material (WGSL `MeshMaterial`, 96 bytes): [`splat_core::mesh::MeshMaterial`].
@@ -441,13 +441,14 @@ fn gpu_material(m: &Material, first: u32) -> GpuMaterial {
     }
 }
 
-/// Refuse transparent mesh materials (an opacity below 1): the GPU kernels treat every triangle
-/// as an opaque surface, and would draw a transparent one as opaque.
-pub fn check_opaque(meshes: &Meshes) -> Result<(), crate::GpuError> {
+/// Refuse transparent mesh materials (an opacity below 1) in `what`, which draws every
+/// triangle as an opaque surface (the ray tracer, the path tracer, the hybrid): on the GPU only
+/// the raster operations of Enderton and Laine–Karras draw them.
+pub fn check_opaque(meshes: &Meshes, what: &str) -> Result<(), crate::GpuError> {
     if meshes.has_transparent() {
         return Err(crate::GpuError::refused(
-            "transparent mesh materials (an opacity below 1) render on the CPU only",
-            &[crate::Remedy::Cpu],
+            format!("{what} draws no transparent mesh materials (an opacity below 1)"),
+            &[crate::Remedy::RasterOperations, crate::Remedy::Cpu],
         ));
     }
     Ok(())
@@ -456,79 +457,98 @@ pub fn check_opaque(meshes: &Meshes) -> Result<(), crate::GpuError> {
 /// The triangles of the trace scene's meshes in their BVH's leaf order (one unused entry when
 /// there are none: a binding cannot be empty).
 pub fn triangles(meshes: &Meshes) -> Vec<GpuTriangle> {
-    let mut v: Vec<GpuTriangle> = meshes
-        .triangles()
-        .iter()
-        .map(|t| {
-            let [n0, n1, n2] = t.normals.map(|n| n.to_array());
-            GpuTriangle {
-                p0: t.p0.to_array(),
-                mesh: t.mesh,
-                e1: t.e1.to_array(),
-                e2: t.e2.to_array(),
-                n0,
-                n1,
-                n2,
-                ..GpuTriangle::default()
-            }
-        })
-        .collect();
+    non_empty(meshes.triangles().iter().map(gpu_triangle).collect())
+}
+
+/// The triangles in the order the meshes list them (entry `order` is the triangle of that
+/// place): how the raster operations find a transparent triangle from the id it wrote.
+pub fn triangles_in_order(meshes: &Meshes) -> Vec<GpuTriangle> {
+    let mut v = vec![GpuTriangle::default(); meshes.triangles().len()];
+    for t in meshes.triangles() {
+        v[t.order as usize] = gpu_triangle(t);
+    }
+    non_empty(v)
+}
+
+fn gpu_triangle(t: &splat_core::mesh::PreparedTriangle) -> GpuTriangle {
+    let [n0, n1, n2] = t.normals.map(|n| n.to_array());
+    let [alpha0, alpha1, alpha2] = t.alphas;
+    GpuTriangle {
+        p0: t.p0.to_array(),
+        mesh: t.mesh,
+        e1: t.e1.to_array(),
+        alpha0,
+        e2: t.e2.to_array(),
+        alpha1,
+        n0,
+        alpha2,
+        n1,
+        order: t.order,
+        n2,
+        pad: 0,
+    }
+}
+
+/// `v`, or one unused entry where it is empty (a binding cannot be empty).
+pub(crate) fn non_empty<T: Default>(mut v: Vec<T>) -> Vec<T> {
     if v.is_empty() {
-        v.push(GpuTriangle::default());
+        v.push(T::default());
     }
     v
 }
 
 /// The material of each mesh (one unused entry when there are none).
 pub fn mesh_materials(meshes: &Meshes) -> Vec<GpuMeshMaterial> {
-    let mut v: Vec<GpuMeshMaterial> = meshes
-        .materials()
-        .iter()
-        .map(|m| GpuMeshMaterial {
-            color: m.color.to_array(),
-            mirror: m.mirror,
-            transmission: m.transmission,
-            ior: m.ior,
-            roughness: m.roughness,
-            shading: gpu_material(&m.shading, 0),
-            ..GpuMeshMaterial::default()
-        })
-        .collect();
-    if v.is_empty() {
-        v.push(GpuMeshMaterial::default());
-    }
-    v
+    non_empty(
+        meshes
+            .materials()
+            .iter()
+            .map(|m| GpuMeshMaterial {
+                color: m.color.to_array(),
+                mirror: m.mirror,
+                transmission: m.transmission,
+                ior: m.ior,
+                roughness: m.roughness,
+                shading: gpu_material(&m.shading, 0),
+                ..GpuMeshMaterial::default()
+            })
+            .collect(),
+    )
 }
 
 /// The light buffer of a lighting (one unused entry when it has none: a binding cannot be
 /// empty). Cone cosines are computed here as the core computes them.
 pub fn lights(lighting: &Lighting) -> Vec<GpuLight> {
-    let mut v: Vec<GpuLight> = lighting
-        .lights
-        .iter()
-        .map(|l| {
-            let base =
-                GpuLight { color: l.color.to_array(), intensity: l.intensity, radius: l.radius, ..GpuLight::default() };
-            match l.kind {
-                LightKind::Point { position } => GpuLight { position: position.to_array(), kind: LIGHT_POINT, ..base },
-                LightKind::Spot { position, direction, inner_deg, outer_deg } => GpuLight {
-                    position: position.to_array(),
-                    kind: LIGHT_SPOT,
-                    direction: direction.to_array(),
-                    cos_inner: inner_deg.to_radians().cos(),
-                    cos_outer: outer_deg.to_radians().cos(),
-                    ..base
-                },
-                LightKind::Directional { direction } => {
-                    GpuLight { kind: LIGHT_DIRECTIONAL, direction: direction.to_array(), ..base }
+    non_empty(
+        lighting
+            .lights
+            .iter()
+            .map(|l| {
+                let base = GpuLight {
+                    color: l.color.to_array(),
+                    intensity: l.intensity,
+                    radius: l.radius,
+                    ..GpuLight::default()
+                };
+                match l.kind {
+                    LightKind::Point { position } => {
+                        GpuLight { position: position.to_array(), kind: LIGHT_POINT, ..base }
+                    }
+                    LightKind::Spot { position, direction, inner_deg, outer_deg } => GpuLight {
+                        position: position.to_array(),
+                        kind: LIGHT_SPOT,
+                        direction: direction.to_array(),
+                        cos_inner: inner_deg.to_radians().cos(),
+                        cos_outer: outer_deg.to_radians().cos(),
+                        ..base
+                    },
+                    LightKind::Directional { direction } => {
+                        GpuLight { kind: LIGHT_DIRECTIONAL, direction: direction.to_array(), ..base }
+                    }
                 }
-            }
-        })
-        .collect();
-    if v.is_empty() {
-        v.push(GpuLight::default());
-    }
-    v
+            })
+            .collect(),
+    )
 }
 
 /// The leaf-order particles of a scene.
@@ -582,12 +602,7 @@ pub fn mesh_root(trace: &TraceScene) -> u32 {
 /// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle.
 pub fn sh(scene: &Scene) -> Vec<[f32; 4]> {
     let per = sh_coeff_count(scene.sh_degree);
-    let mut v: Vec<[f32; 4]> =
-        scene.particles.iter().flat_map(|p| (0..per).map(|k| p.sh[k]).map(|c| [c.x, c.y, c.z, 0.0])).collect();
-    if v.is_empty() {
-        v.push([0.0; 4]); // a binding cannot be empty
-    }
-    v
+    non_empty(scene.particles.iter().flat_map(|p| (0..per).map(|k| p.sh[k]).map(|c| [c.x, c.y, c.z, 0.0])).collect())
 }
 
 /// The uniforms of one dispatch: `chunk` frames starting at `first_frame`.
@@ -935,16 +950,17 @@ mod tests {
     use super::*;
     use splat_core::camera::Distortion;
 
-    /// The kernels draw every triangle opaque: a transparent mesh is refused before any upload,
-    /// naming the CPU as the remedy; opaque meshes pass.
+    /// The kernels that draw every triangle opaque refuse a transparent mesh before any upload,
+    /// naming the raster operations and the CPU as the remedies; opaque meshes pass.
     #[test]
     fn transparent_meshes_are_refused() {
         use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
         let mesh =
             |opacity| Meshes::new(&[(TriangleMesh::plane(), MeshMaterial { opacity, ..MeshMaterial::default() })]);
-        assert!(check_opaque(&mesh(1.0).unwrap()).is_ok());
-        let refused = check_opaque(&mesh(0.5).unwrap()).unwrap_err();
-        assert!(refused.to_string().contains("CPU only"), "{refused}");
+        assert!(check_opaque(&mesh(1.0).unwrap(), "the ray tracer").is_ok());
+        let refused = check_opaque(&mesh(0.5).unwrap(), "the ray tracer").unwrap_err().to_string();
+        assert!(refused.contains("the ray tracer draws no transparent") && refused.contains("CPU"), "{refused}");
+        assert!(refused.contains("Enderton or stratified"), "{refused}");
     }
 
     /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
@@ -1045,7 +1061,7 @@ mod tests {
             crate::TRACE_WGSL,
             GpuTriangle,
             "Triangle",
-            [p0, mesh, e1, pad0, e2, pad1, n0, pad2, n1, pad3, n2, pad4]
+            [p0, mesh, e1, alpha0, e2, alpha1, n0, alpha2, n1, order, n2, pad]
         );
         assert_mirrors!(
             crate::TRACE_WGSL,

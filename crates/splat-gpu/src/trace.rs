@@ -33,6 +33,7 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../shaders/sh.wgsl"),
     include_str!("../shaders/lighting.wgsl"),
     include_str!("../shaders/bvh.wgsl"),
+    include_str!("../shaders/triangle.wgsl"),
     include_str!("../shaders/mesh.wgsl"),
     include_str!("../shaders/pick.wgsl"),
     include_str!("../shaders/hybrid_fragment.wgsl"),
@@ -281,7 +282,7 @@ impl<'a> GpuTracer<'a> {
     /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
     /// binding limit.
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
-        layout::check_opaque(trace.meshes())?;
+        layout::check_opaque(trace.meshes(), "the GPU ray tracer")?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());

@@ -251,6 +251,24 @@ pub struct PixelSamples {
     surfaces: Vec<Option<SurfaceHit>>,
 }
 
+impl PixelSamples {
+    /// The nearest opaque mesh along sample `s`'s ray (what the sample holds before any
+    /// fragment: the mesh depth pre-pass).
+    pub fn surface(&self, s: usize) -> Option<&SurfaceHit> {
+        self.surfaces.get(s)?.as_ref()
+    }
+
+    /// The number of samples.
+    pub fn len(&self) -> usize {
+        self.rays.len()
+    }
+
+    /// Whether the pixel has no samples (never: a rasterizer has at least one).
+    pub fn is_empty(&self) -> bool {
+        self.rays.is_empty()
+    }
+}
+
 /// A scene projected for one camera and binned into tiles, ready to rasterize.
 pub struct Rasterizer<'a> {
     scene: &'a Scene,
@@ -540,7 +558,7 @@ impl<'a> Rasterizer<'a> {
 
     /// Depth of fragment `f` at sample `s`: distance along the sample's ray.
     #[inline]
-    fn depth(&self, px: &PixelSamples, f: &Fragment, s: usize) -> f32 {
+    pub fn depth(&self, px: &PixelSamples, f: &Fragment, s: usize) -> f32 {
         if let Some(k) = triangle_of(f.source) {
             return self.meshes.hit_triangle(k, &px.rays[s]).map_or(f32::INFINITY, |h| h.t);
         }

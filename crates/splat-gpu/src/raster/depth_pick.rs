@@ -131,6 +131,7 @@ impl GpuRasterizer<'_> {
     /// normal and pick are sample 0's, as the CPU reference takes them.
     pub fn depth_pick(&self) -> Result<DepthPick, GpuError> {
         Self::supports_depth_pick(&self.raster)?;
+        self.check_opaque_meshes("the GPU's iso-opacity depth pick")?;
         let TilePass { hits: Hits { color, pick, normal }, pairs } =
             self.tile_pass(RasterParams { mode: Draw::Under.mode(), ..self.params }, None)?;
         let image = |channels, f: &dyn Fn(usize) -> f32| crate::context::rgba_image(&self.camera, channels, f);
@@ -167,6 +168,7 @@ impl GpuRasterizer<'_> {
     /// at its mesh ([`crate::GpuTracer::render_hybrid`]).
     pub fn first_hits(&self, method: &RasterMethod, frame_key: u32, u_shift: f32) -> Result<FirstHits, GpuError> {
         Self::supports_first_hits(&self.raster)?;
+        self.check_opaque_meshes("the GPU hybrid's rasterized first hit")?;
         let volumetric = self.params.lit == 1 && self.params.look == crate::layout::LOOK_VOLUMETRIC;
         let first_hit = match method {
             RasterMethod::Sorted { .. } if volumetric => return self.fragment_first_hits(),

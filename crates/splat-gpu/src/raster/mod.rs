@@ -76,6 +76,7 @@ pub const RASTER_WGSL: &str = concat!(
     include_str!("../../shaders/raster_lighting.wgsl"),
     include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/raster.wgsl"),
+    include_str!("../../shaders/triangle.wgsl"),
     include_str!("../../shaders/binning.wgsl"),
     include_str!("../../shaders/hybrid_fragment.wgsl"),
     include_str!("../../shaders/depth_pick.wgsl"),
@@ -109,6 +110,7 @@ pub const MESH_PREPASS_WGSL: &str = concat!(
     include_str!("../../shaders/raster_lighting.wgsl"),
     include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/bvh.wgsl"),
+    include_str!("../../shaders/triangle.wgsl"),
     include_str!("../../shaders/mesh.wgsl"),
     include_str!("../../shaders/mesh_prepass.wgsl")
 );
@@ -211,7 +213,7 @@ impl<'a> GpuRasterizer<'a> {
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splats"),
-            size: (scene.count as usize * size_of::<GpuSplat>()) as u64,
+            size: (scene.count.max(1) as usize * size_of::<GpuSplat>()) as u64,
             usage: rw,
             mapped_at_creation: false,
         });
@@ -453,6 +455,9 @@ impl<'a> GpuRasterizer<'a> {
                 method.id().name()
             ))
         })?;
+        if !draw.is_rop() {
+            self.check_opaque_meshes(&format!("{} on the GPU", method.id().name()))?;
+        }
         let s = self.raster.samples;
         if !draw.is_rop() && !self.ctx.msaa_counts.contains(&s) {
             let reason = format!(
@@ -462,6 +467,19 @@ impl<'a> GpuRasterizer<'a> {
             return Err(GpuError::refused(reason, &[Remedy::Cpu]));
         }
         Ok(draw)
+    }
+
+    /// Refuse transparent mesh triangles in `what`, which draws splats only: the render
+    /// pipelines' hardware blending and depth test (sorted splatting, StochasticSplats) and the
+    /// tile rasterizer's depth pick and first hits have no place for a triangle among them.
+    pub(super) fn check_opaque_meshes(&self, what: &str) -> Result<(), GpuError> {
+        if self.scene.transparent.is_empty() {
+            return Ok(());
+        }
+        Err(GpuError::refused(
+            format!("{what} draws no transparent mesh triangles"),
+            &[Remedy::RasterOperations, Remedy::Cpu],
+        ))
     }
 
     /// One lit frame of sorted splatting from the compute tile rasterizer.

@@ -7,6 +7,11 @@
 //! binned in that order (the depth pick's binning with the shuffled order), and `tile_rop`,
 //! which writes the frame's resolved colour to the target the fold reads.
 //!
+//! Transparent mesh triangles are fragments too (the CPU's `Rasterizer::triangle_fragments`),
+//! drawn before the splats in the meshes' order: each camera bins them into per-tile lists on
+//! the host ([`TriangleLists`]), and `tile_rop` walks a tile's triangle list before its splat
+//! list, testing each sample's ray against each triangle as the CPU's ray cast does.
+//!
 //! lavapipe stops an invocation's loops after [`crate::LOOP_BUDGET`] iterations in all (every
 //! loop of the inlined shader counts, for the SIMD group as a whole), silently: a tile of the
 //! bonsai at 300 × 200 holds tens of thousands of splats. On a CPU adapter the lists are
@@ -31,11 +36,105 @@ pub(super) struct RopPass {
     state: wgpu::Buffer,
 }
 
+/// Each tile's transparent triangles for one camera (rop.wgsl `rop_triangle_lists`): words 2 t
+/// and 2 t + 1 bound tile t's list of entries, which follow the 2 × tiles header words, three
+/// words each: the triangle's place in the meshes' order (ascending: the draw order) and the
+/// pixels it may reach, x0 | x1 << 16 and y0 | y1 << 16 (inclusive), so that a pixel outside
+/// skips it without casting its sample rays.
+pub(super) struct TriangleLists {
+    buffer: wgpu::Buffer,
+    /// The most triangles any tile's list holds.
+    longest: u32,
+}
+
+/// Words of one entry of a triangle list.
+const ENTRY_WORDS: usize = 3;
+
+impl TriangleLists {
+    /// Bin the scene's transparent triangles into the tiles of the rasterizer's camera.
+    fn new(r: &GpuRasterizer) -> Result<Self, GpuError> {
+        if r.camera.width > 0xffff || r.camera.height > 0xffff {
+            return Err(GpuError::refused(
+                "transparent triangles on the GPU need images of at most 65,535 pixels a side",
+                &[Remedy::Cpu],
+            ));
+        }
+        let lists = Self::bin(r);
+        let tiles = lists.len();
+        let total: usize = lists.iter().map(Vec::len).sum();
+        let count = r.scene.transparent.len();
+        r.ctx.check_binding("transparent triangle list", 4 * (2 * tiles + ENTRY_WORDS * total) as u64, count)?;
+        let mut words = vec![0u32; 2 * tiles];
+        let mut entries = 0u32;
+        for (t, list) in lists.iter().enumerate() {
+            words[2 * t] = entries;
+            for &(order, [x0, y0, x1, y1]) in list {
+                words.extend([order, x0 | x1 << 16, y0 | y1 << 16]);
+            }
+            entries += list.len() as u32;
+            words[2 * t + 1] = entries;
+        }
+        let longest = lists.iter().map(Vec::len).max().unwrap_or(0) as u32;
+        Ok(Self { buffer: r.ctx.upload("transparent triangle lists", bytemuck::cast_slice(&words)), longest })
+    }
+
+    /// Each tile's list: the place and pixel rect of each transparent triangle whose
+    /// [`pixel_span`] reaches the tile.
+    fn bin(r: &GpuRasterizer) -> Vec<Vec<(u32, [u32; 4])>> {
+        let [tiles_x, tiles_y] = r.params.tiles;
+        let mut lists = vec![Vec::new(); (tiles_x * tiles_y) as usize];
+        for (order, vertices) in &r.scene.transparent {
+            let Some(rect) = pixel_span(&r.camera, vertices) else { continue };
+            let [x0, y0, x1, y1] = rect.map(|v| v / TILE);
+            for ty in y0..=y1 {
+                for tx in x0..=x1 {
+                    lists[(ty * tiles_x + tx) as usize].push((*order, rect));
+                }
+            }
+        }
+        lists
+    }
+}
+
+/// The pixels (x0, y0, x1, y1, inclusive) whose sample rays may cross the triangle of
+/// `vertices`, `None` where none can. Through a pinhole, a point the rays reach projects to the
+/// sample position of its ray, so the crossing points of a triangle in front of the camera lie
+/// within its projected vertices' bounding box (grown by a pixel, for the edge slack); a
+/// triangle partly behind the camera, or any triangle through another lens (whose image of a
+/// straight edge bends), may reach every pixel.
+fn pixel_span(camera: &Camera, vertices: &[glam::Vec3; 3]) -> Option<[u32; 4]> {
+    let every = Some([0, 0, camera.width - 1, camera.height - 1]);
+    let local = vertices.map(|v| camera.to_camera(v));
+    if camera.is_pinhole() && local.iter().all(|p| p.z <= 0.0) {
+        return None;
+    }
+    if !camera.is_pinhole() || !local.iter().all(|p| p.z > 0.0) {
+        return every;
+    }
+    let [a, b, c] = local.map(|p| camera.project_camera(p));
+    let (lo, hi) = (a.min(b).min(c) - 1.0, a.max(b).max(c) + 1.0);
+    if !(lo.is_finite() && hi.is_finite()) {
+        return every;
+    }
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    if hi.x < 0.0 || hi.y < 0.0 || lo.x >= w || lo.y >= h {
+        return None;
+    }
+    let pixel = |v: f32, size: f32| v.clamp(0.0, size - 1.0) as u32;
+    Some([pixel(lo.x, w), pixel(lo.y, h), pixel(hi.x, w), pixel(hi.y, h)])
+}
+
 /// Most loop iterations one fragment of the raster operations can cost at S samples (its
 /// iteration of the list, the coverage loop, Enderton's writes or stratified's insertion sort
 /// and tests), bounding the fragments a chunk may hold.
 fn iterations_per_fragment(samples: u32) -> u32 {
     2 + samples + samples * (samples - 1) / 2 + 2 * samples
+}
+
+/// Most loop iterations one transparent triangle can cost: a fragment's, and the ray cast of
+/// each sample.
+fn triangle_iterations(samples: u32) -> u32 {
+    iterations_per_fragment(samples) + samples
 }
 
 impl RopPass {
@@ -45,8 +144,13 @@ impl RopPass {
     pub(super) fn new(r: &GpuRasterizer, targets: &RasterTargets, keep_state: bool) -> Result<Self, GpuError> {
         let (ctx, pipes, n) = (r.ctx, r.pipes, r.scene.count);
         let pair_count = r.pair_count()?;
-        let (chunk_len, chunk_count) = r.raster_operation_chunks()?;
-        let table: Vec<[u32; 4]> = (0..chunk_count).map(|c| [c, chunk_len, chunk_count, 0]).collect();
+        let triangles = TriangleLists::new(r)?;
+        let (chunk_len, splat_chunks) = r.raster_operation_chunks()?;
+        let (triangle_len, triangle_chunks) = r.chunks(triangles.longest, triangle_iterations(r.raster.samples));
+        let chunk_count = triangle_chunks + splat_chunks;
+        let table: Vec<[u32; 4]> = (0..chunk_count)
+            .map(|c| [c, if c < triangle_chunks { triangle_len } else { chunk_len }, chunk_count, triangle_chunks])
+            .collect();
         let chunks = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("rop chunks"),
             contents: bytemuck::cast_slice(&table),
@@ -98,6 +202,9 @@ impl RopPass {
                 wgpu::BindGroupEntry { binding: 21, resource: wgpu::BindingResource::TextureView(&targets.color_view) },
                 wgpu::BindGroupEntry { binding: 22, resource: state.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 26, resource: r.scene.ordered_triangles.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 27, resource: r.scene.mesh_materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 28, resource: triangles.buffer.as_entire_binding() },
             ],
         });
         Ok(Self { shuffle, lists, frame, keys_group, rop_group, chunk, chunks, chunk_count, state })
@@ -211,13 +318,31 @@ impl GpuRasterizer<'_> {
     /// on a hardware adapter, chunks within lavapipe's loop budget on a CPU adapter.
     pub fn raster_operation_chunks(&self) -> Result<(u32, u32), GpuError> {
         let longest = self.longest_tile_list()?.max(1);
+        Ok(self.chunks(longest, iterations_per_fragment(self.raster.samples)))
+    }
+
+    /// How Enderton and stratified walk each tile's transparent triangles: (triangles per
+    /// chunk, chunks), as [`GpuRasterizer::raster_operation_chunks`] walks the splats; (0, 0)
+    /// without transparent triangles.
+    pub fn triangle_operation_chunks(&self) -> (u32, u32) {
+        let longest = TriangleLists::bin(self).iter().map(Vec::len).max().unwrap_or(0) as u32;
+        self.chunks(longest, triangle_iterations(self.raster.samples))
+    }
+
+    /// (entries per chunk, chunks) of lists of at most `longest` entries that cost at most
+    /// `per_entry` loop iterations each: one chunk on a hardware adapter (none for empty lists),
+    /// chunks within lavapipe's loop budget on a CPU adapter.
+    fn chunks(&self, longest: u32, per_entry: u32) -> (u32, u32) {
+        if longest == 0 {
+            return (0, 0);
+        }
         let chunk_len = if self.ctx.info.device_type == wgpu::DeviceType::Cpu {
             // A margin of 5,000 iterations for the loops outside the list (setup, resolve).
-            ((crate::LOOP_BUDGET - 5_000) / iterations_per_fragment(self.raster.samples)).min(longest)
+            ((crate::LOOP_BUDGET - 5_000) / per_entry).min(longest)
         } else {
             longest
         };
-        Ok((chunk_len, longest.div_ceil(chunk_len)))
+        (chunk_len, longest.div_ceil(chunk_len))
     }
 
     /// The raster-operations kernel of this rasterizer's fragment depth.

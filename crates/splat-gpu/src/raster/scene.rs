@@ -158,6 +158,12 @@ pub struct RasterScene {
     pub(super) mesh_nodes: wgpu::Buffer,
     pub(super) triangles: wgpu::Buffer,
     pub(super) mesh_materials: wgpu::Buffer,
+    /// Every triangle in the meshes' order, for the raster operations' transparent fragments
+    /// (one unused entry without meshes).
+    pub(super) ordered_triangles: wgpu::Buffer,
+    /// The transparent triangles, ascending in the meshes' order: their place and vertices, which
+    /// each camera bins into its tiles ([`super::rop::TriangleLists`]).
+    pub(super) transparent: Vec<(u32, [glam::Vec3; 3])>,
     pub(super) has_meshes: bool,
 }
 
@@ -196,9 +202,6 @@ impl RasterScene {
         let sh = crate::layout::sh(scene);
         ctx.check_binding("splat", (count.max(1) * size_of::<GpuSplat>()) as u64, count)?;
         ctx.check_binding("SH", (sh.len() * 16) as u64, count)?;
-        if particles.is_empty() {
-            return Err(GpuError::Render(RenderError::Settings("the scene has no particles".into())));
-        }
         // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals.
         let canonical: Vec<[f32; 4]> = scene
             .particles
@@ -213,7 +216,7 @@ impl RasterScene {
             .collect();
         ctx.check_binding("canonical transform", (canonical.len() * 16) as u64, count)?;
         Ok(Self {
-            particles: ctx.upload("raster particles", bytemuck::cast_slice(&particles)),
+            particles: ctx.upload("raster particles", bytemuck::cast_slice(&crate::layout::non_empty(particles))),
             sh: ctx.upload("raster sh", bytemuck::cast_slice(&sh)),
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
@@ -221,12 +224,15 @@ impl RasterScene {
             settings: *settings,
             materials: ctx.upload("raster materials", bytemuck::cast_slice(&crate::layout::materials(lighting))),
             lights: ctx.upload("raster lights", bytemuck::cast_slice(&crate::layout::lights(lighting))),
-            canonical: ctx.upload("raster canonical", bytemuck::cast_slice(&canonical)),
+            canonical: ctx.upload("raster canonical", bytemuck::cast_slice(&crate::layout::non_empty(canonical))),
             lighting: lighting.clone(),
             mesh_nodes: ctx.upload("raster mesh nodes", bytemuck::cast_slice(&[crate::layout::GpuNode::default()])),
             triangles: ctx.upload("raster triangles", bytemuck::cast_slice(&[crate::layout::GpuTriangle::default()])),
             mesh_materials: ctx
                 .upload("raster mesh materials", bytemuck::cast_slice(&[crate::layout::GpuMeshMaterial::default()])),
+            ordered_triangles: ctx
+                .upload("raster ordered triangles", bytemuck::cast_slice(&[crate::layout::GpuTriangle::default()])),
+            transparent: Vec::new(),
             has_meshes: false,
         })
     }
@@ -239,7 +245,6 @@ impl RasterScene {
         if meshes.is_empty() {
             return Ok(self);
         }
-        crate::layout::check_opaque(meshes)?;
         let nodes = crate::layout::bvh_nodes(meshes.bvh(), 0);
         let triangles = crate::layout::triangles(meshes);
         let count = meshes.triangles().len();
@@ -249,6 +254,15 @@ impl RasterScene {
         self.triangles = ctx.upload("raster triangles", bytemuck::cast_slice(&triangles));
         self.mesh_materials =
             ctx.upload("raster mesh materials", bytemuck::cast_slice(&crate::layout::mesh_materials(meshes)));
+        self.ordered_triangles =
+            ctx.upload("raster ordered triangles", bytemuck::cast_slice(&crate::layout::triangles_in_order(meshes)));
+        self.transparent = meshes
+            .triangles()
+            .iter()
+            .filter(|t| t.is_transparent())
+            .map(|t| (t.order, [t.p0, t.p0 + t.e1, t.p0 + t.e2]))
+            .collect();
+        self.transparent.sort_unstable_by_key(|&(order, _)| order);
         self.has_meshes = true;
         Ok(self)
     }
