@@ -668,8 +668,8 @@ fn render_meshes_with_each_pipeline() {
 /// A world with a transparent mesh (`opacity` below 1) renders on the CPU by ray tracing and
 /// by splatting, differently from the same world with the mesh opaque; on the GPU Enderton's
 /// raster operations draw it as the CPU does (the same seed, the standard sample pattern); the
-/// GPU ray tracer, GPU sorted splatting and the path tracer refuse it with the reason and the
-/// flags that would draw it, before any work.
+/// GPU hybrid, GPU sorted splatting and the path tracer refuse it with the reason
+/// and the flags that would draw it, before any work.
 #[test]
 fn transparent_meshes_render_on_the_cpu_and_are_refused_elsewhere() {
     let world = |opacity: &str| {
@@ -701,17 +701,18 @@ fn transparent_meshes_render_on_the_cpu_and_are_refused_elsewhere() {
         let differ = a.data().iter().zip(b.data()).filter(|(x, y)| (*x - *y).abs() > 1e-3).count();
         assert!(differ > 0, "{pipeline:?}: the transparent plane renders as the opaque one ({e})");
     }
-    let (refused, e) = render(&half, &["--backend", "gpu", "--method", "exact"]);
-    assert!(refused.is_none() && e.contains("transparent mesh"), "{e}");
+    let (refused, e) = render(&half, &["--backend", "gpu", "--pipeline", "hybrid"]);
+    assert!(refused.is_none() && e.contains("the GPU hybrid draws no transparent mesh"), "{e}");
     let (refused, e) = render(&half, &["--pipeline", "path", "--spp", "1"]);
     assert!(refused.is_none() && e.contains("transparent mesh"), "{e}");
     let (refused, e) = render(&half, &["--backend", "gpu", "--pipeline", "raster", "--method", "raster-sorted"]);
     assert!(refused.is_none() && e.contains("(--method enderton or --backend cpu)"), "{e}");
+    // (The GPU ray tracer's frames among transparent meshes: splat-gpu's gpu_frames.rs.)
     let enderton = ["--pipeline", "raster", "--method", "enderton", "--raster-samples", "4"];
-    let standard = ["--sample-pattern", "standard", "--spp", "4", "--seed", "3"];
-    let (cpu, e) = render(&half, &[&enderton[..], &standard, &["--backend", "cpu"]].concat());
+    let enderton = [&enderton[..], &["--sample-pattern", "standard", "--spp", "4", "--seed", "3"]].concat();
+    let (cpu, e) = render(&half, &[&enderton[..], &["--backend", "cpu"]].concat());
     let cpu = cpu.unwrap_or_else(|| panic!("{e}"));
-    let (gpu, e) = render(&half, &[&enderton[..], &standard, &["--backend", "gpu"]].concat());
+    let (gpu, e) = render(&half, &[&enderton[..], &["--backend", "gpu"]].concat());
     let Some(gpu) = gpu else { return gpu_missing(&e) };
     let worst = cpu.data().iter().zip(gpu.data()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
     assert!(worst < 1e-4, "Enderton among a transparent plane: the GPU differs from the CPU by {worst}");

@@ -85,10 +85,12 @@ var<private> shadow_in: ShadowInputs;
 var<private> shadow_t: f32;
 var<private> shadow_blocked: bool;
 var<private> shadow_mesh: bool;
+// The light the meshes let through: Π (1 − α) of the transparent triangles crossed.
+var<private> shadow_mesh_t: f32;
 
 // shadow.rs `TraceScene::shadow_visibility`: the shadow ray from x + offset l toward the light,
-// by the world's shadow kind (the path tracer's, path_shadows, in its pipeline); a mesh on the
-// way blocks it.
+// by the world's shadow kind (the path tracer's, path_shadows, in its pipeline); an opaque mesh
+// on the way blocks it, transparent ones let Π (1 − α) through.
 fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_key: u32, slot: u32) -> vec3<f32> {
     let shadow = Ray(x + offset * inc.l, inc.l, inc.l, params.t_min, min(inc.distance - offset, params.t_max));
     let kind = shadow_kind();
@@ -100,6 +102,7 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_key: u32, slot: u3
     shadow_in = ShadowInputs(pixel_key, slot);
     shadow_blocked = false;
     shadow_mesh = false;
+    shadow_mesh_t = 1.0;
     sb.len = 0u;
     traverse_shadow(shadow);
     if (shadow_mesh) {
@@ -107,13 +110,13 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_key: u32, slot: u3
     }
     switch kind {
         case SHADOWS_EXACT: {
-            return vec3<f32>(shadow_t);
+            return vec3<f32>(shadow_mesh_t * shadow_t);
         }
         case SHADOWS_STOCHASTIC: {
-            return select(vec3<f32>(1.0), vec3<f32>(0.0), shadow_blocked);
+            return select(vec3<f32>(shadow_mesh_t), vec3<f32>(0.0), shadow_blocked);
         }
         default: { // SHADOWS_SORTED
-            return sorted_shadow(shadow);
+            return shadow_mesh_t * sorted_shadow(shadow);
         }
     }
 }

@@ -147,10 +147,12 @@ const SHADOWS_NONE: u32 = 0u;
 const SHADOWS_SORTED: u32 = 1u;
 const SHADOWS_STOCHASTIC: u32 = 2u;
 const SHADOWS_EXACT: u32 = 3u;
-// trace/mod.rs `SURFACE_OFFSET`, `BOUNCE_SHIFT`, `SHADOW_BOUNCE_SHIFT` and settings.rs `MAX_BOUNCES`.
+// trace/mod.rs `SURFACE_OFFSET`, `BOUNCE_SHIFT`, `SHADOW_BOUNCE_SHIFT`, `LAYER_PASS_SHIFT` and
+// settings.rs `MAX_BOUNCES`.
 const SURFACE_OFFSET: f32 = 1e-4;
 const BOUNCE_SHIFT: u32 = 20u;
 const SHADOW_BOUNCE_SHIFT: u32 = 26u;
+const LAYER_PASS_SHIFT: u32 = 24u;
 const MAX_BOUNCES: u32 = 15u;
 // lavapipe (Mesa's CPU Vulkan driver) stops a loop after 65535 iterations of its SIMD loop per
 // invocation (gallivm's loop limiter), silently: a ray that needs more would be cut short.
@@ -213,6 +215,9 @@ fn trig_hash(p: vec3<f32>) -> f32 {
 // The bounce number of the segment being traced (trace/mod.rs `Bounce`): slot s of bounce d is
 // s + d·2²⁰, shadow slot s + d·2²⁶, pass p + d·2²⁰, so that every bounce decides anew.
 var<private> bounce: u32;
+// How many transparent surfaces the segment's ray has passed (trace/mod.rs `Bounce::past_layer`):
+// the stochastic pass, whose decisions are keyed by pass alone, draws layer l's at pass + l·2²⁴.
+var<private> layer: u32;
 
 fn bounce_slot(slot: u32) -> u32 {
     return slot + (bounce << select(BOUNCE_SHIFT, SHADOW_BOUNCE_SHIFT, slot >= 0x80000000u));
@@ -241,7 +246,8 @@ fn unshifted_particle_u(pixel_key: u32, id: u32, slot: u32, hit: vec3<f32>) -> f
 }
 
 fn pass_u(pixel_key: u32, pass_index: u32) -> f32 {
-    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, PASS_ID, bounce_slot(pass_index))))) - params.u_shift;
+    let slot = bounce_slot(pass_index) + (layer << LAYER_PASS_SHIFT);
+    return unit_f32(pcg(xxhash32(vec3<u32>(pixel_key, PASS_ID, slot)))) - params.u_shift;
 }
 
 // ---- kernel.rs, hit.rs ----------------------------------------------------------------------
@@ -384,8 +390,9 @@ fn traverse(ray: Ray, visitor: u32) {
 // traced from inside the primary methods.
 //
 // Meshes block the light (shadow.rs `visibility_from`): their BVH follows the splats' in the node
-// buffer, so the same loop walks it first (the splats' root waits on the stack, and a mesh hit
-// ends the walk before any splat could shorten t_max), with triangles at its leaves.
+// buffer, so the same loop walks it first (the splats' root waits on the stack, and an opaque
+// mesh hit ends the walk before any splat could shorten t_max), with triangles at its leaves;
+// transparent ones let Π (1 − α) through (`shadow_mesh_t`).
 fn traverse_shadow(ray: Ray) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
@@ -409,8 +416,17 @@ fn traverse_shadow(ray: Ray) {
                 t_max = visit_shadow(ray, leaf, t_max);
                 continue;
             }
-            let h = triangle_intersect(triangles[leaf], ray);
+            // mesh.rs `Meshes::transmittance`: Π (1 − α) over the triangles crossed (each
+            // shared edge of a transparent surface once), 0 at the first opaque one.
+            let tri = triangles[leaf];
+            var h = triangle_intersect(tri, ray);
+            if (is_transparent(tri)) {
+                h = triangle_crosses(tri, ray);
+            }
             if (h.x >= 0.0 && h.x < ray.t_max) {
+                shadow_mesh_t *= 1.0 - alpha_at(tri, h.y, h.z);
+            }
+            if (shadow_mesh_t == 0.0) {
                 shadow_mesh = true;
                 t_max = -1.0; // every node is now beyond t_max
                 break;
@@ -601,6 +617,11 @@ fn step(ray: Ray, pixel_key: u32, pass_index: u32, st: ptr<function, PassState>)
 
 // The closest mesh along the pixel's camera ray (set in `main`; triangle NONE where none).
 var<private> surface: SurfaceHit;
+// Its opacity α at the hit (mesh.rs `SurfaceHit::alpha`: 1 for an opaque surface): what lies
+// behind the splats is α × the surface over (1 − α) × the same ray continued past it.
+var<private> surface_alpha: f32;
+// Whether the pick of the sample `finish` returned is the surface's (no splat picked).
+var<private> surface_picked: bool;
 // The coefficient of what lies behind in the sample `finish` returned (T for the sorted
 // methods, the share of missing slots for stochastic-n, 1 for a stochastic pass that accepted
 // none): the weight of the mesh's mirror and glass segments.
@@ -628,7 +649,8 @@ fn surface_offset(x: vec3<f32>) -> f32 {
 // was never reached).
 fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
     let mesh = surface.triangle != NONE;
-    let mesh_alpha = select(0.0, 1.0, mesh);
+    let mesh_alpha = select(0.0, surface_alpha, mesh);
+    surface_picked = false;
     var behind_pick = no_pick();
     if (mesh) {
         behind_pick = Pick(surface_normal(surface, ray), surface.t, NONE, 0u, 0u, 0u);
@@ -642,14 +664,17 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
         let samples = f32(params.m * params.n);
         let misses = samples - st.transmittance;
         sample_pick = behind_pick;
+        surface_picked = mesh;
         if (st.picked != NONE) {
             sample_pick = Pick(st.normal, st.depth, st.picked, 0u, 0u, 0u);
+            surface_picked = false;
         }
         out = vec4<f32>(st.radiance, st.transmittance + misses * mesh_alpha) / samples;
         behind_weight = misses / samples;
     } else if (segment_method == METHOD_STOCHASTIC_PASS) {
         if ((st.flags & ACCEPTED) == 0u) {
             sample_pick = behind_pick;
+            surface_picked = mesh;
             out = vec4<f32>(0.0, 0.0, 0.0, mesh_alpha);
             behind_weight = 1.0;
         } else {
@@ -667,10 +692,12 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
             sample_pick.depth = st.depth;
         } else if (mesh) {
             sample_pick = behind_pick;
+            surface_picked = true;
         }
         if (params.lit == 1u && !volumetric() && (st.flags & BEHIND_ONLY) == 0u) {
             if (st.picked == NONE) {
                 sample_pick = behind_pick;
+                surface_picked = mesh;
                 out = vec4<f32>(0.0, 0.0, 0.0, mesh_alpha);
                 behind_weight = 1.0;
             } else {
@@ -680,6 +707,7 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
         }
         if (segment_method == METHOD_DEPTH_SAMPLING_K) {
             sample_pick.depth = select(-1.0, kb.t[0], kb.len > 0u);
+            surface_picked = false;
         }
     }
     // Lit(…) of the pick (k = 0) and of the mesh's local share (k = 1), where the sample shows
@@ -726,7 +754,7 @@ fn finish(st: PassState, ray: Ray, pixel_key: u32) -> vec4<f32> {
             out = vec4<f32>(lit, out.w);
             lit_pick = lit;
         } else {
-            behind = lit;
+            behind = surface_alpha * lit;
         }
     }
     return vec4<f32>(out.xyz + behind_weight * behind, out.w);
@@ -806,18 +834,26 @@ fn fold(index: u32, s: vec4<f32>, frame: u32) {
     }
 }
 
-// One straight piece of a light path waiting to be traced (trace/mod.rs `secondary`): where it
-// starts, where it goes, its weight in the pixel's sample and its bounce number.
+// One straight piece of a light path waiting to be traced (trace/mod.rs `secondary`, or
+// `surface_sample`'s ray continued past a transparent surface): where it starts, where it goes,
+// its weight in the pixel's sample, its bounce number, and for a continued ray (layer > 0) the
+// distance along it where it continues and how many transparent surfaces it has passed.
 struct Segment {
     origin: vec3<f32>,
     weight: f32,
     dir: vec3<f32>,
     depth: u32,
+    t_min: f32,
+    layer: u32,
 }
 
-// The pending segments of one frame, depth first: each segment pushes at most two (the
-// reflected and the refracted ray), so MAX_BOUNCES + 1 entries hold the deepest path.
-var<private> segments: array<Segment, 16>;
+// The pending segments of one frame, depth first: each segment pushes at most three (the ray
+// continued past a transparent surface first, then the reflected and the refracted ray), so
+// that while a segment of bounce d is traced each bounce before it holds at most two (a sibling
+// and a continuation): SEGMENT_STACK entries hold paths of splat_gpu::MAX_LAYERED_BOUNCES
+// bounces among transparent mirrors or glass, and of MAX_BOUNCES among opaque ones.
+const SEGMENT_STACK: u32 = 16u;
+var<private> segments: array<Segment, SEGMENT_STACK>;
 
 // trace/mod.rs `surface_sample`'s bounces: the mirror share and Fresnel's share of the glass go to the
 // reflected ray, the rest of the glass to the refracted one (none under total internal
@@ -827,7 +863,7 @@ fn push_bounces(ray: Ray, seg: Segment, top: u32) -> u32 {
     let m = mesh_materials[triangles[surface.triangle].mesh];
     let n = surface_normal(surface, ray);
     let x = ray.origin + surface.t * ray.dir;
-    let w = seg.weight * behind_weight;
+    let w = seg.weight * behind_weight * surface_alpha;
     var reflected = m.mirror;
     var refracted = vec4<f32>(0.0);
     if (m.transmission > 0.0) {
@@ -841,11 +877,11 @@ fn push_bounces(ray: Ray, seg: Segment, top: u32) -> u32 {
     }
     var t = top;
     if (refracted.w > 0.0) {
-        segments[t] = Segment(x, w * refracted.w, refracted.xyz, seg.depth + 1u);
+        segments[t] = Segment(x, w * refracted.w, refracted.xyz, seg.depth + 1u, 0.0, 0u);
         t += 1u;
     }
     if (reflected > 0.0) {
-        segments[t] = Segment(x, w * reflected, reflect_dir(ray.dir, n), seg.depth + 1u);
+        segments[t] = Segment(x, w * reflected, reflect_dir(ray.dir, n), seg.depth + 1u, 0.0, 0u);
         t += 1u;
     }
     return t;
@@ -901,7 +937,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (hybrid) {
             camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
         }
-        var seg = Segment(camera.origin, weight, camera.dir, 0u);
+        var seg = Segment(camera.origin, weight, camera.dir, 0u, 0.0, 0u);
+        // Whether the camera pick waits for the ray continued past a transparent surface
+        // (trace/mod.rs `surface_sample`: the surface's pick only where 1 − α is below the iso
+        // threshold or nothing with a depth lies behind it).
+        var pick_pending = false;
         var top = 0u;
         loop {
             bounce = seg.depth;
@@ -913,12 +953,24 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 ray = Ray(seg.origin, seg.dir, seg.dir, 0.0, params.t_max);
                 mesh_ray = Ray(seg.origin, seg.dir, seg.dir, surface_offset(seg.origin), params.t_max);
             }
+            if (seg.layer > 0u) {
+                // trace/mod.rs `surface_sample`: the same ray past the transparent surface at
+                // t_min, the splats from there, the meshes from surface_offset beyond it.
+                let view = select(seg.dir, camera.view, seg.depth == 0u);
+                let x = seg.origin + seg.t_min * seg.dir;
+                ray = Ray(seg.origin, seg.dir, view, seg.t_min, params.t_max);
+                let mesh_t_min = seg.t_min + surface_offset(x) / length(seg.dir);
+                mesh_ray = Ray(seg.origin, seg.dir, view, mesh_t_min, params.t_max);
+            }
+            layer = seg.layer;
             // trace/mod.rs `trace_ray`: the closest mesh clips the ray.
             surface = SurfaceHit(FAR, NONE, 0.0, 0.0);
+            surface_alpha = 1.0;
             if (params.mesh_root != NONE) {
                 surface = mesh_traverse(params.mesh_root, mesh_ray, false);
                 if (surface.triangle != NONE) {
                     ray.t_max = surface.t;
+                    surface_alpha = alpha_at(triangles[surface.triangle], surface.b1, surface.b2);
                 }
             }
             var st = start_state(ray.t_min);
@@ -988,13 +1040,24 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         total += vec4<f32>((1.0 - seg.weight) * lit_pick, 0.0);
                     }
                     if (seg.depth == 0u) {
-                        if (sample == 0u) {
-                            camera_pick = sample_pick;
+                        let first_layer = seg.layer == 0u;
+                        if (sample == 0u && (first_layer || pick_pending)) {
+                            if (first_layer || sample_pick.depth >= 0.0) {
+                                camera_pick = sample_pick;
+                            }
+                            pick_pending = surface_picked && !(1.0 - surface_alpha < params.iso_threshold);
                             if (rasterized) {
                                 camera_pick.picked = st.picked; // the rasterizer reports its pick
                             }
                         }
                         finished = true;
+                    }
+                    if (surface.triangle != NONE && surface_alpha < 1.0 && !by_pass && behind_weight > 0.0) {
+                        // The same ray past the transparent surface, one layer on (pushed first:
+                        // traced after the surface's bounces).
+                        let w = seg.weight * behind_weight * (1.0 - surface_alpha);
+                        segments[top] = Segment(ray.origin, w, ray.dir, seg.depth, surface.t, seg.layer + 1u);
+                        top += 1u;
                     }
                     let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
                     if (bounces && !by_pass && behind_weight > 0.0) {
@@ -1014,7 +1077,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 iterations += 1u;
                 hit_index = index * samples + sample;
                 camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
-                seg = Segment(camera.origin, weight, camera.dir, 0u);
+                seg = Segment(camera.origin, weight, camera.dir, 0u, 0.0, 0u);
                 continue;
             }
             // The camera segment is the frame (counted by the frame loop); every other segment

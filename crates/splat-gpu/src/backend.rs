@@ -46,13 +46,15 @@ pub fn supports(algorithm: &Algorithm, extras: Extras) -> Result<(), GpuError> {
 
 /// Whether the GPU draws the world's `meshes` in `algorithm`, checked before anything is
 /// uploaded: opaque meshes in every pipeline, transparent triangles (an opacity below 1) in the
-/// raster operations of Enderton and Laine–Karras only (the other kernels draw every triangle
-/// as an opaque surface, or blend splats only).
+/// ray tracer and the raster operations of Enderton and Laine–Karras (sorted splatting and
+/// StochasticSplats blend or depth-test splats only, the hybrid draws every triangle as an
+/// opaque surface).
 pub fn supports_meshes(algorithm: &Algorithm, meshes: &splat_core::mesh::Meshes) -> Result<(), GpuError> {
     let what = match algorithm {
-        Algorithm::Raster(RasterMethod::Enderton | RasterMethod::Stratified { .. }, _) => return Ok(()),
+        Algorithm::Raster(RasterMethod::Enderton | RasterMethod::Stratified { .. }, _)
+        | Algorithm::Trace(_)
+        | Algorithm::Oracle => return Ok(()),
         Algorithm::Raster(method, _) => format!("{} on the GPU", method.id().name()),
-        Algorithm::Trace(_) | Algorithm::Oracle => "the GPU ray tracer".to_string(),
         Algorithm::Hybrid(..) => "the GPU hybrid".to_string(),
     };
     crate::layout::check_opaque(meshes, &what)

@@ -951,7 +951,8 @@ mod tests {
     use splat_core::camera::Distortion;
 
     /// The kernels that draw every triangle opaque refuse a transparent mesh before any upload,
-    /// naming the raster operations and the CPU as the remedies; opaque meshes pass.
+    /// naming the raster operations and the CPU as the remedies; opaque meshes pass; the ray
+    /// tracer and the raster operations take transparent ones.
     #[test]
     fn transparent_meshes_are_refused() {
         use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
@@ -961,6 +962,19 @@ mod tests {
         let refused = check_opaque(&mesh(0.5).unwrap(), "the ray tracer").unwrap_err().to_string();
         assert!(refused.contains("the ray tracer draws no transparent") && refused.contains("CPU"), "{refused}");
         assert!(refused.contains("Enderton or stratified"), "{refused}");
+        // Which pipelines draw them: the ray tracer and the raster operations, not the hybrid or
+        // sorted splatting.
+        use splat_core::raster::{RasterMethod, RasterSettings};
+        use splat_core::{Algorithm, trace::Method};
+        let half = mesh(0.5).unwrap();
+        let raster = |m| Algorithm::Raster(m, RasterSettings::default());
+        for drawn in [Algorithm::Trace(Method::Exact), raster(RasterMethod::Enderton)] {
+            assert!(crate::supports_meshes(&drawn, &half).is_ok(), "{drawn:?}");
+        }
+        let hybrid = Algorithm::Hybrid(RasterMethod::StochasticSplat, RasterSettings::default(), Method::Exact);
+        for refused in [raster(RasterMethod::StochasticSplat), hybrid] {
+            assert!(crate::supports_meshes(&refused, &half).is_err(), "{refused:?}");
+        }
     }
 
     /// Size and every field offset of each Rust struct equal those naga computes for the WGSL
@@ -1134,6 +1148,7 @@ mod tests {
                 "SURFACE_OFFSET" = splat_core::trace::SURFACE_OFFSET,
                 "BOUNCE_SHIFT" = splat_core::trace::BOUNCE_SHIFT,
                 "SHADOW_BOUNCE_SHIFT" = splat_core::trace::SHADOW_BOUNCE_SHIFT,
+                "LAYER_PASS_SHIFT" = splat_core::trace::LAYER_PASS_SHIFT,
                 "MAX_BOUNCES" = splat_core::settings::MAX_BOUNCES,
                 "PATH_DIM_ID" = splat_core::path::sampler::PATH_DIM_ID,
                 "LIGHT_STREAM" = splat_core::path::sampler::LIGHT_STREAM,

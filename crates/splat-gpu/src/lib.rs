@@ -39,8 +39,8 @@ pub use progressive::ProgressiveTrace;
 pub use raster::{DepthPick, FirstHits, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use sort::RadixSort;
 pub use trace::{
-    DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MethodParams, PathPipeline, TRACE_WGSL,
-    TracePipeline,
+    DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MAX_LAYERED_BOUNCES, MethodParams,
+    PathPipeline, TRACE_WGSL, TracePipeline,
 };
 
 use splat_core::Camera;

@@ -58,6 +58,11 @@ pub const FRAMES_PER_DISPATCH: u32 = 32;
 /// frames that fit ¾ of it (by a probe of frame 0) and refuses a result where that bound
 /// reaches the budget.
 pub const LOOP_BUDGET: u32 = 65_535;
+/// Most mirror and glass bounces the trace kernel follows in a world where a transparent surface
+/// (an opacity below 1) is also a mirror or glass: its segment stack holds 16 pending segments,
+/// and while a segment of bounce d is traced each bounce before it may hold two (a sibling ray and
+/// the ray continued past a transparent surface), 2 d + 1 in all.
+pub const MAX_LAYERED_BOUNCES: u32 = 7;
 
 /// A method as the kernel reads it: its identity and every parameter, named.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -282,7 +287,7 @@ impl<'a> GpuTracer<'a> {
     /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
     /// binding limit.
     pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
-        layout::check_opaque(trace.meshes(), "the GPU ray tracer")?;
+        check_segment_stack(trace)?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());
@@ -365,6 +370,7 @@ impl<'a> GpuTracer<'a> {
         method: &Method,
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
+        layout::check_opaque(self.trace.meshes(), "the GPU hybrid")?;
         let sampling = self.trace.settings().sampling;
         // The first hits on the device, and how many a pixel (the rasterizer's samples).
         let upload = |frame_camera: &Camera, first: crate::FirstHits| {
@@ -413,6 +419,7 @@ impl<'a> GpuTracer<'a> {
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         settings.validate()?;
+        layout::check_opaque(self.trace.meshes(), "the GPU path tracer")?;
         let params = layout::path_params(settings, self.emitter_count).ok_or_else(|| {
             GpuError::refused("depth sampling in the path tracer runs on the CPU only", &[Remedy::Cpu])
         })?;
@@ -529,9 +536,12 @@ impl<'a> GpuTracer<'a> {
             run.execute(ctx.frames_per_dispatch, false)?
         };
         // Multi-pass methods (and stochastic-n, slot by slot: `MethodParams::by_pass`) that do
-        // not fit run again with one pass per dispatch. Mirror and glass bounces run whole frames only: the state between passes is the
-        // camera ray's.
-        let bounces = self.trace.meshes().materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
+        // not fit run again with one pass per dispatch. Mirror and glass bounces, and rays continued
+        // past transparent surfaces, run whole frames only: the state between passes is the camera
+        // ray's.
+        let meshes = self.trace.meshes();
+        let bounces =
+            meshes.has_transparent() || meshes.materials().iter().any(|m| m.mirror > 0.0 || m.transmission > 0.0);
         if over(&out) && params.by_pass && !bounces && first_hits.is_none() && path.is_none() {
             out = run.execute(1, true)?;
         }
@@ -793,6 +803,26 @@ pub(crate) fn dispatch_batch(
 /// The most loop iterations any pixel ran (M2's w channel) and that pixel's index.
 pub(crate) fn busiest_pixel(m2: &[f32]) -> (u32, u32) {
     m2.chunks(4).enumerate().map(|(p, v)| (v[3] as u32, p as u32)).max().unwrap_or((0, 0))
+}
+
+/// Refuse a world whose paths the trace kernel's segment stack cannot hold: more than
+/// [`MAX_LAYERED_BOUNCES`] bounces where a transparent surface is also a mirror or glass.
+fn check_segment_stack(trace: &TraceScene) -> Result<(), GpuError> {
+    let meshes = trace.meshes();
+    let bounces = trace.settings().max_bounces.min(splat_core::settings::MAX_BOUNCES);
+    let layered = meshes.triangles().iter().any(|t| {
+        let m = meshes.material(t.mesh);
+        t.is_transparent() && (m.mirror > 0.0 || m.transmission > 0.0)
+    });
+    if layered && bounces > MAX_LAYERED_BOUNCES {
+        return Err(GpuError::refused(
+            format!(
+                "{bounces} bounces among transparent mirrors or glass: the GPU ray tracer follows at most {MAX_LAYERED_BOUNCES} there"
+            ),
+            &[Remedy::Cpu],
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -4,9 +4,11 @@
 mod common;
 
 use common::{context, fixture, gpu_run, lighting, trace_pipeline, tracer};
+use glam::Vec3;
 use splat_core::catalogue::Family;
 use splat_core::frame::RenderOutput;
 use splat_core::lighting::{Look, Shadows};
+use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Algorithm, Frames, MethodId, Parameters, RenderSettings};
 use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
@@ -186,24 +188,11 @@ fn depth_normal_and_picks_equal_the_cpu() {
 /// off a tessellated sphere) moves a secondary ray across a splat's edge.
 #[test]
 fn one_frame_among_meshes_equals_the_cpu_frame() {
-    use glam::Vec3;
-    use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
     let Some(ctx) = context() else { return };
-    let (scene, camera) = fixture("layers", 32, 24);
-    let place = splat_tests::placed;
-    let matte = |r: f32, g: f32, b: f32| MeshMaterial { color: Vec3::new(r, g, b), ..MeshMaterial::default() };
-    let world = |sphere: MeshMaterial, quad: MeshMaterial| {
-        Meshes::new(&[
-            (place(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
-            (place(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3)), sphere),
-            (place(TriangleMesh::plane(), 0.4, Vec3::new(1.0, 1.0, 1.5), Vec3::new(0.9, 0.9, 1.4)), quad),
-        ])
-        .unwrap()
-    };
-    let matte_world = world(matte(0.9, 0.3, 0.2), matte(0.5, 0.5, 0.5));
+    let matte_world = mesh_world(matte(0.9, 0.3, 0.2), matte(0.5, 0.5, 0.5));
     let glass = MeshMaterial { transmission: 0.9, ior: 1.5, ..MeshMaterial::default() };
     let mirror = MeshMaterial { mirror: 0.5, ..matte(0.5, 0.5, 0.5) };
-    let bounce_world = world(glass, mirror);
+    let bounce_world = mesh_world(glass, mirror);
     let sorted = Shadows::Sorted { k: 8, threshold: 0.8, colored: 0.5 };
     let cases = [
         (sorted, Look::Surface, &matte_world),
@@ -213,46 +202,123 @@ fn one_frame_among_meshes_equals_the_cpu_frame() {
         (Shadows::Exact, Look::Volumetric, &bounce_world),
     ];
     for (shadows, look, meshes) in cases {
-        let lit = lighting(shadows, look);
-        let bare = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lit.clone()).unwrap();
+        frames_among_meshes_equal_the_cpu(ctx, meshes, shadows, look);
+    }
+}
+
+/// Transparent meshes on the GPU ray tracer (trace/mod.rs `surface_sample`): the sphere of
+/// [`one_frame_among_meshes_equals_the_cpu_frame`] at opacity 0.5 (two layers), its quad a half
+/// mirror at opacity 0.6 (the ray continued past it and its mirror ray, weighted 1 − α and α),
+/// and a quad whose opacity ramps per vertex, before the back wall; shadow rays carry Π (1 − α).
+/// One frame of every method, for two shadow kinds and both looks, equals the CPU's frame,
+/// depth, normal and pick as there; the transparency changes every frame far beyond the
+/// tolerance.
+#[test]
+fn one_frame_among_transparent_meshes_equals_the_cpu_frame() {
+    let Some(ctx) = context() else { return };
+    let mut ramp = splat_tests::placed(TriangleMesh::plane(), 0.45, Vec3::Z, Vec3::new(0.25, 0.15, -0.75));
+    ramp.opacities = ramp.positions.iter().map(|p| 0.3 + 0.5 * (p.x - 0.25)).collect();
+    let see_through = |m: MeshMaterial, opacity| MeshMaterial { opacity, ..m };
+    let mirror = MeshMaterial { mirror: 0.5, ..matte(0.5, 0.5, 0.5) };
+    let mut world = vec![
+        (splat_tests::placed(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
+        (sphere(), see_through(matte(0.9, 0.3, 0.2), 0.5)),
+        (quad(), see_through(mirror, 0.6)),
+    ];
+    world.push((ramp, matte(0.2, 0.5, 0.9)));
+    let transparent = Meshes::new(&world).unwrap();
+    let opaque =
+        Meshes::new(&world.iter().map(|(m, mat)| (m.clone(), see_through(*mat, 1.0))).collect::<Vec<_>>()).unwrap();
+    for (shadows, look) in [(Shadows::Exact, Look::Volumetric), (Shadows::Stochastic, Look::Surface)] {
+        let seen = frames_among_meshes_equal_the_cpu(ctx, &transparent, shadows, look);
+        let (scene, camera) = fixture("layers", 32, 24);
         let trace = TraceScene::new(&scene, RenderSettings::default())
             .unwrap()
-            .with_lighting(lit)
+            .with_lighting(lighting(shadows, look))
             .unwrap()
-            .with_meshes(meshes.clone());
-        let tracer = tracer(ctx, &trace);
-        for (name, method) in methods() {
-            let frames = Frames { count: 1, seed: 11, ..Frames::default() };
-            let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
-            let gpu = gpu_run(&tracer, &camera, &method, frames);
-            let without = render_frames(&bare, &camera, &method, &frames, &|_| {}).unwrap();
-            let effect = max_difference(cpu.mean.data(), without.mean.data());
-            assert!(effect > 0.1, "{shadows:?} {look:?} {name}: the meshes change the frame by {effect} only");
-            let (mut near, mut bad) = (0, Vec::new());
-            let pixels = (camera.width * camera.height) as usize;
-            for p in 0..pixels {
-                let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
-                let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
-                let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
-                let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
-                if colour.is_nan()
-                    || colour > LIT_TOLERANCE
-                    || !depth
-                    || normal > 1e-3
-                    || cpu.picked[p] != gpu.picked[p]
-                {
-                    let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
-                    let gap = splat_tests::flips::trace_gap(&trace, &camera, &method, &frames, x, y);
-                    if gap < FLIP_GAP { near += 1 } else { bad.push((x, y, colour, gap)) }
-                }
-            }
-            eprintln!(
-                "meshes {shadows:?} {look:?} {name}: {near} pixels differ by a decision near its threshold, {} by rounding",
-                bad.len()
-            );
-            assert!(bad.len() * 100 <= pixels, "{shadows:?} {look:?} {name}: pixels (x, y, difference, gap) {bad:?}");
-        }
+            .with_meshes(opaque.clone());
+        let frames = Frames { count: 1, seed: 11, ..Frames::default() };
+        let behind_opaque = render_frames(&trace, &camera, &Method::Exact, &frames, &|_| {}).unwrap();
+        let effect = max_difference(seen.mean.data(), behind_opaque.mean.data());
+        assert!(effect > 0.1, "{shadows:?} {look:?}: transparency changes the exact frame by {effect} only");
     }
+    // More bounces among transparent mirrors than the segment stack holds: refused, not cut.
+    let (scene, _) = fixture("layers", 32, 24);
+    let deep = RenderSettings { max_bounces: splat_gpu::MAX_LAYERED_BOUNCES + 1, ..RenderSettings::default() };
+    let trace = TraceScene::new(&scene, deep).unwrap().with_meshes(transparent);
+    let pipeline = trace_pipeline(ctx);
+    let refused = GpuTracer::new(ctx, pipeline, &trace).err().expect("refused").to_string();
+    assert!(refused.contains("at most 7") && refused.contains("CPU"), "{refused}");
+}
+
+fn matte(r: f32, g: f32, b: f32) -> MeshMaterial {
+    MeshMaterial { color: Vec3::new(r, g, b), ..MeshMaterial::default() }
+}
+
+fn sphere() -> TriangleMesh {
+    splat_tests::placed(TriangleMesh::sphere(24, 12), 0.35, Vec3::Y, Vec3::new(-0.3, -0.2, 0.3))
+}
+
+fn quad() -> TriangleMesh {
+    splat_tests::placed(TriangleMesh::plane(), 0.4, Vec3::new(1.0, 1.0, 1.5), Vec3::new(0.9, 0.9, 1.4))
+}
+
+/// A lit back wall, the sphere (material `sphere`) and the quad (material `quad`).
+fn mesh_world(sphere_material: MeshMaterial, quad_material: MeshMaterial) -> Meshes {
+    Meshes::new(&[
+        (splat_tests::placed(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
+        (sphere(), sphere_material),
+        (quad(), quad_material),
+    ])
+    .unwrap()
+}
+
+/// One frame of every method among `meshes` on the layers fixture, by `shadows` and `look`, on
+/// both backends: colour, depth, normal and pick equal but where a decision lay near its
+/// threshold or (at most 1 % of pixels) f32 rounding moved a bounce; the meshes change each frame
+/// beyond the tolerance. Returns the CPU's exact frame.
+fn frames_among_meshes_equal_the_cpu(
+    ctx: &'static GpuContext,
+    meshes: &Meshes,
+    shadows: Shadows,
+    look: Look,
+) -> RenderOutput {
+    let (scene, camera) = fixture("layers", 32, 24);
+    let lit = lighting(shadows, look);
+    let bare = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lit.clone()).unwrap();
+    let trace = TraceScene::new(&scene, RenderSettings::default())
+        .unwrap()
+        .with_lighting(lit)
+        .unwrap()
+        .with_meshes(meshes.clone());
+    let tracer = tracer(ctx, &trace);
+    let frames = Frames { count: 1, seed: 11, ..Frames::default() };
+    for (name, method) in methods() {
+        let cpu = render_frames(&trace, &camera, &method, &frames, &|_| {}).unwrap();
+        let gpu = gpu_run(&tracer, &camera, &method, frames);
+        let without = render_frames(&bare, &camera, &method, &frames, &|_| {}).unwrap();
+        let effect = max_difference(cpu.mean.data(), without.mean.data());
+        assert!(effect > 0.1, "{shadows:?} {look:?} {name}: the meshes change the frame by {effect} only");
+        let (mut near, mut bad) = (0, Vec::new());
+        let pixels = (camera.width * camera.height) as usize;
+        for p in 0..pixels {
+            let colour = max_difference(&cpu.mean.data()[3 * p..3 * p + 3], &gpu.mean.data()[3 * p..3 * p + 3]);
+            let (dc, dg) = (cpu.depth.data()[p], gpu.depth.data()[p]);
+            let depth = (dc.is_nan() && dg.is_nan()) || (dc - dg).abs() <= 1e-4 * dc.abs().max(1.0);
+            let normal = max_difference(&cpu.normal.data()[3 * p..3 * p + 3], &gpu.normal.data()[3 * p..3 * p + 3]);
+            if colour.is_nan() || colour > LIT_TOLERANCE || !depth || normal > 1e-3 || cpu.picked[p] != gpu.picked[p] {
+                let (x, y) = (p as u32 % camera.width, p as u32 / camera.width);
+                let gap = splat_tests::flips::trace_gap(&trace, &camera, &method, &frames, x, y);
+                if gap < FLIP_GAP { near += 1 } else { bad.push((x, y, colour, gap)) }
+            }
+        }
+        eprintln!(
+            "meshes {shadows:?} {look:?} {name}: {near} pixels differ by a decision near its threshold, {} by rounding",
+            bad.len()
+        );
+        assert!(bad.len() * 100 <= pixels, "{shadows:?} {look:?} {name}: pixels (x, y, difference, gap) {bad:?}");
+    }
+    render_frames(&trace, &camera, &Method::Exact, &frames, &|_| {}).unwrap()
 }
 
 fn max_difference(a: &[f32], b: &[f32]) -> f32 {

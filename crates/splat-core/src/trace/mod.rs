@@ -583,7 +583,7 @@ const LAYER_STACK: usize = 1024 * 1024;
 
 /// Bit of a pass number where a ray's transparent layer starts (above the bounce number,
 /// d ≤ [`crate::settings::MAX_BOUNCES`] < 16).
-const LAYER_PASS_SHIFT: u32 = 24;
+pub const LAYER_PASS_SHIFT: u32 = 24;
 
 /// The decisions of a ray `depth` bounces after the camera ray: slot s of bounce d is slot
 /// s + d·2²⁰ (shadow slots s + d·2²⁶, passes likewise), so that every bounce decides
