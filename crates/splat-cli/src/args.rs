@@ -451,6 +451,7 @@ pub struct SceneArgs {
     /// Where rays are traced.
     #[arg(help_heading = "Machine", long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
+    /// How scene files are read.
     #[command(flatten)]
     pub read: ReadArgs,
 }
@@ -536,8 +537,16 @@ impl SceneArgs {
         if let Some(path) = &self.scene {
             warn_skipped_properties(path, &opened.skipped_properties);
         }
-        let mut settings = self.settings_over(opened.world.settings(RenderSettings::default()));
-        let WorldSpec { mut scene, mut lighting, camera, meshes, environment, lens, .. } = opened.world;
+        self.stage(opened.world, width, height)
+    }
+
+    /// Stage a world already read (or built from arrays): these options applied over it as
+    /// [`SceneArgs::load_world`] applies them to a file's, the camera chosen with the world's
+    /// own camera (if any) in place of framing, at `width` × `height` where neither the
+    /// options nor the camera give a size.
+    pub fn stage(&self, world: WorldSpec, width: u32, height: u32) -> Result<Staged> {
+        let mut settings = self.settings_over(world.settings(RenderSettings::default()));
+        let WorldSpec { mut scene, mut lighting, camera, meshes, environment, lens, .. } = world;
         let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(degree) = self.sh_degree {
             splat_io::world::truncate_sh(&mut scene, degree);

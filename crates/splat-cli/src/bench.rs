@@ -14,6 +14,7 @@ use std::time::Instant;
 /// Arguments of `splat bench`.
 #[derive(Args)]
 pub struct BenchArgs {
+    /// The scene, camera and shading.
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Methods to time, comma separated; `opaque` is always measured first as the baseline.
@@ -50,6 +51,7 @@ pub struct BenchArgs {
     /// raster-sorted measured in the same run (CPU; --raster-samples applies).
     #[arg(help_heading = "Measurement", long)]
     pub pipelines: bool,
+    /// The method's parameters.
     #[command(flatten)]
     pub options: MethodOptions,
 }

@@ -5,6 +5,9 @@ use clap::Args;
 use splat_core::Image;
 use std::path::{Path, PathBuf};
 
+/// ꟻLIP's default observer: 0.7 m from a 0.7 m wide 4K monitor.
+pub use nv_flip::DEFAULT_PIXELS_PER_DEGREE;
+
 /// Arguments of `splat compare`.
 #[derive(Args)]
 pub struct CompareArgs {
@@ -33,15 +36,41 @@ fn rgb8(values: &[f32]) -> Vec<u8> {
     values.iter().map(|&v| splat_io::image::to_u8(v)).collect()
 }
 
-/// Run `splat compare`.
-pub fn run(args: CompareArgs) -> Result<()> {
-    let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
-    let (a, b) = (read(&args.reference)?, read(&args.test)?);
+/// RMSE, PSNR, SSIM and ꟻLIP of two images.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Metrics {
+    /// Root mean square difference of the RGB values.
+    pub rmse: f64,
+    /// −20 log₁₀ RMSE (peak 1); infinite for equal images.
+    pub psnr: f64,
+    /// SSIM of the 8-bit images, the lowest of the three channels.
+    pub ssim: f64,
+    /// Mean LDR ꟻLIP of the 8-bit images.
+    pub flip: f64,
+}
+
+/// The metrics of `test` against `reference`, and the per-pixel SSIM and ꟻLIP images behind
+/// them (for the error maps).
+struct Measured {
+    metrics: Metrics,
+    rgb: (Vec<f32>, Vec<f32>),
+    ssim: image_compare::Similarity,
+    flip: nv_flip::FlipImageFloat,
+}
+
+/// RMSE and PSNR on the RGB values (a grey image's value repeated), SSIM and ꟻLIP (LDR, at
+/// `pixels_per_degree`) on their 8-bit display values: the images must be equally sized and
+/// finite.
+pub fn metrics(reference: &Image, test: &Image, pixels_per_degree: f32) -> Result<Metrics> {
+    Ok(measure(reference, test, pixels_per_degree)?.metrics)
+}
+
+fn measure(a: &Image, b: &Image, pixels_per_degree: f32) -> Result<Measured> {
     let (w, h) = (a.width(), a.height());
     if (b.width(), b.height()) != (w, h) {
         bail!("the images differ in size: {w}×{h} and {}×{}", b.width(), b.height());
     }
-    let (fa, fb) = (rgb(&a), rgb(&b));
+    let (fa, fb) = (rgb(a), rgb(b));
     if let Some(v) = fa.iter().chain(&fb).find(|v| !v.is_finite()) {
         bail!("an image holds {v}: every value must be finite");
     }
@@ -55,17 +84,28 @@ pub fn run(args: CompareArgs) -> Result<()> {
     let flip = nv_flip::flip(
         nv_flip::FlipImageRgb8::with_data(w, h, &a8),
         nv_flip::FlipImageRgb8::with_data(w, h, &b8),
-        args.pixels_per_degree,
+        pixels_per_degree,
     );
-    let flip_mean = nv_flip::FlipPool::from_image(&flip).mean();
+    let flip_mean = f64::from(nv_flip::FlipPool::from_image(&flip).mean());
+    let metrics = Metrics { rmse, psnr, ssim: ssim.score, flip: flip_mean };
+    Ok(Measured { metrics, rgb: (fa, fb), ssim, flip })
+}
+
+/// Run `splat compare`.
+pub fn run(args: CompareArgs) -> Result<()> {
+    let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
+    let (a, b) = (read(&args.reference)?, read(&args.test)?);
+    let measured = measure(&a, &b, args.pixels_per_degree)?;
+    let Metrics { rmse, psnr, ssim, flip } = measured.metrics;
     println!("reference  {}", args.reference.display());
     println!("test       {}", args.test.display());
     println!("RMSE       {rmse:.6e}   (RGB values: {})", value_scale(&args.reference, &args.test));
     println!("PSNR       {psnr:.2} dB (peak 1)");
-    println!("SSIM       {:.6}   (8-bit, the lowest of the three channels)", ssim.score);
-    println!("FLIP       {flip_mean:.6}   (LDR ꟻLIP mean, {} pixels per degree)", args.pixels_per_degree);
+    println!("SSIM       {ssim:.6}   (8-bit, the lowest of the three channels)");
+    println!("FLIP       {flip:.6}   (LDR ꟻLIP mean, {} pixels per degree)", args.pixels_per_degree);
     if let Some(prefix) = &args.maps {
-        write_maps(prefix, (w, h), &fa, &fb, &ssim, &flip)?;
+        let (fa, fb) = &measured.rgb;
+        write_maps(prefix, (a.width(), a.height()), fa, fb, &measured.ssim, &measured.flip)?;
     }
     Ok(())
 }

@@ -16,6 +16,7 @@ use std::time::Instant;
 /// Arguments of `splat converge`.
 #[derive(Args)]
 pub struct ConvergeArgs {
+    /// The scene, camera and shading.
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Methods to measure, comma separated (default: stochastic, stochastic-n, stochastic-pass
@@ -28,6 +29,7 @@ pub struct ConvergeArgs {
     /// Output prefix: writes PREFIX.csv and PREFIX.png.
     #[arg(help_heading = "Measurement", short, long, default_value = "converge")]
     pub output: PathBuf,
+    /// The method's parameters.
     #[command(flatten)]
     pub options: MethodOptions,
     /// `path`: converge the path tracer's Gaussian estimators (stochastic, stochastic-n, exact)
@@ -40,6 +42,7 @@ pub struct ConvergeArgs {
     /// Path tracer: the RMSE whose time to reach each method's table reports.
     #[arg(help_heading = "Measurement", long, default_value_t = 0.01)]
     pub target_rmse: f64,
+    /// The path tracer's options.
     #[command(flatten)]
     pub path: crate::render::PathOptions,
 }

@@ -21,6 +21,7 @@ pub struct ConvertArgs {
     /// 4 (zstd streams; readers from 2025 on).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(2..=4))]
     pub spz_version: u32,
+    /// How scene files are read.
     #[command(flatten)]
     pub read: ReadArgs,
 }

@@ -19,6 +19,7 @@ use std::path::PathBuf;
 /// Arguments of `splat hit-distance`.
 #[derive(Args)]
 pub struct HitDistanceArgs {
+    /// The scene, camera and shading.
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Output prefix: writes PREFIX.png (the picked depths side by side, in the table's order).

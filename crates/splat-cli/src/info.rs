@@ -13,6 +13,7 @@ pub struct InfoArgs {
     /// up, the mean up of the views, as an `--up` for framing.
     #[arg(long)]
     pub camera: Option<PathBuf>,
+    /// How scene files are read.
     #[command(flatten)]
     pub read: crate::args::ReadArgs,
 }

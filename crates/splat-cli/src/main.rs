@@ -1,19 +1,7 @@
 //! `splat`: render transparent 3D Gaussian scenes and inspect them.
 
-mod args;
-mod bench;
-mod compare;
-mod converge;
-mod convert;
-mod hint;
-mod hits;
-mod info;
-mod render;
-mod reproduce;
-mod stratify;
-mod ztest;
-
 use clap::{CommandFactory, Parser, Subcommand};
+use splat_cli::{bench, compare, converge, convert, hint, hits, info, merge, render, reproduce, stratify, ztest};
 use std::process::ExitCode;
 
 /// Render 3D Gaussian splat scenes with exact and stochastic transparency, measure convergence
@@ -33,6 +21,9 @@ use std::process::ExitCode;
 ///   splat convert point_cloud.ply scene.spz                 # .ply, .splat, .spz
 ///   splat ztest mean.exr var.exr ref.exr --frames 256 --zmap z.png   # exit 0 pass, 1 reject
 ///   splat compare ref.exr test.png --maps err        # RMSE, PSNR, SSIM, FLIP; err-*.png
+///   splat render scene.ply --method stochastic --seed 1 --frames 0..64 -o part0.acc   # a job's share
+///   splat merge part*.acc -o mean.exr --variance var.exr   # the shares' run
+///   splat render scene.ply --camera sparse/0 --all-cameras --shard 3/8 -o views/   # task 3 of 8
 ///   splat info point_cloud.ply
 ///   splat view scene.ply --camera cameras.json            # interactive window
 #[derive(Parser)]
@@ -61,6 +52,9 @@ enum Command {
     View(Box<splat_view::ViewArgs>),
     /// RMSE, PSNR, SSIM and ꟻLIP between two images (.png, .exr, .npy), with error maps.
     Compare(compare::CompareArgs),
+    /// Merge the shares of a run (`splat render --frames A..B -o PART.acc`, one per task of a
+    /// job array) into its mean, variance and alpha images.
+    Merge(merge::MergeArgs),
     /// Print a shell completion script: `splat completions bash > ~/.local/share/bash-completion/completions/splat`
     /// (zsh: a `_splat` file on $fpath; fish: ~/.config/fish/completions/splat.fish).
     Completions {
@@ -81,11 +75,6 @@ enum Command {
     /// The sources' tables and figures by name (`--list`), each regenerated through these
     /// commands and written beside the published numbers (`--quick`: the demo scene, seconds).
     Reproduce(reproduce::ReproduceArgs),
-}
-
-/// `n` and `noun`, plural unless `n` is 1: "1 view", "3 views".
-pub(crate) fn counted(n: usize, noun: &str) -> String {
-    if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
 }
 
 fn main() -> ExitCode {
@@ -124,6 +113,7 @@ fn main() -> ExitCode {
         Command::HitDistance(args) => hits::run(*args),
         Command::Reproduce(args) => reproduce::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Merge(args) => merge::run(args),
         Command::View(args) => splat_view::run(&args),
         Command::Completions { shell } => {
             clap_complete::generate(shell, &mut Cli::command(), "splat", &mut std::io::stdout());

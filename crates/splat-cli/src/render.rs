@@ -4,7 +4,7 @@
 use crate::args::{BackendArg, MethodOptions, SceneArgs, Staged, method_parser, progress_bar};
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use splat_core::frame::{Frames, RenderOutput};
+use splat_core::frame::{Frames, Progress, RenderOutput};
 use splat_core::mesh::Meshes;
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
@@ -31,6 +31,11 @@ pub struct RenderArgs {
     /// Image format of --all-cameras views.
     #[arg(help_heading = "Output", long, value_enum, default_value = "png", requires = "all_cameras")]
     pub view_format: ViewFormat,
+    /// With --all-cameras, render share I of N of the views (0 ≤ I < N): every view whose index
+    /// is I modulo N, named as in the whole set, so that the N tasks of a job array fill one
+    /// folder together.
+    #[arg(help_heading = "Output", long, value_parser = parse_shard, requires = "all_cameras")]
+    pub shard: Option<(usize, usize)>,
     /// Also write the per-frame variance of the radiance (.exr or .npy recommended).
     #[arg(help_heading = "Output", long)]
     pub variance: Option<PathBuf>,
@@ -61,16 +66,25 @@ pub struct RenderArgs {
     /// Seed of the random stream: the same seed gives the same image, two seeds independent ones.
     #[arg(help_heading = "Method", long, default_value_t = 0)]
     pub seed: u32,
+    /// Render frames A..B (A included, B not) of the run seeded by --seed, a share of it (one
+    /// task of a job array), each frame with the decisions it has in the whole run, and write
+    /// their accumulation (mean, variance, alpha, frame range) to -o PART.acc for `splat
+    /// merge`. Shares of a run that does not start at frame 0 render on the CPU.
+    #[arg(help_heading = "Method", long, value_parser = parse_frame_range, conflicts_with_all = ["spp", "all_cameras"])]
+    pub frames: Option<(u32, u32)>,
+    /// The scene, camera and shading.
     #[command(flatten)]
     pub scene: SceneArgs,
+    /// The method's parameters.
     #[command(flatten)]
     pub options: MethodOptions,
+    /// The path tracer's options.
     #[command(flatten)]
     pub path: PathOptions,
 }
 
 /// Options of the path tracer (`--pipeline path`).
-#[derive(Args)]
+#[derive(Args, Debug)]
 #[command(next_help_heading = "Path tracer")]
 pub struct PathOptions {
     /// Path tracer: most bounces off meshes.
@@ -109,6 +123,9 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     if args.all_cameras {
         return run_all_cameras(args);
     }
+    if args.frames.is_some() {
+        return run_share(args);
+    }
     for (flag, path) in outputs(&args) {
         ImageFormat::from_path(path)?;
         crate::args::check_output(path, flag)?;
@@ -120,23 +137,10 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     if args.pipeline == Some(PipelineArg::Path) {
         return run_path(&args, &staged);
     }
-    let Staged { world: World { scene, lighting, meshes }, camera, .. } = &staged;
-    let cpu_algorithm = algorithm(&args)?;
-    warn_unused(&args, &cpu_algorithm, &staged);
-    let frames = args.options.frames(args.spp, args.seed);
-    let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(&args, &gpu_algorithm, meshes)?;
-    let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
+    let Staged { world: World { scene, .. }, camera, .. } = &staged;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
-    let out = match &gpu {
-        Some(ctx) => render_gpu(&args, ctx, &staged, &algorithm, &frames)?,
-        None => {
-            let progress = |n| bar.inc(n);
-            let render = || algorithm.render_world(&staged.shot(), &frames, &progress);
-            args.scene.pool()?.install(render)?
-        }
-    };
+    let Rendered { out, .. } = render_frames(&args, &staged, extras(&args), &|n| bar.inc(n))?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     write_outputs(&args, &out)?;
@@ -146,10 +150,159 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         camera.width,
         camera.height,
         describe(&args),
-        frames_done(args.spp, algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling)),
+        frames_done(args.spp, is_random(&args, &staged)),
         written(&args)
     );
     Ok(())
+}
+
+/// Whether the render of `args` draws random decisions (its frames differ).
+fn is_random(args: &RenderArgs, staged: &Staged) -> bool {
+    let lighting = &staged.world.lighting;
+    algorithm(args).is_ok_and(|a| a.is_random(lighting, !staged.world.meshes.is_empty(), &staged.settings.sampling))
+}
+
+/// `splat render --frames A..B`: one share of a run, written as an accumulation file.
+fn run_share(mut args: RenderArgs) -> Result<()> {
+    if splat_io::extension(&args.output).as_deref() != Some("acc") {
+        bail!(
+            "--frames writes the share's accumulation (mean, variance, alpha, frame range): give -o PART.acc, \
+             and merge the shares into images with `splat merge`"
+        );
+    }
+    if args.alpha.is_some() || args.depth.is_some() || args.normal.is_some() || args.variance.is_some() {
+        bail!(
+            "--frames writes one accumulation file: drop --alpha, --depth, --normal and --variance (`splat merge` writes them)"
+        );
+    }
+    crate::args::check_output(&args.output, "-o")?;
+    let staged = args.scene.load_world(640, 480)?;
+    args.options.apply_capture(&staged.world.scene);
+    let args = args;
+    crate::args::check_memory(&staged.camera)?;
+    let bar = progress_bar(u64::from(staged.camera.width) * u64::from(staged.camera.height));
+    let start = Instant::now();
+    let share = render_share(&args, &staged, &|n| bar.inc(n))?;
+    bar.finish_and_clear();
+    splat_io::accumulation::write(&args.output, &share)?;
+    let a = &share.accumulation;
+    eprintln!(
+        "rendered frames {}..{} of seed {} ({}) in {:.2} s → {}",
+        a.first,
+        u64::from(a.first) + u64::from(a.count),
+        args.seed,
+        describe(&args),
+        start.elapsed().as_secs_f64(),
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// The share of the run that `args` (with `--frames`) render: its accumulation and the
+/// description that shares of one run have in common.
+pub fn render_share(args: &RenderArgs, staged: &Staged, progress: Progress) -> Result<splat_io::accumulation::Share> {
+    let frames = args.frames();
+    let (out, count, method) = if args.pipeline == Some(PipelineArg::Path) {
+        (render_path(args, staged, progress)?.0, frames.count, path_description(args)?)
+    } else {
+        let Rendered { out, algorithm, count, .. } =
+            render_frames(args, staged, splat_gpu::Extras::default(), progress)?;
+        (out, count, format!("{algorithm:?}"))
+    };
+    let render = run_description(args, staged, &method);
+    Ok(splat_io::accumulation::Share {
+        accumulation: splat_core::frame::Accumulation::of(&out, &frames, count),
+        render,
+    })
+}
+
+/// The path tracer's part of a [`run_description`].
+pub fn path_description(args: &RenderArgs) -> Result<String> {
+    let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
+    Ok(format!("path tracer {:?}, Gaussians {gaussians:?}", args.path))
+}
+
+/// Everything that decides the frames of a run besides their range, for `method` (the
+/// algorithm, or the path tracer's [`path_description`]): equal for shares of one run
+/// ([`crate::merge`]).
+pub fn run_description(args: &RenderArgs, staged: &Staged, method: &str) -> String {
+    let frames = args.frames();
+    format!(
+        "{method}; settings {:?}; camera {:?}; {} splats, {} triangles; seed {}, {:?}, {:?}",
+        staged.settings,
+        staged.camera,
+        staged.world.scene.particles.len(),
+        staged.world.meshes.triangles().len(),
+        frames.seed,
+        frames.rng,
+        frames.accumulation
+    )
+}
+
+impl RenderArgs {
+    /// The frames to render: `--frames A..B`, else `--spp` from frame 0, of the run seeded by
+    /// `--seed`.
+    pub fn frames(&self) -> Frames {
+        let (first, count) = self.frames.map_or((0, self.spp), |(a, b)| (a, b - a));
+        Frames { first, ..self.options.frames(count, self.seed) }
+    }
+}
+
+/// A range of frames "A..B" with A < B.
+fn parse_frame_range(s: &str) -> Result<(u32, u32), String> {
+    let parse = |v: &str| v.trim().parse::<u32>().ok();
+    match s.split_once("..").map(|(a, b)| (parse(a), parse(b))) {
+        Some((Some(a), Some(b))) if a < b => Ok((a, b)),
+        _ => Err(format!("'{s}' is not a range of frames: give A..B with whole numbers A < B (A included, B not)")),
+    }
+}
+
+/// A share "I/N" of a set: 0 ≤ I < N.
+fn parse_shard(s: &str) -> Result<(usize, usize), String> {
+    let parse = |v: &str| v.trim().parse::<usize>().ok();
+    match s.split_once('/').map(|(i, n)| (parse(i), parse(n))) {
+        Some((Some(i), Some(n))) if i < n => Ok((i, n)),
+        _ => Err(format!("'{s}' is not a share: give I/N with whole numbers 0 ≤ I < N (task I of N)")),
+    }
+}
+
+/// What [`render_frames`] made, and how.
+pub struct Rendered {
+    /// The images.
+    pub out: RenderOutput,
+    /// The algorithm that made them (the GPU's variant where it ran there).
+    pub algorithm: Algorithm,
+    /// Frames averaged: the frames asked for, or one where every frame is the same (a
+    /// deterministic method through a still camera).
+    pub count: u32,
+    /// The GPU adapter it ran on, described; `None` for the CPU.
+    pub gpu: Option<String>,
+}
+
+/// Render `staged` as `args` say, on the backend they choose, with `extras` where that is the
+/// GPU (the CPU always makes every image), calling `progress` with pixels done on the CPU.
+/// `args.options` must have had the capture's implications applied
+/// ([`MethodOptions::apply_capture`]); the path tracer goes through [`render_path`].
+pub fn render_frames(
+    args: &RenderArgs,
+    staged: &Staged,
+    extras: splat_gpu::Extras,
+    progress: Progress,
+) -> Result<Rendered> {
+    let cpu_algorithm = algorithm(args)?;
+    warn_unused(args, &cpu_algorithm, staged);
+    let frames = args.frames();
+    let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
+    let gpu = choose_gpu(args, &gpu_algorithm, &staged.world.meshes, extras)?;
+    let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
+    let out = match &gpu {
+        Some(ctx) => render_gpu(ctx, staged, &algorithm, extras, &frames)?,
+        None => args.scene.pool()?.install(|| algorithm.render_world(&staged.shot(), &frames, progress))?,
+    };
+    let World { lighting, meshes, .. } = &staged.world;
+    let random = algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling);
+    let count = if random { frames.count } else { 1 };
+    Ok(Rendered { out, algorithm, count, gpu: gpu.map(|ctx| ctx.describe()) })
 }
 
 /// The images `splat render` writes, with their flags: colour first.
@@ -247,10 +400,12 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     let cpu_algorithm = algorithm(args)?;
     let frames = args.options.frames(args.spp, args.seed);
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(args, &gpu_algorithm, &staged.world.meshes)?;
+    let gpu = choose_gpu(args, &gpu_algorithm, &staged.world.meshes, extras(args))?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
-    let bar = indicatif::ProgressBar::new(cameras.len() as u64).with_style(
+    let (share, of) = args.shard.unwrap_or((0, 1));
+    let mine = (0..cameras.len()).filter(|i| i % of == share).count();
+    let bar = indicatif::ProgressBar::new(mine as u64).with_style(
         indicatif::ProgressStyle::with_template("{spinner} views [{bar:40}] {pos}/{len} {elapsed} (eta {eta}) {msg}")
             .expect("valid template")
             .progress_chars("=> "),
@@ -261,11 +416,11 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         ViewFormat::Exr => "exr",
         ViewFormat::Npy => "npy",
     };
-    for (i, (name, camera)) in cameras.iter().enumerate() {
+    for (i, (name, camera)) in cameras.iter().enumerate().filter(|(i, _)| i % of == share) {
         staged.camera = args.scene.sized(*camera)?;
         bar.set_message(name.clone());
         let out = match &gpu {
-            Some(ctx) => render_gpu(args, ctx, &staged, &algorithm, &frames)?,
+            Some(ctx) => render_gpu(ctx, &staged, &algorithm, extras(args), &frames)?,
             None => args.scene.pool()?.install(|| algorithm.render_world(&staged.shot(), &frames, &|_| {}))?,
         };
         let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
@@ -275,7 +430,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     eprintln!(
         "rendered {}, {}, {} in {:.2} s → {}",
-        crate::counted(cameras.len(), "view"),
+        crate::counted(mine, "view"),
         describe(args),
         frames_done(
             args.spp,
@@ -338,37 +493,11 @@ fn run_path(args: &RenderArgs, staged: &Staged) -> Result<()> {
     if args.depth.is_some() || args.normal.is_some() || args.alpha.is_some() {
         bail!("the path tracer writes colour and --variance only (no --depth, --normal or --alpha)");
     }
-    let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
-    let settings = path_options_settings(&args.path, staged, gaussians)?;
-    let Staged { world: World { scene, lighting, meshes }, camera, settings: render_settings, .. } = staged;
-    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
-    let frames =
-        Frames { count: args.spp, seed: args.seed, accumulation: args.options.accumulation, ..Frames::default() };
-    let gpu = match args.scene.backend {
-        BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
-        BackendArg::Auto if !matches!(gaussians, GaussianEstimator::DepthSampling { .. }) => {
-            crate::args::gpu_context(BackendArg::Auto)?
-        }
-        _ => None,
-    };
+    let Staged { world: World { scene, meshes, .. }, camera, .. } = staged;
+    let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
-    let out = match &gpu {
-        Some(ctx) => {
-            eprintln!("rendering on {}", ctx.describe());
-            let pipeline = splat_gpu::TracePipeline::new(ctx)?;
-            let path = splat_gpu::PathPipeline::new(ctx, &pipeline)?;
-            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
-            tracer.render_path(&path, camera, &settings, &frames)?.0
-        }
-        None => {
-            let tracer = PathTracer::new(&trace, settings)?;
-            let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
-            let progress = |n| bar.inc(n);
-            let out = args.scene.pool()?.install(|| tracer.render(camera, &frames, &progress))?;
-            bar.finish_and_clear();
-            out
-        }
-    };
+    let (out, _) = render_path(args, staged, &|n| bar.inc(n))?;
+    bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     write_outputs(args, &out)?;
     eprintln!(
@@ -382,6 +511,37 @@ fn run_path(args: &RenderArgs, staged: &Staged) -> Result<()> {
         args.output.display()
     );
     Ok(())
+}
+
+/// The Monte Carlo path tracer's render of `staged` as `args` say (`--pipeline path`), on the
+/// CPU (calling `progress` with pixels done) or the GPU: colour and variance, and the GPU
+/// adapter it ran on, described (`None` for the CPU).
+pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Result<(RenderOutput, Option<String>)> {
+    let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
+    let settings = path_options_settings(&args.path, staged, gaussians)?;
+    let Staged { world: World { scene, lighting, meshes }, camera, settings: render_settings, .. } = staged;
+    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
+    let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..args.frames() };
+    let gpu = match args.scene.backend {
+        BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
+        BackendArg::Auto if !matches!(gaussians, GaussianEstimator::DepthSampling { .. }) && frames.first == 0 => {
+            crate::args::gpu_context(BackendArg::Auto)?
+        }
+        _ => None,
+    };
+    Ok(match &gpu {
+        Some(ctx) => {
+            eprintln!("rendering on {}", ctx.describe());
+            let pipeline = splat_gpu::TracePipeline::new(ctx)?;
+            let path = splat_gpu::PathPipeline::new(ctx, &pipeline)?;
+            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
+            (tracer.render_path(&path, camera, &settings, &frames)?.0, Some(ctx.describe()))
+        }
+        None => {
+            let tracer = PathTracer::new(&trace, settings)?;
+            (args.scene.pool()?.install(|| tracer.render(camera, &frames, progress))?, None)
+        }
+    })
 }
 
 /// The method the options name, with the pipeline's default.
@@ -429,9 +589,14 @@ fn extras(args: &RenderArgs) -> splat_gpu::Extras {
 /// The GPU context to render on, or `None` for the CPU: `--backend gpu` insists (and fails
 /// with the reason when the GPU cannot render this algorithm among these meshes), `auto` takes
 /// a hardware GPU when one is found and it renders this, `cpu` never.
-fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, meshes: &Meshes) -> Result<Option<GpuContext>> {
+fn choose_gpu(
+    args: &RenderArgs,
+    algorithm: &Algorithm,
+    meshes: &Meshes,
+    extras: splat_gpu::Extras,
+) -> Result<Option<GpuContext>> {
     let supported = || -> Result<(), splat_gpu::GpuError> {
-        splat_gpu::supports(algorithm, extras(args))?;
+        splat_gpu::supports(algorithm, extras)?;
         splat_gpu::supports_meshes(algorithm, meshes)
     };
     match args.scene.backend {
@@ -439,21 +604,23 @@ fn choose_gpu(args: &RenderArgs, algorithm: &Algorithm, meshes: &Meshes) -> Resu
             supported()?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if supported().is_ok() => crate::args::gpu_context(BackendArg::Auto),
+        BackendArg::Auto if supported().is_ok() && args.frames().first == 0 => {
+            crate::args::gpu_context(BackendArg::Auto)
+        }
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
 }
 
 /// Render on the GPU ([`splat_gpu::render`]), saying on which adapter.
 fn render_gpu(
-    args: &RenderArgs,
     ctx: &GpuContext,
     staged: &Staged,
     algorithm: &Algorithm,
+    extras: splat_gpu::Extras,
     frames: &Frames,
 ) -> Result<RenderOutput> {
     eprintln!("rendering on {}", ctx.describe());
-    Ok(splat_gpu::render(ctx, algorithm, &staged.shot(), extras(args), frames)?)
+    Ok(splat_gpu::render(ctx, algorithm, &staged.shot(), extras, frames)?)
 }
 
 fn write_outputs(args: &RenderArgs, out: &RenderOutput) -> Result<()> {

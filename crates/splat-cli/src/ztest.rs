@@ -39,15 +39,84 @@ pub struct ZtestArgs {
 
 /// The verdict: `Ok(true)` passes, `Ok(false)` rejects, `Err` is bad input.
 pub fn run(args: &ZtestArgs) -> Result<bool> {
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
     let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
     let (mean, variance, reference) = (read(&args.mean)?, read(&args.variance)?, read(&args.reference)?);
     let mean_variance = args.mean_variance.as_deref().map(read).transpose()?;
-    for (name, image) in [("variance", &variance), ("reference", &reference)]
-        .into_iter()
-        .chain(mean_variance.as_ref().map(|m| ("mean-variance", m)))
+    let pooling = mean_variance.as_ref().zip(args.variance_frames);
+    let verdict = verdict(&mean, &variance, &reference, args.frames, pooling)?;
+    println!("z-test of {} ({} frames) against {}", args.mean.display(), args.frames, args.reference.display());
+    println!(
+        "tested     {} pixel-channels ({} constant and equal to the reference left out)",
+        verdict.tested, verdict.left_out
+    );
+    println!("global     {:>7.2}   (≤ {GLOBAL_MAX}: a consistent bias)", verdict.global);
+    println!("spread     {:>7.2}   (≤ {SPREAD_MAX}: a bias whose sign varies)", verdict.spread);
+    println!("outliers   {:>7.2} % (≤ {} %: p < 0.01)", 100.0 * verdict.outliers, 100.0 * OUTLIERS_MAX);
+    println!("variance   {:>7.2}   (≥ {VARIANCE_MIN}: the variance image is not too wide)", verdict.variance);
+    println!("floored    {:>7.2} % (se set to 1/F where the variance run never varied)", 100.0 * verdict.floored);
+    if verdict.passes() {
+        println!("verdict    PASS");
+    } else {
+        println!("verdict    REJECT ({})", verdict.failures.join("; "));
+    }
+    if let Some(path) = &args.zmap {
+        let variance = match pooling {
+            Some((own, frames)) => pooled(own, args.frames, &variance, frames)?,
+            None => variance,
+        };
+        write_zmap(path, &mean, &variance, &reference, args.frames)?;
+        eprintln!("z-map → {}", path.display());
+    }
+    Ok(verdict.passes())
+}
+
+/// The z-test's statistics on a user's images and the criteria they fail.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Verdict {
+    /// Pixel-channels tested.
+    pub tested: usize,
+    /// Pixel-channels left out: constant in the variance run and equal to the reference.
+    pub left_out: usize,
+    /// |Σ(mean − reference)| / √(Σ se²), the largest over the colour channels.
+    pub global: f64,
+    /// (Σ z² − n) / √(2n), the largest over the colour channels.
+    pub spread: f64,
+    /// Share of pixel-channels with p < 0.01.
+    pub outliers: f64,
+    /// The variance check, the smallest over the colour channels.
+    pub variance: f64,
+    /// Share of pixel-channels whose se is the 1/F floor.
+    pub floored: f64,
+    /// The criteria failed, each with its value and bound; empty when the test passes.
+    pub failures: Vec<String>,
+}
+
+impl Verdict {
+    /// Whether every criterion holds.
+    pub fn passes(&self) -> bool {
+        self.failures.is_empty()
+    }
+}
+
+/// The z-test (docs/architecture.md, "How correctness is proven") of `mean` over `frames`
+/// frames against `reference`, with the per-frame `variance` of an independent run; where
+/// `pooling` gives the mean run's own per-frame variance and the independent run's frame
+/// count, the two variances are pooled by degrees of freedom. Each colour channel
+/// is tested on its own (channels of a pixel share decisions) and the worst reported. Bad
+/// input (sizes that differ, values that are not finite, too few informative pixel-channels)
+/// is an error naming it.
+pub fn verdict(
+    mean: &Image,
+    variance: &Image,
+    reference: &Image,
+    frames: u32,
+    pooling: Option<(&Image, u32)>,
+) -> Result<Verdict> {
+    if frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    for (name, image) in
+        [("variance", variance), ("reference", reference)].into_iter().chain(pooling.map(|(m, _)| ("mean-variance", m)))
     {
         if (image.width(), image.height()) != (mean.width(), mean.height()) {
             bail!(
@@ -59,21 +128,28 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
             );
         }
     }
+    if let Some(bad) = mean.data().iter().find(|v| !v.is_finite()) {
+        bail!("the mean image holds {bad}: expected finite values");
+    }
     if let Some(bad) = reference.data().iter().find(|v| !v.is_finite()) {
         bail!("the reference image holds {bad}: expected finite values");
     }
     if let Some(bad) = variance.data().iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
         bail!("the variance image holds {bad}: expected finite values ≥ 0");
     }
-    let variance = match (&mean_variance, args.variance_frames) {
-        (Some(own), Some(frames)) => pooled(own, args.frames, &variance, frames)?,
-        _ => variance,
+    let pooled_variance;
+    let variance = match pooling {
+        Some((own, variance_frames)) => {
+            pooled_variance = pooled(own, frames, variance, variance_frames)?;
+            &pooled_variance
+        }
+        None => variance,
     };
-    let tested = Channels::new(&mean, &variance, &reference);
+    let tested = Channels::new(mean, variance, reference);
     if tested.mean.len() < MIN_TESTED {
         bail!("only {} pixel-channels carry information (at least {MIN_TESTED} are needed)", tested.mean.len());
     }
-    let z = ZTest::new(&tested.mean, &tested.reference, &tested.variance, args.frames, 1);
+    let z = ZTest::new(&tested.mean, &tested.reference, &tested.variance, frames, 1);
     // ZTest with one channel sums over all channels; test each colour channel on its own, as
     // the suites do (channels of a pixel share decisions), and report the worst.
     let per_channel: Vec<ZTest> = (0..tested.channels)
@@ -81,7 +157,7 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
             let pick = |v: &[f32]| v.iter().zip(&tested.channel).filter(|(_, k)| **k == c).map(|(v, _)| *v).collect();
             let (m, r, v): (Vec<f32>, Vec<f32>, Vec<f32>) =
                 (pick(&tested.mean), pick(&tested.reference), pick(&tested.variance));
-            ZTest::new(&m, &r, &v, args.frames, 1)
+            ZTest::new(&m, &r, &v, frames, 1)
         })
         .filter(|t| t.n > 0)
         .collect();
@@ -99,27 +175,16 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
     .into_iter()
     .flatten()
     .collect();
-    println!("z-test of {} ({} frames) against {}", args.mean.display(), args.frames, args.reference.display());
-    println!(
-        "tested     {} pixel-channels ({} constant and equal to the reference left out)",
-        tested.mean.len(),
-        tested.left_out
-    );
-    println!("global     {global:>7.2}   (≤ {GLOBAL_MAX}: a consistent bias)");
-    println!("spread     {spread:>7.2}   (≤ {SPREAD_MAX}: a bias whose sign varies)");
-    println!("outliers   {:>7.2} % (≤ {} %: p < 0.01)", 100.0 * z.outliers, 100.0 * OUTLIERS_MAX);
-    println!("variance   {variance_check:>7.2}   (≥ {VARIANCE_MIN}: the variance image is not too wide)");
-    println!("floored    {:>7.2} % (se set to 1/F where the variance run never varied)", 100.0 * z.floored);
-    if failures.is_empty() {
-        println!("verdict    PASS");
-    } else {
-        println!("verdict    REJECT ({})", failures.join("; "));
-    }
-    if let Some(path) = &args.zmap {
-        write_zmap(path, &mean, &variance, &reference, args.frames)?;
-        eprintln!("z-map → {}", path.display());
-    }
-    Ok(failures.is_empty())
+    Ok(Verdict {
+        tested: tested.mean.len(),
+        left_out: tested.left_out,
+        global,
+        spread,
+        outliers: z.outliers,
+        variance: variance_check,
+        floored: z.floored,
+        failures,
+    })
 }
 
 /// ((F₁ − 1) v₁ + (F₂ − 1) v₂) / (F₁ + F₂ − 2): the two runs' per-frame variances pooled.

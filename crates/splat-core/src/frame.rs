@@ -78,6 +78,11 @@ impl AccumulationFormat {
 pub struct Frames {
     /// Frames (samples per pixel) averaged.
     pub count: u32,
+    /// Index of the first frame: frames `first..first + count` of the run seeded by `seed`
+    /// are rendered, each with the decisions, pixel sample and lens sample of that frame of
+    /// the whole run, so that renders of disjoint ranges (a job array's shares, Ray tasks)
+    /// merge ([`Accumulation::merge`]) into the render of their union. 0 by default.
+    pub first: u32,
     /// Seed of the random stream; two seeds give independent runs.
     pub seed: u32,
     /// Generator of the decisions.
@@ -93,7 +98,7 @@ pub struct Frames {
 
 impl Default for Frames {
     fn default() -> Self {
-        Self { count: 1, seed: 0, rng: RngScheme::Hash, u_shift: 0.0, accumulation: AccumulationFormat::F32 }
+        Self { count: 1, first: 0, seed: 0, rng: RngScheme::Hash, u_shift: 0.0, accumulation: AccumulationFormat::F32 }
     }
 }
 
@@ -107,8 +112,109 @@ impl Frames {
         if self.u_shift.is_nan() || self.u_shift.abs() >= 1.0 {
             return Err(RenderError::Settings(format!("u_shift {} is not in (−1, 1)", self.u_shift)));
         }
+        if self.first.checked_add(self.count).is_none() {
+            let (first, count) = (self.first, self.count);
+            return Err(RenderError::Settings(format!(
+                "{count} frames from frame {first} run past the last frame index {}",
+                u32::MAX
+            )));
+        }
         let count = if stochastic { self.count } else { 1 };
-        Ok((0..count).map(|f| frame_key(self.seed, f)).collect())
+        Ok((self.first..self.first + count).map(|f| frame_key(self.seed, f)).collect())
+    }
+
+    /// The index in the whole run of the `f`-th frame rendered.
+    pub fn index(&self, f: u32) -> u32 {
+        self.first + f
+    }
+}
+
+/// A render's statistics over a range of frames of a run: what one share of the run (a job
+/// array's task, a Ray task) contributes, and what merging disjoint shares gives, per pixel and
+/// channel the mean, the per-frame variance and the frame count ([`Welford::merge`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Accumulation {
+    /// Index of the first frame in the run.
+    pub first: u32,
+    /// Frames averaged (one for a deterministic render, whatever was asked).
+    pub count: u32,
+    /// Mean radiance (RGB).
+    pub mean: Image,
+    /// Per-frame variance of the radiance (RGB, unbiased; 0 with one frame).
+    pub variance: Image,
+    /// Mean coverage 1 − T.
+    pub alpha: Image,
+}
+
+impl Accumulation {
+    /// The statistics of `out`, a render of `frames` that averaged `count` of them.
+    pub fn of(out: &RenderOutput, frames: &Frames, count: u32) -> Self {
+        let (mean, variance, alpha) = (out.mean.clone(), out.variance.clone(), out.alpha.clone());
+        Self { first: frames.first, count, mean, variance, alpha }
+    }
+
+    /// The frames it holds, `first..first + count`.
+    pub fn range(&self) -> std::ops::Range<u64> {
+        u64::from(self.first)..u64::from(self.first) + u64::from(self.count)
+    }
+
+    /// Merge shares of one run whose frames follow on (0..4, 4..10, …) into the statistics of
+    /// their union, in f64 and in order of their first frames, so that the result does not
+    /// depend on the order the shares are given in. Refuses shares of different sizes,
+    /// overlapping ranges (their frames would count twice) and gaps.
+    pub fn merge(parts: &[Accumulation]) -> Result<Accumulation, RenderError> {
+        let mut order: Vec<&Accumulation> = parts.iter().collect();
+        order.sort_by_key(|p| p.first);
+        let Some(head) = order.first() else {
+            return Err(RenderError::Settings("no accumulation to merge".into()));
+        };
+        let size = |p: &Accumulation| (p.mean.width(), p.mean.height());
+        for pair in order.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            if size(a) != size(b) {
+                let ((w, h), (w2, h2)) = (size(a), size(b));
+                return Err(RenderError::Settings(format!(
+                    "the shares are {w}×{h} and {w2}×{h2}: one run has one size"
+                )));
+            }
+            let (ra, rb) = (a.range(), b.range());
+            if ra.end > rb.start {
+                return Err(RenderError::Settings(format!(
+                    "the shares' frames overlap: {}..{} and {}..{} (each frame may count once)",
+                    ra.start, ra.end, rb.start, rb.end
+                )));
+            }
+            if ra.end < rb.start {
+                return Err(RenderError::Settings(format!(
+                    "the shares leave frames {}..{} out: merge shares whose frames follow on (the merge is then \
+                     frames {}.. of the run)",
+                    ra.end, rb.start, head.first
+                )));
+            }
+        }
+        let pixels = head.alpha.data().len();
+        let mut merged = head.mean.clone();
+        let mut variance = head.variance.clone();
+        let mut alpha = head.alpha.clone();
+        for i in 0..pixels {
+            let stats = |c: usize| {
+                let at = 3 * i + c;
+                let of = |p: &&Accumulation| {
+                    Welford::of(p.count.into(), p.mean.data()[at].into(), p.variance.data()[at].into())
+                };
+                order.iter().map(of).fold(Welford::default(), Welford::merge)
+            };
+            for c in 0..3 {
+                let w = stats(c);
+                merged.data_mut()[3 * i + c] = w.mean as f32;
+                variance.data_mut()[3 * i + c] = w.variance() as f32;
+            }
+            let coverage = order.iter().map(|p| Welford::of(p.count.into(), p.alpha.data()[i].into(), 0.0));
+            alpha.data_mut()[i] = coverage.fold(Welford::default(), Welford::merge).mean as f32;
+        }
+        let count = order.iter().map(|p| u64::from(p.count)).sum::<u64>();
+        let count = u32::try_from(count).map_err(|_| RenderError::Settings(format!("{count} frames in all")))?;
+        Ok(Accumulation { first: head.first, count, mean: merged, variance, alpha })
     }
 }
 

@@ -46,6 +46,11 @@ impl Image {
         &self.data
     }
 
+    /// All values, the image consumed (handed to another owner without a copy).
+    pub fn into_data(self) -> Vec<f32> {
+        self.data
+    }
+
     /// All values, mutable.
     pub fn data_mut(&mut self) -> &mut [f32] {
         &mut self.data

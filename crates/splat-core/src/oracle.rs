@@ -117,7 +117,7 @@ pub fn render_oracle(
     }
     let keys = frames.keys(true)?;
     fold_frames(camera, &keys, frames.accumulation, progress, |f, _| {
-        let frame_camera = sampling.pinhole(camera, &frame_sample(frames.seed, f))?;
+        let frame_camera = sampling.pinhole(camera, &frame_sample(frames.seed, frames.index(f)))?;
         Ok(oracle_frame(&oracle, scene, &frame_camera, &|_| {}))
     })
 }

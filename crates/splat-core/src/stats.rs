@@ -26,6 +26,25 @@ impl Welford {
     pub fn variance(&self) -> f64 {
         if self.n < 2 { 0.0 } else { self.m2 / (self.n - 1) as f64 }
     }
+
+    /// The statistics of `n` samples of mean `mean` and unbiased variance `variance`.
+    pub fn of(n: u64, mean: f64, variance: f64) -> Self {
+        Self { n, mean, m2: variance * n.saturating_sub(1) as f64 }
+    }
+
+    /// The statistics of both sets of samples (Chan, Golub & LeVeque 1979): with δ = mean_b −
+    /// mean_a and n = n_a + n_b, mean = mean_a + δ n_b / n and M2 = M2_a + M2_b + δ² n_a n_b / n.
+    pub fn merge(self, other: Welford) -> Welford {
+        let n = self.n + other.n;
+        if n == 0 {
+            return self;
+        }
+        let (na, nb) = (self.n as f64, other.n as f64);
+        let delta = other.mean - self.mean;
+        let mean = self.mean + delta * nb / n as f64;
+        let m2 = self.m2 + other.m2 + delta * delta * na * nb / n as f64;
+        Welford { n, mean, m2 }
+    }
 }
 
 /// Outcome of the per-pixel z-test of a mean image against the exact one.

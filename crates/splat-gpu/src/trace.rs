@@ -501,6 +501,7 @@ impl<'a> GpuTracer<'a> {
         path: Option<(&wgpu::ComputePipeline, &wgpu::Buffer)>,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
+        crate::backend::whole_run(frames)?;
         splat_core::trace::check_camera(self.trace.settings(), camera)?;
         let params = MethodParams::try_from(method)?;
         let per_frame = matches!(first_hits, Some(FirstHits::PerFrame(_)));

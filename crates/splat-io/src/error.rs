@@ -192,6 +192,9 @@ pub enum ErrorKind {
     /// A mesh file (OBJ, glTF) is malformed or holds no triangles.
     #[error("mesh: {0}")]
     Mesh(String),
+    /// An accumulation file (`.acc`, [`crate::accumulation`]) is malformed.
+    #[error("accumulation: {0}")]
+    Accumulation(String),
     /// The file reads but holds neither splats nor meshes.
     #[error("holds no splats and no meshes: nothing to render")]
     Empty,

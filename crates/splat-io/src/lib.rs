@@ -18,6 +18,7 @@
 //! # Ok::<(), splat_io::Error>(())
 //! ```
 
+pub mod accumulation;
 pub mod cameras;
 pub mod colmap;
 pub mod compressed_ply;
@@ -129,7 +130,8 @@ pub struct SceneRead {
     pub file_filter: ScreenFilter,
 }
 
-fn extension(path: &Path) -> Option<String> {
+/// A path's extension in lower case, `None` without one.
+pub fn extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
 }
 

@@ -535,26 +535,22 @@ impl Layout {
         }
         let mut linear_scale = [0.0f32; 3];
         for (axis, (&raw, s)) in scale.iter().zip(&mut linear_scale).enumerate() {
-            *s = raw.exp() as f32;
-            if !(*s > 0.0 && s.is_finite() && (1.0 / (*s * *s)).is_finite()) {
-                let detail =
-                    format!("scale_{axis} = {raw} gives exp(scale_{axis}) = {s}, which is not a usable positive scale");
-                return Err(ErrorKind::BadScale { index, detail });
-            }
+            *s = scale_from_log(raw).ok_or_else(|| {
+                let detail = format!(
+                    "scale_{axis} = {raw} gives exp(scale_{axis}) = {}, which is not a usable positive scale",
+                    raw.exp() as f32
+                );
+                ErrorKind::BadScale { index, detail }
+            })?;
         }
-        let [w, x, y, z] = rotation;
-        let norm = (w * w + x * x + y * y + z * z).sqrt();
-        if norm == 0.0 || !norm.is_normal() {
-            return Err(ErrorKind::ZeroQuaternion { index });
-        }
-        let q = Quat::from_xyzw((x / norm) as f32, (y / norm) as f32, (z / norm) as f32, (w / norm) as f32);
+        let q = unit_quaternion(rotation).ok_or(ErrorKind::ZeroQuaternion { index })?;
         let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
         sh[0] = vec3(dc);
         let per_channel = sh_coeff_count(self.sh_degree) - 1;
         for (k, c) in sh.iter_mut().enumerate().skip(1).take(per_channel) {
             *c = Vec3::new(rest[k - 1] as f32, rest[per_channel + k - 1] as f32, rest[2 * per_channel + k - 1] as f32);
         }
-        let opacity = 1.0 / (1.0 + (-opacity).exp());
+        let opacity = opacity_from_logit(opacity);
         if self.surfels {
             linear_scale[2] = surfel_thickness(linear_scale[0], linear_scale[1]);
         }
@@ -566,6 +562,27 @@ impl Layout {
             })?;
         Ok(particle)
     }
+}
+
+/// The linear scale of a stored log scale (3DGS's exp activation, in f64 and then rounded),
+/// `None` where it is not a usable positive scale (zero, infinite, or so small that 1/s²
+/// overflows).
+pub fn scale_from_log(raw: f64) -> Option<f32> {
+    let s = raw.exp() as f32;
+    (s > 0.0 && s.is_finite() && (1.0 / (s * s)).is_finite()).then_some(s)
+}
+
+/// The opacity of a stored logit (3DGS's sigmoid activation), in f64.
+pub fn opacity_from_logit(logit: f64) -> f64 {
+    1.0 / (1.0 + (-logit).exp())
+}
+
+/// The unit quaternion of stored w, x, y, z (normalised in f64, as 3DGS normalises its
+/// rotations), `None` where it has no usable length.
+pub fn unit_quaternion([w, x, y, z]: [f64; 4]) -> Option<Quat> {
+    let norm = (w * w + x * x + y * y + z * z).sqrt();
+    (norm != 0.0 && norm.is_normal())
+        .then(|| Quat::from_xyzw((x / norm) as f32, (y / norm) as f32, (z / norm) as f32, (w / norm) as f32))
 }
 
 /// The scales and opacity of a Gaussian of `scale` and `opacity` convolved with Mip-Splatting's

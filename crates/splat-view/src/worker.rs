@@ -441,7 +441,14 @@ impl Renderer {
 /// The random stream of a job: the GPU view draws frame i with key i of the panel's seed, as
 /// a batch render of that seed does.
 fn stream(settings: &Settings) -> Frames {
-    Frames { count: 1, seed: settings.seed, rng: settings.rng, u_shift: 0.0, accumulation: settings.accumulation }
+    Frames {
+        count: 1,
+        first: 0,
+        seed: settings.seed,
+        rng: settings.rng,
+        u_shift: 0.0,
+        accumulation: settings.accumulation,
+    }
 }
 
 /// Frame `i` of a job on the CPU: a render of one frame whose seed is key i of the panel's

@@ -568,8 +568,8 @@ impl<'a> PathTracer<'a> {
         self.trace.shadow_visibility(x, offset, inc, decide, slot, kind).x
     }
 
-    /// `frames.count` samples per pixel (sample indices 0, 1, …, the frames of the run seeded
-    /// by `frames.seed`), each a path, averaged into a [`RenderOutput`] (colour and its per-frame
+    /// `frames.count` samples per pixel (sample indices `frames.first`, `frames.first + 1`, …,
+    /// the frames of the run seeded by `frames.seed`), each a path, averaged into a [`RenderOutput`] (colour and its per-frame
     /// variance; alpha 1). `progress` receives finished pixel counts.
     pub fn render(&self, camera: &Camera, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
         camera.validate()?;
@@ -581,7 +581,7 @@ impl<'a> PathTracer<'a> {
             |_| (),
             |_, x, y| {
                 let mut pixel = PixelFrames::new(frames.accumulation);
-                for index in 0..frames.count {
+                for index in (0..frames.count).map(|f| frames.index(f)) {
                     let s = PathSampler::new(self.settings.sampler, x, y, frames.seed, index).shifted(frames.u_shift);
                     let l = self.radiance(self.camera_ray(camera, x, y, &s), &s);
                     pixel.push(&Sample { alpha: 1.0, ..Sample::background(l) });

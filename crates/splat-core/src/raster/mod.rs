@@ -1015,7 +1015,7 @@ pub fn render_raster_frames<'a>(
     }
     let keys = raster_keys(frames, true)?;
     fold_frames(camera, &keys, frames.accumulation, progress, |f, key| {
-        let raster = build(&sampling.pinhole(camera, &frame_sample(frames.seed, f))?)?;
+        let raster = build(&sampling.pinhole(camera, &frame_sample(frames.seed, frames.index(f)))?)?;
         raster.check_meshes()?;
         let one = Frames { accumulation: AccumulationFormat::F32, ..*frames };
         Ok(render_keys(&raster, method, &[key], &one, &|_| {}))

@@ -678,7 +678,8 @@ pub fn render_frames(
     check_camera(trace.settings(), camera)?;
     let sampling = trace.settings().sampling;
     let keys = frames.keys(method.is_stochastic() || trace.is_random())?;
-    let samples: Vec<FrameSample> = (0..keys.len() as u32).map(|f| frame_sample(frames.seed, f)).collect();
+    let samples: Vec<FrameSample> =
+        (0..keys.len() as u32).map(|f| frame_sample(frames.seed, frames.index(f))).collect();
     Ok(render_tiles(
         camera,
         progress,

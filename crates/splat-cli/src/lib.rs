@@ -1,0 +1,23 @@
+//! The commands of `splat` as a library: each module is one command's arguments (clap) and
+//! its `run`, over `splat-core`, `splat-io` and `splat-gpu`. The binary (`main.rs`) parses the
+//! command line and dispatches; the Python package (`splat-py`) stages scenes and renders
+//! through the same arguments, so that an option is declared once for both.
+
+pub mod args;
+pub mod bench;
+pub mod compare;
+pub mod converge;
+pub mod convert;
+pub mod hint;
+pub mod hits;
+pub mod info;
+pub mod merge;
+pub mod render;
+pub mod reproduce;
+pub mod stratify;
+pub mod ztest;
+
+/// `n` and `noun`, plural unless `n` is 1: "1 view", "3 views".
+pub fn counted(n: usize, noun: &str) -> String {
+    if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
+}
