@@ -50,15 +50,26 @@ fn test(extra: &[String]) -> Result<()> {
         // Every test in a process of its own, two at a time: the statistical suites' processes
         // overlap instead of queueing binary after binary (lavapipe keeps one core of two busy
         // on the small test images). cargo-nextest runs no doctests; cargo test runs those.
-        let run = test_command(&["nextest", "run", "--workspace", "--cargo-profile", "release", "--profile", "ci"]);
+        let run = test_command(&[
+            "nextest",
+            "run",
+            "--workspace",
+            "--exclude",
+            PYTHON_PACKAGE,
+            "--cargo-profile",
+            "release",
+            "--profile",
+            "ci",
+        ]);
         let tests = run_status(run, "cargo nextest run")?;
-        let docs = run_status(test_command(&["test", "--workspace", "--release", "--doc"]), "cargo test --doc")?;
+        let doctests = ["test", "--workspace", "--exclude", PYTHON_PACKAGE, "--release", "--doc"];
+        let docs = run_status(test_command(&doctests), "cargo test --doc")?;
         if tests.success() { docs } else { tests }
     } else {
         if extra.is_empty() {
             eprintln!("cargo-nextest is not installed: running the test binaries one after another with cargo test");
         }
-        let mut cmd = test_command(&["test", "--workspace", "--release"]);
+        let mut cmd = test_command(&["test", "--workspace", "--exclude", PYTHON_PACKAGE, "--release"]);
         cmd.args(extra);
         run_status(cmd, "cargo test")?
     };
@@ -69,9 +80,89 @@ fn test(extra: &[String]) -> Result<()> {
     if extra.is_empty() {
         run_examples()?;
         check_docs()?;
+        python_tests()?;
     }
     Ok(())
 }
+
+/// The Python package (crates/splat-py): build its wheel with maturin in the virtual
+/// environment `target/python` (made and filled from requirements-test.txt when needed),
+/// install it into a fresh virtual environment beside it to prove that it installs there with
+/// nothing but its declared dependencies, and run its tests with pytest against this build's
+/// `splat` binary.
+fn python_tests() -> Result<()> {
+    let crate_dir = root().join("crates/splat-py");
+    let venv = target_dir().join("python");
+    let python = venv.join("bin/python");
+    if !python.exists() {
+        eprintln!("making the virtual environment {} …", venv.display());
+        run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&venv), "python3 -m venv")?;
+    }
+    let requirements = crate_dir.join("requirements-test.txt");
+    let pip = ["-m", "pip", "install", "--quiet", "--disable-pip-version-check"];
+    run_checked(Command::new(&python).args(pip).arg("-r").arg(&requirements), "pip install -r requirements-test.txt")?;
+    let wheels = target_dir().join("wheels");
+    let _ = std::fs::remove_dir_all(&wheels);
+    eprintln!("maturin build --release (crates/splat-py) …");
+    let mut maturin = Command::new(venv.join("bin/maturin"));
+    maturin
+        .current_dir(&crate_dir)
+        .args(["build", "--release", "--quiet", "--out"])
+        .arg(&wheels)
+        .arg("-i")
+        .arg(&python);
+    run_checked(&mut maturin, "maturin build")?;
+    let wheel = std::fs::read_dir(&wheels)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.extension().is_some_and(|x| x == "whl"))
+        .context("maturin wrote no wheel")?;
+    let fresh = target_dir().join("python-fresh");
+    let _ = std::fs::remove_dir_all(&fresh);
+    run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&fresh), "python3 -m venv (fresh)")?;
+    let fresh_python = fresh.join("bin/python");
+    run_checked(
+        Command::new(&fresh_python).args(pip).arg(&wheel),
+        "pip install of the wheel into a fresh environment",
+    )?;
+    let smoke = "import splat; out = splat.render(splat.Scene.demo(), width=32, height=24, backend='cpu'); \
+                 assert out['color'].shape == (24, 32, 3) and out['color'].max() > 0; print('fresh environment: ok')";
+    run_checked(
+        Command::new(&fresh_python).args(["-c", smoke]).current_dir(target_dir()),
+        "the wheel in a fresh environment",
+    )?;
+    run_checked(
+        Command::new(&python).args(pip).args(["--force-reinstall", "--no-deps"]).arg(&wheel),
+        "pip install of the wheel",
+    )?;
+    let splat = target_dir().join("release/splat");
+    if !splat.exists() {
+        cargo(&["build", "--quiet", "--release", "--bin", "splat"])?;
+    }
+    eprintln!("pytest crates/splat-py/tests …");
+    let mut pytest = Command::new(&python);
+    pytest.current_dir(&crate_dir).args(["-m", "pytest", "-q", "tests"]);
+    pytest.env("SPLAT_BIN", &splat);
+    run_checked(&mut pytest, "pytest")
+}
+
+/// The system's Python 3.
+fn system_python() -> &'static str {
+    if Command::new("python3").arg("--version").output().is_ok() { "python3" } else { "python" }
+}
+
+/// Run `cmd`, failing with `what` unless it succeeds.
+fn run_checked(cmd: &mut Command, what: &str) -> Result<()> {
+    let status = cmd.status().with_context(|| format!("running {what}"))?;
+    if !status.success() {
+        bail!("{what} failed ({status})");
+    }
+    Ok(())
+}
+
+/// The Python package's crate: an extension module, built by maturin (whose build leaves the
+/// interpreter's symbols to the interpreter) and tested by pytest ([`python_tests`]), not by
+/// cargo.
+const PYTHON_PACKAGE: &str = "splat-py";
 
 /// Cargo's output folder: `CARGO_TARGET_DIR`, else `target/`.
 fn target_dir() -> PathBuf {
@@ -115,7 +206,7 @@ fn has_nextest() -> bool {
 /// run -p` would resolve one package's features and build its libraries a second time) and
 /// run from `target/release/examples/`.
 fn run_examples() -> Result<()> {
-    cargo(&["build", "--quiet", "--release", "--workspace", "--examples"])?;
+    cargo(&["build", "--quiet", "--release", "--workspace", "--exclude", PYTHON_PACKAGE, "--examples"])?;
     let out = root().join("target/examples");
     std::fs::create_dir_all(&out)?;
     let path = |name: &str| out.join(name).display().to_string();
@@ -146,7 +237,8 @@ fn run_examples() -> Result<()> {
 /// 176 s in the dev profile, which builds them again).
 fn check_docs() -> Result<()> {
     eprintln!(
-        "cargo doc --release --workspace --exclude splat-cli --exclude splat-view --no-deps (RUSTDOCFLAGS=-D warnings) …"
+        "cargo doc --release --workspace --exclude splat-cli --exclude splat-view --exclude {PYTHON_PACKAGE} --no-deps \
+         (RUSTDOCFLAGS=-D warnings) …"
     );
     let status = Command::new(env!("CARGO"))
         .current_dir(root())
@@ -158,6 +250,8 @@ fn check_docs() -> Result<()> {
             "splat-cli",
             "--exclude",
             "splat-view",
+            "--exclude",
+            PYTHON_PACKAGE,
             "--no-deps",
             "--quiet",
         ])

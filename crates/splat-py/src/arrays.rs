@@ -1,0 +1,105 @@
+//! Arrays in and out: shapes checked with messages that name the array, images to and from
+//! numpy.
+
+use crate::SplatError;
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use splat_core::Image;
+use splat_core::particle::sh_coeff_count;
+
+/// A shape as Python prints it: `(5, 3)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [one] => format!("({one},)"),
+        _ => format!("({})", shape.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+/// Refuse `name` unless its shape is `expected`.
+pub fn check_shape(name: &str, shape: &[usize], expected: &[usize]) -> PyResult<()> {
+    if shape == expected {
+        return Ok(());
+    }
+    Err(SplatError::new_err(format!("{name} has shape {}; expected {}", shape_text(shape), shape_text(expected))))
+}
+
+/// K of an SH array of shape (N, K, 3): 1, 4, 9 or 16 (degrees 0 to 3).
+pub fn sh_coefficients(shape: &[usize], n: usize) -> PyResult<usize> {
+    let k = match shape {
+        [rows, k, 3] if *rows == n => *k,
+        _ => {
+            return Err(SplatError::new_err(format!(
+                "sh has shape {}; expected ({n}, K, 3) with K = (degree + 1)² = 1, 4, 9 or 16",
+                shape_text(shape)
+            )));
+        }
+    };
+    if !(0..=3).any(|d| sh_coeff_count(d) == k) {
+        return Err(SplatError::new_err(format!(
+            "sh has {k} coefficients a colour channel; expected 1, 4, 9 or 16 (SH degree 0 to 3; degree 4's 25 \
+             are not rendered: drop the last band, sh[:, :16])"
+        )));
+    }
+    Ok(k)
+}
+
+/// The number of rows of a 2-D array `name` of `columns` columns.
+pub fn rows(name: &str, shape: &[usize], columns: usize) -> PyResult<usize> {
+    match shape {
+        [n, c] if *c == columns => Ok(*n),
+        shape => Err(SplatError::new_err(format!("{name} has shape {}; expected (N, {columns})", shape_text(shape)))),
+    }
+}
+
+/// A square matrix of side `N`, rows first, from any nested sequence of numbers (a numpy
+/// array of any float dtype, a list of lists, a CPU tensor).
+pub fn matrix<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<[[f32; N]; N]> {
+    let wrong = || SplatError::new_err(format!("{name}: expected a {N} × {N} matrix of numbers"));
+    let rows: Vec<Vec<f64>> = value.extract().map_err(|_| wrong())?;
+    let shape: Vec<usize> = std::iter::once(rows.len()).chain(rows.first().map(Vec::len)).collect();
+    if rows.len() != N || rows.iter().any(|r| r.len() != N) {
+        return Err(SplatError::new_err(format!("{name} has shape {}; expected ({N}, {N})", shape_text(&shape))));
+    }
+    let mut m = [[0.0; N]; N];
+    for (r, row) in rows.iter().enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(SplatError::new_err(format!("{name}[{r}, {c}] is {v}: expected a finite value")));
+            }
+            m[r][c] = v as f32;
+        }
+    }
+    Ok(m)
+}
+
+/// An image from an array of shape (H, W) or (H, W, C) with 1 to 4 channels.
+pub fn image_from_array(name: &str, array: &PyReadonlyArrayDyn<'_, f32>) -> PyResult<Image> {
+    let (h, w, c) = match array.shape() {
+        &[h, w] => (h, w, 1),
+        &[h, w, c] if (1..=4).contains(&c) => (h, w, c),
+        shape => {
+            return Err(SplatError::new_err(format!(
+                "{name} has shape {}; expected an image (H, W) or (H, W, C) with 1 to 4 channels",
+                shape_text(shape)
+            )));
+        }
+    };
+    let side = |v: usize| u32::try_from(v).ok().filter(|&v| v > 0);
+    let (Some(w), Some(h), Some(c)) = (side(w), side(h), side(c)) else {
+        return Err(SplatError::new_err(format!("{name} is empty (shape {})", shape_text(array.shape()))));
+    };
+    Image::from_data(w, h, c, array.as_slice()?.to_vec())
+        .ok_or_else(|| SplatError::new_err(format!("{name}: the data does not fill {w}×{h}×{c}")))
+}
+
+/// An image as an array (H, W) for one channel, else (H, W, C), without a copy.
+pub fn image_to_array(py: Python<'_>, image: Image) -> PyResult<Bound<'_, PyUntypedArray>> {
+    let (w, h, c) = (image.width() as usize, image.height() as usize, image.channels() as usize);
+    let shape = if c == 1 { vec![h, w] } else { vec![h, w, c] };
+    shaped(py, image.into_data(), &shape)
+}
+
+/// `data` as an array of `shape` (row-major), without a copy.
+pub fn shaped<'py>(py: Python<'py>, data: Vec<f32>, shape: &[usize]) -> PyResult<Bound<'py, PyUntypedArray>> {
+    Ok(PyArray1::from_vec(py, data).reshape(shape)?.as_untyped().clone())
+}

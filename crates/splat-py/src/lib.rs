@@ -1,0 +1,578 @@
+//! `splat._splat`: the extension module of the Python package `splat` (`python/splat`), which
+//! converts arrays (numpy, `__array__`, DLPack) to contiguous float32 and calls in here.
+//!
+//! One home per option: `render` takes every option of `splat render` as a keyword argument,
+//! its dashes as underscores, and parses them with the CLI's own argument definitions
+//! ([`splat_cli::render::RenderArgs`]); scenes from files are read by `splat-io`'s readers, and
+//! scenes from arrays become the same [`Particle`]s those readers make, checked the same way.
+//! Every error is a `splat.SplatError` (a `ValueError`) whose text names the problem, with
+//! option names as Python spells them.
+
+mod arrays;
+mod options;
+
+use arrays::{image_from_array, image_to_array};
+use glam::{Mat3, Vec3};
+use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+use splat_cli::args::ReadArgs;
+use splat_cli::render::{PipelineArg, Rendered};
+use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_core::{Camera, Particle, Scene};
+use splat_io::world::WorldSpec;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+pyo3::create_exception!(
+    _splat,
+    SplatError,
+    pyo3::exceptions::PyValueError,
+    "Bad input or a render that cannot run; the message names the problem and what to do."
+);
+
+/// `error` (with its causes) as a [`SplatError`], CLI flags spelled as keyword arguments.
+fn fail(error: impl Into<anyhow::Error>) -> PyErr {
+    SplatError::new_err(options::pythonic(&format!("{:#}", error.into())))
+}
+
+/// Splats, meshes and lighting, as a file or arrays gave them.
+#[pyclass(name = "Scene", module = "splat", frozen)]
+struct PyScene {
+    world: WorldSpec,
+    name: String,
+}
+
+#[pymethods]
+impl PyScene {
+    /// Read a scene (.ply, compressed .ply, .splat, .spz, .glb/.gltf) or a world (.toml) file;
+    /// `options` are `splat render`'s reading options (strict, spz_axes, preset, screen_filter).
+    #[staticmethod]
+    #[pyo3(signature = (path, **options))]
+    fn load(path: PathBuf, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let read: options::Parsed<ReadArgs> = options::parse("load", options)?;
+        let opened = splat_io::world::open_world(Some(&path), read.0.options()).map_err(fail)?;
+        Ok(Self { world: opened.world, name: opened.name })
+    }
+
+    /// The built-in demo scene (with its camera).
+    #[staticmethod]
+    fn demo() -> PyResult<Self> {
+        let opened = splat_io::world::open_world(None, Default::default()).map_err(fail)?;
+        Ok(Self { world: opened.world, name: opened.name })
+    }
+
+    /// A scene from arrays, float32 and contiguous (the Python wrapper converts): means (N, 3),
+    /// scales (N, 3), rotations (N, 4) as w, x, y, z, opacities (N,), sh (N, K, 3) with
+    /// K = (degree + 1)² in 3DGS's order (sh[:, 0] the DC term). Scales are linear unless
+    /// `log_scales`, opacities in [0, 1] unless `logit_opacities` (the trainers' raw
+    /// parameters: exp and the sigmoid are applied here, as the .ply reader does).
+    #[staticmethod]
+    #[pyo3(signature = (means, scales, rotations, opacities, sh, log_scales, logit_opacities))]
+    fn from_arrays(
+        means: PyReadonlyArrayDyn<'_, f32>,
+        scales: PyReadonlyArrayDyn<'_, f32>,
+        rotations: PyReadonlyArrayDyn<'_, f32>,
+        opacities: PyReadonlyArrayDyn<'_, f32>,
+        sh: PyReadonlyArrayDyn<'_, f32>,
+        log_scales: bool,
+        logit_opacities: bool,
+    ) -> PyResult<Self> {
+        let n = arrays::rows("means", means.shape(), 3)?;
+        arrays::check_shape("scales", scales.shape(), &[n, 3])?;
+        arrays::check_shape("rotations", rotations.shape(), &[n, 4])?;
+        arrays::check_shape("opacities", opacities.shape(), &[n])?;
+        let k = arrays::sh_coefficients(sh.shape(), n)?;
+        let degree = (1..=3u8).find(|&d| sh_coeff_count(d) == k).unwrap_or(0);
+        let (means, scales, rotations) = (means.as_slice()?, scales.as_slice()?, rotations.as_slice()?);
+        let (opacities, sh) = (opacities.as_slice()?, sh.as_slice()?);
+        let particles = (0..n)
+            .map(|i| {
+                let v3 = |a: &[f32]| Vec3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+                let q = &rotations[4 * i..4 * i + 4];
+                let wxyz = [q[0], q[1], q[2], q[3]].map(f64::from);
+                let mean = v3(means);
+                let bad = |what: String| {
+                    SplatError::new_err(format!("splat {i}: {what} (mean {mean}, rotation w, x, y, z {q:?})"))
+                };
+                let scale = if log_scales {
+                    let raw = v3(scales).to_array().map(f64::from);
+                    let linear = raw.map(splat_io::ply::scale_from_log);
+                    match linear {
+                        [Some(x), Some(y), Some(z)] => Vec3::new(x, y, z),
+                        _ => return Err(bad(format!("log scale {raw:?} gives no usable positive scale"))),
+                    }
+                } else {
+                    v3(scales)
+                };
+                let rotation = splat_io::ply::unit_quaternion(wxyz)
+                    .ok_or_else(|| bad("the rotation quaternion has zero length".into()))?;
+                let o = opacities[i];
+                let opacity = if logit_opacities { splat_io::ply::opacity_from_logit(f64::from(o)) as f32 } else { o };
+                let mut coefficients = [Vec3::ZERO; SH_MAX_COEFFS];
+                for (j, c) in coefficients.iter_mut().enumerate().take(k) {
+                    let at = 3 * (i * k + j);
+                    *c = Vec3::new(sh[at], sh[at + 1], sh[at + 2]);
+                }
+                Particle::new(mean, scale, rotation, opacity, coefficients).map_err(|e| bad(e.to_string()))
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        if particles.is_empty() {
+            return Err(SplatError::new_err("the arrays hold no splats (N = 0)"));
+        }
+        Ok(Self { world: WorldSpec::of(Scene::new(particles, degree)), name: "arrays".into() })
+    }
+
+    /// The splats as arrays in the conventions of [`PyScene::from_arrays`] (linear scales,
+    /// opacities in [0, 1], unit w, x, y, z quaternions, sh (N, K, 3)): a dict of float32
+    /// arrays "means", "scales", "rotations", "opacities", "sh".
+    fn to_arrays<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let particles = &self.world.scene.particles;
+        let (n, k) = (particles.len(), sh_coeff_count(self.world.scene.sh_degree));
+        let flat = |f: &dyn Fn(&Particle) -> Vec<f32>| particles.iter().flat_map(f).collect::<Vec<f32>>();
+        let means = flat(&|p| p.mean.to_array().to_vec());
+        let scales = flat(&|p| p.scale.to_array().to_vec());
+        let rotations = flat(&|p| vec![p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z]);
+        let opacities = flat(&|p| vec![p.opacity]);
+        let sh = flat(&|p| p.sh.to_array()[..k].iter().flat_map(|c| c.to_array()).collect());
+        let dict = PyDict::new(py);
+        dict.set_item("means", arrays::shaped(py, means, &[n, 3])?)?;
+        dict.set_item("scales", arrays::shaped(py, scales, &[n, 3])?)?;
+        dict.set_item("rotations", arrays::shaped(py, rotations, &[n, 4])?)?;
+        dict.set_item("opacities", arrays::shaped(py, opacities, &[n])?)?;
+        dict.set_item("sh", arrays::shaped(py, sh, &[n, k, 3])?)?;
+        Ok(dict)
+    }
+
+    /// Number of splats.
+    fn __len__(&self) -> usize {
+        self.world.scene.particles.len()
+    }
+
+    /// SH degree of the splats' colours (0 to 3).
+    #[getter]
+    fn sh_degree(&self) -> u8 {
+        self.world.scene.sh_degree
+    }
+
+    /// Number of mesh triangles (worlds and glTF files).
+    #[getter]
+    fn triangles(&self) -> usize {
+        self.world.meshes.iter().map(|(mesh, _)| mesh.triangles.len()).sum()
+    }
+
+    /// The world's own camera (a world file's or the demo's), if it has one.
+    #[getter]
+    fn camera(&self) -> Option<PyCamera> {
+        self.world.camera.map(|camera| PyCamera { camera })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene({:?}: {} splats, SH degree {}, {} triangles)",
+            self.name,
+            self.__len__(),
+            self.sh_degree(),
+            self.triangles()
+        )
+    }
+}
+
+/// A pinhole (or COLMAP-lens) camera: intrinsics in pixels and a world-to-camera pose in
+/// OpenCV axes (x right, y down, z forward), as 3DGS and gsplat's `viewmats` and `Ks`.
+#[pyclass(name = "Camera", module = "splat", frozen, skip_from_py_object)]
+#[derive(Clone)]
+struct PyCamera {
+    camera: Camera,
+}
+
+#[pymethods]
+impl PyCamera {
+    /// A camera at `eye` looking at `target`, `up` the world's up, `fov_y` the vertical field
+    /// of view in degrees.
+    #[staticmethod]
+    #[pyo3(signature = (eye, target, up = (0.0, 1.0, 0.0), fov_y = 50.0, width = 640, height = 480))]
+    fn look_at(
+        eye: (f32, f32, f32),
+        target: (f32, f32, f32),
+        up: (f32, f32, f32),
+        fov_y: f32,
+        width: u32,
+        height: u32,
+    ) -> PyResult<Self> {
+        let camera = Camera::look_at(eye.into(), target.into(), up.into(), fov_y, width, height).map_err(fail)?;
+        Ok(Self { camera })
+    }
+
+    /// A camera from a 4 × 4 world-to-camera matrix (gsplat's `viewmats[i]`, OpenCV axes) and
+    /// a 3 × 3 intrinsic matrix K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] in pixels.
+    #[staticmethod]
+    fn from_matrices(
+        viewmat: &Bound<'_, PyAny>,
+        intrinsics: &Bound<'_, PyAny>,
+        width: u32,
+        height: u32,
+    ) -> PyResult<Self> {
+        let v = arrays::matrix::<4>("viewmat", viewmat)?;
+        let k = arrays::matrix::<3>("K", intrinsics)?;
+        if v[3] != [0.0, 0.0, 0.0, 1.0] {
+            return Err(SplatError::new_err(format!("viewmat's last row is {:?}; expected [0, 0, 0, 1]", v[3])));
+        }
+        if k[0][1] != 0.0 || k[1][0] != 0.0 || k[2] != [0.0, 0.0, 1.0] {
+            return Err(SplatError::new_err(format!(
+                "K is {k:?}; expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)"
+            )));
+        }
+        let rotation = Mat3::from_cols_array_2d(&[
+            [v[0][0], v[1][0], v[2][0]],
+            [v[0][1], v[1][1], v[2][1]],
+            [v[0][2], v[1][2], v[2][2]],
+        ]);
+        let translation = Vec3::new(v[0][3], v[1][3], v[2][3]);
+        let camera = Camera::from_intrinsics(width, height, k[0][0], k[1][1], k[0][2], k[1][2], rotation, translation)
+            .map_err(fail)?;
+        Ok(Self { camera })
+    }
+
+    /// Image width in pixels.
+    #[getter]
+    fn width(&self) -> u32 {
+        self.camera.width
+    }
+
+    /// Image height in pixels.
+    #[getter]
+    fn height(&self) -> u32 {
+        self.camera.height
+    }
+
+    /// The 4 × 4 world-to-camera matrix (OpenCV axes).
+    #[getter]
+    fn viewmat<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        let (r, t) = (self.camera.rotation, self.camera.translation);
+        let rows = [
+            vec![r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x],
+            vec![r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y],
+            vec![r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z],
+            vec![0.0, 0.0, 0.0, 1.0],
+        ];
+        PyArray2::from_vec2(py, &rows).expect("rows of equal length")
+    }
+
+    /// The 3 × 3 intrinsic matrix K.
+    #[getter(K)]
+    fn intrinsics<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        let c = &self.camera;
+        let rows = [vec![c.fx, 0.0, c.cx], vec![0.0, c.fy, c.cy], vec![0.0, 0.0, 1.0]];
+        PyArray2::from_vec2(py, &rows).expect("rows of equal length")
+    }
+
+    /// Pickling (Ray's object store, multiprocessing): a pinhole camera is rebuilt by
+    /// [`PyCamera::from_matrices`] from its matrices, exactly.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        if !self.camera.is_pinhole() {
+            return Err(SplatError::new_err(
+                "a camera with a COLMAP lens does not pickle: send the camera file's path and camera_index instead",
+            ));
+        }
+        let from = py.get_type::<PyCamera>().getattr("from_matrices")?;
+        let c = &self.camera;
+        let args = (self.viewmat(py), self.intrinsics(py), c.width, c.height).into_pyobject(py)?;
+        Ok((from, args))
+    }
+
+    /// Whether the lens is a pinhole (COLMAP's distorted, fisheye and equirectangular models are
+    /// not; the ray-tracing methods render through them).
+    #[getter]
+    fn is_pinhole(&self) -> bool {
+        self.camera.is_pinhole()
+    }
+
+    fn __repr__(&self) -> String {
+        let c = &self.camera;
+        format!(
+            "Camera({}×{}, fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}, centre {})",
+            c.width,
+            c.height,
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy,
+            c.center()
+        )
+    }
+}
+
+/// Every view of a camera file (an INRIA cameras.json, or a COLMAP model: a sparse/0 folder or
+/// its images.bin / images.txt), as (image name, camera) in the order `splat render` lists them.
+#[pyfunction]
+fn load_cameras(path: PathBuf) -> PyResult<Vec<(String, PyCamera)>> {
+    let views = splat_cli::args::load_cameras(&path).map_err(fail)?;
+    Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
+}
+
+/// Render `scene` as `splat render` would, with `options` its options (dashes as underscores)
+/// and `camera` in place of its camera options; `progress(done, total)` is called with pixels
+/// done as a CPU render advances. Returns a dict of float32 arrays: colour (H, W, 3), variance
+/// (H, W, 3), alpha (H, W), and where the backend made them depth (H, W) and normal (H, W, 3).
+#[pyfunction]
+#[pyo3(signature = (scene, view = None, /, *, progress = None, **options))]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    view: Option<&PyCamera>,
+    progress: Option<Py<PyAny>>,
+    options: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (args, extras) = options::render_args(py, options)?;
+    let mut args = args.0;
+    if view.is_some() && (args.scene.camera.is_some() || args.scene.eye.is_some()) {
+        return Err(SplatError::new_err(
+            "give the camera once: a Camera argument, or camera= (a camera file), or eye= and target=",
+        ));
+    }
+    args.options.apply_preset(args.scene.read.preset);
+    let mut world = scene.world.clone();
+    if let Some(view) = view {
+        world.camera = Some(view.camera);
+    }
+    let staged = args.scene.stage(world, 640, 480).map_err(fail)?;
+    args.options.apply_capture(&staged.world.scene);
+    splat_cli::args::check_memory(&staged.camera).map_err(fail)?;
+    let total = u64::from(staged.camera.width) * u64::from(staged.camera.height);
+    let reporter = Reporter::new(progress, total);
+    let path = args.pipeline == Some(PipelineArg::Path);
+    let frames = args.frames();
+    let (out, count, gpu, method) = py
+        .detach(|| -> anyhow::Result<_> {
+            let progress = |n: u64| reporter.advance(n);
+            if path {
+                let (out, gpu) = splat_cli::render::render_path(&args, &staged, &progress)?;
+                Ok((out, frames.count, gpu, splat_cli::render::path_description(&args)?))
+            } else {
+                let Rendered { out, count, gpu, algorithm } =
+                    splat_cli::render::render_frames(&args, &staged, extras, &progress)?;
+                Ok((out, count, gpu, format!("{algorithm:?}")))
+            }
+        })
+        .map_err(fail)?;
+    reporter.raise()?;
+    let dict = outputs(py, out, gpu, extras, path)?;
+    dict.set_item("first", frames.first)?;
+    dict.set_item("count", count)?;
+    dict.set_item("run", splat_cli::render::run_description(&args, &staged, &method))?;
+    Ok(dict)
+}
+
+/// The images of a render as a dict of arrays: colour and variance always; alpha, depth and
+/// normal from the frame loop, depth and normal of a GPU render where `extras` asked for them;
+/// and where it ran.
+fn outputs(
+    py: Python<'_>,
+    out: splat_core::frame::RenderOutput,
+    gpu: Option<String>,
+    extras: splat_gpu::Extras,
+    path: bool,
+) -> PyResult<Bound<'_, PyDict>> {
+    let dict = PyDict::new(py);
+    dict.set_item("color", image_to_array(py, out.mean)?)?;
+    dict.set_item("variance", image_to_array(py, out.variance)?)?;
+    if !path {
+        dict.set_item("alpha", image_to_array(py, out.alpha)?)?;
+        if gpu.is_none() || extras.depth {
+            dict.set_item("depth", image_to_array(py, out.depth)?)?;
+        }
+        if gpu.is_none() || extras.normal {
+            dict.set_item("normal", image_to_array(py, out.normal)?)?;
+        }
+    }
+    dict.set_item("device", gpu.unwrap_or_else(|| "cpu".into()))?;
+    Ok(dict)
+}
+
+/// Calls a Python progress callback from the render's worker threads: at most about a hundred
+/// times a render, the first exception it raises kept to be raised when the render ends.
+struct Reporter {
+    callback: Option<Py<PyAny>>,
+    total: u64,
+    done: AtomicU64,
+    /// The last count reported, held while the callback runs so that counts arrive in order.
+    reported: Mutex<u64>,
+    error: Mutex<Option<PyErr>>,
+}
+
+impl Reporter {
+    fn new(callback: Option<Py<PyAny>>, total: u64) -> Self {
+        Self { callback, total, done: AtomicU64::new(0), reported: Mutex::new(0), error: Mutex::new(None) }
+    }
+
+    /// `n` more pixels done: report when another hundredth of the image is, or all of it.
+    fn advance(&self, n: u64) {
+        let Some(callback) = &self.callback else { return };
+        self.done.fetch_add(n, Ordering::Relaxed);
+        let step = (self.total / 100).max(1);
+        let mut reported = self.reported.lock().expect("not poisoned");
+        let done = self.done.load(Ordering::Relaxed);
+        if done / step == *reported / step && !(done == self.total && *reported < done) {
+            return;
+        }
+        *reported = done;
+        Python::attach(|py| {
+            if let Err(e) = callback.call1(py, (done, self.total)) {
+                self.error.lock().expect("not poisoned").get_or_insert(e);
+            }
+        });
+    }
+
+    /// The callback's first exception, if it raised one.
+    fn raise(&self) -> PyResult<()> {
+        match self.error.lock().expect("not poisoned").take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The catalogue of methods: for each, its name, summary, family ("oracle", "trace",
+/// "raster"), the keyword arguments of its parameters, whether it is stochastic and unbiased,
+/// and whether the GPU has a kernel for it.
+#[pyfunction]
+fn methods(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+    use splat_core::catalogue::{CATALOGUE, Family};
+    CATALOGUE
+        .iter()
+        .map(|entry| {
+            let dict = PyDict::new(py);
+            dict.set_item("name", entry.name)?;
+            dict.set_item("summary", entry.summary)?;
+            let family = match entry.family {
+                Family::Oracle => "oracle",
+                Family::Trace => "trace",
+                Family::Raster => "raster",
+            };
+            dict.set_item("family", family)?;
+            let params: Vec<String> = entry.params.iter().map(|p| options::keyword(p.info().flag)).collect();
+            dict.set_item("parameters", params)?;
+            dict.set_item("stochastic", entry.stochastic)?;
+            dict.set_item("unbiased", entry.unbiased)?;
+            dict.set_item("gpu", entry.gpu)?;
+            Ok(dict)
+        })
+        .collect()
+}
+
+/// RMSE, PSNR (peak 1), SSIM and ꟻLIP of `test` against `reference`, float32 arrays (H, W) or
+/// (H, W, C), as `splat compare` measures them.
+#[pyfunction]
+#[pyo3(signature = (reference, test, pixels_per_degree = None))]
+fn compare<'py>(
+    py: Python<'py>,
+    reference: PyReadonlyArrayDyn<'py, f32>,
+    test: PyReadonlyArrayDyn<'py, f32>,
+    pixels_per_degree: Option<f32>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (a, b) = (image_from_array("reference", &reference)?, image_from_array("test", &test)?);
+    let ppd = pixels_per_degree.unwrap_or(splat_cli::compare::DEFAULT_PIXELS_PER_DEGREE);
+    let m = py.detach(|| splat_cli::compare::metrics(&a, &b, ppd)).map_err(fail)?;
+    let dict = PyDict::new(py);
+    dict.set_item("rmse", m.rmse)?;
+    dict.set_item("psnr", m.psnr)?;
+    dict.set_item("ssim", m.ssim)?;
+    dict.set_item("flip", m.flip)?;
+    Ok(dict)
+}
+
+/// The project's per-pixel z-test (`splat ztest`) of `mean`, averaged over `frames` frames,
+/// against `reference`, with the per-frame `variance` of an independent run of
+/// `variance_frames` frames, pooled with the mean run's own `mean_variance` where given.
+#[pyfunction]
+#[pyo3(signature = (mean, variance, reference, frames, mean_variance = None, variance_frames = None))]
+fn z_test<'py>(
+    py: Python<'py>,
+    mean: PyReadonlyArrayDyn<'py, f32>,
+    variance: PyReadonlyArrayDyn<'py, f32>,
+    reference: PyReadonlyArrayDyn<'py, f32>,
+    frames: u32,
+    mean_variance: Option<PyReadonlyArrayDyn<'py, f32>>,
+    variance_frames: Option<u32>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let mean = image_from_array("mean", &mean)?;
+    let variance = image_from_array("variance", &variance)?;
+    let reference = image_from_array("reference", &reference)?;
+    let pooling = match (mean_variance, variance_frames) {
+        (Some(v), Some(f)) => Some((image_from_array("mean_variance", &v)?, f)),
+        (None, None) => None,
+        _ => return Err(SplatError::new_err("give mean_variance and variance_frames together, or neither")),
+    };
+    let pooling = pooling.as_ref().map(|(image, frames)| (image, *frames));
+    let v = splat_cli::ztest::verdict(&mean, &variance, &reference, frames, pooling).map_err(fail)?;
+    let dict = PyDict::new(py);
+    dict.set_item("passes", v.passes())?;
+    dict.set_item("tested", v.tested)?;
+    dict.set_item("left_out", v.left_out)?;
+    dict.set_item("global", v.global)?;
+    dict.set_item("spread", v.spread)?;
+    dict.set_item("outliers", v.outliers)?;
+    dict.set_item("variance", v.variance)?;
+    dict.set_item("floored", v.floored)?;
+    dict.set_item("failures", v.failures)?;
+    Ok(dict)
+}
+
+/// Merge renders of shares of one run (`render(..., frames="A..B")`, in any order, their
+/// frames following on) into the render of the whole run, as `splat merge` does: a dict with
+/// "color", "variance", "alpha", "first", "count" and "run".
+#[pyfunction]
+fn merge<'py>(py: Python<'py>, parts: Vec<Bound<'py, PyDict>>) -> PyResult<Bound<'py, PyDict>> {
+    let mut shares = Vec::with_capacity(parts.len());
+    for (i, part) in parts.iter().enumerate() {
+        let item = |key: &str| {
+            part.get_item(key)?.ok_or_else(|| {
+                SplatError::new_err(format!("parts[{i}] has no \"{key}\": give merge the dicts render returns"))
+            })
+        };
+        let image = |key: &str| -> PyResult<splat_core::Image> {
+            let array = item(key)?;
+            let array: PyReadonlyArrayDyn<'_, f32> = array
+                .extract()
+                .map_err(|_| SplatError::new_err(format!("parts[{i}][\"{key}\"] is not a float32 array")))?;
+            image_from_array(&format!("parts[{i}][\"{key}\"]"), &array)
+        };
+        let accumulation = splat_core::frame::Accumulation {
+            first: item("first")?.extract()?,
+            count: item("count")?.extract()?,
+            mean: image("color")?,
+            variance: image("variance")?,
+            alpha: image("alpha")?,
+        };
+        shares.push(splat_io::accumulation::Share { accumulation, render: item("run")?.extract()? });
+    }
+    let names: Vec<PathBuf> = (0..parts.len()).map(|i| PathBuf::from(format!("parts[{i}]"))).collect();
+    let merged = splat_cli::merge::merge(&shares, &names).map_err(fail)?;
+    let a = merged.accumulation;
+    let dict = PyDict::new(py);
+    dict.set_item("color", image_to_array(py, a.mean)?)?;
+    dict.set_item("variance", image_to_array(py, a.variance)?)?;
+    dict.set_item("alpha", image_to_array(py, a.alpha)?)?;
+    dict.set_item("first", a.first)?;
+    dict.set_item("count", a.count)?;
+    dict.set_item("run", merged.render)?;
+    Ok(dict)
+}
+
+/// The module.
+#[pymodule]
+fn _splat(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("SplatError", m.py().get_type::<SplatError>())?;
+    m.add("SH_C0", splat_core::sh::SH_C0)?;
+    m.add_class::<PyScene>()?;
+    m.add_class::<PyCamera>()?;
+    m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(methods, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(z_test, m)?)?;
+    m.add_function(wrap_pyfunction!(merge, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,68 @@
+"""Shared fixtures of the Python package's tests: the `splat` binary the package is compared
+with, random Gaussians in a trainer's raw parameters, and an independent 3DGS .ply writer."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import shutil
+import struct
+
+import numpy as np
+import pytest
+
+REPO = pathlib.Path(__file__).resolve().parents[3]
+
+
+def missing(what: str) -> None:
+    """A test that cannot run fails under CI=true and says loudly that it skipped otherwise."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"{what} (CI=true: a test that cannot run fails)")
+    print(f"\nSKIPPED LOUDLY: {what}")
+    pytest.skip(what)
+
+
+@pytest.fixture(scope="session")
+def splat_bin() -> str:
+    """The `splat` CLI of this checkout's release build (or $SPLAT_BIN)."""
+    path = os.environ.get("SPLAT_BIN") or str(REPO / "target" / "release" / "splat")
+    if not (os.path.isfile(path) and os.access(path, os.X_OK)):
+        found = shutil.which("splat")
+        if found is None:
+            missing(f"no splat binary at {path}: build it with `cargo build --release --bin splat`")
+        path = found
+    return path
+
+
+def raw_gaussians(rng: np.random.Generator, n: int, degree: int = 1) -> dict:
+    """`n` Gaussians in front of a camera at the origin looking down +z, as a trainer stores
+    them: log scales, logit opacities, unnormalised w, x, y, z quaternions, SH (n, K, 3)."""
+    k = (degree + 1) ** 2
+    means = np.column_stack([rng.uniform(-1.2, 1.2, n), rng.uniform(-0.9, 0.9, n), rng.uniform(3.0, 6.0, n)])
+    sh = rng.normal(0.0, 0.4, (n, k, 3))
+    sh[:, 0] = rng.uniform(-1.5, 1.5, (n, 3))
+    return {
+        "means": means.astype(np.float32),
+        "scales": np.log(rng.uniform(0.08, 0.4, (n, 3))).astype(np.float32),
+        "rotations": (rng.normal(size=(n, 4)) * rng.uniform(0.5, 2.0, (n, 1))).astype(np.float32),
+        "opacities": rng.normal(0.0, 1.5, n).astype(np.float32),
+        "sh": sh.astype(np.float32),
+    }
+
+
+def write_3dgs_ply(path: pathlib.Path, g: dict) -> None:
+    """A binary little-endian .ply as the INRIA 3DGS code writes it: x y z nx ny nz, f_dc_0..2,
+    f_rest_* channel-major (all red coefficients, then green, then blue), opacity (logit),
+    scale_0..2 (log), rot_0..3 (w, x, y, z)."""
+    n, k, _ = g["sh"].shape
+    rest = g["sh"][:, 1:, :].transpose(0, 2, 1).reshape(n, 3 * (k - 1))
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+    names += [f"f_rest_{i}" for i in range(3 * (k - 1))]
+    names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    columns = [g["means"], np.zeros((n, 3)), g["sh"][:, 0, :], rest, g["opacities"][:, None], g["scales"], g["rotations"]]
+    table = np.hstack(columns).astype("<f4")
+    assert table.shape[1] == len(names)
+    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {n}\n"
+    header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
+    path.write_bytes(header.encode() + table.tobytes())
+    assert struct.calcsize("<f") * table.size == len(table.tobytes())
