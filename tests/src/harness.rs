@@ -352,11 +352,9 @@ impl Fault {
     }
 }
 
-/// The expected global or spread statistic (noise-free, [`StatTest::z_test_with_expectation`])
-/// from which a fault is visible at a suite's budget: a fault whose expected statistics
-/// stay below it changes the image by less than the noise of F frames can show, and no
-/// test of that budget can be required to see it (docs/power.md says which).
-pub const VISIBLE: f64 = 6.0;
+/// The expected statistic from which a fault is visible at a suite's budget (noise-free,
+/// [`StatTest::z_test_with_expectation`]; docs/power.md says which faults stay below it).
+pub use splat_core::stats::VISIBLE;
 
 /// One row of a power study.
 #[derive(Clone, Copy, Debug)]
@@ -374,7 +372,7 @@ impl PowerRow {
     /// Σ (d / se)² of `expected` over the √(2n) of each of the 3 channels (its own spread
     /// subtracts the n that noise adds).
     pub fn expected_spread(&self) -> f64 {
-        self.expected.spread + (self.expected.n as f64 / 3.0 / 2.0).sqrt()
+        splat_core::stats::expected_spread(self.expected.spread, self.expected.n, 3)
     }
 
     /// Whether the suite must reject it: a 2 % fault visible at the budget.

@@ -50,26 +50,15 @@ fn test(extra: &[String]) -> Result<()> {
         // Every test in a process of its own, two at a time: the statistical suites' processes
         // overlap instead of queueing binary after binary (lavapipe keeps one core of two busy
         // on the small test images). cargo-nextest runs no doctests; cargo test runs those.
-        let run = test_command(&[
-            "nextest",
-            "run",
-            "--workspace",
-            "--exclude",
-            PYTHON_PACKAGE,
-            "--cargo-profile",
-            "release",
-            "--profile",
-            "ci",
-        ]);
+        let run = test_command(&["nextest", "run", "--workspace", "--cargo-profile", "release", "--profile", "ci"]);
         let tests = run_status(run, "cargo nextest run")?;
-        let doctests = ["test", "--workspace", "--exclude", PYTHON_PACKAGE, "--release", "--doc"];
-        let docs = run_status(test_command(&doctests), "cargo test --doc")?;
+        let docs = run_status(test_command(&["test", "--workspace", "--release", "--doc"]), "cargo test --doc")?;
         if tests.success() { docs } else { tests }
     } else {
         if extra.is_empty() {
             eprintln!("cargo-nextest is not installed: running the test binaries one after another with cargo test");
         }
-        let mut cmd = test_command(&["test", "--workspace", "--exclude", PYTHON_PACKAGE, "--release"]);
+        let mut cmd = test_command(&["test", "--workspace", "--release"]);
         cmd.args(extra);
         run_status(cmd, "cargo test")?
     };
@@ -159,11 +148,6 @@ fn run_checked(cmd: &mut Command, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// The Python package's crate: an extension module, built by maturin (whose build leaves the
-/// interpreter's symbols to the interpreter) and tested by pytest ([`python_tests`]), not by
-/// cargo.
-const PYTHON_PACKAGE: &str = "splat-py";
-
 /// Cargo's output folder: `CARGO_TARGET_DIR`, else `target/`.
 fn target_dir() -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root().join("target"), PathBuf::from)
@@ -206,7 +190,7 @@ fn has_nextest() -> bool {
 /// run -p` would resolve one package's features and build its libraries a second time) and
 /// run from `target/release/examples/`.
 fn run_examples() -> Result<()> {
-    cargo(&["build", "--quiet", "--release", "--workspace", "--exclude", PYTHON_PACKAGE, "--examples"])?;
+    cargo(&["build", "--quiet", "--release", "--workspace", "--examples"])?;
     let out = root().join("target/examples");
     std::fs::create_dir_all(&out)?;
     let path = |name: &str| out.join(name).display().to_string();
@@ -237,7 +221,7 @@ fn run_examples() -> Result<()> {
 /// 176 s in the dev profile, which builds them again).
 fn check_docs() -> Result<()> {
     eprintln!(
-        "cargo doc --release --workspace --exclude splat-cli --exclude splat-view --exclude {PYTHON_PACKAGE} --no-deps \
+        "cargo doc --release --workspace --exclude splat-cli --exclude splat-view --exclude splat-py --no-deps \
          (RUSTDOCFLAGS=-D warnings) …"
     );
     let status = Command::new(env!("CARGO"))
@@ -251,7 +235,7 @@ fn check_docs() -> Result<()> {
             "--exclude",
             "splat-view",
             "--exclude",
-            PYTHON_PACKAGE,
+            "splat-py",
             "--no-deps",
             "--quiet",
         ])

@@ -69,7 +69,7 @@ pub struct RenderArgs {
     /// Render frames A..B (A included, B not) of the run seeded by --seed, a share of it (one
     /// task of a job array), each frame with the decisions it has in the whole run, and write
     /// their accumulation (mean, variance, alpha, frame range) to -o PART.acc for `splat
-    /// merge`. Shares of a run that does not start at frame 0 render on the CPU.
+    /// merge`.
     #[arg(help_heading = "Method", long, value_parser = parse_frame_range, conflicts_with_all = ["spp", "all_cameras"])]
     pub frames: Option<(u32, u32)>,
     /// The scene, camera and shading.
@@ -524,7 +524,7 @@ pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Re
     let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..args.frames() };
     let gpu = match args.scene.backend {
         BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
-        BackendArg::Auto if !matches!(gaussians, GaussianEstimator::DepthSampling { .. }) && frames.first == 0 => {
+        BackendArg::Auto if !matches!(gaussians, GaussianEstimator::DepthSampling { .. }) => {
             crate::args::gpu_context(BackendArg::Auto)?
         }
         _ => None,
@@ -604,9 +604,7 @@ fn choose_gpu(
             supported()?;
             crate::args::gpu_context(BackendArg::Gpu)
         }
-        BackendArg::Auto if supported().is_ok() && args.frames().first == 0 => {
-            crate::args::gpu_context(BackendArg::Auto)
-        }
+        BackendArg::Auto if supported().is_ok() => crate::args::gpu_context(BackendArg::Auto),
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
 }

@@ -187,6 +187,31 @@ pub fn verdict(
     })
 }
 
+/// Whether a bias is visible at a budget: the z-test of an estimator's exact expectation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Power {
+    /// The expected global statistic, the largest over the colour channels.
+    pub global: f64,
+    /// The expected spread statistic ([`splat_core::stats::expected_spread`]), the largest
+    /// over the colour channels.
+    pub spread: f64,
+    /// Whether either reaches [`splat_core::stats::VISIBLE`]: a test of this budget can be
+    /// required to see the bias.
+    pub visible: bool,
+}
+
+/// The power of the z-test against a bias (docs/power.md): `expectation`, the exact expected
+/// image of a biased estimator (say the oracle of a scene with its opacities × 1.02), tested
+/// against `reference` with the per-frame `variance` of the unbiased estimator at `frames`
+/// frames, noise-free. Its statistics are those the estimator's z-test has on average.
+pub fn power(expectation: &Image, variance: &Image, reference: &Image, frames: u32) -> Result<Power> {
+    let v = verdict(expectation, variance, reference, frames, None)?;
+    let channels = expectation.channels().min(3) as usize;
+    let spread = splat_core::stats::expected_spread(v.spread, v.tested, channels);
+    let visible = v.global.max(spread) >= splat_core::stats::VISIBLE;
+    Ok(Power { global: v.global, spread, visible })
+}
+
 /// ((F₁ − 1) v₁ + (F₂ − 1) v₂) / (F₁ + F₂ − 2): the two runs' per-frame variances pooled.
 fn pooled(own: &Image, own_frames: u32, other: &Image, other_frames: u32) -> Result<Image> {
     if own.channels() != other.channels() {

@@ -1,7 +1,8 @@
 //! Renders past one machine: `splat render --frames A..B` shares of a run merged by `splat
 //! merge` equal the run rendered at once (bit for bit where every frame is the same, within two
 //! f32 ulps of the mean where they differ: the shares' means are f32, the run's is folded in
-//! f64), and `--all-cameras --shard I/N` tasks fill the folder the whole set fills.
+//! f64), on the GPU as on the CPU, and `--all-cameras --shard I/N` tasks fill the folder the
+//! whole set fills.
 
 use splat_tests::root;
 use std::path::{Path, PathBuf};
@@ -181,7 +182,6 @@ fn shares_of_different_runs_overlaps_and_gaps_are_refused() {
     refused(&["render", "--frames", "4..4", "-o", text(&out)], "is not a range of frames");
     refused(&["render", "--frames", "0..4", "-o", text(&out)], "give -o PART.acc");
     refused(&["render", "--frames", "0..4", "--spp", "4", "-o", text(&cut)], "cannot be used with");
-    refused(&["render", "--backend", "gpu", "--frames", "4..8", "-o", text(&cut)], "render shares of a run on the CPU");
 }
 
 /// The N tasks of a job array (`--shard I/N`) write, together, the files of the whole set.
@@ -235,4 +235,52 @@ fn shards_fill_the_folder_of_the_whole_set() {
     let mut args = base.to_vec();
     args.extend_from_slice(&["--shard", "3/3", "-o", text(&shards)]);
     refused(&args, "is not a share");
+}
+
+/// The GPU renders a share's own frames: its share of frames 5..12 is the CPU's (every
+/// varying pixel-channel within 10⁻⁴ but where a decision's u lies within the kernels' rounding
+/// of its threshold; frames 0..7 agree with it on few), and GPU shares merged equal the GPU's
+/// run within the f32 rounding of its running means.
+#[test]
+fn gpu_shares_are_the_cpus_shares() {
+    let render = |backend: &str, range: &str, name: &str| -> Option<splat_core::frame::Accumulation> {
+        let path = scratch(name);
+        let mut args: Vec<&str> = vec!["render"];
+        args.extend_from_slice(&CLOUD);
+        args.extend_from_slice(&["--method", "stochastic", "--pixel-filter", "box", "--seed", "7"]);
+        args.extend_from_slice(&["--backend", backend, "--frames", range, "-o", text(&path)]);
+        let o = splat(&args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        if !o.status.success() && backend == "gpu" && stderr.contains("adapter") {
+            splat_tests::skip("gpu_shares_are_the_cpus_shares", &stderr);
+            return None;
+        }
+        assert!(o.status.success(), "{stderr}");
+        Some(splat_io::accumulation::read(&path).unwrap().accumulation)
+    };
+    let Some(gpu) = render("gpu", "5..12", "g-share.acc") else { return };
+    let cpu = render("cpu", "5..12", "c-share.acc").unwrap();
+    // Agreement within 10⁻⁴ on the pixel-channels whose frames vary (elsewhere every run agrees).
+    let varying: Vec<usize> = (0..cpu.variance.data().len()).filter(|&i| cpu.variance.data()[i] > 0.0).collect();
+    let close = |a: &[f32], b: &[f32]| {
+        varying.iter().filter(|&&i| (a[i] - b[i]).abs() <= 1e-4).count() as f64 / varying.len() as f64
+    };
+    let agree = close(gpu.mean.data(), cpu.mean.data());
+    let early = render("cpu", "0..7", "c-early.acc").unwrap();
+    let other = close(early.mean.data(), cpu.mean.data());
+    assert!(varying.len() > 1000, "the view varies: {} pixel-channels", varying.len());
+    assert!(
+        agree >= 0.99 && other < 0.2,
+        "the GPU's frames 5..12: {agree:.3} agree with the CPU's; frames 0..7: {other:.3}"
+    );
+    let head = render("gpu", "0..5", "g-head.acc").unwrap();
+    let whole = render("gpu", "0..12", "g-whole.acc").unwrap();
+    let merged = splat_core::frame::Accumulation::merge(&[gpu, head]).unwrap();
+    let largest = merged.mean.data().iter().zip(whole.mean.data()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+    eprintln!(
+        "GPU share agrees with the CPU's on {:.2} %, frames 0..7 on {:.2} %; merged against the run {largest:e}",
+        100.0 * agree,
+        100.0 * other
+    );
+    assert!(largest <= 1e-5, "GPU shares merged against the GPU's run: {largest:e}");
 }

@@ -68,6 +68,20 @@ pub struct ZTest {
     pub n: usize,
 }
 
+/// The expected global or spread statistic (noise-free: the z-test of an estimator's exact
+/// expectation) from which a bias is visible at a budget (docs/power.md): a bias whose
+/// expected statistics stay below it changes the image by less than the noise of the budget's
+/// frames can show, and no test of that budget can be required to see it.
+pub const VISIBLE: f64 = 6.0;
+
+/// The spread statistic an estimator has in expectation, from the `spread` of the z-test of
+/// its exact expectation over `n` pixel-channels of `channels` channels: the noise-free
+/// Σ (d / se)² over the √(2n) of a channel's pixel-channels (the z-test's own spread subtracts
+/// the n that noise adds).
+pub fn expected_spread(spread: f64, n: usize, channels: usize) -> f64 {
+    spread + (n as f64 / channels as f64 / 2.0).sqrt()
+}
+
 /// Thresholds of the z-test (docs/architecture.md).
 pub const GLOBAL_MAX: f64 = 4.0;
 /// Largest accepted spread statistic.

@@ -373,7 +373,7 @@ fn path_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var f = 0u; f < params.frames; f++) {
         iterations += 1u;
         let frame = params.first_frame + f;
-        path_sampler_begin(gid.x, gid.y, params.seed, frame);
+        path_sampler_begin(gid.x, gid.y, params.seed, params.run_first + frame);
         let l = path_radiance(path_camera_ray(gid.x, gid.y));
         sample_pick = no_pick();
         fold(index, vec4<f32>(l, 1.0), frame);

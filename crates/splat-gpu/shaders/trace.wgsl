@@ -83,7 +83,9 @@ struct Params {
     first_hit: u32,
     // In MODE_HYBRID, the rasterizer's samples per pixel S: S first hits a pixel.
     raster_samples: u32,
-    pad_n2: u32,
+    // splat_core::Frames::first: frame f of this render is frame run_first + f of the run,
+    // whose key and camera sample it draws (a share of a longer run; 0 otherwise).
+    run_first: u32,
 }
 
 // The state of one ray between passes (pass-per-dispatch mode), mirrored by splat_gpu::PassState:
@@ -923,7 +925,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var f = 0u; f < frames; f++) {
         iterations += 1u;
         let frame = params.first_frame + f;
-        let pixel_key = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, frame)));
+        let pixel_key = xxhash32(vec3<u32>(gid.x, gid.y, frame_key(params.seed, params.run_first + frame)));
         var total = vec4<f32>(0.0);
         var camera_pick = no_pick();
         var finished = false;
@@ -933,7 +935,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // it made lavapipe run every ray-tracing render about 40 % slower).
         var sample = 0u;
         var hit_index = index * samples;
-        var camera = frame_ray(gid.x, gid.y, frame);
+        var camera = frame_ray(gid.x, gid.y, params.run_first + frame);
         if (hybrid) {
             camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
         }

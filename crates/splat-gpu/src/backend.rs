@@ -18,18 +18,6 @@ pub struct Extras {
     pub normal: bool,
 }
 
-/// Refuse a share of a run (frames from [`Frames::first`] > 0): the kernels number the frames
-/// of a dispatch from 0 (the ray tracer draws each frame's key from its index), so a share would
-/// redraw the first frames of the run instead of its own.
-pub(crate) fn whole_run(frames: &Frames) -> Result<(), GpuError> {
-    match frames.first {
-        0 => Ok(()),
-        first => Err(GpuError::Unsupported(format!(
-            "the GPU renders runs from frame 0; this share starts at frame {first}: render shares of a run on the CPU"
-        ))),
-    }
-}
-
 /// Whether the GPU renders `algorithm` with `extras`, before anything is uploaded: the
 /// kernels' own rules ([`GpuTracer::supports`], [`GpuRasterizer::supports`]) and what the
 /// backend composes from them.
@@ -82,7 +70,6 @@ pub fn render(
     extras: Extras,
     frames: &Frames,
 ) -> Result<RenderOutput, GpuError> {
-    whole_run(frames)?;
     supports(algorithm, extras)?;
     supports_meshes(algorithm, shot.meshes)?;
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
@@ -115,7 +102,7 @@ pub fn render(
             let keys = frames.keys(true)?;
             let one = Frames { accumulation: splat_core::frame::AccumulationFormat::F32, ..*frames };
             splat_core::frame::fold_frames(camera, &keys, frames.accumulation, &|_| {}, |f, key| {
-                let sample = splat_core::camera_sampling::frame_sample(frames.seed, f);
+                let sample = splat_core::camera_sampling::frame_sample(frames.seed, frames.index(f));
                 let frame_camera = settings.sampling.pinhole(camera, &sample)?;
                 let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, &frame_camera, raster_settings)?;
                 let mut out = raster.render_keys(method, &[key], &one)?.0;

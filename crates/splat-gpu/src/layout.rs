@@ -301,8 +301,9 @@ pub struct Params {
     pub first_hit: u32,
     /// In `MODE_HYBRID`, the rasterizer's samples per pixel S: S first hits a pixel.
     pub raster_samples: u32,
-    /// Padding.
-    pub pad_n2: u32,
+    /// [`splat_core::Frames::first`]: frame f of the render draws as frame `run_first + f` of
+    /// the run (its key, its camera sample, the path tracer's sample index).
+    pub run_first: u32,
 }
 
 /// The code of a normal mode in the kernels (`NORMAL_*` in `lighting.wgsl`).
@@ -668,6 +669,7 @@ pub fn params(
         focus_distance: s.sampling.lens.map_or(1.0, |l| l.focus_distance),
         accumulation: frames.accumulation.code(),
         normal_mode: normal_code(s.normal_mode),
+        run_first: frames.first,
         ..lighting_params(trace)
     }
 }
@@ -1068,7 +1070,7 @@ mod tests {
                 normal_mode,
                 first_hit,
                 raster_samples,
-                pad_n2
+                run_first
             ]
         );
         assert_mirrors!(

@@ -63,7 +63,6 @@ impl ProgressiveTrace {
     /// count is ignored: [`ProgressiveTrace::step`] says how many frames to add).
     pub fn new(tracer: &GpuTracer, camera: &Camera, method: &Method, frames: &Frames) -> Result<Self, GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
-        crate::backend::whole_run(frames)?;
         frames.keys(true)?;
         let ctx = tracer.context();
         let targets = TraceTargets::new(ctx, camera.width, camera.height);
@@ -105,7 +104,6 @@ impl ProgressiveTrace {
 
     /// Draw the decisions from `frames`' seed and generator from now on and restart.
     pub fn set_frames(&mut self, frames: &Frames) -> Result<(), GpuError> {
-        crate::backend::whole_run(frames)?;
         frames.keys(true)?;
         self.frames = *frames;
         self.reset();

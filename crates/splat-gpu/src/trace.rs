@@ -393,11 +393,11 @@ impl<'a> GpuTracer<'a> {
         }
         let still = if sampling.is_random() { None } else { Some(raster(camera)?) };
         let per_frame = |f: u32| -> Result<(Camera, DeviceFirstHits), GpuError> {
-            let key = splat_core::rng::frame_key(frames.seed, f);
+            let key = splat_core::rng::frame_key(frames.seed, frames.index(f));
             let (frame_camera, hits) = match &still {
                 Some(r) => (*camera, r.first_hits(first, key, frames.u_shift)?),
                 None => {
-                    let sample = splat_core::camera_sampling::frame_sample(frames.seed, f);
+                    let sample = splat_core::camera_sampling::frame_sample(frames.seed, frames.index(f));
                     let frame_camera = sampling.pinhole(camera, &sample)?;
                     (frame_camera, raster(&frame_camera)?.first_hits(first, key, frames.u_shift)?)
                 }
@@ -501,7 +501,6 @@ impl<'a> GpuTracer<'a> {
         path: Option<(&wgpu::ComputePipeline, &wgpu::Buffer)>,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         camera.validate().map_err(splat_core::RenderError::from)?;
-        crate::backend::whole_run(frames)?;
         splat_core::trace::check_camera(self.trace.settings(), camera)?;
         let params = MethodParams::try_from(method)?;
         let per_frame = matches!(first_hits, Some(FirstHits::PerFrame(_)));

@@ -71,37 +71,36 @@ pub fn write(path: &Path, share: &Share) -> Result<(), Error> {
     std::fs::write(path, bytes).map_err(|e| Error::new(path, ErrorKind::Io(e)))
 }
 
-/// Read a share from `path`, refusing a file that is not one, of another version, or whose
-/// data does not match its header.
+/// Read a share from `path`, refusing a file that is not one ([`parse`]).
 pub fn read(path: &Path) -> Result<Share, Error> {
-    let bytes = read_file(path)?;
-    let bad = |message: String| Error::new(path, ErrorKind::Accumulation(message));
-    let end = bytes.iter().position(|&b| b == b'\n').ok_or_else(|| bad("no header line".into()))?;
-    let header: Header = serde_json::from_slice(&bytes[..end])
-        .map_err(|e| bad(format!("the header is not an accumulation header ({e})")))?;
+    parse(&read_file(path)?).map_err(|message| Error::new(path, ErrorKind::Accumulation(message)))
+}
+
+/// A share from the bytes of an accumulation file, refusing what is not one, another version,
+/// and data that does not match the header or is not finite.
+pub fn parse(bytes: &[u8]) -> Result<Share, String> {
+    let end = bytes.iter().position(|&b| b == b'\n').ok_or("no header line")?;
+    let header: Header =
+        serde_json::from_slice(&bytes[..end]).map_err(|e| format!("the header is not an accumulation header ({e})"))?;
     if header.format != FORMAT {
-        return Err(bad(format!("format '{}', expected '{FORMAT}'", header.format)));
+        return Err(format!("format '{}', expected '{FORMAT}'", header.format));
     }
     if header.version != VERSION {
-        return Err(bad(format!("version {}, this reader reads version {VERSION}", header.version)));
+        return Err(format!("version {}, this reader reads version {VERSION}", header.version));
     }
     if header.count == 0 {
-        return Err(bad("it holds no frames (count 0)".into()));
+        return Err("it holds no frames (count 0)".into());
     }
-    let pixels = u64::from(header.width) * u64::from(header.height);
-    let expected = pixels * VALUES as u64 * 4;
     let data = &bytes[end + 1..];
+    let pixels = u64::from(header.width) * u64::from(header.height);
+    let expected = pixels.checked_mul(VALUES as u64 * 4).ok_or_else(|| format!("{pixels} pixels is not a size"))?;
     if data.len() as u64 != expected {
-        return Err(bad(format!(
-            "{}×{} pixels need {expected} bytes of data; the file holds {}",
-            header.width,
-            header.height,
-            data.len()
-        )));
+        let (w, h) = (header.width, header.height);
+        return Err(format!("{w}×{h} pixels need {expected} bytes of data; the file holds {}", data.len()));
     }
     let values: Vec<f32> = data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     if let Some(v) = values.iter().find(|v| !v.is_finite()) {
-        return Err(bad(format!("it holds {v}: every value must be finite")));
+        return Err(format!("it holds {v}: every value must be finite"));
     }
     let (w, h) = (header.width, header.height);
     let channel =

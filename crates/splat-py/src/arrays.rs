@@ -2,10 +2,11 @@
 //! numpy.
 
 use crate::SplatError;
+use glam::Vec3;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use splat_core::Image;
-use splat_core::particle::sh_coeff_count;
+use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_core::{Image, Particle};
 
 /// A shape as Python prints it: `(5, 3)`.
 fn shape_text(shape: &[usize]) -> String {
@@ -41,6 +42,51 @@ pub fn sh_coefficients(shape: &[usize], n: usize) -> PyResult<usize> {
         )));
     }
     Ok(k)
+}
+
+/// The columns of N splats as the Python layer passes them (float32, contiguous, shapes
+/// checked): means (N, 3), scales (N, 3), rotations (N, 4) w, x, y, z, opacities (N,), sh
+/// (N, k, 3); scales logarithmic and opacities logits where the flags say so.
+pub struct Splats<'a> {
+    pub means: &'a [f32],
+    pub scales: &'a [f32],
+    pub rotations: &'a [f32],
+    pub opacities: &'a [f32],
+    pub sh: &'a [f32],
+    pub k: usize,
+    pub log_scales: bool,
+    pub logit_opacities: bool,
+}
+
+impl Splats<'_> {
+    /// Splat `i` as the `.ply` reader makes a particle (its activations, in f64), validated;
+    /// an error names the splat and what is wrong with it.
+    pub fn particle(&self, i: usize) -> Result<Particle, String> {
+        let v3 = |a: &[f32]| Vec3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+        let q = &self.rotations[4 * i..4 * i + 4];
+        let mean = v3(self.means);
+        let bad = |what: String| format!("splat {i}: {what} (mean {mean}, rotation w, x, y, z {q:?})");
+        let scale = if self.log_scales {
+            let raw = v3(self.scales).to_array().map(f64::from);
+            match raw.map(splat_io::ply::scale_from_log) {
+                [Some(x), Some(y), Some(z)] => Vec3::new(x, y, z),
+                _ => return Err(bad(format!("log scale {raw:?} gives no usable positive scale"))),
+            }
+        } else {
+            v3(self.scales)
+        };
+        let wxyz = [q[0], q[1], q[2], q[3]].map(f64::from);
+        let rotation = splat_io::ply::unit_quaternion(wxyz)
+            .ok_or_else(|| bad("the rotation quaternion has zero length".into()))?;
+        let o = self.opacities[i];
+        let opacity = if self.logit_opacities { splat_io::ply::opacity_from_logit(f64::from(o)) as f32 } else { o };
+        let mut coefficients = [Vec3::ZERO; SH_MAX_COEFFS];
+        for (j, c) in coefficients.iter_mut().enumerate().take(self.k) {
+            let at = 3 * (i * self.k + j);
+            *c = Vec3::new(self.sh[at], self.sh[at + 1], self.sh[at + 2]);
+        }
+        Particle::new(mean, scale, rotation, opacity, coefficients).map_err(|e| bad(e.to_string()))
+    }
 }
 
 /// The number of rows of a 2-D array `name` of `columns` columns.

@@ -16,9 +16,9 @@ use glam::{Mat3, Vec3};
 use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use splat_cli::args::ReadArgs;
-use splat_cli::render::{PipelineArg, Rendered};
-use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_cli::args::{ReadArgs, Staged};
+use splat_cli::render::{PipelineArg, RenderArgs, Rendered};
+use splat_core::particle::sh_coeff_count;
 use splat_core::{Camera, Particle, Scene};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
@@ -50,9 +50,13 @@ impl PyScene {
     /// `options` are `splat render`'s reading options (strict, spz_axes, preset, screen_filter).
     #[staticmethod]
     #[pyo3(signature = (path, **options))]
-    fn load(path: PathBuf, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+    fn load(py: Python<'_>, path: PathBuf, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let read: options::Parsed<ReadArgs> = options::parse("load", options)?;
         let opened = splat_io::world::open_world(Some(&path), read.0.options()).map_err(fail)?;
+        if let Some(warning) = splat_io::skipped_properties_warning(&path, &opened.skipped_properties) {
+            let text = std::ffi::CString::new(format!("{warning} (strict=True refuses them)")).unwrap_or_default();
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &text, 1)?;
+        }
         Ok(Self { world: opened.world, name: opened.name })
     }
 
@@ -70,7 +74,9 @@ impl PyScene {
     /// parameters: exp and the sigmoid are applied here, as the .ply reader does).
     #[staticmethod]
     #[pyo3(signature = (means, scales, rotations, opacities, sh, log_scales, logit_opacities))]
+    #[allow(clippy::too_many_arguments)]
     fn from_arrays(
+        py: Python<'_>,
         means: PyReadonlyArrayDyn<'_, f32>,
         scales: PyReadonlyArrayDyn<'_, f32>,
         rotations: PyReadonlyArrayDyn<'_, f32>,
@@ -85,39 +91,18 @@ impl PyScene {
         arrays::check_shape("opacities", opacities.shape(), &[n])?;
         let k = arrays::sh_coefficients(sh.shape(), n)?;
         let degree = (1..=3u8).find(|&d| sh_coeff_count(d) == k).unwrap_or(0);
-        let (means, scales, rotations) = (means.as_slice()?, scales.as_slice()?, rotations.as_slice()?);
-        let (opacities, sh) = (opacities.as_slice()?, sh.as_slice()?);
-        let particles = (0..n)
-            .map(|i| {
-                let v3 = |a: &[f32]| Vec3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
-                let q = &rotations[4 * i..4 * i + 4];
-                let wxyz = [q[0], q[1], q[2], q[3]].map(f64::from);
-                let mean = v3(means);
-                let bad = |what: String| {
-                    SplatError::new_err(format!("splat {i}: {what} (mean {mean}, rotation w, x, y, z {q:?})"))
-                };
-                let scale = if log_scales {
-                    let raw = v3(scales).to_array().map(f64::from);
-                    let linear = raw.map(splat_io::ply::scale_from_log);
-                    match linear {
-                        [Some(x), Some(y), Some(z)] => Vec3::new(x, y, z),
-                        _ => return Err(bad(format!("log scale {raw:?} gives no usable positive scale"))),
-                    }
-                } else {
-                    v3(scales)
-                };
-                let rotation = splat_io::ply::unit_quaternion(wxyz)
-                    .ok_or_else(|| bad("the rotation quaternion has zero length".into()))?;
-                let o = opacities[i];
-                let opacity = if logit_opacities { splat_io::ply::opacity_from_logit(f64::from(o)) as f32 } else { o };
-                let mut coefficients = [Vec3::ZERO; SH_MAX_COEFFS];
-                for (j, c) in coefficients.iter_mut().enumerate().take(k) {
-                    let at = 3 * (i * k + j);
-                    *c = Vec3::new(sh[at], sh[at + 1], sh[at + 2]);
-                }
-                Particle::new(mean, scale, rotation, opacity, coefficients).map_err(|e| bad(e.to_string()))
-            })
-            .collect::<PyResult<Vec<_>>>()?;
+        let columns = arrays::Splats {
+            means: means.as_slice()?,
+            scales: scales.as_slice()?,
+            rotations: rotations.as_slice()?,
+            opacities: opacities.as_slice()?,
+            sh: sh.as_slice()?,
+            k,
+            log_scales,
+            logit_opacities,
+        };
+        let particles = py.detach(|| (0..n).map(|i| columns.particle(i)).collect::<Result<Vec<_>, String>>());
+        let particles = particles.map_err(SplatError::new_err)?;
         if particles.is_empty() {
             return Err(SplatError::new_err("the arrays hold no splats (N = 0)"));
         }
@@ -315,7 +300,8 @@ fn load_cameras(path: PathBuf) -> PyResult<Vec<(String, PyCamera)>> {
 /// Render `scene` as `splat render` would, with `options` its options (dashes as underscores)
 /// and `camera` in place of its camera options; `progress(done, total)` is called with pixels
 /// done as a CPU render advances. Returns a dict of float32 arrays: colour (H, W, 3), variance
-/// (H, W, 3), alpha (H, W), and where the backend made them depth (H, W) and normal (H, W, 3).
+/// (H, W, 3), alpha (H, W), and where the backend made them depth (H, W) and normal (H, W, 3);
+/// the frames it holds ("first", "count") and what else decides them ("run").
 #[pyfunction]
 #[pyo3(signature = (scene, view = None, /, *, progress = None, **options))]
 fn render<'py>(
@@ -326,22 +312,8 @@ fn render<'py>(
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (args, extras) = options::render_args(py, options)?;
-    let mut args = args.0;
-    if view.is_some() && (args.scene.camera.is_some() || args.scene.eye.is_some()) {
-        return Err(SplatError::new_err(
-            "give the camera once: a Camera argument, or camera= (a camera file), or eye= and target=",
-        ));
-    }
-    args.options.apply_preset(args.scene.read.preset);
-    let mut world = scene.world.clone();
-    if let Some(view) = view {
-        world.camera = Some(view.camera);
-    }
-    let staged = args.scene.stage(world, 640, 480).map_err(fail)?;
-    args.options.apply_capture(&staged.world.scene);
-    splat_cli::args::check_memory(&staged.camera).map_err(fail)?;
-    let total = u64::from(staged.camera.width) * u64::from(staged.camera.height);
-    let reporter = Reporter::new(progress, total);
+    let (args, staged) = stage(args.0, scene, view)?;
+    let reporter = Reporter::new(progress, u64::from(staged.camera.width) * u64::from(staged.camera.height));
     let path = args.pipeline == Some(PipelineArg::Path);
     let frames = args.frames();
     let (out, count, gpu, method) = py
@@ -363,6 +335,26 @@ fn render<'py>(
     dict.set_item("count", count)?;
     dict.set_item("run", splat_cli::render::run_description(&args, &staged, &method))?;
     Ok(dict)
+}
+
+/// `scene` staged as `splat render` stages a file with `args` (the trainer's implications
+/// applied), `view` as the world's camera; refused when the camera is given twice or the
+/// image cannot fit in memory.
+fn stage(mut args: RenderArgs, scene: &PyScene, view: Option<&PyCamera>) -> PyResult<(RenderArgs, Staged)> {
+    if view.is_some() && (args.scene.camera.is_some() || args.scene.eye.is_some()) {
+        return Err(SplatError::new_err(
+            "give the camera once: a Camera argument, or camera= (a camera file), or eye= and target=",
+        ));
+    }
+    args.options.apply_preset(args.scene.read.preset);
+    let mut world = scene.world.clone();
+    if let Some(view) = view {
+        world.camera = Some(view.camera);
+    }
+    let staged = args.scene.stage(world, 640, 480).map_err(fail)?;
+    args.options.apply_capture(&staged.world.scene);
+    splat_cli::args::check_memory(&staged.camera).map_err(fail)?;
+    Ok((args, staged))
 }
 
 /// The images of a render as a dict of arrays: colour and variance always; alpha, depth and
@@ -520,6 +512,31 @@ fn z_test<'py>(
     Ok(dict)
 }
 
+/// The power of the z-test against a bias (docs/power.md): the z-test of `expectation`, a
+/// biased estimator's exact expected image (the oracle of a scene with its opacities × 1.02,
+/// say), against `reference` with the unbiased estimator's per-frame `variance` at `frames`
+/// frames, noise-free: "global" and "spread", the statistics that estimator's z-test has on
+/// average, and "visible", whether either reaches the level a test of this budget can be
+/// required to see.
+#[pyfunction]
+fn power<'py>(
+    py: Python<'py>,
+    expectation: PyReadonlyArrayDyn<'py, f32>,
+    variance: PyReadonlyArrayDyn<'py, f32>,
+    reference: PyReadonlyArrayDyn<'py, f32>,
+    frames: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    let expectation = image_from_array("expectation", &expectation)?;
+    let variance = image_from_array("variance", &variance)?;
+    let reference = image_from_array("reference", &reference)?;
+    let p = splat_cli::ztest::power(&expectation, &variance, &reference, frames).map_err(fail)?;
+    let dict = PyDict::new(py);
+    dict.set_item("global", p.global)?;
+    dict.set_item("spread", p.spread)?;
+    dict.set_item("visible", p.visible)?;
+    Ok(dict)
+}
+
 /// Merge renders of shares of one run (`render(..., frames="A..B")`, in any order, their
 /// frames following on) into the render of the whole run, as `splat merge` does: a dict with
 /// "color", "variance", "alpha", "first", "count" and "run".
@@ -574,5 +591,6 @@ fn _splat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(z_test, m)?)?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add_function(wrap_pyfunction!(power, m)?)?;
     Ok(())
 }

@@ -40,6 +40,12 @@ def test_shares_merge_into_the_run(scene):
     assert (merged["first"], merged["count"]) == (0, 10) and (whole["first"], whole["count"]) == (0, 10)
     assert ulps(merged["color"], whole["color"]) <= 1
     np.testing.assert_allclose(merged["variance"], whole["variance"], rtol=1e-5, atol=1e-9)
+    # The merged variance gives the z-test one run's variance gives.
+    reference = splat.render(scene, camera(), method="exact", backend="cpu")["color"]
+    variance = splat.render(scene, camera(), spp=40, seed=11, method="stochastic", backend="cpu")["variance"]
+    one, joined = (splat.z_test(r["color"], variance, reference, 10, r["variance"], 40) for r in (whole, merged))
+    for key in ("global", "spread", "outliers", "variance"):
+        assert joined[key] == pytest.approx(one[key], rel=1e-4, abs=1e-6), key
     other = splat.render(scene, camera(), frames="10..12", method="stochastic", seed=8, backend="cpu")
     with pytest.raises(splat.SplatError, match="shares of different renders"):
         splat.merge([merged, other])

@@ -174,3 +174,15 @@ def test_the_z_test_accepts_an_unbiased_estimator_and_rejects_a_two_percent_bias
 
     depth_sampling = z_test(stochastic(scene, method="depth-sampling-k", k=1))
     assert not depth_sampling["passes"], depth_sampling
+
+    # The power table's row for these biases: the exact expectation of each biased estimator
+    # (the exact render of the scaled scene) says which is visible at this budget.
+    def expected(factor):
+        scaled = splat.Scene.from_arrays(**dict(arrays, opacities=arrays["opacities"] * factor))
+        expectation = splat.render(scaled, camera, method="exact", backend="cpu")["color"]
+        return splat.power(expectation, variance, reference, frames=FRAMES)
+
+    two, half, none = expected(1.02), expected(1.005), expected(1.0)
+    assert two["visible"] and two["global"] > 6, two
+    assert not half["visible"], half
+    assert none["global"] == 0 and not none["visible"], none

@@ -375,7 +375,6 @@ impl<'a> GpuRasterizer<'a> {
     /// pixel once (the surface look) or each fragment (the volumetric look); StochasticSplats
     /// lights each written fragment.
     pub fn render(&self, method: &RasterMethod, frames: &Frames) -> Result<(RenderOutput, GpuStats), GpuError> {
-        crate::backend::whole_run(frames)?;
         let keys = frames.keys(method.is_stochastic())?;
         self.render_keys(method, &keys, frames)
     }

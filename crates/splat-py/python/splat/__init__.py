@@ -38,6 +38,7 @@ if "XDG_RUNTIME_DIR" not in os.environ:
 from . import _splat  # noqa: E402
 from ._splat import SH_C0, Camera, SplatError, compare as _compare, load_cameras, methods  # noqa: E402
 from ._splat import merge  # noqa: E402
+from ._splat import power as _power  # noqa: E402
 from ._splat import z_test as _z_test  # noqa: E402
 
 __all__ = [
@@ -49,6 +50,7 @@ __all__ = [
     "load_cameras",
     "merge",
     "methods",
+    "power",
     "render",
     "z_test",
 ]
@@ -246,4 +248,16 @@ def z_test(mean, variance, reference, frames: int, mean_variance=None, variance_
         int(frames),
         own,
         variance_frames,
+    )
+
+
+def power(expectation, variance, reference, frames: int) -> dict:
+    """The power of the z-test against a bias (docs/power.md): `expectation` is a biased
+    estimator's exact expected image (say the exact render of the scene with its opacities
+    × 1.02), `variance` the per-frame variance of the unbiased estimator, `frames` the budget.
+    Returns "global" and "spread", the statistics the biased estimator's z-test has on average,
+    and "visible", whether either reaches 6, the level a test of this budget can be required to
+    see (below it the bias hides in the noise of `frames` frames)."""
+    return _power(
+        _as_f32(expectation, "expectation"), _as_f32(variance, "variance"), _as_f32(reference, "reference"), int(frames)
     )

@@ -80,3 +80,9 @@ def z_test(
     variance_frames: Optional[int] = None,
 ) -> dict[str, Any]: ...
 def merge(parts: list[dict[str, Any]]) -> dict[str, Any]: ...
+def power(
+    expectation: npt.NDArray[np.float32],
+    variance: npt.NDArray[np.float32],
+    reference: npt.NDArray[np.float32],
+    frames: int,
+) -> dict[str, Any]: ...
