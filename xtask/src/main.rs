@@ -75,52 +75,16 @@ fn test(extra: &[String]) -> Result<()> {
 }
 
 /// The Python package (crates/splat-py): build its wheel with maturin in the virtual
-/// environment `target/python` (made and filled from requirements-test.txt when needed),
-/// install it into a fresh virtual environment beside it to prove that it installs there with
-/// nothing but its declared dependencies, and run its tests with pytest against this build's
-/// `splat` binary.
+/// environment `target/python` (made and filled from requirements-test.txt), install it into
+/// a fresh virtual environment beside it to prove that it installs there with nothing but its
+/// declared dependencies, and run its tests with pytest against this build's `splat` binary.
 fn python_tests() -> Result<()> {
     let crate_dir = root().join("crates/splat-py");
-    let venv = target_dir().join("python");
-    let python = venv.join("bin/python");
-    if !python.exists() {
-        eprintln!("making the virtual environment {} …", venv.display());
-        run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&venv), "python3 -m venv")?;
-    }
-    let requirements = crate_dir.join("requirements-test.txt");
-    let pip = ["-m", "pip", "install", "--quiet", "--disable-pip-version-check"];
-    run_checked(Command::new(&python).args(pip).arg("-r").arg(&requirements), "pip install -r requirements-test.txt")?;
-    let wheels = target_dir().join("wheels");
-    let _ = std::fs::remove_dir_all(&wheels);
-    eprintln!("maturin build --release (crates/splat-py) …");
-    let mut maturin = Command::new(venv.join("bin/maturin"));
-    maturin
-        .current_dir(&crate_dir)
-        .args(["build", "--release", "--quiet", "--out"])
-        .arg(&wheels)
-        .arg("-i")
-        .arg(&python);
-    run_checked(&mut maturin, "maturin build")?;
-    let wheel = std::fs::read_dir(&wheels)?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .find(|p| p.extension().is_some_and(|x| x == "whl"))
-        .context("maturin wrote no wheel")?;
-    let fresh = target_dir().join("python-fresh");
-    let _ = std::fs::remove_dir_all(&fresh);
-    run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&fresh), "python3 -m venv (fresh)")?;
-    let fresh_python = fresh.join("bin/python");
+    let python = python_environment(&crate_dir.join("requirements-test.txt"))?;
+    let wheel = build_wheel(&crate_dir, &python)?;
+    install_fresh(&wheel)?;
     run_checked(
-        Command::new(&fresh_python).args(pip).arg(&wheel),
-        "pip install of the wheel into a fresh environment",
-    )?;
-    let smoke = "import splat; out = splat.render(splat.Scene.demo(), width=32, height=24, backend='cpu'); \
-                 assert out['color'].shape == (24, 32, 3) and out['color'].max() > 0; print('fresh environment: ok')";
-    run_checked(
-        Command::new(&fresh_python).args(["-c", smoke]).current_dir(target_dir()),
-        "the wheel in a fresh environment",
-    )?;
-    run_checked(
-        Command::new(&python).args(pip).args(["--force-reinstall", "--no-deps"]).arg(&wheel),
+        Command::new(&python).args(PIP_INSTALL).args(["--force-reinstall", "--no-deps"]).arg(&wheel),
         "pip install of the wheel",
     )?;
     let splat = target_dir().join("release/splat");
@@ -129,9 +93,76 @@ fn python_tests() -> Result<()> {
     }
     eprintln!("pytest crates/splat-py/tests …");
     let mut pytest = Command::new(&python);
-    pytest.current_dir(&crate_dir).args(["-m", "pytest", "-q", "tests"]);
-    pytest.env("SPLAT_BIN", &splat);
+    pytest.current_dir(&crate_dir).args(["-m", "pytest", "-q", "tests"]).env("SPLAT_BIN", &splat);
     run_checked(&mut pytest, "pytest")
+}
+
+/// `python -m pip install`, quietly.
+const PIP_INSTALL: [&str; 5] = ["-m", "pip", "install", "--quiet", "--disable-pip-version-check"];
+
+/// The interpreter of `target/python`, made when missing and given `requirements`.
+fn python_environment(requirements: &Path) -> Result<PathBuf> {
+    let venv = target_dir().join("python");
+    let python = venv.join("bin/python");
+    if !python.exists() {
+        eprintln!("making the virtual environment {} …", venv.display());
+        run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&venv), "python3 -m venv")?;
+    }
+    run_checked(
+        Command::new(&python).args(PIP_INSTALL).arg("-r").arg(requirements),
+        "pip install -r requirements-test.txt",
+    )?;
+    Ok(python)
+}
+
+/// The package's wheel, built by the environment's maturin into `target/wheels`. The wheel's
+/// build resolves the features of the workspace's test build (splat-py's Cargo.toml names the
+/// ones its dependencies lack), so it compiles pyo3, numpy and the package alone; a renderer
+/// crate compiled again means the features drifted, which it says.
+fn build_wheel(crate_dir: &Path, python: &Path) -> Result<PathBuf> {
+    let wheels = target_dir().join("wheels");
+    let _ = std::fs::remove_dir_all(&wheels);
+    eprintln!("maturin build --release (crates/splat-py) …");
+    let maturin = python.with_file_name("maturin");
+    let built = Command::new(maturin)
+        .current_dir(crate_dir)
+        .args(["build", "--release", "--out"])
+        .arg(&wheels)
+        .arg("-i")
+        .arg(python)
+        .output()
+        .context("running maturin build")?;
+    let log = String::from_utf8_lossy(&built.stderr);
+    if !built.status.success() {
+        bail!("maturin build failed ({}):\n{log}", built.status);
+    }
+    if let Some(line) = log.lines().find(|l| l.contains("Compiling splat-core")) {
+        eprintln!(
+            "warning: maturin compiled the renderer again ({}): the features of `cargo tree -p splat-py -e features` \
+             differ from the workspace's; name the missing ones in crates/splat-py/Cargo.toml",
+            line.trim()
+        );
+    }
+    std::fs::read_dir(&wheels)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.extension().is_some_and(|x| x == "whl"))
+        .context("maturin wrote no wheel")
+}
+
+/// Install `wheel` into a new virtual environment (`target/python-fresh`) with its declared
+/// dependencies only, and render there.
+fn install_fresh(wheel: &Path) -> Result<()> {
+    let fresh = target_dir().join("python-fresh");
+    let _ = std::fs::remove_dir_all(&fresh);
+    run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&fresh), "python3 -m venv (fresh)")?;
+    let python = fresh.join("bin/python");
+    run_checked(
+        Command::new(&python).args(PIP_INSTALL).arg(wheel),
+        "pip install of the wheel into a fresh environment",
+    )?;
+    let smoke = "import splat; out = splat.render(splat.Scene.demo(), width=32, height=24, backend='cpu'); \
+                 assert out['color'].shape == (24, 32, 3) and out['color'].max() > 0; print('fresh environment: ok')";
+    run_checked(Command::new(&python).args(["-c", smoke]).current_dir(target_dir()), "the wheel in a fresh environment")
 }
 
 /// The system's Python 3.

@@ -21,3 +21,26 @@ pub mod ztest;
 pub fn counted(n: usize, noun: &str) -> String {
     if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::{Args, Command};
+    use splat_core::catalogue::Param;
+
+    /// The flag the catalogue gives each parameter (in the viewer's hover text and the warning
+    /// about options a method does not read) is an option of every command that takes methods.
+    #[test]
+    fn every_parameter_flag_of_the_catalogue_is_an_option() {
+        let commands = [
+            ("render", crate::render::RenderArgs::augment_args(Command::new("render"))),
+            ("converge", crate::converge::ConvergeArgs::augment_args(Command::new("converge"))),
+            ("bench", crate::bench::BenchArgs::augment_args(Command::new("bench"))),
+        ];
+        for (name, command) in commands {
+            for param in Param::ALL {
+                let flag = param.info().flag;
+                assert!(command.get_arguments().any(|a| a.get_long() == Some(flag)), "splat {name} has no --{flag}");
+            }
+        }
+    }
+}

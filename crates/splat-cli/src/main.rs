@@ -129,23 +129,3 @@ fn main() -> ExitCode {
         }
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use splat_core::catalogue::Param;
-
-    /// The flag the catalogue gives each parameter (in the viewer's hover text and the warning
-    /// about options a method does not read) is an option of every command that takes methods.
-    #[test]
-    fn every_parameter_flag_of_the_catalogue_is_an_option() {
-        let cli = Cli::command();
-        for name in ["render", "converge", "bench"] {
-            let command = cli.find_subcommand(name).unwrap_or_else(|| panic!("no command {name}"));
-            for param in Param::ALL {
-                let flag = param.info().flag;
-                assert!(command.get_arguments().any(|a| a.get_long() == Some(flag)), "splat {name} has no --{flag}");
-            }
-        }
-    }
-}

@@ -1,5 +1,9 @@
 //! End-to-end tests of the `splat` binary.
 
+/// Shares of a run and shards of a view set (`--frames`, `splat merge`, `--shard`), in this test
+/// binary rather than one of its own (a binary to link costs CI).
+mod shares;
+
 use splat_core::sh::SH_C0;
 use splat_tests::reference::{Gaussian, trace};
 use splat_tests::root;

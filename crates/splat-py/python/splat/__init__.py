@@ -36,8 +36,8 @@ if "XDG_RUNTIME_DIR" not in os.environ:
     os.environ.setdefault("NODEVICE_SELECT", "1")
 
 from . import _splat  # noqa: E402
-from ._splat import SH_C0, Camera, SplatError, compare as _compare, load_cameras, methods  # noqa: E402
-from ._splat import merge  # noqa: E402
+from ._splat import SH_C0, Camera, SplatError, load_cameras, merge, methods  # noqa: E402
+from ._splat import compare as _compare  # noqa: E402
 from ._splat import power as _power  # noqa: E402
 from ._splat import z_test as _z_test  # noqa: E402
 
@@ -54,6 +54,7 @@ __all__ = [
     "render",
     "z_test",
 ]
+
 
 def _as_f32(value, name: str) -> np.ndarray:
     """A contiguous float32 array over `value`: numpy arrays, anything with ``__array__`` (a CPU
