@@ -137,10 +137,10 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     if args.pipeline == Some(PipelineArg::Path) {
         return run_path(&args, &staged);
     }
-    let Staged { world: World { scene, .. }, camera, .. } = &staged;
+    let Staged { world: World { scene, lighting, meshes }, camera, .. } = &staged;
     let bar = progress_bar(u64::from(camera.width) * u64::from(camera.height));
     let start = Instant::now();
-    let Rendered { out, .. } = render_frames(&args, &staged, extras(&args), &|n| bar.inc(n))?;
+    let Rendered { out, algorithm, .. } = render_frames(&args, &staged, extras(&args), &|n| bar.inc(n))?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     write_outputs(&args, &out)?;
@@ -150,16 +150,10 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         camera.width,
         camera.height,
         describe(&args),
-        frames_done(args.spp, is_random(&args, &staged)),
+        frames_done(args.spp, algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling)),
         written(&args)
     );
     Ok(())
-}
-
-/// Whether the render of `args` draws random decisions (its frames differ).
-fn is_random(args: &RenderArgs, staged: &Staged) -> bool {
-    let lighting = &staged.world.lighting;
-    algorithm(args).is_ok_and(|a| a.is_random(lighting, !staged.world.meshes.is_empty(), &staged.settings.sampling))
 }
 
 /// `splat render --frames A..B`: one share of a run, written as an accumulation file.

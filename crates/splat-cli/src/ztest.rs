@@ -5,6 +5,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Image;
 use splat_core::stats::{GLOBAL_MAX, MIN_TESTED, OUTLIERS_MAX, SPREAD_MAX, VARIANCE_MIN, ZTest, standard_error};
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `splat ztest`.
@@ -43,7 +44,8 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
     let (mean, variance, reference) = (read(&args.mean)?, read(&args.variance)?, read(&args.reference)?);
     let mean_variance = args.mean_variance.as_deref().map(read).transpose()?;
     let pooling = mean_variance.as_ref().zip(args.variance_frames);
-    let verdict = verdict(&mean, &variance, &reference, args.frames, pooling)?;
+    let variance = tested_variance(&mean, &variance, &reference, args.frames, pooling)?;
+    let verdict = statistics(&mean, &variance, &reference, args.frames)?;
     println!("z-test of {} ({} frames) against {}", args.mean.display(), args.frames, args.reference.display());
     println!(
         "tested     {} pixel-channels ({} constant and equal to the reference left out)",
@@ -60,10 +62,6 @@ pub fn run(args: &ZtestArgs) -> Result<bool> {
         println!("verdict    REJECT ({})", verdict.failures.join("; "));
     }
     if let Some(path) = &args.zmap {
-        let variance = match pooling {
-            Some((own, frames)) => pooled(own, args.frames, &variance, frames)?,
-            None => variance,
-        };
         write_zmap(path, &mean, &variance, &reference, args.frames)?;
         eprintln!("z-map → {}", path.display());
     }
@@ -112,6 +110,19 @@ pub fn verdict(
     frames: u32,
     pooling: Option<(&Image, u32)>,
 ) -> Result<Verdict> {
+    let variance = tested_variance(mean, variance, reference, frames, pooling)?;
+    statistics(mean, &variance, reference, frames)
+}
+
+/// The variance [`verdict`] tests with, its inputs checked: `variance`, or pooled with the mean
+/// run's own where `pooling` gives it.
+fn tested_variance<'a>(
+    mean: &Image,
+    variance: &'a Image,
+    reference: &Image,
+    frames: u32,
+    pooling: Option<(&Image, u32)>,
+) -> Result<Cow<'a, Image>> {
     if frames == 0 {
         bail!("--frames must be at least 1");
     }
@@ -137,14 +148,14 @@ pub fn verdict(
     if let Some(bad) = variance.data().iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
         bail!("the variance image holds {bad}: expected finite values ≥ 0");
     }
-    let pooled_variance;
-    let variance = match pooling {
-        Some((own, variance_frames)) => {
-            pooled_variance = pooled(own, frames, variance, variance_frames)?;
-            &pooled_variance
-        }
-        None => variance,
-    };
+    Ok(match pooling {
+        Some((own, variance_frames)) => Cow::Owned(pooled(own, frames, variance, variance_frames)?),
+        None => Cow::Borrowed(variance),
+    })
+}
+
+/// The z-test's statistics of checked images, and the criteria they fail.
+fn statistics(mean: &Image, variance: &Image, reference: &Image, frames: u32) -> Result<Verdict> {
     let tested = Channels::new(mean, variance, reference);
     if tested.mean.len() < MIN_TESTED {
         bail!("only {} pixel-channels carry information (at least {MIN_TESTED} are needed)", tested.mean.len());
