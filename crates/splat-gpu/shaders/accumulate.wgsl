@@ -8,7 +8,7 @@ struct AccParams {
     pad: u32,
 }
 
-@group(0) @binding(0) var<uniform> acc_params: AccParams;
+@group(0) @binding(0) var<storage, read> acc_params: AccParams;
 @group(0) @binding(1) var<storage, read> frame_in: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> acc32: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> acc16: array<vec2<u32>>;

@@ -20,7 +20,7 @@ const MODE_DEPTH: u32 = 1u;
 const MODE_NORMAL: u32 = 2u;
 const MODE_VARIANCE: u32 = 3u;
 
-@group(0) @binding(0) var<uniform> display: DisplayParams;
+@group(0) @binding(0) var<storage, read> display: DisplayParams;
 @group(0) @binding(1) var<storage, read> mean: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> m2: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> picks: array<Pick>;

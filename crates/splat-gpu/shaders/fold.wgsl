@@ -3,8 +3,8 @@
 // The target is read by `frame_color` (fold_target.wgsl: one sample; fold_target_msaa.wgsl: the
 // mean of the S samples, the MSAA resolve), each sample composed over what lies behind it.
 
-@group(0) @binding(0) var<uniform> params: RasterParams;
-@group(0) @binding(1) var<uniform> frame: FrameParams;
+@group(0) @binding(0) var<storage, read> params: RasterParams;
+@group(0) @binding(1) var<storage, read> frame: FrameParams;
 @group(0) @binding(3) var<storage, read_write> out_mean: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> out_var: array<vec4<f32>>;
 // The mesh pre-pass's colour and distance per sample (entry pixel × S + i, mesh_prepass.wgsl),

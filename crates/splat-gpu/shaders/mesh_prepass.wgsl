@@ -7,7 +7,7 @@
 // fragments read the distance (splat.wgsl), the fold blends the colour under them with the
 // sample's remaining transmittance (fold.wgsl). Sample i of pixel p is entry p S + i.
 
-@group(0) @binding(0) var<uniform> params: RasterParams;
+@group(0) @binding(0) var<storage, read> params: RasterParams;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
 @group(0) @binding(2) var<storage, read> triangles: array<Triangle>;
 @group(0) @binding(3) var<storage, read> mesh_materials: array<MeshMaterial>;

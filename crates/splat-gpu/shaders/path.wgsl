@@ -25,7 +25,7 @@ struct PathParams {
     env_up: vec4<f32>,
 }
 
-@group(0) @binding(13) var<uniform> path: PathParams;
+@group(0) @binding(13) var<storage, read> path: PathParams;
 // Sobol direction numbers, bit-reversed, 16 per dimension (sampler.rs `sobol_directions`).
 @group(0) @binding(14) var<storage, read> sobol_vectors: array<u32>;
 // Emissive triangles: cumulative selection probability (f32 bits) and leaf-order index

@@ -15,7 +15,7 @@ struct RasterParticle {
     pad1: f32,
 }
 
-@group(0) @binding(0) var<uniform> params: RasterParams;
+@group(0) @binding(0) var<storage, read> params: RasterParams;
 @group(0) @binding(1) var<storage, read> particles: array<RasterParticle>;
 @group(0) @binding(2) var<storage, read> sh: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> splats: array<Splat>;

@@ -25,7 +25,7 @@
 // transparent triangles' lists come first (chunks 0 .. w), then the splats' (chunks w .. z).
 // lavapipe stops a shader invocation's loops after 65,535 iterations in all, so the host cuts
 // the lists into chunks that stay below it (one chunk of each on other adapters).
-@group(0) @binding(23) var<uniform> rop_chunk: vec4<u32>;
+@group(0) @binding(23) var<storage, read> rop_chunk: vec4<u32>;
 // Every triangle of the meshes in the meshes' order (entry o: the triangle of place o), and
 // their materials: a transparent triangle is a fragment of the raster operations (raster/mod.rs
 // `triangle_fragments`), drawn before the splats in that order.

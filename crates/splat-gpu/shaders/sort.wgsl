@@ -21,7 +21,7 @@ struct SortParams {
     scan_len: u32,
 }
 
-@group(0) @binding(0) var<uniform> sp: SortParams;
+@group(0) @binding(0) var<storage, read> sp: SortParams;
 @group(0) @binding(1) var<storage, read> keys_in: array<u32>;
 @group(0) @binding(2) var<storage, read> vals_in: array<u32>;
 @group(0) @binding(3) var<storage, read_write> keys_out: array<u32>;

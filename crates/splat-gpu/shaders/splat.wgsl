@@ -4,8 +4,8 @@
 // the twin of a branch of crates/splat-core/src/raster/mod.rs (Rasterizer::sorted and
 // Rasterizer::stochastic_splat with one sample at the pixel centre).
 
-@group(0) @binding(0) var<uniform> params: RasterParams;
-@group(0) @binding(1) var<uniform> frame: FrameParams;
+@group(0) @binding(0) var<storage, read> params: RasterParams;
+@group(0) @binding(1) var<storage, read> frame: FrameParams;
 @group(0) @binding(2) var<storage, read> splats: array<Splat>;
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;

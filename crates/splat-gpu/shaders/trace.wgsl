@@ -162,7 +162,7 @@ const MAX_BOUNCES: u32 = 15u;
 // often than lanes × the busiest lane's total, which the host checks against the budget.
 const LOOP_BUDGET: u32 = 65535u;
 
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> particles: array<Particle>;
 @group(0) @binding(2) var<storage, read> nodes: array<Node>;
 @group(0) @binding(3) var<storage, read> sh: array<vec4<f32>>;

@@ -78,7 +78,7 @@ impl Accumulator {
         }
         ctx.queue.write_buffer(&self.frame_in, 0, bytemuck::cast_slice(frame));
         let params = AccParams { count: self.pixels as u32, frame: self.frames, format: self.format.code(), pad: 0 };
-        let uniform = ctx.upload_uniform("acc params", bytemuck::bytes_of(&params));
+        let uniform = ctx.upload("acc params", bytemuck::bytes_of(&params));
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("accumulate"),
             layout: &self.pipeline.get_bind_group_layout(0),

@@ -43,8 +43,8 @@ pub struct GpuContext {
     pub max_binding: u64,
     /// Whether timestamp queries are available.
     pub timestamps: bool,
-    /// Alignment of dynamic uniform offsets.
-    pub(crate) uniform_alignment: u64,
+    /// Alignment of dynamic storage offsets.
+    pub(crate) storage_alignment: u64,
     /// The sample counts the rasterizer's targets (RGBA32F, the blend format and Depth32F)
     /// multisample at on this adapter: 1, and those of 2, 4, 8 and 16 that every format has.
     pub msaa_counts: Vec<u32>,
@@ -157,7 +157,7 @@ impl GpuContext {
             msaa_counts: msaa_counts(adapter, features),
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
-            uniform_alignment: u64::from(limits.min_uniform_buffer_offset_alignment),
+            storage_alignment: u64::from(limits.min_storage_buffer_offset_alignment),
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
             device,
@@ -223,19 +223,15 @@ impl GpuContext {
         })
     }
 
-    /// Bytes between consecutive [`crate::Params`] in a uniform buffer read at dynamic offsets.
-    pub(crate) fn uniform_stride(&self) -> u64 {
-        (std::mem::size_of::<crate::Params>() as u64).next_multiple_of(self.uniform_alignment)
+    /// Bytes between consecutive [`crate::Params`] in their buffer, read at dynamic offsets
+    /// ([`params_entry`]).
+    pub(crate) fn params_stride(&self) -> u64 {
+        (std::mem::size_of::<crate::Params>() as u64).next_multiple_of(self.storage_alignment)
     }
 
     /// A read-only storage buffer holding `contents`.
     pub(crate) fn upload(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
         self.upload_as(label, contents, wgpu::BufferUsages::STORAGE)
-    }
-
-    /// A uniform buffer holding `contents`.
-    pub(crate) fn upload_uniform(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
-        self.upload_as(label, contents, wgpu::BufferUsages::UNIFORM)
     }
 
     fn upload_as(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
@@ -309,8 +305,16 @@ pub(crate) fn storage_entry(
     }
 }
 
-/// A uniform-buffer entry of at least `size` bytes, with a dynamic offset when `dynamic`.
-pub(crate) fn uniform_entry(
+/// The entry of a shader's parameters (at least `size` bytes, at a dynamic offset when
+/// `dynamic`): a read-only storage buffer. No shader of this crate reads a uniform buffer
+/// (`layout::tests::check_layout` refuses one): lavapipe (Mesa 22.3, CI's driver) inlines the
+/// values of uniforms that steer branches into the shader, compiles it again for each new set
+/// of values (16–25 s for the ray-tracing megakernel, here for each scene), and re-derives the
+/// inlined shader at every dispatch that binds the uniform (about 0.1 s of the megakernel's);
+/// it never inlines storage buffers. Measured with an empty Mesa shader cache,
+/// `one_frame_equals_the_cpu_frame` (two fixtures, six methods): 35 s with a uniform buffer
+/// (two compiles, 100–180 ms a render), 19 s with this one (one compile, 3–53 ms a render).
+pub(crate) fn params_entry(
     binding: u32,
     visibility: wgpu::ShaderStages,
     dynamic: bool,
@@ -320,7 +324,7 @@ pub(crate) fn uniform_entry(
         binding,
         visibility,
         ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
             has_dynamic_offset: dynamic,
             min_binding_size: wgpu::BufferSize::new(size as u64),
         },

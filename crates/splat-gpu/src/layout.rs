@@ -812,10 +812,11 @@ pub(crate) mod wgsl_check {
     }
 
     /// Check a bind group layout written in Rust against the bindings the shader declares, as
-    /// naga reflects them (all in group 0): each binding has an entry of its kind (uniform,
-    /// read-only or read-write storage, a texture multisampled or not), visible to every stage
-    /// whose entry point uses it, a uniform's minimum size at least its WGSL type's; and each
-    /// entry is a binding of the shader. wgpu finds the same mistakes only when it creates the
+    /// naga reflects them (all in group 0): each binding has an entry of its kind (read-only or
+    /// read-write storage, a texture multisampled or not; never a uniform buffer,
+    /// [`crate::context::params_entry`]), visible to every stage whose entry point uses it, a
+    /// minimum size, where the layout gives one, at least the WGSL type's; and each entry is a
+    /// binding of the shader. wgpu finds the same mistakes only when it creates the
     /// pipeline, on an adapter.
     pub(crate) fn check_layout(
         name: &str,
@@ -839,20 +840,24 @@ pub(crate) mod wgsl_check {
                 .find(|e| e.binding == binding.binding)
                 .unwrap_or_else(|| panic!("{label} has no entry in the layout"));
             match (var.space, entry.ty) {
-                (
-                    AddressSpace::Uniform,
-                    BindingType::Buffer { ty: BufferBindingType::Uniform, min_binding_size, .. },
-                ) => {
-                    let size = u64::from(layouter[var.ty].size);
-                    let min = min_binding_size.map_or(0, |s| s.get());
-                    assert!(min >= size, "{label}: the layout's minimum size {min} is below the WGSL type's {size}");
+                (AddressSpace::Uniform, _) => {
+                    panic!(
+                        "{label} is a uniform buffer: parameters are read-only storage (context::params_entry says why)"
+                    )
                 }
                 (
                     AddressSpace::Storage { access },
-                    BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, .. },
+                    BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, min_binding_size, .. },
                 ) => {
                     let shader = if access.contains(StorageAccess::STORE) { "read_write" } else { "read" };
                     assert_eq!(read_only, !access.contains(StorageAccess::STORE), "{label}: the shader's is {shader}");
+                    if let Some(min) = min_binding_size {
+                        let size = u64::from(layouter[var.ty].size);
+                        assert!(
+                            min.get() >= size,
+                            "{label}: the layout's minimum size {min} is below the WGSL type's {size}"
+                        );
+                    }
                 }
                 (AddressSpace::Handle, BindingType::Texture { multisampled, .. }) => match module.types[var.ty].inner {
                     TypeInner::Image {

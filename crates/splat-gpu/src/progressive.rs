@@ -279,7 +279,7 @@ impl DisplayPass {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let usage = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let uniform = ctx.buffer("display", std::mem::size_of::<DisplayParams>() as u64, usage);
         Self { module, layout, pipeline_layout, uniform, pipelines: Vec::new() }
     }
@@ -288,7 +288,7 @@ impl DisplayPass {
     pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 4] {
         let fragment = wgpu::ShaderStages::FRAGMENT;
         [
-            crate::context::uniform_entry(0, fragment, false, std::mem::size_of::<DisplayParams>()),
+            crate::context::params_entry(0, fragment, false, std::mem::size_of::<DisplayParams>()),
             crate::context::storage_entry(1, fragment, true),
             crate::context::storage_entry(2, fragment, true),
             crate::context::storage_entry(3, fragment, true),

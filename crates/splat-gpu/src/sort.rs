@@ -133,7 +133,7 @@ impl RadixSort {
             scan: pipeline("scan"),
             scatter: pipeline("scatter"),
             layout,
-            stride: (size_of::<SortParams>() as u64).next_multiple_of(ctx.uniform_alignment),
+            stride: (size_of::<SortParams>() as u64).next_multiple_of(ctx.storage_alignment),
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
@@ -162,7 +162,7 @@ impl RadixSort {
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sort params"),
             size: self.stride * 9,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let bind = |ki: &wgpu::Buffer, vi: &wgpu::Buffer, ko: &wgpu::Buffer, vo: &wgpu::Buffer| {
@@ -273,9 +273,9 @@ pub fn sort_pairs(
 
 /// The sort's bindings (checked against `sort.wgsl`'s by a test).
 fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
-    let uniform = crate::context::uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
+    let params = crate::context::params_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
     let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
-    [uniform, storage(1, true), storage(2, true), storage(3, false), storage(4, false), storage(5, false)]
+    [params, storage(1, true), storage(2, true), storage(3, false), storage(4, false), storage(5, false)]
 }
 
 #[cfg(test)]

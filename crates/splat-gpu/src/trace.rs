@@ -14,7 +14,7 @@
 //! # Ok::<(), splat_gpu::GpuError>(())
 //! ```
 
-use crate::context::{compute_pipeline, storage_entry, uniform_entry};
+use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
@@ -198,7 +198,7 @@ impl TracePipeline {
     pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 18] {
         let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
         [
-            uniform_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
+            params_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
             storage(1, true),
             storage(2, true),
             storage(3, true),
@@ -211,7 +211,7 @@ impl TracePipeline {
             storage(10, true),
             storage(11, true),
             storage(12, true),
-            uniform_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
+            params_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
             storage(14, true),
             storage(15, true),
             storage(16, true),
@@ -302,7 +302,7 @@ impl<'a> GpuTracer<'a> {
         emitters.push([0, 0]);
         density.push(0.0);
         Ok(Self {
-            no_path: ctx.upload_uniform("no path", bytemuck::bytes_of(&layout::PathParams::default())),
+            no_path: ctx.upload("no path", bytemuck::bytes_of(&layout::PathParams::default())),
             sobol: ctx.upload("sobol", bytemuck::cast_slice(&splat_core::path::sampler::sobol_directions())),
             emitters: ctx.upload("emitters", bytemuck::cast_slice(&emitters)),
             emitter_density: ctx.upload("emitter density", bytemuck::cast_slice(&density)),
@@ -423,13 +423,13 @@ impl<'a> GpuTracer<'a> {
         let params = layout::path_params(settings, self.emitter_count).ok_or_else(|| {
             GpuError::refused("depth sampling in the path tracer runs on the CPU only", &[Remedy::Cpu])
         })?;
-        let buffer = self.ctx.upload_uniform("path", bytemuck::bytes_of(&params));
+        let buffer = self.ctx.upload("path", bytemuck::bytes_of(&params));
         let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..*frames };
         self.render_with(camera, &Method::Stochastic, &frames, None, Some((&pipeline.pipeline, &buffer)))
     }
 
     /// The kernel's bind group over this scene's buffers, the per-pixel `targets`, the
-    /// dispatch parameters `uniform` (one [`Params`] per dynamic offset) and, where given, the
+    /// dispatch parameters `uniform` (one [`Params`] per dynamic offset, [`params_buffer`]) and, where given, the
     /// hybrid pipeline's first hits and the path tracer's parameters.
     pub(crate) fn bind_group(
         &self,
@@ -752,10 +752,11 @@ impl TraceTargets {
     }
 }
 
-/// The uniform buffer of one submission's [`Params`], one per dynamic offset.
+/// The buffer of one submission's [`Params`], one per dynamic offset (a read-only storage
+/// buffer, [`crate::context::params_entry`]).
 pub(crate) fn params_buffer(ctx: &GpuContext) -> wgpu::Buffer {
-    let usage = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
-    ctx.buffer("params", ctx.uniform_stride() * u64::from(DISPATCHES_PER_SUBMIT), usage)
+    let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+    ctx.buffer("params", ctx.params_stride() * u64::from(DISPATCHES_PER_SUBMIT), usage)
 }
 
 /// The parameters of frames `frames` of a render in `mode`, `per_dispatch` frames a dispatch.
@@ -788,7 +789,7 @@ pub(crate) fn dispatch_batch(
     batch: &[Params],
     camera: &Camera,
 ) {
-    let stride = ctx.uniform_stride() as usize;
+    let stride = ctx.params_stride() as usize;
     let mut bytes = vec![0u8; stride * batch.len()];
     for (slot, p) in batch.iter().enumerate() {
         bytes[slot * stride..slot * stride + std::mem::size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));

@@ -48,7 +48,7 @@ pub use profile::RasterTimings;
 use scene::raster_params;
 pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene};
 
-use crate::context::{compute_pipeline, storage_entry, uniform_entry};
+use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::sort::{RadixSort, SortBuffers, groups};
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use bytemuck::{Pod, Zeroable};
@@ -229,7 +229,7 @@ impl<'a> GpuRasterizer<'a> {
         let params_buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("raster params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         });
         let compute_group = bind(
             ctx,
@@ -770,7 +770,7 @@ impl RasterTargets {
     }
 }
 
-/// Per-frame uniform slots of one submission, addressed by dynamic offset.
+/// Per-frame parameter slots of one submission, addressed by dynamic offset.
 struct FrameSlots {
     pub(super) buffer: wgpu::Buffer,
     pub(super) stride: u64,
@@ -778,11 +778,11 @@ struct FrameSlots {
 
 impl FrameSlots {
     fn new(ctx: &GpuContext) -> Self {
-        let stride = (size_of::<FrameParams>() as u64).next_multiple_of(ctx.uniform_alignment);
+        let stride = (size_of::<FrameParams>() as u64).next_multiple_of(ctx.storage_alignment);
         let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame params"),
             size: stride * u64::from(FRAMES_PER_SUBMIT),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
         Self { buffer, stride }

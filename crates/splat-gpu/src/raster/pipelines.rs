@@ -53,8 +53,8 @@ pub(super) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth3
 pub(super) fn splat_layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
     let draw_stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
     [
-        uniform_entry(0, draw_stages, false, size_of::<RasterParams>()),
-        uniform_entry(1, draw_stages, true, size_of::<FrameParams>()),
+        params_entry(0, draw_stages, false, size_of::<RasterParams>()),
+        params_entry(1, draw_stages, true, size_of::<FrameParams>()),
         storage_entry(2, draw_stages, true),
         storage_entry(3, wgpu::ShaderStages::VERTEX, true),
         storage_entry(4, wgpu::ShaderStages::VERTEX, true),
@@ -70,8 +70,8 @@ pub(super) fn splat_layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
 /// colour target or not (checked against `fold.wgsl`'s by a test).
 pub(super) fn fold_layout_entries(multisampled: bool) -> [wgpu::BindGroupLayoutEntry; 6] {
     [
-        uniform_entry(0, wgpu::ShaderStages::COMPUTE, false, size_of::<RasterParams>()),
-        uniform_entry(1, wgpu::ShaderStages::COMPUTE, true, size_of::<FrameParams>()),
+        params_entry(0, wgpu::ShaderStages::COMPUTE, false, size_of::<RasterParams>()),
+        params_entry(1, wgpu::ShaderStages::COMPUTE, true, size_of::<FrameParams>()),
         wgpu::BindGroupLayoutEntry {
             binding: 2,
             visibility: wgpu::ShaderStages::COMPUTE,

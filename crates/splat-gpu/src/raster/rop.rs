@@ -159,7 +159,7 @@ impl RopPass {
         let chunk = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rop chunk"),
             size: 16,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let pixels = u64::from(r.camera.width * r.camera.height);
