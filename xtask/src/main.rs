@@ -28,7 +28,8 @@ fn main() -> Result<()> {
                  bless        re-render the golden images in fixtures/golden/\n  \
                  assets       fetch and verify the bonsai capture into target/assets/, and write\n               \
                  files of other tools (npm: splat-transform, spz-js) into target/interop/\n  \
-                 power        write the power tables of the last test run (target/power/) into docs/power.md\n  \
+                 power        run the full power study of the statistical suites (every injected error;\n               \
+                 `test` runs the asserted ones) and write its table into docs/power.md\n  \
                  bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
             );
             bail!("missing or unknown command");
@@ -396,12 +397,39 @@ fn ensure_packages(have: impl Fn() -> bool, packages: &[&str], what: &str, conse
 const POWER_BEGIN: &str = "<!-- power table: cargo xtask power -->";
 const POWER_END: &str = "<!-- end of power table -->";
 
-/// Gather the rows the power studies of the last test run wrote to `target/power/` into
-/// docs/power.md, suites in order.
+/// The test binaries with a power study (`splat_tests::harness::assert_power`).
+const POWER_SUITES: [&str; 7] = [
+    "unbiased",
+    "raster_unbiased",
+    "gpu_stats",
+    "gpu_stats_cloud",
+    "gpu_stats_bonsai",
+    "gpu_raster_stats",
+    "gpu_msaa_stats",
+];
+
+/// Run the full power study (every fault of every suite, for every method a suite studies:
+/// `SPLAT_POWER=full`, `splat_tests::harness::POWER_STUDY_VAR`; about half an hour on two
+/// cores), then gather the rows it wrote to `target/power/` into docs/power.md, suites in
+/// order. `cargo xtask test` runs the asserted rows only.
 fn power() -> Result<()> {
+    ensure_vulkan_driver()?;
     let dir = root().join("target/power");
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir)?;
+    }
+    let suites = POWER_SUITES.iter().flat_map(|s| ["--test", s]);
+    let mut run = if has_nextest() {
+        test_command(&["nextest", "run", "--workspace", "--cargo-profile", "release", "--profile", "ci"])
+    } else {
+        test_command(&["test", "--workspace", "--release"])
+    };
+    run.args(suites).env("SPLAT_POWER", "full");
+    if !run_status(run, "the power study")?.success() {
+        bail!("the power study failed (its verdicts are above); docs/power.md is unchanged");
+    }
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .with_context(|| format!("{}: run `cargo xtask test` first", dir.display()))?
+        .with_context(|| format!("{}: the power study wrote no table", dir.display()))?
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|e| e == "md"))

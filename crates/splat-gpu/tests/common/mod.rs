@@ -11,7 +11,7 @@ use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, RenderSettings, Scene};
 use splat_gpu::{GpuContext, GpuTracer, TracePipeline};
-use splat_tests::harness::{FAULTS, Fault, StatTest, assert_power};
+use splat_tests::harness::{FAULTS, StatTest, assert_power, full_power_study};
 use std::sync::OnceLock;
 
 /// The shared context; `None` when there is no adapter, the test recorded as skipped
@@ -71,10 +71,8 @@ pub const F: u32 = 256;
 
 /// The GPU z-tests of one fixture: every unbiased method passes, `depth-sampling-1` is
 /// rejected, and the power study (docs/power.md) of every unbiased method with `all_methods`
-/// (each injected error, the 2 % ones that are visible at this budget rejected), else of
-/// `stochastic` on the errors the study asserts, the 2 % ones. (On lavapipe a power row costs
-/// seconds on `layers` but most of a minute on the cloud and the bonsai crop; the 1 % rows and
-/// the decision rule, measured and not asserted, are measured on `layers` and by the CPU.)
+/// or in the full study ([`full_power_study`]), else of `stochastic` alone (on lavapipe a power
+/// row costs seconds on `layers` but most of a minute on the cloud and the bonsai crop).
 pub fn z_tests_and_power(
     ctx: &'static GpuContext,
     fixture_name: &str,
@@ -92,13 +90,9 @@ pub fn z_tests_and_power(
     gpu_stat(format!("GPU {fixture_name} depth-sampling-1"), &gpu, &trace, camera, control).assert_rejected(base);
     let exact = |trace: &TraceScene| render_frames(trace, camera, &Method::Exact, &Frames::default(), &|_| {}).unwrap();
     let oracle = exact(&trace);
-    let (methods, faults): (_, &[Fault]) = if all_methods {
-        (unbiased(), &FAULTS)
-    } else {
-        (vec![("stochastic", Method::Stochastic)], &[Fault::Opacity(1.02), Fault::Radiance(1.02)])
-    };
+    let methods = if all_methods || full_power_study() { unbiased() } else { vec![("stochastic", Method::Stochastic)] };
     for (name, method) in methods {
-        assert_power(&format!("gpu-ray {fixture_name} {name}"), faults, |fault| {
+        assert_power(&format!("gpu-ray {fixture_name} {name}"), &FAULTS, |fault| {
             let faulty = fault.scene(scene);
             let faulty = TraceScene::new(&faulty, RenderSettings::default()).unwrap();
             let gpu = tracer(ctx, &faulty);
