@@ -727,5 +727,220 @@ fn new_readers_survive_truncation_and_corruption() {
             cases += 1;
         }
     }
+    // SOG: prefixes of a bundle (the zip container), and corruptions of meta.json and of each
+    // image behind it (the WebP decoder and the splats' decode).
+    let sog = splat_io::sog::encode_sog(&small).unwrap();
+    let entries: Vec<(&str, &[u8])> = sog.iter().map(|(n, d)| (n.as_str(), d.as_slice())).collect();
+    let bundle = std::fs::read({
+        let p = scratch_dir("robust-sog").join("small.sog");
+        splat_io::write_scene(&p, &small, Default::default()).unwrap();
+        p
+    })
+    .unwrap();
+    for end in (0..bundle.len()).step_by(97) {
+        let _ = splat_io::sog::parse_sog_bundle(&bundle[..end]);
+        cases += 1;
+    }
+    for (target, _) in &entries {
+        for _ in 0..60 {
+            let mut files = sog.clone();
+            let data = &mut files.iter_mut().find(|(n, _)| n == target).unwrap().1;
+            let i = (rng.next_f32() * data.len() as f32) as usize % data.len();
+            data[i] = (rng.next_f32() * 256.0) as u8;
+            let load = |name: &str| {
+                files
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map(|(_, d)| d.clone())
+                    .ok_or(splat_io::ErrorKind::Sog(name.into()))
+            };
+            let _ = splat_io::sog::parse_sog(&files[0].1, &load);
+            cases += 1;
+        }
+    }
     eprintln!("{cases} damaged inputs read without a panic");
+}
+
+/// `scene` written as SOG (a `.sog` bundle, or for `folder` a `meta.json` and its images) and
+/// read back, its splats in the scene's order (the writer stores them in Morton order); the
+/// `meta.json` and the bytes of every file, for a folder.
+fn sog_round_trip(scene: &Scene, folder: bool) -> (Scene, Option<(serde_json::Value, u64)>) {
+    let dir = scratch_dir(if folder { "sog-folder" } else { "sog-bundle" });
+    let path = dir.join(if folder { "meta.json" } else { "round-trip.sog" });
+    splat_io::write_scene(&path, scene, Default::default()).unwrap();
+    let read = splat_io::read_scene_with(&path, Default::default()).unwrap();
+    let detail = if folder { "version 2, meta.json and images" } else { "version 2, bundled .sog" };
+    assert_eq!((read.format, read.detail.as_str()), (splat_io::SceneFormat::Sog, detail));
+    let files = folder.then(|| {
+        let meta = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        (meta, std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum())
+    });
+    (in_source_order(scene, read.scene), files)
+}
+
+/// The most a value of `values` moves when stored at its nearest entry of the codebook of
+/// `attribute` in `meta`: half the largest gap between neighbouring entries, or the distance
+/// from the values' extremes to the outermost entries.
+fn nearest_entry_bound(meta: &serde_json::Value, attribute: &str, values: impl Iterator<Item = f32> + Clone) -> f32 {
+    let book: Vec<f32> =
+        meta[attribute]["codebook"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let (lo, hi) = values.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let gaps = 0.5 * book.windows(2).map(|w| w[1] - w[0]).fold(0.0, f32::max);
+    gaps.max(book[0] - lo).max(hi - book[book.len() - 1])
+}
+
+/// SOG's steps for `scene` written with `meta`, half steps for a rounding writer (ours), whole
+/// ones for a truncating one (splat-transform's, which stores floats into byte arrays):
+/// positions 16 bits of l(p) = sign(p) ln(1 + |p|) between the bounds in `meta` (dp/dl =
+/// e^|l|); opacity 8 bits; rotations 8 bits of each smaller component × √2, so the three are
+/// off by |δ| ≤ √3 · √½ / 255 (half steps), the derived largest one by at most √3 |δ|, and the
+/// rotation angle by at most 4 asin |δ|; scales and DC colours at their nearest codebook entry
+/// ([`nearest_entry_bound`]). The SH palette has no step (k-means entries, then a codebook): its
+/// error is measured, and the image bounds it.
+fn sog_steps(scene: &Scene, meta: &serde_json::Value, truncating: bool) -> Steps {
+    let step = if truncating { 1.0 } else { 0.5 };
+    let l_max = scene.particles.iter().map(|p| p.mean.abs().max_element().ln_1p()).fold(0.0, f32::max);
+    let span = (0..3)
+        .map(|a| meta["means"]["maxs"][a].as_f64().unwrap() - meta["means"]["mins"][a].as_f64().unwrap())
+        .fold(0.0, f64::max) as f32;
+    let log_scales = scene.particles.iter().flat_map(|p| p.scale.to_array().map(f32::ln));
+    let dc = scene.particles.iter().flat_map(|p| p.sh[0].to_array());
+    Steps {
+        position: step * span / 65535.0 * l_max.exp(),
+        log_scale: nearest_entry_bound(meta, "scales", log_scales),
+        opacity: step / 255.0,
+        dc: nearest_entry_bound(meta, "sh0", dc),
+        sh1: f32::INFINITY,
+        sh_rest: f32::INFINITY,
+        angle: 4.0 * (2.0 * step * 3f32.sqrt() * std::f32::consts::FRAC_1_SQRT_2 / 255.0).asin(),
+    }
+}
+
+/// SOG written here and read back: every attribute within its step (positions, rotations,
+/// opacities, scales and colours at their nearest codebook entries), and the image within the
+/// bound of spz v3's steps (the SH palette's error shows there); the antialiased mode is kept.
+#[test]
+fn sog_round_trips_within_its_steps() {
+    let (scene, camera) = cloud();
+    let (back, files) = sog_round_trip(&scene, true);
+    let (meta, bytes) = files.unwrap();
+    let steps = sog_steps(&scene, &meta, false);
+    let e = errors(&scene, &back);
+    within(e, steps).unwrap_or_else(|m| panic!("SOG: {m} ({e:?})"));
+    let (error, bound) = image_check(&scene, &back, &camera, spz_steps(3));
+    eprintln!("SOG: {bytes} bytes; image RMSE {error:.2e}, spz v3's bound {bound:.2e}; errors {e:?}; steps {steps:?}");
+    assert!(error <= bound, "SOG: image RMSE {error:.3e} > bound {bound:.3e}");
+    assert_eq!(back.screen_filter, ScreenFilter::Dilation);
+    // A bundle holds the same splats as the folder; the antialiased mode is kept.
+    let small = Scene { screen_filter: ScreenFilter::Antialiased, ..Scene::new(scene.particles[..200].to_vec(), 3) };
+    let (bundled, _) = sog_round_trip(&small, false);
+    assert_eq!(bundled.screen_filter, ScreenFilter::Antialiased);
+    let (folder, _) = sog_round_trip(&small, true);
+    let same = Steps { position: 0.0, log_scale: 0.0, opacity: 0.0, dc: 0.0, sh1: 0.0, sh_rest: 0.0, angle: 1e-3 };
+    within(errors(&bundled, &folder), same).unwrap();
+}
+
+/// splat-transform's SOG files of the interop source (bundled, and as a folder) read within
+/// SOG's steps, and decode to what splat-transform itself decodes them to (its `.ply` of the
+/// bundle): the reader is the reference's. Our bundle decodes through splat-transform's reader
+/// (run with Node) to what ours reads: the writer is one the reference reads.
+#[test]
+fn sog_files_read_and_write_as_splat_transform_does() {
+    let Some(dir) = interop_dir() else { return };
+    let source = splat_io::read_scene(&dir.join("source.ply")).unwrap();
+    let (_, camera) = cloud();
+    for (name, decoded) in [
+        ("splat-transform.sog", "splat-transform-sog-decoded.ply"),
+        ("sog/meta.json", "splat-transform-sog-folder-decoded.ply"),
+    ] {
+        let reference = splat_io::read_scene(&dir.join(decoded)).unwrap();
+        let read =
+            splat_io::read_scene_with(&dir.join(name), Default::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(read.format, splat_io::SceneFormat::Sog);
+        assert_same_splats(name, &read.scene, &reference);
+        let back = in_source_order(&source, read.scene);
+        // The folder's meta.json: the bundle's has the same bounds (one writer, one source).
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("sog/meta.json")).unwrap()).unwrap();
+        let e = errors(&source, &back);
+        let (error, bound) = image_check(&source, &back, &camera, spz_steps(3));
+        eprintln!("{name} ({}): image RMSE {error:.2e}, bound {bound:.2e}; errors {e:?}", read.detail);
+        let steps = Steps { log_scale: f32::INFINITY, dc: f32::INFINITY, ..sog_steps(&source, &meta, true) };
+        within(e, steps).unwrap_or_else(|m| panic!("{name}: {m} ({e:?})"));
+        assert!(error <= bound, "{name}: image RMSE {error:.3e} > bound {bound:.3e}");
+    }
+    assert_eq!(
+        splat_io::read_scene(&dir.join("splat-transform-antialiased.sog")).unwrap().screen_filter,
+        ScreenFilter::Antialiased
+    );
+    // Ours, decoded by the reference.
+    let ours = scratch_dir("sog-ours").join("ours.sog");
+    splat_io::write_scene(&ours, &source, Default::default()).unwrap();
+    let decoded = ours.with_extension("ply");
+    let cli = dir.join("npm/node_modules/@playcanvas/splat-transform/bin/cli.mjs");
+    let status = std::process::Command::new("node").arg(&cli).args(["-q", "-w"]).arg(&ours).arg(&decoded).status();
+    assert!(status.is_ok_and(|s| s.success()), "splat-transform does not read our .sog");
+    let theirs = splat_io::read_scene(&decoded).unwrap();
+    assert_same_splats("ours.sog", &splat_io::read_scene(&ours).unwrap(), &theirs);
+}
+
+/// Two decodings of the same SOG file hold the same splats, in the same order, up to f32
+/// arithmetic (and opacities splat-transform clamps to [1e-6, 1 − 1e-6] on the way to a logit).
+fn assert_same_splats(name: &str, ours: &Scene, theirs: &Scene) {
+    assert_eq!((ours.particles.len(), ours.sh_degree), (theirs.particles.len(), theirs.sh_degree), "{name}");
+    let e = errors(ours, theirs);
+    eprintln!("{name}: against splat-transform's decoding {e:?}");
+    let same =
+        Steps { position: 1e-6, log_scale: 1e-5, opacity: 1.5e-6, dc: 1e-6, sh1: 1e-6, sh_rest: 1e-6, angle: 1e-3 };
+    within(e, same).unwrap_or_else(|m| panic!("{name} decodes unlike splat-transform: {m}"));
+}
+
+/// Bad SOG files are refused with the problem named.
+#[test]
+fn sog_errors_name_the_problem() {
+    let (scene, _) = cloud();
+    let small = Scene::new(scene.particles[..40].to_vec(), 3);
+    let files = splat_io::sog::encode_sog(&small).unwrap();
+    let meta: serde_json::Value = serde_json::from_slice(&files[0].1).unwrap();
+    let load = |name: &str| {
+        files
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, d)| d.clone())
+            .ok_or(splat_io::ErrorKind::Sog(format!("no {name}")))
+    };
+    let with = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut m = meta.clone();
+        edit(&mut m);
+        splat_io::sog::parse_sog(&serde_json::to_vec(&m).unwrap(), &load).unwrap_err().to_string()
+    };
+    assert!(with(&|m| m["version"] = 7.into()).contains("version 7 is not supported"));
+    assert!(with(&|m| m["count"] = 100_000.into()).contains("texels for 100000 splats"));
+    assert!(with(&|m| m["count"] = u64::MAX.into()).contains("more than WebP images can hold"));
+    assert!(with(&|m| m["model"] = "2dgs".into()).contains("2DGS"));
+    assert!(with(&|m| m["scales"]["codebook"] = serde_json::json!([1.0])).contains("scales.codebook"));
+    assert!(with(&|m| m["quats"]["files"] = serde_json::json!(["nowhere.webp"])).contains("no nowhere.webp"));
+    let bad_webp = |name: &str| if name == "quats.webp" { Ok(b"RIFF....WEBPVP8L".to_vec()) } else { load(name) };
+    assert!(splat_io::sog::parse_sog(&files[0].1, &bad_webp).unwrap_err().to_string().contains("quats.webp"));
+    // A folder's meta.json names images beside it, never a path elsewhere.
+    let dir = scratch_dir("sog-errors");
+    let mut m = meta.clone();
+    m["quats"]["files"] = serde_json::json!(["../../etc/passwd"]);
+    std::fs::write(dir.join("meta.json"), serde_json::to_vec(&m).unwrap()).unwrap();
+    for (name, data) in &files[1..] {
+        std::fs::write(dir.join(name), data).unwrap();
+    }
+    let e = splat_io::read_scene(&dir.join("meta.json")).unwrap_err().to_string();
+    assert!(e.contains("not a file name beside meta.json"), "{e}");
+    let bundle = std::fs::read({
+        let p = dir.join("small.sog");
+        splat_io::write_scene(&p, &small, Default::default()).unwrap();
+        p
+    })
+    .unwrap();
+    let e = splat_io::sog::parse_sog_bundle(&bundle[..bundle.len() - 5]).unwrap_err().to_string();
+    assert!(e.contains("end-of-central-directory"), "{e}");
+    let mut damaged = bundle.clone();
+    damaged[200] ^= 0x40;
+    assert!(splat_io::sog::parse_sog_bundle(&damaged).unwrap_err().to_string().contains("CRC-32"));
 }

@@ -1,9 +1,9 @@
 // Writes the files that splat-io's readers are tested on, with other implementations of the
 // formats: spz-js (spz version 2, compressed .ply) and PlayCanvas splat-transform (spz
-// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting). Run by `cargo xtask assets` as
+// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting, SOG). Run by `cargo xtask assets` as
 //   node make.mjs OUT_DIR
 // in a folder where `npm ci` installed package-lock.json; OUT_DIR/source.ply must exist.
-import { readFileSync, writeFileSync } from 'node:fs';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { execFileSync } from 'node:child_process';
 import { join } from 'node:path';
 import { Readable } from 'node:stream';
@@ -27,6 +27,14 @@ transform(source, join(out, 'splat-transform.compressed.ply'));
 // turned a half turn about z into glTF's +Y-up axes.
 transform(source, join(out, 'splat-transform.glb'));
 
+// PlayCanvas SOG, on the CPU (`-g cpu`: no WebGPU adapter here): bundled (.sog) and as a
+// folder (meta.json and its images), and splat-transform's own decoding of each.
+transform('-g', 'cpu', source, join(out, 'splat-transform.sog'));
+mkdirSync(join(out, 'sog'), { recursive: true });
+transform('-g', 'cpu', source, join(out, 'sog', 'meta.json'));
+transform(join(out, 'splat-transform.sog'), join(out, 'splat-transform-sog-decoded.ply'));
+transform(join(out, 'sog', 'meta.json'), join(out, 'splat-transform-sog-folder-decoded.ply'));
+
 // An antialiased capture as Postshot marks it (`comment antialiased 1`), and what splat-transform
 // writes of it: Brush's `SplatRenderMode: mip` in a .ply and a compressed .ply, the antialiased
 // flag (0x1) in spz 3 and 4.
@@ -38,3 +46,4 @@ transform(antialiased, join(out, 'splat-transform-antialiased.ply'));
 transform(antialiased, join(out, 'splat-transform-antialiased.compressed.ply'));
 transform(antialiased, '--spz-version', '3', join(out, 'splat-transform-antialiased-v3.spz'));
 transform(antialiased, '--spz-version', '4', join(out, 'splat-transform-antialiased-v4.spz'));
+transform('-g', 'cpu', antialiased, join(out, 'splat-transform-antialiased.sog'));

@@ -14,7 +14,8 @@ pub struct ConvertArgs {
     /// .glb / .gltf (KHR_gaussian_splatting).
     pub input: PathBuf,
     /// Output scene, format by extension: .ply (f32, lossless), .splat (8-bit degree-0 colour,
-    /// no view dependence), .spz (quantised, about 10× smaller than .ply) or .glb / .gltf
+    /// no view dependence), .spz (quantised, about 10× smaller than .ply), .sog (PlayCanvas SOG
+    /// bundle; a path ending in meta.json writes the images beside it) or .glb / .gltf
     /// (KHR_gaussian_splatting, f32, lossless; glTF's +Y-up axes).
     pub output: PathBuf,
     /// Version of a .spz output: 2 (8-bit rotations), 3 (smallest-three rotations, gzip) or

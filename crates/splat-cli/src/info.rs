@@ -31,7 +31,11 @@ pub fn run(args: InfoArgs) -> Result<()> {
     let scene = read.scene;
     let n = scene.particles.len();
     out!("file       {}", args.scene.display());
-    out!("format     {}", read.format.name());
+    if read.detail.is_empty() {
+        out!("format     {}", read.format.name());
+    } else {
+        out!("format     {} ({})", read.format.name(), read.detail);
+    }
     out!("particles  {n}");
     out!("SH degree  {}", scene.sh_degree);
     if read.filter_3d {

@@ -804,8 +804,9 @@ fn convert_round_trips_every_format() {
         npy(out)
     };
     let reference = render("fixtures/cloud.ply", &scratch("cloud.npy"));
-    for (target, ceiling) in [("cloud.spz", 0.02), ("cloud-v2.spz", 0.03), ("cloud-v4.spz", 0.02), ("cloud.ply", 1e-5)]
-    {
+    let targets =
+        [("cloud.spz", 0.02), ("cloud-v2.spz", 0.03), ("cloud-v4.spz", 0.02), ("cloud.sog", 0.02), ("cloud.ply", 1e-5)];
+    for (target, ceiling) in targets {
         let path = scratch(target);
         let mut args = vec!["convert", "fixtures/cloud.ply", path.to_str().unwrap()];
         match target {
@@ -830,8 +831,16 @@ fn convert_round_trips_every_format() {
     // Refusals: a compressed .ply output, an unknown extension.
     for out in ["x.compressed.ply", "x.obj"] {
         let o = splat(&["convert", "fixtures/cloud.ply", scratch(out).to_str().unwrap()]);
-        assert!(!o.status.success() && stderr(&o).contains(".ply, .splat, .spz, .glb or .gltf"), "{}", stderr(&o));
+        assert!(
+            !o.status.success() && stderr(&o).contains(".ply, .splat, .spz, .glb, .gltf, .sog or meta.json"),
+            "{}",
+            stderr(&o)
+        );
     }
+    // `splat info` names the format, its version and its container.
+    let o = splat(&["info", scratch("cloud.sog").to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("format     PlayCanvas SOG (version 2, bundled .sog)"), "{text}");
     // Axes: a file written as RUB and read as stored renders a different (turned) scene.
     let rub = scratch("rub.spz");
     assert!(splat(&["convert", "fixtures/cloud.ply", rub.to_str().unwrap(), "--spz-axes", "rub"]).status.success());

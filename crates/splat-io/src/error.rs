@@ -157,6 +157,10 @@ pub enum ErrorKind {
     /// A `.spz` file is malformed or uses what this reader does not support.
     #[error("spz: {0}")]
     Spz(String),
+    /// A PlayCanvas SOG file (bundle, `meta.json` or image) is malformed or uses what this
+    /// reader does not support.
+    #[error("SOG: {0}")]
+    Sog(String),
     /// A compressed `.ply` (PlayCanvas / SuperSplat) is malformed.
     #[error("compressed PLY: {0}")]
     CompressedPly(String),

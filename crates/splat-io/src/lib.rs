@@ -2,7 +2,8 @@
 //!
 //! - Scenes (read and write unless noted): INRIA 3DGS `.ply` (binary and ASCII), PlayCanvas
 //!   compressed `.ply` (read), antimatter15 `.splat`, Niantic `.spz` (versions 2–4), glTF
-//!   `.glb` / `.gltf` with `KHR_gaussian_splatting` ([`gltf_splats`]); see [`SceneFormat`].
+//!   `.glb` / `.gltf` with `KHR_gaussian_splatting` ([`gltf_splats`]), PlayCanvas SOG (`.sog`
+//!   bundles and `meta.json` folders, [`sog`]); see [`SceneFormat`].
 //! - Cameras: INRIA `cameras.json`, COLMAP `cameras`/`images` `.bin` and `.txt` ([`colmap`]).
 //! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
 //! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
@@ -27,10 +28,12 @@ pub mod gltf_splats;
 pub mod image;
 pub mod mesh;
 pub mod ply;
+pub mod sog;
 pub mod splat;
 pub mod spz;
 pub mod text;
 pub mod world;
+mod zip;
 
 pub use error::{Error, ErrorKind};
 
@@ -51,24 +54,27 @@ pub enum SceneFormat {
     /// glTF 2.0 `.glb` / `.gltf` with `KHR_gaussian_splatting`: f32 attributes, SH up to
     /// degree 3, lossless ([`gltf_splats`]).
     Gltf,
+    /// PlayCanvas SOG: `meta.json` and WebP images, bundled (`.sog`) or as a folder; codebooks
+    /// and an SH palette ([`sog`]).
+    Sog,
 }
 
 impl SceneFormat {
     /// The format an output path asks for, by extension (`.ply`, `.splat`, `.spz`, `.glb`,
-    /// `.gltf`).
+    /// `.gltf`, `.sog`, or a name ending in `meta.json`: SOG's unbundled form).
     pub fn for_output(path: &Path) -> Result<Self, Error> {
+        if sog::is_sog_path(path) {
+            return Ok(Self::Sog);
+        }
         match extension(path).as_deref() {
-            Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => Err(Error::new(
-                path,
-                ErrorKind::UnknownExtension {
-                    expected: ".ply, .splat, .spz, .glb or .gltf (compressed .ply is read only)",
-                },
-            )),
+            Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => {
+                Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_COMPRESSED }))
+            }
             Some("ply") => Ok(Self::Ply),
             Some("splat") => Ok(Self::Splat),
             Some("spz") => Ok(Self::Spz),
             Some("glb" | "gltf") => Ok(Self::Gltf),
-            _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".ply, .splat, .spz, .glb or .gltf" })),
+            _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS })),
         }
     }
 
@@ -80,8 +86,8 @@ impl SceneFormat {
     pub fn records(self, filter: ScreenFilter) -> ScreenFilter {
         match (self, filter) {
             (Self::Ply | Self::CompressedPly, filter) => filter,
-            (Self::Spz, ScreenFilter::Mip) => ScreenFilter::Antialiased,
-            (Self::Spz, filter) => filter,
+            (Self::Spz | Self::Sog, ScreenFilter::Mip) => ScreenFilter::Antialiased,
+            (Self::Spz | Self::Sog, filter) => filter,
             (Self::Splat | Self::Gltf, _) => ScreenFilter::Dilation,
         }
     }
@@ -94,9 +100,17 @@ impl SceneFormat {
             Self::Splat => ".splat",
             Self::Spz => ".spz",
             Self::Gltf => "glTF (KHR_gaussian_splatting)",
+            Self::Sog => "PlayCanvas SOG",
         }
     }
 }
+
+/// The extensions the writers take, as errors list them.
+const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json";
+const WRITTEN_EXTENSIONS_COMPRESSED: &str =
+    ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json (compressed .ply is read only)";
+/// The extensions the readers take.
+const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -128,6 +142,9 @@ pub struct SceneRead {
     /// flag; the 3DGS dilation where it names none). The scene's is this unless
     /// [`ReadOptions::screen_filter`] overrides it.
     pub file_filter: ScreenFilter,
+    /// The format's version and container where the format has several (SOG's), for `splat
+    /// info`; empty otherwise.
+    pub detail: String,
 }
 
 /// A path's extension in lower case, `None` without one.
@@ -136,7 +153,8 @@ pub fn extension(path: &Path) -> Option<String> {
 }
 
 /// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`,
-/// `.spz`, `.glb` or `.gltf`) with default options: unknown `.ply` properties are skipped.
+/// `.spz`, `.glb`, `.gltf`, `.sog`, or a name ending in `meta.json`) with default options:
+/// unknown `.ply` properties are skipped.
 pub fn read_scene(path: &Path) -> Result<Scene, Error> {
     read_scene_with(path, ReadOptions::default()).map(|read| read.scene)
 }
@@ -158,8 +176,13 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         skipped_properties: Vec::new(),
         filter_3d: false,
         surfels: false,
+        detail: String::new(),
     };
     let mut read = match extension(path).as_deref() {
+        _ if sog::is_sog_path(path) => {
+            let (scene, info) = sog::read_sog(path)?;
+            SceneRead { detail: info.describe(), ..read(SceneFormat::Sog, scene) }
+        }
         Some("ply") => {
             let bytes = read_file(path)?;
             let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
@@ -171,10 +194,7 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         Some("splat") => read(SceneFormat::Splat, splat::read_splat(path)?),
         Some("spz") => read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?),
         Some("glb" | "gltf") => read(SceneFormat::Gltf, gltf_splats::read_gltf_splats(path)?),
-        _ => {
-            let expected = ".ply, .splat, .spz, .glb or .gltf";
-            return Err(Error::new(path, ErrorKind::UnknownExtension { expected }));
-        }
+        _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
     if let Some(filter) = options.screen_filter {
         read.scene.screen_filter = filter;
@@ -183,7 +203,8 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
 }
 
 /// Write a scene in the format its extension names (`.ply`: binary little-endian f32;
-/// `.splat`; `.spz` with `spz` options; `.glb` / `.gltf` with `KHR_gaussian_splatting`).
+/// `.splat`; `.spz` with `spz` options; `.glb` / `.gltf` with `KHR_gaussian_splatting`; `.sog`
+/// or a `meta.json` and its images: PlayCanvas SOG version 2).
 pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Result<SceneFormat, Error> {
     let format = SceneFormat::for_output(path)?;
     match format {
@@ -191,6 +212,7 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::Splat => splat::write_splat(path, scene)?,
         SceneFormat::Spz => spz::write_spz(path, scene, spz)?,
         SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
+        SceneFormat::Sog => sog::write_sog(path, scene)?,
         SceneFormat::CompressedPly => unreachable!("for_output refuses it"),
     }
     Ok(format)

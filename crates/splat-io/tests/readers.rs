@@ -269,7 +269,10 @@ fn errors_name_the_file() {
     let e = splat_io::read_scene(path).unwrap_err();
     assert!(e.to_string().starts_with("/nonexistent/dir/scene.ply: "), "{e}");
     assert!(
-        splat_io::read_scene("x.obj".as_ref()).unwrap_err().to_string().contains(".ply, .splat, .spz, .glb or .gltf")
+        splat_io::read_scene("x.obj".as_ref())
+            .unwrap_err()
+            .to_string()
+            .contains(".ply, .splat, .spz, .glb, .gltf, .sog or meta.json")
     );
 }
 
