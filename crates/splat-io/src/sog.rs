@@ -787,6 +787,37 @@ mod tests {
         assert!(worst < 0.02, "{worst}");
     }
 
+    /// A version 1 file (as splat-transform's `readSogV1` reads it: 8-bit steps between
+    /// `mins` and `maxs`, a logit opacity, the count in `means.shape`) decodes to its values.
+    #[test]
+    fn version_1_files_decode_their_ranges() {
+        let images = Images { width: 4, height: 4 };
+        let one = |t: [u8; 4]| images.encode(&[t]).unwrap();
+        let files: Vec<(&str, Vec<u8>)> = vec![
+            ("means_l.webp", one([0, 0xff, 0, 255])),
+            ("means_u.webp", one([0, 0xff, 0x80, 255])),
+            ("quats.webp", one(pack_quat(Quat::from_rotation_z(0.5)))),
+            ("scales.webp", one([0, 255, 51, 255])),
+            ("sh0.webp", one([255, 0, 102, 255])),
+        ];
+        let meta = json!({
+            "means": { "shape": [1, 3], "mins": [-1.0, -1.0, -1.0], "maxs": [1.0, 1.0, 1.0], "files": ["means_l.webp", "means_u.webp"] },
+            "scales": { "mins": [-4.0, -4.0, -4.0], "maxs": [1.0, 1.0, 1.0], "files": ["scales.webp"] },
+            "quats": { "files": ["quats.webp"] },
+            "sh0": { "mins": [-2.0, -2.0, -2.0, -3.0], "maxs": [2.0, 2.0, 2.0, 3.0], "files": ["sh0.webp"] },
+        });
+        let load = |name: &str| files.iter().find(|(n, _)| *n == name).map(|(_, d)| d.clone()).ok_or(sog_error(name));
+        let (scene, version) = parse_sog(&serde_json::to_vec(&meta).unwrap(), &load).unwrap();
+        assert_eq!((version, scene.particles.len(), scene.sh_degree), (1, 1, 0));
+        let p = &scene.particles[0];
+        let l = |step: f32| inverse_log_transform(-1.0 + 2.0 * step / 65535.0);
+        assert!((p.mean - Vec3::new(l(0.0), l(65535.0), l(32768.0))).abs().max_element() < 1e-6, "{}", p.mean);
+        assert!((p.scale - Vec3::new((-4.0f32).exp(), 1f32.exp(), (-3.0f32).exp())).abs().max_element() < 1e-6);
+        assert!((p.sh[0] - Vec3::new(2.0, -2.0, -2.0 + 4.0 * 0.4)).abs().max_element() < 1e-6, "{}", p.sh[0]);
+        assert!((p.opacity - 1.0 / (1.0 + (-3.0f32).exp())).abs() < 1e-6);
+        assert!(p.rotation.angle_between(Quat::from_rotation_z(0.5)) < 0.02);
+    }
+
     #[test]
     fn texture_sizes_are_splat_transforms() {
         assert_eq!(texture_size(3000).unwrap(), (56, 56));
