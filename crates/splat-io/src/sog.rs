@@ -1,6 +1,6 @@
 //! PlayCanvas SOG ("spatially ordered Gaussians"), the format SuperSplat publishes and
 //! splat-transform writes: a `meta.json` and lossless WebP images whose texel i holds splat i,
-//! either bundled in one zip file (`.sog`, [`crate::zip`]) or as a folder (`meta.json` beside
+//! either bundled in one zip file (`.sog`; the crate's `zip` module) or as a folder (`meta.json` beside
 //! the images). Read (versions 1 and 2) and written (version 2, the current one).
 //!
 //! Version 2, per splat (texel), as splat-transform 3.7's `writeSogSource` writes it:
