@@ -525,11 +525,12 @@ fn spz_errors_name_the_problem() {
         ),
         (
             {
+                // Degree 4 is read (band 4 dropped), but this file has degree 3's SH bytes.
                 let mut raw = gunzip(&v3);
                 raw[12] = 4;
                 gzip(&raw)
             },
-            "SH degree 4",
+            "the sh stream ends after",
         ),
         (b"NGSP\x04\0\0\0".to_vec(), "shorter than the 32-byte"),
     ];
@@ -943,4 +944,82 @@ fn sog_errors_name_the_problem() {
     let mut damaged = bundle.clone();
     damaged[200] ^= 0x40;
     assert!(splat_io::sog::parse_sog_bundle(&damaged).unwrap_err().to_string().contains("CRC-32"));
+}
+
+/// An extension record of the spz library's layout: type, byte length, payload.
+fn spz_record(kind: u32, payload: &[u8]) -> Vec<u8> {
+    [&kind.to_le_bytes()[..], &(payload.len() as u32).to_le_bytes(), payload].concat()
+}
+
+/// `file` (an spz of any version) with extension `records` and the extension flag (0x2): in
+/// version 4 between the header and the table of contents, in versions 2–3 after the attribute
+/// arrays inside the gzip stream.
+fn with_spz_records(file: &[u8], records: &[u8]) -> Vec<u8> {
+    if file.starts_with(b"NGSP") {
+        let mut out = file[..32].to_vec();
+        out[14] |= 0x2;
+        let toc = u32::from_le_bytes(out[16..20].try_into().unwrap()) + records.len() as u32;
+        out[16..20].copy_from_slice(&toc.to_le_bytes());
+        out.extend_from_slice(records);
+        out.extend_from_slice(&file[32..]);
+        out
+    } else {
+        let mut raw = gunzip(file);
+        raw[14] |= 0x2;
+        raw.extend_from_slice(records);
+        gzip(&raw)
+    }
+}
+
+/// spz extension records: the coordinate-system record is honoured (RUB data read as `--spz-axes
+/// rub` reads them, RUF's mirror flips y alone), the safe-orbit record and unknown types are
+/// skipped with a note, and malformed records are refused by name; a degree-4 file reads with
+/// band 4 dropped and said so.
+#[test]
+fn spz_extension_records_are_honoured_or_skipped_with_a_note() {
+    let (scene, _) = cloud();
+    let small = Scene::new(scene.particles[..40].to_vec(), 3);
+    let system = |value: u32| spz_record(0xADBE_0003, &value.to_le_bytes());
+    let orbit = spz_record(0xADBE_0002, &[0.0f32, 1.2, 3.0].map(f32::to_le_bytes).concat());
+    let unknown = spz_record(0x1234_5678, &[1, 2, 3, 4, 5]);
+    for version in [3, 4] {
+        let plain = encode_spz(&small, SpzWriteOptions { version, axes: SpzAxes::AsStored }).unwrap();
+        let rub = splat_io::spz::parse_spz_report(&plain, SpzAxes::Rub).unwrap().scene;
+        let records = [system(4), orbit.clone(), unknown.clone()].concat();
+        let read = splat_io::spz::parse_spz_report(&with_spz_records(&plain, &records), SpzAxes::AsStored).unwrap();
+        assert_eq!(read.scene, rub, "v{version}: a RUB record reads as --spz-axes rub");
+        let notes = read.notes.join("; ");
+        for said in
+            ["RUB axes, converted", "safe_orbit_camera (elevation 0–1.2, radius ≥ 3)", "0x12345678 (5 bytes) skipped"]
+        {
+            assert!(notes.contains(said), "v{version}: {notes}");
+        }
+        let stored = parse_spz(&plain, SpzAxes::AsStored).unwrap();
+        let ruf = parse_spz(&with_spz_records(&plain, &system(8)), SpzAxes::AsStored).unwrap();
+        for (a, b) in stored.particles.iter().zip(&ruf.particles) {
+            assert_eq!(b.mean, a.mean * Vec3::new(1.0, -1.0, 1.0), "v{version}: RUF flips y");
+        }
+        let refused = |records: &[u8]| {
+            splat_io::spz::parse_spz_report(&with_spz_records(&plain, records), SpzAxes::AsStored)
+                .unwrap_err()
+                .to_string()
+        };
+        assert!(refused(&system(9)).contains("LBD"), "v{version}");
+        assert!(refused(&system(20)).contains("not one of spz's 0–16"), "v{version}");
+        assert!(refused(&[system(4), system(4)].concat()).contains("second or malformed"), "v{version}");
+        let mut long = unknown.clone();
+        long[4] = 200;
+        assert!(refused(&long).contains("runs past"), "v{version}: {}", refused(&long));
+    }
+    // Degree 4: nine more coefficients a splat (value 128: zero) after each splat's 15.
+    let plain = encode_spz(&small, SpzWriteOptions { version: 3, axes: SpzAxes::AsStored }).unwrap();
+    let mut raw = gunzip(&plain);
+    let sh_at = 16 + small.particles.len() * (9 + 1 + 3 + 3 + 4);
+    let sh: Vec<u8> = raw[sh_at..].chunks(45).flat_map(|c| [c, &[128u8; 27][..]].concat()).collect();
+    raw.truncate(sh_at);
+    raw.extend_from_slice(&sh);
+    raw[12] = 4;
+    let read = splat_io::spz::parse_spz_report(&gzip(&raw), SpzAxes::AsStored).unwrap();
+    assert_eq!(read.scene, parse_spz(&plain, SpzAxes::AsStored).unwrap());
+    assert!(read.notes.join("; ").contains("SH band 4 dropped"), "{:?}", read.notes);
 }

@@ -537,6 +537,7 @@ impl SceneArgs {
         let opened = splat_io::world::open_world(self.scene.as_deref(), self.read.options())?;
         if let Some(path) = &self.scene {
             warn_skipped_properties(path, &opened.skipped_properties);
+            print_notes(path, &opened.notes);
         }
         self.stage(opened.world, width, height)
     }
@@ -714,7 +715,15 @@ impl SceneArgs {
 pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::SceneRead> {
     let read = splat_io::read_scene_with(path, read.options())?;
     warn_skipped_properties(path, &read.skipped_properties);
+    print_notes(path, &read.notes);
     Ok(read)
+}
+
+/// Print what the reader noted (`splat_io::SceneRead::notes`).
+fn print_notes(path: &std::path::Path, notes: &[String]) {
+    for note in notes {
+        eprintln!("note: {}: {note}", path.display());
+    }
 }
 
 /// Say which unknown `.ply` properties the reader skipped.

@@ -142,9 +142,12 @@ pub struct SceneRead {
     /// flag; the 3DGS dilation where it names none). The scene's is this unless
     /// [`ReadOptions::screen_filter`] overrides it.
     pub file_filter: ScreenFilter,
-    /// The format's version and container where the format has several (SOG's), for `splat
-    /// info`; empty otherwise.
+    /// The format's version and container where the format has several (SOG's, `.spz`'s),
+    /// for `splat info`; empty otherwise.
     pub detail: String,
+    /// What the reader did that the user should hear of (an `.spz` extension skipped or
+    /// honoured, an SH band dropped); front ends print each.
+    pub notes: Vec<String>,
 }
 
 /// A path's extension in lower case, `None` without one.
@@ -177,6 +180,7 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         filter_3d: false,
         surfels: false,
         detail: String::new(),
+        notes: Vec::new(),
     };
     let mut read = match extension(path).as_deref() {
         _ if sog::is_sog_path(path) => {
@@ -192,7 +196,14 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             SceneRead { skipped_properties, filter_3d, surfels, ..read(format, ply.scene) }
         }
         Some("splat") => read(SceneFormat::Splat, splat::read_splat(path)?),
-        Some("spz") => read(SceneFormat::Spz, spz::read_spz(path, options.spz_axes)?),
+        Some("spz") => {
+            let spz = spz::read_spz_report(path, options.spz_axes)?;
+            SceneRead {
+                detail: format!("version {}", spz.version),
+                notes: spz.notes,
+                ..read(SceneFormat::Spz, spz.scene)
+            }
+        }
         Some("glb" | "gltf") => read(SceneFormat::Gltf, gltf_splats::read_gltf_splats(path)?),
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };

@@ -19,6 +19,17 @@
 //! Mip-Splatting's 2D Mip filter: the writer marks such a scene antialiased, the nearest
 //! filter it records ([`crate::SceneFormat::records`]).
 //!
+//! **Extensions.** With header flag 0x2 a file carries extension records (the spz library's
+//! `extensions/`: a u32 type, a u32 byte length, the payload), in version 4 between the header
+//! and the table of contents, in versions 2–3 after the attribute arrays. Adobe's
+//! `SPZ_ADOBE_coordinate_system` (0xADBE0003) is honoured: data in any of spz's eight axis
+//! systems that keep x, y, z in order (LDB … RUF; half turns and mirrors of a `.ply`'s RDF) are
+//! converted to the scene's axes (mean, rotation S R S and SH parities), and it outranks
+//! [`SpzAxes`]; the eight that swap y and z are refused by name. `SPZ_ADOBE_safe_orbit_camera`
+//! and unknown types are skipped with a note ([`SpzRead::notes`]). The writer writes none.
+//!
+//! **SH degree 4** (spz allows it): read with band 4 dropped, and a note.
+//!
 //! **Axes.** The spz README says spz stores right-up-back (RUB) axes, but the library's default
 //! options (`UNSPECIFIED`) convert nothing, and so do its `ply_to_spz`, PlayCanvas
 //! splat-transform 3.7 and spz-js 1.2: files made from a 3DGS `.ply` by these tools hold the
@@ -45,6 +56,37 @@ const HEADER_V4: usize = 32;
 const SPZ_MAX_DEGREE: u8 = 4;
 /// The header flag of an antialiased capture.
 const FLAG_ANTIALIASED: u8 = 0x1;
+/// The header flag of a file with extension records (nianticlabs/spz `extensions/`): in
+/// version 4 between the header and the table of contents, in versions 2–3 after the attribute
+/// arrays inside the gzip stream; each record a u32 type, a u32 byte length and the payload.
+const FLAG_EXTENSIONS: u8 = 0x2;
+/// Extension types (vendor 0xADBE, Adobe): the axes of the data (a u32, spz's
+/// `CoordinateSystem`), and a viewer's safe orbit (three f32: elevation range, least radius).
+const EXTENSION_COORDINATE_SYSTEM: u32 = 0xADBE_0003;
+const EXTENSION_SAFE_ORBIT_CAMERA: u32 = 0xADBE_0002;
+/// Most bytes of extension records read from a version 2–3 gzip stream.
+const MAX_LEGACY_EXTENSIONS: usize = 1 << 20;
+/// spz's `CoordinateSystem` values 1–8 (0 is unspecified): right or left, up or down, back or
+/// front, in x, y, z order. Values 9–16 swap y and z (LBD …), which the reader refuses.
+const COORDINATE_SYSTEMS: [&str; 17] = [
+    "UNSPECIFIED",
+    "LDB",
+    "RDB",
+    "LUB",
+    "RUB",
+    "LDF",
+    "RDF",
+    "LUF",
+    "RUF",
+    "LBD",
+    "RBD",
+    "LBU",
+    "RBU",
+    "LFD",
+    "RFD",
+    "LFU",
+    "RFU",
+];
 
 /// Which axes the file's data are in.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -82,6 +124,12 @@ pub fn read_spz(path: &Path, axes: SpzAxes) -> Result<Scene, Error> {
     parse_spz(&bytes, axes).map_err(|kind| Error::new(path, kind))
 }
 
+/// Read a `.spz` file, with what it held beside the splats.
+pub fn read_spz_report(path: &Path, axes: SpzAxes) -> Result<SpzRead, Error> {
+    let bytes = read_file(path)?;
+    parse_spz_report(&bytes, axes).map_err(|kind| Error::new(path, kind))
+}
+
 /// Write a scene as `.spz`.
 pub fn write_spz(path: &Path, scene: &Scene, options: SpzWriteOptions) -> Result<(), Error> {
     let bytes = encode_spz(scene, options).map_err(|kind| Error::new(path, kind))?;
@@ -115,12 +163,6 @@ impl Header {
         if self.sh_degree > SPZ_MAX_DEGREE {
             return Err(spz_error(format!("SH degree {} is out of range 0–4", self.sh_degree)));
         }
-        if self.sh_degree > splat_core::particle::SH_MAX_DEGREE {
-            return Err(spz_error(
-                "SH degree 4 is not supported (splats here carry degree ≤ 3): drop band 4 first, e.g. \
-                 `splat-transform in.spz -H 3 out.spz`",
-            ));
-        }
         if self.fractional_bits > 23 {
             return Err(spz_error(format!("{} fractional bits do not fit 24-bit positions", self.fractional_bits)));
         }
@@ -151,16 +193,106 @@ struct Packed {
     header: Header,
     /// positions, alphas, colors, scales, rotations, sh.
     streams: [Vec<u8>; 6],
+    /// The extension records' bytes (empty without the flag).
+    extensions: Vec<u8>,
 }
 
-/// Parse the bytes of a `.spz` file (versions 2, 3: gzip; 4: zstd streams).
-pub fn parse_spz(bytes: &[u8], axes: SpzAxes) -> Result<Scene, ErrorKind> {
+/// What a `.spz` file held beside its splats.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpzRead {
+    /// The splats, in the scene's axes: converted from the axes the coordinate-system extension
+    /// names, else as [`SpzAxes`] says.
+    pub scene: Scene,
+    /// The format version.
+    pub version: u32,
+    /// Notes on the file: the axes an extension named (and the conversion made), extensions
+    /// skipped, SH band 4 dropped.
+    pub notes: Vec<String>,
+}
+
+/// Parse the bytes of a `.spz` file, with what it held beside the splats.
+pub fn parse_spz_report(bytes: &[u8], axes: SpzAxes) -> Result<SpzRead, ErrorKind> {
     let packed = match bytes {
         [0x1f, 0x8b, ..] => unpack_legacy(bytes)?,
         [b'N', b'G', b'S', b'P', ..] => unpack_v4(bytes)?,
         _ => return Err(spz_error("not an spz file: neither gzip (1f 8b) nor 'NGSP' at byte 0")),
     };
-    decode(&packed, axes)
+    let (system, mut notes) = parse_extensions(&packed.extensions)?;
+    let signs = match system {
+        Some(system) => {
+            let signs = axis_signs(system)?;
+            notes.push(format!(
+                "SPZ_ADOBE_coordinate_system: {} axes, converted to the scene's (RDF, a .ply's)",
+                COORDINATE_SYSTEMS[system as usize]
+            ));
+            signs
+        }
+        None if axes == SpzAxes::Rub => Vec3::new(1.0, -1.0, -1.0),
+        None => Vec3::ONE,
+    };
+    if packed.header.sh_degree > splat_core::particle::SH_MAX_DEGREE {
+        notes.push("SH band 4 dropped (splats here carry degree ≤ 3)".into());
+    }
+    let scene = decode(&packed, signs)?;
+    Ok(SpzRead { scene, version: packed.header.version, notes })
+}
+
+/// The coordinate system an extension names, and notes on the records skipped.
+fn parse_extensions(mut bytes: &[u8]) -> Result<(Option<u32>, Vec<String>), ErrorKind> {
+    let (mut system, mut notes) = (None, Vec::new());
+    while !bytes.is_empty() {
+        if bytes.len() < 8 {
+            return Err(spz_error(format!("{} stray bytes after the extension records", bytes.len())));
+        }
+        let (kind, len) = (u32_at(bytes, 0), u32_at(bytes, 4) as usize);
+        let payload = bytes.get(8..8 + len).ok_or_else(|| {
+            spz_error(format!("extension record {kind:#010x} of {len} bytes runs past the {} left", bytes.len() - 8))
+        })?;
+        match (kind, len) {
+            (EXTENSION_COORDINATE_SYSTEM, 4) if system.is_none() => {
+                let value = u32_at(payload, 0);
+                if value as usize >= COORDINATE_SYSTEMS.len() {
+                    return Err(spz_error(format!("coordinate system {value} is not one of spz's 0–16")));
+                }
+                system = (value != 0).then_some(value);
+            }
+            (EXTENSION_COORDINATE_SYSTEM, _) => {
+                return Err(spz_error("a second or malformed SPZ_ADOBE_coordinate_system record (4 bytes, once)"));
+            }
+            (EXTENSION_SAFE_ORBIT_CAMERA, 12) => {
+                let f = |k: usize| f32::from_le_bytes(payload[4 * k..4 * k + 4].try_into().expect("4 bytes"));
+                notes.push(format!(
+                    "SPZ_ADOBE_safe_orbit_camera (elevation {}–{}, radius ≥ {}) not used",
+                    f(0),
+                    f(1),
+                    f(2)
+                ));
+            }
+            _ => notes.push(format!("extension {kind:#010x} ({len} bytes) skipped: not known here")),
+        }
+        bytes = &bytes[8 + len..];
+    }
+    Ok((system, notes))
+}
+
+/// The signs (x, y, z) that take data in spz coordinate system `system` (1–8) to the scene's
+/// right-down-front axes (a `.ply`'s): −1 for left, up, back.
+fn axis_signs(system: u32) -> Result<Vec3, ErrorKind> {
+    let name = COORDINATE_SYSTEMS[system as usize].as_bytes();
+    if system > 8 {
+        return Err(spz_error(format!(
+            "coordinate system {} swaps the y and z axes, which this reader does not convert: convert the \
+             file to RDF (a .ply's axes) with the spz library first",
+            COORDINATE_SYSTEMS[system as usize]
+        )));
+    }
+    let sign = |b: u8, minus: u8| if b == minus { -1.0 } else { 1.0 };
+    Ok(Vec3::new(sign(name[0], b'L'), sign(name[1], b'U'), sign(name[2], b'B')))
+}
+
+/// Parse the bytes of a `.spz` file (versions 2, 3: gzip; 4: zstd streams).
+pub fn parse_spz(bytes: &[u8], axes: SpzAxes) -> Result<Scene, ErrorKind> {
+    parse_spz_report(bytes, axes).map(|read| read.scene)
 }
 
 fn u32_at(b: &[u8], at: usize) -> u32 {
@@ -203,7 +335,16 @@ fn unpack_legacy(bytes: &[u8]) -> Result<Packed, ErrorKind> {
     for (stream, (name, stride)) in streams.iter_mut().zip(header.stream_strides()) {
         *stream = read_stream(&mut gz, stride * header.count as usize, name, header.count)?;
     }
-    Ok(Packed { header, streams })
+    let mut extensions = Vec::new();
+    if header.flags & FLAG_EXTENSIONS != 0 {
+        gz.take(MAX_LEGACY_EXTENSIONS as u64 + 1)
+            .read_to_end(&mut extensions)
+            .map_err(|e| spz_error(format!("decompressing the extension records: {e}")))?;
+        if extensions.len() > MAX_LEGACY_EXTENSIONS {
+            return Err(spz_error(format!("more than {MAX_LEGACY_EXTENSIONS} bytes of extension records")));
+        }
+    }
+    Ok(Packed { header, streams, extensions })
 }
 
 fn unpack_v4(bytes: &[u8]) -> Result<Packed, ErrorKind> {
@@ -249,29 +390,46 @@ fn unpack_v4(bytes: &[u8]) -> Result<Packed, ErrorKind> {
         *stream = read_stream(decoder, len, name, header.count)?;
         at = end;
     }
-    Ok(Packed { header, streams })
+    let extensions = if header.flags & FLAG_EXTENSIONS != 0 { bytes[HEADER_V4..toc].to_vec() } else { Vec::new() };
+    Ok(Packed { header, streams, extensions })
 }
 
-/// Flips of the 15 SH coefficients of bands 1–3 under (x, y, z) ↦ (x, −y, −z), in the 3DGS
-/// order (y, z, x; xy, yz, 3z²−1, xz, x²−y²; band 3 likewise): each basis function's parity.
-const RUB_SH_FLIP: [f32; 15] = [-1., -1., 1., -1., 1., 1., -1., 1., -1., 1., -1., -1., 1., -1., 1.];
+/// RUB's axis signs against a `.ply`'s (y and z flipped: a half turn about x).
+const RUB: Vec3 = Vec3::new(1.0, -1.0, -1.0);
 
-/// Convert a particle between the 3DGS axes and RUB (an involution: a half turn about x).
-fn flip_rub(p: &mut Particle) {
-    p.mean = Vec3::new(p.mean.x, -p.mean.y, -p.mean.z);
+/// The signs of the 15 SH basis functions of bands 1–3 under (x, y, z) ↦ (sx x, sy y, sz z), in
+/// the 3DGS order (y, z, x; xy, yz, 3z²−1, xz, x²−y²; y(3x²−y²), xyz, y(4z²−x²−y²),
+/// z(2z²−3x²−3y²), x(4z²−x²−y²), z(x²−y²), x(x²−3y²)): each one's parity in each axis.
+fn sh_parity(s: Vec3) -> [f32; 15] {
+    let (x, y, z) = (s.x, s.y, s.z);
+    [y, z, x, x * y, y * z, 1.0, x * z, 1.0, y, x * y * z, y, z, x, z, x]
+}
+
+/// Convert a particle by the axis flips `s` (x, y, z each ±1; an involution): the mean and the
+/// radiance flip with the axes, the rotation R becomes S R S — a rotation even where S is a
+/// mirror, whose quaternion keeps w and takes the flips of the other two axes on each of x, y, z.
+fn flip_axes(p: &mut Particle, s: Vec3) {
+    if s == Vec3::ONE {
+        return;
+    }
+    p.mean *= s;
     let q = p.rotation;
-    p.rotation = Quat::from_xyzw(q.x, -q.y, -q.z, q.w);
+    p.rotation = Quat::from_xyzw(s.y * s.z * q.x, s.x * s.z * q.y, s.x * s.y * q.z, q.w);
     if let splat_core::Sh::Bands(all) = &mut p.sh {
-        for (c, s) in all[1..].iter_mut().zip(RUB_SH_FLIP) {
-            *c *= s;
+        for (c, sign) in all[1..].iter_mut().zip(sh_parity(s)) {
+            *c *= sign;
         }
     }
 }
 
-fn decode(packed: &Packed, axes: SpzAxes) -> Result<Scene, ErrorKind> {
+/// The splats of `packed`, converted by the axis flips `signs` ([`flip_axes`]); SH bands above
+/// degree 3 are dropped.
+fn decode(packed: &Packed, signs: Vec3) -> Result<Scene, ErrorKind> {
     let h = packed.header;
     let [positions, alphas, colors, scales, rotations, sh] = &packed.streams;
-    let rest = sh_coeff_count(h.sh_degree) - 1;
+    let stored = sh_coeff_count(h.sh_degree) - 1;
+    let degree = h.sh_degree.min(splat_core::particle::SH_MAX_DEGREE);
+    let rest = sh_coeff_count(degree) - 1;
     let unit = 1.0 / (1u32 << h.fractional_bits) as f32;
     let rb = h.rotation_bytes();
     let mut particles = Vec::with_capacity(h.count as usize);
@@ -289,19 +447,17 @@ fn decode(packed: &Packed, axes: SpzAxes) -> Result<Scene, ErrorKind> {
         let mut coeffs = [Vec3::ZERO; SH_MAX_COEFFS];
         coeffs[0] = Vec3::from_array([0, 1, 2].map(|k| (f32::from(colors[3 * i + k]) / 255.0 - 0.5) / COLOR_SCALE));
         for (k, c) in coeffs[1..=rest].iter_mut().enumerate() {
-            let at = 3 * (rest * i + k);
+            let at = 3 * (stored * i + k);
             *c = Vec3::from_array([0, 1, 2].map(|ch| (f32::from(sh[at + ch]) - 128.0) / 128.0));
         }
         let mut p = Particle::new(mean, scale, rotation, opacity, coeffs)
             .map_err(|error| ErrorKind::Particle { index: i as u64, error })?;
-        if axes == SpzAxes::Rub {
-            flip_rub(&mut p);
-        }
+        flip_axes(&mut p, signs);
         particles.push(p);
     }
     let screen_filter =
         if h.flags & FLAG_ANTIALIASED != 0 { ScreenFilter::Antialiased } else { ScreenFilter::Dilation };
-    Ok(Scene { screen_filter, ..Scene::new(particles, h.sh_degree) })
+    Ok(Scene { screen_filter, ..Scene::new(particles, degree) })
 }
 
 /// Version 2 rotation: x, y, z as (c + 1) × 127.5, w = √(1 − |xyz|²) ≥ 0.
@@ -391,7 +547,7 @@ fn pack(scene: &Scene, h: Header, axes: SpzAxes) -> [Vec<u8>; 6] {
     for p in &scene.particles {
         let mut p = p.clone();
         if axes == SpzAxes::Rub {
-            flip_rub(&mut p);
+            flip_axes(&mut p, RUB);
         }
         for c in p.mean.to_array() {
             s[0].extend_from_slice(&((c * unit).round() as i32).to_le_bytes()[..3]);
@@ -481,27 +637,39 @@ mod tests {
         assert_eq!(quantize_sh(1.0, 4), 255);
     }
 
+    /// Every axis flip of spz's coordinate systems 1–8 (half turns and mirrors) maps the mean,
+    /// the covariance and the radiance of a particle as the flip matrix S maps space: S μ,
+    /// S Σ S, and the colour seen along S d equal to the original's along d.
     #[test]
-    fn rub_flip_is_a_half_turn_about_x() {
+    fn axis_flips_map_mean_covariance_and_radiance() {
         let mut coeffs = [Vec3::ZERO; SH_MAX_COEFFS];
         for (k, c) in coeffs.iter_mut().enumerate() {
-            *c = Vec3::splat(0.1 * k as f32 - 0.5);
+            *c = Vec3::new(0.1 * k as f32 - 0.5, 0.03 * k as f32, -0.02 * k as f32);
         }
-        let p =
-            Particle::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.1, 0.2, 0.3), Quat::from_rotation_y(0.4), 0.5, coeffs)
-                .unwrap();
-        let mut flipped = p.clone();
-        flip_rub(&mut flipped);
-        let half_turn = Quat::from_rotation_x(std::f32::consts::PI);
-        assert!((flipped.mean - half_turn * p.mean).length() < 1e-5);
-        // The Gaussian's covariance turns with it.
-        let turned = glam::Mat3::from_quat(half_turn);
-        let expected = turned * p.covariance() * turned.transpose();
-        assert!(flipped.covariance().abs_diff_eq(expected, 1e-5));
-        // Colour in a turned direction equals the original colour in the original direction.
-        let d = Vec3::new(0.3, -0.5, 0.8).normalize();
-        let a = splat_core::sh::eval(p.sh.as_slice(), 3, d);
-        let b = splat_core::sh::eval(flipped.sh.as_slice(), 3, half_turn * d);
-        assert!((a - b).length() < 1e-5, "{a} vs {b}");
+        let p = Particle::new(
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(0.1, 0.2, 0.3),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 1.1),
+            0.5,
+            coeffs,
+        )
+        .unwrap();
+        for system in 1..=8u32 {
+            let s = axis_signs(system).unwrap();
+            let mut flipped = p.clone();
+            flip_axes(&mut flipped, s);
+            let m = glam::Mat3::from_diagonal(s);
+            let name = COORDINATE_SYSTEMS[system as usize];
+            assert!((flipped.mean - m * p.mean).length() < 1e-5, "{name}");
+            assert!(flipped.covariance().abs_diff_eq(m * p.covariance() * m, 1e-5), "{name}");
+            for d in [Vec3::new(0.3, -0.5, 0.8), Vec3::new(-0.9, 0.1, 0.2), Vec3::Z] {
+                let d = d.normalize();
+                let a = splat_core::sh::eval(p.sh.as_slice(), 3, d);
+                let b = splat_core::sh::eval(flipped.sh.as_slice(), 3, m * d);
+                assert!((a - b).length() < 1e-5, "{name}: {a} vs {b}");
+            }
+        }
+        assert_eq!(axis_signs(4).unwrap(), RUB);
+        assert!(axis_signs(9).unwrap_err().to_string().contains("LBD"));
     }
 }

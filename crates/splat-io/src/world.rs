@@ -303,6 +303,8 @@ pub struct Opened {
     pub name: String,
     /// `.ply` vertex properties the reader skipped as unknown (see [`crate::ReadOptions`]).
     pub skipped_properties: Vec<String>,
+    /// The reader's notes ([`crate::SceneRead::notes`]).
+    pub notes: Vec<String>,
 }
 
 /// Open what the user named: a world file (`.toml`), a scene file (`.ply`, compressed `.ply`,
@@ -313,21 +315,21 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
     let Some(path) = path else {
         let (scene, camera) = splat_core::scenes::demo();
         let world = WorldSpec { camera: Some(camera), ..WorldSpec::of(scene) };
-        return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new() });
+        return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new(), notes: Vec::new() });
     };
-    let (world, skipped_properties) = if is_world_file(path) {
-        (read_world_as(path, options.screen_filter)?, Vec::new())
+    let (world, skipped_properties, notes) = if is_world_file(path) {
+        (read_world_as(path, options.screen_filter)?, Vec::new(), Vec::new())
     } else if matches!(crate::extension(path).as_deref(), Some("glb" | "gltf")) {
-        (read_gltf_world(path, options)?, Vec::new())
+        (read_gltf_world(path, options)?, Vec::new(), Vec::new())
     } else {
         let read = crate::read_scene_with(path, options)?;
-        (WorldSpec::of(read.scene), read.skipped_properties)
+        (WorldSpec::of(read.scene), read.skipped_properties, read.notes)
     };
     if world.scene.particles.is_empty() && world.meshes.is_empty() {
         return Err(Error::new(path, ErrorKind::Empty));
     }
     let name = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
-    Ok(Opened { world, name, skipped_properties })
+    Ok(Opened { world, name, skipped_properties, notes })
 }
 
 /// A glTF file as a world: its `KHR_gaussian_splatting` splats ([`crate::gltf_splats`]) and
