@@ -731,18 +731,12 @@ fn new_readers_survive_truncation_and_corruption() {
     // SOG: prefixes of a bundle (the zip container), and corruptions of meta.json and of each
     // image behind it (the WebP decoder and the splats' decode).
     let sog = splat_io::sog::encode_sog(&small).unwrap();
-    let entries: Vec<(&str, &[u8])> = sog.iter().map(|(n, d)| (n.as_str(), d.as_slice())).collect();
-    let bundle = std::fs::read({
-        let p = scratch_dir("robust-sog").join("small.sog");
-        splat_io::write_scene(&p, &small, Default::default()).unwrap();
-        p
-    })
-    .unwrap();
+    let bundle = sog_bundle(&small, &scratch_dir("robust-sog"));
     for end in (0..bundle.len()).step_by(97) {
         let _ = splat_io::sog::parse_sog_bundle(&bundle[..end]);
         cases += 1;
     }
-    for (target, _) in &entries {
+    for target in sog.iter().map(|(name, _)| name) {
         for _ in 0..60 {
             let mut files = sog.clone();
             let data = &mut files.iter_mut().find(|(n, _)| n == target).unwrap().1;
@@ -760,6 +754,13 @@ fn new_readers_survive_truncation_and_corruption() {
         }
     }
     eprintln!("{cases} damaged inputs read without a panic");
+}
+
+/// The bytes of `scene` written by `splat_io::write_scene` as `DIR/small.sog`.
+fn sog_bundle(scene: &Scene, dir: &std::path::Path) -> Vec<u8> {
+    let path = dir.join("small.sog");
+    splat_io::write_scene(&path, scene, Default::default()).unwrap();
+    std::fs::read(path).unwrap()
 }
 
 /// `scene` written as SOG (a `.sog` bundle, or for `folder` a `meta.json` and its images) and
@@ -933,12 +934,7 @@ fn sog_errors_name_the_problem() {
     }
     let e = splat_io::read_scene(&dir.join("meta.json")).unwrap_err().to_string();
     assert!(e.contains("not a file name beside meta.json"), "{e}");
-    let bundle = std::fs::read({
-        let p = dir.join("small.sog");
-        splat_io::write_scene(&p, &small, Default::default()).unwrap();
-        p
-    })
-    .unwrap();
+    let bundle = sog_bundle(&small, &dir);
     let e = splat_io::sog::parse_sog_bundle(&bundle[..bundle.len() - 5]).unwrap_err().to_string();
     assert!(e.contains("end-of-central-directory"), "{e}");
     let mut damaged = bundle.clone();

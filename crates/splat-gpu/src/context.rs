@@ -231,10 +231,7 @@ impl GpuContext {
 
     /// A read-only storage buffer holding `contents`.
     pub(crate) fn upload(&self, label: &str, contents: &[u8]) -> wgpu::Buffer {
-        self.upload_as(label, contents, wgpu::BufferUsages::STORAGE)
-    }
-
-    fn upload_as(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        let usage = wgpu::BufferUsages::STORAGE;
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
     }
 

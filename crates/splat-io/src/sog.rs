@@ -273,11 +273,7 @@ impl Fields<'_> {
             if let Some(rest) = &rest {
                 rest(i, &mut sh[1..sh_coeff_count(degree)]);
             }
-            let scale = scales[i];
-            if !scale.is_finite() || scale.min_element() <= 0.0 {
-                return Err(sog_error(format!("splat {i}: scale {scale} (an empty codebook entry?)")));
-            }
-            let p = Particle::new(means[i], scale, unpack_quat(quats.texel(i)), colours[i].1, sh)
+            let p = Particle::new(means[i], scales[i], unpack_quat(quats.texel(i)), colours[i].1, sh)
                 .map_err(|error| ErrorKind::Particle { index: i as u64, error })?;
             particles.push(p);
         }
