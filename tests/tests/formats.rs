@@ -728,6 +728,22 @@ fn new_readers_survive_truncation_and_corruption() {
             cases += 1;
         }
     }
+    // .ksplat: prefixes and corruptions (headers, bucket records, splats) of GaussianSplats3D's
+    // file of three sections.
+    if let Some(dir) = interop_dir() {
+        let bytes = std::fs::read(dir.join("gaussian-splats-3d-sections.ksplat")).unwrap();
+        for end in (0..bytes.len()).step_by(313) {
+            let _ = splat_io::ksplat::parse_ksplat(&bytes[..end]);
+            cases += 1;
+        }
+        for _ in 0..400 {
+            let mut b = bytes.clone();
+            let i = (rng.next_f32() * 12_000.0) as usize % b.len();
+            b[i] = (rng.next_f32() * 256.0) as u8;
+            let _ = splat_io::ksplat::parse_ksplat(&b);
+            cases += 1;
+        }
+    }
     // SOG: prefixes of a bundle (the zip container), and corruptions of meta.json and of each
     // image behind it (the WebP decoder and the splats' decode).
     let sog = splat_io::sog::encode_sog(&small).unwrap();
@@ -1018,4 +1034,129 @@ fn spz_extension_records_are_honoured_or_skipped_with_a_note() {
     let read = splat_io::spz::parse_spz_report(&gzip(&raw), SpzAxes::AsStored).unwrap();
     assert_eq!(read.scene, parse_spz(&plain, SpzAxes::AsStored).unwrap());
     assert!(read.notes.join("; ").contains("SH band 4 dropped"), "{:?}", read.notes);
+}
+
+/// The interop source as `.ksplat` keeps it: SH degree 2 (band 3 dropped).
+fn at_degree_2(scene: &Scene) -> Scene {
+    let particles = scene
+        .particles
+        .iter()
+        .map(|p| {
+            let mut p = p.clone();
+            for k in 9..16 {
+                p.sh[k] = Vec3::ZERO;
+            }
+            p
+        })
+        .collect();
+    Scene { particles, sh_degree: 2, ..scene.clone() }
+}
+
+/// Bounds of a `.ksplat` file's errors (GaussianSplats3D's `SplatBuffer`, from its encoder):
+/// colour and opacity are floored to 8 bits (up to one step, 1/255), positions rounded to a
+/// step of (block / 2) / 32767 about their bucket's centre (levels 1–2), scales, rotations and
+/// level 1's SH truncated to f16 (three.js's `toHalfFloat` drops the mantissa's low bits: up to
+/// an ulp, 2⁻¹⁰ relative; measured 0.99 of it), level 2's SH floored over the
+/// header's [min, max] in 255 steps; level 0 stores f32. Rotation angles to the 2e-3 rad that
+/// f32's acos resolves near 1.
+fn ksplat_steps(source: &Scene, file: &[u8], level: u8, block: f32) -> Steps {
+    let sh_max = source
+        .particles
+        .iter()
+        .flat_map(|p| p.sh.as_slice()[1..9].to_vec())
+        .fold(0f32, |m, c| m.max(c.abs().max_element()));
+    let f32_at = |at: usize| f32::from_le_bytes(file[at..at + 4].try_into().unwrap());
+    let (sh_min_file, sh_max_file) = (f32_at(36), f32_at(40));
+    let ulp = 2f32.powi(-10);
+    let sh = match level {
+        0 => 1e-7,
+        1 => sh_max * ulp,
+        _ => (sh_max_file - sh_min_file) / 255.0,
+    };
+    let (log_scale, position) =
+        if level == 0 { (1e-6, 1e-7) } else { (-(1.0 - ulp).ln(), 0.5 * block / 2.0 / 32767.0) };
+    Steps { position, log_scale, opacity: 1.0 / 255.0, dc: 1.0 / 255.0 / SH_C0, sh1: sh, sh_rest: sh, angle: 2e-3 }
+}
+
+/// GaussianSplats3D 0.4.7's `.ksplat` files of the interop source (compression levels 0, 1, 2,
+/// and level 1 in three sections of partly filled buckets) decode to what splat-transform's
+/// reader decodes them to, and to the source (at SH degree 2, reordered: the writer sorts the
+/// splats by distance from the centre) within the format's steps, images included. Control: a
+/// reader that took the SH components in the `.ply`'s channel-major order over both bands (not
+/// band by band) fails the bounds.
+#[test]
+fn ksplat_files_read_as_gaussian_splats_3d_wrote_them() {
+    let Some(dir) = interop_dir() else { return };
+    let source = at_degree_2(&splat_io::read_scene(&dir.join("source.ply")).unwrap());
+    let (_, camera) = cloud();
+    for (name, level, block) in [("0", 0, 5.0), ("1", 1, 5.0), ("2", 2, 5.0), ("sections", 1, 0.5)] {
+        let path = dir.join(format!("gaussian-splats-3d-{name}.ksplat"));
+        let read = splat_io::read_scene_with(&path, Default::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(read.format, splat_io::SceneFormat::Ksplat);
+        let decoded = splat_io::read_scene(&dir.join(format!("gaussian-splats-3d-{name}-decoded.ply"))).unwrap();
+        assert_same_splats(name, &read.scene, &decoded);
+        let back = in_source_order(&source, read.scene);
+        let steps = ksplat_steps(&source, &std::fs::read(&path).unwrap(), level, block);
+        let e = errors(&source, &back);
+        let (error, bound) = image_check(&source, &back, &camera, steps);
+        eprintln!("{name} ({}): image RMSE {error:.2e}, bound {bound:.2e}; errors {e:?}", read.detail);
+        within(e, steps).unwrap_or_else(|m| panic!("{name}: {m} ({e:?})"));
+        assert!(error <= bound, "{name}: image RMSE {error:.3e} > bound {bound:.3e}");
+        // The control: components 0..24 put in the .ply's order (8 coefficients of red, then
+        // green, then blue).
+        let misread = Scene {
+            particles: back
+                .particles
+                .iter()
+                .map(|p| {
+                    let mut q = p.clone();
+                    let stored: Vec<f32> = (0..24)
+                        .map(|k| if k < 9 { p.sh[1 + k % 3][k / 3] } else { p.sh[4 + (k - 9) % 5][(k - 9) / 5] })
+                        .collect();
+                    for (k, v) in stored.into_iter().enumerate() {
+                        q.sh[1 + k % 8][k / 8] = v;
+                    }
+                    q
+                })
+                .collect(),
+            ..back.clone()
+        };
+        assert!(within(errors(&source, &misread), steps).is_err(), "{name}: the misread SH layout passes");
+    }
+}
+
+/// Bad `.ksplat` files (GaussianSplats3D's level 1 file, edited) are refused with the problem
+/// named; a scale stored as 0 (f16 underflow) reads as the least f16 with a note.
+#[test]
+fn ksplat_errors_name_the_problem() {
+    let Some(dir) = interop_dir() else { return };
+    let file = std::fs::read(dir.join("gaussian-splats-3d-1.ksplat")).unwrap();
+    let with = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = file.clone();
+        edit(&mut b);
+        splat_io::ksplat::parse_ksplat(&b).map(|_| ()).unwrap_err().to_string()
+    };
+    type Edit<'a> = &'a dyn Fn(&mut Vec<u8>);
+    let cases: [(Edit, &str); 8] = [
+        (&|b| b.truncate(4000), "shorter than the format's 4096-byte header"),
+        (&|b| b[1] = 0, "version 0.0"),
+        (&|b| b[20] = 3, "compression level 3"),
+        (&|b| b.truncate(b.len() - 10), "the file is truncated"),
+        (&|b| b[4096 + 40] = 3, "SH degree 3 is beyond the format's 2"),
+        (&|b| b[16] ^= 1, "declares 3001 splats but its sections hold 3000"),
+        (&|b| b[4] = 250, "header declares 250 sections"),
+        // The first bucket centre's x, after the one partly filled bucket's size.
+        (&|b| b[5120 + 4..5120 + 8].copy_from_slice(&f32::NAN.to_le_bytes()), "bucket 0's centre"),
+    ];
+    for (edit, expected) in cases {
+        let e = with(edit);
+        assert!(e.contains(expected), "expected '{expected}' in: {e}");
+    }
+    // Splat 0's scale x (after its 6-byte position) set to f16 0.
+    let data = 5120 + 4 + 12 * 12;
+    let mut b = file.clone();
+    b[data + 6..data + 8].copy_from_slice(&[0, 0]);
+    let read = splat_io::ksplat::parse_ksplat(&b).unwrap();
+    assert_eq!(read.scene.particles[0].scale.x, 5.960_464_5e-8);
+    assert!(read.notes[0].contains("1 scale component(s) stored as 0"), "{:?}", read.notes);
 }

@@ -1,6 +1,7 @@
 // Writes the files that splat-io's readers are tested on, with other implementations of the
 // formats: spz-js (spz version 2, compressed .ply) and PlayCanvas splat-transform (spz
-// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting, SOG). Run by `cargo xtask assets` as
+// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting, SOG) and
+// GaussianSplats3D (.ksplat). Run by `cargo xtask assets` as
 //   node make.mjs OUT_DIR
 // in a folder where `npm ci` installed package-lock.json; OUT_DIR/source.ply must exist.
 import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
@@ -47,3 +48,22 @@ transform(antialiased, join(out, 'splat-transform-antialiased.compressed.ply'));
 transform(antialiased, '--spz-version', '3', join(out, 'splat-transform-antialiased-v3.spz'));
 transform(antialiased, '--spz-version', '4', join(out, 'splat-transform-antialiased-v4.spz'));
 transform('-g', 'cpu', antialiased, join(out, 'splat-transform-antialiased.sog'));
+
+// mkkellogg's GaussianSplats3D .ksplat, as its util/create-ksplat.js writes one (that script is
+// not in the npm package; these are its calls): the .ply parsed at SH degree 2 (the format's
+// most), then SplatBufferGenerator's standard partition at compression levels 0 (f32), 1 (f16,
+// 16-bit positions) and 2 (as 1, with 8-bit SH); and level 1 in three sections of small blocks
+// and buckets, so that files with several sections and partly filled buckets are read. Then
+// splat-transform's own decoding of each.
+const GaussianSplats3D = await import('@mkkellogg/gaussian-splats-3d');
+const ksplat = (level, sectionSize, blockSize, bucketSize, name) => {
+    const data = readFileSync(source);
+    const buffer = data.buffer.slice(data.byteOffset, data.byteOffset + data.byteLength);
+    const splats = GaussianSplats3D.PlyParser.parseToUncompressedSplatArray(buffer, 2);
+    const generator = GaussianSplats3D.SplatBufferGenerator.getStandardGenerator(
+        undefined, level, sectionSize, undefined, blockSize, bucketSize);
+    writeFileSync(join(out, name), Buffer.from(generator.generateFromUncompressedSplatArray(splats).bufferData));
+    transform(join(out, name), join(out, name.replace('.ksplat', '-decoded.ply')));
+};
+for (const level of [0, 1, 2]) ksplat(level, 0, undefined, undefined, `gaussian-splats-3d-${level}.ksplat`);
+ksplat(1, 1000, 0.5, 64, 'gaussian-splats-3d-sections.ksplat');

@@ -27,7 +27,7 @@ fn main() -> Result<()> {
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
                  assets       fetch and verify the bonsai capture into target/assets/, and write\n               \
-                 files of other tools (npm: splat-transform, spz-js) into target/interop/\n  \
+                 files of other tools (npm: splat-transform, spz-js, gaussian-splats-3d) into target/interop/\n  \
                  power        run the full power study of the statistical suites (every injected error;\n               \
                  `test` runs the asserted ones) and write its table into docs/power.md\n  \
                  bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
@@ -565,7 +565,7 @@ fn assets() -> Result<PathBuf> {
 const INTEROP_SOURCES: &str = "xtask/interop";
 
 /// Write `target/interop/`: `source.ply` (the SH degree 3 cloud scene) and what other
-/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb), for the reader tests in
+/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb, SOG, .ksplat), for the reader tests in
 /// tests/tests/formats.rs. Installs Node.js (Debian's nodejs, npm) when missing and root.
 fn interop() -> Result<PathBuf> {
     let dir = root().join("target/interop");
@@ -592,7 +592,8 @@ fn interop() -> Result<PathBuf> {
         }
         Ok(())
     };
-    if !npm_dir.join("node_modules/spz-js").exists() || !npm_dir.join("node_modules/@playcanvas").exists() {
+    let installed = ["spz-js", "@playcanvas/splat-transform", "@mkkellogg/gaussian-splats-3d", "three"];
+    if !installed.iter().all(|package| npm_dir.join("node_modules").join(package).exists()) {
         eprintln!("installing the pinned npm packages (package-lock.json) …");
         run("npm", &["ci", "--ignore-scripts", "--no-audit", "--no-fund", "--loglevel=error"])?;
     }

@@ -10,8 +10,9 @@ use std::path::PathBuf;
 /// Arguments of `splat convert`.
 #[derive(Args)]
 pub struct ConvertArgs {
-    /// Input scene: .ply (3DGS or PlayCanvas compressed), .splat, .spz (versions 2–4) or glTF
-    /// .glb / .gltf (KHR_gaussian_splatting).
+    /// Input scene: .ply (3DGS or PlayCanvas compressed), .splat, .spz (versions 2–4), glTF
+    /// .glb / .gltf (KHR_gaussian_splatting), PlayCanvas SOG (.sog or meta.json) or
+    /// GaussianSplats3D .ksplat.
     pub input: PathBuf,
     /// Output scene, format by extension: .ply (f32, lossless), .splat (8-bit degree-0 colour,
     /// no view dependence), .spz (quantised, about 10× smaller than .ply), .sog (PlayCanvas SOG

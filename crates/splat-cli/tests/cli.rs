@@ -828,8 +828,8 @@ fn convert_round_trips_every_format() {
     let flat = scratch("cloud.splat");
     let o = splat(&["convert", "fixtures/cloud.ply", flat.to_str().unwrap()]);
     assert!(o.status.success() && stderr(&o).contains("SH bands 1–3 are dropped"), "{}", stderr(&o));
-    // Refusals: a compressed .ply output, an unknown extension.
-    for out in ["x.compressed.ply", "x.obj"] {
+    // Refusals: a compressed .ply or .ksplat output (read only), an unknown extension.
+    for out in ["x.compressed.ply", "x.ksplat", "x.obj"] {
         let o = splat(&["convert", "fixtures/cloud.ply", scratch(out).to_str().unwrap()]);
         assert!(
             !o.status.success() && stderr(&o).contains(".ply, .splat, .spz, .glb, .gltf, .sog or meta.json"),

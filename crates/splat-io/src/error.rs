@@ -161,6 +161,10 @@ pub enum ErrorKind {
     /// reader does not support.
     #[error("SOG: {0}")]
     Sog(String),
+    /// A `.ksplat` file (GaussianSplats3D) is malformed or uses what this reader does not
+    /// support.
+    #[error(".ksplat: {0}")]
+    Ksplat(String),
     /// A compressed `.ply` (PlayCanvas / SuperSplat) is malformed.
     #[error("compressed PLY: {0}")]
     CompressedPly(String),

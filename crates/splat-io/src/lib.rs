@@ -3,7 +3,8 @@
 //! - Scenes (read and write unless noted): INRIA 3DGS `.ply` (binary and ASCII), PlayCanvas
 //!   compressed `.ply` (read), antimatter15 `.splat`, Niantic `.spz` (versions 2–4), glTF
 //!   `.glb` / `.gltf` with `KHR_gaussian_splatting` ([`gltf_splats`]), PlayCanvas SOG (`.sog`
-//!   bundles and `meta.json` folders, [`sog`]); see [`SceneFormat`].
+//!   bundles and `meta.json` folders, [`sog`]), GaussianSplats3D `.ksplat` (read, [`ksplat`]);
+//!   see [`SceneFormat`].
 //! - Cameras: INRIA `cameras.json`, COLMAP `cameras`/`images` `.bin` and `.txt` ([`colmap`]).
 //! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
 //! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
@@ -26,6 +27,7 @@ pub mod compressed_ply;
 mod error;
 pub mod gltf_splats;
 pub mod image;
+pub mod ksplat;
 pub mod mesh;
 pub mod ply;
 pub mod sog;
@@ -57,6 +59,9 @@ pub enum SceneFormat {
     /// PlayCanvas SOG: `meta.json` and WebP images, bundled (`.sog`) or as a folder; codebooks
     /// and an SH palette ([`sog`]).
     Sog,
+    /// mkkellogg's GaussianSplats3D `.ksplat`: f32, or f16 with 16-bit bucket-relative
+    /// positions, 8-bit colour, SH up to degree 2 (read only, [`ksplat`]).
+    Ksplat,
 }
 
 impl SceneFormat {
@@ -68,7 +73,10 @@ impl SceneFormat {
         }
         match extension(path).as_deref() {
             Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => {
-                Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_COMPRESSED }))
+                Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_READ_ONLY }))
+            }
+            Some("ksplat") => {
+                Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_READ_ONLY }))
             }
             Some("ply") => Ok(Self::Ply),
             Some("splat") => Ok(Self::Splat),
@@ -88,7 +96,7 @@ impl SceneFormat {
             (Self::Ply | Self::CompressedPly, filter) => filter,
             (Self::Spz | Self::Sog, ScreenFilter::Mip) => ScreenFilter::Antialiased,
             (Self::Spz | Self::Sog, filter) => filter,
-            (Self::Splat | Self::Gltf, _) => ScreenFilter::Dilation,
+            (Self::Splat | Self::Gltf | Self::Ksplat, _) => ScreenFilter::Dilation,
         }
     }
 
@@ -101,16 +109,17 @@ impl SceneFormat {
             Self::Spz => ".spz",
             Self::Gltf => "glTF (KHR_gaussian_splatting)",
             Self::Sog => "PlayCanvas SOG",
+            Self::Ksplat => "GaussianSplats3D .ksplat",
         }
     }
 }
 
 /// The extensions the writers take, as errors list them.
 const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json";
-const WRITTEN_EXTENSIONS_COMPRESSED: &str =
-    ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json (compressed .ply is read only)";
+const WRITTEN_EXTENSIONS_READ_ONLY: &str =
+    ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json (compressed .ply and .ksplat are read only)";
 /// The extensions the readers take.
-const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json";
+const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .ksplat";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -142,7 +151,8 @@ pub struct SceneRead {
     /// flag; the 3DGS dilation where it names none). The scene's is this unless
     /// [`ReadOptions::screen_filter`] overrides it.
     pub file_filter: ScreenFilter,
-    /// The format's version and container where the format has several (SOG's, `.spz`'s),
+    /// The format's version and container where the format has several (SOG's, `.spz`'s,
+    /// `.ksplat`'s compression level),
     /// for `splat info`; empty otherwise.
     pub detail: String,
     /// What the reader did that the user should hear of (an `.spz` extension skipped or
@@ -156,7 +166,7 @@ pub fn extension(path: &Path) -> Option<String> {
 }
 
 /// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`,
-/// `.spz`, `.glb`, `.gltf`, `.sog`, or a name ending in `meta.json`) with default options:
+/// `.spz`, `.glb`, `.gltf`, `.sog`, a name ending in `meta.json`, `.ksplat`) with default options:
 /// unknown `.ply` properties are skipped.
 pub fn read_scene(path: &Path) -> Result<Scene, Error> {
     read_scene_with(path, ReadOptions::default()).map(|read| read.scene)
@@ -205,6 +215,10 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             }
         }
         Some("glb" | "gltf") => read(SceneFormat::Gltf, gltf_splats::read_gltf_splats(path)?),
+        Some("ksplat") => {
+            let ksplat = ksplat::read_ksplat(path)?;
+            SceneRead { detail: ksplat.describe(), notes: ksplat.notes, ..read(SceneFormat::Ksplat, ksplat.scene) }
+        }
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
     if let Some(filter) = options.screen_filter {
@@ -224,7 +238,7 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::Spz => spz::write_spz(path, scene, spz)?,
         SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
         SceneFormat::Sog => sog::write_sog(path, scene)?,
-        SceneFormat::CompressedPly => unreachable!("for_output refuses it"),
+        SceneFormat::CompressedPly | SceneFormat::Ksplat => unreachable!("for_output refuses them"),
     }
     Ok(format)
 }
