@@ -744,6 +744,20 @@ fn new_readers_survive_truncation_and_corruption() {
             cases += 1;
         }
     }
+    // USD: prefixes and corruptions of a .usda layer (the lexer, the prim and value parsers).
+    let usda = splat_io::usd::encode_usda(&small).into_bytes();
+    for end in (0..usda.len()).step_by(53) {
+        let _ = splat_io::usd::parse_usda(&usda[..end]);
+        cases += 1;
+    }
+    for _ in 0..400 {
+        let mut b = usda.clone();
+        let i = (rng.next_f32() * b.len() as f32) as usize % b.len();
+        let alphabet = b"()[]{}=,\"'<>@#-.0e:abc \n";
+        b[i] = alphabet[(rng.next_f32() * alphabet.len() as f32) as usize % alphabet.len()];
+        let _ = splat_io::usd::parse_usda(&b);
+        cases += 1;
+    }
     // SOG: prefixes of a bundle (the zip container), and corruptions of meta.json and of each
     // image behind it (the WebP decoder and the splats' decode).
     let sog = splat_io::sog::encode_sog(&small).unwrap();
@@ -902,12 +916,12 @@ fn sog_files_read_and_write_as_splat_transform_does() {
     assert_same_splats("ours.sog", &splat_io::read_scene(&ours).unwrap(), &theirs);
 }
 
-/// Two decodings of the same SOG file hold the same splats, in the same order, up to f32
+/// Two decodings of the same file hold the same splats, in the same order, up to f32
 /// arithmetic (and opacities splat-transform clamps to [1e-6, 1 − 1e-6] on the way to a logit).
 fn assert_same_splats(name: &str, ours: &Scene, theirs: &Scene) {
     assert_eq!((ours.particles.len(), ours.sh_degree), (theirs.particles.len(), theirs.sh_degree), "{name}");
     let e = errors(ours, theirs);
-    eprintln!("{name}: against splat-transform's decoding {e:?}");
+    eprintln!("{name}: against the reference's decoding {e:?}");
     let same =
         Steps { position: 1e-6, log_scale: 1e-5, opacity: 1.5e-6, dc: 1e-6, sh1: 1e-6, sh_rest: 1e-6, angle: 1e-3 };
     within(e, same).unwrap_or_else(|m| panic!("{name} decodes unlike splat-transform: {m}"));
@@ -1159,4 +1173,104 @@ fn ksplat_errors_name_the_problem() {
     let read = splat_io::ksplat::parse_ksplat(&b).unwrap();
     assert_eq!(read.scene.particles[0].scale.x, 5.960_464_5e-8);
     assert!(read.notes[0].contains("1 scale component(s) stored as 0"), "{:?}", read.notes);
+}
+
+/// usd-core's interpreter in `target/interop/usd` (`cargo xtask assets`), and usd.py.
+fn usd_python(dir: &std::path::Path) -> Option<(PathBuf, PathBuf)> {
+    let python = dir.join("usd/bin/python");
+    if !python.exists() {
+        splat_tests::skip(
+            &splat_tests::current_test(),
+            &format!("{} has no usd-core (run `cargo xtask assets`, needs Python's venv)", python.display()),
+        );
+        return None;
+    }
+    Some((python, splat_tests::root().join("xtask/interop/usd.py")))
+}
+
+/// OpenUSD (usd-core 26.11, the reference implementation) and this reader and writer agree on
+/// `ParticleField3DGaussianSplat`:
+/// - usd-core's layer of the interop source (laid out as 3dgrut's exporter lays one out) reads
+///   to the source's splats (positions and SH bit for bit; scales, opacities and rotations to
+///   the f32 rounding of usd.py's exp, sigmoid and normalisation in f64);
+/// - its layer with the splats under translate, pivot, rotateXYZ, orient, a mirroring scale,
+///   an inverted op and a matrix reads to those splats placed by usd-core's own world matrix
+///   (means, covariances L Σ Lᵀ, and the colour along L d against the source's along d): the
+///   reader composes xformOps as USD does;
+/// - usd-core reads our layer of the source as a `ParticleField3DGaussianSplat` whose every
+///   attribute is the scene's, f32 for f32, with `elementSize` 16 and the sRGB colour space.
+#[test]
+fn usd_layers_read_and_write_as_openusd_does() {
+    let Some(dir) = interop_dir() else { return };
+    let Some((python, script)) = usd_python(&dir) else { return };
+    let source = splat_io::read_scene(&dir.join("source.ply")).unwrap();
+    let plain = splat_io::read_scene_with(&dir.join("usd-core.usda"), Default::default()).unwrap();
+    assert_eq!(
+        (plain.format, plain.detail.as_str()),
+        (splat_io::SceneFormat::Usd, "usda layer, 1 prim: /World/Gaussians/gaussians")
+    );
+    assert_same_splats("usd-core.usda", &plain.scene, &source);
+    for (p, q) in plain.scene.particles.iter().zip(&source.particles) {
+        assert_eq!((p.mean, p.sh.to_array()), (q.mean, q.sh.to_array()));
+    }
+
+    let placed = splat_io::read_scene(&dir.join("usd-core-placed.usda")).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("usd-core-placed.json")).unwrap()).unwrap();
+    let rows: Vec<f64> = json["world"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|r| r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+        .collect();
+    // USD's rows (x' = x M) are the columns of the column-vector matrix.
+    let world = glam::DMat4::from_cols_array(&rows.try_into().unwrap()).as_mat4();
+    let linear = glam::Mat3::from_mat4(world);
+    assert!(linear.determinant() < 0.0, "the placed layer mirrors");
+    let (mut mean_error, mut covariance, mut colour) = (0f32, 0f32, 0f32);
+    for (p, q) in placed.particles.iter().zip(&source.particles) {
+        mean_error = mean_error.max((p.mean - world.transform_point3(q.mean)).length());
+        let expected = Particle { mean: p.mean, ..q.clone() };
+        let l_sigma = linear * expected.covariance() * linear.transpose();
+        let diff = (p.covariance() - l_sigma).to_cols_array().iter().fold(0f32, |m, v| m.max(v.abs()));
+        covariance = covariance.max(diff / l_sigma.to_cols_array().iter().fold(0f32, |m, v| m.max(v.abs())));
+        for d in [Vec3::new(0.3, -0.5, 0.8), Vec3::new(-0.9, 0.1, 0.2)] {
+            let d = d.normalize();
+            let a = splat_core::sh::eval(q.sh.as_slice(), 3, d);
+            let b = splat_core::sh::eval(p.sh.as_slice(), 3, (linear * d).normalize());
+            colour = colour.max((a - b).abs().max_element());
+        }
+    }
+    eprintln!(
+        "placed by usd-core's world matrix: mean {mean_error:.2e}, covariance {covariance:.2e} (relative), colour {colour:.2e}"
+    );
+    assert!(mean_error < 1e-5 && covariance < 1e-5 && colour < 1e-4, "{mean_error} {covariance} {colour}");
+
+    let ours = scratch_dir("usd-ours").join("ours.usda");
+    splat_io::write_scene(&ours, &source, Default::default()).unwrap();
+    let dumped = ours.with_extension("json");
+    let status = std::process::Command::new(&python).arg(&script).arg("dump").arg(&ours).arg(&dumped).status();
+    assert!(status.is_ok_and(|s| s.success()), "usd-core does not read our layer");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&dumped).unwrap()).unwrap();
+    let prims = json["prims"].as_array().unwrap();
+    assert_eq!(prims.len(), 1, "{json}");
+    let prim = &prims[0];
+    assert_eq!(prim["path"], "/World/gaussians");
+    assert_eq!(
+        (prim["is_a"].as_bool(), prim["degree"].as_u64(), prim["element_size"].as_u64()),
+        (Some(true), Some(3), Some(16))
+    );
+    assert_eq!(prim["color_space"], "srgb_rec709_display");
+    let floats = |name: &str| -> Vec<f32> {
+        prim[name].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect()
+    };
+    let expect = |name: &str, each: &dyn Fn(&Particle) -> Vec<f32>| {
+        let ours: Vec<f32> = source.particles.iter().flat_map(each).collect();
+        assert!(floats(name) == ours, "usd-core reads our {name} otherwise");
+    };
+    expect("positions", &|p| p.mean.to_array().to_vec());
+    expect("orientations", &|p| vec![p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z]);
+    expect("scales", &|p| p.scale.to_array().to_vec());
+    expect("opacities", &|p| vec![p.opacity]);
+    expect("coefficients", &|p| p.sh.to_array().iter().flat_map(|c| c.to_array()).collect());
 }

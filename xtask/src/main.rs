@@ -27,7 +27,8 @@ fn main() -> Result<()> {
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
                  assets       fetch and verify the bonsai capture into target/assets/, and write\n               \
-                 files of other tools (npm: splat-transform, spz-js, gaussian-splats-3d) into target/interop/\n  \
+                 files of other tools (npm: splat-transform, spz-js, gaussian-splats-3d; PyPI: usd-core)\n               \
+                 into target/interop/\n  \
                  power        run the full power study of the statistical suites (every injected error;\n               \
                  `test` runs the asserted ones) and write its table into docs/power.md\n  \
                  bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
@@ -565,7 +566,7 @@ fn assets() -> Result<PathBuf> {
 const INTEROP_SOURCES: &str = "xtask/interop";
 
 /// Write `target/interop/`: `source.ply` (the SH degree 3 cloud scene) and what other
-/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb, SOG, .ksplat), for the reader tests in
+/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb, SOG, .ksplat, USD), for the reader tests in
 /// tests/tests/formats.rs. Installs Node.js (Debian's nodejs, npm) when missing and root.
 fn interop() -> Result<PathBuf> {
     let dir = root().join("target/interop");
@@ -598,5 +599,34 @@ fn interop() -> Result<PathBuf> {
         run("npm", &["ci", "--ignore-scripts", "--no-audit", "--no-fund", "--loglevel=error"])?;
     }
     run("node", &["make.mjs", dir.to_str().context("target path is not UTF-8")?])?;
+    usd_interop(&dir)?;
     Ok(dir)
+}
+
+/// OpenUSD's files of the interop source: usd-core (requirements-usd.txt, installed with
+/// `--require-hashes` into `target/interop/usd`) writes them through `usd.py`, which the USD
+/// tests also run to read ours.
+fn usd_interop(dir: &Path) -> Result<()> {
+    if !ensure_venv()? {
+        eprintln!("no Python venv here: the USD tests will skip");
+        return Ok(());
+    }
+    let venv = dir.join("usd");
+    let python = venv.join("bin/python");
+    if !python.exists() {
+        run_checked(Command::new(system_python()).args(["-m", "venv"]).arg(&venv), "python3 -m venv (usd-core)")?;
+    }
+    let requirements = root().join(INTEROP_SOURCES).join("requirements-usd.txt");
+    if Command::new(&python).args(["-c", "import pxr.UsdVol"]).output().map_or(true, |o| !o.status.success()) {
+        eprintln!("installing usd-core (pinned by hash in {}) …", requirements.display());
+        run_checked(
+            Command::new(&python).args(PIP_INSTALL).arg("--require-hashes").arg("-r").arg(&requirements),
+            "pip install usd-core",
+        )?;
+    }
+    let script = root().join(INTEROP_SOURCES).join("usd.py");
+    run_checked(
+        Command::new(&python).arg(&script).arg("write").arg(dir.join("source.ply")).arg(dir),
+        "usd.py write (usd-core's files of the interop source)",
+    )
 }

@@ -345,8 +345,9 @@ impl Staged {
 #[derive(Args, Clone)]
 pub struct SceneArgs {
     /// Scene file (.ply, compressed .ply, .splat, .spz, PlayCanvas SOG (.sog, or a meta.json
-    /// beside its images), GaussianSplats3D .ksplat, or .glb / .gltf with KHR_gaussian_splatting
-    /// and any meshes beside the splats) or world file (.toml: splat sets,
+    /// beside its images), GaussianSplats3D .ksplat, OpenUSD .usda (ParticleField3DGaussianSplat
+    /// prims), or .glb / .gltf with KHR_gaussian_splatting and any meshes beside the splats) or
+    /// world file (.toml: splat sets,
     /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
     /// Cameras: an INRIA cameras.json, or a COLMAP model (a sparse/0 folder, or its

@@ -11,13 +11,14 @@ use std::path::PathBuf;
 #[derive(Args)]
 pub struct ConvertArgs {
     /// Input scene: .ply (3DGS or PlayCanvas compressed), .splat, .spz (versions 2–4), glTF
-    /// .glb / .gltf (KHR_gaussian_splatting), PlayCanvas SOG (.sog or meta.json) or
-    /// GaussianSplats3D .ksplat.
+    /// .glb / .gltf (KHR_gaussian_splatting), PlayCanvas SOG (.sog or meta.json),
+    /// GaussianSplats3D .ksplat or OpenUSD .usda.
     pub input: PathBuf,
     /// Output scene, format by extension: .ply (f32, lossless), .splat (8-bit degree-0 colour,
     /// no view dependence), .spz (quantised, about 10× smaller than .ply), .sog (PlayCanvas SOG
-    /// bundle; a path ending in meta.json writes the images beside it) or .glb / .gltf
-    /// (KHR_gaussian_splatting, f32, lossless; glTF's +Y-up axes).
+    /// bundle; a path ending in meta.json writes the images beside it), .glb / .gltf
+    /// (KHR_gaussian_splatting, f32, lossless; glTF's +Y-up axes) or .usda (OpenUSD
+    /// ParticleField3DGaussianSplat, f32, lossless).
     pub output: PathBuf,
     /// Version of a .spz output: 2 (8-bit rotations), 3 (smallest-three rotations, gzip) or
     /// 4 (zstd streams; readers from 2025 on).

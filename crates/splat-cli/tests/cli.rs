@@ -804,8 +804,14 @@ fn convert_round_trips_every_format() {
         npy(out)
     };
     let reference = render("fixtures/cloud.ply", &scratch("cloud.npy"));
-    let targets =
-        [("cloud.spz", 0.02), ("cloud-v2.spz", 0.03), ("cloud-v4.spz", 0.02), ("cloud.sog", 0.02), ("cloud.ply", 1e-5)];
+    let targets = [
+        ("cloud.spz", 0.02),
+        ("cloud-v2.spz", 0.03),
+        ("cloud-v4.spz", 0.02),
+        ("cloud.sog", 0.02),
+        ("cloud.ply", 1e-5),
+        ("cloud.usda", 1e-7),
+    ];
     for (target, ceiling) in targets {
         let path = scratch(target);
         let mut args = vec!["convert", "fixtures/cloud.ply", path.to_str().unwrap()];
@@ -832,7 +838,7 @@ fn convert_round_trips_every_format() {
     for out in ["x.compressed.ply", "x.ksplat", "x.obj"] {
         let o = splat(&["convert", "fixtures/cloud.ply", scratch(out).to_str().unwrap()]);
         assert!(
-            !o.status.success() && stderr(&o).contains(".ply, .splat, .spz, .glb, .gltf, .sog or meta.json"),
+            !o.status.success() && stderr(&o).contains(".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda"),
             "{}",
             stderr(&o)
         );
@@ -841,6 +847,12 @@ fn convert_round_trips_every_format() {
     let o = splat(&["info", scratch("cloud.sog").to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("format     PlayCanvas SOG (version 2, bundled .sog)"), "{text}");
+    let o = splat(&["info", scratch("cloud.usda").to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("format     OpenUSD ParticleField3DGaussianSplat (usda layer, 1 prim: /World/gaussians)"),
+        "{text}"
+    );
     // Axes: a file written as RUB and read as stored renders a different (turned) scene.
     let rub = scratch("rub.spz");
     assert!(splat(&["convert", "fixtures/cloud.ply", rub.to_str().unwrap(), "--spz-axes", "rub"]).status.success());

@@ -165,6 +165,9 @@ pub enum ErrorKind {
     /// support.
     #[error(".ksplat: {0}")]
     Ksplat(String),
+    /// An OpenUSD layer is malformed, or holds what this reader does not read.
+    #[error("USD: {0}")]
+    Usd(String),
     /// A compressed `.ply` (PlayCanvas / SuperSplat) is malformed.
     #[error("compressed PLY: {0}")]
     CompressedPly(String),

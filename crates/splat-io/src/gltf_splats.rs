@@ -25,11 +25,12 @@
 //! splats and the meshes of a world. Compressed splats (`KHR_gaussian_splatting_compression_spz_2`,
 //! `EXT_meshopt_compression`) and sparse accessors are refused by name.
 
+use crate::placement::Placement;
 use crate::{Error, ErrorKind, read_file};
-use glam::{Mat3, Mat4, Quat, Vec3};
+use glam::{Mat4, Quat, Vec3};
 use serde_json::{Map, Value, json};
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
-use splat_core::sh::{Rotation, SH_C0};
+use splat_core::sh::SH_C0;
 use splat_core::{Particle, Scene};
 use std::path::Path;
 
@@ -95,6 +96,10 @@ pub(crate) fn splats_in(bytes: &[u8], base: &Path) -> Result<Scene, ErrorKind> {
         for (p, primitive) in primitives.iter().enumerate().filter(|(_, p)| is_splat_primitive(p)) {
             let at = format!("mesh {} primitive {p}", node.mesh);
             let placement = Placement::of(world).map_err(|m| gltf_error(format!("node {}: {m}", node.index)))?;
+            if placement.mirror {
+                let message = "its transform mirrors (negative determinant), which the extension leaves undefined";
+                return Err(gltf_error(format!("node {}: {message}", node.index)));
+            }
             let (splats, degree) = read_primitive(&json, &buffers, primitive, &at, &placement, particles.len())?;
             sh_degree = sh_degree.max(degree);
             particles.extend(splats);
@@ -250,36 +255,6 @@ fn node_transform(node: &Value) -> Result<Mat4, String> {
     let r = floats("rotation", 4)?.map_or(Quat::IDENTITY, |v| Quat::from_slice(&v));
     let s = floats("scale", 3)?.map_or(Vec3::ONE, |v| Vec3::from_slice(&v));
     Ok(Mat4::from_scale_rotation_translation(s, r, t))
-}
-
-/// A node's global transform as splats take it: M = T · s R, and R's map of SH coefficients
-/// where R is not the identity.
-struct Placement {
-    matrix: Mat4,
-    rotation: Quat,
-    scale: f32,
-    sh: Option<Rotation>,
-}
-
-impl Placement {
-    /// The placement of transform `m`, or why splats cannot take it.
-    fn of(m: Mat4) -> Result<Self, String> {
-        let linear = Mat3::from_mat4(m);
-        let lengths = Vec3::new(linear.x_axis.length(), linear.y_axis.length(), linear.z_axis.length());
-        let scale = lengths.x;
-        if !(scale.is_finite() && scale > 0.0) || (lengths - Vec3::splat(scale)).abs().max_element() > 1e-5 * scale {
-            return Err(format!(
-                "its transform scales the axes by {lengths}: Gaussians take a uniform scale only (Σ = M C Cᵀ Mᵀ would not stay a scaled rotation)"
-            ));
-        }
-        let rotation = linear * (1.0 / scale);
-        if rotation.determinant() < 0.0 {
-            return Err("its transform mirrors (negative determinant), which the extension leaves undefined".into());
-        }
-        let rotation = Quat::from_mat3(&rotation).normalize();
-        let sh = (rotation.angle_between(Quat::IDENTITY) > 1e-6).then(|| Rotation::new(rotation));
-        Ok(Self { matrix: m, rotation, scale, sh })
-    }
 }
 
 /// One attribute's elements in a buffer.
@@ -492,13 +467,9 @@ fn read_primitive(
             *c = a.vec3(i);
         }
         let q = Quat::from_xyzw(rotation.get(i, 0), rotation.get(i, 1), rotation.get(i, 2), rotation.get(i, 3));
-        if let Some(r) = &placement.sh {
-            coeffs = r.apply(&coeffs);
-        }
-        let mean = placement.matrix.transform_point3(position.vec3(i));
-        let mut p =
-            Particle::new(mean, placement.scale * scale.vec3(i), placement.rotation * q, opacity.get(i, 0), coeffs)
-                .map_err(|error| ErrorKind::Particle { index: (first + i) as u64, error })?;
+        let (mean, scale, q, coeffs) = placement.place(position.vec3(i), scale.vec3(i), q, coeffs);
+        let mut p = Particle::new(mean, scale, q, opacity.get(i, 0), coeffs)
+            .map_err(|error| ErrorKind::Particle { index: (first + i) as u64, error })?;
         half_turn(&mut p);
         particles.push(p);
     }

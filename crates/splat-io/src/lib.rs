@@ -3,8 +3,8 @@
 //! - Scenes (read and write unless noted): INRIA 3DGS `.ply` (binary and ASCII), PlayCanvas
 //!   compressed `.ply` (read), antimatter15 `.splat`, Niantic `.spz` (versions 2–4), glTF
 //!   `.glb` / `.gltf` with `KHR_gaussian_splatting` ([`gltf_splats`]), PlayCanvas SOG (`.sog`
-//!   bundles and `meta.json` folders, [`sog`]), GaussianSplats3D `.ksplat` (read, [`ksplat`]);
-//!   see [`SceneFormat`].
+//!   bundles and `meta.json` folders, [`sog`]), GaussianSplats3D `.ksplat` (read, [`ksplat`]),
+//!   OpenUSD `ParticleField3DGaussianSplat` in `.usda` layers ([`usd`]); see [`SceneFormat`].
 //! - Cameras: INRIA `cameras.json`, COLMAP `cameras`/`images` `.bin` and `.txt` ([`colmap`]).
 //! - Meshes: Wavefront `.obj` and glTF 2.0 `.gltf` / `.glb` triangles ([`mesh`]).
 //! - Worlds: splat sets, meshes, materials and lights in TOML ([`world`]).
@@ -29,11 +29,13 @@ pub mod gltf_splats;
 pub mod image;
 pub mod ksplat;
 pub mod mesh;
+mod placement;
 pub mod ply;
 pub mod sog;
 pub mod splat;
 pub mod spz;
 pub mod text;
+pub mod usd;
 pub mod world;
 mod zip;
 
@@ -62,6 +64,9 @@ pub enum SceneFormat {
     /// mkkellogg's GaussianSplats3D `.ksplat`: f32, or f16 with 16-bit bucket-relative
     /// positions, 8-bit colour, SH up to degree 2 (read only, [`ksplat`]).
     Ksplat,
+    /// OpenUSD `.usda` with `ParticleField3DGaussianSplat` prims: f32 text, lossless; read
+    /// placed by their `xformOp`s ([`usd`]).
+    Usd,
 }
 
 impl SceneFormat {
@@ -82,6 +87,7 @@ impl SceneFormat {
             Some("splat") => Ok(Self::Splat),
             Some("spz") => Ok(Self::Spz),
             Some("glb" | "gltf") => Ok(Self::Gltf),
+            Some("usda") => Ok(Self::Usd),
             _ => Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS })),
         }
     }
@@ -96,7 +102,7 @@ impl SceneFormat {
             (Self::Ply | Self::CompressedPly, filter) => filter,
             (Self::Spz | Self::Sog, ScreenFilter::Mip) => ScreenFilter::Antialiased,
             (Self::Spz | Self::Sog, filter) => filter,
-            (Self::Splat | Self::Gltf | Self::Ksplat, _) => ScreenFilter::Dilation,
+            (Self::Splat | Self::Gltf | Self::Ksplat | Self::Usd, _) => ScreenFilter::Dilation,
         }
     }
 
@@ -110,16 +116,17 @@ impl SceneFormat {
             Self::Gltf => "glTF (KHR_gaussian_splatting)",
             Self::Sog => "PlayCanvas SOG",
             Self::Ksplat => "GaussianSplats3D .ksplat",
+            Self::Usd => "OpenUSD ParticleField3DGaussianSplat",
         }
     }
 }
 
 /// The extensions the writers take, as errors list them.
-const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json";
+const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda";
 const WRITTEN_EXTENSIONS_READ_ONLY: &str =
-    ".ply, .splat, .spz, .glb, .gltf, .sog or meta.json (compressed .ply and .ksplat are read only)";
+    ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda (compressed .ply and .ksplat are read only)";
 /// The extensions the readers take.
-const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .ksplat";
+const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda or .usd";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -166,7 +173,8 @@ pub fn extension(path: &Path) -> Option<String> {
 }
 
 /// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`,
-/// `.spz`, `.glb`, `.gltf`, `.sog`, a name ending in `meta.json`, `.ksplat`) with default options:
+/// `.spz`, `.glb`, `.gltf`, `.sog`, a name ending in `meta.json`, `.ksplat`, `.usda`, `.usd`) with
+/// default options:
 /// unknown `.ply` properties are skipped.
 pub fn read_scene(path: &Path) -> Result<Scene, Error> {
     read_scene_with(path, ReadOptions::default()).map(|read| read.scene)
@@ -219,6 +227,10 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             let ksplat = ksplat::read_ksplat(path)?;
             SceneRead { detail: ksplat.describe(), notes: ksplat.notes, ..read(SceneFormat::Ksplat, ksplat.scene) }
         }
+        Some("usda" | "usd" | "usdc" | "usdz") => {
+            let usd = usd::read_usd(path)?;
+            SceneRead { detail: usd.describe(), notes: usd.notes, ..read(SceneFormat::Usd, usd.scene) }
+        }
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
     if let Some(filter) = options.screen_filter {
@@ -229,7 +241,7 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
 
 /// Write a scene in the format its extension names (`.ply`: binary little-endian f32;
 /// `.splat`; `.spz` with `spz` options; `.glb` / `.gltf` with `KHR_gaussian_splatting`; `.sog`
-/// or a `meta.json` and its images: PlayCanvas SOG version 2).
+/// or a `meta.json` and its images: PlayCanvas SOG version 2; `.usda`: OpenUSD).
 pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Result<SceneFormat, Error> {
     let format = SceneFormat::for_output(path)?;
     match format {
@@ -238,6 +250,7 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::Spz => spz::write_spz(path, scene, spz)?,
         SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
         SceneFormat::Sog => sog::write_sog(path, scene)?,
+        SceneFormat::Usd => usd::write_usda(path, scene)?,
         SceneFormat::CompressedPly | SceneFormat::Ksplat => unreachable!("for_output refuses them"),
     }
     Ok(format)

@@ -37,6 +37,7 @@
 //! and writes those files unchanged; [`SpzAxes::Rub`] converts from and to RUB (y and z
 //! flipped, the quaternion and SH coefficients with them), for captures exported in RUB.
 
+use crate::placement::flip_axes;
 use crate::{Error, ErrorKind, read_file};
 use glam::{Quat, Vec3};
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
@@ -396,31 +397,6 @@ fn unpack_v4(bytes: &[u8]) -> Result<Packed, ErrorKind> {
 
 /// RUB's axis signs against a `.ply`'s (y and z flipped: a half turn about x).
 const RUB: Vec3 = Vec3::new(1.0, -1.0, -1.0);
-
-/// The signs of the 15 SH basis functions of bands 1–3 under (x, y, z) ↦ (sx x, sy y, sz z), in
-/// the 3DGS order (y, z, x; xy, yz, 3z²−1, xz, x²−y²; y(3x²−y²), xyz, y(4z²−x²−y²),
-/// z(2z²−3x²−3y²), x(4z²−x²−y²), z(x²−y²), x(x²−3y²)): each one's parity in each axis.
-fn sh_parity(s: Vec3) -> [f32; 15] {
-    let (x, y, z) = (s.x, s.y, s.z);
-    [y, z, x, x * y, y * z, 1.0, x * z, 1.0, y, x * y * z, y, z, x, z, x]
-}
-
-/// Convert a particle by the axis flips `s` (x, y, z each ±1; an involution): the mean and the
-/// radiance flip with the axes, the rotation R becomes S R S — a rotation even where S is a
-/// mirror, whose quaternion keeps w and takes the flips of the other two axes on each of x, y, z.
-fn flip_axes(p: &mut Particle, s: Vec3) {
-    if s == Vec3::ONE {
-        return;
-    }
-    p.mean *= s;
-    let q = p.rotation;
-    p.rotation = Quat::from_xyzw(s.y * s.z * q.x, s.x * s.z * q.y, s.x * s.y * q.z, q.w);
-    if let splat_core::Sh::Bands(all) = &mut p.sh {
-        for (c, sign) in all[1..].iter_mut().zip(sh_parity(s)) {
-            *c *= sign;
-        }
-    }
-}
 
 /// The splats of `packed`, converted by the axis flips `signs` ([`flip_axes`]); SH bands above
 /// degree 3 are dropped.

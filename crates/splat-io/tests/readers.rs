@@ -272,7 +272,7 @@ fn errors_name_the_file() {
         splat_io::read_scene("x.obj".as_ref())
             .unwrap_err()
             .to_string()
-            .contains(".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .ksplat")
+            .contains(".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda or .usd")
     );
 }
 
