@@ -7,7 +7,7 @@ use std::path::PathBuf;
 /// Arguments of `splat info`.
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Scene file: INRIA 3DGS `.ply`, compressed `.ply`, antimatter15 `.splat` or `.spz`.
+    /// Scene file: any format `splat render` reads.
     pub scene: PathBuf,
     /// The capture's cameras (a cameras.json or COLMAP model): `info` then says which way is
     /// up, the mean up of the views, as an `--up` for framing.
@@ -27,7 +27,9 @@ pub fn run(args: InfoArgs) -> Result<()> {
             let _ = writeln!(text, $($arg)*);
         }};
     }
+    let started = std::time::Instant::now();
     let read = crate::args::read_scene(&args.scene, args.read)?;
+    let seconds = started.elapsed().as_secs_f64();
     let scene = read.scene;
     let n = scene.particles.len();
     out!("file       {}", args.scene.display());
@@ -38,6 +40,19 @@ pub fn run(args: InfoArgs) -> Result<()> {
     }
     out!("particles  {n}");
     out!("SH degree  {}", scene.sh_degree);
+    let file_bytes = std::fs::metadata(&args.scene).ok().filter(|m| m.is_file()).map(|m| m.len());
+    let mb = |bytes: f64| bytes / 1e6;
+    match file_bytes {
+        Some(bytes) => {
+            out!("read       {seconds:.2} s, {:.0} MB/s ({:.1} MB)", mb(bytes as f64) / seconds, mb(bytes as f64))
+        }
+        None => out!("read       {seconds:.2} s"),
+    }
+    let held = scene.heap_bytes() as f64;
+    let per_splat = held / n.max(1) as f64;
+    let ratio = file_bytes.map_or(String::new(), |f| format!(", {:.2} × the file", held / f as f64));
+    let peak = peak_rss().map_or(String::new(), |p| format!("; the process's peak {:.1} MB", mb(p as f64)));
+    out!("memory     {:.1} MB held, {per_splat:.0} bytes a splat{ratio}{peak}", mb(held));
     if read.filter_3d {
         out!("3D filter  Mip-Splatting's filter_3D, applied (scales and opacities as Mip-Splatting renders them)");
     }
@@ -125,6 +140,14 @@ fn up_line(cameras: Option<&std::path::Path>) -> Result<String> {
         }
         None => format!("up         the {} views disagree (no common up)", views.len()),
     })
+}
+
+/// The process's peak resident set (Linux's `VmHWM`), in bytes; `None` elsewhere.
+pub fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
 }
 
 /// Write `text` to stdout; a closed pipe (`splat info … | head`) is not an error.

@@ -1777,3 +1777,61 @@ fn reproduce_runs_every_experiment_of_the_sources() {
     let o = splat(&["reproduce", "--capture", "/nonexistent.splat", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("cargo xtask assets"), "{}", stderr(&o));
 }
+
+/// `splat info`'s memory line: the bytes held and the process's peak resident set.
+fn info_memory(scene: &std::path::Path) -> (f64, f64) {
+    let o = splat(&["info", scene.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let line = text.lines().find(|l| l.starts_with("memory")).unwrap_or_else(|| panic!("no memory line: {text}"));
+    let number_before = |marker: &str| -> f64 {
+        let head = &line[..line.find(marker).unwrap_or_else(|| panic!("{marker} in {line}"))];
+        head.trim_end().rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    let peak = line.rsplit("peak ").next().expect("Linux reports the peak").trim_end_matches(" MB");
+    (number_before(" MB held") * 1e6, peak.parse::<f64>().unwrap() * 1e6)
+}
+
+/// A mid-sized capture (500,000 splats at SH degree 3, a 124 MB binary `.ply`) loads in
+/// little more memory than the file: the particles held ≤ 1.25 × the file, and the process's
+/// peak resident set, less that of `splat info` on a 3,000-splat file, ≤ 1.25 × the file too
+/// (the reader streams the body in chunks; it held the whole file besides the particles before,
+/// 2.06 × it at peak).
+#[test]
+fn a_large_ply_loads_in_little_more_memory_than_the_file() {
+    let n = 500_000;
+    let particles = (0..n)
+        .map(|i| {
+            let t = i as f32 * 1e-4;
+            let sh: [glam::Vec3; 16] =
+                std::array::from_fn(|k| glam::Vec3::new(t.sin(), k as f32 * 0.01, t.cos()) * 0.1);
+            splat_core::Particle::new(
+                glam::Vec3::new(t.sin(), t.cos(), t),
+                glam::Vec3::new(0.01, 0.02, 0.03),
+                glam::Quat::from_rotation_z(t),
+                0.5,
+                sh,
+            )
+            .unwrap()
+        })
+        .collect();
+    let path = scratch("large.ply");
+    let scene = splat_core::Scene::new(particles, 3);
+    splat_io::ply::write_ply(&path, &scene, splat_io::ply::PlyFormat::BinaryLittleEndian).unwrap();
+    drop(scene);
+    let file = std::fs::metadata(&path).unwrap().len() as f64;
+    let (held, peak) = info_memory(&path);
+    let (_, baseline) = info_memory(std::path::Path::new("fixtures/cloud.ply"));
+    eprintln!(
+        "{n} splats, {:.1} MB file: {:.1} MB held ({:.2} ×), peak {:.1} MB less {:.1} MB baseline ({:.2} ×)",
+        file / 1e6,
+        held / 1e6,
+        held / file,
+        peak / 1e6,
+        baseline / 1e6,
+        (peak - baseline) / file
+    );
+    assert!(held <= 1.25 * file, "held {held} > 1.25 × {file}");
+    assert!(peak - baseline <= 1.25 * file, "peak {peak} − {baseline} > 1.25 × {file}");
+    let _ = std::fs::remove_file(&path);
+}

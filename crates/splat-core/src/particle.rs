@@ -367,6 +367,14 @@ impl Scene {
         !self.particles.is_empty() && self.particles.iter().all(Particle::is_surfel)
     }
 
+    /// Bytes the scene holds on the heap: its particle array (at its capacity) and the SH
+    /// bands of the particles that have them.
+    pub fn heap_bytes(&self) -> usize {
+        let bands = self.particles.iter().filter(|p| matches!(p.sh, Sh::Bands(_))).count();
+        self.particles.capacity() * std::mem::size_of::<Particle>()
+            + bands * std::mem::size_of::<[Vec3; SH_MAX_COEFFS]>()
+    }
+
     /// Box of all particle means.
     pub fn mean_bounds(&self) -> Aabb {
         self.particles.iter().fold(Aabb::EMPTY, |b, p| b.union(Aabb { min: p.mean, max: p.mean }))

@@ -74,6 +74,19 @@ pub enum ErrorKind {
         /// Its byte offset in the file.
         first_incomplete_offset: u64,
     },
+    /// The scene's particles would not fit in the memory this machine has available.
+    #[error(
+        "holding its {count} splats needs about {:.1} GB, more than the {:.1} GB this machine has available: nothing was read (this renderer holds a scene in memory; render it on a machine with more, or decimate it first)",
+        *needed as f64 / 1e9, *available as f64 / 1e9
+    )]
+    TooLarge {
+        /// Splats in the file.
+        count: u64,
+        /// Bytes they would take.
+        needed: u64,
+        /// Bytes available.
+        available: u64,
+    },
     /// An ASCII body ends before the declared count.
     #[error("body is truncated: vertex {index} (line {line}) is missing; the header declares {count}")]
     Truncated {

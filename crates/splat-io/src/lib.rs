@@ -206,9 +206,8 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             SceneRead { detail: info.describe(), ..read(SceneFormat::Sog, scene) }
         }
         Some("ply") => {
-            let bytes = read_file(path)?;
             let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
-            let ply = ply::parse_ply_report(&bytes, plain).map_err(|kind| Error::new(path, kind))?;
+            let ply = ply::read_ply_report(path, plain)?;
             let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
             let (skipped_properties, filter_3d, surfels) = (ply.skipped, ply.filter_3d, ply.surfels);
             SceneRead { skipped_properties, filter_3d, surfels, ..read(format, ply.scene) }

@@ -69,8 +69,7 @@ pub fn read_ply(path: &Path) -> Result<Scene, Error> {
 
 /// Read a 3DGS `.ply`.
 pub fn read_ply_with(path: &Path, options: PlyOptions) -> Result<Scene, Error> {
-    let bytes = read_file(path)?;
-    parse_ply(&bytes, options).map_err(|kind| Error::new(path, kind))
+    read_ply_report(path, options).map(|read| read.scene)
 }
 
 /// Parse the bytes of a 3DGS `.ply` (or a compressed `.ply`, see [`crate::compressed_ply`]).
@@ -111,62 +110,144 @@ pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, Er
         return Ok(PlyRead { scene, skipped: Vec::new(), compressed: true, filter_3d: false, surfels });
     }
     let header = Header::parse(bytes, options)?;
-    let has = |slot: Slot| header.properties.iter().any(|p| p.slot == slot);
-    let surfels = mode == Some(Mode::Surfels) || (has(Slot::Scale(0)) && has(Slot::Scale(1)) && !has(Slot::Scale(2)));
     let body = &bytes[header.body_offset..];
-    let count = header.count;
-    let layout = Layout::new(&header.properties, surfels)?;
-    let mut particles = Vec::with_capacity(capacity(count, body.len(), header.properties.len()));
-    let mut values = vec![0.0f64; header.properties.len()];
-    let mut emit = |index: u64, values: &[f64]| -> Result<(), ErrorKind> {
-        particles.push(layout.particle(index, values, &header.properties)?);
-        Ok(())
-    };
-    match header.format {
+    let layout = Layout::of(&header, mode)?;
+    let particles = match header.format {
         PlyFormat::Ascii => {
+            let mut particles = Vec::with_capacity(capacity(header.count, body.len(), header.properties.len()));
+            let mut values = vec![0.0f64; header.properties.len()];
             let mut lines = Lines::new(body, header.lines);
+            let count = header.count;
             for index in 0..count {
                 let (line_no, line) =
                     lines.next_nonblank().ok_or(ErrorKind::Truncated { index, line: lines.line, count })?;
                 parse_ascii_vertex(index, line_no, line, &header.properties, &mut values)?;
-                emit(index, &values)?;
+                particles.push(layout.particle(index, &values, &header.properties)?);
             }
+            particles
         }
         PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
-            let stride: usize = header.properties.iter().map(|p| p.ty.size()).sum();
-            let needed = u128::from(count) * stride as u128;
-            if needed > body.len() as u128 {
-                let complete = (body.len() / stride.max(1)) as u64;
-                return Err(ErrorKind::CountTooLarge {
-                    count,
-                    stride: stride as u64,
-                    needed,
-                    available: body.len() as u64,
-                    body_offset: header.body_offset as u64,
-                    first_incomplete: complete,
-                    first_incomplete_offset: header.body_offset as u64 + complete * stride as u64,
-                });
-            }
-            let big = header.format == PlyFormat::BinaryBigEndian;
-            for (index, record) in body.chunks_exact(stride.max(1)).take(count as usize).enumerate() {
-                let mut at = 0;
-                for (v, p) in values.iter_mut().zip(&header.properties) {
-                    *v = p.ty.read(&record[at..at + p.ty.size()], big);
-                    at += p.ty.size();
-                }
-                emit(index as u64, &values)?;
-            }
+            header.check_body(body.len() as u64)?;
+            let mut particles = Vec::with_capacity(header.count as usize);
+            decode_binary(&body[..header.body_len() as usize], 0, &header, &layout, &mut particles)?;
+            particles
         }
-    }
-    let skipped = header.properties.iter().filter(|p| p.unknown).map(|p| p.name.clone()).collect();
-    let filter_3d = has(Slot::Filter3d);
-    let screen_filter = match mode {
-        _ if filter_3d => ScreenFilter::Mip,
-        Some(Mode::Filter(filter)) => filter,
-        Some(Mode::Surfels) | None => ScreenFilter::Dilation,
     };
-    let scene = Scene { screen_filter, ..Scene::new(particles, layout.sh_degree) };
-    Ok(PlyRead { scene, skipped, compressed: false, filter_3d, surfels })
+    Ok(header.read(particles, &layout, mode))
+}
+
+/// Read a 3DGS `.ply` file as [`parse_ply_report`] parses its bytes, a binary body streamed in
+/// chunks of [`CHUNK_RECORDS`] vertices, each decoded in parallel: the file is never held
+/// whole, so a load costs the particles and one chunk, and runs at the speed of the decode on
+/// every core. ASCII and compressed `.ply` files are read whole.
+pub fn read_ply_report(path: &Path, options: PlyOptions) -> Result<PlyRead, Error> {
+    use std::io::{Read, Seek};
+    let at = |kind: ErrorKind| Error::new(path, kind);
+    let io = |e: std::io::Error| Error::new(path, ErrorKind::Io(e));
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    let mut head = Vec::new();
+    (&mut file).take((MAX_HEADER + 64) as u64).read_to_end(&mut head).map_err(io)?;
+    let binary = |h: &Header| matches!(h.format, PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian);
+    let header = match crate::compressed_ply::sniff(&head).map_err(at)? {
+        None => Header::parse(&head, options).map_err(at)?,
+        Some(_) => return parse_ply_report(&read_file(path)?, options).map_err(at),
+    };
+    if !binary(&header) {
+        return parse_ply_report(&read_file(path)?, options).map_err(at);
+    }
+    let mode = Mode::of_header(&head);
+    let layout = Layout::of(&header, mode).map_err(at)?;
+    header.check_body(len - header.body_offset as u64).map_err(at)?;
+    check_memory(header.count, layout.sh_degree, available_memory()).map_err(at)?;
+    let stride = header.stride();
+    drop(head);
+    let count = header.count;
+    let chunk_bytes = |first: u64| (count - first).min(CHUNK_RECORDS) as usize * stride;
+    let read_chunk = |file: &mut std::fs::File, buffer: &mut Vec<u8>, bytes: usize| {
+        buffer.resize(bytes, 0);
+        file.read_exact(buffer)
+    };
+    file.seek(std::io::SeekFrom::Start(header.body_offset as u64)).map_err(io)?;
+    let (mut current, mut next) = (Vec::new(), Vec::new());
+    read_chunk(&mut file, &mut current, chunk_bytes(0)).map_err(io)?;
+    let mut particles = Vec::with_capacity(count as usize);
+    let mut first = 0u64;
+    while first < count {
+        // Decode this chunk on every core while the next one is read.
+        let after = first + (current.len() / stride) as u64;
+        let (decoded, read) = rayon::join(
+            || decode_binary(&current, first, &header, &layout, &mut particles),
+            || if after < count { read_chunk(&mut file, &mut next, chunk_bytes(after)) } else { Ok(()) },
+        );
+        decoded.map_err(at)?;
+        read.map_err(io)?;
+        std::mem::swap(&mut current, &mut next);
+        first = after;
+    }
+    Ok(header.read(particles, &layout, mode))
+}
+
+/// Bytes a scene of `count` particles at SH degree `sh_degree` holds (its particle array, and
+/// the SH bands of each particle where it has them): what [`Scene::heap_bytes`] measures.
+pub fn scene_bytes(count: u64, sh_degree: u8) -> u64 {
+    let bands = if sh_degree > 0 { std::mem::size_of::<[Vec3; SH_MAX_COEFFS]>() } else { 0 };
+    count.saturating_mul((std::mem::size_of::<Particle>() + bands) as u64)
+}
+
+/// Refuse, before reading them, `count` particles that would not fit in `available` bytes
+/// (`None`: not known, nothing refused).
+pub fn check_memory(count: u64, sh_degree: u8, available: Option<u64>) -> Result<(), ErrorKind> {
+    let needed = scene_bytes(count, sh_degree);
+    match available {
+        Some(available) if needed > available => Err(ErrorKind::TooLarge { count, needed, available }),
+        _ => Ok(()),
+    }
+}
+
+/// The memory this machine has available (Linux's `MemAvailable`), in bytes; `None`
+/// elsewhere.
+pub fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    Some(line.split_whitespace().nth(1)?.parse::<u64>().ok()? * 1024)
+}
+
+/// Vertices a streamed binary body is read and decoded in at a time (4 MB of a 3DGS `.ply`
+/// at SH degree 3).
+pub const CHUNK_RECORDS: u64 = 1 << 14;
+
+/// Append the particles of the binary vertex records `body` (whole records, the first of
+/// index `first`) to `out`, decoded in parallel straight into its spare capacity; an error
+/// names the lowest bad vertex, whatever the threads, and leaves `out` as it was.
+fn decode_binary(
+    body: &[u8],
+    first: u64,
+    header: &Header,
+    layout: &Layout,
+    out: &mut Vec<Particle>,
+) -> Result<(), ErrorKind> {
+    use rayon::prelude::*;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stride = header.stride().max(1);
+    let big = header.format == PlyFormat::BinaryBigEndian;
+    let properties = &header.properties;
+    let decode = |(i, record): (usize, &[u8])| layout.particle_of_record(first + i as u64, record, big, properties);
+    let failed = AtomicBool::new(false);
+    let stand_in = Particle::new(Vec3::ZERO, Vec3::ONE, Quat::IDENTITY, 0.0, [Vec3::ZERO; SH_MAX_COEFFS])
+        .expect("a valid particle");
+    let before = out.len();
+    out.par_extend(body.par_chunks_exact(stride).enumerate().map(|r| {
+        decode(r).unwrap_or_else(|_| {
+            failed.store(true, Ordering::Relaxed);
+            stand_in.clone()
+        })
+    }));
+    if failed.into_inner() {
+        out.truncate(before);
+        return Err(body.chunks_exact(stride).enumerate().find_map(|r| decode(r).err()).expect("a record failed"));
+    }
+    Ok(())
 }
 
 /// A render mode a header comment names.
@@ -331,6 +412,20 @@ enum Slot {
 }
 
 impl Slot {
+    /// Where the value goes among a particle's [`SLOTS`] values; `None` for an ignored property.
+    fn index(self) -> Option<usize> {
+        Some(match self {
+            Self::Position(i) => i,
+            Self::Dc(i) => 3 + i,
+            Self::Rest(i) => 6 + i,
+            Self::Opacity => 51,
+            Self::Scale(i) => 52 + i,
+            Self::Rotation(i) => 55 + i,
+            Self::Filter3d => 59,
+            Self::Ignored => return None,
+        })
+    }
+
     fn from_name(name: &str) -> Option<Self> {
         let indexed = |prefix: &str, n: usize| name.strip_prefix(prefix)?.parse::<usize>().ok().filter(|&i| i < n);
         Some(match name {
@@ -452,6 +547,49 @@ impl Header {
         let count = count.ok_or_else(|| err(lines.line, "no 'element vertex' line".into()))?;
         Ok(Self { format, count, properties, body_offset: lines.offset, lines: lines.line })
     }
+
+    /// Bytes of a binary vertex record.
+    fn stride(&self) -> usize {
+        self.properties.iter().map(|p| p.ty.size()).sum()
+    }
+
+    /// Bytes of the binary vertex records (checked by [`Header::check_body`] to fit).
+    fn body_len(&self) -> u64 {
+        self.count * self.stride() as u64
+    }
+
+    /// Whether the `available` bytes after the header hold the declared vertices.
+    fn check_body(&self, available: u64) -> Result<(), ErrorKind> {
+        let stride = self.stride();
+        let needed = u128::from(self.count) * stride as u128;
+        if needed <= u128::from(available) {
+            return Ok(());
+        }
+        let complete = available / stride.max(1) as u64;
+        Err(ErrorKind::CountTooLarge {
+            count: self.count,
+            stride: stride as u64,
+            needed,
+            available,
+            body_offset: self.body_offset as u64,
+            first_incomplete: complete,
+            first_incomplete_offset: self.body_offset as u64 + complete * stride as u64,
+        })
+    }
+
+    /// The scene and report of `particles` read under this header.
+    fn read(&self, particles: Vec<Particle>, layout: &Layout, mode: Option<Mode>) -> PlyRead {
+        let has = |slot: Slot| self.properties.iter().any(|p| p.slot == slot);
+        let skipped = self.properties.iter().filter(|p| p.unknown).map(|p| p.name.clone()).collect();
+        let filter_3d = has(Slot::Filter3d);
+        let screen_filter = match mode {
+            _ if filter_3d => ScreenFilter::Mip,
+            Some(Mode::Filter(filter)) => filter,
+            Some(Mode::Surfels) | None => ScreenFilter::Dilation,
+        };
+        let scene = Scene { screen_filter, ..Scene::new(particles, layout.sh_degree) };
+        PlyRead { scene, skipped, compressed: false, filter_3d, surfels: layout.surfels }
+    }
 }
 
 /// Where each particle field comes from, checked once per file.
@@ -459,9 +597,22 @@ struct Layout {
     sh_degree: u8,
     /// 2DGS surfels: two scales, the third [`surfel_thickness`].
     surfels: bool,
+    /// The properties a binary record's decode reads.
+    fields: Vec<Field>,
+    /// Whether they are all f32.
+    all_f32: bool,
 }
 
 impl Layout {
+    /// The layout of `header`'s vertices: 2DGS surfels where the render-mode comment says so
+    /// or the vertices have two scales.
+    fn of(header: &Header, mode: Option<Mode>) -> Result<Self, ErrorKind> {
+        let has = |slot: Slot| header.properties.iter().any(|p| p.slot == slot);
+        let surfels =
+            mode == Some(Mode::Surfels) || (has(Slot::Scale(0)) && has(Slot::Scale(1)) && !has(Slot::Scale(2)));
+        Self::new(&header.properties, surfels)
+    }
+
     fn new(properties: &[Property], surfels: bool) -> Result<Self, ErrorKind> {
         let has = |slot: Slot| properties.iter().any(|p| p.slot == slot);
         let required = [
@@ -503,38 +654,71 @@ impl Layout {
         if let Some(missing) = (0..rest).find(|&i| !has(Slot::Rest(i))) {
             return Err(ErrorKind::MissingProperty(format!("f_rest_{missing}")));
         }
-        Ok(Self { sh_degree, surfels })
+        let mut fields = Vec::new();
+        let mut offset = 0;
+        for p in properties {
+            if let Some(slot) = p.slot.index() {
+                fields.push(Field { offset, ty: p.ty, slot });
+            }
+            offset += p.ty.size();
+        }
+        let all_f32 = fields.iter().all(|f| f.ty == Scalar::F32);
+        Ok(Self { sh_degree, surfels, fields, all_f32 })
     }
 
-    /// Build one particle from its property values, applying the 3DGS activations.
+    /// Build one particle from its property values (one per property, in header order),
+    /// applying the 3DGS activations.
     fn particle(&self, index: u64, values: &[f64], properties: &[Property]) -> Result<Particle, ErrorKind> {
-        let mut position = [0.0f64; 3];
-        let mut dc = [0.0f64; 3];
-        let mut rest = [0.0f64; 45];
-        let mut scale = [0.0f64; 3];
-        let mut rotation = [0.0f64; 4];
-        let mut opacity = 0.0f64;
-        let mut filter = 0.0f64;
+        let mut slots = [0.0f64; SLOTS];
         for (&v, p) in values.iter().zip(properties) {
-            if p.slot == Slot::Ignored {
-                continue;
-            }
-            if !v.is_finite() {
-                return Err(ErrorKind::NonFinite { index, property: p.name.clone(), value: v });
-            }
-            match p.slot {
-                Slot::Position(i) => position[i] = v,
-                Slot::Dc(i) => dc[i] = v,
-                Slot::Rest(i) => rest[i] = v,
-                Slot::Opacity => opacity = v,
-                Slot::Scale(i) => scale[i] = v,
-                Slot::Rotation(i) => rotation[i] = v,
-                Slot::Filter3d => filter = v,
-                Slot::Ignored => {}
+            if let Some(at) = p.slot.index() {
+                slots[at] = v;
             }
         }
+        self.particle_of(index, &slots, properties)
+    }
+
+    /// Build one particle from the binary vertex `record`.
+    fn particle_of_record(
+        &self,
+        index: u64,
+        record: &[u8],
+        big: bool,
+        properties: &[Property],
+    ) -> Result<Particle, ErrorKind> {
+        let mut slots = [0.0f64; SLOTS];
+        if self.all_f32 && !big {
+            // Every 3DGS trainer's layout: one branch a record, not one a property.
+            for f in &self.fields {
+                let b = &record[f.offset..f.offset + 4];
+                slots[f.slot] = f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+            }
+        } else {
+            for f in &self.fields {
+                slots[f.slot] = f.ty.read(&record[f.offset..f.offset + f.ty.size()], big);
+            }
+        }
+        self.particle_of(index, &slots, properties)
+    }
+
+    /// Build one particle from its values by slot ([`Slot::index`]).
+    fn particle_of(&self, index: u64, slots: &[f64; SLOTS], properties: &[Property]) -> Result<Particle, ErrorKind> {
+        if let Some(bad) = slots.iter().position(|v| !v.is_finite()) {
+            let p = properties.iter().find(|p| p.slot.index() == Some(bad)).expect("only read slots are set");
+            return Err(ErrorKind::NonFinite { index, property: p.name.clone(), value: slots[bad] });
+        }
+        let position = [slots[0], slots[1], slots[2]];
+        let dc = [slots[3], slots[4], slots[5]];
+        let rest = &slots[6..51];
+        let opacity = slots[51];
+        let scale = [slots[52], slots[53], slots[54]];
+        let rotation = [slots[55], slots[56], slots[57], slots[58]];
+        let filter = slots[59];
         let mut linear_scale = [0.0f32; 3];
         for (axis, (&raw, s)) in scale.iter().zip(&mut linear_scale).enumerate() {
+            if self.surfels && axis == 2 {
+                continue;
+            }
             *s = scale_from_log(raw).ok_or_else(|| {
                 let detail = format!(
                     "scale_{axis} = {raw} gives exp(scale_{axis}) = {}, which is not a usable positive scale",
@@ -562,6 +746,17 @@ impl Layout {
             })?;
         Ok(particle)
     }
+}
+
+/// Values a particle is built from, by [`Slot::index`]: position 0–2, DC 3–5, the 45 SH rest
+/// coefficients 6–50, opacity 51, log scales 52–54, rotation 55–58, Mip-Splatting's σ_f 59.
+const SLOTS: usize = 60;
+
+/// A property a binary record's decode reads: its byte offset, type and slot.
+struct Field {
+    offset: usize,
+    ty: Scalar,
+    slot: usize,
 }
 
 /// The linear scale of a stored log scale (3DGS's exp activation, in f64 and then rounded),

@@ -412,3 +412,74 @@ fn every_screen_filter_round_trips_through_ply() {
         assert_same_scene(&scene, &back, 1e-5);
     }
 }
+
+/// The streamed, parallel binary `.ply` reader (`read_ply_report`: chunks of `CHUNK_RECORDS`
+/// vertices, each decoded on every thread) reads the particles, and the first error, of the
+/// sequential in-memory parser, whatever the thread count and across chunk boundaries.
+#[test]
+fn streamed_ply_reads_as_the_in_memory_parser_whatever_the_threads() {
+    use splat_io::ply::{CHUNK_RECORDS, parse_ply_report, read_ply_report};
+    let n = 2 * CHUNK_RECORDS as usize + 123;
+    let particles = (0..n)
+        .map(|i| {
+            let t = i as f32 * 0.001;
+            let sh: [Vec3; 16] = std::array::from_fn(|k| Vec3::new(t.sin() * 0.1, k as f32 * 0.01, -t.cos() * 0.1));
+            Particle::new(
+                Vec3::new(t.sin(), t.cos(), t * 0.01),
+                Vec3::new(0.01 + 0.001 * t.sin().abs(), 0.02, 0.03),
+                Quat::from_euler(glam::EulerRot::XYZ, t, 2.0 * t, 0.5),
+                0.5 + 0.4 * t.sin(),
+                sh,
+            )
+            .unwrap()
+        })
+        .collect();
+    let bytes = encode_ply(&Scene::new(particles, 3), PlyFormat::BinaryLittleEndian);
+    let dir = std::env::temp_dir().join(format!("splat-io-streamed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("scene.ply");
+    std::fs::write(&path, &bytes).unwrap();
+    let expected = parse_ply_report(&bytes, PlyOptions::default()).unwrap().scene;
+    let in_pool = |threads: usize, path: &std::path::Path| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| read_ply_report(path, PlyOptions::default()))
+    };
+    for threads in [1, 3] {
+        let read = in_pool(threads, &path).unwrap().scene;
+        assert_eq!(read.particles.len(), n);
+        assert!(read.particles == expected.particles, "{threads} threads read other particles");
+    }
+    // Two bad vertices in different chunks (x = NaN): the lower one is named.
+    let header_len = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let stride = (bytes.len() - header_len) / n;
+    let mut bad = bytes.clone();
+    for vertex in [CHUNK_RECORDS as usize + 5, 2 * CHUNK_RECORDS as usize + 1] {
+        let at = header_len + vertex * stride;
+        bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    }
+    std::fs::write(&path, &bad).unwrap();
+    let in_memory = parse_ply_report(&bad, PlyOptions::default()).unwrap_err().to_string();
+    assert!(in_memory.contains(&format!("vertex {}", CHUNK_RECORDS + 5)), "{in_memory}");
+    for threads in [1, 3] {
+        let streamed = in_pool(threads, &path).unwrap_err();
+        assert_eq!(streamed.kind.to_string(), in_memory, "{threads} threads");
+    }
+    // A truncated body is refused before any decoding, as the in-memory parser refuses it.
+    std::fs::write(&path, &bytes[..bytes.len() - 100]).unwrap();
+    let in_memory = parse_ply_report(&bytes[..bytes.len() - 100], PlyOptions::default()).unwrap_err().to_string();
+    assert_eq!(in_pool(2, &path).unwrap_err().kind.to_string(), in_memory);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A scene whose particles would not fit in the memory available is refused before it is
+/// read, with the estimate; what `splat info` reports as held is that estimate.
+#[test]
+fn scenes_beyond_the_memory_available_are_refused_with_the_estimate() {
+    use splat_io::ply::{check_memory, scene_bytes};
+    let e = check_memory(100_000_000, 3, Some(8 << 30)).unwrap_err().to_string();
+    assert!(e.contains("100000000 splats needs about 25.6 GB, more than the 8.6 GB"), "{e}");
+    assert!(check_memory(1_000_000, 3, Some(8 << 30)).is_ok());
+    assert!(check_memory(u64::MAX, 3, None).is_ok());
+    let scene = scenes::cloud().0;
+    assert_eq!(scene_bytes(scene.particles.len() as u64, 3), scene.heap_bytes() as u64);
+}
