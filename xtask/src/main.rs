@@ -16,6 +16,7 @@ fn main() -> Result<()> {
             println!("{}", interop()?.display());
             Ok(())
         }
+        Some("bench") if args.get(1).is_some_and(|a| a.starts_with("--scaling")) => scaling(&args[1]),
         Some("bench") => bench(),
         Some("power") => power(),
         _ => {
@@ -31,7 +32,9 @@ fn main() -> Result<()> {
                  into target/interop/\n  \
                  power        run the full power study of the statistical suites (every injected error;\n               \
                  `test` runs the asserted ones) and write its table into docs/power.md\n  \
-                 bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800"
+                 bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800\n  \
+                 bench --scaling[=N,…]  load, BVH build, rays and memory on synthetic SH-3 shells of\n               \
+                 N splats (default 100000,500000,2000000,8000000,32000000) into target/scaling/"
             );
             bail!("missing or unknown command");
         }
@@ -493,6 +496,139 @@ fn bench() -> Result<()> {
     splat(&["--backend", "cpu"])?;
     println!("\n## Sun et al. Tables 4–5: m traversals × n samples, CPU\n");
     splat(&["--backend", "cpu", "--sweep", "mn", "--width", "300", "--height", "200"])
+}
+
+/// `cargo xtask bench --scaling[=N,…]`: how load, BVH build, rays and memory grow with the
+/// scene. For each N, a synthetic SH degree 3 shell of N splats ([`write_shell`]) is read by
+/// `splat info` twice (the rate of the first read and of the second, warm one; the bytes held)
+/// and by `splat bench --backend cpu` (load, build, frame
+/// times of opaque, stochastic and exact at 320 × 240, the process's peak memory); the table
+/// goes to stdout and target/scaling/table.md. The splats shrink as 1/√N, so that a ray meets
+/// as many at every N: the per-ray cost should then grow as the BVH's depth, log N.
+fn scaling(arg: &str) -> Result<()> {
+    let sizes: Vec<u64> = match arg.strip_prefix("--scaling=") {
+        Some(list) => list
+            .split(',')
+            .map(|n| n.trim().parse().context("--scaling=N,… takes splat counts"))
+            .collect::<Result<_>>()?,
+        None => vec![100_000, 500_000, 2_000_000, 8_000_000, 32_000_000],
+    };
+    cargo(&["build", "--release", "--bin", "splat"])?;
+    let splat = target_dir().join("release/splat");
+    let dir = target_dir().join("scaling");
+    std::fs::create_dir_all(&dir)?;
+    let output = |args: &[&str]| -> Result<String> {
+        let out = Command::new(&splat).args(args).output().context("running splat")?;
+        if !out.status.success() {
+            bail!("splat {} failed: {}", args.join(" "), String::from_utf8_lossy(&out.stderr));
+        }
+        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+    };
+    // The number after `marker` in `text`.
+    let after = |text: &str, marker: &str| -> Result<f64> {
+        let at = text.find(marker).with_context(|| format!("no '{marker}' in:\n{text}"))? + marker.len();
+        let number: String = text[at..].trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+        number.parse().with_context(|| format!("no number after '{marker}'"))
+    };
+    let frame = |table: &str, method: &str| after(table, &format!("| {method} |"));
+    let mut table = String::from(
+        "| splats | file (MB) | first read (GB/s) | warm read (s) | warm read (GB/s) | held (bytes a splat) | BVH build (s) | build (µs a splat) | opaque (ms) | stochastic (ms) | exact (ms) | peak (GB) | peak (bytes a splat) |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for &n in &sizes {
+        let path = dir.join(format!("shell-{n}.ply"));
+        write_shell(&path, n)?;
+        let file = path.to_str().context("non-UTF-8 path")?;
+        // The first read finds what the page cache holds of the file; the second finds it all
+        // there where memory allows (warm).
+        let first_s = after(&output(&["info", file])?, "read ")?;
+        let info = output(&["info", file])?;
+        let bench = output(&[
+            "bench",
+            file,
+            "--backend",
+            "cpu",
+            "--methods",
+            "stochastic,exact",
+            "--width",
+            "320",
+            "--height",
+            "240",
+        ])?;
+        let (read_s, mb) = (after(&info, "read ")?, after(&info, "MB/s (")?);
+        let held = after(&info, "held,")?;
+        let build = after(&bench, "BVH built in")?;
+        let peak = after(&bench, "peak memory")?;
+        let row = format!(
+            "| {n} | {mb:.0} | {:.2} | {read_s:.2} | {:.2} | {held:.0} | {build:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {peak:.2} | {:.0} |\n",
+            mb / 1e3 / first_s,
+            mb / 1e3 / read_s,
+            build * 1e6 / n as f64,
+            frame(&bench, "opaque")?,
+            frame(&bench, "stochastic")?,
+            frame(&bench, "exact")?,
+            peak * 1e9 / n as f64
+        );
+        print!("{row}");
+        table.push_str(&row);
+    }
+    println!("\n{table}");
+    std::fs::write(dir.join("table.md"), &table)?;
+    Ok(())
+}
+
+/// A synthetic SH degree 3 capture of `n` splats as a binary 3DGS `.ply` (kept when already
+/// written): means on a shell of radius 1–1.05, scales about 4 × 10⁻³ √(2 × 10⁶ / n), random
+/// colours, SH, opacities and rotations from a fixed seed; written as it is made, so that any n
+/// fits in memory.
+fn write_shell(path: &Path, n: u64) -> Result<()> {
+    use std::io::Write as _;
+    let mut names: Vec<String> =
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].map(String::from).to_vec();
+    names.extend((0..45).map(|i| format!("f_rest_{i}")));
+    names.extend(["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"].map(String::from));
+    let mut header = format!("ply\nformat binary_little_endian 1.0\nelement vertex {n}\n");
+    for name in &names {
+        header.push_str(&format!("property float {name}\n"));
+    }
+    header.push_str("end_header\n");
+    let expected = header.len() as u64 + n * 4 * names.len() as u64;
+    if std::fs::metadata(path).is_ok_and(|m| m.len() == expected) {
+        return Ok(());
+    }
+    eprintln!("writing {} ({:.1} GB) …", path.display(), expected as f64 / 1e9);
+    let mut out = std::io::BufWriter::with_capacity(1 << 23, std::fs::File::create(path)?);
+    out.write_all(header.as_bytes())?;
+    // SplitMix64, uniform in [0, 1).
+    let mut state = 0x5eed_u64;
+    let mut uniform = move || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let base_scale = 4e-3 * (2e6 / n as f64).sqrt() as f32;
+    let mut record = Vec::with_capacity(4 * names.len());
+    for _ in 0..n {
+        let z = 2.0 * uniform() - 1.0;
+        let phi = std::f32::consts::TAU * uniform();
+        let r = 1.0 + 0.05 * uniform();
+        let s = (1.0 - z * z).max(0.0).sqrt();
+        let mut values = vec![r * s * phi.cos(), r * s * phi.sin(), r * z, 0.0, 0.0, 0.0];
+        values.extend((0..3).map(|_| 2.0 * uniform() - 1.0));
+        values.extend((0..45).map(|_| 0.1 * (uniform() - 0.5)));
+        values.push(4.0 * (uniform() - 0.5));
+        values.extend((0..3).map(|_| (base_scale * (0.5 + uniform())).ln()));
+        values.extend((0..4).map(|_| uniform() - 0.5));
+        record.clear();
+        for v in values {
+            record.extend(v.to_le_bytes());
+        }
+        out.write_all(&record)?;
+    }
+    out.flush()?;
+    Ok(())
 }
 
 /// PyPI source distribution that carries the bonsai capture, pinned by version and hash.

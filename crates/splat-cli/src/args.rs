@@ -493,7 +493,36 @@ impl ReadArgs {
     /// The reader's options.
     pub fn options(&self) -> splat_io::ReadOptions {
         let screen_filter = self.screen_filter.or(self.preset.and_then(Preset::screen_filter));
-        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into(), screen_filter }
+        let progress = splat_io::Progress(Some(&load_progress));
+        splat_io::ReadOptions { strict: self.strict, spz_axes: self.spz_axes.into(), screen_filter, progress }
+    }
+}
+
+/// The load's progress bar: shown once a read has taken a second (and stderr is a terminal),
+/// cleared when it ends.
+fn load_progress(done: u64, total: u64) {
+    use std::sync::Mutex;
+    use std::time::{Duration, Instant};
+    static LOAD: Mutex<Option<(Instant, Option<ProgressBar>)>> = Mutex::new(None);
+    let mut load = LOAD.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if done == 0 {
+        *load = Some((Instant::now(), None));
+        return;
+    }
+    let Some((start, bar)) = load.as_mut() else { return };
+    if bar.is_none() && start.elapsed() > Duration::from_secs(1) && done < total {
+        let style = ProgressStyle::with_template(
+            "{spinner} reading [{bar:40}] {binary_bytes}/{binary_total_bytes} {elapsed} (eta {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> ");
+        *bar = Some(ProgressBar::new(total).with_style(style));
+    }
+    if let Some(bar) = bar {
+        bar.set_position(done);
+        if done >= total {
+            bar.finish_and_clear();
+        }
     }
 }
 

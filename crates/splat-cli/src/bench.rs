@@ -88,7 +88,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if let Some(ctx) = ctx {
         return run_gpu(&args, &ctx);
     }
+    let load = Instant::now();
     let (scene, camera, settings) = args.scene.load(1200, 800)?;
+    let load_s = load.elapsed().as_secs_f64();
     let pool = args.scene.pool()?;
     let threads = pool.current_num_threads();
     let build = Instant::now();
@@ -99,7 +101,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let build_s = build.elapsed().as_secs_f64();
     let pixels = f64::from(camera.width) * f64::from(camera.height);
     println!(
-        "{} particles, BVH built in {build_s:.2} s ({} nodes), {}×{} at {} spp, {threads} threads\n",
+        "{} particles loaded in {load_s:.2} s, BVH built in {build_s:.2} s ({} nodes), {}×{} at {} spp, {threads} threads\n",
         scene.particles.len(),
         trace.bvh().nodes.len(),
         camera.width,
@@ -125,6 +127,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let name = m.name();
         let mrays = pixels / best / 1e6;
         println!("| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |", 1e3 * best, mrays / threads as f64, best / base);
+    }
+    if let Some(peak) = crate::info::peak_rss() {
+        let per_splat = peak as f64 / scene.particles.len().max(1) as f64;
+        println!(
+            "\npeak memory {:.2} GB ({per_splat:.0} bytes a splat: the scene, its BVH and the frames)",
+            peak as f64 / 1e9
+        );
     }
     Ok(())
 }

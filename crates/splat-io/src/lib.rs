@@ -138,7 +138,38 @@ pub struct ReadOptions {
     /// The screen filter the capture was trained with, overriding what the file says (its
     /// render-mode comment, its `filter_3D`, its `.spz` flag) or does not say.
     pub screen_filter: Option<ScreenFilter>,
+    /// Told how far a long read has come (binary `.ply` bodies, chunk by chunk).
+    pub progress: Progress,
 }
+
+/// A callback told the bytes read of a file's total, for a front end's progress display;
+/// `Progress::default()` tells nobody. Two are equal whatever they call: progress does not
+/// change what is read.
+#[derive(Clone, Copy, Default)]
+pub struct Progress(pub Option<&'static (dyn Fn(u64, u64) + Sync)>);
+
+impl Progress {
+    /// Tell the callback, if any, that `done` bytes of `total` are read.
+    pub fn report(self, done: u64, total: u64) {
+        if let Some(f) = self.0 {
+            f(done, total);
+        }
+    }
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() { "Progress(reported)" } else { "Progress(none)" })
+    }
+}
+
+impl PartialEq for Progress {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl Eq for Progress {}
 
 /// A scene read from a file, with what the reader made of it.
 #[derive(Clone, Debug)]
@@ -207,7 +238,7 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         }
         Some("ply") => {
             let plain = ply::PlyOptions { allow_unknown_properties: !options.strict };
-            let ply = ply::read_ply_report(path, plain)?;
+            let ply = ply::read_ply_progress(path, plain, options.progress)?;
             let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
             let (skipped_properties, filter_3d, surfels) = (ply.skipped, ply.filter_3d, ply.surfels);
             SceneRead { skipped_properties, filter_3d, surfels, ..read(format, ply.scene) }

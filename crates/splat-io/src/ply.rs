@@ -141,6 +141,11 @@ pub fn parse_ply_report(bytes: &[u8], options: PlyOptions) -> Result<PlyRead, Er
 /// whole, so a load costs the particles and one chunk, and runs at the speed of the decode on
 /// every core. ASCII and compressed `.ply` files are read whole.
 pub fn read_ply_report(path: &Path, options: PlyOptions) -> Result<PlyRead, Error> {
+    read_ply_progress(path, options, crate::Progress::default())
+}
+
+/// [`read_ply_report`], telling `progress` the bytes of the body read, chunk by chunk.
+pub fn read_ply_progress(path: &Path, options: PlyOptions, progress: crate::Progress) -> Result<PlyRead, Error> {
     use std::io::{Read, Seek};
     let at = |kind: ErrorKind| Error::new(path, kind);
     let io = |e: std::io::Error| Error::new(path, ErrorKind::Io(e));
@@ -173,6 +178,7 @@ pub fn read_ply_report(path: &Path, options: PlyOptions) -> Result<PlyRead, Erro
     read_chunk(&mut file, &mut current, chunk_bytes(0)).map_err(io)?;
     let mut particles = Vec::with_capacity(count as usize);
     let mut first = 0u64;
+    progress.report(0, count * stride as u64);
     while first < count {
         // Decode this chunk on every core while the next one is read.
         let after = first + (current.len() / stride) as u64;
@@ -184,6 +190,7 @@ pub fn read_ply_report(path: &Path, options: PlyOptions) -> Result<PlyRead, Erro
         read.map_err(io)?;
         std::mem::swap(&mut current, &mut next);
         first = after;
+        progress.report(first * stride as u64, count * stride as u64);
     }
     Ok(header.read(particles, &layout, mode))
 }
