@@ -46,7 +46,7 @@ const SPLAT_TYPE: &str = "ParticleField3DGaussianSplat";
 /// A binary crate file's first bytes.
 const CRATE_MAGIC: &[u8] = b"PXR-USDC";
 /// How to make a layer this reader reads.
-const FLATTEN: &str = "flatten it to one text layer with `usdcat --flatten -o scene.usda`";
+const FLATTEN: &str = "flatten it to one text layer with OpenUSD's usdcat (its flatten option, writing a .usda)";
 
 fn bad(message: impl Into<String>) -> ErrorKind {
     ErrorKind::Usd(message.into())
