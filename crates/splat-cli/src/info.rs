@@ -40,7 +40,10 @@ pub fn run(args: InfoArgs) -> Result<()> {
     }
     out!("particles  {n}");
     out!("SH degree  {}", scene.sh_degree);
-    let file_bytes = std::fs::metadata(&args.scene).ok().filter(|m| m.is_file()).map(|m| m.len());
+    // The rate of a read of one file (a SOG folder's meta.json is not all it read).
+    let one_file =
+        !(read.format == splat_io::SceneFormat::Sog && splat_io::extension(&args.scene).as_deref() != Some("sog"));
+    let file_bytes = std::fs::metadata(&args.scene).ok().filter(|m| m.is_file() && one_file).map(|m| m.len());
     let mb = |bytes: f64| bytes / 1e6;
     match file_bytes {
         Some(bytes) => {
