@@ -776,14 +776,6 @@ pub fn check_output(path: &std::path::Path, flag: &str) -> Result<()> {
     Ok(())
 }
 
-/// Bytes of memory the system can still give, from `/proc/meminfo` (`None` elsewhere).
-fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// Refuse a render of `camera`'s size whose images cannot fit in the memory available, with
 /// the estimate: the frame loop's peak ([`splat_core::frame::BYTES_PER_PIXEL`]) and an 8-bit
 /// copy for writing, per pixel.
@@ -792,7 +784,7 @@ pub fn check_memory(camera: &Camera) -> Result<()> {
     let per_pixel = splat_core::frame::BYTES_PER_PIXEL + 4;
     let need = pixels * per_pixel;
     let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
-    match available_memory() {
+    match splat_io::memory::available() {
         Some(available) if need > available => bail!(
             "a {}×{} render needs about {:.1} GiB ({per_pixel} bytes a pixel) and {:.1} GiB of memory is available: \
              render a smaller image (--width, --height)",

@@ -128,7 +128,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let mrays = pixels / best / 1e6;
         println!("| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |", 1e3 * best, mrays / threads as f64, best / base);
     }
-    if let Some(peak) = crate::info::peak_rss() {
+    if let Some(peak) = splat_io::memory::peak_resident() {
         let per_splat = peak as f64 / scene.particles.len().max(1) as f64;
         println!(
             "\npeak memory {:.2} GB ({per_splat:.0} bytes a splat: the scene, its BVH and the frames)",

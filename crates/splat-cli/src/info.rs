@@ -54,7 +54,8 @@ pub fn run(args: InfoArgs) -> Result<()> {
     let held = scene.heap_bytes() as f64;
     let per_splat = held / n.max(1) as f64;
     let ratio = file_bytes.map_or(String::new(), |f| format!(", {:.2} × the file", held / f as f64));
-    let peak = peak_rss().map_or(String::new(), |p| format!("; the process's peak {:.1} MB", mb(p as f64)));
+    let peak = splat_io::memory::peak_resident()
+        .map_or(String::new(), |p| format!("; the process's peak {:.1} MB", mb(p as f64)));
     out!("memory     {:.1} MB held, {per_splat:.0} bytes a splat{ratio}{peak}", mb(held));
     if read.filter_3d {
         out!("3D filter  Mip-Splatting's filter_3D, applied (scales and opacities as Mip-Splatting renders them)");
@@ -143,14 +144,6 @@ fn up_line(cameras: Option<&std::path::Path>) -> Result<String> {
         }
         None => format!("up         the {} views disagree (no common up)", views.len()),
     })
-}
-
-/// The process's peak resident set (Linux's `VmHWM`), in bytes; `None` elsewhere.
-pub fn peak_rss() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
 }
 
 /// Write `text` to stdout; a closed pipe (`splat info … | head`) is not an error.

@@ -276,6 +276,10 @@ pub fn normalize_quat(q: Quat) -> Result<Quat, ParticleError> {
     Ok(Quat::from_vec4(v / len))
 }
 
+/// Bytes of a particle in its array, and of the SH bands it holds on the heap ([`Sh::Bands`]).
+const PARTICLE_BYTES: usize = std::mem::size_of::<Particle>();
+const BANDS_BYTES: usize = std::mem::size_of::<[Vec3; SH_MAX_COEFFS]>();
+
 /// Axis-aligned bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
@@ -371,8 +375,14 @@ impl Scene {
     /// bands of the particles that have them.
     pub fn heap_bytes(&self) -> usize {
         let bands = self.particles.iter().filter(|p| matches!(p.sh, Sh::Bands(_))).count();
-        self.particles.capacity() * std::mem::size_of::<Particle>()
-            + bands * std::mem::size_of::<[Vec3; SH_MAX_COEFFS]>()
+        self.particles.capacity() * PARTICLE_BYTES + bands * BANDS_BYTES
+    }
+
+    /// What [`Scene::heap_bytes`] will measure of `count` particles read at SH degree
+    /// `sh_degree` (each with bands above degree 0), for a reader to check before it reads.
+    pub fn bytes_for(count: u64, sh_degree: u8) -> u64 {
+        let bands = if sh_degree > 0 { BANDS_BYTES } else { 0 };
+        count.saturating_mul((PARTICLE_BYTES + bands) as u64)
     }
 
     /// Box of all particle means.

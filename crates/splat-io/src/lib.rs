@@ -28,6 +28,7 @@ mod error;
 pub mod gltf_splats;
 pub mod image;
 pub mod ksplat;
+pub mod memory;
 pub mod mesh;
 mod placement;
 pub mod ply;

@@ -103,42 +103,54 @@ impl Placement {
     }
 }
 
+/// What the tests of placements and axis flips share.
+#[cfg(test)]
+pub(crate) mod check {
+    use glam::{Mat3, Mat4, Quat, Vec3};
+    use splat_core::Particle;
+
+    /// A particle turned about every axis, with every SH coefficient set.
+    pub(crate) fn particle() -> Particle {
+        let coeffs: [Vec3; 16] =
+            std::array::from_fn(|k| Vec3::new(0.1 * k as f32 - 0.5, 0.03 * k as f32, -0.02 * k as f32));
+        let rotation = Quat::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 1.1);
+        Particle::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.1, 0.2, 0.3), rotation, 0.5, coeffs).unwrap()
+    }
+
+    /// Assert that `q` is `p` placed by `m` as `m` maps space: the mean M μ + t, the covariance
+    /// L Σ Lᵀ (L the linear part), and the colour seen along L d (normalised) within `colour`
+    /// of `p`'s along d.
+    pub(crate) fn assert_placed(p: &Particle, q: &Particle, m: Mat4, colour: f32, label: &str) {
+        let l = Mat3::from_mat4(m);
+        assert!((q.mean - m.transform_point3(p.mean)).length() < 1e-5, "{label}");
+        assert!(q.covariance().abs_diff_eq(l * p.covariance() * l.transpose(), 1e-5), "{label}");
+        for d in [Vec3::new(0.3, -0.5, 0.8), Vec3::new(-0.9, 0.1, 0.2), Vec3::Z] {
+            let d = d.normalize();
+            let a = splat_core::sh::eval(p.sh.as_slice(), 3, d);
+            let b = splat_core::sh::eval(q.sh.as_slice(), 3, (l * d).normalize());
+            assert!((a - b).length() < colour, "{label}: {a} vs {b}");
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A placement maps a particle's mean, covariance and radiance as the transform maps space:
-    /// M μ + t, L Σ Lᵀ (L the linear part), and the colour seen along L d equal to the
-    /// original's along d; mirrors included, non-uniform scales refused.
+    /// A placement maps a particle's mean, covariance and radiance as the transform maps space
+    /// ([`check::assert_placed`]); mirrors included, non-uniform scales refused.
     #[test]
     fn placements_map_mean_covariance_and_radiance() {
-        let coeffs: [Vec3; 16] =
-            std::array::from_fn(|k| Vec3::new(0.1 * k as f32 - 0.5, 0.03 * k as f32, -0.02 * k as f32));
-        let p = Particle::new(
-            Vec3::new(1.0, 2.0, 3.0),
-            Vec3::new(0.1, 0.2, 0.3),
-            Quat::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 1.1),
-            0.5,
-            coeffs,
-        )
-        .unwrap();
+        let p = check::particle();
         let turn = Quat::from_euler(glam::EulerRot::ZYX, 0.3, 1.2, -0.5);
         let t = Vec3::new(5.0, -1.0, 2.0);
         for mirror in [Vec3::ONE, Vec3::new(1.0, -1.0, 1.0), Vec3::new(-1.0, -1.0, -1.0)] {
             let m = Mat4::from_scale_rotation_translation(2.0 * mirror, turn, t);
             let placement = Placement::of(m).unwrap();
             assert_eq!(placement.mirror, mirror.x * mirror.y * mirror.z < 0.0);
-            let (mean, scale, rotation, sh) = placement.place(p.mean, p.scale, p.rotation, coeffs);
+            let (mean, scale, rotation, sh) = placement.place(p.mean, p.scale, p.rotation, p.sh.to_array());
             let q = Particle::new(mean, scale, rotation, p.opacity, sh).unwrap();
-            let l = Mat3::from_mat4(m);
-            assert!((q.mean - m.transform_point3(p.mean)).length() < 1e-5);
-            assert!(q.covariance().abs_diff_eq(l * p.covariance() * l.transpose(), 1e-5), "{mirror}");
-            for d in [Vec3::new(0.3, -0.5, 0.8), Vec3::new(-0.9, 0.1, 0.2), Vec3::Z] {
-                let d = d.normalize();
-                let a = splat_core::sh::eval(p.sh.as_slice(), 3, d);
-                let b = splat_core::sh::eval(q.sh.as_slice(), 3, (l * d).normalize());
-                assert!((a - b).length() < 1e-4, "{mirror}: {a} vs {b}");
-            }
+            check::assert_placed(&p, &q, m, 1e-4, &mirror.to_string());
         }
         let stretch = Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0));
         assert!(Placement::of(stretch).err().unwrap().contains("uniform scale only"));

@@ -164,7 +164,7 @@ pub fn read_ply_progress(path: &Path, options: PlyOptions, progress: crate::Prog
     let mode = Mode::of_header(&head);
     let layout = Layout::of(&header, mode).map_err(at)?;
     header.check_body(len - header.body_offset as u64).map_err(at)?;
-    check_memory(header.count, layout.sh_degree, available_memory()).map_err(at)?;
+    crate::memory::check_scene(header.count, layout.sh_degree, crate::memory::available()).map_err(at)?;
     let stride = header.stride();
     drop(head);
     let count = header.count;
@@ -193,31 +193,6 @@ pub fn read_ply_progress(path: &Path, options: PlyOptions, progress: crate::Prog
         progress.report(first * stride as u64, count * stride as u64);
     }
     Ok(header.read(particles, &layout, mode))
-}
-
-/// Bytes a scene of `count` particles at SH degree `sh_degree` holds (its particle array, and
-/// the SH bands of each particle where it has them): what [`Scene::heap_bytes`] measures.
-pub fn scene_bytes(count: u64, sh_degree: u8) -> u64 {
-    let bands = if sh_degree > 0 { std::mem::size_of::<[Vec3; SH_MAX_COEFFS]>() } else { 0 };
-    count.saturating_mul((std::mem::size_of::<Particle>() + bands) as u64)
-}
-
-/// Refuse, before reading them, `count` particles that would not fit in `available` bytes
-/// (`None`: not known, nothing refused).
-pub fn check_memory(count: u64, sh_degree: u8, available: Option<u64>) -> Result<(), ErrorKind> {
-    let needed = scene_bytes(count, sh_degree);
-    match available {
-        Some(available) if needed > available => Err(ErrorKind::TooLarge { count, needed, available }),
-        _ => Ok(()),
-    }
-}
-
-/// The memory this machine has available (Linux's `MemAvailable`), in bytes; `None`
-/// elsewhere.
-pub fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    Some(line.split_whitespace().nth(1)?.parse::<u64>().ok()? * 1024)
 }
 
 /// Vertices a streamed binary body is read and decoded in at a time (4 MB of a 3DGS `.ply`

@@ -614,36 +614,17 @@ mod tests {
     }
 
     /// Every axis flip of spz's coordinate systems 1–8 (half turns and mirrors) maps the mean,
-    /// the covariance and the radiance of a particle as the flip matrix S maps space: S μ,
-    /// S Σ S, and the colour seen along S d equal to the original's along d.
+    /// the covariance and the radiance of a particle as the flip matrix S maps space
+    /// ([`crate::placement::check::assert_placed`]).
     #[test]
     fn axis_flips_map_mean_covariance_and_radiance() {
-        let mut coeffs = [Vec3::ZERO; SH_MAX_COEFFS];
-        for (k, c) in coeffs.iter_mut().enumerate() {
-            *c = Vec3::new(0.1 * k as f32 - 0.5, 0.03 * k as f32, -0.02 * k as f32);
-        }
-        let p = Particle::new(
-            Vec3::new(1.0, 2.0, 3.0),
-            Vec3::new(0.1, 0.2, 0.3),
-            Quat::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 1.1),
-            0.5,
-            coeffs,
-        )
-        .unwrap();
+        let p = crate::placement::check::particle();
         for system in 1..=8u32 {
             let s = axis_signs(system).unwrap();
             let mut flipped = p.clone();
             flip_axes(&mut flipped, s);
-            let m = glam::Mat3::from_diagonal(s);
-            let name = COORDINATE_SYSTEMS[system as usize];
-            assert!((flipped.mean - m * p.mean).length() < 1e-5, "{name}");
-            assert!(flipped.covariance().abs_diff_eq(m * p.covariance() * m, 1e-5), "{name}");
-            for d in [Vec3::new(0.3, -0.5, 0.8), Vec3::new(-0.9, 0.1, 0.2), Vec3::Z] {
-                let d = d.normalize();
-                let a = splat_core::sh::eval(p.sh.as_slice(), 3, d);
-                let b = splat_core::sh::eval(flipped.sh.as_slice(), 3, m * d);
-                assert!((a - b).length() < 1e-5, "{name}: {a} vs {b}");
-            }
+            let m = glam::Mat4::from_scale(s);
+            crate::placement::check::assert_placed(&p, &flipped, m, 1e-5, COORDINATE_SYSTEMS[system as usize]);
         }
         assert_eq!(axis_signs(4).unwrap(), RUB);
         assert!(axis_signs(9).unwrap_err().to_string().contains("LBD"));

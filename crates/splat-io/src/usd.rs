@@ -651,10 +651,6 @@ fn layer(text: &str, arcs: &mut Arcs) -> Result<Vec<Prim>, ErrorKind> {
 // ---------------------------------------------------------------------------------------------
 // Transforms
 
-fn degrees(v: f64) -> f64 {
-    v.to_radians()
-}
-
 /// The matrix (column vectors, x' = M x) of `xformOp:KIND[:suffix]` with value `value`.
 fn op_matrix(op: &str, value: &Numbers) -> Result<DMat4, String> {
     let kind = op.strip_prefix("xformOp:").unwrap_or(op).split(':').next().unwrap_or("");
@@ -664,7 +660,7 @@ fn op_matrix(op: &str, value: &Numbers) -> Result<DMat4, String> {
     };
     let axis_angle = |axis: DVec3| -> Result<DMat4, String> {
         want(1)?;
-        Ok(DMat4::from_axis_angle(axis, degrees(v[0])))
+        Ok(DMat4::from_axis_angle(axis, v[0].to_radians()))
     };
     Ok(match kind {
         "transform" => {
@@ -694,9 +690,9 @@ fn op_matrix(op: &str, value: &Numbers) -> Result<DMat4, String> {
             let mut m = DMat4::IDENTITY;
             for (axis, angle) in rotate[6..].chars().zip(v) {
                 let r = match axis {
-                    'X' => DMat4::from_rotation_x(degrees(*angle)),
-                    'Y' => DMat4::from_rotation_y(degrees(*angle)),
-                    'Z' => DMat4::from_rotation_z(degrees(*angle)),
+                    'X' => DMat4::from_rotation_x(angle.to_radians()),
+                    'Y' => DMat4::from_rotation_y(angle.to_radians()),
+                    'Z' => DMat4::from_rotation_z(angle.to_radians()),
                     _ => return Err(format!("{op} is not a rotation order")),
                 };
                 m = r * m;

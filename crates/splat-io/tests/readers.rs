@@ -475,11 +475,11 @@ fn streamed_ply_reads_as_the_in_memory_parser_whatever_the_threads() {
 /// read, with the estimate; what `splat info` reports as held is that estimate.
 #[test]
 fn scenes_beyond_the_memory_available_are_refused_with_the_estimate() {
-    use splat_io::ply::{check_memory, scene_bytes};
-    let e = check_memory(100_000_000, 3, Some(8 << 30)).unwrap_err().to_string();
+    use splat_io::memory::check_scene;
+    let e = check_scene(100_000_000, 3, Some(8 << 30)).unwrap_err().to_string();
     assert!(e.contains("100000000 splats needs about 25.6 GB, more than the 8.6 GB"), "{e}");
-    assert!(check_memory(1_000_000, 3, Some(8 << 30)).is_ok());
-    assert!(check_memory(u64::MAX, 3, None).is_ok());
+    assert!(check_scene(1_000_000, 3, Some(8 << 30)).is_ok());
+    assert!(check_scene(u64::MAX, 3, None).is_ok());
     let scene = scenes::cloud().0;
-    assert_eq!(scene_bytes(scene.particles.len() as u64, 3), scene.heap_bytes() as u64);
+    assert_eq!(Scene::bytes_for(scene.particles.len() as u64, 3), scene.heap_bytes() as u64);
 }
