@@ -514,7 +514,6 @@ pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Re
     let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
     let settings = path_options_settings(&args.path, staged, gaussians)?;
     let Staged { world: World { scene, lighting, meshes }, camera, settings: render_settings, .. } = staged;
-    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
     let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..args.frames() };
     let gpu = match args.scene.backend {
         BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
@@ -523,13 +522,17 @@ pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Re
         }
         _ => None,
     };
+    if let Some(ctx) = &gpu {
+        // A scene the GPU cannot bind is refused before its BVH is built.
+        splat_gpu::TraceSplit::at_least(ctx, scene.particles.len(), scene.sh_degree)?;
+    }
+    let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
     Ok(match &gpu {
         Some(ctx) => {
             eprintln!("rendering on {}", ctx.describe());
             let pipeline = splat_gpu::TracePipeline::new(ctx)?;
-            let path = splat_gpu::PathPipeline::new(ctx, &pipeline)?;
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
-            (tracer.render_path(&path, camera, &settings, &frames)?.0, Some(ctx.describe()))
+            (tracer.render_path(camera, &settings, &frames)?.0, Some(ctx.describe()))
         }
         None => {
             let tracer = PathTracer::new(&trace, settings)?;

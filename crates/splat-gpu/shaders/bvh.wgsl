@@ -1,7 +1,7 @@
 // BVH traversal of crates/splat-core/src/bvh.rs (`Bvh::traverse`), prepended to the kernels
 // that trace rays (trace.wgsl, mesh_prepass.wgsl): a stack traversal that yields the leaves a
 // ray overlaps, nearer child first, and lets the caller shrink t_max between leaves; the leaf
-// loops are the callers' (trace.wgsl `traverse`, mesh.wgsl `mesh_traverse`). It reads `nodes`,
+// loops are the callers' (trace.wgsl `traverse`, mesh.wgsl `mesh_traverse`). It reads `node_at(i)`,
 // and counts loop iterations in `iterations`, both declared by the including
 // kernel.
 
@@ -41,7 +41,7 @@ var<private> trav_next: u32;
 // nodes follow the splats' in the same buffer (splat_gpu::layout::nodes).
 fn traversal_begin(root: u32, origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) {
     trav_top = 0u;
-    trav_next = select(NONE, root, enter(nodes[root], origin, inv, t_min, t_max) < FAR);
+    trav_next = select(NONE, root, enter(node_at(root), origin, inv, t_min, t_max) < FAR);
 }
 
 // The next leaf whose box the ray overlaps before t_max, nearer child first; NONE when the
@@ -56,21 +56,21 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32
             }
             trav_top -= 1u;
             let c = trav_stack[trav_top];
-            if (enter(nodes[c], origin, inv, t_min, t_max) < FAR) {
+            if (enter(node_at(c), origin, inv, t_min, t_max) < FAR) {
                 trav_next = c;
             }
             continue;
         }
         let node = trav_next;
-        let nd = nodes[node];
+        let nd = node_at(node);
         if (nd.count > 0u) {
             trav_next = NONE;
             return node;
         }
         let a = nd.first;
         let b = nd.first + 1u;
-        let ta = enter(nodes[a], origin, inv, t_min, t_max);
-        let tb = enter(nodes[b], origin, inv, t_min, t_max);
+        let ta = enter(node_at(a), origin, inv, t_min, t_max);
+        let tb = enter(node_at(b), origin, inv, t_min, t_max);
         if (ta < FAR && tb < FAR) {
             trav_stack[trav_top] = select(a, b, ta <= tb);
             trav_next = select(b, a, ta <= tb);

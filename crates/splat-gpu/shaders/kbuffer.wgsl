@@ -59,7 +59,7 @@ fn next_k(ray: Ray, k: u32, after_t: f32, after_id: u32, accepted: bool, pixel_k
 // One particle of next_k's traversal: kept when it is behind the previous pass (and, for depth
 // sampling, accepted).
 fn next_k_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let p = particles[leaf];
+    let p = particle_at(leaf);
     let k = visit_in.k;
     let h = intersect(p, ray);
     if (!h.ok || !before(visit_in.after_t, visit_in.after_id, h.t, p.id)) {

@@ -1,7 +1,7 @@
 // Twin of crates/splat-core/src/mesh.rs, prepended to the kernels that walk meshes (trace.wgsl
 // and the raster pipeline's mesh pre-pass, mesh_prepass.wgsl): the surface hit, its normal and
 // bounces, and the traversal of the triangle BVH (after bvh.wgsl; the triangle itself is
-// triangle.wgsl's). Reads the including kernel's `triangles`, `nodes` and `iterations`.
+// triangle.wgsl's). Reads the including kernel's `triangles`, `node_at` and `iterations`.
 
 // mesh.rs `reflect`.
 fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
@@ -74,7 +74,7 @@ fn mesh_traverse(root: u32, ray: Ray, opaque_only: bool) -> SurfaceHit {
         if (node == NONE) {
             break;
         }
-        let nd = nodes[node];
+        let nd = node_at(node);
         for (var k = nd.first; k < nd.first + nd.count; k++) {
             iterations += 1u;
             let h = triangle_intersect(triangles[k], ray);

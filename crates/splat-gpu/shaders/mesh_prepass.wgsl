@@ -9,6 +9,8 @@
 
 @group(0) @binding(0) var<storage, read> params: RasterParams;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
+// bvh.wgsl's read of node i (the ray tracer's may span several bindings, splat_gpu::split).
+fn node_at(i: u32) -> Node { return nodes[i]; }
 @group(0) @binding(2) var<storage, read> triangles: array<Triangle>;
 @group(0) @binding(3) var<storage, read> mesh_materials: array<MeshMaterial>;
 @group(0) @binding(4) var<storage, read_write> behind: array<vec4<f32>>;

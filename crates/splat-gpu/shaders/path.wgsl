@@ -34,7 +34,7 @@ struct PathParams {
 // P(select) / area of every leaf-order triangle (0 for the others).
 @group(0) @binding(16) var<storage, read> emitter_density: array<f32>;
 
-// Whether the pipeline is the path tracer's (splat_gpu::PathPipeline sets it): trace.wgsl's
+// Whether the pipeline is the path tracer's (GpuTracer::render_path compiles it so): trace.wgsl's
 // particle_u and visit_shadow then take the path's decisions. A pipeline-overridable constant,
 // so that the ray-tracing kernel compiles without the path's code in its traversal loops.
 override PATH_MODE: bool = false;
@@ -163,7 +163,7 @@ fn path_visibility(x: vec3<f32>, offset: f32, inc: Incident, slot: u32, exact: b
 
 // `gaussian_radiance`: Lᵢ of the Gaussian in leaf `leaf` hit at t.
 fn gaussian_radiance(leaf: u32, t: f32, ray: Ray, b: u32, exact: bool) -> vec3<f32> {
-    let id = particles[leaf].id;
+    let id = particle_at(leaf).id;
     let c = sh_color(id, ray.dir);
     let m = material_of(id);
     if (m.emissive_only == 1u) {

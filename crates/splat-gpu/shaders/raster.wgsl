@@ -18,6 +18,8 @@ struct RasterParticle {
 @group(0) @binding(0) var<storage, read> params: RasterParams;
 @group(0) @binding(1) var<storage, read> particles: array<RasterParticle>;
 @group(0) @binding(2) var<storage, read> sh: array<vec4<f32>>;
+// sh.wgsl's read of coefficient i (the ray tracer's may span several bindings, splat_gpu::split).
+fn sh_at(i: u32) -> vec4<f32> { return sh[i]; }
 @group(0) @binding(3) var<storage, read_write> splats: array<Splat>;
 // Depth sort: keys (depth bits, NONE when culled) and values (particle ids); after the sort,
 // `order[r]` is the particle of rank r.

@@ -4,7 +4,7 @@
 
 // normal.rs `particle_normal` of the particle in leaf `leaf` (lighting.wgsl `particle_normal_of`).
 fn particle_normal(leaf: u32, ray: Ray) -> vec3<f32> {
-    let p = particles[leaf];
+    let p = particle_at(leaf);
     return particle_normal_of(p.row0, p.row1, p.row2, p.mean, ray.origin, ray.dir, params.normal_mode, params.cutoff);
 }
 
@@ -123,7 +123,7 @@ fn visibility(x: vec3<f32>, offset: f32, inc: Incident, pixel_key: u32, slot: u3
 
 // shadow.rs `TraceScene::transmittance`: Π(1 − αᵢ) over every hit.
 fn transmittance_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let h = intersect(particles[leaf], ray);
+    let h = intersect(particle_at(leaf), ray);
     if (h.ok) {
         shadow_t *= 1.0 - h.alpha;
     }
@@ -135,7 +135,7 @@ fn occluded_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
     if (shadow_blocked) {
         return t_max;
     }
-    let p = particles[leaf];
+    let p = particle_at(leaf);
     if (params.rng_scheme == RNG_HASH
         && particle_u(shadow_in.pixel_key, p.id, shadow_in.slot, vec3<f32>(0.0)) >= min(p.opacity, params.alpha_clamp)) {
         return t_max;
@@ -153,7 +153,7 @@ fn occluded_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
 
 // shadow.rs `TraceScene::sorted_shadow`'s pass: the shadow_k nearest hits, into sb.
 fn shadow_sorted_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let p = particles[leaf];
+    let p = particle_at(leaf);
     let h = intersect(p, ray);
     if (!h.ok) {
         return t_max;

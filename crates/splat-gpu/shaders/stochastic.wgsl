@@ -20,7 +20,7 @@ fn stochastic_traverse(ray: Ray, pixel_key: u32, n: u32, first_slot: u32) {
 // One particle of Algorithm 1's traversal in each of the n slots (stochastic.rs
 // `TraceScene::stochastic_n`); returns t_max clipped at the farthest slot's hit.
 fn stochastic_visit(ray: Ray, leaf: u32, t_max: f32) -> f32 {
-    let p = particles[leaf];
+    let p = particle_at(leaf);
     let early = params.rng_scheme == RNG_HASH;
     if (early) {
         let bound = min(p.opacity, params.alpha_clamp);

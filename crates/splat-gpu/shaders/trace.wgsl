@@ -163,9 +163,9 @@ const MAX_BOUNCES: u32 = 15u;
 const LOOP_BUDGET: u32 = 65535u;
 
 @group(0) @binding(0) var<storage, read> params: Params;
-@group(0) @binding(1) var<storage, read> particles: array<Particle>;
-@group(0) @binding(2) var<storage, read> nodes: array<Node>;
-@group(0) @binding(3) var<storage, read> sh: array<vec4<f32>>;
+// Bindings 1–3, the particles, BVH nodes and SH coefficients, are declared by the host
+// (splat_gpu::split) with their accessors particle_at, node_at and sh_at, over as many
+// bindings as the scene needs (18 and up for the parts after the first).
 @group(0) @binding(4) var<storage, read_write> out_mean: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> out_var: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> pass_state: array<PassState>;
@@ -378,7 +378,7 @@ fn traverse(ray: Ray, visitor: u32) {
         if (node == NONE) {
             break;
         }
-        let nd = nodes[node];
+        let nd = node_at(node);
         for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
             iterations += 1u;
             t_max = visit(visitor, ray, leaf, t_max);
@@ -410,7 +410,7 @@ fn traverse_shadow(ray: Ray) {
         if (node == NONE) {
             break;
         }
-        let nd = nodes[node];
+        let nd = node_at(node);
         let triangle_leaf = node >= params.mesh_root;
         for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
             iterations += 1u;

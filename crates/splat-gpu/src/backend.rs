@@ -74,6 +74,8 @@ pub fn render(
     supports_meshes(algorithm, shot.meshes)?;
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
+        // A scene the GPU cannot bind is refused before its BVH is built.
+        crate::TraceSplit::at_least(ctx, scene.particles.len(), scene.sh_degree)?;
         Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes))
     };
     let raster_scene = || -> Result<RasterScene, GpuError> {

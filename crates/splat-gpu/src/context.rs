@@ -45,6 +45,9 @@ pub struct GpuContext {
     pub timestamps: bool,
     /// Alignment of dynamic storage offsets.
     pub(crate) storage_alignment: u64,
+    /// Storage buffers a shader stage binds (what the ray tracer's split arrays may use beside
+    /// its own bindings, `crate::split`).
+    pub(crate) storage_buffers: u32,
     /// The sample counts the rasterizer's targets (RGBA32F, the blend format and Depth32F)
     /// multisample at on this adapter: 1, and those of 2, 4, 8 and 16 that every format has.
     pub msaa_counts: Vec<u32>,
@@ -158,6 +161,7 @@ impl GpuContext {
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             storage_alignment: u64::from(limits.min_storage_buffer_offset_alignment),
+            storage_buffers: limits.max_storage_buffers_per_shader_stage,
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
             device,
@@ -172,7 +176,8 @@ impl GpuContext {
         blend_format(self.device.features())
     }
 
-    /// Lower the storage binding limit scenes are checked against (to test the refusal).
+    /// Lower the storage binding limit scenes are checked against and split by (to test the
+    /// split and the refusal on any adapter).
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.max_binding = self.max_binding.min(bytes);
         self

@@ -84,6 +84,37 @@ pub enum GpuError {
         /// Particles in the scene.
         count: usize,
     },
+    /// The scene's arrays, split over bindings of the adapter's limit, need more storage
+    /// bindings than the adapter gives a kernel (`crate::split`).
+    #[error(
+        "the scene's {arrays} ({bytes} bytes) split over bindings of at most {limit} bytes make the ray tracer bind {needed} storage buffers, but the adapter binds at most {available} in a shader stage: it fits about {fits} particles like these; render it on the CPU backend or on an adapter with larger limits"
+    )]
+    SceneOverBindings {
+        /// The arrays split ("particles, BVH nodes and SH").
+        arrays: &'static str,
+        /// Storage buffers the kernel would bind, its own included.
+        needed: u32,
+        /// Storage buffers the adapter binds in a shader stage.
+        available: u32,
+        /// The adapter's (or the context's) binding limit.
+        limit: u64,
+        /// Their size.
+        bytes: u64,
+        /// Particles of this scene's kind that would fit.
+        fits: u64,
+    },
+    /// The device could not allocate a scene buffer (its memory is full).
+    #[error(
+        "the GPU could not allocate the scene's {buffer} buffers ({bytes} bytes): {message}; render it on the CPU backend or on a device with more memory"
+    )]
+    DeviceMemory {
+        /// Which buffer.
+        buffer: &'static str,
+        /// Its size.
+        bytes: u64,
+        /// wgpu's message.
+        message: String,
+    },
     /// The method or its parameters cannot run on the GPU.
     #[error("{0}")]
     Unsupported(String),
@@ -124,11 +155,14 @@ impl GpuError {
     }
 
     /// What would let the refused render run: the CPU backend for a scene above the binding
-    /// limit or a ray over lavapipe's loop budget, a refusal's own remedies, nothing otherwise.
+    /// limits or the device's memory, or a ray over lavapipe's loop budget, a refusal's own remedies, nothing otherwise.
     pub fn remedies(&self) -> &[Remedy] {
         match self {
             Self::Refused { remedies, .. } => remedies,
-            Self::SceneTooLarge { .. } | Self::LoopBudget { .. } => &[Remedy::Cpu],
+            Self::SceneTooLarge { .. }
+            | Self::SceneOverBindings { .. }
+            | Self::DeviceMemory { .. }
+            | Self::LoopBudget { .. } => &[Remedy::Cpu],
             _ => &[],
         }
     }

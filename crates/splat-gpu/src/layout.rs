@@ -989,40 +989,40 @@ mod tests {
     #[test]
     fn rust_structs_mirror_the_wgsl_structs() {
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             GpuParticle,
             "Particle",
             [mean, opacity, row0, id, row1, extent, row2, pad2]
         );
-        assert_mirrors!(crate::TRACE_WGSL, GpuNode, "Node", [min, first, max, count]);
+        assert_mirrors!(&crate::TRACE_WGSL, GpuNode, "Node", [min, first, max, count]);
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             GpuFirstHit,
             "FirstHit",
             [radiance, transmittance, normal, depth, picked, pad0, offset, fragments, pad1]
         );
-        assert_mirrors!(crate::TRACE_WGSL, GpuFragment, "Fragment", [color, weight, normal, t, id, pad0, pad1, pad2]);
+        assert_mirrors!(&crate::TRACE_WGSL, GpuFragment, "Fragment", [color, weight, normal, t, id, pad0, pad1, pad2]);
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             PassState,
             "PassState",
             [radiance, transmittance, after_t, after_id, flags, picked, normal, depth]
         );
-        assert_mirrors!(crate::TRACE_WGSL, GpuPick, "Pick", [normal, depth, picked, pad0, pad1, pad2]);
+        assert_mirrors!(&crate::TRACE_WGSL, GpuPick, "Pick", [normal, depth, picked, pad0, pad1, pad2]);
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             GpuMaterial,
             "Material",
             [emissive, first, ambient, shininess, diffuse, emissive_only, specular, pad]
         );
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             GpuLight,
             "Light",
             [position, kind, direction, radius, color, intensity, cos_inner, cos_outer, pad0, pad1]
         );
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             Params,
             "Params",
             [
@@ -1079,19 +1079,19 @@ mod tests {
             ]
         );
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             GpuTriangle,
             "Triangle",
             [p0, mesh, e1, alpha0, e2, alpha1, n0, alpha2, n1, order, n2, pad]
         );
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             GpuMeshMaterial,
             "MeshMaterial",
             [color, mirror, transmission, ior, roughness, pad1, shading]
         );
         assert_mirrors!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             PathParams,
             "PathParams",
             [max_depth, roulette_depth, estimator, n, sampler, environment, emitters, pad0, env_a, env_b, env_up]
@@ -1099,10 +1099,23 @@ mod tests {
         assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
     }
 
+    /// The kernel's layout matches its WGSL whole and split: every part of a split array is a
+    /// binding of the module and an entry of the layout.
     #[test]
     fn trace_layout_matches_the_shader() {
-        let entries = crate::trace::TracePipeline::layout_entries();
-        wgsl_check::check_layout("trace", crate::TRACE_WGSL, naga::valid::Capabilities::empty(), &entries);
+        use crate::split::Split;
+        let whole = crate::TraceSplit::WHOLE;
+        let split = crate::TraceSplit {
+            particles: Split { parts: 3, shift: 4 },
+            nodes: Split { parts: 2, shift: 6 },
+            sh: Split { parts: 5, shift: 7 },
+        };
+        for split in [whole, split] {
+            let entries = crate::trace::TracePipeline::layout_entries(&split);
+            let source = split.wgsl();
+            wgsl_check::check_layout("trace", &source, naga::valid::Capabilities::empty(), &entries);
+        }
+        assert_eq!(crate::trace::TracePipeline::layout_entries(&split).len(), 18 + 2 + 1 + 4);
     }
 
     /// Every constant the kernel shares with the core has the core's value: the method
@@ -1111,7 +1124,7 @@ mod tests {
     fn trace_constants_equal_their_rust_twins() {
         use splat_core::{bvh, rng, sh, trace};
         // A METHOD_* constant for every method of the catalogue the kernel runs, and no other.
-        let module = naga::front::wgsl::parse_str(crate::TRACE_WGSL).expect("parses");
+        let module = naga::front::wgsl::parse_str(&crate::TRACE_WGSL).expect("parses");
         let mut wgsl: Vec<String> = module
             .constants
             .iter()
@@ -1121,14 +1134,14 @@ mod tests {
         let mut catalogue = Vec::new();
         for id in splat_core::MethodId::of(splat_core::catalogue::Family::Trace).filter(|m| m.entry().gpu) {
             let name = id.wgsl_constant();
-            assert_eq!(constant(crate::TRACE_WGSL, &name), vec![f64::from(id.code())], "{name}");
+            assert_eq!(constant(&crate::TRACE_WGSL, &name), vec![f64::from(id.code())], "{name}");
             catalogue.push(name);
         }
         wgsl.sort();
         catalogue.sort();
         assert_eq!(wgsl, catalogue, "the kernel's METHOD_* constants and the catalogue's GPU ray-tracing methods");
         assert_constants!(
-            crate::TRACE_WGSL,
+            &crate::TRACE_WGSL,
             [
                 "MAX_HITS" = trace::MAX_HITS,
                 "STACK_DEPTH" = bvh::STACK_DEPTH,
@@ -1192,14 +1205,14 @@ mod tests {
             ]
         );
         let f64s = |v: &[f32]| v.iter().map(|&c| f64::from(c)).collect::<Vec<_>>();
-        assert_eq!(constant(crate::TRACE_WGSL, "SH_C2"), f64s(&sh::SH_C2), "SH_C2");
-        assert_eq!(constant(crate::TRACE_WGSL, "SH_C3"), f64s(&sh::SH_C3), "SH_C3");
+        assert_eq!(constant(&crate::TRACE_WGSL, "SH_C2"), f64s(&sh::SH_C2), "SH_C2");
+        assert_eq!(constant(&crate::TRACE_WGSL, "SH_C3"), f64s(&sh::SH_C3), "SH_C3");
     }
 
     /// The kernel is valid WGSL for naga's validator (a shader error fails `cargo test`).
     #[test]
     fn trace_wgsl_validates() {
-        validate("trace", crate::TRACE_WGSL);
+        validate("trace", &crate::TRACE_WGSL);
     }
 
     /// docs/architecture.md's table of shaders and their CPU twins names every shader file:

@@ -24,6 +24,7 @@ mod layout;
 pub mod progressive;
 pub mod raster;
 pub mod sort;
+mod split;
 mod timing;
 pub mod trace;
 
@@ -38,9 +39,10 @@ pub use layout::{GpuFirstHit, GpuFragment, GpuParticle, Params, PassState, PathP
 pub use progressive::ProgressiveTrace;
 pub use raster::{DepthPick, FirstHits, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
 pub use sort::RadixSort;
+pub use split::Split;
 pub use trace::{
-    DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MAX_LAYERED_BOUNCES, MethodParams,
-    PathPipeline, TRACE_WGSL, TracePipeline,
+    DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MAX_LAYERED_BOUNCES, MethodParams, TRACE_WGSL,
+    TracePipeline, TraceSplit,
 };
 
 use splat_core::Camera;

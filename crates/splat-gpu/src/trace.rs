@@ -16,6 +16,7 @@
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
+use crate::split::{Split, SplitArray, SplitLayout};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
@@ -27,8 +28,9 @@ use splat_core::trace::{DEFAULT_K, MAX_HITS, Method, TraceScene};
 use std::time::{Duration, Instant};
 
 /// WGSL of the ray-tracing kernel (entry point `main`) and of the path tracer that calls its
-/// traversals (`path_main`, `shaders/path.wgsl`).
-pub const TRACE_WGSL: &str = concat!(
+/// traversals (`path_main`, `shaders/path.wgsl`), but for the scene arrays, which
+/// [`TraceSplit`] declares.
+const TRACE_SOURCE: &str = concat!(
     include_str!("../shaders/common.wgsl"),
     include_str!("../shaders/sh.wgsl"),
     include_str!("../shaders/lighting.wgsl"),
@@ -46,6 +48,102 @@ pub const TRACE_WGSL: &str = concat!(
     include_str!("../shaders/sampler.wgsl"),
     include_str!("../shaders/bsdf.wgsl")
 );
+
+/// The ray-tracing kernel of every scene that fits one binding per array.
+pub static TRACE_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| TraceSplit::WHOLE.wgsl());
+
+/// The scene arrays of the ray tracer (bindings 1–3), each split over as many bindings as it needs
+/// ([`crate::split`]); parts after the first bind from 18 on.
+const PARTICLES: SplitArray =
+    SplitArray::of::<layout::GpuParticle>("particle", "particles", "particle_at", "Particle", 1);
+const NODES: SplitArray = SplitArray::of::<layout::GpuNode>("BVH node", "nodes", "node_at", "Node", 2);
+const SH: SplitArray = SplitArray::of::<[f32; 4]>("SH", "sh", "sh_at", "vec4<f32>", 3);
+/// Bindings of the kernel beside the parts after the first of its split arrays.
+const OWN_BINDINGS: u32 = 18;
+
+/// How a scene's particles, BVH nodes and SH coefficients are split over bindings: the kernel's
+/// module and layout are made for it ([`TracePipeline`] keeps one per split it has met).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TraceSplit {
+    /// The particles (in BVH leaf order).
+    pub particles: Split,
+    /// The BVH nodes (splats', then meshes').
+    pub nodes: Split,
+    /// The SH coefficients (RGB + pad, scene order).
+    pub sh: Split,
+}
+
+impl TraceSplit {
+    /// Every array in one binding.
+    pub const WHOLE: TraceSplit = TraceSplit { particles: Split::WHOLE, nodes: Split::WHOLE, sh: Split::WHOLE };
+
+    /// The split of arrays of these lengths (elements) on `ctx`, refused when it needs more
+    /// bindings than the adapter has ([`GpuError::SceneOverBindings`]) with how many particles
+    /// like these would fit.
+    pub fn new(ctx: &GpuContext, particles: u64, nodes: u64, sh: u64) -> Result<Self, GpuError> {
+        Self::checked(ctx, [particles, nodes, sh], [particles, nodes, sh])
+    }
+
+    /// The split a scene of `count` particles of SH degree `sh_degree` needs at least (its
+    /// BVH not built yet: one node), refused as [`TraceSplit::new`] refuses, so that a scene
+    /// that cannot fit is refused before the BVH is built; what fits is estimated with a node a
+    /// particle, about what the BVH builds (2,985 for the 3,000 particles of the `cloud` fixture).
+    pub fn at_least(ctx: &GpuContext, count: usize, sh_degree: u8) -> Result<Self, GpuError> {
+        let (n, coefficients) = (count as u64, splat_core::particle::sh_coeff_count(sh_degree) as u64);
+        Self::checked(ctx, [n, 1, n * coefficients], [n, n, n * coefficients])
+    }
+
+    /// The split of arrays of `lengths` (particles, nodes, SH), refused with the particles that
+    /// would fit in arrays in the proportions of `like`.
+    fn checked(ctx: &GpuContext, lengths: [u64; 3], like: [u64; 3]) -> Result<Self, GpuError> {
+        let arrays = [&PARTICLES, &NODES, &SH];
+        let split = |lengths: [u64; 3]| {
+            let [particles, nodes, sh] =
+                std::array::from_fn(|k| Split::of(lengths[k], arrays[k].stride, ctx.max_binding));
+            TraceSplit { particles, nodes, sh }
+        };
+        if let Some(k) = (0..3).find(|&k| lengths[k] > 0 && arrays[k].stride > ctx.max_binding) {
+            let (buffer, bytes) = (arrays[k].what, lengths[k] * arrays[k].stride);
+            return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count: lengths[0] as usize });
+        }
+        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
+        // Element indices are u32 in the kernel.
+        let fit = |lengths: [u64; 3]| {
+            lengths.iter().all(|&n| n <= u64::from(u32::MAX)) && split(lengths).layout().extra_bindings() <= available
+        };
+        if fit(lengths) {
+            return Ok(split(lengths));
+        }
+        // The most particles m whose arrays, scaled from `like`, fit.
+        let n = like[0].max(1);
+        let scaled = |m: u64| like.map(|len| (u128::from(len) * u128::from(m) / u128::from(n)) as u64);
+        let (mut lo, mut hi) = (0, n);
+        while lo < hi {
+            let mid = (lo + hi).div_ceil(2);
+            if fit(scaled(mid)) { lo = mid } else { hi = mid - 1 }
+        }
+        Err(GpuError::SceneOverBindings {
+            arrays: "particles, BVH nodes and SH",
+            needed: split(lengths).layout().extra_bindings() + OWN_BINDINGS,
+            available: ctx.storage_buffers,
+            limit: ctx.max_binding,
+            bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),
+            fits: lo,
+        })
+    }
+
+    fn layout(&self) -> SplitLayout {
+        SplitLayout {
+            arrays: vec![(PARTICLES, self.particles), (NODES, self.nodes), (SH, self.sh)],
+            first_extra: OWN_BINDINGS,
+        }
+    }
+
+    /// The kernel's WGSL for this split.
+    pub(crate) fn wgsl(&self) -> String {
+        format!("{TRACE_SOURCE}{}", self.layout().wgsl())
+    }
+}
 /// Dispatches encoded into one submission.
 pub const DISPATCHES_PER_SUBMIT: u32 = 64;
 /// Frames rendered per dispatch on a real GPU; longer runs are split so that no dispatch runs
@@ -129,29 +227,84 @@ fn kernel_traversals(m: u32, n: u32) -> (u32, u32) {
     (m * (n / c), c)
 }
 
-/// The compiled ray-tracing kernel and its bind group layout.
+/// The ray-tracing kernel, compiled for each [`TraceSplit`] a scene needs (one, [`TraceSplit::WHOLE`],
+/// for every scene whose arrays fit one binding each) on the first tracer of that split.
 pub struct TracePipeline {
+    kernels: std::sync::Mutex<Vec<std::sync::Arc<TraceKernel>>>,
+}
+
+/// The kernel compiled for one split: its module, bind group layout and entry points.
+pub(crate) struct TraceKernel {
+    split: TraceSplit,
     pub(crate) pipeline: wgpu::ComputePipeline,
     pub(crate) layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
     pipeline_layout: wgpu::PipelineLayout,
     /// The kernel with `HYBRID_MODE` on, compiled on the first hybrid render.
     hybrid: std::sync::OnceLock<wgpu::ComputePipeline>,
+    /// The path tracer (`path_main`, `PATH_MODE` on), compiled on the first path-traced render.
+    path: std::sync::OnceLock<wgpu::ComputePipeline>,
 }
 
 impl TracePipeline {
-    /// Compile the kernel; shader and pipeline errors come back as [`GpuError::Shader`], not
-    /// wgpu's panicking handler.
-    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+    /// A pipeline with no kernel compiled yet: each tracer compiles the kernel of its split on
+    /// first use ([`GpuTracer::new`]), shader and pipeline errors coming back as
+    /// [`GpuError::Shader`], not wgpu's panicking handler.
+    pub fn new(_ctx: &GpuContext) -> Result<Self, GpuError> {
+        Ok(Self { kernels: std::sync::Mutex::new(Vec::new()) })
+    }
+
+    /// The kernel of `split`, compiled on first use.
+    pub(crate) fn kernel(&self, ctx: &GpuContext, split: TraceSplit) -> Result<std::sync::Arc<TraceKernel>, GpuError> {
+        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = kernels.iter().find(|k| k.split == split) {
+            return Ok(k.clone());
+        }
+        let kernel = std::sync::Arc::new(TraceKernel::new(ctx, split)?);
+        kernels.push(kernel.clone());
+        Ok(kernel)
+    }
+
+    /// The kernel's bindings for `split` (checked against its WGSL by
+    /// `layout::tests::trace_layout_matches_the_shader`).
+    pub(crate) fn layout_entries(split: &TraceSplit) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
+        let mut entries = vec![
+            params_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
+            storage(1, true),
+            storage(2, true),
+            storage(3, true),
+            storage(4, false),
+            storage(5, false),
+            storage(6, false),
+            storage(7, true),
+            storage(8, true),
+            storage(9, false),
+            storage(10, true),
+            storage(11, true),
+            storage(12, true),
+            params_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
+            storage(14, true),
+            storage(15, true),
+            storage(16, true),
+            storage(17, true),
+        ];
+        entries.extend(split.layout().extra_entries(wgpu::ShaderStages::COMPUTE));
+        entries
+    }
+}
+
+impl TraceKernel {
+    fn new(ctx: &GpuContext, split: TraceSplit) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("trace.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(TRACE_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(split.wgsl().into()),
         });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("trace"),
-            entries: &Self::layout_entries(),
+            entries: &TracePipeline::layout_entries(&split),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("trace"),
@@ -162,17 +315,30 @@ impl TracePipeline {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        Ok(Self { pipeline, layout, module, pipeline_layout, hybrid: std::sync::OnceLock::new() })
+        let (hybrid, path) = (std::sync::OnceLock::new(), std::sync::OnceLock::new());
+        Ok(Self { split, pipeline, layout, module, pipeline_layout, hybrid, path })
     }
 
     /// The hybrid pipeline's kernel (`HYBRID_MODE`: the rasterizer's samples continued, the
     /// volumetric look's fragments lit), compiled on first use.
     fn hybrid(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
-        if let Some(p) = self.hybrid.get() {
+        Self::once(&self.hybrid, || self.specialised(ctx, "main", "HYBRID_MODE"))
+    }
+
+    /// The path tracer's kernel (`path_main`), compiled on first use.
+    fn path(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
+        Self::once(&self.path, || self.specialised(ctx, "path_main", "PATH_MODE"))
+    }
+
+    fn once(
+        cell: &std::sync::OnceLock<wgpu::ComputePipeline>,
+        compile: impl FnOnce() -> Result<wgpu::ComputePipeline, GpuError>,
+    ) -> Result<&wgpu::ComputePipeline, GpuError> {
+        if let Some(p) = cell.get() {
             return Ok(p);
         }
-        let pipeline = self.specialised(ctx, "main", "HYBRID_MODE")?;
-        Ok(self.hybrid.get_or_init(|| pipeline))
+        let pipeline = compile()?;
+        Ok(cell.get_or_init(|| pipeline))
     }
 
     /// Entry point `entry` of the kernel's module on its layout, with the pipeline-overridable
@@ -192,56 +358,18 @@ impl TracePipeline {
         }
         Ok(pipeline)
     }
-
-    /// The kernel's bindings (checked against `trace.wgsl`'s by
-    /// `layout::tests::trace_layout_matches_the_shader`).
-    pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 18] {
-        let storage = |binding, read_only| storage_entry(binding, wgpu::ShaderStages::COMPUTE, read_only);
-        [
-            params_entry(0, wgpu::ShaderStages::COMPUTE, true, std::mem::size_of::<Params>()),
-            storage(1, true),
-            storage(2, true),
-            storage(3, true),
-            storage(4, false),
-            storage(5, false),
-            storage(6, false),
-            storage(7, true),
-            storage(8, true),
-            storage(9, false),
-            storage(10, true),
-            storage(11, true),
-            storage(12, true),
-            params_entry(13, wgpu::ShaderStages::COMPUTE, false, std::mem::size_of::<layout::PathParams>()),
-            storage(14, true),
-            storage(15, true),
-            storage(16, true),
-            storage(17, true),
-        ]
-    }
-}
-
-/// The compiled path tracer (`path_main` of [`TRACE_WGSL`]), on the ray-tracing kernel's
-/// bindings; compiled apart, since only path-traced renders need it.
-pub struct PathPipeline {
-    pipeline: wgpu::ComputePipeline,
-}
-
-impl PathPipeline {
-    /// Compile `path_main` against `trace`'s module and layout.
-    pub fn new(ctx: &GpuContext, trace: &TracePipeline) -> Result<Self, GpuError> {
-        Ok(Self { pipeline: trace.specialised(ctx, "path_main", "PATH_MODE")? })
-    }
 }
 
 /// A scene on the GPU, ready to trace: particles in BVH leaf order, BVH nodes and SH
-/// coefficients uploaded beside the [`TraceScene`] they came from.
+/// coefficients uploaded beside the [`TraceScene`] they came from, each in as many parts as
+/// its [`TraceSplit`] cuts it into.
 pub struct GpuTracer<'a> {
     ctx: &'a GpuContext,
-    pipeline: &'a TracePipeline,
+    kernel: std::sync::Arc<TraceKernel>,
     trace: &'a TraceScene<'a>,
-    particles: wgpu::Buffer,
-    nodes: wgpu::Buffer,
-    sh: wgpu::Buffer,
+    particles: Vec<wgpu::Buffer>,
+    nodes: Vec<wgpu::Buffer>,
+    sh: Vec<wgpu::Buffer>,
     materials: wgpu::Buffer,
     lights: wgpu::Buffer,
     triangles: wgpu::Buffer,
@@ -284,18 +412,21 @@ enum FirstHits<'a> {
 }
 
 impl<'a> GpuTracer<'a> {
-    /// Upload the particles, BVH, materials and lights of `trace`; refuse buffers above the
-    /// binding limit.
-    pub fn new(ctx: &'a GpuContext, pipeline: &'a TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
+    /// Upload the particles, BVH, materials and lights of `trace`, the particles, nodes and SH
+    /// split over as many bindings as they need ([`TraceSplit`]; refused when the adapter has
+    /// too few, [`GpuError::SceneOverBindings`], or too little memory,
+    /// [`GpuError::DeviceMemory`]), and compile the kernel of that split if `pipeline` has not.
+    pub fn new(ctx: &'a GpuContext, pipeline: &TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
         check_segment_stack(trace)?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());
-        let count = trace.scene().particles.len();
-        let bytes = |data: &[u8]| data.len() as u64;
-        ctx.check_binding("particle", bytes(bytemuck::cast_slice(&particles)), count)?;
-        ctx.check_binding("BVH node", bytes(bytemuck::cast_slice(&nodes)), count)?;
-        ctx.check_binding("SH", bytes(bytemuck::cast_slice(&sh)), count)?;
+        let len = |n: usize| n as u64;
+        let split = TraceSplit::new(ctx, len(particles.len()), len(nodes.len()), len(sh.len()))?;
+        let kernel = pipeline.kernel(ctx, split)?;
+        let particles = crate::split::upload(ctx, &PARTICLES, split.particles, bytemuck::cast_slice(&particles))?;
+        let nodes = crate::split::upload(ctx, &NODES, split.nodes, bytemuck::cast_slice(&nodes))?;
+        let sh = crate::split::upload(ctx, &SH, split.sh, bytemuck::cast_slice(&sh))?;
         let (mut emitters, mut density) = splat_core::path::emitter_table(trace);
         let emitter_count = emitters.len() as u32;
         // A binding cannot be empty.
@@ -308,11 +439,11 @@ impl<'a> GpuTracer<'a> {
             emitter_density: ctx.upload("emitter density", bytemuck::cast_slice(&density)),
             emitter_count,
             ctx,
-            pipeline,
+            kernel,
             trace,
-            particles: ctx.upload("particles", bytemuck::cast_slice(&particles)),
-            nodes: ctx.upload("nodes", bytemuck::cast_slice(&nodes)),
-            sh: ctx.upload("sh", bytemuck::cast_slice(&sh)),
+            particles,
+            nodes,
+            sh,
             materials: ctx.upload("materials", bytemuck::cast_slice(&layout::materials(trace.lighting()))),
             lights: ctx.upload("lights", bytemuck::cast_slice(&layout::lights(trace.lighting()))),
             triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace.meshes()))),
@@ -413,7 +544,6 @@ impl<'a> GpuTracer<'a> {
     /// pixel named). Every Gaussian estimator but depth sampling (the CPU's control) runs.
     pub fn render_path(
         &self,
-        pipeline: &PathPipeline,
         camera: &Camera,
         settings: &splat_core::path::PathSettings,
         frames: &Frames,
@@ -425,7 +555,8 @@ impl<'a> GpuTracer<'a> {
         })?;
         let buffer = self.ctx.upload("path", bytemuck::bytes_of(&params));
         let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..*frames };
-        self.render_with(camera, &Method::Stochastic, &frames, None, Some((&pipeline.pipeline, &buffer)))
+        let pipeline = self.kernel.path(self.ctx)?;
+        self.render_with(camera, &Method::Stochastic, &frames, None, Some((pipeline, &buffer)))
     }
 
     /// The kernel's bind group over this scene's buffers, the per-pixel `targets`, the
@@ -444,9 +575,9 @@ impl<'a> GpuTracer<'a> {
             size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
         });
         let buffers = [
-            &self.particles,
-            &self.nodes,
-            &self.sh,
+            &self.particles[0],
+            &self.nodes[0],
+            &self.sh[0],
             &targets.mean,
             &targets.m2,
             &targets.pass_state,
@@ -462,17 +593,23 @@ impl<'a> GpuTracer<'a> {
             &self.emitter_density,
             first_hits.and_then(|f| f.fragments.as_ref()).unwrap_or(&self.no_fragments),
         ];
+        // The parts after the first of the split arrays.
+        let arrays = [&self.particles, &self.nodes, &self.sh];
+        let parts = self.kernel.split.layout().bindings().into_iter().filter(|&(_, p, _)| p > 0);
+        let parts = parts.map(|(a, p, binding)| (arrays[a][p as usize].as_entire_binding(), binding));
         let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(wgpu::BindGroupEntry { binding: 0, resource: params })
             .chain(
                 buffers
                     .iter()
+                    .map(|b| b.as_entire_binding())
                     .zip(1..)
-                    .map(|(b, binding)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }),
+                    .chain(parts)
+                    .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource }),
             )
             .collect();
         self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("trace"),
-            layout: &self.pipeline.layout,
+            layout: &self.kernel.layout,
             entries: &entries,
         })
     }
@@ -489,7 +626,12 @@ impl<'a> GpuTracer<'a> {
 
     /// The compiled ray-tracing kernel.
     pub(crate) fn kernel(&self) -> &wgpu::ComputePipeline {
-        &self.pipeline.pipeline
+        &self.kernel.pipeline
+    }
+
+    /// How its scene arrays are split over bindings.
+    pub fn split(&self) -> TraceSplit {
+        self.kernel.split
     }
 
     fn render_with(
@@ -509,8 +651,8 @@ impl<'a> GpuTracer<'a> {
         let cpu_adapter = ctx.info.device_type == wgpu::DeviceType::Cpu;
         let kernel = match (path, first_hits) {
             (Some((pipeline, _)), _) => pipeline,
-            (None, Some(_)) => self.pipeline.hybrid(ctx)?,
-            (None, None) => &self.pipeline.pipeline,
+            (None, Some(_)) => self.kernel.hybrid(ctx)?,
+            (None, None) => &self.kernel.pipeline,
         };
         let path = path.map(|(_, buffer)| buffer);
         let run = Run { tracer: self, camera, params, frames, count, first_hits, path, kernel };
@@ -857,6 +999,20 @@ mod tests {
         for ((m, n), kernel) in [((4, 256), (16, 64)), ((1, 100), (2, 50)), ((2, 67), (134, 1)), ((8, 64), (8, 64))] {
             let p = MethodParams::try_from(&Method::StochasticN { m, n }).unwrap();
             assert_eq!((p.m, p.n), kernel, "{m} × {n}");
+        }
+    }
+
+    /// The kernel reads its split arrays only through their accessors, which are all that know
+    /// the parts: an access by index (`particles[i]`) would read part 0 of a split scene.
+    #[test]
+    fn the_kernel_reads_the_scene_arrays_through_their_accessors() {
+        for array in [PARTICLES, NODES, SH] {
+            let index = format!("{}[", array.var);
+            let direct = TRACE_SOURCE
+                .match_indices(&index)
+                .filter(|&(at, _)| !TRACE_SOURCE[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_'));
+            assert_eq!(direct.count(), 0, "`{}[` in the kernel: read it through `{}`", array.var, array.accessor);
+            assert!(TRACE_SOURCE.contains(&format!("{}(", array.accessor)), "{} unused", array.accessor);
         }
     }
 }

@@ -4,19 +4,13 @@
 
 mod common;
 
-use common::{context, trace_pipeline, tracer};
+use common::{context, tracer};
 use splat_core::camera_sampling::{CameraSampling, ThinLens};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
-use splat_gpu::{GpuError, PathPipeline};
+use splat_gpu::GpuError;
 use splat_tests::path_worlds::{glass_world, lit_world, trace_scene, trace_scene_with};
-use std::sync::OnceLock;
-
-fn path_pipeline(ctx: &'static splat_gpu::GpuContext) -> &'static PathPipeline {
-    static PIPELINE: OnceLock<PathPipeline> = OnceLock::new();
-    PIPELINE.get_or_init(|| PathPipeline::new(ctx, trace_pipeline(ctx)).expect("the path kernel compiles"))
-}
 
 fn settings(gaussians: GaussianEstimator, sampler: SamplerKind) -> PathSettings {
     PathSettings {
@@ -65,7 +59,7 @@ fn gpu_paths_are_the_cpu_paths() {
                 let s = settings(gaussians, sampler);
                 let frames = Frames { count: 4, seed: 9, ..Frames::default() };
                 let cpu = PathTracer::new(&trace, s).unwrap().render(camera, &frames, &|_| {}).unwrap();
-                let out = gpu.render_path(path_pipeline(ctx), camera, &s, &frames).expect("GPU path render").0;
+                let out = gpu.render_path(camera, &s, &frames).expect("GPU path render").0;
                 let (differ, mean) = differences(&cpu, &out);
                 let share = differ as f64 / f64::from(camera.width * camera.height);
                 eprintln!("{name}, {gaussians:?}, {sampler:?}: {differ} pixels differ, mean |Δ| {mean:.2e}");
@@ -83,7 +77,7 @@ fn depth_sampling_stays_on_the_cpu() {
     let trace = trace_scene(&world);
     let gpu = tracer(ctx, &trace);
     let s = settings(GaussianEstimator::DepthSampling { k: 2 }, SamplerKind::Hash);
-    match gpu.render_path(path_pipeline(ctx), &world.1, &s, &Frames::default()) {
+    match gpu.render_path(&world.1, &s, &Frames::default()) {
         Err(e @ GpuError::Refused { .. }) => {
             assert!(e.to_string().contains("CPU only") && e.remedies() == [splat_gpu::Remedy::Cpu], "{e}")
         }

@@ -27,7 +27,7 @@ pub fn context() -> Option<&'static GpuContext> {
     }
 }
 
-/// The ray-tracing kernel, compiled once per test binary.
+/// The ray-tracing kernels, each compiled once per test binary (on the first tracer of its split).
 pub fn trace_pipeline(ctx: &'static GpuContext) -> &'static TracePipeline {
     static PIPELINE: OnceLock<TracePipeline> = OnceLock::new();
     PIPELINE.get_or_init(|| TracePipeline::new(ctx).expect("the trace kernel compiles"))
