@@ -16,9 +16,14 @@ struct RasterParticle {
 }
 
 @group(0) @binding(0) var<storage, read> params: RasterParams;
+// The particles and SH coefficients of the chunk this dispatch projects: `project_chunk.y`
+// particles from scene index `project_chunk.x` on (splat_gpu::RasterScene uploads them in
+// chunks of one binding each, projected by a dispatch each; particle k of the chunk is
+// `particles[k]`).
 @group(0) @binding(1) var<storage, read> particles: array<RasterParticle>;
 @group(0) @binding(2) var<storage, read> sh: array<vec4<f32>>;
-// sh.wgsl's read of coefficient i (the ray tracer's may span several bindings, splat_gpu::split).
+@group(0) @binding(29) var<storage, read> project_chunk: vec2<u32>;
+// sh.wgsl's read of coefficient i of the chunk.
 fn sh_at(i: u32) -> vec4<f32> { return sh[i]; }
 @group(0) @binding(3) var<storage, read_write> splats: array<Splat>;
 // Depth sort: keys (depth bits, NONE when culled) and values (particle ids); after the sort,
@@ -159,12 +164,14 @@ fn ellipse_box(mean: vec2<f32>, a: f32, c: f32, bound: f32) -> vec4<f32> {
 // key NONE and sort behind all others.
 @compute @workgroup_size(256, 1, 1)
 fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = flat_index(gid, groups);
-    if (i >= params.count) {
+    // k in the chunk, i in the scene.
+    let k = flat_index(gid, groups);
+    if (k >= project_chunk.y) {
         return;
     }
+    let i = project_chunk.x + k;
     cull(i);
-    let p = particles[i];
+    let p = particles[k];
     if (p.opacity < params.alpha_cull) {
         return;
     }
@@ -220,7 +227,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.opacity = opacity;
     s.conic = vec3<f32>(c / det, -b / det, a / det);
     s.id = i;
-    s.color = sh_eval(i, params.sh_degree, dir);
+    s.color = sh_eval(k, params.sh_degree, dir);
     s.bound = bound;
     s.rect = vec4<u32>(rect);
     splats[i] = s;

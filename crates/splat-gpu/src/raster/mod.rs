@@ -185,7 +185,8 @@ pub struct GpuRasterizer<'a> {
     pub(super) splats: wgpu::Buffer,
     pub(super) depth: SortBuffers,
     pub(super) draw_args: wgpu::Buffer,
-    pub(super) compute_group: wgpu::BindGroup,
+    /// The projection's bind group of each chunk of the scene ([`scene::ProjectChunk`]).
+    pub(super) project_groups: Vec<wgpu::BindGroup>,
     /// The mesh pre-pass's colour and distance per sample (one unused entry without meshes).
     pub(super) behind: wgpu::Buffer,
     /// The mesh pre-pass's normal per sample (one unused entry without meshes).
@@ -231,20 +232,27 @@ impl<'a> GpuRasterizer<'a> {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         });
-        let compute_group = bind(
-            ctx,
-            &pipes.project,
-            &[
-                (0, &params_buffer),
-                (1, &scene.particles),
-                (2, &scene.sh),
-                (3, &splats),
-                (4, &depth.keys),
-                (5, &depth.vals),
-                (6, &draw_args),
-                (15, &scene.canonical),
-            ],
-        );
+        let project_groups = scene
+            .chunks
+            .iter()
+            .map(|chunk| {
+                bind(
+                    ctx,
+                    &pipes.project,
+                    &[
+                        (0, &params_buffer),
+                        (1, &chunk.particles),
+                        (2, &chunk.sh),
+                        (3, &splats),
+                        (4, &depth.keys),
+                        (5, &depth.vals),
+                        (6, &draw_args),
+                        (15, &scene.canonical),
+                        (29, &chunk.range),
+                    ],
+                )
+            })
+            .collect();
         let pre_pass = |label| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -267,7 +275,7 @@ impl<'a> GpuRasterizer<'a> {
             splats,
             depth,
             draw_args,
-            compute_group,
+            project_groups,
             behind,
             behind_normal,
             raster: *raster,
@@ -330,15 +338,18 @@ impl<'a> GpuRasterizer<'a> {
         Ok(())
     }
 
-    /// Projection: reset the visible count (6 vertices, 0 instances) and run `project`.
+    /// Projection: reset the visible count (6 vertices, 0 instances) and run `project` on each
+    /// chunk of the scene.
     fn encode_project(&self, encoder: &mut wgpu::CommandEncoder, timestamps: Option<wgpu::ComputePassTimestampWrites>) {
         self.ctx.queue.write_buffer(&self.draw_args, 0, bytemuck::cast_slice(&[6u32, 0, 0, 0]));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("project"), timestamp_writes: timestamps });
         pass.set_pipeline(&self.pipes.project);
-        pass.set_bind_group(0, &self.compute_group, &[]);
-        let (gx, gy) = groups(self.scene.count.div_ceil(256));
-        pass.dispatch_workgroups(gx, gy, 1);
+        for (group, chunk) in self.project_groups.iter().zip(&self.scene.chunks) {
+            pass.set_bind_group(0, group, &[]);
+            let (gx, gy) = groups(chunk.count.div_ceil(256));
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
     }
 
     /// The global depth sort: all particles, culled ones (key u32::MAX) last.

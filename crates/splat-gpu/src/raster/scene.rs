@@ -144,8 +144,8 @@ pub struct FrameParams {
 /// order, and its lighting (materials, lights, and each particle's canonical transform for its
 /// normal).
 pub struct RasterScene {
-    pub(super) particles: wgpu::Buffer,
-    pub(super) sh: wgpu::Buffer,
+    /// The particles and SH coefficients in chunks of one binding each.
+    pub(super) chunks: Vec<ProjectChunk>,
     pub(super) count: u32,
     pub(super) sh_degree: u32,
     pub(super) screen_filter: splat_core::ScreenFilter,
@@ -167,7 +167,58 @@ pub struct RasterScene {
     pub(super) has_meshes: bool,
 }
 
+/// Particles `first..first + count` of the scene and their SH coefficients, each in a binding
+/// of its own, projected by a dispatch of their own (`project_chunk` in `shaders/raster.wgsl`):
+/// so neither array bounds a scene, only the projected splats (64 bytes a splat, where an SH-3
+/// particle holds 256 of SH).
+pub(super) struct ProjectChunk {
+    pub(super) particles: wgpu::Buffer,
+    pub(super) sh: wgpu::Buffer,
+    /// `[first, count]`.
+    pub(super) range: wgpu::Buffer,
+    pub(super) count: u32,
+}
+
+impl ProjectChunk {
+    /// `particles` and their SH `sh` (`per` coefficients each) in chunks of the most particles,
+    /// a power of two, whose particles and SH each fit a binding.
+    fn split(
+        ctx: &GpuContext,
+        particles: &[RasterParticle],
+        sh: &[[f32; 4]],
+        per: usize,
+    ) -> Result<Vec<Self>, GpuError> {
+        use crate::split::{Split, SplitArray, upload};
+        let count = particles.len();
+        let stride = size_of::<RasterParticle>().max(16 * per) as u64;
+        let split = Split::of(count as u64, stride, ctx.max_binding);
+        let chunk = if split.parts == 1 { count.max(1) } else { 1 << split.shift };
+        let array = |what, stride| SplitArray { what, var: what, accessor: "", ty: "", stride, binding: 0 };
+        let particles_array = array("raster particle", size_of::<RasterParticle>() as u64);
+        let sh_array = array("SH", (16 * per) as u64);
+        let particles = crate::layout::non_empty(particles.to_vec());
+        let particles = upload(ctx, &particles_array, split, bytemuck::cast_slice(&particles))?;
+        let sh = upload(ctx, &sh_array, split, bytemuck::cast_slice(sh))?;
+        Ok(particles
+            .into_iter()
+            .zip(sh)
+            .enumerate()
+            .map(|(c, (particles, sh))| {
+                let (first, n) = ((c * chunk) as u32, (count - c * chunk).min(chunk) as u32);
+                let range = ctx.upload("project chunk", bytemuck::cast_slice(&[first, n]));
+                ProjectChunk { particles, sh, range, count: n }
+            })
+            .collect())
+    }
+}
+
 impl RasterScene {
+    /// The chunks the projection runs in: particles and SH coefficients in as many bindings
+    /// as they need, one dispatch each.
+    pub fn chunks(&self) -> usize {
+        self.chunks.len()
+    }
+
     /// Validate and upload `scene`, unlit; refuse buffers above the adapter's binding limit.
     pub fn new(ctx: &GpuContext, scene: &Scene, settings: &RenderSettings) -> Result<Self, GpuError> {
         Self::new_lit(ctx, scene, settings, &Lighting::default())
@@ -201,7 +252,6 @@ impl RasterScene {
             .collect();
         let sh = crate::layout::sh(scene);
         ctx.check_binding("splat", (count.max(1) * size_of::<GpuSplat>()) as u64, count)?;
-        ctx.check_binding("SH", (sh.len() * 16) as u64, count)?;
         // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals.
         let canonical: Vec<[f32; 4]> = scene
             .particles
@@ -216,8 +266,7 @@ impl RasterScene {
             .collect();
         ctx.check_binding("canonical transform", (canonical.len() * 16) as u64, count)?;
         Ok(Self {
-            particles: ctx.upload("raster particles", bytemuck::cast_slice(&crate::layout::non_empty(particles))),
-            sh: ctx.upload("raster sh", bytemuck::cast_slice(&sh)),
+            chunks: ProjectChunk::split(ctx, &particles, &sh, splat_core::particle::sh_coeff_count(scene.sh_degree))?,
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
             screen_filter: scene.screen_filter,
