@@ -1095,3 +1095,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     out_var[index].w = max(most, f32(iterations));
 }
+
+// The scene arrays as this kernel reads them: element i of each through its accessor into
+// out_mean[7 i + k], the particle's four vec4 (k = 0..3), the node's two (4, 5) and the SH
+// coefficient (6), bit for bit. GpuTracer::arrays_as_read reads them back, so that a test
+// compares a scene split over bindings (splat_gpu::split) with the same scene whole, element by
+// element, without compiling the whole kernel for the split. An array shorter than i reads a
+// clamped element, which the host ignores.
+@compute @workgroup_size(64, 1, 1)
+fn split_gather(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = gid.y * groups.x * 64u + gid.x;
+    let base = 7u * i;
+    if (base + 6u >= arrayLength(&out_mean)) {
+        return;
+    }
+    let p = particle_at(i);
+    let n = node_at(i);
+    out_mean[base] = vec4<f32>(p.mean, p.opacity);
+    out_mean[base + 1u] = vec4<f32>(p.row0, bitcast<f32>(p.id));
+    out_mean[base + 2u] = vec4<f32>(p.row1, p.extent);
+    out_mean[base + 3u] = vec4<f32>(p.row2, p.pad2);
+    out_mean[base + 4u] = vec4<f32>(n.min, bitcast<f32>(n.first));
+    out_mean[base + 5u] = vec4<f32>(n.max, bitcast<f32>(n.count));
+    out_mean[base + 6u] = sh_at(i);
+}

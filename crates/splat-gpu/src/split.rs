@@ -162,6 +162,9 @@ pub(crate) fn upload(
 ) -> Result<Vec<wgpu::Buffer>, GpuError> {
     let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let part_bytes = if split.parts == 1 { data.len().max(1) } else { (array.stride << split.shift) as usize };
+    // A binding cannot be empty: an empty array is one zeroed element.
+    let zero = vec![0u8; array.stride as usize];
+    let data = if data.is_empty() { &zero[..] } else { data };
     let buffers = data.chunks(part_bytes).map(|part| ctx.upload(array.var, part)).collect();
     if let Some(e) = pollster::block_on(scope.pop()) {
         return Err(GpuError::DeviceMemory { buffer: array.what, bytes: data.len() as u64, message: e.to_string() });

@@ -244,6 +244,8 @@ pub(crate) struct TraceKernel {
     hybrid: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// The path tracer (`path_main`, `PATH_MODE` on), compiled on the first path-traced render.
     path: std::sync::OnceLock<wgpu::ComputePipeline>,
+    /// `split_gather`, compiled on first use ([`GpuTracer::arrays_as_read`]).
+    gather: std::sync::OnceLock<wgpu::ComputePipeline>,
 }
 
 impl TracePipeline {
@@ -315,8 +317,9 @@ impl TraceKernel {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        let (hybrid, path) = (std::sync::OnceLock::new(), std::sync::OnceLock::new());
-        Ok(Self { split, pipeline, layout, module, pipeline_layout, hybrid, path })
+        let (hybrid, path, gather) =
+            (std::sync::OnceLock::new(), std::sync::OnceLock::new(), std::sync::OnceLock::new());
+        Ok(Self { split, pipeline, layout, module, pipeline_layout, hybrid, path, gather })
     }
 
     /// The hybrid pipeline's kernel (`HYBRID_MODE`: the rasterizer's samples continued, the
@@ -328,6 +331,18 @@ impl TraceKernel {
     /// The path tracer's kernel (`path_main`), compiled on first use.
     fn path(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
         Self::once(&self.path, || self.specialised(ctx, "path_main", "PATH_MODE"))
+    }
+
+    /// `split_gather`, the scene arrays as the kernel reads them, compiled on first use.
+    fn gather(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
+        Self::once(&self.gather, || {
+            let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let pipeline = compute_pipeline(&ctx.device, &self.module, Some(&self.pipeline_layout), "split_gather");
+            match pollster::block_on(scope.pop()) {
+                Some(e) => Err(GpuError::Shader(e.to_string())),
+                None => Ok(pipeline),
+            }
+        })
     }
 
     fn once(
@@ -370,6 +385,8 @@ pub struct GpuTracer<'a> {
     particles: Vec<wgpu::Buffer>,
     nodes: Vec<wgpu::Buffer>,
     sh: Vec<wgpu::Buffer>,
+    /// Elements of each: particles, nodes, SH coefficients.
+    lengths: [u64; 3],
     materials: wgpu::Buffer,
     lights: wgpu::Buffer,
     triangles: wgpu::Buffer,
@@ -422,7 +439,8 @@ impl<'a> GpuTracer<'a> {
         let nodes = layout::nodes(trace);
         let sh = layout::sh(trace.scene());
         let len = |n: usize| n as u64;
-        let split = TraceSplit::new(ctx, len(particles.len()), len(nodes.len()), len(sh.len()))?;
+        let lengths = [len(particles.len()), len(nodes.len()), len(sh.len())];
+        let split = TraceSplit::new(ctx, lengths[0], lengths[1], lengths[2])?;
         let kernel = pipeline.kernel(ctx, split)?;
         let particles = crate::split::upload(ctx, &PARTICLES, split.particles, bytemuck::cast_slice(&particles))?;
         let nodes = crate::split::upload(ctx, &NODES, split.nodes, bytemuck::cast_slice(&nodes))?;
@@ -444,6 +462,7 @@ impl<'a> GpuTracer<'a> {
             particles,
             nodes,
             sh,
+            lengths,
             materials: ctx.upload("materials", bytemuck::cast_slice(&layout::materials(trace.lighting()))),
             lights: ctx.upload("lights", bytemuck::cast_slice(&layout::lights(trace.lighting()))),
             triangles: ctx.upload("triangles", bytemuck::cast_slice(&layout::triangles(trace.meshes()))),
@@ -632,6 +651,35 @@ impl<'a> GpuTracer<'a> {
     /// How its scene arrays are split over bindings.
     pub fn split(&self) -> TraceSplit {
         self.kernel.split
+    }
+
+    /// The particles, BVH nodes and SH coefficients as the kernel reads them through its
+    /// accessors (`split_gather` in `shaders/trace.wgsl`), in element order, as the u32 words
+    /// of their 16-byte rows (four a particle, two a node, one a coefficient): the same for every
+    /// split of a scene, which a test checks without compiling the whole kernel for each.
+    pub fn arrays_as_read(&self) -> Result<[Vec<[u32; 4]>; 3], GpuError> {
+        let ctx = self.ctx;
+        let lengths = self.lengths.map(|n| n as usize);
+        let longest = lengths.iter().copied().max().unwrap_or(0).max(1);
+        let targets = TraceTargets::new(ctx, 7 * longest as u32, 1);
+        let uniform = params_buffer(ctx);
+        let group = self.bind_group(&uniform, &targets, None, None);
+        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gather") });
+        {
+            let mut pass = encoder
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("gather"), timestamp_writes: None });
+            pass.set_pipeline(self.kernel.gather(ctx)?);
+            pass.set_bind_group(0, &group, &[0]);
+            let (gx, gy) = crate::sort::groups(longest.div_ceil(64) as u32);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let words = ctx.read_u32(&targets.mean, 28 * longest)?;
+        let rows: Vec<[u32; 4]> = words.chunks(4).map(|w| [w[0], w[1], w[2], w[3]]).collect();
+        let take = |k: std::ops::Range<usize>, n: usize| -> Vec<[u32; 4]> {
+            rows.chunks(7).take(n).flat_map(|element| element[k.clone()].to_vec()).collect()
+        };
+        Ok([take(0..4, lengths[0]), take(4..6, lengths[1]), take(6..7, lengths[2])])
     }
 
     fn render_with(
