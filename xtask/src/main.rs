@@ -52,12 +52,26 @@ fn test(extra: &[String]) -> Result<()> {
     let skips = skip_log();
     let _ = std::fs::remove_file(&skips);
     let status = if extra.is_empty() && has_nextest() {
-        // Every test in a process of its own, two at a time: the statistical suites' processes
-        // overlap instead of queueing binary after binary (lavapipe keeps one core of two busy
-        // on the small test images). cargo-nextest runs no doctests; cargo test runs those.
-        let run = test_command(&["nextest", "run", "--workspace", "--cargo-profile", "release", "--profile", "ci"]);
-        let tests = run_status(run, "cargo nextest run")?;
-        let docs = run_status(test_command(&["test", "--workspace", "--release", "--doc"]), "cargo test --doc")?;
+        // Every test in a process of its own, one more at a time than the machine has cores: the
+        // statistical suites' processes overlap instead of queueing binary after binary, and GPU
+        // tests wait on lavapipe's fences and on the processes they start (the suite on 2 cores,
+        // warm shader cache: 370 s at 3 a time, 384 s at 2). cargo-nextest runs no doctests;
+        // cargo test runs those.
+        let threads = std::thread::available_parallelism().map_or(2, |n| n.get() + 1).to_string();
+        let run = test_command(&[
+            "nextest",
+            "run",
+            "--workspace",
+            "--cargo-profile",
+            "release",
+            "--profile",
+            "ci",
+            "--test-threads",
+            &threads,
+        ]);
+        let tests = timed("cargo nextest run (build and tests)", || run_status(run, "cargo nextest run"))?;
+        let doc_tests = test_command(&["test", "--workspace", "--release", "--doc"]);
+        let docs = timed("doctests", || run_status(doc_tests, "cargo test --doc"))?;
         if tests.success() { docs } else { tests }
     } else {
         if extra.is_empty() {
@@ -72,9 +86,9 @@ fn test(extra: &[String]) -> Result<()> {
         bail!("tests failed ({status})");
     }
     if extra.is_empty() {
-        run_examples()?;
-        check_docs()?;
-        python_tests()?;
+        timed("examples", run_examples)?;
+        timed("cargo doc", check_docs)?;
+        timed("the Python package", python_tests)?;
     }
     Ok(())
 }
@@ -223,6 +237,15 @@ fn test_command(args: &[&str]) -> Command {
         cmd.env("WGPU_BACKEND", "vulkan");
     }
     cmd
+}
+
+/// Run `step`, then print how long it took (CI's budget is the whole run's: docs/architecture.md
+/// says what each phase costs).
+fn timed<T>(what: &str, step: impl FnOnce() -> Result<T>) -> Result<T> {
+    let start = std::time::Instant::now();
+    let out = step();
+    eprintln!("{what}: {:.0} s", start.elapsed().as_secs_f64());
+    out
 }
 
 fn run_status(mut cmd: Command, what: &str) -> Result<std::process::ExitStatus> {

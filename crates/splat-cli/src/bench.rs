@@ -6,6 +6,7 @@
 use crate::args::{MethodOptions, SceneArgs, method_parser};
 use anyhow::Result;
 use clap::Args;
+use splat_core::bvh::work;
 use splat_core::catalogue::Family;
 use splat_core::trace::{TraceScene, render_frames};
 use splat_core::{Frames, MethodId};
@@ -108,8 +109,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
         camera.height,
         args.spp
     );
-    println!("| method | frame (ms) | Mrays/s | Mrays/s per core | cost vs opaque |");
-    println!("|---|---:|---:|---:|---:|");
+    println!(
+        "| method | frame (ms) | Mrays/s | Mrays/s per core | cost vs opaque | traversals/ray | nodes/ray | leaves/ray | tests/ray | bytes/ray |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    // Work counters of every thread of the pool (splat_core::bvh::work), summed.
+    let work = || pool.broadcast(|_| work::take()).into_iter().fold(work::Work::default(), work::Work::plus);
     let mut methods = vec![MethodId::Opaque];
     methods.extend(args.methods.iter().copied().filter(|&m| m != MethodId::Opaque));
     let mut baseline = None;
@@ -118,15 +123,30 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let frames = Frames { count: args.spp, seed: 1, rng: args.options.rng(), ..Frames::default() };
         let rendered = rendered_frames(&splat_core::Algorithm::Trace(method), &trace.shot(&camera), &frames);
         let mut best = f64::INFINITY;
+        let _ = work();
         for _ in 0..args.repeat.max(1) {
             let start = Instant::now();
             pool.install(|| render_frames(&trace, &camera, &method, &frames, &|_| {}))?;
             best = best.min(start.elapsed().as_secs_f64() / rendered);
         }
+        let counts = work();
+        let rays = pixels * rendered * f64::from(args.repeat.max(1));
+        let per_ray = |n: u64| n as f64 / rays;
+        let bytes = counts.bytes(std::mem::size_of::<splat_core::hit::PreparedParticle>());
         let base = *baseline.get_or_insert(best);
         let name = m.name();
         let mrays = pixels / best / 1e6;
-        println!("| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× |", 1e3 * best, mrays / threads as f64, best / base);
+        println!(
+            "| {name} | {:.1} | {mrays:.3} | {:.3} | {:.2}× | {:.2} | {:.1} | {:.1} | {:.1} | {:.0} |",
+            1e3 * best,
+            mrays / threads as f64,
+            best / base,
+            per_ray(counts.traversals),
+            per_ray(counts.nodes),
+            per_ray(counts.leaves),
+            per_ray(counts.tests),
+            per_ray(bytes)
+        );
     }
     if let Some(peak) = splat_io::memory::peak_resident() {
         let per_splat = peak as f64 / scene.particles.len().max(1) as f64;

@@ -358,14 +358,35 @@ fn stratify_on_the_gpu_equals_the_cpu(prefix: &std::path::Path) {
     assert!(table.contains("| plates | 64 | cpu | hammersley |"), "{table}");
 }
 
+/// `splat bench` times every method against opaque and counts its BVH work per ray
+/// (traversals, wide nodes, leaves, primitive tests, bytes read): the counts are the same on one
+/// thread as on three, a Gaussian method does more work than an opaque ray, and `exact`, which
+/// visits every hit, tests more particles than Algorithm 1, which shrinks t_max to its first
+/// accepted hit.
 #[test]
 fn bench_reports_every_method_against_opaque() {
-    let o = splat(&["bench", "fixtures/cloud.ply", "--width", "32", "--height", "24", "--repeat", "1"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = String::from_utf8_lossy(&o.stdout);
+    let bench = |threads: &str| {
+        let args =
+            ["bench", "fixtures/cloud.ply", "--width", "32", "--height", "24", "--repeat", "1", "--threads", threads];
+        let o = splat(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let (one, three) = (bench("1"), bench("3"));
+    // The work columns (the last five) of method m's row.
+    let work = |text: &str, m: &str| -> Vec<f64> {
+        let row =
+            text.lines().find(|l| l.starts_with(&format!("| {m} |"))).unwrap_or_else(|| panic!("{m} missing:\n{text}"));
+        let cells: Vec<&str> = row.split('|').map(str::trim).filter(|c| !c.is_empty()).collect();
+        cells[cells.len() - 5..].iter().map(|c| c.parse().unwrap()).collect()
+    };
     for m in ["opaque", "stochastic", "stochastic-n", "stochastic-pass", "kbuffer", "exact"] {
-        assert!(text.contains(&format!("| {m} |")), "{m} missing:\n{text}");
+        let counts = work(&one, m);
+        assert_eq!(counts, work(&three, m), "{m}: the work depends on the threads");
+        assert!(counts[0] >= 1.0 && counts[1] >= 1.0 && counts[3] >= counts[2], "{m}: {counts:?}");
     }
+    let (opaque, stochastic, exact) = (work(&one, "opaque"), work(&one, "stochastic"), work(&one, "exact"));
+    assert!(stochastic[3] > opaque[3] && exact[3] > stochastic[3], "tests a ray: {opaque:?} {stochastic:?} {exact:?}");
 }
 
 /// `splat bench --sweep mn` prints the eight m × n rows of Sun et al. Tables 4–5 with their

@@ -5,6 +5,7 @@
 
 mod build;
 mod wide;
+pub mod work;
 
 pub use wide::{Bvh4, MAX_PRIMITIVES};
 

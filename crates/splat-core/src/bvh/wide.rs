@@ -32,6 +32,9 @@ pub struct Node4 {
     count: u32,
 }
 
+/// Bytes of a wide node.
+pub(super) const NODE_BYTES: usize = std::mem::size_of::<Node4>();
+
 /// A 4-wide BVH over the leaf order of a [`Bvh`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Bvh4 {
@@ -120,13 +123,14 @@ impl Bvh4 {
     /// boxes the ray overlaps within (t_min, t_max], nearer children first, `visit(k, t_max)` may
     /// lower t_max and nodes entered beyond it are skipped); four boxes tested per step, and the
     /// stack keeps each entry's distance so that a popped node is culled without a new test.
+    /// Counts its work into the thread's [`super::work`] counters.
     #[inline]
     pub fn traverse(&self, ray: &Ray, t_max: &mut f32, mut visit: impl FnMut(u32, &mut f32)) {
-        let Some(root) = self.root else { return };
+        let Some(root) = self.root else { return super::work::record(0, 0, 0) };
         let inv = inverse_direction(ray.dir);
         let [lo, hi] = self.root_box.map(Vec3A::from_array);
         if slab(lo, hi, Vec3A::from(ray.origin), inv, ray.t_min, *t_max).is_none() {
-            return;
+            return super::work::record(0, 0, 0);
         }
         let (ox, oy, oz) = (Vec4::splat(ray.origin.x), Vec4::splat(ray.origin.y), Vec4::splat(ray.origin.z));
         let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
@@ -137,12 +141,17 @@ impl Bvh4 {
         let mut stack = [(0u32, 0.0f32); WIDE_STACK];
         let mut top = 0usize;
         let mut current = root;
+        let (mut nodes, mut leaves, mut tests) = (0u32, 0u32, 0u32);
         loop {
             if current & LEAF != 0 {
-                for k in leaf_range(current) {
+                let range = leaf_range(current);
+                leaves += 1;
+                tests += range.len() as u32;
+                for k in range {
                     visit(k, t_max);
                 }
             } else {
+                nodes += 1;
                 let n = &self.nodes[current as usize];
                 // Slab test of the four children: the arithmetic of `super::slab`, with the min
                 // and max of each axis's two distances taken by choosing the planes (1/d is
@@ -184,6 +193,7 @@ impl Bvh4 {
             // Pop the nearest pushed entry still in front of t_max.
             loop {
                 if top == 0 {
+                    super::work::record(nodes, leaves, tests);
                     return;
                 }
                 top -= 1;
@@ -265,6 +275,27 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A traversal adds itself, its nodes, its leaves and every primitive it visits to the
+    /// thread's work counters, once; a ray that misses the root box counts a traversal alone.
+    #[test]
+    fn traversals_count_their_work() {
+        let boxes = random_boxes(5000, 9);
+        let wide = Bvh4::from_binary(&Bvh::build(&boxes));
+        let _ = super::super::work::take();
+        let ray = Ray::new(Vec3::new(0.1, 0.2, -8.0), Vec3::Z);
+        let mut visited = 0u64;
+        wide.traverse(&ray, &mut 1e4, |_, _| visited += 1);
+        let work = super::super::work::take();
+        assert_eq!((work.traversals, work.tests), (1, visited), "{work:?}");
+        assert!(visited > 0 && work.leaves >= 1 && work.leaves <= visited && work.nodes >= 1, "{work:?}");
+        assert!(work.nodes < wide.len() as u64, "a ray tests a few of {} nodes: {work:?}", wide.len());
+        let away = Ray::new(Vec3::new(50.0, 50.0, 50.0), Vec3::X);
+        wide.traverse(&away, &mut 1e4, |_, _| panic!("a ray away from the boxes visits nothing"));
+        let missed = super::super::work::Work { traversals: 1, ..Default::default() };
+        assert_eq!(super::super::work::take(), missed);
+        assert_eq!(super::super::work::take(), super::super::work::Work::default());
     }
 
     #[test]
