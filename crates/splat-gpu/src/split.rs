@@ -13,8 +13,12 @@
 //! @group(0) @binding(18) var<storage, read> particles_1: array<Particle>;
 //! fn particle_at(i: u32) -> Particle {
 //!     let j = i & 1048575u;
-//!     if (i >> 20u) == 1u { return particles_1[j]; }
-//!     return particles[j];
+//!     var v: Particle;
+//!     switch i >> 20u {
+//!         case 1u: { v = particles_1[j]; }
+//!         default: { v = particles[j]; }
+//!     }
+//!     return v;
 //! }
 //! ```
 //!
