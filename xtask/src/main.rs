@@ -52,23 +52,13 @@ fn test(extra: &[String]) -> Result<()> {
     let skips = skip_log();
     let _ = std::fs::remove_file(&skips);
     let status = if extra.is_empty() && has_nextest() {
-        // Every test in a process of its own, one more at a time than the machine has cores: the
-        // statistical suites' processes overlap instead of queueing binary after binary, and GPU
-        // tests wait on lavapipe's fences and on the processes they start (the suite on 2 cores,
-        // warm shader cache: 370 s at 3 a time, 384 s at 2). cargo-nextest runs no doctests;
+        // Every test in a process of its own, as many at a time as the machine has cores: the
+        // statistical suites' processes overlap instead of queueing binary after binary (lavapipe
+        // keeps one core of two busy on the small test images). One more at a time was tried: the
+        // suite on 2 cores took 397 s and then 482 s for one commit (three lavapipe suites at
+        // once: 101–111 s each, against 48–63 s two at a time). cargo-nextest runs no doctests;
         // cargo test runs those.
-        let threads = std::thread::available_parallelism().map_or(2, |n| n.get() + 1).to_string();
-        let run = test_command(&[
-            "nextest",
-            "run",
-            "--workspace",
-            "--cargo-profile",
-            "release",
-            "--profile",
-            "ci",
-            "--test-threads",
-            &threads,
-        ]);
+        let run = test_command(&["nextest", "run", "--workspace", "--cargo-profile", "release", "--profile", "ci"]);
         let tests = timed("cargo nextest run (build and tests)", || run_status(run, "cargo nextest run"))?;
         let doc_tests = test_command(&["test", "--workspace", "--release", "--doc"]);
         let docs = timed("doctests", || run_status(doc_tests, "cargo test --doc"))?;
