@@ -155,23 +155,24 @@ fn part_name(var: &str, p: u32) -> String {
     if p == 0 { var.to_string() } else { format!("{var}_{p}") }
 }
 
-/// `data` (elements of `array.stride` bytes) as `split`'s parts, one read-only storage buffer
-/// each, in part order; a device that cannot allocate them is refused with
+/// `data` (elements of `stride` bytes, the scene's `what`) as `split`'s parts, one read-only
+/// storage buffer each, in part order; a device that cannot allocate them is refused with
 /// [`GpuError::DeviceMemory`].
 pub(crate) fn upload(
     ctx: &GpuContext,
-    array: &SplitArray,
+    what: &'static str,
+    stride: u64,
     split: Split,
     data: &[u8],
 ) -> Result<Vec<wgpu::Buffer>, GpuError> {
     let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let part_bytes = if split.parts == 1 { data.len().max(1) } else { (array.stride << split.shift) as usize };
     // A binding cannot be empty: an empty array is one zeroed element.
-    let zero = vec![0u8; array.stride as usize];
+    let zero = vec![0u8; stride as usize];
     let data = if data.is_empty() { &zero[..] } else { data };
-    let buffers = data.chunks(part_bytes).map(|part| ctx.upload(array.var, part)).collect();
+    let part_bytes = if split.parts == 1 { data.len() } else { (stride << split.shift) as usize };
+    let buffers = data.chunks(part_bytes).map(|part| ctx.upload(what, part)).collect();
     if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::DeviceMemory { buffer: array.what, bytes: data.len() as u64, message: e.to_string() });
+        return Err(GpuError::DeviceMemory { buffer: what, bytes: data.len() as u64, message: e.to_string() });
     }
     Ok(buffers)
 }

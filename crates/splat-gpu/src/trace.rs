@@ -325,24 +325,17 @@ impl TraceKernel {
     /// The hybrid pipeline's kernel (`HYBRID_MODE`: the rasterizer's samples continued, the
     /// volumetric look's fragments lit), compiled on first use.
     fn hybrid(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
-        Self::once(&self.hybrid, || self.specialised(ctx, "main", "HYBRID_MODE"))
+        Self::once(&self.hybrid, || self.specialised(ctx, "main", Some("HYBRID_MODE")))
     }
 
     /// The path tracer's kernel (`path_main`), compiled on first use.
     fn path(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
-        Self::once(&self.path, || self.specialised(ctx, "path_main", "PATH_MODE"))
+        Self::once(&self.path, || self.specialised(ctx, "path_main", Some("PATH_MODE")))
     }
 
     /// `split_gather`, the scene arrays as the kernel reads them, compiled on first use.
     fn gather(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
-        Self::once(&self.gather, || {
-            let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-            let pipeline = compute_pipeline(&ctx.device, &self.module, Some(&self.pipeline_layout), "split_gather");
-            match pollster::block_on(scope.pop()) {
-                Some(e) => Err(GpuError::Shader(e.to_string())),
-                None => Ok(pipeline),
-            }
-        })
+        Self::once(&self.gather, || self.specialised(ctx, "split_gather", None))
     }
 
     fn once(
@@ -357,15 +350,21 @@ impl TraceKernel {
     }
 
     /// Entry point `entry` of the kernel's module on its layout, with the pipeline-overridable
-    /// constant `mode` set; shader and pipeline errors as [`GpuError::Shader`].
-    fn specialised(&self, ctx: &GpuContext, entry: &str, mode: &str) -> Result<wgpu::ComputePipeline, GpuError> {
+    /// constant `mode` set where given; shader and pipeline errors as [`GpuError::Shader`].
+    fn specialised(
+        &self,
+        ctx: &GpuContext,
+        entry: &str,
+        mode: Option<&str>,
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let constants: Vec<(&str, f64)> = mode.map(|m| (m, 1.0)).into_iter().collect();
         let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(mode),
+            label: Some(mode.unwrap_or(entry)),
             layout: Some(&self.pipeline_layout),
             module: &self.module,
             entry_point: Some(entry),
-            compilation_options: wgpu::PipelineCompilationOptions { constants: &[(mode, 1.0)], ..Default::default() },
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
             cache: None,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -442,9 +441,15 @@ impl<'a> GpuTracer<'a> {
         let lengths = [len(particles.len()), len(nodes.len()), len(sh.len())];
         let split = TraceSplit::new(ctx, lengths[0], lengths[1], lengths[2])?;
         let kernel = pipeline.kernel(ctx, split)?;
-        let particles = crate::split::upload(ctx, &PARTICLES, split.particles, bytemuck::cast_slice(&particles))?;
-        let nodes = crate::split::upload(ctx, &NODES, split.nodes, bytemuck::cast_slice(&nodes))?;
-        let sh = crate::split::upload(ctx, &SH, split.sh, bytemuck::cast_slice(&sh))?;
+        let particles = crate::split::upload(
+            ctx,
+            PARTICLES.what,
+            PARTICLES.stride,
+            split.particles,
+            bytemuck::cast_slice(&particles),
+        )?;
+        let nodes = crate::split::upload(ctx, NODES.what, NODES.stride, split.nodes, bytemuck::cast_slice(&nodes))?;
+        let sh = crate::split::upload(ctx, SH.what, SH.stride, split.sh, bytemuck::cast_slice(&sh))?;
         let (mut emitters, mut density) = splat_core::path::emitter_table(trace);
         let emitter_count = emitters.len() as u32;
         // A binding cannot be empty.

@@ -188,17 +188,15 @@ impl ProjectChunk {
         sh: &[[f32; 4]],
         per: usize,
     ) -> Result<Vec<Self>, GpuError> {
-        use crate::split::{Split, SplitArray, upload};
+        use crate::split::{Split, upload};
         let count = particles.len();
         let stride = size_of::<RasterParticle>().max(16 * per) as u64;
         let split = Split::of(count as u64, stride, ctx.max_binding);
         let chunk = if split.parts == 1 { count.max(1) } else { 1 << split.shift };
-        let array = |what, stride| SplitArray { what, var: what, accessor: "", ty: "", stride, binding: 0 };
-        let particles_array = array("raster particle", size_of::<RasterParticle>() as u64);
-        let sh_array = array("SH", (16 * per) as u64);
-        let particles = crate::layout::non_empty(particles.to_vec());
-        let particles = upload(ctx, &particles_array, split, bytemuck::cast_slice(&particles))?;
-        let sh = upload(ctx, &sh_array, split, bytemuck::cast_slice(sh))?;
+        // `upload` gives an empty scene one zeroed particle, as a binding needs.
+        let particle_bytes = size_of::<RasterParticle>() as u64;
+        let particles = upload(ctx, "raster particle", particle_bytes, split, bytemuck::cast_slice(particles))?;
+        let sh = upload(ctx, "SH", (16 * per) as u64, split, bytemuck::cast_slice(sh))?;
         Ok(particles
             .into_iter()
             .zip(sh)
