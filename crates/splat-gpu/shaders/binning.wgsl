@@ -36,7 +36,7 @@ fn tile_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     }
     var n = 0u;
     if (r < drawn()) {
-        let s = splats[order[r]];
+        let s = splat_at(order[r]);
         let t = tile_rect(s);
         n = select(0u, (t.z - t.x + 1u) * (t.w - t.y + 1u), visible(s));
     }
@@ -46,10 +46,10 @@ fn tile_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
 @compute @workgroup_size(256, 1, 1)
 fn tile_emit(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let r = flat_index(gid, groups);
-    if (r >= drawn() || !visible(splats[order[r]])) {
+    if (r >= drawn() || !visible(splat_at(order[r]))) {
         return;
     }
-    let t = tile_rect(splats[order[r]]);
+    let t = tile_rect(splat_at(order[r]));
     var at = offsets[r];
     for (var ty = t.y; ty <= t.w; ty++) {
         for (var tx = t.x; tx <= t.z; tx++) {
@@ -94,7 +94,7 @@ fn tile_pairs(tile: u32, l: u32) -> vec2<u32> {
 // Pairs [start, min(start + BATCH, end)) of the tile's list into `batch`, one per invocation.
 fn load_batch(start: u32, end: u32, l: u32) {
     if (l < BATCH && start + l < end) {
-        batch[l] = splats[order[pair_ranks[start + l]]];
+        batch[l] = splat_at(order[pair_ranks[start + l]]);
     }
     workgroupBarrier();
 }

@@ -11,6 +11,10 @@
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
 // bvh.wgsl's read of node i (the ray tracer's may span several bindings, splat_gpu::split).
 fn node_at(i: u32) -> Node { return nodes[i]; }
+// raster_lighting.wgsl's read of the canonical transforms (the splatting kernels' may span
+// several bindings, splat_gpu::RasterSplit); the pre-pass lights meshes only, so it binds none.
+@group(0) @binding(15) var<storage, read> canonical: array<vec4<f32>>;
+fn canonical_at(i: u32) -> vec4<f32> { return canonical[i]; }
 @group(0) @binding(2) var<storage, read> triangles: array<Triangle>;
 @group(0) @binding(3) var<storage, read> mesh_materials: array<MeshMaterial>;
 @group(0) @binding(4) var<storage, read_write> behind: array<vec4<f32>>;

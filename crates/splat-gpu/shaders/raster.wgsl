@@ -25,7 +25,8 @@ struct RasterParticle {
 @group(0) @binding(29) var<storage, read> project_chunk: vec2<u32>;
 // sh.wgsl's read of coefficient i of the chunk.
 fn sh_at(i: u32) -> vec4<f32> { return sh[i]; }
-@group(0) @binding(3) var<storage, read_write> splats: array<Splat>;
+// The projected splats, `splat_at(i)` and `splat_set(i, s)` (binding 3, split over more by
+// splat_gpu::RasterSplit).
 // Depth sort: keys (depth bits, NONE when culled) and values (particle ids); after the sort,
 // `order[r]` is the particle of rank r.
 @group(0) @binding(4) var<storage, read_write> depth_keys: array<u32>;
@@ -40,7 +41,9 @@ fn flat_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
 }
 
 fn cull(i: u32) {
-    splats[i].rect = vec4<u32>(0u);
+    var culled = splat_at(i);
+    culled.rect = vec4<u32>(0u);
+    splat_set(i, culled);
     depth_keys[i] = NONE;
     order[i] = i;
 }
@@ -100,9 +103,9 @@ fn unscented(i: u32, p: RasterParticle) -> Projected {
     if (!(out.depth > params.near)) {
         return out;
     }
-    let m0 = canonical[3u * i].xyz;
-    let m1 = canonical[3u * i + 1u].xyz;
-    let m2 = canonical[3u * i + 2u].xyz;
+    let m0 = canonical_at(3u * i).xyz;
+    let m1 = canonical_at(3u * i + 1u).xyz;
+    let m2 = canonical_at(3u * i + 2u).xyz;
     let det = dot(m0, cross(m1, m2));
     let axes = mat3x3<f32>(cross(m1, m2), cross(m2, m0), cross(m0, m1)) * (sqrt(3.0) / det);
     let p0 = lens_project(centre);
@@ -230,7 +233,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.color = sh_eval(k, params.sh_degree, dir);
     s.bound = bound;
     s.rect = vec4<u32>(rect);
-    splats[i] = s;
+    splat_set(i, s);
     depth_keys[i] = bitcast<u32>(projected.depth);
     atomicAdd(&draw_args[1], 1u);
 }

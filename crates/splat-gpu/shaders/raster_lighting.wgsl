@@ -5,8 +5,8 @@
 @group(0) @binding(13) var<storage, read> materials: array<Material>;
 @group(0) @binding(14) var<storage, read> lights: array<Light>;
 // Per particle in scene order, the rows of its canonical transform M = S⁻¹ Rᵀ with the mean in
-// w (three entries): its normal.
-@group(0) @binding(15) var<storage, read> canonical: array<vec4<f32>>;
+// w (three entries): its normal, `canonical_at(3 id + row)` (binding 15, split over more by
+// splat_gpu::RasterSplit).
 
 // The splat kernels have no loop budget to count.
 fn count_iteration() {
@@ -36,9 +36,9 @@ fn stretch(p: vec2<f32>) -> f32 {
 
 // normal.rs `particle_normal` of particle `id` for the ray (origin, dir), in the settings' mode.
 fn splat_normal(id: u32, origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
-    let r0 = canonical[3u * id];
-    let r1 = canonical[3u * id + 1u];
-    let r2 = canonical[3u * id + 2u];
+    let r0 = canonical_at(3u * id);
+    let r1 = canonical_at(3u * id + 1u);
+    let r2 = canonical_at(3u * id + 2u);
     let mean = vec3<f32>(r0.w, r1.w, r2.w);
     return particle_normal_of(r0.xyz, r1.xyz, r2.xyz, mean, origin, dir, params.normal_mode, params.cutoff);
 }
@@ -57,9 +57,9 @@ fn splat_lit(s: Splat, p: vec2<f32>) -> vec3<f32> {
 // raster/mod.rs `Rasterizer::depth` with FragmentDepth::MaxDensityPlane: in the particle's
 // canonical frame (o, d) = M (origin − μ, dir), t = −o·d / d·d along the sample's unit ray.
 fn plane_depth(id: u32, origin: vec3<f32>, dir: vec3<f32>) -> f32 {
-    let r0 = canonical[3u * id];
-    let r1 = canonical[3u * id + 1u];
-    let r2 = canonical[3u * id + 2u];
+    let r0 = canonical_at(3u * id);
+    let r1 = canonical_at(3u * id + 1u);
+    let r2 = canonical_at(3u * id + 2u);
     let x = origin - vec3<f32>(r0.w, r1.w, r2.w);
     let o = vec3<f32>(dot(r0.xyz, x), dot(r1.xyz, x), dot(r2.xyz, x));
     let d = vec3<f32>(dot(r0.xyz, dir), dot(r1.xyz, dir), dot(r2.xyz, dir));

@@ -178,7 +178,7 @@ fn resolve_rop(rop: ptr<function, Rop>, spp: u32, corner: vec2<f32>, pixel: u32)
             color += triangle_color(id & ~TRIANGLE, sample_ray(corner, i));
             written++;
         } else {
-            var c = splats[id].color;
+            var c = splat_at(id).color;
             if (params.lit == 1u) {
                 let n = splat_normal(id, origin, ray0);
                 c = shade_unshadowed(c, id, origin, pixel_dir(corner + rop_offsets[i]), (*rop).t[i], n);
@@ -459,7 +459,7 @@ fn rop_first_hit(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (id == NONE || id == MESH) {
             write_first_hit(index, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), -1.0, NONE);
         } else {
-            write_first_hit(index, splats[id].color, 0.0, splat_normal(id, camera_origin(), dir), t, id);
+            write_first_hit(index, splat_at(id).color, 0.0, splat_normal(id, camera_origin(), dir), t, id);
         }
     }
 }

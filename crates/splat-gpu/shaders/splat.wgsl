@@ -6,7 +6,7 @@
 
 @group(0) @binding(0) var<storage, read> params: RasterParams;
 @group(0) @binding(1) var<storage, read> frame: FrameParams;
-@group(0) @binding(2) var<storage, read> splats: array<Splat>;
+// The projected splats, `splat_at(i)` (binding 2, split over more by splat_gpu::RasterSplit).
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;
 // Per sample of each pixel (entry pixel × S + i) the mesh pre-pass's colour and distance
@@ -48,7 +48,7 @@ fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32
     } else if (params.mode == MODE_UNDER) {
         index = order[instance];
     }
-    let rect = vec4<f32>(splats[index].rect);
+    let rect = vec4<f32>(splat_at(index).rect);
     // Two triangles: corners 0 1 2, 2 1 3 of the rect, in pixels.
     let corner = array<vec2<u32>, 6>(
         vec2<u32>(0u, 0u), vec2<u32>(1u, 0u), vec2<u32>(0u, 1u),
@@ -61,7 +61,7 @@ fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32
     let ndc = vec2<f32>(2.0 * p.x / size.x - 1.0, 1.0 - 2.0 * p.y / size.y);
     // A constant depth over the quad (w = 1, so no perspective division): the rasterizer's
     // plane equation has zero slope and every fragment gets this value, with early depth tests.
-    let z = splats[index].depth * DEPTH_SCALE;
+    let z = splat_at(index).depth * DEPTH_SCALE;
     return VertexOut(vec4<f32>(ndc, z, 1.0), index);
 }
 
@@ -69,7 +69,7 @@ fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32
 // premultiplied (α c, α) for ONE_MINUS_DST_ALPHA / ONE.
 @fragment
 fn fs_sorted(in: VertexOut) -> @location(0) vec4<f32> {
-    let s = splats[in.splat];
+    let s = splat_at(in.splat);
     let alpha = splat_alpha(s, in.position.xy, params);
     if (alpha <= 0.0 || centre_behind_mesh(s, in.position.xy, true)) {
         discard;
@@ -88,7 +88,7 @@ fn fs_sorted(in: VertexOut) -> @location(0) vec4<f32> {
 // the shader runs (a written frag_depth disables early depth testing). This function is the
 // decision: the splat this fragment writes, or a discard.
 fn accepted_splat(in: VertexOut) -> Splat {
-    let s = splats[in.splat];
+    let s = splat_at(in.splat);
     let alpha = splat_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
     let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));
@@ -148,7 +148,7 @@ fn coverage(s: Splat, pixel: vec2<f32>, at_mesh: bool) -> u32 {
 // Sorted blending at S samples: the fragment's alpha once per pixel, its coverage per sample.
 @fragment
 fn fs_sorted_msaa(in: VertexOut) -> Masked {
-    let s = splats[in.splat];
+    let s = splat_at(in.splat);
     let alpha = fragment_alpha(s, in.position.xy, params);
     let mask = coverage(s, floor(in.position.xy), true);
     if (alpha <= 0.0 || mask == 0u) {
@@ -164,7 +164,7 @@ fn fs_sorted_msaa(in: VertexOut) -> Masked {
 // u_i = hash(pixel, frame, splat id, i) is below α (raster/mod.rs `stochastic_splat`, slot = i).
 @fragment
 fn fs_stochastic_msaa(in: VertexOut) -> Masked {
-    let s = splats[in.splat];
+    let s = splat_at(in.splat);
     let alpha = fragment_alpha(s, in.position.xy, params);
     let pixel = vec2<u32>(in.position.xy);
     let pixel_key = xxhash32(vec3<u32>(pixel.x, pixel.y, frame.key));

@@ -23,7 +23,7 @@ struct Written {
 // the pixel centre) and the fragment, at the max-density plane (`plane`) or the centre depth,
 // lies in front of the sample's mesh; else the fragment is discarded.
 fn accepted_sample(in: VertexOut, i: u32, plane: bool) -> Written {
-    let s = splats[in.splat];
+    let s = splat_at(in.splat);
     let corner = floor(in.position.xy);
     let alpha = fragment_alpha(s, corner + vec2<f32>(0.5), params);
     let pixel = vec2<u32>(corner);

@@ -811,6 +811,28 @@ pub(crate) mod wgsl_check {
         (module, info)
     }
 
+    /// The storage buffers each entry point of `source` uses (what an automatic layout binds
+    /// in its stage), by name.
+    pub(crate) fn storage_buffers_used(name: &str, source: &str) -> Vec<(String, u32)> {
+        let (module, info) = parse_and_validate(name, source, naga::valid::Capabilities::all());
+        module
+            .entry_points
+            .iter()
+            .enumerate()
+            .map(|(i, entry_point)| {
+                let used = module
+                    .global_variables
+                    .iter()
+                    .filter(|(handle, var)| {
+                        matches!(var.space, naga::AddressSpace::Storage { .. })
+                            && !info.get_entry_point(i)[*handle].is_empty()
+                    })
+                    .count();
+                (entry_point.name.clone(), used as u32)
+            })
+            .collect()
+    }
+
     /// Check a bind group layout written in Rust against the bindings the shader declares, as
     /// naga reflects them (all in group 0): each binding has an entry of its kind (read-only or
     /// read-write storage, a texture multisampled or not; never a uniform buffer,

@@ -37,7 +37,9 @@ pub use display::{DisplayMode, DisplayTransform, PixelState, read_rgba8};
 pub use error::{GpuError, Remedy};
 pub use layout::{GpuFirstHit, GpuFragment, GpuParticle, Params, PassState, PathParams};
 pub use progressive::ProgressiveTrace;
-pub use raster::{DepthPick, FirstHits, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterTimings};
+pub use raster::{
+    DepthPick, FirstHits, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterSplit, RasterTimings,
+};
 pub use sort::RadixSort;
 pub use split::Split;
 pub use trace::{

@@ -28,7 +28,7 @@ impl TileLists {
         offsets: &SortBuffers,
         pair_count: u32,
     ) -> Result<Self, GpuError> {
-        let (ctx, pipes) = (r.ctx, r.pipes);
+        let (ctx, pipes, k) = (r.ctx, r.pipes, &r.k);
         let pairs = pipes.sort.buffers(ctx, pair_count.max(1))?;
         let [tiles_x, tiles_y] = r.params.tiles;
         let ranges = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -37,23 +37,12 @@ impl TileLists {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let (params, splats, draw_args) = (&r.params_buffer, &r.splats, &r.draw_args);
+        let (params, draw_args) = (&r.params_buffer, &r.draw_args);
         let count_group = r.count_group(order, offsets);
-        let emit_group = bind(
-            ctx,
-            &pipes.tile_emit,
-            &[
-                (0, params),
-                (3, splats),
-                (5, order),
-                (6, draw_args),
-                (7, &offsets.hist),
-                (8, &pairs.keys),
-                (9, &pairs.vals),
-            ],
-        );
+        let own = [(0, params), (5, order), (6, draw_args), (7, &offsets.hist), (8, &pairs.keys), (9, &pairs.vals)];
+        let emit_group = bind(ctx, &k.tile_emit, &[&own[..], &r.split_parts(false, false)].concat());
         let ranges_group =
-            bind(ctx, &pipes.tile_ranges, &[(0, params), (7, &offsets.hist), (8, &pairs.keys), (10, &ranges)]);
+            bind(ctx, &k.tile_ranges, &[(0, params), (7, &offsets.hist), (8, &pairs.keys), (10, &ranges)]);
         Ok(Self { pairs, pair_count, ranges, count_group, emit_group, ranges_group })
     }
 
@@ -65,12 +54,12 @@ impl TileLists {
 
     /// Emit the pairs at the counted offsets, sort them by tile and find each tile's range.
     pub(super) fn encode_lists(&self, r: &GpuRasterizer, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
-        let (ctx, pipes, n) = (r.ctx, r.pipes, r.scene.count);
+        let (ctx, pipes, k, n) = (r.ctx, r.pipes, &r.k, r.scene.count);
         encoder.clear_buffer(&self.ranges, 0, None);
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile emit"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_emit);
+            pass.set_pipeline(&k.tile_emit);
             pass.set_bind_group(0, &self.emit_group, &[]);
             let (gx, gy) = groups(n.div_ceil(256));
             pass.dispatch_workgroups(gx, gy, 1);
@@ -80,7 +69,7 @@ impl TileLists {
         pipes.sort.encode(ctx, encoder, &self.pairs, self.pair_count, tile_bits, None)?;
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile ranges"), timestamp_writes: None });
-        pass.set_pipeline(&pipes.tile_ranges);
+        pass.set_pipeline(&k.tile_ranges);
         pass.set_bind_group(0, &self.ranges_group, &[]);
         let (gx, gy) = groups(self.pair_count.div_ceil(256));
         pass.dispatch_workgroups(gx, gy, 1);
@@ -91,11 +80,8 @@ impl TileLists {
 impl GpuRasterizer<'_> {
     /// The group of `tile_count` over the splats in `order`, counting into `offsets.hist`.
     fn count_group(&self, order: &wgpu::Buffer, offsets: &SortBuffers) -> wgpu::BindGroup {
-        bind(
-            self.ctx,
-            &self.pipes.tile_count,
-            &[(0, &self.params_buffer), (3, &self.splats), (5, order), (6, &self.draw_args), (7, &offsets.hist)],
-        )
+        let own = [(0, &self.params_buffer), (5, order), (6, &self.draw_args), (7, &offsets.hist)];
+        bind(self.ctx, &self.k.tile_count, &[&own[..], &self.split_parts(false, false)].concat())
     }
 
     /// Per rank the tiles its rect touches (`tile_count`), and their exclusive scan in
@@ -105,7 +91,7 @@ impl GpuRasterizer<'_> {
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile count"), timestamp_writes: None });
-            pass.set_pipeline(&self.pipes.tile_count);
+            pass.set_pipeline(&self.k.tile_count);
             pass.set_bind_group(0, group, &[]);
             let (gx, gy) = groups((n + 1).div_ceil(256));
             pass.dispatch_workgroups(gx, gy, 1);

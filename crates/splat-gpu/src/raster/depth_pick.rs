@@ -228,7 +228,7 @@ impl GpuRasterizer<'_> {
         fragments: Option<(&wgpu::Buffer, &wgpu::Buffer)>,
     ) -> Result<TilePass, GpuError> {
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
-        let (ctx, pipes) = (self.ctx, self.pipes);
+        let ctx = self.ctx;
         let [tiles_x, tiles_y] = self.params.tiles;
         // 1. Pairs per rank and their exclusive scan in depth order (offsets[n] is the total).
         let pairs = self.pair_count()?;
@@ -242,34 +242,29 @@ impl GpuRasterizer<'_> {
             ctx.buffer("no fragments", size_of::<GpuFragment>() as u64, storage),
         );
         let (starts, list) = fragments.unwrap_or((&none.0, &none.1));
-        let blend_group = bind(
-            ctx,
-            &pipes.tile_blend,
-            &[
-                (0, &self.params_buffer),
-                (3, &self.splats),
-                (5, &self.depth.vals),
-                (9, &lists.pairs.vals),
-                (10, &lists.ranges),
-                (11, &out.color),
-                (12, &out.pick),
-                (13, &self.scene.materials),
-                (14, &self.scene.lights),
-                (15, &self.scene.canonical),
-                (16, &out.normal),
-                (17, &self.behind),
-                (18, &self.behind_normal),
-                (20, &self.sample_offsets),
-                (24, starts),
-                (25, list),
-            ],
-        );
+        let own = [
+            (0, &self.params_buffer),
+            (5, &self.depth.vals),
+            (9, &lists.pairs.vals),
+            (10, &lists.ranges),
+            (11, &out.color),
+            (12, &out.pick),
+            (13, &self.scene.materials),
+            (14, &self.scene.lights),
+            (16, &out.normal),
+            (17, &self.behind),
+            (18, &self.behind_normal),
+            (20, &self.sample_offsets),
+            (24, starts),
+            (25, list),
+        ];
+        let blend_group = bind(ctx, &self.k.tile_blend, &[&own[..], &self.split_parts(false, true)].concat());
         let mut encoder = self.encoder("tile lists");
         lists.encode_lists(self, &mut encoder)?;
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile blend"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.tile_blend);
+            pass.set_pipeline(&self.k.tile_blend);
             pass.set_bind_group(0, &blend_group, &[]);
             pass.dispatch_workgroups(tiles_x, tiles_y, 1);
         }

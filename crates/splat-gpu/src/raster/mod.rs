@@ -43,10 +43,10 @@ mod scene;
 use binning::TileLists;
 pub use depth_pick::{DepthPick, FirstHits};
 pub use pipelines::RasterPipelines;
-use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT};
+use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT, SplatKernels};
 pub use profile::RasterTimings;
 use scene::raster_params;
-pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene};
+pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene, RasterSplit};
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::sort::{RadixSort, SortBuffers, groups};
@@ -67,8 +67,9 @@ use splat_core::tile::TILE;
 use std::time::{Duration, Instant};
 use wgpu::util::DeviceExt;
 
-/// WGSL of the projection and tile kernels.
-pub const RASTER_WGSL: &str = concat!(
+/// WGSL of the projection and tile kernels, but for the projected splats and canonical
+/// transforms, which [`RasterSplit`] declares.
+const RASTER_SOURCE: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
     include_str!("../../shaders/sh.wgsl"),
     include_str!("../../shaders/raster_types.wgsl"),
@@ -82,8 +83,8 @@ pub const RASTER_WGSL: &str = concat!(
     include_str!("../../shaders/depth_pick.wgsl"),
     include_str!("../../shaders/rop.wgsl")
 );
-/// WGSL of the splatting render pipeline.
-pub const SPLAT_WGSL: &str = concat!(
+/// WGSL of the splatting render pipeline, but for the split arrays.
+const SPLAT_SOURCE: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
     include_str!("../../shaders/raster_types.wgsl"),
     include_str!("../../shaders/lighting.wgsl"),
@@ -91,17 +92,15 @@ pub const SPLAT_WGSL: &str = concat!(
     include_str!("../../shaders/lens.wgsl"),
     include_str!("../../shaders/splat.wgsl")
 );
-/// WGSL of the splatting render pipeline with the max-density-plane entry point, which needs
-/// sample-rate shading.
-pub const SPLAT_PLANE_WGSL: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
-    include_str!("../../shaders/raster_types.wgsl"),
-    include_str!("../../shaders/lighting.wgsl"),
-    include_str!("../../shaders/raster_lighting.wgsl"),
-    include_str!("../../shaders/lens.wgsl"),
-    include_str!("../../shaders/splat.wgsl"),
-    include_str!("../../shaders/splat_plane.wgsl")
-);
+/// The max-density-plane entry point of the splat draw, which needs sample-rate shading.
+const SPLAT_PLANE_SOURCE: &str = include_str!("../../shaders/splat_plane.wgsl");
+/// WGSL of the projection and tile kernels of every scene whose split arrays fit one binding.
+pub static RASTER_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| RasterSplit::WHOLE.raster_wgsl());
+/// WGSL of the splatting render pipeline of those scenes.
+pub static SPLAT_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| RasterSplit::WHOLE.splat_wgsl(false));
+/// The same with the max-density-plane entry point.
+pub static SPLAT_PLANE_WGSL: std::sync::LazyLock<String> =
+    std::sync::LazyLock::new(|| RasterSplit::WHOLE.splat_wgsl(true));
 /// WGSL of the mesh pre-pass (vk_gaussian_splatting Lighting §1.5.3 and §3).
 pub const MESH_PREPASS_WGSL: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
@@ -182,7 +181,10 @@ pub struct GpuRasterizer<'a> {
     pub(super) camera: Camera,
     pub(super) params: RasterParams,
     pub(super) params_buffer: wgpu::Buffer,
-    pub(super) splats: wgpu::Buffer,
+    /// The kernels and splat draw of the scene's [`RasterSplit`].
+    pub(super) k: std::sync::Arc<SplatKernels>,
+    /// The projected splats, in the parts of the scene's [`RasterSplit`].
+    pub(super) splats: Vec<wgpu::Buffer>,
     pub(super) depth: SortBuffers,
     pub(super) draw_args: wgpu::Buffer,
     /// The projection's bind group of each chunk of the scene ([`scene::ProjectChunk`]).
@@ -211,13 +213,9 @@ impl<'a> GpuRasterizer<'a> {
         camera.validate().map_err(RenderError::from)?;
         check_settings(raster)?;
         let entries = mesh_prepass_entries(ctx, scene, camera, raster)?;
+        let k = pipes.kernels(ctx, scene.split)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
-        let splats = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("splats"),
-            size: (scene.count.max(1) as usize * size_of::<GpuSplat>()) as u64,
-            usage: rw,
-            mapped_at_creation: false,
-        });
+        let splats = splat_parts(ctx, scene.count, scene.split.splats)?;
         // Room for count + 1 tile counts in the histogram (their scan's last entry is the total).
         let depth = pipes.sort.buffers(ctx, scene.count + 1)?;
         let draw_args = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -232,25 +230,21 @@ impl<'a> GpuRasterizer<'a> {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         });
+        let (splat_parts, canonical_parts) = scene.split.entries(false, &splats, &scene.canonical);
         let project_groups = scene
             .chunks
             .iter()
             .map(|chunk| {
-                bind(
-                    ctx,
-                    &pipes.project,
-                    &[
-                        (0, &params_buffer),
-                        (1, &chunk.particles),
-                        (2, &chunk.sh),
-                        (3, &splats),
-                        (4, &depth.keys),
-                        (5, &depth.vals),
-                        (6, &draw_args),
-                        (15, &scene.canonical),
-                        (29, &chunk.range),
-                    ],
-                )
+                let own = [
+                    (0, &params_buffer),
+                    (1, &chunk.particles),
+                    (2, &chunk.sh),
+                    (4, &depth.keys),
+                    (5, &depth.vals),
+                    (6, &draw_args),
+                    (29, &chunk.range),
+                ];
+                bind(ctx, &k.project, &[&own[..], &splat_parts, &canonical_parts].concat())
             })
             .collect();
         let pre_pass = |label| {
@@ -272,6 +266,7 @@ impl<'a> GpuRasterizer<'a> {
             camera: *camera,
             params,
             params_buffer,
+            k,
             splats,
             depth,
             draw_args,
@@ -344,7 +339,7 @@ impl<'a> GpuRasterizer<'a> {
         self.ctx.queue.write_buffer(&self.draw_args, 0, bytemuck::cast_slice(&[6u32, 0, 0, 0]));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("project"), timestamp_writes: timestamps });
-        pass.set_pipeline(&self.pipes.project);
+        pass.set_pipeline(&self.k.project);
         for (group, chunk) in self.project_groups.iter().zip(&self.scene.chunks) {
             pass.set_bind_group(0, group, &[]);
             let (gx, gy) = groups(chunk.count.div_ceil(256));
@@ -363,8 +358,25 @@ impl<'a> GpuRasterizer<'a> {
 
     /// The projected splats in scene order (culled ones have an empty rect).
     pub fn splats(&self) -> Result<Vec<GpuSplat>, GpuError> {
-        let words = self.ctx.read_u32(&self.splats, self.scene.count as usize * 16)?;
+        let split = self.scene.split.splats;
+        let mut words = Vec::with_capacity(self.scene.count as usize * 16);
+        for (p, part) in self.splats.iter().enumerate() {
+            let first = if split.parts == 1 { 0 } else { p << split.shift };
+            let len = if split.parts == 1 { self.scene.count as usize } else { 1 << split.shift };
+            let len = len.min(self.scene.count as usize - first);
+            words.extend(self.ctx.read_u32(part, len * 16)?);
+        }
         Ok(bytemuck::cast_slice(&words).to_vec())
+    }
+
+    /// The parts of the projected splats and, with `canonical`, of the canonical transforms,
+    /// as the raster kernels bind them (`drawn`: as the splat draw does).
+    pub(super) fn split_parts(&self, drawn: bool, canonical: bool) -> Vec<(u32, &wgpu::Buffer)> {
+        let (mut parts, transforms) = self.scene.split.entries(drawn, &self.splats, &self.scene.canonical);
+        if canonical {
+            parts.extend(transforms);
+        }
+        parts
     }
 
     /// The visible splats' scene indices in (depth, id) order.
@@ -562,19 +574,21 @@ impl<'a> GpuRasterizer<'a> {
     fn draw_group(&self, frame_params: &wgpu::Buffer) -> wgpu::BindGroup {
         self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("splat"),
-            layout: &self.pipes.splat_layout,
+            layout: &self.k.splat_layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
-                frame_entry(1, frame_params),
-                wgpu::BindGroupEntry { binding: 2, resource: self.splats.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: self.sample_offsets.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 15, resource: self.scene.canonical.as_entire_binding() },
-            ],
+                &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
+                    frame_entry(1, frame_params),
+                    wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 6, resource: self.sample_offsets.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
+                ][..],
+                &buffer_entries(&self.split_parts(true, true)),
+            ]
+            .concat(),
         })
     }
 
@@ -611,11 +625,11 @@ impl<'a> GpuRasterizer<'a> {
         timestamps: Option<wgpu::RenderPassTimestampWrites>,
     ) -> Result<(), GpuError> {
         let pipelines = match self.raster.samples {
-            1 => &self.pipes.single,
+            1 => &self.k.single,
             s => match self.msaa.get() {
                 Some(p) => p,
                 None => {
-                    let built = self.pipes.at_samples(self.ctx, s)?;
+                    let built = self.k.at_samples(self.ctx, s)?;
                     self.msaa.get_or_init(|| built)
                 }
             },
@@ -732,6 +746,38 @@ fn bind(ctx: &GpuContext, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wg
     })
 }
 
+/// Bind group entries of whole buffers.
+fn buffer_entries<'b>(buffers: &[(u32, &'b wgpu::Buffer)]) -> Vec<wgpu::BindGroupEntry<'b>> {
+    buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect()
+}
+
+/// The buffers of `count` projected splats in the parts of `split`; a device that cannot
+/// allocate them is refused with [`GpuError::DeviceMemory`].
+fn splat_parts(ctx: &GpuContext, count: u32, split: crate::split::Split) -> Result<Vec<wgpu::Buffer>, GpuError> {
+    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let count = u64::from(count.max(1));
+    let per_part = if split.parts == 1 { count } else { 1 << split.shift };
+    let stride = size_of::<GpuSplat>() as u64;
+    let buffers = (0..u64::from(split.parts))
+        .map(|p| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("splats"),
+                size: per_part.min(count - p * per_part) * stride,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })
+        .collect();
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(GpuError::DeviceMemory {
+            buffer: "projected splat",
+            bytes: count * stride,
+            message: e.to_string(),
+        });
+    }
+    Ok(buffers)
+}
+
 fn frame_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry {
         binding,
@@ -826,7 +872,7 @@ mod tests {
     fn raster_constants_equal_their_rust_twins() {
         use splat_core::raster::project;
         assert_constants!(
-            RASTER_WGSL,
+            &RASTER_WGSL,
             [
                 "TILE" = TILE,
                 "EXTENT_SQ" = project::EXTENT_SQ,
@@ -859,7 +905,7 @@ mod tests {
             ]
         );
         assert_constants!(
-            SPLAT_WGSL,
+            &SPLAT_WGSL,
             [
                 "MODE_OVER" = Draw::Over.mode(),
                 "MODE_UNDER" = Draw::Under.mode(),
@@ -871,16 +917,16 @@ mod tests {
     /// Sizes and offsets of the Rust mirrors equal naga's layout of the WGSL structs.
     #[test]
     fn rust_structs_mirror_the_raster_wgsl_structs() {
-        assert_mirrors!(RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
-        assert_mirrors!(RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, bound, rect]);
+        assert_mirrors!(&RASTER_WGSL, RasterParticle, "RasterParticle", [mean, opacity, cov_a, pad0, cov_b, pad1]);
+        assert_mirrors!(&RASTER_WGSL, GpuSplat, "Splat", [mean, depth, opacity, conic, id, color, bound, rect]);
         assert_mirrors!(
-            RASTER_WGSL,
+            &RASTER_WGSL,
             crate::layout::GpuFragment,
             "Fragment",
             [color, weight, normal, t, id, pad0, pad1, pad2]
         );
         assert_mirrors!(
-            RASTER_WGSL,
+            &RASTER_WGSL,
             RasterParams,
             "RasterParams",
             [
@@ -922,15 +968,15 @@ mod tests {
                 u_shift
             ]
         );
-        assert_mirrors!(SPLAT_WGSL, FrameParams, "FrameParams", [key, index, accumulation, u_shift]);
+        assert_mirrors!(&SPLAT_WGSL, FrameParams, "FrameParams", [key, index, accumulation, u_shift]);
     }
 
     /// Every raster module is valid WGSL for naga (a shader error fails `cargo test`).
     #[test]
     fn raster_wgsl_validates() {
         let modules = [
-            ("raster", RASTER_WGSL),
-            ("splat", SPLAT_WGSL),
+            ("raster", RASTER_WGSL.as_str()),
+            ("splat", SPLAT_WGSL.as_str()),
             ("fold", FOLD_WGSL),
             ("fold (multisampled)", FOLD_MSAA_WGSL),
             ("mesh pre-pass", MESH_PREPASS_WGSL),
@@ -938,7 +984,43 @@ mod tests {
         for (name, source) in modules {
             validate(name, source);
         }
-        validate_with("splat (plane)", SPLAT_PLANE_WGSL, naga::valid::Capabilities::MULTISAMPLED_SHADING);
+        validate_with("splat (plane)", &SPLAT_PLANE_WGSL, naga::valid::Capabilities::MULTISAMPLED_SHADING);
+    }
+
+    /// [`scene::OWN_BINDINGS`] is the most storage buffers a splatting kernel (its automatic
+    /// layout) or a stage of the splat draw (its written one) binds beside the split arrays'
+    /// extra parts: the budget [`RasterSplit::new`] leaves them.
+    #[test]
+    fn own_bindings_are_the_most_a_splatting_stage_binds() {
+        use crate::layout::wgsl_check::storage_buffers_used;
+        let kernels = storage_buffers_used("raster", &RASTER_WGSL);
+        let draw = super::pipelines::splat_layout_entries(&RasterSplit::WHOLE);
+        let stage = |stage: wgpu::ShaderStages| {
+            let storage = |e: &&wgpu::BindGroupLayoutEntry| matches!(e.ty, wgpu::BindingType::Buffer { .. });
+            draw.iter().filter(storage).filter(|e| e.visibility.contains(stage)).count() as u32
+        };
+        let most = kernels
+            .iter()
+            .map(|(_, n)| *n)
+            .chain([stage(wgpu::ShaderStages::VERTEX), stage(wgpu::ShaderStages::FRAGMENT)])
+            .max();
+        assert_eq!(most, Some(scene::OWN_BINDINGS), "{kernels:?}");
+    }
+
+    /// A split scene's modules validate, and the splat draw's layout of that split matches its
+    /// WGSL (the kernels' layouts are automatic).
+    #[test]
+    fn split_modules_validate_and_their_draw_layout_matches() {
+        use crate::split::Split;
+        use naga::valid::Capabilities;
+        let split = RasterSplit { splats: Split { parts: 3, shift: 4 }, canonical: Split { parts: 2, shift: 6 } };
+        let raster = split.raster_wgsl();
+        validate("raster (split)", &raster);
+        assert!(raster.contains("case 2u: { splats_2[j] = v; }"), "the setter writes every part");
+        assert!(raster.contains("@binding(32) var<storage, read> canonical_1"), "canonical parts follow the splats'");
+        let entries = super::pipelines::splat_layout_entries(&split);
+        check_layout("splat (split)", &split.splat_wgsl(false), Capabilities::empty(), &entries);
+        check_layout("splat (split, plane)", &split.splat_wgsl(true), Capabilities::MULTISAMPLED_SHADING, &entries);
     }
 
     /// The hand-written layouts of the splat draw and the fold match their shaders' bindings
@@ -947,9 +1029,9 @@ mod tests {
     fn raster_layouts_match_their_shaders() {
         use super::pipelines::{fold_layout_entries, splat_layout_entries};
         use naga::valid::Capabilities;
-        let splat = splat_layout_entries();
-        check_layout("splat", SPLAT_WGSL, Capabilities::empty(), &splat);
-        check_layout("splat (plane)", SPLAT_PLANE_WGSL, Capabilities::MULTISAMPLED_SHADING, &splat);
+        let splat = splat_layout_entries(&RasterSplit::WHOLE);
+        check_layout("splat", &SPLAT_WGSL, Capabilities::empty(), &splat);
+        check_layout("splat (plane)", &SPLAT_PLANE_WGSL, Capabilities::MULTISAMPLED_SHADING, &splat);
         check_layout("fold", FOLD_WGSL, Capabilities::empty(), &fold_layout_entries(false));
         check_layout("fold (multisampled)", FOLD_MSAA_WGSL, Capabilities::empty(), &fold_layout_entries(true));
     }

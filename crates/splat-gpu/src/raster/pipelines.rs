@@ -2,9 +2,25 @@
 
 use super::*;
 
-/// The compiled kernels and pipelines of the splatting path.
+/// The compiled kernels and pipelines of the splatting path: those that read the projected
+/// splats and canonical transforms for each [`RasterSplit`] a scene needs (one,
+/// [`RasterSplit::WHOLE`], compiled at once, for every scene whose arrays fit one binding each;
+/// another on the first rasterizer of its split), the others once.
 pub struct RasterPipelines {
     pub(super) sort: RadixSort,
+    pub(super) mesh_prepass: wgpu::ComputePipeline,
+    pub(super) fold_layout: wgpu::BindGroupLayout,
+    pub(super) fold: wgpu::ComputePipeline,
+    pub(super) fold_msaa_layout: wgpu::BindGroupLayout,
+    pub(super) fold_msaa: wgpu::ComputePipeline,
+    /// Colour target of sorted blending: RGBA32F where the adapter blends it, else RGBA16F.
+    pub blend_format: wgpu::TextureFormat,
+    kernels: std::sync::Mutex<Vec<std::sync::Arc<SplatKernels>>>,
+}
+
+/// The kernels and the splat draw compiled for one [`RasterSplit`].
+pub(crate) struct SplatKernels {
+    split: RasterSplit,
     pub(super) project: wgpu::ComputePipeline,
     pub(super) tile_count: wgpu::ComputePipeline,
     pub(super) tile_emit: wgpu::ComputePipeline,
@@ -15,7 +31,6 @@ pub struct RasterPipelines {
     pub(super) tile_rop: [wgpu::ComputePipeline; 2],
     /// Their written sample as the hybrid's first hit.
     pub(super) rop_first_hit: wgpu::ComputePipeline,
-    pub(super) mesh_prepass: wgpu::ComputePipeline,
     pub(super) splat_module: wgpu::ShaderModule,
     /// The same with the max-density-plane entry point, where the device shades per sample.
     pub(super) plane_module: Option<wgpu::ShaderModule>,
@@ -23,12 +38,7 @@ pub struct RasterPipelines {
     pub(super) splat_pipeline_layout: wgpu::PipelineLayout,
     /// The one-sample pipelines.
     pub(super) single: SamplePipelines,
-    pub(super) fold_layout: wgpu::BindGroupLayout,
-    pub(super) fold: wgpu::ComputePipeline,
-    pub(super) fold_msaa_layout: wgpu::BindGroupLayout,
-    pub(super) fold_msaa: wgpu::ComputePipeline,
-    /// Colour target of sorted blending: RGBA32F where the adapter blends it, else RGBA16F.
-    pub blend_format: wgpu::TextureFormat,
+    blend_format: wgpu::TextureFormat,
 }
 
 /// The render pipelines of one sample count: sorted over and under, StochasticSplats (unlit,
@@ -48,11 +58,11 @@ pub(crate) struct SamplePipelines {
 pub(super) const STOCHASTIC_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub(super) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// The bindings of the splat draw's vertex and fragment stages (checked against `splat.wgsl`'s
-/// by a test).
-pub(super) fn splat_layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
+/// The bindings of the splat draw's vertex and fragment stages for `split` (checked against
+/// `splat.wgsl`'s by a test).
+pub(super) fn splat_layout_entries(split: &RasterSplit) -> Vec<wgpu::BindGroupLayoutEntry> {
     let draw_stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
-    [
+    let mut entries = vec![
         params_entry(0, draw_stages, false, size_of::<RasterParams>()),
         params_entry(1, draw_stages, true, size_of::<FrameParams>()),
         storage_entry(2, draw_stages, true),
@@ -63,7 +73,9 @@ pub(super) fn splat_layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
         storage_entry(13, wgpu::ShaderStages::FRAGMENT, true),
         storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
         storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
-    ]
+    ];
+    entries.extend(split.draw_extra_entries());
+    entries
 }
 
 /// The bindings of the fold of the raster targets into the accumulation, from a `multisampled`
@@ -88,28 +100,33 @@ pub(super) fn fold_layout_entries(multisampled: bool) -> [wgpu::BindGroupLayoutE
     ]
 }
 
+/// A shader module of `source`.
+fn module(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    })
+}
+
+/// A pipeline layout of the one bind group `layout`.
+fn pipeline_layout(device: &wgpu::Device, label: &str, layout: &wgpu::BindGroupLayout) -> wgpu::PipelineLayout {
+    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    })
+}
+
 impl RasterPipelines {
-    /// Compile every raster kernel; a typed error when the device rejects one.
+    /// Compile every raster kernel (those of [`RasterSplit::WHOLE`] among them); a typed error
+    /// when the device rejects one.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let sort = RadixSort::new(ctx)?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = |label, source: &str| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            })
-        };
-        let raster = module("raster.wgsl", RASTER_WGSL);
-        let splat_module = module("splat.wgsl", SPLAT_WGSL);
-        let plane_module = ctx.sample_rate_shading.then(|| module("splat.wgsl (plane)", SPLAT_PLANE_WGSL));
-        let fold = module("fold.wgsl", FOLD_WGSL);
-        let fold_msaa = module("fold.wgsl (msaa)", FOLD_MSAA_WGSL);
-        let mesh_prepass = module("mesh_prepass.wgsl", MESH_PREPASS_WGSL);
-        let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("splat"),
-            entries: &splat_layout_entries(),
-        });
+        let fold = module(device, "fold.wgsl", FOLD_WGSL);
+        let fold_msaa = module(device, "fold.wgsl (msaa)", FOLD_MSAA_WGSL);
+        let mesh_prepass = module(device, "mesh_prepass.wgsl", MESH_PREPASS_WGSL);
         let fold_layout_of = |multisampled| {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("fold"),
@@ -117,15 +134,63 @@ impl RasterPipelines {
             })
         };
         let (fold_layout, fold_msaa_layout) = (fold_layout_of(false), fold_layout_of(true));
-        let pipeline_layout = |label, layout: &wgpu::BindGroupLayout| {
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(label),
-                bind_group_layouts: &[Some(layout)],
-                immediate_size: 0,
-            })
+        let pipes = Self {
+            mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
+            fold: compute_pipeline(device, &fold, Some(&pipeline_layout(device, "fold", &fold_layout)), "fold"),
+            fold_msaa: compute_pipeline(
+                device,
+                &fold_msaa,
+                Some(&pipeline_layout(device, "fold (msaa)", &fold_msaa_layout)),
+                "fold",
+            ),
+            fold_layout,
+            fold_msaa_layout,
+            blend_format: ctx.blend_format(),
+            sort,
+            kernels: std::sync::Mutex::new(Vec::new()),
         };
-        let splat_pipeline_layout = pipeline_layout("splat", &splat_layout);
-        let blend_format = ctx.blend_format();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        pipes.kernels(ctx, RasterSplit::WHOLE)?;
+        Ok(pipes)
+    }
+
+    /// The radix sort.
+    pub fn sort(&self) -> &RadixSort {
+        &self.sort
+    }
+
+    /// The kernels of `split`, compiled on first use.
+    pub(super) fn kernels(
+        &self,
+        ctx: &GpuContext,
+        split: RasterSplit,
+    ) -> Result<std::sync::Arc<SplatKernels>, GpuError> {
+        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = kernels.iter().find(|k| k.split == split) {
+            return Ok(k.clone());
+        }
+        let k = std::sync::Arc::new(SplatKernels::new(ctx, split, self.blend_format)?);
+        kernels.push(k.clone());
+        Ok(k)
+    }
+}
+
+impl SplatKernels {
+    /// Compile the kernels and the splat draw that read the arrays as `split` cuts them.
+    fn new(ctx: &GpuContext, split: RasterSplit, blend_format: wgpu::TextureFormat) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let raster = module(device, "raster.wgsl", &split.raster_wgsl());
+        let splat_module = module(device, "splat.wgsl", &split.splat_wgsl(false));
+        let plane_module =
+            ctx.sample_rate_shading.then(|| module(device, "splat.wgsl (plane)", &split.splat_wgsl(true)));
+        let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("splat"),
+            entries: &splat_layout_entries(&split),
+        });
+        let splat_pipeline_layout = pipeline_layout(device, "splat", &splat_layout);
         let rop = |plane: f64| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some("tile_rop"),
@@ -141,7 +206,8 @@ impl RasterPipelines {
         };
         let modules = (&splat_module, plane_module.as_ref());
         let single = SamplePipelines::new(device, modules, &splat_pipeline_layout, blend_format, 1);
-        let pipes = Self {
+        let kernels = Self {
+            split,
             project: compute_pipeline(device, &raster, None, "project"),
             tile_count: compute_pipeline(device, &raster, None, "tile_count"),
             tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
@@ -150,38 +216,20 @@ impl RasterPipelines {
             shuffle_keys: compute_pipeline(device, &raster, None, "shuffle_keys"),
             tile_rop: [rop(0.0), rop(1.0)],
             rop_first_hit: compute_pipeline(device, &raster, None, "rop_first_hit"),
-            mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
-            fold: compute_pipeline(device, &fold, Some(&pipeline_layout("fold", &fold_layout)), "fold"),
-            fold_msaa: compute_pipeline(
-                device,
-                &fold_msaa,
-                Some(&pipeline_layout("fold (msaa)", &fold_msaa_layout)),
-                "fold",
-            ),
             single,
             splat_module,
             plane_module,
             splat_layout,
             splat_pipeline_layout,
-            fold_layout,
-            fold_msaa_layout,
             blend_format,
-            sort,
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        Ok(pipes)
-    }
-}
-
-impl RasterPipelines {
-    /// The radix sort.
-    pub fn sort(&self) -> &RadixSort {
-        &self.sort
+        Ok(kernels)
     }
 
-    /// The render pipelines at `samples` per pixel (the one-sample set is [`RasterPipelines::single`]).
+    /// The render pipelines at `samples` per pixel (the one-sample set is [`SplatKernels::single`]).
     pub(super) fn at_samples(&self, ctx: &GpuContext, samples: u32) -> Result<SamplePipelines, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let modules = (&self.splat_module, self.plane_module.as_ref());

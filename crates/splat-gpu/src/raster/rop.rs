@@ -180,32 +180,38 @@ impl RopPass {
         });
         let keys_group = bind(
             ctx,
-            &pipes.shuffle_keys,
+            &r.k.shuffle_keys,
             &[(0, &r.params_buffer), (4, &shuffle.keys), (5, &shuffle.vals), (19, &frame)],
         );
         let rop = r.rop_pipeline();
+        let parts = r.split_parts(false, true);
         let rop_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("tile rop"),
             layout: &rop.get_bind_group_layout(0),
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: r.params_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: r.splats.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: shuffle.vals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 9, resource: lists.pairs.vals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 10, resource: lists.ranges.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 13, resource: r.scene.materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 14, resource: r.scene.lights.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 15, resource: r.scene.canonical.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 17, resource: r.behind.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 19, resource: frame.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 20, resource: r.sample_offsets.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 21, resource: wgpu::BindingResource::TextureView(&targets.color_view) },
-                wgpu::BindGroupEntry { binding: 22, resource: state.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 26, resource: r.scene.ordered_triangles.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 27, resource: r.scene.mesh_materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 28, resource: triangles.buffer.as_entire_binding() },
-            ],
+                &[
+                    wgpu::BindGroupEntry { binding: 0, resource: r.params_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 5, resource: shuffle.vals.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 9, resource: lists.pairs.vals.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 10, resource: lists.ranges.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 13, resource: r.scene.materials.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 14, resource: r.scene.lights.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 17, resource: r.behind.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 19, resource: frame.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 20, resource: r.sample_offsets.as_entire_binding() },
+                    wgpu::BindGroupEntry {
+                        binding: 21,
+                        resource: wgpu::BindingResource::TextureView(&targets.color_view),
+                    },
+                    wgpu::BindGroupEntry { binding: 22, resource: state.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 26, resource: r.scene.ordered_triangles.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 27, resource: r.scene.mesh_materials.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 28, resource: triangles.buffer.as_entire_binding() },
+                ][..],
+                &buffer_entries(&parts),
+            ]
+            .concat(),
         });
         Ok(Self { shuffle, lists, frame, keys_group, rop_group, chunk, chunks, chunk_count, state })
     }
@@ -226,7 +232,7 @@ impl RopPass {
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("shuffle"), timestamp_writes: None });
-            pass.set_pipeline(&pipes.shuffle_keys);
+            pass.set_pipeline(&r.k.shuffle_keys);
             pass.set_bind_group(0, &self.keys_group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
@@ -266,20 +272,15 @@ impl GpuRasterizer<'_> {
         let slots = FrameSlots::new(ctx);
         slots.write(ctx, &[frame_key], 0, &Frames { u_shift, ..Frames::default() });
         let out = super::depth_pick::HitBuffers::new(ctx, (w * h * self.raster.samples) as usize);
-        let group = bind(
-            ctx,
-            &self.pipes.rop_first_hit,
-            &[
-                (0, &self.params_buffer),
-                (3, &self.splats),
-                (11, &out.color),
-                (12, &out.pick),
-                (15, &self.scene.canonical),
-                (16, &out.normal),
-                (20, &self.sample_offsets),
-                (22, &rop.state),
-            ],
-        );
+        let own = [
+            (0, &self.params_buffer),
+            (11, &out.color),
+            (12, &out.pick),
+            (16, &out.normal),
+            (20, &self.sample_offsets),
+            (22, &rop.state),
+        ];
+        let group = bind(ctx, &self.k.rop_first_hit, &[&own[..], &self.split_parts(false, true)].concat());
         let mut encoder = self.encoder("rop first hits");
         rop.encode(self, &mut encoder, &slots, 0)?;
         {
@@ -287,7 +288,7 @@ impl GpuRasterizer<'_> {
                 label: Some("rop first hit"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(&self.pipes.rop_first_hit);
+            pass.set_pipeline(&self.k.rop_first_hit);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
@@ -347,6 +348,6 @@ impl GpuRasterizer<'_> {
 
     /// The raster-operations kernel of this rasterizer's fragment depth.
     fn rop_pipeline(&self) -> &wgpu::ComputePipeline {
-        &self.pipes.tile_rop[usize::from(self.raster.fragment_depth == FragmentDepth::MaxDensityPlane)]
+        &self.k.tile_rop[usize::from(self.raster.fragment_depth == FragmentDepth::MaxDensityPlane)]
     }
 }

@@ -2,6 +2,7 @@
 //! structs mirrored by `shaders/raster_types.wgsl`.
 
 use super::*;
+use crate::split::{Split, SplitArray, SplitLayout};
 
 /// One particle in scene order (WGSL `RasterParticle`, 48 bytes): the 3D covariance is
 /// computed once on the CPU, as the rasterizers of 3DGS precompute it.
@@ -140,6 +141,121 @@ pub struct FrameParams {
     pub u_shift: f32,
 }
 
+/// The projected splats as the raster kernels write and read them (`splat_at`, `splat_set`), part
+/// 0 at binding 3 ([`crate::split`]).
+const SPLATS: SplitArray =
+    SplitArray::of::<GpuSplat>("projected splat", "splats", "splat_at", "Splat", 3).writable("splat_set");
+/// The same splats as the splat draw's stages read them, part 0 at binding 2.
+const DRAWN_SPLATS: SplitArray = SplitArray::of::<GpuSplat>("projected splat", "splats", "splat_at", "Splat", 2);
+/// The rows of each particle's canonical transform (three a particle, `canonical_at`), part 0 at
+/// binding 15 in every module.
+const CANONICAL: SplitArray =
+    SplitArray::of::<[f32; 4]>("canonical transform", "canonical", "canonical_at", "vec4<f32>", 15);
+/// The binding of the first part after the first of the split arrays, in every splatting module.
+const FIRST_EXTRA: u32 = 30;
+/// The most storage buffers a splatting kernel or a stage of the splat draw binds beside the
+/// parts after the first of its split arrays (checked against the shaders by a test).
+pub(super) const OWN_BINDINGS: u32 = 16;
+
+/// Buffers and their bindings.
+pub(super) type Bindings<'b> = Vec<(u32, &'b wgpu::Buffer)>;
+
+/// How a scene's projected splats (64 bytes each) and canonical transforms (48) are split over
+/// bindings: the splatting kernels and the splat draw are compiled for it
+/// ([`RasterPipelines`] keeps one set per split it has met). The particles and SH need no
+/// split: the projection reads them in chunks of one binding each ([`RasterScene::chunks`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct RasterSplit {
+    /// The projected splats, in scene order.
+    pub splats: Split,
+    /// The canonical transforms' rows, in scene order.
+    pub canonical: Split,
+}
+
+impl RasterSplit {
+    /// Both arrays in one binding.
+    pub const WHOLE: RasterSplit = RasterSplit { splats: Split::WHOLE, canonical: Split::WHOLE };
+
+    /// The split of a scene of `count` particles on `ctx`, refused when it needs more bindings
+    /// than the adapter has ([`GpuError::SceneOverBindings`]) with how many particles would fit.
+    pub fn new(ctx: &GpuContext, count: usize) -> Result<Self, GpuError> {
+        let split = |n: u64| RasterSplit {
+            splats: Split::of(n.max(1), SPLATS.stride, ctx.max_binding),
+            canonical: Split::of(3 * n.max(1), CANONICAL.stride, ctx.max_binding),
+        };
+        let n = count as u64;
+        if SPLATS.stride > ctx.max_binding {
+            let (buffer, bytes) = (SPLATS.what, n.max(1) * SPLATS.stride);
+            return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count });
+        }
+        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
+        // Element indices are u32 in the kernels.
+        let fits = |n: u64| 3 * n <= u64::from(u32::MAX) && split(n).layout(false).extra_bindings() <= available;
+        if fits(n) {
+            return Ok(split(n));
+        }
+        let (mut lo, mut hi) = (0, n);
+        while lo < hi {
+            let mid = (lo + hi).div_ceil(2);
+            if fits(mid) { lo = mid } else { hi = mid - 1 }
+        }
+        Err(GpuError::SceneOverBindings {
+            arrays: "projected splats and canonical transforms",
+            needed: split(n).layout(false).extra_bindings() + OWN_BINDINGS,
+            available: ctx.storage_buffers,
+            limit: ctx.max_binding,
+            bytes: n * (SPLATS.stride + 3 * CANONICAL.stride),
+            fits: lo,
+        })
+    }
+
+    /// The split arrays of the raster kernels (`drawn`: of the splat draw).
+    pub(super) fn layout(&self, drawn: bool) -> SplitLayout {
+        let splats = if drawn { DRAWN_SPLATS } else { SPLATS };
+        SplitLayout { arrays: vec![(splats, self.splats), (CANONICAL, self.canonical)], first_extra: FIRST_EXTRA }
+    }
+
+    /// The raster kernels' WGSL for this split.
+    pub(super) fn raster_wgsl(&self) -> String {
+        format!("{RASTER_SOURCE}{}", self.layout(false).wgsl())
+    }
+
+    /// The splat draw's WGSL for this split, with the max-density-plane entry point or not.
+    pub(super) fn splat_wgsl(&self, plane: bool) -> String {
+        let plane = if plane { SPLAT_PLANE_SOURCE } else { "" };
+        format!("{SPLAT_SOURCE}{plane}{}", self.layout(true).wgsl())
+    }
+
+    /// The splat draw's layout entries of the parts after the first: the splats' in both
+    /// stages, the canonical transforms' in the fragment stage.
+    pub(super) fn draw_extra_entries(&self) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let layout = self.layout(true);
+        let mut entries = layout.extra_entries(wgpu::ShaderStages::FRAGMENT);
+        for (entry, (a, _, _)) in entries.iter_mut().zip(layout.bindings().into_iter().filter(|&(_, p, _)| p > 0)) {
+            if a == 0 {
+                entry.visibility = wgpu::ShaderStages::VERTEX_FRAGMENT;
+            }
+        }
+        entries
+    }
+
+    /// The bindings of the parts of `splats` and of `canonical` in a raster kernel (`drawn`: in
+    /// the splat draw).
+    pub(super) fn entries<'b>(
+        &self,
+        drawn: bool,
+        splats: &'b [wgpu::Buffer],
+        canonical: &'b [wgpu::Buffer],
+    ) -> (Bindings<'b>, Bindings<'b>) {
+        let mut parts = (Vec::new(), Vec::new());
+        for (a, p, binding) in self.layout(drawn).bindings() {
+            let p = p as usize;
+            if a == 0 { parts.0.push((binding, &splats[p])) } else { parts.1.push((binding, &canonical[p])) }
+        }
+        parts
+    }
+}
+
 /// A scene uploaded for rasterization: particles (mean, opacity, covariance) and SH in scene
 /// order, and its lighting (materials, lights, and each particle's canonical transform for its
 /// normal).
@@ -153,7 +269,10 @@ pub struct RasterScene {
     pub(super) lighting: Lighting,
     pub(super) materials: wgpu::Buffer,
     pub(super) lights: wgpu::Buffer,
-    pub(super) canonical: wgpu::Buffer,
+    /// The canonical transforms' rows, in the parts of `split.canonical`.
+    pub(super) canonical: Vec<wgpu::Buffer>,
+    /// How the projected splats and canonical transforms are split over bindings.
+    pub(super) split: RasterSplit,
     /// The meshes' BVH nodes, triangles and materials (one unused entry each without meshes).
     pub(super) mesh_nodes: wgpu::Buffer,
     pub(super) triangles: wgpu::Buffer,
@@ -188,7 +307,7 @@ impl ProjectChunk {
         sh: &[[f32; 4]],
         per: usize,
     ) -> Result<Vec<Self>, GpuError> {
-        use crate::split::{Split, upload};
+        use crate::split::upload;
         let count = particles.len();
         let stride = size_of::<RasterParticle>().max(16 * per) as u64;
         let split = Split::of(count as u64, stride, ctx.max_binding);
@@ -248,8 +367,8 @@ impl RasterScene {
                 }
             })
             .collect();
+        let split = RasterSplit::new(ctx, count)?;
         let sh = crate::layout::sh(scene);
-        ctx.check_binding("splat", (count.max(1) * size_of::<GpuSplat>()) as u64, count)?;
         // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals.
         let canonical: Vec<[f32; 4]> = scene
             .particles
@@ -262,7 +381,13 @@ impl RasterScene {
                 })
             })
             .collect();
-        ctx.check_binding("canonical transform", (canonical.len() * 16) as u64, count)?;
+        let canonical = crate::split::upload(
+            ctx,
+            CANONICAL.what,
+            CANONICAL.stride,
+            split.canonical,
+            bytemuck::cast_slice(&canonical),
+        )?;
         Ok(Self {
             chunks: ProjectChunk::split(ctx, &particles, &sh, splat_core::particle::sh_coeff_count(scene.sh_degree))?,
             count: count as u32,
@@ -271,7 +396,8 @@ impl RasterScene {
             settings: *settings,
             materials: ctx.upload("raster materials", bytemuck::cast_slice(&crate::layout::materials(lighting))),
             lights: ctx.upload("raster lights", bytemuck::cast_slice(&crate::layout::lights(lighting))),
-            canonical: ctx.upload("raster canonical", bytemuck::cast_slice(&crate::layout::non_empty(canonical))),
+            canonical,
+            split,
             lighting: lighting.clone(),
             mesh_nodes: ctx.upload("raster mesh nodes", bytemuck::cast_slice(&[crate::layout::GpuNode::default()])),
             triangles: ctx.upload("raster triangles", bytemuck::cast_slice(&[crate::layout::GpuTriangle::default()])),
@@ -312,6 +438,11 @@ impl RasterScene {
         self.transparent.sort_unstable_by_key(|&(order, _)| order);
         self.has_meshes = true;
         Ok(self)
+    }
+
+    /// How its projected splats and canonical transforms are split over bindings.
+    pub fn split(&self) -> RasterSplit {
+        self.split
     }
 
     /// Whether the scene has meshes.
