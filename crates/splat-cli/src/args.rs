@@ -16,6 +16,7 @@ use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
 use splat_core::raster::{Blend, FragmentDepth, RasterSettings, Response, SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
+use splat_core::sh::ShStorage;
 use splat_core::trace::Method;
 use splat_core::trainer::Preset;
 use splat_core::{
@@ -156,6 +157,11 @@ fn accumulation_parser() -> impl TypedValueParser<Value = AccumulationFormat> {
 /// The values of `--hit-distance`: every [`HitDistance`] by its name, described.
 fn hit_distance_parser() -> impl TypedValueParser<Value = HitDistance> {
     splat_view::choice_parser(&HitDistance::ALL, HitDistance::name, HitDistance::describe)
+}
+
+/// The values of `--sh-storage`: every [`ShStorage`] by its name.
+fn sh_storage_parser() -> impl TypedValueParser<Value = ShStorage> {
+    splat_view::choice_parser(&ShStorage::ALL, ShStorage::name, ShStorage::describe)
 }
 
 /// The values of `--pixel-filter`: every [`PixelFilter`] by its name.
@@ -429,6 +435,10 @@ pub struct SceneArgs {
     /// Per-particle normal.
     #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "plane")]
     pub normals: NormalArg,
+    /// How the SH coefficients are stored (vk_gaussian_splatting's SH format): f16 halves the
+    /// GPU's largest scene array and rounds the colours; the CPU reads the same rounded values.
+    #[arg(help_heading = "Scene and shading", long, value_parser = sh_storage_parser(), default_value = "f32")]
+    pub sh_storage: ShStorage,
     /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8 [default: the
     /// --preset's, else 2].
     #[arg(help_heading = "Scene and shading", long)]
@@ -690,6 +700,7 @@ impl SceneArgs {
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
             raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
             sampling: CameraSampling { filter: self.pixel_filter, ..base.sampling },
+            sh_storage: self.sh_storage,
             ..base
         }
     }

@@ -276,7 +276,7 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
 /// run (wall time around submit and poll; the opaque baseline exists on the CPU only).
 fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let (scene, camera, settings) = args.scene.load(1200, 800)?;
-    splat_gpu::TraceSplit::at_least(ctx, scene.particles.len(), scene.sh_degree)?;
+    splat_gpu::TraceSplit::at_least(ctx, &scene, &settings)?;
     let trace = TraceScene::new(&scene, settings)?;
     let pipeline = splat_gpu::TracePipeline::new(ctx)?;
     let tracer = splat_gpu::GpuTracer::new(ctx, &pipeline, &trace)?;

@@ -524,7 +524,7 @@ pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Re
     };
     if let Some(ctx) = &gpu {
         // A scene the GPU cannot bind is refused before its BVH is built.
-        splat_gpu::TraceSplit::at_least(ctx, scene.particles.len(), scene.sh_degree)?;
+        splat_gpu::TraceSplit::at_least(ctx, scene, render_settings)?;
     }
     let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
     Ok(match &gpu {

@@ -119,7 +119,7 @@ pub fn shade_hit(
     ShadedHit {
         t: hit.t,
         alpha: hit.alpha,
-        color: sh::eval(particle.sh.as_slice(), scene.sh_degree, ray.dir),
+        color: sh::eval_stored(particle.sh.as_slice(), scene.sh_degree, ray.dir, settings.sh_storage),
         normal: particle_normal(p, ray, settings.normal_mode, settings.kernel.cutoff),
         index: hit.index,
     }

@@ -43,6 +43,8 @@ pub struct RenderSettings {
     /// Where each frame's camera rays pass through the pixel and the lens (a box filter, depth
     /// of field); the pixel centre and a pinhole by default.
     pub sampling: CameraSampling,
+    /// How the SH coefficients are stored (f32, or f16: half the GPU's SH memory).
+    pub sh_storage: crate::sh::ShStorage,
 }
 
 /// Default bounce limit (the title figure of the vk_gaussian_splatting lighting documentation
@@ -65,6 +67,7 @@ impl Default for RenderSettings {
             t_max: DEFAULT_T_MAX,
             max_bounces: DEFAULT_MAX_BOUNCES,
             sampling: CameraSampling::default(),
+            sh_storage: crate::sh::ShStorage::F32,
         }
     }
 }

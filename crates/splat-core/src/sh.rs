@@ -13,6 +13,69 @@ pub const SH_C2: [f32; 5] = [1.092_548_4, -1.092_548_4, 0.315_391_57, -1.092_548
 pub const SH_C3: [f32; 7] =
     [-0.590_043_6, 2.890_611_4, -0.457_045_8, 0.373_176_34, -0.457_045_8, 1.445_305_7, -0.590_043_6];
 
+/// How a renderer stores the SH coefficients: f32 as read (the default), or IEEE half
+/// precision, rounded to nearest even (vk_gaussian_splatting's fp16 SH format): half the memory
+/// of the GPU's largest scene array, and a colour error the README measures. The CPU reads the
+/// same rounded values ([`eval_stored`]), so both backends render the same image.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ShStorage {
+    /// 32-bit floats.
+    #[default]
+    F32,
+    /// 16-bit floats.
+    F16,
+}
+
+impl ShStorage {
+    /// Every storage, by name.
+    pub const ALL: [ShStorage; 2] = [ShStorage::F32, ShStorage::F16];
+
+    /// Its name on the command line and in world files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ShStorage::F32 => "f32",
+            ShStorage::F16 => "f16",
+        }
+    }
+
+    /// One line on what it stores.
+    pub fn describe(self) -> &'static str {
+        match self {
+            ShStorage::F32 => "32-bit floats, as read",
+            ShStorage::F16 => "16-bit floats: half the GPU's SH memory, the colours rounded",
+        }
+    }
+
+    /// The storage named `name`.
+    pub fn parse(name: &str) -> Option<ShStorage> {
+        Self::ALL.into_iter().find(|s| s.name() == name)
+    }
+
+    /// The coefficient as stored and read back: `c` itself in f32, each channel rounded to the
+    /// nearest half (ties to even; beyond ±65504, ±∞) in f16.
+    pub fn load(self, c: Vec3) -> Vec3 {
+        match self {
+            ShStorage::F32 => c,
+            ShStorage::F16 => c.to_array().map(|x| half::f16::from_f32(x).to_f32()).into(),
+        }
+    }
+}
+
+/// [`eval`] of the coefficients as `storage` holds them ([`ShStorage::load`]).
+pub fn eval_stored(sh: &[Vec3], degree: u8, dir: Vec3, storage: ShStorage) -> Vec3 {
+    match storage {
+        ShStorage::F32 => eval(sh, degree, dir),
+        ShStorage::F16 => {
+            let mut stored = [Vec3::ZERO; 16];
+            let n = sh.len().min(16);
+            for (s, &c) in stored.iter_mut().zip(&sh[..n]) {
+                *s = storage.load(c);
+            }
+            eval(&stored[..n], degree, dir)
+        }
+    }
+}
+
 /// Colour of a particle seen along the unit direction `dir` (from the viewer toward the
 /// particle): Σ SH basis × coefficients + 0.5, clamped at 0. Coefficients past `degree` are
 /// ignored, and so are bands that `sh` does not hold (a DC-only [`crate::particle::Sh`] is one
@@ -157,6 +220,29 @@ fn solve(mut a: [[f64; 16]; 16], mut b: [[f64; 16]; 16]) -> [[f64; 16]; 16] {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    /// f16 storage rounds each channel to the nearest half, ties to even (IEEE 754's binary16,
+    /// written out here: 11 significant bits), and evaluates the rounded coefficients; f32 is the
+    /// plain evaluation.
+    #[test]
+    fn f16_storage_rounds_each_coefficient_to_the_nearest_half() {
+        // 1 + 2⁻¹¹ is halfway between 1 and 1 + 2⁻¹⁰: to even (1); 1 + 3·2⁻¹¹ up to 1 + 2⁻⁹.
+        let c = Vec3::new(1.0 + 2f32.powi(-11), 1.0 + 3.0 * 2f32.powi(-11), -0.1);
+        let stored = ShStorage::F16.load(c);
+        assert_eq!((stored.x, stored.y), (1.0, 1.0 + 2f32.powi(-9)));
+        // 0.1 in binary16: 1638 / 2¹⁴ (0.0999755…), the nearest of its neighbours.
+        assert_eq!(stored.z, -1638.0 / 16384.0);
+        assert_eq!(ShStorage::F32.load(c), c);
+        let sh: Vec<Vec3> = (0..16).map(|k| Vec3::new(0.3, -0.2, 0.1) * (k as f32 + 1.0).recip()).collect();
+        let dir = Vec3::new(0.48, -0.6, 0.64);
+        assert_eq!(eval_stored(&sh, 3, dir, ShStorage::F32), eval(&sh, 3, dir));
+        let rounded: Vec<Vec3> = sh.iter().map(|&c| ShStorage::F16.load(c)).collect();
+        let half = eval_stored(&sh, 3, dir, ShStorage::F16);
+        assert_eq!(half, eval(&rounded, 3, dir));
+        let error = (half - eval(&sh, 3, dir)).abs().max_element();
+        assert!(error > 0.0 && error < 1e-3, "the f16 colour differs by {error}");
+        assert_eq!(ShStorage::parse("f16"), Some(ShStorage::F16));
+    }
 
     #[test]
     fn degree_zero_is_dc_plus_half() {

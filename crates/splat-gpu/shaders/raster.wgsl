@@ -21,10 +21,9 @@ struct RasterParticle {
 // chunks of one binding each, projected by a dispatch each; particle k of the chunk is
 // `particles[k]`).
 @group(0) @binding(1) var<storage, read> particles: array<RasterParticle>;
-@group(0) @binding(2) var<storage, read> sh: array<vec4<f32>>;
 @group(0) @binding(29) var<storage, read> project_chunk: vec2<u32>;
-// sh.wgsl's read of coefficient i of the chunk.
-fn sh_at(i: u32) -> vec4<f32> { return sh[i]; }
+// Its SH (binding 2), coefficient i of the chunk read by sh.wgsl's `sh_at(i)` as the scene's
+// storage holds them (declared by splat_gpu::RasterSplit).
 // The projected splats, `splat_at(i)` and `splat_set(i, s)` (binding 3, split over more by
 // splat_gpu::RasterSplit).
 // Depth sort: keys (depth bits, NONE when culled) and values (particle ids); after the sort,

@@ -75,7 +75,7 @@ pub fn render(
     let Shot { scene, meshes, lighting, camera, settings } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
         // A scene the GPU cannot bind is refused before its BVH is built.
-        crate::TraceSplit::at_least(ctx, scene.particles.len(), scene.sh_degree)?;
+        crate::TraceSplit::at_least(ctx, scene, settings)?;
         Ok(TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes))
     };
     let raster_scene = || -> Result<RasterScene, GpuError> {

@@ -13,6 +13,7 @@ use splat_core::lighting::{LightKind, Lighting, Look, Material, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::particle::sh_coeff_count;
 use splat_core::rng::RngScheme;
+use splat_core::sh::ShStorage;
 use splat_core::trace::TraceScene;
 
 /// `Params::mode`: every frame of the dispatch in one invocation per pixel.
@@ -600,12 +601,62 @@ pub fn mesh_root(trace: &TraceScene) -> u32 {
     if trace.meshes().is_empty() { NO_MESHES } else { trace.bvh().nodes.len() as u32 }
 }
 
-/// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle.
-pub fn sh(scene: &Scene) -> Vec<[f32; 4]> {
+/// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle, as `storage`
+/// holds them: RGB and a zero pad in f32 (four words), or the halves of R, G | B, 0 (two words,
+/// as WGSL's `unpack2x16float` reads them: the lower half first) in f16.
+pub fn sh(scene: &Scene, storage: ShStorage) -> Vec<u32> {
     let per = sh_coeff_count(scene.sh_degree);
-    non_empty(scene.particles.iter().flat_map(|p| (0..per).map(|k| p.sh[k]).map(|c| [c.x, c.y, c.z, 0.0])).collect())
+    let coefficients = scene.particles.iter().flat_map(|p| (0..per).map(move |k| p.sh[k]));
+    let half = |x: f32| u32::from(half::f16::from_f32(x).to_bits());
+    let words: Vec<u32> = match storage {
+        ShStorage::F32 => coefficients.flat_map(|c| [c.x, c.y, c.z, 0.0].map(f32::to_bits)).collect(),
+        ShStorage::F16 => coefficients.flat_map(|c| [half(c.x) | half(c.y) << 16, half(c.z)]).collect(),
+    };
+    if words.is_empty() { vec![0; sh_words(storage)] } else { words }
 }
 
+/// Words (u32) of one SH coefficient as `storage` holds it: four in f32, two in f16.
+pub fn sh_words(storage: ShStorage) -> usize {
+    match storage {
+        ShStorage::F32 => 4,
+        ShStorage::F16 => 2,
+    }
+}
+
+/// The SH array of a module as `storage` holds it, part 0 at `binding`, and the WGSL that reads
+/// coefficient i of it as RGB + pad, `sh_at(i)`: the array's own accessor in f32; in f16 a
+/// decode of the words its accessor `sh_half_at` reads.
+pub(crate) fn sh_array(storage: ShStorage, binding: u32) -> (crate::split::SplitArray, &'static str) {
+    use crate::split::SplitArray;
+    match storage {
+        ShStorage::F32 => (SplitArray::of::<[f32; 4]>("SH", "sh", "sh_at", "vec4<f32>", binding), ""),
+        ShStorage::F16 => (SplitArray::of::<[u32; 2]>("SH", "sh", "sh_half_at", "vec2<u32>", binding), SH_HALF_DECODE),
+    }
+}
+
+/// `sh_at` of the f16 SH ([`ShStorage::F16`]): RGB + pad, two halves a word, the lower first,
+/// decoded exactly (WGSL's `unpack2x16float` written out: naga wants a capability for it,
+/// `SHADER_FLOAT16_IN_FLOAT32`, that not every adapter has).
+const SH_HALF_DECODE: &str = "
+// IEEE binary16 bits (the low 16 of h) as the f32 of the same value.
+fn half_to_f32(h: u32) -> f32 {
+    let magnitude = h & 0x7fffu;
+    let exponent = magnitude >> 10u;
+    var v: f32;
+    if (exponent == 0u) {
+        v = ldexp(f32(magnitude), -24); // zero and subnormals: m 2^-24
+    } else if (exponent == 31u) {
+        v = bitcast<f32>(0x7f800000u | ((magnitude & 0x3ffu) << 13u));
+    } else {
+        v = bitcast<f32>((magnitude << 13u) + 0x38000000u); // the exponent rebiased by 127 - 15
+    }
+    return select(v, -v, (h & 0x8000u) != 0u);
+}
+fn sh_at(i: u32) -> vec4<f32> {
+    let w = sh_half_at(i);
+    return vec4<f32>(half_to_f32(w.x), half_to_f32(w.x >> 16u), half_to_f32(w.y), half_to_f32(w.y >> 16u));
+}
+";
 /// The uniforms of one dispatch: `chunk` frames starting at `first_frame`.
 pub fn params(
     trace: &TraceScene,
@@ -1131,8 +1182,10 @@ mod tests {
             particles: Split { parts: 3, shift: 4 },
             nodes: Split { parts: 2, shift: 6 },
             sh: Split { parts: 5, shift: 7 },
+            sh_storage: splat_core::sh::ShStorage::F32,
         };
-        for split in [whole, split] {
+        let half = crate::TraceSplit { sh_storage: splat_core::sh::ShStorage::F16, ..split };
+        for split in [whole, split, half] {
             let entries = crate::trace::TracePipeline::layout_entries(&split);
             let source = split.wgsl();
             wgsl_check::check_layout("trace", &source, naga::valid::Capabilities::empty(), &entries);

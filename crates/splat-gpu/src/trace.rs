@@ -24,7 +24,9 @@ use splat_core::MethodId;
 use splat_core::catalogue::Param;
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::raster::RasterMethod;
+use splat_core::sh::ShStorage;
 use splat_core::trace::{DEFAULT_K, MAX_HITS, Method, TraceScene};
+use splat_core::{RenderSettings, Scene};
 use std::time::{Duration, Instant};
 
 /// WGSL of the ray-tracing kernel (entry point `main`) and of the path tracer that calls its
@@ -52,17 +54,20 @@ const TRACE_SOURCE: &str = concat!(
 /// The ray-tracing kernel of every scene that fits one binding per array.
 pub static TRACE_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| TraceSplit::WHOLE.wgsl());
 
-/// The scene arrays of the ray tracer (bindings 1–3), each split over as many bindings as it needs
-/// ([`crate::split`]); parts after the first bind from 18 on.
+/// The scene arrays of the ray tracer (bindings 1–3, the SH's as its storage holds them,
+/// [`layout::sh_array`]), each split over as many bindings as it needs ([`crate::split`]);
+/// parts after the first bind from 18 on.
 const PARTICLES: SplitArray =
     SplitArray::of::<layout::GpuParticle>("particle", "particles", "particle_at", "Particle", 1);
 const NODES: SplitArray = SplitArray::of::<layout::GpuNode>("BVH node", "nodes", "node_at", "Node", 2);
-const SH: SplitArray = SplitArray::of::<[f32; 4]>("SH", "sh", "sh_at", "vec4<f32>", 3);
+/// The SH array's binding.
+const SH_BINDING: u32 = 3;
 /// Bindings of the kernel beside the parts after the first of its split arrays.
 const OWN_BINDINGS: u32 = 18;
 
-/// How a scene's particles, BVH nodes and SH coefficients are split over bindings: the kernel's
-/// module and layout are made for it ([`TracePipeline`] keeps one per split it has met).
+/// How a scene's particles, BVH nodes and SH coefficients are split over bindings, and how the
+/// SH are stored: the kernel's module and layout are made for it ([`TracePipeline`] keeps one
+/// per split it has met).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct TraceSplit {
     /// The particles (in BVH leaf order).
@@ -71,36 +76,41 @@ pub struct TraceSplit {
     pub nodes: Split,
     /// The SH coefficients (RGB + pad, scene order).
     pub sh: Split,
+    /// Their precision ([`splat_core::RenderSettings::sh_storage`]).
+    pub sh_storage: ShStorage,
 }
 
 impl TraceSplit {
     /// Every array in one binding.
-    pub const WHOLE: TraceSplit = TraceSplit { particles: Split::WHOLE, nodes: Split::WHOLE, sh: Split::WHOLE };
+    pub const WHOLE: TraceSplit =
+        TraceSplit { particles: Split::WHOLE, nodes: Split::WHOLE, sh: Split::WHOLE, sh_storage: ShStorage::F32 };
 
-    /// The split of arrays of these lengths (elements) on `ctx`, refused when it needs more
-    /// bindings than the adapter has ([`GpuError::SceneOverBindings`]) with how many particles
-    /// like these would fit.
-    pub fn new(ctx: &GpuContext, particles: u64, nodes: u64, sh: u64) -> Result<Self, GpuError> {
-        Self::checked(ctx, [particles, nodes, sh], [particles, nodes, sh])
+    /// The split of arrays of these lengths (elements; SH coefficients stored as `sh_storage`)
+    /// on `ctx`, refused when it needs more bindings than the adapter has
+    /// ([`GpuError::SceneOverBindings`]) with how many particles like these would fit.
+    pub fn new(ctx: &GpuContext, [particles, nodes, sh]: [u64; 3], sh_storage: ShStorage) -> Result<Self, GpuError> {
+        Self::checked(ctx, [particles, nodes, sh], [particles, nodes, sh], sh_storage)
     }
 
     /// The split a scene of `count` particles of SH degree `sh_degree` needs at least (its
     /// BVH not built yet: one node), refused as [`TraceSplit::new`] refuses, so that a scene
     /// that cannot fit is refused before the BVH is built; what fits is estimated with a node a
     /// particle, about what the BVH builds (2,985 for the 3,000 particles of the `cloud` fixture).
-    pub fn at_least(ctx: &GpuContext, count: usize, sh_degree: u8) -> Result<Self, GpuError> {
-        let (n, coefficients) = (count as u64, splat_core::particle::sh_coeff_count(sh_degree) as u64);
-        Self::checked(ctx, [n, 1, n * coefficients], [n, n, n * coefficients])
+    pub fn at_least(ctx: &GpuContext, scene: &Scene, settings: &RenderSettings) -> Result<Self, GpuError> {
+        let n = scene.particles.len() as u64;
+        let coefficients = splat_core::particle::sh_coeff_count(scene.sh_degree) as u64;
+        Self::checked(ctx, [n, 1, n * coefficients], [n, n, n * coefficients], settings.sh_storage)
     }
 
     /// The split of arrays of `lengths` (particles, nodes, SH), refused with the particles that
     /// would fit in arrays in the proportions of `like`.
-    fn checked(ctx: &GpuContext, lengths: [u64; 3], like: [u64; 3]) -> Result<Self, GpuError> {
-        let arrays = [&PARTICLES, &NODES, &SH];
+    fn checked(ctx: &GpuContext, lengths: [u64; 3], like: [u64; 3], sh_storage: ShStorage) -> Result<Self, GpuError> {
+        let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
+        let arrays = [&PARTICLES, &NODES, &sh_array];
         let split = |lengths: [u64; 3]| {
             let [particles, nodes, sh] =
                 std::array::from_fn(|k| Split::of(lengths[k], arrays[k].stride, ctx.max_binding));
-            TraceSplit { particles, nodes, sh }
+            TraceSplit { particles, nodes, sh, sh_storage }
         };
         if let Some(k) = (0..3).find(|&k| lengths[k] > 0 && arrays[k].stride > ctx.max_binding) {
             let (buffer, bytes) = (arrays[k].what, lengths[k] * arrays[k].stride);
@@ -133,15 +143,16 @@ impl TraceSplit {
     }
 
     fn layout(&self) -> SplitLayout {
+        let sh = layout::sh_array(self.sh_storage, SH_BINDING).0;
         SplitLayout {
-            arrays: vec![(PARTICLES, self.particles), (NODES, self.nodes), (SH, self.sh)],
+            arrays: vec![(PARTICLES, self.particles), (NODES, self.nodes), (sh, self.sh)],
             first_extra: OWN_BINDINGS,
         }
     }
 
     /// The kernel's WGSL for this split.
     pub(crate) fn wgsl(&self) -> String {
-        format!("{TRACE_SOURCE}{}", self.layout().wgsl())
+        format!("{TRACE_SOURCE}{}{}", self.layout().wgsl(), layout::sh_array(self.sh_storage, SH_BINDING).1)
     }
 }
 /// Dispatches encoded into one submission.
@@ -436,10 +447,11 @@ impl<'a> GpuTracer<'a> {
         check_segment_stack(trace)?;
         let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
-        let sh = layout::sh(trace.scene());
+        let sh_storage = trace.settings().sh_storage;
+        let sh = layout::sh(trace.scene(), sh_storage);
         let len = |n: usize| n as u64;
-        let lengths = [len(particles.len()), len(nodes.len()), len(sh.len())];
-        let split = TraceSplit::new(ctx, lengths[0], lengths[1], lengths[2])?;
+        let lengths = [len(particles.len()), len(nodes.len()), len(sh.len() / layout::sh_words(sh_storage))];
+        let split = TraceSplit::new(ctx, lengths, sh_storage)?;
         let kernel = pipeline.kernel(ctx, split)?;
         let particles = crate::split::upload(
             ctx,
@@ -449,7 +461,8 @@ impl<'a> GpuTracer<'a> {
             bytemuck::cast_slice(&particles),
         )?;
         let nodes = crate::split::upload(ctx, NODES.what, NODES.stride, split.nodes, bytemuck::cast_slice(&nodes))?;
-        let sh = crate::split::upload(ctx, SH.what, SH.stride, split.sh, bytemuck::cast_slice(&sh))?;
+        let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
+        let sh = crate::split::upload(ctx, sh_array.what, sh_array.stride, split.sh, bytemuck::cast_slice(&sh))?;
         let (mut emitters, mut density) = splat_core::path::emitter_table(trace);
         let emitter_count = emitters.len() as u32;
         // A binding cannot be empty.
@@ -1059,7 +1072,8 @@ mod tests {
     /// the parts: an access by index (`particles[i]`) would read part 0 of a split scene.
     #[test]
     fn the_kernel_reads_the_scene_arrays_through_their_accessors() {
-        for array in [PARTICLES, NODES, SH] {
+        // The kernel reads the SH through `sh_at` in either storage (f16's decodes `sh_half_at`).
+        for array in [PARTICLES, NODES, layout::sh_array(ShStorage::F32, SH_BINDING).0] {
             let index = format!("{}[", array.var);
             let direct = TRACE_SOURCE
                 .match_indices(&index)

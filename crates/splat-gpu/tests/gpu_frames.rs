@@ -9,6 +9,7 @@ use splat_core::catalogue::Family;
 use splat_core::frame::RenderOutput;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
+use splat_core::sh::ShStorage;
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Algorithm, Frames, MethodId, Parameters, RenderSettings};
 use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
@@ -375,6 +376,41 @@ fn split_scenes_read_every_element_of_the_whole_ones() {
     }
 }
 
+/// With f16 SH storage (`RenderSettings::sh_storage`, half the SH memory) the kernel reads every
+/// coefficient as the CPU does, `ShStorage::F16.load` of it, bit for bit, whole and split over 4
+/// bindings (27,000 coefficients of 8 bytes at 64 KiB), and the particles and nodes as with f32:
+/// so a render from f16 storage is the CPU's render at the same setting, as the f32 kernel's is
+/// at f32. A decode that swapped two channels or dropped a half fails.
+#[test]
+fn f16_sh_reads_the_cpus_rounded_coefficients() {
+    let Some(ctx) = context() else { return };
+    let (mut scene, _) = fixture("cloud", 8, 8);
+    scene.sh_degree = 2;
+    let f32_trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
+    let f16_settings = RenderSettings { sh_storage: ShStorage::F16, ..RenderSettings::default() };
+    let f16_trace = TraceScene::new(&scene, f16_settings).unwrap();
+    let whole = tracer(ctx, &f32_trace).arrays_as_read().unwrap();
+    let expected: Vec<[u32; 4]> = scene
+        .particles
+        .iter()
+        .flat_map(|p| (0..9).map(move |k| ShStorage::F16.load(p.sh[k])))
+        .map(|c| [c.x.to_bits(), c.y.to_bits(), c.z.to_bits(), 0])
+        .collect();
+    assert!(expected.iter().zip(&whole[2]).any(|(a, b)| a != b), "f16 rounds some coefficient of the scene");
+    let small = GpuContext::new().unwrap().with_binding_limit(64 * 1024);
+    let pipeline = splat_gpu::TracePipeline::new(&small).unwrap();
+    for (ctx, pipeline) in [(ctx, trace_pipeline(ctx)), (&small, &pipeline)] {
+        let gpu = GpuTracer::new(ctx, pipeline, &f16_trace).unwrap();
+        let read = gpu.arrays_as_read().unwrap();
+        assert_eq!(read[..2], whole[..2], "particles and nodes as with f32 SH");
+        let first = expected.iter().zip(&read[2]).position(|(a, b)| a != b);
+        assert!(first.is_none() && read[2].len() == expected.len(), "{:?}: SH row {first:?} differs", gpu.split());
+        assert_eq!(gpu.split().sh_storage, ShStorage::F16);
+    }
+    let split = GpuTracer::new(&small, &pipeline, &f16_trace).unwrap().split();
+    assert_eq!((split.particles.parts, split.sh.parts), (3, 4), "{split:?}");
+}
+
 /// A scene whose split needs more bindings than the adapter has is refused (before its BVH is
 /// built) with the sizes, the limits and how many particles like these would fit; that count
 /// fits and 10 % more does not.
@@ -396,9 +432,9 @@ fn scenes_over_the_bindings_are_refused_with_what_fits() {
         Err(e) => panic!("unexpected error {e}"),
         Ok(_) => panic!("a scene over the bindings was accepted"),
     };
-    let like = |m: u64| splat_gpu::TraceSplit::new(&small, m, nodes * m / n, coefficients * m);
+    let like = |m: u64| splat_gpu::TraceSplit::new(&small, [m, nodes * m / n, coefficients * m], ShStorage::F32);
     assert!(fits > 0 && fits < n && like(fits).is_ok() && like(fits + fits / 10).is_err(), "fits {fits} of {n}");
-    let early = splat_gpu::TraceSplit::at_least(&small, scene.particles.len(), scene.sh_degree);
+    let early = splat_gpu::TraceSplit::at_least(&small, &scene, &RenderSettings::default());
     assert!(matches!(early, Err(GpuError::SceneOverBindings { .. })), "{early:?}");
     assert!(GpuTracer::new(ctx, trace_pipeline(ctx), &trace).is_ok());
 }

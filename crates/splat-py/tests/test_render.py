@@ -30,12 +30,13 @@ def capture(tmp_path_factory):
     "options",
     [
         {"method": "exact"},
+        {"method": "exact", "sh_storage": "f16"},
         {"method": "stochastic", "spp": 4, "seed": 3},
         {"method": "kbuffer", "k": 4},
         {"method": "raster-sorted", "raster_samples": 4},
         {"method": "stratified", "raster_samples": 8, "spp": 2, "background": (0.2, 0.3, 0.4)},
     ],
-    ids=lambda o: o["method"],
+    ids=lambda o: "-".join(str(v) for k, v in o.items() if k in ("method", "sh_storage")),
 )
 def test_arrays_render_equals_the_cli_render_of_the_same_ply(capture, splat_bin, tmp_path, options):
     """The scene from arrays in a trainer's raw parameters, rendered from Python, equals bit for

@@ -183,7 +183,8 @@ pub fn project(
         (Response::Projected, SplatExtent::Sqrt8) => (EXTENT_SQ, ellipse_box(mean, a, c, EXTENT_SQ, w, h)?),
         (Response::Projected, SplatExtent::AlphaCull) => (r2, ellipse_box(mean, a, c, r2, w, h)?),
     };
-    let color = sh::eval(p.sh.as_slice(), scene.sh_degree, (p.mean - camera.center()).normalize_or_zero());
+    let dir = (p.mean - camera.center()).normalize_or_zero();
+    let color = sh::eval_stored(p.sh.as_slice(), scene.sh_degree, dir, settings.sh_storage);
     Some(Splat { id: index, mean, conic, depth, opacity, color, bound, rect })
 }
 

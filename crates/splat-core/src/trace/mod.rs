@@ -543,7 +543,8 @@ impl<'a> TraceScene<'a> {
             return self.behind(seg);
         }
         let p = &self.scene.particles[best.id as usize];
-        let color = sh::eval(p.sh.as_slice(), self.scene.sh_degree, ray.dir).as_dvec3();
+        let color =
+            sh::eval_stored(p.sh.as_slice(), self.scene.sh_degree, ray.dir, self.settings.sh_storage).as_dvec3();
         Sample { color, alpha: 1.0, depth: Some(best.t), normal: Vec3::ZERO, picked: Some(best.id) }
     }
 }

@@ -1013,9 +1013,13 @@ mod tests {
     fn split_modules_validate_and_their_draw_layout_matches() {
         use crate::split::Split;
         use naga::valid::Capabilities;
-        let split = RasterSplit { splats: Split { parts: 3, shift: 4 }, canonical: Split { parts: 2, shift: 6 } };
+        let split = RasterSplit {
+            splats: Split { parts: 3, shift: 4 },
+            canonical: Split { parts: 2, shift: 6 },
+            sh_storage: splat_core::sh::ShStorage::F16,
+        };
         let raster = split.raster_wgsl();
-        validate("raster (split)", &raster);
+        validate("raster (split, f16 SH)", &raster);
         assert!(raster.contains("case 2u: { splats_2[j] = v; }"), "the setter writes every part");
         assert!(raster.contains("@binding(32) var<storage, read> canonical_1"), "canonical parts follow the splats'");
         let entries = super::pipelines::splat_layout_entries(&split);

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::split::{Split, SplitArray, SplitLayout};
+use splat_core::sh::ShStorage;
 
 /// One particle in scene order (WGSL `RasterParticle`, 48 bytes): the 3D covariance is
 /// computed once on the CPU, as the rasterizers of 3DGS precompute it.
@@ -151,6 +152,8 @@ const DRAWN_SPLATS: SplitArray = SplitArray::of::<GpuSplat>("projected splat", "
 /// binding 15 in every module.
 const CANONICAL: SplitArray =
     SplitArray::of::<[f32; 4]>("canonical transform", "canonical", "canonical_at", "vec4<f32>", 15);
+/// The binding of a projection chunk's SH.
+const SH_BINDING: u32 = 2;
 /// The binding of the first part after the first of the split arrays, in every splatting module.
 const FIRST_EXTRA: u32 = 30;
 /// The most storage buffers a splatting kernel or a stage of the splat draw binds beside the
@@ -161,8 +164,8 @@ pub(super) const OWN_BINDINGS: u32 = 16;
 pub(super) type Bindings<'b> = Vec<(u32, &'b wgpu::Buffer)>;
 
 /// How a scene's projected splats (64 bytes each) and canonical transforms (48) are split over
-/// bindings: the splatting kernels and the splat draw are compiled for it
-/// ([`RasterPipelines`] keeps one set per split it has met). The particles and SH need no
+/// bindings, and how its SH are stored: the splatting kernels and the splat draw are compiled
+/// for it ([`RasterPipelines`] keeps one set per split it has met). The particles and SH need no
 /// split: the projection reads them in chunks of one binding each ([`RasterScene::chunks`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct RasterSplit {
@@ -170,18 +173,23 @@ pub struct RasterSplit {
     pub splats: Split,
     /// The canonical transforms' rows, in scene order.
     pub canonical: Split,
+    /// The SH's precision ([`RenderSettings::sh_storage`]).
+    pub sh_storage: ShStorage,
 }
 
 impl RasterSplit {
     /// Both arrays in one binding.
-    pub const WHOLE: RasterSplit = RasterSplit { splats: Split::WHOLE, canonical: Split::WHOLE };
+    pub const WHOLE: RasterSplit =
+        RasterSplit { splats: Split::WHOLE, canonical: Split::WHOLE, sh_storage: ShStorage::F32 };
 
-    /// The split of a scene of `count` particles on `ctx`, refused when it needs more bindings
-    /// than the adapter has ([`GpuError::SceneOverBindings`]) with how many particles would fit.
-    pub fn new(ctx: &GpuContext, count: usize) -> Result<Self, GpuError> {
+    /// The split of a scene of `count` particles, SH stored as `sh_storage`, on `ctx`, refused
+    /// when it needs more bindings than the adapter has ([`GpuError::SceneOverBindings`]) with how
+    /// many particles would fit.
+    pub fn new(ctx: &GpuContext, count: usize, sh_storage: ShStorage) -> Result<Self, GpuError> {
         let split = |n: u64| RasterSplit {
             splats: Split::of(n.max(1), SPLATS.stride, ctx.max_binding),
             canonical: Split::of(3 * n.max(1), CANONICAL.stride, ctx.max_binding),
+            sh_storage,
         };
         let n = count as u64;
         if SPLATS.stride > ctx.max_binding {
@@ -209,15 +217,21 @@ impl RasterSplit {
         })
     }
 
-    /// The split arrays of the raster kernels (`drawn`: of the splat draw).
+    /// The split arrays of the raster kernels, with a chunk's SH whole (`drawn`: of the splat
+    /// draw, which reads no SH).
     pub(super) fn layout(&self, drawn: bool) -> SplitLayout {
         let splats = if drawn { DRAWN_SPLATS } else { SPLATS };
-        SplitLayout { arrays: vec![(splats, self.splats), (CANONICAL, self.canonical)], first_extra: FIRST_EXTRA }
+        let mut arrays = vec![(splats, self.splats), (CANONICAL, self.canonical)];
+        if !drawn {
+            arrays.push((crate::layout::sh_array(self.sh_storage, SH_BINDING).0, Split::WHOLE));
+        }
+        SplitLayout { arrays, first_extra: FIRST_EXTRA }
     }
 
     /// The raster kernels' WGSL for this split.
     pub(super) fn raster_wgsl(&self) -> String {
-        format!("{RASTER_SOURCE}{}", self.layout(false).wgsl())
+        let sh_decode = crate::layout::sh_array(self.sh_storage, SH_BINDING).1;
+        format!("{RASTER_SOURCE}{}{sh_decode}", self.layout(false).wgsl())
     }
 
     /// The splat draw's WGSL for this split, with the max-density-plane entry point or not.
@@ -250,7 +264,12 @@ impl RasterSplit {
         let mut parts = (Vec::new(), Vec::new());
         for (a, p, binding) in self.layout(drawn).bindings() {
             let p = p as usize;
-            if a == 0 { parts.0.push((binding, &splats[p])) } else { parts.1.push((binding, &canonical[p])) }
+            match a {
+                0 => parts.0.push((binding, &splats[p])),
+                1 => parts.1.push((binding, &canonical[p])),
+                // The SH bind per projection chunk.
+                _ => {}
+            }
         }
         parts
     }
@@ -288,8 +307,7 @@ pub struct RasterScene {
 
 /// Particles `first..first + count` of the scene and their SH coefficients, each in a binding
 /// of its own, projected by a dispatch of their own (`project_chunk` in `shaders/raster.wgsl`):
-/// so neither array bounds a scene, only the projected splats (64 bytes a splat, where an SH-3
-/// particle holds 256 of SH).
+/// so neither array bounds a scene.
 pub(super) struct ProjectChunk {
     pub(super) particles: wgpu::Buffer,
     pub(super) sh: wgpu::Buffer,
@@ -304,18 +322,19 @@ impl ProjectChunk {
     fn split(
         ctx: &GpuContext,
         particles: &[RasterParticle],
-        sh: &[[f32; 4]],
+        (sh, sh_storage): (&[u32], ShStorage),
         per: usize,
     ) -> Result<Vec<Self>, GpuError> {
         use crate::split::upload;
         let count = particles.len();
-        let stride = size_of::<RasterParticle>().max(16 * per) as u64;
+        let sh_bytes = 4 * crate::layout::sh_words(sh_storage) * per;
+        let stride = size_of::<RasterParticle>().max(sh_bytes) as u64;
         let split = Split::of(count as u64, stride, ctx.max_binding);
         let chunk = if split.parts == 1 { count.max(1) } else { 1 << split.shift };
         // `upload` gives an empty scene one zeroed particle, as a binding needs.
         let particle_bytes = size_of::<RasterParticle>() as u64;
         let particles = upload(ctx, "raster particle", particle_bytes, split, bytemuck::cast_slice(particles))?;
-        let sh = upload(ctx, "SH", (16 * per) as u64, split, bytemuck::cast_slice(sh))?;
+        let sh = upload(ctx, "SH", sh_bytes as u64, split, bytemuck::cast_slice(sh))?;
         Ok(particles
             .into_iter()
             .zip(sh)
@@ -367,8 +386,8 @@ impl RasterScene {
                 }
             })
             .collect();
-        let split = RasterSplit::new(ctx, count)?;
-        let sh = crate::layout::sh(scene);
+        let split = RasterSplit::new(ctx, count, settings.sh_storage)?;
+        let sh = crate::layout::sh(scene, settings.sh_storage);
         // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals.
         let canonical: Vec<[f32; 4]> = scene
             .particles
@@ -389,7 +408,12 @@ impl RasterScene {
             bytemuck::cast_slice(&canonical),
         )?;
         Ok(Self {
-            chunks: ProjectChunk::split(ctx, &particles, &sh, splat_core::particle::sh_coeff_count(scene.sh_degree))?,
+            chunks: ProjectChunk::split(
+                ctx,
+                &particles,
+                (&sh, settings.sh_storage),
+                splat_core::particle::sh_coeff_count(scene.sh_degree),
+            )?,
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
             screen_filter: scene.screen_filter,
