@@ -17,6 +17,7 @@ fn main() -> Result<()> {
             Ok(())
         }
         Some("bench") if args.get(1).is_some_and(|a| a.starts_with("--scaling")) => scaling(&args[1]),
+        Some("bench") if args.get(1).is_some_and(|a| a == "--gpu") => bench_gpu(),
         Some("bench") => bench(),
         Some("power") => power(),
         _ => {
@@ -34,7 +35,9 @@ fn main() -> Result<()> {
                  `test` runs the asserted ones) and write its table into docs/power.md\n  \
                  bench        cargo bench, then `splat bench` on the bonsai capture at 1200×800\n  \
                  bench --scaling[=N,…]  load, BVH build, rays and memory on synthetic SH-3 shells of\n               \
-                 N splats (default 100000,500000,2000000,8000000,32000000) into target/scaling/"
+                 N splats (default 100000,500000,2000000,8000000,32000000) into target/scaling/\n  \
+                 bench --gpu  the GPU table in one command: every ray-tracing and splatting method on the\n               \
+                 bonsai capture at 1200×800, and the splatting of a 6 M-splat SH-3 shell at 1920×1080"
             );
             bail!("missing or unknown command");
         }
@@ -509,6 +512,43 @@ fn bench() -> Result<()> {
     splat(&["--backend", "cpu"])?;
     println!("\n## Sun et al. Tables 4–5: m traversals × n samples, CPU\n");
     splat(&["--backend", "cpu", "--sweep", "mn", "--width", "300", "--height", "200"])
+}
+
+/// `cargo xtask bench --gpu`: the GPU table of issue 40 in one command, for a machine with a GPU
+/// (a few minutes on a data-centre GPU; lavapipe takes far longer): `splat bench --backend gpu`
+/// of the ray-tracing methods (frame, Mrays/s, cost against Algorithm 1, dispatches and host
+/// waits a frame, device bytes a splat) and of the splatting methods (each stage, then each
+/// method against raster-sorted) on the bonsai capture from the standard view at 1200 × 800,
+/// then raster-sorted and StochasticSplats on a 6 M-splat SH-3 shell ([`write_shell`]) at
+/// 1920 × 1080, vk_gaussian_splatting's scale. Each table is ratios within its own run.
+fn bench_gpu() -> Result<()> {
+    let bonsai = assets()?;
+    cargo(&["build", "--release", "--bin", "splat"])?;
+    let splat = target_dir().join("release/splat");
+    let run = |args: &[&str]| -> Result<()> {
+        let status = Command::new(&splat).args(args).status().context("running splat")?;
+        if !status.success() {
+            bail!("splat {} failed ({status})", args.join(" "));
+        }
+        Ok(())
+    };
+    let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
+    let view = ["--eye", "0,-1.5,4", "--target", "0,0.5,0", "--up", "0,-1,0", "--width", "1200", "--height", "800"];
+    let gpu = ["--backend", "gpu", "--repeat", "3"];
+    println!("\n## Ray tracing on the GPU, bonsai, 1200 × 800, 16 spp\n");
+    let trace = ["--methods", "stochastic,stochastic-n,stochastic-pass,kbuffer,exact", "--spp", "16"];
+    run(&[&["bench", bonsai][..], &view, &gpu, &trace].concat())?;
+    println!("\n## Splatting on the GPU, bonsai, 1200 × 800\n");
+    let raster = ["--methods", "raster-sorted,stochastic-splat,enderton,stratified", "--spp", "16"];
+    run(&[&["bench", bonsai][..], &view, &gpu, &raster].concat())?;
+    let dir = target_dir().join("scaling");
+    std::fs::create_dir_all(&dir)?;
+    let shell = dir.join("shell-6000000.ply");
+    write_shell(&shell, 6_000_000)?;
+    println!("\n## Splatting on the GPU, a 6 M-splat SH-3 shell, 1920 × 1080\n");
+    let shell = shell.to_str().context("non-UTF-8 path")?;
+    let size = ["--width", "1920", "--height", "1080", "--methods", "raster-sorted,stochastic-splat", "--spp", "16"];
+    run(&[&["bench", shell][..], &size, &gpu].concat())
 }
 
 /// `cargo xtask bench --scaling[=N,…]`: how load, BVH build, rays and memory grow with the

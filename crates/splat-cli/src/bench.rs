@@ -281,16 +281,17 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let pipeline = splat_gpu::TracePipeline::new(ctx)?;
     let tracer = splat_gpu::GpuTracer::new(ctx, &pipeline, &trace)?;
     println!(
-        "{} particles on {}, {}×{} at {} spp, {}\n",
+        "{} particles on {}, {}×{} at {} spp, {}; scene arrays {:.0} bytes a splat on the device\n",
         scene.particles.len(),
         ctx.describe(),
         camera.width,
         camera.height,
         args.spp,
-        if ctx.timestamps { "timestamp queries" } else { "wall time around submit + poll" }
+        if ctx.timestamps { "timestamp queries" } else { "wall time around submit + poll" },
+        tracer.scene_bytes() as f64 / scene.particles.len().max(1) as f64
     );
-    println!("| method | frame (ms) | Mrays/s | cost vs stochastic |");
-    println!("|---|---:|---:|---:|");
+    println!("| method | frame (ms) | Mrays/s | cost vs stochastic | dispatches a frame | host waits a frame |");
+    println!("|---|---:|---:|---:|---:|---:|");
     let mut methods = vec![MethodId::Stochastic];
     methods.extend(args.methods.iter().copied().filter(|&m| m != MethodId::Stochastic && m != MethodId::Opaque));
     let pixels = f64::from(camera.width) * f64::from(camera.height);
@@ -301,18 +302,29 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         let rendered = rendered_frames(&splat_core::Algorithm::Trace(method), &tracer.trace().shot(&camera), &frames);
         let name = m.name();
         let mut best = f64::INFINITY;
+        let mut work = splat_gpu::GpuCounters::default();
         for _ in 0..args.repeat.max(1) {
+            let before = ctx.counters();
             match tracer.render(&camera, &method, &frames) {
-                Ok((_, stats)) => best = best.min(stats.gpu_time.as_secs_f64() / rendered),
+                Ok((_, stats)) => {
+                    best = best.min(stats.gpu_time.as_secs_f64() / rendered);
+                    work = ctx.counters() - before;
+                }
                 Err(e) => {
-                    println!("| {name} | refused: {e} | | |");
+                    println!("| {name} | refused: {e} | | | | |");
                     break;
                 }
             }
         }
         if best.is_finite() {
             let base = *baseline.get_or_insert(best);
-            println!("| {name} | {:.1} | {:.3} | {:.2}× |", 1e3 * best, pixels / best / 1e6, best / base);
+            let (dispatches, waits) = (work.dispatches as f64 / rendered, work.waits as f64 / rendered);
+            println!(
+                "| {name} | {:.1} | {:.3} | {:.2}× | {dispatches:.2} | {waits:.2} |",
+                1e3 * best,
+                pixels / best / 1e6,
+                best / base
+            );
         }
     }
     Ok(())
@@ -335,13 +347,14 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     let raster = splat_gpu::GpuRasterizer::new(ctx, &pipes, &gpu_scene, &camera, &settings)?;
     if settings.samples > 1 || settings.fragment_depth != splat_core::raster::FragmentDepth::Center {
         println!("{} particles on {}, {}×{}\n", scene.particles.len(), ctx.describe(), camera.width, camera.height);
-        return raster_methods_gpu(args, &raster, &settings);
+        return raster_methods_gpu(args, ctx, &raster, &settings);
     }
     let t = raster.profile(args.repeat)?;
     let visible = raster.order()?.len();
     let n = scene.particles.len();
+    let bytes = (gpu_scene.scene_bytes() + raster.camera_bytes()) as f64 / n.max(1) as f64;
     println!(
-        "{n} particles ({visible} visible) on {}, {}×{}, fastest of {} runs, {}\n",
+        "{n} particles ({visible} visible) on {}, {}×{}, fastest of {} runs, {}; scene and camera arrays {bytes:.0} bytes a splat on the device\n",
         ctx.describe(),
         camera.width,
         camera.height,
@@ -368,7 +381,7 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         ms(t.stochastic_frame()) / sorted
     );
     println!();
-    raster_methods_gpu(args, &raster, &settings)
+    raster_methods_gpu(args, ctx, &raster, &settings)
 }
 
 /// The frame of each raster method of `args.methods` on the GPU at `settings` (raster-sorted
@@ -379,6 +392,7 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
 /// depth sort run once per camera and are not in it.
 fn raster_methods_gpu(
     args: &BenchArgs,
+    ctx: &splat_gpu::GpuContext,
     raster: &splat_gpu::GpuRasterizer,
     settings: &splat_core::raster::RasterSettings,
 ) -> Result<()> {
@@ -394,8 +408,10 @@ fn raster_methods_gpu(
         args.spp,
         args.repeat.max(1)
     );
-    println!("| method | fragment depth | frame (ms) | cost vs raster-sorted |");
-    println!("|---|---|---:|---:|");
+    println!(
+        "| method | fragment depth | frame (ms) | cost vs raster-sorted | dispatches a frame | host waits a frame |"
+    );
+    println!("|---|---|---:|---:|---:|---:|");
     let mut baseline = None;
     for m in methods {
         let splat_core::Algorithm::Raster(method, _) = args.options.resolve(m) else { continue };
@@ -410,22 +426,27 @@ fn raster_methods_gpu(
             let frames = Frames { count: args.spp, seed: 1, ..Frames::default() };
             let label = if depth == FragmentDepth::Center { "centre" } else { "max-density plane" };
             let mut best = f64::INFINITY;
+            let rendered = f64::from(if method.is_stochastic() { args.spp } else { 1 });
+            let mut work = splat_gpu::GpuCounters::default();
             for run in 0..=args.repeat.max(1) {
+                let before = ctx.counters();
                 match gpu.render(&method, &frames) {
                     Ok((_, stats)) if run > 0 => {
-                        let rendered = if method.is_stochastic() { args.spp } else { 1 };
-                        best = best.min(stats.gpu_time.as_secs_f64() / f64::from(rendered));
+                        best = best.min(stats.gpu_time.as_secs_f64() / rendered);
+                        work = ctx.counters() - before;
                     }
                     Ok(_) => {}
                     Err(e) => {
-                        println!("| {} | {label} | refused: {e} | |", m.name());
+                        println!("| {} | {label} | refused: {e} | | | |", m.name());
                         break;
                     }
                 }
             }
             if best.is_finite() {
                 let base = *baseline.get_or_insert(best);
-                println!("| {} | {label} | {:.2} | {:.2}× |", m.name(), 1e3 * best, best / base);
+                let (dispatches, waits) = (work.dispatches as f64 / rendered, work.waits as f64 / rendered);
+                let (name, frame, cost) = (m.name(), 1e3 * best, best / base);
+                println!("| {name} | {label} | {frame:.2} | {cost:.2}× | {dispatches:.2} | {waits:.2} |");
             }
         }
     }

@@ -427,7 +427,8 @@ fn bench_sweeps_the_m_n_rows_of_tables_4_and_5() {
 }
 
 /// `splat bench --methods raster-sorted,stochastic-splat` times the splatting path: on the CPU
-/// both methods as a ratio, on the GPU every stage with the sort's share and keys/s.
+/// both methods as a ratio, on the GPU every stage with the sort's share and keys/s, the device
+/// bytes a splat, and each frame's dispatches (two: the draw and the fold) and host waits.
 #[test]
 fn bench_reports_the_splatting_path() {
     let args = ["bench", "fixtures/cloud.ply", "--width", "32", "--height", "24", "--repeat", "1"];
@@ -444,6 +445,14 @@ fn bench_reports_the_splatting_path() {
     let text = String::from_utf8_lossy(&o.stdout);
     for row in ["| projection |", "| depth sort (", "Mkeys/s", "| **sorted frame** |", "× the sorted frame"] {
         assert!(text.contains(row), "{row} missing:\n{text}");
+    }
+    assert!(text.contains("bytes a splat on the device"), "{text}");
+    // The work counters: a sorted frame and a StochasticSplats frame are each a draw and the fold
+    // of its target into the running mean.
+    for method in ["raster-sorted", "stochastic-splat"] {
+        let row = text.lines().find(|l| l.starts_with(&format!("| {method} | centre |")));
+        let cells: Vec<&str> = row.unwrap_or_else(|| panic!("no {method} row:\n{text}")).split('|').collect();
+        assert_eq!(cells[5].trim(), "2.00", "{method}: dispatches a frame:\n{text}");
     }
 }
 

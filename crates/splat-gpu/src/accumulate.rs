@@ -97,9 +97,9 @@ impl Accumulator {
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("accumulate"), timestamp_writes: None });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups((self.pixels as u32).div_ceil(64), 1, 1);
+            ctx.dispatch(&mut pass, (self.pixels as u32).div_ceil(64), 1, 1);
         }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         self.frames += 1;
         Ok(())
     }
@@ -120,7 +120,7 @@ impl Accumulator {
         let mut encoder =
             ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("acc read") });
         encoder.copy_buffer_to_buffer(source, 0, &staging, 0, bytes.max(16) as u64);
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         let words: Vec<u32> = ctx.read_buffer(&staging)?.iter().map(|f| f.to_bits()).collect();
         Ok((0..self.pixels)
             .map(|i| match self.format {

@@ -57,6 +57,40 @@ pub struct GpuContext {
     /// Most frames one dispatch of the ray tracer renders ([`crate::FRAMES_PER_DISPATCH`] by
     /// default).
     pub frames_per_dispatch: u32,
+    /// What the renderers have sent the device ([`GpuContext::counters`]).
+    work: WorkCounters,
+}
+
+/// Work a context's renderers have sent its device, a machine-independent measure of their
+/// overhead (issue 40's counters; `splat bench --backend gpu` prints them a frame): dispatches
+/// and draws encoded, command buffers submitted, and host waits for the device (each a
+/// synchronisation that idles the device while the host reads back or encodes more).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuCounters {
+    /// Compute dispatches and draws.
+    pub dispatches: u64,
+    /// Queue submissions.
+    pub submissions: u64,
+    /// Host waits for the device (polls to completion, readbacks).
+    pub waits: u64,
+}
+
+impl std::ops::Sub for GpuCounters {
+    type Output = GpuCounters;
+    fn sub(self, earlier: GpuCounters) -> GpuCounters {
+        GpuCounters {
+            dispatches: self.dispatches - earlier.dispatches,
+            submissions: self.submissions - earlier.submissions,
+            waits: self.waits - earlier.waits,
+        }
+    }
+}
+
+#[derive(Debug, Default)]
+struct WorkCounters {
+    dispatches: std::sync::atomic::AtomicU64,
+    submissions: std::sync::atomic::AtomicU64,
+    waits: std::sync::atomic::AtomicU64,
 }
 
 impl GpuContext {
@@ -164,6 +198,7 @@ impl GpuContext {
             storage_buffers: limits.max_storage_buffers_per_shader_stage,
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
+            work: WorkCounters::default(),
             device,
             queue,
             info,
@@ -188,6 +223,41 @@ impl GpuContext {
         self.info.subgroup_max_size.clamp(1, 128)
     }
 
+    /// The work its renderers have sent the device so far ([`GpuCounters`]); the difference of
+    /// two readings is what ran between them.
+    pub fn counters(&self) -> GpuCounters {
+        use std::sync::atomic::Ordering::Relaxed;
+        GpuCounters {
+            dispatches: self.work.dispatches.load(Relaxed),
+            submissions: self.work.submissions.load(Relaxed),
+            waits: self.work.waits.load(Relaxed),
+        }
+    }
+
+    /// `pass.dispatch_workgroups(x, y, z)`, counted.
+    pub(crate) fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, x: u32, y: u32, z: u32) {
+        self.count_draw();
+        pass.dispatch_workgroups(x, y, z);
+    }
+
+    /// Count a draw (or a dispatch).
+    pub(crate) fn count_draw(&self) {
+        self.work.dispatches.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Submit `commands`, counted.
+    pub(crate) fn submit(&self, commands: wgpu::CommandBuffer) {
+        self.work.submissions.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.queue.submit([commands]);
+    }
+
+    /// Wait for the device to finish what was submitted, counted.
+    pub(crate) fn wait(&self) -> Result<(), GpuError> {
+        self.work.waits.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        Ok(())
+    }
+
     /// One line naming the adapter.
     pub fn describe(&self) -> String {
         format!("{} ({:?}, {})", self.info.name, self.info.backend, self.info.driver)
@@ -199,7 +269,7 @@ impl GpuContext {
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.wait()?;
         rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
         let data = {
             let view = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
@@ -266,7 +336,7 @@ impl GpuContext {
         let mut encoder =
             self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
         encoder.copy_buffer_to_buffer(source, offset, staging, 0, bytes);
-        self.queue.submit([encoder.finish()]);
+        self.submit(encoder.finish());
         self.read_buffer(staging)
     }
 

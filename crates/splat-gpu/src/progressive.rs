@@ -30,7 +30,7 @@
 //! let target = texture.create_view(&Default::default());
 //! let mut encoder = ctx.device.create_command_encoder(&Default::default());
 //! view.present(&ctx, &mut encoder, &target, texture.format(), &DisplayTransform::default())?;
-//! ctx.queue.submit([encoder.finish()]);
+//! ctx.submit(encoder.finish());
 //! # use splat_gpu::wgpu;
 //! # Ok::<(), splat_gpu::GpuError>(())
 //! ```
@@ -179,7 +179,7 @@ impl ProgressiveTrace {
             pass.set_pipeline(tracer.kernel());
             dispatch_batch(ctx, &mut pass, &self.uniform, &self.bind_group, batch, &self.camera);
         }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
     }
 
     /// Refuse the state when its busiest pixel may have reached lavapipe's loop budget.

@@ -222,11 +222,11 @@ impl RadixSort {
             let offset = (self.stride * u64::from(p)) as u32;
             pass.set_bind_group(0, &buf.bind_groups[(p % 2) as usize], &[offset]);
             pass.set_pipeline(&self.histogram);
-            pass.dispatch_workgroups(gx, gy, 1);
+            ctx.dispatch(&mut pass, gx, gy, 1);
             pass.set_pipeline(&self.scan);
-            pass.dispatch_workgroups(1, 1, 1);
+            ctx.dispatch(&mut pass, 1, 1, 1);
             pass.set_pipeline(&self.scatter);
-            pass.dispatch_workgroups(gx, gy, 1);
+            ctx.dispatch(&mut pass, gx, gy, 1);
         }
         Ok(())
     }
@@ -240,7 +240,7 @@ impl RadixSort {
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
         pass.set_bind_group(0, &buf.bind_groups[0], &[(self.stride * 8) as u32]);
         pass.set_pipeline(&self.scan);
-        pass.dispatch_workgroups(1, 1, 1);
+        ctx.dispatch(&mut pass, 1, 1, 1);
     }
 }
 
@@ -265,7 +265,7 @@ pub fn sort_pairs(
     ctx.queue.write_buffer(&buf.vals, 0, bytemuck::cast_slice(vals));
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("sort") });
     sort.encode(ctx, &mut encoder, &buf, count, bits, None)?;
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
     let keys = ctx.read_u32(&buf.keys, count as usize)?;
     let vals = ctx.read_u32(&buf.vals, count as usize)?;
     Ok((keys, vals))

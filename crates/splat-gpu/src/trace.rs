@@ -671,6 +671,11 @@ impl<'a> GpuTracer<'a> {
         self.kernel.split
     }
 
+    /// Bytes of its scene arrays on the device: particles, BVH nodes (the meshes' too) and SH.
+    pub fn scene_bytes(&self) -> u64 {
+        self.particles.iter().chain(&self.nodes).chain(&self.sh).map(wgpu::Buffer::size).sum()
+    }
+
     /// The particles, BVH nodes and SH coefficients as the kernel reads them through its
     /// accessors (`split_gather` in `shaders/trace.wgsl`), in element order, as the u32 words
     /// of their 16-byte rows (four a particle, two a node, one a coefficient): the same for every
@@ -689,9 +694,9 @@ impl<'a> GpuTracer<'a> {
             pass.set_pipeline(self.kernel.gather(ctx)?);
             pass.set_bind_group(0, &group, &[0]);
             let (gx, gy) = crate::sort::groups(longest.div_ceil(64) as u32);
-            pass.dispatch_workgroups(gx, gy, 1);
+            ctx.dispatch(&mut pass, gx, gy, 1);
         }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         let words = ctx.read_u32(&targets.mean, 28 * longest)?;
         let rows: Vec<[u32; 4]> = words.chunks(4).map(|w| [w[0], w[1], w[2], w[3]]).collect();
         let take = |k: std::ops::Range<usize>, n: usize| -> Vec<[u32; 4]> {
@@ -840,8 +845,8 @@ impl Run<'_> {
                     t.resolve(&mut encoder);
                 }
                 let start = Instant::now();
-                ctx.queue.submit([encoder.finish()]);
-                ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+                ctx.submit(encoder.finish());
+                ctx.wait()?;
                 gpu_time += match &timer {
                     Some(t) => t.elapsed(ctx)?,
                     None => start.elapsed(),
@@ -1005,7 +1010,7 @@ pub(crate) fn dispatch_batch(
     ctx.queue.write_buffer(uniform, 0, &bytes);
     for slot in 0..batch.len() {
         pass.set_bind_group(0, bind_group, &[(slot * stride) as u32]);
-        pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
+        ctx.dispatch(pass, camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
     }
 }
 

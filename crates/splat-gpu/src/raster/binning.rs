@@ -62,7 +62,7 @@ impl TileLists {
             pass.set_pipeline(&k.tile_emit);
             pass.set_bind_group(0, &self.emit_group, &[]);
             let (gx, gy) = groups(n.div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
+            ctx.dispatch(&mut pass, gx, gy, 1);
         }
         let [tiles_x, tiles_y] = r.params.tiles;
         let tile_bits = u32::BITS - (tiles_x * tiles_y - 1).leading_zeros();
@@ -72,7 +72,7 @@ impl TileLists {
         pass.set_pipeline(&k.tile_ranges);
         pass.set_bind_group(0, &self.ranges_group, &[]);
         let (gx, gy) = groups(self.pair_count.div_ceil(256));
-        pass.dispatch_workgroups(gx, gy, 1);
+        ctx.dispatch(&mut pass, gx, gy, 1);
         Ok(())
     }
 }
@@ -94,7 +94,7 @@ impl GpuRasterizer<'_> {
             pass.set_pipeline(&self.k.tile_count);
             pass.set_bind_group(0, group, &[]);
             let (gx, gy) = groups((n + 1).div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
+            self.ctx.dispatch(&mut pass, gx, gy, 1);
         }
         self.pipes.sort.encode_scan(self.ctx, encoder, offsets, n + 1);
     }

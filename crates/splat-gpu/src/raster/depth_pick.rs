@@ -266,7 +266,7 @@ impl GpuRasterizer<'_> {
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile blend"), timestamp_writes: None });
             pass.set_pipeline(&self.k.tile_blend);
             pass.set_bind_group(0, &blend_group, &[]);
-            pass.dispatch_workgroups(tiles_x, tiles_y, 1);
+            ctx.dispatch(&mut pass, tiles_x, tiles_y, 1);
         }
         self.submit(encoder)?;
         Ok(TilePass { hits: out.read(ctx)?, pairs })

@@ -320,7 +320,7 @@ impl<'a> GpuRasterizer<'a> {
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("mesh pre-pass"), timestamp_writes: None });
         pass.set_pipeline(&self.pipes.mesh_prepass);
         pass.set_bind_group(0, &group, &[]);
-        pass.dispatch_workgroups(self.camera.width.div_ceil(8), self.camera.height.div_ceil(8), 1);
+        self.ctx.dispatch(&mut pass, self.camera.width.div_ceil(8), self.camera.height.div_ceil(8), 1);
     }
 
     fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
@@ -328,8 +328,8 @@ impl<'a> GpuRasterizer<'a> {
     }
 
     fn submit(&self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
-        self.ctx.queue.submit([encoder.finish()]);
-        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.ctx.submit(encoder.finish());
+        self.ctx.wait()?;
         Ok(())
     }
 
@@ -343,7 +343,7 @@ impl<'a> GpuRasterizer<'a> {
         for (group, chunk) in self.project_groups.iter().zip(&self.scene.chunks) {
             pass.set_bind_group(0, group, &[]);
             let (gx, gy) = groups(chunk.count.div_ceil(256));
-            pass.dispatch_workgroups(gx, gy, 1);
+            self.ctx.dispatch(&mut pass, gx, gy, 1);
         }
     }
 
@@ -354,6 +354,13 @@ impl<'a> GpuRasterizer<'a> {
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
         self.pipes.sort.encode(self.ctx, encoder, &self.depth, self.scene.count, 32, timestamps)
+    }
+
+    /// Bytes of a camera's arrays on the device: the projected splats and the depth sort's keys,
+    /// values and histogram (the tile pairs come and go with each tile pass).
+    pub fn camera_bytes(&self) -> u64 {
+        let depth = [&self.depth.keys, &self.depth.vals, &self.depth.hist].map(wgpu::Buffer::size);
+        self.splats.iter().map(wgpu::Buffer::size).sum::<u64>() + depth.iter().sum::<u64>()
     }
 
     /// The projected splats in scene order (culled ones have an empty rect).
@@ -457,7 +464,7 @@ impl<'a> GpuRasterizer<'a> {
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("fold"), timestamp_writes: None });
                 pass.set_pipeline(fold);
                 pass.set_bind_group(0, &fold_group, &[offset]);
-                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+                self.ctx.dispatch(&mut pass, w.div_ceil(8), h.div_ceil(8), 1);
             }
             let start = Instant::now();
             self.submit(encoder)?;
@@ -665,6 +672,7 @@ impl<'a> GpuRasterizer<'a> {
         });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, group, &[frame_offset]);
+        self.ctx.count_draw();
         match draw {
             Draw::Over | Draw::Under => pass.draw_indirect(&self.draw_args, 0),
             Draw::Stochastic | Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => {

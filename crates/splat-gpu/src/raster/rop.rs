@@ -234,7 +234,7 @@ impl RopPass {
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("shuffle"), timestamp_writes: None });
             pass.set_pipeline(&r.k.shuffle_keys);
             pass.set_bind_group(0, &self.keys_group, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
+            ctx.dispatch(&mut pass, gx, gy, 1);
         }
         pipes.sort.encode(ctx, encoder, &self.shuffle, n, 32, None)?;
         self.lists.encode_count(r, encoder, &self.shuffle);
@@ -246,7 +246,7 @@ impl RopPass {
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
             pass.set_pipeline(r.rop_pipeline());
             pass.set_bind_group(0, &self.rop_group, &[]);
-            pass.dispatch_workgroups(tiles_x, tiles_y, 1);
+            ctx.dispatch(&mut pass, tiles_x, tiles_y, 1);
         }
         Ok(())
     }
@@ -290,7 +290,7 @@ impl GpuRasterizer<'_> {
             });
             pass.set_pipeline(&self.k.rop_first_hit);
             pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            ctx.dispatch(&mut pass, w.div_ceil(8), h.div_ceil(8), 1);
         }
         self.submit(encoder)?;
         Ok(out.read(ctx)?.first_hits(&self.offsets()))

@@ -464,6 +464,13 @@ impl RasterScene {
         Ok(self)
     }
 
+    /// Bytes of its particle arrays on the device: particles, SH and canonical transforms (the
+    /// projected splats and sort buffers are each camera's, [`GpuRasterizer::camera_bytes`]).
+    pub fn scene_bytes(&self) -> u64 {
+        let chunks = self.chunks.iter().map(|c| c.particles.size() + c.sh.size());
+        chunks.chain(self.canonical.iter().map(wgpu::Buffer::size)).sum()
+    }
+
     /// How its projected splats and canonical transforms are split over bindings.
     pub fn split(&self) -> RasterSplit {
         self.split
