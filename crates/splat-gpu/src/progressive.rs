@@ -30,7 +30,7 @@
 //! let target = texture.create_view(&Default::default());
 //! let mut encoder = ctx.device.create_command_encoder(&Default::default());
 //! view.present(&ctx, &mut encoder, &target, texture.format(), &DisplayTransform::default())?;
-//! ctx.submit(encoder.finish());
+//! ctx.queue.submit([encoder.finish()]);
 //! # use splat_gpu::wgpu;
 //! # Ok::<(), splat_gpu::GpuError>(())
 //! ```
