@@ -67,6 +67,11 @@ impl SplitArray {
         Self { setter: Some(setter), ..self }
     }
 
+    /// `data` (elements of this array) uploaded as `split`'s parts ([`upload`]).
+    pub fn upload(&self, ctx: &GpuContext, split: Split, data: &[u8]) -> Result<Vec<wgpu::Buffer>, GpuError> {
+        upload(ctx, self.what, self.stride, split, data)
+    }
+
     /// Its WGSL access mode.
     fn access(&self) -> &'static str {
         if self.setter.is_some() { "read_write" } else { "read" }
@@ -96,6 +101,27 @@ impl Split {
         let shift = (max_binding / stride).max(1).ilog2();
         Split { parts: u32::try_from(len.div_ceil(1 << shift)).unwrap_or(u32::MAX), shift }
     }
+
+    /// The elements of each part of an array of `len` elements so cut, in part order (one empty
+    /// part for an empty array, which binds one zeroed element).
+    pub fn ranges(self, len: u64) -> impl Iterator<Item = std::ops::Range<u64>> {
+        let per_part = if self.parts == 1 { len } else { 1 << self.shift };
+        (0..u64::from(self.parts)).map(move |p| {
+            let first = (p * per_part).min(len);
+            first..(first + per_part).min(len)
+        })
+    }
+}
+
+/// The largest m in 0..=n for which `fits(m)` holds, `fits` holding up to some m and not after
+/// (bisection): how many particles of a scene's kind fit where all of them do not.
+pub(crate) fn most_that_fit(n: u64, fits: impl Fn(u64) -> bool) -> u64 {
+    let (mut lo, mut hi) = (0, n);
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if fits(mid) { lo = mid } else { hi = mid - 1 }
+    }
+    lo
 }
 
 /// A kernel's split arrays: each with its cut, part 0 at the array's own binding and the other
@@ -224,6 +250,12 @@ mod tests {
         assert_eq!(Split::of(129, 16, 1024), Split { parts: 3, shift: 6 });
         // An element above the limit still gets one per part (the binding check refuses it).
         assert_eq!(Split::of(3, 64, 16), Split { parts: 3, shift: 0 });
+        let ranges = |split: Split, len| split.ranges(len).collect::<Vec<_>>();
+        assert_eq!(ranges(Split { parts: 4, shift: 5 }, 100), [0..32, 32..64, 64..96, 96..100]);
+        assert_eq!(Split::WHOLE.ranges(7).collect::<Vec<_>>(), vec![std::ops::Range { start: 0, end: 7 }]);
+        assert_eq!(Split::WHOLE.ranges(0).collect::<Vec<_>>(), vec![std::ops::Range { start: 0, end: 0 }]);
+        assert_eq!(most_that_fit(1000, |m| m <= 617), 617);
+        assert_eq!(most_that_fit(1000, |_| false), 0);
     }
 
     #[test]

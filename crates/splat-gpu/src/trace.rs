@@ -127,18 +127,14 @@ impl TraceSplit {
         // The most particles m whose arrays, scaled from `like`, fit.
         let n = like[0].max(1);
         let scaled = |m: u64| like.map(|len| (u128::from(len) * u128::from(m) / u128::from(n)) as u64);
-        let (mut lo, mut hi) = (0, n);
-        while lo < hi {
-            let mid = (lo + hi).div_ceil(2);
-            if fit(scaled(mid)) { lo = mid } else { hi = mid - 1 }
-        }
+        let fits = crate::split::most_that_fit(n, |m| fit(scaled(m)));
         Err(GpuError::SceneOverBindings {
             arrays: "particles, BVH nodes and SH",
             needed: split(lengths).layout().extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_binding,
             bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),
-            fits: lo,
+            fits,
         })
     }
 
@@ -453,16 +449,9 @@ impl<'a> GpuTracer<'a> {
         let lengths = [len(particles.len()), len(nodes.len()), len(sh.len() / layout::sh_words(sh_storage))];
         let split = TraceSplit::new(ctx, lengths, sh_storage)?;
         let kernel = pipeline.kernel(ctx, split)?;
-        let particles = crate::split::upload(
-            ctx,
-            PARTICLES.what,
-            PARTICLES.stride,
-            split.particles,
-            bytemuck::cast_slice(&particles),
-        )?;
-        let nodes = crate::split::upload(ctx, NODES.what, NODES.stride, split.nodes, bytemuck::cast_slice(&nodes))?;
-        let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
-        let sh = crate::split::upload(ctx, sh_array.what, sh_array.stride, split.sh, bytemuck::cast_slice(&sh))?;
+        let particles = PARTICLES.upload(ctx, split.particles, bytemuck::cast_slice(&particles))?;
+        let nodes = NODES.upload(ctx, split.nodes, bytemuck::cast_slice(&nodes))?;
+        let sh = layout::sh_array(sh_storage, SH_BINDING).0.upload(ctx, split.sh, bytemuck::cast_slice(&sh))?;
         let (mut emitters, mut density) = splat_core::path::emitter_table(trace);
         let emitter_count = emitters.len() as u32;
         // A binding cannot be empty.

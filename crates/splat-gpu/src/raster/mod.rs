@@ -365,13 +365,9 @@ impl<'a> GpuRasterizer<'a> {
 
     /// The projected splats in scene order (culled ones have an empty rect).
     pub fn splats(&self) -> Result<Vec<GpuSplat>, GpuError> {
-        let split = self.scene.split.splats;
         let mut words = Vec::with_capacity(self.scene.count as usize * 16);
-        for (p, part) in self.splats.iter().enumerate() {
-            let first = if split.parts == 1 { 0 } else { p << split.shift };
-            let len = if split.parts == 1 { self.scene.count as usize } else { 1 << split.shift };
-            let len = len.min(self.scene.count as usize - first);
-            words.extend(self.ctx.read_u32(part, len * 16)?);
+        for (part, range) in self.splats.iter().zip(self.scene.split.splats.ranges(u64::from(self.scene.count))) {
+            words.extend(self.ctx.read_u32(part, (range.end - range.start) as usize * 16)?);
         }
         Ok(bytemuck::cast_slice(&words).to_vec())
     }
@@ -745,12 +741,10 @@ fn mesh_prepass_entries(
 
 /// A bind group for an auto-layout compute pipeline: just the bindings its entry point uses.
 fn bind(ctx: &GpuContext, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> =
-        buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect();
     ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: None,
         layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
+        entries: &buffer_entries(buffers),
     })
 }
 
@@ -764,13 +758,13 @@ fn buffer_entries<'b>(buffers: &[(u32, &'b wgpu::Buffer)]) -> Vec<wgpu::BindGrou
 fn splat_parts(ctx: &GpuContext, count: u32, split: crate::split::Split) -> Result<Vec<wgpu::Buffer>, GpuError> {
     let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let count = u64::from(count.max(1));
-    let per_part = if split.parts == 1 { count } else { 1 << split.shift };
     let stride = size_of::<GpuSplat>() as u64;
-    let buffers = (0..u64::from(split.parts))
-        .map(|p| {
+    let buffers = split
+        .ranges(count)
+        .map(|range| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("splats"),
-                size: per_part.min(count - p * per_part) * stride,
+                size: (range.end - range.start) * stride,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })

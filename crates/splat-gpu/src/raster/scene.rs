@@ -202,18 +202,13 @@ impl RasterSplit {
         if fits(n) {
             return Ok(split(n));
         }
-        let (mut lo, mut hi) = (0, n);
-        while lo < hi {
-            let mid = (lo + hi).div_ceil(2);
-            if fits(mid) { lo = mid } else { hi = mid - 1 }
-        }
         Err(GpuError::SceneOverBindings {
             arrays: "projected splats and canonical transforms",
             needed: split(n).layout(false).extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_binding,
             bytes: n * (SPLATS.stride + 3 * CANONICAL.stride),
-            fits: lo,
+            fits: crate::split::most_that_fit(n, fits),
         })
     }
 
@@ -330,7 +325,6 @@ impl ProjectChunk {
         let sh_bytes = 4 * crate::layout::sh_words(sh_storage) * per;
         let stride = size_of::<RasterParticle>().max(sh_bytes) as u64;
         let split = Split::of(count as u64, stride, ctx.max_binding);
-        let chunk = if split.parts == 1 { count.max(1) } else { 1 << split.shift };
         // `upload` gives an empty scene one zeroed particle, as a binding needs.
         let particle_bytes = size_of::<RasterParticle>() as u64;
         let particles = upload(ctx, "raster particle", particle_bytes, split, bytemuck::cast_slice(particles))?;
@@ -338,9 +332,9 @@ impl ProjectChunk {
         Ok(particles
             .into_iter()
             .zip(sh)
-            .enumerate()
-            .map(|(c, (particles, sh))| {
-                let (first, n) = ((c * chunk) as u32, (count - c * chunk).min(chunk) as u32);
+            .zip(split.ranges(count as u64))
+            .map(|((particles, sh), range)| {
+                let (first, n) = (range.start as u32, (range.end - range.start) as u32);
                 let range = ctx.upload("project chunk", bytemuck::cast_slice(&[first, n]));
                 ProjectChunk { particles, sh, range, count: n }
             })
@@ -400,13 +394,7 @@ impl RasterScene {
                 })
             })
             .collect();
-        let canonical = crate::split::upload(
-            ctx,
-            CANONICAL.what,
-            CANONICAL.stride,
-            split.canonical,
-            bytemuck::cast_slice(&canonical),
-        )?;
+        let canonical = CANONICAL.upload(ctx, split.canonical, bytemuck::cast_slice(&canonical))?;
         Ok(Self {
             chunks: ProjectChunk::split(
                 ctx,
