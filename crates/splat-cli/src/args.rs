@@ -159,11 +159,6 @@ fn hit_distance_parser() -> impl TypedValueParser<Value = HitDistance> {
     splat_view::choice_parser(&HitDistance::ALL, HitDistance::name, HitDistance::describe)
 }
 
-/// The values of `--sh-storage`: every [`ShStorage`] by its name.
-fn sh_storage_parser() -> impl TypedValueParser<Value = ShStorage> {
-    splat_view::choice_parser(&ShStorage::ALL, ShStorage::name, ShStorage::describe)
-}
-
 /// The values of `--pixel-filter`: every [`PixelFilter`] by its name.
 fn pixel_filter_parser() -> impl TypedValueParser<Value = PixelFilter> {
     splat_view::choice_parser(&PixelFilter::ALL, PixelFilter::name, PixelFilter::describe)
@@ -437,7 +432,7 @@ pub struct SceneArgs {
     pub normals: NormalArg,
     /// How the SH coefficients are stored (vk_gaussian_splatting's SH format): f16 halves the
     /// GPU's largest scene array and rounds the colours; the CPU reads the same rounded values.
-    #[arg(help_heading = "Scene and shading", long, value_parser = sh_storage_parser(), default_value = "f32")]
+    #[arg(help_heading = "Scene and shading", long, value_parser = splat_view::sh_storage_parser(), default_value = "f32")]
     pub sh_storage: ShStorage,
     /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8 [default: the
     /// --preset's, else 2].

@@ -3,10 +3,10 @@
 // batched walk of a tile's list that depth_pick.wgsl and rop.wgsl share. Part of the raster
 // kernels (splat_gpu::RASTER_WGSL).
 
-// Pairs per rank, then their exclusive scan: where rank r's pairs start.
-@group(0) @binding(7) var<storage, read_write> offsets: array<u32>;
-@group(0) @binding(8) var<storage, read_write> pair_tiles: array<u32>;
-@group(0) @binding(9) var<storage, read_write> pair_ranks: array<u32>;
+// Pairs per rank, then their exclusive scan: where rank r's pairs start (`offset_at(r)`,
+// `offset_set`, binding 7); the pairs' tiles and ranks (`pair_tile_at`, `pair_rank_at` and
+// their setters, bindings 8 and 9): split over more bindings by splat_gpu::RasterSplit, as the
+// sort cuts them.
 // Per tile, the range [x, y) of its pairs.
 @group(0) @binding(10) var<storage, read_write> ranges: array<vec2<u32>>;
 
@@ -36,25 +36,25 @@ fn tile_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     }
     var n = 0u;
     if (r < drawn()) {
-        let s = splat_at(order[r]);
+        let s = splat_at(order_at(r));
         let t = tile_rect(s);
         n = select(0u, (t.z - t.x + 1u) * (t.w - t.y + 1u), visible(s));
     }
-    offsets[r] = n; // offsets[count] stays 0: after the scan it holds the total
+    offset_set(r, n); // offset count stays 0: after the scan it holds the total
 }
 
 @compute @workgroup_size(256, 1, 1)
 fn tile_emit(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let r = flat_index(gid, groups);
-    if (r >= drawn() || !visible(splat_at(order[r]))) {
+    if (r >= drawn() || !visible(splat_at(order_at(r)))) {
         return;
     }
-    let t = tile_rect(splat_at(order[r]));
-    var at = offsets[r];
+    let t = tile_rect(splat_at(order_at(r)));
+    var at = offset_at(r);
     for (var ty = t.y; ty <= t.w; ty++) {
         for (var tx = t.x; tx <= t.z; tx++) {
-            pair_tiles[at] = ty * params.tiles.x + tx;
-            pair_ranks[at] = r;
+            pair_tile_set(at, ty * params.tiles.x + tx);
+            pair_rank_set(at, r);
             at++;
         }
     }
@@ -63,15 +63,15 @@ fn tile_emit(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
 @compute @workgroup_size(256, 1, 1)
 fn tile_ranges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = flat_index(gid, groups);
-    let total = offsets[params.count];
+    let total = offset_at(params.count);
     if (i >= total) {
         return;
     }
-    let tile = pair_tiles[i];
-    if (i == 0u || pair_tiles[i - 1u] != tile) {
+    let tile = pair_tile_at(i);
+    if (i == 0u || pair_tile_at(i - 1u) != tile) {
         ranges[tile].x = i;
     }
-    if (i + 1u == total || pair_tiles[i + 1u] != tile) {
+    if (i + 1u == total || pair_tile_at(i + 1u) != tile) {
         ranges[tile].y = i + 1u;
     }
 }
@@ -94,7 +94,7 @@ fn tile_pairs(tile: u32, l: u32) -> vec2<u32> {
 // Pairs [start, min(start + BATCH, end)) of the tile's list into `batch`, one per invocation.
 fn load_batch(start: u32, end: u32, l: u32) {
     if (l < BATCH && start + l < end) {
-        batch[l] = splat_at(order[pair_ranks[start + l]]);
+        batch[l] = splat_at(order_at(pair_rank_at(start + l)));
     }
     workgroupBarrier();
 }

@@ -26,10 +26,9 @@ struct RasterParticle {
 // storage holds them (declared by splat_gpu::RasterSplit).
 // The projected splats, `splat_at(i)` and `splat_set(i, s)` (binding 3, split over more by
 // splat_gpu::RasterSplit).
-// Depth sort: keys (depth bits, NONE when culled) and values (particle ids); after the sort,
-// `order[r]` is the particle of rank r.
-@group(0) @binding(4) var<storage, read_write> depth_keys: array<u32>;
-@group(0) @binding(5) var<storage, read_write> order: array<u32>;
+// Depth sort: keys (depth bits, NONE when culled; `depth_key_set(i, k)`, binding 4) and values
+// (particle ids; `order_set(i, id)`, binding 5); after the sort, `order_at(r)` is the particle of
+// rank r (both split over more bindings by splat_gpu::RasterSplit, as the sort cuts them).
 // Indirect draw arguments (vertex count, instance count = visible splats, 0, 0).
 @group(0) @binding(6) var<storage, read_write> draw_args: array<atomic<u32>, 4>;
 
@@ -43,8 +42,8 @@ fn cull(i: u32) {
     var culled = splat_at(i);
     culled.rect = vec4<u32>(0u);
     splat_set(i, culled);
-    depth_keys[i] = NONE;
-    order[i] = i;
+    depth_key_set(i, NONE);
+    order_set(i, i);
 }
 
 // A particle projected to the image: its mean, Σ₂ as (a, b, c), its depth, and whether it is
@@ -233,6 +232,6 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.bound = bound;
     s.rect = vec4<u32>(rect);
     splat_set(i, s);
-    depth_keys[i] = bitcast<u32>(projected.depth);
+    depth_key_set(i, bitcast<u32>(projected.depth));
     atomicAdd(&draw_args[1], 1u);
 }

@@ -71,8 +71,8 @@ fn shuffle_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
         return;
     }
     let seed = xxhash32(vec3<u32>(rop_frame.key, ORDER_ID, 0u));
-    depth_keys[i] = xxhash32(vec3<u32>(i, seed, 0u));
-    order[i] = i;
+    depth_key_set(i, xxhash32(vec3<u32>(i, seed, 0u)));
+    order_set(i, i);
 }
 
 // rng.rs `hilbert_index`: cell (x, y)'s index along the Hilbert curve of order `order`.

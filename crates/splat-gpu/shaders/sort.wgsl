@@ -22,11 +22,10 @@ struct SortParams {
 }
 
 @group(0) @binding(0) var<storage, read> sp: SortParams;
-@group(0) @binding(1) var<storage, read> keys_in: array<u32>;
-@group(0) @binding(2) var<storage, read> vals_in: array<u32>;
-@group(0) @binding(3) var<storage, read_write> keys_out: array<u32>;
-@group(0) @binding(4) var<storage, read_write> vals_out: array<u32>;
-@group(0) @binding(5) var<storage, read_write> hist: array<u32>;
+// The pass's input keys and values (`key_in_at(i)`, `val_in_at(i)`, bindings 1 and 2), its
+// output (`key_out_set(i, k)`, `val_out_set(i, v)`, 3 and 4) and the histogram (`hist_at(i)`,
+// `hist_set(i, h)`, 5): declared with their accessors by splat_gpu::sort::sort_wgsl, each split
+// over more bindings where it is larger than one (splat_gpu::split).
 
 const WG: u32 = 256u;
 const RADIX: u32 = 16u;
@@ -81,11 +80,11 @@ fn histogram(
     workgroupBarrier();
     let i = block * WG + l;
     if (i < sp.count) {
-        atomicAdd(&counts[digit(keys_in[i])], 1u);
+        atomicAdd(&counts[digit(key_in_at(i))], 1u);
     }
     workgroupBarrier();
     if (l < RADIX) {
-        hist[l * sp.blocks + block] = atomicLoad(&counts[l]);
+        hist_set(l * sp.blocks + block, atomicLoad(&counts[l]));
     }
 }
 
@@ -99,12 +98,12 @@ fn scan(@builtin(local_invocation_index) l: u32) {
     let end = min(start + per, n);
     var sum = 0u;
     for (var i = start; i < end; i++) {
-        sum += hist[i];
+        sum += hist_at(i);
     }
     var running = workgroup_exclusive_scan(l, sum);
     for (var i = start; i < end; i++) {
-        let h = hist[i];
-        hist[i] = running;
+        let h = hist_at(i);
+        hist_set(i, running);
         running += h;
     }
 }
@@ -128,8 +127,8 @@ fn scatter(
     var key = 0u;
     var val = 0u;
     if (valid) {
-        key = keys_in[i];
-        val = vals_in[i];
+        key = key_in_at(i);
+        val = val_in_at(i);
     }
     let d = digit(key);
     // Past the end: digit RADIX, which no invocation counts.
@@ -158,8 +157,8 @@ fn scatter(
         for (var s = own * SEGMENT; s < l; s++) {
             rank += u32(digits[s] == d);
         }
-        let at = hist[d * sp.blocks + block] + rank;
-        keys_out[at] = key;
-        vals_out[at] = val;
+        let at = hist_at(d * sp.blocks + block) + rank;
+        key_out_set(at, key);
+        val_out_set(at, val);
     }
 }

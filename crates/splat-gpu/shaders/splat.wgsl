@@ -7,7 +7,7 @@
 @group(0) @binding(0) var<storage, read> params: RasterParams;
 @group(0) @binding(1) var<storage, read> frame: FrameParams;
 // The projected splats, `splat_at(i)` (binding 2, split over more by splat_gpu::RasterSplit).
-@group(0) @binding(3) var<storage, read> order: array<u32>;
+// The depth order, `order_at(r)` (binding 3, split over more by splat_gpu::RasterSplit).
 @group(0) @binding(4) var<storage, read> draw_args: array<u32, 4>;
 // Per sample of each pixel (entry pixel × S + i) the mesh pre-pass's colour and distance
 // (mesh_prepass.wgsl), read where params.meshes is 1.
@@ -44,9 +44,9 @@ struct VertexOut {
 fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     var index = instance;
     if (params.mode == MODE_OVER) {
-        index = order[draw_args[1] - 1u - instance];
+        index = order_at(draw_args[1] - 1u - instance);
     } else if (params.mode == MODE_UNDER) {
-        index = order[instance];
+        index = order_at(instance);
     }
     let rect = vec4<f32>(splat_at(index).rect);
     // Two triangles: corners 0 1 2, 2 1 3 of the rect, in pixels.

@@ -48,6 +48,10 @@ pub struct GpuContext {
     /// Storage buffers a shader stage binds (what the ray tracer's split arrays may use beside
     /// its own bindings, `crate::split`).
     pub(crate) storage_buffers: u32,
+    /// The binding limit the 4-byte index arrays of the splatting path are split by (the depth
+    /// sort's keys and values, the tile pairs, the offsets): `max_binding` but for
+    /// [`GpuContext::with_index_binding_limit`].
+    pub(crate) max_index_binding: u64,
     /// The sample counts the rasterizer's targets (RGBA32F, the blend format and Depth32F)
     /// multisample at on this adapter: 1, and those of 2, 4, 8 and 16 that every format has.
     pub msaa_counts: Vec<u32>,
@@ -196,6 +200,7 @@ impl GpuContext {
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             storage_alignment: u64::from(limits.min_storage_buffer_offset_alignment),
             storage_buffers: limits.max_storage_buffers_per_shader_stage,
+            max_index_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
             work: WorkCounters::default(),
@@ -215,6 +220,15 @@ impl GpuContext {
     /// split and the refusal on any adapter).
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.max_binding = self.max_binding.min(bytes);
+        self.max_index_binding = self.max_index_binding.min(bytes);
+        self
+    }
+
+    /// Lower the binding limit of the splatting path's 4-byte index arrays only (sort keys and
+    /// values, tile pairs, offsets): they hold a sixteenth of a projected splat's bytes, so a
+    /// scene small enough for the adapter's binding count splits them only below the others'.
+    pub fn with_index_binding_limit(mut self, bytes: u64) -> Self {
+        self.max_index_binding = self.max_index_binding.min(bytes);
         self
     }
 
@@ -402,6 +416,38 @@ pub(crate) fn params_entry(
         },
         count: None,
     }
+}
+
+/// A shader module of WGSL `source`.
+pub(crate) fn shader_module(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    })
+}
+
+/// A pipeline layout of the one bind group `layout`.
+pub(crate) fn pipeline_layout(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+) -> wgpu::PipelineLayout {
+    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    })
+}
+
+/// The bind group layout of `entries` and the pipeline layout of it alone.
+pub(crate) fn layouts(
+    device: &wgpu::Device,
+    label: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+) -> (wgpu::BindGroupLayout, wgpu::PipelineLayout) {
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
+    let pipeline = pipeline_layout(device, label, &layout);
+    (layout, pipeline)
 }
 
 /// A compute pipeline of `entry` (also its label); `layout: None` derives it from the shader.

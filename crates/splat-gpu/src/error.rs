@@ -87,11 +87,13 @@ pub enum GpuError {
     /// The scene's arrays, split over bindings of the adapter's limit, need more storage
     /// bindings than the adapter gives a kernel (`crate::split`).
     #[error(
-        "the scene's {arrays} ({bytes} bytes) split over bindings of at most {limit} bytes make the ray tracer bind {needed} storage buffers, but the adapter binds at most {available} in a shader stage: it fits about {fits} particles like these; render it on the CPU backend or on an adapter with larger limits"
+        "the scene's {arrays} ({bytes} bytes) split over bindings of at most {limit} bytes make {kernel} bind {needed} storage buffers, but the adapter binds at most {available} in a shader stage: it fits about {fits} {fits_what}; render it on the CPU backend or on an adapter with larger limits"
     )]
     SceneOverBindings {
         /// The arrays split ("particles, BVH nodes and SH").
         arrays: &'static str,
+        /// The kernel that binds them ("the ray tracer").
+        kernel: &'static str,
         /// Storage buffers the kernel would bind, its own included.
         needed: u32,
         /// Storage buffers the adapter binds in a shader stage.
@@ -100,8 +102,10 @@ pub enum GpuError {
         limit: u64,
         /// Their size.
         bytes: u64,
-        /// Particles of this scene's kind that would fit.
+        /// How many would fit: particles of this scene's kind, or pairs of a sort.
         fits: u64,
+        /// What `fits` counts ("particles like these", "tile pairs").
+        fits_what: &'static str,
     },
     /// The device could not allocate a scene buffer (its memory is full).
     #[error(

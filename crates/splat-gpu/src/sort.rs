@@ -10,11 +10,12 @@
 //! [`cpu_radix_sort`] is the CPU mirror of the same passes; [`depth_key`] maps a view depth to
 //! its sortable key, and filters what cannot be sorted (NaN, negative, infinite).
 
+use crate::split::{Split, SplitArray, SplitLayout};
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
-/// WGSL of the sort kernels.
-pub const SORT_WGSL: &str = include_str!("../shaders/sort.wgsl");
+/// WGSL of the sort kernels before the declarations of their arrays ([`sort_wgsl`]).
+const SORT_SOURCE: &str = include_str!("../shaders/sort.wgsl");
 /// Keys per workgroup block.
 pub const BLOCK: u32 = 256;
 /// Bits sorted per pass.
@@ -74,33 +75,96 @@ pub fn pass_count(bits: u32) -> u32 {
     bits.clamp(1, 32).div_ceil(RADIX_BITS).next_multiple_of(2)
 }
 
-/// The sort's pipelines.
+/// The arrays of the sort's kernels: a pass's input keys and values, its output, and the
+/// histogram, each of `array_len(capacity)` u32 split alike ([`split_of`]).
+const KEYS_IN: SplitArray = SplitArray::of::<u32>("sort key", "keys_in", "key_in_at", "u32", 1);
+const VALS_IN: SplitArray = SplitArray::of::<u32>("sort value", "vals_in", "val_in_at", "u32", 2);
+const KEYS_OUT: SplitArray =
+    SplitArray::of::<u32>("sort key", "keys_out", "key_out_at", "u32", 3).writable("key_out_set");
+const VALS_OUT: SplitArray =
+    SplitArray::of::<u32>("sort value", "vals_out", "val_out_at", "u32", 4).writable("val_out_set");
+const HIST: SplitArray = SplitArray::of::<u32>("sort histogram", "hist", "hist_at", "u32", 5).writable("hist_set");
+/// The storage buffers a sort kernel binds when its arrays are whole (the uniforms and the five
+/// arrays).
+const OWN_BINDINGS: u32 = 6;
+
+/// Elements of each of the sort's arrays for `capacity` pairs: the pairs, and at least the
+/// histogram's 16 counts a block of [`BLOCK`] keys.
+pub fn array_len(capacity: u32) -> u64 {
+    let capacity = u64::from(capacity.max(1));
+    (16 * capacity.div_ceil(u64::from(BLOCK))).max(capacity)
+}
+
+/// How the sort's arrays for `capacity` pairs are cut in bindings of `max_binding` bytes; the
+/// splatting kernels that read and write them are compiled for the same cut.
+pub fn split_of(capacity: u32, max_binding: u64) -> Split {
+    Split::of(array_len(capacity), 4, max_binding)
+}
+
+/// The sort kernels' arrays as `split` cuts them, extra parts from binding 6 on.
+fn split_layout(split: Split) -> SplitLayout {
+    SplitLayout { arrays: [KEYS_IN, VALS_IN, KEYS_OUT, VALS_OUT, HIST].map(|a| (a, split)).to_vec(), first_extra: 6 }
+}
+
+/// The WGSL of the sort kernels over arrays cut as `split`.
+pub fn sort_wgsl(split: Split) -> String {
+    format!("{SORT_SOURCE}{}", split_layout(split).wgsl())
+}
+
+/// The sort's pipelines, compiled for each [`Split`] of its arrays on first use (the whole one
+/// at once).
 pub struct RadixSort {
+    kernels: crate::split::PerSplit<Split, SortKernels>,
+    stride: u64,
+}
+
+/// The sort's kernels for arrays cut as `split`.
+struct SortKernels {
     layout: wgpu::BindGroupLayout,
     histogram: wgpu::ComputePipeline,
     scan: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
-    stride: u64,
 }
 
-/// Buffers of one sort of up to `capacity` pairs: keys and values in place (`keys`, `vals`)
-/// with ping-pong scratch, per-block histogram and per-pass uniforms.
+/// Buffers of one sort of up to `capacity` pairs: keys and values in place with ping-pong
+/// scratch, the per-block histogram and per-pass uniforms, each array in the parts of `split`.
 pub struct SortBuffers {
     /// Keys: the input, and the sorted output after [`RadixSort::encode`].
-    pub keys: wgpu::Buffer,
+    pub(crate) keys: Vec<wgpu::Buffer>,
     /// Values, permuted with their keys.
-    pub vals: wgpu::Buffer,
+    pub(crate) vals: Vec<wgpu::Buffer>,
     /// Histogram (and scan) scratch, `16 × blocks` entries, at least `capacity`.
-    pub hist: wgpu::Buffer,
+    pub(crate) hist: Vec<wgpu::Buffer>,
+    /// The ping-pong halves of keys and values.
+    scratch: [Vec<wgpu::Buffer>; 2],
+    /// How every array is cut over bindings.
+    pub(crate) split: Split,
     capacity: u32,
     params: wgpu::Buffer,
     bind_groups: [wgpu::BindGroup; 2],
+    kernels: std::sync::Arc<SortKernels>,
 }
 
 impl SortBuffers {
     /// Pairs the buffers hold.
     pub fn capacity(&self) -> u32 {
         self.capacity
+    }
+
+    /// Bytes of the buffers on the device.
+    pub fn bytes(&self) -> u64 {
+        let arrays = [&self.keys, &self.vals, &self.hist, &self.scratch[0], &self.scratch[1]];
+        arrays.iter().flat_map(|parts| parts.iter()).map(wgpu::Buffer::size).sum()
+    }
+
+    /// Elements `range` of `parts`, one of this sort's arrays.
+    pub(crate) fn read(
+        &self,
+        ctx: &GpuContext,
+        parts: &[wgpu::Buffer],
+        range: std::ops::Range<u64>,
+    ) -> Result<Vec<u32>, GpuError> {
+        crate::split::read_u32(ctx, parts, self.split, range)
     }
 }
 
@@ -110,84 +174,75 @@ pub(crate) fn groups(blocks: u32) -> (u32, u32) {
 }
 
 impl RadixSort {
-    /// Compile the kernels; a typed error when the device rejects them.
+    /// Compile the kernels of whole arrays; a typed error when the device rejects them.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        let device = &ctx.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("sort.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(SORT_WGSL.into()),
-        });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("sort"),
-            entries: &layout_entries(),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("sort"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
         let sort = Self {
-            histogram: pipeline("histogram"),
-            scan: pipeline("scan"),
-            scatter: pipeline("scatter"),
-            layout,
+            kernels: crate::split::PerSplit::new(),
             stride: (size_of::<SortParams>() as u64).next_multiple_of(ctx.storage_alignment),
         };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
+        sort.kernels(ctx, Split::WHOLE)?;
         Ok(sort)
     }
 
-    /// Buffers for up to `capacity` pairs; refuses sizes above the adapter's binding limit.
+    /// The kernels of arrays cut as `split`, compiled on first use.
+    fn kernels(&self, ctx: &GpuContext, split: Split) -> Result<std::sync::Arc<SortKernels>, GpuError> {
+        self.kernels.get(split, || SortKernels::new(ctx, split))
+    }
+
+    /// Buffers for up to `capacity` pairs, split over as many bindings as they need; refused
+    /// when that is more than the adapter binds in a stage.
     pub fn buffers(&self, ctx: &GpuContext, capacity: u32) -> Result<SortBuffers, GpuError> {
         let capacity = capacity.max(1);
-        let blocks = capacity.div_ceil(BLOCK);
-        let hist_len = (16 * blocks).max(capacity);
-        ctx.check_binding("sort", 4 * u64::from(hist_len), capacity as usize)?;
-        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
-        let buffer = |label, words: u32| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: 4 * u64::from(words),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let (keys, vals) = (buffer("sort keys", capacity), buffer("sort values", capacity));
-        let (keys_tmp, vals_tmp) = (buffer("sort keys scratch", capacity), buffer("sort values scratch", capacity));
-        let hist = buffer("sort histogram", hist_len);
+        let len = array_len(capacity);
+        let split = split_of(capacity, ctx.max_index_binding);
+        let needed = OWN_BINDINGS + split_layout(split).extra_bindings();
+        if needed > ctx.storage_buffers {
+            let fits = |m: u64| OWN_BINDINGS + split_layout(split_of(m as u32, ctx.max_index_binding)).extra_bindings();
+            return Err(GpuError::SceneOverBindings {
+                arrays: "sort keys, values and histogram",
+                kernel: "the radix sort",
+                needed,
+                available: ctx.storage_buffers,
+                limit: ctx.max_index_binding,
+                bytes: 5 * 4 * len,
+                fits: crate::split::most_that_fit(u64::from(capacity), |m| fits(m) <= ctx.storage_buffers),
+                fits_what: "pairs",
+            });
+        }
+        let kernels = self.kernels(ctx, split)?;
+        let array = |what| crate::split::alloc(ctx, what, 4, split, len);
+        let (keys, vals) = (array("sort keys")?, array("sort values")?);
+        let scratch = [array("sort keys scratch")?, array("sort values scratch")?];
+        let hist = array("sort histogram")?;
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sort params"),
             size: self.stride * 9,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind = |ki: &wgpu::Buffer, vi: &wgpu::Buffer, ko: &wgpu::Buffer, vo: &wgpu::Buffer| {
+        let layout = split_layout(split);
+        let bind = |ki: &[wgpu::Buffer], vi: &[wgpu::Buffer], ko: &[wgpu::Buffer], vo: &[wgpu::Buffer]| {
+            let params = wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &params,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(size_of::<SortParams>() as u64),
+                }),
+            };
+            let arrays = [(KEYS_IN, ki), (VALS_IN, vi), (KEYS_OUT, ko), (VALS_OUT, vo), (HIST, &hist[..])];
+            let parts = arrays.iter().flat_map(|(array, buffers)| layout.bind(array, buffers));
+            let entries: Vec<_> = std::iter::once(params)
+                .chain(parts.map(|(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }))
+                .collect();
             ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("sort"),
-                layout: &self.layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &params,
-                            offset: 0,
-                            size: wgpu::BufferSize::new(size_of::<SortParams>() as u64),
-                        }),
-                    },
-                    wgpu::BindGroupEntry { binding: 1, resource: ki.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: vi.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 3, resource: ko.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 4, resource: vo.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 5, resource: hist.as_entire_binding() },
-                ],
+                layout: &kernels.layout,
+                entries: &entries,
             })
         };
-        let bind_groups = [bind(&keys, &vals, &keys_tmp, &vals_tmp), bind(&keys_tmp, &vals_tmp, &keys, &vals)];
-        Ok(SortBuffers { keys, vals, hist, capacity, params, bind_groups })
+        let bind_groups = [bind(&keys, &vals, &scratch[0], &scratch[1]), bind(&scratch[0], &scratch[1], &keys, &vals)];
+        Ok(SortBuffers { keys, vals, hist, scratch, split, capacity, params, bind_groups, kernels })
     }
 
     /// Encode the sort of the first `count` pairs of `buf` on their low `bits` key bits, in
@@ -221,11 +276,11 @@ impl RadixSort {
         for p in 0..passes {
             let offset = (self.stride * u64::from(p)) as u32;
             pass.set_bind_group(0, &buf.bind_groups[(p % 2) as usize], &[offset]);
-            pass.set_pipeline(&self.histogram);
+            pass.set_pipeline(&buf.kernels.histogram);
             ctx.dispatch(&mut pass, gx, gy, 1);
-            pass.set_pipeline(&self.scan);
+            pass.set_pipeline(&buf.kernels.scan);
             ctx.dispatch(&mut pass, 1, 1, 1);
-            pass.set_pipeline(&self.scatter);
+            pass.set_pipeline(&buf.kernels.scatter);
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
         Ok(())
@@ -239,7 +294,7 @@ impl RadixSort {
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
         pass.set_bind_group(0, &buf.bind_groups[0], &[(self.stride * 8) as u32]);
-        pass.set_pipeline(&self.scan);
+        pass.set_pipeline(&buf.kernels.scan);
         ctx.dispatch(&mut pass, 1, 1, 1);
     }
 }
@@ -261,21 +316,41 @@ pub fn sort_pairs(
     if count == 0 {
         return Ok((Vec::new(), Vec::new()));
     }
-    ctx.queue.write_buffer(&buf.keys, 0, bytemuck::cast_slice(keys));
-    ctx.queue.write_buffer(&buf.vals, 0, bytemuck::cast_slice(vals));
+    crate::split::write_u32(ctx, &buf.keys, buf.split, keys);
+    crate::split::write_u32(ctx, &buf.vals, buf.split, vals);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("sort") });
     sort.encode(ctx, &mut encoder, &buf, count, bits, None)?;
     ctx.submit(encoder.finish());
-    let keys = ctx.read_u32(&buf.keys, count as usize)?;
-    let vals = ctx.read_u32(&buf.vals, count as usize)?;
+    let keys = buf.read(ctx, &buf.keys, 0..u64::from(count))?;
+    let vals = buf.read(ctx, &buf.vals, 0..u64::from(count))?;
     Ok((keys, vals))
 }
 
-/// The sort's bindings (checked against `sort.wgsl`'s by a test).
-fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
+/// The sort's bindings for arrays cut as `split` (checked against `sort_wgsl`'s by a test).
+fn layout_entries(split: Split) -> Vec<wgpu::BindGroupLayoutEntry> {
     let params = crate::context::params_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
     let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
-    [params, storage(1, true), storage(2, true), storage(3, false), storage(4, false), storage(5, false)]
+    let mut entries =
+        vec![params, storage(1, true), storage(2, true), storage(3, false), storage(4, false), storage(5, false)];
+    entries.extend(split_layout(split).extra_entries(wgpu::ShaderStages::COMPUTE));
+    entries
+}
+
+impl SortKernels {
+    /// Compile the kernels of arrays cut as `split`; a typed error when the device rejects them.
+    fn new(ctx: &GpuContext, split: Split) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split));
+        let (layout, pipeline_layout) = crate::context::layouts(device, "sort", &layout_entries(split));
+        let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
+        let kernels =
+            Self { histogram: pipeline("histogram"), scan: pipeline("scan"), scatter: pipeline("scatter"), layout };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(kernels)
+    }
 }
 
 #[cfg(test)]
@@ -312,12 +387,16 @@ mod tests {
     #[test]
     fn sort_wgsl_validates_without_subgroup_operations() {
         // Capabilities::empty() lacks SUBGROUP, so a subgroup builtin fails validation.
-        crate::layout::wgsl_check::validate("sort", SORT_WGSL);
+        crate::layout::wgsl_check::validate("sort", &sort_wgsl(Split::WHOLE));
+        crate::layout::wgsl_check::validate("sort (split)", &sort_wgsl(Split { parts: 3, shift: 8 }));
     }
 
     #[test]
     fn sort_layout_matches_the_shader() {
         let none = naga::valid::Capabilities::empty();
-        crate::layout::wgsl_check::check_layout("sort", SORT_WGSL, none, &super::layout_entries());
+        for split in [Split::WHOLE, Split { parts: 3, shift: 8 }] {
+            let wgsl = sort_wgsl(split);
+            crate::layout::wgsl_check::check_layout("sort", &wgsl, none, &super::layout_entries(split));
+        }
     }
 }

@@ -124,6 +124,28 @@ pub(crate) fn most_that_fit(n: u64, fits: impl Fn(u64) -> bool) -> u64 {
     lo
 }
 
+/// Kernels compiled for each split of their arrays on first use, and kept: a split is a compile
+/// of its own (the ray tracer's megakernel, the splatting kernels, the radix sort).
+pub(crate) struct PerSplit<K, V>(std::sync::Mutex<Vec<(K, std::sync::Arc<V>)>>);
+
+impl<K: PartialEq + Copy, V> PerSplit<K, V> {
+    /// None compiled yet.
+    pub fn new() -> Self {
+        Self(std::sync::Mutex::new(Vec::new()))
+    }
+
+    /// The kernels of `split`: kept ones, or `compile`'s, kept from now on.
+    pub fn get(&self, split: K, compile: impl FnOnce() -> Result<V, GpuError>) -> Result<std::sync::Arc<V>, GpuError> {
+        let mut kept = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, k)) = kept.iter().find(|(s, _)| *s == split) {
+            return Ok(k.clone());
+        }
+        let k = std::sync::Arc::new(compile()?);
+        kept.push((split, k.clone()));
+        Ok(k)
+    }
+}
+
 /// A kernel's split arrays: each with its cut, part 0 at the array's own binding and the other
 /// parts at bindings from `first_extra` on, array by array.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -133,6 +155,14 @@ pub(crate) struct SplitLayout {
 }
 
 impl SplitLayout {
+    /// The bindings of `array`'s parts, each with its buffer in `parts` (the array's buffers in
+    /// part order), as a bind group of a kernel of this layout takes them; none when the layout
+    /// has no such array.
+    pub fn bind<'b>(&self, array: &SplitArray, parts: &'b [wgpu::Buffer]) -> Vec<(u32, &'b wgpu::Buffer)> {
+        let Some(a) = self.arrays.iter().position(|(x, _)| x == array) else { return Vec::new() };
+        self.bindings().into_iter().filter(|b| b.0 == a).map(|(_, p, binding)| (binding, &parts[p as usize])).collect()
+    }
+
     /// Every part: (array index, part, binding).
     pub fn bindings(&self) -> Vec<(usize, u32, u32)> {
         let mut extra = self.first_extra;
@@ -210,6 +240,58 @@ fn write_switch(out: &mut String, var: &str, split: Split, statement: &str) {
 /// Part p's variable: `var`, `var_1`, `var_2`, …
 fn part_name(var: &str, p: u32) -> String {
     if p == 0 { var.to_string() } else { format!("{var}_{p}") }
+}
+
+/// Read-write buffers of `len` elements of `stride` bytes (the scene's `what`) in the parts of
+/// `split` (one element for an empty array, as a binding needs one); a device that cannot
+/// allocate them is refused with [`GpuError::DeviceMemory`].
+pub(crate) fn alloc(
+    ctx: &GpuContext,
+    what: &'static str,
+    stride: u64,
+    split: Split,
+    len: u64,
+) -> Result<Vec<wgpu::Buffer>, GpuError> {
+    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let buffers = split
+        .ranges(len.max(1))
+        .map(|range| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(what),
+                size: (range.end - range.start) * stride,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })
+        .collect();
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(GpuError::DeviceMemory { buffer: what, bytes: len * stride, message: e.to_string() });
+    }
+    Ok(buffers)
+}
+
+/// Elements `range` of a u32 array held in `parts`, cut as `split`.
+pub(crate) fn read_u32(
+    ctx: &GpuContext,
+    parts: &[wgpu::Buffer],
+    split: Split,
+    range: std::ops::Range<u64>,
+) -> Result<Vec<u32>, GpuError> {
+    let mut out = Vec::with_capacity((range.end - range.start) as usize);
+    for (part, held) in parts.iter().zip(split.ranges(range.end)) {
+        let (first, last) = (range.start.max(held.start), range.end.min(held.end));
+        if first < last {
+            out.extend(ctx.read_u32_at(part, (first - held.start) as usize, (last - first) as usize)?);
+        }
+    }
+    Ok(out)
+}
+
+/// Write `data` (u32 elements from element 0) into `parts`, cut as `split`.
+pub(crate) fn write_u32(ctx: &GpuContext, parts: &[wgpu::Buffer], split: Split, data: &[u32]) {
+    for (part, held) in parts.iter().zip(split.ranges(data.len() as u64)).filter(|(_, held)| !held.is_empty()) {
+        ctx.queue.write_buffer(part, 0, bytemuck::cast_slice(&data[held.start as usize..held.end as usize]));
+    }
 }
 
 /// `data` (elements of `stride` bytes, the scene's `what`) as `split`'s parts, one read-only

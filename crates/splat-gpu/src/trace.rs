@@ -130,11 +130,13 @@ impl TraceSplit {
         let fits = crate::split::most_that_fit(n, |m| fit(scaled(m)));
         Err(GpuError::SceneOverBindings {
             arrays: "particles, BVH nodes and SH",
+            kernel: "the ray tracer",
             needed: split(lengths).layout().extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_binding,
             bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),
             fits,
+            fits_what: "particles like these",
         })
     }
 
@@ -237,7 +239,7 @@ fn kernel_traversals(m: u32, n: u32) -> (u32, u32) {
 /// The ray-tracing kernel, compiled for each [`TraceSplit`] a scene needs (one, [`TraceSplit::WHOLE`],
 /// for every scene whose arrays fit one binding each) on the first tracer of that split.
 pub struct TracePipeline {
-    kernels: std::sync::Mutex<Vec<std::sync::Arc<TraceKernel>>>,
+    kernels: crate::split::PerSplit<TraceSplit, TraceKernel>,
 }
 
 /// The kernel compiled for one split: its module, bind group layout and entry points.
@@ -260,18 +262,12 @@ impl TracePipeline {
     /// first use ([`GpuTracer::new`]), shader and pipeline errors coming back as
     /// [`GpuError::Shader`], not wgpu's panicking handler.
     pub fn new(_ctx: &GpuContext) -> Result<Self, GpuError> {
-        Ok(Self { kernels: std::sync::Mutex::new(Vec::new()) })
+        Ok(Self { kernels: crate::split::PerSplit::new() })
     }
 
     /// The kernel of `split`, compiled on first use.
     pub(crate) fn kernel(&self, ctx: &GpuContext, split: TraceSplit) -> Result<std::sync::Arc<TraceKernel>, GpuError> {
-        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(k) = kernels.iter().find(|k| k.split == split) {
-            return Ok(k.clone());
-        }
-        let kernel = std::sync::Arc::new(TraceKernel::new(ctx, split)?);
-        kernels.push(kernel.clone());
-        Ok(kernel)
+        self.kernels.get(split, || TraceKernel::new(ctx, split))
     }
 
     /// The kernel's bindings for `split` (checked against its WGSL by
@@ -307,19 +303,9 @@ impl TraceKernel {
     fn new(ctx: &GpuContext, split: TraceSplit) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("trace.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(split.wgsl().into()),
-        });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("trace"),
-            entries: &TracePipeline::layout_entries(&split),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("trace"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
+        let module = crate::context::shader_module(device, "trace.wgsl", &split.wgsl());
+        let (layout, pipeline_layout) =
+            crate::context::layouts(device, "trace", &TracePipeline::layout_entries(&split));
         let pipeline = compute_pipeline(device, &module, Some(&pipeline_layout), "main");
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));

@@ -55,8 +55,13 @@ fn gpu_sort_equals_the_cpu_sort() {
         })
         .collect();
     cases.push(("depths, NaN filtered".into(), depths.iter().filter_map(|&z| depth_key(z)).collect(), 32));
+    // Split over bindings of 16,384 keys: 5 parts of each array.
+    let small = GpuContext::new().unwrap().with_index_binding_limit(64 * 1024);
+    let small_pipes = RasterPipelines::new(&small).unwrap();
+    cases.push(("random 70000, split".into(), (0..70_000).map(|_| rng.next_u64() as u32).collect(), 32));
     for (name, keys, bits) in cases {
         let vals: Vec<u32> = (0..keys.len() as u32).collect();
+        let (ctx, sort) = if name.ends_with("split") { (&small, small_pipes.sort()) } else { (ctx, sort) };
         let gpu = sort_pairs(ctx, sort, &keys, &vals, bits).unwrap();
         assert_eq!(gpu, cpu_sorted(&keys, bits), "{name}");
         let mut std_sorted: Vec<(u32, u32)> = keys.iter().copied().zip(vals).collect();
@@ -65,6 +70,10 @@ fn gpu_sort_equals_the_cpu_sort() {
             assert_eq!(gpu.1, std_sorted.iter().map(|p| p.1).collect::<Vec<_>>(), "{name}: not stable");
         }
     }
+    // More parts than the adapter binds: refused with what fits, before any work.
+    let tiny = GpuContext::new().unwrap().with_index_binding_limit(1024);
+    let e = small_pipes.sort().buffers(&tiny, 1 << 20).err().expect("too many parts").to_string();
+    assert!(e.contains("radix sort") && e.contains("pairs") && e.contains("fits about"), "{e}");
 }
 
 struct Case {
@@ -430,16 +439,19 @@ fn bonsai_crop_equals_the_cpu() {
 /// 3,000 SH-3 particles are projected in 12 chunks of 256, and its projected splats (64 bytes each) and
 /// canonical transforms (48) are split over 3 bindings each ([`splat_gpu::RasterSplit`]), which
 /// the projection writes and the splat draw, the tile rasterizer and the raster operations read
-/// through generated accessors. The projected splats and every frame are bit for bit the whole
-/// scene's: sorted (the draw), StochasticSplats and Enderton (the raster operations), through a
-/// pinhole and a fisheye, and lit (the canonical transforms' normals) sorted on the tile
-/// rasterizer and stochastic in the draw.
+/// through generated accessors; at 8 KiB bindings of its 4-byte arrays, the depth sort's keys
+/// and values and the tile offsets are split over 2 (2,048 each), and so are the tile pairs,
+/// which the sort, the binning and the tile passes read and write through theirs. The
+/// projected splats and every frame are bit for bit the whole scene's: sorted (the draw),
+/// StochasticSplats and Enderton (the raster operations), through a pinhole and a fisheye, and
+/// lit (the canonical transforms' normals) sorted on the tile rasterizer and stochastic in the
+/// draw.
 #[test]
 fn split_scenes_render_the_whole_scenes_frames() {
     use splat_core::camera::{Distortion, Lens};
     let Some(ctx) = context() else { return };
     let c = case("cloud", 48, 36);
-    let small = GpuContext::new().unwrap().with_binding_limit(64 * 1024);
+    let small = GpuContext::new().unwrap().with_binding_limit(64 * 1024).with_index_binding_limit(8 * 1024);
     let small_pipes = RasterPipelines::new(&small).unwrap();
     let lighting = common::lighting(Shadows::None, Look::Surface);
     let scenes = |lighting: &Lighting| {
@@ -449,8 +461,9 @@ fn split_scenes_render_the_whole_scenes_frames() {
         (whole, split)
     };
     let (unlit, lit) = (scenes(&Lighting::default()), scenes(&lighting));
-    let parts = |s: &RasterScene| (s.chunks(), s.split().splats.parts, s.split().canonical.parts);
-    assert_eq!((parts(&unlit.0), parts(&unlit.1)), ((1, 1, 1), (12, 3, 3)));
+    let parts =
+        |s: &RasterScene| (s.chunks(), s.split().splats.parts, s.split().canonical.parts, s.split().ranks.parts);
+    assert_eq!((parts(&unlit.0), parts(&unlit.1)), ((1, 1, 1, 1), (12, 3, 3, 2)));
     let fisheye =
         Distortion { radial: [0.04, -0.01, 0.002, 0.0], rational: [0.0; 3], tangential: [0.0; 2], prism: [0.0; 2] };
     let through_fisheye = c.camera.with_lens(Lens::Fisheye(fisheye)).unwrap();
@@ -468,7 +481,16 @@ fn split_scenes_render_the_whole_scenes_frames() {
         let settings = RasterSettings::default();
         let a = GpuRasterizer::new(ctx, pipelines(ctx), whole, &camera, &settings).unwrap();
         let b = GpuRasterizer::new(&small, &small_pipes, split, &camera, &settings).unwrap();
-        assert!(a.splats().unwrap() == b.splats().unwrap(), "{method:?}: the projected splats differ");
+        let splats = a.splats().unwrap();
+        assert!(splats == b.splats().unwrap(), "{method:?}: the projected splats differ");
+        assert!(a.order().unwrap() == b.order().unwrap(), "{method:?}: the depth orders differ");
+        // The tile pairs the visible splats make (16-pixel tiles): more than one part holds.
+        let pairs: u32 = splats
+            .iter()
+            .filter(|s| s.rect[0] < s.rect[2] && s.rect[1] < s.rect[3])
+            .map(|s| (s.rect[2].div_ceil(16) - s.rect[0] / 16) * (s.rect[3].div_ceil(16) - s.rect[1] / 16))
+            .sum();
+        assert!(pairs > 2048, "{method:?}: {pairs} tile pairs fit one 8 KiB binding");
         let (a, b) = (a.render(&method, &frames).unwrap().0, b.render(&method, &frames).unwrap().0);
         let differ = a.mean.data().iter().zip(b.mean.data()).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
         let lit = whole.is_lit();

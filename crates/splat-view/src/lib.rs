@@ -24,6 +24,7 @@ use anyhow::{Context, Result};
 use eframe::egui_wgpu;
 use splat_core::ScreenFilter;
 use splat_core::glam::Vec3;
+use splat_core::sh::ShStorage;
 use splat_gpu::GpuContext;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -64,6 +65,16 @@ pub struct ViewArgs {
     /// (default: the one its file names; else 3dgs).
     #[arg(long, value_parser = screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
+    /// How the SH coefficients are stored (vk_gaussian_splatting's SH format): f16 halves the
+    /// GPU's largest scene array and rounds the colours; the CPU reads the same rounded values.
+    #[arg(long, value_parser = sh_storage_parser(), default_value = "f32")]
+    pub sh_storage: ShStorage,
+}
+
+/// The values of `--sh-storage` (here and in the `splat` commands): every [`ShStorage`] by its
+/// name, described.
+pub fn sh_storage_parser() -> impl clap::builder::TypedValueParser<Value = ShStorage> {
+    choice_parser(&ShStorage::ALL, ShStorage::name, ShStorage::describe)
 }
 
 /// The values of `--screen-filter` (here and in the `splat` commands): every [`ScreenFilter`]
@@ -113,7 +124,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         anyhow::bail!("--width and --height must be at least 64 points");
     }
     let read = splat_io::ReadOptions { screen_filter: args.screen_filter, ..Default::default() };
-    let loaded = load::load(args.scene.as_deref(), args.camera.as_deref(), read)?;
+    let mut loaded = load::load(args.scene.as_deref(), args.camera.as_deref(), read)?;
+    loaded.info.render.sh_storage = args.sh_storage;
     if let Some(camera) = &args.camera
         && args.camera_index >= loaded.info.views.len()
     {

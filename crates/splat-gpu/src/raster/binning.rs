@@ -13,23 +13,24 @@ pub(super) struct TileLists {
     pub(super) pair_count: u32,
     /// Per tile, the range [x, y) of its pairs.
     pub(super) ranges: wgpu::Buffer,
+    /// The kernels of the scene's split with the pairs' ([`RasterSplit::with_pairs`]): those
+    /// that read the pairs (emit, ranges, and the tile passes after them).
+    pub(super) k: std::sync::Arc<SplatKernels>,
     count_group: wgpu::BindGroup,
     emit_group: wgpu::BindGroup,
     ranges_group: wgpu::BindGroup,
 }
 
 impl TileLists {
-    /// Bind the binning of the splats in `order`, counting into `offsets.hist` (room for
-    /// count + 1 entries), with room for `pair_count` pairs ([`GpuRasterizer::pair_count`]: the
-    /// same in every order).
-    pub(super) fn new(
-        r: &GpuRasterizer,
-        order: &wgpu::Buffer,
-        offsets: &SortBuffers,
-        pair_count: u32,
-    ) -> Result<Self, GpuError> {
-        let (ctx, pipes, k) = (r.ctx, r.pipes, &r.k);
+    /// Bind the binning of the splats in `order` (the values of `offsets`), counting into
+    /// `offsets.hist` (room for count + 1 entries), with room for `pair_count` pairs
+    /// ([`GpuRasterizer::pair_count`]: the same in every order).
+    pub(super) fn new(r: &GpuRasterizer, offsets: &SortBuffers, pair_count: u32) -> Result<Self, GpuError> {
+        let (ctx, pipes) = (r.ctx, r.pipes);
         let pairs = pipes.sort.buffers(ctx, pair_count.max(1))?;
+        let split = r.scene.split.with_pairs(ctx, pair_count.max(1))?;
+        debug_assert_eq!(pairs.split, split.pairs, "the kernels index the pairs as their sort cuts them");
+        let k = pipes.kernels(ctx, split)?;
         let [tiles_x, tiles_y] = r.params.tiles;
         let ranges = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tile ranges"),
@@ -38,12 +39,19 @@ impl TileLists {
             mapped_at_creation: false,
         });
         let (params, draw_args) = (&r.params_buffer, &r.draw_args);
-        let count_group = r.count_group(order, offsets);
-        let own = [(0, params), (5, order), (6, draw_args), (7, &offsets.hist), (8, &pairs.keys), (9, &pairs.vals)];
-        let emit_group = bind(ctx, &k.tile_emit, &[&own[..], &r.split_parts(false, false)].concat());
-        let ranges_group =
-            bind(ctx, &k.tile_ranges, &[(0, params), (7, &offsets.hist), (8, &pairs.keys), (10, &ranges)]);
-        Ok(Self { pairs, pair_count, ranges, count_group, emit_group, ranges_group })
+        let count_group = r.count_group(offsets);
+        let parts = [
+            split.bind(&ORDER, &offsets.vals),
+            split.bind(&OFFSETS, &offsets.hist),
+            split.bind(&PAIR_TILES, &pairs.keys),
+            split.bind(&PAIR_RANKS, &pairs.vals),
+            r.split_parts(false, false),
+        ]
+        .concat();
+        let emit_group = bind(ctx, &k.tile_emit, &[&[(0, params), (6, draw_args)][..], &parts].concat());
+        let parts = [split.bind(&OFFSETS, &offsets.hist), split.bind(&PAIR_TILES, &pairs.keys)].concat();
+        let ranges_group = bind(ctx, &k.tile_ranges, &[&[(0, params), (10, &ranges)][..], &parts].concat());
+        Ok(Self { pairs, pair_count, ranges, k, count_group, emit_group, ranges_group })
     }
 
     /// Count each rank's pairs and scan them into `offsets.hist` (the buffers [`TileLists::new`]
@@ -54,7 +62,7 @@ impl TileLists {
 
     /// Emit the pairs at the counted offsets, sort them by tile and find each tile's range.
     pub(super) fn encode_lists(&self, r: &GpuRasterizer, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
-        let (ctx, pipes, k, n) = (r.ctx, r.pipes, &r.k, r.scene.count);
+        let (ctx, pipes, k, n) = (r.ctx, r.pipes, &self.k, r.scene.count);
         encoder.clear_buffer(&self.ranges, 0, None);
         {
             let mut pass = encoder
@@ -78,10 +86,14 @@ impl TileLists {
 }
 
 impl GpuRasterizer<'_> {
-    /// The group of `tile_count` over the splats in `order`, counting into `offsets.hist`.
-    fn count_group(&self, order: &wgpu::Buffer, offsets: &SortBuffers) -> wgpu::BindGroup {
-        let own = [(0, &self.params_buffer), (5, order), (6, &self.draw_args), (7, &offsets.hist)];
-        bind(self.ctx, &self.k.tile_count, &[&own[..], &self.split_parts(false, false)].concat())
+    /// The group of `tile_count` over the splats in the order `offsets.vals`, counting into
+    /// `offsets.hist`.
+    fn count_group(&self, offsets: &SortBuffers) -> wgpu::BindGroup {
+        let split = &self.scene.split;
+        let own = [(0, &self.params_buffer), (6, &self.draw_args)];
+        let parts =
+            [split.bind(&ORDER, &offsets.vals), split.bind(&OFFSETS, &offsets.hist), self.split_parts(false, false)];
+        bind(self.ctx, &self.k.tile_count, &[&own[..], &parts.concat()].concat())
     }
 
     /// Per rank the tiles its rect touches (`tile_count`), and their exclusive scan in
@@ -104,8 +116,9 @@ impl GpuRasterizer<'_> {
     /// total is the same in any draw order.
     pub(super) fn pair_count(&self) -> Result<u32, GpuError> {
         let mut encoder = self.encoder("tile count");
-        self.encode_count(&mut encoder, &self.count_group(&self.depth.vals, &self.depth), &self.depth);
+        self.encode_count(&mut encoder, &self.count_group(&self.depth), &self.depth);
         self.submit(encoder)?;
-        Ok(self.ctx.read_u32_at(&self.depth.hist, self.scene.count as usize, 1)?[0])
+        let total = u64::from(self.scene.count);
+        Ok(self.depth.read(self.ctx, &self.depth.hist, total..total + 1)?[0])
     }
 }

@@ -233,7 +233,7 @@ impl GpuRasterizer<'_> {
         // 1. Pairs per rank and their exclusive scan in depth order (offsets[n] is the total).
         let pairs = self.pair_count()?;
         // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
-        let lists = TileLists::new(self, &self.depth.vals, &self.depth, pairs)?;
+        let lists = TileLists::new(self, &self.depth, pairs)?;
         let per_pixel = if params.first_hit != 0 { self.raster.samples } else { 1 };
         let out = HitBuffers::new(ctx, (self.camera.width * self.camera.height * per_pixel) as usize);
         let storage = wgpu::BufferUsages::STORAGE;
@@ -244,8 +244,6 @@ impl GpuRasterizer<'_> {
         let (starts, list) = fragments.unwrap_or((&none.0, &none.1));
         let own = [
             (0, &self.params_buffer),
-            (5, &self.depth.vals),
-            (9, &lists.pairs.vals),
             (10, &lists.ranges),
             (11, &out.color),
             (12, &out.pick),
@@ -258,13 +256,16 @@ impl GpuRasterizer<'_> {
             (24, starts),
             (25, list),
         ];
-        let blend_group = bind(ctx, &self.k.tile_blend, &[&own[..], &self.split_parts(false, true)].concat());
+        let split = &lists.k.split;
+        let lists_parts = [split.bind(&ORDER, &self.depth.vals), split.bind(&PAIR_RANKS, &lists.pairs.vals)].concat();
+        let parts = [&own[..], &self.split_parts(false, true), &lists_parts].concat();
+        let blend_group = bind(ctx, &lists.k.tile_blend, &parts);
         let mut encoder = self.encoder("tile lists");
         lists.encode_lists(self, &mut encoder)?;
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile blend"), timestamp_writes: None });
-            pass.set_pipeline(&self.k.tile_blend);
+            pass.set_pipeline(&lists.k.tile_blend);
             pass.set_bind_group(0, &blend_group, &[]);
             ctx.dispatch(&mut pass, tiles_x, tiles_y, 1);
         }

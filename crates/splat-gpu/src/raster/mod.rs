@@ -45,7 +45,9 @@ pub use depth_pick::{DepthPick, FirstHits};
 pub use pipelines::RasterPipelines;
 use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT, SplatKernels};
 pub use profile::RasterTimings;
-use scene::raster_params;
+use scene::{
+    CANONICAL, DEPTH_KEYS, DRAWN_ORDER, DRAWN_SPLATS, OFFSETS, ORDER, PAIR_RANKS, PAIR_TILES, SPLATS, raster_params,
+};
 pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene, RasterSplit};
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
@@ -215,9 +217,11 @@ impl<'a> GpuRasterizer<'a> {
         let entries = mesh_prepass_entries(ctx, scene, camera, raster)?;
         let k = pipes.kernels(ctx, scene.split)?;
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
-        let splats = splat_parts(ctx, scene.count, scene.split.splats)?;
+        let splats =
+            crate::split::alloc(ctx, "projected splat", SPLATS.stride, scene.split.splats, scene.count.into())?;
         // Room for count + 1 tile counts in the histogram (their scan's last entry is the total).
         let depth = pipes.sort.buffers(ctx, scene.count + 1)?;
+        debug_assert_eq!(depth.split, scene.split.ranks, "the kernels index the sort's arrays as it cuts them");
         let draw_args = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("draw args"),
             size: 16,
@@ -230,21 +234,21 @@ impl<'a> GpuRasterizer<'a> {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         });
-        let (splat_parts, canonical_parts) = scene.split.entries(false, &splats, &scene.canonical);
+        let split = &scene.split;
+        let parts = [
+            split.bind(&SPLATS, &splats),
+            split.bind(&CANONICAL, &scene.canonical),
+            split.bind(&DEPTH_KEYS, &depth.keys),
+            split.bind(&ORDER, &depth.vals),
+        ]
+        .concat();
         let project_groups = scene
             .chunks
             .iter()
             .map(|chunk| {
-                let own = [
-                    (0, &params_buffer),
-                    (1, &chunk.particles),
-                    (2, &chunk.sh),
-                    (4, &depth.keys),
-                    (5, &depth.vals),
-                    (6, &draw_args),
-                    (29, &chunk.range),
-                ];
-                bind(ctx, &k.project, &[&own[..], &splat_parts, &canonical_parts].concat())
+                let own =
+                    [(0, &params_buffer), (1, &chunk.particles), (2, &chunk.sh), (6, &draw_args), (29, &chunk.range)];
+                bind(ctx, &k.project, &[&own[..], &parts].concat())
             })
             .collect();
         let pre_pass = |label| {
@@ -359,8 +363,7 @@ impl<'a> GpuRasterizer<'a> {
     /// Bytes of a camera's arrays on the device: the projected splats and the depth sort's keys,
     /// values and histogram (the tile pairs come and go with each tile pass).
     pub fn camera_bytes(&self) -> u64 {
-        let depth = [&self.depth.keys, &self.depth.vals, &self.depth.hist].map(wgpu::Buffer::size);
-        self.splats.iter().map(wgpu::Buffer::size).sum::<u64>() + depth.iter().sum::<u64>()
+        self.splats.iter().map(wgpu::Buffer::size).sum::<u64>() + self.depth.bytes()
     }
 
     /// The projected splats in scene order (culled ones have an empty rect).
@@ -375,9 +378,10 @@ impl<'a> GpuRasterizer<'a> {
     /// The parts of the projected splats and, with `canonical`, of the canonical transforms,
     /// as the raster kernels bind them (`drawn`: as the splat draw does).
     pub(super) fn split_parts(&self, drawn: bool, canonical: bool) -> Vec<(u32, &wgpu::Buffer)> {
-        let (mut parts, transforms) = self.scene.split.entries(drawn, &self.splats, &self.scene.canonical);
+        let split = &self.scene.split;
+        let mut parts = split.bind(if drawn { &DRAWN_SPLATS } else { &SPLATS }, &self.splats);
         if canonical {
-            parts.extend(transforms);
+            parts.extend(split.bind(&CANONICAL, &self.scene.canonical));
         }
         parts
     }
@@ -385,7 +389,7 @@ impl<'a> GpuRasterizer<'a> {
     /// The visible splats' scene indices in (depth, id) order.
     pub fn order(&self) -> Result<Vec<u32>, GpuError> {
         let visible = self.ctx.read_u32(&self.draw_args, 4)?[1];
-        self.ctx.read_u32(&self.depth.vals, visible as usize)
+        self.depth.read(self.ctx, &self.depth.vals, 0..u64::from(visible))
     }
 
     /// Render `frames.count` frames of `method` (one for sorted splatting) and fold them into
@@ -582,7 +586,6 @@ impl<'a> GpuRasterizer<'a> {
                 &[
                     wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
                     frame_entry(1, frame_params),
-                    wgpu::BindGroupEntry { binding: 3, resource: self.depth.vals.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 6, resource: self.sample_offsets.as_entire_binding() },
@@ -590,6 +593,7 @@ impl<'a> GpuRasterizer<'a> {
                     wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
                 ][..],
                 &buffer_entries(&self.split_parts(true, true)),
+                &buffer_entries(&self.scene.split.bind(&DRAWN_ORDER, &self.depth.vals)),
             ]
             .concat(),
         })
@@ -751,33 +755,6 @@ fn bind(ctx: &GpuContext, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wg
 /// Bind group entries of whole buffers.
 fn buffer_entries<'b>(buffers: &[(u32, &'b wgpu::Buffer)]) -> Vec<wgpu::BindGroupEntry<'b>> {
     buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect()
-}
-
-/// The buffers of `count` projected splats in the parts of `split`; a device that cannot
-/// allocate them is refused with [`GpuError::DeviceMemory`].
-fn splat_parts(ctx: &GpuContext, count: u32, split: crate::split::Split) -> Result<Vec<wgpu::Buffer>, GpuError> {
-    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let count = u64::from(count.max(1));
-    let stride = size_of::<GpuSplat>() as u64;
-    let buffers = split
-        .ranges(count)
-        .map(|range| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("splats"),
-                size: (range.end - range.start) * stride,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        })
-        .collect();
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::DeviceMemory {
-            buffer: "projected splat",
-            bytes: count * stride,
-            message: e.to_string(),
-        });
-    }
-    Ok(buffers)
 }
 
 fn frame_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
@@ -1018,12 +995,17 @@ mod tests {
         let split = RasterSplit {
             splats: Split { parts: 3, shift: 4 },
             canonical: Split { parts: 2, shift: 6 },
+            ranks: Split { parts: 2, shift: 8 },
+            pairs: Split { parts: 3, shift: 9 },
             sh_storage: splat_core::sh::ShStorage::F16,
         };
         let raster = split.raster_wgsl();
         validate("raster (split, f16 SH)", &raster);
         assert!(raster.contains("case 2u: { splats_2[j] = v; }"), "the setter writes every part");
         assert!(raster.contains("@binding(32) var<storage, read> canonical_1"), "canonical parts follow the splats'");
+        assert!(raster.contains("case 1u: { offsets_1[j] = v; }"), "the offsets are split as the sort cuts them");
+        assert!(raster.contains("case 2u: { v = pair_ranks_2[j]; }"), "the pairs are split as their sort cuts them");
+        assert!(split.splat_wgsl(false).contains("case 1u: { v = order_1[j]; }"), "the draw reads the split order");
         let entries = super::pipelines::splat_layout_entries(&split);
         check_layout("splat (split)", &split.splat_wgsl(false), Capabilities::empty(), &entries);
         check_layout("splat (split, plane)", &split.splat_wgsl(true), Capabilities::MULTISAMPLED_SHADING, &entries);

@@ -1,6 +1,7 @@
 //! The compiled kernels and render pipelines of the splatting path.
 
 use super::*;
+use crate::context::{pipeline_layout, shader_module};
 
 /// The compiled kernels and pipelines of the splatting path: those that read the projected
 /// splats and canonical transforms for each [`RasterSplit`] a scene needs (one,
@@ -15,12 +16,12 @@ pub struct RasterPipelines {
     pub(super) fold_msaa: wgpu::ComputePipeline,
     /// Colour target of sorted blending: RGBA32F where the adapter blends it, else RGBA16F.
     pub blend_format: wgpu::TextureFormat,
-    kernels: std::sync::Mutex<Vec<std::sync::Arc<SplatKernels>>>,
+    kernels: crate::split::PerSplit<RasterSplit, SplatKernels>,
 }
 
 /// The kernels and the splat draw compiled for one [`RasterSplit`].
 pub(crate) struct SplatKernels {
-    split: RasterSplit,
+    pub(super) split: RasterSplit,
     pub(super) project: wgpu::ComputePipeline,
     pub(super) tile_count: wgpu::ComputePipeline,
     pub(super) tile_emit: wgpu::ComputePipeline,
@@ -100,23 +101,6 @@ pub(super) fn fold_layout_entries(multisampled: bool) -> [wgpu::BindGroupLayoutE
     ]
 }
 
-/// A shader module of `source`.
-fn module(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModule {
-    device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    })
-}
-
-/// A pipeline layout of the one bind group `layout`.
-fn pipeline_layout(device: &wgpu::Device, label: &str, layout: &wgpu::BindGroupLayout) -> wgpu::PipelineLayout {
-    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
-    })
-}
-
 impl RasterPipelines {
     /// Compile every raster kernel (those of [`RasterSplit::WHOLE`] among them); a typed error
     /// when the device rejects one.
@@ -124,9 +108,9 @@ impl RasterPipelines {
         let device = &ctx.device;
         let sort = RadixSort::new(ctx)?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let fold = module(device, "fold.wgsl", FOLD_WGSL);
-        let fold_msaa = module(device, "fold.wgsl (msaa)", FOLD_MSAA_WGSL);
-        let mesh_prepass = module(device, "mesh_prepass.wgsl", MESH_PREPASS_WGSL);
+        let fold = shader_module(device, "fold.wgsl", FOLD_WGSL);
+        let fold_msaa = shader_module(device, "fold.wgsl (msaa)", FOLD_MSAA_WGSL);
+        let mesh_prepass = shader_module(device, "mesh_prepass.wgsl", MESH_PREPASS_WGSL);
         let fold_layout_of = |multisampled| {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("fold"),
@@ -147,7 +131,7 @@ impl RasterPipelines {
             fold_msaa_layout,
             blend_format: ctx.blend_format(),
             sort,
-            kernels: std::sync::Mutex::new(Vec::new()),
+            kernels: crate::split::PerSplit::new(),
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
@@ -167,13 +151,7 @@ impl RasterPipelines {
         ctx: &GpuContext,
         split: RasterSplit,
     ) -> Result<std::sync::Arc<SplatKernels>, GpuError> {
-        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(k) = kernels.iter().find(|k| k.split == split) {
-            return Ok(k.clone());
-        }
-        let k = std::sync::Arc::new(SplatKernels::new(ctx, split, self.blend_format)?);
-        kernels.push(k.clone());
-        Ok(k)
+        self.kernels.get(split, || SplatKernels::new(ctx, split, self.blend_format))
     }
 }
 
@@ -182,10 +160,10 @@ impl SplatKernels {
     fn new(ctx: &GpuContext, split: RasterSplit, blend_format: wgpu::TextureFormat) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let raster = module(device, "raster.wgsl", &split.raster_wgsl());
-        let splat_module = module(device, "splat.wgsl", &split.splat_wgsl(false));
+        let raster = shader_module(device, "raster.wgsl", &split.raster_wgsl());
+        let splat_module = shader_module(device, "splat.wgsl", &split.splat_wgsl(false));
         let plane_module =
-            ctx.sample_rate_shading.then(|| module(device, "splat.wgsl (plane)", &split.splat_wgsl(true)));
+            ctx.sample_rate_shading.then(|| shader_module(device, "splat.wgsl (plane)", &split.splat_wgsl(true)));
         let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat"),
             entries: &splat_layout_entries(&split),

@@ -171,28 +171,27 @@ impl RopPass {
             mapped_at_creation: false,
         });
         let shuffle = pipes.sort.buffers(ctx, n + 1)?;
-        let lists = TileLists::new(r, &shuffle.vals, &shuffle, pair_count)?;
+        let lists = TileLists::new(r, &shuffle, pair_count)?;
         let frame = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rop frame"),
             size: size_of::<FrameParams>() as u64,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let keys_group = bind(
-            ctx,
-            &r.k.shuffle_keys,
-            &[(0, &r.params_buffer), (4, &shuffle.keys), (5, &shuffle.vals), (19, &frame)],
-        );
-        let rop = r.rop_pipeline();
-        let parts = r.split_parts(false, true);
+        let split = &lists.k.split;
+        let shuffled = [split.bind(&DEPTH_KEYS, &shuffle.keys), split.bind(&ORDER, &shuffle.vals)].concat();
+        let keys_group =
+            bind(ctx, &r.k.shuffle_keys, &[&[(0, &r.params_buffer), (19, &frame)][..], &shuffled].concat());
+        let rop = r.rop_pipeline(&lists.k);
+        let parts =
+            [r.split_parts(false, true), split.bind(&ORDER, &shuffle.vals), split.bind(&PAIR_RANKS, &lists.pairs.vals)]
+                .concat();
         let rop_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("tile rop"),
             layout: &rop.get_bind_group_layout(0),
             entries: &[
                 &[
                     wgpu::BindGroupEntry { binding: 0, resource: r.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 5, resource: shuffle.vals.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 9, resource: lists.pairs.vals.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 10, resource: lists.ranges.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 13, resource: r.scene.materials.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 14, resource: r.scene.lights.as_entire_binding() },
@@ -244,7 +243,7 @@ impl RopPass {
             encoder.copy_buffer_to_buffer(&self.chunks, u64::from(c) * 16, &self.chunk, 0, 16);
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
-            pass.set_pipeline(r.rop_pipeline());
+            pass.set_pipeline(r.rop_pipeline(&self.lists.k));
             pass.set_bind_group(0, &self.rop_group, &[]);
             ctx.dispatch(&mut pass, tiles_x, tiles_y, 1);
         }
@@ -347,7 +346,7 @@ impl GpuRasterizer<'_> {
     }
 
     /// The raster-operations kernel of this rasterizer's fragment depth.
-    fn rop_pipeline(&self) -> &wgpu::ComputePipeline {
-        &self.k.tile_rop[usize::from(self.raster.fragment_depth == FragmentDepth::MaxDensityPlane)]
+    fn rop_pipeline<'k>(&self, k: &'k SplatKernels) -> &'k wgpu::ComputePipeline {
+        &k.tile_rop[usize::from(self.raster.fragment_depth == FragmentDepth::MaxDensityPlane)]
     }
 }

@@ -144,14 +144,34 @@ pub struct FrameParams {
 
 /// The projected splats as the raster kernels write and read them (`splat_at`, `splat_set`), part
 /// 0 at binding 3 ([`crate::split`]).
-const SPLATS: SplitArray =
+pub(super) const SPLATS: SplitArray =
     SplitArray::of::<GpuSplat>("projected splat", "splats", "splat_at", "Splat", 3).writable("splat_set");
 /// The same splats as the splat draw's stages read them, part 0 at binding 2.
-const DRAWN_SPLATS: SplitArray = SplitArray::of::<GpuSplat>("projected splat", "splats", "splat_at", "Splat", 2);
+pub(super) const DRAWN_SPLATS: SplitArray =
+    SplitArray::of::<GpuSplat>("projected splat", "splats", "splat_at", "Splat", 2);
 /// The rows of each particle's canonical transform (three a particle, `canonical_at`), part 0 at
 /// binding 15 in every module.
-const CANONICAL: SplitArray =
+pub(super) const CANONICAL: SplitArray =
     SplitArray::of::<[f32; 4]>("canonical transform", "canonical", "canonical_at", "vec4<f32>", 15);
+/// The depth sort's keys (depth bits) as the projection writes them, part 0 at binding 4; the
+/// shuffle of the raster operations writes its hashes there.
+pub(super) const DEPTH_KEYS: SplitArray =
+    SplitArray::of::<u32>("sort key", "depth_keys", "depth_key_at", "u32", 4).writable("depth_key_set");
+/// The particle of each rank after the sort (`order_at(r)`), part 0 at binding 5.
+pub(super) const ORDER: SplitArray =
+    SplitArray::of::<u32>("sort value", "order", "order_at", "u32", 5).writable("order_set");
+/// The same order as the splat draw's vertex stage reads it, part 0 at binding 3.
+pub(super) const DRAWN_ORDER: SplitArray = SplitArray::of::<u32>("sort value", "order", "order_at", "u32", 3);
+/// Each rank's tile pairs, then their exclusive scan (`offset_at(r)`): the sort's histogram, part
+/// 0 at binding 7.
+pub(super) const OFFSETS: SplitArray =
+    SplitArray::of::<u32>("sort histogram", "offsets", "offset_at", "u32", 7).writable("offset_set");
+/// The tile of each (tile, rank) pair, part 0 at binding 8.
+pub(super) const PAIR_TILES: SplitArray =
+    SplitArray::of::<u32>("tile pair", "pair_tiles", "pair_tile_at", "u32", 8).writable("pair_tile_set");
+/// The rank of each pair, part 0 at binding 9.
+pub(super) const PAIR_RANKS: SplitArray =
+    SplitArray::of::<u32>("tile pair", "pair_ranks", "pair_rank_at", "u32", 9).writable("pair_rank_set");
 /// The binding of a projection chunk's SH.
 const SH_BINDING: u32 = 2;
 /// The binding of the first part after the first of the split arrays, in every splatting module.
@@ -163,24 +183,37 @@ pub(super) const OWN_BINDINGS: u32 = 16;
 /// Buffers and their bindings.
 pub(super) type Bindings<'b> = Vec<(u32, &'b wgpu::Buffer)>;
 
-/// How a scene's projected splats (64 bytes each) and canonical transforms (48) are split over
-/// bindings, and how its SH are stored: the splatting kernels and the splat draw are compiled
-/// for it ([`RasterPipelines`] keeps one set per split it has met). The particles and SH need no
-/// split: the projection reads them in chunks of one binding each ([`RasterScene::chunks`]).
+/// How a scene's projected splats (64 bytes each), canonical transforms (48), sort arrays (4 a
+/// particle each: depth keys, order, offsets) and the tile pairs of a tile pass (4 bytes each
+/// for the tile and the rank) are split over bindings, and how its SH are stored: the splatting
+/// kernels and the splat draw are compiled for it ([`RasterPipelines`] keeps one set per split
+/// it has met). The particles and SH need no split: the projection reads them in chunks of one
+/// binding each ([`RasterScene::chunks`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct RasterSplit {
     /// The projected splats, in scene order.
     pub splats: Split,
     /// The canonical transforms' rows, in scene order.
     pub canonical: Split,
+    /// The depth sort's keys and values and the offsets of the tile pairs: the arrays of the
+    /// sort of `count + 1` pairs ([`crate::sort::split_of`]).
+    pub ranks: Split,
+    /// The tile pairs: the arrays of their sort, set for each tile pass by the pairs it makes
+    /// (`RasterSplit::with_pairs`).
+    pub pairs: Split,
     /// The SH's precision ([`RenderSettings::sh_storage`]).
     pub sh_storage: ShStorage,
 }
 
 impl RasterSplit {
-    /// Both arrays in one binding.
-    pub const WHOLE: RasterSplit =
-        RasterSplit { splats: Split::WHOLE, canonical: Split::WHOLE, sh_storage: ShStorage::F32 };
+    /// Every array in one binding.
+    pub const WHOLE: RasterSplit = RasterSplit {
+        splats: Split::WHOLE,
+        canonical: Split::WHOLE,
+        ranks: Split::WHOLE,
+        pairs: Split::WHOLE,
+        sh_storage: ShStorage::F32,
+    };
 
     /// The split of a scene of `count` particles, SH stored as `sh_storage`, on `ctx`, refused
     /// when it needs more bindings than the adapter has ([`GpuError::SceneOverBindings`]) with how
@@ -189,6 +222,8 @@ impl RasterSplit {
         let split = |n: u64| RasterSplit {
             splats: Split::of(n.max(1), SPLATS.stride, ctx.max_binding),
             canonical: Split::of(3 * n.max(1), CANONICAL.stride, ctx.max_binding),
+            ranks: crate::sort::split_of(n.saturating_add(1).min(u64::from(u32::MAX)) as u32, ctx.max_index_binding),
+            pairs: Split::WHOLE,
             sh_storage,
         };
         let n = count as u64;
@@ -203,23 +238,56 @@ impl RasterSplit {
             return Ok(split(n));
         }
         Err(GpuError::SceneOverBindings {
-            arrays: "projected splats and canonical transforms",
+            arrays: "projected splats, canonical transforms and depth sort",
+            kernel: "the splatting kernels",
             needed: split(n).layout(false).extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_binding,
-            bytes: n * (SPLATS.stride + 3 * CANONICAL.stride),
+            bytes: n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4),
             fits: crate::split::most_that_fit(n, fits),
+            fits_what: "particles like these",
+        })
+    }
+
+    /// The split of a tile pass making `pairs` tile pairs: the arrays of their sort
+    /// ([`crate::sort::split_of`]), refused when the kernels would need more bindings than the
+    /// adapter has.
+    pub(super) fn with_pairs(self, ctx: &GpuContext, pairs: u32) -> Result<Self, GpuError> {
+        let with = |m: u64| RasterSplit { pairs: crate::sort::split_of(m as u32, ctx.max_index_binding), ..self };
+        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
+        let fits = |m: u64| with(m).layout(false).extra_bindings() <= available;
+        if fits(u64::from(pairs)) {
+            return Ok(with(u64::from(pairs)));
+        }
+        Err(GpuError::SceneOverBindings {
+            arrays: "tile pairs",
+            kernel: "the tile pass",
+            needed: with(u64::from(pairs)).layout(false).extra_bindings() + OWN_BINDINGS,
+            available: ctx.storage_buffers,
+            limit: ctx.max_index_binding,
+            bytes: 8 * u64::from(pairs),
+            fits: crate::split::most_that_fit(u64::from(pairs), fits),
+            fits_what: "tile pairs (a smaller image or fewer splats make fewer)",
         })
     }
 
     /// The split arrays of the raster kernels, with a chunk's SH whole (`drawn`: of the splat
     /// draw, which reads no SH).
     pub(super) fn layout(&self, drawn: bool) -> SplitLayout {
-        let splats = if drawn { DRAWN_SPLATS } else { SPLATS };
-        let mut arrays = vec![(splats, self.splats), (CANONICAL, self.canonical)];
-        if !drawn {
-            arrays.push((crate::layout::sh_array(self.sh_storage, SH_BINDING).0, Split::WHOLE));
-        }
+        let arrays = if drawn {
+            vec![(DRAWN_SPLATS, self.splats), (CANONICAL, self.canonical), (DRAWN_ORDER, self.ranks)]
+        } else {
+            vec![
+                (SPLATS, self.splats),
+                (CANONICAL, self.canonical),
+                (DEPTH_KEYS, self.ranks),
+                (ORDER, self.ranks),
+                (OFFSETS, self.ranks),
+                (PAIR_TILES, self.pairs),
+                (PAIR_RANKS, self.pairs),
+                (crate::layout::sh_array(self.sh_storage, SH_BINDING).0, Split::WHOLE),
+            ]
+        };
         SplitLayout { arrays, first_extra: FIRST_EXTRA }
     }
 
@@ -236,37 +304,22 @@ impl RasterSplit {
     }
 
     /// The splat draw's layout entries of the parts after the first: the splats' in both
-    /// stages, the canonical transforms' in the fragment stage.
+    /// stages, the canonical transforms' in the fragment stage, the order's in the vertex stage.
     pub(super) fn draw_extra_entries(&self) -> Vec<wgpu::BindGroupLayoutEntry> {
         let layout = self.layout(true);
+        let stages = [wgpu::ShaderStages::VERTEX_FRAGMENT, wgpu::ShaderStages::FRAGMENT, wgpu::ShaderStages::VERTEX];
         let mut entries = layout.extra_entries(wgpu::ShaderStages::FRAGMENT);
         for (entry, (a, _, _)) in entries.iter_mut().zip(layout.bindings().into_iter().filter(|&(_, p, _)| p > 0)) {
-            if a == 0 {
-                entry.visibility = wgpu::ShaderStages::VERTEX_FRAGMENT;
-            }
+            entry.visibility = stages[a];
         }
         entries
     }
 
-    /// The bindings of the parts of `splats` and of `canonical` in a raster kernel (`drawn`: in
-    /// the splat draw).
-    pub(super) fn entries<'b>(
-        &self,
-        drawn: bool,
-        splats: &'b [wgpu::Buffer],
-        canonical: &'b [wgpu::Buffer],
-    ) -> (Bindings<'b>, Bindings<'b>) {
-        let mut parts = (Vec::new(), Vec::new());
-        for (a, p, binding) in self.layout(drawn).bindings() {
-            let p = p as usize;
-            match a {
-                0 => parts.0.push((binding, &splats[p])),
-                1 => parts.1.push((binding, &canonical[p])),
-                // The SH bind per projection chunk.
-                _ => {}
-            }
-        }
-        parts
+    /// The bindings of `array`'s parts, held in `parts`, in a raster kernel or the splat draw
+    /// (whichever has the array).
+    pub(super) fn bind<'b>(&self, array: &SplitArray, parts: &'b [wgpu::Buffer]) -> Bindings<'b> {
+        let raster = self.layout(false).bind(array, parts);
+        if raster.is_empty() { self.layout(true).bind(array, parts) } else { raster }
     }
 }
 
