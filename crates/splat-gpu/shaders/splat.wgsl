@@ -38,14 +38,22 @@ struct VertexOut {
     @location(0) @interpolate(flat) splat: u32,
 }
 
-// Instance i draws the splat of rank count − 1 − i (over: back to front), of rank i (under:
-// front to back), or particle i (stochastic: no sort, any order).
+// Whether StochasticSplats draws the visible splats front to back (rank i of the depth order,
+// an indirect draw of the visible ones alone, whose depth test then rejects what lies behind
+// before it is shaded): at centre depth, where two splats tie only at equal centre depths and
+// the order (depth, id) breaks the tie as the CPU twin does, by the lower id. 0 for the
+// max-density-plane depth, whose per-sample depths can tie between splats of different centre
+// depths: every particle in scene order, the CPU twin's rule for those ties.
+override STOCHASTIC_IN_DEPTH_ORDER: bool = true;
+
+// Instance i draws the splat of rank count − 1 − i (over: back to front), of rank i (under, and
+// stochastic in depth order: front to back), or particle i (stochastic in scene order).
 @vertex
 fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     var index = instance;
     if (params.mode == MODE_OVER) {
         index = order_at(draw_args[1] - 1u - instance);
-    } else if (params.mode == MODE_UNDER) {
+    } else if (params.mode == MODE_UNDER || (params.mode == MODE_STOCHASTIC && STOCHASTIC_IN_DEPTH_ORDER)) {
         index = order_at(instance);
     }
     let rect = vec4<f32>(splat_at(index).rect);

@@ -673,8 +673,12 @@ impl<'a> GpuRasterizer<'a> {
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, group, &[frame_offset]);
         self.ctx.count_draw();
+        // The visible splats in depth order (an indirect draw of the projection's count), but
+        // StochasticSplats at the max-density plane: every particle in scene order, whose culled
+        // ones draw nothing (splat.wgsl's `STOCHASTIC_IN_DEPTH_ORDER` says why).
         match draw {
             Draw::Over | Draw::Under => pass.draw_indirect(&self.draw_args, 0),
+            Draw::Stochastic if !plane => pass.draw_indirect(&self.draw_args, 0),
             Draw::Stochastic | Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => {
                 pass.draw(0..6, 0..self.scene.count);
             }
