@@ -555,9 +555,10 @@ fn bench_gpu() -> Result<()> {
 /// scene. For each N, a synthetic SH degree 3 shell of N splats ([`write_shell`]) is read by
 /// `splat info` twice (the rate of the first read and of the second, warm one; the bytes held)
 /// and by `splat bench --backend cpu` (load, build, frame
-/// times of opaque, stochastic and exact at 320 × 240, the process's peak memory); the table
-/// goes to stdout and target/scaling/table.md. The splats shrink as 1/√N, so that a ray meets
-/// as many at every N: the per-ray cost should then grow as the BVH's depth, log N.
+/// times of opaque, stochastic and exact at 320 × 240, the process's peak memory); a second
+/// table gives an exact ray's work counters and the time a thread spends per byte it fetches.
+/// Both go to stdout and target/scaling/table.md. The splats shrink as 1/√N, so that a ray
+/// meets as many at every N: the per-ray work should then grow as the BVH's depth, log N.
 fn scaling(arg: &str) -> Result<()> {
     let sizes: Vec<u64> = match arg.strip_prefix("--scaling=") {
         Some(list) => list
@@ -584,9 +585,21 @@ fn scaling(arg: &str) -> Result<()> {
         number.parse().with_context(|| format!("no number after '{marker}'"))
     };
     let frame = |table: &str, method: &str| after(table, &format!("| {method} |"));
+    // Column `k` (0: the method) of `method`'s row of `splat bench`'s table.
+    let column = |table: &str, method: &str, k: usize| -> Result<f64> {
+        let row = table.lines().find(|l| l.starts_with(&format!("| {method} |"))).context("no row")?;
+        let cell = row.split('|').nth(k + 1).context("no such column")?;
+        cell.trim().trim_end_matches('×').parse().with_context(|| format!("'{cell}' in {row}"))
+    };
     let mut table = String::from(
         "| splats | file (MB) | first read (GB/s) | warm read (s) | warm read (GB/s) | held (bytes a splat) | BVH build (s) | build (µs a splat) | opaque (ms) | stochastic (ms) | exact (ms) | peak (GB) | peak (bytes a splat) |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    // What an exact ray does and what it costs per byte it fetches: the work should grow as
+    // log N; the time grows past it where the fetches leave the caches.
+    let mut work = String::from(
+        "| splats | exact (ms) | nodes/ray | leaves/ray | tests/ray | bytes/ray | ns per byte fetched |\n\
+         |---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for &n in &sizes {
         let path = dir.join(format!("shell-{n}.ply"));
@@ -624,9 +637,18 @@ fn scaling(arg: &str) -> Result<()> {
         );
         print!("{row}");
         table.push_str(&row);
+        let [ms, nodes, leaves, tests, bytes] = [1, 6, 7, 8, 9].map(|k| column(&bench, "exact", k));
+        let (ms, bytes) = (ms?, bytes?);
+        // 320 × 240 rays a frame: the time a thread spends per byte.
+        let threads = after(&bench, "spp, ")?;
+        let ns_per_byte = ms * 1e6 * threads / (320.0 * 240.0 * bytes);
+        work.push_str(&format!(
+            "| {n} | {ms:.1} | {:.1} | {:.1} | {:.1} | {bytes:.0} | {ns_per_byte:.2} |\n",
+            nodes?, leaves?, tests?
+        ));
     }
-    println!("\n{table}");
-    std::fs::write(dir.join("table.md"), &table)?;
+    println!("\n{table}\n{work}");
+    std::fs::write(dir.join("table.md"), format!("{table}\n{work}"))?;
     Ok(())
 }
 
