@@ -430,8 +430,9 @@ pub struct SceneArgs {
     /// Per-particle normal.
     #[arg(help_heading = "Scene and shading", long, value_enum, default_value = "plane")]
     pub normals: NormalArg,
-    /// How the SH coefficients are stored (vk_gaussian_splatting's SH format): f16 halves the
-    /// GPU's largest scene array and rounds the colours; the CPU reads the same rounded values.
+    /// How the SH coefficients are stored (vk_gaussian_splatting's SH formats): f16 halves the
+    /// GPU's largest scene array, u8 quarters it, each rounding the colours; the CPU reads the
+    /// same stored values.
     #[arg(help_heading = "Scene and shading", long, value_parser = splat_view::sh_storage_parser(), default_value = "f32")]
     pub sh_storage: ShStorage,
     /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8 [default: the

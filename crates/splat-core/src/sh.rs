@@ -13,10 +13,11 @@ pub const SH_C2: [f32; 5] = [1.092_548_4, -1.092_548_4, 0.315_391_57, -1.092_548
 pub const SH_C3: [f32; 7] =
     [-0.590_043_6, 2.890_611_4, -0.457_045_8, 0.373_176_34, -0.457_045_8, 1.445_305_7, -0.590_043_6];
 
-/// How a renderer stores the SH coefficients: f32 as read (the default), or IEEE half
-/// precision, rounded to nearest even (vk_gaussian_splatting's fp16 SH format): half the memory
-/// of the GPU's largest scene array, and a colour error the README measures. The CPU reads the
-/// same rounded values ([`eval_stored`]), so both backends render the same image.
+/// How a renderer stores the SH coefficients: f32 as read (the default), IEEE half precision
+/// rounded to nearest even (vk_gaussian_splatting's fp16 SH format), or 8 bits a channel
+/// (vk_gaussian_splatting's uint8 formats): a half or a quarter of the memory of the GPU's
+/// largest scene array, and a colour error the README measures. The CPU reads the same stored
+/// values ([`eval_stored`]), so both backends render the same image.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum ShStorage {
     /// 32-bit floats.
@@ -24,17 +25,20 @@ pub enum ShStorage {
     F32,
     /// 16-bit floats.
     F16,
+    /// 8-bit fixed point ([`u8_quantize`]).
+    U8,
 }
 
 impl ShStorage {
     /// Every storage, by name.
-    pub const ALL: [ShStorage; 2] = [ShStorage::F32, ShStorage::F16];
+    pub const ALL: [ShStorage; 3] = [ShStorage::F32, ShStorage::F16, ShStorage::U8];
 
-    /// Its name on the command line and in world files.
+    /// Its name on the command line and from Python.
     pub fn name(self) -> &'static str {
         match self {
             ShStorage::F32 => "f32",
             ShStorage::F16 => "f16",
+            ShStorage::U8 => "u8",
         }
     }
 
@@ -43,6 +47,9 @@ impl ShStorage {
         match self {
             ShStorage::F32 => "32-bit floats, as read",
             ShStorage::F16 => "16-bit floats: half the GPU's SH memory, the colours rounded",
+            ShStorage::U8 => {
+                "8 bits a channel (vk_gaussian_splatting's uint8): a quarter of the GPU's SH memory, the base colour clamped to [0, 1] and higher coefficients to [-1, 1]"
+            }
         }
     }
 
@@ -51,25 +58,48 @@ impl ShStorage {
         Self::ALL.into_iter().find(|s| s.name() == name)
     }
 
-    /// The coefficient as stored and read back: `c` itself in f32, each channel rounded to the
-    /// nearest half (ties to even; beyond ±65504, ±∞) in f16.
-    pub fn load(self, c: Vec3) -> Vec3 {
+    /// Coefficient `k` (0 the DC term) as stored and read back: `c` itself in f32, each channel
+    /// rounded to the nearest half (ties to even; beyond ±65504, ±∞) in f16, quantized to 8 bits
+    /// and decoded in u8 ([`u8_quantize`], [`u8_decode`]).
+    pub fn load(self, c: Vec3, k: usize) -> Vec3 {
         match self {
             ShStorage::F32 => c,
             ShStorage::F16 => c.to_array().map(|x| half::f16::from_f32(x).to_f32()).into(),
+            ShStorage::U8 => u8_decode(u8_quantize(c, k), k),
         }
     }
+}
+
+/// The 8-bit channels of coefficient `k` as vk_gaussian_splatting's uint8 formats store them
+/// (`toUint8` in its splat_set_vk.cpp: round(clamp(255 (v − lo) / (hi − lo), 0, 255))): the DC
+/// term as the base colour 0.5 + C₀ c in [0, 1] (its RGBA buffer), the higher coefficients in
+/// [−1, 1] (its SH buffer).
+pub fn u8_quantize(c: Vec3, k: usize) -> [u8; 3] {
+    let normalized = if k == 0 { Vec3::splat(0.5) + SH_C0 * c } else { 0.5 * (c + Vec3::ONE) };
+    normalized.to_array().map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8)
+}
+
+/// The scale of an 8-bit channel q: the coefficient is (2q − 255) × this, one rounding, so the
+/// CPU and the GPU decode it to the same float (vk divides by 255 and subtracts, which a GPU may
+/// fuse): 1 / (510 C₀) for the DC term, 1 / 255 for the others.
+pub fn u8_scale(k: usize) -> f32 {
+    if k == 0 { (1.0 / (510.0 * f64::from(SH_C0))) as f32 } else { (1.0f64 / 255.0) as f32 }
+}
+
+/// Coefficient `k` of its 8-bit channels `q` ([`u8_quantize`]): (2q − 255) [`u8_scale`]`(k)`.
+pub fn u8_decode(q: [u8; 3], k: usize) -> Vec3 {
+    Vec3::from(q.map(|q| (2.0 * f32::from(q) - 255.0) * u8_scale(k)))
 }
 
 /// [`eval`] of the coefficients as `storage` holds them ([`ShStorage::load`]).
 pub fn eval_stored(sh: &[Vec3], degree: u8, dir: Vec3, storage: ShStorage) -> Vec3 {
     match storage {
         ShStorage::F32 => eval(sh, degree, dir),
-        ShStorage::F16 => {
+        ShStorage::F16 | ShStorage::U8 => {
             let mut stored = [Vec3::ZERO; 16];
             let n = sh.len().min(16);
-            for (s, &c) in stored.iter_mut().zip(&sh[..n]) {
-                *s = storage.load(c);
+            for (k, (s, &c)) in stored.iter_mut().zip(&sh[..n]).enumerate() {
+                *s = storage.load(c, k);
             }
             eval(&stored[..n], degree, dir)
         }
@@ -228,20 +258,47 @@ mod tests {
     fn f16_storage_rounds_each_coefficient_to_the_nearest_half() {
         // 1 + 2⁻¹¹ is halfway between 1 and 1 + 2⁻¹⁰: to even (1); 1 + 3·2⁻¹¹ up to 1 + 2⁻⁹.
         let c = Vec3::new(1.0 + 2f32.powi(-11), 1.0 + 3.0 * 2f32.powi(-11), -0.1);
-        let stored = ShStorage::F16.load(c);
+        let stored = ShStorage::F16.load(c, 1);
         assert_eq!((stored.x, stored.y), (1.0, 1.0 + 2f32.powi(-9)));
         // 0.1 in binary16: 1638 / 2¹⁴ (0.0999755…), the nearest of its neighbours.
         assert_eq!(stored.z, -1638.0 / 16384.0);
-        assert_eq!(ShStorage::F32.load(c), c);
+        assert_eq!(ShStorage::F32.load(c, 1), c);
         let sh: Vec<Vec3> = (0..16).map(|k| Vec3::new(0.3, -0.2, 0.1) * (k as f32 + 1.0).recip()).collect();
         let dir = Vec3::new(0.48, -0.6, 0.64);
         assert_eq!(eval_stored(&sh, 3, dir, ShStorage::F32), eval(&sh, 3, dir));
-        let rounded: Vec<Vec3> = sh.iter().map(|&c| ShStorage::F16.load(c)).collect();
+        let rounded: Vec<Vec3> = sh.iter().enumerate().map(|(k, &c)| ShStorage::F16.load(c, k)).collect();
         let half = eval_stored(&sh, 3, dir, ShStorage::F16);
         assert_eq!(half, eval(&rounded, 3, dir));
         let error = (half - eval(&sh, 3, dir)).abs().max_element();
         assert!(error > 0.0 && error < 1e-3, "the f16 colour differs by {error}");
         assert_eq!(ShStorage::parse("f16"), Some(ShStorage::F16));
+    }
+
+    /// vk_gaussian_splatting's uint8 rule, by hand: a higher coefficient v is round(127.5 (v + 1))
+    /// clamped to 0..=255, decoded as (2q − 255) / 255; the DC term goes through the base colour
+    /// 0.5 + C₀ c, so 0 stores as 128 and a colour of 1 as 255, decoded to 0.5 / C₀.
+    #[test]
+    fn u8_storage_quantizes_as_vk_and_decodes_in_one_rounding() {
+        let rest = |v: f32| u8_quantize(Vec3::new(v, -v, 2.0 * v), 1);
+        assert_eq!(rest(0.0), [128, 128, 128]);
+        assert_eq!(rest(1.0), [255, 0, 255]);
+        assert_eq!(rest(0.6), [204, 51, 255]); // 203.99…, 51.0…, clamped
+        assert_eq!(u8_decode([255, 0, 128], 1), Vec3::new(1.0, -1.0, f32::from_bits(0x3b80_8081)));
+        assert_eq!(u8_scale(1).to_bits(), 0x3b80_8081, "1/255 rounded once");
+        assert_eq!(u8_quantize(Vec3::ZERO, 0), [128; 3]);
+        let white = Vec3::splat(0.5 / SH_C0);
+        assert_eq!(u8_quantize(white, 0), [255; 3]);
+        assert_eq!(u8_quantize(-white, 0), [0; 3]);
+        let stored = ShStorage::U8.load(white, 0);
+        assert!((stored - white).abs().max_element() < 1e-6, "{stored}");
+        let sh: Vec<Vec3> = (0..16).map(|k| Vec3::new(0.3, -0.2, 0.1) * (k as f32 + 1.0).recip()).collect();
+        let dir = Vec3::new(0.48, -0.6, 0.64);
+        let loaded: Vec<Vec3> = sh.iter().enumerate().map(|(k, &c)| ShStorage::U8.load(c, k)).collect();
+        let byte = eval_stored(&sh, 3, dir, ShStorage::U8);
+        assert_eq!(byte, eval(&loaded, 3, dir));
+        let error = (byte - eval(&sh, 3, dir)).abs().max_element();
+        assert!(error > 0.0 && error < 0.02, "the u8 colour differs by {error}");
+        assert_eq!(ShStorage::parse("u8"), Some(ShStorage::U8));
     }
 
     #[test]

@@ -611,28 +611,54 @@ pub fn sh(scene: &Scene, storage: ShStorage) -> Vec<u32> {
     let words: Vec<u32> = match storage {
         ShStorage::F32 => coefficients.flat_map(|c| [c.x, c.y, c.z, 0.0].map(f32::to_bits)).collect(),
         ShStorage::F16 => coefficients.flat_map(|c| [half(c.x) | half(c.y) << 16, half(c.z)]).collect(),
+        // The three channels, then 1 for the DC term (the decode's scale): one word.
+        ShStorage::U8 => scene
+            .particles
+            .iter()
+            .flat_map(|p| (0..per).map(move |k| (splat_core::sh::u8_quantize(p.sh[k], k), k)))
+            .map(|([r, g, b], k)| u32::from_le_bytes([r, g, b, u8::from(k == 0)]))
+            .collect(),
     };
     if words.is_empty() { vec![0; sh_words(storage)] } else { words }
 }
 
-/// Words (u32) of one SH coefficient as `storage` holds it: four in f32, two in f16.
+/// Words (u32) of one SH coefficient as `storage` holds it: four in f32, two in f16, one in u8.
 pub fn sh_words(storage: ShStorage) -> usize {
     match storage {
         ShStorage::F32 => 4,
         ShStorage::F16 => 2,
+        ShStorage::U8 => 1,
     }
 }
 
 /// The SH array of a module as `storage` holds it, part 0 at `binding`, and the WGSL that reads
-/// coefficient i of it as RGB + pad, `sh_at(i)`: the array's own accessor in f32; in f16 a
-/// decode of the words its accessor `sh_half_at` reads.
+/// coefficient i of it as RGB + pad, `sh_at(i)`: the array's own accessor in f32; in f16 and u8
+/// a decode of the words its accessor (`sh_half_at`, `sh_byte_at`) reads.
 pub(crate) fn sh_array(storage: ShStorage, binding: u32) -> (crate::split::SplitArray, &'static str) {
     use crate::split::SplitArray;
     match storage {
         ShStorage::F32 => (SplitArray::of::<[f32; 4]>("SH", "sh", "sh_at", "vec4<f32>", binding), ""),
         ShStorage::F16 => (SplitArray::of::<[u32; 2]>("SH", "sh", "sh_half_at", "vec2<u32>", binding), SH_HALF_DECODE),
+        ShStorage::U8 => (SplitArray::of::<u32>("SH", "sh", "sh_byte_at", "u32", binding), &SH_BYTE_DECODE),
     }
 }
+
+/// `sh_at` of the u8 SH ([`ShStorage::U8`]): three channels q and a DC flag a word, decoded as
+/// `splat_core::sh::u8_decode` does, (2q − 255) times the scale `u8_scale` (its f32 bits
+/// written here), one rounding, so the GPU reads the CPU's floats.
+static SH_BYTE_DECODE: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+    let [dc, rest] = [0, 1].map(|k| splat_core::sh::u8_scale(k).to_bits());
+    format!(
+        "
+fn sh_at(i: u32) -> vec4<f32> {{
+    let w = sh_byte_at(i);
+    let q = vec3<f32>(f32(w & 0xffu), f32((w >> 8u) & 0xffu), f32((w >> 16u) & 0xffu));
+    let scale = select(bitcast<f32>({rest:#x}u), bitcast<f32>({dc:#x}u), (w >> 24u) != 0u);
+    return vec4<f32>((2.0 * q - 255.0) * scale, 0.0);
+}}
+"
+    )
+});
 
 /// `sh_at` of the f16 SH ([`ShStorage::F16`]): RGB + pad, two halves a word, the lower first,
 /// decoded exactly (WGSL's `unpack2x16float` written out: naga wants a capability for it,

@@ -376,39 +376,42 @@ fn split_scenes_read_every_element_of_the_whole_ones() {
     }
 }
 
-/// With f16 SH storage (`RenderSettings::sh_storage`, half the SH memory) the kernel reads every
-/// coefficient as the CPU does, `ShStorage::F16.load` of it, bit for bit, whole and split over 4
-/// bindings (27,000 coefficients of 8 bytes at 64 KiB), and the particles and nodes as with f32:
-/// so a render from f16 storage is the CPU's render at the same setting, as the f32 kernel's is
-/// at f32. A decode that swapped two channels or dropped a half fails.
+/// With f16 or u8 SH storage (`RenderSettings::sh_storage`, a half or a quarter of the SH
+/// memory) the kernel reads every coefficient as the CPU does, `ShStorage::load` of it, bit for
+/// bit, whole and split over bindings (27,000 coefficients of 8 or 4 bytes at 64 KiB: 4 or 2
+/// parts), and the particles and nodes as with f32: so a render from compact storage is the
+/// CPU's render at the same setting, as the f32 kernel's is at f32. A decode that swapped two
+/// channels, dropped a half or took the DC term's scale for another's fails.
 #[test]
-fn f16_sh_reads_the_cpus_rounded_coefficients() {
+fn compact_sh_reads_the_cpus_rounded_coefficients() {
     let Some(ctx) = context() else { return };
     let (mut scene, _) = fixture("cloud", 8, 8);
     scene.sh_degree = 2;
     let f32_trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-    let f16_settings = RenderSettings { sh_storage: ShStorage::F16, ..RenderSettings::default() };
-    let f16_trace = TraceScene::new(&scene, f16_settings).unwrap();
     let whole = tracer(ctx, &f32_trace).arrays_as_read().unwrap();
-    let expected: Vec<[u32; 4]> = scene
-        .particles
-        .iter()
-        .flat_map(|p| (0..9).map(move |k| ShStorage::F16.load(p.sh[k])))
-        .map(|c| [c.x.to_bits(), c.y.to_bits(), c.z.to_bits(), 0])
-        .collect();
-    assert!(expected.iter().zip(&whole[2]).any(|(a, b)| a != b), "f16 rounds some coefficient of the scene");
     let small = GpuContext::new().unwrap().with_binding_limit(64 * 1024);
     let pipeline = splat_gpu::TracePipeline::new(&small).unwrap();
-    for (ctx, pipeline) in [(ctx, trace_pipeline(ctx)), (&small, &pipeline)] {
-        let gpu = GpuTracer::new(ctx, pipeline, &f16_trace).unwrap();
-        let read = gpu.arrays_as_read().unwrap();
-        assert_eq!(read[..2], whole[..2], "particles and nodes as with f32 SH");
-        let first = expected.iter().zip(&read[2]).position(|(a, b)| a != b);
-        assert!(first.is_none() && read[2].len() == expected.len(), "{:?}: SH row {first:?} differs", gpu.split());
-        assert_eq!(gpu.split().sh_storage, ShStorage::F16);
+    for (storage, sh_parts) in [(ShStorage::F16, 4), (ShStorage::U8, 2)] {
+        let settings = RenderSettings { sh_storage: storage, ..RenderSettings::default() };
+        let trace = TraceScene::new(&scene, settings).unwrap();
+        let expected: Vec<[u32; 4]> = scene
+            .particles
+            .iter()
+            .flat_map(|p| (0..9).map(move |k| storage.load(p.sh[k], k)))
+            .map(|c| [c.x.to_bits(), c.y.to_bits(), c.z.to_bits(), 0])
+            .collect();
+        assert!(expected.iter().zip(&whole[2]).any(|(a, b)| a != b), "{storage:?} rounds some coefficient");
+        for (ctx, pipeline) in [(ctx, trace_pipeline(ctx)), (&small, &pipeline)] {
+            let gpu = GpuTracer::new(ctx, pipeline, &trace).unwrap();
+            let read = gpu.arrays_as_read().unwrap();
+            assert_eq!(read[..2], whole[..2], "particles and nodes as with f32 SH");
+            let first = expected.iter().zip(&read[2]).position(|(a, b)| a != b);
+            assert!(first.is_none() && read[2].len() == expected.len(), "{:?}: SH row {first:?} differs", gpu.split());
+            assert_eq!(gpu.split().sh_storage, storage);
+        }
+        let split = GpuTracer::new(&small, &pipeline, &trace).unwrap().split();
+        assert_eq!((split.particles.parts, split.sh.parts), (3, sh_parts), "{split:?}");
     }
-    let split = GpuTracer::new(&small, &pipeline, &f16_trace).unwrap().split();
-    assert_eq!((split.particles.parts, split.sh.parts), (3, 4), "{split:?}");
 }
 
 /// A scene whose split needs more bindings than the adapter has is refused (before its BVH is

@@ -503,43 +503,45 @@ fn split_scenes_render_the_whole_scenes_frames() {
     }
 }
 
-/// Splatting from f16 SH storage (`RenderSettings::sh_storage`) projects the colours of the
-/// scene with every coefficient rounded to f16 and stored in f32, bit for bit (the projection's
-/// `sh_at` decodes the halves exactly), in one chunk and in 12: sorted and StochasticSplats;
-/// and the rounding shows (the f32 image differs).
+/// Splatting from f16 or u8 SH storage (`RenderSettings::sh_storage`) projects the colours of
+/// the scene with every coefficient as stored and read back (`ShStorage::load`) and held in
+/// f32, bit for bit (the projection's `sh_at` decodes them exactly), in one chunk and in 12:
+/// sorted and StochasticSplats; and the rounding shows (the f32 image differs).
 #[test]
-fn f16_sh_splats_the_scene_rounded_to_f16() {
+fn compact_sh_splats_the_scene_as_stored() {
     use splat_core::sh::ShStorage;
     let Some(ctx) = context() else { return };
     let c = case("cloud", 48, 36);
-    let mut rounded = c.scene.clone();
-    for p in &mut rounded.particles {
-        p.sh = p.sh.to_array().map(|k| ShStorage::F16.load(k)).into();
-    }
-    let f16 = RenderSettings { sh_storage: ShStorage::F16, ..RenderSettings::default() };
     let small = GpuContext::new().unwrap().with_binding_limit(64 * 1024);
     let small_pipes = RasterPipelines::new(&small).unwrap();
-    let reference = RasterScene::new(ctx, &rounded, &RenderSettings::default()).unwrap();
     let plain = RasterScene::new(ctx, &c.scene, &RenderSettings::default()).unwrap();
     let frames = Frames { count: 2, seed: 5, ..Frames::default() };
     let render = |ctx: &GpuContext, pipes: &RasterPipelines, scene: &RasterScene, method: &RasterMethod| {
         let r = GpuRasterizer::new(ctx, pipes, scene, &c.camera, &RasterSettings::default()).unwrap();
         r.render(method, &frames).unwrap().0.mean.data().to_vec()
     };
-    for method in [RasterMethod::Sorted { blend: Blend::Over }, RasterMethod::StochasticSplat] {
-        let want = render(ctx, pipelines(ctx), &reference, &method);
-        assert!(want != render(ctx, pipelines(ctx), &plain, &method), "{method:?}: f16 rounding changes nothing");
-        for (ctx, pipes) in [(ctx, pipelines(ctx)), (&small, &small_pipes)] {
-            let half = RasterScene::new(ctx, &c.scene, &f16).unwrap();
-            assert_eq!(half.split().sh_storage, ShStorage::F16);
-            let got = render(ctx, pipes, &half, &method);
-            let differ = got.iter().zip(&want).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
-            assert_eq!(
-                differ,
-                0,
-                "{method:?} in {} chunks: values that differ from the rounded scene's",
-                half.chunks()
-            );
+    for storage in [ShStorage::F16, ShStorage::U8] {
+        let mut rounded = c.scene.clone();
+        for p in &mut rounded.particles {
+            p.sh = std::array::from_fn(|k| storage.load(p.sh[k], k)).into();
+        }
+        let settings = RenderSettings { sh_storage: storage, ..RenderSettings::default() };
+        let reference = RasterScene::new(ctx, &rounded, &RenderSettings::default()).unwrap();
+        for method in [RasterMethod::Sorted { blend: Blend::Over }, RasterMethod::StochasticSplat] {
+            let want = render(ctx, pipelines(ctx), &reference, &method);
+            let unchanged = want == render(ctx, pipelines(ctx), &plain, &method);
+            assert!(!unchanged, "{storage:?}, {method:?}: the storage changes nothing");
+            for (ctx, pipes) in [(ctx, pipelines(ctx)), (&small, &small_pipes)] {
+                let compact = RasterScene::new(ctx, &c.scene, &settings).unwrap();
+                assert_eq!(compact.split().sh_storage, storage);
+                let got = render(ctx, pipes, &compact, &method);
+                let differ = got.iter().zip(&want).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+                let chunks = compact.chunks();
+                assert_eq!(
+                    differ, 0,
+                    "{storage:?}, {method:?} in {chunks} chunks: values that differ from the stored scene's"
+                );
+            }
         }
     }
 }

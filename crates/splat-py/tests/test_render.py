@@ -31,6 +31,7 @@ def capture(tmp_path_factory):
     [
         {"method": "exact"},
         {"method": "exact", "sh_storage": "f16"},
+        {"method": "exact", "sh_storage": "u8"},
         {"method": "stochastic", "spp": 4, "seed": 3},
         {"method": "kbuffer", "k": 4},
         {"method": "raster-sorted", "raster_samples": 4},

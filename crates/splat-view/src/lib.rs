@@ -65,8 +65,9 @@ pub struct ViewArgs {
     /// (default: the one its file names; else 3dgs).
     #[arg(long, value_parser = screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
-    /// How the SH coefficients are stored (vk_gaussian_splatting's SH format): f16 halves the
-    /// GPU's largest scene array and rounds the colours; the CPU reads the same rounded values.
+    /// How the SH coefficients are stored (vk_gaussian_splatting's SH formats): f16 halves the
+    /// GPU's largest scene array, u8 quarters it, each rounding the colours; the CPU reads the
+    /// same stored values.
     #[arg(long, value_parser = sh_storage_parser(), default_value = "f32")]
     pub sh_storage: ShStorage,
 }
