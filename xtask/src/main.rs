@@ -584,8 +584,7 @@ fn scaling(arg: &str) -> Result<()> {
         let number: String = text[at..].trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
         number.parse().with_context(|| format!("no number after '{marker}'"))
     };
-    let frame = |table: &str, method: &str| after(table, &format!("| {method} |"));
-    // Column `k` (0: the method) of `method`'s row of `splat bench`'s table.
+    // Column `k` (0: the method, 1: its frame time) of `method`'s row of `splat bench`'s table.
     let column = |table: &str, method: &str, k: usize| -> Result<f64> {
         let row = table.lines().find(|l| l.starts_with(&format!("| {method} |"))).context("no row")?;
         let cell = row.split('|').nth(k + 1).context("no such column")?;
@@ -625,20 +624,20 @@ fn scaling(arg: &str) -> Result<()> {
         let held = after(&info, "held,")?;
         let build = after(&bench, "BVH built in")?;
         let peak = after(&bench, "peak memory")?;
+        let [ms, nodes, leaves, tests, bytes] = [1, 6, 7, 8, 9].map(|k| column(&bench, "exact", k));
+        let (ms, bytes) = (ms?, bytes?);
         let row = format!(
             "| {n} | {mb:.0} | {:.2} | {read_s:.2} | {:.2} | {held:.0} | {build:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {peak:.2} | {:.0} |\n",
             mb / 1e3 / first_s,
             mb / 1e3 / read_s,
             build * 1e6 / n as f64,
-            frame(&bench, "opaque")?,
-            frame(&bench, "stochastic")?,
-            frame(&bench, "exact")?,
+            column(&bench, "opaque", 1)?,
+            column(&bench, "stochastic", 1)?,
+            ms,
             peak * 1e9 / n as f64
         );
         print!("{row}");
         table.push_str(&row);
-        let [ms, nodes, leaves, tests, bytes] = [1, 6, 7, 8, 9].map(|k| column(&bench, "exact", k));
-        let (ms, bytes) = (ms?, bytes?);
         // 320 × 240 rays a frame: the time a thread spends per byte.
         let threads = after(&bench, "spp, ")?;
         let ns_per_byte = ms * 1e6 * threads / (320.0 * 240.0 * bytes);

@@ -35,10 +35,7 @@ pub struct Accumulator {
 impl Accumulator {
     /// An empty accumulator of `pixels` RGBA pixels.
     pub fn new(ctx: &GpuContext, pixels: usize, format: AccumulationFormat) -> Self {
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("accumulate.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(ACCUMULATE_WGSL.into()),
-        });
+        let module = crate::context::shader_module(&ctx.device, "accumulate.wgsl", ACCUMULATE_WGSL);
         let pipeline = crate::context::compute_pipeline(&ctx.device, &module, None, "accumulate");
         let buffer = |label, bytes: usize, usage| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {

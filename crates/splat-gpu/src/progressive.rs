@@ -266,19 +266,8 @@ pub(crate) struct DisplayPass {
 impl DisplayPass {
     fn new(ctx: &GpuContext) -> Self {
         let device = &ctx.device;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("display.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(DISPLAY_WGSL.into()),
-        });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("display"),
-            entries: &Self::layout_entries(),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("display"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
+        let module = crate::context::shader_module(device, "display.wgsl", DISPLAY_WGSL);
+        let (layout, pipeline_layout) = crate::context::layouts(device, "display", &Self::layout_entries());
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let uniform = ctx.buffer("display", std::mem::size_of::<DisplayParams>() as u64, usage);
         Self { module, layout, pipeline_layout, uniform, pipelines: Vec::new() }

@@ -28,8 +28,7 @@ impl TileLists {
     pub(super) fn new(r: &GpuRasterizer, offsets: &SortBuffers, pair_count: u32) -> Result<Self, GpuError> {
         let (ctx, pipes) = (r.ctx, r.pipes);
         let pairs = pipes.sort.buffers(ctx, pair_count.max(1))?;
-        let split = r.scene.split.with_pairs(ctx, pair_count.max(1))?;
-        debug_assert_eq!(pairs.split, split.pairs, "the kernels index the pairs as their sort cuts them");
+        let split = r.scene.split.with_pairs(ctx, &pairs)?;
         let k = pipes.kernels(ctx, split)?;
         let [tiles_x, tiles_y] = r.params.tiles;
         let ranges = ctx.device.create_buffer(&wgpu::BufferDescriptor {

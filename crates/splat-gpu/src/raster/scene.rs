@@ -249,20 +249,21 @@ impl RasterSplit {
         })
     }
 
-    /// The split of a tile pass making `pairs` tile pairs: the arrays of their sort
-    /// ([`crate::sort::split_of`]), refused when the kernels would need more bindings than the
-    /// adapter has.
-    pub(super) fn with_pairs(self, ctx: &GpuContext, pairs: u32) -> Result<Self, GpuError> {
-        let with = |m: u64| RasterSplit { pairs: crate::sort::split_of(m as u32, ctx.max_index_binding), ..self };
+    /// The split of a tile pass whose tile pairs are sorted in `pairs`: their arrays cut as that
+    /// sort cuts them, refused when the kernels would need more bindings than the adapter has.
+    pub(super) fn with_pairs(self, ctx: &GpuContext, pairs: &crate::sort::SortBuffers) -> Result<Self, GpuError> {
+        let split = RasterSplit { pairs: pairs.split, ..self };
         let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
-        let fits = |m: u64| with(m).layout(false).extra_bindings() <= available;
-        if fits(u64::from(pairs)) {
-            return Ok(with(u64::from(pairs)));
+        if split.layout(false).extra_bindings() <= available {
+            return Ok(split);
         }
+        let with = |m: u64| RasterSplit { pairs: crate::sort::split_of(m as u32, ctx.max_index_binding), ..self };
+        let fits = |m: u64| with(m).layout(false).extra_bindings() <= available;
+        let pairs = pairs.capacity();
         Err(GpuError::SceneOverBindings {
             arrays: "tile pairs",
             kernel: "the tile pass",
-            needed: with(u64::from(pairs)).layout(false).extra_bindings() + OWN_BINDINGS,
+            needed: split.layout(false).extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_index_binding,
             bytes: 8 * u64::from(pairs),
