@@ -272,6 +272,29 @@ fn run_pipelines(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// What the adapter's storage bindings let the GPU paths hold: bindings a stage and their size,
+/// and the most particles like the scene's (its SH degree and storage) the ray tracer and the
+/// splatting kernels bind, the bound of issue 39 that device memory may undercut.
+fn binding_budget(
+    ctx: &splat_gpu::GpuContext,
+    scene: &splat_core::Scene,
+    settings: &splat_core::RenderSettings,
+) -> String {
+    let mib = |bytes: u64| bytes as f64 / f64::from(1 << 20);
+    format!(
+        "bindings: {} storage buffers a stage of at most {:.0} MiB each (arrays of buffers in a binding: {}); \
+         they hold {} particles like these (SH degree {}, {:?}) in the ray tracer, {} in the splatting kernels; \
+         device memory may bound them first",
+        ctx.storage_buffers_per_stage(),
+        mib(ctx.max_binding),
+        if ctx.buffer_binding_arrays { "available, unused" } else { "no" },
+        splat_gpu::TraceSplit::capacity(ctx, scene.sh_degree, settings.sh_storage),
+        scene.sh_degree,
+        settings.sh_storage,
+        splat_gpu::RasterSplit::capacity(ctx),
+    )
+}
+
 /// Frame times of every method on the GPU, as ratios against `stochastic` measured in the same
 /// run (wall time around submit and poll; the opaque baseline exists on the CPU only).
 fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
@@ -290,6 +313,7 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         if ctx.timestamps { "timestamp queries" } else { "wall time around submit + poll" },
         tracer.scene_bytes() as f64 / scene.particles.len().max(1) as f64
     );
+    println!("{}\n", binding_budget(ctx, &scene, &settings));
     println!("| method | frame (ms) | Mrays/s | cost vs stochastic | dispatches a frame | host waits a frame |");
     println!("|---|---:|---:|---:|---:|---:|");
     let mut methods = vec![MethodId::Stochastic];
@@ -340,6 +364,7 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     options.apply_capture(&scene);
     let pipes = splat_gpu::RasterPipelines::new(ctx)?;
     let gpu_scene = splat_gpu::RasterScene::new(ctx, &scene, &settings)?;
+    let budget = binding_budget(ctx, &scene, &settings);
     let settings = match options.on_gpu(options.resolve(MethodId::RasterSorted)) {
         splat_core::Algorithm::Raster(_, settings) => settings,
         _ => unreachable!("raster-sorted resolves to a raster algorithm"),
@@ -361,6 +386,7 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         args.repeat.max(1),
         if t.timestamps { "timestamp queries" } else { "wall time around submit + poll" }
     );
+    println!("{budget}\n");
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let sorted = ms(t.sorted_frame());
     println!("| stage | time (ms) | share of the sorted frame |");

@@ -48,6 +48,10 @@ pub struct GpuContext {
     /// Storage buffers a shader stage binds (what the ray tracer's split arrays may use beside
     /// its own bindings, `crate::split`).
     pub(crate) storage_buffers: u32,
+    /// Whether the adapter has arrays of storage buffers in one binding (wgpu's
+    /// `BUFFER_BINDING_ARRAY` and `STORAGE_RESOURCE_BINDING_ARRAY`): the way past
+    /// `storage_buffers` for split arrays, which the kernels do not take yet.
+    pub buffer_binding_arrays: bool,
     /// The binding limit the 4-byte index arrays of the splatting path are split by (the depth
     /// sort's keys and values, the tile pairs, the offsets): `max_binding` but for
     /// [`GpuContext::with_index_binding_limit`].
@@ -200,6 +204,9 @@ impl GpuContext {
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             storage_alignment: u64::from(limits.min_storage_buffer_offset_alignment),
             storage_buffers: limits.max_storage_buffers_per_shader_stage,
+            buffer_binding_arrays: adapter
+                .features()
+                .contains(wgpu::Features::BUFFER_BINDING_ARRAY | wgpu::Features::STORAGE_RESOURCE_BINDING_ARRAY),
             max_index_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
@@ -270,6 +277,12 @@ impl GpuContext {
         self.work.waits.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
         Ok(())
+    }
+
+    /// Storage buffers a shader stage binds: with [`GpuContext::max_binding`], what bounds the
+    /// scenes the kernels take (`TraceSplit::capacity`, `RasterSplit::capacity`).
+    pub fn storage_buffers_per_stage(&self) -> u32 {
+        self.storage_buffers
     }
 
     /// One line naming the adapter.

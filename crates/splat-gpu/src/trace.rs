@@ -102,36 +102,58 @@ impl TraceSplit {
         Self::checked(ctx, [n, 1, n * coefficients], [n, n, n * coefficients], settings.sh_storage)
     }
 
+    /// The most particles of SH degree `sh_degree`, their coefficients stored as `sh_storage`,
+    /// whose arrays the ray tracer binds on `ctx` (a BVH node a particle, about what the build
+    /// makes): the bound the adapter's storage bindings set, whatever its memory.
+    pub fn capacity(ctx: &GpuContext, sh_degree: u8, sh_storage: ShStorage) -> u64 {
+        let coefficients = splat_core::particle::sh_coeff_count(sh_degree) as u64;
+        let lengths = |m: u64| [m, m, m * coefficients];
+        if !Self::fits(ctx, lengths(1), sh_storage) {
+            return 0;
+        }
+        crate::split::most_that_fit(u64::from(u32::MAX), |m| Self::fits(ctx, lengths(m), sh_storage))
+    }
+
+    /// The split of arrays of `lengths` (particles, nodes, SH) by `ctx`'s binding limit.
+    fn split(ctx: &GpuContext, lengths: [u64; 3], sh_storage: ShStorage) -> Self {
+        let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
+        let arrays = [&PARTICLES, &NODES, &sh_array];
+        let [particles, nodes, sh] = std::array::from_fn(|k| Split::of(lengths[k], arrays[k].stride, ctx.max_binding));
+        TraceSplit { particles, nodes, sh, sh_storage }
+    }
+
+    /// Whether arrays of `lengths` fit the adapter: element indices within u32 (the kernel's),
+    /// every element within a binding, their parts within its storage bindings a stage.
+    fn fits(ctx: &GpuContext, lengths: [u64; 3], sh_storage: ShStorage) -> bool {
+        let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
+        let strides = [PARTICLES.stride, NODES.stride, sh_array.stride];
+        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
+        lengths.iter().all(|&n| n <= u64::from(u32::MAX))
+            && strides.iter().all(|&stride| stride <= ctx.max_binding)
+            && Self::split(ctx, lengths, sh_storage).layout().extra_bindings() <= available
+    }
+
     /// The split of arrays of `lengths` (particles, nodes, SH), refused with the particles that
     /// would fit in arrays in the proportions of `like`.
     fn checked(ctx: &GpuContext, lengths: [u64; 3], like: [u64; 3], sh_storage: ShStorage) -> Result<Self, GpuError> {
         let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
         let arrays = [&PARTICLES, &NODES, &sh_array];
-        let split = |lengths: [u64; 3]| {
-            let [particles, nodes, sh] =
-                std::array::from_fn(|k| Split::of(lengths[k], arrays[k].stride, ctx.max_binding));
-            TraceSplit { particles, nodes, sh, sh_storage }
-        };
         if let Some(k) = (0..3).find(|&k| lengths[k] > 0 && arrays[k].stride > ctx.max_binding) {
             let (buffer, bytes) = (arrays[k].what, lengths[k] * arrays[k].stride);
             return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count: lengths[0] as usize });
         }
-        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
-        // Element indices are u32 in the kernel.
-        let fit = |lengths: [u64; 3]| {
-            lengths.iter().all(|&n| n <= u64::from(u32::MAX)) && split(lengths).layout().extra_bindings() <= available
-        };
-        if fit(lengths) {
-            return Ok(split(lengths));
+        let split = Self::split(ctx, lengths, sh_storage);
+        if Self::fits(ctx, lengths, sh_storage) {
+            return Ok(split);
         }
         // The most particles m whose arrays, scaled from `like`, fit.
         let n = like[0].max(1);
         let scaled = |m: u64| like.map(|len| (u128::from(len) * u128::from(m) / u128::from(n)) as u64);
-        let fits = crate::split::most_that_fit(n, |m| fit(scaled(m)));
+        let fits = crate::split::most_that_fit(n, |m| Self::fits(ctx, scaled(m), sh_storage));
         Err(GpuError::SceneOverBindings {
             arrays: "particles, BVH nodes and SH",
             kernel: "the ray tracer",
-            needed: split(lengths).layout().extra_bindings() + OWN_BINDINGS,
+            needed: split.layout().extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_binding,
             bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),

@@ -440,6 +440,21 @@ fn scenes_over_the_bindings_are_refused_with_what_fits() {
     let early = splat_gpu::TraceSplit::at_least(&small, &scene, &RenderSettings::default());
     assert!(matches!(early, Err(GpuError::SceneOverBindings { .. })), "{early:?}");
     assert!(GpuTracer::new(ctx, trace_pipeline(ctx), &trace).is_ok());
+
+    // The capacities `splat bench` prints are the largest scenes accepted: c particles (a node
+    // each) are, c + 1 are not; u8 SH holds more than f32; the adapter's own limits hold this scene.
+    let capacity = |storage| splat_gpu::TraceSplit::capacity(&small, scene.sh_degree, storage);
+    let with = |m: u64, storage| splat_gpu::TraceSplit::new(&small, [m, m, coefficients * m], storage);
+    for storage in [ShStorage::F32, ShStorage::U8] {
+        let c = capacity(storage);
+        assert!(c > 0 && with(c, storage).is_ok() && with(c + 1, storage).is_err(), "{storage:?}: capacity {c}");
+    }
+    assert!(capacity(ShStorage::U8) > capacity(ShStorage::F32));
+    assert!(splat_gpu::TraceSplit::capacity(ctx, scene.sh_degree, ShStorage::F32) >= n);
+    let r = splat_gpu::RasterSplit::capacity(&small) as usize;
+    let raster = |m| splat_gpu::RasterSplit::new(&small, m, ShStorage::F32);
+    assert!(r > 0 && raster(r).is_ok() && raster(r + 1).is_err(), "splatting capacity {r}");
+    assert!(splat_gpu::RasterSplit::capacity(ctx) >= n);
 }
 
 /// vk_gaussian_splatting's warning, measured: a running mean stored in f16 drifts away from the

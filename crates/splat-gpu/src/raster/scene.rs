@@ -219,34 +219,56 @@ impl RasterSplit {
     /// when it needs more bindings than the adapter has ([`GpuError::SceneOverBindings`]) with how
     /// many particles would fit.
     pub fn new(ctx: &GpuContext, count: usize, sh_storage: ShStorage) -> Result<Self, GpuError> {
-        let split = |n: u64| RasterSplit {
-            splats: Split::of(n.max(1), SPLATS.stride, ctx.max_binding),
-            canonical: Split::of(3 * n.max(1), CANONICAL.stride, ctx.max_binding),
-            ranks: crate::sort::split_of(n.saturating_add(1).min(u64::from(u32::MAX)) as u32, ctx.max_index_binding),
-            pairs: Split::WHOLE,
-            sh_storage,
-        };
         let n = count as u64;
         if SPLATS.stride > ctx.max_binding {
             let (buffer, bytes) = (SPLATS.what, n.max(1) * SPLATS.stride);
             return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count });
         }
-        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
-        // Element indices are u32 in the kernels.
-        let fits = |n: u64| 3 * n <= u64::from(u32::MAX) && split(n).layout(false).extra_bindings() <= available;
-        if fits(n) {
-            return Ok(split(n));
+        let split = Self::split(ctx, n, sh_storage);
+        if Self::fits(ctx, n) {
+            return Ok(split);
         }
         Err(GpuError::SceneOverBindings {
             arrays: "projected splats, canonical transforms and depth sort",
             kernel: "the splatting kernels",
-            needed: split(n).layout(false).extra_bindings() + OWN_BINDINGS,
+            needed: split.layout(false).extra_bindings() + OWN_BINDINGS,
             available: ctx.storage_buffers,
             limit: ctx.max_binding,
             bytes: n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4),
-            fits: crate::split::most_that_fit(n, fits),
+            fits: crate::split::most_that_fit(n, |m| Self::fits(ctx, m)),
             fits_what: "particles like these",
         })
+    }
+
+    /// The most particles whose projected splats, canonical transforms and depth sort the
+    /// splatting kernels bind on `ctx` (before an image's tile pairs, which the tile pass checks
+    /// for itself): the bound the adapter's storage bindings set, whatever its memory.
+    pub fn capacity(ctx: &GpuContext) -> u64 {
+        if !Self::fits(ctx, 1) {
+            return 0;
+        }
+        crate::split::most_that_fit(u64::from(u32::MAX), |n| Self::fits(ctx, n))
+    }
+
+    /// The split of a scene of `n` particles by `ctx`'s binding limits (tile pairs whole).
+    fn split(ctx: &GpuContext, n: u64, sh_storage: ShStorage) -> Self {
+        RasterSplit {
+            splats: Split::of(n.max(1), SPLATS.stride, ctx.max_binding),
+            canonical: Split::of(3 * n.max(1), CANONICAL.stride, ctx.max_binding),
+            ranks: crate::sort::split_of(n.saturating_add(1).min(u64::from(u32::MAX)) as u32, ctx.max_index_binding),
+            pairs: Split::WHOLE,
+            sh_storage,
+        }
+    }
+
+    /// Whether a scene of `n` particles fits the adapter: element indices within u32 (the
+    /// kernels'), a projected splat within a binding, the parts within its storage bindings a
+    /// stage (the SH's storage does not change the count: a projection chunk's SH is whole).
+    fn fits(ctx: &GpuContext, n: u64) -> bool {
+        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
+        3 * n <= u64::from(u32::MAX)
+            && SPLATS.stride <= ctx.max_binding
+            && Self::split(ctx, n, ShStorage::F32).layout(false).extra_bindings() <= available
     }
 
     /// The split of a tile pass whose tile pairs are sorted in `pairs`: their arrays cut as that
