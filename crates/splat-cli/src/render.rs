@@ -11,7 +11,7 @@ use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer}
 use splat_core::raster::Response;
 use splat_core::trace::TraceScene;
 use splat_core::trainer::Preset;
-use splat_core::{Algorithm, MethodId, ScreenFilter, World};
+use splat_core::{Algorithm, Camera, MethodId, ScreenFilter, World};
 use splat_gpu::{GpuContext, GpuTracer};
 use splat_io::image::{ImageFormat, Single, depth_for_display, normal_for_display, write_image, write_image_as};
 use std::path::{Path, PathBuf};
@@ -388,7 +388,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     for (_, camera) in &cameras {
         crate::args::check_memory(&args.scene.sized(*camera)?)?;
     }
-    let mut staged = args.scene.load_world(640, 480)?;
+    let staged = args.scene.load_world(640, 480)?;
     args.options.apply_capture(&staged.world.scene);
     let args = &args;
     let cpu_algorithm = algorithm(args)?;
@@ -410,16 +410,27 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         ViewFormat::Exr => "exr",
         ViewFormat::Npy => "npy",
     };
-    for (i, (name, camera)) in cameras.iter().enumerate().filter(|(i, _)| i % of == share) {
-        staged.camera = args.scene.sized(*camera)?;
-        bar.set_message(name.clone());
-        let out = match &gpu {
-            Some(ctx) => render_gpu(ctx, &staged, &algorithm, extras(args), &frames)?,
-            None => args.scene.pool()?.install(|| algorithm.render_world(&staged.shot(), &frames, &|_| {}))?,
-        };
-        let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
-        write_image(&file, &out.mean)?;
-        bar.inc(1);
+    // The world is prepared once (BVH, device arrays, pipelines) and rendered through each view.
+    let each_view = |render: &dyn Fn(&Camera) -> Result<RenderOutput>| -> Result<()> {
+        for (i, (name, camera)) in cameras.iter().enumerate().filter(|(i, _)| i % of == share) {
+            bar.set_message(name.clone());
+            let out = render(&args.scene.sized(*camera)?)?;
+            let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
+            write_image(&file, &out.mean)?;
+            bar.inc(1);
+        }
+        Ok(())
+    };
+    match &gpu {
+        Some(ctx) => {
+            eprintln!("rendering on {}", ctx.describe());
+            splat_gpu::render_views(ctx, &algorithm, &staged.shot(), extras(args), |render| {
+                each_view(&|camera| Ok(render(camera, &frames)?))
+            })??
+        }
+        None => args.scene.pool()?.install(|| {
+            algorithm.render_views(&staged.shot(), |render| each_view(&|camera| Ok(render(camera, &frames, &|_| {})?)))
+        })??,
     }
     bar.finish_and_clear();
     eprintln!(

@@ -1192,6 +1192,48 @@ fn colmap_cameras_and_all_cameras() {
     assert!(!o.status.success() && stderr(&o).contains("--camera"), "{}", stderr(&o));
 }
 
+/// `--all-cameras` prepares the world once (the BVH, the device arrays, the pipelines) and renders
+/// every view through it: each view's image is, bit for bit, what `--camera-index` renders of
+/// that view alone, on the CPU and the GPU, for a ray-tracing method (a stochastic one, whose
+/// frames are keyed by the run) and a splatting one.
+#[test]
+fn all_cameras_views_are_the_single_view_renders() {
+    let json = root().join("fixtures/cloud.cameras.json");
+    let base = splat_io::cameras::read_cameras(&json).unwrap()[0];
+    let cameras: Vec<_> = [0.0f32, 0.5, -0.6]
+        .iter()
+        .map(|&angle| splat_core::Camera { rotation: base.rotation * glam::Mat3::from_rotation_y(angle), ..base })
+        .collect();
+    let json = scratch("views3.cameras.json");
+    splat_io::cameras::write_cameras(&json, &cameras).unwrap();
+    let camera = json.to_str().unwrap();
+    for backend in ["cpu", "gpu"] {
+        for method in ["stochastic", "raster-sorted"] {
+            let common = ["render", "fixtures/cloud.ply", "--camera", camera, "--method", method, "--spp", "2"];
+            let common = [&common[..], &["--width", "32", "--height", "24", "--backend", backend]].concat();
+            let dir = scratch(&format!("views-{backend}-{method}"));
+            let dir_arg = dir.to_str().unwrap();
+            let o = splat(&[&common[..], &["--all-cameras", "--view-format", "npy", "-o", dir_arg]].concat());
+            if backend == "gpu" && !o.status.success() {
+                gpu_missing(&stderr(&o));
+                return;
+            }
+            assert!(o.status.success(), "{}", stderr(&o));
+            let mut views = Vec::new();
+            for i in 0..cameras.len() {
+                let one = scratch(&format!("view-{backend}-{method}-{i}.npy"));
+                let index = i.to_string();
+                let o = splat(&[&common[..], &["--camera-index", &index, "-o", one.to_str().unwrap()]].concat());
+                assert!(o.status.success(), "{}", stderr(&o));
+                let all = npy(&dir.join(format!("view_{i:04}.npy")));
+                assert!(all == npy(&one), "{backend} {method}: view {i} of --all-cameras is not its own render");
+                views.push(all);
+            }
+            assert!(views[0] != views[1] && views[1] != views[2], "{backend} {method}: the views are alike");
+        }
+    }
+}
+
 /// `--backend auto` on a machine whose only adapters are CPU ones prints nothing of the
 /// graphics stack's and renders what `--backend cpu` renders.
 #[test]

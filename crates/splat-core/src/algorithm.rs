@@ -55,6 +55,10 @@ pub struct Shot<'a> {
     pub settings: &'a RenderSettings,
 }
 
+/// One world's renderer through any camera ([`Algorithm::render_views`]): `render(camera,
+/// frames, progress)`.
+pub type ViewRenderer<'a> = dyn Fn(&Camera, &Frames, Progress) -> Result<RenderOutput, RenderError> + 'a;
+
 /// A renderer of either family, with its parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Algorithm {
@@ -126,20 +130,28 @@ impl Algorithm {
     /// Render `frames` on the CPU of the splats among the shot's meshes ([`crate::mesh`]), lit
     /// by its lighting; without meshes this is exactly [`Algorithm::render_lit`].
     pub fn render_world(&self, shot: &Shot, frames: &Frames, progress: Progress) -> Result<RenderOutput, RenderError> {
-        let Shot { scene, meshes, lighting, camera, settings } = *shot;
-        match self {
-            Algorithm::Oracle => oracle(shot, frames, progress),
+        self.render_views(shot, |render| render(shot.camera, frames, progress))?
+    }
+
+    /// The world of `shot` (its camera aside) rendered from many cameras: `views` gets a
+    /// renderer, `render(camera, frames, progress)` = [`Algorithm::render_world`] through that
+    /// camera, and what does not depend on the camera (the ray-tracing algorithms' BVH) is built
+    /// once for all of them (`splat render --all-cameras`).
+    pub fn render_views<R>(&self, shot: &Shot, views: impl FnOnce(&ViewRenderer) -> R) -> Result<R, RenderError> {
+        let Shot { scene, meshes, lighting, settings, .. } = *shot;
+        Ok(match self {
+            Algorithm::Oracle => views(&|camera, frames, progress| oracle(&Shot { camera, ..*shot }, frames, progress)),
             Algorithm::Trace(_) | Algorithm::Hybrid(..) => {
                 let trace = TraceScene::new(scene, *settings)?.with_lighting(lighting)?.with_meshes(meshes);
-                self.render_on(&trace, camera, frames, progress)
+                views(&|camera, frames, progress| self.render_on(&trace, camera, frames, progress))
             }
-            Algorithm::Raster(method, raster) => {
+            Algorithm::Raster(method, raster) => views(&|camera, frames, progress| {
                 let build = |camera: &Camera| {
                     Ok(Rasterizer::new(scene, camera, *settings, *raster)?.with_lighting(lighting)?.with_meshes(meshes))
                 };
                 render_raster_frames(camera, &settings.sampling, method, frames, progress, build)
-            }
-        }
+            }),
+        })
     }
 
     /// Render `frames` on the CPU of the scene, settings, lighting and meshes of `trace`, whose

@@ -61,7 +61,7 @@ pub mod trainer;
 /// not match its version.
 pub use glam;
 
-pub use algorithm::{Algorithm, Shot, World};
+pub use algorithm::{Algorithm, Shot, ViewRenderer, World};
 pub use camera::Camera;
 pub use catalogue::{MethodId, Parameters};
 pub use filter::ScreenFilter;

@@ -70,9 +70,26 @@ pub fn render(
     extras: Extras,
     frames: &Frames,
 ) -> Result<RenderOutput, GpuError> {
+    render_views(ctx, algorithm, shot, extras, |render| render(shot.camera, frames))?
+}
+
+/// One world's GPU renderer through any camera ([`render_views`]): `render(camera, frames)`.
+pub type GpuViewRenderer<'a> = dyn Fn(&splat_core::Camera, &Frames) -> Result<RenderOutput, GpuError> + 'a;
+
+/// The world of `shot` (its camera aside) rendered on `ctx` from many cameras: `views` gets a
+/// renderer, `render(camera, frames)` = [`render`] through that camera, and what does not
+/// depend on the camera (the BVH, the scene's device arrays, the compiled pipelines) is built
+/// and uploaded once for all of them (`splat render --all-cameras --backend gpu`).
+pub fn render_views<R>(
+    ctx: &GpuContext,
+    algorithm: &Algorithm,
+    shot: &Shot,
+    extras: Extras,
+    views: impl FnOnce(&GpuViewRenderer) -> R,
+) -> Result<R, GpuError> {
     supports(algorithm, extras)?;
     supports_meshes(algorithm, shot.meshes)?;
-    let Shot { scene, meshes, lighting, camera, settings } = *shot;
+    let Shot { scene, meshes, lighting, settings, .. } = *shot;
     let trace = || -> Result<TraceScene, GpuError> {
         // A scene the GPU cannot bind is refused before its BVH is built.
         crate::TraceSplit::at_least(ctx, scene, settings)?;
@@ -81,11 +98,12 @@ pub fn render(
     let raster_scene = || -> Result<RasterScene, GpuError> {
         RasterScene::new_lit(ctx, scene, settings, lighting)?.with_meshes(ctx, meshes)
     };
-    match algorithm {
+    Ok(match algorithm {
         Algorithm::Trace(method) => {
             let trace = trace()?;
             let pipeline = TracePipeline::new(ctx)?;
-            Ok(GpuTracer::new(ctx, &pipeline, &trace)?.render(camera, method, frames)?.0)
+            let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
+            views(&|camera, frames| Ok(tracer.render(camera, method, frames)?.0))
         }
         Algorithm::Hybrid(first, raster_settings, secondary) => {
             let trace = trace()?;
@@ -94,46 +112,60 @@ pub fn render(
             let pipes = RasterPipelines::new(ctx)?;
             let gpu_scene = raster_scene()?;
             let raster = |c: &splat_core::Camera| GpuRasterizer::new(ctx, &pipes, &gpu_scene, c, raster_settings);
-            Ok(tracer.render_hybrid(&raster, camera, first, secondary, frames)?.0)
+            views(&|camera, frames| Ok(tracer.render_hybrid(&raster, camera, first, secondary, frames)?.0))
         }
         Algorithm::Raster(method, raster_settings) if settings.sampling.is_random() => {
-            // A camera drawn per frame (splat_core::camera_sampling): each frame projected
-            // through its own pinhole camera, folded as the CPU folds them.
             let pipes = RasterPipelines::new(ctx)?;
             let gpu_scene = raster_scene()?;
-            let keys = frames.keys(true)?;
-            let one = Frames { accumulation: splat_core::frame::AccumulationFormat::F32, ..*frames };
-            splat_core::frame::fold_frames(camera, &keys, frames.accumulation, &|_| {}, |f, key| {
-                let sample = splat_core::camera_sampling::frame_sample(frames.seed, frames.index(f));
-                let frame_camera = settings.sampling.pinhole(camera, &sample)?;
-                let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, &frame_camera, raster_settings)?;
-                let mut out = raster.render_keys(method, &[key], &one)?.0;
-                // Frame 0's depth and normal, as every render keeps them.
-                let picked = gpu_scene.is_lit() && matches!(method, RasterMethod::Sorted { .. });
-                if f == 0 && (extras.depth || extras.normal) && !picked {
-                    let pick = raster.depth_pick()?;
-                    out.depth = pick.depth_image();
-                    out.normal = pick.normal;
-                }
-                Ok(out)
+            views(&|camera, frames| {
+                // A camera drawn per frame (splat_core::camera_sampling): each frame projected
+                // through its own pinhole camera, folded as the CPU folds them.
+                let keys = frames.keys(true)?;
+                let one = Frames { accumulation: splat_core::frame::AccumulationFormat::F32, ..*frames };
+                splat_core::frame::fold_frames(camera, &keys, frames.accumulation, &|_| {}, |f, key| {
+                    let sample = splat_core::camera_sampling::frame_sample(frames.seed, frames.index(f));
+                    let frame_camera = settings.sampling.pinhole(camera, &sample)?;
+                    let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, &frame_camera, raster_settings)?;
+                    let mut out = raster.render_keys(method, &[key], &one)?.0;
+                    // Frame 0's depth and normal, as every render keeps them.
+                    if f == 0 {
+                        picked_extras(&raster, &gpu_scene, method, extras, &mut out)?;
+                    }
+                    Ok(out)
+                })
             })
         }
         Algorithm::Raster(method, raster_settings) => {
             let pipes = RasterPipelines::new(ctx)?;
             let gpu_scene = raster_scene()?;
-            let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
-            let mut out = raster.render(method, frames)?.0;
-            // Lit sorted splatting already ran on the tile rasterizer, depth and normal included.
-            let picked = gpu_scene.is_lit() && matches!(method, RasterMethod::Sorted { .. });
-            if (extras.depth || extras.normal) && !picked {
-                let pick = raster.depth_pick()?;
-                out.depth = pick.depth_image();
-                out.normal = pick.normal;
-            }
-            Ok(out)
+            views(&|camera, frames| {
+                let raster = GpuRasterizer::new(ctx, &pipes, &gpu_scene, camera, raster_settings)?;
+                let mut out = raster.render(method, frames)?.0;
+                picked_extras(&raster, &gpu_scene, method, extras, &mut out)?;
+                Ok(out)
+            })
         }
-        Algorithm::Oracle => Err(oracle_refused()),
+        Algorithm::Oracle => return Err(oracle_refused()),
+    })
+}
+
+/// The depth and normal images `extras` asks for, from the compute tile rasterizer's depth
+/// pick, unless the frame drew them already (lit sorted splatting runs on the tile rasterizer,
+/// depth and normal included).
+fn picked_extras(
+    raster: &GpuRasterizer,
+    gpu_scene: &RasterScene,
+    method: &RasterMethod,
+    extras: Extras,
+    out: &mut RenderOutput,
+) -> Result<(), GpuError> {
+    let picked = gpu_scene.is_lit() && matches!(method, RasterMethod::Sorted { .. });
+    if (extras.depth || extras.normal) && !picked {
+        let pick = raster.depth_pick()?;
+        out.depth = pick.depth_image();
+        out.normal = pick.normal;
     }
+    Ok(())
 }
 
 /// The brute-force oracle is the CPU's alone; the exact method renders the same image.

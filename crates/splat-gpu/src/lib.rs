@@ -31,7 +31,7 @@ pub mod trace;
 pub use wgpu;
 
 pub use accumulate::{AccumulationFormat, Accumulator};
-pub use backend::{Extras, render, supports, supports_meshes};
+pub use backend::{Extras, GpuViewRenderer, render, render_views, supports, supports_meshes};
 pub use context::{GpuContext, GpuCounters, quiet_device_select};
 pub use display::{DisplayMode, DisplayTransform, PixelState, read_rgba8};
 pub use error::{GpuError, Remedy};
