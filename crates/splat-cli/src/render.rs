@@ -203,7 +203,7 @@ pub fn render_share(args: &RenderArgs, staged: &Staged, progress: Progress) -> R
             render_frames(args, staged, splat_gpu::Extras::default(), progress)?;
         (out, count, format!("{algorithm:?}"))
     };
-    let render = run_description(args, staged, &method);
+    let render = run_description(args, staged, &staged.camera, &method);
     Ok(splat_io::accumulation::Share {
         accumulation: splat_core::frame::Accumulation::of(&out, &frames, count),
         render,
@@ -218,13 +218,13 @@ pub fn path_description(args: &RenderArgs) -> Result<String> {
 
 /// Everything that decides the frames of a run besides their range, for `method` (the
 /// algorithm, or the path tracer's [`path_description`]): equal for shares of one run
-/// ([`crate::merge`]).
-pub fn run_description(args: &RenderArgs, staged: &Staged, method: &str) -> String {
+/// ([`crate::merge`]), through `camera` (the staged one, or one of [`render_views`]' views).
+pub fn run_description(args: &RenderArgs, staged: &Staged, camera: &Camera, method: &str) -> String {
     let frames = args.frames();
     format!(
         "{method}; settings {:?}; camera {:?}; {} splats, {} triangles; seed {}, {:?}, {:?}",
         staged.settings,
-        staged.camera,
+        camera,
         staged.world.scene.particles.len(),
         staged.world.meshes.triangles().len(),
         frames.seed,
@@ -274,29 +274,64 @@ pub struct Rendered {
 }
 
 /// Render `staged` as `args` say, on the backend they choose, with `extras` where that is the
-/// GPU (the CPU always makes every image), calling `progress` with pixels done on the CPU.
-/// `args.options` must have had the capture's implications applied
-/// ([`MethodOptions::apply_capture`]); the path tracer goes through [`render_path`].
+/// GPU (the CPU always makes every image), calling `progress` with pixels done on the CPU: one
+/// view, [`render_views`] of the staged camera. `args.options` must have had the capture's
+/// implications applied ([`MethodOptions::apply_capture`]); the path tracer goes through
+/// [`render_path`].
 pub fn render_frames(
     args: &RenderArgs,
     staged: &Staged,
     extras: splat_gpu::Extras,
     progress: Progress,
 ) -> Result<Rendered> {
+    let mut one = None;
+    render_views(args, staged, &[staged.camera], extras, progress, |_, rendered| {
+        one = Some(rendered);
+        Ok(())
+    })?;
+    one.context("a view was rendered")
+}
+
+/// Render `staged`'s world through each of `cameras` as `args` say, on the backend they choose:
+/// the world is prepared once (the BVH; on the GPU also its device arrays and pipelines,
+/// `splat_gpu::render_views`) and `each(i, rendered)` receives view i's images in order.
+/// `progress` counts a CPU render's pixels over all the views.
+pub fn render_views(
+    args: &RenderArgs,
+    staged: &Staged,
+    cameras: &[Camera],
+    extras: splat_gpu::Extras,
+    progress: Progress,
+    mut each: impl FnMut(usize, Rendered) -> Result<()> + Send,
+) -> Result<()> {
     let cpu_algorithm = algorithm(args)?;
     warn_unused(args, &cpu_algorithm, staged);
     let frames = args.frames();
     let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
     let gpu = choose_gpu(args, &gpu_algorithm, &staged.world.meshes, extras)?;
     let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
-    let out = match &gpu {
-        Some(ctx) => render_gpu(ctx, staged, &algorithm, extras, &frames)?,
-        None => args.scene.pool()?.install(|| algorithm.render_world(&staged.shot(), &frames, progress))?,
-    };
     let World { lighting, meshes, .. } = &staged.world;
     let random = algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling);
     let count = if random { frames.count } else { 1 };
-    Ok(Rendered { out, algorithm, count, gpu: gpu.map(|ctx| ctx.describe()) })
+    let adapter = gpu.as_ref().map(GpuContext::describe);
+    let mut views = |render: &dyn Fn(&Camera) -> Result<RenderOutput>| -> Result<()> {
+        for (i, camera) in cameras.iter().enumerate() {
+            let out = render(camera)?;
+            each(i, Rendered { out, algorithm, count, gpu: adapter.clone() })?;
+        }
+        Ok(())
+    };
+    match &gpu {
+        Some(ctx) => {
+            eprintln!("rendering on {}", ctx.describe());
+            splat_gpu::render_views(ctx, &algorithm, &staged.shot(), extras, |render| {
+                views(&|camera| Ok(render(camera, &frames)?))
+            })?
+        }
+        None => args.scene.pool()?.install(|| {
+            algorithm.render_views(&staged.shot(), |render| views(&|camera| Ok(render(camera, &frames, progress)?)))
+        })?,
+    }
 }
 
 /// The images `splat render` writes, with their flags: colour first.
@@ -391,15 +426,12 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     let staged = args.scene.load_world(640, 480)?;
     args.options.apply_capture(&staged.world.scene);
     let args = &args;
-    let cpu_algorithm = algorithm(args)?;
-    let frames = args.options.frames(args.spp, args.seed);
-    let gpu_algorithm = args.options.on_gpu(cpu_algorithm);
-    let gpu = choose_gpu(args, &gpu_algorithm, &staged.world.meshes, extras(args))?;
-    let algorithm = if gpu.is_some() { gpu_algorithm } else { cpu_algorithm };
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let (share, of) = args.shard.unwrap_or((0, 1));
-    let mine = (0..cameras.len()).filter(|i| i % of == share).count();
-    let bar = indicatif::ProgressBar::new(mine as u64).with_style(
+    let mine: Vec<(usize, &String)> =
+        cameras.iter().enumerate().filter(|(i, _)| i % of == share).map(|(i, (name, _))| (i, name)).collect();
+    let views = mine.iter().map(|&(i, _)| args.scene.sized(cameras[i].1)).collect::<Result<Vec<Camera>>>()?;
+    let bar = indicatif::ProgressBar::new(mine.len() as u64).with_style(
         indicatif::ProgressStyle::with_template("{spinner} views [{bar:40}] {pos}/{len} {elapsed} (eta {eta}) {msg}")
             .expect("valid template")
             .progress_chars("=> "),
@@ -410,36 +442,27 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         ViewFormat::Exr => "exr",
         ViewFormat::Npy => "npy",
     };
-    // The world is prepared once (BVH, device arrays, pipelines) and rendered through each view.
-    let each_view = |render: &dyn Fn(&Camera) -> Result<RenderOutput>| -> Result<()> {
-        for (i, (name, camera)) in cameras.iter().enumerate().filter(|(i, _)| i % of == share) {
-            bar.set_message(name.clone());
-            let out = render(&args.scene.sized(*camera)?)?;
-            let file = args.output.join(format!("{}.{extension}", view_stem(name, i)));
-            write_image(&file, &out.mean)?;
-            bar.inc(1);
-        }
+    let mut algorithm = None;
+    render_views(args, &staged, &views, extras(args), &|_| {}, |k, rendered| {
+        let (i, name) = mine[k];
+        write_image(&args.output.join(format!("{}.{extension}", view_stem(name, i))), &rendered.out.mean)?;
+        algorithm = Some(rendered.algorithm);
+        bar.set_message(name.clone());
+        bar.inc(1);
         Ok(())
-    };
-    match &gpu {
-        Some(ctx) => {
-            eprintln!("rendering on {}", ctx.describe());
-            splat_gpu::render_views(ctx, &algorithm, &staged.shot(), extras(args), |render| {
-                each_view(&|camera| Ok(render(camera, &frames)?))
-            })??
-        }
-        None => args.scene.pool()?.install(|| {
-            algorithm.render_views(&staged.shot(), |render| each_view(&|camera| Ok(render(camera, &frames, &|_| {})?)))
-        })??,
-    }
+    })?;
     bar.finish_and_clear();
     eprintln!(
         "rendered {}, {}, {} in {:.2} s → {}",
-        crate::counted(mine, "view"),
+        crate::counted(mine.len(), "view"),
         describe(args),
         frames_done(
             args.spp,
-            algorithm.is_random(&staged.world.lighting, !staged.world.meshes.is_empty(), &staged.settings.sampling),
+            algorithm.is_some_and(|a| a.is_random(
+                &staged.world.lighting,
+                !staged.world.meshes.is_empty(),
+                &staged.settings.sampling
+            )),
         ),
         start.elapsed().as_secs_f64(),
         args.output.display()
@@ -615,18 +638,6 @@ fn choose_gpu(
         BackendArg::Auto if supported().is_ok() => crate::args::gpu_context(BackendArg::Auto),
         BackendArg::Auto | BackendArg::Cpu => Ok(None),
     }
-}
-
-/// Render on the GPU ([`splat_gpu::render`]), saying on which adapter.
-fn render_gpu(
-    ctx: &GpuContext,
-    staged: &Staged,
-    algorithm: &Algorithm,
-    extras: splat_gpu::Extras,
-    frames: &Frames,
-) -> Result<RenderOutput> {
-    eprintln!("rendering on {}", ctx.describe());
-    Ok(splat_gpu::render(ctx, algorithm, &staged.shot(), extras, frames)?)
 }
 
 fn write_outputs(args: &RenderArgs, out: &RenderOutput) -> Result<()> {

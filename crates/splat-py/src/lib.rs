@@ -333,8 +333,68 @@ fn render<'py>(
     let dict = outputs(py, out, gpu, extras, path)?;
     dict.set_item("first", frames.first)?;
     dict.set_item("count", count)?;
-    dict.set_item("run", splat_cli::render::run_description(&args, &staged, &method))?;
+    dict.set_item("run", splat_cli::render::run_description(&args, &staged, &staged.camera, &method))?;
     Ok(dict)
+}
+
+/// Render `scene` through each camera of `views` as [`render`] renders one (the same options,
+/// the same dict a view), the world prepared once for all of them: the BVH, and on the GPU the
+/// device arrays and pipelines, which `render` rebuilds at every call. Every view's images are
+/// returned together, so a long list of large images is best given in batches;
+/// `progress(done, total)` counts a CPU render's pixels over all the views.
+#[pyfunction]
+#[pyo3(signature = (scene, views, /, *, progress = None, **options))]
+fn render_views<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    views: Vec<Bound<'py, PyCamera>>,
+    progress: Option<Py<PyAny>>,
+    options: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    let (args, extras) = options::render_args(py, options)?;
+    if args.0.pipeline == Some(PipelineArg::Path) {
+        return Err(SplatError::new_err(
+            "render_views renders with the splat methods: render path-traced views one render() call at a time",
+        ));
+    }
+    let Some(first) = views.first() else { return Ok(Vec::new()) };
+    let (args, staged) = stage(args.0, scene, Some(first.get()))?;
+    let cameras = views
+        .iter()
+        .map(|view| {
+            let camera = args.scene.sized(view.get().camera)?;
+            splat_cli::args::check_memory(&camera)?;
+            Ok(camera)
+        })
+        .collect::<anyhow::Result<Vec<Camera>>>()
+        .map_err(fail)?;
+    let pixels = cameras.iter().map(|c| u64::from(c.width) * u64::from(c.height)).sum();
+    let reporter = Reporter::new(progress, pixels);
+    let frames = args.frames();
+    let rendered = py
+        .detach(|| -> anyhow::Result<Vec<Rendered>> {
+            let mut all = Vec::with_capacity(cameras.len());
+            let progress = |n: u64| reporter.advance(n);
+            splat_cli::render::render_views(&args, &staged, &cameras, extras, &progress, |_, rendered| {
+                all.push(rendered);
+                Ok(())
+            })?;
+            Ok(all)
+        })
+        .map_err(fail)?;
+    reporter.raise()?;
+    rendered
+        .into_iter()
+        .zip(&cameras)
+        .map(|(Rendered { out, count, gpu, algorithm }, camera)| {
+            let dict = outputs(py, out, gpu, extras, false)?;
+            dict.set_item("first", frames.first)?;
+            dict.set_item("count", count)?;
+            let method = format!("{algorithm:?}");
+            dict.set_item("run", splat_cli::render::run_description(&args, &staged, camera, &method))?;
+            Ok(dict)
+        })
+        .collect()
 }
 
 /// `scene` staged as `splat render` stages a file with `args` (the trainer's implications
@@ -587,6 +647,7 @@ fn _splat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyCamera>()?;
     m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(render_views, m)?)?;
     m.add_function(wrap_pyfunction!(methods, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(z_test, m)?)?;

@@ -63,6 +63,29 @@ def test_arrays_render_equals_the_cli_render_of_the_same_ply(capture, splat_bin,
     assert out["device"] == "cpu"
 
 
+@pytest.mark.parametrize("options", [{"method": "stochastic", "spp": 2, "seed": 5}, {"method": "raster-sorted"}])
+def test_render_views_equals_a_render_of_each_view(capture, options):
+    """render_views prepares the world once and renders every camera through it: each view's
+    dict equals render()'s of that camera alone, bit for bit, for a ray-tracing method and a
+    splatting one; the views differ from each other; wrong inputs are refused by name."""
+    _, _, scene = capture
+    look = lambda x: splat.Camera.look_at((x, -0.2, -0.5), TARGET, up=(0, -1, 0), width=WIDTH, height=HEIGHT)  # noqa: E731
+    cameras = [look(x) for x in (0.3, -0.4, 0.1)]
+    views = splat.render_views(scene, cameras, backend="cpu", **options)
+    assert len(views) == 3
+    for camera, view in zip(cameras, views):
+        one = splat.render(scene, camera, backend="cpu", **options)
+        for name in ("color", "variance", "alpha", "depth"):
+            np.testing.assert_array_equal(view[name], one[name], err_msg=f"{name} differs from render()'s")
+        assert (view["run"], view["count"], view["device"]) == (one["run"], one["count"], one["device"])
+    assert not np.array_equal(views[0]["color"], views[1]["color"])
+    assert splat.render_views(scene, [], backend="cpu") == []
+    with pytest.raises(splat.SplatError, match=r"cameras\[1\] is a str"):
+        splat.render_views(scene, [cameras[0], "cameras.json"])
+    with pytest.raises(splat.SplatError, match="path-traced views one"):
+        splat.render_views(scene, cameras, pipeline="path")
+
+
 def test_a_scene_from_arrays_equals_the_same_scene_from_linear_values(capture):
     """log_scales and logit_opacities apply exp and the sigmoid, nothing else."""
     g, _, raw_scene = capture

@@ -52,6 +52,7 @@ __all__ = [
     "methods",
     "power",
     "render",
+    "render_views",
     "z_test",
 ]
 
@@ -223,6 +224,22 @@ def render(scene: Scene, camera=None, *, progress=None, **options) -> dict:
     elif camera is not None and not isinstance(camera, Camera):
         raise SplatError(f"camera is a {type(camera).__name__}: expected a splat.Camera or a camera file's path")
     return _splat.render(scene._native, camera, progress=progress, **options)
+
+
+def render_views(scene: Scene, cameras, *, progress=None, **options) -> list:
+    """Render `scene` through each of `cameras` (a sequence of Camera) as `render` renders one
+    view, the same options and one dict a view, in order: each view's images equal
+    ``render(scene, camera, **options)``'s, but the world is prepared once (the BVH; on the GPU
+    also its device arrays and pipelines), where every `render` call prepares it anew. All the
+    views' images are returned together: give a long list of large views in batches.
+    `progress(done, total)` counts a CPU render's pixels over all the views."""
+    if not isinstance(scene, Scene):
+        raise SplatError(f"scene is a {type(scene).__name__}: expected a splat.Scene (Scene.load, Scene.from_arrays)")
+    cameras = list(cameras)
+    for i, camera in enumerate(cameras):
+        if not isinstance(camera, Camera):
+            raise SplatError(f"cameras[{i}] is a {type(camera).__name__}: expected a splat.Camera")
+    return _splat.render_views(scene._native, cameras, progress=progress, **options)
 
 
 def compare(reference, test, pixels_per_degree: float | None = None) -> dict:

@@ -67,6 +67,14 @@ def render(
     progress: Optional[Callable[[int, int], Any]] = None,
     **options: Any,
 ) -> dict[str, Any]: ...
+def render_views(
+    scene: Scene,
+    views: Sequence[Camera],
+    /,
+    *,
+    progress: Optional[Callable[[int, int], Any]] = None,
+    **options: Any,
+) -> list[dict[str, Any]]: ...
 def methods() -> list[dict[str, Any]]: ...
 def compare(
     reference: npt.NDArray[np.float32], test: npt.NDArray[np.float32], pixels_per_degree: Optional[float] = None
