@@ -1195,14 +1195,17 @@ fn colmap_cameras_and_all_cameras() {
 /// `--all-cameras` prepares the world once (the BVH, the device arrays, the pipelines) and renders
 /// every view through it: each view's image is, bit for bit, what `--camera-index` renders of
 /// that view alone, on the CPU and the GPU, for a ray-tracing method (a stochastic one, whose
-/// frames are keyed by the run) and a splatting one.
+/// frames are keyed by the run) and a splatting one; the views differ in pose and in size.
 #[test]
 fn all_cameras_views_are_the_single_view_renders() {
     let json = root().join("fixtures/cloud.cameras.json");
     let base = splat_io::cameras::read_cameras(&json).unwrap()[0];
-    let cameras: Vec<_> = [0.0f32, 0.5, -0.6]
+    let cameras: Vec<_> = [(0.0f32, 32, 24), (0.5, 40, 30), (-0.6, 24, 18)]
         .iter()
-        .map(|&angle| splat_core::Camera { rotation: base.rotation * glam::Mat3::from_rotation_y(angle), ..base })
+        .map(|&(angle, w, h)| {
+            let turned = splat_core::Camera { rotation: base.rotation * glam::Mat3::from_rotation_y(angle), ..base };
+            turned.rescaled(w, h).unwrap()
+        })
         .collect();
     let json = scratch("views3.cameras.json");
     splat_io::cameras::write_cameras(&json, &cameras).unwrap();
@@ -1210,7 +1213,7 @@ fn all_cameras_views_are_the_single_view_renders() {
     for backend in ["cpu", "gpu"] {
         for method in ["stochastic", "raster-sorted"] {
             let common = ["render", "fixtures/cloud.ply", "--camera", camera, "--method", method, "--spp", "2"];
-            let common = [&common[..], &["--width", "32", "--height", "24", "--backend", backend]].concat();
+            let common = [&common[..], &["--backend", backend]].concat();
             let dir = scratch(&format!("views-{backend}-{method}"));
             let dir_arg = dir.to_str().unwrap();
             let o = splat(&[&common[..], &["--all-cameras", "--view-format", "npy", "-o", dir_arg]].concat());
