@@ -1194,8 +1194,10 @@ fn colmap_cameras_and_all_cameras() {
 
 /// `--all-cameras` prepares the world once (the BVH, the device arrays, the pipelines) and renders
 /// every view through it: each view's image is, bit for bit, what `--camera-index` renders of
-/// that view alone, on the CPU and the GPU, for a ray-tracing method (a stochastic one, whose
-/// frames are keyed by the run) and a splatting one; the views differ in pose and in size.
+/// that view alone, on the CPU for a ray-tracing method (a stochastic one, whose frames are
+/// keyed by the run) and a splatting one, on the GPU for the ray-tracing one (views 1 and 2: a
+/// renderer stuck on the first view fails there; the GPU's pipelines make each run a second);
+/// the views differ in pose and in size.
 #[test]
 fn all_cameras_views_are_the_single_view_renders() {
     let json = root().join("fixtures/cloud.cameras.json");
@@ -1210,8 +1212,8 @@ fn all_cameras_views_are_the_single_view_renders() {
     let json = scratch("views3.cameras.json");
     splat_io::cameras::write_cameras(&json, &cameras).unwrap();
     let camera = json.to_str().unwrap();
-    for backend in ["cpu", "gpu"] {
-        for method in ["stochastic", "raster-sorted"] {
+    for (backend, methods, first) in [("cpu", &["stochastic", "raster-sorted"][..], 0), ("gpu", &["stochastic"], 1)] {
+        for &method in methods {
             let common = ["render", "fixtures/cloud.ply", "--camera", camera, "--method", method, "--spp", "2"];
             let common = [&common[..], &["--backend", backend]].concat();
             let dir = scratch(&format!("views-{backend}-{method}"));
@@ -1223,7 +1225,7 @@ fn all_cameras_views_are_the_single_view_renders() {
             }
             assert!(o.status.success(), "{}", stderr(&o));
             let mut views = Vec::new();
-            for i in 0..cameras.len() {
+            for i in first..cameras.len() {
                 let one = scratch(&format!("view-{backend}-{method}-{i}.npy"));
                 let index = i.to_string();
                 let o = splat(&[&common[..], &["--camera-index", &index, "-o", one.to_str().unwrap()]].concat());
@@ -1232,7 +1234,7 @@ fn all_cameras_views_are_the_single_view_renders() {
                 assert!(all == npy(&one), "{backend} {method}: view {i} of --all-cameras is not its own render");
                 views.push(all);
             }
-            assert!(views[0] != views[1] && views[1] != views[2], "{backend} {method}: the views are alike");
+            assert!(views.windows(2).all(|w| w[0] != w[1]), "{backend} {method}: the views are alike");
         }
     }
 }
