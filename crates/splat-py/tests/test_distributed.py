@@ -87,8 +87,14 @@ def test_ray_renders_a_camera_set_equal_to_one_process(scene, ray_cluster):
     views = [camera(i) for i in range(8)]
     options = {"method": "stochastic", "spp": 4, "seed": 3, "backend": "cpu"}
     remote = distributed.render_views(scene, views, **options)
-    for view, result in zip(views, remote):
-        np.testing.assert_array_equal(result["color"], splat.render(scene, view, **options)["color"])
+    batched = distributed.render_views(scene, views, views_per_task=3, **options)
+    assert len(remote) == len(batched) == 8
+    for view, result, in_batch in zip(views, remote, batched):
+        here = splat.render(scene, view, **options)["color"]
+        np.testing.assert_array_equal(result["color"], here)
+        np.testing.assert_array_equal(in_batch["color"], here, err_msg="a view of a batch of 3 differs")
+    with pytest.raises(splat.SplatError, match="views_per_task = 0"):
+        distributed.render_views(scene, views, views_per_task=0)
 
     @ray_cluster.remote
     def pid():

@@ -227,7 +227,8 @@ def render(scene: Scene, camera=None, *, progress=None, **options) -> dict:
 
 
 def render_views(scene: Scene, cameras, *, progress=None, **options) -> list:
-    """Render `scene` through each of `cameras` (a sequence of Camera) as `render` renders one
+    """Render `scene` through each of `cameras` (Camera objects, or the (name, Camera) pairs of
+    load_cameras) as `render` renders one
     view, the same options and one dict a view, in order: each view's images equal
     ``render(scene, camera, **options)``'s, but the world is prepared once (the BVH; on the GPU
     also its device arrays and pipelines), where every `render` call prepares it anew. All the
@@ -235,7 +236,7 @@ def render_views(scene: Scene, cameras, *, progress=None, **options) -> list:
     `progress(done, total)` counts a CPU render's pixels over all the views."""
     if not isinstance(scene, Scene):
         raise SplatError(f"scene is a {type(scene).__name__}: expected a splat.Scene (Scene.load, Scene.from_arrays)")
-    cameras = list(cameras)
+    cameras = [c[1] if isinstance(c, tuple) and len(c) == 2 else c for c in cameras]
     for i, camera in enumerate(cameras):
         if not isinstance(camera, Camera):
             raise SplatError(f"cameras[{i}] is a {type(camera).__name__}: expected a splat.Camera")

@@ -16,20 +16,25 @@ from __future__ import annotations
 from typing import Sequence
 
 from . import Camera, Scene, SplatError, merge, render
+from . import render_views as render_views_here
 
 
 def _render_task(scene: Scene, camera, options: dict) -> dict:
     return render(scene, camera, **options)
 
 
-def _remote(cpus_per_task: int):
+def _render_views_task(scene: Scene, cameras: list, options: dict) -> list[dict]:
+    return render_views_here(scene, cameras, **options)
+
+
+def _remote(cpus_per_task: int, function=_render_task):
     try:
         import ray
     except ImportError as error:
         raise SplatError("splat.distributed needs Ray: pip install ray") from error
     if not ray.is_initialized():
         raise SplatError("Ray is not initialised: call ray.init() (a local cluster) or ray.init(address=...) first")
-    return ray, ray.remote(num_cpus=cpus_per_task)(_render_task)
+    return ray, ray.remote(num_cpus=cpus_per_task)(function)
 
 
 def _per_task(options: dict, cpus_per_task: int) -> dict:
@@ -40,16 +45,25 @@ def _per_task(options: dict, cpus_per_task: int) -> dict:
     return {"threads": cpus_per_task, **options}
 
 
-def render_views(scene: Scene, cameras: Sequence, *, cpus_per_task: int = 1, **options) -> list[dict]:
+def render_views(
+    scene: Scene, cameras: Sequence, *, cpus_per_task: int = 1, views_per_task: int = 1, **options
+) -> list[dict]:
     """Render each of `cameras` (Camera objects, or (name, Camera) pairs as load_cameras
-    gives them) as a Ray task with render()'s `options`; the results in the cameras' order."""
-    ray, task = _remote(cpus_per_task)
+    gives them) with render()'s `options`, `views_per_task` consecutive views a Ray task; the
+    results in the cameras' order. A task renders its views with splat.render_views, so it
+    prepares the scene (its BVH, or its GPU arrays) once for all of them: more views a task pay
+    that once where a scene is large, fewer spread the views wider."""
+    if views_per_task < 1:
+        raise SplatError(f"views_per_task = {views_per_task}: give at least 1")
+    ray, task = _remote(cpus_per_task, _render_views_task)
     views = [c[1] if isinstance(c, tuple) else c for c in cameras]
     if not all(isinstance(v, Camera) for v in views):
         raise SplatError("cameras: give Camera objects (or the (name, Camera) pairs of load_cameras)")
     options = _per_task(options, cpus_per_task)
     shared = ray.put(scene)
-    return ray.get([task.remote(shared, view, options) for view in views])
+    batches = [views[i : i + views_per_task] for i in range(0, len(views), views_per_task)]
+    rendered = ray.get([task.remote(shared, batch, options) for batch in batches])
+    return [view for batch in rendered for view in batch]
 
 
 def render_frames(
