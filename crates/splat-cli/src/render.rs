@@ -420,8 +420,9 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     }
     let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
     let cameras = crate::args::load_cameras(path)?;
-    for (_, camera) in &cameras {
-        crate::args::check_memory(&args.scene.sized(*camera)?)?;
+    let sized = cameras.iter().map(|(_, camera)| args.scene.sized(*camera)).collect::<Result<Vec<Camera>>>()?;
+    for camera in &sized {
+        crate::args::check_memory(camera)?;
     }
     let staged = args.scene.load_world(640, 480)?;
     args.options.apply_capture(&staged.world.scene);
@@ -430,7 +431,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     let (share, of) = args.shard.unwrap_or((0, 1));
     let mine: Vec<(usize, &String)> =
         cameras.iter().enumerate().filter(|(i, _)| i % of == share).map(|(i, (name, _))| (i, name)).collect();
-    let views = mine.iter().map(|&(i, _)| args.scene.sized(cameras[i].1)).collect::<Result<Vec<Camera>>>()?;
+    let views: Vec<Camera> = mine.iter().map(|&(i, _)| sized[i]).collect();
     let bar = indicatif::ProgressBar::new(mine.len() as u64).with_style(
         indicatif::ProgressStyle::with_template("{spinner} views [{bar:40}] {pos}/{len} {elapsed} (eta {eta}) {msg}")
             .expect("valid template")

@@ -108,9 +108,6 @@ impl TraceSplit {
     pub fn capacity(ctx: &GpuContext, sh_degree: u8, sh_storage: ShStorage) -> u64 {
         let coefficients = splat_core::particle::sh_coeff_count(sh_degree) as u64;
         let lengths = |m: u64| [m, m, m * coefficients];
-        if !Self::fits(ctx, lengths(1), sh_storage) {
-            return 0;
-        }
         crate::split::most_that_fit(u64::from(u32::MAX), |m| Self::fits(ctx, lengths(m), sh_storage))
     }
 

@@ -330,10 +330,25 @@ fn render<'py>(
         })
         .map_err(fail)?;
     reporter.raise()?;
+    let run = splat_cli::render::run_description(&args, &staged, &staged.camera, &method);
+    view_dict(py, out, gpu, extras, path, (frames.first, count), run)
+}
+
+/// The dict a view renders into: [`outputs`], the frames it holds ("first", "count") and what
+/// else decides them ("run").
+fn view_dict(
+    py: Python<'_>,
+    out: splat_core::frame::RenderOutput,
+    gpu: Option<String>,
+    extras: splat_gpu::Extras,
+    path: bool,
+    (first, count): (u32, u32),
+    run: String,
+) -> PyResult<Bound<'_, PyDict>> {
     let dict = outputs(py, out, gpu, extras, path)?;
-    dict.set_item("first", frames.first)?;
+    dict.set_item("first", first)?;
     dict.set_item("count", count)?;
-    dict.set_item("run", splat_cli::render::run_description(&args, &staged, &staged.camera, &method))?;
+    dict.set_item("run", run)?;
     Ok(dict)
 }
 
@@ -387,12 +402,8 @@ fn render_views<'py>(
         .into_iter()
         .zip(&cameras)
         .map(|(Rendered { out, count, gpu, algorithm }, camera)| {
-            let dict = outputs(py, out, gpu, extras, false)?;
-            dict.set_item("first", frames.first)?;
-            dict.set_item("count", count)?;
-            let method = format!("{algorithm:?}");
-            dict.set_item("run", splat_cli::render::run_description(&args, &staged, camera, &method))?;
-            Ok(dict)
+            let run = splat_cli::render::run_description(&args, &staged, camera, &format!("{algorithm:?}"));
+            view_dict(py, out, gpu, extras, false, (frames.first, count), run)
         })
         .collect()
 }

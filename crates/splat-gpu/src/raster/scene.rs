@@ -244,9 +244,6 @@ impl RasterSplit {
     /// splatting kernels bind on `ctx` (before an image's tile pairs, which the tile pass checks
     /// for itself): the bound the adapter's storage bindings set, whatever its memory.
     pub fn capacity(ctx: &GpuContext) -> u64 {
-        if !Self::fits(ctx, 1) {
-            return 0;
-        }
         crate::split::most_that_fit(u64::from(u32::MAX), |n| Self::fits(ctx, n))
     }
 
