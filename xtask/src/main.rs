@@ -11,6 +11,8 @@ fn main() -> Result<()> {
         Some("fixtures") => regenerate("fixtures"),
         Some("bless") => regenerate("bless"),
         Some("assets") => {
+            // Every Debian package CI needs, in one apt-get run, before the first is wanted.
+            ensure_all()?;
             let bonsai = assets()?;
             println!("{}", bonsai.display());
             println!("{}", interop()?.display());
@@ -49,9 +51,7 @@ fn root() -> PathBuf {
 }
 
 fn test(extra: &[String]) -> Result<()> {
-    ensure_vulkan_driver()?;
-    ensure_embree()?;
-    ensure_xvfb()?;
+    ensure_all()?;
     let skips = skip_log();
     let _ = std::fs::remove_file(&skips);
     let status = if extra.is_empty() && has_nextest() {
@@ -188,12 +188,8 @@ fn install_fresh(wheel: &Path) -> Result<()> {
 /// Debian packages apart as python3-venv, installed here when root; under `CI` its absence is
 /// an error).
 fn ensure_venv() -> Result<bool> {
-    let have = || {
-        let probe = Command::new(system_python()).args(["-c", "import ensurepip, venv"]).output();
-        probe.is_ok_and(|o| o.status.success())
-    };
-    ensure_packages(have, &["python3-venv"], "Python's venv", "the Python package's tests will skip")?;
-    Ok(have())
+    ensure(&VENV)?;
+    Ok((VENV.have)())
 }
 
 /// The system's Python 3.
@@ -345,32 +341,47 @@ fn vulkan_icds() -> Vec<PathBuf> {
         .collect()
 }
 
-/// Install Mesa's Vulkan drivers (lavapipe, a CPU Vulkan implementation) when no Vulkan driver
-/// is present and we run as root, so the GPU tests have an adapter on any machine.
-fn ensure_vulkan_driver() -> Result<()> {
-    let have = || !vulkan_icds().is_empty();
-    ensure_packages(have, &["mesa-vulkan-drivers", "libvulkan1"], "Vulkan driver", "GPU tests will skip")
+/// Debian packages a part of the tests needs: what they give, how to tell they are there, and
+/// what skips without them.
+struct Need {
+    what: &'static str,
+    packages: &'static [&'static str],
+    have: fn() -> bool,
+    consequence: &'static str,
 }
+
+/// Mesa's Vulkan drivers (lavapipe, a CPU Vulkan implementation), so the GPU tests have an
+/// adapter on any machine.
+const VULKAN: Need = Need {
+    what: "Vulkan driver",
+    packages: &["mesa-vulkan-drivers", "libvulkan1"],
+    have: || !vulkan_icds().is_empty(),
+    consequence: "GPU tests will skip",
+};
 
 /// Embree 3's headers and library, for the Embree peer of the CPU tracer (`embree-peer`).
 const EMBREE_HEADER: &str = "/usr/include/embree3/rtcore.h";
 
-/// Install Embree 3 (Debian's libembree-dev) when it is missing and we run as root, so that the
-/// peer's image test and `cargo xtask bench` can build the C++ peer.
-fn ensure_embree() -> Result<()> {
-    let have = || Path::new(EMBREE_HEADER).exists();
-    ensure_packages(have, &["libembree-dev"], "Embree 3", "the Embree peer's test will skip")
-}
+/// Embree 3 (Debian's libembree-dev), so that the peer's image test and `cargo xtask bench` can
+/// build the C++ peer.
+const EMBREE: Need = Need {
+    what: "Embree 3",
+    packages: &["libembree-dev"],
+    have: || Path::new(EMBREE_HEADER).exists(),
+    consequence: "the Embree peer's test will skip",
+};
 
 /// Xvfb and the X client libraries winit loads at run time (it links none of them), for the
 /// viewer's real-window test under `xvfb-run`.
 const X11_PACKAGES: [&str; 7] =
     ["xvfb", "xauth", "libxkbcommon-x11-0", "libxcursor1", "libxi6", "libxrandr2", "libx11-xcb1"];
 
-/// Install [`X11_PACKAGES`] when they are missing and we run as root.
-fn ensure_xvfb() -> Result<()> {
-    let have = || {
-        let on_path = Command::new("sh").args(["-c", "command -v xvfb-run"]).output().is_ok_and(|o| o.status.success());
+/// [`X11_PACKAGES`].
+const XVFB: Need = Need {
+    what: "Xvfb",
+    packages: &X11_PACKAGES,
+    have: || {
+        let on_path = on_path("xvfb-run");
         let query = Command::new("dpkg-query").args(["-W", "-f=${Status}\n"]).args(X11_PACKAGES).output();
         // Where dpkg is not the package manager, xvfb-run on the PATH is all we can check.
         let installed = query.map_or(true, |o| {
@@ -378,8 +389,60 @@ fn ensure_xvfb() -> Result<()> {
                 == X11_PACKAGES.len()
         });
         on_path && installed
-    };
-    ensure_packages(have, &X11_PACKAGES, "Xvfb", "the viewer's window test will skip")
+    },
+    consequence: "the viewer's window test will skip",
+};
+
+/// Debian's Chromium, for the test of `splat serve`'s page in a real headless browser.
+const CHROMIUM: Need = Need {
+    what: "Chromium",
+    packages: &["chromium"],
+    have: || on_path("chromium"),
+    consequence: "the test of splat serve's page will skip",
+};
+
+/// Python's `venv` with pip inside its environments (`ensurepip`, which Debian packages apart).
+const VENV: Need = Need {
+    what: "Python's venv",
+    packages: &["python3-venv"],
+    have: || {
+        let probe = Command::new(system_python()).args(["-c", "import ensurepip, venv"]).output();
+        probe.is_ok_and(|o| o.status.success())
+    },
+    consequence: "the Python tests will skip",
+};
+
+/// Node.js and npm, which write the files of other tools (`cargo xtask assets`).
+const NODE: Need = Need {
+    what: "Node.js",
+    packages: &["nodejs", "npm"],
+    have: || Command::new("npm").arg("--version").output().is_ok_and(|o| o.status.success()),
+    consequence: "the tests on other tools' files will skip",
+};
+
+/// Every package set `cargo xtask assets` and `test` need.
+const NEEDS: [&Need; 6] = [&VULKAN, &EMBREE, &XVFB, &CHROMIUM, &VENV, &NODE];
+
+/// Whether `program` is on the PATH.
+fn on_path(program: &str) -> bool {
+    Command::new("sh").args(["-c", &format!("command -v {program}")]).output().is_ok_and(|o| o.status.success())
+}
+
+/// Install what [`NEEDS`] lack in one apt-get run (one index update, not one a set).
+fn ensure_all() -> Result<()> {
+    let missing: Vec<&Need> = NEEDS.into_iter().filter(|n| !(n.have)()).collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let packages: Vec<&str> = missing.iter().flat_map(|n| n.packages.iter().copied()).collect();
+    let what = missing.iter().map(|n| n.what).collect::<Vec<_>>().join(", ");
+    let consequences = missing.iter().map(|n| n.consequence).collect::<Vec<_>>().join("; ");
+    ensure_packages(|| missing.iter().all(|n| (n.have)()), &packages, &what, &consequences)
+}
+
+/// Make one [`Need`] met.
+fn ensure(need: &Need) -> Result<()> {
+    ensure_packages(need.have, need.packages, need.what, need.consequence)
 }
 
 /// Make `have()` true by installing Debian `packages` with apt-get when we are root; otherwise
@@ -433,7 +496,7 @@ const POWER_SUITES: [&str; 7] = [
 /// 699d157), then gather the rows it wrote to `target/power/` into docs/power.md, suites in
 /// order. `cargo xtask test` runs the asserted rows only.
 fn power() -> Result<()> {
-    ensure_vulkan_driver()?;
+    ensure(&VULKAN)?;
     let dir = root().join("target/power");
     if dir.exists() {
         std::fs::remove_dir_all(&dir)?;
@@ -494,7 +557,7 @@ fn cargo(args: &[&str]) -> Result<()> {
 /// sweep at 300 × 200 (1024 samples a pixel per row).
 fn bench() -> Result<()> {
     let bonsai = assets()?;
-    ensure_embree()?;
+    ensure(&EMBREE)?;
     cargo(&["bench", "-p", "splat-tests", "--bench", "trace"])?;
     cargo(&["bench", "-p", "splat-gpu", "--bench", "sort"])?;
     let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
@@ -782,9 +845,8 @@ fn interop() -> Result<PathBuf> {
     let dir = root().join("target/interop");
     let npm_dir = dir.join("npm");
     std::fs::create_dir_all(&npm_dir)?;
-    let have_node = || Command::new("npm").arg("--version").output().is_ok_and(|o| o.status.success());
-    ensure_packages(have_node, &["nodejs", "npm"], "Node.js", "the tests on other tools' files will skip")?;
-    if !have_node() {
+    ensure(&NODE)?;
+    if !(NODE.have)() {
         return Ok(dir);
     }
     for file in ["package.json", "package-lock.json", "make.mjs"] {
