@@ -51,6 +51,9 @@ enum Command {
     /// Open a window on a scene: fly through it, switch methods, watch them converge (the
     /// built-in demo scene without a file).
     View(Box<splat_view::ViewArgs>),
+    /// Serve a scene to a browser: a page on localhost shows the render converging and steers
+    /// it with the window's controls (for GPU machines without a display).
+    Serve(Box<splat_view::serve::ServeArgs>),
     /// RMSE, PSNR, SSIM and ꟻLIP between two images (.png, .exr, .npy), with error maps.
     Compare(compare::CompareArgs),
     /// Merge the shares of a run (`splat render --frames A..B -o PART.acc`, one per task of a
@@ -116,6 +119,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => compare::run(args),
         Command::Merge(args) => merge::run(args),
         Command::View(args) => splat_view::run(&args),
+        Command::Serve(args) => splat_view::serve::run(&args),
         Command::Completions { shell } => {
             clap_complete::generate(shell, &mut Cli::command(), "splat", &mut std::io::stdout());
             Ok(())

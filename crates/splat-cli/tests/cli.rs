@@ -1,5 +1,7 @@
 //! End-to-end tests of the `splat` binary.
 
+/// `splat serve` and its page in headless Chromium.
+mod serve;
 /// Shares of a run and shards of a view set (`--frames`, `splat merge`, `--shard`), in this test
 /// binary rather than one of its own (a binary to link costs CI).
 mod shares;

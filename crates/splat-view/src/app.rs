@@ -3,14 +3,15 @@
 //! only posts jobs and shows the texture the thread draws into.
 
 use crate::camera::Orbit;
-use crate::load::{Loaded, SceneInfo};
-use crate::settings::{Backend, Pipeline, Settings};
-use crate::worker::{Job, Status, TEXTURE_FORMAT, Worker};
+use crate::load::Loaded;
+pub use crate::navigate::KEY_BINDINGS;
+use crate::navigate::{Action, FLY_KEYS, Navigation, fly_direction, key_action};
+use crate::settings::{Backend, LOOKS, Pipeline, SHADOWS, Settings, look_name, shadows_name};
+use crate::worker::{self, Status, TEXTURE_FORMAT, Worker};
 use eframe::egui::{self, Key, PointerButton, Sense};
 use eframe::egui_wgpu;
 use splat_core::catalogue::{Limits, Param};
 use splat_core::glam::Vec3;
-use splat_core::lighting::{Look, Shadows};
 use splat_core::normal::NormalMode;
 use splat_core::raster::SAMPLE_COUNTS;
 use splat_core::raster::{Blend, FragmentDepth, Response, SamplePattern, SplatExtent};
@@ -28,6 +29,31 @@ pub enum BackendChoice {
     Gpu,
     /// The CPU renderers.
     Cpu,
+}
+
+impl BackendChoice {
+    /// Where frames render, and why, given the adapter and the GPU context made on it (`Err(None)`
+    /// when none was asked for, `Err(Some(why))` when it could not be made).
+    pub fn resolve(
+        self,
+        adapter: Option<&wgpu::AdapterInfo>,
+        gpu: &Result<GpuContext, Option<String>>,
+    ) -> (Backend, String) {
+        let hardware = adapter.is_some_and(|a| a.device_type != wgpu::DeviceType::Cpu);
+        let name = adapter.map_or("", |a| &a.name);
+        let backend = match (gpu, self) {
+            (Ok(_), BackendChoice::Gpu) => Backend::Gpu,
+            (Ok(_), BackendChoice::Auto) if hardware => Backend::Gpu,
+            _ => Backend::Cpu,
+        };
+        let note = match (gpu, hardware) {
+            (Err(None), _) => "--backend cpu: rendering on the CPU".into(),
+            (Err(Some(e)), _) => format!("the GPU tracer cannot run here ({e}): rendering on the CPU"),
+            (Ok(_), true) => format!("GPU: {name}"),
+            (Ok(_), false) => format!("{name} is a CPU Vulkan driver (slow): tracing on the CPU unless GPU is chosen"),
+        };
+        (backend, note)
+    }
 }
 
 /// What the command line sets.
@@ -53,13 +79,8 @@ struct Target {
 
 /// The viewer's state.
 pub struct Viewer {
-    scene: SceneInfo,
-    orbit: Orbit,
-    /// The loaded view shown while the camera has not moved from it.
-    view: Option<usize>,
-    /// The view F returns to (`--camera-index`) and the world's up for framing.
-    home: usize,
-    up: Vec3,
+    /// The orbit, the loaded view shown and the keys' actions (shared with `splat serve`).
+    nav: Navigation,
     settings: Settings,
     /// Why the panel's GPU choice is what it is (adapter name, or why the CPU renders).
     backend_note: String,
@@ -69,10 +90,6 @@ pub struct Viewer {
     target: Option<Target>,
     /// Where the view's texture was last drawn in the window, in points.
     shown: Option<egui::Rect>,
-    /// The last job posted: its number and what it asked for.
-    posted: Option<(u64, Camera, Settings, u64)>,
-    /// Bumped by "restart": a new accumulation of the same view.
-    restart: u64,
     quit_after: Option<u32>,
     /// A test hook: show no frames/s (its value varies from run to run) so that snapshots are
     /// repeatable.
@@ -83,8 +100,6 @@ impl Viewer {
     /// A viewer of `loaded` on the UI's device (`render_state`), waking `egui` when frames
     /// arrive.
     pub fn new(loaded: Loaded, options: &Options, render_state: egui_wgpu::RenderState, egui: egui::Context) -> Self {
-        let adapter = render_state.adapter.get_info();
-        let hardware = adapter.device_type != wgpu::DeviceType::Cpu;
         let gpu = match options.backend {
             BackendChoice::Cpu => Err(None),
             _ => {
@@ -92,31 +107,14 @@ impl Viewer {
                     .map_err(|e| Some(e.to_string()))
             }
         };
-        let backend = match (&gpu, options.backend) {
-            (Ok(_), BackendChoice::Gpu) => Backend::Gpu,
-            (Ok(_), BackendChoice::Auto) if hardware => Backend::Gpu,
-            _ => Backend::Cpu,
-        };
-        let backend_note = match (&gpu, hardware) {
-            (Err(None), _) => "--backend cpu: rendering on the CPU".into(),
-            (Err(Some(e)), _) => format!("the GPU tracer cannot run here ({e}): rendering on the CPU"),
-            (Ok(_), true) => format!("GPU: {}", adapter.name),
-            (Ok(_), false) => {
-                format!("{} is a CPU Vulkan driver (slow): tracing on the CPU unless GPU is chosen", adapter.name)
-            }
-        };
+        let (backend, backend_note) = options.backend.resolve(Some(&render_state.adapter.get_info()), &gpu);
         let gpu_available = gpu.is_ok();
         let Loaded { world, info } = loaded;
         let mut settings = Settings::new(info.render, &world.lighting, backend);
         settings.max_frames = options.max_frames;
-        let (view, orbit) = initial_view(&info, options.camera_index, options.up);
-        let worker = Worker::spawn(world, gpu.ok(), render_state.queue.clone(), move || egui.request_repaint());
+        let worker = Worker::spawn(world, gpu.ok(), Some(render_state.queue.clone()), move || egui.request_repaint());
         Self {
-            scene: info,
-            orbit,
-            view,
-            home: options.camera_index,
-            up: options.up,
+            nav: Navigation::new(info, options.camera_index, options.up),
             settings,
             backend_note,
             gpu_available,
@@ -124,8 +122,6 @@ impl Viewer {
             render_state,
             target: None,
             shown: None,
-            posted: None,
-            restart: 0,
             quit_after: options.quit_after,
             hide_rate: false,
         }
@@ -143,18 +139,17 @@ impl Viewer {
 
     /// The render thread's latest status for the posted job, `None` before it has one.
     pub fn status(&self) -> Option<Status> {
-        let status = self.worker.status();
-        (self.posted.as_ref().map(|p| p.0) == Some(status.job)).then_some(status)
+        self.worker.posted_status()
     }
 
     /// The orbit camera.
     pub fn orbit(&self) -> &Orbit {
-        &self.orbit
+        self.nav.orbit()
     }
 
     /// The camera of the last job posted.
     pub fn camera(&self) -> Option<Camera> {
-        self.posted.as_ref().map(|p| p.1)
+        self.worker.posted().map(|p| p.camera)
     }
 
     /// The texture the view is drawn into.
@@ -169,7 +164,7 @@ impl Viewer {
 
     /// Which loaded view is shown, `None` once the camera has moved.
     pub fn view(&self) -> Option<usize> {
-        self.view
+        self.nav.view()
     }
 
     /// Draw the window's contents and post what they ask for.
@@ -207,26 +202,11 @@ impl Viewer {
         self.status_line(ui, rect);
     }
 
-    /// The camera of the view: the loaded view itself (its aspect, letterboxed) until the
-    /// camera moves, the orbit's after; with the rectangle of the window it fills.
+    /// The camera of the view ([`Navigation::camera`]) and the rectangle of the window it
+    /// fills, centred in `rect`.
     fn view_camera(&self, rect: egui::Rect, ppp: f32) -> (Camera, egui::Rect) {
-        let scale = self.settings.scale * ppp;
-        let pixels = |points: f32| ((points * scale).round() as u32).max(8);
-        if let Some(i) = self.view {
-            let file = self.scene.views.get(i).map(|v| v.1).or(self.scene.camera);
-            if let Some(file) = file {
-                let aspect = file.width as f32 / file.height as f32;
-                let size = if rect.width() / rect.height() > aspect {
-                    egui::vec2(rect.height() * aspect, rect.height())
-                } else {
-                    egui::vec2(rect.width(), rect.width() / aspect)
-                };
-                let shown = egui::Rect::from_center_size(rect.center(), size);
-                let camera = file.rescaled(pixels(size.x), pixels(size.y)).unwrap_or(file);
-                return (camera, shown);
-            }
-        }
-        (self.orbit.camera(pixels(rect.width()), pixels(rect.height())), rect)
+        let (camera, [w, h]) = self.nav.camera([rect.width(), rect.height()], self.settings.scale * ppp);
+        (camera, egui::Rect::from_center_size(rect.center(), egui::vec2(w, h)))
     }
 
     /// A texture of `width` × `height` for the render thread, registered for the UI.
@@ -262,107 +242,51 @@ impl Viewer {
 
     /// Post a job when the camera, the settings or the texture changed.
     fn post(&mut self, camera: Camera) {
-        let (near, far) = self.depth_range(&camera);
-        self.settings.display.depth_near = near;
-        self.settings.display.depth_far = far;
-        let unchanged =
-            self.posted.as_ref().is_some_and(|(_, c, s, r)| *c == camera && *s == self.settings && *r == self.restart);
-        if unchanged {
-            return;
-        }
-        let id = self.posted.as_ref().map_or(1, |p| p.0 + 1);
-        let target = self.target.as_ref().expect("made before posting").texture.clone();
-        let job = Job { camera, settings: self.settings.clone(), target, generation: self.restart };
-        self.worker.submit(id, job);
-        self.posted = Some((id, camera, self.settings.clone(), self.restart));
+        (self.settings.display.depth_near, self.settings.display.depth_far) = self.nav.depth_range(&camera);
+        let texture = &self.target.as_ref().expect("made before posting").texture;
+        self.worker.post(camera, &self.settings, self.nav.restart, || worker::Target::Texture(texture.clone()));
     }
 
-    /// Depths shown white and black: the scene's central sphere seen from the camera.
-    fn depth_range(&self, camera: &Camera) -> (f32, f32) {
-        let (center, radius) = self.scene.sphere();
-        let d = (center - camera.center()).length();
-        ((d - radius).max(0.0), d + radius)
-    }
-
-    /// Mouse and keys: drag turns, right or middle drag pans, the wheel dollies, W A S D Q E
-    /// fly, N and P step through the loaded views, F returns to the opening view, R restarts,
-    /// Space pauses, 1–4 choose what is shown.
+    /// Mouse and keys as [`Action`]s ([`KEY_BINDINGS`]): drag turns, right or middle drag
+    /// pans, the wheel dollies, W A S D Q E fly, the other keys jump.
     fn navigate(&mut self, ui: &egui::Ui, response: &egui::Response, rect: egui::Rect) {
-        let before = self.orbit;
         let delta = response.drag_delta();
+        let mut actions = Vec::new();
         if response.dragged_by(PointerButton::Primary) {
-            self.orbit.rotate(delta.x, delta.y);
+            actions.push(Action::Rotate(delta.x, delta.y));
         } else if response.dragged_by(PointerButton::Secondary) || response.dragged_by(PointerButton::Middle) {
-            self.orbit.pan(delta.x, delta.y, rect.height());
+            actions.push(Action::Pan(delta.x, delta.y, rect.height()));
         }
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta().y);
             if scroll != 0.0 {
-                self.orbit.zoom(scroll / 50.0);
+                actions.push(Action::Zoom(scroll / 50.0));
             }
         }
-        let keys = !ui.ctx().text_edit_focused();
-        if keys {
-            self.fly(ui);
+        if !ui.ctx().text_edit_focused() {
+            actions.extend(self.fly(ui));
+            let keys = [Key::N, Key::P, Key::F, Key::R, Key::Space, Key::Num1, Key::Num2, Key::Num3, Key::Num4];
+            let pressed = ui.input(|i| keys.map(|k| i.key_pressed(k)));
+            actions.extend(keys.iter().zip(pressed).filter(|p| p.1).filter_map(|(k, _)| key_action(k.name())));
         }
-        if self.orbit != before {
-            self.view = None;
-        }
-        if keys {
-            self.keys(ui);
+        for action in actions {
+            self.nav.act(action, &mut self.settings);
         }
     }
 
-    /// W A S D Q E: move eye and target.
-    fn fly(&mut self, ui: &egui::Ui) {
+    /// W A S D Q E held: fly by half the scene's radius a second (Shift: two).
+    fn fly(&mut self, ui: &egui::Ui) -> Option<Action> {
         let (dt, fast, down) = ui.input(|i| {
-            let down = [Key::W, Key::S, Key::A, Key::D, Key::E, Key::Q].map(|k| i.key_down(k));
+            let down = FLY_KEYS.map(|c| Key::from_name(&c.to_string()).is_some_and(|k| i.key_down(k)));
             (i.stable_dt.min(0.1), i.modifiers.shift, down)
         });
-        let speed = self.scene.sphere().1 * if fast { 2.0 } else { 0.5 } * dt;
-        let axis = |plus: bool, minus: bool| f32::from(u8::from(plus)) - f32::from(u8::from(minus));
-        let (forward, right, up) = (axis(down[0], down[1]), axis(down[3], down[2]), axis(down[4], down[5]));
-        if forward != 0.0 || right != 0.0 || up != 0.0 {
-            self.orbit.fly(speed * forward, speed * right, speed * up);
-            ui.ctx().request_repaint();
+        let speed = if fast { 2.0 } else { 0.5 } * dt;
+        let (forward, right, up) = fly_direction(down);
+        if forward == 0.0 && right == 0.0 && up == 0.0 {
+            return None;
         }
-    }
-
-    /// The keys that jump: views, home, restart, pause, display modes.
-    fn keys(&mut self, ui: &egui::Ui) {
-        let pressed = ui.input(|i| {
-            [Key::N, Key::P, Key::F, Key::R, Key::Space, Key::Num1, Key::Num2, Key::Num3, Key::Num4]
-                .map(|k| i.key_pressed(k))
-        });
-        let [next, previous, home, restart, pause, modes @ ..] = pressed;
-        if next || previous {
-            self.step_view(if next { 1 } else { -1 });
-        }
-        if home {
-            (self.view, self.orbit) = initial_view(&self.scene, self.home, self.up);
-        }
-        if restart {
-            self.restart += 1;
-        }
-        if pause {
-            self.settings.paused = !self.settings.paused;
-        }
-        for (mode, chosen) in DisplayMode::ALL.into_iter().zip(modes) {
-            if chosen {
-                self.settings.display.mode = mode;
-            }
-        }
-    }
-
-    /// Show the loaded view `by` steps after the current one (wrapping).
-    fn step_view(&mut self, by: isize) {
-        let n = self.scene.views.len();
-        if n == 0 {
-            return;
-        }
-        let current = self.view.unwrap_or(0) as isize;
-        let i = (current + by).rem_euclid(n as isize) as usize;
-        (self.view, self.orbit) = initial_view(&self.scene, i, self.up);
+        ui.ctx().request_repaint();
+        Some(Action::Fly(speed * forward, speed * right, speed * up))
     }
 
     /// Frames, rate, RMSE and errors over the top left of the view.
@@ -378,8 +302,8 @@ impl Viewer {
         if status.idle {
             line += if self.settings.paused { " · paused" } else { " · done" };
         }
-        let view = match (self.view, self.view.and_then(|i| self.scene.views.get(i))) {
-            (Some(i), Some((name, _))) => format!("view {} of {}: {name}", i + 1, self.scene.views.len()),
+        let view = match (self.nav.view(), self.nav.view().and_then(|i| self.nav.scene().views.get(i))) {
+            (Some(i), Some((name, _))) => format!("view {} of {}: {name}", i + 1, self.nav.scene().views.len()),
             (Some(_), None) => "the scene's camera".into(),
             (None, _) => "free camera".into(),
         };
@@ -402,8 +326,13 @@ impl Viewer {
     /// The side panel.
     fn panel(&mut self, ui: &mut egui::Ui) {
         ui.heading("splat view");
-        ui.label(format!("{}: {} splats, SH degree {}", self.scene.name, self.scene.particles, self.scene.sh_degree))
-            .on_hover_text(format!("splatting through {}", self.scene.screen_filter.describe()));
+        ui.label(format!(
+            "{}: {} splats, SH degree {}",
+            self.nav.scene().name,
+            self.nav.scene().particles,
+            self.nav.scene().sh_degree
+        ))
+        .on_hover_text(format!("splatting through {}", self.nav.scene().screen_filter.describe()));
         ui.separator();
         self.renderer_section(ui);
         ui.separator();
@@ -471,14 +400,8 @@ impl Viewer {
             }
         });
         let s = &mut self.settings;
-        combo(ui, "look", &mut s.look, &[Look::Surface, Look::Volumetric], |l| format!("{l:?}").to_lowercase());
-        let shadows = [Shadows::None, Shadows::SORTED, Shadows::Stochastic, Shadows::Exact];
-        combo(ui, "shadows", &mut s.shadows, &shadows, |s| match s {
-            Shadows::None => "no shadows".into(),
-            Shadows::Sorted { .. } => "sorted shadows".into(),
-            Shadows::Stochastic => "stochastic shadows".into(),
-            _ => "exact shadows".into(),
-        });
+        combo(ui, "look", &mut s.look, &LOOKS, |l| look_name(l).into());
+        combo(ui, "shadows", &mut s.shadows, &SHADOWS, |s| shadows_name(s).into());
     }
 
     /// The world's lights and each splat set's material, edited live (vk_gaussian_splatting's
@@ -526,7 +449,7 @@ impl Viewer {
     }
 
     fn display_section(&mut self, ui: &mut egui::Ui) {
-        let s = &mut self.settings;
+        let (s, nav) = (&mut self.settings, &mut self.nav);
         combo(ui, "show", &mut s.display.mode, &DisplayMode::ALL, |m| m.name().to_string());
         if s.display.mode == DisplayMode::Variance {
             ui.add(
@@ -539,16 +462,16 @@ impl Viewer {
         ui.horizontal(|ui| {
             ui.checkbox(&mut s.paused, "pause");
             if ui.button("restart").clicked() {
-                self.restart += 1;
+                nav.act(Action::Restart, s);
             }
         });
-        if !self.scene.views.is_empty() {
+        if !nav.scene().views.is_empty() {
             ui.horizontal(|ui| {
                 if ui.button("previous view").clicked() {
-                    self.step_view(-1);
+                    nav.act(Action::StepView(-1), s);
                 }
                 if ui.button("next view").clicked() {
-                    self.step_view(1);
+                    nav.act(Action::StepView(1), s);
                 }
             });
         }
@@ -560,20 +483,6 @@ impl eframe::App for Viewer {
         self.show(ui);
     }
 }
-
-/// The key bindings, as the panel and the README list them.
-pub const KEY_BINDINGS: &[&str] = &[
-    "left drag: orbit",
-    "right or middle drag: pan",
-    "wheel: dolly",
-    "W A S D: fly forward, left, back, right",
-    "Q E: fly down, up (Shift: faster)",
-    "N / P: next / previous loaded view",
-    "F: back to the opening view (--camera-index, else the scene's framing)",
-    "R: restart the accumulation",
-    "Space: pause",
-    "1 2 3 4: colour, depth, normals, variance",
-];
 
 /// A colour button editing `colour` (linear RGB, any non-negative value up to 1 per channel).
 fn rgb(ui: &mut egui::Ui, colour: &mut Vec3) {
@@ -660,22 +569,4 @@ fn combo<T: PartialEq + Copy>(
             ui.selectable_value(value, choice, name(choice));
         }
     });
-}
-
-/// The first view: loaded view `camera_index` when there are loaded views (clamped), else
-/// the file's camera, else a framing of the scene with world up `up`; and the orbit about the
-/// scene's centre that starts there.
-fn initial_view(loaded: &SceneInfo, camera_index: usize, up: Vec3) -> (Option<usize>, Orbit) {
-    let (center, radius) = loaded.sphere();
-    let (view, camera) = if loaded.views.is_empty() {
-        let camera = loaded.camera.unwrap_or_else(|| {
-            Camera::framing(&loaded.bounds, up, 16, 10).expect("framing a finite box gives a camera")
-        });
-        (loaded.camera.map(|_| 0), camera)
-    } else {
-        let i = camera_index.min(loaded.views.len() - 1);
-        (Some(i), loaded.views[i].1)
-    };
-    let distance = (center - camera.center()).dot(camera.forward()).max(0.1 * radius);
-    (view, Orbit::from_camera(&camera, distance))
 }

@@ -15,6 +15,8 @@ pub mod accumulate;
 pub mod app;
 pub mod camera;
 pub mod load;
+pub mod navigate;
+pub mod serve;
 pub mod settings;
 pub mod worker;
 
@@ -29,9 +31,9 @@ use splat_gpu::GpuContext;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// The command line of `splat view`.
+/// What `splat view` and `splat serve` open and how they render it.
 #[derive(clap::Args, Clone, Debug)]
-pub struct ViewArgs {
+pub struct SceneArgs {
     /// Scene file (.ply, compressed .ply, .splat, .spz) or world file (.toml); the built-in
     /// demo scene when omitted.
     pub scene: Option<PathBuf>,
@@ -49,18 +51,9 @@ pub struct ViewArgs {
     /// World up "x,y,z" for framing a scene without cameras (COLMAP captures: 0,-1,0).
     #[arg(long, value_parser = splat_io::text::parse_direction, default_value = "0,1,0")]
     pub up: Vec3,
-    /// Window width in points.
-    #[arg(long, default_value_t = 1280.0)]
-    pub width: f32,
-    /// Window height in points.
-    #[arg(long, default_value_t = 800.0)]
-    pub height: f32,
     /// Frames after which the accumulation stops.
     #[arg(long, default_value_t = 1024)]
     pub max_frames: u32,
-    /// Render N frames of the first view, print a summary and close the window (smoke tests).
-    #[arg(long, value_name = "N")]
-    pub quit_after: Option<u32>,
     /// The screen-space filter the capture was trained with, which the splatting methods apply
     /// (default: the one its file names; else 3dgs).
     #[arg(long, value_parser = screen_filter_parser())]
@@ -70,6 +63,54 @@ pub struct ViewArgs {
     /// same stored values.
     #[arg(long, value_parser = sh_storage_parser(), default_value = "f32")]
     pub sh_storage: ShStorage,
+}
+
+impl SceneArgs {
+    /// Read the scene and its views, checking `--camera-index` against them.
+    pub fn load(&self) -> Result<load::Loaded> {
+        let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
+        let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), read)?;
+        loaded.info.render.sh_storage = self.sh_storage;
+        if let Some(camera) = &self.camera
+            && self.camera_index >= loaded.info.views.len()
+        {
+            anyhow::bail!(
+                "--camera-index {} but {} has {} views",
+                self.camera_index,
+                camera.display(),
+                loaded.info.views.len()
+            );
+        }
+        Ok(loaded)
+    }
+
+    /// The options the window (or the server) needs; `quit_after` frames close the window.
+    pub fn options(&self, quit_after: Option<u32>) -> Options {
+        Options {
+            backend: self.backend,
+            camera_index: self.camera_index,
+            up: self.up.normalize(),
+            quit_after,
+            max_frames: quit_after.unwrap_or(u32::MAX).min(self.max_frames).max(1),
+        }
+    }
+}
+
+/// The command line of `splat view`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ViewArgs {
+    /// The scene and how it renders.
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Window width in points.
+    #[arg(long, default_value_t = 1280.0)]
+    pub width: f32,
+    /// Window height in points.
+    #[arg(long, default_value_t = 800.0)]
+    pub height: f32,
+    /// Render N frames of the first view, print a summary and close the window (smoke tests).
+    #[arg(long, value_name = "N")]
+    pub quit_after: Option<u32>,
 }
 
 /// The values of `--sh-storage` (here and in the `splat` commands): every [`ShStorage`] by its
@@ -100,13 +141,7 @@ pub fn choice_parser<T: Copy + Send + Sync + 'static>(
 impl ViewArgs {
     /// The options the window needs.
     pub fn options(&self) -> Options {
-        Options {
-            backend: self.backend,
-            camera_index: self.camera_index,
-            up: self.up.normalize(),
-            quit_after: self.quit_after,
-            max_frames: self.quit_after.unwrap_or(u32::MAX).min(self.max_frames).max(1),
-        }
+        self.scene.options(self.quit_after)
     }
 }
 
@@ -124,19 +159,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if args.width < 64.0 || args.height < 64.0 || !args.width.is_finite() || !args.height.is_finite() {
         anyhow::bail!("--width and --height must be at least 64 points");
     }
-    let read = splat_io::ReadOptions { screen_filter: args.screen_filter, ..Default::default() };
-    let mut loaded = load::load(args.scene.as_deref(), args.camera.as_deref(), read)?;
-    loaded.info.render.sh_storage = args.sh_storage;
-    if let Some(camera) = &args.camera
-        && args.camera_index >= loaded.info.views.len()
-    {
-        anyhow::bail!(
-            "--camera-index {} but {} has {} views",
-            args.camera_index,
-            camera.display(),
-            loaded.info.views.len()
-        );
-    }
+    let loaded = args.scene.load()?;
     let title = format!("splat view — {}", loaded.info.name);
     let options = eframe::NativeOptions {
         viewport: eframe::egui::ViewportBuilder::default()

@@ -38,6 +38,30 @@ impl Pipeline {
     }
 }
 
+/// The looks of the menu.
+pub const LOOKS: [Look; 2] = [Look::Surface, Look::Volumetric];
+
+/// A look's menu name.
+pub fn look_name(look: Look) -> &'static str {
+    match look {
+        Look::Surface => "surface",
+        Look::Volumetric => "volumetric",
+    }
+}
+
+/// The shadows of the menu (sorted shadows with vk_gaussian_splatting's defaults).
+pub const SHADOWS: [Shadows; 4] = [Shadows::None, Shadows::SORTED, Shadows::Stochastic, Shadows::Exact];
+
+/// Shadows' menu name.
+pub fn shadows_name(shadows: Shadows) -> &'static str {
+    match shadows {
+        Shadows::None => "no shadows",
+        Shadows::Sorted { .. } => "sorted shadows",
+        Shadows::Stochastic => "stochastic shadows",
+        Shadows::Exact => "exact shadows",
+    }
+}
+
 /// Where frames are rendered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backend {

@@ -1,6 +1,7 @@
-//! The render thread: it owns the scene and its BVH, takes the newest [`Job`] the window
-//! posts, folds frames into the view's accumulation and draws the result into the job's
-//! texture, so that the window stays responsive however long a frame takes.
+//! The render thread: it owns the scene and its BVH, takes the newest [`Job`] the window (or
+//! the page of `splat serve`) posts, folds frames into the view's accumulation and draws the
+//! result into the job's [`Target`], so that the window stays responsive however long a frame
+//! takes.
 //!
 //! A job that changes the scene's settings (kernel, hit distance, normals, iso threshold,
 //! backend) rebuilds the BVH; one that changes the lighting (look, shadows, lights, materials)
@@ -27,10 +28,56 @@ pub struct Job {
     pub camera: Camera,
     /// The panel's choices.
     pub settings: Settings,
-    /// Where the view is drawn: `camera`'s size, [`TEXTURE_FORMAT`].
-    pub target: wgpu::Texture,
+    /// Where the view is drawn.
+    pub target: Target,
     /// A new generation restarts the accumulation of the same view ("restart").
     pub generation: u64,
+}
+
+/// Where the render thread draws the view.
+#[derive(Clone)]
+pub enum Target {
+    /// A texture of the window's device: `camera`'s size, [`TEXTURE_FORMAT`].
+    Texture(wgpu::Texture),
+    /// 8-bit RGBA rows in host memory, read with [`Worker::feed`] (the page of `splat
+    /// serve`): the same display transform, read back from the device on the GPU.
+    Host,
+}
+
+/// The view as the render thread last drew it into a [`Target::Host`].
+#[derive(Clone, Debug, Default)]
+pub struct HostFrame {
+    /// Increases with every frame drawn (0: none yet).
+    pub sequence: u64,
+    /// The job it belongs to.
+    pub job: u64,
+    /// Frames accumulated in it.
+    pub frames: u32,
+    /// Width and height in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width` × `height` RGBA8 texels, row after row, as a window would show them.
+    pub rgba: Arc<Vec<u8>>,
+}
+
+/// The frames a worker draws into a [`Target::Host`] ([`Worker::feed`]).
+#[derive(Clone)]
+pub struct FrameFeed(Arc<Shared>);
+
+impl FrameFeed {
+    /// The newest frame once its sequence number passes `after`, waiting at most `timeout`
+    /// for it (then the newest there is, perhaps older).
+    pub fn wait(&self, after: u64, timeout: Duration) -> HostFrame {
+        let frame = self.0.frame.lock().expect("lock");
+        let (frame, _) = self.0.drawn.wait_timeout_while(frame, timeout, |f| f.sequence <= after).expect("lock");
+        frame.clone()
+    }
+
+    /// The render thread's latest status.
+    pub fn status(&self) -> Status {
+        self.0.status.lock().expect("lock").clone()
+    }
 }
 
 /// The format of the view's texture: the display's sRGB-encoded bytes, stored as they are
@@ -62,6 +109,20 @@ pub struct Status {
 pub struct Worker {
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
+    posted: Option<Posted>,
+}
+
+/// The last job [`Worker::post`] submitted: its number and what it asked for.
+#[derive(Clone, Debug)]
+pub struct Posted {
+    /// The job's number.
+    pub id: u64,
+    /// Its camera.
+    pub camera: Camera,
+    /// Its settings.
+    pub settings: Settings,
+    /// Its generation (bumped by "restart").
+    pub generation: u64,
 }
 
 #[derive(Default)]
@@ -69,6 +130,8 @@ struct Shared {
     control: Mutex<Control>,
     wake: Condvar,
     status: Mutex<Status>,
+    frame: Mutex<HostFrame>,
+    drawn: Condvar,
 }
 
 #[derive(Default)]
@@ -103,16 +166,24 @@ impl Shared {
     fn publish(&self, status: Status) {
         *self.status.lock().expect("lock") = status;
     }
+
+    /// Make `rgba` the newest host frame and wake whoever waits for one.
+    fn publish_frame(&self, job: u64, frames: u32, (width, height): (u32, u32), rgba: Vec<u8>) {
+        let mut frame = self.frame.lock().expect("lock");
+        *frame = HostFrame { sequence: frame.sequence + 1, job, frames, width, height, rgba: Arc::new(rgba) };
+        self.drawn.notify_all();
+    }
 }
 
 impl Worker {
     /// Start the render thread on `world`: on `gpu` (the window's device) where the settings
-    /// ask for it, on the CPU otherwise; `queue` uploads the CPU's images;
-    /// `repaint` wakes the window when there is something new to show.
+    /// ask for it, on the CPU otherwise; `queue` uploads the CPU's images into a
+    /// [`Target::Texture`] (a [`Target::Host`] needs none); `repaint` wakes the window when
+    /// there is something new to show.
     pub fn spawn(
         world: World,
         gpu: Option<GpuContext>,
-        queue: wgpu::Queue,
+        queue: Option<wgpu::Queue>,
         repaint: impl Fn() + Send + 'static,
     ) -> Self {
         let shared = Arc::new(Shared::default());
@@ -127,11 +198,44 @@ impl Worker {
                 .spawn(move || Renderer { world, gpu, queue, shared, repaint: Box::new(repaint) }.run())
                 .expect("the OS starts a thread")
         };
-        Self { shared, thread: Some(thread) }
+        Self { shared, thread: Some(thread), posted: None }
+    }
+
+    /// Submit a job of `camera`, `settings` and `generation` into `target` when it asks for
+    /// anything the last one posted did not; the number of the job now asked for.
+    pub fn post(
+        &mut self,
+        camera: Camera,
+        settings: &Settings,
+        generation: u64,
+        target: impl FnOnce() -> Target,
+    ) -> u64 {
+        if let Some(p) = &self.posted
+            && p.camera == camera
+            && p.settings == *settings
+            && p.generation == generation
+        {
+            return p.id;
+        }
+        let id = self.posted.as_ref().map_or(1, |p| p.id + 1);
+        self.submit(id, Job { camera, settings: settings.clone(), target: target(), generation });
+        self.posted = Some(Posted { id, camera, settings: settings.clone(), generation });
+        id
+    }
+
+    /// The last job [`Worker::post`] submitted.
+    pub fn posted(&self) -> Option<&Posted> {
+        self.posted.as_ref()
+    }
+
+    /// The render thread's latest status once it is about the last job posted.
+    pub fn posted_status(&self) -> Option<Status> {
+        let status = self.status();
+        (self.posted.as_ref().map(|p| p.id) == Some(status.job)).then_some(status)
     }
 
     /// Ask for `job` (numbered `id`, increasing), replacing any job not yet taken.
-    pub fn submit(&self, id: u64, job: Job) {
+    fn submit(&self, id: u64, job: Job) {
         self.shared.control.lock().expect("lock").job = Some((id, job));
         self.shared.wake.notify_all();
     }
@@ -139,6 +243,11 @@ impl Worker {
     /// The latest status.
     pub fn status(&self) -> Status {
         self.shared.status.lock().expect("lock").clone()
+    }
+
+    /// The frames drawn into a [`Target::Host`], to wait for without holding the worker.
+    pub fn feed(&self) -> FrameFeed {
+        FrameFeed(self.shared.clone())
     }
 }
 
@@ -158,7 +267,7 @@ type Gpu = Result<(GpuContext, TracePipeline), String>;
 struct Renderer {
     world: World,
     gpu: Gpu,
-    queue: wgpu::Queue,
+    queue: Option<wgpu::Queue>,
     shared: Arc<Shared>,
     repaint: Box<dyn Fn() + Send>,
 }
@@ -169,6 +278,8 @@ enum View<'t> {
         tracer: Box<GpuTracer<'t>>,
         progressive: Box<ProgressiveTrace>,
         per_step: u32,
+        /// The texture a [`Target::Host`] is drawn into before it is read back.
+        host: Option<wgpu::Texture>,
     },
     /// The CPU's running mean, and the algorithm prepared for the view (a splatting method's
     /// projected and sorted splats, kept while the camera holds still).
@@ -296,7 +407,9 @@ impl Renderer {
                     Err(e) => status.error = Some(e),
                 },
             }
-            self.present(&mut view, job);
+            if let Err(e) = self.present(&mut view, job, *id) {
+                status.error = Some(e);
+            }
             // Paused, a view still gets its first frame: a camera moved while paused shows
             // where it looks rather than a black texture.
             let paused = job.settings.paused && self.frames(&view) >= 1;
@@ -317,12 +430,12 @@ impl Renderer {
         let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
         let progressive = ProgressiveTrace::new(&tracer, &job.camera, &job.settings.method(), &stream(&job.settings))
             .map_err(|e| e.to_string())?;
-        Ok(View::Gpu { tracer: Box::new(tracer), progressive: Box::new(progressive), per_step: 1 })
+        Ok(View::Gpu { tracer: Box::new(tracer), progressive: Box::new(progressive), per_step: 1, host: None })
     }
 
     fn restart(&self, view: &mut View, job: &Job) -> Result<(), String> {
         match view {
-            View::Gpu { tracer, progressive, per_step } => {
+            View::Gpu { tracer, progressive, per_step, .. } => {
                 *per_step = 1;
                 progressive.set_camera(tracer, &job.camera).map_err(|e| e.to_string())?;
                 progressive.set_frames(&stream(&job.settings)).map_err(|e| e.to_string())?;
@@ -354,7 +467,7 @@ impl Renderer {
     fn step<'t>(&self, view: &mut View<'t>, trace: &'t TraceScene<'t>, job: &Job) -> Result<u32, String> {
         let left = job.settings.max_frames.saturating_sub(self.frames(view));
         match view {
-            View::Gpu { tracer, progressive, per_step } => {
+            View::Gpu { tracer, progressive, per_step, .. } => {
                 let start = Instant::now();
                 let done = progressive.step(tracer, (*per_step).min(left)).map_err(|e| e.to_string())?;
                 let ctx = tracer.context();
@@ -382,31 +495,41 @@ impl Renderer {
         }
     }
 
-    /// Draw what is accumulated into the job's texture.
-    fn present(&self, view: &mut View, job: &Job) {
+    /// Draw what is accumulated into the job's target (job `id`).
+    fn present(&self, view: &mut View, job: &Job, id: u64) -> Result<(), String> {
         let display = job.settings.display;
-        match view {
-            View::Gpu { tracer, progressive, .. } => {
+        let frames = self.frames(view);
+        match (view, &job.target) {
+            (View::Gpu { tracer, progressive, host, .. }, target) => {
                 let ctx = tracer.context();
+                let texture = match target {
+                    Target::Texture(texture) => texture,
+                    Target::Host => host_texture(ctx, host, progressive.camera()),
+                };
                 let mut encoder = ctx.device.create_command_encoder(&Default::default());
-                let target = job.target.create_view(&Default::default());
-                if progressive.present(ctx, &mut encoder, &target, job.target.format(), &display).is_ok() {
-                    ctx.queue.submit([encoder.finish()]);
+                let view = texture.create_view(&Default::default());
+                progressive.present(ctx, &mut encoder, &view, texture.format(), &display).map_err(|e| e.to_string())?;
+                ctx.queue.submit([encoder.finish()]);
+                if let Target::Host = target {
+                    let rgba = splat_gpu::read_rgba8(&ctx.device, &ctx.queue, texture).map_err(|e| e.to_string())?;
+                    self.shared.publish_frame(id, frames, (texture.width(), texture.height()), rgba);
                 }
             }
-            View::Cpu(acc, _) => {
-                let (w, h) = (job.target.width(), job.target.height());
-                if (w, h) != acc.size() {
-                    return;
+            (View::Cpu(acc, _), Target::Texture(texture)) => {
+                let (w, h) = (texture.width(), texture.height());
+                let queue = self.queue.as_ref().ok_or("no queue to upload the view with")?;
+                if (w, h) == acc.size() {
+                    queue.write_texture(
+                        texture.as_image_copy(),
+                        &acc.rgba8(&display),
+                        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * w), rows_per_image: Some(h) },
+                        texture.size(),
+                    );
                 }
-                self.queue.write_texture(
-                    job.target.as_image_copy(),
-                    &acc.rgba8(&display),
-                    wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * w), rows_per_image: Some(h) },
-                    job.target.size(),
-                );
             }
+            (View::Cpu(acc, _), Target::Host) => self.shared.publish_frame(id, frames, acc.size(), acc.rgba8(&display)),
         }
+        Ok(())
     }
 
     /// The RMSE of the running mean against the exact image of the view, rendered once per
@@ -436,6 +559,27 @@ impl Renderer {
         };
         Ok(splat_core::stats::rmse(mean.data(), reference.expect("set above").mean.data()))
     }
+}
+
+/// The texture a [`Target::Host`] view of `camera` is drawn into on the device, made again
+/// when the size changes.
+fn host_texture<'a>(ctx: &GpuContext, host: &'a mut Option<wgpu::Texture>, camera: &Camera) -> &'a wgpu::Texture {
+    let size = (camera.width, camera.height);
+    if host.as_ref().is_some_and(|t| (t.width(), t.height()) != size) {
+        *host = None;
+    }
+    host.get_or_insert_with(|| {
+        ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("host view"),
+            size: wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: TEXTURE_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        })
+    })
 }
 
 /// The random stream of a job: the GPU view draws frame i with key i of the panel's seed, as

@@ -1,0 +1,617 @@
+//! `splat serve`: the viewer's render thread behind a small HTTP server, for GPUs in machines
+//! without a display. The page (one HTML file, no build step, nothing fetched from elsewhere)
+//! shows the running mean as it converges and steers it with the viewer's controls and keys.
+//!
+//! - `GET /` the page; `GET /state` the settings, the menus, the render status and the camera
+//!   as JSON; `GET /frame?after=S` the newest frame past sequence number `S` as a PNG (waiting
+//!   up to [`FRAME_WAIT`] for one, else 204: nothing new); `POST /settings` a JSON object of settings to change;
+//!   `POST /input` a JSON list of navigation actions ([`Action`]).
+//! - Every browser on a server sees and steers one accumulation: there is one render thread,
+//!   and on a GPU machine one device whose time is best spent converging one image rather than
+//!   several at a fraction of the rate each. A page pulls the newest frame when it has drawn the
+//!   last, so a slow client gets fewer frames and the render loop never waits for anyone; a
+//!   client that goes away leaves nothing behind (a request waits at most [`FRAME_WAIT`]).
+//! - Security: the server binds to 127.0.0.1 unless told otherwise (another address needs
+//!   `public` and prints a warning); every request carries the token printed at start; the
+//!   server reads only the scene it was started with (no request names a file); bodies are
+//!   at most [`MAX_BODY`] bytes, at most [`MAX_IN_FLIGHT`] requests run at once and at most
+//!   [`MAX_PER_SECOND`] are accepted a second.
+
+use crate::load::SceneInfo;
+use crate::navigate::{Action, FLY_KEYS, KEY_BINDINGS, Navigation, fly_direction, key_action};
+use crate::settings::{Backend, Pipeline, Settings};
+use crate::worker::{FrameFeed, HostFrame, Target, Worker};
+use crate::{BackendChoice, SceneArgs};
+use anyhow::{Context, Result, bail};
+use serde_json::{Value, json};
+use splat_core::MethodId;
+use splat_core::catalogue::Param;
+use splat_gpu::{DisplayMode, GpuContext};
+use std::io::Read;
+use std::net::{IpAddr, SocketAddr};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// The page: HTML, CSS and JavaScript in one file.
+const PAGE: &str = include_str!("serve/page.html");
+
+/// Longest wait of a `/frame` request for a new frame.
+pub const FRAME_WAIT: Duration = Duration::from_secs(5);
+/// Largest request body (a settings change or a batch of input events).
+pub const MAX_BODY: usize = 16 * 1024;
+/// Requests handled at once; more are answered 503.
+pub const MAX_IN_FLIGHT: usize = 32;
+/// Requests accepted a second; more are answered 429.
+pub const MAX_PER_SECOND: usize = 600;
+/// Largest view, in pixels a side.
+const MAX_SIZE: u32 = 4096;
+
+/// The command line of `splat serve`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ServeArgs {
+    /// The scene and how it renders.
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Width of the view in pixels at render scale 1.
+    #[arg(long, default_value_t = 960)]
+    pub width: u32,
+    /// Height of the view in pixels at render scale 1.
+    #[arg(long, default_value_t = 600)]
+    pub height: u32,
+    /// Address to listen on: loopback unless --public is given too.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub bind: IpAddr,
+    /// Port to listen on (0: any free port; the URL printed at start names it).
+    #[arg(long, default_value_t = 8080)]
+    pub port: u16,
+    /// Allow --bind to a non-loopback address: whoever reaches it with the token steers the render.
+    #[arg(long)]
+    pub public: bool,
+}
+
+/// Serve `args`' scene until the process is stopped.
+pub fn run(args: &ServeArgs) -> Result<()> {
+    if !(8..=MAX_SIZE).contains(&args.width) || !(8..=MAX_SIZE).contains(&args.height) {
+        bail!("--width and --height must be 8 to {MAX_SIZE} pixels");
+    }
+    if !args.bind.is_loopback() && !args.public {
+        bail!("--bind {} is not a loopback address: add --public to serve other machines", args.bind);
+    }
+    let loaded = args.scene.load()?;
+    let options = args.scene.options(None);
+    let (gpu, backend, note) = gpu_for(args.scene.backend);
+    let mut settings = Settings::new(loaded.info.render, &loaded.world.lighting, backend);
+    settings.max_frames = options.max_frames;
+    let session = Session {
+        nav: Navigation::new(loaded.info, options.camera_index, options.up),
+        settings,
+        size: [args.width, args.height],
+        note,
+        gpu_available: gpu.is_some(),
+        worker: Worker::spawn(loaded.world, gpu, None, || {}),
+    };
+    let server = tiny_http::Server::http(SocketAddr::new(args.bind, args.port))
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .with_context(|| format!("cannot listen on {}:{}", args.bind, args.port))?;
+    let port = server.server_addr().to_ip().map_or(args.port, |a| a.port());
+    let token = token()?;
+    if !args.bind.is_loopback() {
+        eprintln!(
+            "warning: serving on {} (--public): anyone who can reach it and has the token steers the render",
+            args.bind
+        );
+    }
+    println!(
+        "splat serve: http://{}:{port}/?token={token}",
+        if args.bind.is_unspecified() { "127.0.0.1".to_string() } else { args.bind.to_string() }
+    );
+    println!("splat serve: {} ({})", session.nav.scene().name, session.note);
+    let state = Arc::new(State {
+        feed: session.worker.feed(),
+        png: Mutex::new(None),
+        session: Mutex::new(session),
+        token,
+        in_flight: AtomicUsize::new(0),
+        rate: Mutex::new((Instant::now(), 0)),
+    });
+    state.session().post();
+    for request in server.incoming_requests() {
+        if let Some(refusal) = state.admit() {
+            let _ = request.respond(refusal);
+            continue;
+        }
+        let state = state.clone();
+        std::thread::spawn(move || {
+            state.handle(request);
+            state.in_flight.fetch_sub(1, Ordering::SeqCst);
+        });
+    }
+    Ok(())
+}
+
+/// The GPU context `choice` asks for (`auto`: a hardware GPU only), the backend frames start
+/// on, and why.
+fn gpu_for(choice: BackendChoice) -> (Option<GpuContext>, Backend, String) {
+    let gpu = match choice {
+        BackendChoice::Cpu => Err(None),
+        BackendChoice::Auto => match GpuContext::hardware() {
+            Ok(Some(ctx)) => Ok(ctx),
+            Ok(None) => return (None, Backend::Cpu, "no hardware GPU: rendering on the CPU".into()),
+            Err(e) => Err(Some(e.to_string())),
+        },
+        BackendChoice::Gpu => GpuContext::new().map_err(|e| Some(e.to_string())),
+    };
+    let (backend, note) = choice.resolve(gpu.as_ref().ok().map(|ctx| &ctx.info), &gpu);
+    (gpu.ok(), backend, note)
+}
+
+/// 128 random bits from the operating system, in hex: the token every request carries.
+fn token() -> Result<String> {
+    let mut bytes = [0u8; 16];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut bytes))
+        .context("no random token without /dev/urandom")?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// What the server holds: the session, the token and the request bounds.
+struct State {
+    session: Mutex<Session>,
+    feed: FrameFeed,
+    /// The newest frame encoded as PNG, shared by every page that asks for it.
+    png: Mutex<Option<(u64, Arc<Vec<u8>>)>>,
+    token: String,
+    in_flight: AtomicUsize,
+    /// The start of the current second and the requests accepted in it.
+    rate: Mutex<(Instant, usize)>,
+}
+
+/// The render and everything the page steers.
+struct Session {
+    nav: Navigation,
+    settings: Settings,
+    /// The view's size at render scale 1.
+    size: [u32; 2],
+    /// Where frames render, and why.
+    note: String,
+    gpu_available: bool,
+    worker: Worker,
+}
+
+type Response = tiny_http::Response<std::io::Cursor<Vec<u8>>>;
+
+/// A response of `status` with `body` of `content_type`.
+fn reply(status: u16, content_type: &str, body: Vec<u8>) -> Response {
+    let header = tiny_http::Header::from_bytes("Content-Type", content_type).expect("an ASCII header");
+    let cache = tiny_http::Header::from_bytes("Cache-Control", "no-store").expect("an ASCII header");
+    tiny_http::Response::from_data(body).with_status_code(status).with_header(header).with_header(cache)
+}
+
+/// A plain-text error of `status`.
+fn error(status: u16, message: &str) -> Response {
+    reply(status, "text/plain; charset=utf-8", format!("{message}\n").into_bytes())
+}
+
+/// A JSON response.
+fn json_reply(value: &Value) -> Response {
+    reply(200, "application/json", value.to_string().into_bytes())
+}
+
+impl State {
+    fn session(&self) -> std::sync::MutexGuard<'_, Session> {
+        self.session.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// Count a request in, or the refusal when too many run or arrived this second.
+    fn admit(&self) -> Option<Response> {
+        {
+            let mut rate = self.rate.lock().unwrap_or_else(|p| p.into_inner());
+            if rate.0.elapsed() >= Duration::from_secs(1) {
+                *rate = (Instant::now(), 0);
+            }
+            if rate.1 >= MAX_PER_SECOND {
+                return Some(error(429, "too many requests this second"));
+            }
+            rate.1 += 1;
+        }
+        if self.in_flight.fetch_add(1, Ordering::SeqCst) >= MAX_IN_FLIGHT {
+            self.in_flight.fetch_sub(1, Ordering::SeqCst);
+            return Some(error(503, "too many requests at once"));
+        }
+        None
+    }
+
+    /// Answer one request.
+    fn handle(&self, mut request: tiny_http::Request) {
+        let url = request.url().to_string();
+        let (path, query) = url.split_once('?').unwrap_or((&url, ""));
+        let param =
+            |name: &str| query.split('&').filter_map(|kv| kv.split_once('=')).find(|(k, _)| *k == name).map(|(_, v)| v);
+        let response = if !param("token").is_some_and(|t| same(t.as_bytes(), self.token.as_bytes())) {
+            error(403, "missing or wrong token: open the URL splat serve printed")
+        } else {
+            use tiny_http::Method::{Get, Post};
+            match (request.method(), path) {
+                (Get, "/") => reply(200, "text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
+                (Get, "/state") => json_reply(&self.session().state()),
+                (Get, "/frame") => self.frame(param("after").and_then(|a| a.parse().ok()).unwrap_or(0)),
+                (Post, "/settings" | "/input") => match body(&mut request) {
+                    Ok(value) => self.change(path, &value),
+                    Err(response) => response,
+                },
+                (_, "/" | "/state" | "/frame" | "/settings" | "/input") => error(405, "method not allowed"),
+                _ => error(404, "no such page"),
+            }
+        };
+        let _ = request.respond(response);
+    }
+
+    /// `/settings` or `/input` with `value`: the new state, or why nothing changed.
+    fn change(&self, path: &str, value: &Value) -> Response {
+        let mut session = self.session();
+        let changed = match path {
+            "/settings" => session.apply_settings(value),
+            _ => session.apply_input(value),
+        };
+        match changed {
+            Ok(()) => {
+                session.post();
+                json_reply(&session.state())
+            }
+            Err(message) => error(400, &message),
+        }
+    }
+
+    /// The newest frame past `after` as a PNG, with its sequence number, job, frame count and
+    /// status in headers.
+    fn frame(&self, after: u64) -> Response {
+        let frame = self.feed.wait(after, FRAME_WAIT);
+        if frame.sequence <= after {
+            // Nothing new (paused, converged, or a slow frame): ask again.
+            return reply(204, "image/png", Vec::new());
+        }
+        let png = match self.png(&frame) {
+            Ok(png) => png,
+            Err(e) => return error(500, &format!("the frame could not be encoded: {e}")),
+        };
+        let mut response = reply(200, "image/png", png.to_vec());
+        let status = self.feed.status();
+        for (name, value) in [
+            ("X-Sequence", frame.sequence.to_string()),
+            ("X-Job", frame.job.to_string()),
+            ("X-Frames", frame.frames.to_string()),
+            ("X-Fps", format!("{:.1}", status.frames_per_second)),
+            ("X-Rmse", status.rmse.map_or(String::new(), |r| format!("{r:.6}"))),
+        ] {
+            response.add_header(tiny_http::Header::from_bytes(name, value).expect("an ASCII header"));
+        }
+        response
+    }
+}
+
+impl State {
+    /// `frame` as a PNG, encoded once for every page that asks for it.
+    fn png(&self, frame: &HostFrame) -> Result<Arc<Vec<u8>>, png::EncodingError> {
+        let mut cache = self.png.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((sequence, png)) = cache.as_ref()
+            && *sequence == frame.sequence
+        {
+            return Ok(png.clone());
+        }
+        let png = Arc::new(encode_png(frame)?);
+        *cache = Some((frame.sequence, png.clone()));
+        Ok(png)
+    }
+}
+
+/// `frame`'s RGBA8 texels as a PNG (fast compression: lossless, and quick enough to stream).
+fn encode_png(frame: &HostFrame) -> Result<Vec<u8>, png::EncodingError> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, frame.width, frame.height);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Fast);
+    encoder.write_header()?.write_image_data(&frame.rgba)?;
+    Ok(bytes)
+}
+
+/// Whether `a` equals `b`, in a time that does not depend on where they first differ.
+fn same(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |d, (x, y)| d | (x ^ y)) == 0
+}
+
+/// The request's body as JSON, at most [`MAX_BODY`] bytes.
+fn body(request: &mut tiny_http::Request) -> Result<Value, Response> {
+    if request.body_length().is_some_and(|n| n > MAX_BODY) {
+        return Err(error(413, &format!("a request body is at most {MAX_BODY} bytes")));
+    }
+    let mut bytes = Vec::new();
+    let read = request.as_reader().take(MAX_BODY as u64 + 1).read_to_end(&mut bytes);
+    if read.is_err() || bytes.len() > MAX_BODY {
+        return Err(error(413, &format!("a request body is at most {MAX_BODY} bytes")));
+    }
+    serde_json::from_slice(&bytes).map_err(|e| error(400, &format!("the body is not JSON: {e}")))
+}
+
+impl Session {
+    /// Post the job of the current camera and settings (nothing when neither changed).
+    fn post(&mut self) {
+        let [w, h] = self.size;
+        let (camera, _) = self.nav.camera([w as f32, h as f32], self.settings.scale);
+        (self.settings.display.depth_near, self.settings.display.depth_far) = self.nav.depth_range(&camera);
+        self.worker.post(camera, &self.settings, self.nav.restart, || Target::Host);
+    }
+
+    /// Everything the page shows: the scene, the settings and their menus, the render's
+    /// status, the camera (as a cameras.json entry) and the keys.
+    fn state(&self) -> Value {
+        let s = &self.settings;
+        let status = self.worker.posted_status().unwrap_or_default();
+        let camera =
+            self.worker.posted().map(|p| splat_io::cameras::CameraEntry::from_camera(0, "splat serve", &p.camera));
+        let SceneInfo { name, particles, sh_degree, views, .. } = self.nav.scene();
+        json!({
+            "scene": { "name": name, "particles": particles, "sh_degree": sh_degree, "views": views.len() },
+            "backend_note": self.note,
+            "settings": settings_json(s),
+            "menus": menus(self.gpu_available),
+            "status": {
+                "job": status.job,
+                "frames": status.frames,
+                "frames_per_second": status.frames_per_second,
+                "rmse": status.rmse,
+                "error": status.error,
+                "idle": status.idle,
+            },
+            "camera": camera,
+            "view": self.nav.view(),
+            "keys": KEY_BINDINGS,
+        })
+    }
+
+    /// Change the settings `value` names (an object of [`settings_json`]'s keys).
+    fn apply_settings(&mut self, value: &Value) -> Result<(), String> {
+        let object = value.as_object().ok_or("the settings are a JSON object")?;
+        let mut s = self.settings.clone();
+        for (key, v) in object {
+            set(&mut s, key, v, self.gpu_available).map_err(|e| format!("{key}: {e}"))?;
+        }
+        s.params.validate().map_err(|e| e.to_string())?;
+        self.settings = s;
+        Ok(())
+    }
+
+    /// Apply a list of navigation actions: `{"do": "rotate", "dx", "dy"}`, `{"do": "pan",
+    /// "dx", "dy", "height"}`, `{"do": "zoom", "steps"}`, `{"do": "key", "key"}` (a key that
+    /// jumps, or a fly key held for `seconds`, faster with `fast`).
+    fn apply_input(&mut self, value: &Value) -> Result<(), String> {
+        let actions = value.as_array().ok_or("the input is a JSON list of actions")?;
+        if actions.len() > 256 {
+            return Err("at most 256 actions a request".into());
+        }
+        let parsed: Vec<Action> = actions.iter().map(action).collect::<Result<_, _>>()?;
+        for a in parsed {
+            self.nav.act(a, &mut self.settings);
+        }
+        Ok(())
+    }
+}
+
+/// The action one input event asks for.
+fn action(event: &Value) -> Result<Action, String> {
+    let number = |key: &str| {
+        event
+            .get(key)
+            .and_then(Value::as_f64)
+            .filter(|v| v.is_finite() && v.abs() <= 1e6)
+            .map(|v| v as f32)
+            .ok_or_else(|| format!("an input event needs a finite number \"{key}\": {event}"))
+    };
+    match event.get("do").and_then(Value::as_str) {
+        Some("rotate") => Ok(Action::Rotate(number("dx")?, number("dy")?)),
+        Some("pan") => Ok(Action::Pan(number("dx")?, number("dy")?, number("height")?.max(1.0))),
+        Some("zoom") => Ok(Action::Zoom(number("steps")?.clamp(-50.0, 50.0))),
+        Some("key") => {
+            let key = event.get("key").and_then(Value::as_str).ok_or("a key event needs \"key\"")?;
+            if let Some(action) = key_action(key) {
+                return Ok(action);
+            }
+            let held = FLY_KEYS.map(|c| key.eq_ignore_ascii_case(&c.to_string()));
+            if !held.contains(&true) {
+                return Err(format!("no key \"{key}\": the keys are {}", KEY_BINDINGS.join("; ")));
+            }
+            let fast = event.get("fast").and_then(Value::as_bool).unwrap_or(false);
+            let seconds = number("seconds").unwrap_or(1.0 / 30.0).clamp(0.0, 0.1);
+            let speed = if fast { 2.0 } else { 0.5 } * seconds;
+            let (forward, right, up) = fly_direction(held);
+            Ok(Action::Fly(speed * forward, speed * right, speed * up))
+        }
+        _ => Err(format!("an input event is {{\"do\": \"rotate\" | \"pan\" | \"zoom\" | \"key\", …}}: {event}")),
+    }
+}
+
+/// The numeric method parameters the page sets, by their CLI names.
+fn numeric_params() -> impl Iterator<Item = Param> {
+    Param::ALL.into_iter().filter(|p| p.info().limits.is_some())
+}
+
+/// The settings the page shows and sets.
+fn settings_json(s: &Settings) -> Value {
+    let params: serde_json::Map<String, Value> =
+        numeric_params().map(|p| (p.info().flag.to_string(), json!(param_value(s, p)))).collect();
+    json!({
+        "backend": match s.backend { Backend::Gpu => "gpu", Backend::Cpu => "cpu" },
+        "pipeline": s.pipeline.name(),
+        "trace": s.trace.name(),
+        "raster": s.raster.name(),
+        "params": params,
+        "seed": s.seed,
+        "look": crate::settings::look_name(s.look),
+        "shadows": crate::settings::shadows_name(s.shadows),
+        "display": s.display.mode.name(),
+        "scale": s.scale,
+        "max_frames": s.max_frames,
+        "rmse": s.rmse,
+        "paused": s.paused,
+    })
+}
+
+/// The choices of each menu of the page, and each numeric parameter's limits and methods.
+fn menus(gpu_available: bool) -> Value {
+    let names = |ids: Vec<MethodId>| ids.into_iter().map(MethodId::name).collect::<Vec<_>>();
+    let params: Vec<Value> = numeric_params()
+        .map(|p| {
+            let info = p.info();
+            let limits = info.limits.expect("numeric");
+            let readers: Vec<&str> = MethodId::ALL.iter().filter(|m| m.reads(p)).map(|m| m.name()).collect();
+            json!({ "name": info.flag, "label": info.label, "min": limits.min, "max": limits.max,
+                    "slider_max": limits.slider_max, "integer": p != Param::MinTransmittance, "methods": readers })
+        })
+        .collect();
+    json!({
+        "backend": if gpu_available { vec!["gpu", "cpu"] } else { vec!["cpu"] },
+        "pipeline": Pipeline::ALL.map(Pipeline::name),
+        "trace": names(Settings::trace_menu()),
+        "raster": names(Settings::raster_menu()),
+        "look": crate::settings::LOOKS.map(crate::settings::look_name),
+        "shadows": crate::settings::SHADOWS.map(crate::settings::shadows_name),
+        "display": DisplayMode::ALL.map(DisplayMode::name),
+        "params": params,
+    })
+}
+
+/// The value of numeric parameter `p`.
+fn param_value(s: &Settings, p: Param) -> f64 {
+    match p {
+        Param::K => s.params.k as f64,
+        Param::MaxPasses => f64::from(s.params.max_passes),
+        Param::MinTransmittance => f64::from(s.params.min_transmittance),
+        Param::N => f64::from(s.params.n),
+        Param::M => f64::from(s.params.m),
+        _ => unreachable!("{p:?} is not numeric"),
+    }
+}
+
+/// Set `key` of the settings to `v`.
+fn set(s: &mut Settings, key: &str, v: &Value, gpu_available: bool) -> Result<(), String> {
+    let text = || v.as_str().ok_or_else(|| format!("expected a name, got {v}"));
+    let flag = || v.as_bool().ok_or_else(|| format!("expected true or false, got {v}"));
+    let number = || v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!("expected a number, got {v}"));
+    let pick = |name: &str, all: &[&str]| {
+        all.iter().position(|n| *n == name).ok_or_else(|| format!("\"{name}\" is not one of {}", all.join(", ")))
+    };
+    let method = |menu: Vec<MethodId>| -> Result<MethodId, String> {
+        let name = text()?;
+        menu.into_iter().find(|m| m.name() == name).ok_or_else(|| format!("\"{name}\" is not a method of this menu"))
+    };
+    match key {
+        "backend" => match text()? {
+            "cpu" => s.backend = Backend::Cpu,
+            "gpu" if gpu_available => s.backend = Backend::Gpu,
+            "gpu" => return Err("this server has no GPU context".into()),
+            other => return Err(format!("\"{other}\" is not gpu or cpu")),
+        },
+        "pipeline" => s.pipeline = Pipeline::ALL[pick(text()?, &Pipeline::ALL.map(Pipeline::name))?],
+        "trace" => s.trace = method(Settings::trace_menu())?,
+        "raster" => s.raster = method(Settings::raster_menu())?,
+        "look" => {
+            let looks = crate::settings::LOOKS;
+            s.look = looks[pick(text()?, &looks.map(crate::settings::look_name))?];
+        }
+        "shadows" => {
+            let shadows = crate::settings::SHADOWS;
+            s.shadows = shadows[pick(text()?, &shadows.map(crate::settings::shadows_name))?];
+        }
+        "display" => s.display.mode = DisplayMode::ALL[pick(text()?, &DisplayMode::ALL.map(DisplayMode::name))?],
+        "scale" => s.scale = (number()? as f32).clamp(0.125, 1.0),
+        "max_frames" => s.max_frames = number()?.clamp(1.0, 1e6) as u32,
+        "seed" => s.seed = number()?.clamp(0.0, f64::from(u32::MAX)) as u32,
+        "rmse" => s.rmse = flag()?,
+        "paused" => s.paused = flag()?,
+        "params" => {
+            let object = v.as_object().ok_or("the parameters are a JSON object")?;
+            for (name, value) in object {
+                let p =
+                    numeric_params().find(|p| p.info().flag == name).ok_or_else(|| format!("no parameter {name}"))?;
+                let x = value.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!("{name}: expected a number"))?;
+                match p {
+                    Param::K => s.params.k = x as usize,
+                    Param::MaxPasses => s.params.max_passes = x as u32,
+                    Param::MinTransmittance => s.params.min_transmittance = x as f32,
+                    Param::N => s.params.n = x as u32,
+                    Param::M => s.params.m = x as u32,
+                    _ => unreachable!("numeric"),
+                }
+            }
+        }
+        _ => return Err("not a setting".into()),
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat_core::RenderSettings;
+    use splat_core::lighting::Lighting;
+
+    fn settings() -> Settings {
+        Settings::new(RenderSettings::default(), &Lighting::default(), Backend::Cpu)
+    }
+
+    /// Every choice of every menu the page offers is accepted and read back as chosen; a
+    /// name outside a menu is refused, naming the menu.
+    #[test]
+    fn every_menu_choice_round_trips_and_others_are_refused() {
+        let menus = menus(false);
+        for key in ["pipeline", "trace", "raster", "look", "shadows", "display", "backend"] {
+            for choice in menus[key].as_array().unwrap() {
+                let mut s = settings();
+                set(&mut s, key, choice, false).unwrap_or_else(|e| panic!("{key} = {choice}: {e}"));
+                assert_eq!(&settings_json(&s)[key], choice, "{key}");
+            }
+            let refused = set(&mut settings(), key, &json!("no-such-choice"), false).unwrap_err();
+            assert!(refused.contains("no-such-choice"), "{refused}");
+        }
+        assert!(set(&mut settings(), "backend", &json!("gpu"), false).unwrap_err().contains("no GPU"));
+        assert_eq!(set(&mut settings(), "path", &json!("/etc/passwd"), false).unwrap_err(), "not a setting");
+    }
+
+    /// Each numeric parameter is set by its CLI name and validated against the catalogue's
+    /// limits; switches and numbers take their types only.
+    #[test]
+    fn parameters_are_set_by_name_within_their_limits() {
+        let mut session_settings = settings();
+        for p in numeric_params() {
+            let limits = p.info().limits.unwrap();
+            let mut s = settings();
+            set(&mut s, "params", &json!({ p.info().flag: limits.max }), false).unwrap();
+            assert_eq!(param_value(&s, p), limits.max, "{p:?}");
+            set(&mut s, "params", &json!({ p.info().flag: limits.max + 1.0 }), false).unwrap();
+            assert!(s.params.validate().is_err(), "{p:?} above its limit passes validation");
+        }
+        assert!(set(&mut session_settings, "params", &json!({ "no-such": 1 }), false).is_err());
+        assert!(set(&mut session_settings, "rmse", &json!(1), false).is_err());
+        assert!(set(&mut session_settings, "scale", &json!("big"), false).is_err());
+        set(&mut session_settings, "scale", &json!(9.0), false).unwrap();
+        assert_eq!(session_settings.scale, 1.0, "the render scale is clamped to the panel's range");
+    }
+
+    /// Input events become the window's actions; malformed ones are refused with the reason.
+    #[test]
+    fn input_events_are_the_windows_actions() {
+        assert_eq!(action(&json!({"do": "rotate", "dx": 3, "dy": -2})), Ok(Action::Rotate(3.0, -2.0)));
+        assert_eq!(action(&json!({"do": "key", "key": "n"})), Ok(Action::StepView(1)));
+        assert_eq!(action(&json!({"do": "key", "key": "2"})), Ok(Action::Show(DisplayMode::ALL[1])));
+        let Ok(Action::Fly(forward, right, up)) = action(&json!({"do": "key", "key": "W", "seconds": 0.1})) else {
+            panic!("W does not fly")
+        };
+        assert_eq!((forward, right, up), (0.05, 0.0, 0.0));
+        assert!(action(&json!({"do": "rotate", "dx": "x", "dy": 0})).unwrap_err().contains("dx"));
+        assert!(action(&json!({"do": "rotate", "dx": 1e300, "dy": 0})).is_err(), "an absurd drag");
+        assert!(action(&json!({"do": "key", "key": "z"})).unwrap_err().contains("no key"));
+        assert!(action(&json!({"do": "open", "path": "/"})).is_err());
+        assert!(same(b"abc", b"abc") && !same(b"abc", b"abd") && !same(b"abc", b"ab"));
+    }
+}
