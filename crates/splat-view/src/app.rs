@@ -6,16 +6,14 @@ use crate::camera::Orbit;
 use crate::load::Loaded;
 pub use crate::navigate::KEY_BINDINGS;
 use crate::navigate::{Action, FLY_KEYS, Navigation, fly_direction, key_action};
-use crate::settings::{Backend, LOOKS, Pipeline, SHADOWS, Settings, look_name, shadows_name};
+use crate::settings::{Backend, LOOKS, ParamValue, Pipeline, SHADOWS, Settings, is_count, look_name};
+use crate::settings::{RNGS, param_choices, param_value, rng_name, set_param, shadows_name};
 use crate::worker::{self, Status, TEXTURE_FORMAT, Worker};
 use eframe::egui::{self, Key, PointerButton, Sense};
 use eframe::egui_wgpu;
 use splat_core::catalogue::{Limits, Param};
 use splat_core::glam::Vec3;
 use splat_core::normal::NormalMode;
-use splat_core::raster::SAMPLE_COUNTS;
-use splat_core::raster::{Blend, FragmentDepth, Response, SamplePattern, SplatExtent};
-use splat_core::rng::RngScheme;
 use splat_core::{Camera, HitDistance};
 use splat_core::{MethodId, Parameters};
 use splat_gpu::{AccumulationFormat, DisplayMode, GpuContext, wgpu};
@@ -380,9 +378,7 @@ impl Viewer {
                 parameter(ui, param, &mut s.params);
             }
         }
-        combo(ui, "random numbers", &mut s.rng, &[RngScheme::Hash, RngScheme::Trig], |r| {
-            format!("{r:?}").to_lowercase()
-        });
+        combo(ui, "random numbers", &mut s.rng, &RNGS, |r| rng_name(r).into());
         ui.add(egui::DragValue::new(&mut s.seed).prefix("seed "));
         combo(ui, "accumulation", &mut s.accumulation, &AccumulationFormat::ALL, |f| f.name().to_string());
     }
@@ -510,50 +506,32 @@ fn method_combo(ui: &mut egui::Ui, label: &str, value: &mut MethodId, choices: &
     });
 }
 
-/// The widget of one method parameter: a slider over the catalogue's limits for a number, a
-/// menu for a choice, a check box for a switch.
+/// The widget of one method parameter ([`param_value`]): a slider over the catalogue's limits
+/// for a number, a menu for a choice, a check box for a switch.
 fn parameter(ui: &mut egui::Ui, param: Param, p: &mut Parameters) {
     let info = param.info();
-    let range = info.limits.map_or(0.0..=1.0, |l: Limits| l.min..=l.slider_max);
-    // A slider over the limits; a count moves in whole steps.
-    let number = |ui: &mut egui::Ui, value: f64, count: bool| {
-        let mut v = value;
-        let slider = egui::Slider::new(&mut v, range.clone()).text(info.label);
-        ui.add(if count { slider.integer() } else { slider });
-        v
-    };
-    match param {
-        Param::K => p.k = number(ui, p.k as f64, true) as usize,
-        Param::MaxPasses => p.max_passes = number(ui, f64::from(p.max_passes), true) as u32,
-        Param::MinTransmittance => p.min_transmittance = number(ui, f64::from(p.min_transmittance), false) as f32,
-        Param::N => p.n = number(ui, f64::from(p.n), true) as u32,
-        Param::M => p.m = number(ui, f64::from(p.m), true) as u32,
-        Param::Blend => combo(ui, info.label, &mut p.blend, &[Blend::Over, Blend::Under], |b| match b {
-            Blend::Over => "back to front".into(),
-            Blend::Under => "front to back".into(),
-        }),
-        Param::EarlyStop => {
-            ui.checkbox(&mut p.raster.early_stop, info.label);
+    let changed = match param_value(p, param) {
+        ParamValue::Number(mut v) => {
+            let range = info.limits.map_or(0.0..=1.0, |l: Limits| l.min..=l.slider_max);
+            let slider = egui::Slider::new(&mut v, range).text(info.label);
+            let changed = ui.add(if is_count(param) { slider.integer() } else { slider }).changed();
+            changed.then_some(ParamValue::Number(v))
         }
-        Param::Scramble => {
-            ui.checkbox(&mut p.scramble, info.label);
-        }
-        Param::RasterSamples => {
-            combo(ui, info.label, &mut p.raster.samples, &SAMPLE_COUNTS, |n| n.to_string());
-        }
-        Param::SamplePattern => {
-            let patterns = [SamplePattern::Hammersley, SamplePattern::Standard];
-            combo(ui, info.label, &mut p.raster.sample_pattern, &patterns, |s| format!("{s:?}").to_lowercase());
-        }
-        Param::FragmentDepth => {
-            let depths = [FragmentDepth::Center, FragmentDepth::MaxDensityPlane];
-            combo(ui, info.label, &mut p.raster.fragment_depth, &depths, |d| match d {
-                FragmentDepth::Center => "centre".into(),
-                FragmentDepth::MaxDensityPlane => "max-density plane".into(),
+        ParamValue::Switch(mut on) => ui.checkbox(&mut on, info.label).changed().then_some(ParamValue::Switch(on)),
+        ParamValue::Choice(current) => {
+            let mut chosen = None;
+            egui::ComboBox::from_label(info.label).selected_text(&current).show_ui(ui, |ui| {
+                for choice in param_choices(param) {
+                    if ui.selectable_label(choice == current, &choice).clicked() {
+                        chosen = Some(ParamValue::Choice(choice));
+                    }
+                }
             });
+            chosen
         }
-        Param::Extent => combo(ui, info.label, &mut p.raster.extent, &SplatExtent::ALL, |e| e.name().into()),
-        Param::Response => combo(ui, info.label, &mut p.raster.response, &Response::ALL, |r| r.name().into()),
+    };
+    if let Some(value) = changed {
+        set_param(p, param, value).expect("the widget offers the parameter's own kind and choices");
     }
 }
 

@@ -19,14 +19,14 @@
 
 use crate::load::SceneInfo;
 use crate::navigate::{Action, FLY_KEYS, KEY_BINDINGS, Navigation, fly_direction, key_action};
-use crate::settings::{Backend, Pipeline, Settings};
+use crate::settings::{Backend, ParamValue, Pipeline, Settings, is_count, param_choices, param_value, set_param};
 use crate::worker::{FrameFeed, HostFrame, Target, Worker};
 use crate::{BackendChoice, SceneArgs};
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
 use splat_core::MethodId;
 use splat_core::catalogue::Param;
-use splat_gpu::{DisplayMode, GpuContext};
+use splat_gpu::{AccumulationFormat, DisplayMode, GpuContext};
 use std::io::Read;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -102,29 +102,31 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             args.bind
         );
     }
-    println!(
-        "splat serve: http://{}:{port}/?token={token}",
-        if args.bind.is_unspecified() { "127.0.0.1".to_string() } else { args.bind.to_string() }
-    );
+    // An unspecified address (0.0.0.0, ::) listens on loopback too: the URL names loopback.
+    let host = match args.bind {
+        IpAddr::V4(ip) if ip.is_unspecified() => IpAddr::V4(std::net::Ipv4Addr::LOCALHOST),
+        IpAddr::V6(ip) if ip.is_unspecified() => IpAddr::V6(std::net::Ipv6Addr::LOCALHOST),
+        ip => ip,
+    };
+    println!("splat serve: http://{}/?token={token}", SocketAddr::new(host, port));
     println!("splat serve: {} ({})", session.nav.scene().name, session.note);
     let state = Arc::new(State {
         feed: session.worker.feed(),
         png: Mutex::new(None),
         session: Mutex::new(session),
         token,
-        in_flight: AtomicUsize::new(0),
-        rate: Mutex::new((Instant::now(), 0)),
+        bounds: Bounds::default(),
     });
     state.session().post();
     for request in server.incoming_requests() {
-        if let Some(refusal) = state.admit() {
+        if let Some(refusal) = state.bounds.admit() {
             let _ = request.respond(refusal);
             continue;
         }
         let state = state.clone();
         std::thread::spawn(move || {
+            let _counted = InFlight(&state.bounds.in_flight);
             state.handle(request);
-            state.in_flight.fetch_sub(1, Ordering::SeqCst);
         });
     }
     Ok(())
@@ -162,9 +164,47 @@ struct State {
     /// The newest frame encoded as PNG, shared by every page that asks for it.
     png: Mutex<Option<(u64, Arc<Vec<u8>>)>>,
     token: String,
+    bounds: Bounds,
+}
+
+/// The requests running and those accepted this second.
+struct Bounds {
     in_flight: AtomicUsize,
     /// The start of the current second and the requests accepted in it.
     rate: Mutex<(Instant, usize)>,
+}
+
+impl Default for Bounds {
+    fn default() -> Self {
+        Self { in_flight: AtomicUsize::new(0), rate: Mutex::new((Instant::now(), 0)) }
+    }
+}
+
+impl Bounds {
+    /// Count a request in ([`InFlight`] counts it out), or the refusal when
+    /// [`MAX_PER_SECOND`] arrived this second or [`MAX_IN_FLIGHT`] run.
+    fn admit(&self) -> Option<Response> {
+        self.admit_at(Instant::now())
+    }
+
+    /// [`Bounds::admit`] at time `now`.
+    fn admit_at(&self, now: Instant) -> Option<Response> {
+        {
+            let mut rate = self.rate.lock().unwrap_or_else(|p| p.into_inner());
+            if now.saturating_duration_since(rate.0) >= Duration::from_secs(1) {
+                *rate = (now, 0);
+            }
+            if rate.1 >= MAX_PER_SECOND {
+                return Some(error(429, "too many requests this second"));
+            }
+            rate.1 += 1;
+        }
+        if self.in_flight.fetch_add(1, Ordering::SeqCst) >= MAX_IN_FLIGHT {
+            self.in_flight.fetch_sub(1, Ordering::SeqCst);
+            return Some(error(503, "too many requests at once"));
+        }
+        None
+    }
 }
 
 /// The render and everything the page steers.
@@ -177,6 +217,15 @@ struct Session {
     note: String,
     gpu_available: bool,
     worker: Worker,
+}
+
+/// One request counted in [`State::admit`], counted out when it ends however it ends.
+struct InFlight<'a>(&'a AtomicUsize);
+
+impl Drop for InFlight<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 type Response = tiny_http::Response<std::io::Cursor<Vec<u8>>>;
@@ -201,25 +250,6 @@ fn json_reply(value: &Value) -> Response {
 impl State {
     fn session(&self) -> std::sync::MutexGuard<'_, Session> {
         self.session.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-    }
-
-    /// Count a request in, or the refusal when too many run or arrived this second.
-    fn admit(&self) -> Option<Response> {
-        {
-            let mut rate = self.rate.lock().unwrap_or_else(|p| p.into_inner());
-            if rate.0.elapsed() >= Duration::from_secs(1) {
-                *rate = (Instant::now(), 0);
-            }
-            if rate.1 >= MAX_PER_SECOND {
-                return Some(error(429, "too many requests this second"));
-            }
-            rate.1 += 1;
-        }
-        if self.in_flight.fetch_add(1, Ordering::SeqCst) >= MAX_IN_FLIGHT {
-            self.in_flight.fetch_sub(1, Ordering::SeqCst);
-            return Some(error(503, "too many requests at once"));
-        }
-        None
     }
 
     /// Answer one request.
@@ -372,13 +402,7 @@ impl Session {
 
     /// Change the settings `value` names (an object of [`settings_json`]'s keys).
     fn apply_settings(&mut self, value: &Value) -> Result<(), String> {
-        let object = value.as_object().ok_or("the settings are a JSON object")?;
-        let mut s = self.settings.clone();
-        for (key, v) in object {
-            set(&mut s, key, v, self.gpu_available).map_err(|e| format!("{key}: {e}"))?;
-        }
-        s.params.validate().map_err(|e| e.to_string())?;
-        self.settings = s;
+        self.settings = changed(&self.settings, value, self.gpu_available)?;
         Ok(())
     }
 
@@ -396,6 +420,18 @@ impl Session {
         }
         Ok(())
     }
+}
+
+/// `settings` with the changes `value` names (an object of [`settings_json`]'s keys), all or
+/// none: the first bad key or value is the error.
+fn changed(settings: &Settings, value: &Value, gpu_available: bool) -> Result<Settings, String> {
+    let object = value.as_object().ok_or("the settings are a JSON object")?;
+    let mut s = settings.clone();
+    for (key, v) in object {
+        set(&mut s, key, v, gpu_available).map_err(|e| format!("{key}: {e}"))?;
+    }
+    s.params.validate().map_err(|e| e.to_string())?;
+    Ok(s)
 }
 
 /// The action one input event asks for.
@@ -431,22 +467,38 @@ fn action(event: &Value) -> Result<Action, String> {
     }
 }
 
-/// The numeric method parameters the page sets, by their CLI names.
-fn numeric_params() -> impl Iterator<Item = Param> {
-    Param::ALL.into_iter().filter(|p| p.info().limits.is_some())
+/// A parameter's value as JSON: a number, a choice's name or a switch.
+fn param_json(value: ParamValue) -> Value {
+    match value {
+        ParamValue::Number(x) => json!(x),
+        ParamValue::Choice(name) => json!(name),
+        ParamValue::Switch(on) => json!(on),
+    }
+}
+
+/// The parameter value a JSON value gives.
+fn param_of_json(v: &Value) -> Result<ParamValue, String> {
+    match v {
+        Value::Number(x) => x.as_f64().map(ParamValue::Number).ok_or_else(|| format!("{v} is not a number")),
+        Value::String(name) => Ok(ParamValue::Choice(name.clone())),
+        Value::Bool(on) => Ok(ParamValue::Switch(*on)),
+        _ => Err(format!("a parameter is a number, a name or true / false, not {v}")),
+    }
 }
 
 /// The settings the page shows and sets.
 fn settings_json(s: &Settings) -> Value {
     let params: serde_json::Map<String, Value> =
-        numeric_params().map(|p| (p.info().flag.to_string(), json!(param_value(s, p)))).collect();
+        Param::ALL.iter().map(|&p| (p.info().flag.to_string(), param_json(param_value(&s.params, p)))).collect();
     json!({
         "backend": match s.backend { Backend::Gpu => "gpu", Backend::Cpu => "cpu" },
         "pipeline": s.pipeline.name(),
         "trace": s.trace.name(),
         "raster": s.raster.name(),
         "params": params,
+        "rng": crate::settings::rng_name(s.rng),
         "seed": s.seed,
+        "accumulation": s.accumulation.name(),
         "look": crate::settings::look_name(s.look),
         "shadows": crate::settings::shadows_name(s.shadows),
         "display": s.display.mode.name(),
@@ -460,13 +512,27 @@ fn settings_json(s: &Settings) -> Value {
 /// The choices of each menu of the page, and each numeric parameter's limits and methods.
 fn menus(gpu_available: bool) -> Value {
     let names = |ids: Vec<MethodId>| ids.into_iter().map(MethodId::name).collect::<Vec<_>>();
-    let params: Vec<Value> = numeric_params()
-        .map(|p| {
+    let defaults = splat_core::Parameters::default();
+    let params: Vec<Value> = Param::ALL
+        .iter()
+        .map(|&p| {
             let info = p.info();
-            let limits = info.limits.expect("numeric");
             let readers: Vec<&str> = MethodId::ALL.iter().filter(|m| m.reads(p)).map(|m| m.name()).collect();
-            json!({ "name": info.flag, "label": info.label, "min": limits.min, "max": limits.max,
-                    "slider_max": limits.slider_max, "integer": p != Param::MinTransmittance, "methods": readers })
+            let mut entry = json!({ "name": info.flag, "label": info.label, "methods": readers });
+            match (param_value(&defaults, p), info.limits) {
+                (ParamValue::Number(_), Some(limits)) => {
+                    entry["kind"] = json!("number");
+                    entry["min"] = json!(limits.min);
+                    entry["max"] = json!(limits.max);
+                    entry["integer"] = json!(is_count(p));
+                }
+                (ParamValue::Choice(_), _) => {
+                    entry["kind"] = json!("choice");
+                    entry["choices"] = json!(param_choices(p));
+                }
+                _ => entry["kind"] = json!("switch"),
+            }
+            entry
         })
         .collect();
     json!({
@@ -474,23 +540,13 @@ fn menus(gpu_available: bool) -> Value {
         "pipeline": Pipeline::ALL.map(Pipeline::name),
         "trace": names(Settings::trace_menu()),
         "raster": names(Settings::raster_menu()),
+        "rng": crate::settings::RNGS.map(crate::settings::rng_name),
+        "accumulation": AccumulationFormat::ALL.map(AccumulationFormat::name),
         "look": crate::settings::LOOKS.map(crate::settings::look_name),
         "shadows": crate::settings::SHADOWS.map(crate::settings::shadows_name),
         "display": DisplayMode::ALL.map(DisplayMode::name),
         "params": params,
     })
-}
-
-/// The value of numeric parameter `p`.
-fn param_value(s: &Settings, p: Param) -> f64 {
-    match p {
-        Param::K => s.params.k as f64,
-        Param::MaxPasses => f64::from(s.params.max_passes),
-        Param::MinTransmittance => f64::from(s.params.min_transmittance),
-        Param::N => f64::from(s.params.n),
-        Param::M => f64::from(s.params.m),
-        _ => unreachable!("{p:?} is not numeric"),
-    }
 }
 
 /// Set `key` of the settings to `v`.
@@ -515,6 +571,14 @@ fn set(s: &mut Settings, key: &str, v: &Value, gpu_available: bool) -> Result<()
         "pipeline" => s.pipeline = Pipeline::ALL[pick(text()?, &Pipeline::ALL.map(Pipeline::name))?],
         "trace" => s.trace = method(Settings::trace_menu())?,
         "raster" => s.raster = method(Settings::raster_menu())?,
+        "rng" => {
+            let rngs = crate::settings::RNGS;
+            s.rng = rngs[pick(text()?, &rngs.map(crate::settings::rng_name))?];
+        }
+        "accumulation" => {
+            let formats = AccumulationFormat::ALL;
+            s.accumulation = formats[pick(text()?, &formats.map(AccumulationFormat::name))?];
+        }
         "look" => {
             let looks = crate::settings::LOOKS;
             s.look = looks[pick(text()?, &looks.map(crate::settings::look_name))?];
@@ -532,17 +596,9 @@ fn set(s: &mut Settings, key: &str, v: &Value, gpu_available: bool) -> Result<()
         "params" => {
             let object = v.as_object().ok_or("the parameters are a JSON object")?;
             for (name, value) in object {
-                let p =
-                    numeric_params().find(|p| p.info().flag == name).ok_or_else(|| format!("no parameter {name}"))?;
-                let x = value.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!("{name}: expected a number"))?;
-                match p {
-                    Param::K => s.params.k = x as usize,
-                    Param::MaxPasses => s.params.max_passes = x as u32,
-                    Param::MinTransmittance => s.params.min_transmittance = x as f32,
-                    Param::N => s.params.n = x as u32,
-                    Param::M => s.params.m = x as u32,
-                    _ => unreachable!("numeric"),
-                }
+                let p = Param::ALL.into_iter().find(|p| p.info().flag == name);
+                let p = p.ok_or_else(|| format!("no parameter {name}"))?;
+                set_param(&mut s.params, p, param_of_json(value)?)?;
             }
         }
         _ => return Err("not a setting".into()),
@@ -565,7 +621,7 @@ mod tests {
     #[test]
     fn every_menu_choice_round_trips_and_others_are_refused() {
         let menus = menus(false);
-        for key in ["pipeline", "trace", "raster", "look", "shadows", "display", "backend"] {
+        for key in ["pipeline", "trace", "raster", "rng", "accumulation", "look", "shadows", "display", "backend"] {
             for choice in menus[key].as_array().unwrap() {
                 let mut s = settings();
                 set(&mut s, key, choice, false).unwrap_or_else(|e| panic!("{key} = {choice}: {e}"));
@@ -578,24 +634,68 @@ mod tests {
         assert_eq!(set(&mut settings(), "path", &json!("/etc/passwd"), false).unwrap_err(), "not a setting");
     }
 
-    /// Each numeric parameter is set by its CLI name and validated against the catalogue's
-    /// limits; switches and numbers take their types only.
+    /// Every parameter is set by its CLI name with the values its menu entry offers (numbers
+    /// within the catalogue's limits, each choice, both switch states) and reads back as set;
+    /// a number above its limit is refused, as a value of the wrong kind.
     #[test]
     fn parameters_are_set_by_name_within_their_limits() {
         let mut session_settings = settings();
-        for p in numeric_params() {
-            let limits = p.info().limits.unwrap();
-            let mut s = settings();
-            set(&mut s, "params", &json!({ p.info().flag: limits.max }), false).unwrap();
-            assert_eq!(param_value(&s, p), limits.max, "{p:?}");
-            set(&mut s, "params", &json!({ p.info().flag: limits.max + 1.0 }), false).unwrap();
-            assert!(s.params.validate().is_err(), "{p:?} above its limit passes validation");
+        let menus = menus(false);
+        for entry in menus["params"].as_array().unwrap() {
+            let name = entry["name"].as_str().unwrap();
+            let values = match entry["kind"].as_str().unwrap() {
+                "number" => vec![entry["max"].clone()],
+                "choice" => entry["choices"].as_array().unwrap().clone(),
+                _ => vec![json!(false), json!(true)],
+            };
+            for value in values {
+                let mut s = settings();
+                set(&mut s, "params", &json!({ name: value }), false).unwrap_or_else(|e| panic!("{name}: {e}"));
+                assert_eq!(settings_json(&s)["params"][name], value, "{name}");
+            }
+            if entry["kind"] == "number" {
+                let above = entry["max"].as_f64().unwrap() + 1.0;
+                let refused = changed(&settings(), &json!({ "params": { name: above } }), false);
+                assert!(refused.is_err(), "{name} above its limit");
+                let max = changed(&settings(), &json!({ "params": { name: entry["max"] } }), false);
+                assert!(max.is_ok(), "{name} at its limit");
+            }
+            assert!(set(&mut settings(), "params", &json!({ name: [1] }), false).is_err(), "{name} took a list");
         }
         assert!(set(&mut session_settings, "params", &json!({ "no-such": 1 }), false).is_err());
         assert!(set(&mut session_settings, "rmse", &json!(1), false).is_err());
         assert!(set(&mut session_settings, "scale", &json!("big"), false).is_err());
         set(&mut session_settings, "scale", &json!(9.0), false).unwrap();
         assert_eq!(session_settings.scale, 1.0, "the render scale is clamped to the panel's range");
+    }
+
+    /// At most [`MAX_IN_FLIGHT`] requests run at once (one more is refused until one ends) and
+    /// at most [`MAX_PER_SECOND`] are accepted in a second.
+    #[test]
+    fn requests_are_bounded_at_once_and_per_second() {
+        let bounds = Bounds::default();
+        let now = bounds.rate.lock().unwrap().0;
+        let admitted: Vec<_> = (0..MAX_IN_FLIGHT).map(|_| bounds.admit_at(now)).collect();
+        assert!(admitted.iter().all(Option::is_none));
+        assert_eq!(bounds.admit_at(now).map(|r| r.status_code().0), Some(503));
+        drop(InFlight(&bounds.in_flight));
+        assert!(bounds.admit_at(now).is_none(), "a request that ended makes room");
+        for _ in 0..MAX_IN_FLIGHT {
+            drop(InFlight(&bounds.in_flight));
+        }
+        // 34 counted this second so far (the refused one too).
+        let accepted = (0..2 * MAX_PER_SECOND)
+            .filter(|_| {
+                let admitted = bounds.admit_at(now).is_none();
+                if admitted {
+                    drop(InFlight(&bounds.in_flight));
+                }
+                admitted
+            })
+            .count();
+        assert_eq!(accepted, MAX_PER_SECOND - MAX_IN_FLIGHT - 2, "requests beyond the second's budget pass");
+        assert_eq!(bounds.admit_at(now).map(|r| r.status_code().0), Some(429));
+        assert!(bounds.admit_at(now + Duration::from_secs(1)).is_none(), "the next second has its own budget");
     }
 
     /// Input events become the window's actions; malformed ones are refused with the reason.

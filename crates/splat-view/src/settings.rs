@@ -3,9 +3,10 @@
 
 use splat_core::RenderSettings;
 use splat_core::algorithm::Algorithm;
-use splat_core::catalogue::Family;
+use splat_core::catalogue::{Family, Param};
 use splat_core::lighting::{Light, Lighting, Look, Material, Shadows};
-use splat_core::raster::{RasterMethod, RasterSettings};
+use splat_core::raster::{Blend, FragmentDepth, RasterMethod, RasterSettings, Response, SAMPLE_COUNTS};
+use splat_core::raster::{SamplePattern, SplatExtent};
 use splat_core::rng::RngScheme;
 use splat_core::trace::Method;
 use splat_core::{MethodId, Parameters};
@@ -35,6 +36,126 @@ impl Pipeline {
             Pipeline::Raster => "raster",
             Pipeline::Hybrid => "hybrid",
         }
+    }
+}
+
+/// A method parameter's value as the panel and the page edit it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ParamValue {
+    /// A number within the catalogue's limits ([`is_count`]: a whole number).
+    Number(f64),
+    /// One of [`param_choices`], by name.
+    Choice(String),
+    /// On or off.
+    Switch(bool),
+}
+
+/// Whether numeric parameter `param` counts (takes whole numbers).
+pub fn is_count(param: Param) -> bool {
+    param != Param::MinTransmittance
+}
+
+/// The blend orders of the menu.
+const BLENDS: [Blend; 2] = [Blend::Over, Blend::Under];
+/// The sample patterns of the menu.
+const PATTERNS: [SamplePattern; 2] = [SamplePattern::Hammersley, SamplePattern::Standard];
+/// The fragment depths of the menu.
+const DEPTHS: [FragmentDepth; 2] = [FragmentDepth::Center, FragmentDepth::MaxDensityPlane];
+
+/// The names a choice parameter takes, in menu order (empty for numbers and switches).
+pub fn param_choices(param: Param) -> Vec<String> {
+    let names = |v: &[&str]| v.iter().map(|n| n.to_string()).collect();
+    match param {
+        Param::Blend => BLENDS.map(blend_name).iter().map(|n| n.to_string()).collect(),
+        Param::RasterSamples => SAMPLE_COUNTS.iter().map(u32::to_string).collect(),
+        Param::SamplePattern => names(&PATTERNS.map(SamplePattern::name)),
+        Param::FragmentDepth => names(&DEPTHS.map(depth_name)),
+        Param::Extent => names(&SplatExtent::ALL.map(SplatExtent::name)),
+        Param::Response => names(&Response::ALL.map(Response::name)),
+        _ => Vec::new(),
+    }
+}
+
+fn blend_name(blend: Blend) -> &'static str {
+    match blend {
+        Blend::Over => "back to front",
+        Blend::Under => "front to back",
+    }
+}
+
+fn depth_name(depth: FragmentDepth) -> &'static str {
+    match depth {
+        FragmentDepth::Center => "centre",
+        FragmentDepth::MaxDensityPlane => "max-density plane",
+    }
+}
+
+/// The value of `param` in `p`.
+pub fn param_value(p: &Parameters, param: Param) -> ParamValue {
+    use ParamValue::{Choice, Number, Switch};
+    let r = &p.raster;
+    match param {
+        Param::K => Number(p.k as f64),
+        Param::MaxPasses => Number(f64::from(p.max_passes)),
+        Param::MinTransmittance => Number(f64::from(p.min_transmittance)),
+        Param::N => Number(f64::from(p.n)),
+        Param::M => Number(f64::from(p.m)),
+        Param::EarlyStop => Switch(r.early_stop),
+        Param::Scramble => Switch(p.scramble),
+        Param::Blend => Choice(blend_name(p.blend).into()),
+        Param::RasterSamples => Choice(r.samples.to_string()),
+        Param::SamplePattern => Choice(r.sample_pattern.name().into()),
+        Param::FragmentDepth => Choice(depth_name(r.fragment_depth).into()),
+        Param::Extent => Choice(r.extent.name().into()),
+        Param::Response => Choice(r.response.name().into()),
+    }
+}
+
+/// Set `param` of `p` to `value` (of the kind [`param_value`] gives; numbers are checked
+/// against the limits by [`Parameters::validate`]).
+pub fn set_param(p: &mut Parameters, param: Param, value: ParamValue) -> Result<(), String> {
+    let label = param.info().label;
+    match (param_value(p, param), value) {
+        (ParamValue::Number(_), ParamValue::Number(x)) if x.is_finite() => match param {
+            Param::K => p.k = x as usize,
+            Param::MaxPasses => p.max_passes = x as u32,
+            Param::MinTransmittance => p.min_transmittance = x as f32,
+            Param::N => p.n = x as u32,
+            _ => p.m = x as u32,
+        },
+        (ParamValue::Switch(_), ParamValue::Switch(on)) => match param {
+            Param::EarlyStop => p.raster.early_stop = on,
+            _ => p.scramble = on,
+        },
+        (ParamValue::Choice(_), ParamValue::Choice(name)) => {
+            let choices = param_choices(param);
+            let i = choices
+                .iter()
+                .position(|c| *c == name)
+                .ok_or_else(|| format!("{label}: \"{name}\" is not one of {}", choices.join(", ")))?;
+            let r = &mut p.raster;
+            match param {
+                Param::Blend => p.blend = BLENDS[i],
+                Param::RasterSamples => r.samples = SAMPLE_COUNTS[i],
+                Param::SamplePattern => r.sample_pattern = PATTERNS[i],
+                Param::FragmentDepth => r.fragment_depth = DEPTHS[i],
+                Param::Extent => r.extent = SplatExtent::ALL[i],
+                _ => r.response = Response::ALL[i],
+            }
+        }
+        (kind, value) => return Err(format!("{label} takes a value like {kind:?}, not {value:?}")),
+    }
+    Ok(())
+}
+
+/// The generators of the menu.
+pub const RNGS: [RngScheme; 2] = [RngScheme::Hash, RngScheme::Trig];
+
+/// A generator's menu name.
+pub fn rng_name(rng: RngScheme) -> &'static str {
+    match rng {
+        RngScheme::Hash => "hash",
+        RngScheme::Trig => "trig",
     }
 }
 
@@ -232,6 +353,31 @@ mod tests {
         s.pipeline = Pipeline::RayTracing;
         s.backend = Backend::Gpu;
         assert!(s.on_gpu());
+    }
+
+    /// Every parameter reads back what was set, for every choice and both switch states; a
+    /// value of the wrong kind or outside the choices is refused.
+    #[test]
+    fn every_parameter_value_round_trips() {
+        for param in Param::ALL {
+            let mut p = Parameters::default();
+            let values = match param_value(&p, param) {
+                ParamValue::Number(_) => vec![ParamValue::Number(param.info().limits.unwrap().max)],
+                ParamValue::Switch(_) => vec![ParamValue::Switch(false), ParamValue::Switch(true)],
+                ParamValue::Choice(_) => param_choices(param).into_iter().map(ParamValue::Choice).collect(),
+            };
+            assert!(!values.is_empty(), "{param:?}");
+            for value in values {
+                set_param(&mut p, param, value.clone()).unwrap();
+                assert_eq!(param_value(&p, param), value, "{param:?}");
+                assert!(p.validate().is_ok(), "{param:?} = {value:?}");
+            }
+            assert!(set_param(&mut p, param, ParamValue::Choice("no such".into())).is_err(), "{param:?}");
+        }
+        // Each choice is a distinct setting.
+        let mut p = Parameters::default();
+        set_param(&mut p, Param::Extent, ParamValue::Choice("sqrt8".into())).unwrap();
+        assert_eq!(p.raster.extent, SplatExtent::Sqrt8);
     }
 
     #[test]

@@ -10,6 +10,7 @@ token or with an oversized body are refused, then opens the page in Chromium and
     the viewer's own tolerance);
   - drags on the view and checks that the camera moved and the accumulation restarted, presses
     2 and checks the display shows depth, presses W and checks the camera flew;
+  - checks that clients that never read their frame, or go away, hold up nothing;
   - opens a second page and checks that it shows the same accumulation;
   - takes a screenshot (the README's) when asked.
 Exits non-zero with the reason on the first failure. Standard library only: the protocol runs
@@ -20,6 +21,7 @@ import base64
 import fcntl
 import json
 import os
+import socket
 import struct
 import subprocess
 import sys
@@ -163,6 +165,12 @@ class Page:
             self.send("Input.dispatchKeyEvent", {"type": kind, "key": key, "code": code, "text": key if kind == "keyDown" else ""})
 
 
+def choose(menu, value):
+    """The script that picks `value` in the panel's menu `menu`, as a click would."""
+    return (f"(() => {{ const s = document.getElementById({json.dumps(menu)}); s.value = {json.dumps(value)}; "
+            "s.dispatchEvent(new Event('change')); })()")
+
+
 def png_rgba(path):
     """The 8-bit RGB or RGBA pixels of a non-interlaced PNG, as RGBA bytes (width, height, bytes)."""
     data = open(path, "rb").read()
@@ -242,8 +250,7 @@ def main():
         print(f"page: {first['drawn']} frames drawn, {first['frames']} accumulated")
 
         # The panel's menu chooses the exact method.
-        page.eval("(() => { const s = document.getElementById('method'); s.value = 'exact'; "
-                  "s.dispatchEvent(new Event('change')); })()")
+        page.eval(choose("method", "exact"))
         exact = wait_for("the exact method's frame", lambda: (
             (s := page.splat()).get("state") and s["state"]["settings"]["trace"] == "exact"
             and s["state"]["status"]["idle"] and s["job"] == s["state"]["status"]["job"] and s["frames"] == 1 and s))
@@ -281,12 +288,40 @@ def main():
         wait_for("the camera to fly", lambda: page.splat()["state"]["camera"]["position"] != position)
         print("input: the drag turned the camera, 2 showed depth, W flew")
 
+        # The splatting pipeline shows its parameters: a choice set from its menu reaches the
+        # render (StochasticSplats at four samples a pixel).
+        page.eval(choose("pipeline", "raster"))
+        wait_for("the splatting controls", lambda: page.eval("!!document.getElementById('samples_per_pixel')"))
+        page.eval(choose("samples_per_pixel", "4"))
+        wait_for("four samples a pixel", lambda: (s := page.splat()["state"])["settings"]["params"]["raster-samples"] == "4"
+                 and s["settings"]["pipeline"] == "raster" and s["status"]["frames"] >= 2)
+        page.eval(choose("pipeline", "ray tracing"))
+        wait_for("the ray-tracing controls", lambda: page.eval("!!document.getElementById('method')"))
+        print("splatting: the pipeline and its samples per pixel chosen from the panel")
+
         # Back to Algorithm 1: the frames accumulate; a second page shows the same accumulation.
-        page.eval("(() => { const s = document.getElementById('method'); s.value = 'stochastic'; "
-                  "s.dispatchEvent(new Event('change')); })()")
+        page.eval(choose("method", "stochastic"))
         page.key("1", "Digit1")
         wait_for("Algorithm 1 to accumulate", lambda: (s := page.splat())["state"]["settings"]["trace"] == "stochastic"
                  and s["frames"] >= 8 and s["job"] == s["state"]["status"]["job"])
+        # Clients that ask for frames and never read them, or go away mid-request, hold up
+        # nothing: the page's frames keep coming.
+        stalled = []
+        host, port = base.removeprefix("http://").rsplit(":", 1)
+        for i in range(4):
+            c = socket.create_connection((host, int(port)))
+            c.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1024)
+            c.sendall(f"GET /frame?after=0&token={token} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+            if i % 2:
+                c.close()
+            else:
+                stalled.append(c)
+        drawn = page.splat()["drawn"]
+        wait_for("frames past the stalled clients", lambda: page.splat()["drawn"] >= drawn + 5)
+        for c in stalled:
+            c.close()
+        print("stalled and vanished clients: the page's frames kept coming")
+
         second = browser.page(url)
         both = wait_for("the second page's frames", lambda: (
             (s := second.splat()).get("drawn", 0) >= 2 and s["state"] and s))
