@@ -13,7 +13,6 @@ use crate::accumulate::CpuAccumulation;
 use crate::settings::Settings;
 use splat_core::algorithm::{Algorithm, PreparedView};
 use splat_core::frame::{Frames, RenderOutput};
-use splat_core::rng::frame_key;
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Camera, World};
 use splat_gpu::{GpuContext, GpuTracer, ProgressiveTrace, TracePipeline, wgpu};
@@ -595,10 +594,11 @@ fn stream(settings: &Settings) -> Frames {
     }
 }
 
-/// Frame `i` of a job on the CPU: a render of one frame whose seed is key i of the panel's
-/// seed, so that every frame draws its own decisions.
+/// Frame `i` of a job on the CPU: frame `i` of a batch render of the panel's seed (its key
+/// and its camera sample), as a share of a run renders it, so that the view after n frames
+/// shows the frames of `splat render` with n frames.
 fn cpu_frame(settings: &Settings, i: u32) -> Frames {
     // One frame at full precision: the view's accumulation stores the running mean.
     let accumulation = splat_core::frame::AccumulationFormat::F32;
-    Frames { seed: frame_key(settings.seed, i), accumulation, ..stream(settings) }
+    Frames { first: i, accumulation, ..stream(settings) }
 }

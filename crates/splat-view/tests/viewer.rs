@@ -216,54 +216,63 @@ fn the_gpu_view_draws_the_frames_of_a_batch_render() {
     let (w, hgt, view) = texels(&state, h.state());
     let camera = h.state().camera().unwrap();
     assert_eq!((camera.width, camera.height), (w, hgt));
-    let worst = against_a_batch_render(&camera, &view, 4);
+    let worst = against_a_batch_render(&camera, &view, 4, Backend::Gpu);
     assert!(worst <= 1, "the window's texture differs from the batch render by {worst}");
 }
 
-/// `splat serve`'s target: the GPU view read back into host memory shows the same frames (the
-/// render thread's `Target::Host`, drawn by the same display pass and read back).
+/// `splat serve`'s target: the view in host memory (the render thread's `Target::Host`) shows
+/// the frames of a batch render: on the GPU drawn by the same display pass and read back, on
+/// the CPU frame i of the view being frame i of the batch (its key and camera sample).
 #[test]
-fn the_gpu_view_in_host_memory_is_the_batch_render() {
-    let ctx = match GpuContext::new() {
-        Ok(ctx) => ctx,
-        Err(e) => return splat_tests::skip(&splat_tests::current_test(), &format!("no GPU adapter ({e})")),
-    };
+fn the_view_in_host_memory_is_the_batch_render() {
+    if let Err(e) = GpuContext::new() {
+        return splat_tests::skip(&splat_tests::current_test(), &format!("no GPU adapter ({e})"));
+    }
     let root = splat_tests::root();
-    let loaded =
-        splat_view::load::load(Some(&root.join("fixtures/cloud.ply")), None, Default::default()).expect("the cloud");
     let camera = splat_io::cameras::read_cameras(&root.join("fixtures/cloud.cameras.json")).unwrap()[0]
         .rescaled(96, 72)
         .unwrap();
-    let mut settings = Settings::new(loaded.info.render, &loaded.world.lighting, Backend::Gpu);
-    settings.max_frames = 4;
-    let mut worker = Worker::spawn(loaded.world, Some(ctx), None, || {});
-    let feed = worker.feed();
-    let job = worker.post(camera, &settings, 0, || Target::Host);
-    let start = Instant::now();
-    let frame = loop {
-        let frame = feed.wait(0, Duration::from_secs(1));
-        assert!(feed.status().error.is_none(), "{:?}", feed.status());
-        if frame.job == job && frame.frames == 4 {
-            break frame;
-        }
-        assert!(start.elapsed() < Duration::from_secs(120), "no frame 4: {:?}", feed.status());
-    };
-    assert_eq!((frame.width, frame.height), (96, 72));
-    let worst = against_a_batch_render(&camera, &frame.rgba, 4);
-    assert!(worst <= 1, "the host frame differs from the batch render by {worst}");
+    for backend in [Backend::Gpu, Backend::Cpu] {
+        let loaded = splat_view::load::load(Some(&root.join("fixtures/cloud.ply")), None, Default::default())
+            .expect("the cloud");
+        let mut settings = Settings::new(loaded.info.render, &loaded.world.lighting, backend);
+        settings.max_frames = 4;
+        let gpu = (backend == Backend::Gpu).then(|| GpuContext::new().expect("an adapter, as above"));
+        let mut worker = Worker::spawn(loaded.world, gpu, None, || {});
+        let feed = worker.feed();
+        let job = worker.post(camera, &settings, 0, || Target::Host);
+        let start = Instant::now();
+        let frame = loop {
+            let frame = feed.wait(0, Duration::from_secs(1));
+            assert!(feed.status().error.is_none(), "{:?}", feed.status());
+            if frame.job == job && frame.frames == 4 {
+                break frame;
+            }
+            assert!(start.elapsed() < Duration::from_secs(120), "no frame 4: {:?}", feed.status());
+        };
+        assert_eq!((frame.width, frame.height), (96, 72));
+        let worst = against_a_batch_render(&camera, &frame.rgba, 4, backend);
+        assert!(worst <= 1, "{backend:?}: the host frame differs from the batch render by {worst}");
+    }
 }
 
 /// The largest difference, in 8-bit levels, between `view` (RGBA8 of `camera`) and a batch
-/// render of `frames` frames of Algorithm 1 on the cloud fixture on the GPU, shown with the
+/// render of `frames` frames of Algorithm 1 on the cloud fixture on `backend`, shown with the
 /// default display transform; fails on a nearly empty view.
-fn against_a_batch_render(camera: &Camera, view: &[u8], frames: u32) -> u8 {
-    let ctx = GpuContext::new().expect("an adapter, as the view has one");
-    let pipeline = TracePipeline::new(&ctx).unwrap();
+fn against_a_batch_render(camera: &Camera, view: &[u8], frames: u32, backend: Backend) -> u8 {
     let root = splat_tests::root();
     let scene = splat_io::read_scene(&root.join("fixtures/cloud.ply")).unwrap();
     let trace = TraceScene::new(&scene, splat_core::RenderSettings::default()).unwrap();
-    let tracer = GpuTracer::new(&ctx, &pipeline, &trace).unwrap();
-    let batch = tracer.render(camera, &Method::Stochastic, &Frames { count: frames, ..Frames::default() }).unwrap().0;
+    let batch = Frames { count: frames, ..Frames::default() };
+    let batch = match backend {
+        Backend::Gpu => {
+            let ctx = GpuContext::new().expect("an adapter, as the view has one");
+            let pipeline = TracePipeline::new(&ctx).unwrap();
+            let tracer = GpuTracer::new(&ctx, &pipeline, &trace).unwrap();
+            tracer.render(camera, &Method::Stochastic, &batch).unwrap().0
+        }
+        Backend::Cpu => Algorithm::Trace(Method::Stochastic).render_on(&trace, camera, &batch, &|_| {}).unwrap(),
+    };
     let display = DisplayTransform::default();
     let mut worst = 0u8;
     for (p, texel) in view.chunks(4).enumerate() {

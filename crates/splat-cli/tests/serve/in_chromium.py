@@ -7,7 +7,8 @@ token or with an oversized body are refused, then opens the page in Chromium and
   - waits for frames and reads the canvas back;
   - chooses the exact method from the panel's menu and compares the canvas with the PNG of
     `splat render --method exact` at the camera the server reports (within one 8-bit level,
-    the viewer's own tolerance);
+    the viewer's own tolerance), then Algorithm 1 stopped at 16 frames with `splat render
+    --method stochastic --spp 16`;
   - drags on the view and checks that the camera moved and the accumulation restarted, presses
     2 and checks the display shows depth, presses W and checks the camera flew;
   - checks that clients that never read their frame, or go away, hold up nothing;
@@ -165,6 +166,36 @@ class Page:
             self.send("Input.dispatchKeyEvent", {"type": kind, "key": key, "code": code, "text": key if kind == "keyDown" else ""})
 
 
+def settled(page, method, frames):
+    """Wait until the page shows the finished accumulation of `frames` frames of `method`."""
+    return wait_for(f"{frames} frames of {method}", lambda: (
+        (s := page.splat()).get("state") and s["state"]["settings"]["trace"] == method
+        and s["state"]["status"]["idle"] and s["job"] == s["state"]["status"]["job"] and s["frames"] == frames and s))
+
+
+def against_splat_render(page, splat, work, options, what):
+    """Compare the canvas with the PNG `splat render` writes with `options` at the camera the
+    server reports: within one 8-bit level, the window's tolerance."""
+    time.sleep(0.3)
+    width, height, shown = page.canvas()
+    camera = page.splat()["state"]["camera"]
+    check((camera["width"], camera["height"]) == (width, height), f"canvas {width}×{height}, camera {camera}")
+    cameras = os.path.join(work, "serve-camera.json")
+    with open(cameras, "w") as f:
+        json.dump([camera], f)
+    reference = os.path.join(work, "serve-reference.png")
+    render = subprocess.run([splat, "render", "--camera", cameras, *options, "--backend", "cpu", "-o", reference],
+                            capture_output=True, text=True)
+    check(render.returncode == 0, f"splat render failed: {render.stderr}")
+    w, h, expected = png_rgba(reference)
+    check((w, h) == (width, height), f"splat render wrote {w}×{h}, the page shows {width}×{height}")
+    worst = max(abs(a - b) for i, (a, b) in enumerate(zip(shown, expected)) if i % 4 != 3)
+    lit = sum(1 for i in range(0, len(expected), 4) if expected[i] > 16)
+    print(f"{what}: the canvas against splat render's PNG: largest difference {worst} levels ({width}×{height})")
+    check(lit > width * height // 80, "the view is nearly black")
+    check(worst <= 1, f"{what}: the page differs from splat render's PNG by up to {worst} levels")
+
+
 def choose(menu, value):
     """The script that picks `value` in the panel's menu `menu`, as a click would."""
     return (f"(() => {{ const s = document.getElementById({json.dumps(menu)}); s.value = {json.dumps(value)}; "
@@ -249,36 +280,27 @@ def main():
         first = wait_for("the first frames", lambda: (s := page.splat()).get("drawn", 0) >= 3 and s)
         print(f"page: {first['drawn']} frames drawn, {first['frames']} accumulated")
 
-        # The panel's menu chooses the exact method.
+        # The panel's menu chooses the exact method: the page shows splat render's PNG.
         page.eval(choose("method", "exact"))
-        exact = wait_for("the exact method's frame", lambda: (
-            (s := page.splat()).get("state") and s["state"]["settings"]["trace"] == "exact"
-            and s["state"]["status"]["idle"] and s["job"] == s["state"]["status"]["job"] and s["frames"] == 1 and s))
-        time.sleep(0.3)
-        width, height, shown = page.canvas()
-        camera = page.splat()["state"]["camera"]
-        check((camera["width"], camera["height"]) == (width, height), f"canvas {width}×{height}, camera {camera}")
-        cameras = os.path.join(work, "serve-camera.json")
-        with open(cameras, "w") as f:
-            json.dump([camera], f)
-        reference = os.path.join(work, "serve-exact.png")
-        render = subprocess.run([splat, "render", "--camera", cameras, "--method", "exact", "--backend", "cpu",
-                                 "-o", reference], capture_output=True, text=True)
-        check(render.returncode == 0, f"splat render failed: {render.stderr}")
-        w, h, expected = png_rgba(reference)
-        check((w, h) == (width, height), f"splat render wrote {w}×{h}, the page shows {width}×{height}")
-        worst = max(abs(a - b) for i, (a, b) in enumerate(zip(shown, expected)) if i % 4 != 3)
-        lit = sum(1 for i in range(0, len(expected), 4) if expected[i] > 16)
-        print(f"exact: the canvas against splat render's PNG: largest difference {worst} levels ({width}×{height})")
-        check(lit > width * height // 80, "the view is nearly black")
-        check(worst <= 1, f"the page differs from splat render's PNG by up to {worst} levels")
+        settled(page, "exact", 1)
+        against_splat_render(page, splat, work, ["--method", "exact"], "exact")
+
+        # Algorithm 1 stopped after 16 frames (the panel's frame limit): the converged image is
+        # splat render's with 16 frames.
+        page.eval("(() => { const f = document.getElementById('max_frames'); f.value = 16; "
+                  "f.dispatchEvent(new Event('change')); })()")
+        page.eval(choose("method", "stochastic"))
+        converged = settled(page, "stochastic", 16)
+        against_splat_render(page, splat, work, ["--method", "stochastic", "--spp", "16"], "16 frames of Algorithm 1")
+        page.eval("(() => { const f = document.getElementById('max_frames'); f.value = 1024; "
+                  "f.dispatchEvent(new Event('change')); })()")
 
         # A drag turns the camera and restarts the accumulation; keys change the display and fly.
         before = page.splat()["state"]
         page.drag(80, 0)
         moved = wait_for("the dragged camera", lambda: (
             (s := page.splat())["state"]["camera"]["rotation"] != before["camera"]["rotation"]
-            and s["job"] > exact["job"] and s))
+            and s["job"] > converged["job"] and s))
         check(moved["state"]["view"] is None, "the camera moved but the page still shows the loaded view")
         page.eval("document.getElementById('canvas').focus()")
         page.key("2", "Digit2")
@@ -299,8 +321,7 @@ def main():
         wait_for("the ray-tracing controls", lambda: page.eval("!!document.getElementById('method')"))
         print("splatting: the pipeline and its samples per pixel chosen from the panel")
 
-        # Back to Algorithm 1: the frames accumulate; a second page shows the same accumulation.
-        page.eval(choose("method", "stochastic"))
+        # Back to colour: the frames accumulate; a second page shows the same accumulation.
         page.key("1", "Digit1")
         wait_for("Algorithm 1 to accumulate", lambda: (s := page.splat())["state"]["settings"]["trace"] == "stochastic"
                  and s["frames"] >= 8 and s["job"] == s["state"]["status"]["job"])
