@@ -48,6 +48,9 @@ impl BackendChoice {
             (Err(None), _) => "--backend cpu: rendering on the CPU".into(),
             (Err(Some(e)), _) => format!("the GPU tracer cannot run here ({e}): rendering on the CPU"),
             (Ok(_), true) => format!("GPU: {name}"),
+            (Ok(_), false) if backend == Backend::Gpu => {
+                format!("{name} is a CPU Vulkan driver: the GPU tracer runs on it, slowly")
+            }
             (Ok(_), false) => format!("{name} is a CPU Vulkan driver (slow): tracing on the CPU unless GPU is chosen"),
         };
         (backend, note)

@@ -10,7 +10,9 @@ token or with an oversized body are refused, then opens the page in Chromium and
     the viewer's own tolerance), then Algorithm 1 stopped at 16 frames with `splat render
     --method stochastic --spp 16`;
   - drags on the view and checks that the camera moved and the accumulation restarted, presses
-    2 and checks the display shows depth, presses W and checks the camera flew;
+    2 and checks the display shows depth, presses W and checks the camera flew, turns the wheel
+    and checks it dollied; pauses (the frame count holds), resumes and restarts from the panel;
+  - switches to the splatting pipeline and sets its samples per pixel from the panel;
   - checks that clients that never read their frame, or go away, hold up nothing;
   - opens a second page and checks that it shows the same accumulation;
   - takes a screenshot (the README's) when asked.
@@ -161,6 +163,10 @@ class Page:
             mouse("mouseMoved", x + dx * i / 5, y + dy * i / 5, 1)
         mouse("mouseReleased", x + dx, y + dy, 0)
 
+    def wheel(self, delta_y):
+        x, y = self.centre()
+        self.send("Input.dispatchMouseEvent", {"type": "mouseWheel", "x": x, "y": y, "deltaX": 0, "deltaY": delta_y})
+
     def key(self, key, code):
         for kind in ("keyDown", "keyUp"):
             self.send("Input.dispatchKeyEvent", {"type": kind, "key": key, "code": code, "text": key if kind == "keyDown" else ""})
@@ -308,7 +314,24 @@ def main():
         position = page.splat()["state"]["camera"]["position"]
         page.key("w", "KeyW")
         wait_for("the camera to fly", lambda: page.splat()["state"]["camera"]["position"] != position)
-        print("input: the drag turned the camera, 2 showed depth, W flew")
+        distance = page.splat()["state"]["camera"]["position"]
+        page.wheel(-240)
+        wait_for("the wheel to dolly", lambda: page.splat()["state"]["camera"]["position"] != distance)
+        print("input: the drag turned the camera, 2 showed depth, W flew, the wheel dollied")
+
+        # Pause holds the frame count; restart starts a new accumulation of the same view.
+        page.eval("document.getElementById('paused').click()")
+        paused = wait_for("the pause", lambda: (s := page.splat())["state"]["settings"]["paused"]
+                          and s["state"]["status"]["idle"] and s)
+        time.sleep(0.5)
+        check(page.splat()["state"]["status"]["frames"] == paused["state"]["status"]["frames"], "frames came while paused")
+        page.eval("document.getElementById('paused').click()")
+        wait_for("the resumption", lambda: not (s := page.splat()["state"])["settings"]["paused"]
+                 and s["status"]["frames"] > paused["state"]["status"]["frames"])
+        job = page.splat()["state"]["status"]["job"]
+        page.eval("document.getElementById('restart').click()")
+        wait_for("the restart", lambda: page.splat()["state"]["status"]["job"] > job)
+        print(f"pause held {paused['state']['status']['frames']} frames; restart began job {page.splat()['state']['status']['job']}")
 
         # The splatting pipeline shows its parameters: a choice set from its menu reaches the
         # render (StochasticSplats at four samples a pixel).
