@@ -3,16 +3,17 @@
 //! only posts jobs and shows the texture the thread draws into.
 
 use crate::camera::Orbit;
-use crate::load::Loaded;
+use crate::load::{Loaded, SceneInfo};
 pub use crate::navigate::KEY_BINDINGS;
-use crate::navigate::{Action, FLY_KEYS, Navigation, fly_direction, key_action};
+use crate::navigate::{Action, FLY_KEYS, JUMP_KEYS, Navigation, fly_action, key_action};
 use crate::settings::{Backend, LOOKS, ParamValue, Pipeline, SHADOWS, Settings, is_count, look_name};
 use crate::settings::{RNGS, param_choices, param_value, rng_name, set_param, shadows_name};
-use crate::worker::{self, Status, TEXTURE_FORMAT, Worker};
+use crate::worker::{self, Status, Worker};
 use eframe::egui::{self, Key, PointerButton, Sense};
 use eframe::egui_wgpu;
 use splat_core::catalogue::{Limits, Param};
 use splat_core::glam::Vec3;
+use splat_core::lighting::Lighting;
 use splat_core::normal::NormalMode;
 use splat_core::{Camera, HitDistance};
 use splat_core::{MethodId, Parameters};
@@ -72,6 +73,16 @@ pub struct Options {
     pub max_frames: u32,
 }
 
+impl Options {
+    /// How the window and the server start on `scene`: the navigation at the opening view and
+    /// the panel's settings on `backend` with the frame limit.
+    pub fn start(&self, scene: SceneInfo, lighting: &Lighting, backend: Backend) -> (Navigation, Settings) {
+        let mut settings = Settings::new(scene.render, lighting, backend);
+        settings.max_frames = self.max_frames;
+        (Navigation::new(scene, self.camera_index, self.up), settings)
+    }
+}
+
 /// The texture the render thread draws into, registered with the UI renderer.
 struct Target {
     texture: wgpu::Texture,
@@ -111,11 +122,10 @@ impl Viewer {
         let (backend, backend_note) = options.backend.resolve(Some(&render_state.adapter.get_info()), &gpu);
         let gpu_available = gpu.is_ok();
         let Loaded { world, info } = loaded;
-        let mut settings = Settings::new(info.render, &world.lighting, backend);
-        settings.max_frames = options.max_frames;
+        let (nav, settings) = options.start(info, &world.lighting, backend);
         let worker = Worker::spawn(world, gpu.ok(), Some(render_state.queue.clone()), move || egui.request_repaint());
         Self {
-            nav: Navigation::new(info, options.camera_index, options.up),
+            nav,
             settings,
             backend_note,
             gpu_available,
@@ -215,19 +225,9 @@ impl Viewer {
         if self.target.as_ref().is_some_and(|t| (t.texture.width(), t.texture.height()) == (width, height)) {
             return;
         }
-        let texture = self.render_state.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("splat view"),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: TEXTURE_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_DST
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        let usage =
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC;
+        let texture = worker::view_texture(&self.render_state.device, (width, height), usage);
         let view = texture.create_view(&Default::default());
         let mut renderer = self.render_state.renderer.write();
         let filter = wgpu::FilterMode::Linear;
@@ -243,9 +243,8 @@ impl Viewer {
 
     /// Post a job when the camera, the settings or the texture changed.
     fn post(&mut self, camera: Camera) {
-        (self.settings.display.depth_near, self.settings.display.depth_far) = self.nav.depth_range(&camera);
         let texture = &self.target.as_ref().expect("made before posting").texture;
-        self.worker.post(camera, &self.settings, self.nav.restart, || worker::Target::Texture(texture.clone()));
+        self.nav.post(&mut self.worker, camera, &mut self.settings, || worker::Target::Texture(texture.clone()));
     }
 
     /// Mouse and keys as [`Action`]s ([`KEY_BINDINGS`]): drag turns, right or middle drag
@@ -266,28 +265,25 @@ impl Viewer {
         }
         if !ui.ctx().text_edit_focused() {
             actions.extend(self.fly(ui));
-            let keys = [Key::N, Key::P, Key::F, Key::R, Key::Space, Key::Num1, Key::Num2, Key::Num3, Key::Num4];
-            let pressed = ui.input(|i| keys.map(|k| i.key_pressed(k)));
-            actions.extend(keys.iter().zip(pressed).filter(|p| p.1).filter_map(|(k, _)| key_action(k.name())));
+            let pressed = ui.input(|i| JUMP_KEYS.map(|k| Key::from_name(k).is_some_and(|k| i.key_pressed(k))));
+            actions.extend(JUMP_KEYS.iter().zip(pressed).filter(|p| p.1).filter_map(|(k, _)| key_action(k)));
         }
         for action in actions {
             self.nav.act(action, &mut self.settings);
         }
     }
 
-    /// W A S D Q E held: fly by half the scene's radius a second (Shift: two).
+    /// W A S D Q E held for this frame's time ([`fly_action`]).
     fn fly(&mut self, ui: &egui::Ui) -> Option<Action> {
         let (dt, fast, down) = ui.input(|i| {
             let down = FLY_KEYS.map(|c| Key::from_name(&c.to_string()).is_some_and(|k| i.key_down(k)));
             (i.stable_dt.min(0.1), i.modifiers.shift, down)
         });
-        let speed = if fast { 2.0 } else { 0.5 } * dt;
-        let (forward, right, up) = fly_direction(down);
-        if forward == 0.0 && right == 0.0 && up == 0.0 {
-            return None;
+        let fly = fly_action(down, fast, dt);
+        if fly.is_some() {
+            ui.ctx().request_repaint();
         }
-        ui.ctx().request_repaint();
-        Some(Action::Fly(speed * forward, speed * right, speed * up))
+        fly
     }
 
     /// Frames, rate, RMSE and errors over the top left of the view.

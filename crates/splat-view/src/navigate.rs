@@ -5,6 +5,7 @@
 use crate::camera::Orbit;
 use crate::load::SceneInfo;
 use crate::settings::Settings;
+use crate::worker::{Target, Worker};
 use splat_core::Camera;
 use splat_core::glam::Vec3;
 use splat_gpu::DisplayMode;
@@ -46,8 +47,11 @@ pub const KEY_BINDINGS: &[&str] = &[
     "1 2 3 4: colour, depth, normals, variance",
 ];
 
-/// The keys that fly, in the order of [`fly_direction`]'s `down`: W S A D E Q.
+/// The keys that fly, in the order of [`fly_action`]'s `down`: W S A D E Q.
 pub const FLY_KEYS: [char; 6] = ['w', 's', 'a', 'd', 'e', 'q'];
+
+/// The keys that jump ([`key_action`]), by name.
+pub const JUMP_KEYS: [&str; 9] = ["N", "P", "F", "R", "Space", "1", "2", "3", "4"];
 
 /// The action of a key that jumps (a key's name, case ignored: "N", "space", "1"), if any.
 pub fn key_action(key: &str) -> Option<Action> {
@@ -64,9 +68,17 @@ pub fn key_action(key: &str) -> Option<Action> {
 }
 
 /// (forward, right, up) of the fly keys held `down` (in [`FLY_KEYS`] order), each −1, 0 or 1.
-pub fn fly_direction(down: [bool; 6]) -> (f32, f32, f32) {
+fn fly_direction(down: [bool; 6]) -> (f32, f32, f32) {
     let axis = |plus: bool, minus: bool| f32::from(u8::from(plus)) - f32::from(u8::from(minus));
     (axis(down[0], down[1]), axis(down[3], down[2]), axis(down[4], down[5]))
+}
+
+/// The flight of the fly keys held `down` (in [`FLY_KEYS`] order) for `seconds`: half the
+/// scene's radius a second, two with `fast` (Shift); `None` when none is held.
+pub fn fly_action(down: [bool; 6], fast: bool, seconds: f32) -> Option<Action> {
+    let speed = if fast { 2.0 } else { 0.5 } * seconds;
+    let (forward, right, up) = fly_direction(down);
+    (forward != 0.0 || right != 0.0 || up != 0.0).then_some(Action::Fly(speed * forward, speed * right, speed * up))
 }
 
 /// The camera's state: the orbit, the loaded view it still shows, and where "home" is.
@@ -157,10 +169,18 @@ impl Navigation {
     }
 
     /// Depths shown white and black: the scene's central sphere seen from `camera`.
-    pub fn depth_range(&self, camera: &Camera) -> (f32, f32) {
+    fn depth_range(&self, camera: &Camera) -> (f32, f32) {
         let (center, radius) = self.scene.sphere();
         let d = (center - camera.center()).length();
         ((d - radius).max(0.0), d + radius)
+    }
+
+    /// Post the job of `camera` and `settings` into `target` with this navigation's restart
+    /// generation ([`Worker::post`]: nothing when none of them changed), the display's depth
+    /// range set for `camera` first.
+    pub fn post(&self, worker: &mut Worker, camera: Camera, settings: &mut Settings, target: impl FnOnce() -> Target) {
+        (settings.display.depth_near, settings.display.depth_far) = self.depth_range(&camera);
+        worker.post(camera, settings, self.restart, target);
     }
 }
 
@@ -196,6 +216,9 @@ mod tests {
         }
         assert_eq!(key_action("5"), None);
         assert_eq!(key_action("w"), None, "flying is held, not pressed");
+        assert!(JUMP_KEYS.iter().all(|k| key_action(k).is_some()), "a jump key without an action");
         assert_eq!(fly_direction([true, false, false, true, false, true]), (1.0, 1.0, -1.0));
+        assert_eq!(fly_action([false; 6], true, 0.1), None);
+        assert_eq!(fly_action([true, false, false, false, false, false], true, 0.1), Some(Action::Fly(0.2, 0.0, 0.0)));
     }
 }

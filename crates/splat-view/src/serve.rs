@@ -4,8 +4,8 @@
 //!
 //! - `GET /` the page; `GET /state` the settings, the menus, the render status and the camera
 //!   as JSON; `GET /frame?after=S` the newest frame past sequence number `S` as a PNG (waiting
-//!   up to [`FRAME_WAIT`] for one, else 204: nothing new); `POST /settings` a JSON object of settings to change;
-//!   `POST /input` a JSON list of navigation actions ([`Action`]).
+//!   up to [`FRAME_WAIT`] for one, else 204: nothing new); `POST /settings` a JSON object of
+//!   settings to change; `POST /input` a JSON list of navigation actions ([`Action`]).
 //! - Every browser on a server sees and steers one accumulation: there is one render thread,
 //!   and on a GPU machine one device whose time is best spent converging one image rather than
 //!   several at a fraction of the rate each. A page pulls the newest frame when it has drawn the
@@ -18,8 +18,9 @@
 //!   [`MAX_PER_SECOND`] are accepted a second.
 
 use crate::load::SceneInfo;
-use crate::navigate::{Action, FLY_KEYS, KEY_BINDINGS, Navigation, fly_direction, key_action};
-use crate::settings::{Backend, ParamValue, Pipeline, Settings, is_count, param_choices, param_value, set_param};
+use crate::navigate::{Action, FLY_KEYS, KEY_BINDINGS, Navigation, fly_action, key_action};
+use crate::settings::{Backend, LOOKS, ParamValue, Pipeline, RNGS, SHADOWS, Settings, is_count, look_name};
+use crate::settings::{param_choices, param_value, rng_name, set_param, shadows_name};
 use crate::worker::{FrameFeed, HostFrame, Target, Worker};
 use crate::{BackendChoice, SceneArgs};
 use anyhow::{Context, Result, bail};
@@ -81,10 +82,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let loaded = args.scene.load()?;
     let options = args.scene.options(None);
     let (gpu, backend, note) = gpu_for(args.scene.backend);
-    let mut settings = Settings::new(loaded.info.render, &loaded.world.lighting, backend);
-    settings.max_frames = options.max_frames;
+    let (nav, settings) = options.start(loaded.info, &loaded.world.lighting, backend);
     let session = Session {
-        nav: Navigation::new(loaded.info, options.camera_index, options.up),
+        nav,
         settings,
         size: [args.width, args.height],
         note,
@@ -219,7 +219,7 @@ struct Session {
     worker: Worker,
 }
 
-/// One request counted in [`State::admit`], counted out when it ends however it ends.
+/// One request counted in [`Bounds::admit`], counted out when it ends however it ends.
 struct InFlight<'a>(&'a AtomicUsize);
 
 impl Drop for InFlight<'_> {
@@ -318,9 +318,7 @@ impl State {
         }
         response
     }
-}
 
-impl State {
     /// `frame` as a PNG, encoded once for every page that asks for it.
     fn png(&self, frame: &HostFrame) -> Result<Arc<Vec<u8>>, png::EncodingError> {
         let mut cache = self.png.lock().unwrap_or_else(|p| p.into_inner());
@@ -369,8 +367,7 @@ impl Session {
     fn post(&mut self) {
         let [w, h] = self.size;
         let (camera, _) = self.nav.camera([w as f32, h as f32], self.settings.scale);
-        (self.settings.display.depth_near, self.settings.display.depth_far) = self.nav.depth_range(&camera);
-        self.worker.post(camera, &self.settings, self.nav.restart, || Target::Host);
+        self.nav.post(&mut self.worker, camera, &mut self.settings, || Target::Host);
     }
 
     /// Everything the page shows: the scene, the settings and their menus, the render's
@@ -454,14 +451,10 @@ fn action(event: &Value) -> Result<Action, String> {
                 return Ok(action);
             }
             let held = FLY_KEYS.map(|c| key.eq_ignore_ascii_case(&c.to_string()));
-            if !held.contains(&true) {
-                return Err(format!("no key \"{key}\": the keys are {}", KEY_BINDINGS.join("; ")));
-            }
             let fast = event.get("fast").and_then(Value::as_bool).unwrap_or(false);
             let seconds = number("seconds").unwrap_or(1.0 / 30.0).clamp(0.0, 0.1);
-            let speed = if fast { 2.0 } else { 0.5 } * seconds;
-            let (forward, right, up) = fly_direction(held);
-            Ok(Action::Fly(speed * forward, speed * right, speed * up))
+            fly_action(held, fast, seconds)
+                .ok_or_else(|| format!("no key \"{key}\": the keys are {}", KEY_BINDINGS.join("; ")))
         }
         _ => Err(format!("an input event is {{\"do\": \"rotate\" | \"pan\" | \"zoom\" | \"key\", …}}: {event}")),
     }
@@ -496,11 +489,11 @@ fn settings_json(s: &Settings) -> Value {
         "trace": s.trace.name(),
         "raster": s.raster.name(),
         "params": params,
-        "rng": crate::settings::rng_name(s.rng),
+        "rng": rng_name(s.rng),
         "seed": s.seed,
         "accumulation": s.accumulation.name(),
-        "look": crate::settings::look_name(s.look),
-        "shadows": crate::settings::shadows_name(s.shadows),
+        "look": look_name(s.look),
+        "shadows": shadows_name(s.shadows),
         "display": s.display.mode.name(),
         "scale": s.scale,
         "max_frames": s.max_frames,
@@ -540,12 +533,21 @@ fn menus(gpu_available: bool) -> Value {
         "pipeline": Pipeline::ALL.map(Pipeline::name),
         "trace": names(Settings::trace_menu()),
         "raster": names(Settings::raster_menu()),
-        "rng": crate::settings::RNGS.map(crate::settings::rng_name),
+        "rng": RNGS.map(rng_name),
         "accumulation": AccumulationFormat::ALL.map(AccumulationFormat::name),
-        "look": crate::settings::LOOKS.map(crate::settings::look_name),
-        "shadows": crate::settings::SHADOWS.map(crate::settings::shadows_name),
+        "look": LOOKS.map(look_name),
+        "shadows": SHADOWS.map(shadows_name),
         "display": DisplayMode::ALL.map(DisplayMode::name),
         "params": params,
+    })
+}
+
+/// The one of the menu `all` that `v` names by `name`.
+fn one_of<T: Copy>(v: &Value, all: &[T], name: fn(T) -> &'static str) -> Result<T, String> {
+    let chosen = v.as_str().ok_or_else(|| format!("expected a name, got {v}"))?;
+    all.iter().copied().find(|&x| name(x) == chosen).ok_or_else(|| {
+        let names: Vec<&str> = all.iter().map(|&x| name(x)).collect();
+        format!("\"{chosen}\" is not one of {}", names.join(", "))
     })
 }
 
@@ -554,13 +556,6 @@ fn set(s: &mut Settings, key: &str, v: &Value, gpu_available: bool) -> Result<()
     let text = || v.as_str().ok_or_else(|| format!("expected a name, got {v}"));
     let flag = || v.as_bool().ok_or_else(|| format!("expected true or false, got {v}"));
     let number = || v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!("expected a number, got {v}"));
-    let pick = |name: &str, all: &[&str]| {
-        all.iter().position(|n| *n == name).ok_or_else(|| format!("\"{name}\" is not one of {}", all.join(", ")))
-    };
-    let method = |menu: Vec<MethodId>| -> Result<MethodId, String> {
-        let name = text()?;
-        menu.into_iter().find(|m| m.name() == name).ok_or_else(|| format!("\"{name}\" is not a method of this menu"))
-    };
     match key {
         "backend" => match text()? {
             "cpu" => s.backend = Backend::Cpu,
@@ -568,26 +563,14 @@ fn set(s: &mut Settings, key: &str, v: &Value, gpu_available: bool) -> Result<()
             "gpu" => return Err("this server has no GPU context".into()),
             other => return Err(format!("\"{other}\" is not gpu or cpu")),
         },
-        "pipeline" => s.pipeline = Pipeline::ALL[pick(text()?, &Pipeline::ALL.map(Pipeline::name))?],
-        "trace" => s.trace = method(Settings::trace_menu())?,
-        "raster" => s.raster = method(Settings::raster_menu())?,
-        "rng" => {
-            let rngs = crate::settings::RNGS;
-            s.rng = rngs[pick(text()?, &rngs.map(crate::settings::rng_name))?];
-        }
-        "accumulation" => {
-            let formats = AccumulationFormat::ALL;
-            s.accumulation = formats[pick(text()?, &formats.map(AccumulationFormat::name))?];
-        }
-        "look" => {
-            let looks = crate::settings::LOOKS;
-            s.look = looks[pick(text()?, &looks.map(crate::settings::look_name))?];
-        }
-        "shadows" => {
-            let shadows = crate::settings::SHADOWS;
-            s.shadows = shadows[pick(text()?, &shadows.map(crate::settings::shadows_name))?];
-        }
-        "display" => s.display.mode = DisplayMode::ALL[pick(text()?, &DisplayMode::ALL.map(DisplayMode::name))?],
+        "pipeline" => s.pipeline = one_of(v, &Pipeline::ALL, Pipeline::name)?,
+        "trace" => s.trace = one_of(v, &Settings::trace_menu(), MethodId::name)?,
+        "raster" => s.raster = one_of(v, &Settings::raster_menu(), MethodId::name)?,
+        "rng" => s.rng = one_of(v, &RNGS, rng_name)?,
+        "accumulation" => s.accumulation = one_of(v, &AccumulationFormat::ALL, AccumulationFormat::name)?,
+        "look" => s.look = one_of(v, &LOOKS, look_name)?,
+        "shadows" => s.shadows = one_of(v, &SHADOWS, shadows_name)?,
+        "display" => s.display.mode = one_of(v, &DisplayMode::ALL, DisplayMode::name)?,
         "scale" => s.scale = (number()? as f32).clamp(0.125, 1.0),
         "max_frames" => s.max_frames = number()?.clamp(1.0, 1e6) as u32,
         "seed" => s.seed = number()?.clamp(0.0, f64::from(u32::MAX)) as u32,

@@ -66,7 +66,7 @@ const DEPTHS: [FragmentDepth; 2] = [FragmentDepth::Center, FragmentDepth::MaxDen
 pub fn param_choices(param: Param) -> Vec<String> {
     let names = |v: &[&str]| v.iter().map(|n| n.to_string()).collect();
     match param {
-        Param::Blend => BLENDS.map(blend_name).iter().map(|n| n.to_string()).collect(),
+        Param::Blend => names(&BLENDS.map(blend_name)),
         Param::RasterSamples => SAMPLE_COUNTS.iter().map(u32::to_string).collect(),
         Param::SamplePattern => names(&PATTERNS.map(SamplePattern::name)),
         Param::FragmentDepth => names(&DEPTHS.map(depth_name)),

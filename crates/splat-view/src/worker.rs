@@ -52,7 +52,7 @@ pub struct HostFrame {
     pub job: u64,
     /// Frames accumulated in it.
     pub frames: u32,
-    /// Width and height in pixels.
+    /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
@@ -75,7 +75,7 @@ impl FrameFeed {
 
     /// The render thread's latest status.
     pub fn status(&self) -> Status {
-        self.0.status.lock().expect("lock").clone()
+        self.0.status()
     }
 }
 
@@ -166,6 +166,11 @@ impl Shared {
         *self.status.lock().expect("lock") = status;
     }
 
+    /// The latest status published.
+    fn status(&self) -> Status {
+        self.status.lock().expect("lock").clone()
+    }
+
     /// Make `rgba` the newest host frame and wake whoever waits for one.
     fn publish_frame(&self, job: u64, frames: u32, (width, height): (u32, u32), rgba: Vec<u8>) {
         let mut frame = self.frame.lock().expect("lock");
@@ -241,7 +246,7 @@ impl Worker {
 
     /// The latest status.
     pub fn status(&self) -> Status {
-        self.shared.status.lock().expect("lock").clone()
+        self.shared.status()
     }
 
     /// The frames drawn into a [`Target::Host`], to wait for without holding the worker.
@@ -560,6 +565,21 @@ impl Renderer {
     }
 }
 
+/// A `width` × `height` texture of [`TEXTURE_FORMAT`] the display pass draws a view into, with
+/// `usage` besides (the window samples it, the host view copies it out).
+pub fn view_texture(device: &wgpu::Device, (width, height): (u32, u32), usage: wgpu::TextureUsages) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("splat view"),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: TEXTURE_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | usage,
+        view_formats: &[],
+    })
+}
+
 /// The texture a [`Target::Host`] view of `camera` is drawn into on the device, made again
 /// when the size changes.
 fn host_texture<'a>(ctx: &GpuContext, host: &'a mut Option<wgpu::Texture>, camera: &Camera) -> &'a wgpu::Texture {
@@ -567,18 +587,7 @@ fn host_texture<'a>(ctx: &GpuContext, host: &'a mut Option<wgpu::Texture>, camer
     if host.as_ref().is_some_and(|t| (t.width(), t.height()) != size) {
         *host = None;
     }
-    host.get_or_insert_with(|| {
-        ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("host view"),
-            size: wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: TEXTURE_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        })
-    })
+    host.get_or_insert_with(|| view_texture(&ctx.device, size, wgpu::TextureUsages::COPY_SRC))
 }
 
 /// The random stream of a job: the GPU view draws frame i with key i of the panel's seed, as
