@@ -18,7 +18,7 @@
 //!   [`MAX_PER_SECOND`] are accepted a second.
 
 use crate::load::SceneInfo;
-use crate::navigate::{Action, FLY_KEYS, KEY_BINDINGS, Navigation, fly_action, key_action};
+use crate::navigate::{Action, FLY_KEYS, JUMP_KEYS, KEY_BINDINGS, Navigation, fly_action, key_action};
 use crate::settings::{Backend, LOOKS, ParamValue, Pipeline, RNGS, SHADOWS, Settings, is_count, look_name};
 use crate::settings::{param_choices, param_value, rng_name, set_param, shadows_name};
 use crate::worker::{FrameFeed, HostFrame, Target, Worker};
@@ -394,6 +394,7 @@ impl Session {
             "camera": camera,
             "view": self.nav.view(),
             "keys": KEY_BINDINGS,
+            "key_names": key_names(),
         })
     }
 
@@ -429,6 +430,12 @@ fn changed(settings: &Settings, value: &Value, gpu_available: bool) -> Result<Se
     }
     s.params.validate().map_err(|e| e.to_string())?;
     Ok(s)
+}
+
+/// The names of the keys the page sends (lower case, as its key events name them): the fly
+/// keys and the keys that jump.
+fn key_names() -> Vec<String> {
+    FLY_KEYS.iter().map(char::to_string).chain(JUMP_KEYS.iter().map(|k| k.to_ascii_lowercase())).collect()
 }
 
 /// The action one input event asks for.
@@ -694,6 +701,9 @@ mod tests {
         assert!(action(&json!({"do": "rotate", "dx": "x", "dy": 0})).unwrap_err().contains("dx"));
         assert!(action(&json!({"do": "rotate", "dx": 1e300, "dy": 0})).is_err(), "an absurd drag");
         assert!(action(&json!({"do": "key", "key": "z"})).unwrap_err().contains("no key"));
+        for key in key_names() {
+            assert!(action(&json!({"do": "key", "key": key})).is_ok(), "the page sends {key}, which does nothing");
+        }
         assert!(action(&json!({"do": "open", "path": "/"})).is_err());
         assert!(same(b"abc", b"abc") && !same(b"abc", b"abd") && !same(b"abc", b"ab"));
     }
