@@ -314,8 +314,10 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         tracer.scene_bytes() as f64 / scene.particles.len().max(1) as f64
     );
     println!("{}\n", binding_budget(ctx, &scene, &settings));
-    println!("| method | frame (ms) | Mrays/s | cost vs stochastic | dispatches a frame | host waits a frame |");
-    println!("|---|---:|---:|---:|---:|---:|");
+    println!(
+        "| method | frame (ms) | Mrays/s | cost vs stochastic | dispatches a frame | host waits a frame | loop steps a pixel |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|");
     let mut methods = vec![MethodId::Stochastic];
     methods.extend(args.methods.iter().copied().filter(|&m| m != MethodId::Stochastic && m != MethodId::Opaque));
     let pixels = f64::from(camera.width) * f64::from(camera.height);
@@ -327,15 +329,17 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
         let name = m.name();
         let mut best = f64::INFINITY;
         let mut work = splat_gpu::GpuCounters::default();
+        let mut steps = 0.0;
         for _ in 0..args.repeat.max(1) {
             let before = ctx.counters();
             match tracer.render(&camera, &method, &frames) {
                 Ok((_, stats)) => {
                     best = best.min(stats.gpu_time.as_secs_f64() / rendered);
                     work = ctx.counters() - before;
+                    steps = stats.mean_loop_iterations;
                 }
                 Err(e) => {
-                    println!("| {name} | refused: {e} | | | | |");
+                    println!("| {name} | refused: {e} | | | | | |");
                     break;
                 }
             }
@@ -344,7 +348,7 @@ fn run_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
             let base = *baseline.get_or_insert(best);
             let (dispatches, waits) = (work.dispatches as f64 / rendered, work.waits as f64 / rendered);
             println!(
-                "| {name} | {:.1} | {:.3} | {:.2}× | {dispatches:.2} | {waits:.2} |",
+                "| {name} | {:.1} | {:.3} | {:.2}× | {dispatches:.2} | {waits:.2} | {steps:.1} |",
                 1e3 * best,
                 pixels / best / 1e6,
                 best / base

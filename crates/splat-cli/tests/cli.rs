@@ -392,6 +392,28 @@ fn bench_reports_every_method_against_opaque() {
     assert!(stochastic[3] > opaque[3] && exact[3] > stochastic[3], "tests a ray: {opaque:?} {stochastic:?} {exact:?}");
 }
 
+/// `splat bench --backend gpu` times the ray-tracing methods and reports the kernel's own work
+/// counter, its loop iterations a pixel (traversal steps and particle visits): positive for every
+/// method, the same in two runs, and more for `exact`, which visits every hit, than for
+/// Algorithm 1.
+#[test]
+fn bench_reports_the_gpu_tracers_loop_steps() {
+    let args = ["bench", "fixtures/cloud.ply", "--width", "24", "--height", "16", "--repeat", "2", "--backend", "gpu"];
+    let o = splat(&[&args[..], &["--methods", "stochastic,exact"]].concat());
+    if !o.status.success() {
+        gpu_missing(&stderr(&o));
+        return;
+    }
+    let text = String::from_utf8_lossy(&o.stdout);
+    let steps = |m: &str| -> f64 {
+        let row =
+            text.lines().find(|l| l.starts_with(&format!("| {m} |"))).unwrap_or_else(|| panic!("{m} missing:\n{text}"));
+        row.split('|').map(str::trim).filter(|c| !c.is_empty()).last().unwrap().parse().unwrap()
+    };
+    let (stochastic, exact) = (steps("stochastic"), steps("exact"));
+    assert!(stochastic > 1.0 && exact > stochastic, "loop steps a pixel: {stochastic} {exact}\n{text}");
+}
+
 /// `splat bench --sweep mn` prints the eight m × n rows of Sun et al. Tables 4–5 with their
 /// speed-ups and RMSE against exact (1024 × 1 is the baseline, 1.00× by definition), every row
 /// the same image, on the CPU and on the GPU (which runs 4 × 256 as 16 × 64 and says so).

@@ -56,6 +56,10 @@ use std::time::Duration;
 pub struct GpuStats {
     /// Most loop iterations one invocation ran in one dispatch (lavapipe's budget is 65535).
     pub loop_iterations: u32,
+    /// The ray tracer's loop iterations a pixel, in its busiest dispatch, averaged over the
+    /// pixels: traversal steps and particle visits, a work counter of the kernel itself (one
+    /// frame's at one frame a dispatch; 0 for the splatting path).
+    pub mean_loop_iterations: f64,
     /// Frames per dispatch the render settled on.
     pub frames_per_dispatch: u32,
     /// Whether rays ran one pass per dispatch (multi-pass methods over lavapipe's loop budget).
@@ -84,6 +88,13 @@ pub(crate) fn output(
         image(3, &|i| if count > 1 { (f64::from(m2[i]) / (n - 1.0)) as f32 } else { 0.0 }),
         image(1, &|i| mean[i - i % 4 + 3]),
     );
-    let stats = GpuStats { loop_iterations: 0, frames_per_dispatch: 1, pass_per_dispatch: false, gpu_time, timestamps };
+    let stats = GpuStats {
+        loop_iterations: 0,
+        mean_loop_iterations: 0.0,
+        frames_per_dispatch: 1,
+        pass_per_dispatch: false,
+        gpu_time,
+        timestamps,
+    };
     (images, stats)
 }

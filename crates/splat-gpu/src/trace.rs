@@ -904,6 +904,7 @@ impl Run<'_> {
         set_picks(&mut output, bytemuck::cast_slice(&picks));
         let stats = GpuStats {
             loop_iterations: busiest.0,
+            mean_loop_iterations: mean_iterations(&m2),
             frames_per_dispatch: per_dispatch,
             pass_per_dispatch: by_pass,
             ..stats
@@ -1006,6 +1007,12 @@ pub(crate) fn dispatch_batch(
         pass.set_bind_group(0, bind_group, &[(slot * stride) as u32]);
         ctx.dispatch(pass, camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
     }
+}
+
+/// The loop iterations of each pixel's busiest dispatch (M2's w channel), averaged.
+fn mean_iterations(m2: &[f32]) -> f64 {
+    let pixels = (m2.len() / 4).max(1);
+    m2.chunks(4).map(|v| f64::from(v[3])).sum::<f64>() / pixels as f64
 }
 
 /// The most loop iterations any pixel ran (M2's w channel) and that pixel's index.

@@ -519,6 +519,7 @@ impl<'a> GpuRasterizer<'a> {
         let pick = self.depth_pick()?;
         let stats = GpuStats {
             loop_iterations: 0,
+            mean_loop_iterations: 0.0,
             frames_per_dispatch: 1,
             pass_per_dispatch: false,
             gpu_time: start.elapsed(),
