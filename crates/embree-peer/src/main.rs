@@ -128,11 +128,7 @@ fn main() -> Result<()> {
             );
         }
     }
-    println!(
-        "\nsplat BVH: {:.1} bytes/splat binary (the GPU's), {:.1} bytes/splat 4-wide (the CPU's)",
-        trace.bvh().bytes() as f64 / n as f64,
-        trace.wide_bvh().bytes() as f64 / n as f64
-    );
+    println!("\nsplat BVH: {:.1} bytes/splat (4-wide nodes)", trace.bvh().bytes() as f64 / n as f64);
     println!(
         "pixels apart: a channel differs by more than 1e-4 (a different decision, not float noise), of {}",
         rays as u64

@@ -408,7 +408,7 @@ fn bench_reports_the_gpu_tracers_loop_steps() {
     let steps = |m: &str| -> f64 {
         let row =
             text.lines().find(|l| l.starts_with(&format!("| {m} |"))).unwrap_or_else(|| panic!("{m} missing:\n{text}"));
-        row.split('|').map(str::trim).filter(|c| !c.is_empty()).last().unwrap().parse().unwrap()
+        row.split('|').map(str::trim).rfind(|c| !c.is_empty()).unwrap().parse().unwrap()
     };
     let (stochastic, exact) = (steps("stochastic"), steps("exact"));
     assert!(stochastic > 1.0 && exact > stochastic, "loop steps a pixel: {stochastic} {exact}\n{text}");

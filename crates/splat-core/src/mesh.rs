@@ -371,8 +371,7 @@ pub struct Meshes {
     materials: Vec<MeshMaterial>,
     /// Whether any triangle is transparent.
     transparent: bool,
-    bvh: Bvh,
-    wide: Bvh4,
+    bvh: Bvh4,
 }
 
 /// Most triangles of a world's meshes (the BVH's index range).
@@ -418,11 +417,11 @@ impl Meshes {
                 Aabb { min: b[0].min(b[1]).min(b[2]), max: b[0].max(b[1]).max(b[2]) }.padded()
             })
             .collect();
-        let bvh = Bvh::build(&boxes);
-        let wide = Bvh4::from_binary(&bvh);
-        let triangles: Vec<PreparedTriangle> = bvh.order.iter().map(|&i| prepared[i as usize]).collect();
+        let binary = Bvh::build(&boxes);
+        let bvh = Bvh4::from_binary(&binary);
+        let triangles: Vec<PreparedTriangle> = binary.order.iter().map(|&i| prepared[i as usize]).collect();
         let transparent = triangles.iter().any(PreparedTriangle::is_transparent);
-        Ok(Self { triangles, materials: meshes.iter().map(|m| m.1).collect(), transparent, bvh, wide })
+        Ok(Self { triangles, materials: meshes.iter().map(|m| m.1).collect(), transparent, bvh })
     }
 
     /// Whether there are no triangles.
@@ -441,8 +440,8 @@ impl Meshes {
         &self.triangles
     }
 
-    /// The binary BVH over the triangles.
-    pub fn bvh(&self) -> &Bvh {
+    /// The 4-wide BVH over the triangles, which both backends traverse.
+    pub fn bvh(&self) -> &Bvh4 {
         &self.bvh
     }
 
@@ -474,7 +473,7 @@ impl Meshes {
     fn closest_where(&self, ray: &Ray, keep: impl Fn(&PreparedTriangle) -> bool) -> Option<SurfaceHit> {
         let mut best: Option<(f32, u32, f32, f32)> = None;
         let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |k, t_max| {
+        self.bvh.traverse(ray, &mut t_max, |k, t_max| {
             let tri = &self.triangles[k as usize];
             let clipped = Ray { t_max: t_max.next_up(), ..*ray };
             let Some((t, b1, b2)) = tri.intersect(&clipped).filter(|_| keep(tri)) else { return };
@@ -510,7 +509,7 @@ impl Meshes {
             return;
         }
         let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |k, _| {
+        self.bvh.traverse(ray, &mut t_max, |k, _| {
             let tri = &self.triangles[k as usize];
             if tri.is_transparent() && tri.crosses(ray).is_some() {
                 out.push(k);
@@ -524,7 +523,7 @@ impl Meshes {
     pub fn transmittance(&self, ray: &Ray) -> f32 {
         let mut transmittance = 1.0f32;
         let mut t_max = ray.t_max;
-        self.wide.traverse(ray, &mut t_max, |k, t_max| {
+        self.bvh.traverse(ray, &mut t_max, |k, t_max| {
             if transmittance == 0.0 {
                 return;
             }

@@ -1,30 +1,41 @@
-// BVH traversal of crates/splat-core/src/bvh.rs (`Bvh::traverse`), prepended to the kernels
-// that trace rays (trace.wgsl, mesh_prepass.wgsl): a stack traversal that yields the leaves a
-// ray overlaps, nearer child first, and lets the caller shrink t_max between leaves; the leaf
-// loops are the callers' (trace.wgsl `traverse`, mesh.wgsl `mesh_traverse`). It reads `node_at(i)`,
-// and counts loop iterations in `iterations`, both declared by the including
-// kernel.
+// The wide BVH's traversal, the twin of crates/splat-core/src/bvh/wide.rs (`Bvh4::traverse`),
+// prepended to the kernels that trace rays (trace.wgsl, mesh_prepass.wgsl): a stack traversal
+// that yields the leaves a ray overlaps, nearer child first, and lets the caller shrink t_max
+// between leaves; the leaf loops are the callers' (trace.wgsl `traverse`, mesh.wgsl
+// `mesh_traverse`). It reads `node_at(i)`, and counts loop iterations in `iterations`, both
+// declared by the including kernel.
 
-// One BVH node (32 bytes), mirrored by splat_core::bvh::BvhNode.
+// One wide node (128 bytes), mirrored by splat_gpu::layout::GpuNode (splat_core::bvh::Node4):
+// the four children's boxes as lanes, each axis's lower and upper planes, the children's
+// references (a node's index, or a leaf: LEAF set) and the lanes in use.
 struct Node {
-    min: vec3<f32>,
-    first: u32,
-    max: vec3<f32>,
+    lo_x: vec4<f32>,
+    hi_x: vec4<f32>,
+    lo_y: vec4<f32>,
+    hi_y: vec4<f32>,
+    lo_z: vec4<f32>,
+    hi_z: vec4<f32>,
+    child: vec4<u32>,
     count: u32,
 }
 
-const STACK_DEPTH: u32 = 64u;
+// bvh/wide.rs: a leaf reference is LEAF, the count − 1 from bit COUNT_SHIFT, then the first
+// leaf-order primitive; a tree's walk starts at its ROOT node, of one lane, the tree's box.
+// No leaf reference equals NONE: a tree holds at most 2^COUNT_SHIFT primitives.
+const LEAF: u32 = 0x80000000u;
+const COUNT_SHIFT: u32 = 29u;
+const ROOT: u32 = 0u;
+const WIDE_STACK: u32 = 196u;
 const FAR: f32 = 3.0e38;
+// The largest f32: a child the ray misses enters there, in its lane + 4, after every hit.
+const MISSED: f32 = 3.40282347e38;
 
-// Entry distance into the node's box within (t_min, t_max], FAR when the ray misses it.
-fn enter(n: Node, origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -> f32 {
-    let t0 = (n.min - origin) * inv;
-    let t1 = (n.max - origin) * inv;
-    let near = min(t0, t1);
-    let far = max(t0, t1);
-    let e = max(max(max(near.x, near.y), near.z), t_min);
-    let x = min(min(min(far.x, far.y), far.z), t_max);
-    return select(FAR, e, e <= x);
+fn leaf_first(r: u32) -> u32 {
+    return r & ((1u << COUNT_SHIFT) - 1u);
+}
+
+fn leaf_end(r: u32) -> u32 {
+    return leaf_first(r) + ((r & ~LEAF) >> COUNT_SHIFT) + 1u;
 }
 
 fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
@@ -32,22 +43,60 @@ fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
     return 1.0 / select(d, tiny, abs(d) < vec3<f32>(1e-30));
 }
 
-// Stack traversal state of the current ray (bvh.rs `Bvh::traverse`).
-var<private> trav_stack: array<u32, STACK_DEPTH>;
+// Stack traversal state of the current ray (`Bvh4::traverse`): the pushed references and the
+// distances at which the ray enters them, so that a popped one behind t_max is dropped without
+// reading its node again; `trav_next` is the reference to go on with (NONE: pop).
+var<private> trav_ref: array<u32, WIDE_STACK>;
+var<private> trav_t: array<f32, WIDE_STACK>;
 var<private> trav_top: u32;
 var<private> trav_next: u32;
 
-// Start a traversal at node `root`: 0 for the splats, params.mesh_root for the meshes, whose
-// nodes follow the splats' in the same buffer (splat_gpu::layout::nodes).
-fn traversal_begin(root: u32, origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) {
+// Start a traversal at the root node `root`: ROOT for the splats, params.mesh_root for the
+// meshes, whose nodes follow the splats' in the same buffer (splat_gpu::layout::nodes).
+fn traversal_begin(root: u32) {
     trav_top = 0u;
-    trav_next = select(NONE, root, enter(node_at(root), origin, inv, t_min, t_max) < FAR);
+    trav_next = root;
 }
 
-// The next leaf whose box the ray overlaps before t_max, nearer child first; NONE when the
-// traversal is over. Nodes are re-tested against the current t_max when popped, so a caller
+// A child the ray enters: its reference, the distance at which it enters, and its lane (+ 4
+// for one it misses).
+struct Entry {
+    r: u32,
+    t: f32,
+    lane: u32,
+}
+
+// Whether entry a comes before entry b: nearer, or as near and in a lower lane (the order of
+// `Bvh4::traverse`).
+fn visited_before(a: Entry, b: Entry) -> bool {
+    return a.t < b.t || (a.t == b.t && a.lane < b.lane);
+}
+
+// Entries a and b in visit order (a compare-exchange of the sorting network).
+fn ordered(a: ptr<function, Entry>, b: ptr<function, Entry>) {
+    if (visited_before(*b, *a)) {
+        let x = *a;
+        *a = *b;
+        *b = x;
+    }
+}
+
+fn traversal_push(e: Entry) {
+    trav_ref[trav_top] = e.r;
+    trav_t[trav_top] = e.t;
+    trav_top += 1u;
+}
+
+// The next leaf (its reference) whose box the ray overlaps before t_max, nearer child first;
+// NONE when the traversal is over. A node's four child boxes are tested at once (the near plane
+// of each axis is the lower where the ray goes up the axis: 1/d is finite and non-zero, so its
+// sign orders the two distances); of the children the ray enters, the traversal goes on with
+// the nearest and pushes the others far to near with their entry distances, sorted by a
+// network of five compare-exchanges (misses last), so that no loop or dynamic index
+// over the lanes is needed. A popped entry behind the current t_max is dropped, so a caller
 // that lowers t_max between leaves clips the rest of the traversal.
 fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -> u32 {
+    let down = inv < vec3<f32>(0.0);
     loop {
         iterations += 1u;
         if (trav_next == NONE) {
@@ -55,32 +104,49 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32
                 return NONE;
             }
             trav_top -= 1u;
-            let c = trav_stack[trav_top];
-            if (enter(node_at(c), origin, inv, t_min, t_max) < FAR) {
-                trav_next = c;
+            if (trav_t[trav_top] <= t_max) {
+                trav_next = trav_ref[trav_top];
             }
             continue;
         }
-        let node = trav_next;
-        let nd = node_at(node);
-        if (nd.count > 0u) {
-            trav_next = NONE;
-            return node;
+        let r = trav_next;
+        trav_next = NONE;
+        if ((r & LEAF) != 0u) {
+            return r;
         }
-        let a = nd.first;
-        let b = nd.first + 1u;
-        let ta = enter(node_at(a), origin, inv, t_min, t_max);
-        let tb = enter(node_at(b), origin, inv, t_min, t_max);
-        if (ta < FAR && tb < FAR) {
-            trav_stack[trav_top] = select(a, b, ta <= tb);
-            trav_next = select(b, a, ta <= tb);
-            trav_top += 1u;
-        } else if (ta < FAR) {
-            trav_next = a;
-        } else if (tb < FAR) {
-            trav_next = b;
-        } else {
-            trav_next = NONE;
+        let n = node_at(r);
+        let near_x = (select(n.lo_x, n.hi_x, down.x) - origin.x) * inv.x;
+        let far_x = (select(n.hi_x, n.lo_x, down.x) - origin.x) * inv.x;
+        let near_y = (select(n.lo_y, n.hi_y, down.y) - origin.y) * inv.y;
+        let far_y = (select(n.hi_y, n.lo_y, down.y) - origin.y) * inv.y;
+        let near_z = (select(n.lo_z, n.hi_z, down.z) - origin.z) * inv.z;
+        let far_z = (select(n.hi_z, n.lo_z, down.z) - origin.z) * inv.z;
+        let enter = max(max(max(near_x, near_y), near_z), vec4<f32>(t_min));
+        let exit = min(min(min(far_x, far_y), far_z), vec4<f32>(t_max));
+        let hit = (enter <= exit) & (vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(n.count));
+        let t = select(vec4<f32>(MISSED), enter, hit);
+        let lane = vec4<u32>(0u, 1u, 2u, 3u) + select(vec4<u32>(4u), vec4<u32>(0u), hit);
+        var e0 = Entry(n.child.x, t.x, lane.x);
+        var e1 = Entry(n.child.y, t.y, lane.y);
+        var e2 = Entry(n.child.z, t.z, lane.z);
+        var e3 = Entry(n.child.w, t.w, lane.w);
+        ordered(&e0, &e1);
+        ordered(&e2, &e3);
+        ordered(&e0, &e2);
+        ordered(&e1, &e3);
+        ordered(&e1, &e2);
+        let hits = dot(select(vec4<u32>(0u), vec4<u32>(1u), hit), vec4<u32>(1u));
+        if (hits > 3u) {
+            traversal_push(e3);
+        }
+        if (hits > 2u) {
+            traversal_push(e2);
+        }
+        if (hits > 1u) {
+            traversal_push(e1);
+        }
+        if (hits > 0u) {
+            trav_next = e0.r;
         }
     }
     return NONE; // unreachable: the loop only ends by returning

@@ -67,15 +67,14 @@ fn mesh_traverse(root: u32, ray: Ray, opaque_only: bool) -> SurfaceHit {
     var best = SurfaceHit(FAR, NONE, 0.0, 0.0);
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(root, ray.origin, inv, ray.t_min, t_max);
+    traversal_begin(root);
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
-        if (node == NONE) {
+        let r = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
+        if (r == NONE) {
             break;
         }
-        let nd = node_at(node);
-        for (var k = nd.first; k < nd.first + nd.count; k++) {
+        for (var k = leaf_first(r); k < leaf_end(r); k++) {
             iterations += 1u;
             let h = triangle_intersect(triangles[k], ray);
             if (h.x < 0.0 || (opaque_only && is_transparent(triangles[k]))) {

@@ -37,7 +37,7 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
         let index = pixel * params.samples + i;
         let p = vec2<f32>(gid.xy) + sample_offsets[i];
         let ray = Ray(camera_origin(), pixel_dir(p), params.cam_row2.xyz, params.t_min, params.t_max);
-        let hit = mesh_traverse(0u, ray, true);
+        let hit = mesh_traverse(ROOT, ray, true);
         if (hit.triangle == NONE) {
             behind[index] = vec4<f32>(params.background.xyz, FAR);
             behind_normal[index] = vec4<f32>(0.0);

@@ -363,7 +363,7 @@ fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
 
 // ---- bvh.rs: the splats' traversals -----------------------------------------------------------
 
-// Bvh::traverse: every particle of every leaf the ray overlaps before t_max, nearer child
+// Bvh4::traverse: every particle of every leaf the ray overlaps before t_max, nearer child
 // first, handed to `visit` (the including kernel's twin of the CPU closure), which returns the
 // new t_max. The leaf loop is nested in the node loop, as on the CPU: each loop statement then
 // runs few iterations per ray, which keeps lavapipe's loop limiter bound (see LOOP_BUDGET)
@@ -371,15 +371,14 @@ fn sh_color(id: u32, dir: vec3<f32>) -> vec3<f32> {
 fn traverse(ray: Ray, visitor: u32) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    traversal_begin(0u, ray.origin, inv, ray.t_min, t_max);
+    traversal_begin(ROOT);
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
-        if (node == NONE) {
+        let r = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
+        if (r == NONE) {
             break;
         }
-        let nd = node_at(node);
-        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+        for (var leaf = leaf_first(r); leaf < leaf_end(r); leaf++) {
             iterations += 1u;
             t_max = visit(visitor, ray, leaf, t_max);
         }
@@ -392,27 +391,26 @@ fn traverse(ray: Ray, visitor: u32) {
 // traced from inside the primary methods.
 //
 // Meshes block the light (shadow.rs `visibility_from`): their BVH follows the splats' in the node
-// buffer, so the same loop walks it first (the splats' root waits on the stack, and an opaque
-// mesh hit ends the walk before any splat could shorten t_max), with triangles at its leaves;
-// transparent ones let Π (1 − α) through (`shadow_mesh_t`).
+// buffer, so the same loop walks it first and then the splats' (an opaque mesh hit ends the
+// walk before any splat could shorten t_max), with triangles at its leaves; transparent ones let
+// Π (1 − α) through (`shadow_mesh_t`).
 fn traverse_shadow(ray: Ray) {
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
-    let meshes = params.mesh_root != NONE;
-    traversal_begin(select(0u, params.mesh_root, meshes), ray.origin, inv, ray.t_min, t_max);
-    if (meshes) {
-        trav_stack[trav_top] = 0u;
-        trav_top += 1u;
-    }
+    var triangle_leaf = params.mesh_root != NONE;
+    traversal_begin(select(ROOT, params.mesh_root, triangle_leaf));
     loop {
         iterations += 1u;
-        let node = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
-        if (node == NONE) {
+        let r = traversal_next_leaf(ray.origin, inv, ray.t_min, t_max);
+        if (r == NONE) {
+            if (triangle_leaf) {
+                triangle_leaf = false;
+                traversal_begin(ROOT);
+                continue;
+            }
             break;
         }
-        let nd = node_at(node);
-        let triangle_leaf = node >= params.mesh_root;
-        for (var leaf = nd.first; leaf < nd.first + nd.count; leaf++) {
+        for (var leaf = leaf_first(r); leaf < leaf_end(r); leaf++) {
             iterations += 1u;
             if (!triangle_leaf) {
                 t_max = visit_shadow(ray, leaf, t_max);
@@ -430,8 +428,7 @@ fn traverse_shadow(ray: Ray) {
             }
             if (shadow_mesh_t == 0.0) {
                 shadow_mesh = true;
-                t_max = -1.0; // every node is now beyond t_max
-                break;
+                return;
             }
         }
     }
@@ -441,7 +438,7 @@ fn traverse_shadow(ray: Ray) {
 
 var<private> iterations: u32;
 
-// The visitors of `traverse` (bvh.wgsl), the closures that trace/mod.rs hands to Bvh::traverse
+// The visitors of `traverse` (bvh.wgsl), the closures that trace/mod.rs hands to Bvh4::traverse
 // (stochastic_visit in stochastic.wgsl, next_k_visit in kbuffer.wgsl; the shadow visitors in
 // shadow.wgsl); their inputs are set in the private variables below before the traversal.
 const VISIT_STOCHASTIC: u32 = 0u;
@@ -1097,16 +1094,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // The scene arrays as this kernel reads them: element i of each through its accessor into
-// out_mean[7 i + k], the particle's four vec4 (k = 0..3), the node's two (4, 5) and the SH
-// coefficient (6), bit for bit. GpuTracer::arrays_as_read reads them back, so that a test
+// out_mean[13 i + k], the particle's four vec4 (k = 0..3), the node's eight (4..11) and the SH
+// coefficient (12), bit for bit. GpuTracer::arrays_as_read reads them back, so that a test
 // compares a scene split over bindings (splat_gpu::split) with the same scene whole, element by
 // element, without compiling the whole kernel for the split. An array shorter than i reads a
 // clamped element, which the host ignores.
 @compute @workgroup_size(64, 1, 1)
 fn split_gather(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = gid.y * groups.x * 64u + gid.x;
-    let base = 7u * i;
-    if (base + 6u >= arrayLength(&out_mean)) {
+    let base = 13u * i;
+    if (base + 12u >= arrayLength(&out_mean)) {
         return;
     }
     let p = particle_at(i);
@@ -1115,7 +1112,13 @@ fn split_gather(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
     out_mean[base + 1u] = vec4<f32>(p.row0, bitcast<f32>(p.id));
     out_mean[base + 2u] = vec4<f32>(p.row1, p.extent);
     out_mean[base + 3u] = vec4<f32>(p.row2, p.pad2);
-    out_mean[base + 4u] = vec4<f32>(n.min, bitcast<f32>(n.first));
-    out_mean[base + 5u] = vec4<f32>(n.max, bitcast<f32>(n.count));
-    out_mean[base + 6u] = sh_at(i);
+    out_mean[base + 4u] = n.lo_x;
+    out_mean[base + 5u] = n.hi_x;
+    out_mean[base + 6u] = n.lo_y;
+    out_mean[base + 7u] = n.hi_y;
+    out_mean[base + 8u] = n.lo_z;
+    out_mean[base + 9u] = n.hi_z;
+    out_mean[base + 10u] = bitcast<vec4<f32>>(n.child);
+    out_mean[base + 11u] = vec4<f32>(bitcast<f32>(n.count), 0.0, 0.0, 0.0);
+    out_mean[base + 12u] = sh_at(i);
 }

@@ -5,7 +5,7 @@ use crate::trace::MethodParams;
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::Scene;
-use splat_core::bvh::{Bvh, BvhNode};
+use splat_core::bvh::{Bvh4, LEAF, Node4};
 use splat_core::camera::Lens;
 use splat_core::camera_sampling::PixelFilter;
 use splat_core::frame::Frames;
@@ -96,18 +96,30 @@ pub struct GpuParticle {
     pub pad2: f32,
 }
 
-/// BVH node as the kernel reads it (WGSL `Node`, 32 bytes).
+/// A wide BVH node as the kernel reads it (WGSL `Node`, 128 bytes): [`Node4`]'s four
+/// children, their lower and upper planes on each axis as lanes, their references (a node's
+/// index in the node buffer, or a leaf: [`LEAF`] set) and the lanes in use.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuNode {
-    /// Lower corner.
-    pub min: [f32; 3],
-    /// First primitive or left child.
-    pub first: u32,
-    /// Upper corner.
-    pub max: [f32; 3],
-    /// Primitive count, 0 for interior nodes.
+    /// Lower x planes.
+    pub lo_x: [f32; 4],
+    /// Upper x planes.
+    pub hi_x: [f32; 4],
+    /// Lower y planes.
+    pub lo_y: [f32; 4],
+    /// Upper y planes.
+    pub hi_y: [f32; 4],
+    /// Lower z planes.
+    pub lo_z: [f32; 4],
+    /// Upper z planes.
+    pub hi_z: [f32; 4],
+    /// Children's references.
+    pub child: [u32; 4],
+    /// Lanes in use.
     pub count: u32,
+    /// Padding to 128 bytes.
+    pub pad: [u32; 3],
 }
 
 /// The state of one ray between the passes of pass-per-dispatch mode (WGSL `PassState`).
@@ -576,29 +588,35 @@ pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
         .collect()
 }
 
-/// The BVH nodes of a scene.
+/// The wide BVH nodes of a scene: the splats' (their root at 0), then the meshes' (at
+/// [`mesh_root`]).
 pub fn nodes(trace: &TraceScene) -> Vec<GpuNode> {
     let mut v = bvh_nodes(trace.bvh(), 0);
-    v.extend(bvh_nodes(trace.meshes().bvh(), v.len() as u32));
+    if !trace.meshes().is_empty() {
+        v.extend(bvh_nodes(trace.meshes().bvh(), v.len() as u32));
+    }
     v
 }
 
-/// The nodes of `bvh` placed at index `offset` of a node buffer (an inner node's `first` is its
-/// first child's index, moved by the offset; a leaf's is a primitive's, kept); one unused node
-/// for an empty BVH.
-pub fn bvh_nodes(bvh: &Bvh, offset: u32) -> Vec<GpuNode> {
-    bvh.nodes
-        .iter()
-        .map(|n: &BvhNode| {
-            let first = if n.count == 0 { n.first + offset } else { n.first };
-            GpuNode { min: n.min, first, max: n.max, count: n.count }
-        })
-        .collect()
+/// The nodes of `bvh` placed at index `offset` of a node buffer, its root first (a reference to
+/// a node is its index, moved by the offset; a leaf's reference is kept).
+pub fn bvh_nodes(bvh: &Bvh4, offset: u32) -> Vec<GpuNode> {
+    bvh.nodes().iter().map(|n| gpu_node(n, offset)).collect()
+}
+
+fn gpu_node(n: &Node4, offset: u32) -> GpuNode {
+    let [[lo_x, hi_x], [lo_y, hi_y], [lo_z, hi_z]] = n.planes();
+    let lanes = n.count() as usize;
+    let child = std::array::from_fn(|lane| match n.children()[lane] {
+        r if lane < lanes && r & LEAF == 0 => r + offset,
+        r => r,
+    });
+    GpuNode { lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, child, count: n.count(), pad: [0; 3] }
 }
 
 /// Where [`nodes`] puts the mesh BVH's root: after the splat BVH's nodes, or [`NO_MESHES`].
 pub fn mesh_root(trace: &TraceScene) -> u32 {
-    if trace.meshes().is_empty() { NO_MESHES } else { trace.bvh().nodes.len() as u32 }
+    if trace.meshes().is_empty() { NO_MESHES } else { trace.bvh().len() as u32 }
 }
 
 /// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle, as `storage`
@@ -1093,7 +1111,7 @@ mod tests {
             "Particle",
             [mean, opacity, row0, id, row1, extent, row2, pad2]
         );
-        assert_mirrors!(&crate::TRACE_WGSL, GpuNode, "Node", [min, first, max, count]);
+        assert_mirrors!(&crate::TRACE_WGSL, GpuNode, "Node", [lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, child, count]);
         assert_mirrors!(
             &crate::TRACE_WGSL,
             GpuFirstHit,
@@ -1195,7 +1213,7 @@ mod tests {
             "PathParams",
             [max_depth, roulette_depth, estimator, n, sampler, environment, emitters, pad0, env_a, env_b, env_up]
         );
-        assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<BvhNode>());
+        assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<Node4>());
     }
 
     /// The kernel's layout matches its WGSL whole and split: every part of a split array is a
@@ -1245,7 +1263,10 @@ mod tests {
             &crate::TRACE_WGSL,
             [
                 "MAX_HITS" = trace::MAX_HITS,
-                "STACK_DEPTH" = bvh::STACK_DEPTH,
+                "WIDE_STACK" = bvh::WIDE_STACK,
+                "LEAF" = bvh::LEAF,
+                "COUNT_SHIFT" = bvh::COUNT_SHIFT,
+                "ROOT" = bvh::ROOT,
                 "PASS_ID" = rng::PASS_ID,
                 "OFFSET_ID" = rng::OFFSET_ID,
                 "LOOP_BUDGET" = crate::LOOP_BUDGET,

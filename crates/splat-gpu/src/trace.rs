@@ -92,22 +92,29 @@ impl TraceSplit {
         Self::checked(ctx, [particles, nodes, sh], [particles, nodes, sh], sh_storage)
     }
 
+    /// About how many wide BVH nodes the build makes for `n` particles, before it has run: a
+    /// node for four particles (0.24 for the 3,000 of the `cloud` fixture, 0.26 for the 272,956
+    /// of the bonsai mini: leaves of up to four, four children a node).
+    pub fn nodes_about(n: u64) -> u64 {
+        n.div_ceil(4)
+    }
+
     /// The split a scene of `count` particles of SH degree `sh_degree` needs at least (its
     /// BVH not built yet: one node), refused as [`TraceSplit::new`] refuses, so that a scene
-    /// that cannot fit is refused before the BVH is built; what fits is estimated with a node a
-    /// particle, about what the BVH builds (2,985 for the 3,000 particles of the `cloud` fixture).
+    /// that cannot fit is refused before the BVH is built; what fits is estimated with
+    /// [`TraceSplit::nodes_about`] wide nodes.
     pub fn at_least(ctx: &GpuContext, scene: &Scene, settings: &RenderSettings) -> Result<Self, GpuError> {
         let n = scene.particles.len() as u64;
         let coefficients = splat_core::particle::sh_coeff_count(scene.sh_degree) as u64;
-        Self::checked(ctx, [n, 1, n * coefficients], [n, n, n * coefficients], settings.sh_storage)
+        Self::checked(ctx, [n, 1, n * coefficients], [n, Self::nodes_about(n), n * coefficients], settings.sh_storage)
     }
 
     /// The most particles of SH degree `sh_degree`, their coefficients stored as `sh_storage`,
-    /// whose arrays the ray tracer binds on `ctx` (a BVH node a particle, about what the build
-    /// makes): the bound the adapter's storage bindings set, whatever its memory.
+    /// whose arrays the ray tracer binds on `ctx` (with [`TraceSplit::nodes_about`] wide nodes): the bound
+    /// the adapter's storage bindings set, whatever its memory.
     pub fn capacity(ctx: &GpuContext, sh_degree: u8, sh_storage: ShStorage) -> u64 {
         let coefficients = splat_core::particle::sh_coeff_count(sh_degree) as u64;
-        let lengths = |m: u64| [m, m, m * coefficients];
+        let lengths = |m: u64| [m, Self::nodes_about(m), m * coefficients];
         crate::split::most_that_fit(u64::from(u32::MAX), |m| Self::fits(ctx, lengths(m), sh_storage))
     }
 
@@ -672,13 +679,15 @@ impl<'a> GpuTracer<'a> {
 
     /// The particles, BVH nodes and SH coefficients as the kernel reads them through its
     /// accessors (`split_gather` in `shaders/trace.wgsl`), in element order, as the u32 words
-    /// of their 16-byte rows (four a particle, two a node, one a coefficient): the same for every
+    /// of their 16-byte rows (four a particle, eight a node, one a coefficient): the same for every
     /// split of a scene, which a test checks without compiling the whole kernel for each.
     pub fn arrays_as_read(&self) -> Result<[Vec<[u32; 4]>; 3], GpuError> {
+        /// Rows `split_gather` writes an element: a particle's, a node's and a coefficient's.
+        const ROWS: u32 = 13;
         let ctx = self.ctx;
         let lengths = self.lengths.map(|n| n as usize);
         let longest = lengths.iter().copied().max().unwrap_or(0).max(1);
-        let targets = TraceTargets::new(ctx, 7 * longest as u32, 1);
+        let targets = TraceTargets::new(ctx, ROWS * longest as u32, 1);
         let uniform = params_buffer(ctx);
         let group = self.bind_group(&uniform, &targets, None, None);
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gather") });
@@ -691,12 +700,12 @@ impl<'a> GpuTracer<'a> {
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
         ctx.submit(encoder.finish());
-        let words = ctx.read_u32(&targets.mean, 28 * longest)?;
+        let words = ctx.read_u32(&targets.mean, 4 * ROWS as usize * longest)?;
         let rows: Vec<[u32; 4]> = words.chunks(4).map(|w| [w[0], w[1], w[2], w[3]]).collect();
         let take = |k: std::ops::Range<usize>, n: usize| -> Vec<[u32; 4]> {
-            rows.chunks(7).take(n).flat_map(|element| element[k.clone()].to_vec()).collect()
+            rows.chunks(ROWS as usize).take(n).flat_map(|element| element[k.clone()].to_vec()).collect()
         };
-        Ok([take(0..4, lengths[0]), take(4..6, lengths[1]), take(6..7, lengths[2])])
+        Ok([take(0..4, lengths[0]), take(4..12, lengths[1]), take(12..13, lengths[2])])
     }
 
     fn render_with(

@@ -1,14 +1,15 @@
-//! Bounding volume hierarchy over particle boxes: a parallel binned SAH build ([`Bvh::build`]),
-//! flattened binary nodes (the layout the GPU traverses), their 4-wide collapse that the CPU
-//! traverses ([`Bvh4`]), and stack traversals that visit children front to back and let the
-//! caller shrink t_max, so that an accepted hit clips the rest of the ray.
+//! Bounding volume hierarchy over particle boxes: a parallel binned SAH build ([`Bvh::build`])
+//! into flattened binary nodes, their 4-wide collapse that both backends traverse ([`Bvh4`]),
+//! and its stack traversal that visits children front to back and lets the caller shrink t_max,
+//! so that an accepted hit clips the rest of the ray.
 
 mod build;
 mod wide;
 pub mod work;
 
-pub use wide::{Bvh4, MAX_PRIMITIVES};
+pub use wide::{Bvh4, COUNT_SHIFT, LEAF, MAX_PRIMITIVES, Node4, ROOT, WIDE_STACK, leaf_range};
 
+#[cfg(test)]
 use crate::hit::Ray;
 use crate::particle::Aabb;
 #[cfg(test)]
@@ -41,7 +42,7 @@ impl BvhNode {
     }
 
     /// Entry distance of the ray into this node's box within (t_min, t_max].
-    #[inline(always)]
+    #[cfg(test)]
     fn enter(&self, origin: Vec3A, inv: Vec3A, t_min: f32, t_max: f32) -> Option<f32> {
         slab(Vec3A::from_array(self.min), Vec3A::from_array(self.max), origin, inv, t_min, t_max)
     }
@@ -84,29 +85,36 @@ impl Bvh {
         self.nodes.len() * std::mem::size_of::<BvhNode>() + self.order.len() * 4
     }
 
-    /// Visit every leaf primitive whose node box the ray overlaps within (t_min, t_max],
-    /// nearer child first. `visit(k, t_max)` receives the leaf-order index k and may lower
-    /// `t_max`; nodes entered beyond the current t_max are skipped.
-    #[inline]
-    pub fn traverse(&self, ray: &Ray, t_max: &mut f32, mut visit: impl FnMut(u32, &mut f32)) {
+    /// The binary tree's own traversal, the reference [`Bvh4::traverse`] is checked against
+    /// (and the walk the GPU took before it walked the wide nodes): every leaf primitive whose
+    /// node box the ray overlaps within (t_min, t_max], nearer child first. `visit(k, t_max)`
+    /// receives the leaf-order index k and may lower `t_max`; nodes entered beyond the current
+    /// t_max are skipped. Returns its loop steps (a node entered or a node popped) and the nodes
+    /// it read (each step's node, an interior node's two children, a popped node again).
+    #[cfg(test)]
+    pub fn traverse(&self, ray: &Ray, t_max: &mut f32, mut visit: impl FnMut(u32, &mut f32)) -> (u32, u32) {
         if self.order.is_empty() {
-            return;
+            return (0, 0);
         }
         let inv = inverse_direction(ray.dir);
         let origin = Vec3A::from(ray.origin);
         let mut stack = [0u32; STACK_DEPTH];
         let mut top = 0usize;
         let mut node = 0u32;
+        let (mut steps, mut reads) = (0, 1);
         if self.nodes[0].enter(origin, inv, ray.t_min, *t_max).is_none() {
-            return;
+            return (steps, reads);
         }
         loop {
+            steps += 1;
+            reads += 1;
             let n = &self.nodes[node as usize];
             if n.count > 0 {
                 for k in n.first..n.first + n.count {
                     visit(k, t_max);
                 }
             } else {
+                reads += 2;
                 let (a, b) = (n.first, n.first + 1);
                 let ta = self.nodes[a as usize].enter(origin, inv, ray.t_min, *t_max);
                 let tb = self.nodes[b as usize].enter(origin, inv, ray.t_min, *t_max);
@@ -132,8 +140,10 @@ impl Bvh {
             // Pop the next node that is still in front of t_max.
             loop {
                 if top == 0 {
-                    return;
+                    return (steps, reads);
                 }
+                steps += 1;
+                reads += 1;
                 top -= 1;
                 let candidate = stack[top];
                 if self.nodes[candidate as usize].enter(origin, inv, ray.t_min, *t_max).is_some() {
@@ -212,13 +222,14 @@ pub(super) mod tests {
     fn traversal_finds_every_box_the_ray_crosses() {
         let boxes = random_boxes(3000, 9, HALF);
         let bvh = Bvh::build(&boxes);
+        let wide = Bvh4::from_binary(&bvh);
         let mut rng = SplitMix64::new(11);
         for _ in 0..200 {
             let o = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0));
             let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize();
             let ray = Ray::new(o, d);
             let mut found = Vec::new();
-            bvh.traverse(&ray, &mut ray.t_max.clone(), |k, _| found.push(bvh.order[k as usize]));
+            wide.traverse(&ray, &mut ray.t_max.clone(), |k, _| found.push(bvh.order[k as usize]));
             found.sort_unstable();
             let len = found.len();
             found.dedup();
@@ -236,10 +247,10 @@ pub(super) mod tests {
     fn axis_aligned_rays_on_box_planes_are_not_lost() {
         // Origin exactly on the slab planes x = 0 and y = 0 with zero x and y direction.
         let boxes = vec![Aabb { min: Vec3::new(0.0, 0.0, 2.0), max: Vec3::new(1.0, 1.0, 3.0) }; 9];
-        let bvh = Bvh::build(&boxes);
+        let wide = Bvh4::from_binary(&Bvh::build(&boxes));
         let ray = Ray::new(Vec3::ZERO, Vec3::Z);
         let mut count = 0;
-        bvh.traverse(&ray, &mut ray.t_max.clone(), |_, _| count += 1);
+        wide.traverse(&ray, &mut ray.t_max.clone(), |_, _| count += 1);
         assert_eq!(count, 9);
     }
 

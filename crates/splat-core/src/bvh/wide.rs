@@ -2,8 +2,9 @@
 //! holds up to four children, their boxes stored as SIMD lanes (structure of arrays) and tested
 //! against the ray together (Wald et al. 2008, "Getting rid of packets"; Dammertz et al. 2008,
 //! "Shallow bounding volume hierarchies"). It is a conversion of the same tree: the same leaves
-//! over the same leaf order, so the GPU (which walks the binary nodes) and the CPU visit the
-//! same primitives.
+//! over the same leaf order. Both backends walk it: [`Bvh4::traverse`] on the CPU and its twin
+//! `traversal_next_leaf` in splat-gpu's `shaders/bvh.wgsl`, which uploads these nodes as they
+//! are (`splat_gpu::layout::GpuNode`) and visits them in the same order.
 
 use super::{Bvh, STACK_DEPTH, inverse_direction, slab};
 use crate::hit::Ray;
@@ -12,14 +13,19 @@ use glam::{Vec3A, Vec4};
 /// Lanes of a wide node.
 const WIDTH: usize = 4;
 /// A child reference that is a leaf: this bit, the count − 1 in the next two bits, then the
-/// first leaf-order primitive.
-const LEAF: u32 = 1 << 31;
-const COUNT_SHIFT: u32 = 29;
+/// first leaf-order primitive. A reference without it is a node's index.
+pub const LEAF: u32 = 1 << 31;
+/// Where a leaf reference's count − 1 starts.
+pub const COUNT_SHIFT: u32 = 29;
+/// The node every traversal starts from: a node of one lane, the whole tree's box, whose child
+/// is the root (a leaf when the whole scene fits in one); with no lane for no primitives.
+pub const ROOT: u32 = 0;
 /// Largest leaf-order index a leaf reference can hold.
 pub const MAX_PRIMITIVES: usize = 1 << COUNT_SHIFT;
-/// Each popped node pushes at most `WIDTH` entries and removes itself, so the stack grows by at
-/// most WIDTH − 1 per level of the binary tree, whose depth [`STACK_DEPTH`] bounds.
-const WIDE_STACK: usize = (WIDTH - 1) * STACK_DEPTH + 1;
+/// Entries of a traversal stack: each popped node pushes at most `WIDTH` entries and removes
+/// itself, so the stack grows by at most WIDTH − 1 per level of the binary tree, whose depth
+/// [`STACK_DEPTH`] bounds, and by one for the [`ROOT`] node above it.
+pub const WIDE_STACK: usize = (WIDTH - 1) * (STACK_DEPTH + 1) + 1;
 
 /// One wide node, 128 bytes: the bounding planes of the four children as lanes, `planes[axis][0]`
 /// the lower and `planes[axis][1]` the upper (so that a ray picks its near and far plane per axis
@@ -32,17 +38,49 @@ pub struct Node4 {
     count: u32,
 }
 
+impl Node4 {
+    /// A node with no children.
+    const EMPTY: Node4 = Node4 { planes: [[Vec4::INFINITY, Vec4::NEG_INFINITY]; 3], child: [0; WIDTH], count: 0 };
+
+    /// The children's bounding planes, `[axis][lower, upper][lane]` (empty lanes: +∞ below −∞).
+    pub fn planes(&self) -> [[[f32; WIDTH]; 2]; 3] {
+        self.planes.map(|axis| axis.map(|v| v.to_array()))
+    }
+
+    /// The children's references: a node's index, or a leaf ([`LEAF`] set); 0 in empty lanes.
+    pub fn children(&self) -> [u32; WIDTH] {
+        self.child
+    }
+
+    /// Lanes in use, 1 to 4 (0 only for the root of an empty tree).
+    pub fn count(&self) -> u32 {
+        self.count
+    }
+
+    /// Set lane `lane` to a child of box `min`–`max` and reference `r`.
+    fn set(&mut self, lane: usize, min: [f32; 3], max: [f32; 3], r: u32) {
+        for axis in 0..3 {
+            self.planes[axis][0][lane] = min[axis];
+            self.planes[axis][1][lane] = max[axis];
+        }
+        self.child[lane] = r;
+    }
+}
+
 /// Bytes of a wide node.
 pub(super) const NODE_BYTES: usize = std::mem::size_of::<Node4>();
 
-/// A 4-wide BVH over the leaf order of a [`Bvh`].
-#[derive(Clone, Debug, Default, PartialEq)]
+/// A 4-wide BVH over the leaf order of a [`Bvh`]: node [`ROOT`] holds the root's box, the
+/// others follow in depth-first order.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Bvh4 {
     nodes: Vec<Node4>,
-    /// The root reference (a leaf when the whole scene fits in one), `None` for no primitives.
-    root: Option<u32>,
-    /// The root's box, tested first as [`Bvh::traverse`] does.
-    root_box: [[f32; 3]; 2],
+}
+
+impl Default for Bvh4 {
+    fn default() -> Self {
+        Self { nodes: vec![Node4::EMPTY] }
+    }
 }
 
 fn leaf_ref(first: u32, count: u32) -> u32 {
@@ -52,7 +90,7 @@ fn leaf_ref(first: u32, count: u32) -> u32 {
 
 /// Leaf-order range of a leaf reference.
 #[inline(always)]
-fn leaf_range(r: u32) -> std::ops::Range<u32> {
+pub fn leaf_range(r: u32) -> std::ops::Range<u32> {
     let first = r & (MAX_PRIMITIVES as u32 - 1);
     let count = ((r & !LEAF) >> COUNT_SHIFT) + 1;
     first..first + count
@@ -67,10 +105,11 @@ impl Bvh4 {
         if bvh.order.is_empty() {
             return Self::default();
         }
-        let root = &bvh.nodes[0];
-        let root_box = [root.min, root.max];
-        let mut wide = Self { nodes: Vec::with_capacity(bvh.nodes.len() / 2 + 1), root: None, root_box };
-        wide.root = Some(if root.count > 0 { leaf_ref(root.first, root.count) } else { wide.collapse(bvh, 0) });
+        let root = bvh.nodes[0];
+        let mut wide = Self { nodes: Vec::with_capacity(bvh.nodes.len() / 3 + 2) };
+        wide.nodes.push(Node4 { count: 1, ..Node4::EMPTY });
+        let r = if root.count > 0 { leaf_ref(root.first, root.count) } else { wide.collapse(bvh, 0) };
+        wide.nodes[ROOT as usize].set(0, root.min, root.max, r);
         wide
     }
 
@@ -86,32 +125,28 @@ impl Bvh4 {
             children.splice(k..=k, [first, first + 1]);
         }
         let index = self.nodes.len();
-        self.nodes.push(Node4 {
-            planes: [[Vec4::INFINITY, Vec4::NEG_INFINITY]; 3],
-            child: [0; WIDTH],
-            count: children.len() as u32,
-        });
+        self.nodes.push(Node4 { count: children.len() as u32, ..Node4::EMPTY });
         for (lane, &c) in children.iter().enumerate() {
             let n = bvh.nodes[c];
             let r = if n.count > 0 { leaf_ref(n.first, n.count) } else { self.collapse(bvh, c) };
-            let node = &mut self.nodes[index];
-            for axis in 0..3 {
-                node.planes[axis][0][lane] = n.min[axis];
-                node.planes[axis][1][lane] = n.max[axis];
-            }
-            node.child[lane] = r;
+            self.nodes[index].set(lane, n.min, n.max, r);
         }
         index as u32
     }
 
-    /// Number of wide nodes.
+    /// Number of wide nodes, [`ROOT`] included.
     pub fn len(&self) -> usize {
         self.nodes.len()
     }
 
     /// Whether the tree holds no primitives.
     pub fn is_empty(&self) -> bool {
-        self.root.is_none()
+        self.nodes[ROOT as usize].count == 0
+    }
+
+    /// The nodes, [`ROOT`] first.
+    pub fn nodes(&self) -> &[Node4] {
+        &self.nodes
     }
 
     /// Bytes of the wide nodes.
@@ -119,18 +154,21 @@ impl Bvh4 {
         self.nodes.len() * std::mem::size_of::<Node4>()
     }
 
-    /// [`Bvh::traverse`] on the wide tree: the same contract (every leaf primitive whose node
-    /// boxes the ray overlaps within (t_min, t_max], nearer children first, `visit(k, t_max)` may
-    /// lower t_max and nodes entered beyond it are skipped); four boxes tested per step, and the
-    /// stack keeps each entry's distance so that a popped node is culled without a new test.
-    /// Counts its work into the thread's [`super::work`] counters.
+    /// Visit every leaf primitive whose node boxes the ray overlaps within (t_min, t_max],
+    /// nearer children first (in the order of entry distance, then lane): `visit(k, t_max)`
+    /// receives the leaf-order index k and may lower t_max, and nodes entered beyond it are
+    /// skipped (the binary tree's walk, the test reference, keeps the same contract); four
+    /// boxes tested per step, and the stack keeps each entry's distance so that a popped node
+    /// is culled without a new test. Counts its work into the thread's [`super::work`]
+    /// counters, [`ROOT`] among the nodes (tested here as one box, the GPU tests it as a node).
     #[inline]
     pub fn traverse(&self, ray: &Ray, t_max: &mut f32, mut visit: impl FnMut(u32, &mut f32)) {
-        let Some(root) = self.root else { return super::work::record(0, 0, 0) };
         let inv = inverse_direction(ray.dir);
-        let [lo, hi] = self.root_box.map(Vec3A::from_array);
-        if slab(lo, hi, Vec3A::from(ray.origin), inv, ray.t_min, *t_max).is_none() {
-            return super::work::record(0, 0, 0);
+        let root = &self.nodes[ROOT as usize];
+        let [lo, hi] =
+            [0, 1].map(|side| Vec3A::new(root.planes[0][side].x, root.planes[1][side].x, root.planes[2][side].x));
+        if root.count == 0 || slab(lo, hi, Vec3A::from(ray.origin), inv, ray.t_min, *t_max).is_none() {
+            return super::work::record(1, 0, 0);
         }
         let (ox, oy, oz) = (Vec4::splat(ray.origin.x), Vec4::splat(ray.origin.y), Vec4::splat(ray.origin.z));
         let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
@@ -140,8 +178,8 @@ impl Bvh4 {
         let near = [inv.x, inv.y, inv.z].map(|i| usize::from(i < 0.0));
         let mut stack = [(0u32, 0.0f32); WIDE_STACK];
         let mut top = 0usize;
-        let mut current = root;
-        let (mut nodes, mut leaves, mut tests) = (0u32, 0u32, 0u32);
+        let mut current = root.child[0];
+        let (mut nodes, mut leaves, mut tests) = (1u32, 0u32, 0u32);
         loop {
             if current & LEAF != 0 {
                 let range = leaf_range(current);
@@ -178,8 +216,11 @@ impl Bvh4 {
                         if entry.1 < nearest.1 {
                             std::mem::swap(&mut entry, &mut nearest);
                         }
+                        // Entries as near as this one but of lower lanes stay above it: the
+                        // children are visited in the order of (entry distance, lane), as the
+                        // GPU's sorting network orders them.
                         let mut i = top;
-                        while i > base && stack[i - 1].1 < entry.1 {
+                        while i > base && stack[i - 1].1 <= entry.1 {
                             stack[i] = stack[i - 1];
                             i -= 1;
                         }
@@ -254,7 +295,12 @@ mod tests {
                     d.x = 0.0;
                 }
                 let ray = Ray::new(o, d.normalize());
-                let (binary, _) = visits(|t, f| bvh.traverse(&ray, t, f), None);
+                let (binary, _) = visits(
+                    |t, f| {
+                        bvh.traverse(&ray, t, f);
+                    },
+                    None,
+                );
                 let (four, _) = visits(|t, f| wide.traverse(&ray, t, f), None);
                 assert_eq!(binary, four, "n = {n}, ray {r}");
                 // A hit at the distance of the box centre along the ray, when in front.
@@ -277,8 +323,46 @@ mod tests {
         }
     }
 
+    /// The wide walk reads fewer node bytes than the binary walk the GPU took before it (32 bytes
+    /// for each step's node, an interior node's two children and a popped node read again),
+    /// for free rays and for closest-hit rays, on flat boxes as splats make them.
+    #[test]
+    fn the_wide_walk_reads_fewer_node_bytes_than_the_binary_walk() {
+        let boxes = random_boxes(20_000, 21);
+        let bvh = Bvh::build(&boxes);
+        let wide = Bvh4::from_binary(&bvh);
+        let mut rng = SplitMix64::new(22);
+        let (mut binary, mut four) = ([0u64; 2], [0u64; 2]);
+        let _ = super::super::work::take();
+        for _ in 0..500 {
+            let o = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), -9.0);
+            let ray = Ray::new(o, (Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), 0.0) - o).normalize());
+            let hit =
+                |k: u32, t: &mut f32| *t = t.min((boxes[bvh.order[k as usize] as usize].center() - o).dot(ray.dir));
+            for (closest, counts) in [(false, 0), (true, 1)] {
+                let visit = |k: u32, t: &mut f32| {
+                    if closest {
+                        hit(k, t)
+                    }
+                };
+                binary[counts] += u64::from(bvh.traverse(&ray, &mut 1e4, visit).1) * 32;
+                wide.traverse(&ray, &mut 1e4, visit);
+                four[counts] += super::super::work::take().bytes(0);
+            }
+        }
+        for k in 0..2 {
+            assert!(four[k] < binary[k], "node bytes: wide {} against binary {}", four[k], binary[k]);
+        }
+        eprintln!(
+            "node bytes, wide / binary: free {:.2}, closest hit {:.2}",
+            four[0] as f64 / binary[0] as f64,
+            four[1] as f64 / binary[1] as f64
+        );
+    }
+
     /// A traversal adds itself, its nodes, its leaves and every primitive it visits to the
-    /// thread's work counters, once; a ray that misses the root box counts a traversal alone.
+    /// thread's work counters, once; a ray that misses the root box counts a traversal and the
+    /// root node alone.
     #[test]
     fn traversals_count_their_work() {
         let boxes = random_boxes(5000, 9);
@@ -293,7 +377,7 @@ mod tests {
         assert!(work.nodes < wide.len() as u64, "a ray tests a few of {} nodes: {work:?}", wide.len());
         let away = Ray::new(Vec3::new(50.0, 50.0, 50.0), Vec3::X);
         wide.traverse(&away, &mut 1e4, |_, _| panic!("a ray away from the boxes visits nothing"));
-        let missed = super::super::work::Work { traversals: 1, ..Default::default() };
+        let missed = super::super::work::Work { traversals: 1, nodes: 1, ..Default::default() };
         assert_eq!(super::super::work::take(), missed);
         assert_eq!(super::super::work::take(), super::super::work::Work::default());
     }

@@ -1,4 +1,5 @@
-//! Work counters of the CPU's BVH traversals: how many traversals ran, how many wide nodes they
+//! Work counters of the BVH traversals (the CPU's; the GPU walks the same nodes in the same
+//! order, so they are its counts too): how many traversals ran, how many wide nodes they
 //! tested, how many leaves they entered and how many primitives they handed their visitor (a
 //! particle's hit test, a triangle's). They do not depend on the machine or the thread count,
 //! so `splat bench` reports them beside the wall time to compare variants of a method.
@@ -12,7 +13,7 @@ use std::cell::Cell;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Work {
     /// Traversals (camera, shadow, bounce and mesh rays; a k-buffer pass is one; a ray that
-    /// misses the root box is one of no nodes).
+    /// misses the root box is one of one node, the root's).
     pub traversals: u64,
     /// Wide nodes whose four child boxes were tested.
     pub nodes: u64,

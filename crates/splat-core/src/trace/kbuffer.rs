@@ -87,7 +87,7 @@ impl TraceScene<'_> {
     pub(crate) fn sorted_hits(&self, ray: &Ray) -> Vec<Candidate> {
         let mut found = Vec::with_capacity(64);
         let mut t_max = ray.t_max;
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, _| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, _| {
             if let Some(h) = self.hit(leaf, ray) {
                 found.push(Candidate { t: h.t, id: h.index, leaf, alpha: h.alpha });
             }
@@ -107,7 +107,7 @@ impl TraceScene<'_> {
     ) -> KBuf {
         let mut buf = KBuf::new(k);
         let mut t_max = ray.t_max;
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let Some(h) = self.hit(leaf, ray) else { return };
             let id = self.ids[leaf as usize];
             if !depth_before(after.0, after.1, h.t, id) || !buf.admits(h.t, id) {

@@ -30,7 +30,6 @@ use crate::sh;
 use glam::{DVec3, Vec2, Vec3};
 use std::borrow::Cow;
 use std::cell::OnceCell;
-use std::sync::OnceLock;
 
 mod kbuffer;
 mod shadow;
@@ -80,11 +79,8 @@ impl Method {
 pub struct TraceScene<'a> {
     scene: &'a Scene,
     settings: RenderSettings,
-    /// The binary tree (what the GPU traverses).
-    bvh: Bvh,
-    /// Its 4-wide collapse (what the CPU traverses): the same leaves, collapsed when a CPU ray
-    /// first needs it, so that a scene traced on the GPU never builds it.
-    wide: OnceLock<Bvh4>,
+    /// The 4-wide BVH both backends traverse.
+    bvh: Bvh4,
     /// Prepared particles in BVH leaf order.
     prims: Vec<PreparedParticle>,
     /// Scene index of each leaf-order particle.
@@ -221,15 +217,16 @@ impl<'a> TraceScene<'a> {
             par::map(&scene.particles, |p| (bounding_radius(&settings, p.opacity), bounding_box(&settings, p)))
                 .into_iter()
                 .unzip();
-        let bvh = Bvh::build(&boxes);
-        let wide = OnceLock::new();
-        let prims = par::map(&bvh.order, |&i| PreparedParticle::new(&scene.particles[i as usize]));
-        let ids = bvh.order.clone();
+        // The binary tree is only the build's: its collapse is what both backends walk.
+        let binary = Bvh::build(&boxes);
+        let bvh = Bvh4::from_binary(&binary);
+        let ids = binary.order;
+        let prims = par::map(&ids, |&i| PreparedParticle::new(&scene.particles[i as usize]));
         let clamp = settings.kernel.alpha_clamp;
-        let alpha_bound = bvh.order.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
-        let radius_sq = bvh.order.iter().map(|&i| radii[i as usize].powi(2)).collect();
+        let alpha_bound = ids.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
+        let radius_sq = ids.iter().map(|&i| radii[i as usize].powi(2)).collect();
         let (lighting, meshes) = (Cow::Owned(Lighting::default()), Cow::Owned(Meshes::none()));
-        Ok(Self { scene, settings, bvh, wide, prims, ids, alpha_bound, radius_sq, lighting, meshes })
+        Ok(Self { scene, settings, bvh, prims, ids, alpha_bound, radius_sq, lighting, meshes })
     }
 
     /// The same scene lit by `lighting` (checked against the scene's particle count).
@@ -279,14 +276,9 @@ impl<'a> TraceScene<'a> {
         }
     }
 
-    /// The binary BVH (the GPU's layout).
-    pub fn bvh(&self) -> &Bvh {
+    /// The 4-wide BVH over the particles, which both backends traverse.
+    pub fn bvh(&self) -> &Bvh4 {
         &self.bvh
-    }
-
-    /// The 4-wide BVH the CPU traverses, collapsed from [`TraceScene::bvh`] on first use.
-    pub fn wide_bvh(&self) -> &Bvh4 {
-        self.wide.get_or_init(|| Bvh4::from_binary(&self.bvh))
     }
 
     /// The scene.
@@ -530,7 +522,7 @@ impl<'a> TraceScene<'a> {
         let ray = &seg.ray;
         let mut best = Candidate::EMPTY;
         let mut t_max = ray.t_max;
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let (o, d) = to_canonical(&self.prims[leaf as usize], ray);
             let Some(t) = sphere_entry(o, d, self.radius_sq[leaf as usize]) else { return };
             let id = self.ids[leaf as usize];
@@ -695,24 +687,4 @@ pub fn render_frames(
             pixel
         },
     ))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::rng::RngScheme;
-
-    /// A scene prepared for the GPU (which walks the binary tree) never collapses the 4-wide
-    /// tree; the first CPU ray does.
-    #[test]
-    fn the_wide_tree_is_collapsed_when_a_cpu_ray_first_needs_it() {
-        let (scene, camera) = crate::scenes::cloud();
-        let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-        assert!(!trace.bvh().nodes.is_empty());
-        assert!(trace.wide.get().is_none(), "collapsed before any CPU ray");
-        let ray = trace.clip(camera.pixel_ray(camera.width / 2, camera.height / 2));
-        let sample = trace.sample(&Method::Exact, &ray, &RayRng::new(0, 0, 0, RngScheme::Hash));
-        assert!(trace.wide.get().is_some());
-        assert!(sample.alpha > 0.0, "the centre ray of the cloud meets splats");
-    }
 }

@@ -80,7 +80,7 @@ impl TraceScene<'_> {
     pub fn transmittance(&self, ray: &Ray) -> f64 {
         let mut t = 1.0f64;
         let mut t_max = ray.t_max;
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, _| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, _| {
             if let Some(h) = self.hit(leaf, ray) {
                 t *= 1.0 - f64::from(h.alpha);
             }
@@ -94,7 +94,7 @@ impl TraceScene<'_> {
         let early = !decide.needs_position();
         let mut occluded = false;
         let mut t_max = ray.t_max;
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             if occluded {
                 return;
             }

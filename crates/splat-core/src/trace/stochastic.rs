@@ -26,7 +26,7 @@ impl TraceScene<'_> {
         let early = !decide.needs_position();
         let mut best = Candidate::EMPTY;
         let mut t_max = ray.t_max;
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let id = self.ids[leaf as usize];
             let u = if early {
                 let u = decide.particle(id, slot, Vec3::ZERO);
@@ -96,7 +96,7 @@ impl TraceScene<'_> {
         let mut u = [0.0f32; N];
         let mut t_max = ray.t_max;
         let draw = decide.slot_draws(first_slot, n);
-        self.wide_bvh().traverse(ray, &mut t_max, |leaf, t_max| {
+        self.bvh().traverse(ray, &mut t_max, |leaf, t_max| {
             let id = self.ids[leaf as usize];
             if early {
                 let bound = self.alpha_bound[leaf as usize];
