@@ -217,10 +217,13 @@ impl<'a> TraceScene<'a> {
             par::map(&scene.particles, |p| (bounding_radius(&settings, p.opacity), bounding_box(&settings, p)))
                 .into_iter()
                 .unzip();
-        // The binary tree is only the build's: its collapse is what both backends walk.
+        // The binary tree is only the build's: its collapse is what both backends walk, and the
+        // boxes and binary nodes go before the prepared particles are made.
         let binary = Bvh::build(&boxes);
+        drop(boxes);
         let bvh = Bvh4::from_binary(&binary);
-        let ids = binary.order;
+        let Bvh { nodes, order: ids } = binary;
+        drop(nodes);
         let prims = par::map(&ids, |&i| PreparedParticle::new(&scene.particles[i as usize]));
         let clamp = settings.kernel.alpha_clamp;
         let alpha_bound = ids.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
