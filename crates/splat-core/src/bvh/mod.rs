@@ -7,7 +7,7 @@ mod build;
 mod wide;
 pub mod work;
 
-pub use wide::{Bvh4, COUNT_SHIFT, LEAF, MAX_PRIMITIVES, Node4, ROOT, WIDE_STACK, leaf_range};
+pub use wide::{Bvh4, COUNT_SHIFT, LEAF, MAX_PRIMITIVES, Node4, ROOT, WIDE_STACK};
 
 #[cfg(test)]
 use crate::hit::Ray;

@@ -90,7 +90,7 @@ fn leaf_ref(first: u32, count: u32) -> u32 {
 
 /// Leaf-order range of a leaf reference.
 #[inline(always)]
-pub fn leaf_range(r: u32) -> std::ops::Range<u32> {
+fn leaf_range(r: u32) -> std::ops::Range<u32> {
     let first = r & (MAX_PRIMITIVES as u32 - 1);
     let count = ((r & !LEAF) >> COUNT_SHIFT) + 1;
     first..first + count
