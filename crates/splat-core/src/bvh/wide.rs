@@ -96,6 +96,30 @@ fn leaf_range(r: u32) -> std::ops::Range<u32> {
     first..first + count
 }
 
+/// The binary nodes a wide node over binary interior node `b` takes as its children, in order:
+/// `b`'s two children, the interior one of largest surface area (the first of equal ones)
+/// replaced by its own two until there are four or none is interior.
+fn wide_children(bvh: &Bvh, b: usize) -> ([usize; WIDTH], usize) {
+    let first = bvh.nodes[b].first as usize;
+    let (mut children, mut count) = ([first, first + 1, 0, 0], 2);
+    while count < WIDTH {
+        let mut widest: Option<(usize, f32)> = None;
+        for (k, &c) in children[..count].iter().enumerate() {
+            let area = super::node_area(&bvh.nodes[c]);
+            if bvh.nodes[c].count == 0 && widest.is_none_or(|(_, a)| area > a) {
+                widest = Some((k, area));
+            }
+        }
+        let Some((k, _)) = widest else { break };
+        let first = bvh.nodes[children[k]].first as usize;
+        children.copy_within(k + 1..count, k + 2);
+        children[k] = first;
+        children[k + 1] = first + 1;
+        count += 1;
+    }
+    (children, count)
+}
+
 impl Bvh4 {
     /// Collapse a binary BVH: every wide node takes its binary node's two children and keeps
     /// opening the interior child with the largest surface area until it has four. Leaves hold
@@ -113,20 +137,12 @@ impl Bvh4 {
         wide
     }
 
-    /// The wide node for binary interior node `b`; returns its index.
+    /// The wide node for binary interior node `b`, its subtree after it; returns its index.
     fn collapse(&mut self, bvh: &Bvh, b: usize) -> u32 {
-        let mut children = vec![bvh.nodes[b].first as usize, bvh.nodes[b].first as usize + 1];
-        while children.len() < WIDTH {
-            let interior = children.iter().enumerate().filter(|&(_, &c)| bvh.nodes[c].count == 0).max_by(|a, b| {
-                super::node_area(&bvh.nodes[*a.1]).total_cmp(&super::node_area(&bvh.nodes[*b.1])).then(b.0.cmp(&a.0))
-            });
-            let Some((k, &c)) = interior else { break };
-            let first = bvh.nodes[c].first as usize;
-            children.splice(k..=k, [first, first + 1]);
-        }
+        let (children, count) = wide_children(bvh, b);
         let index = self.nodes.len();
-        self.nodes.push(Node4 { count: children.len() as u32, ..Node4::EMPTY });
-        for (lane, &c) in children.iter().enumerate() {
+        self.nodes.push(Node4 { count: count as u32, ..Node4::EMPTY });
+        for (lane, &c) in children[..count].iter().enumerate() {
             let n = bvh.nodes[c];
             let r = if n.count > 0 { leaf_ref(n.first, n.count) } else { self.collapse(bvh, c) };
             self.nodes[index].set(lane, n.min, n.max, r);
