@@ -110,8 +110,8 @@ impl TraceSplit {
     }
 
     /// The most particles of SH degree `sh_degree`, their coefficients stored as `sh_storage`,
-    /// whose arrays the ray tracer binds on `ctx` (with [`TraceSplit::nodes_about`] wide nodes): the bound
-    /// the adapter's storage bindings set, whatever its memory.
+    /// whose arrays the ray tracer binds on `ctx` (with [`TraceSplit::nodes_about`] wide
+    /// nodes): the bound the adapter's storage bindings set, whatever its memory.
     pub fn capacity(ctx: &GpuContext, sh_degree: u8, sh_storage: ShStorage) -> u64 {
         let coefficients = splat_core::particle::sh_coeff_count(sh_degree) as u64;
         let lengths = |m: u64| [m, Self::nodes_about(m), m * coefficients];
@@ -679,8 +679,8 @@ impl<'a> GpuTracer<'a> {
 
     /// The particles, BVH nodes and SH coefficients as the kernel reads them through its
     /// accessors (`split_gather` in `shaders/trace.wgsl`), in element order, as the u32 words
-    /// of their 16-byte rows (four a particle, eight a node, one a coefficient): the same for every
-    /// split of a scene, which a test checks without compiling the whole kernel for each.
+    /// of their 16-byte rows (four a particle, eight a node, one a coefficient): the same for
+    /// every split of a scene, which a test checks without compiling the whole kernel for each.
     pub fn arrays_as_read(&self) -> Result<[Vec<[u32; 4]>; 3], GpuError> {
         /// Rows `split_gather` writes an element: a particle's, a node's and a coefficient's.
         const ROWS: u32 = 13;
