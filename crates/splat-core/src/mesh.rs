@@ -418,6 +418,7 @@ impl Meshes {
             })
             .collect();
         let binary = Bvh::build(&boxes);
+        binary.check_depth("triangles")?;
         let bvh = Bvh4::from_binary(&binary);
         let triangles: Vec<PreparedTriangle> = binary.order.iter().map(|&i| prepared[i as usize]).collect();
         let transparent = triangles.iter().any(PreparedTriangle::is_transparent);

@@ -80,6 +80,36 @@ impl Bvh {
         Self { nodes, order }
     }
 
+    /// Levels below the root of the deepest leaf.
+    pub fn depth(&self) -> usize {
+        let mut deepest = 0;
+        let mut stack = vec![(0usize, 0usize)];
+        while let Some((i, d)) = stack.pop() {
+            deepest = deepest.max(d);
+            let n = &self.nodes[i];
+            if n.count == 0 && !self.order.is_empty() {
+                stack.extend([(n.first as usize, d + 1), (n.first as usize + 1, d + 1)]);
+            }
+        }
+        deepest
+    }
+
+    /// Refuse a tree deeper than the traversals' stacks hold ([`STACK_DEPTH`] levels, which
+    /// [`WIDE_STACK`] entries cover on both backends): a binned SAH tree over f32 boxes stays
+    /// far above it (a split peels off at least a bin's worth, and f32 spans about 280
+    /// octaves), but a deeper one would overflow the CPU's stack (a panic) and the GPU's (a
+    /// wrong image), so it is refused by name instead.
+    pub fn check_depth(&self, what: &str) -> Result<(), String> {
+        let depth = self.depth();
+        if depth > STACK_DEPTH {
+            return Err(format!(
+                "the BVH over these {what} is {depth} levels deep, more than the {STACK_DEPTH} its traversals hold: \
+                 their positions span too many orders of magnitude; rescale or split the scene"
+            ));
+        }
+        Ok(())
+    }
+
     /// Bytes of the nodes and the leaf order.
     pub fn bytes(&self) -> usize {
         self.nodes.len() * std::mem::size_of::<BvhNode>() + self.order.len() * 4
@@ -252,6 +282,33 @@ pub(super) mod tests {
         let mut count = 0;
         wide.traverse(&ray, &mut ray.t_max.clone(), |_, _| count += 1);
         assert_eq!(count, 9);
+    }
+
+    /// A tree within the stacks' depth passes; a chain of leaves one level deeper than the
+    /// stacks hold is refused by name.
+    #[test]
+    fn a_tree_deeper_than_the_stacks_is_refused() {
+        let bvh = Bvh::build(&random_boxes(3000, 9, HALF));
+        assert!(bvh.depth() > 5 && bvh.check_depth("particles").is_ok());
+        // Level L holds the pair 2L − 1 (a leaf) and 2L (the next interior node, a leaf at the
+        // last level).
+        let levels = STACK_DEPTH + 1;
+        let mut chain = vec![BvhNode { min: [0.0; 3], first: 1, max: [1.0; 3], count: 0 }];
+        for level in 1..=levels {
+            let leaf = BvhNode { min: [0.0; 3], first: level as u32 - 1, max: [1.0; 3], count: 1 };
+            let last = level == levels;
+            let next = BvhNode {
+                min: [0.0; 3],
+                first: if last { level as u32 } else { chain.len() as u32 + 2 },
+                max: [1.0; 3],
+                count: u32::from(last),
+            };
+            chain.extend([leaf, next]);
+        }
+        let deep = Bvh { nodes: chain, order: (0..=levels as u32).collect() };
+        assert_eq!(deep.depth(), levels);
+        let refused = deep.check_depth("particles").unwrap_err();
+        assert!(refused.contains(&format!("{levels} levels deep")) && refused.contains("particles"), "{refused}");
     }
 
     #[test]

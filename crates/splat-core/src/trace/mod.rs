@@ -221,6 +221,7 @@ impl<'a> TraceScene<'a> {
         // boxes and binary nodes go before the prepared particles are made.
         let binary = Bvh::build(&boxes);
         drop(boxes);
+        binary.check_depth("particles").map_err(RenderError::Settings)?;
         let bvh = Bvh4::from_binary(&binary);
         let Bvh { nodes, order: ids } = binary;
         drop(nodes);
