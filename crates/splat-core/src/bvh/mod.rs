@@ -96,7 +96,7 @@ impl Bvh {
 
     /// Refuse a tree deeper than the traversals' stacks hold ([`STACK_DEPTH`] levels, which
     /// [`WIDE_STACK`] entries cover on both backends): a binned SAH tree over f32 boxes stays
-    /// far above it (a split peels off at least a bin's worth, and f32 spans about 280
+    /// well within it (a split peels off at least a bin's worth, and f32 spans about 280
     /// octaves), but a deeper one would overflow the CPU's stack (a panic) and the GPU's (a
     /// wrong image), so it is refused by name instead.
     pub fn check_depth(&self, what: &str) -> Result<(), String> {
