@@ -23,7 +23,7 @@
 //! no use for, and the mesh traversal, done first, hands the splat traversal its tightest t_max
 //! from the start.
 
-use crate::bvh::{Bvh, Bvh4};
+use crate::bvh::Bvh4;
 use crate::hit::Ray;
 use crate::lighting::Material;
 use crate::particle::Aabb;
@@ -417,10 +417,8 @@ impl Meshes {
                 Aabb { min: b[0].min(b[1]).min(b[2]), max: b[0].max(b[1]).max(b[2]) }.padded()
             })
             .collect();
-        let binary = Bvh::build(&boxes);
-        binary.check_depth("triangles")?;
-        let bvh = Bvh4::from_binary(&binary);
-        let triangles: Vec<PreparedTriangle> = binary.order.iter().map(|&i| prepared[i as usize]).collect();
+        let (bvh, order) = Bvh4::build(boxes, "triangles")?;
+        let triangles: Vec<PreparedTriangle> = order.iter().map(|&i| prepared[i as usize]).collect();
         let transparent = triangles.iter().any(PreparedTriangle::is_transparent);
         Ok(Self { triangles, materials: meshes.iter().map(|m| m.1).collect(), transparent, bvh })
     }

@@ -80,14 +80,18 @@ impl Bvh {
         Self { nodes, order }
     }
 
-    /// Levels below the root of the deepest leaf.
-    pub fn depth(&self) -> usize {
+    /// Levels below the root of the deepest leaf (0 for an empty tree, whose root is a node of
+    /// no children).
+    fn depth(&self) -> usize {
+        if self.order.is_empty() {
+            return 0;
+        }
         let mut deepest = 0;
         let mut stack = vec![(0usize, 0usize)];
         while let Some((i, d)) = stack.pop() {
             deepest = deepest.max(d);
             let n = &self.nodes[i];
-            if n.count == 0 && !self.order.is_empty() {
+            if n.count == 0 {
                 stack.extend([(n.first as usize, d + 1), (n.first as usize + 1, d + 1)]);
             }
         }
@@ -99,7 +103,7 @@ impl Bvh {
     /// well within it (a split peels off at least a bin's worth, and f32 spans about 280
     /// octaves), but a deeper one would overflow the CPU's stack (a panic) and the GPU's (a
     /// wrong image), so it is refused by name instead.
-    pub fn check_depth(&self, what: &str) -> Result<(), String> {
+    fn check_depth(&self, what: &str) -> Result<(), String> {
         let depth = self.depth();
         if depth > STACK_DEPTH {
             return Err(format!(

@@ -8,6 +8,7 @@
 
 use super::{Bvh, STACK_DEPTH, inverse_direction, slab};
 use crate::hit::Ray;
+use crate::particle::Aabb;
 use glam::{Vec3A, Vec4};
 
 /// Lanes of a wide node.
@@ -135,6 +136,17 @@ impl Bvh4 {
         let r = if root.count > 0 { leaf_ref(root.first, root.count) } else { wide.collapse(bvh, 0) };
         wide.nodes[ROOT as usize].set(0, root.min, root.max, r);
         wide
+    }
+
+    /// Build the binary tree over `what` of `boxes` (dropped once built), refuse it when it
+    /// is deeper than the traversals' stacks hold, and collapse it: the wide tree and its leaf
+    /// order (`order[k]`, the index in `boxes` of the k-th leaf primitive). The binary nodes
+    /// are only the build's and are dropped here, before the caller lays anything out.
+    pub fn build(boxes: Vec<Aabb>, what: &str) -> Result<(Self, Vec<u32>), String> {
+        let binary = Bvh::build(&boxes);
+        drop(boxes);
+        binary.check_depth(what)?;
+        Ok((Self::from_binary(&binary), binary.order))
     }
 
     /// The wide node for binary interior node `b`, its subtree after it; returns its index.

@@ -13,7 +13,7 @@
 //! (Algorithm 1, §3.5), `kbuffer.rs` (the sorted hits of exact, the k-buffer, the stochastic
 //! pass and depth sampling) and `shadow.rs` (lighting a hit, the shadow rays).
 
-use crate::bvh::{Bvh, Bvh4, MAX_PRIMITIVES};
+use crate::bvh::{Bvh4, MAX_PRIMITIVES};
 use crate::camera::Camera;
 use crate::camera_sampling::{FrameSample, frame_sample};
 use crate::catalogue::MethodId;
@@ -217,14 +217,8 @@ impl<'a> TraceScene<'a> {
             par::map(&scene.particles, |p| (bounding_radius(&settings, p.opacity), bounding_box(&settings, p)))
                 .into_iter()
                 .unzip();
-        // The binary tree is only the build's: its collapse is what both backends walk, and the
-        // boxes and binary nodes go before the prepared particles are made.
-        let binary = Bvh::build(&boxes);
-        drop(boxes);
-        binary.check_depth("particles").map_err(RenderError::Settings)?;
-        let bvh = Bvh4::from_binary(&binary);
-        let Bvh { nodes, order: ids } = binary;
-        drop(nodes);
+        // The boxes and binary nodes go before the prepared particles are made.
+        let (bvh, ids) = Bvh4::build(boxes, "particles").map_err(RenderError::Settings)?;
         let prims = par::map(&ids, |&i| PreparedParticle::new(&scene.particles[i as usize]));
         let clamp = settings.kernel.alpha_clamp;
         let alpha_bound = ids.iter().map(|&i| scene.particles[i as usize].opacity.min(clamp)).collect();
