@@ -3,13 +3,19 @@
 //
 // No subgroup operation is used anywhere: every cooperation between invocations goes through
 // workgroup memory and workgroupBarrier, so the result cannot depend on the subgroup size
-// (lavapipe runs 8 lanes, GPUs 32 or 64). A pass is three dispatches:
+// (lavapipe runs 8 lanes, GPUs 32 or 64). A pass is:
 //   histogram: per block of WG keys, the count of each digit  -> hist[digit * blocks + block];
 //   scan:      exclusive prefix sum of hist in that (digit-major) order: the first output
 //              position of each (digit, block);
 //   scatter:   each key goes to hist[digit, block] + its rank among the block's keys of that
 //              digit. Stable because blocks, and keys within a block, keep input order.
-
+//
+// The scan is reduce-then-scan over tiles of SCAN_TILE entries, one workgroup a tile, every
+// access coalesced (entry k * WG + l of a tile is invocation l's k-th load): `scan_reduce`
+// writes each tile's sum to the next level (in `partials`), the levels are reduced until one
+// tile holds them, and `scan_down` scans each tile from the top level down, starting it at its
+// own sum's prefix from the level above. No invocation reads more than SCAN_ITEMS entries of a
+// level, however long the scan.
 struct SortParams {
     // Keys to sort (or entries to scan).
     count: u32,
@@ -17,8 +23,14 @@ struct SortParams {
     shift: u32,
     // Blocks of WG keys.
     blocks: u32,
-    // Entries of `hist` the scan covers.
+    // Entries of the scan level a dispatch covers.
     scan_len: u32,
+    // Where that level lives: FROM_HIST for `hist` itself, else its first entry in `partials`.
+    scan_in: u32,
+    // The first entry in `partials` of the level above (its tiles' sums), or TOP for the top.
+    scan_out: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<storage, read> sp: SortParams;
@@ -27,16 +39,27 @@ struct SortParams {
 // `hist_set(i, h)`, 5): declared with their accessors by splat_gpu::sort::sort_wgsl, each split
 // over more bindings where it is larger than one (splat_gpu::split).
 
+// The scan's upper levels: the tiles' sums of each level below, level after level.
+@group(0) @binding(6) var<storage, read_write> partials: array<u32>;
+
 const WG: u32 = 256u;
 const RADIX: u32 = 16u;
 
 // Keys per segment of a block in the scatter's ranking (WG = SEGMENT²).
 const SEGMENT: u32 = 16u;
 
+// Entries a scan invocation loads from a level, and a scan tile's (WG × SCAN_ITEMS).
+const SCAN_ITEMS: u32 = 4u;
+const SCAN_TILE: u32 = 1024u;
+// `scan_in` of the bottom level, `hist`; `scan_out` of the top level, which has no level above.
+const FROM_HIST: u32 = 0xffffffffu;
+const TOP: u32 = 0xffffffffu;
+
 var<workgroup> counts: array<atomic<u32>, 16>;
 var<workgroup> partial: array<u32, 256>;
 var<workgroup> digits: array<u32, 256>;
 var<workgroup> offsets: array<u32, 256>;
+var<workgroup> tile: array<u32, 1024>;
 
 fn digit(key: u32) -> u32 {
     return (key >> sp.shift) & (RADIX - 1u);
@@ -88,23 +111,89 @@ fn histogram(
     }
 }
 
-// One workgroup: each invocation sums a contiguous run of hist, the runs' totals are scanned
-// in workgroup memory, and each run is rewritten as its exclusive prefix.
-@compute @workgroup_size(256, 1, 1)
-fn scan(@builtin(local_invocation_index) l: u32) {
-    let n = sp.scan_len;
-    let per = (n + WG - 1u) / WG;
-    let start = min(l * per, n);
-    let end = min(start + per, n);
-    var sum = 0u;
-    for (var i = start; i < end; i++) {
-        sum += hist_at(i);
+// Entry i of the level being scanned.
+fn level_at(i: u32) -> u32 {
+    if (sp.scan_in == FROM_HIST) {
+        return hist_at(i);
     }
-    var running = workgroup_exclusive_scan(l, sum);
-    for (var i = start; i < end; i++) {
-        let h = hist_at(i);
-        hist_set(i, running);
-        running += h;
+    return partials[sp.scan_in + i];
+}
+
+fn level_set(i: u32, v: u32) {
+    if (sp.scan_in == FROM_HIST) {
+        hist_set(i, v);
+    } else {
+        partials[sp.scan_in + i] = v;
+    }
+}
+
+// The sum of each tile of the level, to entry `tile` of the level above.
+@compute @workgroup_size(256, 1, 1)
+fn scan_reduce(
+    @builtin(local_invocation_index) l: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let t = block_of(wg, groups);
+    if (t * SCAN_TILE >= sp.scan_len) {
+        return;
+    }
+    var sum = 0u;
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        let i = t * SCAN_TILE + k * WG + l;
+        if (i < sp.scan_len) {
+            sum += level_at(i);
+        }
+    }
+    workgroup_exclusive_scan(l, sum);
+    if (l == 0u) {
+        partials[sp.scan_out + t] = partial[WG - 1u];
+    }
+}
+
+// Each tile of the level rewritten as its exclusive prefix sum, plus the prefix of the tiles
+// before it (entry `tile` of the level above, already scanned; 0 at the top): the tile is
+// staged in workgroup memory with coalesced loads, each invocation scans SCAN_ITEMS
+// consecutive entries of it, and the runs' sums are scanned across the workgroup.
+@compute @workgroup_size(256, 1, 1)
+fn scan_down(
+    @builtin(local_invocation_index) l: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let t = block_of(wg, groups);
+    let first = t * SCAN_TILE;
+    if (first >= sp.scan_len) {
+        return;
+    }
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        let i = first + k * WG + l;
+        var v = 0u;
+        if (i < sp.scan_len) {
+            v = level_at(i);
+        }
+        tile[k * WG + l] = v;
+    }
+    workgroupBarrier();
+    var run = 0u;
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        run += tile[l * SCAN_ITEMS + k];
+    }
+    var running = workgroup_exclusive_scan(l, run);
+    if (sp.scan_out != TOP) {
+        running += partials[sp.scan_out + t];
+    }
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        let v = tile[l * SCAN_ITEMS + k];
+        tile[l * SCAN_ITEMS + k] = running;
+        running += v;
+    }
+    workgroupBarrier();
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        let i = first + k * WG + l;
+        if (i < sp.scan_len) {
+            level_set(i, tile[k * WG + l]);
+        }
     }
 }
 

@@ -2,10 +2,15 @@
 //! exclusive scan it is built from.
 //!
 //! No maintained sort crate targets wgpu 30 (`wgpu_sort` stops at wgpu 0.19 and assumes a
-//! subgroup size), so the sort is our own: 4 bits per pass, three dispatches per pass
-//! (histogram, scan, scatter), stable, and free of subgroup operations, so it is correct for
-//! any subgroup size by construction (lavapipe runs 8 lanes, GPUs 32 or 64). A test checks the
-//! shader never calls a subgroup builtin.
+//! subgroup size), so the sort is our own: 4 bits per pass, each pass a histogram, a scan and a
+//! scatter, stable, and free of subgroup operations, so it is correct for any subgroup size by
+//! construction (lavapipe runs 8 lanes, GPUs 32 or 64). A test checks the shader never calls a
+//! subgroup builtin.
+//!
+//! The scan is reduce-then-scan over tiles of [`SCAN_TILE`] entries ([`scan_levels`]): one
+//! workgroup a tile, coalesced loads, and no invocation reading more than four entries of a
+//! level, where a single workgroup used to sum a 6 M-key sort's 375,000 histogram entries in
+//! runs of 1,465 serial loads an invocation.
 //!
 //! [`cpu_radix_sort`] is the CPU mirror of the same passes; [`depth_key`] maps a view depth to
 //! its sortable key, and filters what cannot be sorted (NaN, negative, infinite).
@@ -20,6 +25,18 @@ const SORT_SOURCE: &str = include_str!("../shaders/sort.wgsl");
 pub const BLOCK: u32 = 256;
 /// Bits sorted per pass.
 pub const RADIX_BITS: u32 = 4;
+/// Entries of a scan tile: a workgroup of [`BLOCK`] invocations, four entries each.
+pub const SCAN_TILE: u32 = 1024;
+/// Most levels of a scan: four cover 2³² entries (2³² → 2²² → 2¹² → 4 tiles' sums).
+pub const MAX_LEVELS: usize = 4;
+/// `SortParams::scan_in` of the bottom level: the histogram itself.
+const FROM_HIST: u32 = u32::MAX;
+/// `SortParams::scan_out` of the top level: no level above.
+const TOP: u32 = u32::MAX;
+/// Uniform slots of the passes (at most eight of [`RADIX_BITS`]), then of the sort's scan
+/// levels, then of [`RadixSort::encode_scan`]'s.
+const PASS_SLOTS: u64 = 8;
+const SLOTS: u64 = PASS_SLOTS + 2 * MAX_LEVELS as u64;
 /// Most workgroups along one dispatch dimension (WebGPU's default limit); more blocks are
 /// dispatched as rows of a 2D grid.
 const MAX_GROUPS_X: u32 = 65_535;
@@ -34,8 +51,15 @@ pub struct SortParams {
     pub shift: u32,
     /// Blocks of [`BLOCK`] keys.
     pub blocks: u32,
-    /// Entries of the histogram the scan covers.
+    /// Entries of the scan level a dispatch covers.
     pub scan_len: u32,
+    /// Where that level lives: `u32::MAX` for the histogram, else its first entry in the
+    /// partial sums.
+    pub scan_in: u32,
+    /// The first entry in the partial sums of the level above, `u32::MAX` at the top.
+    pub scan_out: u32,
+    /// Padding to 32 bytes.
+    pub pad: [u32; 2],
 }
 
 /// The sortable key of a view depth: its IEEE bits, which order positive floats like the
@@ -69,6 +93,28 @@ pub fn cpu_radix_sort(keys: &mut Vec<u32>, vals: &mut Vec<u32>, bits: u32) {
     }
 }
 
+/// The levels of an exclusive scan of `n` entries, bottom (the histogram) to top, as the
+/// uniforms of their dispatches: level i + 1 holds the sums of level i's tiles of
+/// [`SCAN_TILE`] entries, packed one level after another in the partial sums; the top level is
+/// one tile.
+pub fn scan_levels(n: u32) -> Vec<SortParams> {
+    let mut levels = vec![SortParams { scan_len: n, scan_in: FROM_HIST, scan_out: TOP, ..SortParams::default() }];
+    let mut next = 0;
+    while let Some(below) = levels.last_mut().filter(|l| l.scan_len > SCAN_TILE) {
+        below.scan_out = next;
+        let len = below.scan_len.div_ceil(SCAN_TILE);
+        levels.push(SortParams { scan_len: len, scan_in: next, scan_out: TOP, ..SortParams::default() });
+        next += len;
+    }
+    debug_assert!(levels.len() <= MAX_LEVELS);
+    levels
+}
+
+/// Entries of the partial sums a scan of `n` entries needs (its levels above the bottom).
+fn partials_len(n: u32) -> u64 {
+    scan_levels(n)[1..].iter().map(|l| u64::from(l.scan_len)).sum()
+}
+
 /// Passes for `bits` key bits: rounded up to an even count so that the result lands back in
 /// the input buffers after the ping-pong.
 pub fn pass_count(bits: u32) -> u32 {
@@ -84,9 +130,9 @@ const KEYS_OUT: SplitArray =
 const VALS_OUT: SplitArray =
     SplitArray::of::<u32>("sort value", "vals_out", "val_out_at", "u32", 4).writable("val_out_set");
 const HIST: SplitArray = SplitArray::of::<u32>("sort histogram", "hist", "hist_at", "u32", 5).writable("hist_set");
-/// The storage buffers a sort kernel binds when its arrays are whole (the uniforms and the five
-/// arrays).
-const OWN_BINDINGS: u32 = 6;
+/// The storage buffers a sort kernel binds when its arrays are whole (the uniforms, the five
+/// arrays and the scan's partial sums).
+const OWN_BINDINGS: u32 = 7;
 
 /// Elements of each of the sort's arrays for `capacity` pairs: the pairs, and at least the
 /// histogram's 16 counts a block of [`BLOCK`] keys.
@@ -101,9 +147,9 @@ pub fn split_of(capacity: u32, max_binding: u64) -> Split {
     Split::of(array_len(capacity), 4, max_binding)
 }
 
-/// The sort kernels' arrays as `split` cuts them, extra parts from binding 6 on.
+/// The sort kernels' arrays as `split` cuts them, extra parts from binding 7 on.
 fn split_layout(split: Split) -> SplitLayout {
-    SplitLayout { arrays: [KEYS_IN, VALS_IN, KEYS_OUT, VALS_OUT, HIST].map(|a| (a, split)).to_vec(), first_extra: 6 }
+    SplitLayout { arrays: [KEYS_IN, VALS_IN, KEYS_OUT, VALS_OUT, HIST].map(|a| (a, split)).to_vec(), first_extra: 7 }
 }
 
 /// The WGSL of the sort kernels over arrays cut as `split`.
@@ -122,7 +168,8 @@ pub struct RadixSort {
 struct SortKernels {
     layout: wgpu::BindGroupLayout,
     histogram: wgpu::ComputePipeline,
-    scan: wgpu::ComputePipeline,
+    scan_reduce: wgpu::ComputePipeline,
+    scan_down: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
 }
 
@@ -135,6 +182,8 @@ pub struct SortBuffers {
     pub(crate) vals: Vec<wgpu::Buffer>,
     /// Histogram (and scan) scratch, `16 × blocks` entries, at least `capacity`.
     pub(crate) hist: Vec<wgpu::Buffer>,
+    /// The scan's levels above the histogram ([`scan_levels`]).
+    partials: wgpu::Buffer,
     /// The ping-pong halves of keys and values.
     scratch: [Vec<wgpu::Buffer>; 2],
     /// How every array is cut over bindings.
@@ -154,7 +203,7 @@ impl SortBuffers {
     /// Bytes of the buffers on the device.
     pub fn bytes(&self) -> u64 {
         let arrays = [&self.keys, &self.vals, &self.hist, &self.scratch[0], &self.scratch[1]];
-        arrays.iter().flat_map(|parts| parts.iter()).map(wgpu::Buffer::size).sum()
+        arrays.iter().flat_map(|parts| parts.iter()).map(wgpu::Buffer::size).sum::<u64>() + self.partials.size()
     }
 
     /// Elements `range` of `parts`, one of this sort's arrays.
@@ -214,9 +263,15 @@ impl RadixSort {
         let (keys, vals) = (array("sort keys")?, array("sort values")?);
         let scratch = [array("sort keys scratch")?, array("sort values scratch")?];
         let hist = array("sort histogram")?;
+        let partials = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("sort scan partial sums"),
+            size: 4 * partials_len(len.min(u64::from(u32::MAX)) as u32).max(1),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sort params"),
-            size: self.stride * 9,
+            size: self.stride * SLOTS,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -232,7 +287,9 @@ impl RadixSort {
             };
             let arrays = [(KEYS_IN, ki), (VALS_IN, vi), (KEYS_OUT, ko), (VALS_OUT, vo), (HIST, &hist[..])];
             let parts = arrays.iter().flat_map(|(array, buffers)| layout.bind(array, buffers));
-            let entries: Vec<_> = std::iter::once(params)
+            let partials = wgpu::BindGroupEntry { binding: 6, resource: partials.as_entire_binding() };
+            let entries: Vec<_> = [params, partials]
+                .into_iter()
                 .chain(parts.map(|(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }))
                 .collect();
             ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -242,7 +299,7 @@ impl RadixSort {
             })
         };
         let bind_groups = [bind(&keys, &vals, &scratch[0], &scratch[1]), bind(&scratch[0], &scratch[1], &keys, &vals)];
-        Ok(SortBuffers { keys, vals, hist, scratch, split, capacity, params, bind_groups, kernels })
+        Ok(SortBuffers { keys, vals, hist, partials, scratch, split, capacity, params, bind_groups, kernels })
     }
 
     /// Encode the sort of the first `count` pairs of `buf` on their low `bits` key bits, in
@@ -261,41 +318,78 @@ impl RadixSort {
         }
         let blocks = count.div_ceil(BLOCK).max(1);
         let passes = pass_count(bits);
-        let mut uniforms = vec![0u8; (self.stride * u64::from(passes)) as usize];
+        let mut uniforms = vec![0u8; (self.stride * PASS_SLOTS) as usize];
         for p in 0..passes {
-            let params = SortParams { count, shift: p * RADIX_BITS, blocks, scan_len: 16 * blocks };
+            let params = SortParams { count, shift: p * RADIX_BITS, blocks, ..SortParams::default() };
             let at = (self.stride * u64::from(p)) as usize;
             uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(&params));
         }
         ctx.queue.write_buffer(&buf.params, 0, &uniforms);
+        let levels = self.write_levels(ctx, buf, PASS_SLOTS, 16 * blocks);
         let (gx, gy) = groups(blocks);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("radix sort"),
             timestamp_writes: timestamps,
         });
         for p in 0..passes {
-            let offset = (self.stride * u64::from(p)) as u32;
-            pass.set_bind_group(0, &buf.bind_groups[(p % 2) as usize], &[offset]);
+            let group = &buf.bind_groups[(p % 2) as usize];
+            pass.set_bind_group(0, group, &[(self.stride * u64::from(p)) as u32]);
             pass.set_pipeline(&buf.kernels.histogram);
             ctx.dispatch(&mut pass, gx, gy, 1);
-            pass.set_pipeline(&buf.kernels.scan);
-            ctx.dispatch(&mut pass, 1, 1, 1);
+            self.encode_levels(ctx, &mut pass, buf, group, PASS_SLOTS, &levels);
+            pass.set_bind_group(0, group, &[(self.stride * u64::from(p)) as u32]);
             pass.set_pipeline(&buf.kernels.scatter);
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
         Ok(())
     }
 
+    /// Write the uniforms of a scan of `n` entries of the histogram from slot `first` on; its
+    /// levels.
+    fn write_levels(&self, ctx: &GpuContext, buf: &SortBuffers, first: u64, n: u32) -> Vec<SortParams> {
+        let levels = scan_levels(n);
+        let mut uniforms = vec![0u8; (self.stride * levels.len() as u64) as usize];
+        for (i, level) in levels.iter().enumerate() {
+            let at = (self.stride * i as u64) as usize;
+            uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(level));
+        }
+        ctx.queue.write_buffer(&buf.params, self.stride * first, &uniforms);
+        levels
+    }
+
+    /// Encode the scan of `levels` (uniforms from slot `first` on): each level below the top
+    /// reduced to the next, then each level scanned from the top down.
+    fn encode_levels(
+        &self,
+        ctx: &GpuContext,
+        pass: &mut wgpu::ComputePass<'_>,
+        buf: &SortBuffers,
+        group: &wgpu::BindGroup,
+        first: u64,
+        levels: &[SortParams],
+    ) {
+        let mut dispatch = |i: usize, pipeline: &wgpu::ComputePipeline| {
+            pass.set_bind_group(0, group, &[(self.stride * (first + i as u64)) as u32]);
+            pass.set_pipeline(pipeline);
+            let (gx, gy) = groups(levels[i].scan_len.div_ceil(SCAN_TILE));
+            ctx.dispatch(pass, gx, gy, 1);
+        };
+        for i in 0..levels.len() - 1 {
+            dispatch(i, &buf.kernels.scan_reduce);
+        }
+        for i in (0..levels.len()).rev() {
+            dispatch(i, &buf.kernels.scan_down);
+        }
+    }
+
     /// Encode an exclusive prefix sum of the first `count` entries of `buf.hist`, in place
-    /// (one workgroup; uniform slot 8 of the buffers).
+    /// (its own uniform slots of the buffers).
     pub fn encode_scan(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, buf: &SortBuffers, count: u32) {
-        let params = SortParams { count, shift: 0, blocks: 0, scan_len: count };
-        ctx.queue.write_buffer(&buf.params, self.stride * 8, bytemuck::bytes_of(&params));
+        let first = PASS_SLOTS + MAX_LEVELS as u64;
+        let levels = self.write_levels(ctx, buf, first, count);
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
-        pass.set_bind_group(0, &buf.bind_groups[0], &[(self.stride * 8) as u32]);
-        pass.set_pipeline(&buf.kernels.scan);
-        ctx.dispatch(&mut pass, 1, 1, 1);
+        self.encode_levels(ctx, &mut pass, buf, &buf.bind_groups[0], first, &levels);
     }
 }
 
@@ -326,12 +420,34 @@ pub fn sort_pairs(
     Ok((keys, vals))
 }
 
+/// The exclusive prefix sum of `values` on the GPU (uploading and reading back), by the sort's
+/// scan: the entry point of the tests.
+pub fn exclusive_scan(ctx: &GpuContext, sort: &RadixSort, values: &[u32]) -> Result<Vec<u32>, GpuError> {
+    let count = u32::try_from(values.len()).map_err(|_| GpuError::Unsupported("more than 2³² entries".into()))?;
+    let buf = sort.buffers(ctx, count)?;
+    if count == 0 {
+        return Ok(Vec::new());
+    }
+    crate::split::write_u32(ctx, &buf.hist, buf.split, values);
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scan") });
+    sort.encode_scan(ctx, &mut encoder, &buf, count);
+    ctx.submit(encoder.finish());
+    buf.read(ctx, &buf.hist, 0..u64::from(count))
+}
+
 /// The sort's bindings for arrays cut as `split` (checked against `sort_wgsl`'s by a test).
 fn layout_entries(split: Split) -> Vec<wgpu::BindGroupLayoutEntry> {
     let params = crate::context::params_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
     let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
-    let mut entries =
-        vec![params, storage(1, true), storage(2, true), storage(3, false), storage(4, false), storage(5, false)];
+    let mut entries = vec![
+        params,
+        storage(1, true),
+        storage(2, true),
+        storage(3, false),
+        storage(4, false),
+        storage(5, false),
+        storage(6, false),
+    ];
     entries.extend(split_layout(split).extra_entries(wgpu::ShaderStages::COMPUTE));
     entries
 }
@@ -344,8 +460,13 @@ impl SortKernels {
         let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split));
         let (layout, pipeline_layout) = crate::context::layouts(device, "sort", &layout_entries(split));
         let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
-        let kernels =
-            Self { histogram: pipeline("histogram"), scan: pipeline("scan"), scatter: pipeline("scatter"), layout };
+        let kernels = Self {
+            histogram: pipeline("histogram"),
+            scan_reduce: pipeline("scan_reduce"),
+            scan_down: pipeline("scan_down"),
+            scatter: pipeline("scatter"),
+            layout,
+        };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
@@ -368,6 +489,21 @@ mod tests {
         expected.sort_by_key(|&(key, _)| key); // stable
         assert_eq!(k, expected.iter().map(|e| e.0).collect::<Vec<_>>());
         assert_eq!(v, expected.iter().map(|e| e.1).collect::<Vec<_>>());
+    }
+
+    /// Each level holds its tiles' sums, packed one after another, up to a single tile.
+    #[test]
+    fn scan_levels_reduce_to_one_tile() {
+        let lens = |n| scan_levels(n).iter().map(|l| (l.scan_len, l.scan_in, l.scan_out)).collect::<Vec<_>>();
+        assert_eq!(lens(0), [(0, FROM_HIST, TOP)]);
+        assert_eq!(lens(SCAN_TILE), [(SCAN_TILE, FROM_HIST, TOP)]);
+        assert_eq!(lens(SCAN_TILE + 1), [(SCAN_TILE + 1, FROM_HIST, 0), (2, 0, TOP)]);
+        let n = SCAN_TILE * SCAN_TILE + 1;
+        assert_eq!(lens(n), [(n, FROM_HIST, 0), (SCAN_TILE + 1, 0, SCAN_TILE + 1), (2, SCAN_TILE + 1, TOP)]);
+        assert_eq!(partials_len(n), u64::from(SCAN_TILE) + 3);
+        assert_eq!(scan_levels(u32::MAX).len(), MAX_LEVELS);
+        // A 6.1 M-key sort's histogram: 381,264 entries in 373 tiles, whose sums are one tile.
+        assert_eq!(lens(16 * 6_100_000u32.div_ceil(BLOCK)), [(381_264, FROM_HIST, 0), (373, 0, TOP)]);
     }
 
     #[test]

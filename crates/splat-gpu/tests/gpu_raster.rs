@@ -14,7 +14,7 @@ use splat_core::raster::{
 use splat_core::rng::SplitMix64;
 use splat_core::trainer::Preset;
 use splat_core::{Camera, Scene};
-use splat_gpu::sort::{cpu_radix_sort, depth_key, sort_pairs};
+use splat_gpu::sort::{SCAN_TILE, cpu_radix_sort, depth_key, exclusive_scan, sort_pairs};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
 use std::sync::OnceLock;
 
@@ -31,9 +31,10 @@ fn cpu_sorted(keys: &[u32], bits: u32) -> (Vec<u32>, Vec<u32>) {
 
 /// The GPU sort equals the CPU sort (keys and the stable order of values) on random keys of
 /// sizes around block boundaries and on adversarial ones: all equal, reversed, few distinct,
-/// depth keys with NaN and negative depths filtered out before sorting.
+/// depth keys with NaN and negative depths filtered out before sorting; and the scan it is
+/// built from equals the CPU's.
 #[test]
-fn gpu_sort_equals_the_cpu_sort() {
+fn gpu_sort_and_scan_equal_the_cpu_ones() {
     let Some(ctx) = context() else { return };
     let sort = pipelines(ctx).sort();
     let mut rng = SplitMix64::new(7);
@@ -69,6 +70,15 @@ fn gpu_sort_equals_the_cpu_sort() {
         if bits == 32 {
             assert_eq!(gpu.1, std_sorted.iter().map(|p| p.1).collect::<Vec<_>>(), "{name}: not stable");
         }
+    }
+    // The scan the sort is built from, at the sizes where it gains a level (one tile, two
+    // levels, three), whole and split over bindings.
+    let t = SCAN_TILE as usize;
+    for (n, split) in [(1, false), (t, false), (t + 1, false), (300_001, false), (t * t + 5, false), (70_000, true)] {
+        let values: Vec<u32> = (0..n).map(|_| (rng.next_u64() % 1000) as u32).collect();
+        let expected: Vec<u32> = values.iter().scan(0u32, |sum, &v| Some(std::mem::replace(sum, *sum + v))).collect();
+        let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
+        assert_eq!(exclusive_scan(ctx, sort, &values).unwrap(), expected, "scan of {n}, split {split}");
     }
     // More parts than the adapter binds: refused with what fits, before any work.
     let tiny = GpuContext::new().unwrap().with_index_binding_limit(1024);
