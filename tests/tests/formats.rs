@@ -439,13 +439,93 @@ fn a_gltf_file_holds_splats_and_meshes_together() {
     assert_eq!(opened.world.meshes.len(), 1);
     assert_eq!(opened.world.meshes[0].0.triangles.len(), 2);
     let mesh = splat_io::mesh::read_mesh(&path).unwrap();
-    assert_eq!(mesh.triangles.len(), 2, "the mesh reader skips the splats and keeps the floor");
+    assert_eq!(mesh.triangle_count(), 2, "the mesh reader skips the splats and keeps the floor");
     // Without the floor the file is splats only; the mesh reader then finds no triangles.
     let splats_only = folder.join("splats.gltf");
     std::fs::write(&splats_only, &gltf).unwrap();
     assert!(splat_io::world::open_world(Some(&splats_only), Default::default()).unwrap().world.meshes.is_empty());
     let e = splat_io::mesh::read_mesh(&splats_only).unwrap_err().to_string();
     assert!(e.contains("no triangles"), "{e}");
+}
+
+/// three.js's GLTFExporter writes six quads, a material each (xtask/interop/make.mjs, the
+/// parameters named again here); each reads as glTF 2.0 §3.9 and its extensions define the
+/// material, mapped onto the mesh material's shares as `splat_io::mesh::gltf_material`
+/// documents: the masked quad (opacity 0.3, cutoff 0.5) draws nothing, the black blue channel
+/// that emits is read as `EMITTING_BLACK`, and the unread `KHR_materials_volume` is noted. A
+/// world file's keys override every part's.
+#[test]
+fn gltf_materials_read_as_three_js_writes_them() {
+    use splat_core::lighting::Material;
+    use splat_core::mesh::MeshMaterial;
+    let Some(dir) = interop_dir() else { return };
+    let path = dir.join("three-materials.glb");
+    let read = splat_io::mesh::read_mesh(&path).unwrap();
+    let matte =
+        |emissive: Vec3| Material { emissive, ambient: Vec3::splat(0.1), diffuse: Vec3::ONE, ..Material::DIFFUSE };
+    let standard = |c: Vec3, metallic: f32, roughness: f32, opacity: f32| MeshMaterial {
+        color: c,
+        shading: matte(Vec3::ZERO),
+        mirror: metallic,
+        transmission: 0.0,
+        ior: 1.5,
+        roughness,
+        opacity,
+    };
+    let black = splat_io::mesh::EMITTING_BLACK;
+    let expected = [
+        standard(Vec3::new(0.5, 0.25, 0.125), 0.0, 0.5, 1.0),
+        standard(Vec3::new(0.2, 0.4, 0.6), 0.25, 0.3, 0.4),
+        // Transmission is the dielectric (1 − metallic) share: 0.5 × 0.8.
+        MeshMaterial { transmission: 0.4, ior: 1.33, ..standard(Vec3::ONE, 0.5, 0.1, 1.0) },
+        MeshMaterial {
+            shading: matte(Vec3::new(0.25 * 4.0 / 0.5, 4.0 / 0.5, 0.5 * 4.0 / black)),
+            ..standard(Vec3::new(0.5, 0.5, black), 0.0, 1.0, 1.0)
+        },
+        MeshMaterial { shading: Material::EMISSIVE, ..standard(Vec3::new(0.3, 0.6, 0.9), 0.0, 0.9, 1.0) },
+    ];
+    let materials: Vec<MeshMaterial> = read.parts.iter().map(|p| p.material.expect("every quad has one")).collect();
+    assert_eq!(materials.len(), expected.len(), "{materials:#?}");
+    for (i, (got, want)) in materials.iter().zip(&expected).enumerate() {
+        let close = |a: Vec3, b: Vec3| (a - b).abs().max_element() <= 1e-6 * b.abs().max_element().max(1.0);
+        let scalars = [
+            (got.mirror, want.mirror),
+            (got.transmission, want.transmission),
+            (got.ior, want.ior),
+            (got.roughness, want.roughness),
+            (got.opacity, want.opacity),
+        ];
+        assert!(
+            close(got.color, want.color)
+                && close(got.shading.emissive, want.shading.emissive)
+                && close(got.shading.diffuse, want.shading.diffuse)
+                && close(got.shading.ambient, want.shading.ambient)
+                && scalars.iter().all(|(a, b)| (a - b).abs() <= 1e-6),
+            "quad {i}: {got:?}, expected {want:?}"
+        );
+    }
+    // Emission as glTF defines it: k_e ⊙ c = emissiveFactor × emissiveStrength.
+    let emitted = materials[3].shading.emissive * materials[3].color;
+    assert!((emitted - Vec3::new(1.0, 4.0, 2.0)).abs().max_element() < 1e-5, "{emitted}");
+    assert!(read.parts.iter().all(|p| p.mesh.triangles.len() == 2));
+    assert!(read.notes.iter().any(|n| n.contains("KHR_materials_volume")), "{:?}", read.notes);
+    // As a world of its own, and under a world file's keys.
+    let opened = splat_io::world::open_world(Some(&path), Default::default()).unwrap();
+    assert_eq!(opened.world.meshes.iter().map(|m| m.1).collect::<Vec<_>>(), materials);
+    assert_eq!(opened.notes, read.notes);
+    let folder = scratch_dir("gltf-materials");
+    let world = folder.join("world.toml");
+    let entry = format!(
+        "[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nfile = {:?}\ncolor = [0, 1, 0]\nroughness = 0.7\n",
+        path.to_str().unwrap()
+    );
+    std::fs::write(&world, entry).unwrap();
+    let spec = splat_io::world::read_world(&world).unwrap();
+    assert_eq!(spec.meshes.len(), expected.len());
+    for ((_, m), file) in spec.meshes.iter().zip(&materials) {
+        assert_eq!(*m, MeshMaterial { color: Vec3::Y, roughness: 0.7, ..*file });
+    }
+    assert!(spec.notes.iter().all(|n| n.starts_with("meshes[0]: ")) && spec.notes.len() == read.notes.len());
 }
 
 /// splat-transform reads Postshot's `antialiased 1` and writes the mode in every format (Brush's

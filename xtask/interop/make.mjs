@@ -1,7 +1,7 @@
 // Writes the files that splat-io's readers are tested on, with other implementations of the
 // formats: spz-js (spz version 2, compressed .ply) and PlayCanvas splat-transform (spz
-// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting, SOG) and
-// GaussianSplats3D (.ksplat). Run by `cargo xtask assets` as
+// versions 3 and 4, compressed .ply, glTF .glb with KHR_gaussian_splatting, SOG),
+// GaussianSplats3D (.ksplat) and three.js's GLTFExporter (meshes with glTF materials). Run by `cargo xtask assets` as
 //   node make.mjs OUT_DIR
 // in a folder where `npm ci` installed package-lock.json; OUT_DIR/source.ply must exist.
 import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
@@ -80,3 +80,35 @@ const ksplat = (level, sectionSize, blockSize, bucketSize, name) => {
 };
 for (const level of [0, 1, 2]) ksplat(level, 0, undefined, undefined, `gaussian-splats-3d-${level}.ksplat`);
 ksplat(1, 1000, 0.5, 64, 'gaussian-splats-3d-sections.ksplat');
+
+// three.js's GLTFExporter: six quads, one a material, as a three.js user exports them (.glb).
+// tests/tests/formats.rs names the same parameters. Colours are set in three.js's linear working
+// space, so the exporter writes them as given. Node has Blob but no FileReader, through which
+// the exporter reads its Blob.
+globalThis.FileReader ??= class {
+    readAsArrayBuffer(blob) {
+        blob.arrayBuffer().then((bytes) => {
+            this.result = bytes;
+            this.onloadend();
+        });
+    }
+};
+const THREE = await import('three');
+const { GLTFExporter } = await import('three/examples/jsm/exporters/GLTFExporter.js');
+const rgb = (r, g, b) => new THREE.Color().setRGB(r, g, b, THREE.LinearSRGBColorSpace);
+const materials = [
+    new THREE.MeshStandardMaterial({ color: rgb(0.5, 0.25, 0.125), metalness: 0, roughness: 0.5 }),
+    new THREE.MeshStandardMaterial({ color: rgb(0.2, 0.4, 0.6), transparent: true, opacity: 0.4, metalness: 0.25, roughness: 0.3 }),
+    new THREE.MeshStandardMaterial({ color: rgb(0.9, 0.9, 0.9), alphaTest: 0.5, opacity: 0.3 }),
+    new THREE.MeshPhysicalMaterial({ color: rgb(1, 1, 1), transmission: 0.8, ior: 1.33, metalness: 0.5, roughness: 0.1 }),
+    new THREE.MeshStandardMaterial({ color: rgb(0.5, 0.5, 0), emissive: rgb(0.25, 1, 0.5), emissiveIntensity: 4 }),
+    new THREE.MeshBasicMaterial({ color: rgb(0.3, 0.6, 0.9) }),
+];
+const world = new THREE.Scene();
+materials.forEach((material, i) => {
+    const quad = new THREE.Mesh(new THREE.PlaneGeometry(1, 1), material);
+    quad.position.set(1.5 * i, 0, 0);
+    world.add(quad);
+});
+const glb = await new GLTFExporter().parseAsync(world, { binary: true });
+writeFileSync(join(out, 'three-materials.glb'), Buffer.from(glb));

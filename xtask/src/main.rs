@@ -31,7 +31,7 @@ fn main() -> Result<()> {
                  fixtures     regenerate fixtures/*.ply and fixtures/*.cameras.json\n  \
                  bless        re-render the golden images in fixtures/golden/\n  \
                  assets       fetch and verify the bonsai capture into target/assets/, and write\n               \
-                 files of other tools (npm: splat-transform, spz-js, gaussian-splats-3d; PyPI: usd-core)\n               \
+                 files of other tools (npm: splat-transform, spz-js, gaussian-splats-3d, three; PyPI: usd-core)\n               \
                  into target/interop/\n  \
                  power        run the full power study of the statistical suites (every injected error;\n               \
                  `test` runs the asserted ones) and write its table into docs/power.md\n  \
@@ -839,7 +839,8 @@ fn assets() -> Result<PathBuf> {
 const INTEROP_SOURCES: &str = "xtask/interop";
 
 /// Write `target/interop/`: `source.ply` (the SH degree 3 cloud scene) and what other
-/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb, SOG, .ksplat, USD), for the reader tests in
+/// implementations make of it (spz versions 2–4, compressed .ply, glTF .glb, SOG, .ksplat, USD), and three.js's
+/// glTF meshes with materials, for the reader tests in
 /// tests/tests/formats.rs. Installs Node.js (Debian's nodejs, npm) when missing and root.
 fn interop() -> Result<PathBuf> {
     let dir = root().join("target/interop");

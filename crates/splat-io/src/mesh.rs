@@ -4,27 +4,57 @@
 //! OBJ: every object and group, polygons fanned into triangles, normals where the file has them;
 //! `mtllib` is ignored (materials come from the world file). glTF: every triangle primitive of
 //! the default scene (or the first), each node's transform applied, buffers from the `.glb`
-//! binary chunk, a file beside the `.gltf`, or a base64 `data:` URI.
+//! binary chunk, a file beside the `.gltf`, or a base64 `data:` URI; one part per material,
+//! read as [`gltf_material`] maps it.
 
 use crate::{Error, ErrorKind};
 use glam::{Mat4, Vec3};
-use splat_core::mesh::TriangleMesh;
+use splat_core::lighting::Material;
+use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use std::path::Path;
 
+/// The triangles of one material of a mesh file.
+#[derive(Clone, Debug, Default)]
+pub struct MeshPart {
+    /// The triangles, in the file's units.
+    pub mesh: TriangleMesh,
+    /// The file's material ([`gltf_material`]); `None` where the file gives none (an OBJ, a
+    /// glTF primitive without a material): the world's, else the matte default.
+    pub material: Option<MeshMaterial>,
+}
+
+/// A mesh file read: its parts, and what of its materials this renderer does not represent.
+#[derive(Clone, Debug, Default)]
+pub struct MeshRead {
+    /// One part per material, in the order the file first uses them.
+    pub parts: Vec<MeshPart>,
+    /// What was not read (textures, vertex colours, extensions), for the user.
+    pub notes: Vec<String>,
+}
+
+impl MeshRead {
+    /// Every triangle of every part.
+    pub fn triangle_count(&self) -> usize {
+        self.parts.iter().map(|p| p.mesh.triangles.len()).sum()
+    }
+}
+
 /// Read a mesh, choosing the format by extension (`.obj`, `.gltf`, `.glb`).
-pub fn read_mesh(path: &Path) -> Result<TriangleMesh, Error> {
+pub fn read_mesh(path: &Path) -> Result<MeshRead, Error> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let bytes = crate::read_file(path)?;
-    let mesh = match ext.as_deref() {
-        Some("obj") => parse_obj(&bytes),
+    let read = match ext.as_deref() {
+        Some("obj") => {
+            parse_obj(&bytes).map(|mesh| MeshRead { parts: vec![MeshPart { mesh, material: None }], notes: Vec::new() })
+        }
         Some("gltf" | "glb") => parse_gltf(&bytes, path.parent().unwrap_or(Path::new("."))),
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: ".obj, .gltf or .glb" })),
     };
-    let mesh = mesh.and_then(|m| {
-        m.validate()?;
-        if m.triangles.is_empty() { Err("the file holds no triangles".into()) } else { Ok(m) }
+    let read = read.and_then(|r| {
+        r.parts.iter().try_for_each(|p| p.mesh.validate())?;
+        if r.triangle_count() == 0 { Err("the file holds no triangles".into()) } else { Ok(r) }
     });
-    mesh.map_err(|m| Error::new(path, ErrorKind::Mesh(m)))
+    read.map_err(|m| Error::new(path, ErrorKind::Mesh(m)))
 }
 
 /// Parse OBJ text: all models into one mesh; normals only when every model has them.
@@ -55,8 +85,9 @@ pub fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, String> {
 }
 
 /// Parse a glTF 2.0 document (`.gltf` JSON or `.glb`); external buffers are read relative to
-/// `base`.
-pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<TriangleMesh, String> {
+/// `base`. Primitives of a material that draws nothing (blended at alpha 0, masked below its
+/// cutoff) are left out.
+pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<MeshRead, String> {
     let raw = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| format!("glTF: {e}"))?;
     let mut json = raw.document.into_json();
     // Primitives with attributes gltf-json cannot name are the splats of KHR_gaussian_splatting
@@ -116,8 +147,16 @@ pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<TriangleMesh, String> {
         Some(s) => s.nodes().collect(),
         None => gltf.document.nodes().collect(),
     };
-    let mut mesh = TriangleMesh::default();
-    let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut notes = Vec::new();
+    let materials =
+        gltf.document.materials().map(|m| gltf_material(&m, &mut notes)).collect::<Result<Vec<_>, String>>()?;
+    let unread: Vec<&str> = gltf.document.extensions_used().filter(|e| !READ_EXTENSIONS.contains(e)).collect();
+    if !unread.is_empty() {
+        notes.push(format!("glTF extensions not read: {}", unread.join(", ")));
+    }
+    let mut parts = Parts { materials, parts: Vec::new(), colours: false };
+    // Depth first, in the document's order: a node, then its children in turn.
+    let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
     let mut visited = 0usize;
     while let Some((node, parent)) = stack.pop() {
         visited += 1;
@@ -126,45 +165,174 @@ pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<TriangleMesh, String> {
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if let Some(m) = node.mesh() {
-            append_gltf_mesh(&mut mesh, &m, world, &buffers)?;
+            parts.append(&m, world, &buffers)?;
         }
-        stack.extend(node.children().map(|c| (c, world)));
+        let children: Vec<gltf::Node> = node.children().collect();
+        stack.extend(children.into_iter().rev().map(|c| (c, world)));
     }
-    Ok(mesh)
+    if parts.colours {
+        notes.push("glTF vertex colours (COLOR_0) are not read".into());
+    }
+    Ok(MeshRead { parts: parts.parts.into_iter().map(|(_, part)| part).collect(), notes })
 }
 
-/// Append every triangle primitive of `m` under transform `world`.
-fn append_gltf_mesh(mesh: &mut TriangleMesh, m: &gltf::Mesh, world: Mat4, buffers: &[Vec<u8>]) -> Result<(), String> {
-    let normal_map = glam::Mat3::from_mat4(world).inverse().transpose();
-    for primitive in m.primitives() {
-        if primitive.mode() != gltf::mesh::Mode::Triangles {
-            continue;
-        }
-        let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-        let positions: Vec<Vec3> = reader
-            .read_positions()
-            .ok_or_else(|| format!("glTF mesh {} has a primitive without positions", m.index()))?
-            .map(|p| world.transform_point3(Vec3::from(p)))
-            .collect();
-        let normals: Option<Vec<Vec3>> =
-            reader.read_normals().map(|n| n.map(|n| (normal_map * Vec3::from(n)).normalize_or_zero()).collect());
-        let count = positions.len() as u32;
-        let indices: Vec<u32> = match reader.read_indices() {
-            Some(i) => i.into_u32().collect(),
-            None => (0..count).collect(),
-        };
-        if let Some(&bad) = indices.iter().find(|&&v| v >= count) {
-            return Err(format!("glTF mesh {} indexes vertex {bad} of {count}", m.index()));
-        }
-        // Normals for every vertex of the mesh or for none.
-        match (&normals, mesh.positions.is_empty() || !mesh.normals.is_empty()) {
-            (Some(n), true) if n.len() == positions.len() => mesh.normals.extend(n),
-            _ => mesh.normals.clear(),
-        }
-        let base = mesh.positions.len() as u32;
-        mesh.positions.extend(positions);
-        mesh.triangles.extend(indices.chunks_exact(3).map(|t| [base + t[0], base + t[1], base + t[2]]));
+/// The glTF extensions [`gltf_material`] reads (`KHR_gaussian_splatting` is read by
+/// [`crate::gltf_splats`]).
+const READ_EXTENSIONS: [&str; 5] = [
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_unlit",
+    "KHR_gaussian_splatting",
+];
+
+/// A glTF material (glTF 2.0 §3.9, metallic–roughness) as this renderer's, or `None` for one
+/// that draws nothing. Each factor maps onto [`MeshMaterial`]'s shares as the path tracer reads
+/// them ([`splat_core::path`]: a Lambertian lobe of albedo k_d ⊙ c, an untinted GGX conductor,
+/// a dielectric, GGX α = roughness² as in glTF):
+///
+/// - c = `baseColorFactor`.rgb; the conductor share (`mirror`) is `metallicFactor`, the
+///   dielectric's (`transmission`) (1 − metallic) × `KHR_materials_transmission`, the rest
+///   Lambertian with k_d = 1 (albedo c) and the matte default's ambient stand-in k_a = 0.1;
+///   `roughness` = `roughnessFactor`; `ior` = `KHR_materials_ior` (1.5).
+/// - Emission k_e ⊙ c = `emissiveFactor` × `KHR_materials_emissive_strength`, so k_e = that ÷ c
+///   (a black channel that emits is read as [`EMITTING_BLACK`]); `KHR_materials_unlit`: c
+///   emitted, unlit.
+/// - Opacity: `baseColorFactor`.a for `BLEND` (0 draws nothing), 1 for `OPAQUE`, and for
+///   `MASK` 1 at or above `alphaCutoff` (0.5), else nothing.
+///
+/// Not represented: textures (the factors alone are read) and a metal's tint (the conductor is
+/// untinted), both noted; the dielectric's specular layer (F₀ = 0.04).
+pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Option<MeshMaterial>, String> {
+    let name = m.index().map_or("the default material".to_string(), |i| format!("material {i}"));
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, a] = pbr.base_color_factor();
+    let opacity = match m.alpha_mode() {
+        gltf::material::AlphaMode::Opaque => 1.0,
+        gltf::material::AlphaMode::Mask if a >= m.alpha_cutoff().unwrap_or(0.5) => 1.0,
+        gltf::material::AlphaMode::Mask => return Ok(None),
+        gltf::material::AlphaMode::Blend if a > 0.0 => a.min(1.0),
+        gltf::material::AlphaMode::Blend => return Ok(None),
+    };
+    let textures = [
+        ("base colour", pbr.base_color_texture().is_some()),
+        ("metallic-roughness", pbr.metallic_roughness_texture().is_some()),
+        ("emissive", m.emissive_texture().is_some()),
+        ("normal", m.normal_texture().is_some()),
+        ("transmission", m.transmission().is_some_and(|t| t.transmission_texture().is_some())),
+    ];
+    let unread: Vec<&str> = textures.iter().filter(|t| t.1).map(|t| t.0).collect();
+    if !unread.is_empty() {
+        notes.push(format!("glTF {name}: {} textures not read (their factors are)", unread.join(", ")));
     }
+    let emission = Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
+    // A black channel that emits reflects 10⁻⁶ of the light instead, so that k_e ⊙ c can be
+    // the emission.
+    let emits = emission.cmpgt(Vec3::ZERO);
+    let base = Vec3::new(r, g, b);
+    let c = Vec3::select(emits & base.cmpeq(Vec3::ZERO), Vec3::splat(EMITTING_BLACK), base);
+    let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
+    let transmission = m.transmission().map_or(0.0, |t| t.transmission_factor().clamp(0.0, 1.0));
+    let emissive = Vec3::select(emits, emission / c, Vec3::ZERO);
+    if metallic > 0.0 && c.min_element() < c.max_element() {
+        notes.push(format!("glTF {name}: a metal's tint {c} is not represented (the mirror share is untinted)"));
+    }
+    let shading = if m.unlit() {
+        Material::EMISSIVE
+    } else {
+        Material { emissive, ambient: Vec3::splat(0.1), diffuse: Vec3::ONE, ..Material::DIFFUSE }
+    };
+    let material = MeshMaterial {
+        color: c,
+        shading,
+        mirror: if m.unlit() { 0.0 } else { metallic },
+        transmission: if m.unlit() { 0.0 } else { (1.0 - metallic) * transmission },
+        ior: m.ior().unwrap_or(1.5),
+        roughness: pbr.roughness_factor().clamp(0.0, 1.0),
+        opacity,
+    };
+    material.validate().map_err(|e| format!("glTF {name}: {e}"))?;
+    Ok(Some(material))
+}
+
+/// The base colour an emitting black channel is read as: k_e ⊙ c is a mesh's emission, so c
+/// cannot be 0 where it emits; 10⁻⁶ reflects nothing visible.
+pub const EMITTING_BLACK: f32 = 1e-6;
+
+/// The parts of a glTF file as its primitives are appended: keyed by material index.
+struct Parts {
+    /// Each material of the file as [`gltf_material`] read it (`None`: draws nothing).
+    materials: Vec<Option<MeshMaterial>>,
+    parts: Vec<(Option<usize>, MeshPart)>,
+    /// Whether a primitive had vertex colours.
+    colours: bool,
+}
+
+impl Parts {
+    /// Append every triangle primitive of `m` under transform `world` to its material's part.
+    fn append(&mut self, m: &gltf::Mesh, world: Mat4, buffers: &[Vec<u8>]) -> Result<(), String> {
+        for primitive in m.primitives() {
+            let index = primitive.material().index();
+            let material = match index {
+                None => None,
+                Some(i) => match self.materials.get(i) {
+                    Some(Some(material)) => Some(*material),
+                    Some(None) => continue,
+                    None => {
+                        return Err(format!("glTF mesh {} names material {i} of {}", m.index(), self.materials.len()));
+                    }
+                },
+            };
+            self.colours |= primitive.get(&gltf::Semantic::Colors(0)).is_some();
+            let at = match self.parts.iter().position(|(k, _)| *k == index) {
+                Some(at) => at,
+                None => {
+                    self.parts.push((index, MeshPart { mesh: TriangleMesh::default(), material }));
+                    self.parts.len() - 1
+                }
+            };
+            append_primitive(&mut self.parts[at].1.mesh, m, &primitive, world, buffers)?;
+        }
+        Ok(())
+    }
+}
+
+/// Append a triangle primitive of `m` under transform `world` (others are skipped).
+fn append_primitive(
+    mesh: &mut TriangleMesh,
+    m: &gltf::Mesh,
+    primitive: &gltf::Primitive,
+    world: Mat4,
+    buffers: &[Vec<u8>],
+) -> Result<(), String> {
+    if primitive.mode() != gltf::mesh::Mode::Triangles {
+        return Ok(());
+    }
+    let normal_map = glam::Mat3::from_mat4(world).inverse().transpose();
+    let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let positions: Vec<Vec3> = reader
+        .read_positions()
+        .ok_or_else(|| format!("glTF mesh {} has a primitive without positions", m.index()))?
+        .map(|p| world.transform_point3(Vec3::from(p)))
+        .collect();
+    let normals: Option<Vec<Vec3>> =
+        reader.read_normals().map(|n| n.map(|n| (normal_map * Vec3::from(n)).normalize_or_zero()).collect());
+    let count = positions.len() as u32;
+    let indices: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None => (0..count).collect(),
+    };
+    if let Some(&bad) = indices.iter().find(|&&v| v >= count) {
+        return Err(format!("glTF mesh {} indexes vertex {bad} of {count}", m.index()));
+    }
+    // Normals for every vertex of the part or for none.
+    match (&normals, mesh.positions.is_empty() || !mesh.normals.is_empty()) {
+        (Some(n), true) if n.len() == positions.len() => mesh.normals.extend(n),
+        _ => mesh.normals.clear(),
+    }
+    let base = mesh.positions.len() as u32;
+    mesh.positions.extend(positions);
+    mesh.triangles.extend(indices.chunks_exact(3).map(|t| [base + t[0], base + t[1], base + t[2]]));
     if !mesh.normals.is_empty() && mesh.normals.len() != mesh.positions.len() {
         mesh.normals.clear();
     }
@@ -237,12 +405,58 @@ mod tests {
             "bufferViews":[{{"buffer":0,"byteLength":36}}],
             "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#
         );
-        let mesh = parse_gltf(json.as_bytes(), Path::new(".")).unwrap();
+        let read = parse_gltf(json.as_bytes(), Path::new(".")).unwrap();
+        assert_eq!(read.parts.len(), 1);
+        assert_eq!(read.parts[0].material, None, "no material: the world's");
+        let mesh = &read.parts[0].mesh;
         assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
         assert_eq!(mesh.positions[1], Vec3::new(1.0, 0.0, 2.0));
         // A buffer shorter than declared is refused, not read past its end.
         let short = json.replace("\"byteLength\":36,\"uri\"", "\"byteLength\":48,\"uri\"");
         assert!(parse_gltf(short.as_bytes(), Path::new(".")).unwrap_err().contains("fewer than"));
+    }
+
+    /// One part per material in the order of first use (two primitives of material 0 share
+    /// one), the default material's primitive left to the world (`None`), a blended material
+    /// at alpha 0 drawing nothing, a texture noted, and a material the renderer cannot hold
+    /// (a NaN factor) refused by name.
+    #[test]
+    fn gltf_primitives_are_parted_by_material() {
+        let floats: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        let bytes: Vec<u8> = floats.iter().flat_map(|f| f.to_le_bytes()).collect();
+        let b64 = base64_encode(&bytes);
+        let primitive = |material: &str| format!(r#"{{"attributes":{{"POSITION":0}}{material}}}"#);
+        let primitives = [
+            primitive(r#","material":1"#),
+            primitive(""),
+            primitive(r#","material":0"#),
+            primitive(r#","material":1"#),
+            primitive(r#","material":2"#),
+        ]
+        .join(",");
+        let json = |red: &str| {
+            format!(
+                r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+                "meshes":[{{"primitives":[{primitives}]}}],
+                "materials":[
+                  {{"pbrMetallicRoughness":{{"baseColorFactor":[{red},0.5,0.5,1],"baseColorTexture":{{"index":0}}}}}},
+                  {{"pbrMetallicRoughness":{{"baseColorFactor":[0.1,0.2,0.3,0.6],"metallicFactor":0}},"alphaMode":"BLEND"}},
+                  {{"pbrMetallicRoughness":{{"baseColorFactor":[1,1,1,0]}},"alphaMode":"BLEND"}}],
+                "textures":[{{"source":0}}],"images":[{{"uri":"nowhere.png"}}],
+                "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
+                "bufferViews":[{{"buffer":0,"byteLength":36}}],
+                "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#
+            )
+        };
+        let read = parse_gltf(json("0.9").as_bytes(), Path::new(".")).unwrap();
+        let summary: Vec<(usize, Option<f32>)> =
+            read.parts.iter().map(|p| (p.mesh.triangles.len(), p.material.map(|m| m.opacity))).collect();
+        assert_eq!(summary, [(2, Some(0.6)), (1, None), (1, Some(1.0))]);
+        assert_eq!(read.parts[0].material.unwrap().color, Vec3::new(0.1, 0.2, 0.3));
+        assert_eq!(read.parts[2].material.unwrap().mirror, 1.0, "glTF's metallicFactor defaults to 1");
+        assert!(read.notes.iter().any(|n| n.contains("material 0: base colour textures not read")), "{:?}", read.notes);
+        let e = parse_gltf(json("-1").as_bytes(), Path::new(".")).unwrap_err();
+        assert!(e.contains("glTF material 0") && e.contains("colour"), "{e}");
     }
 
     #[test]

@@ -57,7 +57,9 @@
 //! ```
 //!
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
-//! without one is fully emissive, a mesh without one matte (ambient 0.1, diffuse 0.9). Particle
+//! without one is fully emissive, a mesh without one matte (ambient 0.1, diffuse 0.9). A glTF
+//! file's triangles are a mesh for each of its materials, read as
+//! [`crate::mesh::gltf_material`] maps them, each key of the entry overriding them. Particle
 //! ids run over the sets in file order. `max_bounces` (top level, default 3) limits mirror and
 //! glass bounces. `iso_threshold` and `raster_iso_threshold` (top level, default 0.7 each) are the
 //! transmittance at which the ray tracers and splatting pick a pixel's surface
@@ -92,7 +94,7 @@ pub struct WorldSpec {
     /// The file's background colour.
     pub background: Option<Vec3>,
     /// Meshes in world space with their materials.
-    pub meshes: Vec<(TriangleMesh, MeshMaterial)>,
+    pub meshes: Vec<PlacedMesh>,
     /// The file's bounce limit.
     pub max_bounces: Option<u32>,
     /// The file's iso-opacity threshold of the ray tracers.
@@ -103,6 +105,9 @@ pub struct WorldSpec {
     pub environment: Option<Environment>,
     /// The camera's thin lens (`aperture` and `focus_distance` in `[camera]`), if any.
     pub lens: Option<ThinLens>,
+    /// What the mesh readers could not represent (glTF textures, vertex colours, extensions),
+    /// for front ends to print.
+    pub notes: Vec<String>,
 }
 
 impl WorldSpec {
@@ -130,6 +135,7 @@ impl WorldSpec {
             raster_iso_threshold: None,
             environment: None,
             lens: None,
+            notes: Vec::new(),
         }
     }
 }
@@ -318,9 +324,13 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
         return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new(), notes: Vec::new() });
     };
     let (world, skipped_properties, notes) = if is_world_file(path) {
-        (read_world_as(path, options.screen_filter)?, Vec::new(), Vec::new())
+        let world = read_world_as(path, options.screen_filter)?;
+        let notes = world.notes.clone();
+        (world, Vec::new(), notes)
     } else if matches!(crate::extension(path).as_deref(), Some("glb" | "gltf")) {
-        (read_gltf_world(path, options)?, Vec::new(), Vec::new())
+        let world = read_gltf_world(path, options)?;
+        let notes = world.notes.clone();
+        (world, Vec::new(), notes)
     } else {
         let read = crate::read_scene_with(path, options)?;
         (WorldSpec::of(read.scene), read.skipped_properties, read.notes)
@@ -333,8 +343,8 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
 }
 
 /// A glTF file as a world: its `KHR_gaussian_splatting` splats ([`crate::gltf_splats`]) and
-/// its triangles as one matte mesh ([`crate::mesh::parse_gltf`], which skips the splats), either
-/// of which may be absent; glTF materials are not read (a world file gives meshes theirs).
+/// its triangles, a mesh for each material ([`crate::mesh::parse_gltf`], which skips the
+/// splats; primitives without a material are matte), either of which may be absent.
 fn read_gltf_world(path: &Path, options: crate::ReadOptions) -> Result<WorldSpec, Error> {
     let bytes = crate::read_file(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
@@ -342,12 +352,13 @@ fn read_gltf_world(path: &Path, options: crate::ReadOptions) -> Result<WorldSpec
     if let Some(filter) = options.screen_filter {
         scene.screen_filter = filter;
     }
-    let mesh = crate::mesh::parse_gltf(&bytes, base).map_err(|m| Error::new(path, ErrorKind::Mesh(m)))?;
+    let read = crate::mesh::parse_gltf(&bytes, base).map_err(|m| Error::new(path, ErrorKind::Mesh(m)))?;
     let mut world = WorldSpec::of(scene);
-    if !mesh.triangles.is_empty() {
-        mesh.validate().map_err(|m| Error::new(path, ErrorKind::Mesh(m)))?;
-        world.meshes.push((mesh, MeshMaterial::default()));
+    for part in read.parts.into_iter().filter(|p| !p.mesh.triangles.is_empty()) {
+        part.mesh.validate().map_err(|m| Error::new(path, ErrorKind::Mesh(m)))?;
+        world.meshes.push((part.mesh, part.material.unwrap_or_default()));
     }
+    world.notes = read.notes;
     Ok(world)
 }
 
@@ -439,9 +450,11 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
     if background.is_some_and(|b| !b.is_finite()) {
         return Err("background is not finite".to_string());
     }
-    let mut meshes = Vec::new();
+    let (mut meshes, mut notes) = (Vec::new(), Vec::new());
     for (i, m) in file.meshes.iter().enumerate() {
-        meshes.push(load_mesh(m, base).map_err(|e| format!("meshes[{i}]: {e}"))?);
+        let (parts, read_notes) = load_mesh(m, base).map_err(|e| format!("meshes[{i}]: {e}"))?;
+        meshes.extend(parts);
+        notes.extend(read_notes.into_iter().map(|n| format!("meshes[{i}]: {n}")));
     }
     if let Some(b) = file.max_bounces.filter(|&b| b > splat_core::settings::MAX_BOUNCES) {
         return Err(format!("max_bounces {b} is above {}", splat_core::settings::MAX_BOUNCES));
@@ -464,21 +477,28 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
         raster_iso_threshold: file.raster_iso_threshold,
         environment,
         lens,
+        notes,
     })
 }
 
-/// One mesh in world space with its material.
-fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), String> {
-    let mesh = match (&m.file, m.shape) {
+/// A mesh in world space with its material.
+pub type PlacedMesh = (TriangleMesh, MeshMaterial);
+
+/// One mesh entry in world space: a part for each material of its file, each with the file's
+/// material (or the matte default) under the keys the entry sets; and the reader's notes.
+fn load_mesh(m: &MeshFile, base: &Path) -> Result<(Vec<PlacedMesh>, Vec<String>), String> {
+    let shape =
+        |mesh| crate::mesh::MeshRead { parts: vec![crate::mesh::MeshPart { mesh, material: None }], notes: Vec::new() };
+    let read = match (&m.file, m.shape) {
         (Some(file), None) => crate::mesh::read_mesh(&base.join(file)).map_err(|e| named_file(file, e))?,
-        (None, Some(ShapeName::Plane)) => TriangleMesh::plane(),
-        (None, Some(ShapeName::Cube)) => TriangleMesh::cube(),
+        (None, Some(ShapeName::Plane)) => shape(TriangleMesh::plane()),
+        (None, Some(ShapeName::Cube)) => shape(TriangleMesh::cube()),
         (None, Some(ShapeName::Sphere)) => {
             let segments = m.segments.unwrap_or(48);
             if !(3..=4096).contains(&segments) {
                 return Err(format!("segments {segments} is outside 3..=4096"));
             }
-            TriangleMesh::sphere(segments, segments / 2)
+            shape(TriangleMesh::sphere(segments, segments / 2))
         }
         _ => return Err("give exactly one of shape = \"plane|cube|sphere\" or file = \"…\"".to_string()),
     };
@@ -487,19 +507,23 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(TriangleMesh, MeshMaterial), 
     if !(s.is_finite() && s.min_element() > 0.0) {
         return Err(format!("scale {s} must be finite and positive"));
     }
-    let mesh = mesh.transformed(glam::Affine3A::from_scale_rotation_translation(s, r, t));
-    let defaults = MeshMaterial::default();
-    let material = MeshMaterial {
-        color: m.color.map_or(defaults.color, Colour::rgb),
-        shading: m.material.as_ref().map_or(defaults.shading, material),
-        mirror: m.mirror.unwrap_or(0.0),
-        transmission: m.transmission.unwrap_or(0.0),
-        ior: m.ior.unwrap_or(defaults.ior),
-        roughness: m.roughness.unwrap_or(0.0),
-        opacity: m.opacity.unwrap_or(1.0),
-    };
-    material.validate()?;
-    Ok((mesh, material))
+    let placed = glam::Affine3A::from_scale_rotation_translation(s, r, t);
+    let mut parts = Vec::with_capacity(read.parts.len());
+    for part in read.parts {
+        let file = part.material.unwrap_or_default();
+        let material = MeshMaterial {
+            color: m.color.map_or(file.color, Colour::rgb),
+            shading: m.material.as_ref().map_or(file.shading, material),
+            mirror: m.mirror.unwrap_or(file.mirror),
+            transmission: m.transmission.unwrap_or(file.transmission),
+            ior: m.ior.unwrap_or(file.ior),
+            roughness: m.roughness.unwrap_or(file.roughness),
+            opacity: m.opacity.unwrap_or(file.opacity),
+        };
+        material.validate()?;
+        parts.push((part.mesh.transformed(placed), material));
+    }
+    Ok((parts, read.notes))
 }
 
 /// The particles of one set and, for a built-in scene, its camera.
