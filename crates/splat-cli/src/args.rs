@@ -383,9 +383,9 @@ pub struct SceneArgs {
     pub fov: f32,
     /// Where each frame's rays pass through the pixel: its centre, or a point drawn per frame
     /// from a Sobol sequence (a box filter: edges anti-aliased over the frames; Sun et al.
-    /// §4.2). The path tracer always samples the box.
-    #[arg(help_heading = "Camera", long, value_parser = pixel_filter_parser(), default_value = "center")]
-    pub pixel_filter: PixelFilter,
+    /// §4.2). The path tracer always samples the box [default: the world's, else center].
+    #[arg(help_heading = "Camera", long, value_parser = pixel_filter_parser())]
+    pub pixel_filter: Option<PixelFilter>,
     /// Thin-lens radius in world units: depth of field, integrated over the frames by every
     /// pipeline (overrides the world's camera) [default: the world's, else none].
     #[arg(help_heading = "Camera", long)]
@@ -695,7 +695,7 @@ impl SceneArgs {
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
             raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
-            sampling: CameraSampling { filter: self.pixel_filter, ..base.sampling },
+            sampling: CameraSampling { filter: self.pixel_filter.unwrap_or(base.sampling.filter), ..base.sampling },
             sh_storage: self.sh_storage,
             ..base
         }

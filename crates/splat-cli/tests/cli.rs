@@ -1739,6 +1739,31 @@ fn depth_of_field_and_the_box_filter_on_every_pipeline() {
     assert!(mean < 1e-5, "the GPU hybrid through a lens: mean difference {mean}");
 }
 
+/// A world file's `pixel_filter` is the render's unless `--pixel-filter` says otherwise: the
+/// world with `box` renders what the world without it renders under `--pixel-filter box`, and
+/// `--pixel-filter center` over it what the plain world renders.
+#[test]
+fn a_world_files_pixel_filter_is_the_default() {
+    let camera = "[camera]\neye = [0, 0.4, 3]\ntarget = [0, 0.4, 0]\n";
+    let (boxed, plain) = (scratch("filter-box.toml"), scratch("filter-plain.toml"));
+    std::fs::write(&boxed, format!("{camera}pixel_filter = \"box\"\n[[splats]]\nbuiltin = \"demo\"\n")).unwrap();
+    std::fs::write(&plain, format!("{camera}[[splats]]\nbuiltin = \"demo\"\n")).unwrap();
+    let render = |world: &PathBuf, extra: &[&str], name: &str| {
+        let out = scratch(name);
+        let mut args = vec!["render", world.to_str().unwrap(), "--width", "32", "--height", "24", "--spp", "4"];
+        args.extend_from_slice(&["--method", "exact", "--backend", "cpu", "-o", out.to_str().unwrap()]);
+        args.extend_from_slice(extra);
+        let o = splat(&args);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        npy(&out)
+    };
+    let world_box = render(&boxed, &[], "filter-world-box.npy");
+    assert_eq!(world_box, render(&plain, &["--pixel-filter", "box"], "filter-flag-box.npy"));
+    let centre = render(&plain, &[], "filter-plain.npy");
+    assert_eq!(render(&boxed, &["--pixel-filter", "center"], "filter-flag-center.npy"), centre);
+    assert!(rmse(&world_box, &centre) > 1e-3, "the box filter changed nothing");
+}
+
 /// `splat hit-distance` (vk_gaussian_splatting Lighting §1.4.3): a table row per surface and the
 /// four depth images side by side; the icosahedron's surface differs from the maximum density's.
 #[test]

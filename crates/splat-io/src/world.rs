@@ -17,6 +17,7 @@
 //! height = 480
 //! aperture = 0.03                   # thin-lens radius, every pipeline (0 or absent: pinhole)
 //! focus_distance = 3.5              # plane in focus (default: eye to target along the view)
+//! pixel_filter = "box"              # center (default) | box: a point of the pixel per frame
 //!
 //! [environment]                     # where paths escape (path tracer; default: the background)
 //! horizon = [0.6, 0.55, 0.5]        # or color = [r, g, b] for a constant environment
@@ -69,7 +70,7 @@ use crate::{Error, ErrorKind};
 use glam::{EulerRot, Quat, Vec3};
 use serde::Deserialize;
 use splat_core::RenderSettings;
-use splat_core::camera_sampling::ThinLens;
+use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, SplatSet};
 use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
@@ -105,15 +106,19 @@ pub struct WorldSpec {
     pub environment: Option<Environment>,
     /// The camera's thin lens (`aperture` and `focus_distance` in `[camera]`), if any.
     pub lens: Option<ThinLens>,
+    /// Where the camera's rays pass through their pixels (`pixel_filter` in `[camera]`).
+    pub pixel_filter: Option<PixelFilter>,
     /// What the mesh readers could not represent (glTF textures, vertex colours, extensions),
     /// for front ends to print.
     pub notes: Vec<String>,
 }
 
 impl WorldSpec {
-    /// `base` with what the file sets: its background, bounce limit and iso thresholds.
+    /// `base` with what the file sets: its background, bounce limit, iso thresholds and pixel
+    /// filter.
     pub fn settings(&self, base: RenderSettings) -> RenderSettings {
         RenderSettings {
+            sampling: CameraSampling { filter: self.pixel_filter.unwrap_or(base.sampling.filter), ..base.sampling },
             background: self.background.unwrap_or(base.background),
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
@@ -135,6 +140,7 @@ impl WorldSpec {
             raster_iso_threshold: None,
             environment: None,
             lens: None,
+            pixel_filter: None,
             notes: Vec::new(),
         }
     }
@@ -233,6 +239,7 @@ struct CameraFile {
     height: Option<u32>,
     aperture: Option<f32>,
     focus_distance: Option<f32>,
+    pixel_filter: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -466,6 +473,7 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
     }
     let environment = file.environment.as_ref().map(environment).transpose()?;
     let lens = file.camera.as_ref().and_then(|c| lens(c, camera.as_ref())).transpose()?;
+    let pixel_filter = file.camera.as_ref().and_then(|c| c.pixel_filter.as_deref()).map(pixel_filter).transpose()?;
     Ok(WorldSpec {
         scene,
         lighting,
@@ -477,6 +485,7 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
         raster_iso_threshold: file.raster_iso_threshold,
         environment,
         lens,
+        pixel_filter,
         notes,
     })
 }
@@ -679,6 +688,14 @@ fn lens(c: &CameraFile, camera: Option<&Camera>) -> Option<Result<ThinLens, Stri
     })
 }
 
+/// The pixel filter a world file names.
+fn pixel_filter(name: &str) -> Result<PixelFilter, String> {
+    PixelFilter::ALL.into_iter().find(|f| f.name() == name).ok_or_else(|| {
+        let names: Vec<&str> = PixelFilter::ALL.iter().map(|f| f.name()).collect();
+        format!("camera: pixel_filter \"{name}\" is not one of {}", names.join(", "))
+    })
+}
+
 fn camera_from(c: &CameraFile) -> Result<Camera, String> {
     let up = Vec3::from(c.up.unwrap_or([0.0, 1.0, 0.0]));
     Camera::look_at(
@@ -727,12 +744,15 @@ mod tests {
     }
 
     #[test]
-    fn environment_and_lens_are_read() {
+    fn environment_lens_and_pixel_filter_are_read() {
         let w = parse(
-            "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 1]\naperture = 0.1\n\
+            "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 1]\naperture = 0.1\npixel_filter = \"box\"\n\
              [environment]\nhorizon = [1, 0.5, 0]\nzenith = 0.2\n[[splats]]\nbuiltin = \"demo\"",
         )
         .unwrap();
+        assert_eq!(w.settings(RenderSettings::default()).sampling.filter, PixelFilter::Box);
+        let plain = parse("[[splats]]\nbuiltin = \"demo\"").unwrap();
+        assert_eq!(plain.settings(RenderSettings::default()).sampling.filter, PixelFilter::Center);
         let lens = w.lens.unwrap();
         assert_eq!(lens.aperture, 0.1);
         assert!((lens.focus_distance - 4.0).abs() < 1e-5, "eye to target: {}", lens.focus_distance);
@@ -770,6 +790,10 @@ mod tests {
             ("[[splats]]\nbuiltin = \"demo\"\nmaterial = { diffuse = -0.5 }", "non-negative"),
             ("[[splats]]\nbuiltin = \"demo\"\ncolour = 1", "unknown field"),
             ("[[splats]]\nbuiltin = \"demo\"\nsh_degree = 7", "above 3"),
+            (
+                "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 1]\npixel_filter = \"gauss\"\n[[splats]]\nbuiltin = \"demo\"",
+                "pixel_filter \"gauss\" is not one of center, box",
+            ),
             ("[[splats]]\nbuiltin = \"demo\"\n[shadows]\nkind = \"sorted\"\nk = 0", "shadow k"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nscale = 1", "meshes[0]: give exactly one of"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nmirror = 2", "meshes[0]: mirror 2"),
