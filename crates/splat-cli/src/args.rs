@@ -432,9 +432,9 @@ pub struct SceneArgs {
     pub normals: NormalArg,
     /// How the SH coefficients are stored (vk_gaussian_splatting's SH formats): f16 halves the
     /// GPU's largest scene array, u8 quarters it, each rounding the colours; the CPU reads the
-    /// same stored values.
-    #[arg(help_heading = "Scene and shading", long, value_parser = splat_view::sh_storage_parser(), default_value = "f32")]
-    pub sh_storage: ShStorage,
+    /// same stored values [default: the world's, else f32].
+    #[arg(help_heading = "Scene and shading", long, value_parser = splat_view::sh_storage_parser())]
+    pub sh_storage: Option<ShStorage>,
     /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8 [default: the
     /// --preset's, else 2].
     #[arg(help_heading = "Scene and shading", long)]
@@ -696,7 +696,7 @@ impl SceneArgs {
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
             raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
             sampling: CameraSampling { filter: self.pixel_filter.unwrap_or(base.sampling.filter), ..base.sampling },
-            sh_storage: self.sh_storage,
+            sh_storage: self.sh_storage.unwrap_or(base.sh_storage),
             ..base
         }
     }

@@ -1739,11 +1739,12 @@ fn depth_of_field_and_the_box_filter_on_every_pipeline() {
     assert!(mean < 1e-5, "the GPU hybrid through a lens: mean difference {mean}");
 }
 
-/// A world file's `pixel_filter` is the render's unless `--pixel-filter` says otherwise: the
-/// world with `box` renders what the world without it renders under `--pixel-filter box`, and
-/// `--pixel-filter center` over it what the plain world renders.
+/// A world file's `pixel_filter` and `sh_storage` are the render's unless the flags say
+/// otherwise: the world with `box` renders what the world without it renders under
+/// `--pixel-filter box`, and `--pixel-filter center` over it what the plain world renders; the
+/// same for `u8` storage of the SH-3 cloud.
 #[test]
-fn a_world_files_pixel_filter_is_the_default() {
+fn a_world_files_pixel_filter_and_sh_storage_are_the_defaults() {
     let camera = "[camera]\neye = [0, 0.4, 3]\ntarget = [0, 0.4, 0]\n";
     let (boxed, plain) = (scratch("filter-box.toml"), scratch("filter-plain.toml"));
     std::fs::write(&boxed, format!("{camera}pixel_filter = \"box\"\n[[splats]]\nbuiltin = \"demo\"\n")).unwrap();
@@ -1762,6 +1763,16 @@ fn a_world_files_pixel_filter_is_the_default() {
     let centre = render(&plain, &[], "filter-plain.npy");
     assert_eq!(render(&boxed, &["--pixel-filter", "center"], "filter-flag-center.npy"), centre);
     assert!(rmse(&world_box, &centre) > 1e-3, "the box filter changed nothing");
+    // The world's SH storage likewise: u8 in the file is `--sh-storage u8`, and the flag wins.
+    let u8 = scratch("storage-u8.toml");
+    std::fs::write(&u8, format!("sh_storage = \"u8\"\n{camera}[[splats]]\nbuiltin = \"cloud\"\n")).unwrap();
+    let cloud = scratch("storage-plain.toml");
+    std::fs::write(&cloud, format!("{camera}[[splats]]\nbuiltin = \"cloud\"\n")).unwrap();
+    let world_u8 = render(&u8, &[], "storage-world-u8.npy");
+    assert_eq!(world_u8, render(&cloud, &["--sh-storage", "u8"], "storage-flag-u8.npy"));
+    let f32 = render(&cloud, &[], "storage-plain.npy");
+    assert_eq!(render(&u8, &["--sh-storage", "f32"], "storage-flag-f32.npy"), f32);
+    assert!(world_u8 != f32, "u8 storage rounded nothing");
 }
 
 /// `splat hit-distance` (vk_gaussian_splatting Lighting §1.4.3): a table row per surface and the

@@ -4,6 +4,7 @@
 //! ```toml
 //! background = [0.02, 0.02, 0.03]
 //! look = "surface"                 # sorted methods: "surface" (lit once) or "volumetric"
+//! sh_storage = "f16"               # f32 (default) | f16 | u8: how the SH coefficients are stored
 //!
 //! [shadows]
 //! kind = "stochastic"              # none | sorted | stochastic | exact
@@ -64,7 +65,8 @@
 //! ids run over the sets in file order. `max_bounces` (top level, default 3) limits mirror and
 //! glass bounces. `iso_threshold` and `raster_iso_threshold` (top level, default 0.7 each) are the
 //! transmittance at which the ray tracers and splatting pick a pixel's surface
-//! (vk_gaussian_splatting Lighting §1.1: two values, one per panel).
+//! (vk_gaussian_splatting Lighting §1.1: two values, one per panel). What the file sets is the
+//! render's default, which the front ends' flags override ([`WorldSpec::settings`]).
 
 use crate::{Error, ErrorKind};
 use glam::{EulerRot, Quat, Vec3};
@@ -76,6 +78,7 @@ use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
 use splat_core::path::Environment;
 use splat_core::sh::Rotation;
+use splat_core::sh::ShStorage;
 use splat_core::{Camera, Scene, ScreenFilter};
 use std::path::{Path, PathBuf};
 
@@ -108,16 +111,19 @@ pub struct WorldSpec {
     pub lens: Option<ThinLens>,
     /// Where the camera's rays pass through their pixels (`pixel_filter` in `[camera]`).
     pub pixel_filter: Option<PixelFilter>,
+    /// How the SH coefficients are stored (`sh_storage`, top level).
+    pub sh_storage: Option<ShStorage>,
     /// What the mesh readers could not represent (glTF textures, vertex colours, extensions),
     /// for front ends to print.
     pub notes: Vec<String>,
 }
 
 impl WorldSpec {
-    /// `base` with what the file sets: its background, bounce limit, iso thresholds and pixel
-    /// filter.
+    /// `base` with what the file sets: its background, bounce limit, iso thresholds, pixel
+    /// filter and SH storage.
     pub fn settings(&self, base: RenderSettings) -> RenderSettings {
         RenderSettings {
+            sh_storage: self.sh_storage.unwrap_or(base.sh_storage),
             sampling: CameraSampling { filter: self.pixel_filter.unwrap_or(base.sampling.filter), ..base.sampling },
             background: self.background.unwrap_or(base.background),
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
@@ -141,6 +147,7 @@ impl WorldSpec {
             environment: None,
             lens: None,
             pixel_filter: None,
+            sh_storage: None,
             notes: Vec::new(),
         }
     }
@@ -162,6 +169,7 @@ struct WorldFile {
     max_bounces: Option<u32>,
     iso_threshold: Option<f32>,
     raster_iso_threshold: Option<f32>,
+    sh_storage: Option<String>,
     environment: Option<EnvironmentFile>,
 }
 
@@ -473,7 +481,9 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
     }
     let environment = file.environment.as_ref().map(environment).transpose()?;
     let lens = file.camera.as_ref().and_then(|c| lens(c, camera.as_ref())).transpose()?;
-    let pixel_filter = file.camera.as_ref().and_then(|c| c.pixel_filter.as_deref()).map(pixel_filter).transpose()?;
+    let pixel_filter = file.camera.as_ref().and_then(|c| c.pixel_filter.as_deref());
+    let pixel_filter = pixel_filter.map(|n| by_name(&PixelFilter::ALL, PixelFilter::name, "camera: pixel_filter", n));
+    let sh_storage = file.sh_storage.as_deref().map(|n| by_name(&ShStorage::ALL, ShStorage::name, "sh_storage", n));
     Ok(WorldSpec {
         scene,
         lighting,
@@ -485,7 +495,8 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
         raster_iso_threshold: file.raster_iso_threshold,
         environment,
         lens,
-        pixel_filter,
+        pixel_filter: pixel_filter.transpose()?,
+        sh_storage: sh_storage.transpose()?,
         notes,
     })
 }
@@ -688,11 +699,11 @@ fn lens(c: &CameraFile, camera: Option<&Camera>) -> Option<Result<ThinLens, Stri
     })
 }
 
-/// The pixel filter a world file names.
-fn pixel_filter(name: &str) -> Result<PixelFilter, String> {
-    PixelFilter::ALL.into_iter().find(|f| f.name() == name).ok_or_else(|| {
-        let names: Vec<&str> = PixelFilter::ALL.iter().map(|f| f.name()).collect();
-        format!("camera: pixel_filter \"{name}\" is not one of {}", names.join(", "))
+/// The choice among `all` that `key` names by `name`, as the command line names them.
+fn by_name<T: Copy>(all: &[T], name_of: fn(T) -> &'static str, key: &str, name: &str) -> Result<T, String> {
+    all.iter().copied().find(|&t| name_of(t) == name).ok_or_else(|| {
+        let names: Vec<&str> = all.iter().map(|&t| name_of(t)).collect();
+        format!("{key} \"{name}\" is not one of {}", names.join(", "))
     })
 }
 
@@ -753,6 +764,9 @@ mod tests {
         assert_eq!(w.settings(RenderSettings::default()).sampling.filter, PixelFilter::Box);
         let plain = parse("[[splats]]\nbuiltin = \"demo\"").unwrap();
         assert_eq!(plain.settings(RenderSettings::default()).sampling.filter, PixelFilter::Center);
+        assert_eq!(plain.settings(RenderSettings::default()).sh_storage, ShStorage::F32);
+        let u8 = parse("sh_storage = \"u8\"\n[[splats]]\nbuiltin = \"demo\"").unwrap();
+        assert_eq!(u8.settings(RenderSettings::default()).sh_storage, ShStorage::U8);
         let lens = w.lens.unwrap();
         assert_eq!(lens.aperture, 0.1);
         assert!((lens.focus_distance - 4.0).abs() < 1e-5, "eye to target: {}", lens.focus_distance);
@@ -794,6 +808,7 @@ mod tests {
                 "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 1]\npixel_filter = \"gauss\"\n[[splats]]\nbuiltin = \"demo\"",
                 "pixel_filter \"gauss\" is not one of center, box",
             ),
+            ("sh_storage = \"f8\"\n[[splats]]\nbuiltin = \"demo\"", "sh_storage \"f8\" is not one of f32, f16, u8"),
             ("[[splats]]\nbuiltin = \"demo\"\n[shadows]\nkind = \"sorted\"\nk = 0", "shadow k"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nscale = 1", "meshes[0]: give exactly one of"),
             ("[[splats]]\nbuiltin = \"demo\"\n[[meshes]]\nshape = \"cube\"\nmirror = 2", "meshes[0]: mirror 2"),

@@ -60,9 +60,9 @@ pub struct SceneArgs {
     pub screen_filter: Option<ScreenFilter>,
     /// How the SH coefficients are stored (vk_gaussian_splatting's SH formats): f16 halves the
     /// GPU's largest scene array, u8 quarters it, each rounding the colours; the CPU reads the
-    /// same stored values.
-    #[arg(long, value_parser = sh_storage_parser(), default_value = "f32")]
-    pub sh_storage: ShStorage,
+    /// same stored values [default: the world's, else f32].
+    #[arg(long, value_parser = sh_storage_parser())]
+    pub sh_storage: Option<ShStorage>,
 }
 
 impl SceneArgs {
@@ -70,7 +70,9 @@ impl SceneArgs {
     pub fn load(&self) -> Result<load::Loaded> {
         let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
         let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), read)?;
-        loaded.info.render.sh_storage = self.sh_storage;
+        if let Some(storage) = self.sh_storage {
+            loaded.info.render.sh_storage = storage;
+        }
         if let Some(camera) = &self.camera
             && self.camera_index >= loaded.info.views.len()
         {
