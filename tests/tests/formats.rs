@@ -448,7 +448,7 @@ fn a_gltf_file_holds_splats_and_meshes_together() {
     assert!(e.contains("no triangles"), "{e}");
 }
 
-/// three.js's GLTFExporter writes six quads, a material each (xtask/interop/make.mjs, the
+/// three.js's GLTFExporter writes seven quads, a material each (xtask/interop/make.mjs, the
 /// parameters named again here); each reads as glTF 2.0 §3.9 and its extensions define the
 /// material, mapped onto the mesh material's shares as `splat_io::mesh::gltf_material`
 /// documents: the masked quad (opacity 0.3, cutoff 0.5) draws nothing, the black blue channel
@@ -483,6 +483,7 @@ fn gltf_materials_read_as_three_js_writes_them() {
             ..standard(Vec3::new(0.5, 0.5, black), 0.0, 1.0, 1.0)
         },
         MeshMaterial { shading: Material::EMISSIVE, ..standard(Vec3::new(0.3, 0.6, 0.9), 0.0, 0.9, 1.0) },
+        standard(Vec3::splat(0.7), 0.0, 1.0, 0.5),
     ];
     let materials: Vec<MeshMaterial> = read.parts.iter().map(|p| p.material.expect("every quad has one")).collect();
     assert_eq!(materials.len(), expected.len(), "{materials:#?}");
@@ -508,6 +509,11 @@ fn gltf_materials_read_as_three_js_writes_them() {
     let emitted = materials[3].shading.emissive * materials[3].color;
     assert!((emitted - Vec3::new(1.0, 4.0, 2.0)).abs().max_element() < 1e-5, "{emitted}");
     assert!(read.parts.iter().all(|p| p.mesh.triangles.len() == 2));
+    // The blended quad's vertex colours: their alpha is the vertices' opacity, their rgb noted.
+    let opacities: Vec<Vec<f32>> = read.parts.iter().map(|p| p.mesh.opacities.clone()).collect();
+    assert_eq!(opacities[..5], vec![Vec::<f32>::new(); 5]);
+    assert_eq!(opacities[5], [0.2, 0.4, 0.6, 0.8]);
+    assert!(read.notes.iter().any(|n| n.contains("COLOR_0")), "{:?}", read.notes);
     assert!(read.notes.iter().any(|n| n.contains("KHR_materials_volume")), "{:?}", read.notes);
     // As a world of its own, and under a world file's keys.
     let opened = splat_io::world::open_world(Some(&path), Default::default()).unwrap();

@@ -81,7 +81,8 @@ const ksplat = (level, sectionSize, blockSize, bucketSize, name) => {
 for (const level of [0, 1, 2]) ksplat(level, 0, undefined, undefined, `gaussian-splats-3d-${level}.ksplat`);
 ksplat(1, 1000, 0.5, 64, 'gaussian-splats-3d-sections.ksplat');
 
-// three.js's GLTFExporter: six quads, one a material, as a three.js user exports them (.glb).
+// three.js's GLTFExporter: seven quads, one a material, as a three.js user exports them (.glb);
+// the last blends with RGBA vertex colours.
 // tests/tests/formats.rs names the same parameters. Colours are set in three.js's linear working
 // space, so the exporter writes them as given. Node has Blob but no FileReader, through which
 // the exporter reads its Blob.
@@ -103,10 +104,14 @@ const materials = [
     new THREE.MeshPhysicalMaterial({ color: rgb(1, 1, 1), transmission: 0.8, ior: 1.33, metalness: 0.5, roughness: 0.1 }),
     new THREE.MeshStandardMaterial({ color: rgb(0.5, 0.5, 0), emissive: rgb(0.25, 1, 0.5), emissiveIntensity: 4 }),
     new THREE.MeshBasicMaterial({ color: rgb(0.3, 0.6, 0.9) }),
+    new THREE.MeshStandardMaterial({ color: rgb(0.7, 0.7, 0.7), transparent: true, opacity: 0.5, vertexColors: true }),
 ];
 const world = new THREE.Scene();
+const rgba = new THREE.Float32BufferAttribute([1, 0, 0, 0.2, 0, 1, 0, 0.4, 0, 0, 1, 0.6, 1, 1, 1, 0.8], 4);
 materials.forEach((material, i) => {
-    const quad = new THREE.Mesh(new THREE.PlaneGeometry(1, 1), material);
+    const geometry = new THREE.PlaneGeometry(1, 1);
+    if (material.vertexColors) geometry.setAttribute('color', rgba);
+    const quad = new THREE.Mesh(geometry, material);
     quad.position.set(1.5 * i, 0, 0);
     world.add(quad);
 });

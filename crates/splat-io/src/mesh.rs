@@ -150,11 +150,12 @@ pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<MeshRead, String> {
     let mut notes = Vec::new();
     let materials =
         gltf.document.materials().map(|m| gltf_material(&m, &mut notes)).collect::<Result<Vec<_>, String>>()?;
+    let blended = gltf.document.materials().map(|m| m.alpha_mode() == gltf::material::AlphaMode::Blend).collect();
     let unread: Vec<&str> = gltf.document.extensions_used().filter(|e| !READ_EXTENSIONS.contains(e)).collect();
     if !unread.is_empty() {
         notes.push(format!("glTF extensions not read: {}", unread.join(", ")));
     }
-    let mut parts = Parts { materials, parts: Vec::new(), colours: false };
+    let mut parts = Parts { materials, blended, parts: Vec::new(), colours: false };
     // Depth first, in the document's order: a node, then its children in turn.
     let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
     let mut visited = 0usize;
@@ -171,7 +172,9 @@ pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<MeshRead, String> {
         stack.extend(children.into_iter().rev().map(|c| (c, world)));
     }
     if parts.colours {
-        notes.push("glTF vertex colours (COLOR_0) are not read".into());
+        notes.push(
+            "glTF vertex colours (COLOR_0): their rgb is not read, nor their alpha outside BLEND materials".into(),
+        );
     }
     Ok(MeshRead { parts: parts.parts.into_iter().map(|(_, part)| part).collect(), notes })
 }
@@ -198,8 +201,9 @@ const READ_EXTENSIONS: [&str; 5] = [
 /// - Emission k_e ⊙ c = `emissiveFactor` × `KHR_materials_emissive_strength`, so k_e = that ÷ c
 ///   (a black channel that emits is read as [`EMITTING_BLACK`]); `KHR_materials_unlit`: c
 ///   emitted, unlit.
-/// - Opacity: `baseColorFactor`.a for `BLEND` (0 draws nothing), 1 for `OPAQUE`, and for
-///   `MASK` 1 at or above `alphaCutoff` (0.5), else nothing.
+/// - Opacity: `baseColorFactor`.a for `BLEND` (0 draws nothing; times each vertex's `COLOR_0`
+///   alpha, the mesh's per-vertex opacities), 1 for `OPAQUE`, and for `MASK` 1 at or above
+///   `alphaCutoff` (0.5), else nothing.
 ///
 /// Not represented: textures (the factors alone are read) and a metal's tint (the conductor is
 /// untinted), both noted; the dielectric's specular layer (F₀ = 0.04).
@@ -263,8 +267,10 @@ pub const EMITTING_BLACK: f32 = 1e-6;
 struct Parts {
     /// Each material of the file as [`gltf_material`] read it (`None`: draws nothing).
     materials: Vec<Option<MeshMaterial>>,
+    /// Whether each material blends (its vertex colours' alpha is the vertex opacity).
+    blended: Vec<bool>,
     parts: Vec<(Option<usize>, MeshPart)>,
-    /// Whether a primitive had vertex colours.
+    /// Whether a primitive had vertex colours whose rgb (or alpha, outside BLEND) went unread.
     colours: bool,
 }
 
@@ -283,6 +289,7 @@ impl Parts {
                     }
                 },
             };
+            let blend = index.is_some_and(|i| self.blended[i]);
             self.colours |= primitive.get(&gltf::Semantic::Colors(0)).is_some();
             let at = match self.parts.iter().position(|(k, _)| *k == index) {
                 Some(at) => at,
@@ -291,19 +298,22 @@ impl Parts {
                     self.parts.len() - 1
                 }
             };
-            append_primitive(&mut self.parts[at].1.mesh, m, &primitive, world, buffers)?;
+            append_primitive(&mut self.parts[at].1.mesh, m, &primitive, world, buffers, blend)?;
         }
         Ok(())
     }
 }
 
-/// Append a triangle primitive of `m` under transform `world` (others are skipped).
+/// Append a triangle primitive of `m` under transform `world` (others are skipped), with its
+/// vertex colours' alpha as the vertices' opacities where its material `blend`s (glTF 2.0
+/// §3.9: `COLOR_0` multiplies the base colour, alpha included).
 fn append_primitive(
     mesh: &mut TriangleMesh,
     m: &gltf::Mesh,
     primitive: &gltf::Primitive,
     world: Mat4,
     buffers: &[Vec<u8>],
+    blend: bool,
 ) -> Result<(), String> {
     if primitive.mode() != gltf::mesh::Mode::Triangles {
         return Ok(());
@@ -324,6 +334,20 @@ fn append_primitive(
     };
     if let Some(&bad) = indices.iter().find(|&&v| v >= count) {
         return Err(format!("glTF mesh {} indexes vertex {bad} of {count}", m.index()));
+    }
+    // Opacities for every vertex of the part once one has them (1 where a primitive has none).
+    let (before, added) = (mesh.positions.len(), positions.len());
+    match reader.read_colors(0).filter(|_| blend) {
+        Some(colours) => {
+            let alphas: Vec<f32> = colours.into_rgba_f32().map(|c| c[3]).collect();
+            if alphas.len() != added {
+                return Err(format!("glTF mesh {} has {} colours for {added} vertices", m.index(), alphas.len()));
+            }
+            mesh.opacities.resize(before, 1.0);
+            mesh.opacities.extend(alphas);
+        }
+        None if !mesh.opacities.is_empty() => mesh.opacities.resize(before + added, 1.0),
+        None => {}
     }
     // Normals for every vertex of the part or for none.
     match (&normals, mesh.positions.is_empty() || !mesh.normals.is_empty()) {
@@ -416,18 +440,20 @@ mod tests {
         assert!(parse_gltf(short.as_bytes(), Path::new(".")).unwrap_err().contains("fewer than"));
     }
 
-    /// One part per material in the order of first use (two primitives of material 0 share
-    /// one), the default material's primitive left to the world (`None`), a blended material
-    /// at alpha 0 drawing nothing, a texture noted, and a material the renderer cannot hold
-    /// (a NaN factor) refused by name.
+    /// One part per material in the order of first use (two primitives of material 1 share
+    /// one, the vertex colours' alpha of one of them its vertices' opacities, 1 for the
+    /// other's), the default material's primitive left to the world (`None`), a blended
+    /// material at alpha 0 drawing nothing, a texture noted, and a material the renderer cannot
+    /// hold (a negative factor) refused by name.
     #[test]
     fn gltf_primitives_are_parted_by_material() {
-        let floats: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        let floats: [f32; 21] =
+            [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.25, 1.0, 1.0, 1.0, 0.5, 1.0, 1.0, 1.0, 0.75];
         let bytes: Vec<u8> = floats.iter().flat_map(|f| f.to_le_bytes()).collect();
         let b64 = base64_encode(&bytes);
         let primitive = |material: &str| format!(r#"{{"attributes":{{"POSITION":0}}{material}}}"#);
         let primitives = [
-            primitive(r#","material":1"#),
+            r#"{"attributes":{"POSITION":0,"COLOR_0":1},"material":1}"#.to_string(),
             primitive(""),
             primitive(r#","material":0"#),
             primitive(r#","material":1"#),
@@ -443,9 +469,10 @@ mod tests {
                   {{"pbrMetallicRoughness":{{"baseColorFactor":[0.1,0.2,0.3,0.6],"metallicFactor":0}},"alphaMode":"BLEND"}},
                   {{"pbrMetallicRoughness":{{"baseColorFactor":[1,1,1,0]}},"alphaMode":"BLEND"}}],
                 "textures":[{{"source":0}}],"images":[{{"uri":"nowhere.png"}}],
-                "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
-                "bufferViews":[{{"buffer":0,"byteLength":36}}],
-                "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#
+                "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
+                  {{"bufferView":1,"componentType":5126,"count":3,"type":"VEC4"}}],
+                "bufferViews":[{{"buffer":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":48}}],
+                "buffers":[{{"byteLength":84,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#
             )
         };
         let read = parse_gltf(json("0.9").as_bytes(), Path::new(".")).unwrap();
@@ -453,6 +480,8 @@ mod tests {
             read.parts.iter().map(|p| (p.mesh.triangles.len(), p.material.map(|m| m.opacity))).collect();
         assert_eq!(summary, [(2, Some(0.6)), (1, None), (1, Some(1.0))]);
         assert_eq!(read.parts[0].material.unwrap().color, Vec3::new(0.1, 0.2, 0.3));
+        assert_eq!(read.parts[0].mesh.opacities, [0.25, 0.5, 0.75, 1.0, 1.0, 1.0]);
+        assert!(read.parts[1..].iter().all(|p| p.mesh.opacities.is_empty()));
         assert_eq!(read.parts[2].material.unwrap().mirror, 1.0, "glTF's metallicFactor defaults to 1");
         assert!(read.notes.iter().any(|n| n.contains("material 0: base colour textures not read")), "{:?}", read.notes);
         let e = parse_gltf(json("-1").as_bytes(), Path::new(".")).unwrap_err();
