@@ -77,8 +77,7 @@ use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows, 
 use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
 use splat_core::path::Environment;
-use splat_core::sh::Rotation;
-use splat_core::sh::ShStorage;
+use splat_core::sh::{Rotation, ShStorage};
 use splat_core::{Camera, Scene, ScreenFilter};
 use std::path::{Path, PathBuf};
 
