@@ -757,7 +757,7 @@ pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::Sc
 }
 
 /// Print what the reader noted (`splat_io::SceneRead::notes`).
-fn print_notes(path: &std::path::Path, notes: &[String]) {
+pub(crate) fn print_notes(path: &std::path::Path, notes: &[String]) {
     for note in notes {
         eprintln!("note: {}: {note}", path.display());
     }

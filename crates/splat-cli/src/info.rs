@@ -1,4 +1,4 @@
-//! `splat info`: what is in a scene file.
+//! `splat info`: what is in a scene file, or in a world (a world file, a glTF file's meshes).
 
 use anyhow::Result;
 use clap::Args;
@@ -7,7 +7,8 @@ use std::path::PathBuf;
 /// Arguments of `splat info`.
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Scene file: any format `splat render` reads.
+    /// Scene file: any format `splat render` reads; a world file (.toml) or a glTF file's
+    /// meshes are listed with their materials.
     pub scene: PathBuf,
     /// The capture's cameras (a cameras.json or COLMAP model): `info` then says which way is
     /// up, the mean up of the views, as an `--up` for framing.
@@ -27,6 +28,20 @@ pub fn run(args: InfoArgs) -> Result<()> {
             let _ = writeln!(text, $($arg)*);
         }};
     }
+    // A world file, or a glTF file that may hold meshes: its meshes (and, for a world file,
+    // all it holds) from the world reader; the splats of a glTF file as any scene file's.
+    let gltf = matches!(splat_io::extension(&args.scene).as_deref(), Some("glb" | "gltf"));
+    let world = if splat_io::world::is_world_file(&args.scene) || gltf {
+        let opened = splat_io::world::open_world(Some(&args.scene), args.read.options())?;
+        crate::args::print_notes(&args.scene, &opened.notes);
+        if !gltf || opened.world.scene.particles.is_empty() {
+            out!("file       {}", args.scene.display());
+            return print(&(text + &world_text(&opened.world)));
+        }
+        Some(opened.world)
+    } else {
+        None
+    };
     let started = std::time::Instant::now();
     let read = crate::args::read_scene(&args.scene, args.read)?;
     let seconds = started.elapsed().as_secs_f64();
@@ -87,6 +102,9 @@ pub fn run(args: InfoArgs) -> Result<()> {
             read.file_filter.name()
         );
     }
+    if let Some(world) = &world {
+        text += &world_text(world);
+    }
     if n == 0 {
         return print(&text);
     }
@@ -116,6 +134,53 @@ pub fn run(args: InfoArgs) -> Result<()> {
         );
     }
     print(&text)
+}
+
+/// What a world holds besides a scene file's statistics: its sets, lights and camera, and each
+/// mesh with its triangles and material.
+fn world_text(world: &splat_io::world::WorldSpec) -> String {
+    use std::fmt::Write as _;
+    let mut text = String::new();
+    let triangles: usize = world.meshes.iter().map(|(m, _)| m.triangles.len()).sum();
+    let (sets, lights) = (world.lighting.sets.len(), world.lighting.lights.len());
+    let splats = match world.scene.particles.len() {
+        0 => "no splats".to_string(),
+        n => format!(
+            "{} of {} (SH degree {})",
+            crate::counted(sets, "splat set"),
+            crate::counted(n, "particle"),
+            world.scene.sh_degree
+        ),
+    };
+    let meshes = match world.meshes.len() {
+        1 => "1 mesh".to_string(),
+        n => format!("{n} meshes"),
+    };
+    let _ = writeln!(
+        text,
+        "world      {splats}, {}, {meshes} ({})",
+        crate::counted(lights, "light"),
+        crate::counted(triangles, "triangle")
+    );
+    if let Some(c) = &world.camera {
+        let (eye, ahead) = (c.center(), c.forward());
+        let _ = writeln!(text, "camera     eye {eye:.3}, looking along {ahead:.3}, {}×{}", c.width, c.height);
+    }
+    for (i, (mesh, m)) in world.meshes.iter().enumerate() {
+        let _ = writeln!(
+            text,
+            "mesh {i:<5} {}: colour {:.3}, mirror {}, transmission {} (ior {}), roughness {}, opacity {}, emission {:.3}",
+            crate::counted(mesh.triangles.len(), "triangle"),
+            m.color,
+            m.mirror,
+            m.transmission,
+            m.ior,
+            m.roughness,
+            m.opacity,
+            m.shading.emissive * m.color,
+        );
+    }
+    text
 }
 
 /// Which way is up: the mean up of the capture's views when `cameras` are given, otherwise

@@ -1739,6 +1739,24 @@ fn depth_of_field_and_the_box_filter_on_every_pipeline() {
     assert!(mean < 1e-5, "the GPU hybrid through a lens: mean difference {mean}");
 }
 
+/// `splat info` of a world file lists its splats, lights, camera and each mesh with its
+/// material, as the world reader holds them.
+#[test]
+fn info_lists_a_worlds_meshes_and_their_materials() {
+    let o = splat(&["info", "fixtures/worlds/demo-meshes.toml"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let world = splat_io::world::read_world(&root().join("fixtures/worlds/demo-meshes.toml")).unwrap();
+    let triangles: usize = world.meshes.iter().map(|(m, _)| m.triangles.len()).sum();
+    let header = format!("{} meshes ({triangles} triangles)", world.meshes.len());
+    assert!(text.contains(&header) && text.contains("camera     eye"), "{text}");
+    for (i, (mesh, m)) in world.meshes.iter().enumerate() {
+        let line = format!("mesh {i:<5} {} triangles: colour", mesh.triangles.len());
+        let shares = format!("transmission {} (ior {})", m.transmission, m.ior);
+        assert!(text.lines().any(|l| l.starts_with(&line) && l.contains(&shares)), "mesh {i}: {text}");
+    }
+}
+
 /// A world file's `pixel_filter` and `sh_storage` are the render's unless the flags say
 /// otherwise: the world with `box` renders what the world without it renders under
 /// `--pixel-filter box`, and `--pixel-filter center` over it what the plain world renders; the
