@@ -318,14 +318,11 @@ impl RadixSort {
         }
         let blocks = count.div_ceil(BLOCK).max(1);
         let passes = pass_count(bits);
-        let mut uniforms = vec![0u8; (self.stride * PASS_SLOTS) as usize];
-        for p in 0..passes {
-            let params = SortParams { count, shift: p * RADIX_BITS, blocks, ..SortParams::default() };
-            let at = (self.stride * u64::from(p)) as usize;
-            uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(&params));
-        }
-        ctx.queue.write_buffer(&buf.params, 0, &uniforms);
-        let levels = self.write_levels(ctx, buf, PASS_SLOTS, 16 * blocks);
+        let pass_params: Vec<SortParams> =
+            (0..passes).map(|p| SortParams { count, shift: p * RADIX_BITS, blocks, ..SortParams::default() }).collect();
+        self.write_slots(ctx, buf, 0, &pass_params);
+        let levels = scan_levels(16 * blocks);
+        self.write_slots(ctx, buf, PASS_SLOTS, &levels);
         let (gx, gy) = groups(blocks);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("radix sort"),
@@ -344,17 +341,14 @@ impl RadixSort {
         Ok(())
     }
 
-    /// Write the uniforms of a scan of `n` entries of the histogram from slot `first` on; its
-    /// levels.
-    fn write_levels(&self, ctx: &GpuContext, buf: &SortBuffers, first: u64, n: u32) -> Vec<SortParams> {
-        let levels = scan_levels(n);
-        let mut uniforms = vec![0u8; (self.stride * levels.len() as u64) as usize];
-        for (i, level) in levels.iter().enumerate() {
+    /// Write `params` to the uniform slots of `buf` from slot `first` on, one a stride.
+    fn write_slots(&self, ctx: &GpuContext, buf: &SortBuffers, first: u64, params: &[SortParams]) {
+        let mut uniforms = vec![0u8; (self.stride * params.len() as u64) as usize];
+        for (i, p) in params.iter().enumerate() {
             let at = (self.stride * i as u64) as usize;
-            uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(level));
+            uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(p));
         }
         ctx.queue.write_buffer(&buf.params, self.stride * first, &uniforms);
-        levels
     }
 
     /// Encode the scan of `levels` (uniforms from slot `first` on): each level below the top
@@ -386,7 +380,8 @@ impl RadixSort {
     /// (its own uniform slots of the buffers).
     pub fn encode_scan(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, buf: &SortBuffers, count: u32) {
         let first = PASS_SLOTS + MAX_LEVELS as u64;
-        let levels = self.write_levels(ctx, buf, first, count);
+        let levels = scan_levels(count);
+        self.write_slots(ctx, buf, first, &levels);
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
         self.encode_levels(ctx, &mut pass, buf, &buf.bind_groups[0], first, &levels);
