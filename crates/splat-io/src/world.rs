@@ -112,8 +112,8 @@ pub struct WorldSpec {
     pub pixel_filter: Option<PixelFilter>,
     /// How the SH coefficients are stored (`sh_storage`, top level).
     pub sh_storage: Option<ShStorage>,
-    /// What the mesh readers could not represent (glTF textures, vertex colours, extensions),
-    /// for front ends to print.
+    /// What the readers noted (a scene file's skipped records; glTF textures, vertex colours,
+    /// extensions the mesh reader could not represent), for front ends to print.
     pub notes: Vec<String>,
 }
 
@@ -337,18 +337,15 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
         let world = WorldSpec { camera: Some(camera), ..WorldSpec::of(scene) };
         return Ok(Opened { world, name: "demo".into(), skipped_properties: Vec::new(), notes: Vec::new() });
     };
-    let (world, skipped_properties, notes) = if is_world_file(path) {
-        let world = read_world_as(path, options.screen_filter)?;
-        let notes = world.notes.clone();
-        (world, Vec::new(), notes)
+    let (world, skipped_properties) = if is_world_file(path) {
+        (read_world_as(path, options.screen_filter)?, Vec::new())
     } else if matches!(crate::extension(path).as_deref(), Some("glb" | "gltf")) {
-        let world = read_gltf_world(path, options)?;
-        let notes = world.notes.clone();
-        (world, Vec::new(), notes)
+        (read_gltf_world(path, options)?, Vec::new())
     } else {
         let read = crate::read_scene_with(path, options)?;
-        (WorldSpec::of(read.scene), read.skipped_properties, read.notes)
+        (WorldSpec { notes: read.notes, ..WorldSpec::of(read.scene) }, read.skipped_properties)
     };
+    let notes = world.notes.clone();
     if world.scene.particles.is_empty() && world.meshes.is_empty() {
         return Err(Error::new(path, ErrorKind::Empty));
     }
