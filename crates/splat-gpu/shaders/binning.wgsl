@@ -10,12 +10,11 @@
 // Per tile, the range [x, y) of its pairs.
 @group(0) @binding(10) var<storage, read_write> ranges: array<vec2<u32>>;
 
-// Ranks to bin: the visible splats in depth order, or every particle in a shuffled draw order
-// (the raster operations of tile_rop; the culled ones touch no tile).
+// Ranks to bin, the length of the order (word 1 of binding 6): the visible splats in depth
+// order (the draw arguments' instance count: the depth sort sorts them alone), or every
+// particle in a shuffled draw order (the raster operations of tile_rop bind a count of their
+// own; the culled ones touch no tile).
 fn drawn() -> u32 {
-    if (params.mode >= MODE_ENDERTON) {
-        return params.count;
-    }
     return atomicLoad(&draw_args[1]);
 }
 

@@ -28,8 +28,10 @@ struct RasterParticle {
 // splat_gpu::RasterSplit).
 // Depth sort: keys (depth bits, NONE when culled; `depth_key_set(i, k)`, binding 4) and values
 // (particle ids; `order_set(i, id)`, binding 5); after the sort, `order_at(r)` is the particle of
-// rank r (both split over more bindings by splat_gpu::RasterSplit, as the sort cuts them).
-// Indirect draw arguments (vertex count, instance count = visible splats, 0, 0).
+// rank r among the visible splats, the only ones it sorts (both split over more bindings by
+// splat_gpu::RasterSplit, as the sort cuts them).
+// Indirect draw arguments (vertex count, instance count = visible splats, 0, 0); the binning
+// kernels read word 1 as the length of the order they bin (binning.wgsl `drawn`).
 @group(0) @binding(6) var<storage, read_write> draw_args: array<atomic<u32>, 4>;
 
 const TILE: u32 = 16u;

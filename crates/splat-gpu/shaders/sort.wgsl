@@ -16,6 +16,11 @@
 // tile holds them, and `scan_down` scans each tile from the top level down, starting it at its
 // own sum's prefix from the level above. No invocation reads more than SCAN_ITEMS entries of a
 // level, however long the scan.
+//
+// Every dispatch is indirect, its workgroups at the uniform slot's place in the sort's
+// dispatch arguments: written by the host when it knows the count, by `sort_setup`
+// (sort_setup.wgsl) when the device counted it. A pass that culls (`cull`, the first pass of
+// the depth sort) drops the keys CULLED, so the passes after it sort the visible keys alone.
 struct SortParams {
     // Keys to sort (or entries to scan).
     count: u32,
@@ -29,8 +34,9 @@ struct SortParams {
     scan_in: u32,
     // The first entry in `partials` of the level above (its tiles' sums), or TOP for the top.
     scan_out: u32,
-    pad0: u32,
-    pad1: u32,
+    // 1: the pass drops the keys CULLED (they are neither counted nor written).
+    cull: u32,
+    pad: u32,
 }
 
 @group(0) @binding(0) var<storage, read> sp: SortParams;
@@ -49,8 +55,8 @@ const RADIX: u32 = 16u;
 const SEGMENT: u32 = 16u;
 
 // Entries a scan invocation loads from a level, and a scan tile's (WG × SCAN_ITEMS).
+// SCAN_TILE, MAX_GROUPS_X and CULLED are declared by splat_gpu::sort::constants_wgsl.
 const SCAN_ITEMS: u32 = 4u;
-const SCAN_TILE: u32 = 1024u;
 // `scan_in` of the bottom level, `hist`; `scan_out` of the top level, which has no level above.
 const FROM_HIST: u32 = 0xffffffffu;
 const TOP: u32 = 0xffffffffu;
@@ -65,9 +71,16 @@ fn digit(key: u32) -> u32 {
     return (key >> sp.shift) & (RADIX - 1u);
 }
 
-// Blocks beyond 65535 workgroups are dispatched in rows of a 2D grid.
-fn block_of(wg: vec3<u32>, groups: vec3<u32>) -> u32 {
-    return wg.y * groups.x + wg.x;
+// Blocks beyond MAX_GROUPS_X workgroups are dispatched in rows of a 2D grid, every row but
+// the last full (so the row width is a constant, not `num_workgroups`, which an indirect
+// dispatch need not provide on every backend).
+fn block_of(wg: vec3<u32>) -> u32 {
+    return wg.y * MAX_GROUPS_X + wg.x;
+}
+
+// Whether input key i is sorted: one of the pass's keys, and not dropped by a culling pass.
+fn kept(i: u32) -> bool {
+    return i < sp.count && (sp.cull == 0u || key_in_at(i) != CULLED);
 }
 
 // Exclusive prefix sum of `v` over the workgroup (Hillis–Steele in workgroup memory); the
@@ -91,9 +104,8 @@ fn workgroup_exclusive_scan(l: u32, v: u32) -> u32 {
 fn histogram(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let block = block_of(wg, groups);
+    let block = block_of(wg);
     if (block >= sp.blocks) {
         return;
     }
@@ -102,7 +114,7 @@ fn histogram(
     }
     workgroupBarrier();
     let i = block * WG + l;
-    if (i < sp.count) {
+    if (kept(i)) {
         atomicAdd(&counts[digit(key_in_at(i))], 1u);
     }
     workgroupBarrier();
@@ -132,9 +144,8 @@ fn level_set(i: u32, v: u32) {
 fn scan_reduce(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let t = block_of(wg, groups);
+    let t = block_of(wg);
     if (t * SCAN_TILE >= sp.scan_len) {
         return;
     }
@@ -159,9 +170,8 @@ fn scan_reduce(
 fn scan_down(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let t = block_of(wg, groups);
+    let t = block_of(wg);
     let first = t * SCAN_TILE;
     if (first >= sp.scan_len) {
         return;
@@ -205,14 +215,13 @@ fn scan_down(
 fn scatter(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let block = block_of(wg, groups);
+    let block = block_of(wg);
     if (block >= sp.blocks) {
         return;
     }
     let i = block * WG + l;
-    let valid = i < sp.count;
+    let valid = kept(i);
     var key = 0u;
     var val = 0u;
     if (valid) {
@@ -220,7 +229,7 @@ fn scatter(
         val = val_in_at(i);
     }
     let d = digit(key);
-    // Past the end: digit RADIX, which no invocation counts.
+    // Past the end or culled: digit RADIX, which no invocation counts.
     digits[l] = select(RADIX, d, valid);
     workgroupBarrier();
     let counted = l / SEGMENT;

@@ -261,6 +261,12 @@ impl GpuContext {
         pass.dispatch_workgroups(x, y, z);
     }
 
+    /// Dispatch the workgroups the three u32 of `args` at byte `offset` give, counted.
+    pub(crate) fn dispatch_indirect(&self, pass: &mut wgpu::ComputePass<'_>, args: &wgpu::Buffer, offset: u64) {
+        self.count_draw();
+        pass.dispatch_workgroups_indirect(args, offset);
+    }
+
     /// Count a draw (or a dispatch).
     pub(crate) fn count_draw(&self) {
         self.work.dispatches.fetch_add(1, std::sync::atomic::Ordering::Relaxed);

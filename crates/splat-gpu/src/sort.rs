@@ -12,6 +12,12 @@
 //! level, where a single workgroup used to sum a 6 M-key sort's 375,000 histogram entries in
 //! runs of 1,465 serial loads an invocation.
 //!
+//! The depth sort sorts the visible splats alone ([`RadixSort::encode_culled`]): its first pass
+//! drops the culled keys ([`CULLED`]) as it sorts the first digit, and the passes after it run
+//! on the count the projection left on the device, their uniforms and workgroup counts written
+//! there by `sort_setup` (`shaders/sort_setup.wgsl`), so a view that culls most of a scene
+//! sorts little more than what it draws, without a read-back.
+//!
 //! [`cpu_radix_sort`] is the CPU mirror of the same passes; [`depth_key`] maps a view depth to
 //! its sortable key, and filters what cannot be sorted (NaN, negative, infinite).
 
@@ -21,6 +27,10 @@ use bytemuck::{Pod, Zeroable};
 
 /// WGSL of the sort kernels before the declarations of their arrays ([`sort_wgsl`]).
 const SORT_SOURCE: &str = include_str!("../shaders/sort.wgsl");
+/// WGSL of the setup of a culling sort's later passes ([`setup_wgsl`]).
+const SETUP_SOURCE: &str = include_str!("../shaders/sort_setup.wgsl");
+/// The key of a culled splat: the bits of no finite depth ([`depth_key`] never returns it).
+pub const CULLED: u32 = u32::MAX;
 /// Keys per workgroup block.
 pub const BLOCK: u32 = 256;
 /// Bits sorted per pass.
@@ -33,10 +43,17 @@ pub const MAX_LEVELS: usize = 4;
 const FROM_HIST: u32 = u32::MAX;
 /// `SortParams::scan_out` of the top level: no level above.
 const TOP: u32 = u32::MAX;
-/// Uniform slots of the passes (at most eight of [`RADIX_BITS`]), then of the sort's scan
-/// levels, then of [`RadixSort::encode_scan`]'s.
+/// Uniform slots (and dispatch arguments) of the passes, at most eight of [`RADIX_BITS`];
 const PASS_SLOTS: u64 = 8;
-const SLOTS: u64 = PASS_SLOTS + 2 * MAX_LEVELS as u64;
+/// then of the first pass's scan levels;
+const FIRST_LEVELS: u64 = PASS_SLOTS;
+/// of the later passes' (shorter after a culling first pass);
+const LATER_LEVELS: u64 = FIRST_LEVELS + MAX_LEVELS as u64;
+/// and of [`RadixSort::encode_scan`]'s.
+const SCAN_LEVELS: u64 = LATER_LEVELS + MAX_LEVELS as u64;
+const SLOTS: u64 = SCAN_LEVELS + MAX_LEVELS as u64;
+/// Bytes of a slot's dispatch arguments: workgroups in x, y and z.
+const ARGS: u64 = 12;
 /// Most workgroups along one dispatch dimension (WebGPU's default limit); more blocks are
 /// dispatched as rows of a 2D grid.
 const MAX_GROUPS_X: u32 = 65_535;
@@ -58,8 +75,10 @@ pub struct SortParams {
     pub scan_in: u32,
     /// The first entry in the partial sums of the level above, `u32::MAX` at the top.
     pub scan_out: u32,
+    /// 1: the pass drops the keys [`CULLED`] (the first pass of [`RadixSort::encode_culled`]).
+    pub cull: u32,
     /// Padding to 32 bytes.
-    pub pad: [u32; 2],
+    pub pad: u32,
 }
 
 /// The sortable key of a view depth: its IEEE bits, which order positive floats like the
@@ -70,7 +89,8 @@ pub fn depth_key(z: f32) -> Option<u32> {
 }
 
 /// CPU mirror of the GPU passes: a stable LSD radix sort of `keys` (with `vals`) on the low
-/// `bits` bits, [`RADIX_BITS`] at a time, via per-digit counts and their exclusive scan.
+/// `bits` bits, [`RADIX_BITS`] at a time, via per-digit counts and their exclusive scan. (A
+/// culling sort is this sort of the keys other than [`CULLED`].)
 pub fn cpu_radix_sort(keys: &mut Vec<u32>, vals: &mut Vec<u32>, bits: u32) {
     let radix = 1usize << RADIX_BITS;
     for shift in (0..pass_count(bits)).map(|p| p * RADIX_BITS) {
@@ -152,15 +172,40 @@ fn split_layout(split: Split) -> SplitLayout {
     SplitLayout { arrays: [KEYS_IN, VALS_IN, KEYS_OUT, VALS_OUT, HIST].map(|a| (a, split)).to_vec(), first_extra: 7 }
 }
 
+/// The constants the sort's shaders share with this file, declared here once.
+fn constants_wgsl() -> String {
+    format!(
+        "const SCAN_TILE: u32 = {SCAN_TILE}u;\nconst MAX_GROUPS_X: u32 = {MAX_GROUPS_X}u;\nconst CULLED: u32 = {CULLED}u;\n"
+    )
+}
+
 /// The WGSL of the sort kernels over arrays cut as `split`.
 pub fn sort_wgsl(split: Split) -> String {
-    format!("{SORT_SOURCE}{}", split_layout(split).wgsl())
+    format!("{}{SORT_SOURCE}{}", constants_wgsl(), split_layout(split).wgsl())
+}
+
+/// The WGSL of `sort_setup` for uniform slots `stride` bytes apart: the words of the
+/// [`SortParams`] fields it writes are those of the struct here.
+pub fn setup_wgsl(stride: u64) -> String {
+    let word = |offset: usize| offset / 4;
+    format!(
+        "{}const SLOT_WORDS: u32 = {}u;\nconst COUNT: u32 = {}u;\nconst BLOCKS: u32 = {}u;\nconst SCAN_LEN: u32 = {}u;\n\
+         const LATER_LEVELS: u32 = {LATER_LEVELS}u;\nconst BLOCK: u32 = {BLOCK}u;\nconst RADIX: u32 = {}u;\n{SETUP_SOURCE}",
+        constants_wgsl(),
+        stride / 4,
+        word(std::mem::offset_of!(SortParams, count)),
+        word(std::mem::offset_of!(SortParams, blocks)),
+        word(std::mem::offset_of!(SortParams, scan_len)),
+        1u32 << RADIX_BITS,
+    )
 }
 
 /// The sort's pipelines, compiled for each [`Split`] of its arrays on first use (the whole one
 /// at once).
 pub struct RadixSort {
     kernels: crate::split::PerSplit<Split, SortKernels>,
+    /// `sort_setup` and its layout (the same for every split).
+    setup: (wgpu::BindGroupLayout, wgpu::ComputePipeline),
     stride: u64,
 }
 
@@ -174,7 +219,8 @@ struct SortKernels {
 }
 
 /// Buffers of one sort of up to `capacity` pairs: keys and values in place with ping-pong
-/// scratch, the per-block histogram and per-pass uniforms, each array in the parts of `split`.
+/// scratch, the per-block histogram, and the uniforms and workgroup counts of each dispatch,
+/// each array in the parts of `split`.
 pub struct SortBuffers {
     /// Keys: the input, and the sorted output after [`RadixSort::encode`].
     pub(crate) keys: Vec<wgpu::Buffer>,
@@ -189,7 +235,13 @@ pub struct SortBuffers {
     /// How every array is cut over bindings.
     pub(crate) split: Split,
     capacity: u32,
+    /// The uniform slots, one a stride ([`PASS_SLOTS`] and the levels after them).
     params: wgpu::Buffer,
+    /// Each slot's workgroups, [`ARGS`] bytes a slot.
+    args: wgpu::Buffer,
+    /// `sort_setup`'s input: the device's count, the passes and the levels.
+    setup: wgpu::Buffer,
+    setup_group: wgpu::BindGroup,
     bind_groups: [wgpu::BindGroup; 2],
     kernels: std::sync::Arc<SortKernels>,
 }
@@ -225,10 +277,8 @@ pub(crate) fn groups(blocks: u32) -> (u32, u32) {
 impl RadixSort {
     /// Compile the kernels of whole arrays; a typed error when the device rejects them.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        let sort = Self {
-            kernels: crate::split::PerSplit::new(),
-            stride: (size_of::<SortParams>() as u64).next_multiple_of(ctx.storage_alignment),
-        };
+        let stride = (size_of::<SortParams>() as u64).next_multiple_of(ctx.storage_alignment);
+        let sort = Self { kernels: crate::split::PerSplit::new(), setup: setup_kernel(ctx, stride)?, stride };
         sort.kernels(ctx, Split::WHOLE)?;
         Ok(sort)
     }
@@ -269,11 +319,25 @@ impl RadixSort {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
-        let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("sort params"),
-            size: self.stride * SLOTS,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
+        let small = |label, size, usage| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | usage,
+                mapped_at_creation: false,
+            })
+        };
+        let params = small("sort params", self.stride * SLOTS, wgpu::BufferUsages::empty());
+        let args = small("sort dispatch args", ARGS * SLOTS, wgpu::BufferUsages::INDIRECT);
+        let setup = small("sort setup", 16, wgpu::BufferUsages::empty());
+        let setup_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sort setup"),
+            layout: &self.setup.0,
+            entries: &[&setup, &params, &args]
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect::<Vec<_>>(),
         });
         let layout = split_layout(split);
         let bind = |ki: &[wgpu::Buffer], vi: &[wgpu::Buffer], ko: &[wgpu::Buffer], vo: &[wgpu::Buffer]| {
@@ -299,7 +363,21 @@ impl RadixSort {
             })
         };
         let bind_groups = [bind(&keys, &vals, &scratch[0], &scratch[1]), bind(&scratch[0], &scratch[1], &keys, &vals)];
-        Ok(SortBuffers { keys, vals, hist, partials, scratch, split, capacity, params, bind_groups, kernels })
+        Ok(SortBuffers {
+            keys,
+            vals,
+            hist,
+            partials,
+            scratch,
+            split,
+            capacity,
+            params,
+            args,
+            setup,
+            setup_group,
+            bind_groups,
+            kernels,
+        })
     }
 
     /// Encode the sort of the first `count` pairs of `buf` on their low `bits` key bits, in
@@ -313,46 +391,139 @@ impl RadixSort {
         bits: u32,
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
+        let (passes, levels) = self.write_pass_slots(ctx, buf, count, bits, false)?;
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("radix sort"),
+            timestamp_writes: timestamps,
+        });
+        self.encode_passes(ctx, &mut pass, buf, passes, levels);
+        Ok(())
+    }
+
+    /// Encode the sort of the first `n` pairs of `buf` on their low `bits` key bits without the
+    /// keys [`CULLED`], in one compute pass: the others, as many as the u32 at `visible` (a
+    /// buffer and a byte offset) says, end up sorted in the first pairs of `buf.keys` and
+    /// `buf.vals`. The first pass reads all `n` and drops the culled keys; `sort_setup` then
+    /// sizes the passes after it on the device's count, which the host never reads.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_culled(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        buf: &SortBuffers,
+        n: u32,
+        visible: (&wgpu::Buffer, u64),
+        bits: u32,
+        timestamps: Option<wgpu::ComputePassTimestampWrites>,
+    ) -> Result<(), GpuError> {
+        let (passes, levels) = self.write_pass_slots(ctx, buf, n, bits, true)?;
+        ctx.queue.write_buffer(&buf.setup, 0, bytemuck::cast_slice(&[0, passes, levels as u32, 0]));
+        encoder.copy_buffer_to_buffer(visible.0, visible.1, &buf.setup, 0, 4);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("radix sort"),
+            timestamp_writes: timestamps,
+        });
+        pass.set_pipeline(&self.setup.1);
+        pass.set_bind_group(0, &buf.setup_group, &[]);
+        ctx.dispatch(&mut pass, 1, 1, 1);
+        self.encode_passes(ctx, &mut pass, buf, passes, levels);
+        Ok(())
+    }
+
+    /// Write the slots of a sort of `count` pairs on `bits` bits (the first pass culling with
+    /// `cull`): each pass's uniforms and blocks, and the scan levels of its histogram, the
+    /// same for the first pass and the later ones. The passes and levels a pass has.
+    fn write_pass_slots(
+        &self,
+        ctx: &GpuContext,
+        buf: &SortBuffers,
+        count: u32,
+        bits: u32,
+        cull: bool,
+    ) -> Result<(u32, usize), GpuError> {
         if count > buf.capacity {
             return Err(GpuError::Unsupported(format!("{count} keys exceed the sort's capacity of {}", buf.capacity)));
         }
         let blocks = count.div_ceil(BLOCK).max(1);
         let passes = pass_count(bits);
-        let pass_params: Vec<SortParams> =
-            (0..passes).map(|p| SortParams { count, shift: p * RADIX_BITS, blocks, ..SortParams::default() }).collect();
-        self.write_slots(ctx, buf, 0, &pass_params);
+        let pass_params: Vec<SortParams> = (0..passes)
+            .map(|p| SortParams {
+                count,
+                shift: p * RADIX_BITS,
+                blocks,
+                cull: u32::from(cull && p == 0),
+                ..SortParams::default()
+            })
+            .collect();
+        self.write_slots(ctx, buf, 0, &pass_params, |p| p.blocks);
         let levels = scan_levels(16 * blocks);
-        self.write_slots(ctx, buf, PASS_SLOTS, &levels);
-        let (gx, gy) = groups(blocks);
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("radix sort"),
-            timestamp_writes: timestamps,
-        });
-        for p in 0..passes {
-            let group = &buf.bind_groups[(p % 2) as usize];
-            pass.set_bind_group(0, group, &[(self.stride * u64::from(p)) as u32]);
-            pass.set_pipeline(&buf.kernels.histogram);
-            ctx.dispatch(&mut pass, gx, gy, 1);
-            self.encode_levels(ctx, &mut pass, buf, group, PASS_SLOTS, &levels);
-            pass.set_bind_group(0, group, &[(self.stride * u64::from(p)) as u32]);
-            pass.set_pipeline(&buf.kernels.scatter);
-            ctx.dispatch(&mut pass, gx, gy, 1);
+        for first in [FIRST_LEVELS, LATER_LEVELS] {
+            self.write_slots(ctx, buf, first, &levels, |l| l.scan_len.div_ceil(SCAN_TILE));
         }
-        Ok(())
+        Ok((passes, levels.len()))
     }
 
-    /// Write `params` to the uniform slots of `buf` from slot `first` on, one a stride.
-    fn write_slots(&self, ctx: &GpuContext, buf: &SortBuffers, first: u64, params: &[SortParams]) {
+    /// Write `params` to the uniform slots of `buf` from slot `first` on, one a stride, and
+    /// the workgroups of `work(params)` blocks or tiles to their dispatch arguments.
+    fn write_slots(
+        &self,
+        ctx: &GpuContext,
+        buf: &SortBuffers,
+        first: u64,
+        params: &[SortParams],
+        work: impl Fn(&SortParams) -> u32,
+    ) {
         let mut uniforms = vec![0u8; (self.stride * params.len() as u64) as usize];
         for (i, p) in params.iter().enumerate() {
             let at = (self.stride * i as u64) as usize;
             uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(p));
         }
         ctx.queue.write_buffer(&buf.params, self.stride * first, &uniforms);
+        let args: Vec<u32> = params
+            .iter()
+            .flat_map(|p| {
+                let (x, y) = groups(work(p));
+                [x, y, 1]
+            })
+            .collect();
+        ctx.queue.write_buffer(&buf.args, ARGS * first, bytemuck::cast_slice(&args));
     }
 
-    /// Encode the scan of `levels` (uniforms from slot `first` on): each level below the top
-    /// reduced to the next, then each level scanned from the top down.
+    /// Encode `passes` sort passes, each a histogram, the scan of its `levels` levels and a
+    /// scatter, ping-ponging between the buffers' halves.
+    fn encode_passes(
+        &self,
+        ctx: &GpuContext,
+        pass: &mut wgpu::ComputePass<'_>,
+        buf: &SortBuffers,
+        passes: u32,
+        levels: usize,
+    ) {
+        for p in 0..passes {
+            let group = &buf.bind_groups[(p % 2) as usize];
+            self.dispatch(ctx, pass, buf, group, u64::from(p), &buf.kernels.histogram);
+            self.encode_levels(ctx, pass, buf, group, if p == 0 { FIRST_LEVELS } else { LATER_LEVELS }, levels);
+            self.dispatch(ctx, pass, buf, group, u64::from(p), &buf.kernels.scatter);
+        }
+    }
+
+    /// Dispatch `pipeline` with the uniforms and workgroups of `slot`.
+    fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        pass: &mut wgpu::ComputePass<'_>,
+        buf: &SortBuffers,
+        group: &wgpu::BindGroup,
+        slot: u64,
+        pipeline: &wgpu::ComputePipeline,
+    ) {
+        pass.set_bind_group(0, group, &[(self.stride * slot) as u32]);
+        pass.set_pipeline(pipeline);
+        ctx.dispatch_indirect(pass, &buf.args, ARGS * slot);
+    }
+
+    /// Encode the scan of the `levels` levels whose slots start at `first`: each level below
+    /// the top reduced to the next, then each level scanned from the top down.
     fn encode_levels(
         &self,
         ctx: &GpuContext,
@@ -360,31 +531,24 @@ impl RadixSort {
         buf: &SortBuffers,
         group: &wgpu::BindGroup,
         first: u64,
-        levels: &[SortParams],
+        levels: usize,
     ) {
-        let mut dispatch = |i: usize, pipeline: &wgpu::ComputePipeline| {
-            pass.set_bind_group(0, group, &[(self.stride * (first + i as u64)) as u32]);
-            pass.set_pipeline(pipeline);
-            let (gx, gy) = groups(levels[i].scan_len.div_ceil(SCAN_TILE));
-            ctx.dispatch(pass, gx, gy, 1);
-        };
-        for i in 0..levels.len() - 1 {
-            dispatch(i, &buf.kernels.scan_reduce);
+        for i in 0..levels as u64 - 1 {
+            self.dispatch(ctx, pass, buf, group, first + i, &buf.kernels.scan_reduce);
         }
-        for i in (0..levels.len()).rev() {
-            dispatch(i, &buf.kernels.scan_down);
+        for i in (0..levels as u64).rev() {
+            self.dispatch(ctx, pass, buf, group, first + i, &buf.kernels.scan_down);
         }
     }
 
     /// Encode an exclusive prefix sum of the first `count` entries of `buf.hist`, in place
     /// (its own uniform slots of the buffers).
     pub fn encode_scan(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, buf: &SortBuffers, count: u32) {
-        let first = PASS_SLOTS + MAX_LEVELS as u64;
         let levels = scan_levels(count);
-        self.write_slots(ctx, buf, first, &levels);
+        self.write_slots(ctx, buf, SCAN_LEVELS, &levels, |l| l.scan_len.div_ceil(SCAN_TILE));
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
-        self.encode_levels(ctx, &mut pass, buf, &buf.bind_groups[0], first, &levels);
+        self.encode_levels(ctx, &mut pass, buf, &buf.bind_groups[0], SCAN_LEVELS, levels.len());
     }
 }
 
@@ -397,21 +561,58 @@ pub fn sort_pairs(
     vals: &[u32],
     bits: u32,
 ) -> Result<(Vec<u32>, Vec<u32>), GpuError> {
+    sort_uploaded(ctx, sort, keys, vals, bits, false)
+}
+
+/// Sort `keys` with `vals` on the GPU on their low `bits` bits without the keys [`CULLED`], as
+/// the depth sort does (the count of the others uploaded to the device for `sort_setup`): the
+/// entry point of the tests.
+pub fn sort_culled_pairs(
+    ctx: &GpuContext,
+    sort: &RadixSort,
+    keys: &[u32],
+    vals: &[u32],
+    bits: u32,
+) -> Result<(Vec<u32>, Vec<u32>), GpuError> {
+    sort_uploaded(ctx, sort, keys, vals, bits, true)
+}
+
+/// Upload the pairs, sort them ([`RadixSort::encode_culled`] with `cull`, else
+/// [`RadixSort::encode`]) and read back the sorted ones.
+fn sort_uploaded(
+    ctx: &GpuContext,
+    sort: &RadixSort,
+    keys: &[u32],
+    vals: &[u32],
+    bits: u32,
+    cull: bool,
+) -> Result<(Vec<u32>, Vec<u32>), GpuError> {
+    use wgpu::util::DeviceExt as _;
     if keys.len() != vals.len() {
         return Err(GpuError::Unsupported(format!("{} keys but {} values", keys.len(), vals.len())));
     }
-    let count = u32::try_from(keys.len()).map_err(|_| GpuError::Unsupported("more than 2³² keys".into()))?;
-    let buf = sort.buffers(ctx, count)?;
-    if count == 0 {
+    let n = u32::try_from(keys.len()).map_err(|_| GpuError::Unsupported("more than 2³² keys".into()))?;
+    let kept = if cull { keys.iter().filter(|&&k| k != CULLED).count() as u32 } else { n };
+    let buf = sort.buffers(ctx, n)?;
+    if n == 0 {
         return Ok((Vec::new(), Vec::new()));
     }
     crate::split::write_u32(ctx, &buf.keys, buf.split, keys);
     crate::split::write_u32(ctx, &buf.vals, buf.split, vals);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("sort") });
-    sort.encode(ctx, &mut encoder, &buf, count, bits, None)?;
+    if cull {
+        let count = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("kept keys"),
+            contents: bytemuck::cast_slice(&[0u32, kept]),
+            usage: wgpu::BufferUsages::COPY_SRC,
+        });
+        sort.encode_culled(ctx, &mut encoder, &buf, n, (&count, 4), bits, None)?;
+    } else {
+        sort.encode(ctx, &mut encoder, &buf, n, bits, None)?;
+    }
     ctx.submit(encoder.finish());
-    let keys = buf.read(ctx, &buf.keys, 0..u64::from(count))?;
-    let vals = buf.read(ctx, &buf.vals, 0..u64::from(count))?;
+    let keys = buf.read(ctx, &buf.keys, 0..u64::from(kept))?;
+    let vals = buf.read(ctx, &buf.vals, 0..u64::from(kept))?;
     Ok((keys, vals))
 }
 
@@ -445,6 +646,25 @@ fn layout_entries(split: Split) -> Vec<wgpu::BindGroupLayoutEntry> {
     ];
     entries.extend(split_layout(split).extra_entries(wgpu::ShaderStages::COMPUTE));
     entries
+}
+
+/// `sort_setup`'s bindings: its input, the uniform slots and the dispatch arguments.
+fn setup_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
+    vec![storage(0, true), storage(1, false), storage(2, false)]
+}
+
+/// Compile `sort_setup` for uniform slots `stride` bytes apart.
+fn setup_kernel(ctx: &GpuContext, stride: u64) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), GpuError> {
+    let device = &ctx.device;
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let module = crate::context::shader_module(device, "sort_setup.wgsl", &setup_wgsl(stride));
+    let (layout, pipeline_layout) = crate::context::layouts(device, "sort setup", &setup_entries());
+    let pipeline = crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), "sort_setup");
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(GpuError::Shader(e.to_string()));
+    }
+    Ok((layout, pipeline))
 }
 
 impl SortKernels {
@@ -520,6 +740,7 @@ mod tests {
         // Capabilities::empty() lacks SUBGROUP, so a subgroup builtin fails validation.
         crate::layout::wgsl_check::validate("sort", &sort_wgsl(Split::WHOLE));
         crate::layout::wgsl_check::validate("sort (split)", &sort_wgsl(Split { parts: 3, shift: 8 }));
+        crate::layout::wgsl_check::validate("sort setup", &setup_wgsl(256));
     }
 
     #[test]
@@ -529,5 +750,6 @@ mod tests {
             let wgsl = sort_wgsl(split);
             crate::layout::wgsl_check::check_layout("sort", &wgsl, none, &super::layout_entries(split));
         }
+        crate::layout::wgsl_check::check_layout("sort setup", &setup_wgsl(32), none, &super::setup_entries());
     }
 }

@@ -14,7 +14,7 @@ use splat_core::raster::{
 use splat_core::rng::SplitMix64;
 use splat_core::trainer::Preset;
 use splat_core::{Camera, Scene};
-use splat_gpu::sort::{SCAN_TILE, cpu_radix_sort, depth_key, exclusive_scan, sort_pairs};
+use splat_gpu::sort::{CULLED, SCAN_TILE, cpu_radix_sort, depth_key, exclusive_scan, sort_culled_pairs, sort_pairs};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
 use std::sync::OnceLock;
 
@@ -31,8 +31,9 @@ fn cpu_sorted(keys: &[u32], bits: u32) -> (Vec<u32>, Vec<u32>) {
 
 /// The GPU sort equals the CPU sort (keys and the stable order of values) on random keys of
 /// sizes around block boundaries and on adversarial ones: all equal, reversed, few distinct,
-/// depth keys with NaN and negative depths filtered out before sorting; and the scan it is
-/// built from equals the CPU's.
+/// depth keys with NaN and negative depths filtered out before sorting; the culling sort of the
+/// depth order equals the CPU sort of the keys it keeps, however many it drops; and the scan
+/// the sort is built from equals the CPU's.
 #[test]
 fn gpu_sort_and_scan_equal_the_cpu_ones() {
     let Some(ctx) = context() else { return };
@@ -70,6 +71,37 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
         if bits == 32 {
             assert_eq!(gpu.1, std_sorted.iter().map(|p| p.1).collect::<Vec<_>>(), "{name}: not stable");
         }
+    }
+    // The culling sort (the depth sort's): the keys CULLED dropped by the first pass, the later
+    // passes sized on the device. Kept shares from all to none, so that the later passes have
+    // as many scan levels as the first (half kept), fewer used than the first's (100 of 70,000:
+    // one tile under two levels), or no block at all; whole and split over bindings.
+    let culled_cases = [
+        ("none culled", 1000, 1.0, false),
+        ("half culled", 70_000, 0.5, false),
+        ("100 kept of 70000", 70_000, 100.0 / 70_000.0, false),
+        ("all culled", 5000, 0.0, false),
+        ("depths with culled", 4000, 0.7, false),
+        ("half culled, split", 70_000, 0.5, true),
+    ];
+    for (name, n, kept, split) in culled_cases {
+        let keys: Vec<u32> = (0..n)
+            .map(|i| {
+                // As the projection keys them: unsortable depths and culled splats as CULLED.
+                let key = match name.starts_with("depths") {
+                    true => depth_key(depths[i % depths.len()]).unwrap_or(CULLED),
+                    false => (rng.next_u64() as u32).min(CULLED - 1),
+                };
+                if rng.next_f32() < kept { key } else { CULLED }
+            })
+            .collect();
+        let vals: Vec<u32> = (0..n as u32).collect();
+        let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
+        let gpu = sort_culled_pairs(ctx, sort, &keys, &vals, 32).unwrap();
+        let (mut k, mut v): (Vec<u32>, Vec<u32>) = keys.iter().copied().zip(vals).filter(|&(k, _)| k != CULLED).unzip();
+        cpu_radix_sort(&mut k, &mut v, 32);
+        let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));
+        assert_eq!(differ, None, "{name}: {} pairs sorted, {} kept; the first differs there", gpu.0.len(), k.len());
     }
     // The scan the sort is built from, at the sizes where it gains a level (one tile, two
     // levels, three), whole and split over bindings.

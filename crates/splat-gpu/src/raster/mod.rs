@@ -351,13 +351,16 @@ impl<'a> GpuRasterizer<'a> {
         }
     }
 
-    /// The global depth sort: all particles, culled ones (key u32::MAX) last.
+    /// The global depth sort of the visible splats: the culled ones (key
+    /// [`crate::sort::CULLED`], the shaders' NONE) dropped by its first pass, the later passes
+    /// sized on the count the projection left in the draw arguments (their instance count).
     fn encode_sort(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
-        self.pipes.sort.encode(self.ctx, encoder, &self.depth, self.scene.count, 32, timestamps)
+        let visible = (&self.draw_args, 4);
+        self.pipes.sort.encode_culled(self.ctx, encoder, &self.depth, self.scene.count, visible, 32, timestamps)
     }
 
     /// Bytes of a camera's arrays on the device: the projected splats and the depth sort's keys,

@@ -171,7 +171,9 @@ impl RopPass {
             mapped_at_creation: false,
         });
         let shuffle = pipes.sort.buffers(ctx, n + 1)?;
-        let lists = TileLists::new(r, &shuffle, pair_count)?;
+        // The shuffled order holds every particle (the depth order only the visible ones).
+        let everyone = ctx.upload("shuffled order length", bytemuck::cast_slice(&[6u32, n, 0, 0]));
+        let lists = TileLists::new(r, &shuffle, &everyone, pair_count)?;
         let frame = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rop frame"),
             size: size_of::<FrameParams>() as u64,
