@@ -10,10 +10,9 @@
 // Per tile, the range [x, y) of its pairs.
 @group(0) @binding(10) var<storage, read_write> ranges: array<vec2<u32>>;
 
-// Ranks to bin, the length of the order (word 1 of binding 6): the visible splats in depth
-// order (the draw arguments' instance count: the depth sort sorts them alone), or every
-// particle in a shuffled draw order (the raster operations of tile_rop bind a count of their
-// own; the culled ones touch no tile).
+// Ranks to bin: the visible splats (the draw arguments' instance count), in depth order or in
+// the shuffled draw order of the raster operations of tile_rop, each sort dropping the culled
+// ones.
 fn drawn() -> u32 {
     return atomicLoad(&draw_args[1]);
 }

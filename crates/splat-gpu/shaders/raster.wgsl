@@ -30,8 +30,8 @@ struct RasterParticle {
 // (particle ids; `order_set(i, id)`, binding 5); after the sort, `order_at(r)` is the particle of
 // rank r among the visible splats, the only ones it sorts (both split over more bindings by
 // splat_gpu::RasterSplit, as the sort cuts them).
-// Indirect draw arguments (vertex count, instance count = visible splats, 0, 0); the binning
-// kernels read word 1 as the length of the order they bin (binning.wgsl `drawn`).
+// Indirect draw arguments (vertex count, instance count = visible splats, 0, 0): the length of
+// every order of the visible splats (binning.wgsl `drawn`).
 @group(0) @binding(6) var<storage, read_write> draw_args: array<atomic<u32>, 4>;
 
 const TILE: u32 = 16u;
@@ -45,7 +45,7 @@ fn cull(i: u32) {
     culled.rect = vec4<u32>(0u);
     splat_set(i, culled);
     depth_key_set(i, NONE);
-    order_set(i, i);
+    order_set(i, NONE); // dropped by the sort (splat_gpu::sort::CULLED)
 }
 
 // A particle projected to the image: its mean, Σ₂ as (a, b, c), its depth, and whether it is
@@ -163,8 +163,8 @@ fn ellipse_box(mean: vec2<f32>, a: f32, c: f32, bound: f32) -> vec4<f32> {
 
 // project.rs `project`: Σ₂ by `ewa` through the pinhole or `unscented` through another lens, the
 // screen filter (Σ′ = Σ₂ + s I, the opacity × ρ; filter.rs `ScreenFilter::apply`), the rect of
-// the extent, the SH colour from the camera centre, and the sort key; culled particles get the
-// key NONE and sort behind all others.
+// the extent, the SH colour from the camera centre, and the sort key and value; culled particles
+// get the value NONE, which the depth sort drops.
 @compute @workgroup_size(256, 1, 1)
 fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     // k in the chunk, i in the scene.
@@ -235,5 +235,6 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     s.rect = vec4<u32>(rect);
     splat_set(i, s);
     depth_key_set(i, bitcast<u32>(projected.depth));
+    order_set(i, i);
     atomicAdd(&draw_args[1], 1u);
 }

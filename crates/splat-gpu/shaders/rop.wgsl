@@ -62,8 +62,9 @@ fn fragment_depth(s: Splat, p: vec2<f32>) -> f32 {
 }
 
 // raster/mod.rs `Rasterizer::shuffle`: the frame's draw order, every particle keyed by
-// xxhash32(id, seed) (ties by id: the sort is stable and the values start in id order); culled
-// particles are drawn too (their rect is empty, they touch no tile).
+// xxhash32(id, seed) (ties by id: the sort is stable and the values start in id order); the
+// culled ones get the value NONE, which the sort drops (they touch no tile, so the visible ones
+// keep the CPU's order).
 @compute @workgroup_size(256, 1, 1)
 fn shuffle_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = flat_index(gid, groups);
@@ -72,7 +73,7 @@ fn shuffle_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
     }
     let seed = xxhash32(vec3<u32>(rop_frame.key, ORDER_ID, 0u));
     depth_key_set(i, xxhash32(vec3<u32>(i, seed, 0u)));
-    order_set(i, i);
+    order_set(i, select(NONE, i, visible(splat_at(i))));
 }
 
 // rng.rs `hilbert_index`: cell (x, y)'s index along the Hilbert curve of order `order`.

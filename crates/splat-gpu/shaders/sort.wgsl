@@ -20,7 +20,8 @@
 // Every dispatch is indirect, its workgroups at the uniform slot's place in the sort's
 // dispatch arguments: written by the host when it knows the count, by `sort_setup`
 // (sort_setup.wgsl) when the device counted it. A pass that culls (`cull`, the first pass of
-// the depth sort) drops the keys CULLED, so the passes after it sort the visible keys alone.
+// the depth sort and of the draw-order shuffle) drops the pairs whose value is CULLED, so the
+// passes after it sort the visible splats alone.
 struct SortParams {
     // Keys to sort (or entries to scan).
     count: u32,
@@ -34,7 +35,7 @@ struct SortParams {
     scan_in: u32,
     // The first entry in `partials` of the level above (its tiles' sums), or TOP for the top.
     scan_out: u32,
-    // 1: the pass drops the keys CULLED (they are neither counted nor written).
+    // 1: the pass drops the pairs whose value is CULLED (neither counted nor written).
     cull: u32,
     pad: u32,
 }
@@ -78,9 +79,9 @@ fn block_of(wg: vec3<u32>) -> u32 {
     return wg.y * MAX_GROUPS_X + wg.x;
 }
 
-// Whether input key i is sorted: one of the pass's keys, and not dropped by a culling pass.
+// Whether input pair i is sorted: one of the pass's pairs, and not dropped by a culling pass.
 fn kept(i: u32) -> bool {
-    return i < sp.count && (sp.cull == 0u || key_in_at(i) != CULLED);
+    return i < sp.count && (sp.cull == 0u || val_in_at(i) != CULLED);
 }
 
 // Exclusive prefix sum of `v` over the workgroup (Hillis–Steele in workgroup memory); the

@@ -12,9 +12,10 @@
 //! level, where a single workgroup used to sum a 6 M-key sort's 375,000 histogram entries in
 //! runs of 1,465 serial loads an invocation.
 //!
-//! The depth sort sorts the visible splats alone ([`RadixSort::encode_culled`]): its first pass
-//! drops the culled keys ([`CULLED`]) as it sorts the first digit, and the passes after it run
-//! on the count the projection left on the device, their uniforms and workgroup counts written
+//! The depth sort and the draw-order shuffle sort the visible splats alone
+//! ([`RadixSort::encode_culled`]): the first pass drops the culled ones (value [`CULLED`]) as it
+//! sorts the first digit, and the passes after it run on the count the projection left on the
+//! device, their uniforms and workgroup counts written
 //! there by `sort_setup` (`shaders/sort_setup.wgsl`), so a view that culls most of a scene
 //! sorts little more than what it draws, without a read-back.
 //!
@@ -29,7 +30,7 @@ use bytemuck::{Pod, Zeroable};
 const SORT_SOURCE: &str = include_str!("../shaders/sort.wgsl");
 /// WGSL of the setup of a culling sort's later passes ([`setup_wgsl`]).
 const SETUP_SOURCE: &str = include_str!("../shaders/sort_setup.wgsl");
-/// The key of a culled splat: the bits of no finite depth ([`depth_key`] never returns it).
+/// The value of a pair a culling sort drops (a culled splat's): no particle's id.
 pub const CULLED: u32 = u32::MAX;
 /// Keys per workgroup block.
 pub const BLOCK: u32 = 256;
@@ -75,7 +76,7 @@ pub struct SortParams {
     pub scan_in: u32,
     /// The first entry in the partial sums of the level above, `u32::MAX` at the top.
     pub scan_out: u32,
-    /// 1: the pass drops the keys [`CULLED`] (the first pass of [`RadixSort::encode_culled`]).
+    /// 1: the pass drops the pairs of value [`CULLED`] (the first of [`RadixSort::encode_culled`]'s).
     pub cull: u32,
     /// Padding to 32 bytes.
     pub pad: u32,
@@ -90,7 +91,7 @@ pub fn depth_key(z: f32) -> Option<u32> {
 
 /// CPU mirror of the GPU passes: a stable LSD radix sort of `keys` (with `vals`) on the low
 /// `bits` bits, [`RADIX_BITS`] at a time, via per-digit counts and their exclusive scan. (A
-/// culling sort is this sort of the keys other than [`CULLED`].)
+/// culling sort is this sort of the pairs whose value is not [`CULLED`].)
 pub fn cpu_radix_sort(keys: &mut Vec<u32>, vals: &mut Vec<u32>, bits: u32) {
     let radix = 1usize << RADIX_BITS;
     for shift in (0..pass_count(bits)).map(|p| p * RADIX_BITS) {
@@ -401,10 +402,11 @@ impl RadixSort {
     }
 
     /// Encode the sort of the first `n` pairs of `buf` on their low `bits` key bits without the
-    /// keys [`CULLED`], in one compute pass: the others, as many as the u32 at `visible` (a
-    /// buffer and a byte offset) says, end up sorted in the first pairs of `buf.keys` and
-    /// `buf.vals`. The first pass reads all `n` and drops the culled keys; `sort_setup` then
-    /// sizes the passes after it on the device's count, which the host never reads.
+    /// pairs of value [`CULLED`], in one compute pass: the others, as many as the u32 at
+    /// `visible` (a buffer and a byte offset) says, end up sorted in the first pairs of
+    /// `buf.keys` and `buf.vals`. The first pass reads all `n` and drops the culled pairs;
+    /// `sort_setup` then sizes the passes after it on the device's count, which the host never
+    /// reads.
     #[allow(clippy::too_many_arguments)]
     pub fn encode_culled(
         &self,
@@ -564,8 +566,8 @@ pub fn sort_pairs(
     sort_uploaded(ctx, sort, keys, vals, bits, false)
 }
 
-/// Sort `keys` with `vals` on the GPU on their low `bits` bits without the keys [`CULLED`], as
-/// the depth sort does (the count of the others uploaded to the device for `sort_setup`): the
+/// Sort `keys` with `vals` on the GPU on their low `bits` bits without the pairs of value
+/// [`CULLED`], as the depth sort does (the count of the others uploaded to the device for `sort_setup`): the
 /// entry point of the tests.
 pub fn sort_culled_pairs(
     ctx: &GpuContext,
@@ -592,7 +594,7 @@ fn sort_uploaded(
         return Err(GpuError::Unsupported(format!("{} keys but {} values", keys.len(), vals.len())));
     }
     let n = u32::try_from(keys.len()).map_err(|_| GpuError::Unsupported("more than 2³² keys".into()))?;
-    let kept = if cull { keys.iter().filter(|&&k| k != CULLED).count() as u32 } else { n };
+    let kept = if cull { vals.iter().filter(|&&v| v != CULLED).count() as u32 } else { n };
     let buf = sort.buffers(ctx, n)?;
     if n == 0 {
         return Ok((Vec::new(), Vec::new()));

@@ -72,8 +72,8 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
             assert_eq!(gpu.1, std_sorted.iter().map(|p| p.1).collect::<Vec<_>>(), "{name}: not stable");
         }
     }
-    // The culling sort (the depth sort's): the keys CULLED dropped by the first pass, the later
-    // passes sized on the device. Kept shares from all to none, so that the later passes have
+    // The culling sort (the depth sort's and the shuffle's): the pairs of value CULLED dropped
+    // by the first pass, the later passes sized on the device. Kept shares from all to none, so that the later passes have
     // as many scan levels as the first (half kept), fewer used than the first's (100 of 70,000:
     // one tile under two levels), or no block at all; whole and split over bindings.
     let culled_cases = [
@@ -85,20 +85,22 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
         ("half culled, split", 70_000, 0.5, true),
     ];
     for (name, n, kept, split) in culled_cases {
-        let keys: Vec<u32> = (0..n)
+        // As the projection keys them: unsortable depths and culled splats of value CULLED.
+        let (keys, vals): (Vec<u32>, Vec<u32>) = (0..n)
             .map(|i| {
-                // As the projection keys them: unsortable depths and culled splats as CULLED.
                 let key = match name.starts_with("depths") {
-                    true => depth_key(depths[i % depths.len()]).unwrap_or(CULLED),
-                    false => (rng.next_u64() as u32).min(CULLED - 1),
+                    true => depth_key(depths[i % depths.len()]),
+                    false => Some(rng.next_u64() as u32),
                 };
-                if rng.next_f32() < kept { key } else { CULLED }
+                match key.filter(|_| rng.next_f32() < kept) {
+                    Some(key) => (key, i as u32),
+                    None => (CULLED, CULLED),
+                }
             })
-            .collect();
-        let vals: Vec<u32> = (0..n as u32).collect();
+            .unzip();
         let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
         let gpu = sort_culled_pairs(ctx, sort, &keys, &vals, 32).unwrap();
-        let (mut k, mut v): (Vec<u32>, Vec<u32>) = keys.iter().copied().zip(vals).filter(|&(k, _)| k != CULLED).unzip();
+        let (mut k, mut v): (Vec<u32>, Vec<u32>) = keys.iter().copied().zip(vals).filter(|&(_, v)| v != CULLED).unzip();
         cpu_radix_sort(&mut k, &mut v, 32);
         let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));
         assert_eq!(differ, None, "{name}: {} pairs sorted, {} kept; the first differs there", gpu.0.len(), k.len());

@@ -22,15 +22,10 @@ pub(super) struct TileLists {
 }
 
 impl TileLists {
-    /// Bind the binning of the splats in `order` (the values of `offsets`, as many as word 1
-    /// of `order_len` says), counting into `offsets.hist` (room for count + 1 entries), with
-    /// room for `pair_count` pairs ([`GpuRasterizer::pair_count`]: the same in every order).
-    pub(super) fn new(
-        r: &GpuRasterizer,
-        offsets: &SortBuffers,
-        order_len: &wgpu::Buffer,
-        pair_count: u32,
-    ) -> Result<Self, GpuError> {
+    /// Bind the binning of the splats in `order` (the values of `offsets`), counting into
+    /// `offsets.hist` (room for count + 1 entries), with room for `pair_count` pairs
+    /// ([`GpuRasterizer::pair_count`]: the same in every order).
+    pub(super) fn new(r: &GpuRasterizer, offsets: &SortBuffers, pair_count: u32) -> Result<Self, GpuError> {
         let (ctx, pipes) = (r.ctx, r.pipes);
         let pairs = pipes.sort.buffers(ctx, pair_count.max(1))?;
         let split = r.scene.split.with_pairs(ctx, &pairs)?;
@@ -42,8 +37,8 @@ impl TileLists {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let params = &r.params_buffer;
-        let count_group = r.count_group(offsets, order_len);
+        let (params, draw_args) = (&r.params_buffer, &r.draw_args);
+        let count_group = r.count_group(offsets);
         let parts = [
             split.bind(&ORDER, &offsets.vals),
             split.bind(&OFFSETS, &offsets.hist),
@@ -52,7 +47,7 @@ impl TileLists {
             r.split_parts(false, false),
         ]
         .concat();
-        let emit_group = bind(ctx, &k.tile_emit, &[&[(0, params), (6, order_len)][..], &parts].concat());
+        let emit_group = bind(ctx, &k.tile_emit, &[&[(0, params), (6, draw_args)][..], &parts].concat());
         let parts = [split.bind(&OFFSETS, &offsets.hist), split.bind(&PAIR_TILES, &pairs.keys)].concat();
         let ranges_group = bind(ctx, &k.tile_ranges, &[&[(0, params), (10, &ranges)][..], &parts].concat());
         Ok(Self { pairs, pair_count, ranges, k, count_group, emit_group, ranges_group })
@@ -90,11 +85,11 @@ impl TileLists {
 }
 
 impl GpuRasterizer<'_> {
-    /// The group of `tile_count` over the splats in the order `offsets.vals` (as many as word 1
-    /// of `order_len` says), counting into `offsets.hist`.
-    fn count_group(&self, offsets: &SortBuffers, order_len: &wgpu::Buffer) -> wgpu::BindGroup {
+    /// The group of `tile_count` over the splats in the order `offsets.vals`, counting into
+    /// `offsets.hist`.
+    fn count_group(&self, offsets: &SortBuffers) -> wgpu::BindGroup {
         let split = &self.scene.split;
-        let own = [(0, &self.params_buffer), (6, order_len)];
+        let own = [(0, &self.params_buffer), (6, &self.draw_args)];
         let parts =
             [split.bind(&ORDER, &offsets.vals), split.bind(&OFFSETS, &offsets.hist), self.split_parts(false, false)];
         bind(self.ctx, &self.k.tile_count, &[&own[..], &parts.concat()].concat())
@@ -120,7 +115,7 @@ impl GpuRasterizer<'_> {
     /// total is the same in any draw order.
     pub(super) fn pair_count(&self) -> Result<u32, GpuError> {
         let mut encoder = self.encoder("tile count");
-        self.encode_count(&mut encoder, &self.count_group(&self.depth, &self.draw_args), &self.depth);
+        self.encode_count(&mut encoder, &self.count_group(&self.depth), &self.depth);
         self.submit(encoder)?;
         let total = u64::from(self.scene.count);
         Ok(self.depth.read(self.ctx, &self.depth.hist, total..total + 1)?[0])

@@ -233,7 +233,7 @@ impl GpuRasterizer<'_> {
         // 1. Pairs per rank and their exclusive scan in depth order (offsets[n] is the total).
         let pairs = self.pair_count()?;
         // 2. Emit the pairs, sort them by tile, find each tile's range, composite.
-        let lists = TileLists::new(self, &self.depth, &self.draw_args, pairs)?;
+        let lists = TileLists::new(self, &self.depth, pairs)?;
         let per_pixel = if params.first_hit != 0 { self.raster.samples } else { 1 };
         let out = HitBuffers::new(ctx, (self.camera.width * self.camera.height * per_pixel) as usize);
         let storage = wgpu::BufferUsages::STORAGE;

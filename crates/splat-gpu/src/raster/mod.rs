@@ -351,7 +351,7 @@ impl<'a> GpuRasterizer<'a> {
         }
     }
 
-    /// The global depth sort of the visible splats: the culled ones (key
+    /// The global depth sort of the visible splats: the culled ones (value
     /// [`crate::sort::CULLED`], the shaders' NONE) dropped by its first pass, the later passes
     /// sized on the count the projection left in the draw arguments (their instance count).
     fn encode_sort(

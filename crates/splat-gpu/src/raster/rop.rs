@@ -171,9 +171,7 @@ impl RopPass {
             mapped_at_creation: false,
         });
         let shuffle = pipes.sort.buffers(ctx, n + 1)?;
-        // The shuffled order holds every particle (the depth order only the visible ones).
-        let everyone = ctx.upload("shuffled order length", bytemuck::cast_slice(&[6u32, n, 0, 0]));
-        let lists = TileLists::new(r, &shuffle, &everyone, pair_count)?;
+        let lists = TileLists::new(r, &shuffle, pair_count)?;
         let frame = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rop frame"),
             size: size_of::<FrameParams>() as u64,
@@ -182,8 +180,8 @@ impl RopPass {
         });
         let split = &lists.k.split;
         let shuffled = [split.bind(&DEPTH_KEYS, &shuffle.keys), split.bind(&ORDER, &shuffle.vals)].concat();
-        let keys_group =
-            bind(ctx, &r.k.shuffle_keys, &[&[(0, &r.params_buffer), (19, &frame)][..], &shuffled].concat());
+        let own = [(0, &r.params_buffer), (19, &frame)];
+        let keys_group = bind(ctx, &r.k.shuffle_keys, &[&own[..], &shuffled, &r.split_parts(false, false)].concat());
         let rop = r.rop_pipeline(&lists.k);
         let parts =
             [r.split_parts(false, true), split.bind(&ORDER, &shuffle.vals), split.bind(&PAIR_RANKS, &lists.pairs.vals)]
@@ -237,7 +235,7 @@ impl RopPass {
             pass.set_bind_group(0, &self.keys_group, &[]);
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
-        pipes.sort.encode(ctx, encoder, &self.shuffle, n, 32, None)?;
+        pipes.sort.encode_culled(ctx, encoder, &self.shuffle, n, (&r.draw_args, 4), 32, None)?;
         self.lists.encode_count(r, encoder, &self.shuffle);
         self.lists.encode_lists(r, encoder)?;
         let [tiles_x, tiles_y] = r.params.tiles;
