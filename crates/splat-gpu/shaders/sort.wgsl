@@ -17,9 +17,9 @@
 // own sum's prefix from the level above. No invocation reads more than SCAN_ITEMS entries of a
 // level, however long the scan.
 //
-// Every dispatch is indirect, its workgroups at the uniform slot's place in the sort's
-// dispatch arguments: written by the host when it knows the count, by `sort_setup`
-// (sort_setup.wgsl) when the device counted it. A pass that culls (`cull`, the first pass of
+// The host dispatches what it can size; the passes after a culling one run on a count only the
+// device knows and are dispatched indirectly, their uniforms and workgroups written by
+// `sort_setup` (sort_setup.wgsl). A pass that culls (`cull`, the first pass of
 // the depth sort and of the draw-order shuffle) drops the pairs whose value is CULLED, so the
 // passes after it sort the visible splats alone.
 struct SortParams {

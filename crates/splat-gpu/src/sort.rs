@@ -238,7 +238,9 @@ pub struct SortBuffers {
     capacity: u32,
     /// The uniform slots, one a stride ([`PASS_SLOTS`] and the levels after them).
     params: wgpu::Buffer,
-    /// Each slot's workgroups, [`ARGS`] bytes a slot.
+    /// The workgroups of each slot `sort_setup` sizes, [`ARGS`] bytes a slot (those the host
+    /// sizes are dispatched directly: wgpu validates every indirect dispatch with one of its
+    /// own by default).
     args: wgpu::Buffer,
     /// `sort_setup`'s input: the device's count, the passes and the levels.
     setup: wgpu::Buffer,
@@ -397,7 +399,7 @@ impl RadixSort {
             label: Some("radix sort"),
             timestamp_writes: timestamps,
         });
-        self.encode_passes(ctx, &mut pass, buf, passes, levels);
+        self.encode_passes(ctx, &mut pass, buf, &passes, &levels, false);
         Ok(())
     }
 
@@ -406,7 +408,7 @@ impl RadixSort {
     /// `visible` (a buffer and a byte offset) says, end up sorted in the first pairs of
     /// `buf.keys` and `buf.vals`. The first pass reads all `n` and drops the culled pairs;
     /// `sort_setup` then sizes the passes after it on the device's count, which the host never
-    /// reads.
+    /// reads, and they are dispatched indirectly.
     #[allow(clippy::too_many_arguments)]
     pub fn encode_culled(
         &self,
@@ -419,7 +421,8 @@ impl RadixSort {
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
         let (passes, levels) = self.write_pass_slots(ctx, buf, n, bits, true)?;
-        ctx.queue.write_buffer(&buf.setup, 0, bytemuck::cast_slice(&[0, passes, levels as u32, 0]));
+        let setup = [0, passes.len() as u32, levels.len() as u32, 0];
+        ctx.queue.write_buffer(&buf.setup, 0, bytemuck::cast_slice(&setup));
         encoder.copy_buffer_to_buffer(visible.0, visible.1, &buf.setup, 0, 4);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("radix sort"),
@@ -428,13 +431,13 @@ impl RadixSort {
         pass.set_pipeline(&self.setup.1);
         pass.set_bind_group(0, &buf.setup_group, &[]);
         ctx.dispatch(&mut pass, 1, 1, 1);
-        self.encode_passes(ctx, &mut pass, buf, passes, levels);
+        self.encode_passes(ctx, &mut pass, buf, &passes, &levels, true);
         Ok(())
     }
 
     /// Write the slots of a sort of `count` pairs on `bits` bits (the first pass culling with
-    /// `cull`): each pass's uniforms and blocks, and the scan levels of its histogram, the
-    /// same for the first pass and the later ones. The passes and levels a pass has.
+    /// `cull`): each pass's uniforms, and the scan levels of its histogram, the same for the
+    /// first pass and the later ones. Those passes and levels.
     fn write_pass_slots(
         &self,
         ctx: &GpuContext,
@@ -442,13 +445,12 @@ impl RadixSort {
         count: u32,
         bits: u32,
         cull: bool,
-    ) -> Result<(u32, usize), GpuError> {
+    ) -> Result<(Vec<SortParams>, Vec<SortParams>), GpuError> {
         if count > buf.capacity {
             return Err(GpuError::Unsupported(format!("{count} keys exceed the sort's capacity of {}", buf.capacity)));
         }
         let blocks = count.div_ceil(BLOCK).max(1);
-        let passes = pass_count(bits);
-        let pass_params: Vec<SortParams> = (0..passes)
+        let passes: Vec<SortParams> = (0..pass_count(bits))
             .map(|p| SortParams {
                 count,
                 shift: p * RADIX_BITS,
@@ -457,89 +459,44 @@ impl RadixSort {
                 ..SortParams::default()
             })
             .collect();
-        self.write_slots(ctx, buf, 0, &pass_params, |p| p.blocks);
+        self.write_slots(ctx, buf, 0, &passes);
         let levels = scan_levels(16 * blocks);
-        for first in [FIRST_LEVELS, LATER_LEVELS] {
-            self.write_slots(ctx, buf, first, &levels, |l| l.scan_len.div_ceil(SCAN_TILE));
-        }
-        Ok((passes, levels.len()))
+        self.write_slots(ctx, buf, FIRST_LEVELS, &levels);
+        self.write_slots(ctx, buf, LATER_LEVELS, &levels);
+        Ok((passes, levels))
     }
 
-    /// Write `params` to the uniform slots of `buf` from slot `first` on, one a stride, and
-    /// the workgroups of `work(params)` blocks or tiles to their dispatch arguments.
-    fn write_slots(
-        &self,
-        ctx: &GpuContext,
-        buf: &SortBuffers,
-        first: u64,
-        params: &[SortParams],
-        work: impl Fn(&SortParams) -> u32,
-    ) {
+    /// Write `params` to the uniform slots of `buf` from slot `first` on, one a stride.
+    fn write_slots(&self, ctx: &GpuContext, buf: &SortBuffers, first: u64, params: &[SortParams]) {
         let mut uniforms = vec![0u8; (self.stride * params.len() as u64) as usize];
         for (i, p) in params.iter().enumerate() {
             let at = (self.stride * i as u64) as usize;
             uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(p));
         }
         ctx.queue.write_buffer(&buf.params, self.stride * first, &uniforms);
-        let args: Vec<u32> = params
-            .iter()
-            .flat_map(|p| {
-                let (x, y) = groups(work(p));
-                [x, y, 1]
-            })
-            .collect();
-        ctx.queue.write_buffer(&buf.args, ARGS * first, bytemuck::cast_slice(&args));
     }
 
-    /// Encode `passes` sort passes, each a histogram, the scan of its `levels` levels and a
-    /// scatter, ping-ponging between the buffers' halves.
+    /// Encode the sort `passes`, each a histogram, the scan of its histogram's `levels` and a
+    /// scatter, ping-ponging between the buffers' halves; with `device_sized`, the passes after
+    /// the first are dispatched as `sort_setup` sized them.
     fn encode_passes(
         &self,
         ctx: &GpuContext,
         pass: &mut wgpu::ComputePass<'_>,
         buf: &SortBuffers,
-        passes: u32,
-        levels: usize,
+        passes: &[SortParams],
+        levels: &[SortParams],
+        device_sized: bool,
     ) {
-        for p in 0..passes {
+        let mut encoding = Encoding { stride: self.stride, ctx, pass, buf };
+        for (p, params) in (0u64..).zip(passes) {
             let group = &buf.bind_groups[(p % 2) as usize];
-            self.dispatch(ctx, pass, buf, group, u64::from(p), &buf.kernels.histogram);
-            self.encode_levels(ctx, pass, buf, group, if p == 0 { FIRST_LEVELS } else { LATER_LEVELS }, levels);
-            self.dispatch(ctx, pass, buf, group, u64::from(p), &buf.kernels.scatter);
-        }
-    }
-
-    /// Dispatch `pipeline` with the uniforms and workgroups of `slot`.
-    fn dispatch(
-        &self,
-        ctx: &GpuContext,
-        pass: &mut wgpu::ComputePass<'_>,
-        buf: &SortBuffers,
-        group: &wgpu::BindGroup,
-        slot: u64,
-        pipeline: &wgpu::ComputePipeline,
-    ) {
-        pass.set_bind_group(0, group, &[(self.stride * slot) as u32]);
-        pass.set_pipeline(pipeline);
-        ctx.dispatch_indirect(pass, &buf.args, ARGS * slot);
-    }
-
-    /// Encode the scan of the `levels` levels whose slots start at `first`: each level below
-    /// the top reduced to the next, then each level scanned from the top down.
-    fn encode_levels(
-        &self,
-        ctx: &GpuContext,
-        pass: &mut wgpu::ComputePass<'_>,
-        buf: &SortBuffers,
-        group: &wgpu::BindGroup,
-        first: u64,
-        levels: usize,
-    ) {
-        for i in 0..levels as u64 - 1 {
-            self.dispatch(ctx, pass, buf, group, first + i, &buf.kernels.scan_reduce);
-        }
-        for i in (0..levels as u64).rev() {
-            self.dispatch(ctx, pass, buf, group, first + i, &buf.kernels.scan_down);
+            let on_device = device_sized && p > 0;
+            let blocks = (!on_device).then(|| groups(params.blocks));
+            encoding.dispatch(group, p, &buf.kernels.histogram, blocks);
+            let first = if p == 0 { FIRST_LEVELS } else { LATER_LEVELS };
+            encoding.levels(group, first, levels, on_device);
+            encoding.dispatch(group, p, &buf.kernels.scatter, blocks);
         }
     }
 
@@ -547,10 +504,51 @@ impl RadixSort {
     /// (its own uniform slots of the buffers).
     pub fn encode_scan(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, buf: &SortBuffers, count: u32) {
         let levels = scan_levels(count);
-        self.write_slots(ctx, buf, SCAN_LEVELS, &levels, |l| l.scan_len.div_ceil(SCAN_TILE));
+        self.write_slots(ctx, buf, SCAN_LEVELS, &levels);
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
-        self.encode_levels(ctx, &mut pass, buf, &buf.bind_groups[0], SCAN_LEVELS, levels.len());
+        let mut encoding = Encoding { stride: self.stride, ctx, pass: &mut pass, buf };
+        encoding.levels(&buf.bind_groups[0], SCAN_LEVELS, &levels, false);
+    }
+}
+
+/// The dispatches of one sort (or scan) being encoded into a compute pass.
+struct Encoding<'e, 'p> {
+    stride: u64,
+    ctx: &'e GpuContext,
+    pass: &'e mut wgpu::ComputePass<'p>,
+    buf: &'e SortBuffers,
+}
+
+impl Encoding<'_, '_> {
+    /// Dispatch `pipeline` with the uniforms of `slot`: `workgroups` where the host knows them,
+    /// else those `sort_setup` wrote for the slot.
+    fn dispatch(
+        &mut self,
+        group: &wgpu::BindGroup,
+        slot: u64,
+        pipeline: &wgpu::ComputePipeline,
+        workgroups: Option<(u32, u32)>,
+    ) {
+        self.pass.set_bind_group(0, group, &[(self.stride * slot) as u32]);
+        self.pass.set_pipeline(pipeline);
+        match workgroups {
+            Some((x, y)) => self.ctx.dispatch(self.pass, x, y, 1),
+            None => self.ctx.dispatch_indirect(self.pass, &self.buf.args, ARGS * slot),
+        }
+    }
+
+    /// The scan of `levels`, whose slots start at `first`: each level below the top reduced to
+    /// the next, then each level scanned from the top down (`on_device`: sized by `sort_setup`).
+    fn levels(&mut self, group: &wgpu::BindGroup, first: u64, levels: &[SortParams], on_device: bool) {
+        let kernels = &self.buf.kernels;
+        let tiles = |i: usize| (!on_device).then(|| groups(levels[i].scan_len.div_ceil(SCAN_TILE)));
+        for i in 0..levels.len() - 1 {
+            self.dispatch(group, first + i as u64, &kernels.scan_reduce, tiles(i));
+        }
+        for i in (0..levels.len()).rev() {
+            self.dispatch(group, first + i as u64, &kernels.scan_down, tiles(i));
+        }
     }
 }
 
