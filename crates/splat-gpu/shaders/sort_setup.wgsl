@@ -2,8 +2,8 @@
 // the device holds (the visible splats the projection counted): the twin of
 // splat_gpu::sort::RadixSort::write_pass_slots for those passes. One invocation.
 //
-// The host has written every slot for all `n` keys (the first pass culls: it keeps the
-// visible keys alone, packed in input order). This rewrites what the visible count changes:
+// The host has written every slot for all `n` pairs (the first pass culls: it writes the
+// visible pairs alone, packed, sorted on the first digit). This rewrites what the visible count changes:
 // the later passes' count and blocks, the scan levels of their histogram, and each slot's
 // workgroups (`args`, three words a slot, read by dispatch_workgroups_indirect). The levels'
 // places in `partials` stay those of the n keys' levels, which hold the shorter ones.
