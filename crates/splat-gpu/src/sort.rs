@@ -403,27 +403,25 @@ impl RadixSort {
         Ok(())
     }
 
-    /// Encode the sort of the first `n` pairs of `buf` on their low `bits` key bits without the
-    /// pairs of value [`CULLED`], in one compute pass: the others, as many as the u32 at
-    /// `visible` (a buffer and a byte offset) says, end up sorted in the first pairs of
-    /// `buf.keys` and `buf.vals`. The first pass reads all `n` and drops the culled pairs;
-    /// `sort_setup` then sizes the passes after it on the device's count, which the host never
-    /// reads, and they are dispatched indirectly.
-    #[allow(clippy::too_many_arguments)]
+    /// Encode the sort of the first `n` pairs of `buf` on their whole keys without the pairs of
+    /// value [`CULLED`], in one compute pass: the others, as many as word 1 of `instances` says
+    /// (an indirect draw's instance count: the visible splats the projection counted), end up
+    /// sorted in the first pairs of `buf.keys` and `buf.vals`. The first pass reads all `n` and
+    /// drops the culled pairs; `sort_setup` then sizes the passes after it on the device's
+    /// count, which the host never reads, and they are dispatched indirectly.
     pub fn encode_culled(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         buf: &SortBuffers,
         n: u32,
-        visible: (&wgpu::Buffer, u64),
-        bits: u32,
+        instances: &wgpu::Buffer,
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
-        let (passes, levels) = self.write_pass_slots(ctx, buf, n, bits, true)?;
+        let (passes, levels) = self.write_pass_slots(ctx, buf, n, u32::BITS, true)?;
         let setup = [0, passes.len() as u32, levels.len() as u32, 0];
         ctx.queue.write_buffer(&buf.setup, 0, bytemuck::cast_slice(&setup));
-        encoder.copy_buffer_to_buffer(visible.0, visible.1, &buf.setup, 0, 4);
+        encoder.copy_buffer_to_buffer(instances, 4, &buf.setup, 0, 4);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("radix sort"),
             timestamp_writes: timestamps,
@@ -564,21 +562,20 @@ pub fn sort_pairs(
     sort_uploaded(ctx, sort, keys, vals, bits, false)
 }
 
-/// Sort `keys` with `vals` on the GPU on their low `bits` bits without the pairs of value
-/// [`CULLED`], as the depth sort does (the count of the others uploaded to the device for `sort_setup`): the
-/// entry point of the tests.
+/// Sort `keys` with `vals` on the GPU without the pairs of value [`CULLED`], as the depth sort
+/// does (the count of the others uploaded to the device for `sort_setup`): the entry point of
+/// the tests.
 pub fn sort_culled_pairs(
     ctx: &GpuContext,
     sort: &RadixSort,
     keys: &[u32],
     vals: &[u32],
-    bits: u32,
 ) -> Result<(Vec<u32>, Vec<u32>), GpuError> {
-    sort_uploaded(ctx, sort, keys, vals, bits, true)
+    sort_uploaded(ctx, sort, keys, vals, u32::BITS, true)
 }
 
-/// Upload the pairs, sort them ([`RadixSort::encode_culled`] with `cull`, else
-/// [`RadixSort::encode`]) and read back the sorted ones.
+/// Upload the pairs, sort them ([`RadixSort::encode_culled`] with `cull`, on whole keys, else
+/// [`RadixSort::encode`] on `bits`) and read back the sorted ones.
 fn sort_uploaded(
     ctx: &GpuContext,
     sort: &RadixSort,
@@ -606,7 +603,7 @@ fn sort_uploaded(
             contents: bytemuck::cast_slice(&[0u32, kept]),
             usage: wgpu::BufferUsages::COPY_SRC,
         });
-        sort.encode_culled(ctx, &mut encoder, &buf, n, (&count, 4), bits, None)?;
+        sort.encode_culled(ctx, &mut encoder, &buf, n, &count, None)?;
     } else {
         sort.encode(ctx, &mut encoder, &buf, n, bits, None)?;
     }

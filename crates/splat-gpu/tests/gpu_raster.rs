@@ -99,7 +99,7 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
             })
             .unzip();
         let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
-        let gpu = sort_culled_pairs(ctx, sort, &keys, &vals, 32).unwrap();
+        let gpu = sort_culled_pairs(ctx, sort, &keys, &vals).unwrap();
         let (mut k, mut v): (Vec<u32>, Vec<u32>) = keys.iter().copied().zip(vals).filter(|&(_, v)| v != CULLED).unzip();
         cpu_radix_sort(&mut k, &mut v, 32);
         let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));

@@ -359,8 +359,7 @@ impl<'a> GpuRasterizer<'a> {
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
-        let visible = (&self.draw_args, 4);
-        self.pipes.sort.encode_culled(self.ctx, encoder, &self.depth, self.scene.count, visible, 32, timestamps)
+        self.pipes.sort.encode_culled(self.ctx, encoder, &self.depth, self.scene.count, &self.draw_args, timestamps)
     }
 
     /// Bytes of a camera's arrays on the device: the projected splats and the depth sort's keys,
