@@ -236,6 +236,13 @@ pub struct SortBuffers {
     /// How every array is cut over bindings.
     pub(crate) split: Split,
     capacity: u32,
+    slots: Slots,
+    bind_groups: [wgpu::BindGroup; 2],
+    kernels: std::sync::Arc<SortKernels>,
+}
+
+/// The uniforms and workgroups of a sort's dispatches, and what sizes them on the device.
+struct Slots {
     /// The uniform slots, one a stride ([`PASS_SLOTS`] and the levels after them).
     params: wgpu::Buffer,
     /// The workgroups of each slot `sort_setup` sizes, [`ARGS`] bytes a slot (those the host
@@ -245,8 +252,6 @@ pub struct SortBuffers {
     /// `sort_setup`'s input: the device's count, the passes and the levels.
     setup: wgpu::Buffer,
     setup_group: wgpu::BindGroup,
-    bind_groups: [wgpu::BindGroup; 2],
-    kernels: std::sync::Arc<SortKernels>,
 }
 
 impl SortBuffers {
@@ -322,32 +327,13 @@ impl RadixSort {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
-        let small = |label, size, usage| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | usage,
-                mapped_at_creation: false,
-            })
-        };
-        let params = small("sort params", self.stride * SLOTS, wgpu::BufferUsages::empty());
-        let args = small("sort dispatch args", ARGS * SLOTS, wgpu::BufferUsages::INDIRECT);
-        let setup = small("sort setup", 16, wgpu::BufferUsages::empty());
-        let setup_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("sort setup"),
-            layout: &self.setup.0,
-            entries: &[&setup, &params, &args]
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                .collect::<Vec<_>>(),
-        });
+        let slots = self.slots(ctx);
         let layout = split_layout(split);
         let bind = |ki: &[wgpu::Buffer], vi: &[wgpu::Buffer], ko: &[wgpu::Buffer], vo: &[wgpu::Buffer]| {
             let params = wgpu::BindGroupEntry {
                 binding: 0,
                 resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &params,
+                    buffer: &slots.params,
                     offset: 0,
                     size: wgpu::BufferSize::new(size_of::<SortParams>() as u64),
                 }),
@@ -366,21 +352,33 @@ impl RadixSort {
             })
         };
         let bind_groups = [bind(&keys, &vals, &scratch[0], &scratch[1]), bind(&scratch[0], &scratch[1], &keys, &vals)];
-        Ok(SortBuffers {
-            keys,
-            vals,
-            hist,
-            partials,
-            scratch,
-            split,
-            capacity,
-            params,
-            args,
-            setup,
-            setup_group,
-            bind_groups,
-            kernels,
-        })
+        Ok(SortBuffers { keys, vals, hist, partials, scratch, split, capacity, slots, bind_groups, kernels })
+    }
+
+    /// A sort's uniform slots and dispatch arguments, and `sort_setup`'s input and bindings.
+    fn slots(&self, ctx: &GpuContext) -> Slots {
+        let small = |label, size, usage| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | usage,
+                mapped_at_creation: false,
+            })
+        };
+        let params = small("sort params", self.stride * SLOTS, wgpu::BufferUsages::empty());
+        let args =
+            small("sort dispatch args", ARGS * SLOTS, wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC);
+        let setup = small("sort setup", 16, wgpu::BufferUsages::empty());
+        let setup_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sort setup"),
+            layout: &self.setup.0,
+            entries: &[&setup, &params, &args]
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect::<Vec<_>>(),
+        });
+        Slots { params, args, setup, setup_group }
     }
 
     /// Encode the sort of the first `count` pairs of `buf` on their low `bits` key bits, in
@@ -419,18 +417,33 @@ impl RadixSort {
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
         let (passes, levels) = self.write_pass_slots(ctx, buf, n, u32::BITS, true)?;
+        let mut pass = self.encode_setup(ctx, encoder, &buf.slots, (&passes, &levels), instances, timestamps);
+        self.encode_passes(ctx, &mut pass, buf, &passes, &levels, true);
+        Ok(())
+    }
+
+    /// Begin the compute pass of a culling sort with `sort_setup`: the later `passes` and
+    /// `levels` of `slots` sized on word 1 of `instances`.
+    fn encode_setup<'e>(
+        &self,
+        ctx: &GpuContext,
+        encoder: &'e mut wgpu::CommandEncoder,
+        slots: &Slots,
+        (passes, levels): (&[SortParams], &[SortParams]),
+        instances: &wgpu::Buffer,
+        timestamps: Option<wgpu::ComputePassTimestampWrites<'e>>,
+    ) -> wgpu::ComputePass<'e> {
         let setup = [0, passes.len() as u32, levels.len() as u32, 0];
-        ctx.queue.write_buffer(&buf.setup, 0, bytemuck::cast_slice(&setup));
-        encoder.copy_buffer_to_buffer(instances, 4, &buf.setup, 0, 4);
+        ctx.queue.write_buffer(&slots.setup, 0, bytemuck::cast_slice(&setup));
+        encoder.copy_buffer_to_buffer(instances, 4, &slots.setup, 0, 4);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("radix sort"),
             timestamp_writes: timestamps,
         });
         pass.set_pipeline(&self.setup.1);
-        pass.set_bind_group(0, &buf.setup_group, &[]);
+        pass.set_bind_group(0, &slots.setup_group, &[]);
         ctx.dispatch(&mut pass, 1, 1, 1);
-        self.encode_passes(ctx, &mut pass, buf, &passes, &levels, true);
-        Ok(())
+        pass
     }
 
     /// Write the slots of a sort of `count` pairs on `bits` bits (the first pass culling with
@@ -447,6 +460,18 @@ impl RadixSort {
         if count > buf.capacity {
             return Err(GpuError::Unsupported(format!("{count} keys exceed the sort's capacity of {}", buf.capacity)));
         }
+        Ok(self.write_sort(ctx, &buf.slots, count, bits, cull))
+    }
+
+    /// [`Self::write_pass_slots`] into `slots`, whatever the arrays.
+    fn write_sort(
+        &self,
+        ctx: &GpuContext,
+        slots: &Slots,
+        count: u32,
+        bits: u32,
+        cull: bool,
+    ) -> (Vec<SortParams>, Vec<SortParams>) {
         let blocks = count.div_ceil(BLOCK).max(1);
         let passes: Vec<SortParams> = (0..pass_count(bits))
             .map(|p| SortParams {
@@ -457,21 +482,21 @@ impl RadixSort {
                 ..SortParams::default()
             })
             .collect();
-        self.write_slots(ctx, buf, 0, &passes);
+        self.write_slots(ctx, slots, 0, &passes);
         let levels = scan_levels(16 * blocks);
-        self.write_slots(ctx, buf, FIRST_LEVELS, &levels);
-        self.write_slots(ctx, buf, LATER_LEVELS, &levels);
-        Ok((passes, levels))
+        self.write_slots(ctx, slots, FIRST_LEVELS, &levels);
+        self.write_slots(ctx, slots, LATER_LEVELS, &levels);
+        (passes, levels)
     }
 
-    /// Write `params` to the uniform slots of `buf` from slot `first` on, one a stride.
-    fn write_slots(&self, ctx: &GpuContext, buf: &SortBuffers, first: u64, params: &[SortParams]) {
+    /// Write `params` to the uniform slots of `slots` from slot `first` on, one a stride.
+    fn write_slots(&self, ctx: &GpuContext, slots: &Slots, first: u64, params: &[SortParams]) {
         let mut uniforms = vec![0u8; (self.stride * params.len() as u64) as usize];
         for (i, p) in params.iter().enumerate() {
             let at = (self.stride * i as u64) as usize;
             uniforms[at..at + size_of::<SortParams>()].copy_from_slice(bytemuck::bytes_of(p));
         }
-        ctx.queue.write_buffer(&buf.params, self.stride * first, &uniforms);
+        ctx.queue.write_buffer(&slots.params, self.stride * first, &uniforms);
     }
 
     /// Encode the sort `passes`, each a histogram, the scan of its histogram's `levels` and a
@@ -502,7 +527,7 @@ impl RadixSort {
     /// (its own uniform slots of the buffers).
     pub fn encode_scan(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, buf: &SortBuffers, count: u32) {
         let levels = scan_levels(count);
-        self.write_slots(ctx, buf, SCAN_LEVELS, &levels);
+        self.write_slots(ctx, &buf.slots, SCAN_LEVELS, &levels);
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
         let mut encoding = Encoding { stride: self.stride, ctx, pass: &mut pass, buf };
@@ -532,7 +557,7 @@ impl Encoding<'_, '_> {
         self.pass.set_pipeline(pipeline);
         match workgroups {
             Some((x, y)) => self.ctx.dispatch(self.pass, x, y, 1),
-            None => self.ctx.dispatch_indirect(self.pass, &self.buf.args, ARGS * slot),
+            None => self.ctx.dispatch_indirect(self.pass, &self.buf.slots.args, ARGS * slot),
         }
     }
 
@@ -611,6 +636,37 @@ fn sort_uploaded(
     let keys = buf.read(ctx, &buf.keys, 0..u64::from(kept))?;
     let vals = buf.read(ctx, &buf.vals, 0..u64::from(kept))?;
     Ok((keys, vals))
+}
+
+/// The workgroups of a dispatch in x, y and z.
+pub type Workgroups = [u32; 3];
+
+/// The workgroups `sort_setup` gives a culling sort of `n` pairs of which `visible` are kept:
+/// those of each later pass, then those of each scan level of the later passes (x, y, z). No
+/// array is allocated, so that the test of counts past a row of the dispatch grid (more than
+/// 65,535 blocks, 16.8 M pairs) runs where such a sort could not.
+pub fn culled_workgroups(
+    ctx: &GpuContext,
+    sort: &RadixSort,
+    n: u32,
+    visible: u32,
+) -> Result<(Vec<Workgroups>, Vec<Workgroups>), GpuError> {
+    use wgpu::util::DeviceExt as _;
+    let slots = sort.slots(ctx);
+    let (passes, levels) = sort.write_sort(ctx, &slots, n, u32::BITS, true);
+    let instances = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("visible pairs"),
+        contents: bytemuck::cast_slice(&[0u32, visible]),
+        usage: wgpu::BufferUsages::COPY_SRC,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("setup") });
+    drop(sort.encode_setup(ctx, &mut encoder, &slots, (&passes, &levels), &instances, None));
+    ctx.submit(encoder.finish());
+    let args = ctx.read_u32(&slots.args, (ARGS / 4 * SLOTS) as usize)?;
+    let slot = |s: u64| -> Workgroups { std::array::from_fn(|k| args[(3 * s) as usize + k]) };
+    let pass_groups = (1..passes.len() as u64).map(slot).collect();
+    let level_groups = (0..levels.len() as u64).map(|i| slot(LATER_LEVELS + i)).collect();
+    Ok((pass_groups, level_groups))
 }
 
 /// The exclusive prefix sum of `values` on the GPU (uploading and reading back), by the sort's

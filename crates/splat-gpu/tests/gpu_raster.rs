@@ -14,7 +14,9 @@ use splat_core::raster::{
 use splat_core::rng::SplitMix64;
 use splat_core::trainer::Preset;
 use splat_core::{Camera, Scene};
-use splat_gpu::sort::{CULLED, SCAN_TILE, cpu_radix_sort, depth_key, exclusive_scan, sort_culled_pairs, sort_pairs};
+use splat_gpu::sort::{
+    CULLED, SCAN_TILE, cpu_radix_sort, culled_workgroups, depth_key, exclusive_scan, sort_culled_pairs, sort_pairs,
+};
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
 use std::sync::OnceLock;
 
@@ -104,6 +106,23 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
         cpu_radix_sort(&mut k, &mut v, 32);
         let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));
         assert_eq!(differ, None, "{name}: {} pairs sorted, {} kept; the first differs there", gpu.0.len(), k.len());
+    }
+    // sort_setup's workgroups where the blocks pass one row of the dispatch grid (65,535
+    // workgroups: more take rows of it), at counts this device could not sort: 20 M pairs, of
+    // which none, 1,000, a row's worth, one more, or 17 M are kept.
+    let row = 65_535u32;
+    let grid = |k: u32| if k <= row { [k, 1, 1] } else { [row, k.div_ceil(row), 1] };
+    for (visible, blocks) in [(0, 0), (1000, 4), (row * 256, row), (row * 256 + 1, row + 1), (17_000_000, 66_407)] {
+        let (passes, levels) = culled_workgroups(ctx, sort, 20_000_000, visible).unwrap();
+        assert_eq!(passes, vec![grid(blocks); 7], "{visible} kept: the later passes' blocks");
+        let mut len = 16 * blocks;
+        for (i, &groups) in levels.iter().enumerate() {
+            len = len.div_ceil(SCAN_TILE);
+            assert_eq!(groups, grid(len), "{visible} kept: scan level {i}'s tiles");
+        }
+        if visible == 17_000_000 {
+            assert_eq!(levels, [[1038, 1, 1], [2, 1, 1], [1, 1, 1]], "1,062,512 histogram entries");
+        }
     }
     // The scan the sort is built from, at the sizes where it gains a level (one tile, two
     // levels, three), whole and split over bindings.
