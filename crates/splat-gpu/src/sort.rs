@@ -609,7 +609,6 @@ fn sort_uploaded(
     bits: u32,
     cull: bool,
 ) -> Result<(Vec<u32>, Vec<u32>), GpuError> {
-    use wgpu::util::DeviceExt as _;
     if keys.len() != vals.len() {
         return Err(GpuError::Unsupported(format!("{} keys but {} values", keys.len(), vals.len())));
     }
@@ -623,12 +622,7 @@ fn sort_uploaded(
     crate::split::write_u32(ctx, &buf.vals, buf.split, vals);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("sort") });
     if cull {
-        let count = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("kept keys"),
-            contents: bytemuck::cast_slice(&[0u32, kept]),
-            usage: wgpu::BufferUsages::COPY_SRC,
-        });
-        sort.encode_culled(ctx, &mut encoder, &buf, n, &count, None)?;
+        sort.encode_culled(ctx, &mut encoder, &buf, n, &instances(ctx, kept), None)?;
     } else {
         sort.encode(ctx, &mut encoder, &buf, n, bits, None)?;
     }
@@ -636,6 +630,17 @@ fn sort_uploaded(
     let keys = buf.read(ctx, &buf.keys, 0..u64::from(kept))?;
     let vals = buf.read(ctx, &buf.vals, 0..u64::from(kept))?;
     Ok((keys, vals))
+}
+
+/// Draw arguments of `count` instances (word 1), as the projection leaves them for a culling
+/// sort to read: the test entries' stand-in for the device's count.
+fn instances(ctx: &GpuContext, count: u32) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt as _;
+    ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("instances"),
+        contents: bytemuck::cast_slice(&[0u32, count]),
+        usage: wgpu::BufferUsages::COPY_SRC,
+    })
 }
 
 /// The workgroups of a dispatch in x, y and z.
@@ -651,16 +656,11 @@ pub fn culled_workgroups(
     n: u32,
     visible: u32,
 ) -> Result<(Vec<Workgroups>, Vec<Workgroups>), GpuError> {
-    use wgpu::util::DeviceExt as _;
     let slots = sort.slots(ctx);
     let (passes, levels) = sort.write_sort(ctx, &slots, n, u32::BITS, true);
-    let instances = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("visible pairs"),
-        contents: bytemuck::cast_slice(&[0u32, visible]),
-        usage: wgpu::BufferUsages::COPY_SRC,
-    });
+    let visible = instances(ctx, visible);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("setup") });
-    drop(sort.encode_setup(ctx, &mut encoder, &slots, (&passes, &levels), &instances, None));
+    drop(sort.encode_setup(ctx, &mut encoder, &slots, (&passes, &levels), &visible, None));
     ctx.submit(encoder.finish());
     let args = ctx.read_u32(&slots.args, (ARGS / 4 * SLOTS) as usize)?;
     let slot = |s: u64| -> Workgroups { std::array::from_fn(|k| args[(3 * s) as usize + k]) };
