@@ -453,7 +453,7 @@ fn a_gltf_file_holds_splats_and_meshes_together() {
 /// material, mapped onto the mesh material's shares as `splat_io::mesh::gltf_material`
 /// documents: the masked quad (opacity 0.3, cutoff 0.5) draws nothing, the black blue channel
 /// that emits is read as `EMITTING_BLACK`, and the unread `KHR_materials_volume` is noted. A
-/// world file's keys override every part's.
+/// world file's keys override every part's; a colour keeps what a lit part emits.
 #[test]
 fn gltf_materials_read_as_three_js_writes_them() {
     use splat_core::lighting::Material;
@@ -528,8 +528,18 @@ fn gltf_materials_read_as_three_js_writes_them() {
     std::fs::write(&world, entry).unwrap();
     let spec = splat_io::world::read_world(&world).unwrap();
     assert_eq!(spec.meshes.len(), expected.len());
-    for ((_, m), file) in spec.meshes.iter().zip(&materials) {
-        assert_eq!(*m, MeshMaterial { color: Vec3::Y, roughness: 0.7, ..*file });
+    for (i, ((_, m), file)) in spec.meshes.iter().zip(&materials).enumerate() {
+        if i == 3 {
+            // The new colour recolours what the quad reflects; it emits what the file says,
+            // its red and blue channels, black in the new colour, read as EMITTING_BLACK.
+            let emitted = m.shading.emissive * m.color;
+            assert!((emitted - Vec3::new(1.0, 4.0, 2.0)).abs().max_element() < 1e-5, "{emitted}");
+            assert_eq!(m.color, Vec3::new(black, 1.0, black));
+            assert_eq!(*m, MeshMaterial { color: m.color, shading: m.shading, roughness: 0.7, ..*file });
+        } else {
+            // The unlit quad's colour is its emission, which the override sets.
+            assert_eq!(*m, MeshMaterial { color: Vec3::Y, roughness: 0.7, ..*file });
+        }
     }
     assert!(spec.notes.iter().all(|n| n.starts_with("meshes[0]: ")) && spec.notes.len() == read.notes.len());
 }

@@ -230,14 +230,9 @@ pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Opti
         notes.push(format!("glTF {name}: {} textures not read (their factors are)", unread.join(", ")));
     }
     let emission = Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
-    // A black channel that emits reflects 10⁻⁶ of the light instead, so that k_e ⊙ c can be
-    // the emission.
-    let emits = emission.cmpgt(Vec3::ZERO);
-    let base = Vec3::new(r, g, b);
-    let c = Vec3::select(emits & base.cmpeq(Vec3::ZERO), Vec3::splat(EMITTING_BLACK), base);
+    let (c, emissive) = emitting(emission, Vec3::new(r, g, b));
     let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
     let transmission = m.transmission().map_or(0.0, |t| t.transmission_factor().clamp(0.0, 1.0));
-    let emissive = Vec3::select(emits, emission / c, Vec3::ZERO);
     if metallic > 0.0 && c.min_element() < c.max_element() {
         notes.push(format!("glTF {name}: a metal's tint {c} is not represented (the mirror share is untinted)"));
     }
@@ -262,6 +257,15 @@ pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Opti
 /// The base colour an emitting black channel is read as: k_e ⊙ c is a mesh's emission, so c
 /// cannot be 0 where it emits; 10⁻⁶ reflects nothing visible.
 pub const EMITTING_BLACK: f32 = 1e-6;
+
+/// The colour c and emissive coefficients k_e of a surface of base colour `base` that emits
+/// `emission`, so that k_e ⊙ c is the emission: a black channel that emits reflects
+/// [`EMITTING_BLACK`] of the light instead (k_e ⊙ 0 would emit nothing).
+pub fn emitting(emission: Vec3, base: Vec3) -> (Vec3, Vec3) {
+    let emits = emission.cmpgt(Vec3::ZERO);
+    let c = Vec3::select(emits & base.cmpeq(Vec3::ZERO), Vec3::splat(EMITTING_BLACK), base);
+    (c, Vec3::select(emits, emission / c, Vec3::ZERO))
+}
 
 /// The parts of a glTF file as its primitives are appended: keyed by material index.
 struct Parts {

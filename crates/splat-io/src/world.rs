@@ -527,7 +527,7 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(Vec<PlacedMesh>, Vec<String>)
     let mut parts = Vec::with_capacity(read.parts.len());
     for part in read.parts {
         let file = part.material.unwrap_or_default();
-        let material = MeshMaterial {
+        let mut material = MeshMaterial {
             color: m.color.map_or(file.color, Colour::rgb),
             shading: m.material.as_ref().map_or(file.shading, material),
             mirror: m.mirror.unwrap_or(file.mirror),
@@ -536,6 +536,14 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(Vec<PlacedMesh>, Vec<String>)
             roughness: m.roughness.unwrap_or(file.roughness),
             opacity: m.opacity.unwrap_or(file.opacity),
         };
+        // A colour over a file's lit material changes what the surface reflects, not what it
+        // emits (glTF's emissiveFactor is no share of the base colour): k_e is read again under
+        // the new colour. An unlit part's colour is its emission, and a material table's k_e
+        // is a share of the entry's colour by this file's own convention.
+        if m.color.is_some() && m.material.is_none() && file.shading != Material::EMISSIVE {
+            (material.color, material.shading.emissive) =
+                crate::mesh::emitting(file.shading.emissive * file.color, material.color);
+        }
         material.validate()?;
         parts.push((part.mesh.transformed(placed), material));
     }
