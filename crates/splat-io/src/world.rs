@@ -61,9 +61,9 @@
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
 //! without one is fully emissive, a mesh without one matte (ambient 0.1, diffuse 0.9). A glTF
 //! file's triangles are a mesh for each of its materials, read as
-//! [`crate::mesh::gltf_material`] maps them, each key of the entry overriding them. Particle
-//! ids run over the sets in file order. `max_bounces` (top level, default 3) limits mirror and
-//! glass bounces. `iso_threshold` and `raster_iso_threshold` (top level, default 0.7 each) are the
+//! [`crate::mesh::gltf_material`] maps them, each key of the entry overriding them (a `color`
+//! keeps what a lit part emits). Particle ids run over the sets in file order. `max_bounces`
+//! (top level, default 3) limits mirror and glass bounces. `iso_threshold` and `raster_iso_threshold` (top level, default 0.7 each) are the
 //! transmittance at which the ray tracers and splatting pick a pixel's surface
 //! (vk_gaussian_splatting Lighting §1.1: two values, one per panel). What the file sets is the
 //! render's default, which the front ends' flags override ([`WorldSpec::settings`]).
