@@ -285,7 +285,7 @@ pub fn render_frames(
     progress: Progress,
 ) -> Result<Rendered> {
     let mut one = None;
-    render_views(args, staged, &[staged.camera], extras, progress, |_, rendered| {
+    render_views(args, staged, [staged.camera], extras, progress, |_, rendered| {
         one = Some(rendered);
         Ok(())
     })?;
@@ -294,12 +294,13 @@ pub fn render_frames(
 
 /// Render `staged`'s world through each of `cameras` as `args` say, on the backend they choose:
 /// the world is prepared once (the BVH; on the GPU also its device arrays and pipelines,
-/// `splat_gpu::render_views`) and `each(i, rendered)` receives view i's images in order.
+/// `splat_gpu::render_views`) and `each(i, rendered)` receives view i's images in order, as
+/// soon as it is rendered (so `cameras` may be a channel that a caller feeds view by view).
 /// `progress` counts a CPU render's pixels over all the views.
 pub fn render_views(
     args: &RenderArgs,
     staged: &Staged,
-    cameras: &[Camera],
+    cameras: impl IntoIterator<Item = Camera, IntoIter: Send>,
     extras: splat_gpu::Extras,
     progress: Progress,
     mut each: impl FnMut(usize, Rendered) -> Result<()> + Send,
@@ -314,9 +315,10 @@ pub fn render_views(
     let random = algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling);
     let count = if random { frames.count } else { 1 };
     let adapter = gpu.as_ref().map(GpuContext::describe);
+    let mut cameras = cameras.into_iter();
     let mut views = |render: &dyn Fn(&Camera) -> Result<RenderOutput>| -> Result<()> {
-        for (i, camera) in cameras.iter().enumerate() {
-            let out = render(camera)?;
+        for (i, camera) in cameras.by_ref().enumerate() {
+            let out = render(&camera)?;
             each(i, Rendered { out, algorithm, count, gpu: adapter.clone() })?;
         }
         Ok(())
@@ -444,7 +446,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         ViewFormat::Npy => "npy",
     };
     let mut algorithm = None;
-    render_views(args, &staged, &views, extras(args), &|_| {}, |k, rendered| {
+    render_views(args, &staged, views.iter().copied(), extras(args), &|_| {}, |k, rendered| {
         let (i, name) = mine[k];
         write_image(&args.output.join(format!("{}.{extension}", view_stem(name, i))), &rendered.out.mean)?;
         algorithm = Some(rendered.algorithm);

@@ -22,8 +22,8 @@ use splat_core::particle::sh_coeff_count;
 use splat_core::{Camera, Particle, Scene};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, mpsc};
 
 pyo3::create_exception!(
     _splat,
@@ -390,10 +390,17 @@ fn render_views<'py>(
         .detach(|| -> anyhow::Result<Vec<Rendered>> {
             let mut all = Vec::with_capacity(cameras.len());
             let progress = |n: u64| reporter.advance(n);
-            splat_cli::render::render_views(&args, &staged, &cameras, extras, &progress, |_, rendered| {
-                all.push(rendered);
-                Ok(())
-            })?;
+            splat_cli::render::render_views(
+                &args,
+                &staged,
+                cameras.iter().copied(),
+                extras,
+                &progress,
+                |_, rendered| {
+                    all.push(rendered);
+                    Ok(())
+                },
+            )?;
             Ok(all)
         })
         .map_err(fail)?;
@@ -406,6 +413,156 @@ fn render_views<'py>(
             view_dict(py, out, gpu, extras, false, (frames.first, count), run)
         })
         .collect()
+}
+
+/// A world prepared once for any number of [`render`] calls, each through its own camera: the
+/// BVH (and on the GPU the device arrays and pipelines) built when it is made, kept by a worker
+/// thread that renders each camera sent to it, until the renderer is closed or dropped.
+#[pyclass(name = "Renderer", module = "splat")]
+struct PyRenderer {
+    /// The options as staged (for each camera's size and memory check, and its frames).
+    args: Arc<(RenderArgs, Staged)>,
+    extras: splat_gpu::Extras,
+    state: Mutex<State>,
+    /// The progress callback of the render under way, which the worker's progress calls.
+    reporter: Arc<Mutex<Option<Arc<Reporter>>>>,
+}
+
+/// Where a [`PyRenderer`]'s worker is. Its lock is never held while rendering, so that another
+/// Python thread that calls in while the interpreter's lock is released is answered at once.
+enum State {
+    Idle(Worker),
+    /// A render is under way (the worker is out with it).
+    Busy,
+    Closed,
+    /// The worker stopped on this error.
+    Failed(String),
+}
+
+/// The worker thread of a [`PyRenderer`] and its two channels.
+struct Worker {
+    cameras: mpsc::Sender<Camera>,
+    views: mpsc::Receiver<(Rendered, String)>,
+    thread: std::thread::JoinHandle<anyhow::Result<()>>,
+}
+
+impl Worker {
+    /// Render `camera`: the worker again with the view, or the error that stopped it.
+    fn render(self, camera: Camera) -> Result<(Worker, (Rendered, String)), String> {
+        if self.cameras.send(camera).is_ok()
+            && let Ok(view) = self.views.recv()
+        {
+            return Ok((self, view));
+        }
+        drop(self.cameras);
+        Err(match self.thread.join() {
+            Ok(Err(e)) => format!("{e:#}"),
+            Ok(Ok(())) => "the renderer's worker stopped".to_string(),
+            Err(_) => "the renderer's worker panicked".to_string(),
+        })
+    }
+}
+
+#[pymethods]
+impl PyRenderer {
+    /// Prepare `scene` for rendering with `options` (those of [`render`]).
+    #[new]
+    #[pyo3(signature = (scene, /, **options))]
+    fn new(py: Python<'_>, scene: &PyScene, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let (args, extras) = options::render_args(py, options)?;
+        if args.0.pipeline == Some(PipelineArg::Path) {
+            return Err(SplatError::new_err(
+                "a Renderer renders with the splat methods: render path-traced views one render() call at a time",
+            ));
+        }
+        let shared = Arc::new(stage(args.0, scene, None)?);
+        let (cameras, requests) = mpsc::channel::<Camera>();
+        let (done, views) = mpsc::channel();
+        let reporter = Arc::new(Mutex::new(None::<Arc<Reporter>>));
+        let (worker_shared, worker_reporter) = (shared.clone(), reporter.clone());
+        let thread = std::thread::spawn(move || {
+            let (args, staged) = &*worker_shared;
+            let current = Mutex::new(None);
+            let requests =
+                requests.into_iter().inspect(|camera| *current.lock().expect("not poisoned") = Some(*camera));
+            let progress = |n: u64| {
+                let reporter = worker_reporter.lock().expect("not poisoned").clone();
+                if let Some(reporter) = reporter {
+                    reporter.advance(n);
+                }
+            };
+            splat_cli::render::render_views(args, staged, requests, extras, &progress, |_, rendered| {
+                let camera = current.lock().expect("not poisoned").expect("a camera was sent");
+                let method = format!("{:?}", rendered.algorithm);
+                let run = splat_cli::render::run_description(args, staged, &camera, &method);
+                done.send((rendered, run)).map_err(|_| anyhow::anyhow!("the renderer was dropped"))
+            })
+        });
+        let state = Mutex::new(State::Idle(Worker { cameras, views, thread }));
+        Ok(Self { args: shared, extras, state, reporter })
+    }
+
+    /// Render through `view` as `render(scene, view, **options)` would, with this renderer's
+    /// scene and options: the same dict, bit for bit.
+    #[pyo3(signature = (view, /, *, progress = None))]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        view: &PyCamera,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (args, _) = &*self.args;
+        let camera = args.scene.sized(view.camera).map_err(fail)?;
+        splat_cli::args::check_memory(&camera).map_err(fail)?;
+        let worker = {
+            let mut state = self.state.lock().expect("not poisoned");
+            match std::mem::replace(&mut *state, State::Busy) {
+                State::Idle(worker) => worker,
+                other => {
+                    let e = match &other {
+                        State::Busy => "the renderer is rendering for another thread: one render at a time (make a Renderer a thread)".to_string(),
+                        State::Failed(e) => format!("the renderer stopped on an error: {e}"),
+                        _ => "the renderer is closed: make another".to_string(),
+                    };
+                    *state = other;
+                    return Err(SplatError::new_err(e));
+                }
+            }
+        };
+        let reporter = Arc::new(Reporter::new(progress, u64::from(camera.width) * u64::from(camera.height)));
+        *self.reporter.lock().expect("not poisoned") = Some(reporter.clone());
+        let rendered = py.detach(|| worker.render(camera));
+        *self.reporter.lock().expect("not poisoned") = None;
+        let mut state = self.state.lock().expect("not poisoned");
+        let (Rendered { out, count, gpu, .. }, run) = match rendered {
+            Ok((worker, view)) => {
+                // Closed meanwhile: the worker is dropped, which stops it.
+                if matches!(*state, State::Busy) {
+                    *state = State::Idle(worker);
+                }
+                view
+            }
+            Err(e) => {
+                let e = options::pythonic(&e);
+                *state = State::Failed(e.clone());
+                return Err(SplatError::new_err(e));
+            }
+        };
+        drop(state);
+        reporter.raise()?;
+        view_dict(py, out, gpu, self.extras, false, (args.frames().first, count), run)
+    }
+
+    /// Stop the worker and free the prepared world; later renders are refused.
+    fn close(&self, py: Python<'_>) {
+        let state = std::mem::replace(&mut *self.state.lock().expect("not poisoned"), State::Closed);
+        if let State::Idle(Worker { cameras, views, thread }) = state {
+            drop((cameras, views));
+            py.detach(|| {
+                let _ = thread.join();
+            });
+        }
+    }
 }
 
 /// `scene` staged as `splat render` stages a file with `args` (the trainer's implications
@@ -656,6 +813,7 @@ fn _splat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SH_C0", splat_core::sh::SH_C0)?;
     m.add_class::<PyScene>()?;
     m.add_class::<PyCamera>()?;
+    m.add_class::<PyRenderer>()?;
     m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(render_views, m)?)?;

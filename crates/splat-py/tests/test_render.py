@@ -86,6 +86,69 @@ def test_render_views_equals_a_render_of_each_view(capture, options):
         splat.render_views(scene, cameras, pipeline="path")
 
 
+@pytest.mark.parametrize("options", [{"method": "stochastic", "spp": 2, "seed": 5}, {"method": "raster-sorted"}])
+def test_a_renderer_renders_each_view_as_render_does(capture, options):
+    """A Renderer prepares the world once and renders camera after camera through it: each
+    view's dict equals render()'s of that camera alone, bit for bit, and its progress counts
+    that view's pixels; a view too large is refused and the renderer goes on; after close(), and
+    outside its with block, renders are refused by name, as a path-tracing renderer is."""
+    _, _, scene = capture
+    look = lambda x, w=WIDTH: splat.Camera.look_at((x, -0.2, -0.5), TARGET, up=(0, -1, 0), width=w, height=HEIGHT)  # noqa: E731
+    cameras = [look(0.3), ("named", look(-0.4)), look(0.1, w=WIDTH + 8)]
+    with splat.Renderer(scene, backend="cpu", **options) as renderer:
+        views = []
+        for camera in cameras:
+            calls = []
+            views.append(renderer.render(camera, progress=lambda d, t: calls.append((d, t))))
+            size = views[-1]["color"].shape[0] * views[-1]["color"].shape[1]
+            assert calls and calls[-1] == (size, size), calls[-3:]
+        with pytest.raises(splat.SplatError, match="image size 100000"):
+            renderer.render(look(0.0, w=100_000))
+        with pytest.raises(splat.SplatError, match="expected a splat.Camera"):
+            renderer.render("cameras.json")
+        again = renderer.render(cameras[0])
+    for camera, view in zip(cameras, views):
+        one = splat.render(scene, camera[1] if isinstance(camera, tuple) else camera, backend="cpu", **options)
+        assert set(view) == set(one)
+        for name in ("color", "variance", "alpha", "depth", "normal"):
+            np.testing.assert_array_equal(view[name], one[name], err_msg=f"{name} differs from render()'s")
+        assert (view["run"], view["count"], view["first"], view["device"]) == (
+            one["run"], one["count"], one["first"], one["device"])
+    np.testing.assert_array_equal(again["color"], views[0]["color"])
+    assert views[2]["color"].shape == (HEIGHT, WIDTH + 8, 3)
+    assert not np.array_equal(views[0]["color"], views[1]["color"])
+    with pytest.raises(splat.SplatError, match="closed"):
+        renderer.render(cameras[0])
+    renderer.close()
+    with pytest.raises(splat.SplatError, match="path-traced views one"):
+        splat.Renderer(scene, pipeline="path")
+    with pytest.raises(splat.SplatError, match="expected a splat.Scene"):
+        splat.Renderer("scene.ply")
+
+
+def test_a_renderer_answers_a_second_call_during_a_render_at_once():
+    """A render called while another is under way (here from the first's progress callback,
+    which runs on a worker thread while the interpreter's lock is released) is refused at once,
+    one render at a time said by name, instead of waiting on the first: a renderer that held its
+    lock through a render would hang here. The first render is not disturbed."""
+    scene = splat.Scene.demo()
+    renderer = splat.Renderer(scene, method="exact", backend="cpu")
+    camera = splat.Camera.look_at((0, 0.5, 3), (0, 0.5, 0), width=64, height=48)
+    refused = []
+
+    def progress(done, total):
+        if not refused:
+            try:
+                renderer.render(camera)
+            except splat.SplatError as error:
+                refused.append(str(error))
+
+    first = renderer.render(camera, progress=progress)
+    assert refused and "one render at a time" in refused[0], refused
+    np.testing.assert_array_equal(renderer.render(camera)["color"], first["color"])
+    renderer.close()
+
+
 def test_a_scene_from_arrays_equals_the_same_scene_from_linear_values(capture):
     """log_scales and logit_opacities apply exp and the sigmoid, nothing else."""
     g, _, raw_scene = capture
@@ -266,6 +329,6 @@ def test_the_type_stubs_cover_the_extension_module():
     native = splat._splat
     public = {name for name in dir(native) if not name.startswith("_")}
     assert public == set(stubbed), (public ^ set(stubbed))
-    for name in ("Scene", "Camera"):
+    for name in ("Scene", "Camera", "Renderer"):
         methods = {m for m in dir(getattr(native, name)) if not m.startswith("_")}
         assert methods == {m for m in stubbed[name] if not m.startswith("_")}, (name, methods ^ stubbed[name])

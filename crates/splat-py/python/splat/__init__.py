@@ -43,6 +43,7 @@ from ._splat import z_test as _z_test  # noqa: E402
 
 __all__ = [
     "Camera",
+    "Renderer",
     "Scene",
     "SplatError",
     "SH_C0",
@@ -241,6 +242,47 @@ def render_views(scene: Scene, cameras, *, progress=None, **options) -> list:
         if not isinstance(camera, Camera):
             raise SplatError(f"cameras[{i}] is a {type(camera).__name__}: expected a splat.Camera")
     return _splat.render_views(scene._native, cameras, progress=progress, **options)
+
+
+class Renderer:
+    """`scene` prepared once for renders through any number of cameras, one at a time, with
+    `options` (those of `render`)::
+
+        with splat.Renderer(scene, method="stochastic", spp=16, seed=1) as renderer:
+            for camera in trajectory:
+                image = renderer.render(camera)["color"]
+
+    Each ``renderer.render(camera)`` returns what ``render(scene, camera, **options)`` returns,
+    bit for bit, but the world is prepared once, when the renderer is made (the BVH; on the GPU
+    also its device arrays and pipelines), where every `render` call prepares it anew: a worker
+    thread keeps it until `close` (or the end of a ``with`` block, or the renderer's deletion).
+    Views come back one at a time, so a long trajectory needs no more memory than one image.
+    One render at a time: a second thread calling in meanwhile is refused (make a Renderer a
+    thread). The path tracer (pipeline="path") renders through `render` only."""
+
+    def __init__(self, scene: Scene, **options):
+        if not isinstance(scene, Scene):
+            raise SplatError(f"scene is a {type(scene).__name__}: expected a splat.Scene (Scene.load, Scene.from_arrays)")
+        self._native = _splat.Renderer(scene._native, **options)
+
+    def render(self, camera, *, progress=None) -> dict:
+        """The dict `render` returns for `camera` (a Camera, or a (name, Camera) pair of
+        load_cameras); `progress(done, total)` counts a CPU render's pixels."""
+        if isinstance(camera, tuple) and len(camera) == 2:
+            camera = camera[1]
+        if not isinstance(camera, Camera):
+            raise SplatError(f"camera is a {type(camera).__name__}: expected a splat.Camera")
+        return self._native.render(camera, progress=progress)
+
+    def close(self) -> None:
+        """Stop the worker, freeing what it prepared; later renders are refused."""
+        self._native.close()
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def compare(reference, test, pixels_per_degree: float | None = None) -> dict:
