@@ -114,42 +114,75 @@ impl DisplayTransform {
 }
 
 /// The texels of an 8-bit RGBA `texture` (one with `COPY_SRC` usage), row after row without
-/// padding: what a view shows, for screenshots and tests. Waits for the queue.
+/// padding: what a view shows, for screenshots and tests. Waits for the queue. A caller that
+/// reads a texture every step keeps an [`Rgba8Readback`] instead.
 pub fn read_rgba8(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     texture: &wgpu::Texture,
 ) -> Result<Vec<u8>, crate::GpuError> {
-    let (w, h) = (texture.width(), texture.height());
-    if texture.format().block_copy_size(None) != Some(4) {
-        return Err(crate::GpuError::Unsupported(format!("{:?} is not 4 bytes a texel", texture.format())));
+    Rgba8Readback::default().read(device, queue, texture)
+}
+
+/// [`read_rgba8`] with its staging buffer kept between reads of textures of one size (a view's
+/// host copy, read back at every step), made again when the size changes.
+#[derive(Debug, Default)]
+pub struct Rgba8Readback {
+    buffer: Option<wgpu::Buffer>,
+}
+
+impl Rgba8Readback {
+    /// The texels of `texture`, as [`read_rgba8`] returns them.
+    pub fn read(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        texture: &wgpu::Texture,
+    ) -> Result<Vec<u8>, crate::GpuError> {
+        let (w, h) = (texture.width(), texture.height());
+        if texture.format().block_copy_size(None) != Some(4) {
+            return Err(crate::GpuError::Unsupported(format!("{:?} is not 4 bytes a texel", texture.format())));
+        }
+        let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let size = u64::from(row) * u64::from(h);
+        let buffer = match self.buffer.take() {
+            Some(buffer) if buffer.size() == size => buffer,
+            _ => device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("texels"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        };
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("texels") });
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+            },
+            texture.size(),
+        );
+        queue.submit([encoder.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        let failed = |e: String| crate::GpuError::Readback(e);
+        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| failed(e.to_string()))?;
+        rx.recv().map_err(|e| failed(e.to_string()))?.map_err(|e| failed(e.to_string()))?;
+        let mut texels = Vec::with_capacity(4 * w as usize * h as usize);
+        {
+            let data = buffer.slice(..).get_mapped_range().map_err(|e| failed(e.to_string()))?;
+            for r in data.chunks(row as usize) {
+                texels.extend_from_slice(&r[..4 * w as usize]);
+            }
+        }
+        // Kept (unmapped) for the next read; on an error above it is dropped instead.
+        buffer.unmap();
+        self.buffer = Some(buffer);
+        Ok(texels)
     }
-    let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("texels"),
-        size: u64::from(row) * u64::from(h),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("texels") });
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
-        },
-        texture.size(),
-    );
-    queue.submit([encoder.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    let failed = |e: String| crate::GpuError::Readback(e);
-    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| failed(e.to_string()))?;
-    rx.recv().map_err(|e| failed(e.to_string()))?.map_err(|e| failed(e.to_string()))?;
-    let data = buffer.slice(..).get_mapped_range().map_err(|e| failed(e.to_string()))?;
-    Ok(data.chunks(row as usize).flat_map(|r| r[..4 * w as usize].to_vec()).collect())
 }
 
 /// display.wgsl's `DisplayParams` (32 bytes).

@@ -33,7 +33,7 @@ pub use wgpu;
 pub use accumulate::{AccumulationFormat, Accumulator};
 pub use backend::{Extras, GpuViewRenderer, render, render_views, supports, supports_meshes};
 pub use context::{GpuContext, GpuCounters, quiet_device_select};
-pub use display::{DisplayMode, DisplayTransform, PixelState, read_rgba8};
+pub use display::{DisplayMode, DisplayTransform, PixelState, Rgba8Readback, read_rgba8};
 pub use error::{GpuError, Remedy};
 pub use layout::{GpuFirstHit, GpuFragment, GpuParticle, Params, PassState, PathParams};
 pub use progressive::ProgressiveTrace;

@@ -9,7 +9,9 @@ use common::{context, fixture, tracer};
 use splat_core::frame::{Frames, RenderOutput};
 use splat_core::trace::{Method, TraceScene};
 use splat_core::{Camera, RenderSettings};
-use splat_gpu::{DisplayMode, DisplayTransform, GpuContext, PixelState, ProgressiveTrace, read_rgba8, wgpu};
+use splat_gpu::{
+    DisplayMode, DisplayTransform, GpuContext, PixelState, ProgressiveTrace, Rgba8Readback, read_rgba8, wgpu,
+};
 
 /// The largest |a − b| over two images' values.
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -19,6 +21,35 @@ fn max_diff(a: &[f32], b: &[f32]) -> f32 {
 
 fn batch(tracer: &splat_gpu::GpuTracer, camera: &Camera, method: &Method, count: u32) -> RenderOutput {
     tracer.render(camera, method, &Frames { count, ..Frames::default() }).expect("GPU render").0
+}
+
+/// One read-back kept across reads returns each texture's texels as written: the same size
+/// twice (its staging buffer reused, the second contents read, not the first's), another size
+/// (a buffer made again), rows whose padding to 256 bytes is dropped, and back.
+#[test]
+fn a_kept_readback_reads_each_texture_as_written() {
+    let Some(ctx) = context() else { return };
+    let mut readback = Rgba8Readback::default();
+    for (k, (w, h)) in [(13u32, 7u32), (13, 7), (70, 3), (13, 7)].into_iter().enumerate() {
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("written"),
+            size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let texels: Vec<u8> = (0..4 * w * h).map(|i| (i * 7 + k as u32 * 31) as u8).collect();
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            &texels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * w), rows_per_image: Some(h) },
+            texture.size(),
+        );
+        assert_eq!(readback.read(&ctx.device, &ctx.queue, &texture).unwrap(), texels, "read {k}, {w} × {h}");
+    }
 }
 
 #[test]

@@ -282,8 +282,10 @@ enum View<'t> {
         tracer: Box<GpuTracer<'t>>,
         progressive: Box<ProgressiveTrace>,
         per_step: u32,
-        /// The texture a [`Target::Host`] is drawn into before it is read back.
+        /// The texture a [`Target::Host`] is drawn into before it is read back, and the
+        /// read-back's staging buffer, both kept between steps.
         host: Option<wgpu::Texture>,
+        readback: splat_gpu::Rgba8Readback,
     },
     /// The CPU's running mean, and the algorithm prepared for the view (a splatting method's
     /// projected and sorted splats, kept while the camera holds still).
@@ -434,7 +436,13 @@ impl Renderer {
         let tracer = GpuTracer::new(ctx, pipeline, trace).map_err(|e| e.to_string())?;
         let progressive = ProgressiveTrace::new(&tracer, &job.camera, &job.settings.method(), &stream(&job.settings))
             .map_err(|e| e.to_string())?;
-        Ok(View::Gpu { tracer: Box::new(tracer), progressive: Box::new(progressive), per_step: 1, host: None })
+        Ok(View::Gpu {
+            tracer: Box::new(tracer),
+            progressive: Box::new(progressive),
+            per_step: 1,
+            host: None,
+            readback: Default::default(),
+        })
     }
 
     fn restart(&self, view: &mut View, job: &Job) -> Result<(), String> {
@@ -504,7 +512,7 @@ impl Renderer {
         let display = job.settings.display;
         let frames = self.frames(view);
         match (view, &job.target) {
-            (View::Gpu { tracer, progressive, host, .. }, target) => {
+            (View::Gpu { tracer, progressive, host, readback, .. }, target) => {
                 let ctx = tracer.context();
                 let texture = match target {
                     Target::Texture(texture) => texture,
@@ -515,7 +523,7 @@ impl Renderer {
                 progressive.present(ctx, &mut encoder, &view, texture.format(), &display).map_err(|e| e.to_string())?;
                 ctx.queue.submit([encoder.finish()]);
                 if let Target::Host = target {
-                    let rgba = splat_gpu::read_rgba8(&ctx.device, &ctx.queue, texture).map_err(|e| e.to_string())?;
+                    let rgba = readback.read(&ctx.device, &ctx.queue, texture).map_err(|e| e.to_string())?;
                     self.shared.publish_frame(id, frames, (texture.width(), texture.height()), rgba);
                 }
             }
