@@ -420,8 +420,6 @@ fn render_views<'py>(
 /// thread that renders each camera sent to it, until the renderer is closed or dropped.
 #[pyclass(name = "Renderer", module = "splat")]
 struct PyRenderer {
-    /// The options as staged (for each camera's size and memory check, and its frames).
-    args: Arc<(RenderArgs, Staged)>,
     extras: splat_gpu::Extras,
     state: Mutex<State>,
     /// The progress callback of the render under way, which the worker's progress calls.
@@ -439,8 +437,11 @@ enum State {
     Failed(String),
 }
 
-/// The worker thread of a [`PyRenderer`] and its two channels.
+/// The worker thread of a [`PyRenderer`], its two channels, and the options and world it
+/// renders (each camera sized and checked by the options on the caller's side), all freed
+/// when the renderer closes.
 struct Worker {
+    staged: Arc<(RenderArgs, Staged)>,
     cameras: mpsc::Sender<Camera>,
     views: mpsc::Receiver<(Rendered, String)>,
     thread: std::thread::JoinHandle<anyhow::Result<()>>,
@@ -460,6 +461,17 @@ impl Worker {
             Ok(Ok(())) => "the renderer's worker stopped".to_string(),
             Err(_) => "the renderer's worker panicked".to_string(),
         })
+    }
+}
+
+impl PyRenderer {
+    /// The worker back from a render, unless the renderer was closed meanwhile (then it is
+    /// dropped, which stops it).
+    fn idle(&self, worker: Worker) {
+        let mut state = self.state.lock().expect("not poisoned");
+        if matches!(*state, State::Busy) {
+            *state = State::Idle(worker);
+        }
     }
 }
 
@@ -498,8 +510,8 @@ impl PyRenderer {
                 done.send((rendered, run)).map_err(|_| anyhow::anyhow!("the renderer was dropped"))
             })
         });
-        let state = Mutex::new(State::Idle(Worker { cameras, views, thread }));
-        Ok(Self { args: shared, extras, state, reporter })
+        let state = Mutex::new(State::Idle(Worker { staged: shared, cameras, views, thread }));
+        Ok(Self { extras, state, reporter })
     }
 
     /// Render through `view` as `render(scene, view, **options)` would, with this renderer's
@@ -511,9 +523,6 @@ impl PyRenderer {
         view: &PyCamera,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (args, _) = &*self.args;
-        let camera = args.scene.sized(view.camera).map_err(fail)?;
-        splat_cli::args::check_memory(&camera).map_err(fail)?;
         let worker = {
             let mut state = self.state.lock().expect("not poisoned");
             match std::mem::replace(&mut *state, State::Busy) {
@@ -529,35 +538,42 @@ impl PyRenderer {
                 }
             }
         };
+        let (args, _) = &*worker.staged;
+        let sized =
+            args.scene.sized(view.camera).and_then(|camera| splat_cli::args::check_memory(&camera).map(|_| camera));
+        let first = args.frames().first;
+        let camera = match sized {
+            Ok(camera) => camera,
+            Err(e) => {
+                self.idle(worker);
+                return Err(fail(e));
+            }
+        };
         let reporter = Arc::new(Reporter::new(progress, u64::from(camera.width) * u64::from(camera.height)));
         *self.reporter.lock().expect("not poisoned") = Some(reporter.clone());
         let rendered = py.detach(|| worker.render(camera));
         *self.reporter.lock().expect("not poisoned") = None;
-        let mut state = self.state.lock().expect("not poisoned");
         let (Rendered { out, count, gpu, .. }, run) = match rendered {
             Ok((worker, view)) => {
-                // Closed meanwhile: the worker is dropped, which stops it.
-                if matches!(*state, State::Busy) {
-                    *state = State::Idle(worker);
-                }
+                self.idle(worker);
                 view
             }
             Err(e) => {
                 let e = options::pythonic(&e);
-                *state = State::Failed(e.clone());
+                *self.state.lock().expect("not poisoned") = State::Failed(e.clone());
                 return Err(SplatError::new_err(e));
             }
         };
-        drop(state);
         reporter.raise()?;
-        view_dict(py, out, gpu, self.extras, false, (args.frames().first, count), run)
+        view_dict(py, out, gpu, self.extras, false, (first, count), run)
     }
 
-    /// Stop the worker and free the prepared world; later renders are refused.
+    /// Stop the worker and free the prepared world (and the renderer's copy of the scene); later
+    /// renders are refused.
     fn close(&self, py: Python<'_>) {
         let state = std::mem::replace(&mut *self.state.lock().expect("not poisoned"), State::Closed);
-        if let State::Idle(Worker { cameras, views, thread }) = state {
-            drop((cameras, views));
+        if let State::Idle(Worker { staged, cameras, views, thread }) = state {
+            drop((staged, cameras, views));
             py.detach(|| {
                 let _ = thread.join();
             });
