@@ -437,6 +437,17 @@ pub(crate) fn params_entry(
     }
 }
 
+/// What `build` makes of shaders and pipelines, or the device's first validation error while it
+/// ran (a kernel the adapter rejects) as a typed error instead of wgpu's uncaptured-error panic.
+pub(crate) fn validated<T>(device: &wgpu::Device, build: impl FnOnce() -> T) -> Result<T, GpuError> {
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let built = build();
+    match pollster::block_on(scope.pop()) {
+        Some(e) => Err(GpuError::Shader(e.to_string())),
+        None => Ok(built),
+    }
+}
+
 /// A shader module of WGSL `source`.
 pub(crate) fn shader_module(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModule {
     device.create_shader_module(wgpu::ShaderModuleDescriptor {

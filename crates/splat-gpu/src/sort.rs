@@ -710,35 +710,29 @@ fn setup_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 /// Compile `sort_setup` for uniform slots `stride` bytes apart.
 fn setup_kernel(ctx: &GpuContext, stride: u64) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), GpuError> {
     let device = &ctx.device;
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = crate::context::shader_module(device, "sort_setup.wgsl", &setup_wgsl(stride));
-    let (layout, pipeline_layout) = crate::context::layouts(device, "sort setup", &setup_entries());
-    let pipeline = crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), "sort_setup");
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Shader(e.to_string()));
-    }
-    Ok((layout, pipeline))
+    crate::context::validated(device, || {
+        let module = crate::context::shader_module(device, "sort_setup.wgsl", &setup_wgsl(stride));
+        let (layout, pipeline_layout) = crate::context::layouts(device, "sort setup", &setup_entries());
+        (layout, crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), "sort_setup"))
+    })
 }
 
 impl SortKernels {
     /// Compile the kernels of arrays cut as `split`; a typed error when the device rejects them.
     fn new(ctx: &GpuContext, split: Split) -> Result<Self, GpuError> {
         let device = &ctx.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split));
-        let (layout, pipeline_layout) = crate::context::layouts(device, "sort", &layout_entries(split));
-        let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
-        let kernels = Self {
-            histogram: pipeline("histogram"),
-            scan_reduce: pipeline("scan_reduce"),
-            scan_down: pipeline("scan_down"),
-            scatter: pipeline("scatter"),
-            layout,
-        };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
-        Ok(kernels)
+        crate::context::validated(device, || {
+            let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split));
+            let (layout, pipeline_layout) = crate::context::layouts(device, "sort", &layout_entries(split));
+            let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
+            Self {
+                histogram: pipeline("histogram"),
+                scan_reduce: pipeline("scan_reduce"),
+                scan_down: pipeline("scan_down"),
+                scatter: pipeline("scatter"),
+                layout,
+            }
+        })
     }
 }
 

@@ -328,14 +328,13 @@ impl TracePipeline {
 impl TraceKernel {
     fn new(ctx: &GpuContext, split: TraceSplit) -> Result<Self, GpuError> {
         let device = &ctx.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = crate::context::shader_module(device, "trace.wgsl", &split.wgsl());
-        let (layout, pipeline_layout) =
-            crate::context::layouts(device, "trace", &TracePipeline::layout_entries(&split));
-        let pipeline = compute_pipeline(device, &module, Some(&pipeline_layout), "main");
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
+        let (module, layout, pipeline_layout, pipeline) = crate::context::validated(device, || {
+            let module = crate::context::shader_module(device, "trace.wgsl", &split.wgsl());
+            let (layout, pipeline_layout) =
+                crate::context::layouts(device, "trace", &TracePipeline::layout_entries(&split));
+            let pipeline = compute_pipeline(device, &module, Some(&pipeline_layout), "main");
+            (module, layout, pipeline_layout, pipeline)
+        })?;
         let (hybrid, path, gather) =
             (std::sync::OnceLock::new(), std::sync::OnceLock::new(), std::sync::OnceLock::new());
         Ok(Self { split, pipeline, layout, module, pipeline_layout, hybrid, path, gather })
@@ -376,20 +375,17 @@ impl TraceKernel {
         entry: &str,
         mode: Option<&str>,
     ) -> Result<wgpu::ComputePipeline, GpuError> {
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let constants: Vec<(&str, f64)> = mode.map(|m| (m, 1.0)).into_iter().collect();
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(mode.unwrap_or(entry)),
-            layout: Some(&self.pipeline_layout),
-            module: &self.module,
-            entry_point: Some(entry),
-            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
-            cache: None,
-        });
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
-        Ok(pipeline)
+        crate::context::validated(&ctx.device, || {
+            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(mode.unwrap_or(entry)),
+                layout: Some(&self.pipeline_layout),
+                module: &self.module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+                cache: None,
+            })
+        })
     }
 }
 

@@ -107,35 +107,33 @@ impl RasterPipelines {
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let sort = RadixSort::new(ctx)?;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let fold = shader_module(device, "fold.wgsl", FOLD_WGSL);
-        let fold_msaa = shader_module(device, "fold.wgsl (msaa)", FOLD_MSAA_WGSL);
-        let mesh_prepass = shader_module(device, "mesh_prepass.wgsl", MESH_PREPASS_WGSL);
-        let fold_layout_of = |multisampled| {
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("fold"),
-                entries: &fold_layout_entries(multisampled),
-            })
-        };
-        let (fold_layout, fold_msaa_layout) = (fold_layout_of(false), fold_layout_of(true));
-        let pipes = Self {
-            mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
-            fold: compute_pipeline(device, &fold, Some(&pipeline_layout(device, "fold", &fold_layout)), "fold"),
-            fold_msaa: compute_pipeline(
-                device,
-                &fold_msaa,
-                Some(&pipeline_layout(device, "fold (msaa)", &fold_msaa_layout)),
-                "fold",
-            ),
-            fold_layout,
-            fold_msaa_layout,
-            blend_format: ctx.blend_format(),
-            sort,
-            kernels: crate::split::PerSplit::new(),
-        };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
+        let pipes = crate::context::validated(device, || {
+            let fold = shader_module(device, "fold.wgsl", FOLD_WGSL);
+            let fold_msaa = shader_module(device, "fold.wgsl (msaa)", FOLD_MSAA_WGSL);
+            let mesh_prepass = shader_module(device, "mesh_prepass.wgsl", MESH_PREPASS_WGSL);
+            let fold_layout_of = |multisampled| {
+                device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("fold"),
+                    entries: &fold_layout_entries(multisampled),
+                })
+            };
+            let (fold_layout, fold_msaa_layout) = (fold_layout_of(false), fold_layout_of(true));
+            Self {
+                mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
+                fold: compute_pipeline(device, &fold, Some(&pipeline_layout(device, "fold", &fold_layout)), "fold"),
+                fold_msaa: compute_pipeline(
+                    device,
+                    &fold_msaa,
+                    Some(&pipeline_layout(device, "fold (msaa)", &fold_msaa_layout)),
+                    "fold",
+                ),
+                fold_layout,
+                fold_msaa_layout,
+                blend_format: ctx.blend_format(),
+                sort,
+                kernels: crate::split::PerSplit::new(),
+            }
+        })?;
         pipes.kernels(ctx, RasterSplit::WHOLE)?;
         Ok(pipes)
     }
@@ -159,63 +157,57 @@ impl SplatKernels {
     /// Compile the kernels and the splat draw that read the arrays as `split` cuts them.
     fn new(ctx: &GpuContext, split: RasterSplit, blend_format: wgpu::TextureFormat) -> Result<Self, GpuError> {
         let device = &ctx.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let raster = shader_module(device, "raster.wgsl", &split.raster_wgsl());
-        let splat_module = shader_module(device, "splat.wgsl", &split.splat_wgsl(false));
-        let plane_module =
-            ctx.sample_rate_shading.then(|| shader_module(device, "splat.wgsl (plane)", &split.splat_wgsl(true)));
-        let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("splat"),
-            entries: &splat_layout_entries(&split),
-        });
-        let splat_pipeline_layout = pipeline_layout(device, "splat", &splat_layout);
-        let rop = |plane: f64| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("tile_rop"),
-                layout: None,
-                module: &raster,
-                entry_point: Some("tile_rop"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("PLANE_DEPTH", plane)],
-                    ..Default::default()
-                },
-                cache: None,
-            })
-        };
-        let modules = (&splat_module, plane_module.as_ref());
-        let single = SamplePipelines::new(device, modules, &splat_pipeline_layout, blend_format, 1);
-        let kernels = Self {
-            split,
-            project: compute_pipeline(device, &raster, None, "project"),
-            tile_count: compute_pipeline(device, &raster, None, "tile_count"),
-            tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
-            tile_ranges: compute_pipeline(device, &raster, None, "tile_ranges"),
-            tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
-            shuffle_keys: compute_pipeline(device, &raster, None, "shuffle_keys"),
-            tile_rop: [rop(0.0), rop(1.0)],
-            rop_first_hit: compute_pipeline(device, &raster, None, "rop_first_hit"),
-            single,
-            splat_module,
-            plane_module,
-            splat_layout,
-            splat_pipeline_layout,
-            blend_format,
-        };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
-        Ok(kernels)
+        crate::context::validated(device, || {
+            let raster = shader_module(device, "raster.wgsl", &split.raster_wgsl());
+            let splat_module = shader_module(device, "splat.wgsl", &split.splat_wgsl(false));
+            let plane_module =
+                ctx.sample_rate_shading.then(|| shader_module(device, "splat.wgsl (plane)", &split.splat_wgsl(true)));
+            let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("splat"),
+                entries: &splat_layout_entries(&split),
+            });
+            let splat_pipeline_layout = pipeline_layout(device, "splat", &splat_layout);
+            let rop = |plane: f64| {
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("tile_rop"),
+                    layout: None,
+                    module: &raster,
+                    entry_point: Some("tile_rop"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &[("PLANE_DEPTH", plane)],
+                        ..Default::default()
+                    },
+                    cache: None,
+                })
+            };
+            let modules = (&splat_module, plane_module.as_ref());
+            let single = SamplePipelines::new(device, modules, &splat_pipeline_layout, blend_format, 1);
+            Self {
+                split,
+                project: compute_pipeline(device, &raster, None, "project"),
+                tile_count: compute_pipeline(device, &raster, None, "tile_count"),
+                tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
+                tile_ranges: compute_pipeline(device, &raster, None, "tile_ranges"),
+                tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
+                shuffle_keys: compute_pipeline(device, &raster, None, "shuffle_keys"),
+                tile_rop: [rop(0.0), rop(1.0)],
+                rop_first_hit: compute_pipeline(device, &raster, None, "rop_first_hit"),
+                single,
+                splat_module,
+                plane_module,
+                splat_layout,
+                splat_pipeline_layout,
+                blend_format,
+            }
+        })
     }
 
     /// The render pipelines at `samples` per pixel (the one-sample set is [`SplatKernels::single`]).
     pub(super) fn at_samples(&self, ctx: &GpuContext, samples: u32) -> Result<SamplePipelines, GpuError> {
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let modules = (&self.splat_module, self.plane_module.as_ref());
-        let pipes = SamplePipelines::new(&ctx.device, modules, &self.splat_pipeline_layout, self.blend_format, samples);
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Shader(e.to_string()));
-        }
-        Ok(pipes)
+        crate::context::validated(&ctx.device, || {
+            SamplePipelines::new(&ctx.device, modules, &self.splat_pipeline_layout, self.blend_format, samples)
+        })
     }
 }
 
