@@ -734,6 +734,14 @@ impl SceneArgs {
         Ok(camera.rescaled(w, h)?)
     }
 
+    /// A view to render: `camera` [`Self::sized`], refused when its images cannot fit in memory
+    /// ([`check_memory`]).
+    pub fn view(&self, camera: Camera) -> Result<Camera> {
+        let camera = self.sized(camera)?;
+        check_memory(&camera)?;
+        Ok(camera)
+    }
+
     /// A rayon pool with --threads workers.
     pub fn pool(&self) -> Result<rayon::ThreadPool> {
         let mut builder = rayon::ThreadPoolBuilder::new();

@@ -422,10 +422,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     }
     let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
     let cameras = crate::args::load_cameras(path)?;
-    let sized = cameras.iter().map(|(_, camera)| args.scene.sized(*camera)).collect::<Result<Vec<Camera>>>()?;
-    for camera in &sized {
-        crate::args::check_memory(camera)?;
-    }
+    let sized = cameras.iter().map(|(_, camera)| args.scene.view(*camera)).collect::<Result<Vec<Camera>>>()?;
     let staged = args.scene.load_world(640, 480)?;
     args.options.apply_capture(&staged.world.scene);
     let args = &args;

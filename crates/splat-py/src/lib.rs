@@ -376,11 +376,7 @@ fn render_views<'py>(
     let (args, staged) = stage(args.0, scene, Some(first.get()))?;
     let cameras = views
         .iter()
-        .map(|view| {
-            let camera = args.scene.sized(view.get().camera)?;
-            splat_cli::args::check_memory(&camera)?;
-            Ok(camera)
-        })
+        .map(|view| args.scene.view(view.get().camera))
         .collect::<anyhow::Result<Vec<Camera>>>()
         .map_err(fail)?;
     let pixels = cameras.iter().map(|c| u64::from(c.width) * u64::from(c.height)).sum();
@@ -539,8 +535,7 @@ impl PyRenderer {
             }
         };
         let (args, _) = &*worker.staged;
-        let sized =
-            args.scene.sized(view.camera).and_then(|camera| splat_cli::args::check_memory(&camera).map(|_| camera));
+        let sized = args.scene.view(view.camera);
         let first = args.frames().first;
         let camera = match sized {
             Ok(camera) => camera,
