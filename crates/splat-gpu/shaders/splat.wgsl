@@ -38,24 +38,17 @@ struct VertexOut {
     @location(0) @interpolate(flat) splat: u32,
 }
 
-// Whether StochasticSplats draws the visible splats front to back (rank i of the depth order,
-// an indirect draw of the visible ones alone, whose depth test then rejects what lies behind
-// before it is shaded): at centre depth, where two splats tie only at equal centre depths and
-// the order (depth, id) breaks the tie as the CPU twin does, by the lower id. 0 for the
-// max-density-plane depth, whose per-sample depths can tie between splats of different centre
-// depths: every particle in scene order, the CPU twin's rule for those ties.
-override STOCHASTIC_IN_DEPTH_ORDER: bool = true;
-
-// Instance i draws the splat of rank count − 1 − i (over: back to front), of rank i (under, and
-// stochastic in depth order: front to back), or particle i (stochastic in scene order).
+// Instance i draws the splat of rank count − 1 − i (over: back to front) or of rank i (under
+// and stochastic: front to back) of the order bound as `order_at`: the visible splats in
+// (depth, id) order, or for StochasticSplats at the max-density plane in scene order
+// (splat_gpu::GpuRasterizer::order_parts says why).
 @vertex
 fn vs(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
-    var index = instance;
+    var rank = instance;
     if (params.mode == MODE_OVER) {
-        index = order_at(draw_args[1] - 1u - instance);
-    } else if (params.mode == MODE_UNDER || (params.mode == MODE_STOCHASTIC && STOCHASTIC_IN_DEPTH_ORDER)) {
-        index = order_at(instance);
+        rank = draw_args[1] - 1u - instance;
     }
+    let index = order_at(rank);
     let rect = vec4<f32>(splat_at(index).rect);
     // Two triangles: corners 0 1 2, 2 1 3 of the rect, in pixels.
     let corner = array<vec2<u32>, 6>(

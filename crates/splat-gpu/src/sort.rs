@@ -241,6 +241,19 @@ pub struct SortBuffers {
     kernels: std::sync::Arc<SortKernels>,
 }
 
+/// The pairs of a culling sort ([`RadixSort::encode_culled`], [`RadixSort::encode_compaction`]):
+/// the first `n` of `buffers`, of which those not of value [`CULLED`] are as many as word 1 of
+/// `kept` says (an indirect draw's instance count: the visible splats the projection counted).
+#[derive(Clone, Copy)]
+pub struct Culled<'b> {
+    /// The sort's buffers, holding the pairs.
+    pub buffers: &'b SortBuffers,
+    /// The pairs the first pass reads.
+    pub n: u32,
+    /// The device's count of the pairs kept, in its word 1.
+    pub kept: &'b wgpu::Buffer,
+}
+
 /// The uniforms and workgroups of a sort's dispatches, and what sizes them on the device.
 struct Slots {
     /// The uniform slots, one a stride ([`PASS_SLOTS`] and the levels after them).
@@ -401,24 +414,47 @@ impl RadixSort {
         Ok(())
     }
 
-    /// Encode the sort of the first `n` pairs of `buf` on their whole keys without the pairs of
-    /// value [`CULLED`], in one compute pass: the others, as many as word 1 of `instances` says
-    /// (an indirect draw's instance count: the visible splats the projection counted), end up
-    /// sorted in the first pairs of `buf.keys` and `buf.vals`. The first pass reads all `n` and
-    /// drops the culled pairs; `sort_setup` then sizes the passes after it on the device's
-    /// count, which the host never reads, and they are dispatched indirectly.
+    /// Encode the sort of `pairs` on their whole keys without the pairs of value [`CULLED`], in
+    /// one compute pass: the others end up sorted in the first pairs of the buffers' `keys` and
+    /// `vals`. The first pass reads all `n` and drops the culled pairs; `sort_setup` then sizes
+    /// the passes after it on the device's count, which the host never reads, and they are
+    /// dispatched indirectly.
     pub fn encode_culled(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        buf: &SortBuffers,
-        n: u32,
-        instances: &wgpu::Buffer,
+        pairs: Culled,
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
-        let (passes, levels) = self.write_pass_slots(ctx, buf, n, u32::BITS, true)?;
-        let mut pass = self.encode_setup(ctx, encoder, &buf.slots, (&passes, &levels), instances, timestamps);
-        self.encode_passes(ctx, &mut pass, buf, &passes, &levels, true);
+        self.encode_culled_on(ctx, encoder, pairs, u32::BITS, timestamps)
+    }
+
+    /// Encode the stream compaction of `pairs`, whose keys are zero: the pairs of value other
+    /// than [`CULLED`] in their input order, in the first pairs of the buffers' `vals`. It is
+    /// [`RadixSort::encode_culled`] on one key bit (two passes, the least that lands back in
+    /// the input buffers): the sort is stable and every digit is zero, so the first pass drops
+    /// the culled pairs and keeps the order of the others, and the second moves them back.
+    pub fn encode_compaction(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        pairs: Culled,
+    ) -> Result<(), GpuError> {
+        self.encode_culled_on(ctx, encoder, pairs, 1, None)
+    }
+
+    /// A culling sort of `pairs` on their low `bits` key bits ([`RadixSort::encode_culled`]).
+    fn encode_culled_on(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        Culled { buffers, n, kept }: Culled,
+        bits: u32,
+        timestamps: Option<wgpu::ComputePassTimestampWrites>,
+    ) -> Result<(), GpuError> {
+        let (passes, levels) = self.write_pass_slots(ctx, buffers, n, bits, true)?;
+        let mut pass = self.encode_setup(ctx, encoder, &buffers.slots, (&passes, &levels), kept, timestamps);
+        self.encode_passes(ctx, &mut pass, buffers, &passes, &levels, true);
         Ok(())
     }
 
@@ -587,20 +623,22 @@ pub fn sort_pairs(
     sort_uploaded(ctx, sort, keys, vals, bits, false)
 }
 
-/// Sort `keys` with `vals` on the GPU without the pairs of value [`CULLED`], as the depth sort
-/// does (the count of the others uploaded to the device for `sort_setup`): the entry point of
-/// the tests.
+/// Sort `keys` with `vals` on the GPU on their low `bits` bits without the pairs of value
+/// [`CULLED`], as the depth sort ([`RadixSort::encode_culled`], 32 bits) and the compaction
+/// ([`RadixSort::encode_compaction`], 1 bit of zero keys) do, the count of the others uploaded
+/// to the device for `sort_setup`: the entry point of the tests.
 pub fn sort_culled_pairs(
     ctx: &GpuContext,
     sort: &RadixSort,
     keys: &[u32],
     vals: &[u32],
+    bits: u32,
 ) -> Result<(Vec<u32>, Vec<u32>), GpuError> {
-    sort_uploaded(ctx, sort, keys, vals, u32::BITS, true)
+    sort_uploaded(ctx, sort, keys, vals, bits, true)
 }
 
-/// Upload the pairs, sort them ([`RadixSort::encode_culled`] with `cull`, on whole keys, else
-/// [`RadixSort::encode`] on `bits`) and read back the sorted ones.
+/// Upload the pairs, sort them on `bits` ([`RadixSort::encode_culled`] with `cull`, else
+/// [`RadixSort::encode`]) and read back the sorted ones.
 fn sort_uploaded(
     ctx: &GpuContext,
     sort: &RadixSort,
@@ -622,7 +660,8 @@ fn sort_uploaded(
     crate::split::write_u32(ctx, &buf.vals, buf.split, vals);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("sort") });
     if cull {
-        sort.encode_culled(ctx, &mut encoder, &buf, n, &instances(ctx, kept), None)?;
+        let kept = instances(ctx, kept);
+        sort.encode_culled_on(ctx, &mut encoder, Culled { buffers: &buf, n, kept: &kept }, bits, None)?;
     } else {
         sort.encode(ctx, &mut encoder, &buf, n, bits, None)?;
     }

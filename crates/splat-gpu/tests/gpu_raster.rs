@@ -77,22 +77,30 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
     // The culling sort (the depth sort's and the shuffle's): the pairs of value CULLED dropped
     // by the first pass, the later passes sized on the device. Kept shares from all to none, so that the later passes have
     // as many scan levels as the first (half kept), fewer used than the first's (100 of 70,000:
-    // one tile under two levels), or no block at all; whole and split over bindings.
+    // one tile under two levels), or no block at all; whole and split over bindings. On one bit
+    // of zero keys it is the compaction of StochasticSplats' scene order at the max-density
+    // plane: the kept pairs in input order (the CPU sort on one bit leaves them so).
     let culled_cases = [
-        ("none culled", 1000, 1.0, false),
-        ("half culled", 70_000, 0.5, false),
-        ("100 kept of 70000", 70_000, 100.0 / 70_000.0, false),
-        ("all culled", 5000, 0.0, false),
-        ("depths with culled", 4000, 0.7, false),
-        ("half culled, split", 70_000, 0.5, true),
+        ("none culled", 1000, 1.0, false, 32),
+        ("half culled", 70_000, 0.5, false, 32),
+        ("100 kept of 70000", 70_000, 100.0 / 70_000.0, false, 32),
+        ("all culled", 5000, 0.0, false, 32),
+        ("depths with culled", 4000, 0.7, false, 32),
+        ("half culled, split", 70_000, 0.5, true, 32),
+        ("compaction, half culled", 70_000, 0.5, false, 1),
+        ("compaction, 100 kept of 70000", 70_000, 100.0 / 70_000.0, false, 1),
+        ("compaction, 0.9 kept, split", 70_000, 0.9, true, 1),
     ];
-    for (name, n, kept, split) in culled_cases {
+    for (name, n, kept, split, bits) in culled_cases {
         // As the projection keys them: unsortable depths and culled splats of value CULLED.
         let (keys, vals): (Vec<u32>, Vec<u32>) = (0..n)
             .map(|i| {
-                let key = match name.starts_with("depths") {
-                    true => depth_key(depths[i % depths.len()]),
-                    false => Some(rng.next_u64() as u32),
+                let key = if name.starts_with("depths") {
+                    depth_key(depths[i % depths.len()])
+                } else if name.starts_with("compaction") {
+                    Some(0)
+                } else {
+                    Some(rng.next_u64() as u32)
                 };
                 match key.filter(|_| rng.next_f32() < kept) {
                     Some(key) => (key, i as u32),
@@ -101,9 +109,12 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
             })
             .unzip();
         let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
-        let gpu = sort_culled_pairs(ctx, sort, &keys, &vals).unwrap();
+        let gpu = sort_culled_pairs(ctx, sort, &keys, &vals, bits).unwrap();
         let (mut k, mut v): (Vec<u32>, Vec<u32>) = keys.iter().copied().zip(vals).filter(|&(_, v)| v != CULLED).unzip();
-        cpu_radix_sort(&mut k, &mut v, 32);
+        cpu_radix_sort(&mut k, &mut v, bits);
+        if bits == 1 {
+            assert!(v.is_sorted(), "{name}: the compaction's expectation is the kept ids in input order");
+        }
         let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));
         assert_eq!(differ, None, "{name}: {} pairs sorted, {} kept; the first differs there", gpu.0.len(), k.len());
     }
@@ -405,6 +416,60 @@ fn cpu_only_raster_settings_are_refused() {
     let e =
         GpuRasterizer::new(ctx, pipelines(ctx), &scene, &c.camera, &along).err().expect("along the ray").to_string();
     assert!(e.contains("along the pixel's ray") && e.contains("CPU"), "{e}");
+}
+
+/// StochasticSplats draws the visible splats alone: in depth order at centre depth (where the
+/// depth order breaks ties by id, as the CPU does), and in scene order at the max-density plane
+/// (where splats of different centre depths can tie at a sample, and only the scene order
+/// breaks every tie by the lower id): the depth order's ids ascending, compacted on the device
+/// from the projection's values. A crop of the `cloud` culls over a quarter of it; whole, and with the
+/// order split over two bindings of 8 KiB. The two orders differ, so the check cannot pass with
+/// either in place of the other; frames drawn in the split order equal the whole scene's.
+#[test]
+fn stochastic_splats_draw_in_scene_order_at_the_max_density_plane() {
+    let Some(ctx) = context() else { return };
+    let (scene, camera) = fixture("cloud", 64, 48);
+    let camera = camera.crop(8, 4, 24, 30).unwrap();
+    let small = GpuContext::new().unwrap().with_index_binding_limit(8 * 1024);
+    let small_pipes = RasterPipelines::new(&small).unwrap();
+    let whole = RasterScene::new(ctx, &scene, &RenderSettings::default()).unwrap();
+    let split = RasterScene::new(&small, &scene, &RenderSettings::default()).unwrap();
+    assert_eq!(split.split().ranks.parts, 2);
+    let at = |depth| RasterSettings { fragment_depth: depth, ..RasterSettings::default() };
+    let depth_order = Rasterizer::new(&scene, &camera, RenderSettings::default(), at(FragmentDepth::Center))
+        .unwrap()
+        .splats()
+        .iter()
+        .map(|s| s.id)
+        .collect::<Vec<_>>();
+    let mut scene_order = depth_order.clone();
+    scene_order.sort_unstable();
+    let visible = format!("{} of {} visible", depth_order.len(), scene.particles.len());
+    assert!(depth_order.len() * 4 < scene.particles.len() * 3, "{visible}");
+    assert_ne!(scene_order, depth_order);
+    let frames = Frames { count: 2, seed: 7, ..Frames::default() };
+    let mut images = Vec::new();
+    for (ctx, pipes, gpu_scene) in [(ctx, pipelines(ctx), &whole), (&small, &small_pipes, &split)] {
+        let same = |gpu: Vec<u32>, cpu: &[u32], what: &str| {
+            let first = (0..gpu.len().max(cpu.len())).find(|&i| gpu.get(i) != cpu.get(i));
+            assert_eq!(first, None, "{what}: {} ids against {}; the first that differs", gpu.len(), cpu.len());
+        };
+        let centre = GpuRasterizer::new(ctx, pipes, gpu_scene, &camera, &at(FragmentDepth::Center)).unwrap();
+        same(centre.stochastic_order().unwrap(), &depth_order, "centre depth");
+        let plane = GpuRasterizer::new(ctx, pipes, gpu_scene, &camera, &at(FragmentDepth::MaxDensityPlane)).unwrap();
+        same(plane.order().unwrap(), &depth_order, "the depth order at the plane");
+        same(plane.stochastic_order().unwrap(), &scene_order, "the max-density plane");
+        if ctx.sample_rate_shading {
+            images.push(plane.render(&RasterMethod::StochasticSplat, &frames).unwrap().0.mean.data().to_vec());
+        } else {
+            let reason = format!("{} shades no samples apart", ctx.describe());
+            splat_tests::skip("the max-density plane's split frames", &reason);
+        }
+    }
+    if let [whole, split] = &images[..] {
+        assert!(whole.iter().zip(split).all(|(a, b)| a.to_bits() == b.to_bits()), "split frames differ");
+        assert!(whole.iter().any(|&x| x > 0.1), "nothing drawn");
+    }
 }
 
 /// Depth ties resolve as on the CPU, to the lower splat id (drawn first, kept by the `less`

@@ -51,7 +51,7 @@ use scene::{
 pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene, RasterSplit};
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
-use crate::sort::{RadixSort, SortBuffers, groups};
+use crate::sort::{Culled, RadixSort, SortBuffers, groups};
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
@@ -188,6 +188,9 @@ pub struct GpuRasterizer<'a> {
     /// The projected splats, in the parts of the scene's [`RasterSplit`].
     pub(super) splats: Vec<wgpu::Buffer>,
     pub(super) depth: SortBuffers,
+    /// At the max-density plane, the visible splats' ids in scene order, StochasticSplats'
+    /// draw order there ([`GpuRasterizer::order_parts`] says why); `None` at centre depth.
+    pub(super) scene_order: Option<SortBuffers>,
     pub(super) draw_args: wgpu::Buffer,
     /// The projection's bind group of each chunk of the scene ([`scene::ProjectChunk`]).
     pub(super) project_groups: Vec<wgpu::BindGroup>,
@@ -222,6 +225,8 @@ impl<'a> GpuRasterizer<'a> {
         // Room for count + 1 tile counts in the histogram (their scan's last entry is the total).
         let depth = pipes.sort.buffers(ctx, scene.count + 1)?;
         debug_assert_eq!(depth.split, scene.split.ranks, "the kernels index the sort's arrays as it cuts them");
+        let plane = raster.fragment_depth == FragmentDepth::MaxDensityPlane;
+        let scene_order = plane.then(|| pipes.sort.buffers(ctx, scene.count + 1)).transpose()?;
         let draw_args = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("draw args"),
             size: 16,
@@ -273,6 +278,7 @@ impl<'a> GpuRasterizer<'a> {
             k,
             splats,
             depth,
+            scene_order,
             draw_args,
             project_groups,
             behind,
@@ -283,6 +289,7 @@ impl<'a> GpuRasterizer<'a> {
         };
         let mut encoder = raster.encoder("project and sort");
         raster.encode_project(&mut encoder, None);
+        raster.encode_scene_order(&mut encoder)?;
         raster.encode_sort(&mut encoder, None)?;
         raster.encode_mesh_prepass(&mut encoder);
         raster.submit(encoder)?;
@@ -359,13 +366,43 @@ impl<'a> GpuRasterizer<'a> {
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<wgpu::ComputePassTimestampWrites>,
     ) -> Result<(), GpuError> {
-        self.pipes.sort.encode_culled(self.ctx, encoder, &self.depth, self.scene.count, &self.draw_args, timestamps)
+        let pairs = Culled { buffers: &self.depth, n: self.scene.count, kept: &self.draw_args };
+        self.pipes.sort.encode_culled(self.ctx, encoder, pairs, timestamps)
+    }
+
+    /// The scene order at the max-density plane, from the projection's values (ids, and
+    /// [`crate::sort::CULLED`] for the culled splats) before the depth sort permutes them: a
+    /// copy, compacted in place ([`crate::RadixSort::encode_compaction`]). Its keys are zero
+    /// as wgpu creates every buffer, and the compaction, which moves only zeros, leaves them so.
+    fn encode_scene_order(&self, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
+        let Some(order) = &self.scene_order else { return Ok(()) };
+        for (from, to) in self.depth.vals.iter().zip(&order.vals) {
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+        }
+        let pairs = Culled { buffers: order, n: self.scene.count, kept: &self.draw_args };
+        self.pipes.sort.encode_compaction(self.ctx, encoder, pairs)
+    }
+
+    /// The order the splat draw walks for `draw` (`order_at` in splat.wgsl): the visible splats
+    /// in (depth, id) order, or for StochasticSplats at the max-density plane in scene order.
+    /// The depth test keeps the first of two fragments at equal depths, and the CPU twin the
+    /// lower id. At centre depth two splats tie only at equal centre depths, which the depth
+    /// order breaks by the lower id too, and front to back the depth test rejects what lies
+    /// behind before it is shaded; at the plane, per-sample depths can tie between splats of
+    /// different centre depths, so only scene order breaks every tie as the CPU does.
+    fn order_parts(&self, draw: Draw) -> &[wgpu::Buffer] {
+        match (&self.scene_order, draw) {
+            (Some(order), Draw::Stochastic) => &order.vals,
+            _ => &self.depth.vals,
+        }
     }
 
     /// Bytes of a camera's arrays on the device: the projected splats and the depth sort's keys,
-    /// values and histogram (the tile pairs come and go with each tile pass).
+    /// values and histogram, and at the max-density plane the scene order's (the tile pairs
+    /// come and go with each tile pass).
     pub fn camera_bytes(&self) -> u64 {
-        self.splats.iter().map(wgpu::Buffer::size).sum::<u64>() + self.depth.bytes()
+        let sorts = [Some(&self.depth), self.scene_order.as_ref()];
+        self.splats.iter().map(wgpu::Buffer::size).sum::<u64>() + sorts.iter().flatten().map(|s| s.bytes()).sum::<u64>()
     }
 
     /// The projected splats in scene order (culled ones have an empty rect).
@@ -390,8 +427,19 @@ impl<'a> GpuRasterizer<'a> {
 
     /// The visible splats' scene indices in (depth, id) order.
     pub fn order(&self) -> Result<Vec<u32>, GpuError> {
+        self.read_order(&self.depth.vals)
+    }
+
+    /// The visible splats' scene indices in the order StochasticSplats draws them at these
+    /// settings: (depth, id) at centre depth, scene order at the max-density plane.
+    pub fn stochastic_order(&self) -> Result<Vec<u32>, GpuError> {
+        self.read_order(self.order_parts(Draw::Stochastic))
+    }
+
+    /// The first (visible) entries of `parts`, an order of the depth sort's cut.
+    fn read_order(&self, parts: &[wgpu::Buffer]) -> Result<Vec<u32>, GpuError> {
         let visible = self.ctx.read_u32(&self.draw_args, 4)?[1];
-        self.depth.read(self.ctx, &self.depth.vals, 0..u64::from(visible))
+        self.depth.read(self.ctx, parts, 0..u64::from(visible))
     }
 
     /// Render `frames.count` frames of `method` (one for sorted splatting) and fold them into
@@ -447,7 +495,7 @@ impl<'a> GpuRasterizer<'a> {
         };
         let (mean, m2) = (make("raster mean"), make("raster m2"));
         let slots = FrameSlots::new(self.ctx);
-        let draw_group = self.draw_group(&slots.buffer);
+        let draw_group = self.draw_group(&slots.buffer, draw);
         let fold_group = self.fold_group(&slots.buffer, &targets.color_view, &mean, &m2, target_samples > 1);
         let fold = if target_samples > 1 { &self.pipes.fold_msaa } else { &self.pipes.fold };
         let rop = draw.is_rop().then(|| rop::RopPass::new(self, &targets, false)).transpose()?;
@@ -581,7 +629,8 @@ impl<'a> GpuRasterizer<'a> {
         self.ctx.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
     }
 
-    fn draw_group(&self, frame_params: &wgpu::Buffer) -> wgpu::BindGroup {
+    /// The splat draw's bindings for `draw`.
+    fn draw_group(&self, frame_params: &wgpu::Buffer, draw: Draw) -> wgpu::BindGroup {
         self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("splat"),
             layout: &self.k.splat_layout,
@@ -596,7 +645,7 @@ impl<'a> GpuRasterizer<'a> {
                     wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
                 ][..],
                 &buffer_entries(&self.split_parts(true, true)),
-                &buffer_entries(&self.scene.split.bind(&DRAWN_ORDER, &self.depth.vals)),
+                &buffer_entries(&self.scene.split.bind(&DRAWN_ORDER, self.order_parts(draw))),
             ]
             .concat(),
         })
@@ -676,16 +725,9 @@ impl<'a> GpuRasterizer<'a> {
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, group, &[frame_offset]);
         self.ctx.count_draw();
-        // The visible splats in depth order (an indirect draw of the projection's count), but
-        // StochasticSplats at the max-density plane: every particle in scene order, whose culled
-        // ones draw nothing (splat.wgsl's `STOCHASTIC_IN_DEPTH_ORDER` says why).
-        match draw {
-            Draw::Over | Draw::Under => pass.draw_indirect(&self.draw_args, 0),
-            Draw::Stochastic if !plane => pass.draw_indirect(&self.draw_args, 0),
-            Draw::Stochastic | Draw::Enderton | Draw::Stratified | Draw::StratifiedPlain => {
-                pass.draw(0..6, 0..self.scene.count);
-            }
-        }
+        // The visible splats alone, in the order the group binds ([`Self::order_parts`]): an
+        // indirect draw of the projection's count.
+        pass.draw_indirect(&self.draw_args, 0);
         Ok(())
     }
 }

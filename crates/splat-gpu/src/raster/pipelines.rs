@@ -219,27 +219,14 @@ impl SamplePipelines {
         blend_format: wgpu::TextureFormat,
         samples: u32,
     ) -> Self {
-        // `plane_depth`: the fragments' depth is the max-density plane's, so the vertex stage
-        // draws StochasticSplats in scene order (`STOCHASTIC_IN_DEPTH_ORDER` in splat.wgsl).
-        let render_with = |module,
-                           entry,
-                           format,
-                           blend: Option<wgpu::BlendState>,
-                           depth: bool,
-                           constants: &[_],
-                           plane_depth: bool| {
-            let vertex_constants: &[(&str, f64)] =
-                if plane_depth { &[("STOCHASTIC_IN_DEPTH_ORDER", 0.0)] } else { &[] };
+        let render_with = |module, entry, format, blend: Option<wgpu::BlendState>, depth: bool, constants: &[_]| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(entry),
                 layout: Some(layout),
                 vertex: wgpu::VertexState {
                     module,
                     entry_point: Some("vs"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: vertex_constants,
-                        ..Default::default()
-                    },
+                    compilation_options: Default::default(),
                     buffers: &[],
                 },
                 primitive: wgpu::PrimitiveState::default(),
@@ -261,14 +248,12 @@ impl SamplePipelines {
                 cache: None,
             })
         };
-        let render = |entry, format, blend, depth| render_with(splat, entry, format, blend, depth, &[], false);
+        let render = |entry, format, blend, depth| render_with(splat, entry, format, blend, depth, &[]);
         let lit_sample = |plane_depth: bool| {
             let constants = [("LIT_PLANE_DEPTH", f64::from(u8::from(plane_depth)))];
             let entry = "fs_stochastic_lit_sample";
             let wanted = samples > 1 || plane_depth;
-            plane
-                .filter(|_| wanted)
-                .map(|m| render_with(m, entry, STOCHASTIC_FORMAT, None, true, &constants, plane_depth))
+            plane.filter(|_| wanted).map(|m| render_with(m, entry, STOCHASTIC_FORMAT, None, true, &constants))
         };
         let component =
             |src, dst| wgpu::BlendComponent { src_factor: src, dst_factor: dst, operation: wgpu::BlendOperation::Add };
@@ -289,8 +274,7 @@ impl SamplePipelines {
             under: render(sorted, blend_format, Some(under), false),
             stochastic: render(stochastic, STOCHASTIC_FORMAT, None, true),
             stochastic_lit: (samples == 1).then(|| render("fs_stochastic_lit", STOCHASTIC_FORMAT, None, true)),
-            stochastic_plane: plane
-                .map(|m| render_with(m, "fs_stochastic_plane", STOCHASTIC_FORMAT, None, true, &[], true)),
+            stochastic_plane: plane.map(|m| render_with(m, "fs_stochastic_plane", STOCHASTIC_FORMAT, None, true, &[])),
             stochastic_lit_sample: [lit_sample(false), lit_sample(true)],
         }
     }

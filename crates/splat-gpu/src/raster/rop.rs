@@ -235,7 +235,8 @@ impl RopPass {
             pass.set_bind_group(0, &self.keys_group, &[]);
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
-        pipes.sort.encode_culled(ctx, encoder, &self.shuffle, n, &r.draw_args, None)?;
+        let pairs = Culled { buffers: &self.shuffle, n, kept: &r.draw_args };
+        pipes.sort.encode_culled(ctx, encoder, pairs, None)?;
         self.lists.encode_count(r, encoder, &self.shuffle);
         self.lists.encode_lists(r, encoder)?;
         let [tiles_x, tiles_y] = r.params.tiles;
