@@ -5,18 +5,27 @@
 // `mesh_traverse`). It reads `node_at(i)`, and counts loop iterations in `iterations`, both
 // declared by the including kernel.
 
-// One wide node (128 bytes), mirrored by splat_gpu::layout::GpuNode (splat_core::bvh::Node4):
-// the four children's boxes as lanes, each axis's lower and upper planes, the children's
-// references (a node's index, or a leaf: LEAF set) and the lanes in use.
+// One wide node (64 bytes), mirrored by splat_gpu::layout::GpuNode: splat_core::bvh::Node4
+// with the four children's boxes quantized on each axis to bytes q of an origin o and a scale
+// s = 2^e, a plane at o + q s (splat_gpu's node.rs says how they are rounded outward):
+// origin.xyz the origin's bits, origin.w the biased exponents of x, y, z (bytes 0-2) and the
+// lanes in use (byte 3); planes_xy the lanes' lower x, upper x, lower y and upper y, planes_z
+// the lower and upper z (lane l in byte l of a word); the children's references (a node's
+// index, or a leaf: LEAF set).
 struct Node {
-    lo_x: vec4<f32>,
-    hi_x: vec4<f32>,
-    lo_y: vec4<f32>,
-    hi_y: vec4<f32>,
-    lo_z: vec4<f32>,
-    hi_z: vec4<f32>,
+    origin: vec4<u32>,
+    planes_xy: vec4<u32>,
+    planes_z: vec4<u32>,
     child: vec4<u32>,
-    count: u32,
+}
+
+// The four lanes' planes of word `w` on an axis of origin `o` and biased exponent `e`
+// (node.rs `GpuNode::planes`): o + q s, where q s is exact, so the sum rounds once whether or
+// not the compiler fuses it.
+fn node_planes(w: u32, o: u32, e: u32) -> vec4<f32> {
+    let q = (vec4<u32>(w) >> vec4<u32>(0u, 8u, 16u, 24u)) & vec4<u32>(255u);
+    let s = bitcast<f32>((e & 255u) << 23u);
+    return bitcast<f32>(o) + vec4<f32>(q) * s;
 }
 
 // bvh/wide.rs: a leaf reference is LEAF, the count − 1 from bit COUNT_SHIFT, then the first
@@ -115,15 +124,22 @@ fn traversal_next_leaf(origin: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32
             return r;
         }
         let n = node_at(r);
-        let near_x = (select(n.lo_x, n.hi_x, down.x) - origin.x) * inv.x;
-        let far_x = (select(n.hi_x, n.lo_x, down.x) - origin.x) * inv.x;
-        let near_y = (select(n.lo_y, n.hi_y, down.y) - origin.y) * inv.y;
-        let far_y = (select(n.hi_y, n.lo_y, down.y) - origin.y) * inv.y;
-        let near_z = (select(n.lo_z, n.hi_z, down.z) - origin.z) * inv.z;
-        let far_z = (select(n.hi_z, n.lo_z, down.z) - origin.z) * inv.z;
+        let e = n.origin.w;
+        let lo_x = node_planes(n.planes_xy.x, n.origin.x, e);
+        let hi_x = node_planes(n.planes_xy.y, n.origin.x, e);
+        let lo_y = node_planes(n.planes_xy.z, n.origin.y, e >> 8u);
+        let hi_y = node_planes(n.planes_xy.w, n.origin.y, e >> 8u);
+        let lo_z = node_planes(n.planes_z.x, n.origin.z, e >> 16u);
+        let hi_z = node_planes(n.planes_z.y, n.origin.z, e >> 16u);
+        let near_x = (select(lo_x, hi_x, down.x) - origin.x) * inv.x;
+        let far_x = (select(hi_x, lo_x, down.x) - origin.x) * inv.x;
+        let near_y = (select(lo_y, hi_y, down.y) - origin.y) * inv.y;
+        let far_y = (select(hi_y, lo_y, down.y) - origin.y) * inv.y;
+        let near_z = (select(lo_z, hi_z, down.z) - origin.z) * inv.z;
+        let far_z = (select(hi_z, lo_z, down.z) - origin.z) * inv.z;
         let enter = max(max(max(near_x, near_y), near_z), vec4<f32>(t_min));
         let exit = min(min(min(far_x, far_y), far_z), vec4<f32>(t_max));
-        let hit = (enter <= exit) & (vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(n.count));
+        let hit = (enter <= exit) & (vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(e >> 24u));
         let t = select(vec4<f32>(MISSED), enter, hit);
         let lane = vec4<u32>(0u, 1u, 2u, 3u) + select(vec4<u32>(4u), vec4<u32>(0u), hit);
         var e0 = Entry(n.child.x, t.x, lane.x);

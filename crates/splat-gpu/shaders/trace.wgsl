@@ -1094,16 +1094,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // The scene arrays as this kernel reads them: element i of each through its accessor into
-// out_mean[13 i + k], the particle's four vec4 (k = 0..3), the node's eight (4..11) and the SH
-// coefficient (12), bit for bit. GpuTracer::arrays_as_read reads them back, so that a test
+// out_mean[9 i + k], the particle's four vec4 (k = 0..3), the node's four (4..7) and the SH
+// coefficient (8), bit for bit. GpuTracer::arrays_as_read reads them back, so that a test
 // compares a scene split over bindings (splat_gpu::split) with the same scene whole, element by
 // element, without compiling the whole kernel for the split. An array shorter than i reads a
 // clamped element, which the host ignores.
 @compute @workgroup_size(64, 1, 1)
 fn split_gather(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = gid.y * groups.x * 64u + gid.x;
-    let base = 13u * i;
-    if (base + 12u >= arrayLength(&out_mean)) {
+    let base = 9u * i;
+    if (base + 8u >= arrayLength(&out_mean)) {
         return;
     }
     let p = particle_at(i);
@@ -1112,13 +1112,9 @@ fn split_gather(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
     out_mean[base + 1u] = vec4<f32>(p.row0, bitcast<f32>(p.id));
     out_mean[base + 2u] = vec4<f32>(p.row1, p.extent);
     out_mean[base + 3u] = vec4<f32>(p.row2, p.pad2);
-    out_mean[base + 4u] = n.lo_x;
-    out_mean[base + 5u] = n.hi_x;
-    out_mean[base + 6u] = n.lo_y;
-    out_mean[base + 7u] = n.hi_y;
-    out_mean[base + 8u] = n.lo_z;
-    out_mean[base + 9u] = n.hi_z;
-    out_mean[base + 10u] = bitcast<vec4<f32>>(n.child);
-    out_mean[base + 11u] = vec4<f32>(bitcast<f32>(n.count), 0.0, 0.0, 0.0);
-    out_mean[base + 12u] = sh_at(i);
+    out_mean[base + 4u] = bitcast<vec4<f32>>(n.origin);
+    out_mean[base + 5u] = bitcast<vec4<f32>>(n.planes_xy);
+    out_mean[base + 6u] = bitcast<vec4<f32>>(n.planes_z);
+    out_mean[base + 7u] = bitcast<vec4<f32>>(n.child);
+    out_mean[base + 8u] = sh_at(i);
 }

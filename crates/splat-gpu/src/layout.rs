@@ -1,11 +1,11 @@
 //! Buffer layouts shared with `shaders/trace.wgsl`: `#[repr(C)]` + `bytemuck::Pod` structs
 //! whose sizes and field offsets a test checks against the WGSL structs reflected by naga.
 
+pub use crate::node::{GpuNode, bvh_nodes};
 use crate::trace::MethodParams;
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
 use splat_core::Scene;
-use splat_core::bvh::{Bvh4, LEAF, Node4};
 use splat_core::camera::Lens;
 use splat_core::camera_sampling::PixelFilter;
 use splat_core::frame::Frames;
@@ -94,32 +94,6 @@ pub struct GpuParticle {
     pub row2: [f32; 3],
     /// Padding.
     pub pad2: f32,
-}
-
-/// A wide BVH node as the kernel reads it (WGSL `Node`, 128 bytes): [`Node4`]'s four
-/// children, their lower and upper planes on each axis as lanes, their references (a node's
-/// index in the node buffer, or a leaf: [`LEAF`] set) and the lanes in use.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct GpuNode {
-    /// Lower x planes.
-    pub lo_x: [f32; 4],
-    /// Upper x planes.
-    pub hi_x: [f32; 4],
-    /// Lower y planes.
-    pub lo_y: [f32; 4],
-    /// Upper y planes.
-    pub hi_y: [f32; 4],
-    /// Lower z planes.
-    pub lo_z: [f32; 4],
-    /// Upper z planes.
-    pub hi_z: [f32; 4],
-    /// Children's references.
-    pub child: [u32; 4],
-    /// Lanes in use.
-    pub count: u32,
-    /// Padding to 128 bytes.
-    pub pad: [u32; 3],
 }
 
 /// The state of one ray between the passes of pass-per-dispatch mode (WGSL `PassState`).
@@ -596,22 +570,6 @@ pub fn nodes(trace: &TraceScene) -> Vec<GpuNode> {
         v.extend(bvh_nodes(trace.meshes().bvh(), v.len() as u32));
     }
     v
-}
-
-/// The nodes of `bvh` placed at index `offset` of a node buffer, its root first (a reference to
-/// a node is its index, moved by the offset; a leaf's reference is kept).
-pub fn bvh_nodes(bvh: &Bvh4, offset: u32) -> Vec<GpuNode> {
-    bvh.nodes().iter().map(|n| gpu_node(n, offset)).collect()
-}
-
-fn gpu_node(n: &Node4, offset: u32) -> GpuNode {
-    let [[lo_x, hi_x], [lo_y, hi_y], [lo_z, hi_z]] = n.planes();
-    let lanes = n.count() as usize;
-    let child = std::array::from_fn(|lane| match n.children()[lane] {
-        r if lane < lanes && r & LEAF == 0 => r + offset,
-        r => r,
-    });
-    GpuNode { lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, child, count: n.count(), pad: [0; 3] }
 }
 
 /// Where [`nodes`] puts the mesh BVH's root: after the splat BVH's nodes, or [`NO_MESHES`].
@@ -1111,7 +1069,7 @@ mod tests {
             "Particle",
             [mean, opacity, row0, id, row1, extent, row2, pad2]
         );
-        assert_mirrors!(&crate::TRACE_WGSL, GpuNode, "Node", [lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, child, count]);
+        assert_mirrors!(&crate::TRACE_WGSL, GpuNode, "Node", [origin, planes_xy, planes_z, child]);
         assert_mirrors!(
             &crate::TRACE_WGSL,
             GpuFirstHit,
@@ -1213,7 +1171,6 @@ mod tests {
             "PathParams",
             [max_depth, roulette_depth, estimator, n, sampler, environment, emitters, pad0, env_a, env_b, env_up]
         );
-        assert_eq!(std::mem::size_of::<GpuNode>(), std::mem::size_of::<Node4>());
     }
 
     /// The kernel's layout matches its WGSL whole and split: every part of a split array is a

@@ -21,6 +21,7 @@ mod context;
 pub mod display;
 mod error;
 mod layout;
+pub mod node;
 pub mod progressive;
 pub mod raster;
 pub mod sort;

@@ -679,7 +679,7 @@ impl<'a> GpuTracer<'a> {
     /// every split of a scene, which a test checks without compiling the whole kernel for each.
     pub fn arrays_as_read(&self) -> Result<[Vec<[u32; 4]>; 3], GpuError> {
         /// Rows `split_gather` writes an element: a particle's, a node's and a coefficient's.
-        const ROWS: u32 = 13;
+        const ROWS: u32 = 9;
         let ctx = self.ctx;
         let lengths = self.lengths.map(|n| n as usize);
         let longest = lengths.iter().copied().max().unwrap_or(0).max(1);
@@ -701,7 +701,7 @@ impl<'a> GpuTracer<'a> {
         let take = |k: std::ops::Range<usize>, n: usize| -> Vec<[u32; 4]> {
             rows.chunks(ROWS as usize).take(n).flat_map(|element| element[k.clone()].to_vec()).collect()
         };
-        Ok([take(0..4, lengths[0]), take(4..12, lengths[1]), take(12..13, lengths[2])])
+        Ok([take(0..4, lengths[0]), take(4..8, lengths[1]), take(8..9, lengths[2])])
     }
 
     fn render_with(
