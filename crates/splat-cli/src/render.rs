@@ -417,9 +417,6 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     if args.alpha.is_some() || args.depth.is_some() || args.normal.is_some() || args.variance.is_some() {
         bail!("--all-cameras writes colour images only: drop --alpha, --depth, --normal and --variance");
     }
-    if args.pipeline == Some(PipelineArg::Path) {
-        bail!("--all-cameras renders with the splat methods; render path-traced views one --camera-index at a time");
-    }
     let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
     let cameras = crate::args::load_cameras(path)?;
     let sized = cameras.iter().map(|(_, camera)| args.scene.view(*camera)).collect::<Result<Vec<Camera>>>()?;
@@ -442,28 +439,31 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         ViewFormat::Exr => "exr",
         ViewFormat::Npy => "npy",
     };
-    let mut algorithm = None;
-    render_views(args, &staged, views.iter().copied(), extras(args), &|_| {}, |k, rendered| {
+    let write = |k: usize, out: &RenderOutput| -> Result<()> {
         let (i, name) = mine[k];
-        write_image(&args.output.join(format!("{}.{extension}", view_stem(name, i))), &rendered.out.mean)?;
-        algorithm = Some(rendered.algorithm);
+        write_image(&args.output.join(format!("{}.{extension}", view_stem(name, i))), &out.mean)?;
         bar.set_message(name.clone());
         bar.inc(1);
         Ok(())
-    })?;
+    };
+    let random = if args.pipeline == Some(PipelineArg::Path) {
+        render_path_views(args, &staged, views.iter().copied(), &|_| {}, |k, out, _| write(k, &out))?;
+        true
+    } else {
+        let mut algorithm = None;
+        render_views(args, &staged, views.iter().copied(), extras(args), &|_| {}, |k, rendered| {
+            algorithm = Some(rendered.algorithm);
+            write(k, &rendered.out)
+        })?;
+        let World { lighting, meshes, .. } = &staged.world;
+        algorithm.is_some_and(|a| a.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling))
+    };
     bar.finish_and_clear();
     eprintln!(
         "rendered {}, {}, {} in {:.2} s → {}",
         crate::counted(mine.len(), "view"),
         describe(args),
-        frames_done(
-            args.spp,
-            algorithm.is_some_and(|a| a.is_random(
-                &staged.world.lighting,
-                !staged.world.meshes.is_empty(),
-                &staged.settings.sampling
-            )),
-        ),
+        frames_done(args.spp, random),
         start.elapsed().as_secs_f64(),
         args.output.display()
     );
@@ -543,11 +543,32 @@ fn run_path(args: &RenderArgs, staged: &Staged) -> Result<()> {
 
 /// The Monte Carlo path tracer's render of `staged` as `args` say (`--pipeline path`), on the
 /// CPU (calling `progress` with pixels done) or the GPU: colour and variance, and the GPU
-/// adapter it ran on, described (`None` for the CPU).
+/// adapter it ran on, described (`None` for the CPU). One view, [`render_path_views`] of the
+/// staged camera.
 pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Result<(RenderOutput, Option<String>)> {
+    let mut one = None;
+    render_path_views(args, staged, [staged.camera], progress, |_, out, gpu| {
+        one = Some((out, gpu.clone()));
+        Ok(())
+    })?;
+    one.context("a view was rendered")
+}
+
+/// The path tracer's renders of `staged`'s world through each of `cameras`, as [`render_views`]
+/// renders the splat methods': the world prepared once (the BVH and the emitters; on the GPU
+/// the device arrays and the kernel), `each(i, out, gpu)` given view i's colour and variance
+/// as soon as it is rendered, and the GPU adapter it ran on, described (`None` for the CPU);
+/// `progress` counts a CPU render's pixels over all the views.
+pub fn render_path_views(
+    args: &RenderArgs,
+    staged: &Staged,
+    cameras: impl IntoIterator<Item = Camera>,
+    progress: Progress,
+    mut each: impl FnMut(usize, RenderOutput, &Option<String>) -> Result<()>,
+) -> Result<()> {
     let gaussians = gaussian_estimator(args.method.unwrap_or(MethodId::Stochastic), &args.options)?;
     let settings = path_options_settings(&args.path, staged, gaussians)?;
-    let Staged { world: World { scene, lighting, meshes }, camera, settings: render_settings, .. } = staged;
+    let Staged { world: World { scene, lighting, meshes }, settings: render_settings, .. } = staged;
     let frames = Frames { rng: splat_core::rng::RngScheme::Hash, ..args.frames() };
     let gpu = match args.scene.backend {
         BackendArg::Gpu => crate::args::gpu_context(BackendArg::Gpu)?,
@@ -561,18 +582,26 @@ pub fn render_path(args: &RenderArgs, staged: &Staged, progress: Progress) -> Re
         splat_gpu::TraceSplit::at_least(ctx, scene, render_settings)?;
     }
     let trace = TraceScene::new(scene, *render_settings)?.with_lighting(lighting)?.with_meshes(meshes);
-    Ok(match &gpu {
+    let views = cameras.into_iter().enumerate();
+    let adapter = gpu.as_ref().map(GpuContext::describe);
+    match &gpu {
         Some(ctx) => {
             eprintln!("rendering on {}", ctx.describe());
             let pipeline = splat_gpu::TracePipeline::new(ctx)?;
             let tracer = GpuTracer::new(ctx, &pipeline, &trace)?;
-            (tracer.render_path(camera, &settings, &frames)?.0, Some(ctx.describe()))
+            for (i, camera) in views {
+                each(i, tracer.render_path(&camera, &settings, &frames)?.0, &adapter)?;
+            }
         }
         None => {
             let tracer = PathTracer::new(&trace, settings)?;
-            (args.scene.pool()?.install(|| tracer.render(camera, &frames, progress))?, None)
+            let pool = args.scene.pool()?;
+            for (i, camera) in views {
+                each(i, pool.install(|| tracer.render(&camera, &frames, progress))?, &adapter)?;
+            }
         }
-    })
+    }
+    Ok(())
 }
 
 /// The method the options name, with the pipeline's default.
@@ -608,6 +637,9 @@ fn algorithm(args: &RenderArgs) -> Result<Algorithm> {
 fn describe(args: &RenderArgs) -> String {
     match args.pipeline {
         Some(PipelineArg::Hybrid) => format!("hybrid {} + {}", method_arg(args).name(), args.secondary.name()),
+        Some(PipelineArg::Path) => {
+            format!("path tracer, {} Gaussians", args.method.unwrap_or(MethodId::Stochastic).name())
+        }
         _ => method_arg(args).name().to_string(),
     }
 }

@@ -1219,9 +1219,9 @@ fn colmap_cameras_and_all_cameras() {
 /// `--all-cameras` prepares the world once (the BVH, the device arrays, the pipelines) and renders
 /// every view through it: each view's image is, bit for bit, what `--camera-index` renders of
 /// that view alone, on the CPU for a ray-tracing method (a stochastic one, whose frames are
-/// keyed by the run) and a splatting one, on the GPU for the ray-tracing one (views 1 and 2: a
-/// renderer stuck on the first view fails there; the GPU's pipelines make each run a second);
-/// the views differ in pose and in size.
+/// keyed by the run), a splatting one and the path tracer, on the GPU for the ray-tracing one
+/// and the path tracer (views 1 and 2: a renderer stuck on the first view fails there; the
+/// GPU's pipelines make each run a second); the views differ in pose and in size.
 #[test]
 fn all_cameras_views_are_the_single_view_renders() {
     let json = root().join("fixtures/cloud.cameras.json");
@@ -1236,10 +1236,15 @@ fn all_cameras_views_are_the_single_view_renders() {
     let json = scratch("views3.cameras.json");
     splat_io::cameras::write_cameras(&json, &cameras).unwrap();
     let camera = json.to_str().unwrap();
-    for (backend, methods, first) in [("cpu", &["stochastic", "raster-sorted"][..], 0), ("gpu", &["stochastic"], 1)] {
+    let runs = [("cpu", &["stochastic", "raster-sorted", "path"][..], 0), ("gpu", &["stochastic", "path"], 1)];
+    for (backend, methods, first) in runs {
         for &method in methods {
-            let common = ["render", "fixtures/cloud.ply", "--camera", camera, "--method", method, "--spp", "2"];
-            let common = [&common[..], &["--backend", backend]].concat();
+            let common = ["render", "fixtures/cloud.ply", "--camera", camera, "--spp", "2", "--backend", backend];
+            let how = match method {
+                "path" => ["--pipeline", "path", "--max-depth", "2"].as_slice(),
+                _ => &["--method", method],
+            };
+            let common = [&common[..], how].concat();
             let dir = scratch(&format!("views-{backend}-{method}"));
             let dir_arg = dir.to_str().unwrap();
             let o = splat(&[&common[..], &["--all-cameras", "--view-format", "npy", "-o", dir_arg]].concat());

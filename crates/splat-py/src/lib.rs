@@ -314,40 +314,67 @@ fn render<'py>(
     let (args, extras) = options::render_args(py, options)?;
     let (args, staged) = stage(args.0, scene, view)?;
     let reporter = Reporter::new(progress, u64::from(staged.camera.width) * u64::from(staged.camera.height));
-    let path = args.pipeline == Some(PipelineArg::Path);
-    let frames = args.frames();
-    let (out, count, gpu, method) = py
-        .detach(|| -> anyhow::Result<_> {
-            let progress = |n: u64| reporter.advance(n);
-            if path {
-                let (out, gpu) = splat_cli::render::render_path(&args, &staged, &progress)?;
-                Ok((out, frames.count, gpu, splat_cli::render::path_description(&args)?))
-            } else {
-                let Rendered { out, count, gpu, algorithm } =
-                    splat_cli::render::render_frames(&args, &staged, extras, &progress)?;
-                Ok((out, count, gpu, format!("{algorithm:?}")))
-            }
+    let mut one = None;
+    py.detach(|| {
+        render_each(&args, &staged, [staged.camera], extras, &|n| reporter.advance(n), |_, view| {
+            one = Some(view);
+            Ok(())
         })
-        .map_err(fail)?;
+    })
+    .map_err(fail)?;
     reporter.raise()?;
-    let run = splat_cli::render::run_description(&args, &staged, &staged.camera, &method);
-    view_dict(py, out, gpu, extras, path, (frames.first, count), run)
+    let view = one.ok_or_else(|| SplatError::new_err("no view was rendered"))?;
+    let run = splat_cli::render::run_description(&args, &staged, &staged.camera, &view.method);
+    view_dict(py, view, &args, extras, run)
+}
+
+/// One view's render as a dict carries it: the images, the frames they hold, where they ran,
+/// and the method's part of the run's description.
+struct View {
+    out: splat_core::frame::RenderOutput,
+    count: u32,
+    gpu: Option<String>,
+    method: String,
+}
+
+/// Render `staged` through each of `cameras` as `args` say, the world prepared once: the path
+/// tracer for `pipeline="path"` (`splat_cli::render::render_path_views`), else the splat
+/// methods (`splat_cli::render::render_views`); `each(i, view)` receives view i as soon as it is
+/// rendered.
+fn render_each(
+    args: &RenderArgs,
+    staged: &Staged,
+    cameras: impl IntoIterator<Item = Camera, IntoIter: Send>,
+    extras: splat_gpu::Extras,
+    progress: splat_core::frame::Progress,
+    mut each: impl FnMut(usize, View) -> anyhow::Result<()> + Send,
+) -> anyhow::Result<()> {
+    if args.pipeline == Some(PipelineArg::Path) {
+        let (method, count) = (splat_cli::render::path_description(args)?, args.frames().count);
+        splat_cli::render::render_path_views(args, staged, cameras, progress, |i, out, gpu| {
+            each(i, View { out, count, gpu: gpu.clone(), method: method.clone() })
+        })
+    } else {
+        splat_cli::render::render_views(args, staged, cameras, extras, progress, |i, rendered| {
+            let Rendered { out, count, gpu, algorithm } = rendered;
+            each(i, View { out, count, gpu, method: format!("{algorithm:?}") })
+        })
+    }
 }
 
 /// The dict a view renders into: [`outputs`], the frames it holds ("first", "count") and what
 /// else decides them ("run").
-fn view_dict(
-    py: Python<'_>,
-    out: splat_core::frame::RenderOutput,
-    gpu: Option<String>,
+fn view_dict<'py>(
+    py: Python<'py>,
+    view: View,
+    args: &RenderArgs,
     extras: splat_gpu::Extras,
-    path: bool,
-    (first, count): (u32, u32),
     run: String,
-) -> PyResult<Bound<'_, PyDict>> {
-    let dict = outputs(py, out, gpu, extras, path)?;
-    dict.set_item("first", first)?;
-    dict.set_item("count", count)?;
+) -> PyResult<Bound<'py, PyDict>> {
+    let path = args.pipeline == Some(PipelineArg::Path);
+    let dict = outputs(py, view.out, view.gpu, extras, path)?;
+    dict.set_item("first", args.frames().first)?;
+    dict.set_item("count", view.count)?;
     dict.set_item("run", run)?;
     Ok(dict)
 }
@@ -367,11 +394,6 @@ fn render_views<'py>(
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
     let (args, extras) = options::render_args(py, options)?;
-    if args.0.pipeline == Some(PipelineArg::Path) {
-        return Err(SplatError::new_err(
-            "render_views renders with the splat methods: render path-traced views one render() call at a time",
-        ));
-    }
     let Some(first) = views.first() else { return Ok(Vec::new()) };
     let (args, staged) = stage(args.0, scene, Some(first.get()))?;
     let cameras = views
@@ -381,32 +403,21 @@ fn render_views<'py>(
         .map_err(fail)?;
     let pixels = cameras.iter().map(|c| u64::from(c.width) * u64::from(c.height)).sum();
     let reporter = Reporter::new(progress, pixels);
-    let frames = args.frames();
-    let rendered = py
-        .detach(|| -> anyhow::Result<Vec<Rendered>> {
-            let mut all = Vec::with_capacity(cameras.len());
-            let progress = |n: u64| reporter.advance(n);
-            splat_cli::render::render_views(
-                &args,
-                &staged,
-                cameras.iter().copied(),
-                extras,
-                &progress,
-                |_, rendered| {
-                    all.push(rendered);
-                    Ok(())
-                },
-            )?;
-            Ok(all)
+    let mut rendered = Vec::with_capacity(cameras.len());
+    py.detach(|| {
+        render_each(&args, &staged, cameras.iter().copied(), extras, &|n| reporter.advance(n), |_, view| {
+            rendered.push(view);
+            Ok(())
         })
-        .map_err(fail)?;
+    })
+    .map_err(fail)?;
     reporter.raise()?;
     rendered
         .into_iter()
         .zip(&cameras)
-        .map(|(Rendered { out, count, gpu, algorithm }, camera)| {
-            let run = splat_cli::render::run_description(&args, &staged, camera, &format!("{algorithm:?}"));
-            view_dict(py, out, gpu, extras, false, (frames.first, count), run)
+        .map(|(view, camera)| {
+            let run = splat_cli::render::run_description(&args, &staged, camera, &view.method);
+            view_dict(py, view, &args, extras, run)
         })
         .collect()
 }
@@ -439,13 +450,13 @@ enum State {
 struct Worker {
     staged: Arc<(RenderArgs, Staged)>,
     cameras: mpsc::Sender<Camera>,
-    views: mpsc::Receiver<(Rendered, String)>,
+    views: mpsc::Receiver<(View, String)>,
     thread: std::thread::JoinHandle<anyhow::Result<()>>,
 }
 
 impl Worker {
     /// Render `camera`: the worker again with the view, or the error that stopped it.
-    fn render(self, camera: Camera) -> Result<(Worker, (Rendered, String)), String> {
+    fn render(self, camera: Camera) -> Result<(Worker, (View, String)), String> {
         if self.cameras.send(camera).is_ok()
             && let Ok(view) = self.views.recv()
         {
@@ -478,11 +489,6 @@ impl PyRenderer {
     #[pyo3(signature = (scene, /, **options))]
     fn new(py: Python<'_>, scene: &PyScene, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let (args, extras) = options::render_args(py, options)?;
-        if args.0.pipeline == Some(PipelineArg::Path) {
-            return Err(SplatError::new_err(
-                "a Renderer renders with the splat methods: render path-traced views one render() call at a time",
-            ));
-        }
         let shared = Arc::new(stage(args.0, scene, None)?);
         let (cameras, requests) = mpsc::channel::<Camera>();
         let (done, views) = mpsc::channel();
@@ -499,11 +505,10 @@ impl PyRenderer {
                     reporter.advance(n);
                 }
             };
-            splat_cli::render::render_views(args, staged, requests, extras, &progress, |_, rendered| {
+            render_each(args, staged, requests, extras, &progress, |_, view| {
                 let camera = current.lock().expect("not poisoned").expect("a camera was sent");
-                let method = format!("{:?}", rendered.algorithm);
-                let run = splat_cli::render::run_description(args, staged, &camera, &method);
-                done.send((rendered, run)).map_err(|_| anyhow::anyhow!("the renderer was dropped"))
+                let run = splat_cli::render::run_description(args, staged, &camera, &view.method);
+                done.send((view, run)).map_err(|_| anyhow::anyhow!("the renderer was dropped"))
             })
         });
         let state = Mutex::new(State::Idle(Worker { staged: shared, cameras, views, thread }));
@@ -534,10 +539,8 @@ impl PyRenderer {
                 }
             }
         };
-        let (args, _) = &*worker.staged;
-        let sized = args.scene.view(view.camera);
-        let first = args.frames().first;
-        let camera = match sized {
+        let staged = worker.staged.clone();
+        let camera = match staged.0.scene.view(view.camera) {
             Ok(camera) => camera,
             Err(e) => {
                 self.idle(worker);
@@ -548,7 +551,7 @@ impl PyRenderer {
         *self.reporter.lock().expect("not poisoned") = Some(reporter.clone());
         let rendered = py.detach(|| worker.render(camera));
         *self.reporter.lock().expect("not poisoned") = None;
-        let (Rendered { out, count, gpu, .. }, run) = match rendered {
+        let (view, run) = match rendered {
             Ok((worker, view)) => {
                 self.idle(worker);
                 view
@@ -560,7 +563,7 @@ impl PyRenderer {
             }
         };
         reporter.raise()?;
-        view_dict(py, out, gpu, self.extras, false, (first, count), run)
+        view_dict(py, view, &staged.0, self.extras, run)
     }
 
     /// Stop the worker and free the prepared world (and the renderer's copy of the scene); later

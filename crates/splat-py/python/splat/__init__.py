@@ -234,7 +234,8 @@ def render_views(scene: Scene, cameras, *, progress=None, **options) -> list:
     ``render(scene, camera, **options)``'s, but the world is prepared once (the BVH; on the GPU
     also its device arrays and pipelines), where every `render` call prepares it anew. All the
     views' images are returned together: give a long list of large views in batches.
-    `progress(done, total)` counts a CPU render's pixels over all the views."""
+    `progress(done, total)` counts a CPU render's pixels over all the views. The path tracer
+    (pipeline="path") renders this way too."""
     if not isinstance(scene, Scene):
         raise SplatError(f"scene is a {type(scene).__name__}: expected a splat.Scene (Scene.load, Scene.from_arrays)")
     cameras = [c[1] if isinstance(c, tuple) and len(c) == 2 else c for c in cameras]
@@ -258,7 +259,8 @@ class Renderer:
     thread keeps it until `close` (or the end of a ``with`` block, or the renderer's deletion).
     Views come back one at a time, so a long trajectory needs no more memory than one image.
     One render at a time: a second thread calling in meanwhile is refused (make a Renderer a
-    thread). The path tracer (pipeline="path") renders through `render` only."""
+    thread). The path tracer (pipeline="path") renders this way too, its world (the BVH, the
+    emitters; on the GPU the device arrays and kernel) prepared once."""
 
     def __init__(self, scene: Scene, **options):
         if not isinstance(scene, Scene):
