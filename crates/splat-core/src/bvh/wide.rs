@@ -3,8 +3,9 @@
 //! against the ray together (Wald et al. 2008, "Getting rid of packets"; Dammertz et al. 2008,
 //! "Shallow bounding volume hierarchies"). It is a conversion of the same tree: the same leaves
 //! over the same leaf order. Both backends walk it: [`Bvh4::traverse`] on the CPU and its twin
-//! `traversal_next_leaf` in splat-gpu's `shaders/bvh.wgsl`, which uploads these nodes as they
-//! are (`splat_gpu::layout::GpuNode`) and visits them in the same order.
+//! `traversal_next_leaf` in splat-gpu's `shaders/bvh.wgsl`, which uploads these nodes with
+//! their planes quantized to a byte and rounded outward (`splat_gpu::node::GpuNode`), so that
+//! it reaches the same leaves and a few more, in nearly the same order.
 
 use super::{Bvh, STACK_DEPTH, inverse_direction, slab};
 use crate::hit::Ray;
