@@ -189,8 +189,9 @@ pub struct GpuRasterizer<'a> {
     pub(super) splats: Vec<wgpu::Buffer>,
     pub(super) depth: SortBuffers,
     /// At the max-density plane, the visible splats' ids in scene order, StochasticSplats'
-    /// draw order there ([`GpuRasterizer::order_parts`] says why); `None` at centre depth.
-    pub(super) scene_order: Option<SortBuffers>,
+    /// draw order there ([`GpuRasterizer::order_parts`] says why), cut as the depth sort's
+    /// arrays; `None` at centre depth.
+    pub(super) scene_order: Option<Vec<wgpu::Buffer>>,
     pub(super) draw_args: wgpu::Buffer,
     /// The projection's bind group of each chunk of the scene ([`scene::ProjectChunk`]).
     pub(super) project_groups: Vec<wgpu::BindGroup>,
@@ -226,7 +227,9 @@ impl<'a> GpuRasterizer<'a> {
         let depth = pipes.sort.buffers(ctx, scene.count + 1)?;
         debug_assert_eq!(depth.split, scene.split.ranks, "the kernels index the sort's arrays as it cuts them");
         let plane = raster.fragment_depth == FragmentDepth::MaxDensityPlane;
-        let scene_order = plane.then(|| pipes.sort.buffers(ctx, scene.count + 1)).transpose()?;
+        let order_len = crate::sort::array_len(scene.count + 1);
+        let scene_order =
+            plane.then(|| crate::split::alloc(ctx, "scene order", 4, depth.split, order_len)).transpose()?;
         let draw_args = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("draw args"),
             size: 16,
@@ -289,10 +292,11 @@ impl<'a> GpuRasterizer<'a> {
         };
         let mut encoder = raster.encoder("project and sort");
         raster.encode_project(&mut encoder, None);
-        raster.encode_scene_order(&mut encoder)?;
+        let compaction = raster.encode_scene_order(&mut encoder)?;
         raster.encode_sort(&mut encoder, None)?;
         raster.encode_mesh_prepass(&mut encoder);
         raster.submit(encoder)?;
+        drop(compaction);
         Ok(raster)
     }
 
@@ -371,16 +375,24 @@ impl<'a> GpuRasterizer<'a> {
     }
 
     /// The scene order at the max-density plane, from the projection's values (ids, and
-    /// [`crate::sort::CULLED`] for the culled splats) before the depth sort permutes them: a
-    /// copy, compacted in place ([`crate::RadixSort::encode_compaction`]). Its keys are zero
-    /// as wgpu creates every buffer, and the compaction, which moves only zeros, leaves them so.
-    fn encode_scene_order(&self, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
-        let Some(order) = &self.scene_order else { return Ok(()) };
-        for (from, to) in self.depth.vals.iter().zip(&order.vals) {
-            encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
-        }
-        let pairs = Culled { buffers: order, n: self.scene.count, kept: &self.draw_args };
-        self.pipes.sort.encode_compaction(self.ctx, encoder, pairs)
+    /// [`crate::sort::CULLED`] for the culled splats) before the depth sort permutes them:
+    /// copied into a sort's buffers, compacted there ([`crate::RadixSort::encode_compaction`];
+    /// the keys are zero as wgpu creates every buffer, and the compaction, which moves only
+    /// zeros, leaves them so) and copied out, so that the camera keeps 4 bytes a splat of it
+    /// rather than a sort's 20. Returns the sort's buffers, to be dropped once submitted.
+    fn encode_scene_order(&self, encoder: &mut wgpu::CommandEncoder) -> Result<Option<SortBuffers>, GpuError> {
+        let Some(order) = &self.scene_order else { return Ok(None) };
+        let sort = self.pipes.sort.buffers(self.ctx, self.scene.count + 1)?;
+        let copy = |encoder: &mut wgpu::CommandEncoder, from: &[wgpu::Buffer], to: &[wgpu::Buffer]| {
+            for (from, to) in from.iter().zip(to) {
+                encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+            }
+        };
+        copy(encoder, &self.depth.vals, &sort.vals);
+        let pairs = Culled { buffers: &sort, n: self.scene.count, kept: &self.draw_args };
+        self.pipes.sort.encode_compaction(self.ctx, encoder, pairs)?;
+        copy(encoder, &sort.vals, order);
+        Ok(Some(sort))
     }
 
     /// The order the splat draw walks for `draw` (`order_at` in splat.wgsl): the visible splats
@@ -392,7 +404,7 @@ impl<'a> GpuRasterizer<'a> {
     /// different centre depths, so only scene order breaks every tie as the CPU does.
     fn order_parts(&self, draw: Draw) -> &[wgpu::Buffer] {
         match (&self.scene_order, draw) {
-            (Some(order), Draw::Stochastic) => &order.vals,
+            (Some(order), Draw::Stochastic) => order,
             _ => &self.depth.vals,
         }
     }
@@ -401,8 +413,8 @@ impl<'a> GpuRasterizer<'a> {
     /// values and histogram, and at the max-density plane the scene order's (the tile pairs
     /// come and go with each tile pass).
     pub fn camera_bytes(&self) -> u64 {
-        let sorts = [Some(&self.depth), self.scene_order.as_ref()];
-        self.splats.iter().map(wgpu::Buffer::size).sum::<u64>() + sorts.iter().flatten().map(|s| s.bytes()).sum::<u64>()
+        let order = self.scene_order.iter().flatten();
+        self.splats.iter().chain(order).map(wgpu::Buffer::size).sum::<u64>() + self.depth.bytes()
     }
 
     /// The projected splats in scene order (culled ones have an empty rect).
