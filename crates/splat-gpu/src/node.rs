@@ -96,10 +96,14 @@ impl Axis {
             o if o.is_subnormal() || o == 0.0 => 0.0,
             o => o,
         };
-        // The least scale whose 255 steps span the extent, then larger ones until the rounding
-        // of every upper plane fits.
+        // The least scale whose 255 steps span the extent and none of which is below a unit in
+        // the last place of the planes (finer steps round to the same floats, and the search
+        // below would walk them one by one: a scene far from the origin made of small splats),
+        // then larger ones until the rounding of every upper plane fits.
         let steps = (f64::from(hi_max) - f64::from(origin)) / f64::from(Q_MAX);
-        let least = if steps > 0.0 { (steps.log2().ceil() as i64 + 127).clamp(1, E_MAX as i64) as u32 } else { 1 };
+        let spanning = if steps > 0.0 { steps.log2().ceil() as i64 + 127 } else { 1 };
+        let ulp = |x: f32| i64::from((x.to_bits() >> 23) & 0xff) - 23;
+        let least = spanning.max(ulp(origin)).max(ulp(hi_max)).clamp(1, E_MAX as i64) as u32;
         (least..=E_MAX)
             .find_map(|exponent| Self::with_scale(origin, exponent, lo, hi, lanes))
             .expect("the largest scale holds every finite plane")
@@ -229,6 +233,10 @@ mod tests {
                 let hi: [f32; WIDTH] = std::array::from_fn(|l| boxes[l][1]);
                 let axis = Axis::quantize(lo, hi, lanes);
                 let s = scale(axis.exponent);
+                // No step below a unit in the last place of the origin (the search would walk
+                // such steps one by one: 256 of them a unit for the boxes at 10⁴ of 10⁻³).
+                let ulp = f32::from_bits(axis.origin.abs().to_bits() + 1) - axis.origin.abs();
+                assert!(axis.origin == 0.0 || s >= ulp, "a scale {s} below the origin {}'s unit {ulp}", axis.origin);
                 for l in 0..WIDTH {
                     let (dlo, dhi) = (plane(axis.origin, axis.lo[l], s), plane(axis.origin, axis.hi[l], s));
                     if l < lanes {
