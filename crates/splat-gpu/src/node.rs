@@ -72,11 +72,12 @@ fn word(q: [u32; WIDTH]) -> u32 {
 }
 
 impl Axis {
-    /// An axis of no lanes in use: each lane's lower plane above its upper.
+    /// An axis of no lanes in use: each lane's lower q 255 and upper q 0 (the kernel masks
+    /// lanes past the count).
     const UNUSED: Axis = Axis { origin: 0.0, exponent: 127, lo: [Q_MAX; WIDTH], hi: [0; WIDTH] };
 
     /// The axis of lanes `lo[..lanes]`, `hi[..lanes]`: each used lane's decoded interval holds
-    /// its own, and the others are empty (lower 255, upper 0).
+    /// its own; the others are as [`Axis::UNUSED`]'s.
     fn quantize(lo: [f32; WIDTH], hi: [f32; WIDTH], lanes: usize) -> Axis {
         if lanes == 0 {
             return Axis::UNUSED;
