@@ -9,7 +9,8 @@
 //! computes each plane as the kernel will ([`GpuNode::planes`], the twin of `node_planes` in
 //! `shaders/bvh.wgsl`). The encoder picks each lower q as the largest whose plane lies at or
 //! below the child's, each upper q as the smallest at or above, and the smallest scale that
-//! lets the uppers fit in a byte: every decoded box holds the child's box, so the traversal
+//! lets the uppers fit in a byte, each bound holding whether or not the device flushes a
+//! subnormal result to zero: every decoded box holds the child's box, so the traversal
 //! reaches every leaf the exact tree reaches (and a few more), and every method's result,
 //! which depends on the hits found and never on the order of the walk, is the CPU's.
 
@@ -59,6 +60,19 @@ fn scale(e: u32) -> f32 {
 /// Plane q of an axis of origin `o` and scale `s`: o + q s, rounded once (q s is exact).
 fn plane(o: f32, q: u32, s: f32) -> f32 {
     o + q as f32 * s
+}
+
+/// Plane p as a device that flushes subnormal results to zero reads it: the decoded planes keep
+/// their bounds whether the device flushes or not ([`plane_either`]).
+fn flushed(p: f32) -> f32 {
+    if p.is_subnormal() { 0.0f32.copysign(p) } else { p }
+}
+
+/// Plane q of an axis, the lower and the higher of what a device that flushes subnormal results
+/// to zero and one that does not read.
+fn plane_either(o: f32, q: u32, s: f32) -> (f32, f32) {
+    let p = plane(o, q, s);
+    (p.min(flushed(p)), p.max(flushed(p)))
 }
 
 /// The four bytes of word `w`, lane l in byte l.
@@ -117,11 +131,11 @@ impl Axis {
         for l in 0..lanes {
             let guess = |x: f32| (f64::from(x) - f64::from(origin)) / f64::from(s);
             let mut q_lo = guess(lo[l]).floor().clamp(0.0, f64::from(Q_MAX)) as u32;
-            while q_lo > 0 && plane(origin, q_lo, s) > lo[l] {
+            while q_lo > 0 && plane_either(origin, q_lo, s).1 > lo[l] {
                 q_lo -= 1;
             }
             let mut q_hi = guess(hi[l]).ceil().clamp(0.0, f64::from(Q_MAX) + 1.0) as u32;
-            while q_hi <= Q_MAX && plane(origin, q_hi, s) < hi[l] {
+            while q_hi <= Q_MAX && plane_either(origin, q_hi, s).0 < hi[l] {
                 q_hi += 1;
             }
             if q_hi > Q_MAX && exponent < E_MAX {
@@ -204,8 +218,11 @@ mod tests {
     }
 
     /// Every child's box of real trees (a random cloud's and a plane mesh's, flat on one axis)
-    /// and of hard cases (boxes far from the origin and tiny, subnormal, spanning ±10³⁰) lies
-    /// within its decoded box, with references and counts kept; and the quantization is
+    /// and of hard cases (boxes far from the origin and tiny, subnormal, straddling the
+    /// smallest normal float so that some decoded planes are subnormal, spanning ±10³⁰) lies
+    /// within its decoded box, whether or not the device flushes subnormals to zero (control,
+    /// by hand: bounds checked unflushed only fail there), with references and counts kept;
+    /// no scale is below a unit in the last place of the origin; and the quantization is
     /// tight: a decoded plane lies within one step of 8 bits of the node's extent from the
     /// exact one on average, so the GPU does not walk a much looser tree. Control: the
     /// rounding to nearest that a plain quantizer would use loses boxes.
@@ -220,9 +237,15 @@ mod tests {
                 [a, b]
             })
         };
-        for (centre, size) in
-            [(0.0, 1.0), (1.0e4, 1.0e-3), (-3.0e5, 7.0), (1.0e-39, 1.0e-39), (0.0, 2.0e30), (5.0, 0.0)]
-        {
+        for (centre, size) in [
+            (0.0, 1.0),
+            (1.0e4, 1.0e-3),
+            (-3.0e5, 7.0),
+            (1.0e-39, 1.0e-39),
+            (-1.5e-38, 2.0e-38),
+            (0.0, 2.0e30),
+            (5.0, 0.0),
+        ] {
             for _ in 0..200 {
                 cases.push(span(centre, size, &mut rng));
             }
@@ -247,6 +270,8 @@ mod tests {
                             lo[l],
                             hi[l]
                         );
+                        let (flo, fhi) = (flushed(dlo), flushed(dhi));
+                        assert!(flo <= lo[l] && hi[l] <= fhi, "[{}, {}] flushed to [{flo}, {fhi}]", lo[l], hi[l]);
                     } else {
                         assert!(dlo > dhi || (dlo == dhi && axis.lo[l] == Q_MAX && axis.hi[l] == 0), "unused lane {l}");
                     }
