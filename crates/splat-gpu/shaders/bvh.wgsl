@@ -5,7 +5,7 @@
 // `mesh_traverse`). It reads `node_at(i)`, and counts loop iterations in `iterations`, both
 // declared by the including kernel.
 
-// One wide node (64 bytes), mirrored by splat_gpu::layout::GpuNode: splat_core::bvh::Node4
+// One wide node (64 bytes), mirrored by splat_gpu::node::GpuNode: splat_core::bvh::Node4
 // with the four children's boxes quantized on each axis to bytes q of an origin o and a scale
 // s = 2^e, a plane at o + q s (splat_gpu's node.rs says how they are rounded outward):
 // origin.xyz the origin's bits, origin.w the biased exponents of x, y, z (bytes 0-2) and the

@@ -1,7 +1,7 @@
 //! Buffer layouts shared with `shaders/trace.wgsl`: `#[repr(C)]` + `bytemuck::Pod` structs
 //! whose sizes and field offsets a test checks against the WGSL structs reflected by naga.
 
-pub use crate::node::{GpuNode, bvh_nodes};
+use crate::node::{GpuNode, bvh_nodes};
 use crate::trace::MethodParams;
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;

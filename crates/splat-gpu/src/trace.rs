@@ -59,7 +59,7 @@ pub static TRACE_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(||
 /// parts after the first bind from 18 on.
 const PARTICLES: SplitArray =
     SplitArray::of::<layout::GpuParticle>("particle", "particles", "particle_at", "Particle", 1);
-const NODES: SplitArray = SplitArray::of::<layout::GpuNode>("BVH node", "nodes", "node_at", "Node", 2);
+const NODES: SplitArray = SplitArray::of::<crate::node::GpuNode>("BVH node", "nodes", "node_at", "Node", 2);
 /// The SH array's binding.
 const SH_BINDING: u32 = 3;
 /// Bindings of the kernel beside the parts after the first of its split arrays.

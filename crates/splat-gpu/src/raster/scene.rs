@@ -484,7 +484,7 @@ impl RasterScene {
             canonical,
             split,
             lighting: lighting.clone(),
-            mesh_nodes: ctx.upload("raster mesh nodes", bytemuck::cast_slice(&[crate::layout::GpuNode::default()])),
+            mesh_nodes: ctx.upload("raster mesh nodes", bytemuck::cast_slice(&[crate::node::GpuNode::default()])),
             triangles: ctx.upload("raster triangles", bytemuck::cast_slice(&[crate::layout::GpuTriangle::default()])),
             mesh_materials: ctx
                 .upload("raster mesh materials", bytemuck::cast_slice(&[crate::layout::GpuMeshMaterial::default()])),
@@ -503,10 +503,10 @@ impl RasterScene {
         if meshes.is_empty() {
             return Ok(self);
         }
-        let nodes = crate::layout::bvh_nodes(meshes.bvh(), 0);
+        let nodes = crate::node::bvh_nodes(meshes.bvh(), 0);
         let triangles = crate::layout::triangles(meshes);
         let count = meshes.triangles().len();
-        ctx.check_binding("mesh BVH node", (nodes.len() * size_of::<crate::layout::GpuNode>()) as u64, count)?;
+        ctx.check_binding("mesh BVH node", (nodes.len() * size_of::<crate::node::GpuNode>()) as u64, count)?;
         ctx.check_binding("triangle", (triangles.len() * size_of::<crate::layout::GpuTriangle>()) as u64, count)?;
         self.mesh_nodes = ctx.upload("raster mesh nodes", bytemuck::cast_slice(&nodes));
         self.triangles = ctx.upload("raster triangles", bytemuck::cast_slice(&triangles));
