@@ -80,3 +80,22 @@ pub fn glass_world() -> (Scene, Camera, Meshes, Lighting) {
     .unwrap();
     (scene, camera, meshes, Lighting::default())
 }
+
+/// Lit layers of Gaussians behind a transparent veil whose opacity ramps from 0.2 to 0.8 across
+/// it (per-vertex opacities), over a floor, under a transparent emissive panel (opacity 0.6):
+/// paths and emitter samples stop at transparent triangles by the path's decisions.
+pub fn veiled_world() -> (Scene, Camera, Meshes, Lighting) {
+    let (scene, camera, _, lighting) = lit_world();
+    let mut veil = quad(Vec3::new(0.5, 0.1, 1.2), Vec3::Z, 0.5);
+    veil.opacities = veil.positions.iter().map(|p| 0.2 + 0.6 * p.x).collect();
+    let meshes = Meshes::new(&[
+        (quad(Vec3::new(0.0, -0.8, 0.0), Vec3::Y, 4.0), lambert(Vec3::new(0.7, 0.65, 0.6))),
+        (veil, lambert(Vec3::new(0.3, 0.5, 0.8))),
+        (
+            quad(Vec3::new(0.3, 2.0, 0.5), -Vec3::Y, 0.6),
+            MeshMaterial { opacity: 0.6, ..emitter(Vec3::new(6.0, 5.5, 5.0)) },
+        ),
+    ])
+    .unwrap();
+    (scene, camera, meshes, lighting)
+}

@@ -419,6 +419,30 @@ fn hybrid_lights_every_fragment_with_shadows() {
 // ---------------------------------------------------------------------------------------------
 // Transparent meshes (Laine & Karras 2011's primitives of constant opacity).
 
+/// The path tracer stops at each transparent quad with probability its opacity, so its mean
+/// (emission only, `max_depth` 0) is Eq. 3 over the layers in expectation: a z-test of 1,024
+/// hashed frames against `want` at each pixel's centre (the quads face the camera, so the
+/// ramp's opacity is affine across a pixel and its mean over the pixel's box filter is the
+/// centre's), with the variance of an independent run. An acceptance error of 0.01
+/// (u < α + 0.01, half a percent of the colour) is rejected.
+fn path_traced_layers_are_eq_3(trace: &TraceScene, camera: &Camera, want: &dyn Fn(u32, u32) -> glam::DVec3) {
+    use splat_core::path::{PathSettings, PathTracer, sampler::SamplerKind};
+    let settings = PathSettings { max_depth: 0, sampler: SamplerKind::Hash, ..PathSettings::default() };
+    let tracer = PathTracer::new(trace, settings).unwrap();
+    let expected: Vec<f32> =
+        (0..camera.height).flat_map(|y| (0..camera.width).flat_map(move |x| want(x, y).as_vec3().to_array())).collect();
+    let frames = 1024;
+    let z_for = |u_shift: f32| {
+        let run = |seed| tracer.render(camera, &Frames { count: frames, seed, u_shift, ..Frames::default() }, &|_| {});
+        let (mean, variance) = (run(1).unwrap(), run(2).unwrap());
+        splat_core::stats::ZTest::new(mean.mean.data(), &expected, variance.variance.data(), frames, 3)
+    };
+    let (z, control) = (z_for(0.0), z_for(0.01));
+    eprintln!("path-traced layers: {z:?}; u < α + 0.01: {control:?}");
+    assert!(z.passes(), "the path tracer's layers are not Eq. 3: {z:?}");
+    assert!(!control.passes(), "an acceptance error of 0.01 passes: {control:?}");
+}
+
 /// A transparent surface of colour `color` and opacity `opacity`, emissive.
 fn transparent(color: Vec3, opacity: f32) -> MeshMaterial {
     MeshMaterial { opacity, ..emissive(color) }
@@ -479,13 +503,12 @@ fn transparent_quads_are_layers_of_eq_3() {
         let hybrid = rasterizer(&scene, &camera, settings, samples).hybrid(&trace, Method::Exact).unwrap();
         check(&format!("hybrid S = {samples}"), &render_raster(&hybrid, &UNDER, &Frames::default(), &|_| {}).unwrap());
     }
-    // What cannot draw them right says so: sorted splatting's lit surface look, the path tracer.
+    // What cannot draw them right says so: sorted splatting's lit surface look.
     let lit = Lighting { look: Look::Surface, ..Lighting::single(Material::DIFFUSE, Vec::new(), Shadows::None) };
     let r = rasterizer(&scene, &camera, settings, 1).with_meshes(&meshes).with_lighting(lit).unwrap();
     let refused = render_raster(&r, &UNDER, &Frames::default(), &|_| {}).unwrap_err().to_string();
     assert!(refused.contains("volumetric look"), "{refused}");
-    let path = splat_core::path::PathTracer::new(&trace, splat_core::path::PathSettings::default());
-    assert!(path.err().is_some_and(|e| e.to_string().contains("transparent mesh")));
+    path_traced_layers_are_eq_3(&trace, &camera, &want);
     let shadow = splat_core::hit::Ray::new(Vec3::new(0.0, 0.0, 2.0), -Vec3::Z);
     let through = splat_core::hit::Ray { t_max: 2.5, ..shadow };
     let a2 = 0.5;

@@ -48,16 +48,25 @@ fn z_against_constant(mean: &RenderOutput, variance: &RenderOutput, value: f32, 
 /// faces: interpolated shading normals do not conserve energy, and a smooth sphere room loses
 /// 0.13 % of its light, which 16,384 frames detect.)
 fn closed_room(albedo: f32) -> (Meshes, Camera) {
-    let material = MeshMaterial {
+    room(room_walls(0.5, albedo))
+}
+
+/// Walls that emit `emitted` and scatter with Lambertian albedo `albedo`.
+fn room_walls(emitted: f32, albedo: f32) -> MeshMaterial {
+    MeshMaterial {
         color: Vec3::ONE,
         shading: Material {
-            emissive: Vec3::splat(0.5),
+            emissive: Vec3::splat(emitted),
             ambient: Vec3::ZERO,
             diffuse: Vec3::splat(albedo),
             ..Material::DIFFUSE
         },
         ..MeshMaterial::default()
-    };
+    }
+}
+
+/// A cube room of half-width 3 with walls of `material`, and a camera inside it.
+fn room(material: MeshMaterial) -> (Meshes, Camera) {
     let meshes = Meshes::new(&[(placed(TriangleMesh::cube(), 3.0, Vec3::Y, Vec3::ZERO), material)]).unwrap();
     let camera = Camera::look_at(Vec3::new(0.3, 0.2, 1.0), Vec3::new(0.0, -0.5, -1.0), Vec3::Y, 70.0, 16, 12).unwrap();
     (meshes, camera)
@@ -82,6 +91,38 @@ fn a_closed_emitting_room_returns_le_over_one_minus_albedo() {
     let control = z_for(0.51);
     eprintln!("closed room: {z:?}; ρ 0.51: {control:?}");
     assert!(!control.passes(), "a 2 % brighter room passes: {control:?}");
+}
+
+/// A room of transparent walls: inside a cube whose walls have opacity α, emit Lₑ (both sides)
+/// and scatter with albedo ρ, under a constant environment E, a ray stops at a wall with
+/// probability α (Lₑ plus ρ times the room's radiance) and otherwise leaves the convex room for
+/// the environment, so every path sees L = (α Lₑ + (1 − α) E) / (1 − α ρ). The walls are found
+/// both by BSDF sampling and by emitter sampling, whose samples must carry α Lₑ for the weights
+/// to add up. An acceptance error of 0.01 (α 0.51 for 0.5: L 1.5 % brighter) is rejected.
+#[test]
+fn a_room_of_transparent_walls_balances_its_layers() {
+    let scene = Scene::default();
+    let (alpha, emitted, albedo, environment) = (0.5, 0.5, 0.5, 0.2);
+    let (meshes, camera) = room(MeshMaterial { opacity: alpha, ..room_walls(emitted, albedo) });
+    let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_meshes(meshes);
+    let settings = PathSettings {
+        max_depth: 40,
+        roulette_depth: 2,
+        sampler: SamplerKind::Hash,
+        environment: Environment::Constant(Vec3::splat(environment)),
+        ..PathSettings::default()
+    };
+    let expected = (alpha * emitted + (1.0 - alpha) * environment) / (1.0 - alpha * albedo);
+    let frames = 2048;
+    let z_for = |u_shift: f32| {
+        let run = |seed: u32| render(&trace, &camera, settings, Frames { u_shift, ..hash_frames(frames, seed) });
+        z_against_constant(&run(1), &run(2), expected, frames)
+    };
+    let z = z_for(0.0);
+    assert!(z.passes(), "the transparent room is not {expected}: {z:?}");
+    let control = z_for(0.01);
+    eprintln!("transparent room ({expected}): {z:?}; u < α + 0.01: {control:?}");
+    assert!(!control.passes(), "an acceptance error of 0.01 passes: {control:?}");
 }
 
 /// The white furnace: a convex albedo-1 Lambertian sphere, a cube and a smooth glass sphere under

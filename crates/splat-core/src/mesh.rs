@@ -292,10 +292,17 @@ impl PreparedTriangle {
     /// takes the closest hit and needs no rule.
     #[inline]
     pub fn crosses(&self, ray: &Ray) -> Option<(f32, f32, f32)> {
-        let (t, b1, b2) = self.intersect(ray)?;
+        self.intersect(ray).filter(|&(_, b1, b2)| self.owns(b1, b2))
+    }
+
+    /// Whether a crossing at barycentrics (b₁, b₂) belongs to this triangle
+    /// ([`PreparedTriangle::crosses`]): inside it beyond the edge slack, or within the slack of
+    /// an edge that it runs along in the canonical direction.
+    #[inline]
+    pub fn owns(&self, b1: f32, b2: f32) -> bool {
         // The edge opposite each vertex: p₁ → p₂, p₂ → p₀, p₀ → p₁.
         let edges = [(1.0 - b1 - b2, self.e2 - self.e1), (b1, -self.e2), (b2, self.e1)];
-        edges.iter().all(|&(b, edge)| b > EDGE_SLACK || canonical(edge)).then_some((t, b1, b2))
+        edges.iter().all(|&(b, edge)| b > EDGE_SLACK || canonical(edge))
     }
 
     /// Möller–Trumbore: (t, b₁, b₂) where the ray crosses the triangle within (t_min, t_max).
@@ -457,7 +464,7 @@ impl Meshes {
     /// The closest triangle the ray crosses within (t_min, t_max), transparent or not; ties go
     /// to the lower leaf-order index, so the answer does not depend on traversal order.
     pub fn closest(&self, ray: &Ray) -> Option<SurfaceHit> {
-        self.closest_where(ray, |_| true)
+        self.closest_where(ray, |_, _, _| true)
     }
 
     /// The closest opaque triangle (what the raster pipeline's depth pre-pass draws; the
@@ -466,16 +473,36 @@ impl Meshes {
         if !self.transparent {
             return self.closest(ray);
         }
-        self.closest_where(ray, |tri| !tri.is_transparent())
+        self.closest_where(ray, |tri, _, _| !tri.is_transparent())
     }
 
-    fn closest_where(&self, ray: &Ray, keep: impl Fn(&PreparedTriangle) -> bool) -> Option<SurfaceHit> {
+    /// The closest triangle the ray meets that stops it: an opaque one wherever it crosses it, a
+    /// transparent one where it [crosses](PreparedTriangle::crosses) it (each crossing of an
+    /// edge counted once) and `accept(order, α)` takes the crossing, given the triangle's place
+    /// in the meshes' order ([`PreparedTriangle::order`], which keys its decisions) and its
+    /// opacity there. With `accept` true with probability α, independently for each triangle,
+    /// this is Algorithm 1 of Sun et al. 2025 over the triangles: the closest accepted surface,
+    /// whose expectation over the decisions composites the surfaces by Eq. 3 (the path tracer's
+    /// transparent meshes). Ties go to the lower leaf-order index, as in [`Meshes::closest`].
+    pub fn closest_accepted(&self, ray: &Ray, accept: impl Fn(u32, f32) -> bool) -> Option<SurfaceHit> {
+        if !self.transparent {
+            return self.closest(ray);
+        }
+        self.closest_where(ray, |tri, b1, b2| {
+            !tri.is_transparent() || (tri.owns(b1, b2) && accept(tri.order, tri.alpha_at(b1, b2)))
+        })
+    }
+
+    /// The closest crossing within (t_min, t_max] that `keep(triangle, b₁, b₂)` keeps.
+    fn closest_where(&self, ray: &Ray, keep: impl Fn(&PreparedTriangle, f32, f32) -> bool) -> Option<SurfaceHit> {
         let mut best: Option<(f32, u32, f32, f32)> = None;
         let mut t_max = ray.t_max;
         self.bvh.traverse(ray, &mut t_max, |k, t_max| {
             let tri = &self.triangles[k as usize];
             let clipped = Ray { t_max: t_max.next_up(), ..*ray };
-            let Some((t, b1, b2)) = tri.intersect(&clipped).filter(|_| keep(tri)) else { return };
+            let Some((t, b1, b2)) = tri.intersect(&clipped).filter(|&(_, b1, b2)| keep(tri, b1, b2)) else {
+                return;
+            };
             if best.is_none_or(|(bt, bk, _, _)| t < bt || (t == bt && k < bk)) {
                 best = Some((t, k, b1, b2));
                 *t_max = t;

@@ -1,7 +1,8 @@
 // Twin of crates/splat-core/src/mesh.rs, prepended to the kernels that walk meshes (trace.wgsl
 // and the raster pipeline's mesh pre-pass, mesh_prepass.wgsl): the surface hit, its normal and
 // bounces, and the traversal of the triangle BVH (after bvh.wgsl; the triangle itself is
-// triangle.wgsl's). Reads the including kernel's `triangles`, `node_at` and `iterations`.
+// triangle.wgsl's). Reads the including kernel's `triangles`, `node_at` and `iterations`, and
+// calls its `transparent_stops`.
 
 // mesh.rs `reflect`.
 fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
@@ -59,11 +60,14 @@ fn surface_normal(h: SurfaceHit, ray: Ray) -> vec3<f32> {
     return facing_normal(triangles[h.triangle], h.b1, h.b2, ray.dir);
 }
 
-// mesh.rs `Meshes::closest` (opaque_only false) and `Meshes::closest_opaque` (true, the raster
-// pre-pass: transparent triangles are the raster operations' fragments) over the mesh BVH whose
-// root is node `root`: every triangle of every leaf the ray overlaps, Möller–Trumbore with the
-// core's edge slack; the closest hit within (t_min, t_max], ties to the lower leaf index.
-fn mesh_traverse(root: u32, ray: Ray, opaque_only: bool) -> SurfaceHit {
+// mesh.rs `Meshes::closest` (filtered false) over the mesh BVH whose root is node `root`: every
+// triangle of every leaf the ray overlaps, Möller–Trumbore with the core's edge slack; the
+// closest hit within (t_min, t_max], ties to the lower leaf index. Filtered, a transparent
+// triangle counts only where the including kernel's `transparent_stops(triangle, (t, b1, b2))`
+// says its crossing stops the ray: never in the raster pre-pass (`Meshes::closest_opaque`:
+// transparent triangles are the raster operations' fragments), by the path's decision in the
+// path tracer (`Meshes::closest_accepted`).
+fn mesh_traverse(root: u32, ray: Ray, filtered: bool) -> SurfaceHit {
     var best = SurfaceHit(FAR, NONE, 0.0, 0.0);
     let inv = safe_inverse(ray.dir);
     var t_max = ray.t_max;
@@ -76,8 +80,9 @@ fn mesh_traverse(root: u32, ray: Ray, opaque_only: bool) -> SurfaceHit {
         }
         for (var k = leaf_first(r); k < leaf_end(r); k++) {
             iterations += 1u;
-            let h = triangle_intersect(triangles[k], ray);
-            if (h.x < 0.0 || (opaque_only && is_transparent(triangles[k]))) {
+            let tri = triangles[k];
+            let h = triangle_intersect(tri, ray);
+            if (h.x < 0.0 || (filtered && is_transparent(tri) && !transparent_stops(tri, h))) {
                 continue;
             }
             if (h.x <= t_max && (h.x < best.t || (h.x == best.t && k < best.triangle))) {

@@ -27,6 +27,11 @@ fn canonical_at(i: u32) -> vec4<f32> { return canonical[i]; }
 // bvh.wgsl's loop counter (no budget is checked here).
 var<private> iterations: u32;
 
+// mesh.wgsl's filter of transparent crossings: the pre-pass draws opaque triangles alone.
+fn transparent_stops(tri: Triangle, h: vec3<f32>) -> bool {
+    return false;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= params.size.x || gid.y >= params.size.y) {

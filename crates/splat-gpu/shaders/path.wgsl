@@ -143,8 +143,16 @@ fn emitter_sample(x: vec3<f32>, b: u32) -> EmitterSample {
         return none;
     }
     let pdf = emitter_density[k] * distance * distance / cos_l;
-    let le = mesh_emission(mesh_materials[tri.mesh]);
+    let le = mesh_emission(mesh_materials[tri.mesh]) * alpha_at(tri, b1, b2);
     return EmitterSample(Incident(l, distance - surface_offset(p), le / pdf, true), pdf);
+}
+
+// mesh.wgsl's filter of transparent crossings, `PathTracer::surface`: a crossing the triangle
+// owns stops the path with probability the opacity there (the triangle's draw of the segment
+// after bounce path_bounce, keyed by its place in the meshes' order).
+fn transparent_stops(tri: Triangle, h: vec3<f32>) -> bool {
+    let u = path_particle(tri.order, surface_decision(path_bounce)) - params.u_shift;
+    return owns_crossing(tri, h.y, h.z) && u < alpha_at(tri, h.y, h.z);
 }
 
 // `emitter_pdf`.
@@ -290,7 +298,7 @@ fn path_radiance(camera: Ray) -> vec3<f32> {
         path_bounce = b;
         var hit = SurfaceHit(FAR, NONE, 0.0, 0.0);
         if (params.mesh_root != NONE) {
-            hit = mesh_traverse(params.mesh_root, Ray(ray.origin, ray.dir, ray.view, max(ray.t_min, mesh_t_min), ray.t_max), false);
+            hit = mesh_traverse(params.mesh_root, Ray(ray.origin, ray.dir, ray.view, max(ray.t_min, mesh_t_min), ray.t_max), true);
         }
         var seg = ray;
         if (hit.triangle != NONE) {

@@ -139,10 +139,13 @@ fn dim_roulette(b: u32) -> u32 {
     return 10u + DIMS_PER_BOUNCE * b;
 }
 
-// sampler.rs `decision` and `shadow_decision`.
+// sampler.rs `decision`, `shadow_decision` and `surface_decision`.
 fn decision(b: u32, slot: u32) -> u32 {
     return (b << 12u) | slot;
 }
 fn shadow_decision(b: u32, light: u32) -> u32 {
     return 0x00800000u | (b << 12u) | light;
+}
+fn surface_decision(b: u32) -> u32 {
+    return 0x00400000u | (b << 12u);
 }

@@ -114,21 +114,20 @@ fn canonical_edge(d: vec3<f32>) -> bool {
 // triangle that runs along it in its canonical direction); t = −1 where it does not cross.
 fn triangle_crosses(tri: Triangle, ray: Ray) -> vec3<f32> {
     let h = triangle_intersect(tri, ray);
-    let miss = vec3<f32>(-1.0, 0.0, 0.0);
-    if (h.x < 0.0 || !(h.x < ray.t_max)) {
-        return miss;
-    }
-    // The edge opposite each vertex: p1 → p2, p2 → p0, p0 → p1.
-    if ((1.0 - h.y - h.z) <= EDGE_SLACK && !canonical_edge(tri.e2 - tri.e1)) {
-        return miss;
-    }
-    if (h.y <= EDGE_SLACK && !canonical_edge(-tri.e2)) {
-        return miss;
-    }
-    if (h.z <= EDGE_SLACK && !canonical_edge(tri.e1)) {
-        return miss;
+    if (h.x < 0.0 || !(h.x < ray.t_max) || !owns_crossing(tri, h.y, h.z)) {
+        return vec3<f32>(-1.0, 0.0, 0.0);
     }
     return h;
+}
+
+// mesh.rs `PreparedTriangle::owns`: whether a crossing at barycentrics (b1, b2) is this
+// triangle's, inside it beyond the slack or within the slack of an edge it runs along in the
+// canonical direction.
+fn owns_crossing(tri: Triangle, b1: f32, b2: f32) -> bool {
+    // The edge opposite each vertex: p1 → p2, p2 → p0, p0 → p1.
+    return ((1.0 - b1 - b2) > EDGE_SLACK || canonical_edge(tri.e2 - tri.e1))
+        && (b1 > EDGE_SLACK || canonical_edge(-tri.e2))
+        && (b2 > EDGE_SLACK || canonical_edge(tri.e1));
 }
 
 // v / |v| where that is finite, else `fallback` (glam's `try_normalize`).

@@ -430,8 +430,9 @@ fn gpu_material(m: &Material, first: u32) -> GpuMaterial {
 }
 
 /// Refuse transparent mesh materials (an opacity below 1) in `what`, which draws every
-/// triangle as an opaque surface (the ray tracer, the path tracer, the hybrid): on the GPU only
-/// the raster operations of Enderton and Laine–Karras draw them.
+/// triangle as an opaque surface (the hybrid, sorted splatting and StochasticSplats): on the GPU
+/// the ray tracer, the path tracer and the raster operations of Enderton and Laine–Karras draw
+/// them.
 pub fn check_opaque(meshes: &Meshes, what: &str) -> Result<(), crate::GpuError> {
     if meshes.has_transparent() {
         return Err(crate::GpuError::refused(
@@ -1034,15 +1035,16 @@ mod tests {
 
     /// The kernels that draw every triangle opaque refuse a transparent mesh before any upload,
     /// naming the raster operations and the CPU as the remedies; opaque meshes pass; the ray
-    /// tracer and the raster operations take transparent ones.
+    /// tracer and the raster operations take transparent ones (and the path tracer, which
+    /// `gpu_paths_are_the_cpu_paths` renders with them).
     #[test]
     fn transparent_meshes_are_refused() {
         use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
         let mesh =
             |opacity| Meshes::new(&[(TriangleMesh::plane(), MeshMaterial { opacity, ..MeshMaterial::default() })]);
-        assert!(check_opaque(&mesh(1.0).unwrap(), "the ray tracer").is_ok());
-        let refused = check_opaque(&mesh(0.5).unwrap(), "the ray tracer").unwrap_err().to_string();
-        assert!(refused.contains("the ray tracer draws no transparent") && refused.contains("CPU"), "{refused}");
+        assert!(check_opaque(&mesh(1.0).unwrap(), "the GPU hybrid").is_ok());
+        let refused = check_opaque(&mesh(0.5).unwrap(), "the GPU hybrid").unwrap_err().to_string();
+        assert!(refused.contains("the GPU hybrid draws no transparent") && refused.contains("CPU"), "{refused}");
         assert!(refused.contains("Enderton or stratified"), "{refused}");
         // Which pipelines draw them: the ray tracer and the raster operations, not the hybrid or
         // sorted splatting.

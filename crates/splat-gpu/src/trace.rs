@@ -583,7 +583,6 @@ impl<'a> GpuTracer<'a> {
         frames: &Frames,
     ) -> Result<(RenderOutput, GpuStats), GpuError> {
         settings.validate()?;
-        layout::check_opaque(self.trace.meshes(), "the GPU path tracer")?;
         let params = layout::path_params(settings, self.emitter_count).ok_or_else(|| {
             GpuError::refused("depth sampling in the path tracer runs on the CPU only", &[Remedy::Cpu])
         })?;

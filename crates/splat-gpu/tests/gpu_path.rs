@@ -10,7 +10,7 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::path::sampler::SamplerKind;
 use splat_core::path::{Environment, GaussianEstimator, PathSettings, PathTracer};
 use splat_gpu::GpuError;
-use splat_tests::path_worlds::{glass_world, lit_world, trace_scene, trace_scene_with};
+use splat_tests::path_worlds::{glass_world, lit_world, trace_scene, trace_scene_with, veiled_world};
 
 fn settings(gaussians: GaussianEstimator, sampler: SamplerKind) -> PathSettings {
     PathSettings {
@@ -36,14 +36,15 @@ fn differences(a: &RenderOutput, b: &RenderOutput) -> (usize, f64) {
     (worst.iter().filter(|&&w| w.is_nan() || w > 1e-3).count(), mean)
 }
 
-/// Four frames of each estimator and sampler on two worlds: the GPU's paths are the CPU's.
+/// Four frames of each estimator and sampler on three worlds (the third with transparent
+/// meshes): the GPU's paths are the CPU's.
 /// A path may part where a decision falls within f32 rounding of its threshold (a BSDF
 /// direction a few ulps apart meets a different Gaussian or triangle edge); at most 2 % of the
 /// pixels may differ, and the mean difference stays below 10⁻³.
 #[test]
 fn gpu_paths_are_the_cpu_paths() {
     let Some(ctx) = context() else { return };
-    for (name, world) in [("lit layers", lit_world()), ("glass", glass_world())] {
+    for (name, world) in [("lit layers", lit_world()), ("glass", glass_world()), ("veiled", veiled_world())] {
         // Through a thin lens: the settings' lens is the path tracer's.
         let lens = Some(ThinLens { aperture: 0.03, focus_distance: 3.0 });
         let with_lens = splat_core::RenderSettings {

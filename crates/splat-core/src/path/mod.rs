@@ -34,7 +34,11 @@
 //! transmission share, both with the material's roughness. The Blinn–Phong ambient and
 //! specular terms are the raster pipelines' stand-ins for indirect and glossy light, which the
 //! path tracer computes instead. Gaussians keep the splat material model of
-//! [`crate::lighting`].
+//! [`crate::lighting`]. A transparent mesh (an opacity α below 1, per material or per vertex)
+//! is sampled as the Gaussians are: each crossing stops the ray with probability α, decided per
+//! triangle ([`sampler::surface_decision`]), so that a surface is α × itself + (1 − α) × what
+//! lies behind in expectation; shadow rays take the meshes' transmittance Π (1 − αᵢ), as the
+//! ray tracer's do.
 
 pub mod bsdf;
 pub mod sampler;
@@ -314,12 +318,6 @@ impl<'a> PathTracer<'a> {
     /// A path tracer for `trace` (validated settings).
     pub fn new(trace: &'a TraceScene<'a>, settings: PathSettings) -> Result<Self, RenderError> {
         settings.validate()?;
-        if trace.meshes().has_transparent() {
-            return Err(RenderError::Settings(
-                "the path tracer has no transparent mesh materials (an opacity below 1): the ray-tracing and raster pipelines render them"
-                    .into(),
-            ));
-        }
         Ok(Self { trace, settings, emitters: Emitters::new(trace) })
     }
 
@@ -346,7 +344,7 @@ impl<'a> PathTracer<'a> {
         // direction (None after a delta lobe or at the camera: emission counts in full).
         let (mut mesh_t_min, mut prev_pdf) = (ray.t_min, None::<f32>);
         for bounce in 0..=self.settings.max_depth {
-            let surface = meshes.closest(&Ray { t_min: ray.t_min.max(mesh_t_min), ..ray });
+            let surface = self.surface(&Ray { t_min: ray.t_min.max(mesh_t_min), ..ray }, bounce, s);
             let segment = Ray { t_max: surface.map_or(ray.t_max, |h| h.t), ..ray };
             let gauss = self.gaussians(&segment, bounce, s);
             l += beta * gauss.radiance;
@@ -405,6 +403,16 @@ impl<'a> PathTracer<'a> {
             mesh_t_min = surface_offset(x);
         }
         l
+    }
+
+    /// The surface that ends the segment after bounce `bounce`: the closest opaque triangle or
+    /// accepted transparent one, each transparent triangle the ray crosses accepted with
+    /// probability its opacity α ([`Meshes::closest_accepted`](crate::mesh::Meshes::closest_accepted)).
+    /// So a transparent surface is, in expectation, α × (its emission and scattering) + (1 − α)
+    /// × the radiance of the same ray past it, the ray tracer's layer of Eq. 3; passing it is no
+    /// bounce, and the Gaussians on both sides of it are one segment.
+    fn surface(&self, ray: &Ray, bounce: u32, s: &PathSampler) -> Option<SurfaceHit> {
+        self.trace.meshes().closest_accepted(ray, |order, alpha| s.surface(order, bounce) < alpha)
     }
 
     /// The Gaussians of one segment by the chosen estimator.
@@ -547,7 +555,9 @@ impl<'a> PathTracer<'a> {
             return None;
         }
         let pdf = self.emitters.density[k as usize] * distance * distance / cos_l;
-        let le = emission(meshes.material(tri.mesh));
+        // A transparent emitter stops a ray with probability α there (`surface`): it sends
+        // α Lₑ in expectation, whichever strategy finds it.
+        let le = emission(meshes.material(tri.mesh)) * tri.alpha_at(b1, b2);
         // The shadow ray stops short of the emitter so that its own triangle does not block it.
         let distance = distance - surface_offset(p);
         Some((Incident { l, distance, irradiance: le / pdf }, pdf))

@@ -1,5 +1,6 @@
 //! The random numbers of one path: every number the path draws (pixel position, lens point,
-//! each Gaussian's acceptance, each BSDF and light sample, Russian roulette) is a pure function
+//! each Gaussian's and transparent triangle's acceptance, each BSDF and light sample, Russian
+//! roulette) is a pure function
 //! of (pixel, sample index, dimension), so one sample index drives the whole path and nothing
 //! depends on thread or traversal order.
 //!
@@ -135,6 +136,13 @@ impl PathSampler {
         }
     }
 
+    /// The acceptance draw of the transparent triangle in place `order` of the meshes' order
+    /// on the segment after bounce `bounce` ([`surface_decision`]), lowered by the shift as every
+    /// acceptance draw is.
+    pub fn surface(&self, order: u32, bounce: u32) -> f32 {
+        self.particle(order, surface_decision(bounce)) - self.u_shift
+    }
+
     /// The acceptance draw of particle `id` in decision `decision` (of [`decision`]).
     fn particle(&self, id: u32, decision: u32) -> f32 {
         match self.kind {
@@ -158,6 +166,12 @@ pub fn decision(bounce: u32, slot: u32) -> u32 {
 /// `light` (the emissive meshes' sample is light [`crate::lighting::MAX_LIGHTS`]).
 pub fn shadow_decision(bounce: u32, light: u32) -> u32 {
     0x0080_0000 | (bounce << 12) | light
+}
+
+/// The decision number of the transparent triangles the segment after bounce `bounce` crosses
+/// (each keyed by its place in the meshes' order, as a Gaussian by its id).
+pub fn surface_decision(bounce: u32) -> u32 {
+    0x0040_0000 | (bounce << 12)
 }
 
 /// The Gaussian decisions of a path as a [`Decide`]: slot s is decision s, light samples of the
