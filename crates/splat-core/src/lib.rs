@@ -44,7 +44,7 @@ pub mod lk_scenes;
 pub mod mesh;
 pub mod normal;
 pub mod oracle;
-mod par;
+pub mod par;
 pub mod particle;
 pub mod path;
 pub mod raster;

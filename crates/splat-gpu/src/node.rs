@@ -192,9 +192,10 @@ impl GpuNode {
 }
 
 /// The nodes of `bvh` placed at index `offset` of a node buffer, its root first (a reference to
-/// a node is its index, moved by the offset; a leaf's reference is kept).
+/// a node is its index, moved by the offset; a leaf's reference is kept). Encoded on every core
+/// where splat-core runs in parallel (its `rayon` feature), in order either way.
 pub fn bvh_nodes(bvh: &Bvh4, offset: u32) -> Vec<GpuNode> {
-    bvh.nodes().iter().map(|n| GpuNode::new(n, offset)).collect()
+    splat_core::par::map(bvh.nodes(), |n| GpuNode::new(n, offset))
 }
 
 #[cfg(test)]
