@@ -42,7 +42,7 @@ pub fn emitter(radiance: Vec3) -> MeshMaterial {
     MeshMaterial { color: radiance, shading: Material::EMISSIVE, ..MeshMaterial::default() }
 }
 
-/// Lit layers of Gaussians over a floor, before a rough mirror that reflects them, under an
+/// Lit layers of Gaussians over a floor, before a rough gold mirror that reflects them, under an
 /// emissive panel, a point light and a sky: Gaussians on camera, mirror and shadow segments.
 pub fn lit_world() -> (Scene, Camera, Meshes, Lighting) {
     let (scene, camera) = super::harness::fixture("layers", 24, 18);
@@ -50,7 +50,12 @@ pub fn lit_world() -> (Scene, Camera, Meshes, Lighting) {
         (quad(Vec3::new(0.0, -0.8, 0.0), Vec3::Y, 4.0), lambert(Vec3::new(0.7, 0.65, 0.6))),
         (
             quad(Vec3::new(0.0, 0.0, -1.4), Vec3::Z, 3.0),
-            MeshMaterial { mirror: 0.8, roughness: 0.3, ..lambert(Vec3::splat(0.5)) },
+            MeshMaterial {
+                mirror: 0.8,
+                roughness: 0.3,
+                mirror_tint: Vec3::new(1.0, 0.78, 0.34),
+                ..lambert(Vec3::splat(0.5))
+            },
         ),
         (quad(Vec3::new(0.3, 2.0, 0.5), -Vec3::Y, 0.6), emitter(Vec3::new(6.0, 5.5, 5.0))),
     ])

@@ -452,8 +452,9 @@ fn a_gltf_file_holds_splats_and_meshes_together() {
 /// parameters named again here); each reads as glTF 2.0 §3.9 and its extensions define the
 /// material, mapped onto the mesh material's shares as `splat_io::mesh::gltf_material`
 /// documents: the masked quad (opacity 0.3, cutoff 0.5) draws nothing, the black blue channel
-/// that emits is read as `EMITTING_BLACK`, and the unread `KHR_materials_volume` is noted. A
-/// world file's keys override every part's; a colour keeps what a lit part emits.
+/// that emits is read as `EMITTING_BLACK`, a metal's mirror tint is its base colour, and the
+/// unread `KHR_materials_volume` is noted. A world file's keys override every part's; a colour
+/// keeps what a lit part emits and retints a metal.
 #[test]
 fn gltf_materials_read_as_three_js_writes_them() {
     use splat_core::lighting::Material;
@@ -467,6 +468,8 @@ fn gltf_materials_read_as_three_js_writes_them() {
         color: c,
         shading: matte(Vec3::ZERO),
         mirror: metallic,
+        // glTF's conductor_fresnel: a metal's F₀ is its base colour.
+        mirror_tint: if metallic > 0.0 { c } else { Vec3::ONE },
         transmission: 0.0,
         ior: 1.5,
         roughness,
@@ -498,6 +501,7 @@ fn gltf_materials_read_as_three_js_writes_them() {
         ];
         assert!(
             close(got.color, want.color)
+                && close(got.mirror_tint, want.mirror_tint)
                 && close(got.shading.emissive, want.shading.emissive)
                 && close(got.shading.diffuse, want.shading.diffuse)
                 && close(got.shading.ambient, want.shading.ambient)
@@ -537,8 +541,10 @@ fn gltf_materials_read_as_three_js_writes_them() {
             assert_eq!(m.color, Vec3::new(black, 1.0, black));
             assert_eq!(*m, MeshMaterial { color: m.color, shading: m.shading, roughness: 0.7, ..*file });
         } else {
-            // The unlit quad's colour is its emission, which the override sets.
-            assert_eq!(*m, MeshMaterial { color: Vec3::Y, roughness: 0.7, ..*file });
+            // The unlit quad's colour is its emission, which the override sets; a metal's tint
+            // is its base colour, which the override sets too.
+            let mirror_tint = if file.mirror > 0.0 { Vec3::Y } else { file.mirror_tint };
+            assert_eq!(*m, MeshMaterial { color: Vec3::Y, roughness: 0.7, mirror_tint, ..*file });
         }
     }
     assert!(spec.notes.iter().all(|n| n.starts_with("meshes[0]: ")) && spec.notes.len() == read.notes.len());

@@ -135,6 +135,59 @@ fn a_perfect_mirror_shows_the_exact_image_of_the_mirrored_camera() {
     assert!(black.mean.data().iter().all(|&v| v == 0.0));
 }
 
+/// A tinted mirror reflects F₀ + (1 − F₀)(1 − cos θ)⁵ of what it sees (Schlick's Fresnel, glTF's
+/// `conductor_fresnel`, F₀ a gold's tint): a slanted mirror before an empty world of background
+/// B, so that cos θ sweeps across the image, shows F(cos θ) B at each pixel's centre ray
+/// in the ray tracer (`exact`), the rasterizer's forward-shaded pre-pass and the path tracer (a
+/// smooth conductor under the environment B), and B around it. An untinted mirror shows B.
+#[test]
+fn a_tinted_mirror_reflects_schlicks_fresnel() {
+    use splat_core::path::{Environment, PathSettings, PathTracer, sampler::PathSampler, sampler::SamplerKind};
+    let scene = Scene::new(Vec::new(), 0);
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 60.0, 32, 24).unwrap();
+    let background = Vec3::new(0.6, 0.5, 0.4);
+    let settings = RenderSettings { background, ..RenderSettings::default() };
+    let (gold, normal) = (Vec3::new(1.0, 0.78, 0.34), Vec3::new(0.8, 0.0, 1.0).normalize());
+    let world = |mirror_tint: Vec3| {
+        let mirror = MeshMaterial { mirror: 1.0, mirror_tint, ..MeshMaterial::default() };
+        let meshes = Meshes::new(&[(quad(Vec3::ZERO, normal, 1.2), mirror)]).unwrap();
+        TraceScene::new(&scene, settings).unwrap().with_meshes(meshes)
+    };
+    let trace = world(gold);
+    let want = |x: u32, y: u32| {
+        let ray = camera.pixel_ray(x, y);
+        match trace.meshes().closest(&trace.clip(ray)) {
+            Some(_) => splat_core::mesh::schlick(gold, (-ray.dir.dot(normal)).clamp(0.0, 1.0)) * background,
+            None => background,
+        }
+    };
+    let largest = |label: &str, got: &dyn Fn(u32, u32) -> Vec3| {
+        let mut err = 0.0f32;
+        let mut mirrored = 0;
+        for y in 0..camera.height {
+            for x in 0..camera.width {
+                err = err.max((got(x, y) - want(x, y)).abs().max_element());
+                mirrored += usize::from(want(x, y) != background);
+            }
+        }
+        eprintln!("{label}: largest difference from F(cos θ) B {err:.1e} over {mirrored} mirrored pixels");
+        assert!(mirrored > 200, "{label}: the mirror covers {mirrored} pixels");
+        err
+    };
+    let rt = exact(&trace, &camera);
+    assert!(largest("exact", &|x, y| Vec3::from_slice(rt.mean.pixel(x, y))) < 1e-5);
+    let r = rasterizer(&scene, &camera, settings, 1).with_meshes(trace.meshes());
+    let raster = render_raster(&r, &UNDER, &Frames::default(), &|_| {}).unwrap();
+    assert!(largest("raster", &|x, y| Vec3::from_slice(raster.mean.pixel(x, y))) < 1e-5);
+    let path = PathSettings { max_depth: 2, environment: Environment::Constant(background), ..PathSettings::default() };
+    let tracer = PathTracer::new(&trace, path).unwrap();
+    let s = PathSampler::new(SamplerKind::Sobol, 0, 0, 0, 0);
+    assert!(largest("path", &|x, y| tracer.radiance(trace.clip(camera.pixel_ray(x, y)), &s)) < 1e-5);
+    // Control: the untinted mirror (F = 1) is the background.
+    let untinted = exact(&world(Vec3::ONE), &camera);
+    assert!(untinted.mean.data().chunks(3).all(|p| Vec3::from_slice(p) == background));
+}
+
 /// Glass of index 1 with full transmission bends nothing and reflects nothing: a sphere of it
 /// through the middle of the sheets leaves `exact` and the k-buffer unchanged.
 #[test]

@@ -169,10 +169,11 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
     for (i, (mesh, m)) in world.meshes.iter().enumerate() {
         let _ = writeln!(
             text,
-            "mesh {i:<5} {}: colour {:.3}, mirror {}, transmission {} (ior {}), roughness {}, opacity {}, emission {:.3}",
+            "mesh {i:<5} {}: colour {:.3}, mirror {} (tint {:.3}), transmission {} (ior {}), roughness {}, opacity {}, emission {:.3}",
             crate::counted(mesh.triangles.len(), "triangle"),
             m.color,
             m.mirror,
+            m.mirror_tint,
             m.transmission,
             m.ior,
             m.roughness,

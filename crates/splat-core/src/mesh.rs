@@ -165,6 +165,10 @@ pub struct MeshMaterial {
     pub shading: Material,
     /// Share of the radiance taken from the perfect mirror reflection.
     pub mirror: f32,
+    /// Reflectance F₀ of the mirror share at normal incidence, rising to 1 at grazing angles by
+    /// Schlick's approximation ([`schlick`]): a metal's colour (glTF's base colour of a metallic
+    /// material, whose conductor Fresnel this is). 1, the default, is an untinted mirror.
+    pub mirror_tint: Vec3,
     /// Share of the radiance taken from a smooth dielectric: Fresnel's mix of the reflected and
     /// refracted rays.
     pub transmission: f32,
@@ -186,6 +190,7 @@ impl Default for MeshMaterial {
             color: Vec3::splat(0.8),
             shading: Material::DIFFUSE,
             mirror: 0.0,
+            mirror_tint: Vec3::ONE,
             transmission: 0.0,
             ior: 1.5,
             roughness: 0.0,
@@ -200,6 +205,9 @@ impl MeshMaterial {
         self.shading.validate()?;
         if !self.color.is_finite() || self.color.min_element() < 0.0 {
             return Err(format!("mesh colour {} must be finite and non-negative", self.color));
+        }
+        if !(self.mirror_tint.min_element() >= 0.0 && self.mirror_tint.max_element() <= 1.0) {
+            return Err(format!("mirror tint {} must lie in [0, 1]", self.mirror_tint));
         }
         let shares = [self.mirror, self.transmission];
         if shares.iter().any(|s| !(0.0..=1.0).contains(s)) || self.mirror + self.transmission > 1.0 {
@@ -223,6 +231,12 @@ impl MeshMaterial {
     /// The weight of the locally lit colour: 1 − mirror − transmission.
     pub fn local_share(&self) -> f32 {
         (1.0 - self.mirror - self.transmission).max(0.0)
+    }
+
+    /// What the mirror share reflects of a ray meeting the surface at `cos_i` to its normal:
+    /// mirror × F(cos θᵢ), [`schlick`] of [`MeshMaterial::mirror_tint`].
+    pub fn mirror_reflectance(&self, cos_i: f32) -> Vec3 {
+        self.mirror * schlick(self.mirror_tint, cos_i)
     }
 }
 
@@ -584,6 +598,15 @@ pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
     }
     let cos_t = (1.0 - sin2_t).sqrt();
     Some((eta * d + (eta * cos_i - cos_t) * n).normalize())
+}
+
+/// Schlick's approximation of a conductor's Fresnel reflectance, F₀ + (1 − F₀)(1 − cos θᵢ)⁵ for
+/// reflectance F₀ at normal incidence and incidence cosine `cos_i` ∈ [0, 1]: glTF 2.0's
+/// `conductor_fresnel` (Appendix B). Exactly 1 at every angle for F₀ = 1.
+pub fn schlick(f0: Vec3, cos_i: f32) -> Vec3 {
+    let m = (1.0 - cos_i).clamp(0.0, 1.0);
+    let m2 = m * m;
+    f0 + (Vec3::ONE - f0) * (m2 * m2 * m)
 }
 
 /// The unpolarised Fresnel reflectance of a smooth dielectric interface (the mean of the s and p

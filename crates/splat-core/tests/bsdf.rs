@@ -104,18 +104,22 @@ fn dir(theta_deg: f32) -> Vec3 {
 /// The lobes and mixtures tested, with the outgoing elevations.
 fn cases() -> Vec<(&'static str, Bsdf)> {
     let grey = Vec3::splat(0.8);
+    let (untinted, gold) = (Vec3::ONE, Vec3::new(1.0, 0.78, 0.34));
+    // The albedo checks read the red channel: F₀ = 0.3 there, Schlick's Fresnel in full.
+    let tinted = Vec3::new(0.3, 0.6, 0.9);
     vec![
-        ("lambert", Bsdf::new(1.0, grey, 0.0, 0.0, 0.0, 1.0)),
-        ("conductor r=0.5", Bsdf::new(0.0, grey, 1.0, 0.0, 0.5, 1.0)),
-        ("conductor r=0.8", Bsdf::new(0.0, grey, 1.0, 0.0, 0.8, 1.0)),
-        ("glass r=0.5 from outside", Bsdf::new(0.0, grey, 0.0, 1.0, 0.5, 1.5)),
-        ("glass r=0.6 from inside", Bsdf::new(0.0, grey, 0.0, 1.0, 0.6, 1.0 / 1.5)),
-        ("mixture", Bsdf::new(0.3, grey, 0.3, 0.4, 0.55, 1.33)),
+        ("lambert", Bsdf::new(1.0, grey, 0.0, untinted, 0.0, 0.0, 1.0)),
+        ("conductor r=0.5", Bsdf::new(0.0, grey, 1.0, untinted, 0.0, 0.5, 1.0)),
+        ("conductor r=0.8", Bsdf::new(0.0, grey, 1.0, untinted, 0.0, 0.8, 1.0)),
+        ("tinted conductor r=0.4", Bsdf::new(0.0, grey, 1.0, tinted, 0.0, 0.4, 1.0)),
+        ("glass r=0.5 from outside", Bsdf::new(0.0, grey, 0.0, untinted, 1.0, 0.5, 1.5)),
+        ("glass r=0.6 from inside", Bsdf::new(0.0, grey, 0.0, untinted, 1.0, 0.6, 1.0 / 1.5)),
+        ("mixture", Bsdf::new(0.3, grey, 0.3, gold, 0.4, 0.55, 1.33)),
     ]
 }
 
-/// Bonferroni: every one of the 12 tests at family-wise level 1 %.
-const ALPHA: f64 = 0.01 / 12.0;
+/// Bonferroni: every one of the 14 tests at family-wise level 1 %.
+const ALPHA: f64 = 0.01 / 14.0;
 
 #[test]
 fn sampled_directions_follow_the_evaluated_density() {
@@ -184,7 +188,7 @@ fn evaluated_and_sampled_albedos_agree() {
         assert!((q - s).abs() < 0.01 * q.max(1.0), "{name}: {q} by quadrature, {s} by sampling");
         assert!(power <= 1.0 + 1e-3, "{name} creates energy: {power}");
     }
-    let smooth_glass = Bsdf::new(0.0, Vec3::ONE, 0.0, 1.0, 0.0, 1.5);
+    let smooth_glass = Bsdf::new(0.0, Vec3::ONE, 0.0, Vec3::ONE, 1.0, 0.0, 1.5);
     let mut rng = SplitMix64::new(3);
     let mean: f64 = (0..10_000)
         .filter_map(|_| smooth_glass.sample(dir(50.0), rng.next_f32(), Vec2::new(rng.next_f32(), 0.5)))
@@ -192,6 +196,6 @@ fn evaluated_and_sampled_albedos_agree() {
         .sum::<f64>()
         / 10_000.0;
     assert!((mean - 1.0).abs() < 1e-6, "smooth glass loses energy: {mean}");
-    let near_mirror = Bsdf::new(0.0, Vec3::ONE, 1.0, 0.0, 0.05, 1.0);
+    let near_mirror = Bsdf::new(0.0, Vec3::ONE, 1.0, Vec3::ONE, 0.0, 0.05, 1.0);
     assert!(albedo_by_sampling(&near_mirror, dir(30.0)) > 0.99);
 }

@@ -8,6 +8,8 @@ struct Bsdf {
     diffuse: f32,
     albedo: vec3<f32>,
     conductor: f32,
+    // The conductor's F₀ (Schlick's Fresnel).
+    tint: vec3<f32>,
     dielectric: f32,
     alpha: f32,
     eta: f32,
@@ -70,14 +72,15 @@ fn cosine_hemisphere(u: vec2<f32>) -> vec3<f32> {
     return vec3<f32>(d.x, d.y, sqrt(max(1.0 - dot(d, d), 0.0)));
 }
 
-// bsdf.rs `conductor_eval`: (f|cos θᵢ|, p).
-fn conductor_eval(wo: vec3<f32>, wi: vec3<f32>, alpha: f32) -> vec2<f32> {
+// bsdf.rs `conductor_eval`: f|cos θᵢ| (rgb, Schlick's Fresnel of F₀ = f0) and p (w).
+fn conductor_eval(wo: vec3<f32>, wi: vec3<f32>, alpha: f32, f0: vec3<f32>) -> vec4<f32> {
     if (wi.z <= 0.0 || wo.z <= 0.0) {
-        return vec2<f32>(0.0);
+        return vec4<f32>(0.0);
     }
     let h = normalize(wo + wi);
     let d = ggx_d(h, alpha);
-    return vec2<f32>(d * ggx_g2(wo, wi, alpha) / (4.0 * wo.z), visible_normal_pdf(wo, h, alpha) / (4.0 * dot(wo, h)));
+    let f = schlick(f0, dot(wo, h)) * (d * ggx_g2(wo, wi, alpha) / (4.0 * wo.z));
+    return vec4<f32>(f, visible_normal_pdf(wo, h, alpha) / (4.0 * dot(wo, h)));
 }
 
 // bsdf.rs `dielectric_eval`: (f|cos θᵢ|, p).
@@ -122,9 +125,9 @@ fn bsdf_eval(b: Bsdf, wo: vec3<f32>, wi: vec3<f32>) -> vec4<f32> {
     }
     if (b.alpha != 0.0) {
         if (b.conductor > 0.0) {
-            let c = conductor_eval(wo, wi, b.alpha);
-            f += vec3<f32>(b.conductor * c.x);
-            pdf += b.conductor * c.y;
+            let c = conductor_eval(wo, wi, b.alpha, b.tint);
+            f += b.conductor * c.xyz;
+            pdf += b.conductor * c.w;
         }
         if (b.dielectric > 0.0) {
             let d = dielectric_eval(wo, wi, b.alpha, b.eta);
@@ -139,8 +142,8 @@ fn absorbed() -> BsdfSample {
     return BsdfSample(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, false, false);
 }
 
-fn delta_sample(wi: vec3<f32>, weight: f32) -> BsdfSample {
-    return BsdfSample(wi, vec3<f32>(weight), 0.0, true, true);
+fn delta_sample(wi: vec3<f32>, weight: vec3<f32>) -> BsdfSample {
+    return BsdfSample(wi, weight, 0.0, true, true);
 }
 
 // bsdf.rs `Bsdf::sample`.
@@ -153,7 +156,7 @@ fn bsdf_sample(b: Bsdf, wo: vec3<f32>, u_lobe: f32, u: vec2<f32>) -> BsdfSample 
         pick -= b.diffuse;
         if (pick < b.conductor) {
             if (b.alpha == 0.0) {
-                return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), 1.0);
+                return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), schlick(b.tint, wo.z));
             }
             wi = reflect_about(wo, visible_normal(wo, b.alpha, u));
             if (!(wi.z > 0.0)) {
@@ -163,13 +166,13 @@ fn bsdf_sample(b: Bsdf, wo: vec3<f32>, u_lobe: f32, u: vec2<f32>) -> BsdfSample 
             if (b.alpha == 0.0) {
                 let f = fresnel(wo.z, 1.0 / b.eta);
                 if (u.x < f) {
-                    return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), 1.0);
+                    return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), vec3<f32>(1.0));
                 }
                 let r = refract_dir(-wo, vec3<f32>(0.0, 0.0, 1.0), 1.0 / b.eta);
                 if (r.w == 0.0) {
                     return absorbed();
                 }
-                return delta_sample(r.xyz, 1.0 / (b.eta * b.eta));
+                return delta_sample(r.xyz, vec3<f32>(1.0 / (b.eta * b.eta)));
             }
             let h = visible_normal(wo, b.alpha, u);
             let cos_o = dot(wo, h);

@@ -209,7 +209,8 @@ fn triangle_color(o: u32, ray: Ray) -> vec3<f32> {
     let m = rop_materials[tri.mesh];
     let n = facing_normal(tri, h.y, h.z, ray.dir);
     let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, h.x, n);
-    return local_share(m) * lit + (m.mirror + m.transmission) * params.background.xyz;
+    let mirror = mirror_reflectance(m, clamp(-dot(ray.dir, n), 0.0, 1.0)) + m.transmission;
+    return local_share(m) * lit + mirror * params.background.xyz;
 }
 
 // raster/mod.rs `triangle_fragments` and `surviving` for the transparent triangle of place `o`:

@@ -835,14 +835,15 @@ fn fold(index: u32, s: vec4<f32>, frame: u32) {
 
 // One straight piece of a light path waiting to be traced (trace/mod.rs `secondary`, or
 // `surface_sample`'s ray continued past a transparent surface): where it starts, where it goes,
-// its weight in the pixel's sample, its bounce number, and for a continued ray (layer > 0) the
-// distance along it where it continues and how many transparent surfaces it has passed.
+// its bounce number, for a continued ray (layer > 0) the distance along it where it continues,
+// its weight in the pixel's sample (per channel: a tinted mirror reflects each its share; grey
+// at bounce 0) and how many transparent surfaces it has passed.
 struct Segment {
     origin: vec3<f32>,
-    weight: f32,
-    dir: vec3<f32>,
     depth: u32,
+    dir: vec3<f32>,
     t_min: f32,
+    weight: vec3<f32>,
     layer: u32,
 }
 
@@ -863,11 +864,15 @@ fn push_bounces(ray: Ray, seg: Segment, top: u32) -> u32 {
     let n = surface_normal(surface, ray);
     let x = ray.origin + surface.t * ray.dir;
     let w = seg.weight * behind_weight * surface_alpha;
-    var reflected = m.mirror;
+    let cos_i = clamp(-dot(ray.dir, n), 0.0, 1.0);
+    var reflected = vec3<f32>(0.0);
+    if (m.mirror > 0.0) {
+        reflected = mirror_reflectance(m, cos_i);
+    }
     var refracted = vec4<f32>(0.0);
     if (m.transmission > 0.0) {
         let eta = select(m.ior, 1.0 / m.ior, from_outside(surface, ray.dir));
-        let f = fresnel(clamp(-dot(ray.dir, n), 0.0, 1.0), eta);
+        let f = fresnel(cos_i, eta);
         reflected += m.transmission * f;
         if (f < 1.0) {
             refracted = refract_dir(ray.dir, n, eta);
@@ -876,11 +881,11 @@ fn push_bounces(ray: Ray, seg: Segment, top: u32) -> u32 {
     }
     var t = top;
     if (refracted.w > 0.0) {
-        segments[t] = Segment(x, w * refracted.w, refracted.xyz, seg.depth + 1u, 0.0, 0u);
+        segments[t] = Segment(x, seg.depth + 1u, refracted.xyz, 0.0, w * refracted.w, 0u);
         t += 1u;
     }
-    if (reflected > 0.0) {
-        segments[t] = Segment(x, w * reflected, reflect_dir(ray.dir, n), seg.depth + 1u, 0.0, 0u);
+    if (any(reflected > vec3<f32>(0.0))) {
+        segments[t] = Segment(x, seg.depth + 1u, reflect_dir(ray.dir, n), 0.0, w * reflected, 0u);
         t += 1u;
     }
     return t;
@@ -936,7 +941,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (hybrid) {
             camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
         }
-        var seg = Segment(camera.origin, weight, camera.dir, 0u, 0.0, 0u);
+        var seg = Segment(camera.origin, 0u, camera.dir, 0.0, vec3<f32>(weight), 0u);
         // Whether the camera pick waits for the ray continued past a transparent surface
         // (trace/mod.rs `surface_sample`: the surface's pick only where 1 − α is below the iso
         // threshold or nothing with a depth lies behind it).
@@ -1033,10 +1038,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (done || last >= params.max_passes) {
                     st.flags |= DONE;
                     let s = finish(st, ray, pixel_key);
-                    total += vec4<f32>(seg.weight * s.xyz, select(0.0, seg.weight * s.w, seg.depth == 0u));
+                    total += vec4<f32>(seg.weight * s.xyz, select(0.0, seg.weight.x * s.w, seg.depth == 0u));
                     if (lit_once && rasterized) {
                         // Sample 0's lit pick counts whole, not 1/S.
-                        total += vec4<f32>((1.0 - seg.weight) * lit_pick, 0.0);
+                        total += vec4<f32>((1.0 - seg.weight.x) * lit_pick, 0.0);
                     }
                     if (seg.depth == 0u) {
                         let first_layer = seg.layer == 0u;
@@ -1055,7 +1060,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         // The same ray past the transparent surface, one layer on (pushed first:
                         // traced after the surface's bounces).
                         let w = seg.weight * behind_weight * (1.0 - surface_alpha);
-                        segments[top] = Segment(ray.origin, w, ray.dir, seg.depth, surface.t, seg.layer + 1u);
+                        segments[top] = Segment(ray.origin, seg.depth, ray.dir, surface.t, w, seg.layer + 1u);
                         top += 1u;
                     }
                     let bounces = surface.triangle != NONE && seg.depth < min(params.max_bounces, MAX_BOUNCES);
@@ -1076,7 +1081,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 iterations += 1u;
                 hit_index = index * samples + sample;
                 camera = camera_ray(gid.x, gid.y, hybrid_in[hit_index].offset);
-                seg = Segment(camera.origin, weight, camera.dir, 0u, 0.0, 0u);
+                seg = Segment(camera.origin, 0u, camera.dir, 0.0, vec3<f32>(weight), 0u);
                 continue;
             }
             // The camera segment is the frame (counted by the frame loop); every other segment

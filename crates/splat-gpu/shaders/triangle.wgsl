@@ -26,8 +26,9 @@ struct Triangle {
     pad: u32,
 }
 
-// A mesh's material (96 bytes), mirrored by splat_gpu::GpuMeshMaterial (mesh.rs `MeshMaterial`):
-// base colour, mirror and glass shares, index of refraction, and the shading shares.
+// A mesh's material (112 bytes), mirrored by splat_gpu::GpuMeshMaterial (mesh.rs
+// `MeshMaterial`): base colour, mirror and glass shares, index of refraction, the mirror's tint,
+// and the shading shares.
 struct MeshMaterial {
     color: vec3<f32>,
     mirror: f32,
@@ -36,12 +37,27 @@ struct MeshMaterial {
     // GGX roughness of the mirror and glass shares (the path tracer's).
     roughness: f32,
     pad1: u32,
+    // The mirror share's reflectance at normal incidence (Schlick's F₀).
+    mirror_tint: vec3<f32>,
+    pad2: u32,
     shading: Material,
 }
 
 // mesh.rs `MeshMaterial::local_share`: 1 − mirror − transmission.
 fn local_share(m: MeshMaterial) -> f32 {
     return max(1.0 - m.mirror - m.transmission, 0.0);
+}
+
+// mesh.rs `schlick`: F₀ + (1 − F₀)(1 − cos θᵢ)⁵, glTF's conductor Fresnel.
+fn schlick(f0: vec3<f32>, cos_i: f32) -> vec3<f32> {
+    let m = clamp(1.0 - cos_i, 0.0, 1.0);
+    let m2 = m * m;
+    return f0 + (vec3<f32>(1.0) - f0) * (m2 * m2 * m);
+}
+
+// mesh.rs `MeshMaterial::mirror_reflectance`: mirror × F(cos θᵢ).
+fn mirror_reflectance(m: MeshMaterial, cos_i: f32) -> vec3<f32> {
+    return m.mirror * schlick(m.mirror_tint, cos_i);
 }
 
 // mesh.rs `PreparedTriangle::is_transparent`: an opacity below 1 somewhere.

@@ -391,7 +391,7 @@ pub struct GpuTriangle {
     pub pad: u32,
 }
 
-/// One mesh's material (WGSL `MeshMaterial`, 96 bytes): [`splat_core::mesh::MeshMaterial`].
+/// One mesh's material (WGSL `MeshMaterial`, 112 bytes): [`splat_core::mesh::MeshMaterial`].
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuMeshMaterial {
@@ -407,6 +407,10 @@ pub struct GpuMeshMaterial {
     pub roughness: f32,
     /// Padding.
     pub pad1: u32,
+    /// The mirror share's reflectance at normal incidence (Schlick's F₀).
+    pub mirror_tint: [f32; 3],
+    /// Padding.
+    pub pad2: u32,
     /// Emissive, ambient, diffuse and specular shares (`first` unused).
     pub shading: GpuMaterial,
 }
@@ -495,6 +499,7 @@ pub fn mesh_materials(meshes: &Meshes) -> Vec<GpuMeshMaterial> {
             .map(|m| GpuMeshMaterial {
                 color: m.color.to_array(),
                 mirror: m.mirror,
+                mirror_tint: m.mirror_tint.to_array(),
                 transmission: m.transmission,
                 ior: m.ior,
                 roughness: m.roughness,
@@ -1165,7 +1170,7 @@ mod tests {
             &crate::TRACE_WGSL,
             GpuMeshMaterial,
             "MeshMaterial",
-            [color, mirror, transmission, ior, roughness, pad1, shading]
+            [color, mirror, transmission, ior, roughness, pad1, mirror_tint, pad2, shading]
         );
         assert_mirrors!(
             &crate::TRACE_WGSL,

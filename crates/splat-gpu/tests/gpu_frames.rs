@@ -180,7 +180,7 @@ fn depth_normal_and_picks_equal_the_cpu() {
 
 /// Meshes on the GPU ray tracer (splat_core::mesh): a lit back wall behind the sheets, a sphere
 /// among them and a quad that shadows them; the sphere matte, then glass (index 1.5) with the
-/// quad a half mirror, so that every segment kind runs (camera, reflected, refracted, total
+/// quad a half gold mirror, so that every segment kind runs (camera, reflected, refracted, total
 /// internal reflection). One frame of every method, for three shadow kinds and both looks,
 /// equals the CPU frame as [`one_lit_frame_equals_the_cpu_frame`] does, and so do depth, normal
 /// and pick (the mesh's where the splats stay below the iso threshold); the meshes change every
@@ -192,7 +192,7 @@ fn one_frame_among_meshes_equals_the_cpu_frame() {
     let Some(ctx) = context() else { return };
     let matte_world = mesh_world(matte(0.9, 0.3, 0.2), matte(0.5, 0.5, 0.5));
     let glass = MeshMaterial { transmission: 0.9, ior: 1.5, ..MeshMaterial::default() };
-    let mirror = MeshMaterial { mirror: 0.5, ..matte(0.5, 0.5, 0.5) };
+    let mirror = MeshMaterial { mirror: 0.5, mirror_tint: GOLD, ..matte(0.5, 0.5, 0.5) };
     let bounce_world = mesh_world(glass, mirror);
     let sorted = Shadows::Sorted { k: 8, threshold: 0.8, colored: 0.5 };
     let cases = [
@@ -220,7 +220,7 @@ fn one_frame_among_transparent_meshes_equals_the_cpu_frame() {
     let mut ramp = splat_tests::placed(TriangleMesh::plane(), 0.45, Vec3::Z, Vec3::new(0.25, 0.15, -0.75));
     ramp.opacities = ramp.positions.iter().map(|p| 0.3 + 0.5 * (p.x - 0.25)).collect();
     let see_through = |m: MeshMaterial, opacity| MeshMaterial { opacity, ..m };
-    let mirror = MeshMaterial { mirror: 0.5, ..matte(0.5, 0.5, 0.5) };
+    let mirror = MeshMaterial { mirror: 0.5, mirror_tint: GOLD, ..matte(0.5, 0.5, 0.5) };
     let mut world = vec![
         (splat_tests::placed(TriangleMesh::plane(), 3.0, Vec3::Z, Vec3::new(0.0, 0.0, -1.2)), matte(0.8, 0.75, 0.7)),
         (sphere(), see_through(matte(0.9, 0.3, 0.2), 0.5)),
@@ -233,7 +233,7 @@ fn one_frame_among_transparent_meshes_equals_the_cpu_frame() {
     for (shadows, look) in [(Shadows::Exact, Look::Volumetric), (Shadows::Stochastic, Look::Surface)] {
         let seen = frames_among_meshes_equal_the_cpu(ctx, &transparent, shadows, look);
         let (scene, camera) = fixture("layers", 32, 24);
-        let trace = TraceScene::new(&scene, RenderSettings::default())
+        let trace = TraceScene::new(&scene, among_meshes_settings())
             .unwrap()
             .with_lighting(lighting(shadows, look))
             .unwrap()
@@ -251,6 +251,14 @@ fn one_frame_among_transparent_meshes_equals_the_cpu_frame() {
     let refused = GpuTracer::new(ctx, pipeline, &trace).err().expect("refused").to_string();
     assert!(refused.contains("at most 7") && refused.contains("CPU"), "{refused}");
 }
+
+/// The settings of the frames among meshes: a background, which the mirrors reflect.
+fn among_meshes_settings() -> RenderSettings {
+    RenderSettings { background: Vec3::new(0.25, 0.3, 0.35), ..RenderSettings::default() }
+}
+
+/// A gold's reflectance at normal incidence, the tint of the mirrors here.
+const GOLD: Vec3 = Vec3::new(1.0, 0.78, 0.34);
 
 fn matte(r: f32, g: f32, b: f32) -> MeshMaterial {
     MeshMaterial { color: Vec3::new(r, g, b), ..MeshMaterial::default() }
@@ -286,8 +294,8 @@ fn frames_among_meshes_equal_the_cpu(
 ) -> RenderOutput {
     let (scene, camera) = fixture("layers", 32, 24);
     let lit = lighting(shadows, look);
-    let bare = TraceScene::new(&scene, RenderSettings::default()).unwrap().with_lighting(lit.clone()).unwrap();
-    let trace = TraceScene::new(&scene, RenderSettings::default())
+    let bare = TraceScene::new(&scene, among_meshes_settings()).unwrap().with_lighting(lit.clone()).unwrap();
+    let trace = TraceScene::new(&scene, among_meshes_settings())
         .unwrap()
         .with_lighting(lit)
         .unwrap()

@@ -92,7 +92,8 @@ fn compare_among(
     seed: u32,
     lighting: &Lighting,
 ) -> Compared {
-    let settings = RenderSettings::default();
+    // A background that mirror shares reflect (forward-shaded, they see it).
+    let settings = RenderSettings { background: glam::Vec3::new(0.25, 0.3, 0.35), ..RenderSettings::default() };
     let cpu_raster = RasterSettings { sample_pattern: cpu_pattern, ..raster };
     let cpu_r = Rasterizer::new(scene, camera, settings, cpu_raster)
         .unwrap()
@@ -379,7 +380,16 @@ fn transparent_triangles_are_fragments_of_the_raster_operations() {
             ),
             lit(glam::Vec3::new(0.2, 0.6, 0.9)),
         ),
-        (ramp, MeshMaterial { color: glam::Vec3::new(0.9, 0.5, 0.1), ..MeshMaterial::default() }),
+        // Its gold-tinted mirror share sees the background by Schlick's Fresnel.
+        (
+            ramp,
+            MeshMaterial {
+                color: glam::Vec3::new(0.9, 0.5, 0.1),
+                mirror: 0.4,
+                mirror_tint: glam::Vec3::new(1.0, 0.78, 0.34),
+                ..MeshMaterial::default()
+            },
+        ),
         (
             splat_tests::placed(TriangleMesh::plane(), 1.5, glam::Vec3::Z, glam::Vec3::new(0.0, 0.0, -1.0)),
             MeshMaterial::default(),

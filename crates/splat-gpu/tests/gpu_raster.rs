@@ -872,7 +872,7 @@ fn lit_rasterization_equals_the_cpu() {
     }
 }
 
-/// The wall, glass sphere and half-mirror the splats of `layers` lie among.
+/// The wall, glass sphere and half-mirror (gold-tinted) the splats of `layers` lie among.
 fn among_meshes() -> splat_core::mesh::Meshes {
     use glam::Vec3;
     use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
@@ -885,7 +885,12 @@ fn among_meshes() -> splat_core::mesh::Meshes {
         ),
         (
             place(TriangleMesh::plane(), 0.5, Vec3::new(-1.0, 0.0, 1.0), Vec3::new(0.7, 0.1, 0.2)),
-            MeshMaterial { color: Vec3::new(0.9, 0.4, 0.2), mirror: 0.5, ..MeshMaterial::default() },
+            MeshMaterial {
+                color: Vec3::new(0.9, 0.4, 0.2),
+                mirror: 0.5,
+                mirror_tint: Vec3::new(1.0, 0.78, 0.34),
+                ..MeshMaterial::default()
+            },
         ),
     ])
     .unwrap()

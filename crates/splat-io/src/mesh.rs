@@ -191,10 +191,11 @@ const READ_EXTENSIONS: [&str; 5] = [
 
 /// A glTF material (glTF 2.0 §3.9, metallic–roughness) as this renderer's, or `None` for one
 /// that draws nothing. Each factor maps onto [`MeshMaterial`]'s shares as the path tracer reads
-/// them ([`splat_core::path`]: a Lambertian lobe of albedo k_d ⊙ c, an untinted GGX conductor,
-/// a dielectric, GGX α = roughness² as in glTF):
+/// them ([`splat_core::path`]: a Lambertian lobe of albedo k_d ⊙ c, a GGX conductor with
+/// Schlick's Fresnel, a dielectric, GGX α = roughness² as in glTF):
 ///
-/// - c = `baseColorFactor`.rgb; the conductor share (`mirror`) is `metallicFactor`, the
+/// - c = `baseColorFactor`.rgb; the conductor share (`mirror`) is `metallicFactor`, its F₀
+///   (`mirror_tint`) c, as glTF's `conductor_fresnel` (Appendix B); the
 ///   dielectric's (`transmission`) (1 − metallic) × `KHR_materials_transmission`, the rest
 ///   Lambertian with k_d = 1 (albedo c) and the matte default's ambient stand-in k_a = 0.1;
 ///   `roughness` = `roughnessFactor`; `ior` = `KHR_materials_ior` (1.5).
@@ -205,8 +206,8 @@ const READ_EXTENSIONS: [&str; 5] = [
 ///   alpha, the mesh's per-vertex opacities), 1 for `OPAQUE`, and for `MASK` 1 at or above
 ///   `alphaCutoff` (0.5), else nothing.
 ///
-/// Not represented: textures (the factors alone are read) and a metal's tint (the conductor is
-/// untinted), both noted; the dielectric's specular layer (F₀ = 0.04).
+/// Not represented: textures (the factors alone are read; noted) and the dielectric's specular
+/// layer (F₀ = 0.04).
 pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Option<MeshMaterial>, String> {
     let name = m.index().map_or("the default material".to_string(), |i| format!("material {i}"));
     let pbr = m.pbr_metallic_roughness();
@@ -233,9 +234,6 @@ pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Opti
     let (c, emissive) = emitting(emission, Vec3::new(r, g, b));
     let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
     let transmission = m.transmission().map_or(0.0, |t| t.transmission_factor().clamp(0.0, 1.0));
-    if metallic > 0.0 && c.min_element() < c.max_element() {
-        notes.push(format!("glTF {name}: a metal's tint {c} is not represented (the mirror share is untinted)"));
-    }
     let shading = if m.unlit() {
         Material::EMISSIVE
     } else {
@@ -245,6 +243,8 @@ pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Opti
         color: c,
         shading,
         mirror: if m.unlit() { 0.0 } else { metallic },
+        // glTF's conductor_fresnel: a metal's F₀ is its base colour.
+        mirror_tint: if metallic > 0.0 && !m.unlit() { c.clamp(Vec3::ZERO, Vec3::ONE) } else { Vec3::ONE },
         transmission: if m.unlit() { 0.0 } else { (1.0 - metallic) * transmission },
         ior: m.ior().unwrap_or(1.5),
         roughness: pbr.roughness_factor().clamp(0.0, 1.0),

@@ -54,6 +54,7 @@
 //! transmission = 0.9                # glass: Fresnel mix of reflection and refraction
 //! ior = 1.5
 //! mirror = 0.0                      # perfect mirror share
+//! mirror_tint = [1.0, 1.0, 1.0]     # its reflectance at normal incidence (Schlick's F₀)
 //! roughness = 0.0                   # GGX roughness of mirror and glass (path tracer only)
 //! opacity = 1.0                     # α in (0, 1]: below 1 a transparent layer (CPU only)
 //! ```
@@ -62,7 +63,7 @@
 //! without one is fully emissive, a mesh without one matte (ambient 0.1, diffuse 0.9). A glTF
 //! file's triangles are a mesh for each of its materials, read as
 //! [`crate::mesh::gltf_material`] maps them, each key of the entry overriding them (a `color`
-//! keeps what a lit part emits). Particle ids run over the sets in file order. `max_bounces`
+//! keeps what a lit part emits, and retints a metal, whose tint is its base colour). Particle ids run over the sets in file order. `max_bounces`
 //! (top level, default 3) limits mirror and glass bounces. `iso_threshold` and `raster_iso_threshold` (top level, default 0.7 each) are the
 //! transmittance at which the ray tracers and splatting pick a pixel's surface
 //! (vk_gaussian_splatting Lighting §1.1: two values, one per panel). What the file sets is the
@@ -203,6 +204,7 @@ struct MeshFile {
     color: Option<Colour>,
     material: Option<MaterialFile>,
     mirror: Option<f32>,
+    mirror_tint: Option<Colour>,
     transmission: Option<f32>,
     ior: Option<f32>,
     roughness: Option<f32>,
@@ -531,11 +533,16 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(Vec<PlacedMesh>, Vec<String>)
             color: m.color.map_or(file.color, Colour::rgb),
             shading: m.material.as_ref().map_or(file.shading, material),
             mirror: m.mirror.unwrap_or(file.mirror),
+            mirror_tint: m.mirror_tint.map_or(file.mirror_tint, Colour::rgb),
             transmission: m.transmission.unwrap_or(file.transmission),
             ior: m.ior.unwrap_or(file.ior),
             roughness: m.roughness.unwrap_or(file.roughness),
             opacity: m.opacity.unwrap_or(file.opacity),
         };
+        // A glTF metal's tint is its base colour: a new colour retints it too.
+        if m.color.is_some() && m.mirror_tint.is_none() && file.mirror > 0.0 && file.mirror_tint == file.color {
+            material.mirror_tint = material.color.min(Vec3::ONE);
+        }
         // A colour over a file's lit material changes what the surface reflects, not what it
         // emits (glTF's emissiveFactor is no share of the base colour): k_e is read again under
         // the new colour. An unlit part's colour is its emission, and a material table's k_e

@@ -26,8 +26,11 @@ pub struct Bsdf {
     pub diffuse: f32,
     /// Lambertian albedo ρ (f = ρ/π).
     pub albedo: Vec3,
-    /// Weight of the GGX conductor lobe (Fresnel 1: an untinted mirror, rough or not).
+    /// Weight of the GGX conductor lobe, rough or not.
     pub conductor: f32,
+    /// The conductor's reflectance F₀ at normal incidence (Schlick's Fresnel,
+    /// [`crate::mesh::schlick`]; 1: an untinted mirror).
+    pub tint: Vec3,
     /// Weight of the dielectric lobe.
     pub dielectric: f32,
     /// GGX α = roughness² of the conductor and dielectric lobes (0 for delta lobes).
@@ -51,9 +54,17 @@ pub struct BsdfSample {
 
 impl Bsdf {
     /// The mixture of `roughness` (GGX α = roughness²) and the given lobe weights.
-    pub fn new(diffuse: f32, albedo: Vec3, conductor: f32, dielectric: f32, roughness: f32, eta: f32) -> Self {
+    pub fn new(
+        diffuse: f32,
+        albedo: Vec3,
+        conductor: f32,
+        tint: Vec3,
+        dielectric: f32,
+        roughness: f32,
+        eta: f32,
+    ) -> Self {
         let alpha = if roughness < MIN_ROUGHNESS { 0.0 } else { roughness * roughness };
-        Self { diffuse, albedo, conductor, dielectric, alpha, eta }
+        Self { diffuse, albedo, conductor, tint, dielectric, alpha, eta }
     }
 
     /// Whether the conductor and dielectric lobes are deltas.
@@ -76,8 +87,8 @@ impl Bsdf {
         }
         if !self.specular_is_delta() {
             if self.conductor > 0.0 {
-                let (fc, pc) = conductor_eval(wo, wi, self.alpha);
-                f += Vec3::splat(self.conductor * fc);
+                let (fc, pc) = conductor_eval(wo, wi, self.alpha, self.tint);
+                f += self.conductor * fc;
                 pdf += self.conductor * pc;
             }
             if self.dielectric > 0.0 {
@@ -100,7 +111,8 @@ impl Bsdf {
             if pick < self.conductor {
                 if self.specular_is_delta() {
                     let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-                    return Some(BsdfSample { wi, weight: Vec3::ONE, pdf: 0.0, delta: true });
+                    let weight = crate::mesh::schlick(self.tint, wo.z);
+                    return Some(BsdfSample { wi, weight, pdf: 0.0, delta: true });
                 }
                 // Reflected below the surface: absorbed (not the dielectric's transmission).
                 Some(reflect_about(wo, visible_normal(wo, self.alpha, u))).filter(|wi| wi.z > 0.0)?
@@ -175,14 +187,15 @@ pub fn visible_normal(wo: Vec3, alpha: f32, u: Vec2) -> Vec3 {
     Vec3::new(alpha * h.x, alpha * h.y, h.z.max(0.0)).normalize()
 }
 
-/// The rough conductor: f|cos θᵢ| = D G₂ / (4 ωₒ.z) (Fresnel 1) and p = D_ωₒ(h) / (4 ωₒ·h).
-fn conductor_eval(wo: Vec3, wi: Vec3, alpha: f32) -> (f32, f32) {
+/// The rough conductor of reflectance `f0` at normal incidence: f|cos θᵢ| = F(ωₒ·h) D G₂ /
+/// (4 ωₒ.z), F by Schlick ([`crate::mesh::schlick`]), and p = D_ωₒ(h) / (4 ωₒ·h).
+fn conductor_eval(wo: Vec3, wi: Vec3, alpha: f32, f0: Vec3) -> (Vec3, f32) {
     if wi.z <= 0.0 || wo.z <= 0.0 {
-        return (0.0, 0.0);
+        return (Vec3::ZERO, 0.0);
     }
     let h = (wo + wi).normalize();
     let d = ggx_d(h, alpha);
-    let f = d * ggx_g2(wo, wi, alpha) / (4.0 * wo.z);
+    let f = crate::mesh::schlick(f0, wo.dot(h)) * (d * ggx_g2(wo, wi, alpha) / (4.0 * wo.z));
     let pdf = visible_normal_pdf(wo, h, alpha) / (4.0 * wo.dot(h));
     (f, pdf)
 }
@@ -274,7 +287,7 @@ mod tests {
     #[test]
     fn reflection_lobes_are_reciprocal() {
         // f(ωₒ, ωᵢ) = f(ωᵢ, ωₒ): compare f|cos θᵢ| / cos θᵢ both ways.
-        let b = Bsdf::new(0.3, Vec3::splat(0.7), 0.4, 0.3, 0.5, 1.5);
+        let b = Bsdf::new(0.3, Vec3::splat(0.7), 0.4, Vec3::new(1.0, 0.78, 0.34), 0.3, 0.5, 1.5);
         for (a, c) in [(dir(20.0, 10.0), dir(60.0, 200.0)), (dir(75.0, 0.0), dir(5.0, 90.0))] {
             let f_ac = b.eval(a, c).0 / c.z;
             let f_ca = b.eval(c, a).0 / a.z;
@@ -298,7 +311,7 @@ mod tests {
 
     #[test]
     fn sample_weights_equal_f_over_pdf() {
-        let b = Bsdf::new(0.2, Vec3::new(0.9, 0.5, 0.1), 0.3, 0.5, 0.35, 1.33);
+        let b = Bsdf::new(0.2, Vec3::new(0.9, 0.5, 0.1), 0.3, Vec3::new(0.95, 0.64, 0.54), 0.5, 0.35, 1.33);
         let wo = dir(40.0, 30.0);
         let mut seen = 0;
         for i in 0..64 {

@@ -30,8 +30,8 @@
 //! pixel per sample) and a thin lens gives depth of field.
 //!
 //! Mesh materials are read physically ([`bsdf::Bsdf`]): emission k_e ⊙ c, Lambertian albedo
-//! k_d ⊙ c for the local share, a GGX conductor for the mirror share and a dielectric for the
-//! transmission share, both with the material's roughness. The Blinn–Phong ambient and
+//! k_d ⊙ c for the local share, a GGX conductor for the mirror share (Schlick's Fresnel of the
+//! mirror tint) and a dielectric for the transmission share, both with the material's roughness. The Blinn–Phong ambient and
 //! specular terms are the raster pipelines' stand-ins for indirect and glossy light, which the
 //! path tracer computes instead. Gaussians keep the splat material model of
 //! [`crate::lighting`]. A transparent mesh (an opacity α below 1, per material or per vertex)
@@ -375,6 +375,7 @@ impl<'a> PathTracer<'a> {
                 material.local_share(),
                 albedo,
                 material.mirror,
+                material.mirror_tint,
                 material.transmission,
                 material.roughness,
                 eta,

@@ -421,7 +421,7 @@ impl<'a> TraceScene<'a> {
             let next = seg.decide.deeper();
             let trace = |dir: Vec3| self.secondary(&seg.method, x, dir, next);
             if material.mirror > 0.0 {
-                color += material.mirror * trace(reflect(d, n));
+                color += material.mirror_reflectance((-d.dot(n)).clamp(0.0, 1.0)) * trace(reflect(d, n));
             }
             if material.transmission > 0.0 {
                 let eta = if outside { 1.0 / material.ior } else { material.ior };
