@@ -206,7 +206,8 @@ impl MeshMaterial {
         if !self.color.is_finite() || self.color.min_element() < 0.0 {
             return Err(format!("mesh colour {} must be finite and non-negative", self.color));
         }
-        if !(self.mirror_tint.min_element() >= 0.0 && self.mirror_tint.max_element() <= 1.0) {
+        let tint = self.mirror_tint;
+        if !(tint.is_finite() && tint.min_element() >= 0.0 && tint.max_element() <= 1.0) {
             return Err(format!("mirror tint {} must lie in [0, 1]", self.mirror_tint));
         }
         let shares = [self.mirror, self.transmission];
@@ -701,6 +702,21 @@ mod tests {
         let mut nan = TriangleMesh::plane();
         nan.positions[0].x = f32::NAN;
         assert!(Meshes::new(&[(nan, MeshMaterial::default())]).unwrap_err().contains("non-finite"));
+        for tint in [Vec3::new(f32::NAN, 0.5, 0.5), Vec3::new(1.2, 0.5, 0.5), Vec3::new(0.5, -0.1, 0.5)] {
+            let tinted = MeshMaterial { mirror: 1.0, mirror_tint: tint, ..MeshMaterial::default() };
+            assert!(Meshes::new(&[(TriangleMesh::plane(), tinted)]).unwrap_err().contains("mirror tint"), "{tint}");
+        }
+    }
+
+    /// Schlick's Fresnel by hand: F₀ at normal incidence, 1 at grazing incidence, exactly 1 at
+    /// every angle for F₀ = 1 (the untinted mirror stays what it was), and at 60° F₀ + (1 − F₀)/32.
+    #[test]
+    fn schlick_by_hand() {
+        let gold = Vec3::new(1.0, 0.78, 0.34);
+        assert_eq!(schlick(gold, 1.0), gold);
+        assert_eq!(schlick(gold, 0.0), Vec3::ONE);
+        assert!((0..=100).all(|i| schlick(Vec3::ONE, i as f32 / 100.0) == Vec3::ONE));
+        assert!(schlick(gold, 0.5).abs_diff_eq(gold + (Vec3::ONE - gold) / 32.0, 1e-7));
     }
 
     #[test]

@@ -31,9 +31,9 @@
 //!
 //! Mesh materials are read physically ([`bsdf::Bsdf`]): emission k_e ⊙ c, Lambertian albedo
 //! k_d ⊙ c for the local share, a GGX conductor for the mirror share (Schlick's Fresnel of the
-//! mirror tint) and a dielectric for the transmission share, both with the material's roughness. The Blinn–Phong ambient and
-//! specular terms are the raster pipelines' stand-ins for indirect and glossy light, which the
-//! path tracer computes instead. Gaussians keep the splat material model of
+//! mirror tint) and a dielectric for the transmission share, both with the material's
+//! roughness. The Blinn–Phong ambient and specular terms are the raster pipelines' stand-ins for
+//! indirect and glossy light, which the path tracer computes instead. Gaussians keep the splat material model of
 //! [`crate::lighting`]. A transparent mesh (an opacity α below 1, per material or per vertex)
 //! is sampled as the Gaussians are: each crossing stops the ray with probability α, decided per
 //! triangle ([`sampler::surface_decision`]), so that a surface is α × itself + (1 − α) × what

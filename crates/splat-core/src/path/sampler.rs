@@ -1,8 +1,7 @@
 //! The random numbers of one path: every number the path draws (pixel position, lens point,
 //! each Gaussian's and transparent triangle's acceptance, each BSDF and light sample, Russian
-//! roulette) is a pure function
-//! of (pixel, sample index, dimension), so one sample index drives the whole path and nothing
-//! depends on thread or traversal order.
+//! roulette) is a pure function of (pixel, sample index, dimension), so one sample index drives
+//! the whole path and nothing depends on thread or traversal order.
 //!
 //! Two generators:
 //!
