@@ -150,12 +150,11 @@ pub fn parse_gltf(bytes: &[u8], base: &Path) -> Result<MeshRead, String> {
     let mut notes = Vec::new();
     let materials =
         gltf.document.materials().map(|m| gltf_material(&m, &mut notes)).collect::<Result<Vec<_>, String>>()?;
-    let blended = gltf.document.materials().map(|m| m.alpha_mode() == gltf::material::AlphaMode::Blend).collect();
     let unread: Vec<&str> = gltf.document.extensions_used().filter(|e| !READ_EXTENSIONS.contains(e)).collect();
     if !unread.is_empty() {
         notes.push(format!("glTF extensions not read: {}", unread.join(", ")));
     }
-    let mut parts = Parts { materials, blended, parts: Vec::new(), colours: false };
+    let mut parts = Parts { materials, parts: Vec::new(), colours: false };
     // Depth first, in the document's order: a node, then its children in turn.
     let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
     let mut visited = 0usize;
@@ -271,8 +270,6 @@ pub fn emitting(emission: Vec3, base: Vec3) -> (Vec3, Vec3) {
 struct Parts {
     /// Each material of the file as [`gltf_material`] read it (`None`: draws nothing).
     materials: Vec<Option<MeshMaterial>>,
-    /// Whether each material blends (its vertex colours' alpha is the vertex opacity).
-    blended: Vec<bool>,
     parts: Vec<(Option<usize>, MeshPart)>,
     /// Whether a primitive had vertex colours whose rgb (or alpha, outside BLEND) went unread.
     colours: bool,
@@ -293,7 +290,9 @@ impl Parts {
                     }
                 },
             };
-            let blend = index.is_some_and(|i| self.blended[i]);
+            // A blended material's vertex colours' alpha is the vertex opacity (glTF's default
+            // material is opaque).
+            let blend = primitive.material().alpha_mode() == gltf::material::AlphaMode::Blend;
             self.colours |= primitive.get(&gltf::Semantic::Colors(0)).is_some();
             let at = match self.parts.iter().position(|(k, _)| *k == index) {
                 Some(at) => at,
