@@ -206,8 +206,8 @@ impl PathSettings {
     }
 }
 
-/// The emissive triangles, chosen in proportion to their power (area × luminance of the
-/// emission).
+/// The emissive triangles, chosen in proportion to their power: area × mean opacity ×
+/// luminance of the emission (a transparent emitter sends α Lₑ, [`PathTracer::surface`]).
 struct Emitters {
     /// Leaf-order indices of the emissive triangles …
     triangles: Vec<u32>,
@@ -225,7 +225,10 @@ impl Emitters {
             .iter()
             .map(|t| {
                 let area = 0.5 * t.e1.cross(t.e2).length();
-                (area, area * luminance(emission(meshes.material(t.mesh))))
+                // The mean of the opacity over the triangle: the mean of its vertices' (it is
+                // linear across it).
+                let opacity = t.alphas.iter().sum::<f32>() / 3.0;
+                (area, area * opacity * luminance(emission(meshes.material(t.mesh))))
             })
             .unzip();
         let total: f64 = power.iter().map(|&p| f64::from(p)).sum();
