@@ -42,12 +42,16 @@ pub fn emitter(radiance: Vec3) -> MeshMaterial {
     MeshMaterial { color: radiance, shading: Material::EMISSIVE, ..MeshMaterial::default() }
 }
 
-/// Lit layers of Gaussians over a floor, before a rough gold mirror that reflects them, under an
+/// Lit layers of Gaussians over a glossy floor, before a rough gold mirror that reflects them, under an
 /// emissive panel, a point light and a sky: Gaussians on camera, mirror and shadow segments.
 pub fn lit_world() -> (Scene, Camera, Meshes, Lighting) {
     let (scene, camera) = super::harness::fixture("layers", 24, 18);
     let meshes = Meshes::new(&[
-        (quad(Vec3::new(0.0, -0.8, 0.0), Vec3::Y, 4.0), lambert(Vec3::new(0.7, 0.65, 0.6))),
+        // Under a smooth dielectric layer (glTF's non-metal).
+        (
+            quad(Vec3::new(0.0, -0.8, 0.0), Vec3::Y, 4.0),
+            MeshMaterial { specular_layer: true, ..lambert(Vec3::new(0.7, 0.65, 0.6)) },
+        ),
         (
             quad(Vec3::new(0.0, 0.0, -1.4), Vec3::Z, 3.0),
             MeshMaterial {
@@ -75,7 +79,8 @@ pub fn lit_world() -> (Scene, Camera, Meshes, Lighting) {
 /// Emissive layers seen through a rough glass sphere and over a glossy floor.
 pub fn glass_world() -> (Scene, Camera, Meshes, Lighting) {
     let (scene, camera) = super::harness::fixture("layers", 24, 18);
-    let floor = MeshMaterial { mirror: 0.4, roughness: 0.4, ..lambert(Vec3::new(0.6, 0.6, 0.7)) };
+    // A rough mirror share beside a base under a rough dielectric layer.
+    let floor = MeshMaterial { mirror: 0.4, roughness: 0.4, specular_layer: true, ..lambert(Vec3::new(0.6, 0.6, 0.7)) };
     let glass = MeshMaterial { transmission: 0.95, roughness: 0.25, ior: 1.5, ..MeshMaterial::default() };
     let meshes = Meshes::new(&[
         (quad(Vec3::new(0.0, -0.7, 0.0), Vec3::Y, 4.0), floor),

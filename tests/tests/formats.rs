@@ -473,6 +473,7 @@ fn gltf_materials_read_as_three_js_writes_them() {
         transmission: 0.0,
         ior: 1.5,
         roughness,
+        specular_layer: true,
         opacity,
     };
     let black = splat_io::mesh::EMITTING_BLACK;
@@ -485,7 +486,11 @@ fn gltf_materials_read_as_three_js_writes_them() {
             shading: matte(Vec3::new(0.25 * 4.0 / 0.5, 4.0 / 0.5, 0.5 * 4.0 / black)),
             ..standard(Vec3::new(0.5, 0.5, black), 0.0, 1.0, 1.0)
         },
-        MeshMaterial { shading: Material::EMISSIVE, ..standard(Vec3::new(0.3, 0.6, 0.9), 0.0, 0.9, 1.0) },
+        MeshMaterial {
+            shading: Material::EMISSIVE,
+            specular_layer: false,
+            ..standard(Vec3::new(0.3, 0.6, 0.9), 0.0, 0.9, 1.0)
+        },
         standard(Vec3::splat(0.7), 0.0, 1.0, 0.5),
     ];
     let materials: Vec<MeshMaterial> = read.parts.iter().map(|p| p.material.expect("every quad has one")).collect();
@@ -502,6 +507,7 @@ fn gltf_materials_read_as_three_js_writes_them() {
         assert!(
             close(got.color, want.color)
                 && close(got.mirror_tint, want.mirror_tint)
+                && got.specular_layer == want.specular_layer
                 && close(got.shading.emissive, want.shading.emissive)
                 && close(got.shading.diffuse, want.shading.diffuse)
                 && close(got.shading.ambient, want.shading.ambient)

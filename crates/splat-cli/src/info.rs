@@ -169,7 +169,7 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
     for (i, (mesh, m)) in world.meshes.iter().enumerate() {
         let _ = writeln!(
             text,
-            "mesh {i:<5} {}: colour {:.3}, mirror {} (tint {:.3}), transmission {} (ior {}), roughness {}, opacity {}, emission {:.3}",
+            "mesh {i:<5} {}: colour {:.3}, mirror {} (tint {:.3}), transmission {} (ior {}), roughness {}, specular layer {}, opacity {}, emission {:.3}",
             crate::counted(mesh.triangles.len(), "triangle"),
             m.color,
             m.mirror,
@@ -177,6 +177,7 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
             m.transmission,
             m.ior,
             m.roughness,
+            m.specular_layer,
             m.opacity,
             m.shading.emissive * m.color,
         );

@@ -177,6 +177,12 @@ pub struct MeshMaterial {
     /// GGX roughness of the mirror and glass shares in the path tracer ([`crate::path`]; 0 is
     /// perfectly smooth). The ray-tracing and raster pipelines treat both shares as smooth.
     pub roughness: f32,
+    /// Whether the path tracer puts a dielectric specular layer over the local share, as glTF's
+    /// non-metals have (glTF 2.0 Appendix B, `fresnel_mix`): Schlick's F of F₀ =
+    /// ((ior − 1)/(ior + 1))² ([`MeshMaterial::layer_f0`]) reflected by a GGX lobe of the
+    /// material's roughness, 1 − F passed to the Lambertian base. The ray-tracing and raster
+    /// pipelines' Blinn–Phong specular term is their stand-in for it.
+    pub specular_layer: bool,
     /// Opacity α ∈ (0, 1] of the surface (times the mesh's per-vertex opacities): a transparent
     /// surface is one more layer of Eq. 3, α S over what lies behind it with weight 1 − α
     /// (Laine & Karras 2011's primitives of constant opacity). 1: opaque.
@@ -194,6 +200,7 @@ impl Default for MeshMaterial {
             transmission: 0.0,
             ior: 1.5,
             roughness: 0.0,
+            specular_layer: false,
             opacity: 1.0,
         }
     }
@@ -232,6 +239,12 @@ impl MeshMaterial {
     /// The weight of the locally lit colour: 1 − mirror − transmission.
     pub fn local_share(&self) -> f32 {
         (1.0 - self.mirror - self.transmission).max(0.0)
+    }
+
+    /// F₀ of the specular layer: ((ior − 1)/(ior + 1))² with one, 0 without.
+    pub fn layer_f0(&self) -> f32 {
+        let r = (self.ior - 1.0) / (self.ior + 1.0);
+        if self.specular_layer { r * r } else { 0.0 }
     }
 
     /// What the mirror share reflects of a ray meeting the surface at `cos_i` to its normal:

@@ -115,11 +115,15 @@ fn cases() -> Vec<(&'static str, Bsdf)> {
         ("glass r=0.5 from outside", Bsdf::new(0.0, grey, 0.0, untinted, 1.0, 0.5, 1.5)),
         ("glass r=0.6 from inside", Bsdf::new(0.0, grey, 0.0, untinted, 1.0, 0.6, 1.0 / 1.5)),
         ("mixture", Bsdf::new(0.3, grey, 0.3, gold, 0.4, 0.55, 1.33)),
+        // glTF's dielectric layer over the Lambertian base, F₀ raised from 0.04 to 0.25 so
+        // that the layer takes a quarter of the draws or more; rough, then smooth (a delta).
+        ("layered lambert r=0.3", Bsdf::new(1.0, grey, 0.0, untinted, 0.0, 0.3, 1.0).with_layer(0.25)),
+        ("layered lambert, smooth layer", Bsdf::new(1.0, grey, 0.0, untinted, 0.0, 0.0, 1.0).with_layer(0.25)),
     ]
 }
 
-/// Bonferroni: every one of the 14 tests at family-wise level 1 %.
-const ALPHA: f64 = 0.01 / 14.0;
+/// Bonferroni: every one of the 18 tests at family-wise level 1 %.
+const ALPHA: f64 = 0.01 / 18.0;
 
 #[test]
 fn sampled_directions_follow_the_evaluated_density() {
@@ -136,10 +140,14 @@ fn sampled_directions_follow_the_evaluated_density() {
     assert!(failures.is_empty(), "χ² rejects: {failures:?}");
 }
 
-/// The same test rejects a sampler whose GGX α is 2 % too large (roughness √1.02 times).
+/// The same test rejects a sampler whose GGX α is 2 % too large (roughness √1.02 times), in
+/// every case with a rough conductor or dielectric lobe. (The layered base draws its GGX layer,
+/// the conductor's sampler, a quarter of the time at θₒ = 30°: there the error goes unseen,
+/// p = 0.13.)
 #[test]
 fn a_two_percent_roughness_error_is_rejected() {
-    for (name, b) in cases().into_iter().skip(1) {
+    let rough = |b: &Bsdf| b.alpha > 0.0 && b.conductor + b.dielectric > 0.0;
+    for (name, b) in cases().into_iter().filter(|(_, b)| rough(b)) {
         let wider = Bsdf { alpha: b.alpha * 1.02, ..b };
         let p = chi2_test(&wider, &b, dir(30.0));
         eprintln!("{name} sampled with α × 1.02: p = {p:.2e}");
@@ -184,6 +192,14 @@ fn evaluated_and_sampled_albedos_agree() {
     for (name, b) in cases() {
         let wo = dir(40.0);
         let ((q, power), s) = (albedo_by_quadrature(&b, wo), albedo_by_sampling(&b, wo));
+        // A smooth layer's mirror reflection, F(ωₒ.z) of the base's weight, is a delta that
+        // quadrature of `eval` does not see.
+        let delta = if b.alpha == 0.0 && b.layer_f0 > 0.0 {
+            f64::from(b.diffuse * splat_core::mesh::schlick(Vec3::splat(b.layer_f0), wo.z).x)
+        } else {
+            0.0
+        };
+        let (q, power) = (q + delta, power + delta);
         eprintln!("{name}: albedo {q:.4} by quadrature, {s:.4} by sampling; power {power:.4}");
         assert!((q - s).abs() < 0.01 * q.max(1.0), "{name}: {q} by quadrature, {s} by sampling");
         assert!(power <= 1.0 + 1e-3, "{name} creates energy: {power}");

@@ -1,5 +1,6 @@
-// The path tracer's BSDFs, the twin of splat-core's path/bsdf.rs: Lambert, GGX conductor and
-// dielectric with visible-normal sampling. Part of the trace kernel (splat_gpu::TRACE_WGSL).
+// The path tracer's BSDFs, the twin of splat-core's path/bsdf.rs: Lambert (under a dielectric
+// specular layer, glTF's fresnel_mix, where layer_f0 > 0), GGX conductor and dielectric with
+// visible-normal sampling. Part of the trace kernel (splat_gpu::TRACE_WGSL).
 
 const PI: f32 = 3.14159265;
 const MIN_ROUGHNESS: f32 = 1e-3;
@@ -11,6 +12,8 @@ struct Bsdf {
     // The conductor's F₀ (Schlick's Fresnel).
     tint: vec3<f32>,
     dielectric: f32,
+    // F₀ of the specular layer over the Lambertian lobe (0: none).
+    layer_f0: f32,
     alpha: f32,
     eta: f32,
 }
@@ -115,13 +118,31 @@ fn dielectric_eval(wo: vec3<f32>, wi: vec3<f32>, alpha: f32, eta: f32) -> vec2<f
     return vec2<f32>((1.0 - f) * d * g2 * cos_o * jacobian / (wo.z * eta * eta), (1.0 - f) * vn * jacobian);
 }
 
+// bsdf.rs `Bsdf::layer_pick`: the layer's Fresnel reflectance at ωₒ's incidence.
+fn layer_pick(b: Bsdf, wo: vec3<f32>) -> f32 {
+    return schlick(vec3<f32>(b.layer_f0), wo.z).x;
+}
+
 // bsdf.rs `Bsdf::eval`: f|cos θᵢ| (rgb) and the mixture density (w).
 fn bsdf_eval(b: Bsdf, wo: vec3<f32>, wi: vec3<f32>) -> vec4<f32> {
     var f = vec3<f32>(0.0);
     var pdf = 0.0;
     if (b.diffuse > 0.0 && wi.z > 0.0) {
-        f += b.diffuse * b.albedo * (wi.z / PI);
-        pdf += b.diffuse * wi.z / PI;
+        if (b.layer_f0 > 0.0) {
+            let h = normalize(wo + wi);
+            let fresnel = schlick(vec3<f32>(b.layer_f0), dot(wo, h)).x;
+            let q = layer_pick(b, wo);
+            f += b.diffuse * (1.0 - fresnel) * b.albedo * (wi.z / PI);
+            pdf += b.diffuse * (1.0 - q) * wi.z / PI;
+            if (b.alpha != 0.0) {
+                let l = conductor_eval(wo, wi, b.alpha, vec3<f32>(b.layer_f0));
+                f += b.diffuse * l.xyz;
+                pdf += b.diffuse * q * l.w;
+            }
+        } else {
+            f += b.diffuse * b.albedo * (wi.z / PI);
+            pdf += b.diffuse * wi.z / PI;
+        }
     }
     if (b.alpha != 0.0) {
         if (b.conductor > 0.0) {
@@ -151,7 +172,22 @@ fn bsdf_sample(b: Bsdf, wo: vec3<f32>, u_lobe: f32, u: vec2<f32>) -> BsdfSample 
     var pick = u_lobe;
     var wi = vec3<f32>(0.0);
     if (pick < b.diffuse) {
-        wi = cosine_hemisphere(u);
+        var q = 0.0;
+        if (b.layer_f0 > 0.0) {
+            q = layer_pick(b, wo);
+        }
+        if (pick < b.diffuse * q) {
+            if (b.alpha == 0.0) {
+                let weight = schlick(vec3<f32>(b.layer_f0), wo.z).x / q;
+                return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), vec3<f32>(weight));
+            }
+            wi = reflect_about(wo, visible_normal(wo, b.alpha, u));
+            if (!(wi.z > 0.0)) {
+                return absorbed();
+            }
+        } else {
+            wi = cosine_hemisphere(u);
+        }
     } else {
         pick -= b.diffuse;
         if (pick < b.conductor) {

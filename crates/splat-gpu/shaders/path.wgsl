@@ -334,7 +334,7 @@ fn path_radiance(camera: Ray) -> vec3<f32> {
         let n = surface_normal(hit, ray);
         let fr = frame_of(n);
         let wo = to_local(fr, -ray.dir);
-        var bs = Bsdf(local_share(m), min(m.shading.diffuse * m.color, vec3<f32>(1.0)), m.mirror, m.mirror_tint, m.transmission, 0.0, select(1.0 / m.ior, m.ior, outside));
+        var bs = Bsdf(local_share(m), min(m.shading.diffuse * m.color, vec3<f32>(1.0)), m.mirror, m.mirror_tint, m.transmission, layer_f0(m), 0.0, select(1.0 / m.ior, m.ior, outside));
         if (m.roughness >= MIN_ROUGHNESS) {
             bs.alpha = m.roughness * m.roughness;
         }

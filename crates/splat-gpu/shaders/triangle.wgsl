@@ -36,7 +36,8 @@ struct MeshMaterial {
     ior: f32,
     // GGX roughness of the mirror and glass shares (the path tracer's).
     roughness: f32,
-    pad1: u32,
+    // 1 with the path tracer's dielectric specular layer over the local share.
+    specular_layer: u32,
     // The mirror share's reflectance at normal incidence (Schlick's F₀).
     mirror_tint: vec3<f32>,
     pad2: u32,
@@ -53,6 +54,12 @@ fn schlick(f0: vec3<f32>, cos_i: f32) -> vec3<f32> {
     let m = clamp(1.0 - cos_i, 0.0, 1.0);
     let m2 = m * m;
     return f0 + (vec3<f32>(1.0) - f0) * (m2 * m2 * m);
+}
+
+// mesh.rs `MeshMaterial::layer_f0`: ((ior − 1)/(ior + 1))² with the specular layer, 0 without.
+fn layer_f0(m: MeshMaterial) -> f32 {
+    let r = (m.ior - 1.0) / (m.ior + 1.0);
+    return select(0.0, r * r, m.specular_layer == 1u);
 }
 
 // mesh.rs `MeshMaterial::mirror_reflectance`: mirror × F(cos θᵢ).

@@ -405,8 +405,8 @@ pub struct GpuMeshMaterial {
     pub ior: f32,
     /// GGX roughness of the mirror and glass shares (the path tracer's).
     pub roughness: f32,
-    /// Padding.
-    pub pad1: u32,
+    /// 1 with the path tracer's dielectric specular layer over the local share, else 0.
+    pub specular_layer: u32,
     /// The mirror share's reflectance at normal incidence (Schlick's F₀).
     pub mirror_tint: [f32; 3],
     /// Padding.
@@ -503,6 +503,7 @@ pub fn mesh_materials(meshes: &Meshes) -> Vec<GpuMeshMaterial> {
                 transmission: m.transmission,
                 ior: m.ior,
                 roughness: m.roughness,
+                specular_layer: u32::from(m.specular_layer),
                 shading: gpu_material(&m.shading, 0),
                 ..GpuMeshMaterial::default()
             })
@@ -1170,7 +1171,7 @@ mod tests {
             &crate::TRACE_WGSL,
             GpuMeshMaterial,
             "MeshMaterial",
-            [color, mirror, transmission, ior, roughness, pad1, mirror_tint, pad2, shading]
+            [color, mirror, transmission, ior, roughness, specular_layer, mirror_tint, pad2, shading]
         );
         assert_mirrors!(
             &crate::TRACE_WGSL,

@@ -205,8 +205,10 @@ const READ_EXTENSIONS: [&str; 5] = [
 ///   alpha, the mesh's per-vertex opacities), 1 for `OPAQUE`, and for `MASK` 1 at or above
 ///   `alphaCutoff` (0.5), else nothing.
 ///
-/// Not represented: textures (the factors alone are read; noted) and the dielectric's specular
-/// layer (F₀ = 0.04).
+/// - The Lambertian part lies under glTF's dielectric specular layer (`specular_layer`: F₀ =
+///   ((ior − 1)/(ior + 1))², 0.04 at 1.5, `fresnel_mix`), which the path tracer draws.
+///
+/// Not represented: textures (the factors alone are read; noted).
 pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Option<MeshMaterial>, String> {
     let name = m.index().map_or("the default material".to_string(), |i| format!("material {i}"));
     let pbr = m.pbr_metallic_roughness();
@@ -247,6 +249,8 @@ pub fn gltf_material(m: &gltf::Material, notes: &mut Vec<String>) -> Result<Opti
         transmission: if m.unlit() { 0.0 } else { (1.0 - metallic) * transmission },
         ior: m.ior().unwrap_or(1.5),
         roughness: pbr.roughness_factor().clamp(0.0, 1.0),
+        // glTF's dielectric BRDF: the base under a specular layer of F₀ from the ior.
+        specular_layer: !m.unlit(),
         opacity,
     };
     material.validate().map_err(|e| format!("glTF {name}: {e}"))?;

@@ -56,6 +56,7 @@
 //! mirror = 0.0                      # perfect mirror share
 //! mirror_tint = [1.0, 1.0, 1.0]     # its reflectance at normal incidence (Schlick's F₀)
 //! roughness = 0.0                   # GGX roughness of mirror and glass (path tracer only)
+//! specular_layer = false            # a dielectric specular layer over the base (path tracer only)
 //! opacity = 1.0                     # α in (0, 1]: below 1 a transparent layer (CPU only)
 //! ```
 //!
@@ -208,6 +209,7 @@ struct MeshFile {
     transmission: Option<f32>,
     ior: Option<f32>,
     roughness: Option<f32>,
+    specular_layer: Option<bool>,
     opacity: Option<f32>,
 }
 
@@ -537,6 +539,7 @@ fn load_mesh(m: &MeshFile, base: &Path) -> Result<(Vec<PlacedMesh>, Vec<String>)
             transmission: m.transmission.unwrap_or(file.transmission),
             ior: m.ior.unwrap_or(file.ior),
             roughness: m.roughness.unwrap_or(file.roughness),
+            specular_layer: m.specular_layer.unwrap_or(file.specular_layer),
             opacity: m.opacity.unwrap_or(file.opacity),
         };
         // A glTF metal's tint is its base colour: a new colour retints it too.

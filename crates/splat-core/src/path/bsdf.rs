@@ -1,5 +1,6 @@
-//! The scattering functions of mesh surfaces in the path tracer: Lambertian, rough conductor
-//! (GGX, sampled by visible normals) and smooth or rough dielectric, mixed by the shares of a
+//! The scattering functions of mesh surfaces in the path tracer: Lambertian (optionally under
+//! a dielectric specular layer, glTF's `fresnel_mix`), rough conductor (GGX, sampled by visible
+//! normals) and smooth or rough dielectric, mixed by the shares of a
 //! [`crate::mesh::MeshMaterial`].
 //!
 //! Everything works in the local shading frame, z along the normal turned toward the outgoing
@@ -33,7 +34,12 @@ pub struct Bsdf {
     pub tint: Vec3,
     /// Weight of the dielectric lobe.
     pub dielectric: f32,
-    /// GGX α = roughness² of the conductor and dielectric lobes (0 for delta lobes).
+    /// F₀ of the dielectric specular layer over the Lambertian lobe (0: none): glTF 2.0's
+    /// `fresnel_mix` (Appendix B), F(ωₒ·h) of the GGX lobe of roughness α reflected and 1 − F
+    /// passed to the Lambertian base.
+    pub layer_f0: f32,
+    /// GGX α = roughness² of the conductor and dielectric lobes and of the layer (0 for delta
+    /// lobes).
     pub alpha: f32,
     /// η = n_t / n_i across the dielectric as seen from ωₒ's side.
     pub eta: f32,
@@ -64,7 +70,19 @@ impl Bsdf {
         eta: f32,
     ) -> Self {
         let alpha = if roughness < MIN_ROUGHNESS { 0.0 } else { roughness * roughness };
-        Self { diffuse, albedo, conductor, tint, dielectric, alpha, eta }
+        Self { diffuse, albedo, conductor, tint, dielectric, layer_f0: 0.0, alpha, eta }
+    }
+
+    /// The same mixture with a dielectric specular layer of reflectance `f0` at normal incidence
+    /// over its Lambertian lobe.
+    pub fn with_layer(self, f0: f32) -> Self {
+        Self { layer_f0: f0, ..self }
+    }
+
+    /// The probability that a draw of the Lambertian lobe takes its specular layer instead: the
+    /// layer's Fresnel reflectance at ωₒ's incidence on the surface.
+    fn layer_pick(&self, wo: Vec3) -> f32 {
+        crate::mesh::schlick(Vec3::splat(self.layer_f0), wo.z).x
     }
 
     /// Whether the conductor and dielectric lobes are deltas.
@@ -82,8 +100,22 @@ impl Bsdf {
         let mut f = Vec3::ZERO;
         let mut pdf = 0.0;
         if self.diffuse > 0.0 && wi.z > 0.0 {
-            f += self.diffuse * self.albedo * (wi.z / PI);
-            pdf += self.diffuse * wi.z / PI;
+            if self.layer_f0 > 0.0 {
+                // glTF's fresnel_mix: (1 − F(ωₒ·h)) of the base, F(ωₒ·h) of the layer.
+                let h = (wo + wi).normalize();
+                let fresnel = crate::mesh::schlick(Vec3::splat(self.layer_f0), wo.dot(h)).x;
+                let q = self.layer_pick(wo);
+                f += self.diffuse * (1.0 - fresnel) * self.albedo * (wi.z / PI);
+                pdf += self.diffuse * (1.0 - q) * wi.z / PI;
+                if !self.specular_is_delta() {
+                    let (fl, pl) = conductor_eval(wo, wi, self.alpha, Vec3::splat(self.layer_f0));
+                    f += self.diffuse * fl;
+                    pdf += self.diffuse * q * pl;
+                }
+            } else {
+                f += self.diffuse * self.albedo * (wi.z / PI);
+                pdf += self.diffuse * wi.z / PI;
+            }
         }
         if !self.specular_is_delta() {
             if self.conductor > 0.0 {
@@ -105,7 +137,18 @@ impl Bsdf {
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
         let mut pick = u_lobe;
         let wi = if pick < self.diffuse {
-            cosine_hemisphere(u)
+            let q = if self.layer_f0 > 0.0 { self.layer_pick(wo) } else { 0.0 };
+            if pick < self.diffuse * q {
+                // The specular layer: a mirror reflection of weight F(ωₒ.z) / q = 1 when smooth.
+                if self.specular_is_delta() {
+                    let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+                    let weight = Vec3::splat(crate::mesh::schlick(Vec3::splat(self.layer_f0), wo.z).x / q);
+                    return Some(BsdfSample { wi, weight, pdf: 0.0, delta: true });
+                }
+                Some(reflect_about(wo, visible_normal(wo, self.alpha, u))).filter(|wi| wi.z > 0.0)?
+            } else {
+                cosine_hemisphere(u)
+            }
         } else {
             pick -= self.diffuse;
             if pick < self.conductor {

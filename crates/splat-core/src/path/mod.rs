@@ -382,7 +382,8 @@ impl<'a> PathTracer<'a> {
                 material.transmission,
                 material.roughness,
                 eta,
-            );
+            )
+            .with_layer(material.layer_f0());
             if f.has_smooth_part() {
                 l += beta * self.direct_at_surface(x, face, &frame, wo, &f, bounce, s);
             }
