@@ -118,9 +118,14 @@ fn dielectric_eval(wo: vec3<f32>, wi: vec3<f32>, alpha: f32, eta: f32) -> vec2<f
     return vec2<f32>((1.0 - f) * d * g2 * cos_o * jacobian / (wo.z * eta * eta), (1.0 - f) * vn * jacobian);
 }
 
+// bsdf.rs `Bsdf::layer_fresnel`: the specular layer's F(cos θ).
+fn layer_fresnel(b: Bsdf, cos_t: f32) -> f32 {
+    return schlick(vec3<f32>(b.layer_f0), cos_t).x;
+}
+
 // bsdf.rs `Bsdf::layer_pick`: the layer's Fresnel reflectance at ωₒ's incidence.
 fn layer_pick(b: Bsdf, wo: vec3<f32>) -> f32 {
-    return schlick(vec3<f32>(b.layer_f0), wo.z).x;
+    return layer_fresnel(b, wo.z);
 }
 
 // bsdf.rs `Bsdf::eval`: f|cos θᵢ| (rgb) and the mixture density (w).
@@ -130,7 +135,7 @@ fn bsdf_eval(b: Bsdf, wo: vec3<f32>, wi: vec3<f32>) -> vec4<f32> {
     if (b.diffuse > 0.0 && wi.z > 0.0) {
         if (b.layer_f0 > 0.0) {
             let h = normalize(wo + wi);
-            let fresnel = schlick(vec3<f32>(b.layer_f0), dot(wo, h)).x;
+            let fresnel = layer_fresnel(b, dot(wo, h));
             let q = layer_pick(b, wo);
             f += b.diffuse * (1.0 - fresnel) * b.albedo * (wi.z / PI);
             pdf += b.diffuse * (1.0 - q) * wi.z / PI;
@@ -178,8 +183,8 @@ fn bsdf_sample(b: Bsdf, wo: vec3<f32>, u_lobe: f32, u: vec2<f32>) -> BsdfSample 
         }
         if (pick < b.diffuse * q) {
             if (b.alpha == 0.0) {
-                let weight = schlick(vec3<f32>(b.layer_f0), wo.z).x / q;
-                return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), vec3<f32>(weight));
+                // F(ωₒ.z) / q = 1.
+                return delta_sample(vec3<f32>(-wo.x, -wo.y, wo.z), vec3<f32>(1.0));
             }
             wi = reflect_about(wo, visible_normal(wo, b.alpha, u));
             if (!(wi.z > 0.0)) {

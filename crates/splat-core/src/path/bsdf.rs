@@ -79,10 +79,15 @@ impl Bsdf {
         Self { layer_f0: f0, ..self }
     }
 
-    /// The probability that a draw of the Lambertian lobe takes its specular layer instead: the
-    /// layer's Fresnel reflectance at ωₒ's incidence on the surface.
+    /// The specular layer's Fresnel reflectance F(cos θ), Schlick's of its F₀.
+    fn layer_fresnel(&self, cos: f32) -> f32 {
+        crate::mesh::schlick(Vec3::splat(self.layer_f0), cos).x
+    }
+
+    /// The probability q that a draw of the Lambertian lobe takes its specular layer instead:
+    /// the layer's Fresnel reflectance at ωₒ's incidence on the surface, F(ωₒ.z).
     fn layer_pick(&self, wo: Vec3) -> f32 {
-        crate::mesh::schlick(Vec3::splat(self.layer_f0), wo.z).x
+        self.layer_fresnel(wo.z)
     }
 
     /// Whether the conductor and dielectric lobes are deltas.
@@ -103,7 +108,7 @@ impl Bsdf {
             if self.layer_f0 > 0.0 {
                 // glTF's fresnel_mix: (1 − F(ωₒ·h)) of the base, F(ωₒ·h) of the layer.
                 let h = (wo + wi).normalize();
-                let fresnel = crate::mesh::schlick(Vec3::splat(self.layer_f0), wo.dot(h)).x;
+                let fresnel = self.layer_fresnel(wo.dot(h));
                 let q = self.layer_pick(wo);
                 f += self.diffuse * (1.0 - fresnel) * self.albedo * (wi.z / PI);
                 pdf += self.diffuse * (1.0 - q) * wi.z / PI;
@@ -139,11 +144,10 @@ impl Bsdf {
         let wi = if pick < self.diffuse {
             let q = if self.layer_f0 > 0.0 { self.layer_pick(wo) } else { 0.0 };
             if pick < self.diffuse * q {
-                // The specular layer: a mirror reflection of weight F(ωₒ.z) / q = 1 when smooth.
+                // The specular layer; smooth, a mirror reflection of weight F(ωₒ.z) / q = 1.
                 if self.specular_is_delta() {
                     let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-                    let weight = Vec3::splat(crate::mesh::schlick(Vec3::splat(self.layer_f0), wo.z).x / q);
-                    return Some(BsdfSample { wi, weight, pdf: 0.0, delta: true });
+                    return Some(BsdfSample { wi, weight: Vec3::ONE, pdf: 0.0, delta: true });
                 }
                 Some(reflect_about(wo, visible_normal(wo, self.alpha, u))).filter(|wi| wi.z > 0.0)?
             } else {
