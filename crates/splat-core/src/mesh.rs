@@ -241,6 +241,13 @@ impl MeshMaterial {
         (1.0 - self.mirror - self.transmission).max(0.0)
     }
 
+    /// What a forward-shaded surface (the raster pipelines') takes from the background for a
+    /// ray meeting it at `cos_i` to its normal: its mirror share, times F(cos θᵢ), and its glass
+    /// share, which see nothing else there.
+    pub fn background_share(&self, cos_i: f32) -> Vec3 {
+        self.mirror_reflectance(cos_i) + Vec3::splat(self.transmission)
+    }
+
     /// F₀ of the specular layer: ((ior − 1)/(ior + 1))² with one, 0 without.
     pub fn layer_f0(&self) -> f32 {
         let r = (self.ior - 1.0) / (self.ior + 1.0);

@@ -52,7 +52,7 @@ fn mesh_prepass(@builtin(global_invocation_id) gid: vec3<u32>) {
         let n = surface_normal(hit, ray);
         behind_normal[index] = vec4<f32>(n, 0.0);
         let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, hit.t, n);
-        let mirror = mirror_reflectance(m, clamp(-dot(ray.dir, n), 0.0, 1.0)) + m.transmission;
-        behind[index] = vec4<f32>(local_share(m) * lit + mirror * params.background.xyz, hit.t);
+        let background = background_share(m, clamp(-dot(ray.dir, n), 0.0, 1.0)) * params.background.xyz;
+        behind[index] = vec4<f32>(local_share(m) * lit + background, hit.t);
     }
 }

@@ -209,8 +209,7 @@ fn triangle_color(o: u32, ray: Ray) -> vec3<f32> {
     let m = rop_materials[tri.mesh];
     let n = facing_normal(tri, h.y, h.z, ray.dir);
     let lit = shade_material_unshadowed(m.shading, m.color, ray.origin, ray.dir, h.x, n);
-    let mirror = mirror_reflectance(m, clamp(-dot(ray.dir, n), 0.0, 1.0)) + m.transmission;
-    return local_share(m) * lit + mirror * params.background.xyz;
+    return local_share(m) * lit + background_share(m, clamp(-dot(ray.dir, n), 0.0, 1.0)) * params.background.xyz;
 }
 
 // raster/mod.rs `triangle_fragments` and `surviving` for the transparent triangle of place `o`:

@@ -67,6 +67,12 @@ fn mirror_reflectance(m: MeshMaterial, cos_i: f32) -> vec3<f32> {
     return m.mirror * schlick(m.mirror_tint, cos_i);
 }
 
+// mesh.rs `MeshMaterial::background_share`: what a forward-shaded surface (the raster
+// pre-pass's, the raster operations') takes from the background, its mirror and glass shares.
+fn background_share(m: MeshMaterial, cos_i: f32) -> vec3<f32> {
+    return mirror_reflectance(m, cos_i) + m.transmission;
+}
+
 // mesh.rs `PreparedTriangle::is_transparent`: an opacity below 1 somewhere.
 fn is_transparent(tri: Triangle) -> bool {
     return tri.alpha0 < 1.0 || tri.alpha1 < 1.0 || tri.alpha2 < 1.0;

@@ -375,8 +375,8 @@ impl<'a> Rasterizer<'a> {
         let m = self.meshes.material(hit.mesh);
         let (_, n, _) = hit.facing(ray.dir);
         let local = self.lighting.shade_material_unshadowed(&m.shading, m.color, ray, hit.t, n);
-        let mirror = m.mirror_reflectance((-ray.dir.dot(n)).clamp(0.0, 1.0)) + Vec3::splat(m.transmission);
-        f64::from(m.local_share()) * local.as_dvec3() + mirror.as_dvec3() * self.settings.background.as_dvec3()
+        let background = m.background_share((-ray.dir.dot(n)).clamp(0.0, 1.0));
+        f64::from(m.local_share()) * local.as_dvec3() + background.as_dvec3() * self.settings.background.as_dvec3()
     }
 
     /// A sample buffer with the meshes drawn in (their depth, for the depth test).
