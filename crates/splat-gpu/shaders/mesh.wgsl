@@ -82,10 +82,10 @@ fn mesh_traverse(root: u32, ray: Ray, filtered: bool) -> SurfaceHit {
             iterations += 1u;
             let tri = triangles[k];
             let h = triangle_intersect(tri, ray);
-            if (h.x < 0.0 || (filtered && is_transparent(tri) && !transparent_stops(tri, h))) {
+            if (h.x < 0.0 || h.x > t_max || (filtered && is_transparent(tri) && !transparent_stops(tri, h))) {
                 continue;
             }
-            if (h.x <= t_max && (h.x < best.t || (h.x == best.t && k < best.triangle))) {
+            if (h.x < best.t || (h.x == best.t && k < best.triangle)) {
                 best = SurfaceHit(h.x, k, h.y, h.z);
                 t_max = h.x;
             }

@@ -151,8 +151,8 @@ fn emitter_sample(x: vec3<f32>, b: u32) -> EmitterSample {
 // owns stops the path with probability the opacity there (the triangle's draw of the segment
 // after bounce path_bounce, keyed by its place in the meshes' order).
 fn transparent_stops(tri: Triangle, h: vec3<f32>) -> bool {
-    let u = path_particle(tri.order, surface_decision(path_bounce)) - params.u_shift;
-    return owns_crossing(tri, h.y, h.z) && u < alpha_at(tri, h.y, h.z);
+    return owns_crossing(tri, h.y, h.z)
+        && path_particle(tri.order, surface_decision(path_bounce)) - params.u_shift < alpha_at(tri, h.y, h.z);
 }
 
 // `emitter_pdf`.

@@ -57,7 +57,7 @@
 //! mirror_tint = [1.0, 1.0, 1.0]     # its reflectance at normal incidence (Schlick's F₀)
 //! roughness = 0.0                   # GGX roughness of mirror and glass (path tracer only)
 //! specular_layer = false            # a dielectric specular layer over the base (path tracer only)
-//! opacity = 1.0                     # α in (0, 1]: below 1 a transparent layer (CPU only)
+//! opacity = 1.0                     # α in (0, 1]: below 1 a transparent layer
 //! ```
 //!
 //! A material table sets the colours it names and leaves the others at 0 (shininess 32); a set
