@@ -52,6 +52,7 @@ fn root() -> PathBuf {
 
 fn test(extra: &[String]) -> Result<()> {
     ensure_all()?;
+    provide_lavapipe()?;
     let skips = skip_log();
     let _ = std::fs::remove_file(&skips);
     let status = if extra.is_empty() && has_nextest() {
@@ -225,7 +226,86 @@ fn test_command(args: &[&str]) -> Command {
     if std::env::var_os("WGPU_BACKEND").is_none() {
         cmd.env("WGPU_BACKEND", "vulkan");
     }
+    if let Some(Some(icd)) = LAVAPIPE_ICD.get() {
+        cmd.env("VK_DRIVER_FILES", icd);
+    }
     cmd
+}
+
+/// Mesa's lavapipe of Debian 12's backports, pinned by version and hash: the driver the GPU tests
+/// run on where the machine has no GPU. Debian 12's own (Mesa 22.3) has no binding arrays of
+/// storage buffers, which the kernels bind split scene arrays in where an adapter has them
+/// (docs/architecture.md, "Scenes larger than a binding"); Mesa 25.0's lavapipe has them (a
+/// million buffers a stage), so both ways of binding are tested here. It needs the libraries
+/// Debian's own `mesa-vulkan-drivers` brings (LLVM 15, the Vulkan loader: [`VULKAN`]).
+const LAVAPIPE_DEB: &str = "mesa-vulkan-drivers_25.0.7-2~bpo12+1_amd64.deb";
+const LAVAPIPE_POOL: &str = "http://deb.debian.org/debian/pool/main/m/mesa/";
+const LAVAPIPE_SHA256: &str = "3899f1800424c60a05df5d6913076a526ca8fdbabec43672cd397563d1ca3263";
+
+/// The pinned lavapipe's ICD manifest once [`provide_lavapipe`] ran: `None` where it does not
+/// apply.
+static LAVAPIPE_ICD: std::sync::OnceLock<Option<PathBuf>> = std::sync::OnceLock::new();
+
+/// Unpack the pinned lavapipe ([`LAVAPIPE_DEB`]) under `target/lavapipe` (fetched and verified
+/// once) and write its ICD manifest, which the test runs then load alone (`VK_DRIVER_FILES`).
+/// Not on a machine with a GPU device node (its own driver is the one to test), nor where the
+/// caller chose the Vulkan drivers (`VK_DRIVER_FILES`, `VK_ICD_FILENAMES`), nor off x86-64 Linux
+/// (the package is amd64): there the tests take the system's driver, and the tests of binding
+/// arrays skip if it has none (fail under `CI=true`).
+fn provide_lavapipe() -> Result<()> {
+    let applies = cfg!(all(target_os = "linux", target_arch = "x86_64"))
+        && std::env::var_os("VK_DRIVER_FILES").is_none()
+        && std::env::var_os("VK_ICD_FILENAMES").is_none()
+        && !gpu_device_node();
+    let icd = if applies { Some(unpack_lavapipe()?) } else { None };
+    if let Some(icd) = &icd {
+        eprintln!("GPU tests on the pinned lavapipe: {}", icd.display());
+    }
+    let _ = LAVAPIPE_ICD.set(icd);
+    Ok(())
+}
+
+/// Whether a GPU device node exists (`/dev/dri/renderD*`, `/dev/nvidia*`), as
+/// `splat_gpu::GpuContext::hardware` asks.
+fn gpu_device_node() -> bool {
+    let has = |dir: &str, prefix: &str| {
+        std::fs::read_dir(dir)
+            .is_ok_and(|entries| entries.flatten().any(|e| e.file_name().to_string_lossy().starts_with(prefix)))
+    };
+    has("/dev/dri", "renderD") || has("/dev", "nvidia")
+}
+
+/// [`LAVAPIPE_DEB`] unpacked under `target/lavapipe`, and the path of the ICD manifest written
+/// for it (the library by its absolute path).
+fn unpack_lavapipe() -> Result<PathBuf> {
+    let dir = target_dir().join("lavapipe");
+    let icd = dir.join("lvp_icd.json");
+    let library = dir.join("root/usr/lib/x86_64-linux-gnu/libvulkan_lvp.so");
+    if icd.exists() && library.exists() {
+        return Ok(icd);
+    }
+    std::fs::create_dir_all(&dir)?;
+    let deb = dir.join(LAVAPIPE_DEB);
+    if !deb.exists() || verify(&deb, LAVAPIPE_SHA256).is_err() {
+        let url = format!("{LAVAPIPE_POOL}{LAVAPIPE_DEB}");
+        eprintln!("fetching {url} …");
+        let fetch = "import sys, urllib.request; urllib.request.urlretrieve(sys.argv[1], sys.argv[2])";
+        run_checked(Command::new(system_python()).args(["-c", fetch, &url]).arg(&deb), "the download of lavapipe")
+            .with_context(|| {
+                format!("{url} is gone from Debian's pool when backports moves on: pin the version it has now and its sha256")
+            })?;
+    }
+    verify(&deb, LAVAPIPE_SHA256)?;
+    run_checked(Command::new("dpkg-deb").arg("-x").arg(&deb).arg(dir.join("root")), "dpkg-deb -x of lavapipe")?;
+    if !library.exists() {
+        bail!("{} holds no {}", deb.display(), library.display());
+    }
+    let manifest = format!(
+        "{{\"file_format_version\": \"1.0.0\", \"ICD\": {{\"library_path\": \"{}\", \"api_version\": \"1.4.305\"}}}}\n",
+        library.display()
+    );
+    std::fs::write(&icd, manifest)?;
+    Ok(icd)
 }
 
 /// Run `step`, then print how long it took (CI's budget is the whole run's: docs/architecture.md
@@ -497,6 +577,7 @@ const POWER_SUITES: [&str; 7] = [
 /// order. `cargo xtask test` runs the asserted rows only.
 fn power() -> Result<()> {
     ensure(&VULKAN)?;
+    provide_lavapipe()?;
     let dir = root().join("target/power");
     if dir.exists() {
         std::fs::remove_dir_all(&dir)?;

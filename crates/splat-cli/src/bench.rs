@@ -279,12 +279,15 @@ fn binding_budget(
 ) -> String {
     let mib = |bytes: u64| bytes as f64 / f64::from(1 << 20);
     format!(
-        "bindings: {} storage buffers a stage of at most {:.0} MiB each (arrays of buffers in a binding: {}); \
+        "bindings: {} storage buffers a stage of at most {:.0} MiB each (binding arrays: {}); \
          they hold {} particles like these (SH degree {}, {:?}) in the ray tracer, {} in the splatting kernels; \
          device memory may bound them first",
         ctx.storage_buffers_per_stage(),
         mib(ctx.max_binding),
-        if ctx.buffer_binding_arrays { "available, unused" } else { "no" },
+        match ctx.binding_array_elements_per_stage() {
+            0 => "none, a split array's parts bind one each".to_string(),
+            n => format!("{n} buffers a stage, a split array's parts bind as one"),
+        },
         splat_gpu::TraceSplit::capacity(ctx, scene.sh_degree, settings.sh_storage),
         scene.sh_degree,
         settings.sh_storage,

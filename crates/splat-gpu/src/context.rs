@@ -27,6 +27,12 @@ pub unsafe fn quiet_device_select() {
     }
 }
 
+/// What split arrays need of a device to bind their parts as one binding array
+/// ([`crate::split::PartBindings::Array`]).
+const BINDING_ARRAYS: wgpu::Features = wgpu::Features::BUFFER_BINDING_ARRAY
+    .union(wgpu::Features::STORAGE_RESOURCE_BINDING_ARRAY)
+    .union(wgpu::Features::SAMPLED_TEXTURE_AND_STORAGE_BUFFER_ARRAY_NON_UNIFORM_INDEXING);
+
 /// Storage buffers the ray-tracing kernel binds in its one stage.
 const MIN_STORAGE_BUFFERS_PER_STAGE: u32 = 15;
 
@@ -48,10 +54,12 @@ pub struct GpuContext {
     /// Storage buffers a shader stage binds (what the ray tracer's split arrays may use beside
     /// its own bindings, `crate::split`).
     pub(crate) storage_buffers: u32,
-    /// Whether the adapter has arrays of storage buffers in one binding (wgpu's
-    /// `BUFFER_BINDING_ARRAY` and `STORAGE_RESOURCE_BINDING_ARRAY`): the way past
-    /// `storage_buffers` for split arrays, which the kernels do not take yet.
-    pub buffer_binding_arrays: bool,
+    /// Storage buffers a shader stage binds in binding arrays: the device's limit where it has
+    /// arrays of storage buffers in one binding, indexed non-uniformly (wgpu's
+    /// `BUFFER_BINDING_ARRAY`, `STORAGE_RESOURCE_BINDING_ARRAY` and
+    /// `SAMPLED_TEXTURE_AND_STORAGE_BUFFER_ARRAY_NON_UNIFORM_INDEXING`), the split arrays' way past
+    /// `storage_buffers` ([`crate::split::PartBindings::Array`]); 0 where it has not.
+    pub(crate) binding_array_elements: u32,
     /// The binding limit the 4-byte index arrays of the splatting path are split by (the depth
     /// sort's keys and values, the tile pairs, the offsets): `max_binding` but for
     /// [`GpuContext::with_index_binding_limit`].
@@ -177,6 +185,7 @@ impl GpuContext {
         wgpu::Features::TIMESTAMP_QUERY
             | wgpu::Features::FLOAT32_BLENDABLE
             | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES
+            | BINDING_ARRAYS
     }
 
     /// A context on a device the caller already has (a window's, shared with its UI renderer),
@@ -204,9 +213,11 @@ impl GpuContext {
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             storage_alignment: u64::from(limits.min_storage_buffer_offset_alignment),
             storage_buffers: limits.max_storage_buffers_per_shader_stage,
-            buffer_binding_arrays: adapter
-                .features()
-                .contains(wgpu::Features::BUFFER_BINDING_ARRAY | wgpu::Features::STORAGE_RESOURCE_BINDING_ARRAY),
+            binding_array_elements: if features.contains(BINDING_ARRAYS) {
+                limits.max_binding_array_elements_per_shader_stage
+            } else {
+                0
+            },
             max_index_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
@@ -229,6 +240,29 @@ impl GpuContext {
         self.max_binding = self.max_binding.min(bytes);
         self.max_index_binding = self.max_index_binding.min(bytes);
         self
+    }
+
+    /// Lower the storage buffers a stage binds in binding arrays (to test the refusal past them
+    /// on any adapter); 0 binds split arrays' parts one binding each, as on an adapter without
+    /// binding arrays (to test that path on any adapter).
+    pub fn with_binding_array_elements(mut self, elements: u32) -> Self {
+        self.binding_array_elements = self.binding_array_elements.min(elements);
+        self
+    }
+
+    /// How the kernels bind the parts of split arrays on this device.
+    pub(crate) fn part_bindings(&self) -> crate::split::PartBindings {
+        if self.binding_array_elements > 0 {
+            crate::split::PartBindings::Array
+        } else {
+            crate::split::PartBindings::Each
+        }
+    }
+
+    /// Storage buffers a shader stage binds in binding arrays (0 where the device has none):
+    /// with [`GpuContext::max_binding`], the bound on scenes where the adapter has them.
+    pub fn binding_array_elements_per_stage(&self) -> u32 {
+        self.binding_array_elements
     }
 
     /// Lower the binding limit of the splatting path's 4-byte index arrays only (sort keys and

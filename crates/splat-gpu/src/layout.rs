@@ -871,6 +871,13 @@ pub(crate) mod wgsl_check {
         (module, info)
     }
 
+    /// What naga needs to validate a module whose split arrays' parts are binding arrays
+    /// ([`crate::split::PartBindings::Array`]): the capabilities of the device features the
+    /// context asks for them.
+    pub(crate) const BINDING_ARRAYS: naga::valid::Capabilities =
+        naga::valid::Capabilities::STORAGE_BUFFER_BINDING_ARRAY
+            .union(naga::valid::Capabilities::STORAGE_BUFFER_BINDING_ARRAY_NON_UNIFORM_INDEXING);
+
     /// The storage buffers each entry point of `source` uses (what an automatic layout binds
     /// in its stage), by name.
     pub(crate) fn storage_buffers_used(name: &str, source: &str) -> Vec<(String, u32)> {
@@ -906,6 +913,17 @@ pub(crate) mod wgsl_check {
         capabilities: naga::valid::Capabilities,
         entries: &[wgpu::BindGroupLayoutEntry],
     ) {
+        check_layouts(name, source, capabilities, &[entries]);
+    }
+
+    /// [`check_layout`] of a module in several bind groups, `groups[g]` the entries of group g
+    /// (a split array's binding arrays are in their own, `crate::split::ARRAY_GROUP`).
+    pub(crate) fn check_layouts(
+        name: &str,
+        source: &str,
+        capabilities: naga::valid::Capabilities,
+        groups: &[&[wgpu::BindGroupLayoutEntry]],
+    ) {
         use naga::{AddressSpace, ImageClass, ShaderStage, StorageAccess, TypeInner};
         use wgpu::{BindingType, BufferBindingType};
         let (module, info) = parse_and_validate(name, source, capabilities);
@@ -914,13 +932,24 @@ pub(crate) mod wgsl_check {
         let mut declared = Vec::new();
         for (handle, var) in module.global_variables.iter() {
             let Some(binding) = &var.binding else { continue };
-            let label = format!("{name}: binding {} ({})", binding.binding, var.name.as_deref().unwrap_or("?"));
-            assert_eq!(binding.group, 0, "{label} is not in group 0");
-            declared.push(binding.binding);
+            let label = format!(
+                "{name}: group {} binding {} ({})",
+                binding.group,
+                binding.binding,
+                var.name.as_deref().unwrap_or("?")
+            );
+            let entries = groups.get(binding.group as usize).unwrap_or_else(|| panic!("{label}: no such group"));
+            declared.push((binding.group, binding.binding));
             let entry = entries
                 .iter()
                 .find(|e| e.binding == binding.binding)
                 .unwrap_or_else(|| panic!("{label} has no entry in the layout"));
+            // A binding array (a split array's parts, crate::split) is an entry of its count.
+            let (ty, count) = match module.types[var.ty].inner {
+                TypeInner::BindingArray { base, size: naga::ArraySize::Constant(n) } => (base, Some(n)),
+                _ => (var.ty, None),
+            };
+            assert_eq!(entry.count, count, "{label}: the layout's count of buffers in the binding");
             match (var.space, entry.ty) {
                 (AddressSpace::Uniform, _) => {
                     panic!(
@@ -934,7 +963,7 @@ pub(crate) mod wgsl_check {
                     let shader = if access.contains(StorageAccess::STORE) { "read_write" } else { "read" };
                     assert_eq!(read_only, !access.contains(StorageAccess::STORE), "{label}: the shader's is {shader}");
                     if let Some(min) = min_binding_size {
-                        let size = u64::from(layouter[var.ty].size);
+                        let size = u64::from(layouter[ty].size);
                         assert!(
                             min.get() >= size,
                             "{label}: the layout's minimum size {min} is below the WGSL type's {size}"
@@ -969,12 +998,14 @@ pub(crate) mod wgsl_check {
                 );
             }
         }
-        for entry in entries {
-            assert!(
-                declared.contains(&entry.binding),
-                "{name}: the layout's entry {} is no binding of the shader",
-                entry.binding
-            );
+        for (group, entries) in groups.iter().enumerate() {
+            for entry in *entries {
+                assert!(
+                    declared.contains(&(group as u32, entry.binding)),
+                    "{name}: the layout's entry {} of group {group} is no binding of the shader",
+                    entry.binding
+                );
+            }
         }
     }
 
@@ -1192,14 +1223,25 @@ mod tests {
             nodes: Split { parts: 2, shift: 6 },
             sh: Split { parts: 5, shift: 7 },
             sh_storage: splat_core::sh::ShStorage::F32,
+            parts: crate::split::PartBindings::Each,
         };
         let half = crate::TraceSplit { sh_storage: splat_core::sh::ShStorage::F16, ..split };
-        for split in [whole, split, half] {
+        let arrayed = crate::TraceSplit { parts: crate::split::PartBindings::Array, ..half };
+        for split in [whole, split, half, arrayed] {
             let entries = crate::trace::TracePipeline::layout_entries(&split);
+            let arrays = crate::trace::TracePipeline::array_entries(&split);
             let source = split.wgsl();
-            wgsl_check::check_layout("trace", &source, naga::valid::Capabilities::empty(), &entries);
+            let arrayed = split.parts == crate::split::PartBindings::Array;
+            let capabilities = if arrayed { wgsl_check::BINDING_ARRAYS } else { naga::valid::Capabilities::empty() };
+            wgsl_check::check_layouts("trace", &source, capabilities, &[&entries, &arrays]);
         }
         assert_eq!(crate::trace::TracePipeline::layout_entries(&split).len(), 18 + 2 + 1 + 4);
+        // In binding arrays: group 0 the kernel's own, group 1 one binding array an array, of its
+        // parts after the first.
+        assert_eq!(crate::trace::TracePipeline::layout_entries(&arrayed).len(), 18);
+        let arrays = crate::trace::TracePipeline::array_entries(&arrayed);
+        let counts: Vec<_> = arrays.iter().map(|e| e.count.map(|c| c.get())).collect();
+        assert_eq!(counts, [Some(2), Some(1), Some(4)]);
     }
 
     /// Every constant the kernel shares with the core has the core's value: the method

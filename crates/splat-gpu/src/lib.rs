@@ -24,6 +24,7 @@ mod layout;
 pub mod node;
 pub mod progressive;
 pub mod raster;
+mod reflect;
 pub mod sort;
 mod split;
 mod timing;
@@ -42,7 +43,7 @@ pub use raster::{
     DepthPick, FirstHits, GpuRasterizer, GpuSplat, RasterPipelines, RasterScene, RasterSplit, RasterTimings,
 };
 pub use sort::RadixSort;
-pub use split::Split;
+pub use split::{PartBindings, Split};
 pub use trace::{
     DISPATCHES_PER_SUBMIT, FRAMES_PER_DISPATCH, GpuTracer, LOOP_BUDGET, MAX_LAYERED_BOUNCES, MethodParams, TRACE_WGSL,
     TracePipeline, TraceSplit,

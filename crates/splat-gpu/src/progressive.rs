@@ -49,7 +49,7 @@ use splat_core::trace::Method;
 pub struct ProgressiveTrace {
     targets: TraceTargets,
     uniform: wgpu::Buffer,
-    bind_group: wgpu::BindGroup,
+    bind_group: crate::split::BindGroups,
     camera: Camera,
     method: Method,
     params: MethodParams,

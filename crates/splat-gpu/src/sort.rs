@@ -22,7 +22,7 @@
 //! [`cpu_radix_sort`] is the CPU mirror of the same passes; [`depth_key`] maps a view depth to
 //! its sortable key, and filters what cannot be sorted (NaN, negative, infinite).
 
-use crate::split::{Split, SplitArray, SplitLayout};
+use crate::split::{BindGroups, PartBindings, Split, SplitArray, SplitLayout};
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
@@ -168,9 +168,10 @@ pub fn split_of(capacity: u32, max_binding: u64) -> Split {
     Split::of(array_len(capacity), 4, max_binding)
 }
 
-/// The sort kernels' arrays as `split` cuts them, extra parts from binding 7 on.
-fn split_layout(split: Split) -> SplitLayout {
-    SplitLayout { arrays: [KEYS_IN, VALS_IN, KEYS_OUT, VALS_OUT, HIST].map(|a| (a, split)).to_vec(), first_extra: 7 }
+/// The sort kernels' arrays as `split` cuts them, extra parts bound as `parts` from binding 7 on.
+fn split_layout(split: Split, parts: PartBindings) -> SplitLayout {
+    let arrays = [KEYS_IN, VALS_IN, KEYS_OUT, VALS_OUT, HIST].map(|a| (a, split)).to_vec();
+    SplitLayout { arrays, first_extra: 7, parts }
 }
 
 /// The constants the sort's shaders share with this file, declared here once.
@@ -180,9 +181,10 @@ fn constants_wgsl() -> String {
     )
 }
 
-/// The WGSL of the sort kernels over arrays cut as `split`.
-pub fn sort_wgsl(split: Split) -> String {
-    format!("{}{SORT_SOURCE}{}", constants_wgsl(), split_layout(split).wgsl())
+/// The WGSL of the sort kernels over arrays cut as `split`, their parts bound as `parts`.
+pub(crate) fn sort_wgsl(split: Split, parts: PartBindings) -> String {
+    let layout = split_layout(split, parts);
+    format!("{}{}{SORT_SOURCE}{}", layout.directives(), constants_wgsl(), layout.wgsl())
 }
 
 /// The WGSL of `sort_setup` for uniform slots `stride` bytes apart: the words of the
@@ -213,6 +215,8 @@ pub struct RadixSort {
 /// The sort's kernels for arrays cut as `split`.
 struct SortKernels {
     layout: wgpu::BindGroupLayout,
+    /// The layout of the binding arrays' group, where the split has any.
+    arrays_layout: Option<wgpu::BindGroupLayout>,
     histogram: wgpu::ComputePipeline,
     scan_reduce: wgpu::ComputePipeline,
     scan_down: wgpu::ComputePipeline,
@@ -237,7 +241,7 @@ pub struct SortBuffers {
     pub(crate) split: Split,
     capacity: u32,
     slots: Slots,
-    bind_groups: [wgpu::BindGroup; 2],
+    bind_groups: [BindGroups; 2],
     kernels: std::sync::Arc<SortKernels>,
 }
 
@@ -315,17 +319,17 @@ impl RadixSort {
         let capacity = capacity.max(1);
         let len = array_len(capacity);
         let split = split_of(capacity, ctx.max_index_binding);
-        let needed = OWN_BINDINGS + split_layout(split).extra_bindings();
-        if needed > ctx.storage_buffers {
-            let fits = |m: u64| OWN_BINDINGS + split_layout(split_of(m as u32, ctx.max_index_binding)).extra_bindings();
+        let over = |split| split_layout(split, ctx.part_bindings()).over(ctx, OWN_BINDINGS);
+        if let Some((needed, available)) = over(split) {
+            let fits = |m: u64| over(split_of(m as u32, ctx.max_index_binding)).is_none();
             return Err(GpuError::SceneOverBindings {
                 arrays: "sort keys, values and histogram",
                 kernel: "the radix sort",
                 needed,
-                available: ctx.storage_buffers,
+                available,
                 limit: ctx.max_index_binding,
                 bytes: 5 * 4 * len,
-                fits: crate::split::most_that_fit(u64::from(capacity), |m| fits(m) <= ctx.storage_buffers),
+                fits: crate::split::most_that_fit(u64::from(capacity), fits),
                 fits_what: "pairs",
             });
         }
@@ -341,7 +345,7 @@ impl RadixSort {
             mapped_at_creation: false,
         });
         let slots = self.slots(ctx);
-        let layout = split_layout(split);
+        let layout = split_layout(split, ctx.part_bindings());
         let bind = |ki: &[wgpu::Buffer], vi: &[wgpu::Buffer], ko: &[wgpu::Buffer], vo: &[wgpu::Buffer]| {
             let params = wgpu::BindGroupEntry {
                 binding: 0,
@@ -352,17 +356,10 @@ impl RadixSort {
                 }),
             };
             let arrays = [(KEYS_IN, ki), (VALS_IN, vi), (KEYS_OUT, ko), (VALS_OUT, vo), (HIST, &hist[..])];
-            let parts = arrays.iter().flat_map(|(array, buffers)| layout.bind(array, buffers));
+            let parts: Vec<_> = arrays.iter().flat_map(|(array, buffers)| layout.bind(array, buffers)).collect();
             let partials = wgpu::BindGroupEntry { binding: 6, resource: partials.as_entire_binding() };
-            let entries: Vec<_> = [params, partials]
-                .into_iter()
-                .chain(parts.map(|(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }))
-                .collect();
-            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("sort"),
-                layout: &kernels.layout,
-                entries: &entries,
-            })
+            let layouts = (&kernels.layout, kernels.arrays_layout.as_ref());
+            BindGroups::new(&ctx.device, Some("sort"), layouts.0, layouts.1, &[params, partials], &parts)
         };
         let bind_groups = [bind(&keys, &vals, &scratch[0], &scratch[1]), bind(&scratch[0], &scratch[1], &keys, &vals)];
         Ok(SortBuffers { keys, vals, hist, partials, scratch, split, capacity, slots, bind_groups, kernels })
@@ -584,12 +581,12 @@ impl Encoding<'_, '_> {
     /// else those `sort_setup` wrote for the slot.
     fn dispatch(
         &mut self,
-        group: &wgpu::BindGroup,
+        group: &BindGroups,
         slot: u64,
         pipeline: &wgpu::ComputePipeline,
         workgroups: Option<(u32, u32)>,
     ) {
-        self.pass.set_bind_group(0, group, &[(self.stride * slot) as u32]);
+        group.set_compute(self.pass, &[(self.stride * slot) as u32]);
         self.pass.set_pipeline(pipeline);
         match workgroups {
             Some((x, y)) => self.ctx.dispatch(self.pass, x, y, 1),
@@ -599,7 +596,7 @@ impl Encoding<'_, '_> {
 
     /// The scan of `levels`, whose slots start at `first`: each level below the top reduced to
     /// the next, then each level scanned from the top down (`on_device`: sized by `sort_setup`).
-    fn levels(&mut self, group: &wgpu::BindGroup, first: u64, levels: &[SortParams], on_device: bool) {
+    fn levels(&mut self, group: &BindGroups, first: u64, levels: &[SortParams], on_device: bool) {
         let kernels = &self.buf.kernels;
         let tiles = |i: usize| (!on_device).then(|| groups(levels[i].scan_len.div_ceil(SCAN_TILE)));
         for i in 0..levels.len() - 1 {
@@ -723,8 +720,9 @@ pub fn exclusive_scan(ctx: &GpuContext, sort: &RadixSort, values: &[u32]) -> Res
     buf.read(ctx, &buf.hist, 0..u64::from(count))
 }
 
-/// The sort's bindings for arrays cut as `split` (checked against `sort_wgsl`'s by a test).
-fn layout_entries(split: Split) -> Vec<wgpu::BindGroupLayoutEntry> {
+/// The sort's bindings for arrays cut as `split`, their parts bound as `parts` (checked against
+/// `sort_wgsl`'s by a test).
+fn layout_entries(split: Split, parts: PartBindings) -> Vec<wgpu::BindGroupLayoutEntry> {
     let params = crate::context::params_entry(0, wgpu::ShaderStages::COMPUTE, true, size_of::<SortParams>());
     let storage = |b, read_only| crate::context::storage_entry(b, wgpu::ShaderStages::COMPUTE, read_only);
     let mut entries = vec![
@@ -736,7 +734,8 @@ fn layout_entries(split: Split) -> Vec<wgpu::BindGroupLayoutEntry> {
         storage(5, false),
         storage(6, false),
     ];
-    entries.extend(split_layout(split).extra_entries(wgpu::ShaderStages::COMPUTE));
+    let extra = split_layout(split, parts).extra_entries(0, wgpu::ShaderStages::COMPUTE);
+    entries.extend(extra.into_iter().map(|(_, e)| e));
     entries
 }
 
@@ -761,8 +760,13 @@ impl SortKernels {
     fn new(ctx: &GpuContext, split: Split) -> Result<Self, GpuError> {
         let device = &ctx.device;
         crate::context::validated(device, || {
-            let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split));
-            let (layout, pipeline_layout) = crate::context::layouts(device, "sort", &layout_entries(split));
+            let parts = ctx.part_bindings();
+            let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split, parts));
+            let arrays =
+                split_layout(split, parts).extra_entries(crate::split::ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
+            let arrays: Vec<_> = arrays.into_iter().map(|(_, e)| e).collect();
+            let (layout, arrays_layout, pipeline_layout) =
+                crate::split::layouts(device, "sort", &layout_entries(split, parts), &arrays);
             let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
             Self {
                 histogram: pipeline("histogram"),
@@ -770,6 +774,7 @@ impl SortKernels {
                 scan_down: pipeline("scan_down"),
                 scatter: pipeline("scatter"),
                 layout,
+                arrays_layout,
             }
         })
     }
@@ -824,8 +829,11 @@ mod tests {
     #[test]
     fn sort_wgsl_validates_without_subgroup_operations() {
         // Capabilities::empty() lacks SUBGROUP, so a subgroup builtin fails validation.
-        crate::layout::wgsl_check::validate("sort", &sort_wgsl(Split::WHOLE));
-        crate::layout::wgsl_check::validate("sort (split)", &sort_wgsl(Split { parts: 3, shift: 8 }));
+        crate::layout::wgsl_check::validate("sort", &sort_wgsl(Split::WHOLE, PartBindings::Each));
+        crate::layout::wgsl_check::validate(
+            "sort (split)",
+            &sort_wgsl(Split { parts: 3, shift: 8 }, PartBindings::Each),
+        );
         crate::layout::wgsl_check::validate("sort setup", &setup_wgsl(256));
     }
 
@@ -833,8 +841,20 @@ mod tests {
     fn sort_layout_matches_the_shader() {
         let none = naga::valid::Capabilities::empty();
         for split in [Split::WHOLE, Split { parts: 3, shift: 8 }] {
-            let wgsl = sort_wgsl(split);
-            crate::layout::wgsl_check::check_layout("sort", &wgsl, none, &super::layout_entries(split));
+            let wgsl = sort_wgsl(split, PartBindings::Each);
+            crate::layout::wgsl_check::check_layout(
+                "sort",
+                &wgsl,
+                none,
+                &super::layout_entries(split, PartBindings::Each),
+            );
+            let wgsl = sort_wgsl(split, PartBindings::Array);
+            let entries = super::layout_entries(split, PartBindings::Array);
+            let layout = split_layout(split, PartBindings::Array);
+            let arrays: Vec<_> = layout.extra_entries(crate::split::ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
+            let arrays: Vec<_> = arrays.into_iter().map(|(_, e)| e).collect();
+            let groups: [&[_]; 2] = [&entries, &arrays];
+            crate::layout::wgsl_check::check_layouts("sort", &wgsl, crate::layout::wgsl_check::BINDING_ARRAYS, &groups);
         }
         crate::layout::wgsl_check::check_layout("sort setup", &setup_wgsl(32), none, &super::setup_entries());
     }

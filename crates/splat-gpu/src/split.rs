@@ -25,6 +25,25 @@
 //!
 //! An array that fits one binding gets the one-line accessor `return particles[i];`, so every
 //! scene that fits has the same module text (compiled once) and reads as it did unsplit.
+//!
+//! Where the adapter has arrays of storage buffers in one binding ([`PartBindings::Array`]), the
+//! parts after the first are one binding array instead, in bind group [`ARRAY_GROUP`], and the
+//! accessor indexes it by the part: no `switch`, and the parts count against the stage's
+//! binding-array elements (lavapipe 25: a million) rather than its storage bindings (48), so what
+//! bounds a scene is the device's memory.
+//!
+//! ```wgsl
+//! @group(0) @binding(1) var<storage, read> particles: array<Particle>;
+//! struct particles_part { e: array<Particle> }
+//! @group(1) @binding(18) var<storage, read> particles_parts: binding_array<particles_part, 2>;
+//! fn particle_at(i: u32) -> Particle {
+//!     let j = i & 1048575u;
+//!     let p = (i >> 20u) - 1u;
+//!     if p >= 2u { return particles[j]; } else {
+//!         return particles_parts[p].e[j];
+//!     }
+//! }
+//! ```
 
 use crate::context::storage_entry;
 use crate::{GpuContext, GpuError};
@@ -146,32 +165,191 @@ impl<K: PartialEq + Copy, V> PerSplit<K, V> {
     }
 }
 
+/// The bind group of binding arrays ([`PartBindings::Array`]), apart from group 0: Vulkan's
+/// update-after-bind descriptor sets, which hold them, cannot hold group 0's dynamically offset
+/// parameters (wgpu refuses "both a binding array and a dynamically offset buffer" in a group).
+pub(crate) const ARRAY_GROUP: u32 = 1;
+
+/// How a kernel binds the parts after the first of a split array.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PartBindings {
+    /// A binding each, the accessor choosing by a `switch`: on any adapter, each part counts
+    /// against the storage bindings a stage.
+    Each,
+    /// One binding array (`binding_array<…, parts − 1>`) indexed by the part, where the adapter
+    /// has arrays of storage buffers in one binding with non-uniform indexing: the parts count
+    /// against the binding-array elements a stage instead.
+    Array,
+}
+
+/// One binding of a [`SplitLayout`]: parts `parts` of its array `array`, alone or as a binding
+/// array.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct PartsBinding {
+    /// The array's index in the layout.
+    pub array: usize,
+    /// Its bind group: 0, or [`ARRAY_GROUP`] for a binding array.
+    pub group: u32,
+    /// The binding.
+    pub binding: u32,
+    /// The parts it holds.
+    pub parts: std::ops::Range<u32>,
+    /// Whether it is a binding array (of `parts.len()` buffers, which may be one).
+    pub arrayed: bool,
+}
+
+/// The buffers of one binding of a split array, as a bind group takes them ([`Bound::entry`]).
+#[derive(Clone, Debug)]
+pub(crate) struct Bound<'b> {
+    group: u32,
+    binding: u32,
+    buffers: Vec<wgpu::BufferBinding<'b>>,
+    arrayed: bool,
+}
+
+impl<'b> Bound<'b> {
+    /// Its bind group entry.
+    pub fn entry(&self) -> wgpu::BindGroupEntry<'_> {
+        let resource = if self.arrayed {
+            wgpu::BindingResource::BufferArray(&self.buffers)
+        } else {
+            wgpu::BindingResource::Buffer(self.buffers[0].clone())
+        };
+        wgpu::BindGroupEntry { binding: self.binding, resource }
+    }
+}
+
+/// A kernel's bind groups: group 0, and [`ARRAY_GROUP`] where its split arrays have binding
+/// arrays.
+pub(crate) struct BindGroups {
+    zero: wgpu::BindGroup,
+    arrays: Option<wgpu::BindGroup>,
+}
+
+impl BindGroups {
+    /// Group 0 of `entries` and the parts of group 0 among `parts` on `layout`, and the others
+    /// (binding arrays) on `arrays_layout`, which a kernel with binding arrays has.
+    pub fn new(
+        device: &wgpu::Device,
+        label: Option<&str>,
+        layout: &wgpu::BindGroupLayout,
+        arrays_layout: Option<&wgpu::BindGroupLayout>,
+        entries: &[wgpu::BindGroupEntry],
+        parts: &[Bound],
+    ) -> Self {
+        let of = |group| parts.iter().filter(move |b| b.group == group).map(Bound::entry);
+        let zero: Vec<_> = entries.iter().cloned().chain(of(0)).collect();
+        let zero = device.create_bind_group(&wgpu::BindGroupDescriptor { label, layout, entries: &zero });
+        let arrays: Vec<_> = of(ARRAY_GROUP).collect();
+        let arrays = (!arrays.is_empty()).then(|| {
+            let layout = arrays_layout.expect("a kernel with binding arrays has their group's layout");
+            device.create_bind_group(&wgpu::BindGroupDescriptor { label, layout, entries: &arrays })
+        });
+        Self { zero, arrays }
+    }
+
+    /// An auto-layout compute pipeline's groups of `entries` and the split arrays' `parts`.
+    pub fn auto(
+        device: &wgpu::Device,
+        label: Option<&str>,
+        pipeline: &wgpu::ComputePipeline,
+        entries: &[wgpu::BindGroupEntry],
+        parts: &[Bound],
+    ) -> Self {
+        let arrays = parts.iter().any(|b| b.group == ARRAY_GROUP).then(|| pipeline.get_bind_group_layout(ARRAY_GROUP));
+        Self::new(device, label, &pipeline.get_bind_group_layout(0), arrays.as_ref(), entries, parts)
+    }
+
+    /// Set them in a compute pass, group 0 at dynamic `offsets`.
+    pub fn set_compute(&self, pass: &mut wgpu::ComputePass<'_>, offsets: &[u32]) {
+        pass.set_bind_group(0, &self.zero, offsets);
+        if let Some(arrays) = &self.arrays {
+            pass.set_bind_group(ARRAY_GROUP, arrays, &[]);
+        }
+    }
+
+    /// Set them in a render pass, group 0 at dynamic `offsets`.
+    pub fn set_render(&self, pass: &mut wgpu::RenderPass<'_>, offsets: &[u32]) {
+        pass.set_bind_group(0, &self.zero, offsets);
+        if let Some(arrays) = &self.arrays {
+            pass.set_bind_group(ARRAY_GROUP, arrays, &[]);
+        }
+    }
+}
+
+/// The bind group layouts of a kernel's own `entries` and its split arrays' binding arrays
+/// (`arrays`, [`SplitLayout::extra_entries`] of [`ARRAY_GROUP`]; none, no such group), and the
+/// pipeline layout of both.
+pub(crate) fn layouts(
+    device: &wgpu::Device,
+    label: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+    arrays: &[wgpu::BindGroupLayoutEntry],
+) -> (wgpu::BindGroupLayout, Option<wgpu::BindGroupLayout>, wgpu::PipelineLayout) {
+    let layout =
+        |entries| device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
+    let (zero, arrays) = (layout(entries), (!arrays.is_empty()).then(|| layout(arrays)));
+    let groups: Vec<_> = std::iter::once(Some(&zero)).chain(arrays.as_ref().map(Some)).collect();
+    let pipeline = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &groups,
+        immediate_size: 0,
+    });
+    (zero, arrays, pipeline)
+}
+
 /// A kernel's split arrays: each with its cut, part 0 at the array's own binding and the other
-/// parts at bindings from `first_extra` on, array by array.
+/// parts at bindings from `first_extra` on, array by array (one binding array an array with
+/// [`PartBindings::Array`]).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub(crate) struct SplitLayout {
     pub arrays: Vec<(SplitArray, Split)>,
     pub first_extra: u32,
+    pub parts: PartBindings,
 }
 
 impl SplitLayout {
-    /// The bindings of `array`'s parts, each with its buffer in `parts` (the array's buffers in
-    /// part order), as a bind group of a kernel of this layout takes them; none when the layout
-    /// has no such array.
-    pub fn bind<'b>(&self, array: &SplitArray, parts: &'b [wgpu::Buffer]) -> Vec<(u32, &'b wgpu::Buffer)> {
+    /// The bindings of `array`'s parts, each with its buffers from `parts` (the array's buffers
+    /// in part order), as a bind group of a kernel of this layout takes them; none when the
+    /// layout has no such array.
+    pub fn bind<'b>(&self, array: &SplitArray, parts: &'b [wgpu::Buffer]) -> Vec<Bound<'b>> {
         let Some(a) = self.arrays.iter().position(|(x, _)| x == array) else { return Vec::new() };
-        self.bindings().into_iter().filter(|b| b.0 == a).map(|(_, p, binding)| (binding, &parts[p as usize])).collect()
+        self.bindings()
+            .into_iter()
+            .filter(|b| b.array == a)
+            .map(|b| Bound {
+                group: b.group,
+                binding: b.binding,
+                buffers: parts[b.parts.start as usize..b.parts.end as usize]
+                    .iter()
+                    .map(wgpu::Buffer::as_entire_buffer_binding)
+                    .collect(),
+                arrayed: b.arrayed,
+            })
+            .collect()
     }
 
-    /// Every part: (array index, part, binding).
-    pub fn bindings(&self) -> Vec<(usize, u32, u32)> {
+    /// Every binding, array by array: part 0 at the array's own binding, then its other parts.
+    pub fn bindings(&self) -> Vec<PartsBinding> {
         let mut extra = self.first_extra;
         let mut out = Vec::new();
         for (a, (array, split)) in self.arrays.iter().enumerate() {
-            out.push((a, 0, array.binding));
-            for p in 1..split.parts {
-                out.push((a, p, extra));
-                extra += 1;
+            let one = |binding, p| PartsBinding { array: a, group: 0, binding, parts: p..p + 1, arrayed: false };
+            out.push(one(array.binding, 0));
+            let rest = 1..split.parts;
+            match self.parts {
+                PartBindings::Each => {
+                    for p in rest {
+                        out.push(one(extra, p));
+                        extra += 1;
+                    }
+                }
+                PartBindings::Array if !rest.is_empty() => {
+                    let (group, binding) = (ARRAY_GROUP, extra);
+                    out.push(PartsBinding { array: a, group, binding, parts: rest, arrayed: true });
+                    extra += 1;
+                }
+                PartBindings::Array => {}
             }
         }
         out
@@ -179,44 +357,100 @@ impl SplitLayout {
 
     /// Bindings beyond one per array.
     pub fn extra_bindings(&self) -> u32 {
-        self.arrays.iter().map(|(_, s)| s.parts - 1).sum()
+        self.bindings().len() as u32 - self.arrays.len() as u32
     }
 
-    /// Storage entries of the parts after the first (part 0 is the kernel's own entry).
-    pub fn extra_entries(&self, visibility: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
+    /// Buffers in binding arrays.
+    pub fn array_elements(&self) -> u32 {
+        self.bindings().iter().filter(|b| b.arrayed).map(|b| b.parts.len() as u32).sum()
+    }
+
+    /// Where a kernel with `own` storage bindings of its own and this layout's needs more of a
+    /// shader stage than `ctx` gives: (needed, available), of storage bindings or, past them,
+    /// of binding-array elements; `None` when it fits.
+    pub fn over(&self, ctx: &GpuContext, own: u32) -> Option<(u32, u32)> {
+        let bindings = own + self.extra_bindings();
+        if bindings > ctx.storage_buffers {
+            return Some((bindings, ctx.storage_buffers));
+        }
+        let elements = self.array_elements();
+        (elements > ctx.binding_array_elements).then_some((elements, ctx.binding_array_elements))
+    }
+
+    /// Storage entries of bind group `group` for the parts after the first (part 0 is the
+    /// kernel's own entry), each with the array it holds parts of.
+    pub fn extra_entries(
+        &self,
+        group: u32,
+        visibility: wgpu::ShaderStages,
+    ) -> Vec<(usize, wgpu::BindGroupLayoutEntry)> {
         self.bindings()
             .into_iter()
-            .filter(|&(_, p, _)| p > 0)
-            .map(|(a, _, b)| storage_entry(b, visibility, self.arrays[a].0.setter.is_none()))
+            .filter(|b| b.parts.start > 0 && b.group == group)
+            .map(|b| {
+                let entry = wgpu::BindGroupLayoutEntry {
+                    count: if b.arrayed { std::num::NonZeroU32::new(b.parts.len() as u32) } else { None },
+                    ..storage_entry(b.binding, visibility, self.arrays[b.array].0.setter.is_none())
+                };
+                (b.array, entry)
+            })
             .collect()
     }
 
-    /// The WGSL declarations of every part and each array's accessor (and setter).
+    /// What must open a module with this layout's declarations, before any other item: the
+    /// enable directive of binding arrays where it has any.
+    pub fn directives(&self) -> &'static str {
+        if self.array_elements() > 0 { "enable wgpu_binding_array;\n" } else { "" }
+    }
+
+    /// The WGSL declarations of every part and each array's accessor (and setter), to follow
+    /// [`SplitLayout::directives`] and the kernel's source.
     pub fn wgsl(&self) -> String {
         let mut out = String::from("\n// Generated by splat_gpu::split: the scene arrays and their accessors.\n");
         let bindings = self.bindings();
         for (a, (array, split)) in self.arrays.iter().enumerate() {
             let SplitArray { var, accessor, ty, .. } = array;
-            for &(_, p, binding) in bindings.iter().filter(|b| b.0 == a) {
-                let name = part_name(var, p);
-                let access = array.access();
-                let _ = writeln!(out, "@group(0) @binding({binding}) var<storage, {access}> {name}: array<{ty}>;");
+            let access = array.access();
+            for b in bindings.iter().filter(|b| b.array == a) {
+                let (group, binding) = (b.group, b.binding);
+                if b.arrayed {
+                    let n = b.parts.len();
+                    let _ = writeln!(out, "struct {var}_part {{ e: array<{ty}> }}");
+                    let _ = writeln!(
+                        out,
+                        "@group({group}) @binding({binding}) var<storage, {access}> {var}_parts: binding_array<{var}_part, {n}>;"
+                    );
+                } else {
+                    let name = part_name(var, b.parts.start);
+                    let _ = writeln!(
+                        out,
+                        "@group({group}) @binding({binding}) var<storage, {access}> {name}: array<{ty}>;"
+                    );
+                }
             }
             let _ = writeln!(out, "fn {accessor}(i: u32) -> {ty} {{");
-            if split.parts == 1 {
-                let _ = writeln!(out, "    return {var}[i];");
-            } else {
-                let _ = writeln!(out, "    var v: {ty};");
-                write_switch(&mut out, var, *split, "v = {}[j];");
-                out.push_str("    return v;\n");
+            match (split.parts, self.parts) {
+                (1, _) => {
+                    let _ = writeln!(out, "    return {var}[i];");
+                }
+                (_, PartBindings::Each) => {
+                    let _ = writeln!(out, "    var v: {ty};");
+                    write_switch(&mut out, var, *split, "v = {}[j];");
+                    out.push_str("    return v;\n");
+                }
+                (_, PartBindings::Array) => {
+                    write_part_branch(&mut out, var, *split, "return {};");
+                }
             }
             out.push_str("}\n");
             if let Some(setter) = array.setter {
                 let _ = writeln!(out, "fn {setter}(i: u32, v: {ty}) {{");
-                if split.parts == 1 {
-                    let _ = writeln!(out, "    {var}[i] = v;");
-                } else {
-                    write_switch(&mut out, var, *split, "{}[j] = v;");
+                match (split.parts, self.parts) {
+                    (1, _) => {
+                        let _ = writeln!(out, "    {var}[i] = v;");
+                    }
+                    (_, PartBindings::Each) => write_switch(&mut out, var, *split, "{}[j] = v;"),
+                    (_, PartBindings::Array) => write_part_branch(&mut out, var, *split, "{} = v;"),
                 }
                 out.push_str("}\n");
             }
@@ -234,6 +468,20 @@ fn write_switch(out: &mut String, var: &str, split: Split, statement: &str) {
         let _ = writeln!(out, "        case {p}u: {{ {} }}", statement.replace("{}", &part_name(var, p)));
     }
     let _ = writeln!(out, "        default: {{ {} }}", statement.replace("{}", var));
+    out.push_str("    }\n");
+}
+
+/// Element i in part 0 or in the binding array of the others: `statement` with `{}` the
+/// element, run in the branch of its part. An index past the array takes part 0, as the
+/// `switch`'s default does: a binding array has no robust access past its count.
+fn write_part_branch(out: &mut String, var: &str, split: Split, statement: &str) {
+    let _ = writeln!(out, "    let j = i & {}u;", (1u64 << split.shift) - 1);
+    // The part's place in the binding array: part 0 wraps to the largest u32.
+    let _ = writeln!(out, "    let p = (i >> {}u) - 1u;", split.shift);
+    let first = statement.replace("{}", &format!("{var}[j]"));
+    let _ = writeln!(out, "    if p >= {}u {{ {first} }} else {{", split.parts - 1);
+    let rest = format!("{var}_parts[p].e[j]");
+    let _ = writeln!(out, "        {}", statement.replace("{}", &rest));
     out.push_str("    }\n");
 }
 
@@ -340,33 +588,70 @@ mod tests {
         assert_eq!(most_that_fit(1000, |_| false), 0);
     }
 
+    /// Parse and validate `source`, with binding arrays where `arrays`.
+    fn validate(source: &str, arrays: bool) {
+        let module =
+            naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{}\n{source}", e.emit_to_string(source)));
+        let capabilities = if arrays {
+            naga::valid::Capabilities::STORAGE_BUFFER_BINDING_ARRAY
+                | naga::valid::Capabilities::STORAGE_BUFFER_BINDING_ARRAY_NON_UNIFORM_INDEXING
+        } else {
+            naga::valid::Capabilities::empty()
+        };
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{e:?}\n{source}"));
+    }
+
     #[test]
     fn the_generated_accessors_validate_and_number_their_bindings_in_order() {
-        let layout = SplitLayout { arrays: vec![(A, Split { parts: 3, shift: 5 }), (B, Split::WHOLE)], first_extra: 7 };
-        assert_eq!(layout.bindings(), vec![(0, 0, 1), (0, 1, 7), (0, 2, 8), (1, 0, 2)]);
-        assert_eq!(layout.extra_bindings(), 2);
-        let source = format!(
-            "{}\n@compute @workgroup_size(1) fn main() {{ let v = x_at(70u) + vec4<f32>(f32(y_at(3u))); y_set(2u, 5u); }}",
-            layout.wgsl()
-        );
-        let module =
-            naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}\n{source}", e.emit_to_string(&source)));
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-            .validate(&module)
-            .expect("valid");
+        let arrays = vec![(A, Split { parts: 3, shift: 5 }), (B, Split::WHOLE)];
+        let layout = SplitLayout { arrays: arrays.clone(), first_extra: 7, parts: PartBindings::Each };
+        let at = |b: &PartsBinding| (b.array, b.group, b.binding, b.parts.clone(), b.arrayed);
+        let bindings: Vec<_> = layout.bindings().iter().map(at).collect();
+        let one = |a, binding, p: u32| (a, 0, binding, p..p + 1, false);
+        assert_eq!(bindings, vec![one(0, 1, 0), one(0, 7, 1), one(0, 8, 2), one(1, 2, 0)]);
+        assert_eq!((layout.extra_bindings(), layout.array_elements()), (2, 0));
+        let main =
+            "@compute @workgroup_size(1) fn main() { let v = x_at(70u) + vec4<f32>(f32(y_at(3u))); y_set(2u, 5u); }";
+        let source = format!("{}{}\n{main}", layout.directives(), layout.wgsl());
+        validate(&source, false);
         assert!(source.contains("case 2u: { v = xs_2[j]; }"), "{source}");
         assert!(source.contains("fn y_at(i: u32) -> u32 {\n    return ys[i];\n}"), "{source}");
         assert!(source.contains("var<storage, read_write> ys: array<u32>;"), "{source}");
         assert!(source.contains("fn y_set(i: u32, v: u32) {\n    ys[i] = v;\n}"), "{source}");
-        let split = SplitLayout { arrays: vec![(B, Split { parts: 2, shift: 4 })], first_extra: 3 };
+        let split =
+            SplitLayout { arrays: vec![(B, Split { parts: 2, shift: 4 })], first_extra: 3, parts: PartBindings::Each };
         assert!(split.wgsl().contains("case 1u: { ys_1[j] = v; }"), "{}", split.wgsl());
         assert!(
-            !split.extra_entries(wgpu::ShaderStages::COMPUTE)[0].ty.eq(&storage_entry(
+            !split.extra_entries(0, wgpu::ShaderStages::COMPUTE)[0].1.ty.eq(&storage_entry(
                 3,
                 wgpu::ShaderStages::COMPUTE,
                 true
             )
             .ty)
         );
+        // As binding arrays: one binding for the parts after the first, of their count.
+        let layout = SplitLayout { arrays, first_extra: 7, parts: PartBindings::Array };
+        let bindings: Vec<_> = layout.bindings().iter().map(at).collect();
+        assert_eq!(bindings, vec![one(0, 1, 0), (0, ARRAY_GROUP, 7, 1..3, true), one(1, 2, 0)]);
+        assert_eq!((layout.extra_bindings(), layout.array_elements()), (1, 2));
+        assert!(layout.extra_entries(0, wgpu::ShaderStages::COMPUTE).is_empty());
+        let arrays = layout.extra_entries(ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
+        let counts: Vec<_> = arrays.iter().map(|(a, e)| (*a, e.binding, e.count)).collect();
+        assert_eq!(counts, [(0, 7, std::num::NonZeroU32::new(2))]);
+        let source = format!("{}{}\n{main}", layout.directives(), layout.wgsl());
+        validate(&source, true);
+        assert!(
+            source.contains("@group(1) @binding(7) var<storage, read> xs_parts: binding_array<xs_part, 2>;"),
+            "{source}"
+        );
+        assert!(source.contains("if p >= 2u { return xs[j]; } else {\n        return xs_parts[p].e[j];"), "{source}");
+        let split =
+            SplitLayout { arrays: vec![(B, Split { parts: 2, shift: 4 })], first_extra: 3, parts: PartBindings::Array };
+        let main = "@compute @workgroup_size(1) fn main() { y_set(20u, y_at(3u)); }";
+        let source = format!("{}{}\n{main}", split.directives(), split.wgsl());
+        validate(&source, true);
+        assert!(source.contains("let j = i & 15u;") && source.contains("ys_parts[p].e[j] = v;"), "{source}");
     }
 }

@@ -16,7 +16,7 @@
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
-use crate::split::{Split, SplitArray, SplitLayout};
+use crate::split::{BindGroups, PartBindings, Split, SplitArray, SplitLayout};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
@@ -78,12 +78,19 @@ pub struct TraceSplit {
     pub sh: Split,
     /// Their precision ([`splat_core::RenderSettings::sh_storage`]).
     pub sh_storage: ShStorage,
+    /// How the parts after the first are bound (the device's way).
+    pub parts: PartBindings,
 }
 
 impl TraceSplit {
     /// Every array in one binding.
-    pub const WHOLE: TraceSplit =
-        TraceSplit { particles: Split::WHOLE, nodes: Split::WHOLE, sh: Split::WHOLE, sh_storage: ShStorage::F32 };
+    pub const WHOLE: TraceSplit = TraceSplit {
+        particles: Split::WHOLE,
+        nodes: Split::WHOLE,
+        sh: Split::WHOLE,
+        sh_storage: ShStorage::F32,
+        parts: PartBindings::Each,
+    };
 
     /// The split of arrays of these lengths (elements; SH coefficients stored as `sh_storage`)
     /// on `ctx`, refused when it needs more bindings than the adapter has
@@ -123,18 +130,17 @@ impl TraceSplit {
         let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
         let arrays = [&PARTICLES, &NODES, &sh_array];
         let [particles, nodes, sh] = std::array::from_fn(|k| Split::of(lengths[k], arrays[k].stride, ctx.max_binding));
-        TraceSplit { particles, nodes, sh, sh_storage }
+        TraceSplit { particles, nodes, sh, sh_storage, parts: ctx.part_bindings() }
     }
 
     /// Whether arrays of `lengths` fit the adapter: element indices within u32 (the kernel's),
-    /// every element within a binding, their parts within its storage bindings a stage.
+    /// every element within a binding, their parts within what a stage binds.
     fn fits(ctx: &GpuContext, lengths: [u64; 3], sh_storage: ShStorage) -> bool {
         let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
         let strides = [PARTICLES.stride, NODES.stride, sh_array.stride];
-        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
         lengths.iter().all(|&n| n <= u64::from(u32::MAX))
             && strides.iter().all(|&stride| stride <= ctx.max_binding)
-            && Self::split(ctx, lengths, sh_storage).layout().extra_bindings() <= available
+            && Self::split(ctx, lengths, sh_storage).layout().over(ctx, OWN_BINDINGS).is_none()
     }
 
     /// The split of arrays of `lengths` (particles, nodes, SH), refused with the particles that
@@ -154,11 +160,13 @@ impl TraceSplit {
         let n = like[0].max(1);
         let scaled = |m: u64| like.map(|len| (u128::from(len) * u128::from(m) / u128::from(n)) as u64);
         let fits = crate::split::most_that_fit(n, |m| Self::fits(ctx, scaled(m), sh_storage));
+        // Over its storage bindings, or past them, over its elements of binding arrays.
+        let (needed, available) = split.layout().over(ctx, OWN_BINDINGS).unwrap_or((0, 0));
         Err(GpuError::SceneOverBindings {
             arrays: "particles, BVH nodes and SH",
             kernel: "the ray tracer",
-            needed: split.layout().extra_bindings() + OWN_BINDINGS,
-            available: ctx.storage_buffers,
+            needed,
+            available,
             limit: ctx.max_binding,
             bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),
             fits,
@@ -171,12 +179,15 @@ impl TraceSplit {
         SplitLayout {
             arrays: vec![(PARTICLES, self.particles), (NODES, self.nodes), (sh, self.sh)],
             first_extra: OWN_BINDINGS,
+            parts: self.parts,
         }
     }
 
     /// The kernel's WGSL for this split.
     pub(crate) fn wgsl(&self) -> String {
-        format!("{TRACE_SOURCE}{}{}", self.layout().wgsl(), layout::sh_array(self.sh_storage, SH_BINDING).1)
+        let split = self.layout();
+        let sh_decode = layout::sh_array(self.sh_storage, SH_BINDING).1;
+        format!("{}{TRACE_SOURCE}{}{sh_decode}", split.directives(), split.wgsl())
     }
 }
 /// Dispatches encoded into one submission.
@@ -273,6 +284,8 @@ pub(crate) struct TraceKernel {
     split: TraceSplit,
     pub(crate) pipeline: wgpu::ComputePipeline,
     pub(crate) layout: wgpu::BindGroupLayout,
+    /// The layout of its binding arrays' group, where its split has any.
+    arrays_layout: Option<wgpu::BindGroupLayout>,
     module: wgpu::ShaderModule,
     pipeline_layout: wgpu::PipelineLayout,
     /// The kernel with `HYBRID_MODE` on, compiled on the first hybrid render.
@@ -320,24 +333,30 @@ impl TracePipeline {
             storage(16, true),
             storage(17, true),
         ];
-        entries.extend(split.layout().extra_entries(wgpu::ShaderStages::COMPUTE));
+        entries.extend(split.layout().extra_entries(0, wgpu::ShaderStages::COMPUTE).into_iter().map(|(_, e)| e));
         entries
+    }
+
+    /// The kernel's bindings in its binding arrays' group for `split` (none, no such group).
+    pub(crate) fn array_entries(split: &TraceSplit) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let entries = split.layout().extra_entries(crate::split::ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
+        entries.into_iter().map(|(_, e)| e).collect()
     }
 }
 
 impl TraceKernel {
     fn new(ctx: &GpuContext, split: TraceSplit) -> Result<Self, GpuError> {
         let device = &ctx.device;
-        let (module, layout, pipeline_layout, pipeline) = crate::context::validated(device, || {
+        let (module, layout, arrays_layout, pipeline_layout, pipeline) = crate::context::validated(device, || {
             let module = crate::context::shader_module(device, "trace.wgsl", &split.wgsl());
-            let (layout, pipeline_layout) =
-                crate::context::layouts(device, "trace", &TracePipeline::layout_entries(&split));
+            let (entries, arrays) = (TracePipeline::layout_entries(&split), TracePipeline::array_entries(&split));
+            let (layout, arrays_layout, pipeline_layout) = crate::split::layouts(device, "trace", &entries, &arrays);
             let pipeline = compute_pipeline(device, &module, Some(&pipeline_layout), "main");
-            (module, layout, pipeline_layout, pipeline)
+            (module, layout, arrays_layout, pipeline_layout, pipeline)
         })?;
         let (hybrid, path, gather) =
             (std::sync::OnceLock::new(), std::sync::OnceLock::new(), std::sync::OnceLock::new());
-        Ok(Self { split, pipeline, layout, module, pipeline_layout, hybrid, path, gather })
+        Ok(Self { split, pipeline, layout, arrays_layout, module, pipeline_layout, hybrid, path, gather })
     }
 
     /// The hybrid pipeline's kernel (`HYBRID_MODE`: the rasterizer's samples continued, the
@@ -601,7 +620,7 @@ impl<'a> GpuTracer<'a> {
         targets: &TraceTargets,
         first_hits: Option<&DeviceFirstHits>,
         path: Option<&wgpu::Buffer>,
-    ) -> wgpu::BindGroup {
+    ) -> BindGroups {
         let params = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
             buffer: uniform,
             offset: 0,
@@ -627,24 +646,21 @@ impl<'a> GpuTracer<'a> {
             first_hits.and_then(|f| f.fragments.as_ref()).unwrap_or(&self.no_fragments),
         ];
         // The parts after the first of the split arrays.
-        let arrays = [&self.particles, &self.nodes, &self.sh];
-        let parts = self.kernel.split.layout().bindings().into_iter().filter(|&(_, p, _)| p > 0);
-        let parts = parts.map(|(a, p, binding)| (arrays[a][p as usize].as_entire_binding(), binding));
+        let layout = self.kernel.split.layout();
+        let arrays = [(&PARTICLES, &self.particles), (&NODES, &self.nodes), (&layout.arrays[2].0, &self.sh)];
+        let parts: Vec<_> =
+            arrays.iter().flat_map(|(array, buffers)| layout.bind(array, buffers).into_iter().skip(1)).collect();
         let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(wgpu::BindGroupEntry { binding: 0, resource: params })
             .chain(
                 buffers
                     .iter()
-                    .map(|b| b.as_entire_binding())
                     .zip(1..)
-                    .chain(parts)
-                    .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource }),
+                    .map(|(b, binding)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }),
             )
             .collect();
-        self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("trace"),
-            layout: &self.kernel.layout,
-            entries: &entries,
-        })
+        let kernel = &self.kernel;
+        let layouts = (&kernel.layout, kernel.arrays_layout.as_ref());
+        BindGroups::new(&self.ctx.device, Some("trace"), layouts.0, layouts.1, &entries, &parts)
     }
 
     /// The scene this tracer holds.
@@ -690,7 +706,7 @@ impl<'a> GpuTracer<'a> {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("gather"), timestamp_writes: None });
             pass.set_pipeline(self.kernel.gather(ctx)?);
-            pass.set_bind_group(0, &group, &[0]);
+            group.set_compute(&mut pass, &[0]);
             let (gx, gy) = crate::sort::groups(longest.div_ceil(64) as u32);
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
@@ -824,7 +840,7 @@ impl Run<'_> {
         let mut gpu_time = Duration::ZERO;
         let timer = ctx.timestamps.then(|| Timer::new(ctx));
         // Submit the dispatches of `params`, one batch per submission.
-        let mut submit = |bind_group: &wgpu::BindGroup, params: &[Params]| -> Result<(), GpuError> {
+        let mut submit = |bind_group: &BindGroups, params: &[Params]| -> Result<(), GpuError> {
             for batch in params.chunks(DISPATCHES_PER_SUBMIT as usize) {
                 let mut encoder =
                     ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
@@ -997,7 +1013,7 @@ pub(crate) fn dispatch_batch(
     ctx: &GpuContext,
     pass: &mut wgpu::ComputePass,
     uniform: &wgpu::Buffer,
-    bind_group: &wgpu::BindGroup,
+    bind_group: &BindGroups,
     batch: &[Params],
     camera: &Camera,
 ) {
@@ -1008,7 +1024,7 @@ pub(crate) fn dispatch_batch(
     }
     ctx.queue.write_buffer(uniform, 0, &bytes);
     for slot in 0..batch.len() {
-        pass.set_bind_group(0, bind_group, &[(slot * stride) as u32]);
+        bind_group.set_compute(pass, &[(slot * stride) as u32]);
         ctx.dispatch(pass, camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
     }
 }

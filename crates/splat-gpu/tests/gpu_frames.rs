@@ -346,8 +346,9 @@ const LIT_TOLERANCE: f32 = 1e-3;
 /// arrays through the accessors alone (`the_kernel_reads_the_scene_arrays_through_their_accessors`)
 /// and the whole scene's frames equal to the CPU's (the tests above), a split scene renders the
 /// whole scene's frames; this checks it element by element without compiling the whole kernel
-/// for each split (lavapipe: 40 s for 2 × 2 × 2 parts, 80 s for 3 × 2 × 7). A part bound at
-/// another's binding, or an element read from the wrong part, fails.
+/// for each split (lavapipe: 40 s for 2 × 2 × 2 parts, 80 s for 3 × 2 × 7). Each split with its
+/// parts after the first in binding arrays, and one binding each. A part bound at another's
+/// binding, or an element read from the wrong part, fails.
 #[test]
 fn split_scenes_read_every_element_of_the_whole_ones() {
     let Some(ctx) = context() else { return };
@@ -372,15 +373,17 @@ fn split_scenes_read_every_element_of_the_whole_ones() {
     // (four rows each): parts of 1,024, 1,024 and 4,096 elements at 64 KiB, of 2,048, 2,048
     // and 8,192 at 128 KiB.
     for (limit, parts) in [(64 * 1024, [3, 2, 7]), (128 * 1024, [2, 1, 4])] {
-        let small = GpuContext::new().unwrap().with_binding_limit(limit);
-        let pipeline = splat_gpu::TracePipeline::new(&small).unwrap();
-        let split = GpuTracer::new(&small, &pipeline, &trace).expect("the split scene binds");
-        let s = split.split();
-        assert_eq!([s.particles.parts, s.nodes.parts, s.sh.parts], parts, "{s:?}");
-        let read = split.arrays_as_read().unwrap();
-        for (k, name) in ["particle", "node", "SH"].iter().enumerate() {
-            let first = whole[k].iter().zip(&read[k]).position(|(a, b)| a != b);
-            assert!(first.is_none() && whole[k].len() == read[k].len(), "{limit} bytes: {name} row {first:?} differs");
+        for (bound, small) in common::part_binding_contexts(|c| c.with_binding_limit(limit)) {
+            let pipeline = splat_gpu::TracePipeline::new(&small).unwrap();
+            let split = GpuTracer::new(&small, &pipeline, &trace).expect("the split scene binds");
+            let s = split.split();
+            assert_eq!(([s.particles.parts, s.nodes.parts, s.sh.parts], s.parts), (parts, bound), "{s:?}");
+            let read = split.arrays_as_read().unwrap();
+            for (k, name) in ["particle", "node", "SH"].iter().enumerate() {
+                let first = whole[k].iter().zip(&read[k]).position(|(a, b)| a != b);
+                let same = first.is_none() && whole[k].len() == read[k].len();
+                assert!(same, "{limit} bytes, {bound:?}: {name} row {first:?} differs");
+            }
         }
     }
 }
@@ -425,17 +428,33 @@ fn compact_sh_reads_the_cpus_rounded_coefficients() {
 
 /// A scene whose split needs more bindings than the adapter has is refused (before its BVH is
 /// built) with the sizes, the limits and how many particles like these would fit; that count
-/// fits and 10 % more does not.
+/// fits and 10 % more does not: with the parts one binding each (over the storage bindings a
+/// stage) and in binding arrays (over 24 buffers in them a stage).
 #[test]
 fn scenes_over_the_bindings_are_refused_with_what_fits() {
     let Some(ctx) = context() else { return };
-    let small = GpuContext::new().unwrap().with_binding_limit(4096);
+    for (_, small) in common::part_binding_contexts(|c| c.with_binding_limit(4096).with_binding_array_elements(24)) {
+        refused_with_what_fits(ctx, &small);
+    }
+    // The adapter's own bindings hold a scene of this kind ten thousand times as large, in
+    // arrays of buffers (lavapipe 25: 48 storage bindings and a million buffers in arrays a
+    // stage, of 128 MiB each).
+    if ctx.binding_array_elements_per_stage() > 0 {
+        let (scene, _) = fixture("cloud", 8, 8);
+        let n = 10_000 * scene.particles.len() as u64;
+        assert!(splat_gpu::TraceSplit::capacity(ctx, scene.sh_degree, ShStorage::F32) >= n);
+        assert!(splat_gpu::RasterSplit::capacity(ctx) >= n);
+    }
+}
+
+/// [`scenes_over_the_bindings_are_refused_with_what_fits`] on `small`.
+fn refused_with_what_fits(ctx: &'static GpuContext, small: &GpuContext) {
     let (scene, _) = fixture("cloud", 8, 8);
     let trace = TraceScene::new(&scene, RenderSettings::default()).unwrap();
-    let pipeline = splat_gpu::TracePipeline::new(&small).unwrap();
+    let pipeline = splat_gpu::TracePipeline::new(small).unwrap();
     let (n, nodes) = (scene.particles.len() as u64, trace.bvh().len() as u64);
     let coefficients = splat_core::particle::sh_coeff_count(scene.sh_degree) as u64;
-    let fits = match GpuTracer::new(&small, &pipeline, &trace) {
+    let fits = match GpuTracer::new(small, &pipeline, &trace) {
         Err(e @ GpuError::SceneOverBindings { limit: 4096, fits, .. }) => {
             let msg = e.to_string();
             assert!(msg.contains("4096 bytes") && msg.contains(&format!("fits about {fits} particles")), "{msg}");
@@ -444,18 +463,18 @@ fn scenes_over_the_bindings_are_refused_with_what_fits() {
         Err(e) => panic!("unexpected error {e}"),
         Ok(_) => panic!("a scene over the bindings was accepted"),
     };
-    let like = |m: u64| splat_gpu::TraceSplit::new(&small, [m, nodes * m / n, coefficients * m], ShStorage::F32);
+    let like = |m: u64| splat_gpu::TraceSplit::new(small, [m, nodes * m / n, coefficients * m], ShStorage::F32);
     assert!(fits > 0 && fits < n && like(fits).is_ok() && like(fits + fits / 10).is_err(), "fits {fits} of {n}");
-    let early = splat_gpu::TraceSplit::at_least(&small, &scene, &RenderSettings::default());
+    let early = splat_gpu::TraceSplit::at_least(small, &scene, &RenderSettings::default());
     assert!(matches!(early, Err(GpuError::SceneOverBindings { .. })), "{early:?}");
     assert!(GpuTracer::new(ctx, trace_pipeline(ctx), &trace).is_ok());
 
     // The capacities `splat bench` prints are the largest scenes accepted: c particles (with the
     // wide nodes the estimate gives them) are, c + 1 are not; u8 SH holds more than f32; the
     // adapter's own limits hold this scene, and the estimate is within 10 % of its nodes.
-    let capacity = |storage| splat_gpu::TraceSplit::capacity(&small, scene.sh_degree, storage);
+    let capacity = |storage| splat_gpu::TraceSplit::capacity(small, scene.sh_degree, storage);
     let about = splat_gpu::TraceSplit::nodes_about;
-    let with = |m: u64, storage| splat_gpu::TraceSplit::new(&small, [m, about(m), coefficients * m], storage);
+    let with = |m: u64, storage| splat_gpu::TraceSplit::new(small, [m, about(m), coefficients * m], storage);
     assert!(about(n).abs_diff(nodes) * 10 <= nodes, "{nodes} nodes for {n} particles, estimated {}", about(n));
     for storage in [ShStorage::F32, ShStorage::U8] {
         let c = capacity(storage);
@@ -463,8 +482,8 @@ fn scenes_over_the_bindings_are_refused_with_what_fits() {
     }
     assert!(capacity(ShStorage::U8) > capacity(ShStorage::F32));
     assert!(splat_gpu::TraceSplit::capacity(ctx, scene.sh_degree, ShStorage::F32) >= n);
-    let r = splat_gpu::RasterSplit::capacity(&small) as usize;
-    let raster = |m| splat_gpu::RasterSplit::new(&small, m, ShStorage::F32);
+    let r = splat_gpu::RasterSplit::capacity(small) as usize;
+    let raster = |m| splat_gpu::RasterSplit::new(small, m, ShStorage::F32);
     assert!(r > 0 && raster(r).is_ok() && raster(r + 1).is_err(), "splatting capacity {r}");
     assert!(splat_gpu::RasterSplit::capacity(ctx) >= n);
 }

@@ -59,15 +59,31 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
         })
         .collect();
     cases.push(("depths, NaN filtered".into(), depths.iter().filter_map(|&z| depth_key(z)).collect(), 32));
-    // Split over bindings of 16,384 keys: 5 parts of each array.
-    let small = GpuContext::new().unwrap().with_index_binding_limit(64 * 1024);
-    let small_pipes = RasterPipelines::new(&small).unwrap();
+    // Split over bindings of 16,384 keys: 5 parts of each array, in binding arrays and one
+    // binding each.
+    let smalls: Vec<_> = common::part_binding_contexts(|c| c.with_index_binding_limit(64 * 1024))
+        .into_iter()
+        .map(|(bound, small)| {
+            let pipes = RasterPipelines::new(&small).unwrap();
+            (bound, small, pipes)
+        })
+        .collect();
+    // The sorts a case runs on: the whole one, or each split one.
+    let on = |split: bool| -> Vec<(&GpuContext, &splat_gpu::RadixSort, String)> {
+        if !split {
+            return vec![(ctx, sort, String::new())];
+        }
+        smalls.iter().map(|(bound, small, pipes)| (small, pipes.sort(), format!(" ({bound:?})"))).collect()
+    };
     cases.push(("random 70000, split".into(), (0..70_000).map(|_| rng.next_u64() as u32).collect(), 32));
-    for (name, keys, bits) in cases {
+    for ((name, keys, bits), (ctx, sort, bound)) in
+        cases.iter().flat_map(|case| on(case.0.ends_with("split")).into_iter().map(move |on| (case, on)))
+    {
+        let (keys, bits) = (keys.as_slice(), *bits);
+        let name = format!("{name}{bound}");
         let vals: Vec<u32> = (0..keys.len() as u32).collect();
-        let (ctx, sort) = if name.ends_with("split") { (&small, small_pipes.sort()) } else { (ctx, sort) };
-        let gpu = sort_pairs(ctx, sort, &keys, &vals, bits).unwrap();
-        assert_eq!(gpu, cpu_sorted(&keys, bits), "{name}");
+        let gpu = sort_pairs(ctx, sort, keys, &vals, bits).unwrap();
+        assert_eq!(gpu, cpu_sorted(keys, bits), "{name}");
         let mut std_sorted: Vec<(u32, u32)> = keys.iter().copied().zip(vals).collect();
         std_sorted.sort_by_key(|&(k, _)| k); // std's stable sort: the specification
         if bits == 32 {
@@ -108,15 +124,18 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
                 }
             })
             .unzip();
-        let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
-        let gpu = sort_culled_pairs(ctx, sort, &keys, &vals, bits).unwrap();
-        let (mut k, mut v): (Vec<u32>, Vec<u32>) = keys.iter().copied().zip(vals).filter(|&(_, v)| v != CULLED).unzip();
+        let (mut k, mut v): (Vec<u32>, Vec<u32>) =
+            keys.iter().copied().zip(vals.iter().copied()).filter(|&(_, v)| v != CULLED).unzip();
         cpu_radix_sort(&mut k, &mut v, bits);
         if bits == 1 {
             assert!(v.is_sorted(), "{name}: the compaction's expectation is the kept ids in input order");
         }
-        let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));
-        assert_eq!(differ, None, "{name}: {} pairs sorted, {} kept; the first differs there", gpu.0.len(), k.len());
+        for (ctx, sort, bound) in on(split) {
+            let gpu = sort_culled_pairs(ctx, sort, &keys, &vals, bits).unwrap();
+            let differ = (0..k.len().max(gpu.0.len())).find(|&i| gpu.0.get(i) != k.get(i) || gpu.1.get(i) != v.get(i));
+            let (sorted, kept) = (gpu.0.len(), k.len());
+            assert_eq!(differ, None, "{name}{bound}: {sorted} pairs sorted, {kept} kept; the first differs there");
+        }
     }
     // sort_setup's workgroups where the blocks pass one row of the dispatch grid (65,535
     // workgroups: more take rows of it), at counts this device could not sort: 20 M pairs, of
@@ -141,13 +160,17 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
     for (n, split) in [(1, false), (t, false), (t + 1, false), (300_001, false), (t * t + 5, false), (70_000, true)] {
         let values: Vec<u32> = (0..n).map(|_| (rng.next_u64() % 1000) as u32).collect();
         let expected: Vec<u32> = values.iter().scan(0u32, |sum, &v| Some(std::mem::replace(sum, *sum + v))).collect();
-        let (ctx, sort) = if split { (&small, small_pipes.sort()) } else { (ctx, sort) };
-        assert_eq!(exclusive_scan(ctx, sort, &values).unwrap(), expected, "scan of {n}, split {split}");
+        for (ctx, sort, bound) in on(split) {
+            assert_eq!(exclusive_scan(ctx, sort, &values).unwrap(), expected, "scan of {n}, split {split}{bound}");
+        }
     }
-    // More parts than the adapter binds: refused with what fits, before any work.
-    let tiny = GpuContext::new().unwrap().with_index_binding_limit(1024);
-    let e = small_pipes.sort().buffers(&tiny, 1 << 20).err().expect("too many parts").to_string();
-    assert!(e.contains("radix sort") && e.contains("pairs") && e.contains("fits about"), "{e}");
+    // More parts than the adapter binds (storage bindings, or buffers in binding arrays): refused
+    // with what fits, before any work.
+    for (_, tiny) in common::part_binding_contexts(|c| c.with_index_binding_limit(1024).with_binding_array_elements(64))
+    {
+        let e = smalls[0].2.sort().buffers(&tiny, 1 << 20).err().expect("too many parts").to_string();
+        assert!(e.contains("radix sort") && e.contains("pairs") && e.contains("fits about"), "{e}");
+    }
 }
 
 struct Case {
@@ -576,22 +599,37 @@ fn bonsai_crop_equals_the_cpu() {
 /// draw.
 #[test]
 fn split_scenes_render_the_whole_scenes_frames() {
-    use splat_core::camera::{Distortion, Lens};
     let Some(ctx) = context() else { return };
     let c = case("cloud", 48, 36);
-    let small = GpuContext::new().unwrap().with_binding_limit(64 * 1024).with_index_binding_limit(8 * 1024);
-    let small_pipes = RasterPipelines::new(&small).unwrap();
+    for (bound, small) in
+        common::part_binding_contexts(|c| c.with_binding_limit(64 * 1024).with_index_binding_limit(8 * 1024))
+    {
+        split_scene_renders_the_whole_scenes_frames(ctx, &c, &small, bound);
+    }
+}
+
+/// [`split_scenes_render_the_whole_scenes_frames`] on `small`, whose split arrays are bound as
+/// `bound`.
+fn split_scene_renders_the_whole_scenes_frames(
+    ctx: &'static GpuContext,
+    c: &Case,
+    small: &GpuContext,
+    bound: splat_gpu::PartBindings,
+) {
+    use splat_core::camera::{Distortion, Lens};
+    let small_pipes = RasterPipelines::new(small).unwrap();
     let lighting = common::lighting(Shadows::None, Look::Surface);
     let scenes = |lighting: &Lighting| {
         let settings = RenderSettings::default();
         let whole = RasterScene::new_lit(ctx, &c.scene, &settings, lighting).unwrap();
-        let split = RasterScene::new_lit(&small, &c.scene, &settings, lighting).unwrap();
+        let split = RasterScene::new_lit(small, &c.scene, &settings, lighting).unwrap();
         (whole, split)
     };
     let (unlit, lit) = (scenes(&Lighting::default()), scenes(&lighting));
     let parts =
         |s: &RasterScene| (s.chunks(), s.split().splats.parts, s.split().canonical.parts, s.split().ranks.parts);
     assert_eq!((parts(&unlit.0), parts(&unlit.1)), ((1, 1, 1, 1), (12, 3, 3, 2)));
+    assert_eq!(unlit.1.split().parts, bound);
     let fisheye =
         Distortion { radial: [0.04, -0.01, 0.002, 0.0], rational: [0.0; 3], tangential: [0.0; 2], prism: [0.0; 2] };
     let through_fisheye = c.camera.with_lens(Lens::Fisheye(fisheye)).unwrap();
@@ -608,7 +646,7 @@ fn split_scenes_render_the_whole_scenes_frames() {
     for ((whole, split), camera, method) in cases {
         let settings = RasterSettings::default();
         let a = GpuRasterizer::new(ctx, pipelines(ctx), whole, &camera, &settings).unwrap();
-        let b = GpuRasterizer::new(&small, &small_pipes, split, &camera, &settings).unwrap();
+        let b = GpuRasterizer::new(small, &small_pipes, split, &camera, &settings).unwrap();
         let splats = a.splats().unwrap();
         assert!(splats == b.splats().unwrap(), "{method:?}: the projected splats differ");
         assert!(a.order().unwrap() == b.order().unwrap(), "{method:?}: the depth orders differ");
@@ -624,7 +662,7 @@ fn split_scenes_render_the_whole_scenes_frames() {
         let lit = whole.is_lit();
         assert_eq!(
             differ, 0,
-            "{method:?} through {:?} (lit: {lit}): values that differ, split against whole",
+            "{method:?} through {:?} (lit: {lit}, {bound:?}): values that differ, split against whole",
             camera.lens
         );
         assert!(a.alpha.data().iter().any(|&x| x > 0.1), "{method:?}: nothing drawn");
@@ -680,9 +718,10 @@ fn compact_sh_splats_the_scene_as_stored() {
 fn bad_raster_input_is_refused_with_a_message() {
     let Some(ctx) = context() else { return };
     let c = case("cloud", 16, 12);
-    let small = GpuContext::new().unwrap().with_binding_limit(4096);
-    let e = RasterScene::new(&small, &c.scene, &RenderSettings::default()).err().expect("too large").to_string();
-    assert!(e.contains("projected splats") && e.contains("4096") && e.contains("fits about"), "{e}");
+    for (_, small) in common::part_binding_contexts(|c| c.with_binding_limit(4096).with_binding_array_elements(24)) {
+        let e = RasterScene::new(&small, &c.scene, &RenderSettings::default()).err().expect("too large").to_string();
+        assert!(e.contains("projected splats") && e.contains("4096") && e.contains("fits about"), "{e}");
+    }
     // A scene without particles (transparent triangles alone, Laine & Karras's scenes) is no
     // error: every method draws the background.
     let settings = RenderSettings { background: glam::Vec3::new(0.2, 0.4, 0.6), ..RenderSettings::default() };

@@ -16,9 +16,9 @@ pub(super) struct TileLists {
     /// The kernels of the scene's split with the pairs' ([`RasterSplit::with_pairs`]): those
     /// that read the pairs (emit, ranges, and the tile passes after them).
     pub(super) k: std::sync::Arc<SplatKernels>,
-    count_group: wgpu::BindGroup,
-    emit_group: wgpu::BindGroup,
-    ranges_group: wgpu::BindGroup,
+    count_group: BindGroups,
+    emit_group: BindGroups,
+    ranges_group: BindGroups,
 }
 
 impl TileLists {
@@ -47,9 +47,9 @@ impl TileLists {
             r.split_parts(false, false),
         ]
         .concat();
-        let emit_group = bind(ctx, &k.tile_emit, &[&[(0, params), (6, draw_args)][..], &parts].concat());
+        let emit_group = bind(ctx, &k.tile_emit, &[(0, params), (6, draw_args)], &parts);
         let parts = [split.bind(&OFFSETS, &offsets.hist), split.bind(&PAIR_TILES, &pairs.keys)].concat();
-        let ranges_group = bind(ctx, &k.tile_ranges, &[&[(0, params), (10, &ranges)][..], &parts].concat());
+        let ranges_group = bind(ctx, &k.tile_ranges, &[(0, params), (10, &ranges)], &parts);
         Ok(Self { pairs, pair_count, ranges, k, count_group, emit_group, ranges_group })
     }
 
@@ -67,7 +67,7 @@ impl TileLists {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile emit"), timestamp_writes: None });
             pass.set_pipeline(&k.tile_emit);
-            pass.set_bind_group(0, &self.emit_group, &[]);
+            self.emit_group.set_compute(&mut pass, &[]);
             let (gx, gy) = groups(n.div_ceil(256));
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
@@ -77,7 +77,7 @@ impl TileLists {
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile ranges"), timestamp_writes: None });
         pass.set_pipeline(&k.tile_ranges);
-        pass.set_bind_group(0, &self.ranges_group, &[]);
+        self.ranges_group.set_compute(&mut pass, &[]);
         let (gx, gy) = groups(self.pair_count.div_ceil(256));
         ctx.dispatch(&mut pass, gx, gy, 1);
         Ok(())
@@ -87,23 +87,23 @@ impl TileLists {
 impl GpuRasterizer<'_> {
     /// The group of `tile_count` over the splats in the order `offsets.vals`, counting into
     /// `offsets.hist`.
-    fn count_group(&self, offsets: &SortBuffers) -> wgpu::BindGroup {
+    fn count_group(&self, offsets: &SortBuffers) -> BindGroups {
         let split = &self.scene.split;
         let own = [(0, &self.params_buffer), (6, &self.draw_args)];
         let parts =
             [split.bind(&ORDER, &offsets.vals), split.bind(&OFFSETS, &offsets.hist), self.split_parts(false, false)];
-        bind(self.ctx, &self.k.tile_count, &[&own[..], &parts.concat()].concat())
+        bind(self.ctx, &self.k.tile_count, &own, &parts.concat())
     }
 
     /// Per rank the tiles its rect touches (`tile_count`), and their exclusive scan in
     /// `offsets.hist` (its entry `count` is the total).
-    fn encode_count(&self, encoder: &mut wgpu::CommandEncoder, group: &wgpu::BindGroup, offsets: &SortBuffers) {
+    fn encode_count(&self, encoder: &mut wgpu::CommandEncoder, group: &BindGroups, offsets: &SortBuffers) {
         let n = self.scene.count;
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile count"), timestamp_writes: None });
             pass.set_pipeline(&self.k.tile_count);
-            pass.set_bind_group(0, group, &[]);
+            group.set_compute(&mut pass, &[]);
             let (gx, gy) = groups((n + 1).div_ceil(256));
             self.ctx.dispatch(&mut pass, gx, gy, 1);
         }

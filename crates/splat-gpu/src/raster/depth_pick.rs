@@ -258,15 +258,15 @@ impl GpuRasterizer<'_> {
         ];
         let split = &lists.k.split;
         let lists_parts = [split.bind(&ORDER, &self.depth.vals), split.bind(&PAIR_RANKS, &lists.pairs.vals)].concat();
-        let parts = [&own[..], &self.split_parts(false, true), &lists_parts].concat();
-        let blend_group = bind(ctx, &lists.k.tile_blend, &parts);
+        let parts = [self.split_parts(false, true), lists_parts].concat();
+        let blend_group = bind(ctx, &lists.k.tile_blend, &own, &parts);
         let mut encoder = self.encoder("tile lists");
         lists.encode_lists(self, &mut encoder)?;
         {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile blend"), timestamp_writes: None });
             pass.set_pipeline(&lists.k.tile_blend);
-            pass.set_bind_group(0, &blend_group, &[]);
+            blend_group.set_compute(&mut pass, &[]);
             ctx.dispatch(&mut pass, tiles_x, tiles_y, 1);
         }
         self.submit(encoder)?;

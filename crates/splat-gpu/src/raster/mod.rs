@@ -46,12 +46,14 @@ pub use pipelines::RasterPipelines;
 use pipelines::{DEPTH_FORMAT, STOCHASTIC_FORMAT, SplatKernels};
 pub use profile::RasterTimings;
 use scene::{
-    CANONICAL, DEPTH_KEYS, DRAWN_ORDER, DRAWN_SPLATS, OFFSETS, ORDER, PAIR_RANKS, PAIR_TILES, SPLATS, raster_params,
+    Bindings, CANONICAL, DEPTH_KEYS, DRAWN_ORDER, DRAWN_SPLATS, OFFSETS, ORDER, PAIR_RANKS, PAIR_TILES, SPLATS,
+    raster_params,
 };
 pub use scene::{FrameParams, GpuSplat, RasterParams, RasterParticle, RasterScene, RasterSplit};
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::sort::{Culled, RadixSort, SortBuffers, groups};
+use crate::split::BindGroups;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use bytemuck::{Pod, Zeroable};
 use splat_core::Camera;
@@ -194,7 +196,7 @@ pub struct GpuRasterizer<'a> {
     pub(super) scene_order: Option<Vec<wgpu::Buffer>>,
     pub(super) draw_args: wgpu::Buffer,
     /// The projection's bind group of each chunk of the scene ([`scene::ProjectChunk`]).
-    pub(super) project_groups: Vec<wgpu::BindGroup>,
+    pub(super) project_groups: Vec<BindGroups>,
     /// The mesh pre-pass's colour and distance per sample (one unused entry without meshes).
     pub(super) behind: wgpu::Buffer,
     /// The mesh pre-pass's normal per sample (one unused entry without meshes).
@@ -256,7 +258,7 @@ impl<'a> GpuRasterizer<'a> {
             .map(|chunk| {
                 let own =
                     [(0, &params_buffer), (1, &chunk.particles), (2, &chunk.sh), (6, &draw_args), (29, &chunk.range)];
-                bind(ctx, &k.project, &[&own[..], &parts].concat())
+                bind(ctx, &k.project, &own, &parts)
             })
             .collect();
         let pre_pass = |label| {
@@ -330,11 +332,12 @@ impl<'a> GpuRasterizer<'a> {
                 (6, &self.sample_offsets),
                 (14, &s.lights),
             ],
+            &[],
         );
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("mesh pre-pass"), timestamp_writes: None });
         pass.set_pipeline(&self.pipes.mesh_prepass);
-        pass.set_bind_group(0, &group, &[]);
+        group.set_compute(&mut pass, &[]);
         self.ctx.dispatch(&mut pass, self.camera.width.div_ceil(8), self.camera.height.div_ceil(8), 1);
     }
 
@@ -356,7 +359,7 @@ impl<'a> GpuRasterizer<'a> {
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("project"), timestamp_writes: timestamps });
         pass.set_pipeline(&self.k.project);
         for (group, chunk) in self.project_groups.iter().zip(&self.scene.chunks) {
-            pass.set_bind_group(0, group, &[]);
+            group.set_compute(&mut pass, &[]);
             let (gx, gy) = groups(chunk.count.div_ceil(256));
             self.ctx.dispatch(&mut pass, gx, gy, 1);
         }
@@ -428,7 +431,7 @@ impl<'a> GpuRasterizer<'a> {
 
     /// The parts of the projected splats and, with `canonical`, of the canonical transforms,
     /// as the raster kernels bind them (`drawn`: as the splat draw does).
-    pub(super) fn split_parts(&self, drawn: bool, canonical: bool) -> Vec<(u32, &wgpu::Buffer)> {
+    pub(super) fn split_parts(&self, drawn: bool, canonical: bool) -> Bindings<'_> {
         let split = &self.scene.split;
         let mut parts = split.bind(if drawn { &DRAWN_SPLATS } else { &SPLATS }, &self.splats);
         if canonical {
@@ -642,25 +645,20 @@ impl<'a> GpuRasterizer<'a> {
     }
 
     /// The splat draw's bindings for `draw`.
-    fn draw_group(&self, frame_params: &wgpu::Buffer, draw: Draw) -> wgpu::BindGroup {
-        self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("splat"),
-            layout: &self.k.splat_layout,
-            entries: &[
-                &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
-                    frame_entry(1, frame_params),
-                    wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 6, resource: self.sample_offsets.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
-                ][..],
-                &buffer_entries(&self.split_parts(true, true)),
-                &buffer_entries(&self.scene.split.bind(&DRAWN_ORDER, self.order_parts(draw))),
-            ]
-            .concat(),
-        })
+    fn draw_group(&self, frame_params: &wgpu::Buffer, draw: Draw) -> BindGroups {
+        let own = [
+            wgpu::BindGroupEntry { binding: 0, resource: self.params_buffer.as_entire_binding() },
+            frame_entry(1, frame_params),
+            wgpu::BindGroupEntry { binding: 4, resource: self.draw_args.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 5, resource: self.behind.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 6, resource: self.sample_offsets.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 13, resource: self.scene.materials.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 14, resource: self.scene.lights.as_entire_binding() },
+        ];
+        let parts =
+            [self.split_parts(true, true), self.scene.split.bind(&DRAWN_ORDER, self.order_parts(draw))].concat();
+        let layouts = (&self.k.splat_layout, self.k.splat_arrays_layout.as_ref());
+        BindGroups::new(&self.ctx.device, Some("splat"), layouts.0, layouts.1, &own, &parts)
     }
 
     fn fold_group(
@@ -691,7 +689,7 @@ impl<'a> GpuRasterizer<'a> {
         encoder: &mut wgpu::CommandEncoder,
         draw: Draw,
         targets: &RasterTargets,
-        group: &wgpu::BindGroup,
+        group: &BindGroups,
         frame_offset: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites>,
     ) -> Result<(), GpuError> {
@@ -735,7 +733,7 @@ impl<'a> GpuRasterizer<'a> {
             multiview_mask: None,
         });
         pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, group, &[frame_offset]);
+        group.set_render(&mut pass, &[frame_offset]);
         self.ctx.count_draw();
         // The visible splats alone, in the order the group binds ([`Self::order_parts`]): an
         // indirect draw of the projection's count.
@@ -804,18 +802,17 @@ fn mesh_prepass_entries(
     Ok(entries)
 }
 
-/// A bind group for an auto-layout compute pipeline: just the bindings its entry point uses.
-fn bind(ctx: &GpuContext, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: None,
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &buffer_entries(buffers),
-    })
-}
-
-/// Bind group entries of whole buffers.
-fn buffer_entries<'b>(buffers: &[(u32, &'b wgpu::Buffer)]) -> Vec<wgpu::BindGroupEntry<'b>> {
-    buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect()
+/// A bind group for an auto-layout compute pipeline: just the bindings its entry point uses,
+/// whole buffers `own` and the split arrays' `parts`.
+fn bind(
+    ctx: &GpuContext,
+    pipeline: &wgpu::ComputePipeline,
+    own: &[(u32, &wgpu::Buffer)],
+    parts: &[crate::split::Bound],
+) -> BindGroups {
+    let own: Vec<_> =
+        own.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect();
+    BindGroups::auto(&ctx.device, None, pipeline, &own, parts)
 }
 
 fn frame_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
@@ -1059,6 +1056,7 @@ mod tests {
             ranks: Split { parts: 2, shift: 8 },
             pairs: Split { parts: 3, shift: 9 },
             sh_storage: splat_core::sh::ShStorage::F16,
+            parts: crate::split::PartBindings::Each,
         };
         let raster = split.raster_wgsl();
         validate("raster (split, f16 SH)", &raster);
@@ -1070,6 +1068,20 @@ mod tests {
         let entries = super::pipelines::splat_layout_entries(&split);
         check_layout("splat (split)", &split.splat_wgsl(false), Capabilities::empty(), &entries);
         check_layout("splat (split, plane)", &split.splat_wgsl(true), Capabilities::MULTISAMPLED_SHADING, &entries);
+        // The same split with the parts after the first in binding arrays.
+        let arrayed = RasterSplit { parts: crate::split::PartBindings::Array, ..split };
+        let arrays = crate::layout::wgsl_check::BINDING_ARRAYS;
+        let raster = arrayed.raster_wgsl();
+        crate::layout::wgsl_check::validate_with("raster (split, binding arrays)", &raster, arrays);
+        assert!(raster.contains("binding_array<pair_ranks_part, 2>"), "the pairs' parts after the first");
+        let entries = super::pipelines::splat_layout_entries(&arrayed);
+        let array_entries = super::pipelines::splat_array_entries(&arrayed);
+        assert_eq!(array_entries.len(), 3, "the splats', canonical transforms' and order's parts after the first");
+        let groups: [&[_]; 2] = [&entries, &array_entries];
+        use crate::layout::wgsl_check::check_layouts;
+        check_layouts("splat (split, binding arrays)", &arrayed.splat_wgsl(false), arrays, &groups);
+        let plane = arrays | Capabilities::MULTISAMPLED_SHADING;
+        check_layouts("splat (split, plane, binding arrays)", &arrayed.splat_wgsl(true), plane, &groups);
     }
 
     /// The hand-written layouts of the splat draw and the fold match their shaders' bindings

@@ -36,6 +36,8 @@ pub(crate) struct SplatKernels {
     /// The same with the max-density-plane entry point, where the device shades per sample.
     pub(super) plane_module: Option<wgpu::ShaderModule>,
     pub(super) splat_layout: wgpu::BindGroupLayout,
+    /// The layout of the splat draw's binding arrays' group, where the split has any.
+    pub(super) splat_arrays_layout: Option<wgpu::BindGroupLayout>,
     pub(super) splat_pipeline_layout: wgpu::PipelineLayout,
     /// The one-sample pipelines.
     pub(super) single: SamplePipelines,
@@ -75,8 +77,13 @@ pub(super) fn splat_layout_entries(split: &RasterSplit) -> Vec<wgpu::BindGroupLa
         storage_entry(14, wgpu::ShaderStages::FRAGMENT, true),
         storage_entry(15, wgpu::ShaderStages::FRAGMENT, true),
     ];
-    entries.extend(split.draw_extra_entries());
+    entries.extend(split.draw_extra_entries(0));
     entries
+}
+
+/// The splat draw's bindings in its binding arrays' group for `split` (none, no such group).
+pub(super) fn splat_array_entries(split: &RasterSplit) -> Vec<wgpu::BindGroupLayoutEntry> {
+    split.draw_extra_entries(crate::split::ARRAY_GROUP)
 }
 
 /// The bindings of the fold of the raster targets into the accumulation, from a `multisampled`
@@ -157,20 +164,27 @@ impl SplatKernels {
     /// Compile the kernels and the splat draw that read the arrays as `split` cuts them.
     fn new(ctx: &GpuContext, split: RasterSplit, blend_format: wgpu::TextureFormat) -> Result<Self, GpuError> {
         let device = &ctx.device;
+        // The kernels' layouts as wgpu would derive them, with the counts of binding arrays.
+        let source = split.raster_wgsl();
+        let layouts = crate::reflect::compute_layouts(&source).map_err(GpuError::Shader)?;
         crate::context::validated(device, || {
-            let raster = shader_module(device, "raster.wgsl", &split.raster_wgsl());
+            let layout = |entry: &str| {
+                let (_, groups) =
+                    layouts.iter().find(|(name, _)| name == entry).expect("an entry point of raster.wgsl");
+                crate::reflect::pipeline_layout(device, entry, groups)
+            };
+            let raster = shader_module(device, "raster.wgsl", &source);
+            let kernel = |entry| compute_pipeline(device, &raster, Some(&layout(entry)), entry);
             let splat_module = shader_module(device, "splat.wgsl", &split.splat_wgsl(false));
             let plane_module =
                 ctx.sample_rate_shading.then(|| shader_module(device, "splat.wgsl (plane)", &split.splat_wgsl(true)));
-            let splat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("splat"),
-                entries: &splat_layout_entries(&split),
-            });
-            let splat_pipeline_layout = pipeline_layout(device, "splat", &splat_layout);
+            let (entries, arrays) = (splat_layout_entries(&split), splat_array_entries(&split));
+            let (splat_layout, splat_arrays_layout, splat_pipeline_layout) =
+                crate::split::layouts(device, "splat", &entries, &arrays);
             let rop = |plane: f64| {
                 device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some("tile_rop"),
-                    layout: None,
+                    layout: Some(&layout("tile_rop")),
                     module: &raster,
                     entry_point: Some("tile_rop"),
                     compilation_options: wgpu::PipelineCompilationOptions {
@@ -184,18 +198,19 @@ impl SplatKernels {
             let single = SamplePipelines::new(device, modules, &splat_pipeline_layout, blend_format, 1);
             Self {
                 split,
-                project: compute_pipeline(device, &raster, None, "project"),
-                tile_count: compute_pipeline(device, &raster, None, "tile_count"),
-                tile_emit: compute_pipeline(device, &raster, None, "tile_emit"),
-                tile_ranges: compute_pipeline(device, &raster, None, "tile_ranges"),
-                tile_blend: compute_pipeline(device, &raster, None, "tile_blend"),
-                shuffle_keys: compute_pipeline(device, &raster, None, "shuffle_keys"),
+                project: kernel("project"),
+                tile_count: kernel("tile_count"),
+                tile_emit: kernel("tile_emit"),
+                tile_ranges: kernel("tile_ranges"),
+                tile_blend: kernel("tile_blend"),
+                shuffle_keys: kernel("shuffle_keys"),
                 tile_rop: [rop(0.0), rop(1.0)],
-                rop_first_hit: compute_pipeline(device, &raster, None, "rop_first_hit"),
+                rop_first_hit: kernel("rop_first_hit"),
                 single,
                 splat_module,
                 plane_module,
                 splat_layout,
+                splat_arrays_layout,
                 splat_pipeline_layout,
                 blend_format,
             }

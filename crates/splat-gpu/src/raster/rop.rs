@@ -26,8 +26,8 @@ pub(super) struct RopPass {
     /// The tile lists in the shuffled order.
     lists: TileLists,
     frame: wgpu::Buffer,
-    keys_group: wgpu::BindGroup,
-    rop_group: wgpu::BindGroup,
+    keys_group: BindGroups,
+    rop_group: BindGroups,
     /// The current chunk (index, length, count), and every chunk's, copied in before its dispatch.
     chunk: wgpu::Buffer,
     chunks: wgpu::Buffer,
@@ -181,37 +181,32 @@ impl RopPass {
         let split = &lists.k.split;
         let shuffled = [split.bind(&DEPTH_KEYS, &shuffle.keys), split.bind(&ORDER, &shuffle.vals)].concat();
         let own = [(0, &r.params_buffer), (19, &frame)];
-        let keys_group = bind(ctx, &r.k.shuffle_keys, &[&own[..], &shuffled, &r.split_parts(false, false)].concat());
+        let keys_group = bind(ctx, &r.k.shuffle_keys, &own, &[shuffled, r.split_parts(false, false)].concat());
         let rop = r.rop_pipeline(&lists.k);
         let parts =
             [r.split_parts(false, true), split.bind(&ORDER, &shuffle.vals), split.bind(&PAIR_RANKS, &lists.pairs.vals)]
                 .concat();
-        let rop_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tile rop"),
-            layout: &rop.get_bind_group_layout(0),
-            entries: &[
-                &[
-                    wgpu::BindGroupEntry { binding: 0, resource: r.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 10, resource: lists.ranges.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 13, resource: r.scene.materials.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 14, resource: r.scene.lights.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 17, resource: r.behind.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 19, resource: frame.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 20, resource: r.sample_offsets.as_entire_binding() },
-                    wgpu::BindGroupEntry {
-                        binding: 21,
-                        resource: wgpu::BindingResource::TextureView(&targets.color_view),
-                    },
-                    wgpu::BindGroupEntry { binding: 22, resource: state.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 26, resource: r.scene.ordered_triangles.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 27, resource: r.scene.mesh_materials.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 28, resource: triangles.buffer.as_entire_binding() },
-                ][..],
-                &buffer_entries(&parts),
-            ]
-            .concat(),
-        });
+        let rop_group = BindGroups::auto(
+            &ctx.device,
+            Some("tile rop"),
+            rop,
+            &[
+                wgpu::BindGroupEntry { binding: 0, resource: r.params_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 10, resource: lists.ranges.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 13, resource: r.scene.materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 14, resource: r.scene.lights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 17, resource: r.behind.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 19, resource: frame.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 20, resource: r.sample_offsets.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 21, resource: wgpu::BindingResource::TextureView(&targets.color_view) },
+                wgpu::BindGroupEntry { binding: 22, resource: state.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 23, resource: chunk.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 26, resource: r.scene.ordered_triangles.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 27, resource: r.scene.mesh_materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 28, resource: triangles.buffer.as_entire_binding() },
+            ],
+            &parts,
+        );
         Ok(Self { shuffle, lists, frame, keys_group, rop_group, chunk, chunks, chunk_count, state })
     }
 
@@ -232,7 +227,7 @@ impl RopPass {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("shuffle"), timestamp_writes: None });
             pass.set_pipeline(&r.k.shuffle_keys);
-            pass.set_bind_group(0, &self.keys_group, &[]);
+            self.keys_group.set_compute(&mut pass, &[]);
             ctx.dispatch(&mut pass, gx, gy, 1);
         }
         let pairs = Culled { buffers: &self.shuffle, n, kept: &r.draw_args };
@@ -245,7 +240,7 @@ impl RopPass {
             let mut pass = encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("tile rop"), timestamp_writes: None });
             pass.set_pipeline(r.rop_pipeline(&self.lists.k));
-            pass.set_bind_group(0, &self.rop_group, &[]);
+            self.rop_group.set_compute(&mut pass, &[]);
             ctx.dispatch(&mut pass, tiles_x, tiles_y, 1);
         }
         Ok(())
@@ -280,7 +275,7 @@ impl GpuRasterizer<'_> {
             (20, &self.sample_offsets),
             (22, &rop.state),
         ];
-        let group = bind(ctx, &self.k.rop_first_hit, &[&own[..], &self.split_parts(false, true)].concat());
+        let group = bind(ctx, &self.k.rop_first_hit, &own, &self.split_parts(false, true));
         let mut encoder = self.encoder("rop first hits");
         rop.encode(self, &mut encoder, &slots, 0)?;
         {
@@ -289,7 +284,7 @@ impl GpuRasterizer<'_> {
                 timestamp_writes: None,
             });
             pass.set_pipeline(&self.k.rop_first_hit);
-            pass.set_bind_group(0, &group, &[]);
+            group.set_compute(&mut pass, &[]);
             ctx.dispatch(&mut pass, w.div_ceil(8), h.div_ceil(8), 1);
         }
         self.submit(encoder)?;

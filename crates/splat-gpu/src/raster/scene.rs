@@ -2,7 +2,7 @@
 //! structs mirrored by `shaders/raster_types.wgsl`.
 
 use super::*;
-use crate::split::{Split, SplitArray, SplitLayout};
+use crate::split::{Bound, PartBindings, Split, SplitArray, SplitLayout};
 use splat_core::sh::ShStorage;
 
 /// One particle in scene order (WGSL `RasterParticle`, 48 bytes): the 3D covariance is
@@ -180,8 +180,8 @@ const FIRST_EXTRA: u32 = 30;
 /// parts after the first of its split arrays (checked against the shaders by a test).
 pub(super) const OWN_BINDINGS: u32 = 16;
 
-/// Buffers and their bindings.
-pub(super) type Bindings<'b> = Vec<(u32, &'b wgpu::Buffer)>;
+/// The bindings of a split array's parts.
+pub(super) type Bindings<'b> = Vec<Bound<'b>>;
 
 /// How a scene's projected splats (64 bytes each), canonical transforms (48), sort arrays (4 a
 /// particle each: depth keys, order, offsets) and the tile pairs of a tile pass (4 bytes each
@@ -203,6 +203,8 @@ pub struct RasterSplit {
     pub pairs: Split,
     /// The SH's precision ([`RenderSettings::sh_storage`]).
     pub sh_storage: ShStorage,
+    /// How the parts after the first are bound (the device's way).
+    pub parts: PartBindings,
 }
 
 impl RasterSplit {
@@ -213,6 +215,7 @@ impl RasterSplit {
         ranks: Split::WHOLE,
         pairs: Split::WHOLE,
         sh_storage: ShStorage::F32,
+        parts: PartBindings::Each,
     };
 
     /// The split of a scene of `count` particles, SH stored as `sh_storage`, on `ctx`, refused
@@ -228,11 +231,12 @@ impl RasterSplit {
         if Self::fits(ctx, n) {
             return Ok(split);
         }
+        let (needed, available) = split.layout(false).over(ctx, OWN_BINDINGS).unwrap_or((0, 0));
         Err(GpuError::SceneOverBindings {
             arrays: "projected splats, canonical transforms and depth sort",
             kernel: "the splatting kernels",
-            needed: split.layout(false).extra_bindings() + OWN_BINDINGS,
-            available: ctx.storage_buffers,
+            needed,
+            available,
             limit: ctx.max_binding,
             bytes: n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4),
             fits: crate::split::most_that_fit(n, |m| Self::fits(ctx, m)),
@@ -255,35 +259,32 @@ impl RasterSplit {
             ranks: crate::sort::split_of(n.saturating_add(1).min(u64::from(u32::MAX)) as u32, ctx.max_index_binding),
             pairs: Split::WHOLE,
             sh_storage,
+            parts: ctx.part_bindings(),
         }
     }
 
     /// Whether a scene of `n` particles fits the adapter: element indices within u32 (the
-    /// kernels'), a projected splat within a binding, the parts within its storage bindings a
-    /// stage (the SH's storage does not change the count: a projection chunk's SH is whole).
+    /// kernels'), a projected splat within a binding, the parts within what a stage binds (the
+    /// SH's storage does not change the count: a projection chunk's SH is whole).
     fn fits(ctx: &GpuContext, n: u64) -> bool {
-        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
         3 * n <= u64::from(u32::MAX)
             && SPLATS.stride <= ctx.max_binding
-            && Self::split(ctx, n, ShStorage::F32).layout(false).extra_bindings() <= available
+            && Self::split(ctx, n, ShStorage::F32).layout(false).over(ctx, OWN_BINDINGS).is_none()
     }
 
     /// The split of a tile pass whose tile pairs are sorted in `pairs`: their arrays cut as that
     /// sort cuts them, refused when the kernels would need more bindings than the adapter has.
     pub(super) fn with_pairs(self, ctx: &GpuContext, pairs: &crate::sort::SortBuffers) -> Result<Self, GpuError> {
         let split = RasterSplit { pairs: pairs.split, ..self };
-        let available = ctx.storage_buffers.saturating_sub(OWN_BINDINGS);
-        if split.layout(false).extra_bindings() <= available {
-            return Ok(split);
-        }
+        let Some((needed, available)) = split.layout(false).over(ctx, OWN_BINDINGS) else { return Ok(split) };
         let with = |m: u64| RasterSplit { pairs: crate::sort::split_of(m as u32, ctx.max_index_binding), ..self };
-        let fits = |m: u64| with(m).layout(false).extra_bindings() <= available;
+        let fits = |m: u64| with(m).layout(false).over(ctx, OWN_BINDINGS).is_none();
         let pairs = pairs.capacity();
         Err(GpuError::SceneOverBindings {
             arrays: "tile pairs",
             kernel: "the tile pass",
-            needed: split.layout(false).extra_bindings() + OWN_BINDINGS,
-            available: ctx.storage_buffers,
+            needed,
+            available,
             limit: ctx.max_index_binding,
             bytes: 8 * u64::from(pairs),
             fits: crate::split::most_that_fit(u64::from(pairs), fits),
@@ -308,31 +309,30 @@ impl RasterSplit {
                 (crate::layout::sh_array(self.sh_storage, SH_BINDING).0, Split::WHOLE),
             ]
         };
-        SplitLayout { arrays, first_extra: FIRST_EXTRA }
+        SplitLayout { arrays, first_extra: FIRST_EXTRA, parts: self.parts }
     }
 
     /// The raster kernels' WGSL for this split.
     pub(super) fn raster_wgsl(&self) -> String {
         let sh_decode = crate::layout::sh_array(self.sh_storage, SH_BINDING).1;
-        format!("{RASTER_SOURCE}{}{sh_decode}", self.layout(false).wgsl())
+        let layout = self.layout(false);
+        format!("{}{RASTER_SOURCE}{}{sh_decode}", layout.directives(), layout.wgsl())
     }
 
     /// The splat draw's WGSL for this split, with the max-density-plane entry point or not.
     pub(super) fn splat_wgsl(&self, plane: bool) -> String {
         let plane = if plane { SPLAT_PLANE_SOURCE } else { "" };
-        format!("{SPLAT_SOURCE}{plane}{}", self.layout(true).wgsl())
+        let layout = self.layout(true);
+        format!("{}{SPLAT_SOURCE}{plane}{}", layout.directives(), layout.wgsl())
     }
 
-    /// The splat draw's layout entries of the parts after the first: the splats' in both
-    /// stages, the canonical transforms' in the fragment stage, the order's in the vertex stage.
-    pub(super) fn draw_extra_entries(&self) -> Vec<wgpu::BindGroupLayoutEntry> {
-        let layout = self.layout(true);
+    /// The splat draw's layout entries in bind group `group` of the parts after the first: the
+    /// splats' in both stages, the canonical transforms' in the fragment stage, the order's in
+    /// the vertex stage.
+    pub(super) fn draw_extra_entries(&self, group: u32) -> Vec<wgpu::BindGroupLayoutEntry> {
         let stages = [wgpu::ShaderStages::VERTEX_FRAGMENT, wgpu::ShaderStages::FRAGMENT, wgpu::ShaderStages::VERTEX];
-        let mut entries = layout.extra_entries(wgpu::ShaderStages::FRAGMENT);
-        for (entry, (a, _, _)) in entries.iter_mut().zip(layout.bindings().into_iter().filter(|&(_, p, _)| p > 0)) {
-            entry.visibility = stages[a];
-        }
-        entries
+        let entries = self.layout(true).extra_entries(group, wgpu::ShaderStages::FRAGMENT);
+        entries.into_iter().map(|(a, entry)| wgpu::BindGroupLayoutEntry { visibility: stages[a], ..entry }).collect()
     }
 
     /// The bindings of `array`'s parts, held in `parts`, in a raster kernel or the splat draw

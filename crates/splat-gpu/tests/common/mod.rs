@@ -10,7 +10,7 @@ use splat_core::frame::{Frames, RenderOutput};
 use splat_core::lighting::{Light, LightKind, Lighting, Look, Material, Shadows};
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Camera, RenderSettings, Scene};
-use splat_gpu::{GpuContext, GpuTracer, TracePipeline};
+use splat_gpu::{GpuContext, GpuTracer, PartBindings, TracePipeline};
 use splat_tests::harness::{FAULTS, StatTest, assert_power, full_power_study};
 use std::sync::OnceLock;
 
@@ -25,6 +25,25 @@ pub fn context() -> Option<&'static GpuContext> {
             None
         }
     }
+}
+
+/// Contexts that bind split arrays' parts each way this machine can test, made by `limits`
+/// from a fresh context (binding limits small enough to split a fixture): as binding arrays
+/// (`PartBindings::Array`) where the adapter has them, and one binding each
+/// (`PartBindings::Each`, every adapter). An adapter without binding arrays is recorded as a
+/// skip of that half ([`splat_tests::skip`]: a failure under `CI=true`, whose lavapipe has them).
+pub fn part_binding_contexts(limits: impl Fn(GpuContext) -> GpuContext) -> Vec<(PartBindings, GpuContext)> {
+    let arrays = limits(GpuContext::new().unwrap());
+    let each = (PartBindings::Each, limits(GpuContext::new().unwrap()).with_binding_array_elements(0));
+    if arrays.binding_array_elements_per_stage() == 0 {
+        let reason = format!(
+            "{} has no binding arrays of storage buffers: split arrays tested one binding a part only",
+            arrays.describe()
+        );
+        splat_tests::skip(&splat_tests::current_test(), &reason);
+        return vec![each];
+    }
+    vec![(PartBindings::Array, arrays), each]
 }
 
 /// The ray-tracing kernels, each compiled once per test binary (on the first tracer of its split).
