@@ -248,7 +248,8 @@ impl BindGroups {
         Self { zero, arrays }
     }
 
-    /// An auto-layout compute pipeline's groups of `entries` and the split arrays' `parts`.
+    /// The groups of `entries` and the split arrays' `parts` on the layouts `pipeline` holds
+    /// (derived from its module: wgpu's automatic ones, or `crate::reflect`'s).
     pub fn auto(
         device: &wgpu::Device,
         label: Option<&str>,

@@ -802,8 +802,8 @@ fn mesh_prepass_entries(
     Ok(entries)
 }
 
-/// A bind group for an auto-layout compute pipeline: just the bindings its entry point uses,
-/// whole buffers `own` and the split arrays' `parts`.
+/// The bind groups of a compute pipeline whose layout is derived from its module (the bindings
+/// its entry point uses alone): whole buffers `own` and the split arrays' `parts`.
 fn bind(
     ctx: &GpuContext,
     pipeline: &wgpu::ComputePipeline,
