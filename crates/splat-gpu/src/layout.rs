@@ -546,13 +546,14 @@ pub fn lights(lighting: &Lighting) -> Vec<GpuLight> {
     )
 }
 
-/// The leaf-order particles of a scene.
-pub fn particles(trace: &TraceScene) -> Vec<GpuParticle> {
+/// The particles `range` of a scene in leaf order: the array, or one part of it made without the
+/// others.
+pub fn particles(trace: &TraceScene, range: std::ops::Range<u64>) -> Vec<GpuParticle> {
     let kernel = trace.settings().kernel;
-    trace
-        .leaf_particles()
+    let range = range.start as usize..range.end as usize;
+    trace.leaf_particles()[range.clone()]
         .iter()
-        .zip(trace.leaf_ids())
+        .zip(&trace.leaf_ids()[range])
         .map(|(p, &id)| {
             let rows = [p.canonical.row(0), p.canonical.row(1), p.canonical.row(2)];
             GpuParticle {
@@ -588,21 +589,33 @@ pub fn mesh_root(trace: &TraceScene) -> u32 {
 /// holds them: RGB and a zero pad in f32 (four words), or the halves of R, G | B, 0 (two words,
 /// as WGSL's `unpack2x16float` reads them: the lower half first) in f16.
 pub fn sh(scene: &Scene, storage: ShStorage) -> Vec<u32> {
-    let per = sh_coeff_count(scene.sh_degree);
-    let coefficients = scene.particles.iter().flat_map(|p| (0..per).map(move |k| p.sh[k]));
-    let half = |x: f32| u32::from(half::f16::from_f32(x).to_bits());
-    let words: Vec<u32> = match storage {
-        ShStorage::F32 => coefficients.flat_map(|c| [c.x, c.y, c.z, 0.0].map(f32::to_bits)).collect(),
-        ShStorage::F16 => coefficients.flat_map(|c| [half(c.x) | half(c.y) << 16, half(c.z)]).collect(),
-        // The three channels, then 1 for the DC term (the decode's scale): one word.
-        ShStorage::U8 => scene
-            .particles
-            .iter()
-            .flat_map(|p| (0..per).map(move |k| (splat_core::sh::u8_quantize(p.sh[k], k), k)))
-            .map(|([r, g, b], k)| u32::from_le_bytes([r, g, b, u8::from(k == 0)]))
-            .collect(),
-    };
+    let words = sh_range(scene, storage, 0..sh_len(scene) as u64);
     if words.is_empty() { vec![0; sh_words(storage)] } else { words }
+}
+
+/// SH coefficients of a scene: (degree + 1)² a particle.
+pub fn sh_len(scene: &Scene) -> usize {
+    scene.particles.len() * sh_coeff_count(scene.sh_degree)
+}
+
+/// The words of [`sh`]'s coefficients `range` (coefficient i is particle i / (degree + 1)²'s
+/// coefficient i mod (degree + 1)²): one part of the array, made without the others.
+pub fn sh_range(scene: &Scene, storage: ShStorage, range: std::ops::Range<u64>) -> Vec<u32> {
+    let per = sh_coeff_count(scene.sh_degree) as u64;
+    let coefficient = |i: u64| (scene.particles[(i / per) as usize].sh[(i % per) as usize], (i % per) as usize);
+    let coefficients = range.map(coefficient);
+    let half = |x: f32| u32::from(half::f16::from_f32(x).to_bits());
+    match storage {
+        ShStorage::F32 => coefficients.flat_map(|(c, _)| [c.x, c.y, c.z, 0.0].map(f32::to_bits)).collect(),
+        ShStorage::F16 => coefficients.flat_map(|(c, _)| [half(c.x) | half(c.y) << 16, half(c.z)]).collect(),
+        // The three channels, then 1 for the DC term (the decode's scale): one word.
+        ShStorage::U8 => coefficients
+            .map(|(c, k)| {
+                let [r, g, b] = splat_core::sh::u8_quantize(c, k);
+                u32::from_le_bytes([r, g, b, u8::from(k == 0)])
+            })
+            .collect(),
+    }
 }
 
 /// Words (u32) of one SH coefficient as `storage` holds it: four in f32, two in f16, one in u8.
@@ -1069,6 +1082,29 @@ mod tests {
     use super::wgsl_check::{assert_constants, assert_mirrors, constant, validate};
     use super::*;
     use splat_core::camera::Distortion;
+
+    /// A part of the SH array made alone ([`sh_range`], as the tracer uploads it) is those
+    /// coefficients of the whole array, in every storage: ranges that start and end inside a
+    /// particle's coefficients, the empty one and the whole.
+    #[test]
+    fn sh_parts_are_slices_of_the_whole_array() {
+        let particle = |i: usize| {
+            let sh: [glam::Vec3; 16] = std::array::from_fn(|k| glam::Vec3::new(0.1 * k as f32, -0.03 * i as f32, 0.2));
+            splat_core::Particle::new(glam::Vec3::ZERO, glam::Vec3::ONE, glam::Quat::IDENTITY, 0.5, sh).unwrap()
+        };
+        let scene = Scene::new((0..5).map(particle).collect(), 2);
+        assert_eq!(sh_len(&scene), 45);
+        for storage in [ShStorage::F32, ShStorage::F16, ShStorage::U8] {
+            let (whole, w) = (sh(&scene, storage), sh_words(storage));
+            for (a, b) in [(0, 45), (0, 0), (7, 20), (20, 45), (44, 45)] {
+                assert_eq!(
+                    sh_range(&scene, storage, a..b),
+                    whole[a as usize * w..b as usize * w],
+                    "{storage:?} {a}..{b}"
+                );
+            }
+        }
+    }
 
     /// The kernels that draw every triangle opaque refuse a transparent mesh before any upload,
     /// naming the raster operations and the CPU as the remedies; opaque meshes pass; the ray

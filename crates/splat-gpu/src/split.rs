@@ -91,6 +91,18 @@ impl SplitArray {
         upload(ctx, self.what, self.stride, split, data)
     }
 
+    /// `len` elements of this array uploaded as `split`'s parts, each part's bytes made by
+    /// `part` ([`upload_parts`]).
+    pub fn upload_parts<P: AsRef<[u8]>>(
+        &self,
+        ctx: &GpuContext,
+        split: Split,
+        len: u64,
+        part: impl Fn(std::ops::Range<u64>) -> P,
+    ) -> Result<Vec<wgpu::Buffer>, GpuError> {
+        upload_parts(ctx, self.what, self.stride, split, len, part)
+    }
+
     /// Its WGSL access mode.
     fn access(&self) -> &'static str {
         if self.setter.is_some() { "read_write" } else { "read" }
@@ -519,6 +531,15 @@ pub(crate) fn alloc(
     Ok(buffers)
 }
 
+/// A part's elements as the bytes [`upload_parts`] takes, without a copy.
+pub(crate) struct PartBytes<T>(pub Vec<T>);
+
+impl<T: bytemuck::Pod> AsRef<[u8]> for PartBytes<T> {
+    fn as_ref(&self) -> &[u8] {
+        bytemuck::cast_slice(&self.0)
+    }
+}
+
 /// Elements `range` of a u32 array held in `parts`, cut as `split`.
 pub(crate) fn read_u32(
     ctx: &GpuContext,
@@ -553,14 +574,33 @@ pub(crate) fn upload(
     split: Split,
     data: &[u8],
 ) -> Result<Vec<wgpu::Buffer>, GpuError> {
+    let bytes = |range: std::ops::Range<u64>| &data[(range.start * stride) as usize..(range.end * stride) as usize];
+    upload_parts(ctx, what, stride, split, data.len() as u64 / stride, bytes)
+}
+
+/// `len` elements of `stride` bytes (the scene's `what`) as `split`'s parts, one read-only
+/// storage buffer each, in part order, part p's bytes made by `part` of its elements' range as
+/// it is uploaded: a scene's arrays made part by part hold one part on the host at a time, not
+/// the whole array beside the device's copy. A device that cannot allocate them is refused with
+/// [`GpuError::DeviceMemory`].
+pub(crate) fn upload_parts<P: AsRef<[u8]>>(
+    ctx: &GpuContext,
+    what: &'static str,
+    stride: u64,
+    split: Split,
+    len: u64,
+    part: impl Fn(std::ops::Range<u64>) -> P,
+) -> Result<Vec<wgpu::Buffer>, GpuError> {
     let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     // A binding cannot be empty: an empty array is one zeroed element.
     let zero = vec![0u8; stride as usize];
-    let data = if data.is_empty() { &zero[..] } else { data };
-    let part_bytes = if split.parts == 1 { data.len() } else { (stride << split.shift) as usize };
-    let buffers = data.chunks(part_bytes).map(|part| ctx.upload(what, part)).collect();
+    let buffers = if len == 0 {
+        vec![ctx.upload(what, &zero)]
+    } else {
+        split.ranges(len).map(|range| ctx.upload(what, part(range).as_ref())).collect()
+    };
     if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::DeviceMemory { buffer: what, bytes: data.len() as u64, message: e.to_string() });
+        return Err(GpuError::DeviceMemory { buffer: what, bytes: len * stride, message: e.to_string() });
     }
     Ok(buffers)
 }

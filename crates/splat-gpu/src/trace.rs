@@ -16,7 +16,7 @@
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
-use crate::split::{BindGroups, PartBindings, Split, SplitArray, SplitLayout};
+use crate::split::{BindGroups, PartBindings, PartBytes, Split, SplitArray, SplitLayout};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
@@ -468,17 +468,20 @@ impl<'a> GpuTracer<'a> {
     /// [`GpuError::DeviceMemory`]), and compile the kernel of that split if `pipeline` has not.
     pub fn new(ctx: &'a GpuContext, pipeline: &TracePipeline, trace: &'a TraceScene<'a>) -> Result<Self, GpuError> {
         check_segment_stack(trace)?;
-        let particles = layout::particles(trace);
         let nodes = layout::nodes(trace);
         let sh_storage = trace.settings().sh_storage;
-        let sh = layout::sh(trace.scene(), sh_storage);
-        let len = |n: usize| n as u64;
-        let lengths = [len(particles.len()), len(nodes.len()), len(sh.len() / layout::sh_words(sh_storage))];
+        let (scene, len) = (trace.scene(), |n: usize| n as u64);
+        let lengths = [len(trace.leaf_particles().len()), len(nodes.len()), len(layout::sh_len(scene))];
         let split = TraceSplit::new(ctx, lengths, sh_storage)?;
         let kernel = pipeline.kernel(ctx, split)?;
-        let particles = PARTICLES.upload(ctx, split.particles, bytemuck::cast_slice(&particles))?;
+        // The particles and SH made a part at a time as they are uploaded (the SH of an SH-3
+        // scene are 256 bytes a particle in f32).
+        let particles = PARTICLES
+            .upload_parts(ctx, split.particles, lengths[0], |range| PartBytes(layout::particles(trace, range)))?;
         let nodes = NODES.upload(ctx, split.nodes, bytemuck::cast_slice(&nodes))?;
-        let sh = layout::sh_array(sh_storage, SH_BINDING).0.upload(ctx, split.sh, bytemuck::cast_slice(&sh))?;
+        let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
+        let sh = sh_array
+            .upload_parts(ctx, split.sh, lengths[2], |range| PartBytes(layout::sh_range(scene, sh_storage, range)))?;
         let (mut emitters, mut density) = splat_core::path::emitter_table(trace);
         let emitter_count = emitters.len() as u32;
         // A binding cannot be empty.
