@@ -585,21 +585,17 @@ pub fn mesh_root(trace: &TraceScene) -> u32 {
     if trace.meshes().is_empty() { NO_MESHES } else { trace.bvh().len() as u32 }
 }
 
-/// SH coefficients in scene order, (degree + 1)² RGB(pad) entries per particle, as `storage`
-/// holds them: RGB and a zero pad in f32 (four words), or the halves of R, G | B, 0 (two words,
-/// as WGSL's `unpack2x16float` reads them: the lower half first) in f16.
-pub fn sh(scene: &Scene, storage: ShStorage) -> Vec<u32> {
-    let words = sh_range(scene, storage, 0..sh_len(scene) as u64);
-    if words.is_empty() { vec![0; sh_words(storage)] } else { words }
-}
-
 /// SH coefficients of a scene: (degree + 1)² a particle.
 pub fn sh_len(scene: &Scene) -> usize {
     scene.particles.len() * sh_coeff_count(scene.sh_degree)
 }
 
-/// The words of [`sh`]'s coefficients `range` (coefficient i is particle i / (degree + 1)²'s
-/// coefficient i mod (degree + 1)²): one part of the array, made without the others.
+/// The words of SH coefficients `range` of the array in scene order, (degree + 1)² RGB(pad)
+/// entries a particle (coefficient i is particle i / (degree + 1)²'s coefficient
+/// i mod (degree + 1)²), as `storage` holds them: RGB and a zero pad in f32 (four words), the
+/// halves of R, G | B, 0 in f16 (two words, as WGSL's `unpack2x16float` reads them: the lower
+/// half first), three bytes and a DC flag in u8 (one word). The whole array, or one part of it
+/// made without the others.
 pub fn sh_range(scene: &Scene, storage: ShStorage, range: std::ops::Range<u64>) -> Vec<u32> {
     let per = sh_coeff_count(scene.sh_degree) as u64;
     let coefficient = |i: u64| (scene.particles[(i / per) as usize].sh[(i % per) as usize], (i % per) as usize);
@@ -1095,7 +1091,8 @@ mod tests {
         let scene = Scene::new((0..5).map(particle).collect(), 2);
         assert_eq!(sh_len(&scene), 45);
         for storage in [ShStorage::F32, ShStorage::F16, ShStorage::U8] {
-            let (whole, w) = (sh(&scene, storage), sh_words(storage));
+            let (whole, w) = (sh_range(&scene, storage, 0..45), sh_words(storage));
+            assert_eq!(whole.len(), 45 * w);
             for (a, b) in [(0, 45), (0, 0), (7, 20), (20, 45), (44, 45)] {
                 assert_eq!(
                     sh_range(&scene, storage, a..b),

@@ -2,7 +2,7 @@
 //! structs mirrored by `shaders/raster_types.wgsl`.
 
 use super::*;
-use crate::split::{Bound, PartBindings, Split, SplitArray, SplitLayout};
+use crate::split::{Bound, PartBindings, PartBytes, Split, SplitArray, SplitLayout};
 use splat_core::sh::ShStorage;
 
 /// One particle in scene order (WGSL `RasterParticle`, 48 bytes): the 3D covariance is
@@ -385,23 +385,34 @@ pub(super) struct ProjectChunk {
 }
 
 impl ProjectChunk {
-    /// `particles` and their SH `sh` (`per` coefficients each) in chunks of the most particles,
-    /// a power of two, whose particles and SH each fit a binding.
-    fn split(
-        ctx: &GpuContext,
-        particles: &[RasterParticle],
-        (sh, sh_storage): (&[u32], ShStorage),
-        per: usize,
-    ) -> Result<Vec<Self>, GpuError> {
-        use crate::split::upload;
-        let count = particles.len();
-        let sh_bytes = 4 * crate::layout::sh_words(sh_storage) * per;
-        let stride = size_of::<RasterParticle>().max(sh_bytes) as u64;
-        let split = Split::of(count as u64, stride, ctx.max_binding);
-        // `upload` gives an empty scene one zeroed particle, as a binding needs.
+    /// The particles of `scene` and their SH (stored as `sh_storage`) in chunks of the most
+    /// particles, a power of two, whose particles and SH each fit a binding, each chunk made as
+    /// it is uploaded.
+    fn split(ctx: &GpuContext, scene: &Scene, sh_storage: ShStorage) -> Result<Vec<Self>, GpuError> {
+        use crate::split::upload_parts;
+        let (count, per) = (scene.particles.len(), splat_core::particle::sh_coeff_count(scene.sh_degree) as u64);
+        let sh_bytes = 4 * crate::layout::sh_words(sh_storage) as u64 * per;
         let particle_bytes = size_of::<RasterParticle>() as u64;
-        let particles = upload(ctx, "raster particle", particle_bytes, split, bytemuck::cast_slice(particles))?;
-        let sh = upload(ctx, "SH", sh_bytes as u64, split, bytemuck::cast_slice(sh))?;
+        let split = Split::of(count as u64, particle_bytes.max(sh_bytes), ctx.max_binding);
+        let particle = |p: &splat_core::Particle| {
+            let c = p.covariance();
+            RasterParticle {
+                mean: p.mean.to_array(),
+                opacity: p.opacity,
+                cov_a: [c.x_axis.x, c.y_axis.x, c.z_axis.x],
+                pad0: 0.0,
+                cov_b: [c.y_axis.y, c.z_axis.y, c.z_axis.z],
+                pad1: 0.0,
+            }
+        };
+        let of = |range: std::ops::Range<u64>| &scene.particles[range.start as usize..range.end as usize];
+        // `upload_parts` gives an empty scene one zeroed particle, as a binding needs.
+        let particles = upload_parts(ctx, "raster particle", particle_bytes, split, count as u64, |range| {
+            PartBytes(of(range).iter().map(particle).collect::<Vec<_>>())
+        })?;
+        let sh = upload_parts(ctx, "SH", sh_bytes, split, count as u64, |range| {
+            PartBytes(crate::layout::sh_range(scene, sh_storage, range.start * per..range.end * per))
+        })?;
         Ok(particles
             .into_iter()
             .zip(sh)
@@ -438,43 +449,21 @@ impl RasterScene {
         validate_scene(scene, settings)?;
         lighting.validate(scene.particles.len()).map_err(RenderError::Settings)?;
         let count = scene.particles.len();
-        let particles: Vec<RasterParticle> = scene
-            .particles
-            .iter()
-            .map(|p| {
-                let c = p.covariance();
-                RasterParticle {
-                    mean: p.mean.to_array(),
-                    opacity: p.opacity,
-                    cov_a: [c.x_axis.x, c.y_axis.x, c.z_axis.x],
-                    pad0: 0.0,
-                    cov_b: [c.y_axis.y, c.z_axis.y, c.z_axis.z],
-                    pad1: 0.0,
-                }
-            })
-            .collect();
         let split = RasterSplit::new(ctx, count, settings.sh_storage)?;
-        let sh = crate::layout::sh(scene, settings.sh_storage);
-        // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals.
-        let canonical: Vec<[f32; 4]> = scene
-            .particles
-            .iter()
-            .flat_map(|p| {
-                let m = p.canonical_transform();
-                (0..3).map(move |i| {
-                    let r = m.row(i);
-                    [r.x, r.y, r.z, p.mean[i]]
-                })
-            })
-            .collect();
-        let canonical = CANONICAL.upload(ctx, split.canonical, bytemuck::cast_slice(&canonical))?;
+        // Rows of M = S⁻¹ Rᵀ with the mean in w, three per particle, for the normals: made a part
+        // at a time as they are uploaded.
+        let rows = |range: std::ops::Range<u64>| {
+            let row = |r: u64| {
+                let p = &scene.particles[(r / 3) as usize];
+                let (i, m) = ((r % 3) as usize, p.canonical_transform());
+                let v = m.row(i);
+                [v.x, v.y, v.z, p.mean[i]]
+            };
+            PartBytes(range.map(row).collect::<Vec<[f32; 4]>>())
+        };
+        let canonical = CANONICAL.upload_parts(ctx, split.canonical, 3 * count as u64, rows)?;
         Ok(Self {
-            chunks: ProjectChunk::split(
-                ctx,
-                &particles,
-                (&sh, settings.sh_storage),
-                splat_core::particle::sh_coeff_count(scene.sh_degree),
-            )?,
+            chunks: ProjectChunk::split(ctx, scene, settings.sh_storage)?,
             count: count as u32,
             sh_degree: u32::from(scene.sh_degree),
             screen_filter: scene.screen_filter,
