@@ -490,15 +490,16 @@ pub(crate) fn shader_module(device: &wgpu::Device, label: &str, source: &str) ->
     })
 }
 
-/// A pipeline layout of the one bind group `layout`.
+/// A pipeline layout of the bind groups `layouts`, group g the g-th.
 pub(crate) fn pipeline_layout(
     device: &wgpu::Device,
     label: &str,
-    layout: &wgpu::BindGroupLayout,
+    layouts: &[&wgpu::BindGroupLayout],
 ) -> wgpu::PipelineLayout {
+    let layouts: Vec<_> = layouts.iter().copied().map(Some).collect();
     device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
-        bind_group_layouts: &[Some(layout)],
+        bind_group_layouts: &layouts,
         immediate_size: 0,
     })
 }
@@ -510,7 +511,7 @@ pub(crate) fn layouts(
     entries: &[wgpu::BindGroupLayoutEntry],
 ) -> (wgpu::BindGroupLayout, wgpu::PipelineLayout) {
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
-    let pipeline = pipeline_layout(device, label, &layout);
+    let pipeline = pipeline_layout(device, label, &[&layout]);
     (layout, pipeline)
 }
 

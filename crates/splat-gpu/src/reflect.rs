@@ -88,12 +88,7 @@ pub(crate) fn pipeline_layout(device: &wgpu::Device, label: &str, groups: &Group
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries })
         })
         .collect();
-    let layouts: Vec<_> = layouts.iter().map(Some).collect();
-    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &layouts,
-        immediate_size: 0,
-    })
+    crate::context::pipeline_layout(device, label, &layouts.iter().collect::<Vec<_>>())
 }
 
 #[cfg(test)]

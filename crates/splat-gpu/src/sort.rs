@@ -734,9 +734,14 @@ fn layout_entries(split: Split, parts: PartBindings) -> Vec<wgpu::BindGroupLayou
         storage(5, false),
         storage(6, false),
     ];
-    let extra = split_layout(split, parts).extra_entries(0, wgpu::ShaderStages::COMPUTE);
-    entries.extend(extra.into_iter().map(|(_, e)| e));
+    entries.extend(split_layout(split, parts).extra_entries(0, |_| wgpu::ShaderStages::COMPUTE));
     entries
+}
+
+/// The sort's bindings in its binding arrays' group for arrays cut as `split`, their parts bound
+/// as `parts` (none, no such group).
+fn array_entries(split: Split, parts: PartBindings) -> Vec<wgpu::BindGroupLayoutEntry> {
+    split_layout(split, parts).extra_entries(crate::split::ARRAY_GROUP, |_| wgpu::ShaderStages::COMPUTE)
 }
 
 /// `sort_setup`'s bindings: its input, the uniform slots and the dispatch arguments.
@@ -762,11 +767,8 @@ impl SortKernels {
         crate::context::validated(device, || {
             let parts = ctx.part_bindings();
             let module = crate::context::shader_module(device, "sort.wgsl", &sort_wgsl(split, parts));
-            let arrays =
-                split_layout(split, parts).extra_entries(crate::split::ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
-            let arrays: Vec<_> = arrays.into_iter().map(|(_, e)| e).collect();
-            let (layout, arrays_layout, pipeline_layout) =
-                crate::split::layouts(device, "sort", &layout_entries(split, parts), &arrays);
+            let (entries, arrays) = (layout_entries(split, parts), array_entries(split, parts));
+            let (layout, arrays_layout, pipeline_layout) = crate::split::layouts(device, "sort", &entries, &arrays);
             let pipeline = |entry| crate::context::compute_pipeline(device, &module, Some(&pipeline_layout), entry);
             Self {
                 histogram: pipeline("histogram"),
@@ -850,9 +852,7 @@ mod tests {
             );
             let wgsl = sort_wgsl(split, PartBindings::Array);
             let entries = super::layout_entries(split, PartBindings::Array);
-            let layout = split_layout(split, PartBindings::Array);
-            let arrays: Vec<_> = layout.extra_entries(crate::split::ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
-            let arrays: Vec<_> = arrays.into_iter().map(|(_, e)| e).collect();
+            let arrays = super::array_entries(split, PartBindings::Array);
             let groups: [&[_]; 2] = [&entries, &arrays];
             crate::layout::wgsl_check::check_layouts("sort", &wgsl, crate::layout::wgsl_check::BINDING_ARRAYS, &groups);
         }

@@ -302,12 +302,8 @@ pub(crate) fn layouts(
     let layout =
         |entries| device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
     let (zero, arrays) = (layout(entries), (!arrays.is_empty()).then(|| layout(arrays)));
-    let groups: Vec<_> = std::iter::once(Some(&zero)).chain(arrays.as_ref().map(Some)).collect();
-    let pipeline = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &groups,
-        immediate_size: 0,
-    });
+    let groups: Vec<_> = std::iter::once(&zero).chain(arrays.as_ref()).collect();
+    let pipeline = crate::context::pipeline_layout(device, label, &groups);
     (zero, arrays, pipeline)
 }
 
@@ -391,21 +387,18 @@ impl SplitLayout {
     }
 
     /// Storage entries of bind group `group` for the parts after the first (part 0 is the
-    /// kernel's own entry), each with the array it holds parts of.
+    /// kernel's own entry), each visible to `visibility` of its array's index in the layout.
     pub fn extra_entries(
         &self,
         group: u32,
-        visibility: wgpu::ShaderStages,
-    ) -> Vec<(usize, wgpu::BindGroupLayoutEntry)> {
+        visibility: impl Fn(usize) -> wgpu::ShaderStages,
+    ) -> Vec<wgpu::BindGroupLayoutEntry> {
         self.bindings()
             .into_iter()
             .filter(|b| b.parts.start > 0 && b.group == group)
-            .map(|b| {
-                let entry = wgpu::BindGroupLayoutEntry {
-                    count: if b.arrayed { std::num::NonZeroU32::new(b.parts.len() as u32) } else { None },
-                    ..storage_entry(b.binding, visibility, self.arrays[b.array].0.setter.is_none())
-                };
-                (b.array, entry)
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                count: if b.arrayed { std::num::NonZeroU32::new(b.parts.len() as u32) } else { None },
+                ..storage_entry(b.binding, visibility(b.array), self.arrays[b.array].0.setter.is_none())
             })
             .collect()
     }
@@ -665,7 +658,7 @@ mod tests {
             SplitLayout { arrays: vec![(B, Split { parts: 2, shift: 4 })], first_extra: 3, parts: PartBindings::Each };
         assert!(split.wgsl().contains("case 1u: { ys_1[j] = v; }"), "{}", split.wgsl());
         assert!(
-            !split.extra_entries(0, wgpu::ShaderStages::COMPUTE)[0].1.ty.eq(&storage_entry(
+            !split.extra_entries(0, |_| wgpu::ShaderStages::COMPUTE)[0].ty.eq(&storage_entry(
                 3,
                 wgpu::ShaderStages::COMPUTE,
                 true
@@ -677,10 +670,11 @@ mod tests {
         let bindings: Vec<_> = layout.bindings().iter().map(at).collect();
         assert_eq!(bindings, vec![one(0, 1, 0), (0, ARRAY_GROUP, 7, 1..3, true), one(1, 2, 0)]);
         assert_eq!((layout.extra_bindings(), layout.array_elements()), (1, 2));
-        assert!(layout.extra_entries(0, wgpu::ShaderStages::COMPUTE).is_empty());
-        let arrays = layout.extra_entries(ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
-        let counts: Vec<_> = arrays.iter().map(|(a, e)| (*a, e.binding, e.count)).collect();
-        assert_eq!(counts, [(0, 7, std::num::NonZeroU32::new(2))]);
+        assert!(layout.extra_entries(0, |_| wgpu::ShaderStages::COMPUTE).is_empty());
+        let stages = [wgpu::ShaderStages::VERTEX, wgpu::ShaderStages::FRAGMENT];
+        let arrays = layout.extra_entries(ARRAY_GROUP, |a| stages[a]);
+        let counts: Vec<_> = arrays.iter().map(|e| (e.visibility, e.binding, e.count)).collect();
+        assert_eq!(counts, [(wgpu::ShaderStages::VERTEX, 7, std::num::NonZeroU32::new(2))]);
         let source = format!("{}{}\n{main}", layout.directives(), layout.wgsl());
         validate(&source, true);
         assert!(

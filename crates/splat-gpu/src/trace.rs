@@ -333,14 +333,13 @@ impl TracePipeline {
             storage(16, true),
             storage(17, true),
         ];
-        entries.extend(split.layout().extra_entries(0, wgpu::ShaderStages::COMPUTE).into_iter().map(|(_, e)| e));
+        entries.extend(split.layout().extra_entries(0, |_| wgpu::ShaderStages::COMPUTE));
         entries
     }
 
     /// The kernel's bindings in its binding arrays' group for `split` (none, no such group).
     pub(crate) fn array_entries(split: &TraceSplit) -> Vec<wgpu::BindGroupLayoutEntry> {
-        let entries = split.layout().extra_entries(crate::split::ARRAY_GROUP, wgpu::ShaderStages::COMPUTE);
-        entries.into_iter().map(|(_, e)| e).collect()
+        split.layout().extra_entries(crate::split::ARRAY_GROUP, |_| wgpu::ShaderStages::COMPUTE)
     }
 }
 

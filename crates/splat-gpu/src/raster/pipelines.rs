@@ -127,11 +127,11 @@ impl RasterPipelines {
             let (fold_layout, fold_msaa_layout) = (fold_layout_of(false), fold_layout_of(true));
             Self {
                 mesh_prepass: compute_pipeline(device, &mesh_prepass, None, "mesh_prepass"),
-                fold: compute_pipeline(device, &fold, Some(&pipeline_layout(device, "fold", &fold_layout)), "fold"),
+                fold: compute_pipeline(device, &fold, Some(&pipeline_layout(device, "fold", &[&fold_layout])), "fold"),
                 fold_msaa: compute_pipeline(
                     device,
                     &fold_msaa,
-                    Some(&pipeline_layout(device, "fold (msaa)", &fold_msaa_layout)),
+                    Some(&pipeline_layout(device, "fold (msaa)", &[&fold_msaa_layout])),
                     "fold",
                 ),
                 fold_layout,

@@ -331,8 +331,7 @@ impl RasterSplit {
     /// the vertex stage.
     pub(super) fn draw_extra_entries(&self, group: u32) -> Vec<wgpu::BindGroupLayoutEntry> {
         let stages = [wgpu::ShaderStages::VERTEX_FRAGMENT, wgpu::ShaderStages::FRAGMENT, wgpu::ShaderStages::VERTEX];
-        let entries = self.layout(true).extra_entries(group, wgpu::ShaderStages::FRAGMENT);
-        entries.into_iter().map(|(a, entry)| wgpu::BindGroupLayoutEntry { visibility: stages[a], ..entry }).collect()
+        self.layout(true).extra_entries(group, |a| stages[a])
     }
 
     /// The bindings of `array`'s parts, held in `parts`, in a raster kernel or the splat draw
