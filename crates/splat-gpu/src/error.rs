@@ -107,6 +107,24 @@ pub enum GpuError {
         /// What `fits` counts ("particles like these", "tile pairs").
         fits_what: &'static str,
     },
+    /// The scene's arrays hold more elements than the kernels' 32-bit indices reach, whatever
+    /// the adapter's bindings.
+    #[error(
+        "the scene's {arrays} hold {elements} elements, but {kernel} index them with 32-bit integers (at most {max}): it fits about {fits} {fits_what}; render it on the CPU backend",
+        max = crate::split::MAX_ELEMENTS
+    )]
+    SceneOverIndices {
+        /// The arrays ("particles, BVH nodes and SH").
+        arrays: &'static str,
+        /// The kernel that indexes them ("the ray tracer").
+        kernel: &'static str,
+        /// Elements of the longest array.
+        elements: u64,
+        /// How many would fit.
+        fits: u64,
+        /// What `fits` counts ("particles like these").
+        fits_what: &'static str,
+    },
     /// The device could not allocate a scene buffer (its memory is full).
     #[error(
         "the GPU could not allocate the scene's {buffer} buffers ({bytes} bytes): {message}; render it on the CPU backend or on a device with more memory"
@@ -165,6 +183,7 @@ impl GpuError {
             Self::Refused { remedies, .. } => remedies,
             Self::SceneTooLarge { .. }
             | Self::SceneOverBindings { .. }
+            | Self::SceneOverIndices { .. }
             | Self::DeviceMemory { .. }
             | Self::LoopBudget { .. } => &[Remedy::Cpu],
             _ => &[],

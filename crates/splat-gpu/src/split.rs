@@ -144,6 +144,9 @@ impl Split {
     }
 }
 
+/// The most elements an array the kernels index holds: their element indices are u32.
+pub(crate) const MAX_ELEMENTS: u64 = u32::MAX as u64;
+
 /// The largest m in 0..=n for which `fits(m)` holds, `fits` holding up to some m and not after
 /// (bisection): how many particles of a scene's kind fit where all of them do not.
 pub(crate) fn most_that_fit(n: u64, fits: impl Fn(u64) -> bool) -> u64 {

@@ -16,7 +16,7 @@
 
 use crate::context::{compute_pipeline, params_entry, storage_entry};
 use crate::layout::{self, GpuPick, Params, PassState};
-use crate::split::{BindGroups, PartBindings, PartBytes, Split, SplitArray, SplitLayout};
+use crate::split::{BindGroups, MAX_ELEMENTS, PartBindings, PartBytes, Split, SplitArray, SplitLayout};
 use crate::timing::Timer;
 use crate::{GpuContext, GpuError, GpuStats, Remedy};
 use splat_core::Camera;
@@ -122,7 +122,7 @@ impl TraceSplit {
     pub fn capacity(ctx: &GpuContext, sh_degree: u8, sh_storage: ShStorage) -> u64 {
         let coefficients = splat_core::particle::sh_coeff_count(sh_degree) as u64;
         let lengths = |m: u64| [m, Self::nodes_about(m), m * coefficients];
-        crate::split::most_that_fit(u64::from(u32::MAX), |m| Self::fits(ctx, lengths(m), sh_storage))
+        crate::split::most_that_fit(MAX_ELEMENTS, |m| Self::fits(ctx, lengths(m), sh_storage))
     }
 
     /// The split of arrays of `lengths` (particles, nodes, SH) by `ctx`'s binding limit.
@@ -138,7 +138,7 @@ impl TraceSplit {
     fn fits(ctx: &GpuContext, lengths: [u64; 3], sh_storage: ShStorage) -> bool {
         let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
         let strides = [PARTICLES.stride, NODES.stride, sh_array.stride];
-        lengths.iter().all(|&n| n <= u64::from(u32::MAX))
+        lengths.iter().all(|&n| n <= MAX_ELEMENTS)
             && strides.iter().all(|&stride| stride <= ctx.max_binding)
             && Self::split(ctx, lengths, sh_storage).layout().over(ctx, OWN_BINDINGS).is_none()
     }
@@ -160,18 +160,23 @@ impl TraceSplit {
         let n = like[0].max(1);
         let scaled = |m: u64| like.map(|len| (u128::from(len) * u128::from(m) / u128::from(n)) as u64);
         let fits = crate::split::most_that_fit(n, |m| Self::fits(ctx, scaled(m), sh_storage));
-        // Over its storage bindings, or past them, over its elements of binding arrays.
-        let (needed, available) = split.layout().over(ctx, OWN_BINDINGS).unwrap_or((0, 0));
-        Err(GpuError::SceneOverBindings {
-            arrays: "particles, BVH nodes and SH",
-            kernel: "the ray tracer",
-            needed,
-            available,
-            limit: ctx.max_binding,
-            bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),
-            fits,
-            fits_what: "particles like these",
-        })
+        let (what, kernel, fits_what) = ("particles, BVH nodes and SH", "the ray tracer", "particles like these");
+        // Past the kernel's indices (whatever the bindings), else over its storage bindings or
+        // its elements of binding arrays.
+        let elements = lengths.into_iter().max().unwrap_or(0);
+        match split.layout().over(ctx, OWN_BINDINGS) {
+            Some((needed, available)) if elements <= MAX_ELEMENTS => Err(GpuError::SceneOverBindings {
+                arrays: what,
+                kernel,
+                needed,
+                available,
+                limit: ctx.max_binding,
+                bytes: (0..3).map(|k| lengths[k] * arrays[k].stride).sum(),
+                fits,
+                fits_what,
+            }),
+            _ => Err(GpuError::SceneOverIndices { arrays: what, kernel, elements, fits, fits_what }),
+        }
     }
 
     fn layout(&self) -> SplitLayout {

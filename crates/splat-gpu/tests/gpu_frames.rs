@@ -12,7 +12,7 @@ use splat_core::mesh::{MeshMaterial, Meshes, TriangleMesh};
 use splat_core::sh::ShStorage;
 use splat_core::trace::{Method, TraceScene, render_frames};
 use splat_core::{Algorithm, Frames, MethodId, Parameters, RenderSettings};
-use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer};
+use splat_gpu::{AccumulationFormat, Accumulator, GpuContext, GpuError, GpuTracer, PartBindings};
 use splat_tests::flips::{FLIP_GAP, FLOAT_TOLERANCE};
 
 /// Every ray-tracing method of the catalogue that has a GPU kernel (a method added to the
@@ -444,6 +444,36 @@ fn scenes_over_the_bindings_are_refused_with_what_fits() {
         let n = 10_000 * scene.particles.len() as u64;
         assert!(splat_gpu::TraceSplit::capacity(ctx, scene.sh_degree, ShStorage::F32) >= n);
         assert!(splat_gpu::RasterSplit::capacity(ctx) >= n);
+    }
+}
+
+/// A scene whose arrays hold more elements than the kernels' u32 indices reach is refused for
+/// that, whatever the adapter's bindings (with binding arrays it would bind them all), with how
+/// many particles like it fit: the ray tracer's SH of a degree-3 scene (16 coefficients a
+/// particle) and the splatting kernels' canonical rows (3 a particle) pass the bound first.
+#[test]
+fn scenes_past_the_kernels_indices_are_refused_for_them() {
+    if context().is_none() {
+        return;
+    }
+    let max = u64::from(u32::MAX);
+    for (parts, c) in common::part_binding_contexts(|c| c) {
+        // In binding arrays the indices alone bound what fits; a binding a part, the bindings.
+        let fits_all = |fits: u64, bound: u64| if parts == PartBindings::Array { fits == bound } else { fits < bound };
+        let n = max / 16 + 1;
+        let refused = splat_gpu::TraceSplit::new(&c, [n, n / 4, 16 * n], ShStorage::F32);
+        let Err(e @ GpuError::SceneOverIndices { elements, fits, .. }) = refused else {
+            panic!("{n} SH-3 particles: {refused:?}")
+        };
+        assert!(elements == 16 * n && fits_all(fits, max / 16), "{parts:?}: {e}");
+        assert!(e.to_string().contains("32-bit integers (at most 4294967295)"), "{e}");
+        assert!(e.remedies().contains(&splat_gpu::Remedy::Cpu));
+        let n = max / 3 + 1;
+        let refused = splat_gpu::RasterSplit::new(&c, n as usize, ShStorage::F32);
+        let Err(e @ GpuError::SceneOverIndices { elements, fits, .. }) = refused else {
+            panic!("{n} particles: {refused:?}")
+        };
+        assert!(elements == 3 * n && fits_all(fits, max / 3), "{parts:?}: {e}");
     }
 }
 

@@ -2,7 +2,7 @@
 //! structs mirrored by `shaders/raster_types.wgsl`.
 
 use super::*;
-use crate::split::{Bound, PartBindings, PartBytes, Split, SplitArray, SplitLayout};
+use crate::split::{Bound, MAX_ELEMENTS, PartBindings, PartBytes, Split, SplitArray, SplitLayout};
 use splat_core::sh::ShStorage;
 
 /// One particle in scene order (WGSL `RasterParticle`, 48 bytes): the 3D covariance is
@@ -231,24 +231,32 @@ impl RasterSplit {
         if Self::fits(ctx, n) {
             return Ok(split);
         }
-        let (needed, available) = split.layout(false).over(ctx, OWN_BINDINGS).unwrap_or((0, 0));
-        Err(GpuError::SceneOverBindings {
-            arrays: "projected splats, canonical transforms and depth sort",
-            kernel: "the splatting kernels",
-            needed,
-            available,
-            limit: ctx.max_binding,
-            bytes: n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4),
-            fits: crate::split::most_that_fit(n, |m| Self::fits(ctx, m)),
-            fits_what: "particles like these",
-        })
+        let (arrays, kernel, fits_what) =
+            ("projected splats, canonical transforms and depth sort", "the splatting kernels", "particles like these");
+        let fits = crate::split::most_that_fit(n, |m| Self::fits(ctx, m));
+        // Past the kernels' indices (three canonical rows a particle, whatever the bindings),
+        // else over their storage bindings or their elements of binding arrays.
+        let elements = 3 * n;
+        match split.layout(false).over(ctx, OWN_BINDINGS) {
+            Some((needed, available)) if elements <= MAX_ELEMENTS => Err(GpuError::SceneOverBindings {
+                arrays,
+                kernel,
+                needed,
+                available,
+                limit: ctx.max_binding,
+                bytes: n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4),
+                fits,
+                fits_what,
+            }),
+            _ => Err(GpuError::SceneOverIndices { arrays, kernel, elements, fits, fits_what }),
+        }
     }
 
     /// The most particles whose projected splats, canonical transforms and depth sort the
     /// splatting kernels bind on `ctx` (before an image's tile pairs, which the tile pass checks
     /// for itself): the bound the adapter's storage bindings set, whatever its memory.
     pub fn capacity(ctx: &GpuContext) -> u64 {
-        crate::split::most_that_fit(u64::from(u32::MAX), |n| Self::fits(ctx, n))
+        crate::split::most_that_fit(MAX_ELEMENTS, |n| Self::fits(ctx, n))
     }
 
     /// The split of a scene of `n` particles by `ctx`'s binding limits (tile pairs whole).
@@ -256,7 +264,7 @@ impl RasterSplit {
         RasterSplit {
             splats: Split::of(n.max(1), SPLATS.stride, ctx.max_binding),
             canonical: Split::of(3 * n.max(1), CANONICAL.stride, ctx.max_binding),
-            ranks: crate::sort::split_of(n.saturating_add(1).min(u64::from(u32::MAX)) as u32, ctx.max_index_binding),
+            ranks: crate::sort::split_of(n.saturating_add(1).min(MAX_ELEMENTS) as u32, ctx.max_index_binding),
             pairs: Split::WHOLE,
             sh_storage,
             parts: ctx.part_bindings(),
@@ -267,7 +275,7 @@ impl RasterSplit {
     /// kernels'), a projected splat within a binding, the parts within what a stage binds (the
     /// SH's storage does not change the count: a projection chunk's SH is whole).
     fn fits(ctx: &GpuContext, n: u64) -> bool {
-        3 * n <= u64::from(u32::MAX)
+        3 * n <= MAX_ELEMENTS
             && SPLATS.stride <= ctx.max_binding
             && Self::split(ctx, n, ShStorage::F32).layout(false).over(ctx, OWN_BINDINGS).is_none()
     }
