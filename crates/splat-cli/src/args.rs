@@ -351,10 +351,11 @@ pub struct SceneArgs {
     /// world file (.toml: splat sets,
     /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,
-    /// Cameras: an INRIA cameras.json, or a COLMAP model (a sparse/0 folder, or its
-    /// images.bin / images.txt; views sorted by image name as 3DGS lists them; distorted,
+    /// Cameras: an INRIA cameras.json, a COLMAP model (a sparse/0 folder, or its
+    /// images.bin / images.txt; views sorted by image name as 3DGS lists them) or a
+    /// transforms.json (NeRF-synthetic, Nerfstudio; the file or its folder); distorted,
     /// fisheye and equirectangular models render through their lens with the ray-tracing
-    /// methods). Without it the camera frames the scene (or the demo's own camera).
+    /// methods. Without it the camera frames the scene (or the demo's own camera).
     #[arg(help_heading = "Camera", long)]
     pub camera: Option<PathBuf>,
     /// Which camera of --camera to use (0-based).
@@ -551,7 +552,7 @@ impl From<SpzAxesArg> for splat_io::spz::SpzAxes {
     }
 }
 
-/// Every camera of a cameras.json or COLMAP model, with its image name.
+/// Every camera of a cameras.json, COLMAP model or transforms.json, with its image name.
 pub fn load_cameras(path: &std::path::Path) -> Result<Vec<(String, Camera)>> {
     Ok(splat_io::cameras::read_views(path)?)
 }

@@ -1176,6 +1176,26 @@ fn colmap_cameras_and_all_cameras() {
     // is the neighbouring view.
     let neighbour = rmse(&a, &render(&json, "json1.npy", "1"));
     assert!(rmse(&a, &b) < 1e-3 && neighbour > 1e-2, "COLMAP vs cameras.json {}, neighbour {neighbour}", rmse(&a, &b));
+    // The same views as a Nerfstudio transforms.json (camera-to-world, OpenGL axes: the camera's
+    // columns x, −y, −z), read from its folder.
+    let frames: Vec<_> = views
+        .iter()
+        .map(|v| {
+            let c = &v.camera;
+            let [x, y, z] = [0, 1, 2].map(|k| c.rotation.row(k));
+            let (y, z, centre) = (-y, -z, c.center());
+            let rows = [0, 1, 2].map(|i| serde_json::json!([x[i], y[i], z[i], centre[i]]));
+            serde_json::json!({"file_path": format!("images/{}", v.name), "transform_matrix": rows,
+                "fl_x": c.fx, "fl_y": c.fy, "cx": c.cx, "cy": c.cy})
+        })
+        .collect();
+    let (w, h) = (base.width, base.height);
+    let nerfstudio = scratch("nerfstudio");
+    std::fs::create_dir_all(&nerfstudio).unwrap();
+    let transforms = serde_json::json!({"w": w, "h": h, "camera_model": "OPENCV", "frames": frames});
+    std::fs::write(nerfstudio.join("transforms.json"), transforms.to_string()).unwrap();
+    let c = render(&nerfstudio, "transforms.npy", "2");
+    assert!(rmse(&c, &b) < 1e-3, "transforms.json vs cameras.json {}", rmse(&c, &b));
     let out = scratch("views");
     let o = splat(&[
         "render",

@@ -83,23 +83,35 @@ pub fn read_cameras(path: &Path) -> Result<Vec<Camera>, Error> {
 /// (a scene given as `--camera`, a binary file) is [`ErrorKind::NotCameras`], naming what
 /// camera files are.
 pub fn read_named_cameras(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
-    let bytes = read_file(path)?;
-    if let Err(e) = serde_json::from_slice::<serde::de::IgnoredAny>(&bytes) {
+    named_cameras(path, &read_file(path)?)
+}
+
+/// [`read_named_cameras`] of the file's `bytes`.
+fn named_cameras(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Camera)>, Error> {
+    if let Err(e) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
         return Err(Error::new(path, ErrorKind::NotCameras(e)));
     }
-    let names = serde_json::from_slice::<Vec<CameraEntry>>(&bytes).map(|e| e.into_iter().map(|e| e.img_name));
-    let cameras = parse_cameras(&bytes).map_err(|kind| Error::new(path, kind))?;
+    let names = serde_json::from_slice::<Vec<CameraEntry>>(bytes).map(|e| e.into_iter().map(|e| e.img_name));
+    let cameras = parse_cameras(bytes).map_err(|kind| Error::new(path, kind))?;
     Ok(names.map_err(|e| Error::new(path, ErrorKind::Json(e)))?.zip(cameras).collect())
 }
 
-/// Every view of a `cameras.json` or a COLMAP model ([`crate::colmap::is_colmap`]), with its
-/// image name, in the file's (or, for COLMAP, the names') order.
+/// Every view of a `cameras.json`, a COLMAP model ([`crate::colmap::is_colmap`]) or a
+/// `transforms.json` ([`crate::transforms`]: the file, or a folder holding it), with its image
+/// name, in the file's (or, for COLMAP, the names') order.
 pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     if crate::colmap::is_colmap(path) {
         let views = crate::colmap::read_colmap(path)?;
         return Ok(views.into_iter().map(|v| (v.name, v.camera)).collect());
     }
-    read_named_cameras(path)
+    if let Some(file) = crate::transforms::in_folder(path) {
+        return crate::transforms::read_transforms(&file);
+    }
+    let bytes = read_file(path)?;
+    if crate::transforms::is_transforms(&bytes) {
+        return crate::transforms::views_of(path, &bytes);
+    }
+    named_cameras(path, &bytes)
 }
 
 /// Parse a `cameras.json`.

@@ -198,9 +198,9 @@ pub enum ErrorKind {
     /// The JSON is malformed.
     #[error("JSON: {0}")]
     Json(#[from] serde_json::Error),
-    /// A file given as cameras is neither a cameras.json nor a COLMAP model.
+    /// A file given as cameras is neither a cameras.json, a COLMAP model nor a transforms.json.
     #[error(
-        "not a camera file: cameras are an INRIA cameras.json or a COLMAP model (a sparse/0 folder, or its images.bin / images.txt); as JSON: {0}"
+        "not a camera file: cameras are an INRIA cameras.json, a COLMAP model (a sparse/0 folder, or its images.bin / images.txt) or a transforms.json (NeRF-synthetic, Nerfstudio); as JSON: {0}"
     )]
     NotCameras(serde_json::Error),
     /// An image cannot be written or read.

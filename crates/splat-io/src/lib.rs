@@ -36,6 +36,7 @@ pub mod sog;
 pub mod splat;
 pub mod spz;
 pub mod text;
+pub mod transforms;
 pub mod usd;
 pub mod world;
 mod zip;

@@ -289,8 +289,9 @@ impl PyCamera {
     }
 }
 
-/// Every view of a camera file (an INRIA cameras.json, or a COLMAP model: a sparse/0 folder or
-/// its images.bin / images.txt), as (image name, camera) in the order `splat render` lists them.
+/// Every view of a camera file (an INRIA cameras.json, a COLMAP model: a sparse/0 folder or
+/// its images.bin / images.txt, or a transforms.json of NeRF-synthetic or Nerfstudio: the file
+/// or its folder), as (image name, camera) in the order `splat render` lists them.
 #[pyfunction]
 fn load_cameras(path: PathBuf) -> PyResult<Vec<(String, PyCamera)>> {
     let views = splat_cli::args::load_cameras(&path).map_err(fail)?;

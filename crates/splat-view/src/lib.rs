@@ -37,8 +37,9 @@ pub struct SceneArgs {
     /// Scene file (.ply, compressed .ply, .splat, .spz) or world file (.toml); the built-in
     /// demo scene when omitted.
     pub scene: Option<PathBuf>,
-    /// Views to step through (N / P): a cameras.json or a COLMAP model (sparse/0, or its
-    /// cameras and images files); the first view opens.
+    /// Views to step through (N / P): a cameras.json, a COLMAP model (sparse/0, or its
+    /// cameras and images files) or a transforms.json (NeRF-synthetic, Nerfstudio); the first
+    /// view opens.
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// The view of --camera to open with.

@@ -199,9 +199,9 @@ def render(scene: Scene, camera=None, *, progress=None, **options) -> dict:
     """Render `scene` from `camera` as ``splat render`` does, `options` its options with dashes
     as underscores (method, spp, seed, backend, raster_samples, background, pipeline, ...).
 
-    `camera` is a Camera, or a camera file (a cameras.json or COLMAP model, the view chosen by
-    camera_index=); without it, eye= and target=, else the world's own camera, else one
-    framing the scene. width= and height= rescale any of them.
+    `camera` is a Camera, or a camera file (a cameras.json, COLMAP model or transforms.json,
+    the view chosen by camera_index=); without it, eye= and target=, else the world's own
+    camera, else one framing the scene. width= and height= rescale any of them.
     `progress(done, total)` is called with pixels done as a CPU render advances. On the GPU,
     ``depth=True`` and ``normal=True`` ask for those images (the CPU makes them always).
 
