@@ -361,6 +361,11 @@ pub struct SceneArgs {
     /// Which camera of --camera to use (0-based).
     #[arg(help_heading = "Camera", long, default_value_t = 0)]
     pub camera_index: usize,
+    /// A Nerfstudio training run's dataparser_transforms.json: moves the cameras of a
+    /// transforms.json (--camera) into the run's normalised world, where splatfacto's exported
+    /// splats (ns-export gaussian-splat) live.
+    #[arg(help_heading = "Camera", long, requires = "camera")]
+    pub dataparser_transforms: Option<PathBuf>,
     /// Image width in pixels (1 to 16384); rescales the camera's intrinsics [default: the
     /// camera's, else the command's framing size: 640 for render].
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
@@ -552,9 +557,10 @@ impl From<SpzAxesArg> for splat_io::spz::SpzAxes {
     }
 }
 
-/// Every camera of a cameras.json, COLMAP model or transforms.json, with its image name.
-pub fn load_cameras(path: &std::path::Path) -> Result<Vec<(String, Camera)>> {
-    Ok(splat_io::cameras::read_views(path)?)
+/// Every camera of a cameras.json, COLMAP model or transforms.json, with its image name; a
+/// transforms.json's moved into the world of a Nerfstudio run by its `dataparser` transforms.
+pub fn load_cameras(path: &std::path::Path, dataparser: Option<&std::path::Path>) -> Result<Vec<(String, Camera)>> {
+    Ok(splat_io::cameras::read_views_in(path, dataparser)?)
 }
 
 impl SceneArgs {
@@ -705,7 +711,7 @@ impl SceneArgs {
     fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
         let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
         let camera = if let Some(path) = &self.camera {
-            let cameras = load_cameras(path)?;
+            let cameras = load_cameras(path, self.dataparser_transforms.as_deref())?;
             let n = cameras.len();
             cameras.get(self.camera_index).map(|(_, c)| *c).with_context(|| {
                 format!("--camera-index {} but {} has {n} cameras", self.camera_index, path.display())

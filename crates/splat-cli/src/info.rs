@@ -10,10 +10,15 @@ pub struct InfoArgs {
     /// Scene file: any format `splat render` reads; a world file (.toml) or a glTF file's
     /// meshes are listed with their materials.
     pub scene: PathBuf,
-    /// The capture's cameras (a cameras.json or COLMAP model): `info` then says which way is
-    /// up, the mean up of the views, as an `--up` for framing.
+    /// The capture's cameras (a cameras.json, COLMAP model or transforms.json): `info` then
+    /// says which way is up, the mean up of the views, as an `--up` for framing.
     #[arg(long)]
     pub camera: Option<PathBuf>,
+    /// A Nerfstudio training run's dataparser_transforms.json: moves the cameras of a
+    /// transforms.json (--camera) into the run's normalised world, where splatfacto's exported
+    /// splats (ns-export gaussian-splat) live.
+    #[arg(long, requires = "camera")]
+    pub dataparser_transforms: Option<PathBuf>,
     /// How scene files are read.
     #[command(flatten)]
     pub read: crate::args::ReadArgs,
@@ -117,7 +122,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| (lo.min(p.scale.min_element()), hi.max(p.scale.max_element())));
     out!("scale      {lo:.2e} … {hi:.2e}");
-    out!("{}", up_line(args.camera.as_deref())?);
+    out!("{}", up_line(args.camera.as_deref(), args.dataparser_transforms.as_deref())?);
     out!("opacity histogram:");
     let mut bins = [0usize; 10];
     for p in &scene.particles {
@@ -187,13 +192,13 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
 
 /// Which way is up: the mean up of the capture's views when `cameras` are given, otherwise
 /// what trained captures usually use.
-fn up_line(cameras: Option<&std::path::Path>) -> Result<String> {
+fn up_line(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Path>) -> Result<String> {
     let Some(path) = cameras else {
         return Ok("up         not measured (no --camera): captures trained from COLMAP data are usually \
                    -y up; frame them with --up 0,-1,0"
             .into());
     };
-    let views: Vec<_> = crate::args::load_cameras(path)?.into_iter().map(|(_, c)| c).collect();
+    let views: Vec<_> = crate::args::load_cameras(path, dataparser)?.into_iter().map(|(_, c)| c).collect();
     Ok(match splat_core::Camera::mean_up(&views) {
         Some(up) => {
             let axis = up.abs().max_position();

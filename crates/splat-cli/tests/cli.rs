@@ -1196,6 +1196,27 @@ fn colmap_cameras_and_all_cameras() {
     std::fs::write(nerfstudio.join("transforms.json"), transforms.to_string()).unwrap();
     let c = render(&nerfstudio, "transforms.npy", "2");
     assert!(rmse(&c, &b) < 1e-3, "transforms.json vs cameras.json {}", rmse(&c, &b));
+    // A Nerfstudio run's dataparser transforms move a transforms.json's cameras, and only those.
+    let run = nerfstudio.join("dataparser_transforms.json");
+    std::fs::write(&run, r#"{"transform": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], "scale": 1.0}"#).unwrap();
+    for (cameras, ok) in [(&nerfstudio, true), (&dir, false)] {
+        let o = splat(&[
+            "render",
+            "fixtures/cloud.ply",
+            "--camera",
+            cameras.to_str().unwrap(),
+            "--dataparser-transforms",
+            run.to_str().unwrap(),
+            "--width",
+            "8",
+            "--height",
+            "6",
+            "-o",
+            scratch("run.npy").to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.success(), ok, "{}", stderr(&o));
+        assert!(ok || stderr(&o).contains("move a transforms.json's cameras"), "{}", stderr(&o));
+    }
     let out = scratch("views");
     let o = splat(&[
         "render",

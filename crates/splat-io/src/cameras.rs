@@ -100,18 +100,31 @@ fn named_cameras(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Camera)>, Err
 /// `transforms.json` ([`crate::transforms`]: the file, or a folder holding it), with its image
 /// name, in the file's (or, for COLMAP, the names') order.
 pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
-    if crate::colmap::is_colmap(path) {
-        let views = crate::colmap::read_colmap(path)?;
-        return Ok(views.into_iter().map(|v| (v.name, v.camera)).collect());
+    read_views_in(path, None)
+}
+
+/// [`read_views`], a `transforms.json`'s cameras moved into the world of a Nerfstudio training
+/// run whose `dataparser_transforms.json` is `dataparser` ([`crate::transforms::Dataparser`]);
+/// other camera files are refused with it.
+pub fn read_views_in(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(String, Camera)>, Error> {
+    let dataparser = dataparser.map(crate::transforms::read_dataparser).transpose()?;
+    let file = crate::transforms::in_folder(path);
+    let bytes = if crate::colmap::is_colmap(path) { None } else { Some(read_file(file.as_deref().unwrap_or(path))?) };
+    match bytes {
+        Some(bytes) if crate::transforms::is_transforms(&bytes) => {
+            crate::transforms::views_of(file.as_deref().unwrap_or(path), &bytes, dataparser.as_ref())
+        }
+        _ if dataparser.is_some() => Err(Error::new(
+            path,
+            ErrorKind::Dataparser(
+                "a training run's dataparser transforms move a transforms.json's cameras (it holds what ns-process-data \
+                 applied); this is a COLMAP model or a cameras.json"
+                    .into(),
+            ),
+        )),
+        Some(bytes) => named_cameras(path, &bytes),
+        None => Ok(crate::colmap::read_colmap(path)?.into_iter().map(|v| (v.name, v.camera)).collect()),
     }
-    if let Some(file) = crate::transforms::in_folder(path) {
-        return crate::transforms::read_transforms(&file);
-    }
-    let bytes = read_file(path)?;
-    if crate::transforms::is_transforms(&bytes) {
-        return crate::transforms::views_of(path, &bytes);
-    }
-    named_cameras(path, &bytes)
 }
 
 /// Parse a `cameras.json`.

@@ -203,6 +203,9 @@ pub enum ErrorKind {
         "not a camera file: cameras are an INRIA cameras.json, a COLMAP model (a sparse/0 folder, or its images.bin / images.txt) or a transforms.json (NeRF-synthetic, Nerfstudio); as JSON: {0}"
     )]
     NotCameras(serde_json::Error),
+    /// A Nerfstudio `dataparser_transforms.json` is malformed or cannot apply to the cameras.
+    #[error("Nerfstudio dataparser transforms: {0}")]
+    Dataparser(String),
     /// An image cannot be written or read.
     #[error("image: {0}")]
     Image(String),

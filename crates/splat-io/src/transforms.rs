@@ -13,9 +13,10 @@
 //! (the camera's centre), the world-to-camera rotation is R = diag(1, −1, −1) Cᵀ and t = −R c
 //! (3DGS's `readCamerasFromTransforms`: `c2w[:3, 1:3] *= -1`, then the inverse). The world is the
 //! file's own, where splats trained from it live (3DGS on NeRF-synthetic scenes, Brush, ...):
-//! `applied_transform` (what `ns-process-data` did to COLMAP's world) is not undone, and
-//! Nerfstudio's dataparser normalisation (the `dataparser_transforms.json` of a training run) is
-//! not applied.
+//! `applied_transform` (what `ns-process-data` did to COLMAP's world) is not undone. Nerfstudio
+//! trains in a normalised world instead, and splatfacto exports its splats there: given the
+//! run's `dataparser_transforms.json` ([`Dataparser`], [`parse_transforms_in`]), the cameras are
+//! moved into that world as Nerfstudio's dataparser moves them.
 //!
 //! **Intrinsics.** fx is `fl_x`, else w / (2 tan(`camera_angle_x` / 2)); fy is `fl_y`, else from
 //! `camera_angle_y`, else fx (3DGS's `focal2fov(fov2focal(fovx, W), H)` is fy = fx). The
@@ -173,8 +174,109 @@ struct Frame {
 #[derive(Debug, Deserialize)]
 struct Transforms {
     frames: Vec<Frame>,
+    /// What `ns-process-data` applied to the data's original coordinates (3 × 4).
+    applied_transform: Option<Vec<Vec<f64>>>,
+    /// The scale it applied to them.
+    applied_scale: Option<f64>,
     #[serde(flatten)]
     intrinsics: Intrinsics,
+}
+
+/// A rigid map x ↦ R x + t (rows [R | t]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Rigid {
+    r: DMat3,
+    t: DVec3,
+}
+
+impl Rigid {
+    const IDENTITY: Rigid = Rigid { r: DMat3::IDENTITY, t: DVec3::ZERO };
+
+    /// The map of 3 × 4 rows (or 4 × 4, last row 0, 0, 0, 1) named `name`; `proper`: its R must
+    /// be a rotation (a camera's pose is checked as a camera).
+    fn from_rows(m: &[Vec<f64>], name: &str, proper: bool) -> Result<Rigid, String> {
+        let lengths: Vec<usize> = m.iter().map(Vec::len).collect();
+        if !(m.len() == 3 || m.len() == 4) || lengths.iter().any(|&n| n != 4) {
+            return Err(format!("{name} is {} rows of {lengths:?} values, not 4 × 4 (or 3 × 4)", m.len()));
+        }
+        if m.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(format!("{name} has a value that is not finite"));
+        }
+        if m.len() == 4 && m[3] != [0.0, 0.0, 0.0, 1.0] {
+            return Err(format!("{name}'s last row is {:?}, not [0, 0, 0, 1]", m[3]));
+        }
+        let r = DMat3::from_cols_array_2d(&[0, 1, 2].map(|col| [m[0][col], m[1][col], m[2][col]]));
+        let off = (r * r.transpose() - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        if proper && (off > 1e-5 || r.determinant() < 0.0) {
+            return Err(format!("{name}'s 3 × 3 part is not a rotation (‖R Rᵀ − I‖∞ = {off:.1e})"));
+        }
+        Ok(Rigid { r, t: DVec3::new(m[0][3], m[1][3], m[2][3]) })
+    }
+
+    fn inverse(self) -> Rigid {
+        let r = self.r.transpose();
+        Rigid { r, t: -(r * self.t) }
+    }
+
+    /// `self`, then `next`.
+    fn then(self, next: Rigid) -> Rigid {
+        Rigid { r: next.r * self.r, t: next.r * self.t + next.t }
+    }
+}
+
+/// A Nerfstudio training run's `dataparser_transforms.json` (`{"transform": 3 × 4, "scale": s}`):
+/// the map x ↦ s (R x + t) from the data's original coordinates (before the `transforms.json`'s
+/// `applied_transform`) to the run's normalised world, where splatfacto trains and exports its
+/// splats. Given to [`parse_transforms_in`], it moves a file's cameras into that world as
+/// Nerfstudio's dataparser does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dataparser {
+    transform: Rigid,
+    scale: f64,
+}
+
+/// Read a `dataparser_transforms.json`.
+pub fn read_dataparser(path: &Path) -> Result<Dataparser, Error> {
+    parse_dataparser(&read_file(path)?).map_err(|kind| Error::new(path, kind))
+}
+
+/// Parse a `dataparser_transforms.json`.
+pub fn parse_dataparser(bytes: &[u8]) -> Result<Dataparser, ErrorKind> {
+    #[derive(Deserialize)]
+    struct File {
+        transform: Vec<Vec<f64>>,
+        scale: f64,
+    }
+    let file: File = serde_json::from_slice(bytes)?;
+    let transform = Rigid::from_rows(&file.transform, "transform", true).map_err(ErrorKind::Dataparser)?;
+    if !(file.scale.is_finite() && file.scale > 0.0) {
+        return Err(ErrorKind::Dataparser(format!("scale {} is not a positive number", file.scale)));
+    }
+    Ok(Dataparser { transform, scale: file.scale })
+}
+
+/// What `ns-process-data` applied to COLMAP's world before `applied_transform` was written
+/// down: Nerfstudio assumes it for a file without one whose folder holds `colmap/sparse/0`.
+const LEGACY_APPLIED: [[f64; 4]; 3] = [[0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0]];
+
+impl Transforms {
+    /// The map of this file's camera centres and axes into `dataparser`'s world, and the scale
+    /// its centres then take: Nerfstudio's training poses are [T A⁻¹ P] with the translation
+    /// times s / `applied_scale` (its dataparser orients the file's poses, then scales their
+    /// centres by its own factor, and saves T after A and s times `applied_scale`).
+    fn to_run_world(&self, dataparser: &Dataparser, folder: Option<&Path>) -> Result<(Rigid, f64), String> {
+        let legacy = || folder.is_some_and(|f| f.join("colmap/sparse/0").is_dir());
+        let applied = match &self.applied_transform {
+            Some(rows) => Rigid::from_rows(rows, "applied_transform", true)?,
+            None if legacy() => Rigid::from_rows(&LEGACY_APPLIED.map(Vec::from), "applied_transform", true)?,
+            None => Rigid::IDENTITY,
+        };
+        let applied_scale = self.applied_scale.unwrap_or(1.0);
+        if !(applied_scale.is_finite() && applied_scale > 0.0) {
+            return Err(format!("applied_scale {applied_scale} is not a positive number"));
+        }
+        Ok((applied.inverse().then(dataparser.transform), dataparser.scale / applied_scale))
+    }
 }
 
 /// Whether `bytes` look like a `transforms.json` rather than a `cameras.json`: a JSON object
@@ -191,22 +293,40 @@ pub fn in_folder(path: &Path) -> Option<std::path::PathBuf> {
 
 /// Every view of the `transforms.json` at `path`, named by `file_path`, in the file's order.
 pub fn read_transforms(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
-    views_of(path, &read_file(path)?)
+    views_of(path, &read_file(path)?, None)
 }
 
-/// [`read_transforms`] of the file's `bytes`.
-pub(crate) fn views_of(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Camera)>, Error> {
+/// [`read_transforms`] of the file's `bytes`, in `dataparser`'s world when given.
+pub(crate) fn views_of(
+    path: &Path,
+    bytes: &[u8],
+    dataparser: Option<&Dataparser>,
+) -> Result<Vec<(String, Camera)>, Error> {
     let folder = path.parent().unwrap_or(Path::new("."));
-    parse_transforms(bytes, Some(folder)).map_err(|kind| Error::new(path, kind))
+    parse_transforms_in(bytes, Some(folder), dataparser).map_err(|kind| Error::new(path, kind))
 }
 
 /// Parse a `transforms.json`; a frame without `w` and `h` takes its image's size, looked up
 /// relative to `folder` (refused where there is none).
 pub fn parse_transforms(bytes: &[u8], folder: Option<&Path>) -> Result<Vec<(String, Camera)>, ErrorKind> {
+    parse_transforms_in(bytes, folder, None)
+}
+
+/// [`parse_transforms`], the cameras moved into a Nerfstudio training run's world when its
+/// `dataparser` transforms are given.
+pub fn parse_transforms_in(
+    bytes: &[u8],
+    folder: Option<&Path>,
+    dataparser: Option<&Dataparser>,
+) -> Result<Vec<(String, Camera)>, ErrorKind> {
     let file: Transforms = serde_json::from_slice(bytes)?;
     if file.frames.is_empty() {
         return Err(ErrorKind::Camera { index: 0, message: "the file lists no frame".into() });
     }
+    let world = match dataparser {
+        Some(d) => file.to_run_world(d, folder).map_err(ErrorKind::Dataparser)?,
+        None => (Rigid::IDENTITY, 1.0),
+    };
     file.frames
         .iter()
         .enumerate()
@@ -214,16 +334,18 @@ pub fn parse_transforms(bytes: &[u8], folder: Option<&Path>) -> Result<Vec<(Stri
             let camera = frame
                 .intrinsics
                 .merged(&file.intrinsics)
-                .and_then(|k| frame_camera(frame, &k, folder))
+                .and_then(|k| frame_camera(frame, &k, folder, world))
                 .map_err(|e| ErrorKind::Camera { index, message: format!("'{}': {e}", frame.file_path) })?;
             Ok((frame.file_path.clone(), camera))
         })
         .collect()
 }
 
-/// The camera of `frame` with intrinsics `k` (its own and the file's, merged).
-fn frame_camera(frame: &Frame, k: &Resolved, folder: Option<&Path>) -> Result<Camera, String> {
-    let (rotation, centre) = pose(&frame.transform_matrix)?;
+/// The camera of `frame` with intrinsics `k` (its own and the file's, merged), its pose moved by
+/// `world` (a map of its centre and axes, then a scale of its centre).
+fn frame_camera(frame: &Frame, k: &Resolved, folder: Option<&Path>, world: (Rigid, f64)) -> Result<Camera, String> {
+    let pose = Rigid::from_rows(&frame.transform_matrix, "transform_matrix", false)?.then(world.0);
+    let (rotation, centre) = (pose.r, world.1 * pose.t);
     let (width, height) = match (k.w, k.h) {
         (Some(w), Some(h)) => (side(w, "w")?, side(h, "h")?),
         _ => image_size(&frame.file_path, folder)?,
@@ -249,27 +371,6 @@ fn frame_camera(frame: &Frame, k: &Resolved, folder: Option<&Path>) -> Result<Ca
     Camera::from_intrinsics(width, height, fx as f32, fy as f32, cx as f32, cy as f32, r.as_mat3(), t.as_vec3())
         .and_then(|c| c.with_lens(lens))
         .map_err(|e| e.to_string())
-}
-
-/// The rotation C and centre c of a camera-to-world `transform_matrix` (4 × 4 with last row
-/// 0, 0, 0, 1, or 3 × 4).
-fn pose(m: &[Vec<f64>]) -> Result<(DMat3, DVec3), String> {
-    let shape = || format!("transform_matrix is {} rows of {:?} values, not 4 × 4 (or 3 × 4)", m.len(), lengths(m));
-    if !(m.len() == 3 || m.len() == 4) || m.iter().any(|row| row.len() != 4) {
-        return Err(shape());
-    }
-    if m.iter().flatten().any(|v| !v.is_finite()) {
-        return Err("transform_matrix has a value that is not finite".into());
-    }
-    if m.len() == 4 && m[3] != [0.0, 0.0, 0.0, 1.0] {
-        return Err(format!("transform_matrix's last row is {:?}, not [0, 0, 0, 1]", m[3]));
-    }
-    let rotation = DMat3::from_cols_array_2d(&[0, 1, 2].map(|col| [m[0][col], m[1][col], m[2][col]]));
-    Ok((rotation, DVec3::new(m[0][3], m[1][3], m[2][3])))
-}
-
-fn lengths(m: &[Vec<f64>]) -> Vec<usize> {
-    m.iter().map(Vec::len).collect()
 }
 
 /// An image side given as a JSON number (Nerfstudio writes integers, some tools floats).
@@ -381,6 +482,31 @@ mod tests {
             assert!(message.contains(expected), "{expected}: {message}");
         }
         assert!(message(&BLENDER.replace("{\"camera", "{\"w\": 8, \"h\": 6, \"fl_x\": 1e40, \"camera")).contains("fx"));
+    }
+
+    #[test]
+    fn dataparser_transforms_are_a_rigid_map_and_a_scale_or_refused() {
+        let identity = r#"{"transform": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], "scale": 1.0}"#;
+        let d = parse_dataparser(identity.as_bytes()).unwrap();
+        assert_eq!((d.transform, d.scale), (Rigid::IDENTITY, 1.0));
+        // The identity run leaves a file's cameras where they were.
+        let json = BLENDER.replace(r#""frames""#, r#""w": 8, "h": 6, "frames""#);
+        let moved = parse_transforms_in(json.as_bytes(), None, Some(&d)).unwrap();
+        assert_eq!(moved, parse_transforms(json.as_bytes(), None).unwrap());
+        let cases = [
+            (identity.replace("1.0}", "0.0}"), "scale 0 is not a positive number"),
+            (identity.replace("[[1, 0, 0, 0]", "[[2, 0, 0, 0]"), "not a rotation"),
+            (identity.replace("[[1, 0, 0, 0]", "[[-1, 0, 0, 0]"), "not a rotation"),
+            (identity.replace("[0, 0, 1, 0]]", "[0, 0, 1]]"), "not 4 × 4"),
+            (r#"{"scale": 1.0}"#.into(), "missing field `transform`"),
+        ];
+        for (json, expected) in cases {
+            let message = parse_dataparser(json.as_bytes()).unwrap_err().to_string();
+            assert!(message.contains(expected), "{expected}: {message}");
+        }
+        let bad_applied = json.replace(r#""w": 8"#, r#""applied_transform": [[1, 0, 0, 0], [0, 1, 0, 0]], "w": 8"#);
+        let message = parse_transforms_in(bad_applied.as_bytes(), None, Some(&d)).unwrap_err().to_string();
+        assert!(message.contains("applied_transform is 2 rows"), "{message}");
     }
 
     /// Every prefix of a file, and the file with each byte changed, is refused or read, never a

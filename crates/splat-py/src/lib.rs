@@ -291,10 +291,13 @@ impl PyCamera {
 
 /// Every view of a camera file (an INRIA cameras.json, a COLMAP model: a sparse/0 folder or
 /// its images.bin / images.txt, or a transforms.json of NeRF-synthetic or Nerfstudio: the file
-/// or its folder), as (image name, camera) in the order `splat render` lists them.
+/// or its folder), as (image name, camera) in the order `splat render` lists them;
+/// `dataparser_transforms`, a Nerfstudio run's `dataparser_transforms.json`, moves a
+/// transforms.json's cameras into that run's world (splatfacto's splats').
 #[pyfunction]
-fn load_cameras(path: PathBuf) -> PyResult<Vec<(String, PyCamera)>> {
-    let views = splat_cli::args::load_cameras(&path).map_err(fail)?;
+#[pyo3(signature = (path, dataparser_transforms = None))]
+fn load_cameras(path: PathBuf, dataparser_transforms: Option<PathBuf>) -> PyResult<Vec<(String, PyCamera)>> {
+    let views = splat_cli::args::load_cameras(&path, dataparser_transforms.as_deref()).map_err(fail)?;
     Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
 }
 

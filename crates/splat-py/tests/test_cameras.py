@@ -156,3 +156,66 @@ def test_nerfstudio_frames_are_splatfacto_cameras(tmp_path):
     (tmp_path / "transforms.json").write_text(json.dumps(meta))
     with pytest.raises(splat.SplatError, match="fl_x 260.0 differs from the file's 250.0"):
         splat.load_cameras(tmp_path)
+
+
+# What ns-process-data writes as applied_transform (colmap_utils.colmap_to_json), and what
+# Nerfstudio assumes for a file without one beside colmap/sparse/0.
+APPLIED = [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0]]
+LEGACY_APPLIED = [[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0]]
+
+
+def nerfstudio_run(meta: dict, folder, orientation: np.ndarray, scale_factor: float):
+    """Nerfstudio's dataparser on `meta` (nerfstudio_dataparser.py): the poses oriented by
+    `orientation` (what auto_orient_and_center_poses returns) and their centres scaled, the
+    dataparser_transforms.json it saves (save_dataparser_transform), and splatfacto's view
+    matrices of the training poses."""
+    poses = np.array([frame["transform_matrix"] for frame in meta["frames"]], dtype=np.float64)
+    poses = orientation @ poses
+    poses[:, :3, 3] *= scale_factor
+    applied_transform = None
+    if "applied_transform" in meta:
+        applied_transform = np.array(meta["applied_transform"], dtype=np.float64)
+    elif (folder / "colmap/sparse/0").exists():
+        applied_transform = np.array(LEGACY_APPLIED, dtype=np.float64)
+    if applied_transform is not None:
+        dataparser_transform = orientation @ np.concatenate([applied_transform, [[0, 0, 0, 1]]], 0)
+    else:
+        dataparser_transform = orientation
+    if "applied_scale" in meta:
+        scale_factor *= float(meta["applied_scale"])
+    saved = {"transform": dataparser_transform.tolist(), "scale": float(scale_factor)}
+    expected = []
+    for frame, pose in zip(meta["frames"], poses):
+        K = np.array([[meta["fl_x"], 0, meta["cx"]], [0, meta["fl_y"], meta["cy"]], [0, 0, 1]])
+        expected.append((frame["file_path"], splatfacto_viewmat(pose), K, (meta["w"], meta["h"])))
+    return saved, expected
+
+
+def test_a_nerfstudio_runs_dataparser_transforms_give_splatfactos_training_cameras(tmp_path):
+    rng = np.random.default_rng(9)
+    frames = [{"file_path": f"images/frame_{i:05}.jpg", "transform_matrix": random_c2w(rng).tolist()} for i in range(4)]
+    base = {"w": 64, "h": 48, "fl_x": 50.0, "fl_y": 52.0, "cx": 31.5, "cy": 24.5, "frames": frames}
+    cases = {
+        "ns-process-data": {"applied_transform": APPLIED},
+        "applied scale": {"applied_transform": APPLIED, "applied_scale": 2.5},
+        "legacy": {},
+        "none": {},
+    }
+    for case, extra in cases.items():
+        folder = tmp_path / case.replace(" ", "-")
+        (folder / "run").mkdir(parents=True)
+        if case == "legacy":
+            (folder / "colmap/sparse/0").mkdir(parents=True)
+        meta = {**base, **extra}
+        (folder / "transforms.json").write_text(json.dumps(meta))
+        orientation = random_c2w(rng)[:3, :]
+        saved, expected = nerfstudio_run(meta, folder, orientation, float(rng.uniform(0.05, 0.5)))
+        (folder / "run/dataparser_transforms.json").write_text(json.dumps(saved))
+        views = dict(splat.load_cameras(folder, dataparser_transforms=folder / "run/dataparser_transforms.json"))
+        for name, viewmat, K, _ in expected:
+            np.testing.assert_allclose(views[name].viewmat, viewmat, atol=TOLERANCE, err_msg=case)
+            np.testing.assert_allclose(views[name].K, K, rtol=TOLERANCE, err_msg=case)
+
+    (tmp_path / "cameras.json").write_text("[]")
+    with pytest.raises(splat.SplatError, match="move a transforms.json's cameras"):
+        splat.load_cameras(tmp_path / "cameras.json", dataparser_transforms=tmp_path / "none/run/dataparser_transforms.json")

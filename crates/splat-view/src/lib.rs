@@ -45,6 +45,11 @@ pub struct SceneArgs {
     /// The view of --camera to open with.
     #[arg(long, default_value_t = 0)]
     pub camera_index: usize,
+    /// A Nerfstudio training run's dataparser_transforms.json: moves the cameras of a
+    /// transforms.json (--camera) into the run's normalised world, where splatfacto's exported
+    /// splats (ns-export gaussian-splat) live.
+    #[arg(long, requires = "camera")]
+    pub dataparser_transforms: Option<PathBuf>,
     /// Where frames render: auto takes a hardware GPU and the CPU renderers on a CPU adapter
     /// such as lavapipe.
     #[arg(long, value_enum, default_value = "auto")]
@@ -70,7 +75,8 @@ impl SceneArgs {
     /// Read the scene and its views, checking `--camera-index` against them.
     pub fn load(&self) -> Result<load::Loaded> {
         let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
-        let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), read)?;
+        let mut loaded =
+            load::load(self.scene.as_deref(), self.camera.as_deref(), self.dataparser_transforms.as_deref(), read)?;
         if let Some(storage) = self.sh_storage {
             loaded.info.render.sh_storage = storage;
         }

@@ -38,15 +38,21 @@ pub struct SceneInfo {
 }
 
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
-/// when `None`) with the reader's `options`, and the views of `cameras`.
-pub fn load(scene: Option<&Path>, cameras: Option<&Path>, options: splat_io::ReadOptions) -> Result<Loaded> {
+/// when `None`) with the reader's `options`, and the views of `cameras` (a transforms.json's in
+/// the world of the Nerfstudio run whose `dataparser_transforms.json` is `dataparser`).
+pub fn load(
+    scene: Option<&Path>,
+    cameras: Option<&Path>,
+    dataparser: Option<&Path>,
+    options: splat_io::ReadOptions,
+) -> Result<Loaded> {
     let opened = splat_io::world::open_world(scene, options)?;
     if let Some(warning) = scene.and_then(|p| splat_io::skipped_properties_warning(p, &opened.skipped_properties)) {
         eprintln!("warning: {warning}");
     }
     let (world, name) = (opened.world, opened.name);
     let views = match cameras {
-        Some(path) => splat_io::cameras::read_views(path)?,
+        Some(path) => splat_io::cameras::read_views_in(path, dataparser)?,
         None => Vec::new(),
     };
     if cameras.is_some() && views.is_empty() {
