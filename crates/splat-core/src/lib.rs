@@ -36,6 +36,7 @@ pub mod estimator;
 pub mod filter;
 pub mod frame;
 pub mod hit;
+pub mod host;
 pub mod image;
 pub mod kernel;
 pub mod lens;

@@ -54,6 +54,8 @@ pub struct GpuContext {
     /// Storage buffers a shader stage binds (what the ray tracer's split arrays may use beside
     /// its own bindings, `crate::split`).
     pub(crate) storage_buffers: u32,
+    /// Device memory left to check scenes against, set by [`GpuContext::with_memory_available`].
+    memory_available: Option<u64>,
     /// Storage buffers a shader stage binds in binding arrays: the device's limit where it has
     /// arrays of storage buffers in one binding, indexed non-uniformly (wgpu's
     /// `BUFFER_BINDING_ARRAY`, `STORAGE_RESOURCE_BINDING_ARRAY` and
@@ -219,6 +221,7 @@ impl GpuContext {
                 0
             },
             max_index_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
+            memory_available: None,
             sample_rate_shading,
             frames_per_dispatch: crate::FRAMES_PER_DISPATCH,
             work: WorkCounters::default(),
@@ -240,6 +243,31 @@ impl GpuContext {
         self.max_binding = self.max_binding.min(bytes);
         self.max_index_binding = self.max_index_binding.min(bytes);
         self
+    }
+
+    /// Check scenes against `bytes` of device memory left, as if the device had only that
+    /// (to test the refusal on any adapter).
+    pub fn with_memory_available(mut self, bytes: u64) -> Self {
+        self.memory_available = Some(bytes);
+        self
+    }
+
+    /// The device memory the context can still fill, where it can tell: a CPU adapter's
+    /// (lavapipe's, WARP's) is the host's ([`splat_core::host::available`]); wgpu reports no
+    /// hardware device's, which refuses an allocation past its memory itself
+    /// ([`GpuError::DeviceMemory`]). Scenes are checked against it before their arrays are built.
+    pub fn memory_available(&self) -> Option<u64> {
+        self.memory_available
+            .or_else(|| (self.info.device_type == wgpu::DeviceType::Cpu).then(splat_core::host::available).flatten())
+    }
+
+    /// Refuse arrays (`what`) of `bytes` that the device's memory left cannot hold
+    /// ([`GpuContext::memory_available`]), before they are built.
+    pub(crate) fn check_memory(&self, what: &'static str, bytes: u64) -> Result<(), GpuError> {
+        match self.memory_available() {
+            Some(available) if bytes > available => Err(GpuError::MemoryShort { arrays: what, bytes, available }),
+            _ => Ok(()),
+        }
     }
 
     /// Lower the storage buffers a stage binds in binding arrays (to test the refusal past them

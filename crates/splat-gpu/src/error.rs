@@ -125,6 +125,19 @@ pub enum GpuError {
         /// What `fits` counts ("particles like these").
         fits_what: &'static str,
     },
+    /// The scene's arrays need more memory than the device has left, where it can tell
+    /// (`GpuContext::memory_available`: a CPU adapter's memory is the host's).
+    #[error(
+        "the scene's {arrays} need {bytes} bytes of device memory and the device has {available} left (a CPU adapter's memory is the host's): render it on the CPU backend, which holds the scene once, or on a GPU"
+    )]
+    MemoryShort {
+        /// The arrays ("particles, BVH nodes and SH").
+        arrays: &'static str,
+        /// What they need.
+        bytes: u64,
+        /// What the device has left.
+        available: u64,
+    },
     /// The device could not allocate a scene buffer (its memory is full).
     #[error(
         "the GPU could not allocate the scene's {buffer} buffers ({bytes} bytes): {message}; render it on the CPU backend or on a device with more memory"
@@ -184,6 +197,7 @@ impl GpuError {
             Self::SceneTooLarge { .. }
             | Self::SceneOverBindings { .. }
             | Self::SceneOverIndices { .. }
+            | Self::MemoryShort { .. }
             | Self::DeviceMemory { .. }
             | Self::LoopBudget { .. } => &[Remedy::Cpu],
             _ => &[],

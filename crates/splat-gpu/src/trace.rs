@@ -144,7 +144,8 @@ impl TraceSplit {
     }
 
     /// The split of arrays of `lengths` (particles, nodes, SH), refused with the particles that
-    /// would fit in arrays in the proportions of `like`.
+    /// would fit in arrays in the proportions of `like`, or when the device's memory left cannot
+    /// hold arrays of `like` ([`GpuError::MemoryShort`]).
     fn checked(ctx: &GpuContext, lengths: [u64; 3], like: [u64; 3], sh_storage: ShStorage) -> Result<Self, GpuError> {
         let sh_array = layout::sh_array(sh_storage, SH_BINDING).0;
         let arrays = [&PARTICLES, &NODES, &sh_array];
@@ -154,6 +155,9 @@ impl TraceSplit {
         }
         let split = Self::split(ctx, lengths, sh_storage);
         if Self::fits(ctx, lengths, sh_storage) {
+            // The device's memory, where it can tell, holds the arrays of `like` (the BVH's
+            // estimated nodes before it is built).
+            ctx.check_memory("particles, BVH nodes and SH", (0..3).map(|k| like[k] * arrays[k].stride).sum())?;
             return Ok(split);
         }
         // The most particles m whose arrays, scaled from `like`, fit.

@@ -477,6 +477,50 @@ fn scenes_past_the_kernels_indices_are_refused_for_them() {
     }
 }
 
+/// A scene whose arrays the device's memory left cannot hold is refused before its BVH is built
+/// (`TraceSplit::at_least`, with the estimated nodes) and before its splats are projected
+/// (`RasterSplit::new`), naming what they need; arrays that fit are accepted. A CPU adapter's
+/// memory left is the host's.
+#[test]
+fn scenes_over_the_devices_memory_are_refused_before_they_are_built() {
+    let Some(ctx) = context() else { return };
+    let (scene, _) = fixture("cloud", 8, 8);
+    let settings = RenderSettings::default();
+    let n = scene.particles.len() as u64;
+    let coefficients = splat_core::particle::sh_coeff_count(scene.sh_degree) as u64;
+    // The ray tracer's arrays (particles, estimated nodes, SH): refused in no memory, accepted in
+    // what they need, refused in a byte less.
+    let needed = match splat_gpu::TraceSplit::at_least(
+        &GpuContext::new().unwrap().with_memory_available(0),
+        &scene,
+        &settings,
+    ) {
+        Err(e @ GpuError::MemoryShort { bytes, available: 0, .. }) => {
+            assert!(
+                e.to_string().contains("particles, BVH nodes and SH") && e.remedies().contains(&splat_gpu::Remedy::Cpu)
+            );
+            bytes
+        }
+        other => panic!("{other:?}"),
+    };
+    assert!(needed > n * (coefficients * 4), "{needed} bytes for {n} particles");
+    let tight = GpuContext::new().unwrap().with_memory_available(needed);
+    assert!(splat_gpu::TraceSplit::at_least(&tight, &scene, &settings).is_ok());
+    let short = GpuContext::new().unwrap().with_memory_available(needed - 1);
+    assert!(matches!(splat_gpu::TraceSplit::at_least(&short, &scene, &settings), Err(GpuError::MemoryShort { .. })));
+    // The splatting arrays: a 64-byte projected splat, three 16-byte canonical rows and three
+    // u32 of the depth sort a particle.
+    let raster = |available| {
+        let c = GpuContext::new().unwrap().with_memory_available(available);
+        splat_gpu::RasterSplit::new(&c, n as usize, ShStorage::F32).map(|_| ())
+    };
+    assert!(matches!(raster(n * 124 - 1), Err(GpuError::MemoryShort { bytes, .. }) if bytes == n * 124));
+    assert!(raster(n * 124).is_ok());
+    // A CPU adapter reports the host's memory left; a hardware one nothing.
+    let cpu = ctx.info.device_type == splat_gpu::wgpu::DeviceType::Cpu;
+    assert_eq!(ctx.memory_available().is_some(), cpu && splat_core::host::available().is_some());
+}
+
 /// [`scenes_over_the_bindings_are_refused_with_what_fits`] on `small`.
 fn refused_with_what_fits(ctx: &'static GpuContext, small: &GpuContext) {
     let (scene, _) = fixture("cloud", 8, 8);

@@ -220,7 +220,8 @@ impl RasterSplit {
 
     /// The split of a scene of `count` particles, SH stored as `sh_storage`, on `ctx`, refused
     /// when it needs more bindings than the adapter has ([`GpuError::SceneOverBindings`]) with how
-    /// many particles would fit.
+    /// many particles would fit, or more memory than the device has left, where it can tell
+    /// ([`GpuError::MemoryShort`]).
     pub fn new(ctx: &GpuContext, count: usize, sh_storage: ShStorage) -> Result<Self, GpuError> {
         let n = count as u64;
         if SPLATS.stride > ctx.max_binding {
@@ -228,7 +229,9 @@ impl RasterSplit {
             return Err(GpuError::SceneTooLarge { buffer, bytes, limit: ctx.max_binding, count });
         }
         let split = Self::split(ctx, n, sh_storage);
+        let bytes = n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4);
         if Self::fits(ctx, n) {
+            ctx.check_memory("projected splats, canonical transforms and depth sort", bytes)?;
             return Ok(split);
         }
         let (arrays, kernel, fits_what) =
@@ -244,7 +247,7 @@ impl RasterSplit {
                 needed,
                 available,
                 limit: ctx.max_binding,
-                bytes: n * (SPLATS.stride + 3 * CANONICAL.stride + 3 * 4),
+                bytes,
                 fits,
                 fits_what,
             }),
