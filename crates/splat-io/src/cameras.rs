@@ -92,8 +92,21 @@ fn named_cameras(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Camera)>, Err
         return Err(Error::new(path, ErrorKind::NotCameras(e)));
     }
     let names = serde_json::from_slice::<Vec<CameraEntry>>(bytes).map(|e| e.into_iter().map(|e| e.img_name));
+    if names.is_err() && is_exported_poses(bytes) {
+        let message = "this is Nerfstudio's `ns-export cameras` output (poses in a training run's world, no \
+                       intrinsics): give the dataset's transforms.json with --dataparser-transforms and the run's \
+                       dataparser_transforms.json instead";
+        return Err(Error::new(path, ErrorKind::Camera { index: 0, message: message.into() }));
+    }
     let cameras = parse_cameras(bytes).map_err(|kind| Error::new(path, kind))?;
     Ok(names.map_err(|e| Error::new(path, ErrorKind::Json(e)))?.zip(cameras).collect())
+}
+
+/// Whether `bytes` are a list whose first entry has Nerfstudio's exported `transform` and
+/// `file_path` (`ns-export cameras`), not a `cameras.json`.
+fn is_exported_poses(bytes: &[u8]) -> bool {
+    let first = serde_json::from_slice::<Vec<serde_json::Value>>(bytes).ok().and_then(|v| v.into_iter().next());
+    first.is_some_and(|e| e.get("transform").is_some() && e.get("file_path").is_some())
 }
 
 /// Every view of a `cameras.json`, a COLMAP model ([`crate::colmap::is_colmap`]) or a

@@ -261,6 +261,18 @@ fn malformed_cameras_are_refused() {
     assert!(matches!(parse_cameras(bad_rot).unwrap_err(), ErrorKind::Camera { index: 0, .. }));
     let zero_f = br#"[{"width": 10, "height": 10, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 0, "fy": 5}]"#;
     assert!(matches!(parse_cameras(zero_f).unwrap_err(), ErrorKind::Camera { index: 0, .. }));
+    // Nerfstudio's `ns-export cameras` list is named, with the way to the same views.
+    let dir = std::env::temp_dir().join(format!("splat-exported-poses-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let exported = dir.join("transforms_train.json");
+    std::fs::write(
+        &exported,
+        r#"[{"file_path": "images/a.png", "transform": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]}]"#,
+    )
+    .unwrap();
+    let message = splat_io::cameras::read_views(&exported).unwrap_err().to_string();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(message.contains("`ns-export cameras` output") && message.contains("--dataparser-transforms"), "{message}");
 }
 
 #[test]
