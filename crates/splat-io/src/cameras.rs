@@ -94,8 +94,8 @@ fn named_cameras(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Camera)>, Err
     let names = serde_json::from_slice::<Vec<CameraEntry>>(bytes).map(|e| e.into_iter().map(|e| e.img_name));
     if names.is_err() && is_exported_poses(bytes) {
         let message = "this is Nerfstudio's `ns-export cameras` output (poses in a training run's world, no \
-                       intrinsics): give the dataset's transforms.json with --dataparser-transforms and the run's \
-                       dataparser_transforms.json instead";
+                       intrinsics): give the dataset's transforms.json as the cameras instead, with the run's \
+                       dataparser_transforms.json";
         return Err(Error::new(path, ErrorKind::Camera { index: 0, message: message.into() }));
     }
     let cameras = parse_cameras(bytes).map_err(|kind| Error::new(path, kind))?;
@@ -121,23 +121,26 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
 /// other camera files are refused with it.
 pub fn read_views_in(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(String, Camera)>, Error> {
     let dataparser = dataparser.map(crate::transforms::read_dataparser).transpose()?;
-    let file = crate::transforms::in_folder(path);
-    let bytes = if crate::colmap::is_colmap(path) { None } else { Some(read_file(file.as_deref().unwrap_or(path))?) };
-    match bytes {
-        Some(bytes) if crate::transforms::is_transforms(&bytes) => {
-            crate::transforms::views_of(file.as_deref().unwrap_or(path), &bytes, dataparser.as_ref())
+    let not_transforms = || {
+        let why = "a training run's dataparser transforms move a transforms.json's cameras (it holds what \
+                   ns-process-data applied); this is a COLMAP model or a cameras.json";
+        Err(Error::new(path, ErrorKind::Dataparser(why.into())))
+    };
+    if crate::colmap::is_colmap(path) {
+        if dataparser.is_some() {
+            return not_transforms();
         }
-        _ if dataparser.is_some() => Err(Error::new(
-            path,
-            ErrorKind::Dataparser(
-                "a training run's dataparser transforms move a transforms.json's cameras (it holds what ns-process-data \
-                 applied); this is a COLMAP model or a cameras.json"
-                    .into(),
-            ),
-        )),
-        Some(bytes) => named_cameras(path, &bytes),
-        None => Ok(crate::colmap::read_colmap(path)?.into_iter().map(|v| (v.name, v.camera)).collect()),
+        return Ok(crate::colmap::read_colmap(path)?.into_iter().map(|v| (v.name, v.camera)).collect());
     }
+    let file = crate::transforms::in_folder(path).unwrap_or_else(|| path.to_path_buf());
+    let bytes = read_file(&file)?;
+    if crate::transforms::is_transforms(&bytes) {
+        return crate::transforms::views_of(&file, &bytes, dataparser.as_ref());
+    }
+    if dataparser.is_some() {
+        return not_transforms();
+    }
+    named_cameras(path, &bytes)
 }
 
 /// Parse a `cameras.json`.

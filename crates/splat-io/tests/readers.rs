@@ -272,7 +272,10 @@ fn malformed_cameras_are_refused() {
     .unwrap();
     let message = splat_io::cameras::read_views(&exported).unwrap_err().to_string();
     std::fs::remove_dir_all(&dir).unwrap();
-    assert!(message.contains("`ns-export cameras` output") && message.contains("--dataparser-transforms"), "{message}");
+    assert!(
+        message.contains("`ns-export cameras` output") && message.contains("with the run's dataparser_transforms.json"),
+        "{message}"
+    );
 }
 
 #[test]
