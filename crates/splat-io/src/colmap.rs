@@ -200,9 +200,8 @@ fn intrinsics(id: u32, model: &str, width: u64, height: u64, params: &[f64]) -> 
                      supported (they must agree)"
                 )));
             }
-            // Pixels per radian, so that the pinhole fields stay meaningful.
-            let f = w / std::f64::consts::TAU;
-            (f, f, 0.5 * w, 0.5 * h, Lens::Equirectangular)
+            let [fx, fy, cx, cy] = equirectangular_intrinsics(w, h);
+            (fx, fy, cx, cy, Lens::Equirectangular)
         }
         _ => {
             return Err(colmap_error(format!(
@@ -218,6 +217,14 @@ fn intrinsics(id: u32, model: &str, width: u64, height: u64, params: &[f64]) -> 
         return Err(colmap_error(format!("camera {id}: focal lengths and principal point {params:?} are unusable")));
     }
     Ok(Intrinsics { width: size(width, "width")?, height: size(height, "height")?, fx, fy, cx, cy, lens })
+}
+
+/// fx, fy, cx, cy an equirectangular camera of w × h pixels stores (its lens spans the whole
+/// image and reads none of them): w / 2π pixels a radian and the image centre, so that the
+/// pinhole fields stay meaningful.
+pub(crate) fn equirectangular_intrinsics(w: f64, h: f64) -> [f64; 4] {
+    let f = w / std::f64::consts::TAU;
+    [f, f, 0.5 * w, 0.5 * h]
 }
 
 /// A little-endian reader that names what it was reading when the bytes run out.

@@ -389,7 +389,8 @@ fn perspective(k: &Resolved, lens: &Lens, width: u32, height: u32) -> Result<[f6
 /// is fl_x = w / 2, fl_y = h, cx = w / 2, cy = h / 2 (what its `cameras.py` assumes), and
 /// [`Lens::Equirectangular`] is that map (the azimuth from −π at the left edge, forward at the
 /// centre, the elevation +π/2 at the top). A camera that names other values covers part of
-/// the sphere, which no lens here models. Stored as COLMAP's are: w / 2π pixels a radian.
+/// the sphere, which no lens here models. Stored as COLMAP's are
+/// ([`crate::colmap::equirectangular_intrinsics`]).
 fn equirectangular(k: &Resolved, width: u32, height: u32) -> Result<[f64; 4], String> {
     let (w, h) = (f64::from(width), f64::from(height));
     for (name, given, whole) in
@@ -403,8 +404,7 @@ fn equirectangular(k: &Resolved, width: u32, height: u32) -> Result<[f64; 4], St
             ));
         }
     }
-    let f = w / std::f64::consts::TAU;
-    Ok([f, f, 0.5 * w, 0.5 * h])
+    Ok(crate::colmap::equirectangular_intrinsics(w, h))
 }
 
 /// An image side given as a JSON number (Nerfstudio writes integers, some tools floats).
