@@ -122,8 +122,8 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
 pub fn read_views_in(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(String, Camera)>, Error> {
     let dataparser = dataparser.map(crate::transforms::read_dataparser).transpose()?;
     let not_transforms = || {
-        let why = "a training run's dataparser transforms move a transforms.json's cameras (it holds what \
-                   ns-process-data applied); this is a COLMAP model or a cameras.json";
+        let why = "a training run's dataparser transforms move a transforms.json's cameras, and this is a \
+                   COLMAP model or a cameras.json: give the run's dataset's transforms.json";
         Err(Error::new(path, ErrorKind::Dataparser(why.into())))
     };
     if crate::colmap::is_colmap(path) {
