@@ -74,23 +74,25 @@ struct Intrinsics {
 impl Intrinsics {
     /// The keys of a frame (`self`) merged with the file's (`top`): a key given in one is taken
     /// from it; given in both, the two must agree, since Nerfstudio reads the file's and Brush
-    /// the frame's. The distortion is one key (`distortion_params`, else k1–k4, p1, p2), as
-    /// Nerfstudio reads it.
-    fn merged(&self, top: &Intrinsics) -> Result<Resolved, String> {
+    /// the frame's. The distortion is one key, as Nerfstudio reads it: the merged keys hold it
+    /// in `distortion_params` alone.
+    fn merged(&self, top: &Intrinsics) -> Result<Intrinsics, String> {
         let distortion = merge("the distortion", self.distortion()?, top.distortion()?)?;
-        Ok(Resolved {
+        Ok(Intrinsics {
+            camera_angle_x: merge("camera_angle_x", self.camera_angle_x, top.camera_angle_x)?,
+            camera_angle_y: merge("camera_angle_y", self.camera_angle_y, top.camera_angle_y)?,
             fl_x: merge("fl_x", self.fl_x, top.fl_x)?,
             fl_y: merge("fl_y", self.fl_y, top.fl_y)?,
-            angle_x: merge("camera_angle_x", self.camera_angle_x, top.camera_angle_x)?,
-            angle_y: merge("camera_angle_y", self.camera_angle_y, top.camera_angle_y)?,
             cx: merge("cx", self.cx, top.cx)?,
             cy: merge("cy", self.cy, top.cy)?,
             w: merge("w", self.w, top.w)?,
             h: merge("h", self.h, top.h)?,
             camera_model: merge("camera_model", self.camera_model.clone(), top.camera_model.clone())?,
-            distortion: distortion.unwrap_or([0.0; 6]),
-            is_fisheye: self.is_fisheye.or(top.is_fisheye) == Some(true),
-            rational: [self.k5, self.k6, top.k5, top.k6].into_iter().flatten().any(|k| k != 0.0),
+            distortion_params: distortion.map(Vec::from),
+            k5: merge("k5", self.k5, top.k5)?,
+            k6: merge("k6", self.k6, top.k6)?,
+            is_fisheye: self.is_fisheye.or(top.is_fisheye),
+            ..Intrinsics::default()
         })
     }
 
@@ -104,47 +106,18 @@ impl Intrinsics {
         let keys = [self.k1, self.k2, self.k3, self.k4, self.p1, self.p2];
         Ok(keys.iter().any(Option::is_some).then(|| keys.map(|k| k.unwrap_or(0.0))))
     }
-}
 
-/// A key of a frame and of the file, as [`Intrinsics::merged`] takes it.
-fn merge<T: PartialEq + std::fmt::Debug>(name: &str, frame: Option<T>, file: Option<T>) -> Result<Option<T>, String> {
-    match (frame, file) {
-        (Some(f), Some(t)) if f != t => Err(format!(
-            "{name} {f:?} differs from the file's {t:?} (Nerfstudio reads the file's, Brush the frame's): give it once"
-        )),
-        (f, t) => Ok(f.or(t)),
-    }
-}
-
-/// A frame's intrinsics and lens, its own and the file's merged.
-struct Resolved {
-    fl_x: Option<f64>,
-    fl_y: Option<f64>,
-    angle_x: Option<f64>,
-    angle_y: Option<f64>,
-    cx: Option<f64>,
-    cy: Option<f64>,
-    w: Option<f64>,
-    h: Option<f64>,
-    camera_model: Option<String>,
-    distortion: [f64; 6],
-    is_fisheye: bool,
-    /// Whether a rational coefficient (k5, k6) is not 0.
-    rational: bool,
-}
-
-impl Resolved {
     /// The lens of `camera_model` with its distortion.
     fn lens(&self) -> Result<Lens, String> {
-        if self.is_fisheye {
+        if self.is_fisheye == Some(true) {
             return Err("instant-ngp's `is_fisheye` is not read: give `camera_model: OPENCV_FISHEYE` and \
                         its k1–k4 instead"
                 .into());
         }
-        if self.rational {
+        if [self.k5, self.k6].into_iter().flatten().any(|k| k != 0.0) {
             return Err("k5 and k6 (FULL_OPENCV's rational distortion) are not a Nerfstudio camera's".into());
         }
-        let [k1, k2, k3, k4, p1, p2] = self.distortion;
+        let [k1, k2, k3, k4, p1, p2] = self.distortion()?.unwrap_or([0.0; 6]);
         let distortion = Distortion {
             radial: [k1, k2, k3, k4].map(|k| k as f32),
             tangential: [p1, p2].map(|p| p as f32),
@@ -162,6 +135,16 @@ impl Resolved {
                  EQUIRECTANGULAR models are)"
             )),
         }
+    }
+}
+
+/// A key of a frame and of the file, as [`Intrinsics::merged`] takes it.
+fn merge<T: PartialEq + std::fmt::Debug>(name: &str, frame: Option<T>, file: Option<T>) -> Result<Option<T>, String> {
+    match (frame, file) {
+        (Some(f), Some(t)) if f != t => Err(format!(
+            "{name} {f:?} differs from the file's {t:?} (Nerfstudio reads the file's, Brush the frame's): give it once"
+        )),
+        (f, t) => Ok(f.or(t)),
     }
 }
 
@@ -347,7 +330,7 @@ pub fn parse_transforms_in(
 
 /// The camera of `frame` with intrinsics `k` (its own and the file's, merged), its pose moved by
 /// `world` (a map of its centre and axes, then a scale of its centre).
-fn frame_camera(frame: &Frame, k: &Resolved, folder: Option<&Path>, world: (Rigid, f64)) -> Result<Camera, String> {
+fn frame_camera(frame: &Frame, k: &Intrinsics, folder: Option<&Path>, world: (Rigid, f64)) -> Result<Camera, String> {
     let pose = Rigid::from_rows(&frame.transform_matrix, "transform_matrix", false)?.then(world.0);
     let (rotation, centre) = (pose.r, world.1 * pose.t);
     let (width, height) = match (k.w, k.h) {
@@ -369,14 +352,14 @@ fn frame_camera(frame: &Frame, k: &Resolved, folder: Option<&Path>, world: (Rigi
 
 /// fx, fy, cx, cy of a perspective or fisheye lens: `fl_x`, else from `camera_angle_x` (a
 /// perspective lens's only); fy likewise, else fx; the principal point, else the image centre.
-fn perspective(k: &Resolved, lens: &Lens, width: u32, height: u32) -> Result<[f64; 4], String> {
+fn perspective(k: &Intrinsics, lens: &Lens, width: u32, height: u32) -> Result<[f64; 4], String> {
     let focal = |fl: Option<f64>, angle: Option<f64>, side: u32, axis: &str| match (fl, angle) {
         (Some(f), _) => Ok(Some(f)),
         (None, Some(a)) if !matches!(lens, Lens::Fisheye(_)) => Ok(Some(0.5 * f64::from(side) / (0.5 * a).tan())),
         (None, Some(_)) => Err(format!("a fisheye's focal length is fl_{axis}, not camera_angle_{axis}")),
         (None, None) => Ok(None),
     };
-    let (fx, fy) = match (focal(k.fl_x, k.angle_x, width, "x")?, focal(k.fl_y, k.angle_y, height, "y")?) {
+    let (fx, fy) = match (focal(k.fl_x, k.camera_angle_x, width, "x")?, focal(k.fl_y, k.camera_angle_y, height, "y")?) {
         (Some(fx), fy) => (fx, fy.unwrap_or(fx)),
         (None, Some(fy)) => (fy, fy),
         (None, None) => return Err("no focal length: give fl_x (and fl_y) or camera_angle_x".into()),
@@ -391,7 +374,7 @@ fn perspective(k: &Resolved, lens: &Lens, width: u32, height: u32) -> Result<[f6
 /// centre, the elevation +π/2 at the top). A camera that names other values covers part of
 /// the sphere, which no lens here models. Stored as COLMAP's are
 /// ([`crate::colmap::equirectangular_intrinsics`]).
-fn equirectangular(k: &Resolved, width: u32, height: u32) -> Result<[f64; 4], String> {
+fn equirectangular(k: &Intrinsics, width: u32, height: u32) -> Result<[f64; 4], String> {
     let (w, h) = (f64::from(width), f64::from(height));
     for (name, given, whole) in
         [("fl_x", k.fl_x, 0.5 * w), ("fl_y", k.fl_y, h), ("cx", k.cx, 0.5 * w), ("cy", k.cy, 0.5 * h)]
