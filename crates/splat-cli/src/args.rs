@@ -19,9 +19,11 @@ use splat_core::rng::RngScheme;
 use splat_core::sh::ShStorage;
 use splat_core::trace::Method;
 use splat_core::trainer::Preset;
+use splat_core::undistort::Undistortion;
 use splat_core::{
     Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, ScreenFilter, World,
 };
+use splat_io::cameras::ViewOptions;
 use splat_io::text::{parse_direction, parse_vec3};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
@@ -366,6 +368,11 @@ pub struct SceneArgs {
     /// splats (ns-export gaussian-splat) live.
     #[arg(help_heading = "Camera", long, requires = "camera")]
     pub dataparser_transforms: Option<PathBuf>,
+    /// Render each camera of --camera as the pinhole this trainer undistorts its photos to
+    /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
+    /// calls it.
+    #[arg(help_heading = "Camera", long, requires = "camera", value_parser = splat_view::undistort_parser())]
+    pub undistort: Option<Undistortion>,
     /// Image width in pixels (1 to 16384); rescales the camera's intrinsics [default: the
     /// camera's, else the command's framing size: 640 for render].
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
@@ -557,10 +564,17 @@ impl From<SpzAxesArg> for splat_io::spz::SpzAxes {
     }
 }
 
-/// Every camera of a cameras.json, COLMAP model or transforms.json, with its image name; a
-/// transforms.json's moved into the world of a Nerfstudio run by its `dataparser` transforms.
-pub fn load_cameras(path: &std::path::Path, dataparser: Option<&std::path::Path>) -> Result<Vec<(String, Camera)>> {
-    Ok(splat_io::cameras::read_views_in(path, dataparser)?)
+/// Every camera of a cameras.json, COLMAP model or transforms.json, with its image name, as
+/// `options` change them.
+pub fn load_cameras(path: &std::path::Path, options: ViewOptions) -> Result<Vec<(String, Camera)>> {
+    Ok(splat_io::cameras::read_views_in(path, options)?)
+}
+
+impl SceneArgs {
+    /// How --camera's views are read.
+    pub fn view_options(&self) -> ViewOptions<'_> {
+        ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort }
+    }
 }
 
 impl SceneArgs {
@@ -711,7 +725,7 @@ impl SceneArgs {
     fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
         let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
         let camera = if let Some(path) = &self.camera {
-            let cameras = load_cameras(path, self.dataparser_transforms.as_deref())?;
+            let cameras = load_cameras(path, self.view_options())?;
             let n = cameras.len();
             cameras.get(self.camera_index).map(|(_, c)| *c).with_context(|| {
                 format!("--camera-index {} but {} has {n} cameras", self.camera_index, path.display())

@@ -198,7 +198,8 @@ fn up_line(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Pat
                    -y up; frame them with --up 0,-1,0"
             .into());
     };
-    let views: Vec<_> = crate::args::load_cameras(path, dataparser)?.into_iter().map(|(_, c)| c).collect();
+    let options = splat_io::cameras::ViewOptions { dataparser, undistort: None };
+    let views: Vec<_> = crate::args::load_cameras(path, options)?.into_iter().map(|(_, c)| c).collect();
     Ok(match splat_core::Camera::mean_up(&views) {
         Some(up) => {
             let axis = up.abs().max_position();

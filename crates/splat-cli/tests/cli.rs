@@ -830,6 +830,12 @@ fn npy(path: &std::path::Path) -> Vec<f32> {
     splat_io::image::read_npy(path).unwrap().data().to_vec()
 }
 
+/// (height, width) of a colour `.npy`.
+fn npy_size(path: &std::path::Path) -> (u32, u32) {
+    let image = splat_io::image::read_npy(path).unwrap();
+    (image.height(), image.width())
+}
+
 fn rmse(a: &[f32], b: &[f32]) -> f64 {
     assert_eq!(a.len(), b.len());
     (a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
@@ -1255,6 +1261,45 @@ fn colmap_cameras_and_all_cameras() {
     assert!(o.status.success() && stderr(&o).contains("rendered 1 view,"), "{}", stderr(&o));
     let o = splat(&["render", "fixtures/cloud.ply", "--all-cameras", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("--camera"), "{}", stderr(&o));
+}
+
+/// `--undistort` renders a distorted capture's cameras as the pinholes its trainer trained
+/// through, at the size of OpenCV's valid-pixel rectangle, so that the oracle, which projects
+/// through a pinhole, renders them too; a lens the trainer does not undistort is refused, by
+/// view.
+#[test]
+fn undistorted_cameras_are_the_trainers_pinholes() {
+    let folder = scratch("undistort");
+    std::fs::create_dir_all(&folder).unwrap();
+    let write = |model: &str, distortion: serde_json::Value| {
+        let frame = serde_json::json!({"file_path": "images/a.png",
+            "transform_matrix": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 4], [0, 0, 0, 1]]});
+        let mut meta = serde_json::json!({"camera_model": model, "fl_x": 40.0, "fl_y": 40.0, "cx": 24.0,
+            "cy": 18.0, "w": 48, "h": 36, "frames": [frame]});
+        meta.as_object_mut().unwrap().extend(distortion.as_object().unwrap().clone());
+        std::fs::write(folder.join("transforms.json"), meta.to_string()).unwrap();
+    };
+    let render = |extra: &[&str]| {
+        let out = scratch("undistort.npy");
+        let camera = folder.to_str().unwrap();
+        let args = ["render", "fixtures/cloud.ply", "--camera", camera, "--method", "oracle"];
+        (splat(&[&args[..], extra, &["--backend", "cpu", "-o", out.to_str().unwrap()]].concat()), out)
+    };
+    write("OPENCV", serde_json::json!({"k1": -0.2, "k2": 0.05}));
+    let (o, _) = render(&[]);
+    assert!(!o.status.success() && stderr(&o).contains("only through a pinhole"), "{}", stderr(&o));
+    for trainer in ["splatfacto", "gsplat"] {
+        let (o, out) = render(&["--undistort", trainer]);
+        assert!(o.status.success(), "{trainer}: {}", stderr(&o));
+        // A 48 × 36 photo's valid rectangle at alpha 0 is 47 × 35 pixels.
+        assert_eq!(npy_size(&out), (35, 47), "{trainer}");
+    }
+    write("OPENCV_FISHEYE", serde_json::json!({"k1": 0.05}));
+    let (o, out) = render(&["--undistort", "splatfacto"]);
+    assert!(o.status.success() && npy_size(&out) == (36, 48), "{}", stderr(&o));
+    let (o, _) = render(&["--undistort", "gsplat"]);
+    let refused = stderr(&o).contains("camera 0: images/a.png: gsplat's undistortion");
+    assert!(!o.status.success() && refused, "{}", stderr(&o));
 }
 
 /// `--all-cameras` prepares the world once (the BVH, the device arrays, the pipelines) and renders

@@ -36,6 +36,14 @@ pub enum CameraError {
         /// The lens, in words.
         lens: &'static str,
     },
+    /// A trainer's undistortion does not apply to the lens ([`crate::undistort`]).
+    #[error("{trainer}'s undistortion cannot make a pinhole of this camera: {why}")]
+    Undistort {
+        /// Whose undistortion.
+        trainer: &'static str,
+        /// Why not.
+        why: String,
+    },
 }
 
 /// Largest image side accepted (a 16K image; larger is certainly a mistake).

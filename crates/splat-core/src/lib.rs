@@ -57,6 +57,7 @@ pub mod stats;
 pub mod tile;
 pub mod trace;
 pub mod trainer;
+pub mod undistort;
 
 /// The vector math of the public API (`Vec3`, `Quat`, `Mat3`), re-exported so that users need
 /// not match its version.

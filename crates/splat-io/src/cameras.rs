@@ -6,6 +6,7 @@ use crate::{Error, ErrorKind, read_file};
 use glam::{Mat3, Vec3};
 use serde::{Deserialize, Serialize};
 use splat_core::Camera;
+use splat_core::undistort::Undistortion;
 use std::path::Path;
 
 /// One entry of `cameras.json` as 3DGS writes it.
@@ -109,17 +110,37 @@ fn is_exported_poses(bytes: &[u8]) -> bool {
     first.is_some_and(|e| e.get("transform").is_some() && e.get("file_path").is_some())
 }
 
+/// What changes the cameras of a camera file as they are read ([`read_views_in`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ViewOptions<'a> {
+    /// A Nerfstudio training run's `dataparser_transforms.json`: moves a `transforms.json`'s
+    /// cameras into the run's world ([`crate::transforms::Dataparser`]); other camera files are
+    /// refused with it.
+    pub dataparser: Option<&'a Path>,
+    /// Whose pinhole each camera becomes ([`Camera::undistorted`]).
+    pub undistort: Option<Undistortion>,
+}
+
 /// Every view of a `cameras.json`, a COLMAP model ([`crate::colmap::is_colmap`]) or a
 /// `transforms.json` ([`crate::transforms`]: the file, or a folder holding it), with its image
 /// name, in the file's (or, for COLMAP, the names') order.
 pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
-    read_views_in(path, None)
+    read_views_in(path, ViewOptions::default())
 }
 
-/// [`read_views`], a `transforms.json`'s cameras moved into the world of a Nerfstudio training
-/// run whose `dataparser_transforms.json` is `dataparser` ([`crate::transforms::Dataparser`]);
-/// other camera files are refused with it.
-pub fn read_views_in(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(String, Camera)>, Error> {
+/// [`read_views`], changed by `options`.
+pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
+    let views = read_views_moved(path, options.dataparser)?;
+    let Some(trainer) = options.undistort else { return Ok(views) };
+    let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
+        Ok(camera) => Ok((name, camera)),
+        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
+    };
+    views.into_iter().enumerate().map(undistort).collect()
+}
+
+/// [`read_views`], a `transforms.json`'s cameras moved by `dataparser` transforms.
+fn read_views_moved(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(String, Camera)>, Error> {
     let dataparser = dataparser.map(crate::transforms::read_dataparser).transpose()?;
     let not_transforms = || {
         let why = "a training run's dataparser transforms move a transforms.json's cameras, and this is a \

@@ -19,7 +19,9 @@ use pyo3::types::{PyDict, PyTuple};
 use splat_cli::args::{ReadArgs, Staged};
 use splat_cli::render::{PipelineArg, RenderArgs, Rendered};
 use splat_core::particle::sh_coeff_count;
+use splat_core::undistort::Undistortion;
 use splat_core::{Camera, Particle, Scene};
+use splat_io::cameras::ViewOptions;
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -293,11 +295,26 @@ impl PyCamera {
 /// its images.bin / images.txt, or a transforms.json of NeRF-synthetic or Nerfstudio: the file
 /// or its folder), as (image name, camera) in the order `splat render` lists them;
 /// `dataparser_transforms`, a Nerfstudio run's `dataparser_transforms.json`, moves a
-/// transforms.json's cameras into that run's world (splatfacto's splats').
+/// transforms.json's cameras into that run's world (splatfacto's splats'); `undistort`
+/// ("splatfacto" or "gsplat") makes each camera the pinhole that trainer undistorts its photos
+/// to, as `splat render --undistort` does.
 #[pyfunction]
-#[pyo3(signature = (path, dataparser_transforms = None))]
-fn load_cameras(path: PathBuf, dataparser_transforms: Option<PathBuf>) -> PyResult<Vec<(String, PyCamera)>> {
-    let views = splat_cli::args::load_cameras(&path, dataparser_transforms.as_deref()).map_err(fail)?;
+#[pyo3(signature = (path, dataparser_transforms = None, undistort = None))]
+fn load_cameras(
+    path: PathBuf,
+    dataparser_transforms: Option<PathBuf>,
+    undistort: Option<&str>,
+) -> PyResult<Vec<(String, PyCamera)>> {
+    let undistort = undistort
+        .map(|name| {
+            Undistortion::from_name(name).ok_or_else(|| {
+                let names: Vec<_> = Undistortion::ALL.iter().map(|u| u.name()).collect();
+                SplatError::new_err(format!("undistort = {name:?}: expected one of {}", names.join(", ")))
+            })
+        })
+        .transpose()?;
+    let options = ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort };
+    let views = splat_cli::args::load_cameras(&path, options).map_err(fail)?;
     Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
 }
 

@@ -27,7 +27,9 @@ use eframe::egui_wgpu;
 use splat_core::ScreenFilter;
 use splat_core::glam::Vec3;
 use splat_core::sh::ShStorage;
+use splat_core::undistort::Undistortion;
 use splat_gpu::GpuContext;
+use splat_io::cameras::ViewOptions;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -50,6 +52,11 @@ pub struct SceneArgs {
     /// splats (ns-export gaussian-splat) live.
     #[arg(long, requires = "camera")]
     pub dataparser_transforms: Option<PathBuf>,
+    /// Show each camera of --camera as the pinhole this trainer undistorts its photos to
+    /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
+    /// calls it.
+    #[arg(long, requires = "camera", value_parser = undistort_parser())]
+    pub undistort: Option<Undistortion>,
     /// Where frames render: auto takes a hardware GPU and the CPU renderers on a CPU adapter
     /// such as lavapipe.
     #[arg(long, value_enum, default_value = "auto")]
@@ -75,8 +82,8 @@ impl SceneArgs {
     /// Read the scene and its views, checking `--camera-index` against them.
     pub fn load(&self) -> Result<load::Loaded> {
         let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
-        let mut loaded =
-            load::load(self.scene.as_deref(), self.camera.as_deref(), self.dataparser_transforms.as_deref(), read)?;
+        let views = ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort };
+        let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), views, read)?;
         if let Some(storage) = self.sh_storage {
             loaded.info.render.sh_storage = storage;
         }
@@ -126,6 +133,12 @@ pub struct ViewArgs {
 /// name, described.
 pub fn sh_storage_parser() -> impl clap::builder::TypedValueParser<Value = ShStorage> {
     choice_parser(&ShStorage::ALL, ShStorage::name, ShStorage::describe)
+}
+
+/// The values of `--undistort` (here and in the `splat` commands): every [`Undistortion`] by
+/// its name, described.
+pub fn undistort_parser() -> impl clap::builder::TypedValueParser<Value = Undistortion> {
+    choice_parser(&Undistortion::ALL, Undistortion::name, Undistortion::describe)
 }
 
 /// The values of `--screen-filter` (here and in the `splat` commands): every [`ScreenFilter`]

@@ -38,12 +38,11 @@ pub struct SceneInfo {
 }
 
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
-/// when `None`) with the reader's `options`, and the views of `cameras` (a transforms.json's in
-/// the world of the Nerfstudio run whose `dataparser_transforms.json` is `dataparser`).
+/// when `None`) with the reader's `options`, and the views of `cameras` as `views` change them.
 pub fn load(
     scene: Option<&Path>,
     cameras: Option<&Path>,
-    dataparser: Option<&Path>,
+    views: splat_io::cameras::ViewOptions,
     options: splat_io::ReadOptions,
 ) -> Result<Loaded> {
     let opened = splat_io::world::open_world(scene, options)?;
@@ -52,7 +51,7 @@ pub fn load(
     }
     let (world, name) = (opened.world, opened.name);
     let views = match cameras {
-        Some(path) => splat_io::cameras::read_views_in(path, dataparser)?,
+        Some(path) => splat_io::cameras::read_views_in(path, views)?,
         None => Vec::new(),
     };
     if cameras.is_some() && views.is_empty() {

@@ -62,7 +62,8 @@ fn harness_of(
     cameras: Option<&std::path::Path>,
     options: &Options,
 ) -> Option<(Harness<'static, Viewer>, RenderState)> {
-    let loaded = splat_view::load::load(scene, cameras, None, Default::default()).expect("the fixture loads");
+    let loaded =
+        splat_view::load::load(scene, cameras, Default::default(), Default::default()).expect("the fixture loads");
     let mut viewer = Viewer::new(loaded, options, state.clone(), egui::Context::default());
     viewer.hide_rate = true;
     let harness = Harness::builder()
@@ -233,8 +234,13 @@ fn the_view_in_host_memory_is_the_batch_render() {
         .rescaled(96, 72)
         .unwrap();
     for backend in [Backend::Gpu, Backend::Cpu] {
-        let loaded = splat_view::load::load(Some(&root.join("fixtures/cloud.ply")), None, None, Default::default())
-            .expect("the cloud");
+        let loaded = splat_view::load::load(
+            Some(&root.join("fixtures/cloud.ply")),
+            None,
+            Default::default(),
+            Default::default(),
+        )
+        .expect("the cloud");
         let mut settings = Settings::new(loaded.info.render, &loaded.world.lighting, backend);
         settings.max_frames = 4;
         let gpu = (backend == Backend::Gpu).then(|| GpuContext::new().expect("an adapter, as above"));
@@ -346,7 +352,7 @@ fn shown_at(rgba: &[u8], (w, h): (u32, u32), shown: egui::Rect, px: u32, py: u32
 /// `splat render`'s 8-bit PNG of the exact method at `camera` of the scene the viewer loaded
 /// from `scene` and `cameras`, as RGBA8 bytes: the CLI's render call and PNG writer, read back.
 fn png_of_splat_render(scene: Option<&std::path::Path>, camera: &Camera, name: &str) -> Vec<u8> {
-    let loaded = splat_view::load::load(scene, None, None, Default::default()).expect("the scene loads");
+    let loaded = splat_view::load::load(scene, None, Default::default(), Default::default()).expect("the scene loads");
     let world = &loaded.world;
     let out = Algorithm::Trace(Method::Exact)
         .render_world(

@@ -66,7 +66,9 @@ class Renderer:
     def close(self) -> None: ...
 
 def load_cameras(
-    path: Union[str, PathLike], dataparser_transforms: Optional[Union[str, PathLike]] = None
+    path: Union[str, PathLike],
+    dataparser_transforms: Optional[Union[str, PathLike]] = None,
+    undistort: Optional[str] = None,
 ) -> list[tuple[str, Camera]]: ...
 def render(
     scene: Scene,
