@@ -11,9 +11,10 @@ pub use nv_flip::DEFAULT_PIXELS_PER_DEGREE;
 /// Arguments of `splat compare`.
 #[derive(Args)]
 pub struct CompareArgs {
-    /// The reference image (.png, .exr or .npy).
+    /// The reference image (.png, .jpg, .exr or .npy), or a folder of them (ground truth).
     pub reference: PathBuf,
-    /// The test image, same size.
+    /// The test image, same size; or a folder: each of its images against the reference's of
+    /// the same name (extension aside), and the mean over them, as 3DGS's metrics.py reports.
     pub test: PathBuf,
     /// Write the error maps PREFIX-abs.png (largest |A − B| over the channels, magma, 0 to the
     /// image's largest), PREFIX-ssim.png (SSIM per pixel) and PREFIX-flip.png (ꟻLIP, magma).
@@ -43,8 +44,12 @@ pub struct Metrics {
     pub rmse: f64,
     /// −20 log₁₀ RMSE (peak 1); infinite for equal images.
     pub psnr: f64,
-    /// SSIM of the 8-bit images, the lowest of the three channels.
+    /// SSIM of the RGB values as 3DGS reports it: the mean over every pixel
+    /// ([`splat_core::ssim`]).
     pub ssim: f64,
+    /// SSIM as torchmetrics (Nerfstudio, gsplat) reports it: the mean over the pixels whose
+    /// window lies inside the image; `None` for an image smaller than the window.
+    pub ssim_inside: Option<f64>,
     /// Mean LDR ꟻLIP of the 8-bit images.
     pub flip: f64,
 }
@@ -54,11 +59,11 @@ pub struct Metrics {
 struct Measured {
     metrics: Metrics,
     rgb: (Vec<f32>, Vec<f32>),
-    ssim: image_compare::Similarity,
+    ssim: Vec<f64>,
     flip: nv_flip::FlipImageFloat,
 }
 
-/// RMSE and PSNR on the RGB values (a grey image's value repeated), SSIM and ꟻLIP (LDR, at
+/// RMSE, PSNR and SSIM on the RGB values (a grey image's value repeated), ꟻLIP (LDR, at
 /// `pixels_per_degree`) on their 8-bit display values: the images must be equally sized and
 /// finite.
 pub fn metrics(reference: &Image, test: &Image, pixels_per_degree: f32) -> Result<Metrics> {
@@ -76,32 +81,37 @@ fn measure(a: &Image, b: &Image, pixels_per_degree: f32) -> Result<Measured> {
     }
     let rmse = splat_core::stats::rmse(&fa, &fb);
     let psnr = if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY };
+    let ssim = splat_core::ssim::ssim(&fa, &fb, w, h, 3);
     let (a8, b8) = (rgb8(&fa), rgb8(&fb));
-    let image_a = image::RgbImage::from_raw(w, h, a8.clone()).expect("3 bytes a pixel");
-    let image_b = image::RgbImage::from_raw(w, h, b8.clone()).expect("3 bytes a pixel");
-    let ssim = image_compare::rgb_similarity_structure(&image_compare::Algorithm::MSSIMSimple, &image_a, &image_b)
-        .map_err(|e| anyhow::anyhow!("SSIM: {e}"))?;
     let flip = nv_flip::flip(
         nv_flip::FlipImageRgb8::with_data(w, h, &a8),
         nv_flip::FlipImageRgb8::with_data(w, h, &b8),
         pixels_per_degree,
     );
     let flip_mean = f64::from(nv_flip::FlipPool::from_image(&flip).mean());
-    let metrics = Metrics { rmse, psnr, ssim: ssim.score, flip: flip_mean };
-    Ok(Measured { metrics, rgb: (fa, fb), ssim, flip })
+    let metrics = Metrics { rmse, psnr, ssim: ssim.mean, ssim_inside: ssim.mean_inside, flip: flip_mean };
+    Ok(Measured { metrics, rgb: (fa, fb), ssim: ssim.map, flip })
 }
 
 /// Run `splat compare`.
 pub fn run(args: CompareArgs) -> Result<()> {
+    if args.reference.is_dir() || args.test.is_dir() {
+        return run_folders(&args);
+    }
     let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
     let (a, b) = (read(&args.reference)?, read(&args.test)?);
     let measured = measure(&a, &b, args.pixels_per_degree)?;
-    let Metrics { rmse, psnr, ssim, flip } = measured.metrics;
+    let Metrics { rmse, psnr, ssim, ssim_inside, flip } = measured.metrics;
     println!("reference  {}", args.reference.display());
     println!("test       {}", args.test.display());
     println!("RMSE       {rmse:.6e}   (RGB values: {})", value_scale(&args.reference, &args.test));
     println!("PSNR       {psnr:.2} dB (peak 1)");
-    println!("SSIM       {ssim:.6}   (8-bit, the lowest of the three channels)");
+    println!("SSIM       {ssim:.6}   (3DGS's: 11 × 11 Gaussian window, σ 1.5, every pixel)");
+    if let Some(inside) = ssim_inside {
+        println!(
+            "SSIM       {inside:.6}   (torchmetrics', as Nerfstudio and gsplat report it: windows inside the image)"
+        );
+    }
     println!("FLIP       {flip:.6}   (LDR ꟻLIP mean, {} pixels per degree)", args.pixels_per_degree);
     if let Some(prefix) = &args.maps {
         let (fa, fb) = &measured.rgb;
@@ -110,14 +120,87 @@ pub fn run(args: CompareArgs) -> Result<()> {
     Ok(())
 }
 
-/// How the inputs' values were read, for the RMSE line: 8-bit PNG values scaled to [0, 1],
-/// float files as they are stored.
+/// The images of a folder that `splat compare` reads, by name without extension.
+fn images_in(folder: &Path) -> Result<std::collections::BTreeMap<String, PathBuf>> {
+    let entries = std::fs::read_dir(folder).with_context(|| format!("reading the folder {}", folder.display()))?;
+    let mut images = std::collections::BTreeMap::new();
+    for entry in entries {
+        let path = entry.with_context(|| format!("reading the folder {}", folder.display()))?.path();
+        let readable = splat_io::image::is_jpeg(&path) || splat_io::image::ImageFormat::from_path(&path).is_ok();
+        let Some(stem) = path.file_stem().and_then(|s| s.to_str()) else { continue };
+        if !readable || !path.is_file() {
+            continue;
+        }
+        if let Some(other) = images.insert(stem.to_string(), path.clone()) {
+            bail!("{} and {} share a name: which one is the image is unclear", other.display(), path.display());
+        }
+    }
+    Ok(images)
+}
+
+/// `splat compare` of two folders: each test image against the reference of its name, then
+/// the mean of each metric over the images (3DGS's metrics.py averages per image).
+fn run_folders(args: &CompareArgs) -> Result<()> {
+    let (reference, test) = (&args.reference, &args.test);
+    if !(reference.is_dir() && test.is_dir()) {
+        bail!("compare two images or two folders: {} and {}", reference.display(), test.display());
+    }
+    if args.maps.is_some() {
+        bail!("--maps writes the maps of two images, not of two folders: compare one pair for its maps");
+    }
+    let (references, tests) = (images_in(reference)?, images_in(test)?);
+    if tests.is_empty() {
+        bail!("{} holds no image (.png, .jpg, .exr or .npy)", test.display());
+    }
+    let missing: Vec<&str> = tests.keys().filter(|name| !references.contains_key(*name)).map(String::as_str).collect();
+    if let Some(first) = missing.first() {
+        bail!(
+            "{} of the {} images of {} have no image of that name in {} (the first: {first})",
+            missing.len(),
+            tests.len(),
+            test.display(),
+            reference.display()
+        );
+    }
+    println!("reference  {}", reference.display());
+    println!("test       {}", test.display());
+    println!("{:<32} {:>9} {:>9} {:>9} {:>9}", "image", "PSNR dB", "SSIM", "SSIM tm", "FLIP");
+    let mut rows = Vec::with_capacity(tests.len());
+    for (name, path) in &tests {
+        let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
+        let (a, b) = (read(&references[name])?, read(path)?);
+        let m = metrics(&a, &b, args.pixels_per_degree).with_context(|| format!("comparing {name}"))?;
+        println!("{name:<32} {:>9.3} {:>9.5} {:>9} {:>9.5}", m.psnr, m.ssim, inside(m.ssim_inside), m.flip);
+        rows.push(m);
+    }
+    let n = rows.len() as f64;
+    let mean = |f: fn(&Metrics) -> f64| rows.iter().map(f).sum::<f64>() / n;
+    let inside_mean = rows.iter().map(|m| m.ssim_inside).sum::<Option<f64>>().map(|s| s / n);
+    let label = format!("mean of {}", rows.len());
+    let (psnr, ssim, flip) = (mean(|m| m.psnr), mean(|m| m.ssim), mean(|m| m.flip));
+    println!("{label:<32} {psnr:>9.3} {ssim:>9.5} {:>9} {flip:>9.5}", inside(inside_mean));
+    println!("SSIM is 3DGS's (every pixel), SSIM tm torchmetrics' (windows inside the image); PSNR peak 1");
+    let unmatched = references.len() - tests.len();
+    if unmatched > 0 {
+        eprintln!("note: {unmatched} images of {} have no test image and were not compared", reference.display());
+    }
+    Ok(())
+}
+
+/// A torchmetrics SSIM for the table: "-" where the image is smaller than its window.
+fn inside(ssim: Option<f64>) -> String {
+    ssim.map_or_else(|| "-".into(), |v| format!("{v:.5}"))
+}
+
+/// How the inputs' values were read, for the RMSE line: 8-bit PNG and JPEG values scaled to
+/// [0, 1], float files as they are stored.
 fn value_scale(a: &Path, b: &Path) -> &'static str {
-    let png = |p: &Path| matches!(splat_io::image::ImageFormat::from_path(p), Ok(splat_io::image::ImageFormat::Png));
-    match (png(a), png(b)) {
-        (true, true) => "8-bit PNG values / 255",
+    use splat_io::image::{ImageFormat, is_jpeg};
+    let eight_bit = |p: &Path| is_jpeg(p) || matches!(ImageFormat::from_path(p), Ok(ImageFormat::Png));
+    match (eight_bit(a), eight_bit(b)) {
+        (true, true) => "8-bit values / 255",
         (false, false) => "float values as stored",
-        _ => "PNG values / 255, float values as stored",
+        _ => "8-bit values / 255, float values as stored",
     }
 }
 
@@ -126,7 +209,7 @@ fn write_maps(
     (w, h): (u32, u32),
     a: &[f32],
     b: &[f32],
-    ssim: &image_compare::Similarity,
+    ssim: &[f64],
     flip: &nv_flip::FlipImageFloat,
 ) -> Result<()> {
     let name = |suffix: &str| {
@@ -152,9 +235,7 @@ fn write_maps(
         Ok(())
     };
     save(name("abs"), abs_map.to_vec())?;
-    let ssim_path = name("ssim");
-    ssim.image.to_color_map().save(&ssim_path).with_context(|| format!("writing {}", ssim_path.display()))?;
-    eprintln!("wrote {}", ssim_path.display());
+    save(name("ssim"), ssim.iter().map(|&v| splat_io::image::to_u8(v as f32)).collect())?;
     save(name("flip"), flip_map.to_vec())?;
     eprintln!("abs map: black 0, yellow {largest:.3e}");
     eprintln!("ssim map: each channel's SSIM as its colour channel, black 0 (or less) to full 1 (identical)");

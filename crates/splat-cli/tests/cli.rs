@@ -1490,6 +1490,67 @@ fn compare_prints_four_metrics_and_writes_maps() {
     assert!(!o.status.success() && stderr(&o).contains("differ in size"), "{}", stderr(&o));
 }
 
+/// `splat compare` of two folders: each test image against the reference of its name (a JPEG
+/// photograph among them), one row each, and the mean of each metric over the images, each row
+/// what comparing the pair alone gives; a test image without a reference is refused by name.
+#[test]
+fn compare_folders_averages_the_images_metrics() {
+    let (gt, renders) = (scratch("cmp-gt"), scratch("cmp-renders"));
+    std::fs::create_dir_all(&gt).unwrap();
+    std::fs::create_dir_all(&renders).unwrap();
+    let scene = ["fixtures/cloud.ply", "--camera", "fixtures/cloud.cameras.json", "--width", "48", "--height", "36"];
+    let render = |method: &str, out: &std::path::Path| {
+        let args = ["--method", method, "--backend", "cpu", "--seed", "3", "-o", out.to_str().unwrap()];
+        let o = splat(&[&["render"][..], &scene, &args].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    render("exact", &gt.join("a.png"));
+    render("exact", &scratch("cmp-b.png"));
+    image::open(scratch("cmp-b.png")).unwrap().to_rgb8().save(gt.join("b.jpg")).unwrap();
+    render("stochastic", &renders.join("a.png"));
+    render("oracle", &renders.join("b.png"));
+    let o = splat(&["compare", gt.to_str().unwrap(), renders.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    let row = |name: &str| -> Vec<f64> {
+        let line = text.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no {name} in {text}"));
+        line[name.len()..].split_whitespace().map(|v| v.parse().unwrap()).collect()
+    };
+    let single = |reference: &std::path::Path, test: &std::path::Path| -> Vec<f64> {
+        let o = splat(&["compare", reference.to_str().unwrap(), test.to_str().unwrap()]);
+        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        ["PSNR", "SSIM", "SSIM", "FLIP"]
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let mut lines = text.lines().filter(|l| l.starts_with(name));
+                let line = if i == 2 { lines.nth(1) } else { lines.next() }.unwrap();
+                line.split_whitespace().nth(1).unwrap().parse().unwrap()
+            })
+            .collect()
+    };
+    let (a, b) = (row("a"), row("b"));
+    for (rows, pair) in [
+        (&a, single(&gt.join("a.png"), &renders.join("a.png"))),
+        (&b, single(&gt.join("b.jpg"), &renders.join("b.png"))),
+    ] {
+        for (v, w) in rows.iter().zip(&pair) {
+            // The rows print PSNR to 3 places, the pair's line to 2.
+            assert!((v - w).abs() < 6e-3, "{rows:?} against the pair's {pair:?}");
+        }
+    }
+    let mean = row("mean of 2");
+    for k in 0..4 {
+        assert!((mean[k] - (a[k] + b[k]) / 2.0).abs() < 2e-3, "{mean:?} of {a:?} and {b:?}");
+    }
+    assert!(a[0] < b[0], "the one-sample render is the further: {text}");
+    std::fs::rename(gt.join("b.jpg"), gt.join("c.jpg")).unwrap();
+    let o = splat(&["compare", gt.to_str().unwrap(), renders.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("(the first: b)"), "{}", stderr(&o));
+    let o = splat(&["compare", gt.to_str().unwrap(), renders.to_str().unwrap(), "--maps", "m"]);
+    assert!(!o.status.success() && stderr(&o).contains("not of two folders"), "{}", stderr(&o));
+}
+
 /// Shell completions name every subcommand and option; `render --help` groups its options
 /// under headings, output and method first.
 #[test]

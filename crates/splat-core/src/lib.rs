@@ -53,6 +53,7 @@ pub mod rng;
 pub mod scenes;
 pub mod settings;
 pub mod sh;
+pub mod ssim;
 pub mod stats;
 pub mod tile;
 pub mod trace;

@@ -140,20 +140,35 @@ pub fn encode_npy(image: &Image) -> Vec<u8> {
 }
 
 /// Read an image, format chosen by extension: `.npy` and `.exr` as f32 (an EXR's R, G, B and,
-/// when present, A; else its first channel), `.png` as 8-bit values / 255.
+/// when present, A; else its first channel), `.png` and `.jpg` (photographs, read only) as 8-bit
+/// values / 255.
 pub fn read_image(path: &Path) -> Result<Image, Error> {
-    match ImageFormat::from_path(path)? {
+    if is_jpeg(path) {
+        return read_8bit(path);
+    }
+    let format = ImageFormat::from_path(path)
+        .map_err(|_| Error::new(path, ErrorKind::UnknownExtension { expected: ".png, .jpg, .exr or .npy" }))?;
+    match format {
         ImageFormat::Npy => read_npy(path),
         ImageFormat::Exr => read_exr(path).map_err(|m| Error::new(path, ErrorKind::Image(m))),
-        ImageFormat::Png => {
-            let png = image::open(path).map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))?;
-            let rgba = png.color().has_alpha();
-            let (w, h) = (png.width(), png.height());
-            let (c, bytes) = if rgba { (4, png.into_rgba8().into_raw()) } else { (3, png.into_rgb8().into_raw()) };
-            let data = bytes.into_iter().map(|b| f32::from(b) / 255.0).collect();
-            Image::from_data(w, h, c, data).ok_or_else(|| Error::new(path, ErrorKind::Image("size mismatch".into())))
-        }
+        ImageFormat::Png => read_8bit(path),
     }
+}
+
+/// Whether `path` names a JPEG (`.jpg`, `.jpeg`, any case), which is read but never written.
+pub fn is_jpeg(path: &Path) -> bool {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    matches!(ext.as_deref(), Some("jpg" | "jpeg"))
+}
+
+/// An 8-bit PNG or JPEG as values / 255: three channels (grey repeated), four where it has alpha.
+fn read_8bit(path: &Path) -> Result<Image, Error> {
+    let decoded = image::open(path).map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))?;
+    let rgba = decoded.color().has_alpha();
+    let (w, h) = (decoded.width(), decoded.height());
+    let (c, bytes) = if rgba { (4, decoded.into_rgba8().into_raw()) } else { (3, decoded.into_rgb8().into_raw()) };
+    let data = bytes.into_iter().map(|b| f32::from(b) / 255.0).collect();
+    Image::from_data(w, h, c, data).ok_or_else(|| Error::new(path, ErrorKind::Image("size mismatch".into())))
 }
 
 fn read_exr(path: &Path) -> Result<Image, String> {

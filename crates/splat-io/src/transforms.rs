@@ -21,7 +21,7 @@
 //! **Intrinsics.** fx is `fl_x`, else w / (2 tan(`camera_angle_x` / 2)); fy is `fl_y`, else from
 //! `camera_angle_y`, else fx (3DGS's `focal2fov(fov2focal(fovx, W), H)` is fy = fx). The
 //! principal point is (`cx`, `cy`), else the image centre. The image size is (`w`, `h`), else the
-//! frame's image's (a PNG's header; `file_path` relative to the file, `.png` added where it has no
+//! frame's image's (a PNG's or JPEG's header; `file_path` relative to the file, `.png` added where it has no
 //! extension, as 3DGS and Brush add it).
 //!
 //! **Lens** (Nerfstudio's `CAMERA_MODEL_TO_TYPE`): no `camera_model`, `SIMPLE_PINHOLE`,
@@ -409,7 +409,7 @@ fn image_size(file_path: &str, folder: Option<&Path>) -> Result<(u32, u32), Stri
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| e.to_string())
         .and_then(|r| r.into_dimensions().map_err(|e| e.to_string()));
-    size.map_err(|e| format!("{missing} ({}: {e}; PNG headers are read): give w and h", image.display()))
+    size.map_err(|e| format!("{missing} ({}: {e}; PNG and JPEG headers are read): give w and h", image.display()))
 }
 
 #[cfg(test)]
@@ -580,13 +580,18 @@ mod tests {
     }
 
     #[test]
-    fn a_size_comes_from_the_frames_png_where_the_file_has_none() {
+    fn a_size_comes_from_the_frames_png_or_jpeg_where_the_file_has_none() {
         let dir = std::env::temp_dir().join(format!("splat-transforms-{}", std::process::id()));
         std::fs::create_dir_all(dir.join("train")).unwrap();
         image::RgbaImage::new(40, 30).save(dir.join("train/r_0.png")).unwrap();
+        image::RgbImage::new(24, 18).save(dir.join("train/photo.JPG")).unwrap();
         let views = parse_transforms(BLENDER.as_bytes(), Some(&dir)).unwrap();
+        let photo = BLENDER.replace("./train/r_0", "train/photo.JPG");
+        let photos = parse_transforms(photo.as_bytes(), Some(&dir)).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
         let c = views[0].1;
         assert_eq!((c.width, c.height, c.cx, c.cy), (40, 30, 20.0, 15.0));
+        let c = photos[0].1;
+        assert_eq!((c.width, c.height, c.cx, c.cy), (24, 18, 12.0, 9.0));
     }
 }

@@ -717,8 +717,9 @@ fn methods(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
         .collect()
 }
 
-/// RMSE, PSNR (peak 1), SSIM and ꟻLIP of `test` against `reference`, float32 arrays (H, W) or
-/// (H, W, C), as `splat compare` measures them.
+/// RMSE, PSNR (peak 1), SSIM (3DGS's, and torchmetrics' as `ssim_inside`: None for an image
+/// smaller than its 11 × 11 window) and ꟻLIP of `test` against `reference`, float32 arrays
+/// (H, W) or (H, W, C), as `splat compare` measures them.
 #[pyfunction]
 #[pyo3(signature = (reference, test, pixels_per_degree = None))]
 fn compare<'py>(
@@ -734,6 +735,7 @@ fn compare<'py>(
     dict.set_item("rmse", m.rmse)?;
     dict.set_item("psnr", m.psnr)?;
     dict.set_item("ssim", m.ssim)?;
+    dict.set_item("ssim_inside", m.ssim_inside)?;
     dict.set_item("flip", m.flip)?;
     Ok(dict)
 }
