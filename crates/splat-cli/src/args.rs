@@ -23,7 +23,7 @@ use splat_core::undistort::Undistortion;
 use splat_core::{
     Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, ScreenFilter, World,
 };
-use splat_io::cameras::ViewOptions;
+use splat_io::cameras::{Split, ViewOptions};
 use splat_io::text::{parse_direction, parse_vec3};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
@@ -373,6 +373,10 @@ pub struct SceneArgs {
     /// calls it.
     #[arg(help_heading = "Camera", long, requires = "camera", value_parser = splat_view::undistort_parser())]
     pub undistort: Option<Undistortion>,
+    /// Keep only a trainer's split of the views of --camera (its held-out views, to score
+    /// renders as it does), in its order: --camera-index and --all-cameras then count in it.
+    #[arg(help_heading = "Camera", long, requires = "camera", value_parser = splat_view::split_parser())]
+    pub split: Option<Split>,
     /// Image width in pixels (1 to 16384); rescales the camera's intrinsics [default: the
     /// camera's, else the command's framing size: 640 for render].
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
@@ -573,7 +577,7 @@ pub fn load_cameras(path: &std::path::Path, options: ViewOptions) -> Result<Vec<
 impl SceneArgs {
     /// How --camera's views are read.
     pub fn view_options(&self) -> ViewOptions<'_> {
-        ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort }
+        ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort, split: self.split }
     }
 }
 

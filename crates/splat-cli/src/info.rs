@@ -198,7 +198,7 @@ fn up_line(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Pat
                    -y up; frame them with --up 0,-1,0"
             .into());
     };
-    let options = splat_io::cameras::ViewOptions { dataparser, undistort: None };
+    let options = splat_io::cameras::ViewOptions { dataparser, ..Default::default() };
     let views: Vec<_> = crate::args::load_cameras(path, options)?.into_iter().map(|(_, c)| c).collect();
     Ok(match splat_core::Camera::mean_up(&views) {
         Some(up) => {

@@ -1244,6 +1244,16 @@ fn colmap_cameras_and_all_cameras() {
     for i in 0..3 {
         assert!(out.join(format!("img_{i}.png")).exists(), "img_{i}.png missing");
     }
+    // 3DGS's training views: all but every 8th by name, so img_1 and img_2.
+    let train = scratch("train-views");
+    let dir_arg = dir.to_str().unwrap();
+    let args = ["--all-cameras", "--split", "3dgs-train", "--width", "8", "--height", "6", "--backend", "cpu"];
+    let o = splat(
+        &[&["render", "fixtures/cloud.ply", "--camera", dir_arg][..], &args, &["-o", train.to_str().unwrap()]].concat(),
+    );
+    assert!(o.status.success() && stderr(&o).contains("rendered 2 views"), "{}", stderr(&o));
+    let written = [0, 1, 2].map(|i| train.join(format!("img_{i}.png")).exists());
+    assert_eq!(written, [false, true, true]);
     let one = scratch("one-view");
     let o = splat(&[
         "render",

@@ -119,6 +119,92 @@ pub struct ViewOptions<'a> {
     pub dataparser: Option<&'a Path>,
     /// Whose pinhole each camera becomes ([`Camera::undistorted`]).
     pub undistort: Option<Undistortion>,
+    /// The trainer's split of the views to keep ([`Split`]).
+    pub split: Option<Split>,
+}
+
+/// A trainer's split of a capture's views into those it trains on and those it holds out for
+/// evaluation, in the order the trainer lists them.
+///
+/// - 3DGS (`--eval`: `readColmapSceneInfo`, llffhold 8) sorts COLMAP's image names and holds
+///   out every 8th from the first; gsplat's `simple_trainer` (`test_every` 8, over the sorted
+///   names) holds out the same views.
+/// - Nerfstudio's `nerfstudio-data` dataparser (`eval_mode` "fraction", `train_split_fraction`
+///   0.9: `get_train_eval_split_fraction`) sorts the frames by path and trains on the indices
+///   `numpy.linspace(0, n − 1, ⌈0.9 n⌉, dtype=int)`, holding out the rest.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Split {
+    /// 3DGS's and gsplat's held-out views.
+    ThreeDgsTest,
+    /// 3DGS's and gsplat's training views.
+    ThreeDgsTrain,
+    /// Nerfstudio's evaluation views.
+    NerfstudioEval,
+    /// Nerfstudio's training views.
+    NerfstudioTrain,
+}
+
+impl Split {
+    /// Every split.
+    pub const ALL: [Split; 4] =
+        [Split::ThreeDgsTest, Split::ThreeDgsTrain, Split::NerfstudioEval, Split::NerfstudioTrain];
+
+    /// Its name, as the CLI and Python take it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Split::ThreeDgsTest => "3dgs-test",
+            Split::ThreeDgsTrain => "3dgs-train",
+            Split::NerfstudioEval => "nerfstudio-eval",
+            Split::NerfstudioTrain => "nerfstudio-train",
+        }
+    }
+
+    /// What it keeps, in words.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Split::ThreeDgsTest => "3DGS's --eval test views (and gsplat's): every 8th by name, from the first",
+            Split::ThreeDgsTrain => "3DGS's and gsplat's training views: all but every 8th by name",
+            Split::NerfstudioEval => "Nerfstudio's evaluation views: those off linspace(0, n-1, ceil(0.9 n)) by path",
+            Split::NerfstudioTrain => "Nerfstudio's training views: linspace(0, n-1, ceil(0.9 n)) by path",
+        }
+    }
+
+    /// The views of `views` (named by their image) in the split, in the trainer's order.
+    pub fn select<T>(self, mut views: Vec<(String, T)>) -> Result<Vec<(String, T)>, String> {
+        let n = views.len();
+        let keep: Vec<bool> = match self {
+            Split::ThreeDgsTest | Split::ThreeDgsTrain => {
+                views.sort_by(|(a, _), (b, _)| a.cmp(b));
+                (0..n).map(|i| (i % 8 == 0) == (self == Split::ThreeDgsTest)).collect()
+            }
+            Split::NerfstudioEval | Split::NerfstudioTrain => {
+                if n < 2 {
+                    return Err("Nerfstudio cannot split a single view (its fraction split fails)".into());
+                }
+                // Python's paths compare by their parts, `.` dropped.
+                let parts = |name: &str| -> Vec<std::ffi::OsString> {
+                    let parts = Path::new(name).components().filter(|c| *c != std::path::Component::CurDir);
+                    parts.map(|c| c.as_os_str().to_owned()).collect()
+                };
+                views.sort_by_cached_key(|(name, _)| parts(name));
+                // math.ceil(n * 0.9), in f64 as Python computes it.
+                let train = linspace_floor(n - 1, (n as f64 * 0.9).ceil() as usize);
+                (0..n).map(|i| train.binary_search(&i).is_ok() == (self == Split::NerfstudioTrain)).collect()
+            }
+        };
+        let kept: Vec<_> = views.into_iter().zip(keep).filter_map(|(v, k)| k.then_some(v)).collect();
+        if kept.is_empty() {
+            return Err(format!("{} of {n} views is empty", self.name()));
+        }
+        Ok(kept)
+    }
+}
+
+/// `numpy.linspace(0, last, count, dtype=int)`: i · (last / (count − 1)) in f64, floored, the
+/// last value `last` itself (count ≥ 2).
+fn linspace_floor(last: usize, count: usize) -> Vec<usize> {
+    let step = last as f64 / (count - 1) as f64;
+    (0..count).map(|i| if i == count - 1 { last } else { (i as f64 * step).floor() as usize }).collect()
 }
 
 /// Every view of a `cameras.json`, a COLMAP model ([`crate::colmap::is_colmap`]) or a
@@ -130,13 +216,18 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
 
 /// [`read_views`], changed by `options`.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
-    let views = read_views_moved(path, options.dataparser)?;
-    let Some(trainer) = options.undistort else { return Ok(views) };
-    let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
-        Ok(camera) => Ok((name, camera)),
-        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
-    };
-    views.into_iter().enumerate().map(undistort).collect()
+    let mut views = read_views_moved(path, options.dataparser)?;
+    if let Some(trainer) = options.undistort {
+        let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
+            Ok(camera) => Ok((name, camera)),
+            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
+        };
+        views = views.into_iter().enumerate().map(undistort).collect::<Result<_, _>>()?;
+    }
+    match options.split {
+        Some(split) => split.select(views).map_err(|m| Error::new(path, ErrorKind::Split(m))),
+        None => Ok(views),
+    }
 }
 
 /// [`read_views`], a `transforms.json`'s cameras moved by `dataparser` transforms.

@@ -206,6 +206,9 @@ pub enum ErrorKind {
     /// A Nerfstudio `dataparser_transforms.json` is malformed or cannot apply to the cameras.
     #[error("Nerfstudio dataparser transforms: {0}")]
     Dataparser(String),
+    /// A trainer's split does not apply to the views.
+    #[error("split: {0}")]
+    Split(String),
     /// An image cannot be written or read.
     #[error("image: {0}")]
     Image(String),

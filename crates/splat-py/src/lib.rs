@@ -21,7 +21,7 @@ use splat_cli::render::{PipelineArg, RenderArgs, Rendered};
 use splat_core::particle::sh_coeff_count;
 use splat_core::undistort::Undistortion;
 use splat_core::{Camera, Particle, Scene};
-use splat_io::cameras::ViewOptions;
+use splat_io::cameras::{Split, ViewOptions};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -297,25 +297,30 @@ impl PyCamera {
 /// `dataparser_transforms`, a Nerfstudio run's `dataparser_transforms.json`, moves a
 /// transforms.json's cameras into that run's world (splatfacto's splats'); `undistort`
 /// ("splatfacto" or "gsplat") makes each camera the pinhole that trainer undistorts its photos
-/// to, as `splat render --undistort` does.
+/// to, as `splat render --undistort` does; `split` ("3dgs-test", "nerfstudio-eval", …) keeps a
+/// trainer's split of the views, as `--split` does.
 #[pyfunction]
-#[pyo3(signature = (path, dataparser_transforms = None, undistort = None))]
+#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None))]
 fn load_cameras(
     path: PathBuf,
     dataparser_transforms: Option<PathBuf>,
     undistort: Option<&str>,
+    split: Option<&str>,
 ) -> PyResult<Vec<(String, PyCamera)>> {
-    let undistort = undistort
-        .map(|name| {
-            Undistortion::from_name(name).ok_or_else(|| {
-                let names: Vec<_> = Undistortion::ALL.iter().map(|u| u.name()).collect();
-                SplatError::new_err(format!("undistort = {name:?}: expected one of {}", names.join(", ")))
-            })
-        })
-        .transpose()?;
-    let options = ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort };
+    let undistort =
+        undistort.map(|name| choice("undistort", name, &Undistortion::ALL, Undistortion::name)).transpose()?;
+    let split = split.map(|name| choice("split", name, &Split::ALL, Split::name)).transpose()?;
+    let options = ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort, split };
     let views = splat_cli::args::load_cameras(&path, options).map_err(fail)?;
     Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
+}
+
+/// The one of `all` named `name`, for the keyword argument `argument`.
+fn choice<T: Copy>(argument: &str, name: &str, all: &[T], name_of: fn(T) -> &'static str) -> PyResult<T> {
+    all.iter().copied().find(|&v| name_of(v) == name).ok_or_else(|| {
+        let names: Vec<_> = all.iter().map(|&v| name_of(v)).collect();
+        SplatError::new_err(format!("{argument} = {name:?}: expected one of {}", names.join(", ")))
+    })
 }
 
 /// Render `scene` as `splat render` would, with `options` its options (dashes as underscores)

@@ -29,7 +29,7 @@ use splat_core::glam::Vec3;
 use splat_core::sh::ShStorage;
 use splat_core::undistort::Undistortion;
 use splat_gpu::GpuContext;
-use splat_io::cameras::ViewOptions;
+use splat_io::cameras::{Split, ViewOptions};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -57,6 +57,9 @@ pub struct SceneArgs {
     /// calls it.
     #[arg(long, requires = "camera", value_parser = undistort_parser())]
     pub undistort: Option<Undistortion>,
+    /// Keep only a trainer's split of the views of --camera (its held-out views), in its order.
+    #[arg(long, requires = "camera", value_parser = split_parser())]
+    pub split: Option<Split>,
     /// Where frames render: auto takes a hardware GPU and the CPU renderers on a CPU adapter
     /// such as lavapipe.
     #[arg(long, value_enum, default_value = "auto")]
@@ -82,7 +85,11 @@ impl SceneArgs {
     /// Read the scene and its views, checking `--camera-index` against them.
     pub fn load(&self) -> Result<load::Loaded> {
         let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
-        let views = ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort };
+        let views = ViewOptions {
+            dataparser: self.dataparser_transforms.as_deref(),
+            undistort: self.undistort,
+            split: self.split,
+        };
         let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), views, read)?;
         if let Some(storage) = self.sh_storage {
             loaded.info.render.sh_storage = storage;
@@ -139,6 +146,12 @@ pub fn sh_storage_parser() -> impl clap::builder::TypedValueParser<Value = ShSto
 /// its name, described.
 pub fn undistort_parser() -> impl clap::builder::TypedValueParser<Value = Undistortion> {
     choice_parser(&Undistortion::ALL, Undistortion::name, Undistortion::describe)
+}
+
+/// The values of `--split` (here and in the `splat` commands): every [`Split`] by its name,
+/// described.
+pub fn split_parser() -> impl clap::builder::TypedValueParser<Value = Split> {
+    choice_parser(&Split::ALL, Split::name, Split::describe)
 }
 
 /// The values of `--screen-filter` (here and in the `splat` commands): every [`ScreenFilter`]

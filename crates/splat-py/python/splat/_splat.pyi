@@ -69,6 +69,7 @@ def load_cameras(
     path: Union[str, PathLike],
     dataparser_transforms: Optional[Union[str, PathLike]] = None,
     undistort: Optional[str] = None,
+    split: Optional[str] = None,
 ) -> list[tuple[str, Camera]]: ...
 def render(
     scene: Scene,
