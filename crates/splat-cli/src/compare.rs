@@ -3,6 +3,7 @@
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use splat_core::Image;
+use splat_core::glam::Vec3;
 use std::path::{Path, PathBuf};
 
 /// ꟻLIP's default observer: 0.7 m from a 0.7 m wide 4K monitor.
@@ -24,6 +25,64 @@ pub struct CompareArgs {
     /// wide 4K monitor).
     #[arg(long, default_value_t = nv_flip::DEFAULT_PIXELS_PER_DEGREE)]
     pub pixels_per_degree: f32,
+    /// Composite 8-bit images with alpha over this colour "r,g,b" (each 0 to 1) before comparing,
+    /// as 3DGS loads a NeRF-synthetic photograph (1,1,1 with its --white_background, else
+    /// 0,0,0); without it such an image is compared on its colour as stored.
+    #[arg(long, value_parser = parse_background)]
+    pub background: Option<Vec3>,
+}
+
+/// A background colour "r,g,b", each in [0, 1].
+fn parse_background(s: &str) -> Result<Vec3, String> {
+    let c = splat_io::text::parse_vec3(s)?;
+    if c.to_array().iter().all(|v| (0.0..=1.0).contains(v)) {
+        Ok(c)
+    } else {
+        Err(format!("{s}: each of r, g, b must be in 0..=1"))
+    }
+}
+
+/// An image as it is compared, and whether alpha was left aside: with `background`, an 8-bit
+/// image with alpha composited over it as 3DGS's `readCamerasFromTransforms` does (c α + b (1 −
+/// α) in f64 from the 8-bit values, then × 255 truncated to 8 bits by its `np.byte` cast);
+/// otherwise as stored.
+fn read_compared(path: &Path, background: Option<Vec3>) -> Result<(Image, bool)> {
+    use splat_io::image::{ImageFormat, is_jpeg};
+    let image = splat_io::image::read_image(path).with_context(|| format!("reading {}", path.display()))?;
+    let eight_bit = is_jpeg(path) || matches!(ImageFormat::from_path(path), Ok(ImageFormat::Png));
+    let has_alpha = image.channels() == 4;
+    match background {
+        Some(background) if has_alpha && eight_bit => Ok((over(&image, background), false)),
+        _ => Ok((image, has_alpha)),
+    }
+}
+
+/// 8-bit RGBA `image` over `background`, as [`read_compared`] describes.
+fn over(image: &Image, background: Vec3) -> Image {
+    let b = background.to_array().map(f64::from);
+    let level = |v: f32| f64::from((v * 255.0).round());
+    let data = image
+        .data()
+        .chunks_exact(4)
+        .flat_map(|p| {
+            let alpha = level(p[3]) / 255.0;
+            std::array::from_fn::<f32, 3, _>(|c| {
+                let v = level(p[c]) / 255.0 * alpha + b[c] * (1.0 - alpha);
+                ((v * 255.0).trunc() / 255.0) as f32
+            })
+        })
+        .collect();
+    Image::from_data(image.width(), image.height(), 3, data).expect("3 values a pixel")
+}
+
+/// The note for images compared on their colour with their alpha left aside.
+fn alpha_note(count: usize) {
+    if count > 0 {
+        eprintln!(
+            "note: {count} image(s) have alpha, compared on their colour as stored: --background composites them \
+             over a colour first (as 3DGS composites NeRF-synthetic photographs)"
+        );
+    }
 }
 
 /// The RGB values of an image (a grey one repeated), as f32.
@@ -98,8 +157,9 @@ pub fn run(args: CompareArgs) -> Result<()> {
     if args.reference.is_dir() || args.test.is_dir() {
         return run_folders(&args);
     }
-    let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
-    let (a, b) = (read(&args.reference)?, read(&args.test)?);
+    let ((a, alpha_a), (b, alpha_b)) =
+        (read_compared(&args.reference, args.background)?, read_compared(&args.test, args.background)?);
+    alpha_note(usize::from(alpha_a) + usize::from(alpha_b));
     let measured = measure(&a, &b, args.pixels_per_degree)?;
     let Metrics { rmse, psnr, ssim, ssim_inside, flip } = measured.metrics;
     println!("reference  {}", args.reference.display());
@@ -166,9 +226,11 @@ fn run_folders(args: &CompareArgs) -> Result<()> {
     println!("test       {}", test.display());
     println!("{:<32} {:>9} {:>9} {:>9} {:>9}", "image", "PSNR dB", "SSIM", "SSIM tm", "FLIP");
     let mut rows = Vec::with_capacity(tests.len());
+    let mut with_alpha = 0;
     for (name, path) in &tests {
-        let read = |p: &Path| splat_io::image::read_image(p).with_context(|| format!("reading {}", p.display()));
-        let (a, b) = (read(&references[name])?, read(path)?);
+        let (a, alpha_a) = read_compared(&references[name], args.background)?;
+        let (b, alpha_b) = read_compared(path, args.background)?;
+        with_alpha += usize::from(alpha_a) + usize::from(alpha_b);
         let m = metrics(&a, &b, args.pixels_per_degree).with_context(|| format!("comparing {name}"))?;
         println!("{name:<32} {:>9.3} {:>9.5} {:>9} {:>9.5}", m.psnr, m.ssim, inside(m.ssim_inside), m.flip);
         rows.push(m);
@@ -180,6 +242,7 @@ fn run_folders(args: &CompareArgs) -> Result<()> {
     let (psnr, ssim, flip) = (mean(|m| m.psnr), mean(|m| m.ssim), mean(|m| m.flip));
     println!("{label:<32} {psnr:>9.3} {ssim:>9.5} {:>9} {flip:>9.5}", inside(inside_mean));
     println!("SSIM is 3DGS's (every pixel), SSIM tm torchmetrics' (windows inside the image); PSNR peak 1");
+    alpha_note(with_alpha);
     let unmatched = references.len() - tests.len();
     if unmatched > 0 {
         eprintln!("note: {unmatched} images of {} have no test image and were not compared", reference.display());
