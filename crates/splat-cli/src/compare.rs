@@ -47,12 +47,10 @@ fn parse_background(s: &str) -> Result<Vec3, String> {
 /// α) in f64 from the 8-bit values, then × 255 truncated to 8 bits by its `np.byte` cast);
 /// otherwise as stored.
 fn read_compared(path: &Path, background: Option<Vec3>) -> Result<(Image, bool)> {
-    use splat_io::image::{ImageFormat, is_jpeg};
     let image = splat_io::image::read_image(path).with_context(|| format!("reading {}", path.display()))?;
-    let eight_bit = is_jpeg(path) || matches!(ImageFormat::from_path(path), Ok(ImageFormat::Png));
     let has_alpha = image.channels() == 4;
     match background {
-        Some(background) if has_alpha && eight_bit => Ok((over(&image, background), false)),
+        Some(background) if has_alpha && splat_io::image::is_eight_bit(path) => Ok((over(&image, background), false)),
         _ => Ok((image, has_alpha)),
     }
 }
@@ -258,9 +256,8 @@ fn inside(ssim: Option<f64>) -> String {
 /// How the inputs' values were read, for the RMSE line: 8-bit PNG and JPEG values scaled to
 /// [0, 1], float files as they are stored.
 fn value_scale(a: &Path, b: &Path) -> &'static str {
-    use splat_io::image::{ImageFormat, is_jpeg};
-    let eight_bit = |p: &Path| is_jpeg(p) || matches!(ImageFormat::from_path(p), Ok(ImageFormat::Png));
-    match (eight_bit(a), eight_bit(b)) {
+    use splat_io::image::is_eight_bit;
+    match (is_eight_bit(a), is_eight_bit(b)) {
         (true, true) => "8-bit values / 255",
         (false, false) => "float values as stored",
         _ => "8-bit values / 255, float values as stored",

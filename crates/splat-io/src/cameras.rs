@@ -214,20 +214,19 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     read_views_in(path, ViewOptions::default())
 }
 
-/// [`read_views`], changed by `options`.
+/// [`read_views`], changed by `options`: moved by the dataparser transforms, then the split kept,
+/// then undistorted.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
     let mut views = read_views_moved(path, options.dataparser)?;
-    if let Some(trainer) = options.undistort {
-        let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
-            Ok(camera) => Ok((name, camera)),
-            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
-        };
-        views = views.into_iter().enumerate().map(undistort).collect::<Result<_, _>>()?;
+    if let Some(split) = options.split {
+        views = split.select(views).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
     }
-    match options.split {
-        Some(split) => split.select(views).map_err(|m| Error::new(path, ErrorKind::Split(m))),
-        None => Ok(views),
-    }
+    let Some(trainer) = options.undistort else { return Ok(views) };
+    let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
+        Ok(camera) => Ok((name, camera)),
+        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
+    };
+    views.into_iter().enumerate().map(undistort).collect()
 }
 
 /// [`read_views`], a `transforms.json`'s cameras moved by `dataparser` transforms.

@@ -161,6 +161,11 @@ pub fn is_jpeg(path: &Path) -> bool {
     matches!(ext.as_deref(), Some("jpg" | "jpeg"))
 }
 
+/// Whether `path` names an 8-bit image (PNG, JPEG), which [`read_image`] reads as values / 255.
+pub fn is_eight_bit(path: &Path) -> bool {
+    is_jpeg(path) || matches!(ImageFormat::from_path(path), Ok(ImageFormat::Png))
+}
+
 /// An 8-bit PNG or JPEG as values / 255: three channels (grey repeated), four where it has alpha.
 fn read_8bit(path: &Path) -> Result<Image, Error> {
     let decoded = image::open(path).map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))?;
