@@ -162,11 +162,18 @@ impl Split {
     /// What it keeps, in words.
     pub const fn describe(self) -> &'static str {
         match self {
-            Split::ThreeDgsTest => "3DGS's --eval test views (and gsplat's): every 8th by name, from the first",
+            Split::ThreeDgsTest => {
+                "3DGS's held-out views in eval mode (and gsplat's): every 8th by name, from the first"
+            }
             Split::ThreeDgsTrain => "3DGS's and gsplat's training views: all but every 8th by name",
             Split::NerfstudioEval => "Nerfstudio's evaluation views: those off linspace(0, n-1, ceil(0.9 n)) by path",
             Split::NerfstudioTrain => "Nerfstudio's training views: linspace(0, n-1, ceil(0.9 n)) by path",
         }
+    }
+
+    /// Whether it is one of Nerfstudio's.
+    pub const fn is_nerfstudio(self) -> bool {
+        matches!(self, Split::NerfstudioEval | Split::NerfstudioTrain)
     }
 
     /// The views of `views` (named by their image) in the split, in the trainer's order.
@@ -219,6 +226,16 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
     let mut views = read_views_moved(path, options.dataparser)?;
     if let Some(split) = options.split {
+        let lists = if split.is_nerfstudio() { nerfstudio_split_lists(path)? } else { Vec::new() };
+        if !lists.is_empty() {
+            let why = format!(
+                "the file names its own split ({}), which Nerfstudio uses in place of {}'s fraction rule; \
+                 reading those lists is not built",
+                lists.join(", "),
+                split.name()
+            );
+            return Err(Error::new(path, ErrorKind::Split(why)));
+        }
         views = split.select(views).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
     }
     let Some(trainer) = options.undistort else { return Ok(views) };
@@ -227,6 +244,16 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
         Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
     };
     views.into_iter().enumerate().map(undistort).collect()
+}
+
+/// The split lists of the `transforms.json` at `path` (the file or its folder), if it is one.
+fn nerfstudio_split_lists(path: &Path) -> Result<Vec<&'static str>, Error> {
+    if crate::colmap::is_colmap(path) {
+        return Ok(Vec::new());
+    }
+    let file = crate::transforms::in_folder(path).unwrap_or_else(|| path.to_path_buf());
+    let bytes = read_file(&file)?;
+    Ok(if crate::transforms::is_transforms(&bytes) { crate::transforms::split_lists(&bytes) } else { Vec::new() })
 }
 
 /// [`read_views`], a `transforms.json`'s cameras moved by `dataparser` transforms.

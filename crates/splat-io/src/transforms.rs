@@ -272,6 +272,14 @@ pub fn is_transforms(bytes: &[u8]) -> bool {
     bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{')
 }
 
+/// The split lists a Nerfstudio `transforms.json` names (`train_filenames`, `val_filenames`,
+/// `test_filenames`), which its dataparser uses in place of its fraction split.
+pub fn split_lists(bytes: &[u8]) -> Vec<&'static str> {
+    let keys = ["train_filenames", "val_filenames", "test_filenames"];
+    let meta = serde_json::from_slice::<serde_json::Map<String, serde_json::Value>>(bytes).unwrap_or_default();
+    keys.into_iter().filter(|key| meta.contains_key(*key)).collect()
+}
+
 /// The `transforms.json` a folder holds, if it holds one.
 pub fn in_folder(path: &Path) -> Option<std::path::PathBuf> {
     let file = path.join("transforms.json");

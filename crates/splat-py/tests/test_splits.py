@@ -64,6 +64,17 @@ def test_nerfstudio_splits_are_its_dataparsers(tmp_path, n):
         assert names == expected, (n, ours)
 
 
+def test_a_file_that_names_its_own_split_is_refused_nerfstudios(tmp_path):
+    path = tmp_path / "transforms.json"
+    transforms_file(path, [f"images/{k}.png" for k in range(12)])
+    meta = json.loads(path.read_text())
+    meta["train_filenames"], meta["test_filenames"] = ["images/0.png"], ["images/1.png"]
+    path.write_text(json.dumps(meta))
+    with pytest.raises(splat.SplatError, match="names its own split .train_filenames, test_filenames."):
+        splat.load_cameras(path, split="nerfstudio-eval")
+    assert len(splat.load_cameras(path, split="3dgs-test")) == 2
+
+
 @pytest.mark.parametrize("n", [1, 8, 9, 30])
 def test_3dgs_splits_are_its_llff_hold(tmp_path, n):
     rng = np.random.default_rng(n)
