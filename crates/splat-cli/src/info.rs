@@ -122,7 +122,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| (lo.min(p.scale.min_element()), hi.max(p.scale.max_element())));
     out!("scale      {lo:.2e} … {hi:.2e}");
-    out!("{}", up_line(args.camera.as_deref(), args.dataparser_transforms.as_deref())?);
+    out!("{}", camera_lines(args.camera.as_deref(), args.dataparser_transforms.as_deref())?);
     out!("opacity histogram:");
     let mut bins = [0usize; 10];
     for p in &scene.particles {
@@ -190,9 +190,9 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
     text
 }
 
-/// Which way is up: the mean up of the capture's views when `cameras` are given, otherwise
-/// what trained captures usually use.
-fn up_line(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Path>) -> Result<String> {
+/// What the capture's views say: which way is up (the mean up of the views when `cameras` are
+/// given, otherwise what trained captures usually use) and their lenses.
+fn camera_lines(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Path>) -> Result<String> {
     let Some(path) = cameras else {
         return Ok("up         not measured (no --camera): captures trained from COLMAP data are usually \
                    -y up; frame them with --up 0,-1,0"
@@ -200,7 +200,30 @@ fn up_line(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Pat
     };
     let options = splat_io::cameras::ViewOptions { dataparser, ..Default::default() };
     let views: Vec<_> = crate::args::load_cameras(path, options)?.into_iter().map(|(_, c)| c).collect();
-    Ok(match splat_core::Camera::mean_up(&views) {
+    Ok(format!("{}\n{}", up_line(&views), lens_line(&views)))
+}
+
+/// The views' lenses, counted; where some are distorted, that the trainers which undistort their
+/// photos trained on pinholes, and how to render those.
+fn lens_line(views: &[splat_core::Camera]) -> String {
+    let mut counts: Vec<(&str, usize)> = Vec::new();
+    for view in views {
+        let lens = view.lens.describe();
+        match counts.iter_mut().find(|(name, _)| *name == lens) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((lens, 1)),
+        }
+    }
+    let list: Vec<String> = counts.iter().map(|(lens, n)| format!("{lens} ({})", crate::counted(*n, "view"))).collect();
+    let distorted = views.iter().any(|v| v.lens.distortion().is_some_and(|d| *d != Default::default()));
+    let advice = "\n           splatfacto and gsplat train on these photographs undistorted: --undistort \
+                  splatfacto or --undistort gsplat renders their pinholes";
+    format!("lenses     {}{}", list.join(", "), if distorted { advice } else { "" })
+}
+
+/// Which way is up: the mean up of `views`.
+fn up_line(views: &[splat_core::Camera]) -> String {
+    match splat_core::Camera::mean_up(views) {
         Some(up) => {
             let axis = up.abs().max_position();
             let sign = if up[axis] < 0.0 { "-" } else { "" };
@@ -216,7 +239,7 @@ fn up_line(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Pat
             )
         }
         None => format!("up         the {} views disagree (no common up)", views.len()),
-    })
+    }
 }
 
 /// Write `text` to stdout; a closed pipe (`splat info … | head`) is not an error.

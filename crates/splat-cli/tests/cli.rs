@@ -1296,6 +1296,12 @@ fn undistorted_cameras_are_the_trainers_pinholes() {
         (splat(&[&args[..], extra, &["--backend", "cpu", "-o", out.to_str().unwrap()]].concat()), out)
     };
     write("OPENCV", serde_json::json!({"k1": -0.2, "k2": 0.05}));
+    let o = splat(&["info", "fixtures/cloud.ply", "--camera", folder.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("a distorted perspective lens (1 view)") && text.contains("--undistort splatfacto"),
+        "{text}"
+    );
     let (o, _) = render(&[]);
     assert!(!o.status.success() && stderr(&o).contains("only through a pinhole"), "{}", stderr(&o));
     for trainer in ["splatfacto", "gsplat"] {
@@ -1711,6 +1717,7 @@ fn info_and_framing_say_which_way_is_up() {
     let o = splat(&["info", "fixtures/cloud.ply", "--camera", views.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success() && text.contains("the mean of 3 views: frame with --up 0,-1,0"), "{text}");
+    assert!(text.contains("lenses     a pinhole lens (3 views)\n") && !text.contains("--undistort"), "{text}");
     let o = splat(&["info", "fixtures/cloud.ply"]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("usually -y up"));
     let out = scratch("framed.png");
