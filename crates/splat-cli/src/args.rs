@@ -579,9 +579,7 @@ impl SceneArgs {
     pub fn view_options(&self) -> ViewOptions<'_> {
         ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort, split: self.split }
     }
-}
 
-impl SceneArgs {
     /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
     /// a look-at or framing camera when none is given.
     pub fn load(&self, width: u32, height: u32) -> Result<(Scene, Camera, RenderSettings)> {

@@ -155,7 +155,7 @@ fn inscribed(k: Intrinsics, d: &Distortion, (w, h): (u32, u32), to: Option<Intri
     let [mut x0, mut x1, mut y0, mut y1] = [f64::MIN, f64::MAX, f64::MIN, f64::MAX];
     for j in 0..N {
         for i in 0..N {
-            let p = DVec2::new(f64::from(i * (w - 1)) / 8.0, f64::from(j * (h - 1)) / 8.0);
+            let p = DVec2::new(f64::from(i * (w - 1)), f64::from(j * (h - 1))) / f64::from(N - 1);
             let x = opencv_undistort(p, k, d);
             let q = to.map_or(x, |to| to.pixel(x));
             if i == 0 {

@@ -224,18 +224,8 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
 /// [`read_views`], changed by `options`: moved by the dataparser transforms, then the split kept,
 /// then undistorted.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
-    let mut views = read_views_moved(path, options.dataparser)?;
+    let mut views = read_views_moved(path, options)?;
     if let Some(split) = options.split {
-        let lists = if split.is_nerfstudio() { nerfstudio_split_lists(path)? } else { Vec::new() };
-        if !lists.is_empty() {
-            let why = format!(
-                "the file names its own split ({}), which Nerfstudio uses in place of {}'s fraction rule; \
-                 reading those lists is not built",
-                lists.join(", "),
-                split.name()
-            );
-            return Err(Error::new(path, ErrorKind::Split(why)));
-        }
         views = split.select(views).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
     }
     let Some(trainer) = options.undistort else { return Ok(views) };
@@ -246,19 +236,10 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     views.into_iter().enumerate().map(undistort).collect()
 }
 
-/// The split lists of the `transforms.json` at `path` (the file or its folder), if it is one.
-fn nerfstudio_split_lists(path: &Path) -> Result<Vec<&'static str>, Error> {
-    if crate::colmap::is_colmap(path) {
-        return Ok(Vec::new());
-    }
-    let file = crate::transforms::in_folder(path).unwrap_or_else(|| path.to_path_buf());
-    let bytes = read_file(&file)?;
-    Ok(if crate::transforms::is_transforms(&bytes) { crate::transforms::split_lists(&bytes) } else { Vec::new() })
-}
-
-/// [`read_views`], a `transforms.json`'s cameras moved by `dataparser` transforms.
-fn read_views_moved(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(String, Camera)>, Error> {
-    let dataparser = dataparser.map(crate::transforms::read_dataparser).transpose()?;
+/// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms; a
+/// `transforms.json` that names its own split lists is refused with Nerfstudio's splits.
+fn read_views_moved(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
+    let dataparser = options.dataparser.map(crate::transforms::read_dataparser).transpose()?;
     let not_transforms = || {
         let why = "a training run's dataparser transforms move a transforms.json's cameras, and this is a \
                    COLMAP model or a cameras.json: give the run's dataset's transforms.json";
@@ -273,6 +254,16 @@ fn read_views_moved(path: &Path, dataparser: Option<&Path>) -> Result<Vec<(Strin
     let file = crate::transforms::in_folder(path).unwrap_or_else(|| path.to_path_buf());
     let bytes = read_file(&file)?;
     if crate::transforms::is_transforms(&bytes) {
+        let lists = crate::transforms::split_lists(&bytes);
+        if let Some(split) = options.split.filter(|s| s.is_nerfstudio() && !lists.is_empty()) {
+            let why = format!(
+                "the file names its own split ({}), which Nerfstudio uses in place of {}'s fraction rule; \
+                 reading those lists is not built",
+                lists.join(", "),
+                split.name()
+            );
+            return Err(Error::new(path, ErrorKind::Split(why)));
+        }
         return crate::transforms::views_of(&file, &bytes, dataparser.as_ref());
     }
     if dataparser.is_some() {
