@@ -22,6 +22,10 @@
 //! - fisheye (`fisheye::undistortPoints`' default): Newton's method on θ_d = θ (1 + k₁θ² + k₂θ⁴ +
 //!   k₃θ⁶ + k₄θ⁸), at most 10 steps, until a step is below 1e-8.
 
+mod remap;
+
+pub use remap::Photo;
+
 use crate::camera::{Camera, CameraError};
 use crate::lens::{Distortion, Lens};
 use glam::DVec2;
@@ -84,6 +88,12 @@ impl Intrinsics {
     /// ours at half-integers: d = −½ into OpenCV, +½ back).
     fn shifted(self, d: f64) -> Self {
         Self { c: self.c + d, ..self }
+    }
+
+    /// Rounded to single precision, as a trainer that keeps K in f32 (Nerfstudio's cameras are
+    /// float32 tensors) hands OpenCV's estimate back to OpenCV.
+    fn single(self) -> Self {
+        Self { f: self.f.as_vec2().as_dvec2(), c: self.c.as_vec2().as_dvec2() }
     }
 
     /// The same in the image cropped to `rect`.
@@ -244,17 +254,62 @@ fn fisheye_pinhole(k: Intrinsics, coefficients: [f64; 4], (w, h): (u32, u32)) ->
     Some(Intrinsics { f: DVec2::new(f, f / aspect), c: DVec2::new(c.x, c.y / aspect) })
 }
 
+/// The lens OpenCV undistorts, in its own terms.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Source {
+    /// `cv::undistort` and `cv::initUndistortRectifyMap`'s model: [`Distortion`].
+    Perspective(Distortion),
+    /// `cv::fisheye`'s k₁…k₄.
+    Fisheye([f64; 4]),
+}
+
+/// What a trainer does to the photos of one distorted camera, in OpenCV's pixel convention
+/// (pixel centres at integers): the photo of intrinsics `source` through `lens` is resampled
+/// to the pinhole `target`, whose image is then cropped to `crop`; the trainer's camera of the
+/// cropped image has intrinsics `camera` in splat's convention.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Plan {
+    source: Intrinsics,
+    lens: Source,
+    target: Intrinsics,
+    crop: Rect,
+    camera: Intrinsics,
+    sampling: remap::Sampling,
+}
+
+impl Plan {
+    /// Where OpenCV samples the photo for pixel (x, y) of the cropped image: the map of
+    /// `cv::initUndistortRectifyMap` (perspective) or `cv::fisheye::initUndistortRectifyMap`,
+    /// in double precision as OpenCV computes it.
+    fn source_pixel(&self, x: u32, y: u32) -> DVec2 {
+        let q = DVec2::new(f64::from(x) + self.crop.x as f64, f64::from(y) + self.crop.y as f64);
+        let n = self.target.normalised(q);
+        let (f, c) = (self.source.f, self.source.c);
+        match self.lens {
+            Source::Perspective(d) => f * d.distort(n) + c,
+            Source::Fisheye([k1, k2, k3, k4]) => {
+                let r = n.length();
+                let theta = r.atan();
+                let (t2, t4, t6, t8) = (theta * theta, theta.powi(4), theta.powi(6), theta.powi(8));
+                let theta_d = theta * (1.0 + k1 * t2 + k2 * t4 + k3 * t6 + k4 * t8);
+                let scale = if r == 0.0 { 1.0 } else { theta_d / r };
+                f * n * scale + c
+            }
+        }
+    }
+}
+
 impl Camera {
-    /// The pinhole camera `trainer` trains this camera's images through (see the module
-    /// documentation); a camera without a distorted lens is its own.
-    pub fn undistorted(&self, trainer: Undistortion) -> Result<Camera, CameraError> {
+    /// What `trainer` does to this camera's photos; `None` for a camera it trains through as
+    /// it is.
+    fn plan(&self, trainer: Undistortion) -> Result<Option<Plan>, CameraError> {
         let refuse = |why: String| CameraError::Undistort { trainer: trainer.name(), why };
         let k = Intrinsics::of(self);
         let size = (self.width, self.height);
-        let (new, (width, height)) = match (self.lens, trainer) {
-            (Lens::Pinhole | Lens::Equirectangular, _) => return Ok(*self),
-            (Lens::Perspective(d), Undistortion::Splatfacto) if d == Distortion::default() => return Ok(*self),
-            (Lens::Fisheye(d), Undistortion::Splatfacto) if d == Distortion::default() => return Ok(*self),
+        let plan = match (self.lens, trainer) {
+            (Lens::Pinhole | Lens::Equirectangular, _) => return Ok(None),
+            (Lens::Perspective(d), Undistortion::Splatfacto) if d == Distortion::default() => return Ok(None),
+            (Lens::Fisheye(d), Undistortion::Splatfacto) if d == Distortion::default() => return Ok(None),
             (Lens::Perspective(d), _) if d.radial[3] != 0.0 => {
                 return Err(refuse(format!(
                     "OpenCV's perspective model has no r⁸ term, and this lens has one ({}; Nerfstudio asserts k4 = 0)",
@@ -262,13 +317,33 @@ impl Camera {
                 )));
             }
             (Lens::Perspective(d), Undistortion::Splatfacto) => {
-                let (new, valid) = optimal_pinhole(k.shifted(-0.5), &d, size);
-                (new.cropped(valid).shifted(0.5), valid.size())
+                // `cv2.undistort`, which samples through fixed-point maps.
+                // Nerfstudio's K is float32, and so is OpenCV's estimate of it.
+                let source = k.shifted(-0.5);
+                let (target, crop) = optimal_pinhole(source, &d, size);
+                let target = target.single();
+                let camera = target.cropped(crop).shifted(0.5);
+                Plan {
+                    source,
+                    lens: Source::Perspective(d),
+                    target,
+                    crop,
+                    camera,
+                    sampling: remap::Sampling::FixedPoint,
+                }
             }
             (Lens::Perspective(d), Undistortion::Gsplat) => {
-                // gsplat crops its images to the valid pixels but keeps the principal point.
-                let (new, valid) = optimal_pinhole(k, &d, size);
-                (new, valid.size())
+                // `cv2.remap` through float maps; gsplat crops its images to the valid pixels
+                // but keeps the principal point.
+                let (target, crop) = optimal_pinhole(k, &d, size);
+                Plan {
+                    source: k,
+                    lens: Source::Perspective(d),
+                    target,
+                    crop,
+                    camera: target,
+                    sampling: remap::Sampling::Float,
+                }
             }
             (Lens::Fisheye(d), Undistortion::Splatfacto) => {
                 if d.rational != [0.0; 3] || d.tangential != [0.0; 2] || d.prism != [0.0; 2] {
@@ -278,10 +353,22 @@ impl Camera {
                             .into(),
                     ));
                 }
-                let new = fisheye_pinhole(k.shifted(-0.5), d.radial.map(f64::from), size).ok_or_else(|| {
+                let source = k.shifted(-0.5);
+                let coefficients = d.radial.map(f64::from);
+                let target = fisheye_pinhole(source, coefficients, size).ok_or_else(|| {
                     refuse("OpenCV cannot undistort the middle of an image edge of this lens (it lies 90° or more from the axis, or its undistortion does not converge)".into())
                 })?;
-                (new.shifted(0.5), size)
+                let target = target.single();
+                let crop = Rect { x: 0, y: 0, width: size.0.into(), height: size.1.into() };
+                let camera = target.shifted(0.5);
+                Plan {
+                    source,
+                    lens: Source::Fisheye(coefficients),
+                    target,
+                    crop,
+                    camera,
+                    sampling: remap::Sampling::Float,
+                }
             }
             (Lens::Fisheye(_), Undistortion::Gsplat) => {
                 return Err(refuse(
@@ -291,9 +378,18 @@ impl Camera {
                 ));
             }
         };
-        if width == 0 {
+        if plan.crop.width == 0 {
             return Err(refuse("OpenCV's valid-pixel rectangle of this lens is empty".into()));
         }
+        Ok(Some(plan))
+    }
+
+    /// The pinhole camera `trainer` trains this camera's images through (see the module
+    /// documentation); a camera without a distorted lens is its own.
+    pub fn undistorted(&self, trainer: Undistortion) -> Result<Camera, CameraError> {
+        let Some(plan) = self.plan(trainer)? else { return Ok(*self) };
+        let (width, height) = plan.crop.size();
+        let new = plan.camera;
         let camera = Camera {
             width,
             height,
@@ -304,7 +400,10 @@ impl Camera {
             lens: Lens::Pinhole,
             ..*self
         };
-        camera.validate().map_err(|e| refuse(format!("OpenCV's estimate for this lens is not a camera ({e})")))?;
+        camera.validate().map_err(|e| CameraError::Undistort {
+            trainer: trainer.name(),
+            why: format!("OpenCV's estimate for this lens is not a camera ({e})"),
+        })?;
         Ok(camera)
     }
 }
