@@ -15,6 +15,7 @@ pub mod merge;
 pub mod render;
 pub mod reproduce;
 pub mod stratify;
+pub mod undistort;
 pub mod ztest;
 
 /// `n` and `noun`, plural unless `n` is 1: "1 view", "3 views".

@@ -1,7 +1,9 @@
 //! `splat`: render transparent 3D Gaussian scenes and inspect them.
 
 use clap::{CommandFactory, Parser, Subcommand};
-use splat_cli::{bench, compare, converge, convert, hint, hits, info, merge, render, reproduce, stratify, ztest};
+use splat_cli::{
+    bench, compare, converge, convert, hint, hits, info, merge, render, reproduce, stratify, undistort, ztest,
+};
 use std::process::ExitCode;
 
 /// Render 3D Gaussian splat scenes with exact and stochastic transparency, measure convergence
@@ -24,6 +26,7 @@ use std::process::ExitCode;
 ///   splat render scene.ply --method stochastic --seed 1 --frames 0..64 -o part0.acc   # a job's share
 ///   splat merge part*.acc -o mean.exr --variance var.exr   # the shares' run
 ///   splat render scene.ply --camera sparse/0 --all-cameras --shard 3/8 -o views/   # task 3 of 8
+///   splat undistort --camera sparse/0 --undistort gsplat --split 3dgs-test -o gt/   # the trainer's test photos
 ///   splat info point_cloud.ply
 ///   splat view scene.ply --camera cameras.json            # interactive window
 #[derive(Parser)]
@@ -56,6 +59,9 @@ enum Command {
     Serve(Box<splat_view::serve::ServeArgs>),
     /// RMSE, PSNR, SSIM and ꟻLIP between two images (.png, .exr, .npy), with error maps.
     Compare(compare::CompareArgs),
+    /// A capture's photographs as a trainer undistorts them (OpenCV's resampling, as splatfacto
+    /// or gsplat calls it): the ground truth that renders through `--undistort` compare against.
+    Undistort(undistort::UndistortArgs),
     /// Merge the shares of a run (`splat render --frames A..B -o PART.acc`, one per task of a
     /// job array) into its mean, variance and alpha images.
     Merge(merge::MergeArgs),
@@ -118,6 +124,7 @@ fn main() -> ExitCode {
         Command::Reproduce(args) => reproduce::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Merge(args) => merge::run(args),
+        Command::Undistort(args) => undistort::run(args),
         Command::View(args) => splat_view::run(&args),
         Command::Serve(args) => splat_view::serve::run(&args),
         Command::Completions { shell } => {

@@ -472,7 +472,7 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
 
 /// File stem of view `index` named `name`: the image name without its extension and folders,
 /// or `view_0007` when the camera file names none.
-fn view_stem(name: &str, index: usize) -> String {
+pub(crate) fn view_stem(name: &str, index: usize) -> String {
     let stem = Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or("");
     let clean: String = stem.chars().map(|c| if c.is_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
     if clean.is_empty() { format!("view_{index:04}") } else { clean }

@@ -5,6 +5,7 @@
 
 use crate::{Error, ErrorKind};
 use splat_core::Image;
+use splat_core::undistort::Photo;
 use std::path::Path;
 
 /// Image file formats.
@@ -174,6 +175,40 @@ fn read_8bit(path: &Path) -> Result<Image, Error> {
     let (c, bytes) = if rgba { (4, decoded.into_rgba8().into_raw()) } else { (3, decoded.into_rgb8().into_raw()) };
     let data = bytes.into_iter().map(|b| f32::from(b) / 255.0).collect();
     Image::from_data(w, h, c, data).ok_or_else(|| Error::new(path, ErrorKind::Image("size mismatch".into())))
+}
+
+/// An 8-bit PNG or JPEG photograph as it is: its grey, grey + alpha, RGB or RGBA values, as
+/// OpenCV and PIL read it for a trainer (for [`splat_core::Camera::undistort_photo`]). A photo
+/// of 16 bits or floats is refused: the trainers read 8-bit photographs.
+pub fn read_photo(path: &Path) -> Result<Photo, Error> {
+    let decoded = image::open(path).map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))?;
+    let (width, height) = (decoded.width(), decoded.height());
+    let (channels, data) = match decoded {
+        image::DynamicImage::ImageLuma8(i) => (1, i.into_raw()),
+        image::DynamicImage::ImageLumaA8(i) => (2, i.into_raw()),
+        image::DynamicImage::ImageRgb8(i) => (3, i.into_raw()),
+        image::DynamicImage::ImageRgba8(i) => (4, i.into_raw()),
+        other => {
+            let why = format!(
+                "a photograph of {:?} values, where the trainers read 8-bit photographs; convert it to 8 bits",
+                other.color()
+            );
+            return Err(Error::new(path, ErrorKind::Image(why)));
+        }
+    };
+    Ok(Photo { width, height, channels, data })
+}
+
+/// Write an 8-bit photograph as a PNG of its channels.
+pub fn write_photo(path: &Path, photo: &Photo) -> Result<(), Error> {
+    let color = match photo.channels {
+        1 => image::ExtendedColorType::L8,
+        2 => image::ExtendedColorType::La8,
+        3 => image::ExtendedColorType::Rgb8,
+        _ => image::ExtendedColorType::Rgba8,
+    };
+    image::save_buffer_with_format(path, &photo.data, photo.width, photo.height, color, image::ImageFormat::Png)
+        .map_err(|e| Error::new(path, ErrorKind::Image(e.to_string())))
 }
 
 fn read_exr(path: &Path) -> Result<Image, String> {

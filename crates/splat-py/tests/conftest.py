@@ -66,3 +66,53 @@ def write_3dgs_ply(path: pathlib.Path, g: dict) -> None:
     header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
     path.write_bytes(header.encode() + table.tobytes())
     assert struct.calcsize("<f") * table.size == len(table.tobytes())
+
+
+def nerfstudio_undistort_image(camera_type: str, distortion_params: np.ndarray, image: np.ndarray, K: np.ndarray):
+    """Nerfstudio's `_undistort_image` (`nerfstudio/data/utils/dataloaders.py`), its perspective
+    and fisheye branches for the image and K, as they are (masks and depths aside): returns
+    the new K and the undistorted image. `distortion_params` in Nerfstudio's order, k1, k2, k3,
+    k4, p1, p2."""
+    import cv2
+
+    if camera_type == "perspective":
+        assert distortion_params[3] == 0
+        distortion_params = np.array(
+            [
+                distortion_params[0],
+                distortion_params[1],
+                distortion_params[4],
+                distortion_params[5],
+                distortion_params[2],
+                distortion_params[3],
+                0,
+                0,
+            ]
+        )
+        K[0, 2] = K[0, 2] - 0.5
+        K[1, 2] = K[1, 2] - 0.5
+        if np.any(distortion_params):
+            newK, roi = cv2.getOptimalNewCameraMatrix(K, distortion_params, (image.shape[1], image.shape[0]), 0)
+            image = cv2.undistort(image, K, distortion_params, None, newK)
+        else:
+            newK = K
+            roi = 0, 0, image.shape[1], image.shape[0]
+        x, y, w, h = roi
+        image = image[y : y + h, x : x + w]
+        newK[0, 2] -= x
+        newK[1, 2] -= y
+    else:
+        K[0, 2] = K[0, 2] - 0.5
+        K[1, 2] = K[1, 2] - 0.5
+        distortion_params = np.array(
+            [distortion_params[0], distortion_params[1], distortion_params[2], distortion_params[3]]
+        )
+        size = (image.shape[1], image.shape[0])
+        newK = cv2.fisheye.estimateNewCameraMatrixForUndistortRectify(
+            K, distortion_params, size, np.eye(3), balance=0
+        )
+        map1, map2 = cv2.fisheye.initUndistortRectifyMap(K, distortion_params, np.eye(3), newK, size, cv2.CV_32FC1)
+        image = cv2.remap(image, map1, map2, interpolation=cv2.INTER_LINEAR)
+    newK[0, 2] = newK[0, 2] + 0.5
+    newK[1, 2] = newK[1, 2] + 0.5
+    return newK, image

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 import pytest
 import splat
+from conftest import nerfstudio_undistort_image
 
 # f32 storage of K (values up to 2,000 px) against OpenCV's f64.
 TOLERANCE_PX = 1e-3
@@ -53,43 +54,13 @@ def nerfstudio_file(path, camera_model: str, lens: tuple, distortion: dict) -> N
 
 
 def splatfacto_undistort(camera_type: str, distortion_params: np.ndarray, K: np.ndarray, size):
-    """Nerfstudio's `_undistort_image`, ported for K and the image's size (the image itself is
-    not needed): returns the new K and (width, height)."""
-    width, height = size
+    """Nerfstudio's `_undistort_image` for K and the image's size: returns the new K and
+    (width, height)."""
     if not np.any(distortion_params):
         return K, size
-    if camera_type == "perspective":
-        assert distortion_params[3] == 0
-        distortion_params = np.array(
-            [
-                distortion_params[0],
-                distortion_params[1],
-                distortion_params[4],
-                distortion_params[5],
-                distortion_params[2],
-                distortion_params[3],
-                0,
-                0,
-            ]
-        )
-        K[0, 2] = K[0, 2] - 0.5
-        K[1, 2] = K[1, 2] - 0.5
-        newK, roi = cv2.getOptimalNewCameraMatrix(K, distortion_params, (width, height), 0)
-        x, y, w, h = roi
-        newK[0, 2] -= x
-        newK[1, 2] -= y
-        newK[0, 2] = newK[0, 2] + 0.5
-        newK[1, 2] = newK[1, 2] + 0.5
-        return newK, (w, h)
-    K[0, 2] = K[0, 2] - 0.5
-    K[1, 2] = K[1, 2] - 0.5
-    distortion_params = np.array(distortion_params[:4])
-    newK = cv2.fisheye.estimateNewCameraMatrixForUndistortRectify(
-        K, distortion_params, (width, height), np.eye(3), balance=0
-    )
-    newK[0, 2] = newK[0, 2] + 0.5
-    newK[1, 2] = newK[1, 2] + 0.5
-    return newK, size
+    width, height = size
+    K, image = nerfstudio_undistort_image(camera_type, distortion_params, np.zeros((height, width), np.uint8), K)
+    return K, (image.shape[1], image.shape[0])
 
 
 def intrinsics(fx, fy, cx, cy) -> np.ndarray:

@@ -1,0 +1,99 @@
+//! `splat undistort`: a capture's photographs as a trainer undistorts them, the ground truth its
+//! evaluation compares renders against.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use splat_core::undistort::Undistortion;
+use splat_io::cameras::{Split, ViewOptions};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `splat undistort`.
+#[derive(Args)]
+pub struct UndistortArgs {
+    /// Cameras: a COLMAP model (a sparse/0 folder, or its images.bin / images.txt), a
+    /// transforms.json (the file or its folder) or a cameras.json, whose views name the
+    /// photographs.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// The trainer whose undistortion to reproduce: the photos resampled as it calls OpenCV
+    /// (bilinear), to the pinhole that `splat render --undistort` renders through.
+    #[arg(long, value_parser = splat_view::undistort_parser())]
+    pub undistort: Undistortion,
+    /// The folder the views' image names are relative to [default: a transforms.json's own
+    /// folder; for a COLMAP model, images/ beside its sparse/ folder].
+    #[arg(long)]
+    pub images: Option<PathBuf>,
+    /// Keep only a trainer's split of the views (its held-out views, the ones it scores).
+    #[arg(long, value_parser = splat_view::split_parser())]
+    pub split: Option<Split>,
+    /// The folder to write the undistorted photographs into, as NAME.png (NAME: the image's
+    /// name without folders and extension, as `splat render --all-cameras` names its views, so
+    /// that `splat compare` pairs them).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Where the photographs of camera file `camera` lie by the trainers' layouts: a
+/// transforms.json's folder (its file paths are relative to it); the folder holding a COLMAP
+/// model's sparse/ folder, whose images/ folder holds them.
+fn default_images(camera: &Path) -> Option<PathBuf> {
+    if splat_io::colmap::is_colmap(camera) {
+        let sparse = camera.ancestors().find(|a| a.file_name().is_some_and(|n| n == "sparse"))?;
+        return Some(sparse.parent()?.join("images"));
+    }
+    let file = splat_io::transforms::in_folder(camera).unwrap_or_else(|| camera.to_path_buf());
+    Some(file.parent()?.to_path_buf())
+}
+
+/// The photograph of view `name` in `images`: the name as it is, or, for a name without an
+/// extension (a cameras.json's), the first of the usual photograph extensions that exists.
+fn photo_path(images: &Path, name: &str) -> PathBuf {
+    let path = images.join(name);
+    if path.extension().is_some() || path.exists() {
+        return path;
+    }
+    ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"]
+        .iter()
+        .map(|e| images.join(format!("{name}.{e}")))
+        .find(|p| p.exists())
+        .unwrap_or(path)
+}
+
+/// `splat undistort`: each view's photograph, read from --images, undistorted as --undistort's
+/// trainer does it, into -o.
+pub fn run(args: UndistortArgs) -> Result<()> {
+    let options = ViewOptions { dataparser: None, undistort: None, split: args.split };
+    let views = crate::args::load_cameras(&args.camera, options)?;
+    let images = match &args.images {
+        Some(images) => images.clone(),
+        None => default_images(&args.camera).with_context(|| {
+            format!("no photographs' folder follows from {}: give it with --images", args.camera.display())
+        })?,
+    };
+    if !images.is_dir() {
+        bail!("{} is not a folder of photographs: give the views' folder with --images", images.display());
+    }
+    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+    let start = Instant::now();
+    let mut resampled = 0;
+    for (index, (name, camera)) in views.iter().enumerate() {
+        let source = photo_path(&images, name);
+        let photo = splat_io::image::read_photo(&source).with_context(|| {
+            format!("view {index} ({name}): its photograph (the image names are relative to --images)")
+        })?;
+        let out = camera.undistort_photo(args.undistort, &photo).with_context(|| format!("view {index} ({name})"))?;
+        resampled += usize::from(out != photo);
+        let target = args.output.join(format!("{}.png", crate::render::view_stem(name, index)));
+        splat_io::image::write_photo(&target, &out)?;
+    }
+    eprintln!(
+        "wrote {} ({} resampled through {}'s undistortion, the others as they are) in {:.2} s → {}",
+        crate::counted(views.len(), "photograph"),
+        resampled,
+        args.undistort.name(),
+        start.elapsed().as_secs_f64(),
+        args.output.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,171 @@
+"""Photographs undistorted as the trainers undistort them: `splat undistort` against OpenCV.
+
+A trainer scores its renders against the photos it resampled itself. Each test ports the
+trainer's own image code around OpenCV, pixel for pixel (Nerfstudio's `_undistort_image` in
+`nerfstudio/data/utils/dataloaders.py`: `cv2.undistort` for perspective lenses, fisheye maps
+and `cv2.remap` for fisheyes; gsplat's COLMAP parser and dataset, `examples/datasets/colmap.py`:
+`cv2.initUndistortRectifyMap` and `cv2.remap`), runs it with OpenCV itself
+(opencv-python-headless, pinned in requirements-test.txt) on a photo of uniform noise, and
+requires `splat undistort`'s PNG to be the same array, value for value.
+
+Noise makes every pixel depend on where it is sampled: a sample 1/32 px off (OpenCV's
+fixed-point map step) moves a value by about 8 levels. The intrinsics are exact in single
+precision, as Nerfstudio hands them to OpenCV (its cameras are float32 tensors) and as splat
+stores them; with a COLMAP camera's double-precision K, gsplat's maps differ from splat's by
+about 1e-5 px, which moves some values by a level. Controls, in the tests: samples 1/32 px
+off, bilinear interpolation in f32 (the arithmetic of OpenCV's newer float kernels, which the
+pinned OpenCV does not use for 8-bit photos) and a principal point without Nerfstudio's
+half-pixel shift each change most of the values, so none could pass.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import cv2
+import numpy as np
+import pytest
+from conftest import nerfstudio_undistort_image
+from PIL import Image
+
+# (name, w, h, fx, fy, cx, cy, k1, k2, k3, p1, p2): small perspective lenses, barrel and
+# pincushion, unequal focal lengths, off-centre principal points; f32-exact intrinsics.
+PERSPECTIVE = [
+    ("barrel", 320, 240, 250.0, 252.5, 161.25, 118.75, -0.3, 0.09, -0.01, 0.001, -0.0015),
+    ("pincushion", 256, 192, 200.0, 201.0, 128.5, 95.25, 0.12, 0.03, 0.0, -0.002, 0.001),
+]
+# (name, w, h, fx, fy, cx, cy, k1, k2, k3, k4): an OpenCV fisheye.
+FISHEYE = [("fisheye", 320, 240, 180.0, 179.0, 160.5, 119.25, 0.05, -0.01, 0.003, -0.0005)]
+
+
+def noise(w: int, h: int, channels: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (h, w, channels), dtype=np.uint8)
+
+
+def intrinsics(fx, fy, cx, cy, dtype) -> np.ndarray:
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=dtype)
+
+
+def splatfacto_photo(camera_type: str, distortion_params: np.ndarray, K: np.ndarray, image: np.ndarray):
+    """Nerfstudio's `_undistort_image`'s image (K and the parameters float32, as its cameras
+    hold them)."""
+    return nerfstudio_undistort_image(camera_type, distortion_params, image, K)[1]
+
+
+def gsplat_photo(K: np.ndarray, params: np.ndarray, image: np.ndarray, remap=cv2.remap) -> np.ndarray:
+    """gsplat's parser (its maps and valid rectangle) and dataset (`cv2.remap`, the crop);
+    `remap` in place of `cv2.remap` for the controls."""
+    height, width = image.shape[:2]
+    K_undist, roi_undist = cv2.getOptimalNewCameraMatrix(K, params, (width, height), 0)
+    mapx, mapy = cv2.initUndistortRectifyMap(K, params, None, K_undist, (width, height), cv2.CV_32FC1)
+    image = remap(image, mapx, mapy, cv2.INTER_LINEAR)
+    x, y, w, h = roi_undist
+    return image[y : y + h, x : x + w]
+
+
+def float_bilinear(image, mapx, mapy, _):
+    """Bilinear interpolation in f32, p00 + a (p01 - p00) along x then y, rounded (the
+    arithmetic of OpenCV's newer float kernels), edges clamped: a control."""
+    ix, iy = np.floor(mapx).astype(int), np.floor(mapy).astype(int)
+    a, b = (mapx - ix)[..., None], (mapy - iy)[..., None]
+    h, w = image.shape[:2]
+
+    def p(dy, dx):
+        return image[np.clip(iy + dy, 0, h - 1), np.clip(ix + dx, 0, w - 1)].astype(np.float32)
+
+    v0 = p(0, 0) + a * (p(0, 1) - p(0, 0))
+    v1 = p(1, 0) + a * (p(1, 1) - p(1, 0))
+    return np.clip(np.rint(v0 + b * (v1 - v0)), 0, 255).astype(np.uint8)
+
+
+def shifted_remap(image, mapx, mapy, interpolation):
+    """`cv2.remap` a thirtysecond of a pixel to the right: a control."""
+    return cv2.remap(image, mapx + np.float32(1 / 32), mapy, interpolation)
+
+
+def undistort(splat_bin: str, tmp_path, camera, trainer: str, photo: np.ndarray, name: str) -> np.ndarray:
+    """`splat undistort` of the one view of `camera`, whose photo lies in tmp_path/images."""
+    (tmp_path / "images").mkdir(exist_ok=True)
+    Image.fromarray(photo.squeeze()).save(tmp_path / "images" / name)
+    out = tmp_path / "out"
+    args = [splat_bin, "undistort", "--camera", str(camera), "--undistort", trainer, "-o", str(out)]
+    subprocess.run(args, check=True, capture_output=True)
+    result = np.asarray(Image.open(out / (name.rsplit(".", 1)[0] + ".png")))
+    return result.reshape(result.shape[0], result.shape[1], -1)
+
+
+def nerfstudio_file(path, camera_model: str, lens: tuple, distortion: dict) -> None:
+    _, w, h, fx, fy, cx, cy = lens[:7]
+    frame = {"file_path": "images/frame_00001.png", "transform_matrix": np.eye(4).tolist()}
+    meta = {"camera_model": camera_model, "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": w, "h": h}
+    path.write_text(json.dumps({**meta, **distortion, "frames": [frame]}))
+
+
+def assert_same(ours: np.ndarray, theirs: np.ndarray, label: str) -> None:
+    assert ours.shape == theirs.shape, f"{label}: {ours.shape} against OpenCV's {theirs.shape}"
+    differ = ours != theirs
+    worst = np.abs(ours.astype(int) - theirs.astype(int)).max()
+    assert not differ.any(), f"{label}: {differ.mean():.2%} of the values differ, by up to {worst}"
+
+
+@pytest.mark.parametrize("channels", [3, 1])
+@pytest.mark.parametrize("lens", PERSPECTIVE, ids=lambda lens: lens[0])
+def test_splatfactos_photo_of_an_opencv_lens(splat_bin, tmp_path, lens, channels):
+    name, w, h, fx, fy, cx, cy, k1, k2, k3, p1, p2 = lens
+    nerfstudio_file(tmp_path / "transforms.json", "OPENCV", lens, {"k1": k1, "k2": k2, "k3": k3, "p1": p1, "p2": p2})
+    photo = noise(w, h, channels, 1)
+    # Nerfstudio's get_distortion_params order: k1, k2, k3, k4, p1, p2.
+    params = np.array([k1, k2, k3, 0.0, p1, p2], dtype=np.float32)
+    theirs = splatfacto_photo("perspective", params, intrinsics(fx, fy, cx, cy, np.float32), photo.squeeze())
+    theirs = theirs.reshape(theirs.shape[0], theirs.shape[1], -1)
+    ours = undistort(splat_bin, tmp_path, tmp_path / "transforms.json", "splatfacto", photo, "frame_00001.png")
+    assert_same(ours, theirs, name)
+    # Control: the principal point without Nerfstudio's half-pixel shift.
+    unshifted = splatfacto_photo("perspective", params, intrinsics(fx, fy, cx + 0.5, cy + 0.5, np.float32), photo.squeeze())
+    unshifted = unshifted.reshape(unshifted.shape[0], unshifted.shape[1], -1)
+    assert unshifted.shape != theirs.shape or (unshifted != theirs).mean() > 0.3
+
+
+@pytest.mark.parametrize("lens", FISHEYE, ids=lambda lens: lens[0])
+def test_splatfactos_photo_of_an_opencv_fisheye(splat_bin, tmp_path, lens):
+    name, w, h, fx, fy, cx, cy, k1, k2, k3, k4 = lens
+    nerfstudio_file(tmp_path / "transforms.json", "OPENCV_FISHEYE", lens, {"k1": k1, "k2": k2, "k3": k3, "k4": k4})
+    photo = noise(w, h, 4, 2)
+    params = np.array([k1, k2, k3, k4, 0.0, 0.0], dtype=np.float32)
+    theirs = splatfacto_photo("fisheye", params, intrinsics(fx, fy, cx, cy, np.float32), photo)
+    ours = undistort(splat_bin, tmp_path, tmp_path / "transforms.json", "splatfacto", photo, "frame_00001.png")
+    assert_same(ours, theirs, name)
+
+
+@pytest.mark.parametrize("lens", PERSPECTIVE, ids=lambda lens: lens[0])
+def test_gsplats_photo_of_a_colmap_camera(splat_bin, tmp_path, lens):
+    name, w, h, fx, fy, cx, cy, k1, k2, _, p1, p2 = lens
+    sparse = tmp_path / "sparse" / "0"
+    sparse.mkdir(parents=True)
+    values = " ".join(repr(float(p)) for p in [fx, fy, cx, cy, k1, k2, p1, p2])
+    (sparse / "cameras.txt").write_text(f"1 OPENCV {w} {h} {values}\n")
+    (sparse / "images.txt").write_text("1 1 0 0 0 0 0 0 1 shot.png\n\n")
+    (sparse / "points3D.txt").write_text("")
+    photo = noise(w, h, 3, 3)
+    # gsplat's _camera_distortion keeps OPENCV's k1, k2, p1, p2 as float32.
+    K, params = intrinsics(fx, fy, cx, cy, np.float64), np.array([k1, k2, p1, p2], dtype=np.float32)
+    theirs = gsplat_photo(K, params, photo)
+    ours = undistort(splat_bin, tmp_path, sparse, "gsplat", photo, "shot.png")
+    assert_same(ours, theirs, name)
+    # Controls: samples 1/32 px off, and interpolation in f32, change most values.
+    for control in (shifted_remap, float_bilinear):
+        assert (gsplat_photo(K, params, photo, control) != theirs).mean() > 0.3, control.__name__
+
+
+def test_photos_that_do_not_fit_are_refused(splat_bin, tmp_path):
+    lens = PERSPECTIVE[0]
+    nerfstudio_file(tmp_path / "transforms.json", "OPENCV", lens, {"k1": -0.1})
+    (tmp_path / "images").mkdir()
+    Image.fromarray(noise(100, 80, 3, 4)).save(tmp_path / "images" / "frame_00001.png")
+    args = [splat_bin, "undistort", "--camera", str(tmp_path), "--undistort", "splatfacto", "-o", str(tmp_path / "o")]
+    run = subprocess.run(args, capture_output=True, text=True)
+    assert run.returncode != 0 and "100 × 80 and the camera 320 × 240" in run.stderr, run.stderr
+    (tmp_path / "images" / "frame_00001.png").unlink()
+    run = subprocess.run(args, capture_output=True, text=True)
+    assert run.returncode != 0 and "frame_00001.png" in run.stderr and "--images" in run.stderr, run.stderr
