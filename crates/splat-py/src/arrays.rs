@@ -6,6 +6,7 @@ use glam::Vec3;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
+use splat_core::undistort::Photo;
 use splat_core::{Image, Particle};
 
 /// A shape as Python prints it: `(5, 3)`.
@@ -120,7 +121,28 @@ pub fn matrix<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<
 
 /// An image from an array of shape (H, W) or (H, W, C) with 1 to 4 channels.
 pub fn image_from_array(name: &str, array: &PyReadonlyArrayDyn<'_, f32>) -> PyResult<Image> {
-    let (h, w, c) = match array.shape() {
+    let (w, h, c) = image_size(name, array.shape())?;
+    Image::from_data(w, h, c, array.as_slice()?.to_vec())
+        .ok_or_else(|| SplatError::new_err(format!("{name}: the data does not fill {w}×{h}×{c}")))
+}
+
+/// An 8-bit photograph from a uint8 array (H, W) or (H, W, C) with 1 to 4 channels, in any
+/// memory order (a view such as `image[..., :3]` included).
+pub fn photo_from_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Photo> {
+    let array: PyReadonlyArrayDyn<'_, u8> = value.extract().map_err(|_| {
+        SplatError::new_err(format!(
+            "{name}: expected a numpy array of uint8 (an 8-bit photograph, (H, W) or (H, W, C)), got {}",
+            value.getattr("dtype").map_or_else(|_| value.get_type().to_string(), |d| format!("dtype {d}"))
+        ))
+    })?;
+    let (width, height, channels) = image_size(name, array.shape())?;
+    Ok(Photo { width, height, channels, data: array.as_array().iter().copied().collect() })
+}
+
+/// Width, height and channels of an image array of `shape`: (H, W) or (H, W, C), 1 to 4
+/// channels, none empty.
+fn image_size(name: &str, shape: &[usize]) -> PyResult<(u32, u32, u32)> {
+    let (h, w, c) = match shape {
         &[h, w] => (h, w, 1),
         &[h, w, c] if (1..=4).contains(&c) => (h, w, c),
         shape => {
@@ -132,10 +154,9 @@ pub fn image_from_array(name: &str, array: &PyReadonlyArrayDyn<'_, f32>) -> PyRe
     };
     let side = |v: usize| u32::try_from(v).ok().filter(|&v| v > 0);
     let (Some(w), Some(h), Some(c)) = (side(w), side(h), side(c)) else {
-        return Err(SplatError::new_err(format!("{name} is empty (shape {})", shape_text(array.shape()))));
+        return Err(SplatError::new_err(format!("{name} is empty (shape {})", shape_text(shape))));
     };
-    Image::from_data(w, h, c, array.as_slice()?.to_vec())
-        .ok_or_else(|| SplatError::new_err(format!("{name}: the data does not fill {w}×{h}×{c}")))
+    Ok((w, h, c))
 }
 
 /// An image as an array (H, W) for one channel, else (H, W, C), without a copy.
@@ -145,7 +166,18 @@ pub fn image_to_array(py: Python<'_>, image: Image) -> PyResult<Bound<'_, PyUnty
     shaped(py, image.into_data(), &shape)
 }
 
+/// A photograph as a uint8 array (H, W) for one channel, else (H, W, C), without a copy.
+pub fn photo_to_array(py: Python<'_>, photo: Photo) -> PyResult<Bound<'_, PyUntypedArray>> {
+    let (w, h, c) = (photo.width as usize, photo.height as usize, photo.channels as usize);
+    let shape = if c == 1 { vec![h, w] } else { vec![h, w, c] };
+    shaped(py, photo.data, &shape)
+}
+
 /// `data` as an array of `shape` (row-major), without a copy.
-pub fn shaped<'py>(py: Python<'py>, data: Vec<f32>, shape: &[usize]) -> PyResult<Bound<'py, PyUntypedArray>> {
+pub fn shaped<'py, T: numpy::Element>(
+    py: Python<'py>,
+    data: Vec<T>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyUntypedArray>> {
     Ok(PyArray1::from_vec(py, data).reshape(shape)?.as_untyped().clone())
 }

@@ -13,7 +13,7 @@ mod options;
 
 use arrays::{image_from_array, image_to_array};
 use glam::{Mat3, Vec3};
-use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use splat_cli::args::{ReadArgs, Staged};
@@ -267,6 +267,23 @@ impl PyCamera {
         let c = &self.camera;
         let args = (self.viewmat(py), self.intrinsics(py), c.width, c.height).into_pyobject(py)?;
         Ok((from, args))
+    }
+
+    /// `photo`, this camera's photograph (a uint8 array (H, W) or (H, W, C) of the camera's
+    /// size), as `undistort`'s trainer ("splatfacto" or "gsplat") resamples it with OpenCV for
+    /// training and evaluation, as `splat undistort` writes it: an array of the size of the
+    /// camera `load_cameras(..., undistort=undistort)` makes of this one; a camera the trainer
+    /// takes as it is keeps its photo.
+    fn undistort_photo<'py>(
+        &self,
+        py: Python<'py>,
+        photo: &Bound<'py, PyAny>,
+        undistort: &str,
+    ) -> PyResult<Bound<'py, PyUntypedArray>> {
+        let trainer = choice("undistort", undistort, &Undistortion::ALL, Undistortion::name)?;
+        let photo = arrays::photo_from_array("photo", photo)?;
+        let out = py.detach(|| self.camera.undistort_photo(trainer, &photo)).map_err(fail)?;
+        arrays::photo_to_array(py, out)
     }
 
     /// Whether the lens is a pinhole (COLMAP's distorted, fisheye and equirectangular models are

@@ -26,6 +26,7 @@ import subprocess
 import cv2
 import numpy as np
 import pytest
+import splat
 from conftest import nerfstudio_undistort_image
 from PIL import Image
 
@@ -169,3 +170,26 @@ def test_photos_that_do_not_fit_are_refused(splat_bin, tmp_path):
     (tmp_path / "images" / "frame_00001.png").unlink()
     run = subprocess.run(args, capture_output=True, text=True)
     assert run.returncode != 0 and "frame_00001.png" in run.stderr and "--images" in run.stderr, run.stderr
+
+
+def test_a_python_camera_undistorts_its_photos_as_the_cli(tmp_path):
+    name, w, h, fx, fy, cx, cy, k1, k2, k3, k4 = lens = FISHEYE[0]
+    nerfstudio_file(tmp_path / "transforms.json", "OPENCV_FISHEYE", lens, {"k1": k1, "k2": k2, "k3": k3, "k4": k4})
+    [(_, camera)] = splat.load_cameras(tmp_path / "transforms.json")
+    params = np.array([k1, k2, k3, k4, 0.0, 0.0], dtype=np.float32)
+    photo = noise(w, h, 4, 5)
+    # An RGB view of an RGBA photo, as gsplat slices its images: not contiguous.
+    rgb = photo[..., :3]
+    theirs = splatfacto_photo("fisheye", params, intrinsics(fx, fy, cx, cy, np.float32), rgb)
+    ours = camera.undistort_photo(rgb, "splatfacto")
+    assert ours.dtype == np.uint8
+    np.testing.assert_array_equal(ours, theirs, err_msg=name)
+    assert camera.undistort_photo(photo[..., 0], "splatfacto").shape == (h, w)
+    with pytest.raises(splat.SplatError, match="uint8"):
+        camera.undistort_photo(photo.astype(np.float32), "splatfacto")
+    with pytest.raises(splat.SplatError, match="100 × 80 and the camera 320 × 240"):
+        camera.undistort_photo(noise(100, 80, 3, 6), "splatfacto")
+    with pytest.raises(splat.SplatError, match="expected one of splatfacto, gsplat"):
+        camera.undistort_photo(photo, "3dgs")
+    with pytest.raises(splat.SplatError, match="ideal fisheye"):
+        camera.undistort_photo(photo, "gsplat")
