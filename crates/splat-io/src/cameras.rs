@@ -123,6 +123,9 @@ pub struct ViewOptions<'a> {
     pub split: Option<Split>,
 }
 
+/// A `transforms.json`'s own split lists: each key (`train_filenames`, …) and its file paths.
+pub type SplitLists = Vec<(&'static str, Vec<String>)>;
+
 /// A trainer's split of a capture's views into those it trains on and those it holds out for
 /// evaluation, in the order the trainer lists them.
 ///
@@ -131,7 +134,11 @@ pub struct ViewOptions<'a> {
 ///   names) holds out the same views.
 /// - Nerfstudio's `nerfstudio-data` dataparser (`eval_mode` "fraction", `train_split_fraction`
 ///   0.9: `get_train_eval_split_fraction`) sorts the frames by path and trains on the indices
-///   `numpy.linspace(0, n − 1, ⌈0.9 n⌉, dtype=int)`, holding out the rest.
+///   `numpy.linspace(0, n − 1, ⌈0.9 n⌉, dtype=int)`, holding out the rest. A file that names
+///   its own split lists (`train_filenames`, `val_filenames`, `test_filenames`) is split by
+///   them instead: the training views are `train_filenames`', the evaluation views
+///   `test_filenames`' (those `ns-eval` scores), each in the sorted order; a missing list, or
+///   a listed path no frame has, is refused, as the dataparser refuses it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Split {
     /// 3DGS's and gsplat's held-out views.
@@ -166,18 +173,18 @@ impl Split {
                 "3DGS's held-out views in eval mode (and gsplat's): every 8th by name, from the first"
             }
             Split::ThreeDgsTrain => "3DGS's and gsplat's training views: all but every 8th by name",
-            Split::NerfstudioEval => "Nerfstudio's evaluation views: those off linspace(0, n-1, ceil(0.9 n)) by path",
-            Split::NerfstudioTrain => "Nerfstudio's training views: linspace(0, n-1, ceil(0.9 n)) by path",
+            Split::NerfstudioEval => {
+                "Nerfstudio's evaluation views: those off linspace(0, n-1, ceil(0.9 n)) by path, or the file's test_filenames"
+            }
+            Split::NerfstudioTrain => {
+                "Nerfstudio's training views: linspace(0, n-1, ceil(0.9 n)) by path, or the file's train_filenames"
+            }
         }
     }
 
-    /// Whether it is one of Nerfstudio's.
-    pub const fn is_nerfstudio(self) -> bool {
-        matches!(self, Split::NerfstudioEval | Split::NerfstudioTrain)
-    }
-
-    /// The views of `views` (named by their image) in the split, in the trainer's order.
-    pub fn select<T>(self, mut views: Vec<(String, T)>) -> Result<Vec<(String, T)>, String> {
+    /// The views of `views` (named by their image) in the split, in the trainer's order; `lists`,
+    /// the file's own split lists, decide Nerfstudio's splits where there are any.
+    pub fn select<T>(self, mut views: Vec<(String, T)>, lists: &SplitLists) -> Result<Vec<(String, T)>, String> {
         let n = views.len();
         let keep: Vec<bool> = match self {
             Split::ThreeDgsTest | Split::ThreeDgsTrain => {
@@ -185,18 +192,16 @@ impl Split {
                 (0..n).map(|i| (i % 8 == 0) == (self == Split::ThreeDgsTest)).collect()
             }
             Split::NerfstudioEval | Split::NerfstudioTrain => {
-                if n < 2 {
+                views.sort_by_cached_key(|(name, _)| path_parts(name));
+                if !lists.is_empty() {
+                    self.listed(&views, lists)?
+                } else if n < 2 {
                     return Err("Nerfstudio cannot split a single view (its fraction split fails)".into());
+                } else {
+                    // math.ceil(n * 0.9), in f64 as Python computes it.
+                    let train = linspace_floor(n - 1, (n as f64 * 0.9).ceil() as usize);
+                    (0..n).map(|i| train.binary_search(&i).is_ok() == (self == Split::NerfstudioTrain)).collect()
                 }
-                // Python's paths compare by their parts, `.` dropped.
-                let parts = |name: &str| -> Vec<std::ffi::OsString> {
-                    let parts = Path::new(name).components().filter(|c| *c != std::path::Component::CurDir);
-                    parts.map(|c| c.as_os_str().to_owned()).collect()
-                };
-                views.sort_by_cached_key(|(name, _)| parts(name));
-                // math.ceil(n * 0.9), in f64 as Python computes it.
-                let train = linspace_floor(n - 1, (n as f64 * 0.9).ceil() as usize);
-                (0..n).map(|i| train.binary_search(&i).is_ok() == (self == Split::NerfstudioTrain)).collect()
             }
         };
         let kept: Vec<_> = views.into_iter().zip(keep).filter_map(|(v, k)| k.then_some(v)).collect();
@@ -205,6 +210,37 @@ impl Split {
         }
         Ok(kept)
     }
+}
+
+impl Split {
+    /// Which of the sorted `views` Nerfstudio's dataparser keeps by the file's own `lists`:
+    /// those whose path (compared as Python's paths compare) its split's list names.
+    fn listed<T>(self, views: &[(String, T)], lists: &SplitLists) -> Result<Vec<bool>, String> {
+        let key = if self == Split::NerfstudioTrain { "train_filenames" } else { "test_filenames" };
+        let Some((_, list)) = lists.iter().find(|(k, _)| *k == key) else {
+            let names: Vec<&str> = lists.iter().map(|(k, _)| *k).collect();
+            return Err(format!(
+                "the file names its own split lists ({}) but not {key}, which {} reads in their place \
+                 (Nerfstudio's dataparser refuses the file so)",
+                names.join(", "),
+                self.name()
+            ));
+        };
+        let wanted: std::collections::HashSet<_> = list.iter().map(|p| path_parts(p)).collect();
+        let have: std::collections::HashSet<_> = views.iter().map(|(name, _)| path_parts(name)).collect();
+        if let Some(missing) = list.iter().find(|p| !have.contains(&path_parts(p))) {
+            let count = list.iter().filter(|p| !have.contains(&path_parts(p))).count();
+            return Err(format!("{key} names {count} path(s) no frame has, such as {missing}"));
+        }
+        Ok(views.iter().map(|(name, _)| wanted.contains(&path_parts(name))).collect())
+    }
+}
+
+/// A path's parts as Python's `pathlib` compares them: `.` parts and repeated separators
+/// dropped.
+fn path_parts(name: &str) -> Vec<std::ffi::OsString> {
+    let parts = Path::new(name).components().filter(|c| *c != std::path::Component::CurDir);
+    parts.map(|c| c.as_os_str().to_owned()).collect()
 }
 
 /// `numpy.linspace(0, last, count, dtype=int)`: i · (last / (count − 1)) in f64, floored, the
@@ -224,9 +260,9 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
 /// [`read_views`], changed by `options`: moved by the dataparser transforms, then the split kept,
 /// then undistorted.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
-    let mut views = read_views_moved(path, options)?;
+    let (mut views, lists) = read_views_moved(path, options)?;
     if let Some(split) = options.split {
-        views = split.select(views).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
+        views = split.select(views, &lists).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
     }
     let Some(trainer) = options.undistort else { return Ok(views) };
     let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
@@ -236,9 +272,9 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     views.into_iter().enumerate().map(undistort).collect()
 }
 
-/// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms; a
-/// `transforms.json` that names its own split lists is refused with Nerfstudio's splits.
-fn read_views_moved(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
+/// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms; and
+/// the split lists a `transforms.json` names (none for other files).
+fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, Camera)>, SplitLists), Error> {
     let dataparser = options.dataparser.map(crate::transforms::read_dataparser).transpose()?;
     let not_transforms = || {
         let why = "a training run's dataparser transforms move a transforms.json's cameras, and this is a \
@@ -249,27 +285,19 @@ fn read_views_moved(path: &Path, options: ViewOptions) -> Result<Vec<(String, Ca
         if dataparser.is_some() {
             return not_transforms();
         }
-        return Ok(crate::colmap::read_colmap(path)?.into_iter().map(|v| (v.name, v.camera)).collect());
+        let views = crate::colmap::read_colmap(path)?.into_iter().map(|v| (v.name, v.camera)).collect();
+        return Ok((views, SplitLists::new()));
     }
     let file = crate::transforms::in_folder(path).unwrap_or_else(|| path.to_path_buf());
     let bytes = read_file(&file)?;
     if crate::transforms::is_transforms(&bytes) {
-        let lists = crate::transforms::split_lists(&bytes);
-        if let Some(split) = options.split.filter(|s| s.is_nerfstudio() && !lists.is_empty()) {
-            let why = format!(
-                "the file names its own split ({}), which Nerfstudio uses in place of {}'s fraction rule; \
-                 reading those lists is not built",
-                lists.join(", "),
-                split.name()
-            );
-            return Err(Error::new(path, ErrorKind::Split(why)));
-        }
-        return crate::transforms::views_of(&file, &bytes, dataparser.as_ref());
+        let lists = crate::transforms::split_lists(&bytes).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
+        return Ok((crate::transforms::views_of(&file, &bytes, dataparser.as_ref())?, lists));
     }
     if dataparser.is_some() {
         return not_transforms();
     }
-    named_cameras(path, &bytes)
+    Ok((named_cameras(path, &bytes)?, SplitLists::new()))
 }
 
 /// Parse a `cameras.json`.

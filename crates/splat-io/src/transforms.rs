@@ -273,11 +273,20 @@ pub fn is_transforms(bytes: &[u8]) -> bool {
 }
 
 /// The split lists a Nerfstudio `transforms.json` names (`train_filenames`, `val_filenames`,
-/// `test_filenames`), which its dataparser uses in place of its fraction split.
-pub fn split_lists(bytes: &[u8]) -> Vec<&'static str> {
+/// `test_filenames`), which its dataparser uses in place of its fraction split: each list's key
+/// and its file paths. A list that is not a list of paths is refused by its key.
+pub fn split_lists(bytes: &[u8]) -> Result<Vec<(&'static str, Vec<String>)>, String> {
     let keys = ["train_filenames", "val_filenames", "test_filenames"];
-    let meta = serde_json::from_slice::<serde_json::Map<String, serde_json::Value>>(bytes).unwrap_or_default();
-    keys.into_iter().filter(|key| meta.contains_key(*key)).collect()
+    let mut meta = serde_json::from_slice::<serde_json::Map<String, serde_json::Value>>(bytes).unwrap_or_default();
+    let list = |key: &'static str| {
+        let value = meta.remove(key)?;
+        Some(
+            serde_json::from_value(value)
+                .map(|paths| (key, paths))
+                .map_err(|_| format!("{key} is not a list of paths")),
+        )
+    };
+    keys.into_iter().filter_map(list).collect()
 }
 
 /// The `transforms.json` a folder holds, if it holds one.

@@ -3,7 +3,8 @@
 `splat.load_cameras(path, split=...)` keeps the views a trainer trains on or holds out, in its
 order. The ports: 3DGS's `readColmapSceneInfo` with `--eval` (sorted COLMAP names, llffhold 8;
 gsplat's `test_every` 8 holds out the same) and Nerfstudio's `nerfstudio-data` dataparser
-(frames sorted by path, `get_train_eval_split_fraction` with its default 0.9).
+(frames sorted by path, `get_train_eval_split_fraction` with its default 0.9, or the file's
+own `train_filenames` and `test_filenames`).
 
 Control, run by hand: a fraction split whose training indices are rounded instead of
 floored by `numpy.linspace(..., dtype=int)` fails the 10-, 11-, 37- and 123-view files.
@@ -64,15 +65,52 @@ def test_nerfstudio_splits_are_its_dataparsers(tmp_path, n):
         assert names == expected, (n, ours)
 
 
-def test_a_file_that_names_its_own_split_is_refused_nerfstudios(tmp_path):
+def nerfstudio_listed_split(file_paths: list[str], data_dir: Path, meta: dict, split: str) -> list[str]:
+    """Nerfstudio's dataparser for a file that names its own split lists: frames sorted by
+    `data_dir / file_path`, those whose path `{split}_filenames` names; its RuntimeErrors."""
+    fnames = [data_dir / Path(p) for p in file_paths]
+    inds = np.argsort(fnames)
+    image_filenames = [fnames[i] for i in inds]
+    has_split_files_spec = any(f"{split}_filenames" in meta for split in ("train", "val", "test"))
+    if f"{split}_filenames" in meta:
+        split_filenames = set(data_dir / Path(x) for x in meta[f"{split}_filenames"])
+        unmatched_filenames = split_filenames.difference(image_filenames)
+        if unmatched_filenames:
+            raise RuntimeError(f"Some filenames for split {split} were not found: {unmatched_filenames}.")
+        indices = [i for i, path in enumerate(image_filenames) if path in split_filenames]
+    elif has_split_files_spec:
+        raise RuntimeError(f"The dataset's list of filenames for split {split} is missing.")
+    return [file_paths[inds[i]] for i in indices]
+
+
+def test_a_files_own_split_lists_are_nerfstudios_splits(tmp_path):
+    rng = np.random.default_rng(7)
+    paths = [f"./images/frame_{k:05d}.png" for k in rng.permutation(20)]
     path = tmp_path / "transforms.json"
-    transforms_file(path, [f"images/{k}.png" for k in range(12)])
+    transforms_file(path, paths)
     meta = json.loads(path.read_text())
-    meta["train_filenames"], meta["test_filenames"] = ["images/0.png"], ["images/1.png"]
+    # The lists spell some paths without "./", as paths compare by their parts.
+    shuffled = [p if k % 2 else p[2:] for k, p in enumerate(rng.permutation(paths))]
+    meta["train_filenames"], meta["val_filenames"], meta["test_filenames"] = shuffled[:13], shuffled[13:16], shuffled[16:]
     path.write_text(json.dumps(meta))
-    with pytest.raises(splat.SplatError, match="names its own split .train_filenames, test_filenames."):
+    for ours, theirs in [("nerfstudio-train", "train"), ("nerfstudio-eval", "test")]:
+        names = [name for name, _ in splat.load_cameras(path, split=ours)]
+        assert names == nerfstudio_listed_split(paths, tmp_path, meta, theirs), ours
+    # 3DGS has no split lists: its llff hold splits the same file.
+    assert len(splat.load_cameras(path, split="3dgs-test")) == 3
+    # A missing list, and a listed path no frame has, are refused as Nerfstudio refuses them.
+    del meta["test_filenames"]
+    path.write_text(json.dumps(meta))
+    with pytest.raises(RuntimeError, match="split test is missing"):
+        nerfstudio_listed_split(paths, tmp_path, meta, "test")
+    with pytest.raises(splat.SplatError, match="not test_filenames"):
         splat.load_cameras(path, split="nerfstudio-eval")
-    assert len(splat.load_cameras(path, split="3dgs-test")) == 2
+    meta["train_filenames"].append("images/elsewhere.png")
+    path.write_text(json.dumps(meta))
+    with pytest.raises(RuntimeError, match="were not found"):
+        nerfstudio_listed_split(paths, tmp_path, meta, "train")
+    with pytest.raises(splat.SplatError, match="train_filenames names 1 path.s. no frame has, such as images/elsewhere.png"):
+        splat.load_cameras(path, split="nerfstudio-train")
 
 
 @pytest.mark.parametrize("n", [1, 8, 9, 30])
