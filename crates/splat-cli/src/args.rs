@@ -377,6 +377,12 @@ pub struct SceneArgs {
     /// renders as it does), in its order: --camera-index and --all-cameras then count in it.
     #[arg(help_heading = "Camera", long, requires = "camera", value_parser = splat_view::split_parser())]
     pub split: Option<Split>,
+    /// The trainer read images downscaled by F (images_F/, gsplat's --data_factor, Nerfstudio's
+    /// downscale factor): each camera of --camera takes K / F and its sides floored, as they
+    /// do (--width and --height, which keep the field of view as 3DGS's -r does, then scale
+    /// from there, as gsplat scales K to the photographs it finds).
+    #[arg(help_heading = "Camera", long, requires = "camera", value_parser = clap::value_parser!(u32).range(1..))]
+    pub data_factor: Option<u32>,
     /// Image width in pixels (1 to 16384); rescales the camera's intrinsics [default: the
     /// camera's, else the command's framing size: 640 for render].
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
@@ -576,8 +582,18 @@ pub fn load_cameras(path: &std::path::Path, options: ViewOptions) -> Result<Vec<
 
 impl SceneArgs {
     /// How --camera's views are read.
+    ///
+    /// With --undistort, --width and --height size the cameras before they are undistorted (the
+    /// photographs' size, as gsplat scales K to it and then undistorts), and [`Self::sized`]
+    /// leaves the undistorted views as they are.
     pub fn view_options(&self) -> ViewOptions<'_> {
-        ViewOptions { dataparser: self.dataparser_transforms.as_deref(), undistort: self.undistort, split: self.split }
+        ViewOptions {
+            dataparser: self.dataparser_transforms.as_deref(),
+            undistort: self.undistort,
+            split: self.split,
+            factor: self.data_factor,
+            size: if self.undistort.is_some() { (self.width, self.height) } else { (None, None) },
+        }
     }
 
     /// Load the scene (or the demo) and choose the camera; `width` × `height` is the size of
@@ -748,8 +764,12 @@ impl SceneArgs {
         self.sized(camera)
     }
 
-    /// `camera` at --width × --height (its own size where they are not given).
+    /// `camera` at --width × --height (its own size where they are not given); an undistorted
+    /// view of --camera as it is, sized before it was undistorted ([`Self::view_options`]).
     pub fn sized(&self, camera: Camera) -> Result<Camera> {
+        if self.undistort.is_some() {
+            return Ok(camera);
+        }
         let (w, h) = (self.width.unwrap_or(camera.width), self.height.unwrap_or(camera.height));
         if w == 0 || h == 0 {
             bail!("--width and --height must be positive");

@@ -27,6 +27,18 @@ pub struct UndistortArgs {
     /// Keep only a trainer's split of the views (its held-out views, the ones it scores).
     #[arg(long, value_parser = splat_view::split_parser())]
     pub split: Option<Split>,
+    /// The photographs are the trainer's images_F/ (gsplat's --data_factor, Nerfstudio's
+    /// downscale factor): each camera takes K / F and its sides floored before it is
+    /// undistorted, as they do.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub data_factor: Option<u32>,
+    /// The photographs' width: each camera scaled to it (after --data-factor) before it is
+    /// undistorted, as gsplat scales K to the photographs it finds.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// The photographs' height (see --width).
+    #[arg(long)]
+    pub height: Option<u32>,
     /// The folder to write the undistorted photographs into, as NAME.png (NAME: the image's
     /// name without folders and extension, as `splat render --all-cameras` names its views, so
     /// that `splat compare` pairs them).
@@ -63,7 +75,12 @@ fn photo_path(images: &Path, name: &str) -> PathBuf {
 /// `splat undistort`: each view's photograph, read from --images, undistorted as --undistort's
 /// trainer does it, into -o.
 pub fn run(args: UndistortArgs) -> Result<()> {
-    let options = ViewOptions { dataparser: None, undistort: None, split: args.split };
+    let options = ViewOptions {
+        split: args.split,
+        factor: args.data_factor,
+        size: (args.width, args.height),
+        ..Default::default()
+    };
     let views = crate::args::load_cameras(&args.camera, options)?;
     let images = match &args.images {
         Some(images) => images.clone(),
@@ -82,6 +99,16 @@ pub fn run(args: UndistortArgs) -> Result<()> {
         let photo = splat_io::image::read_photo(&source).with_context(|| {
             format!("view {index} ({name}): its photograph (the image names are relative to --images)")
         })?;
+        if (photo.width, photo.height) != (camera.width, camera.height) {
+            bail!(
+                "view {index} ({name}): the photograph is {} × {} and the camera {} × {}: give the trainer's \
+                 --data-factor, or the photographs' --width and --height, to scale the cameras to them",
+                photo.width,
+                photo.height,
+                camera.width,
+                camera.height
+            );
+        }
         let out = camera.undistort_photo(args.undistort, &photo).with_context(|| format!("view {index} ({name})"))?;
         resampled += usize::from(out != photo);
         let target = args.output.join(format!("{}.png", crate::render::view_stem(name, index)));

@@ -1310,6 +1310,19 @@ fn undistorted_cameras_are_the_trainers_pinholes() {
         // A 48 × 36 photo's valid rectangle at alpha 0 is 47 × 35 pixels.
         assert_eq!(npy_size(&out), (35, 47), "{trainer}");
     }
+    // Photographs of images_2/ at 25 × 19: the camera is halved and sized to them, then
+    // undistorted (as gsplat's parser does it), and rendered at the undistorted camera's size,
+    // not stretched back to --width × --height.
+    let options = splat_io::cameras::ViewOptions {
+        undistort: Some(splat_core::undistort::Undistortion::Gsplat),
+        factor: Some(2),
+        size: (Some(25), Some(19)),
+        ..Default::default()
+    };
+    let [(_, expected)] = &splat_io::cameras::read_views_in(&folder, options).unwrap()[..] else { panic!("one view") };
+    assert_eq!((expected.width, expected.height), (24, 18));
+    let (o, out) = render(&["--undistort", "gsplat", "--data-factor", "2", "--width", "25", "--height", "19"]);
+    assert!(o.status.success() && npy_size(&out) == (18, 24), "{}", stderr(&o));
     write("OPENCV_FISHEYE", serde_json::json!({"k1": 0.05}));
     let (o, out) = render(&["--undistort", "splatfacto"]);
     assert!(o.status.success() && npy_size(&out) == (36, 48), "{}", stderr(&o));

@@ -217,6 +217,21 @@ impl Camera {
         Ok(cam)
     }
 
+    /// The camera of its images downscaled by `factor`, as gsplat's COLMAP parser (`data_factor`)
+    /// and Nerfstudio's dataparser (`downscale_factor`) take an `images_F/` folder: K divided by
+    /// F, the sides floored (W // F). [`Camera::rescaled`] scales K with the sides instead (3DGS's
+    /// `-r`, which keeps the field of view), which differs where F does not divide them.
+    pub fn downscaled(&self, factor: u32) -> Result<Self, CameraError> {
+        if factor == 0 {
+            return Err(CameraError::Intrinsics("a downscale factor of 0".into()));
+        }
+        let f = factor as f32;
+        let (width, height) = (self.width / factor, self.height / factor);
+        let cam = Self { width, height, fx: self.fx / f, fy: self.fy / f, cx: self.cx / f, cy: self.cy / f, ..*self };
+        cam.validate()?;
+        Ok(cam)
+    }
+
     /// The window [x0, x0 + width) × [y0, y0 + height) of this camera's image as a camera of
     /// its own: same rays for the same pixels, principal point shifted.
     pub fn crop(&self, x0: u32, y0: u32, width: u32, height: u32) -> Result<Self, CameraError> {

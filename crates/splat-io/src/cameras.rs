@@ -121,6 +121,13 @@ pub struct ViewOptions<'a> {
     pub undistort: Option<Undistortion>,
     /// The trainer's split of the views to keep ([`Split`]).
     pub split: Option<Split>,
+    /// The downscale factor of the photographs the trainer read (`images_F/`): each camera
+    /// [`Camera::downscaled`] by it, as gsplat's and Nerfstudio's parsers take it.
+    pub factor: Option<u32>,
+    /// The photographs' width and height (either may be given alone): each camera
+    /// [`Camera::rescaled`] to them after the factor and before it is undistorted, as gsplat
+    /// scales K to the size of the photographs it finds.
+    pub size: (Option<u32>, Option<u32>),
 }
 
 /// A `transforms.json`'s own split lists: each key (`train_filenames`, …) and its file paths.
@@ -257,13 +264,24 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     read_views_in(path, ViewOptions::default())
 }
 
-/// [`read_views`], changed by `options`: moved by the dataparser transforms, then the split kept,
-/// then undistorted.
+/// [`read_views`], changed by `options`: moved by the dataparser transforms, the split kept,
+/// downscaled and sized, then undistorted.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
     let (mut views, lists) = read_views_moved(path, options)?;
     if let Some(split) = options.split {
         views = split.select(views, &lists).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
     }
+    let size = |(index, (name, camera)): (usize, (String, Camera))| {
+        let camera = match options.factor {
+            Some(factor) => camera.downscaled(factor),
+            None => Ok(camera),
+        };
+        let (w, h) = options.size;
+        let camera = camera.and_then(|c| c.rescaled(w.unwrap_or(c.width), h.unwrap_or(c.height)));
+        let message = |e: splat_core::camera::CameraError| format!("{name}: {e}");
+        camera.map_err(|e| Error::new(path, ErrorKind::Camera { index, message: message(e) })).map(|c| (name, c))
+    };
+    let views = views.into_iter().enumerate().map(size).collect::<Result<Vec<_>, Error>>()?;
     let Some(trainer) = options.undistort else { return Ok(views) };
     let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
         Ok(camera) => Ok((name, camera)),

@@ -315,19 +315,26 @@ impl PyCamera {
 /// transforms.json's cameras into that run's world (splatfacto's splats'); `undistort`
 /// ("splatfacto" or "gsplat") makes each camera the pinhole that trainer undistorts its photos
 /// to, as `splat render --undistort` does; `split` ("3dgs-test", "nerfstudio-eval", …) keeps a
-/// trainer's split of the views, as `--split` does.
+/// trainer's split of the views, as `--split` does; `data_factor` F gives each camera K / F and
+/// its sides floored, as gsplat and Nerfstudio take `images_F/` (`--data-factor`); `image_size`
+/// (width, height) scales each camera to the photographs' size after that and before it is
+/// undistorted, as gsplat does.
 #[pyfunction]
-#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None))]
+#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None, data_factor = None, image_size = None))]
 fn load_cameras(
     path: PathBuf,
     dataparser_transforms: Option<PathBuf>,
     undistort: Option<&str>,
     split: Option<&str>,
+    data_factor: Option<u32>,
+    image_size: Option<(u32, u32)>,
 ) -> PyResult<Vec<(String, PyCamera)>> {
     let undistort =
         undistort.map(|name| choice("undistort", name, &Undistortion::ALL, Undistortion::name)).transpose()?;
     let split = split.map(|name| choice("split", name, &Split::ALL, Split::name)).transpose()?;
-    let options = ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort, split };
+    let size = image_size.map_or((None, None), |(w, h)| (Some(w), Some(h)));
+    let options =
+        ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort, split, factor: data_factor, size };
     let views = splat_cli::args::load_cameras(&path, options).map_err(fail)?;
     Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
 }

@@ -193,3 +193,60 @@ def test_a_python_camera_undistorts_its_photos_as_the_cli(tmp_path):
         camera.undistort_photo(photo, "3dgs")
     with pytest.raises(splat.SplatError, match="ideal fisheye"):
         camera.undistort_photo(photo, "gsplat")
+
+
+def gsplat_parser_K(K: np.ndarray, size, factor: int, actual):
+    """gsplat's parser before it undistorts: K / factor and the sides floored, then K scaled to
+    the size of the photographs it finds (`actual`, width and height)."""
+    K = K.copy()
+    K[:2, :] /= factor
+    width, height = size[0] // factor, size[1] // factor
+    s_height, s_width = actual[1] / height, actual[0] / width
+    K[0, :] *= s_width
+    K[1, :] *= s_height
+    return K, (int(width * s_width), int(height * s_height))
+
+
+def colmap_opencv(sparse, w, h, params) -> None:
+    sparse.mkdir(parents=True)
+    (sparse / "cameras.txt").write_text(f"1 OPENCV {w} {h} {' '.join(repr(float(p)) for p in params)}\n")
+    (sparse / "images.txt").write_text("1 1 0 0 0 0 0 0 1 shot.png\n\n")
+    (sparse / "points3D.txt").write_text("")
+
+
+def test_gsplats_photo_at_a_data_factor(splat_bin, tmp_path):
+    # A 1283 × 962 capture read from images_4/: K / 4 and 320 × 240, as gsplat's --data_factor 4.
+    fx, fy, cx, cy, k1, k2, p1, p2 = 1000.0, 1010.0, 641.5, 480.25, -0.3, 0.09, 0.001, -0.0015
+    sparse = tmp_path / "sparse" / "0"
+    colmap_opencv(sparse, 1283, 962, [fx, fy, cx, cy, k1, k2, p1, p2])
+    photo = noise(320, 240, 3, 7)
+    params = np.array([k1, k2, p1, p2], dtype=np.float32)
+    K, size = gsplat_parser_K(intrinsics(fx, fy, cx, cy, np.float64), (1283, 962), 4, (320, 240))
+    assert size == (320, 240)
+    theirs = gsplat_photo(K, params, photo)
+    (tmp_path / "images").mkdir()
+    Image.fromarray(photo).save(tmp_path / "images" / "shot.png")
+    args = [splat_bin, "undistort", "--camera", str(sparse), "--undistort", "gsplat", "--data-factor", "4"]
+    subprocess.run([*args, "-o", str(tmp_path / "out")], check=True, capture_output=True)
+    assert_same(np.asarray(Image.open(tmp_path / "out" / "shot.png")), theirs, "data factor 4")
+    # Without the factor, the camera does not fit the photographs, and the refusal says so.
+    run = subprocess.run([*args[:-2], "-o", str(tmp_path / "o")], capture_output=True, text=True)
+    assert run.returncode != 0 and "--data-factor" in run.stderr, run.stderr
+
+
+@pytest.mark.parametrize("actual", [(320, 240), (321, 241)])
+def test_gsplats_camera_at_a_data_factor_and_the_photographs_size(tmp_path, actual):
+    fx, fy, cx, cy, k1, k2, p1, p2 = 1000.0, 1010.0, 641.5, 480.25, -0.3, 0.09, 0.001, -0.0015
+    sparse = tmp_path / "sparse" / "0"
+    colmap_opencv(sparse, 1283, 962, [fx, fy, cx, cy, k1, k2, p1, p2])
+    K, size = gsplat_parser_K(intrinsics(fx, fy, cx, cy, np.float64), (1283, 962), 4, actual)
+    params = np.array([k1, k2, p1, p2], dtype=np.float32)
+    K_undist, roi = cv2.getOptimalNewCameraMatrix(K, params, size, 0)
+    [(_, camera)] = splat.load_cameras(sparse, undistort="gsplat", data_factor=4, image_size=actual)
+    assert (camera.width, camera.height) == (roi[2], roi[3])
+    np.testing.assert_allclose(camera.K, K_undist, rtol=0, atol=1e-3)
+    # Scaled to the photographs from the whole capture instead (3DGS's way, which keeps the
+    # field of view), the camera misses gsplat's by more than half a pixel (fx and cx: 0.58, 0.38 px).
+    [(_, proportional)] = splat.load_cameras(sparse)
+    ratio = np.array([actual[0] / 1283, actual[1] / 962, 1.0])[:, None]
+    assert np.abs(proportional.K * ratio - K).max() > 0.5

@@ -89,6 +89,7 @@ impl SceneArgs {
             dataparser: self.dataparser_transforms.as_deref(),
             undistort: self.undistort,
             split: self.split,
+            ..Default::default()
         };
         let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), views, read)?;
         if let Some(storage) = self.sh_storage {

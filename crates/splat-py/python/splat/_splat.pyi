@@ -71,6 +71,8 @@ def load_cameras(
     dataparser_transforms: Optional[Union[str, PathLike]] = None,
     undistort: Optional[str] = None,
     split: Optional[str] = None,
+    data_factor: Optional[int] = None,
+    image_size: Optional[tuple[int, int]] = None,
 ) -> list[tuple[str, Camera]]: ...
 def render(
     scene: Scene,
