@@ -58,16 +58,17 @@ fn default_images(camera: &Path) -> Option<PathBuf> {
     Some(file.parent()?.to_path_buf())
 }
 
-/// The photograph of view `name` in `images`: the name as it is, or, for a name without an
-/// extension (a cameras.json's), the first of the usual photograph extensions that exists.
+/// The photograph of view `name` in `images`: the name as it is, else the first that exists
+/// of the name with a usual photograph extension in place of its own (a cameras.json's names
+/// have none; gsplat's `images_F_png/` holds `NAME.png` for COLMAP's `NAME.JPG`).
 fn photo_path(images: &Path, name: &str) -> PathBuf {
     let path = images.join(name);
-    if path.extension().is_some() || path.exists() {
+    if path.exists() {
         return path;
     }
     ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"]
         .iter()
-        .map(|e| images.join(format!("{name}.{e}")))
+        .map(|e| path.with_extension(e))
         .find(|p| p.exists())
         .unwrap_or(path)
 }

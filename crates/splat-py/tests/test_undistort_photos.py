@@ -207,18 +207,19 @@ def gsplat_parser_K(K: np.ndarray, size, factor: int, actual):
     return K, (int(width * s_width), int(height * s_height))
 
 
-def colmap_opencv(sparse, w, h, params) -> None:
+def colmap_opencv(sparse, w, h, params, name="shot.png") -> None:
     sparse.mkdir(parents=True)
     (sparse / "cameras.txt").write_text(f"1 OPENCV {w} {h} {' '.join(repr(float(p)) for p in params)}\n")
-    (sparse / "images.txt").write_text("1 1 0 0 0 0 0 0 1 shot.png\n\n")
+    (sparse / "images.txt").write_text(f"1 1 0 0 0 0 0 0 1 {name}\n\n")
     (sparse / "points3D.txt").write_text("")
 
 
 def test_gsplats_photo_at_a_data_factor(splat_bin, tmp_path):
-    # A 1283 × 962 capture read from images_4/: K / 4 and 320 × 240, as gsplat's --data_factor 4.
+    # A 1283 × 962 capture read from images_4/: K / 4 and 320 × 240, as gsplat's --data_factor 4;
+    # its JPEG's photograph a PNG, as gsplat's images_4_png/ holds them.
     fx, fy, cx, cy, k1, k2, p1, p2 = 1000.0, 1010.0, 641.5, 480.25, -0.3, 0.09, 0.001, -0.0015
     sparse = tmp_path / "sparse" / "0"
-    colmap_opencv(sparse, 1283, 962, [fx, fy, cx, cy, k1, k2, p1, p2])
+    colmap_opencv(sparse, 1283, 962, [fx, fy, cx, cy, k1, k2, p1, p2], name="shot.JPG")
     photo = noise(320, 240, 3, 7)
     params = np.array([k1, k2, p1, p2], dtype=np.float32)
     K, size = gsplat_parser_K(intrinsics(fx, fy, cx, cy, np.float64), (1283, 962), 4, (320, 240))
