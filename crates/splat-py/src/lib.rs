@@ -269,6 +269,26 @@ impl PyCamera {
         Ok((from, args))
     }
 
+    /// The pinhole camera `undistort`'s trainer ("splatfacto" or "gsplat") undistorts this
+    /// camera's photos to (`load_cameras(..., undistort=...)` of one camera); a camera without
+    /// a distorted lens is its own.
+    fn undistorted(&self, undistort: &str) -> PyResult<Self> {
+        let trainer = choice("undistort", undistort, &Undistortion::ALL, Undistortion::name)?;
+        Ok(Self { camera: self.camera.undistorted(trainer).map_err(fail)? })
+    }
+
+    /// The same view at `width` × `height`: K scaled with the sides (the field of view kept, as
+    /// 3DGS's `-r` and `splat render --width` scale it).
+    fn rescaled(&self, width: u32, height: u32) -> PyResult<Self> {
+        Ok(Self { camera: self.camera.rescaled(width, height).map_err(fail)? })
+    }
+
+    /// The camera of this one's images downscaled by `factor`, as gsplat and Nerfstudio read
+    /// `images_F/`: K / F, the sides floored (`load_cameras(..., data_factor=F)`).
+    fn downscaled(&self, factor: u32) -> PyResult<Self> {
+        Ok(Self { camera: self.camera.downscaled(factor).map_err(fail)? })
+    }
+
     /// `photo`, this camera's photograph (a uint8 array (H, W) or (H, W, C) of the camera's
     /// size), as `undistort`'s trainer ("splatfacto" or "gsplat") resamples it with OpenCV for
     /// training and evaluation, as `splat undistort` writes it: an array of the size of the

@@ -251,3 +251,25 @@ def test_gsplats_camera_at_a_data_factor_and_the_photographs_size(tmp_path, actu
     [(_, proportional)] = splat.load_cameras(sparse)
     ratio = np.array([actual[0] / 1283, actual[1] / 962, 1.0])[:, None]
     assert np.abs(proportional.K * ratio - K).max() > 0.5
+
+
+def test_a_python_camera_scales_and_undistorts_as_load_cameras(tmp_path):
+    sparse = tmp_path / "sparse" / "0"
+    colmap_opencv(sparse, 1283, 962, [1000.0, 1010.0, 641.5, 480.25, -0.3, 0.09, 0.001, -0.0015])
+    [(_, camera)] = splat.load_cameras(sparse)
+    for options, made in [
+        ({"data_factor": 4}, camera.downscaled(4)),
+        ({"undistort": "gsplat"}, camera.undistorted("gsplat")),
+        (
+            {"undistort": "splatfacto", "data_factor": 4, "image_size": (321, 241)},
+            camera.downscaled(4).rescaled(321, 241).undistorted("splatfacto"),
+        ),
+    ]:
+        [(_, loaded)] = splat.load_cameras(sparse, **options)
+        assert (made.width, made.height) == (loaded.width, loaded.height), options
+        np.testing.assert_array_equal(made.K, loaded.K, err_msg=str(options))
+    assert (camera.downscaled(4).width, camera.downscaled(4).height) == (320, 240)
+    with pytest.raises(splat.SplatError, match="downscale factor of 0"):
+        camera.downscaled(0)
+    with pytest.raises(splat.SplatError, match="expected one of splatfacto, gsplat"):
+        camera.undistorted("3dgs")
