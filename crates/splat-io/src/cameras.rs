@@ -235,9 +235,9 @@ impl Split {
         };
         let wanted: std::collections::HashSet<_> = list.iter().map(|p| path_parts(p)).collect();
         let have: std::collections::HashSet<_> = views.iter().map(|(name, _)| path_parts(name)).collect();
-        if let Some(missing) = list.iter().find(|p| !have.contains(&path_parts(p))) {
-            let count = list.iter().filter(|p| !have.contains(&path_parts(p))).count();
-            return Err(format!("{key} names {count} path(s) no frame has, such as {missing}"));
+        let missing: Vec<&String> = list.iter().filter(|p| !have.contains(&path_parts(p))).collect();
+        if let Some(first) = missing.first() {
+            return Err(format!("{key} names {} path(s) no frame has, such as {first}", missing.len()));
         }
         Ok(views.iter().map(|(name, _)| wanted.contains(&path_parts(name))).collect())
     }
@@ -291,7 +291,7 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
 }
 
 /// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms; and
-/// the split lists a `transforms.json` names (none for other files).
+/// the split lists a `transforms.json` names, for Nerfstudio's splits (none for other files).
 fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, Camera)>, SplitLists), Error> {
     let dataparser = options.dataparser.map(crate::transforms::read_dataparser).transpose()?;
     let not_transforms = || {
@@ -309,7 +309,13 @@ fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, C
     let file = crate::transforms::in_folder(path).unwrap_or_else(|| path.to_path_buf());
     let bytes = read_file(&file)?;
     if crate::transforms::is_transforms(&bytes) {
-        let lists = crate::transforms::split_lists(&bytes).map_err(|m| Error::new(path, ErrorKind::Split(m)))?;
+        // Only Nerfstudio's splits read the lists: a malformed one stops nothing else.
+        let lists = match options.split {
+            Some(Split::NerfstudioEval | Split::NerfstudioTrain) => {
+                crate::transforms::split_lists(&bytes).map_err(|m| Error::new(path, ErrorKind::Split(m)))?
+            }
+            _ => SplitLists::new(),
+        };
         return Ok((crate::transforms::views_of(&file, &bytes, dataparser.as_ref())?, lists));
     }
     if dataparser.is_some() {

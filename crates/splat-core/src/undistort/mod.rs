@@ -5,7 +5,8 @@
 //! (`examples/datasets/colmap.py`) do not train through a capture's lens. They resample each
 //! photo to a pinhole camera that OpenCV chooses and train on that, so their training and
 //! evaluation images are of that camera. [`Camera::undistorted`] gives it, to render what they
-//! compare against.
+//! compare against, and [`Camera::undistort_photo`] the photographs they compare with,
+//! resampled as OpenCV resamples them (`remap.rs`).
 //!
 //! | lens | [`Undistortion::Splatfacto`] | [`Undistortion::Gsplat`] |
 //! |---|---|---|
@@ -329,7 +330,7 @@ impl Camera {
                     target,
                     crop,
                     camera,
-                    sampling: remap::Sampling::FixedPoint,
+                    sampling: remap::Sampling::FixedPointMap,
                 }
             }
             (Lens::Perspective(d), Undistortion::Gsplat) => {
@@ -342,7 +343,7 @@ impl Camera {
                     target,
                     crop,
                     camera: target,
-                    sampling: remap::Sampling::Float,
+                    sampling: remap::Sampling::FloatMap,
                 }
             }
             (Lens::Fisheye(d), Undistortion::Splatfacto) => {
@@ -367,7 +368,7 @@ impl Camera {
                     target,
                     crop,
                     camera,
-                    sampling: remap::Sampling::Float,
+                    sampling: remap::Sampling::FloatMap,
                 }
             }
             (Lens::Fisheye(_), Undistortion::Gsplat) => {

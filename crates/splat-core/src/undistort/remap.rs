@@ -25,9 +25,9 @@ use glam::DVec2;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Sampling {
     /// `CV_16SC2` maps: from double precision.
-    FixedPoint,
+    FixedPointMap,
     /// `CV_32FC1` maps: from f32.
-    Float,
+    FloatMap,
 }
 
 /// Bits of a map's fraction (OpenCV's `INTER_BITS`).
@@ -69,8 +69,8 @@ impl Sampling {
             return;
         }
         let s = match self {
-            Sampling::FixedPoint => s,
-            Sampling::Float => s.as_vec2().as_dvec2(),
+            Sampling::FixedPointMap => s,
+            Sampling::FloatMap => s.as_vec2().as_dvec2(),
         };
         // cvRound(s · 32): nearest, ties to even; saturated to i32.
         let fixed = |v: f64| (v * f64::from(1 << INTER_BITS)).round_ties_even() as i32;
@@ -157,7 +157,7 @@ mod tests {
     #[test]
     fn whole_pixels_are_the_pixels_and_halves_their_means_rounded_up() {
         let p = photo(4, 3, |x, y| (x * 50 + y * 7) as u8);
-        for sampling in [Sampling::FixedPoint, Sampling::Float] {
+        for sampling in [Sampling::FixedPointMap, Sampling::FloatMap] {
             for (x, y) in [(0, 0), (3, 2), (2, 1)] {
                 assert_eq!(at(sampling, &p, x.into(), y.into()), p.data[(y * 4 + x) as usize], "{sampling:?}");
             }
@@ -172,19 +172,19 @@ mod tests {
     fn maps_are_rounded_to_thirty_seconds_from_their_own_precision() {
         // 0.2 px lies nearest 6/32: 255 × 0.1875 = 47.8 (f32 interpolation would give 51).
         let p = photo(2, 1, |x, _| if x == 0 { 0 } else { 255 });
-        assert_eq!(at(Sampling::FixedPoint, &p, 0.2, 0.0), 48);
+        assert_eq!(at(Sampling::FixedPointMap, &p, 0.2, 0.0), 48);
         // 300 + 1/64 + 10⁻⁶ rounds to 1/32 past 300 from double precision, but is 300 + 1/64
         // in f32, whose 1/32 tie goes to the even 300.
         let p = photo(302, 1, |x, _| if x == 301 { 255 } else { 0 });
         let s = 300.0 + 1.0 / 64.0 + 1e-6;
-        assert_eq!(at(Sampling::FixedPoint, &p, s, 0.0), 8);
-        assert_eq!(at(Sampling::Float, &p, s, 0.0), 0);
+        assert_eq!(at(Sampling::FixedPointMap, &p, s, 0.0), 8);
+        assert_eq!(at(Sampling::FloatMap, &p, s, 0.0), 0);
     }
 
     #[test]
     fn the_border_is_black_and_straddling_taps_take_it() {
         let p = photo(3, 3, |_, _| 200);
-        for sampling in [Sampling::FixedPoint, Sampling::Float] {
+        for sampling in [Sampling::FixedPointMap, Sampling::FloatMap] {
             assert_eq!(at(sampling, &p, -1.5, 1.0), 0, "all four taps outside");
             assert_eq!(at(sampling, &p, 1.0, 3.0), 0, "below the last row");
             assert_eq!(at(sampling, &p, -0.5, 1.0), 100, "half the taps outside");
