@@ -58,19 +58,18 @@ fn default_images(camera: &Path) -> Option<PathBuf> {
     Some(file.parent()?.to_path_buf())
 }
 
-/// The photograph of view `name` in `images`: the name as it is, else the first that exists
-/// of the name with a usual photograph extension in place of its own (a cameras.json's names
-/// have none; gsplat's `images_F_png/` holds `NAME.png` for COLMAP's `NAME.JPG`).
+/// The photograph of view `name` in `images`: the first that exists of the name as it is
+/// relative to `images`, its file name alone in `images` (Nerfstudio's `images_F/` holds
+/// `frame.png` for `images/frame.png`), and each of those with a usual photograph extension in
+/// place of its own (a cameras.json's names have none; gsplat's `images_F_png/` holds
+/// `NAME.png` for COLMAP's `NAME.JPG`); the name as it is where none exists.
 fn photo_path(images: &Path, name: &str) -> PathBuf {
     let path = images.join(name);
-    if path.exists() {
-        return path;
-    }
-    ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"]
-        .iter()
-        .map(|e| path.with_extension(e))
-        .find(|p| p.exists())
-        .unwrap_or(path)
+    let flat = Path::new(name).file_name().map(|f| images.join(f));
+    let places = std::iter::once(path.clone()).chain(flat);
+    let extensions = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"];
+    let candidates = places.flat_map(|p| std::iter::once(p.clone()).chain(extensions.map(|e| p.with_extension(e))));
+    candidates.into_iter().find(|p| p.is_file()).unwrap_or(path)
 }
 
 /// `splat undistort`: each view's photograph, read from --images, undistorted as --undistort's

@@ -273,3 +273,22 @@ def test_a_python_camera_scales_and_undistorts_as_load_cameras(tmp_path):
         camera.downscaled(0)
     with pytest.raises(splat.SplatError, match="expected one of splatfacto, gsplat"):
         camera.undistorted("3dgs")
+
+
+def test_splatfactos_photo_at_a_downscale_factor(splat_bin, tmp_path):
+    # A 641 × 481 Nerfstudio capture read from images_2/: the dataparser's
+    # rescale_output_resolution(1 / 2) (float32 K times 0.5, the sides floored to 320 × 240),
+    # then _undistort_image of the 320 × 240 photograph, which lies in images_2/ by file name.
+    lens = ("odd", 641, 481, 500.0, 505.0, 321.25, 240.75, -0.3, 0.09, -0.01, 0.001, -0.0015)
+    name, w, h, fx, fy, cx, cy, k1, k2, k3, p1, p2 = lens
+    nerfstudio_file(tmp_path / "transforms.json", "OPENCV", lens, {"k1": k1, "k2": k2, "k3": k3, "p1": p1, "p2": p2})
+    photo = noise(w // 2, h // 2, 3, 8)
+    (tmp_path / "images_2").mkdir()
+    Image.fromarray(photo).save(tmp_path / "images_2" / "frame_00001.png")
+    K = intrinsics(fx, fy, cx, cy, np.float32) * np.array([[0.5], [0.5], [1.0]], dtype=np.float32)
+    params = np.array([k1, k2, k3, 0.0, p1, p2], dtype=np.float32)
+    theirs = splatfacto_photo("perspective", params, K, photo)
+    args = ["--camera", str(tmp_path), "--undistort", "splatfacto", "--data-factor", "2"]
+    out = tmp_path / "out"
+    subprocess.run([splat_bin, "undistort", *args, "--images", str(tmp_path / "images_2"), "-o", str(out)], check=True)
+    assert_same(np.asarray(Image.open(out / "frame_00001.png")), theirs, name)
