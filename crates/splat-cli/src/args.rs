@@ -383,14 +383,14 @@ pub struct SceneArgs {
     /// from there, as gsplat scales K to the photographs it finds).
     #[arg(help_heading = "Camera", long, requires = "camera", value_parser = clap::value_parser!(u32).range(1..))]
     pub data_factor: Option<u32>,
-    /// Image width in pixels (1 to 16384); rescales the camera's intrinsics (with --undistort:
-    /// the photographs' width, the cameras scaled to it before they are undistorted) [default:
-    /// the camera's, else the command's framing size: 640 for render].
+    /// Image width in pixels (1 to 16384); rescales the camera's intrinsics [default: the
+    /// camera's, else the command's framing size: 640 for render]. With --undistort, the
+    /// photographs' width: the cameras are scaled to it before they are undistorted.
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
     pub width: Option<u32>,
-    /// Image height in pixels (1 to 16384); rescales the camera's intrinsics (with --undistort:
-    /// the photographs' height) [default: the camera's, else the command's framing size: 480
-    /// for render].
+    /// Image height in pixels (1 to 16384); rescales the camera's intrinsics [default: the
+    /// camera's, else the command's framing size: 480 for render]. With --undistort, the
+    /// photographs' height.
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
     pub height: Option<u32>,
     /// Look-at camera position "x,y,z" (with --target; world up from --up).
