@@ -161,16 +161,19 @@ fn image_size(name: &str, shape: &[usize]) -> PyResult<(u32, u32, u32)> {
 
 /// An image as an array (H, W) for one channel, else (H, W, C), without a copy.
 pub fn image_to_array(py: Python<'_>, image: Image) -> PyResult<Bound<'_, PyUntypedArray>> {
-    let (w, h, c) = (image.width() as usize, image.height() as usize, image.channels() as usize);
-    let shape = if c == 1 { vec![h, w] } else { vec![h, w, c] };
+    let shape = array_shape(image.width(), image.height(), image.channels());
     shaped(py, image.into_data(), &shape)
 }
 
 /// A photograph as a uint8 array (H, W) for one channel, else (H, W, C), without a copy.
 pub fn photo_to_array(py: Python<'_>, photo: Photo) -> PyResult<Bound<'_, PyUntypedArray>> {
-    let (w, h, c) = (photo.width as usize, photo.height as usize, photo.channels as usize);
-    let shape = if c == 1 { vec![h, w] } else { vec![h, w, c] };
-    shaped(py, photo.data, &shape)
+    shaped(py, photo.data, &array_shape(photo.width, photo.height, photo.channels))
+}
+
+/// The array shape of a `w` × `h` image of `c` channels: (H, W) for one channel, else (H, W, C).
+fn array_shape(w: u32, h: u32, c: u32) -> Vec<usize> {
+    let (w, h, c) = (w as usize, h as usize, c as usize);
+    if c == 1 { vec![h, w] } else { vec![h, w, c] }
 }
 
 /// `data` as an array of `shape` (row-major), without a copy.

@@ -273,7 +273,7 @@ impl PyCamera {
     /// camera's photos to (`load_cameras(..., undistort=...)` of one camera); a camera without
     /// a distorted lens is its own.
     fn undistorted(&self, undistort: &str) -> PyResult<Self> {
-        let trainer = choice("undistort", undistort, &Undistortion::ALL, Undistortion::name)?;
+        let trainer = trainer(undistort)?;
         Ok(Self { camera: self.camera.undistorted(trainer).map_err(fail)? })
     }
 
@@ -300,7 +300,7 @@ impl PyCamera {
         photo: &Bound<'py, PyAny>,
         undistort: &str,
     ) -> PyResult<Bound<'py, PyUntypedArray>> {
-        let trainer = choice("undistort", undistort, &Undistortion::ALL, Undistortion::name)?;
+        let trainer = trainer(undistort)?;
         let photo = arrays::photo_from_array("photo", photo)?;
         let out = py.detach(|| self.camera.undistort_photo(trainer, &photo)).map_err(fail)?;
         arrays::photo_to_array(py, out)
@@ -349,14 +349,18 @@ fn load_cameras(
     data_factor: Option<u32>,
     image_size: Option<(u32, u32)>,
 ) -> PyResult<Vec<(String, PyCamera)>> {
-    let undistort =
-        undistort.map(|name| choice("undistort", name, &Undistortion::ALL, Undistortion::name)).transpose()?;
+    let undistort = undistort.map(trainer).transpose()?;
     let split = split.map(|name| choice("split", name, &Split::ALL, Split::name)).transpose()?;
     let size = image_size.map_or((None, None), |(w, h)| (Some(w), Some(h)));
     let options =
         ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort, split, factor: data_factor, size };
     let views = splat_cli::args::load_cameras(&path, options).map_err(fail)?;
     Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
+}
+
+/// The trainer whose undistortion the keyword argument `undistort` names.
+fn trainer(name: &str) -> PyResult<Undistortion> {
+    choice("undistort", name, &Undistortion::ALL, Undistortion::name)
 }
 
 /// The one of `all` named `name`, for the keyword argument `argument`.

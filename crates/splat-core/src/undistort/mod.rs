@@ -52,6 +52,11 @@ impl Undistortion {
         }
     }
 
+    /// Its refusal of a camera or photograph, for reason `why`.
+    fn refuse(self, why: String) -> CameraError {
+        CameraError::Undistort { trainer: self.name(), why }
+    }
+
     /// What it does, in words.
     pub const fn describe(self) -> &'static str {
         match self {
@@ -117,6 +122,11 @@ impl Rect {
     fn rounded(x: f64, y: f64, width: f64, height: f64) -> Self {
         let r = |v: f64| v.round_ties_even() as i64;
         Self { x: r(x), y: r(y), width: r(width), height: r(height) }
+    }
+
+    /// The whole image of `size` (width, height).
+    fn whole((width, height): (u32, u32)) -> Self {
+        Rect { x: 0, y: 0, width: width.into(), height: height.into() }
     }
 
     /// Its width and height.
@@ -194,8 +204,7 @@ fn optimal_pinhole(k: Intrinsics, d: &Distortion, size: (u32, u32)) -> (Intrinsi
     let f = DVec2::new((w - 1.0) / (x1 - x0), (h - 1.0) / (y1 - y0));
     let new = Intrinsics { f, c: -f * DVec2::new(x0, y0) };
     let [x0, y0, x1, y1] = inscribed(k, d, size, Some(new));
-    let whole = Rect { x: 0, y: 0, width: size.0.into(), height: size.1.into() };
-    (new, Rect::rounded(x0, y0, x1 - x0, y1 - y0).intersect(whole))
+    (new, Rect::rounded(x0, y0, x1 - x0, y1 - y0).intersect(Rect::whole(size)))
 }
 
 /// OpenCV's `fisheye::undistortPoints(p, K, D)` with its default criteria: the undistorted
@@ -304,7 +313,7 @@ impl Camera {
     /// What `trainer` does to this camera's photos; `None` for a camera it trains through as
     /// it is.
     fn plan(&self, trainer: Undistortion) -> Result<Option<Plan>, CameraError> {
-        let refuse = |why: String| CameraError::Undistort { trainer: trainer.name(), why };
+        let refuse = |why: String| trainer.refuse(why);
         let k = Intrinsics::of(self);
         let size = (self.width, self.height);
         let plan = match (self.lens, trainer) {
@@ -360,7 +369,7 @@ impl Camera {
                     refuse("OpenCV cannot undistort the middle of an image edge of this lens (it lies 90° or more from the axis, or its undistortion does not converge)".into())
                 })?;
                 let target = target.single();
-                let crop = Rect { x: 0, y: 0, width: size.0.into(), height: size.1.into() };
+                let crop = Rect::whole(size);
                 let camera = target.shifted(0.5);
                 Plan {
                     source,
@@ -401,10 +410,9 @@ impl Camera {
             lens: Lens::Pinhole,
             ..*self
         };
-        camera.validate().map_err(|e| CameraError::Undistort {
-            trainer: trainer.name(),
-            why: format!("OpenCV's estimate for this lens is not a camera ({e})"),
-        })?;
+        camera
+            .validate()
+            .map_err(|e| trainer.refuse(format!("OpenCV's estimate for this lens is not a camera ({e})")))?;
         Ok(camera)
     }
 }

@@ -110,7 +110,7 @@ impl Camera {
     /// interpolation (see the module documentation); a camera the trainer takes as it is keeps
     /// its photo. Refuses a photo of another size than the camera's.
     pub fn undistort_photo(&self, trainer: Undistortion, photo: &Photo) -> Result<Photo, CameraError> {
-        let refuse = |why: String| CameraError::Undistort { trainer: trainer.name(), why };
+        let refuse = |why: String| trainer.refuse(why);
         if (photo.width, photo.height) != (self.width, self.height) {
             return Err(refuse(format!(
                 "the photograph is {} × {} and the camera {} × {}: scale the camera or the photograph to match",
