@@ -368,6 +368,12 @@ pub struct SceneArgs {
     /// splats (ns-export gaussian-splat) live.
     #[arg(help_heading = "Camera", long, requires = "camera")]
     pub dataparser_transforms: Option<PathBuf>,
+    /// The splats are gsplat simple_trainer's, in the normalised world it trains in by default
+    /// (normalize_world_space): moves the cameras of a COLMAP model (--camera, with its
+    /// points3D) into that world, the frame numpy's eigenvectors leave open chosen by where the
+    /// 3D points lie on the splats.
+    #[arg(help_heading = "Camera", long, requires = "camera", conflicts_with = "dataparser_transforms")]
+    pub gsplat_world: bool,
     /// Render each camera of --camera as the pinhole this trainer undistorts its photos to
     /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
     /// calls it.
@@ -588,9 +594,12 @@ impl SceneArgs {
     /// With --undistort, --width and --height size the cameras before they are undistorted (the
     /// photographs' size, as gsplat scales K to it and then undistorts), and [`Self::sized`]
     /// leaves the undistorted views as they are.
-    pub fn view_options(&self) -> ViewOptions<'_> {
+    ///
+    /// `scene` holds the splats whose gsplat world --gsplat-world moves the cameras to.
+    pub fn view_options<'a>(&'a self, scene: &'a Scene) -> ViewOptions<'a> {
         ViewOptions {
             dataparser: self.dataparser_transforms.as_deref(),
+            gsplat_world: self.gsplat_world.then_some(scene),
             undistort: self.undistort,
             split: self.split,
             factor: self.data_factor,
@@ -745,7 +754,7 @@ impl SceneArgs {
     fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
         let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
         let camera = if let Some(path) = &self.camera {
-            let cameras = load_cameras(path, self.view_options())?;
+            let cameras = load_cameras(path, self.view_options(scene))?;
             let n = cameras.len();
             cameras.get(self.camera_index).map(|(_, c)| *c).with_context(|| {
                 format!("--camera-index {} but {} has {n} cameras", self.camera_index, path.display())

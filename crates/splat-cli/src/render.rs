@@ -418,9 +418,9 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         bail!("--all-cameras writes colour images only: drop --alpha, --depth, --normal and --variance");
     }
     let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
-    let cameras = crate::args::load_cameras(path, args.scene.view_options())?;
-    let sized = cameras.iter().map(|(_, camera)| args.scene.view(*camera)).collect::<Result<Vec<Camera>>>()?;
     let staged = args.scene.load_world(640, 480)?;
+    let cameras = crate::args::load_cameras(path, args.scene.view_options(&staged.world.scene))?;
+    let sized = cameras.iter().map(|(_, camera)| args.scene.view(*camera)).collect::<Result<Vec<Camera>>>()?;
     args.options.apply_capture(&staged.world.scene);
     let args = &args;
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;

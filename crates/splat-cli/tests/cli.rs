@@ -1223,6 +1223,13 @@ fn colmap_cameras_and_all_cameras() {
         assert_eq!(o.status.success(), ok, "{}", stderr(&o));
         assert!(ok || stderr(&o).contains("move a transforms.json's cameras"), "{}", stderr(&o));
     }
+    // gsplat's normalised world is a COLMAP model's (with its 3D points), found from the splats.
+    for (cameras, refusal) in [(&nerfstudio, "gsplat normalises the world of a COLMAP model"), (&dir, "points3D.txt")] {
+        let args = ["render", "fixtures/cloud.ply", "--camera", cameras.to_str().unwrap(), "--gsplat-world"];
+        let o =
+            splat(&[&args[..], &["--width", "8", "--height", "6", "-o", scratch("g.npy").to_str().unwrap()]].concat());
+        assert!(!o.status.success() && stderr(&o).contains(refusal), "{}", stderr(&o));
+    }
     let out = scratch("views");
     let o = splat(&[
         "render",

@@ -5,8 +5,8 @@
 use crate::{Error, ErrorKind, read_file};
 use glam::{Mat3, Vec3};
 use serde::{Deserialize, Serialize};
-use splat_core::Camera;
 use splat_core::undistort::Undistortion;
+use splat_core::{Camera, Scene};
 use std::path::Path;
 
 /// One entry of `cameras.json` as 3DGS writes it.
@@ -117,6 +117,10 @@ pub struct ViewOptions<'a> {
     /// cameras into the run's world ([`crate::transforms::Dataparser`]); other camera files are
     /// refused with it.
     pub dataparser: Option<&'a Path>,
+    /// Splats trained by gsplat's `simple_trainer` in its normalised world (its default
+    /// `normalize_world_space`): moves a COLMAP model's cameras into that world
+    /// ([`crate::gsplat_world`]), where these splats are; other camera files are refused with it.
+    pub gsplat_world: Option<&'a Scene>,
     /// Whose pinhole each camera becomes ([`Camera::undistorted`]).
     pub undistort: Option<Undistortion>,
     /// The trainer's split of the views to keep ([`Split`]).
@@ -264,8 +268,8 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     read_views_in(path, ViewOptions::default())
 }
 
-/// [`read_views`], changed by `options`: moved by the dataparser transforms, the split kept,
-/// downscaled and sized, then undistorted.
+/// [`read_views`], changed by `options`: moved by the dataparser transforms or into gsplat's
+/// world, the split kept, downscaled and sized, then undistorted.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
     let (mut views, lists) = read_views_moved(path, options)?;
     if let Some(split) = options.split {
@@ -290,9 +294,17 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     views.into_iter().enumerate().map(undistort).collect()
 }
 
-/// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms; and
-/// the split lists a `transforms.json` names, for Nerfstudio's splits (none for other files).
+/// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms, a
+/// COLMAP model's into gsplat's world; and the split lists a `transforms.json` names, for
+/// Nerfstudio's splits (none for other files).
 fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, Camera)>, SplitLists), Error> {
+    if let Some(splats) = options.gsplat_world {
+        if options.dataparser.is_some() {
+            let why = "a Nerfstudio run's dataparser transforms and gsplat's world are two trainers' worlds: give one";
+            return Err(Error::new(path, ErrorKind::GsplatWorld(why.into())));
+        }
+        return Ok((in_gsplat_world(path, splats)?, SplitLists::new()));
+    }
     let dataparser = options.dataparser.map(crate::transforms::read_dataparser).transpose()?;
     let not_transforms = || {
         let why = "a training run's dataparser transforms move a transforms.json's cameras, and this is a \
@@ -322,6 +334,41 @@ fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, C
         return not_transforms();
     }
     Ok((named_cameras(path, &bytes)?, SplitLists::new()))
+}
+
+/// Every view of the COLMAP model at `path`, moved into the gsplat world where `splats` were
+/// trained ([`crate::gsplat_world::normalized_world`]).
+fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>, Error> {
+    if !crate::colmap::is_colmap(path) {
+        let why = "gsplat normalises the world of a COLMAP model (its cameras and 3D points): give the capture's \
+                   sparse/0 folder as the cameras";
+        return Err(Error::new(path, ErrorKind::GsplatWorld(why.into())));
+    }
+    let posed = crate::colmap::read_colmap_posed(path)?;
+    let points = crate::colmap::read_points3d(path)?;
+    let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
+    let means: Vec<_> = splats.particles.iter().map(|p| p.mean).collect();
+    let world = crate::gsplat_world::normalized_world(&poses, &points, &means)
+        .map_err(|why| Error::new(path, ErrorKind::GsplatWorld(why)))?;
+    let moved = |(index, p): (usize, crate::colmap::PosedView)| {
+        let (world_from_camera, centre) = world.pose(p.rotation, p.centre);
+        let camera_from_world = world_from_camera.transpose();
+        let c = p.view.camera;
+        Camera::from_intrinsics(
+            c.width,
+            c.height,
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy,
+            camera_from_world.as_mat3(),
+            (-(camera_from_world * centre)).as_vec3(),
+        )
+        .and_then(|moved| moved.with_lens(c.lens))
+        .map(|camera| (p.view.name, camera))
+        .map_err(|e| Error::new(path, ErrorKind::Camera { index, message: e.to_string() }))
+    };
+    posed.into_iter().enumerate().map(moved).collect()
 }
 
 /// Parse a `cameras.json`.

@@ -11,7 +11,7 @@
 //! lists them in its `cameras.json` (`id` = index).
 
 use crate::{Error, ErrorKind, read_file};
-use glam::{DQuat, DVec3, Mat3, Quat, Vec3};
+use glam::{DMat3, DQuat, DVec3, Mat3, Quat, Vec3};
 use splat_core::Camera;
 use splat_core::camera::{Distortion, Lens};
 use std::collections::HashMap;
@@ -24,6 +24,18 @@ pub struct View {
     pub name: String,
     /// The camera.
     pub camera: Camera,
+}
+
+/// A [`View`] with its pose in double precision, as COLMAP stores it (for what trainers compute
+/// from the poses in f64, such as gsplat's normalised world).
+#[derive(Clone, Debug)]
+pub struct PosedView {
+    /// The view.
+    pub view: View,
+    /// Camera-to-world rotation (columns: the camera's x right, y down, z forward in the world).
+    pub rotation: DMat3,
+    /// Camera centre in the world.
+    pub centre: DVec3,
 }
 
 /// Intrinsics of a COLMAP camera.
@@ -75,9 +87,19 @@ fn model_files(path: &Path) -> Option<(PathBuf, PathBuf)> {
 /// Read every registered view of a COLMAP model (folder, `images.*` or `cameras.*`), sorted by
 /// image name.
 pub fn read_colmap(path: &Path) -> Result<Vec<View>, Error> {
-    let (cameras_path, images_path) = model_files(path).ok_or_else(|| {
+    Ok(read_colmap_posed(path)?.into_iter().map(|p| p.view).collect())
+}
+
+/// The (cameras, images) files of the model at `path`, or an error naming what a model is.
+fn model_files_of(path: &Path) -> Result<(PathBuf, PathBuf), Error> {
+    model_files(path).ok_or_else(|| {
         Error::new(path, colmap_error("not a COLMAP model: expected a folder with images.bin or images.txt"))
-    })?;
+    })
+}
+
+/// [`read_colmap`], each view with its pose in double precision.
+pub fn read_colmap_posed(path: &Path) -> Result<Vec<PosedView>, Error> {
+    let (cameras_path, images_path) = model_files_of(path)?;
     let binary = images_path.extension().is_some_and(|e| e == "bin");
     let cameras = read_file(&cameras_path)?;
     let images = read_file(&images_path)?;
@@ -88,14 +110,65 @@ pub fn read_colmap(path: &Path) -> Result<Vec<View>, Error> {
     views(&intrinsics, poses).map_err(|kind| Error::new(&images_path, kind))
 }
 
+/// The 3D points of the model at `path`: its `points3D.bin` or `points3D.txt`, beside its
+/// `images.*`, in the file's order. They are the structure-from-motion points trainers start
+/// their splats from.
+pub fn read_points3d(path: &Path) -> Result<Vec<DVec3>, Error> {
+    let (_, images_path) = model_files_of(path)?;
+    let binary = images_path.extension().is_some_and(|e| e == "bin");
+    let points_path = images_path.with_file_name(if binary { "points3D.bin" } else { "points3D.txt" });
+    let data = read_file(&points_path)?;
+    parse_points3d(&data, binary).map_err(|kind| Error::new(&points_path, kind))
+}
+
+/// The points of a `points3D.bin` (`binary`) or `points3D.txt`; a point whose coordinates are
+/// not finite is refused.
+pub fn parse_points3d(data: &[u8], binary: bool) -> Result<Vec<DVec3>, ErrorKind> {
+    let points = if binary { parse_points3d_bin(data)? } else { parse_points3d_txt(data)? };
+    match points.iter().position(|p| !p.is_finite()) {
+        Some(i) => Err(colmap_error(format!("3D point {i} (0-based, in file order) is not finite: {}", points[i]))),
+        None => Ok(points),
+    }
+}
+
+fn parse_points3d_bin(data: &[u8]) -> Result<Vec<DVec3>, ErrorKind> {
+    let mut b = Bytes { data, at: 0 };
+    // id, x y z, r g b, error, track length: 51 bytes before the track.
+    let n = b.count(51, "the 3D point count")?;
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        b.u64("a 3D point id")?;
+        out.push(DVec3::new(b.f64("x")?, b.f64("y")?, b.f64("z")?));
+        b.take(3 + 8, "a 3D point's colour and error")?;
+        let track = b.count(8, "a track length")?;
+        b.take(track * 8, "a track")?;
+    }
+    Ok(out)
+}
+
+fn parse_points3d_txt(data: &[u8]) -> Result<Vec<DVec3>, ErrorKind> {
+    if std::str::from_utf8(data).is_err() {
+        return Err(colmap_error("points3D.txt is not UTF-8 text"));
+    }
+    content_lines(data)
+        .map(|(line, text)| {
+            let words: Vec<&str> = text.split_whitespace().collect();
+            let [_, x, y, z, _, _, _, _, ..] = words.as_slice() else {
+                return Err(colmap_error(format!("line {line}: expected POINT3D_ID X Y Z R G B ERROR TRACK…")));
+            };
+            Ok(DVec3::new(number(line, x, "x")?, number(line, y, "y")?, number(line, z, "z")?))
+        })
+        .collect()
+}
+
 /// Parse a model from the bytes of its two files (`binary`: `.bin`, else `.txt`).
 pub fn parse_colmap(cameras: &[u8], images: &[u8], binary: bool) -> Result<Vec<View>, ErrorKind> {
     let intrinsics = if binary { parse_cameras_bin(cameras)? } else { parse_cameras_txt(cameras)? };
     let poses = if binary { parse_images_bin(images)? } else { parse_images_txt(images)? };
-    views(&intrinsics, poses)
+    Ok(views(&intrinsics, poses)?.into_iter().map(|p| p.view).collect())
 }
 
-fn views(intrinsics: &HashMap<u32, Intrinsics>, mut poses: Vec<Pose>) -> Result<Vec<View>, ErrorKind> {
+fn views(intrinsics: &HashMap<u32, Intrinsics>, mut poses: Vec<Pose>) -> Result<Vec<PosedView>, ErrorKind> {
     if poses.is_empty() {
         return Err(colmap_error("the model has no registered image"));
     }
@@ -113,6 +186,8 @@ fn views(intrinsics: &HashMap<u32, Intrinsics>, mut poses: Vec<Pose>) -> Result<
             }
             let rotation = Mat3::from_quat(q.normalize().as_quat().normalize());
             let translation = DVec3::from(p.t).as_vec3();
+            let world_from_camera = DMat3::from_quat(q.normalize()).transpose();
+            let centre = -(world_from_camera * DVec3::from(p.t));
             let camera = Camera::from_intrinsics(
                 k.width,
                 k.height,
@@ -125,7 +200,7 @@ fn views(intrinsics: &HashMap<u32, Intrinsics>, mut poses: Vec<Pose>) -> Result<
             )
             .and_then(|c| c.with_lens(k.lens))
             .map_err(|e| colmap_error(format!("image '{}': {e}", p.name)))?;
-            Ok(View { name: p.name, camera })
+            Ok(PosedView { view: View { name: p.name, camera }, rotation: world_from_camera, centre })
         })
         .collect()
 }
@@ -404,4 +479,44 @@ pub fn write_colmap_txt(dir: &Path, views: &[View]) -> Result<(), Error> {
     };
     write("cameras.txt", &cameras)?;
     write("images.txt", &images)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `points3D.bin` of `points`, the i-th with a track of i elements.
+    fn points3d_bin(points: &[[f64; 3]]) -> Vec<u8> {
+        let mut out = (points.len() as u64).to_le_bytes().to_vec();
+        for (i, p) in points.iter().enumerate() {
+            out.extend((i as u64 + 10).to_le_bytes());
+            p.iter().for_each(|c| out.extend(c.to_le_bytes()));
+            out.extend([200, 100, 50]);
+            out.extend(0.5f64.to_le_bytes());
+            out.extend((i as u64).to_le_bytes());
+            (0..i as u32).for_each(|j| out.extend([j.to_le_bytes(), (2 * j).to_le_bytes()].concat()));
+        }
+        out
+    }
+
+    #[test]
+    fn points3d_read_alike_from_binary_and_text_and_bad_files_are_refused() {
+        let points = [[1.0, -2.0, 3.5], [0.25, 1e-3, -7.0], [4.0, 5.0, 6.0]];
+        let text = "# POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n\
+                    10 1 -2 3.5 200 100 50 0.5\n11 0.25 0.001 -7 1 2 3 0.1 1 0\n\n12 4 5 6 0 0 0 2 1 0 2 2\n";
+        let expected: Vec<DVec3> = points.iter().map(|&p| DVec3::from(p)).collect();
+        assert_eq!(parse_points3d(&points3d_bin(&points), true).unwrap(), expected);
+        assert_eq!(parse_points3d(text.as_bytes(), false).unwrap(), expected);
+        let bin = points3d_bin(&points);
+        for end in 0..bin.len() {
+            let e = parse_points3d(&bin[..end], true).unwrap_err().to_string();
+            assert!(e.contains("truncated"), "{end}: {e}");
+        }
+        let e = parse_points3d(&points3d_bin(&[[0.0, f64::NAN, 1.0]]), true).unwrap_err().to_string();
+        assert!(e.contains("3D point 0") && e.contains("not finite"), "{e}");
+        let e = parse_points3d(b"10 1 2 3 4 5 6\n", false).unwrap_err().to_string();
+        assert!(e.contains("line 1: expected POINT3D_ID"), "{e}");
+        let e = parse_points3d(b"10 1 y 3 4 5 6 0.5\n", false).unwrap_err().to_string();
+        assert!(e.contains("line 1: y 'y' is not a number"), "{e}");
+    }
 }

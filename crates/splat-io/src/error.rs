@@ -206,6 +206,9 @@ pub enum ErrorKind {
     /// A Nerfstudio `dataparser_transforms.json` is malformed or cannot apply to the cameras.
     #[error("Nerfstudio dataparser transforms: {0}")]
     Dataparser(String),
+    /// gsplat's normalised world cannot be found for the cameras and splats given.
+    #[error("gsplat's normalised world: {0}")]
+    GsplatWorld(String),
     /// A trainer's split does not apply to the views.
     #[error("split: {0}")]
     Split(String),

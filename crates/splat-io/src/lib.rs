@@ -26,6 +26,7 @@ pub mod colmap;
 pub mod compressed_ply;
 mod error;
 pub mod gltf_splats;
+pub mod gsplat_world;
 pub mod image;
 pub mod ksplat;
 pub mod memory;

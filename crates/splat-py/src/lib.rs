@@ -338,9 +338,11 @@ impl PyCamera {
 /// trainer's split of the views, as `--split` does; `data_factor` F gives each camera K / F and
 /// its sides floored, as gsplat and Nerfstudio take `images_F/` (`--data-factor`); `image_size`
 /// (width, height) scales each camera to the photographs' size after that and before it is
-/// undistorted, as gsplat does.
+/// undistorted, as gsplat does; `gsplat_world`, a Scene of splats gsplat's simple_trainer
+/// trained in its normalised world (its default), moves a COLMAP model's cameras into that world
+/// (`--gsplat-world`).
 #[pyfunction]
-#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None, data_factor = None, image_size = None))]
+#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None, data_factor = None, image_size = None, gsplat_world = None))]
 fn load_cameras(
     path: PathBuf,
     dataparser_transforms: Option<PathBuf>,
@@ -348,12 +350,19 @@ fn load_cameras(
     split: Option<&str>,
     data_factor: Option<u32>,
     image_size: Option<(u32, u32)>,
+    gsplat_world: Option<PyRef<PyScene>>,
 ) -> PyResult<Vec<(String, PyCamera)>> {
     let undistort = undistort.map(trainer).transpose()?;
     let split = split.map(|name| choice("split", name, &Split::ALL, Split::name)).transpose()?;
     let size = image_size.map_or((None, None), |(w, h)| (Some(w), Some(h)));
-    let options =
-        ViewOptions { dataparser: dataparser_transforms.as_deref(), undistort, split, factor: data_factor, size };
+    let options = ViewOptions {
+        dataparser: dataparser_transforms.as_deref(),
+        gsplat_world: gsplat_world.as_ref().map(|s| &s.world.scene),
+        undistort,
+        split,
+        factor: data_factor,
+        size,
+    };
     let views = splat_cli::args::load_cameras(&path, options).map_err(fail)?;
     Ok(views.into_iter().map(|(name, camera)| (name, PyCamera { camera })).collect())
 }

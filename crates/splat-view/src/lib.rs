@@ -52,6 +52,11 @@ pub struct SceneArgs {
     /// splats (ns-export gaussian-splat) live.
     #[arg(long, requires = "camera")]
     pub dataparser_transforms: Option<PathBuf>,
+    /// The splats are gsplat simple_trainer's, in the normalised world it trains in by default
+    /// (normalize_world_space): moves the cameras of a COLMAP model (--camera, with its
+    /// points3D) into that world.
+    #[arg(long, requires = "camera", conflicts_with = "dataparser_transforms")]
+    pub gsplat_world: bool,
     /// Show each camera of --camera as the pinhole this trainer undistorts its photos to
     /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
     /// calls it.
@@ -91,7 +96,8 @@ impl SceneArgs {
             split: self.split,
             ..Default::default()
         };
-        let mut loaded = load::load(self.scene.as_deref(), self.camera.as_deref(), views, read)?;
+        let cameras = self.camera.as_deref().map(|path| (path, self.gsplat_world));
+        let mut loaded = load::load(self.scene.as_deref(), cameras, views, read)?;
         if let Some(storage) = self.sh_storage {
             loaded.info.render.sh_storage = storage;
         }

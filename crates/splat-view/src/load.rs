@@ -7,6 +7,7 @@ use splat_core::glam::Vec3;
 use splat_core::mesh::Meshes;
 use splat_core::particle::Aabb;
 use splat_core::{Camera, RenderSettings, World};
+use splat_io::cameras::ViewOptions;
 use std::path::Path;
 
 /// A scene ready to view.
@@ -38,10 +39,12 @@ pub struct SceneInfo {
 }
 
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
-/// when `None`) with the reader's `options`, and the views of `cameras` as `views` change them.
+/// when `None`) with the reader's `options`, and the views of `cameras` as `views` change them;
+/// where `cameras` says so, moved into the gsplat world of the scene's splats
+/// ([`splat_io::gsplat_world`]).
 pub fn load(
     scene: Option<&Path>,
-    cameras: Option<&Path>,
+    cameras: Option<(&Path, bool)>,
     views: splat_io::cameras::ViewOptions,
     options: splat_io::ReadOptions,
 ) -> Result<Loaded> {
@@ -51,9 +54,13 @@ pub fn load(
     }
     let (world, name) = (opened.world, opened.name);
     let views = match cameras {
-        Some(path) => splat_io::cameras::read_views_in(path, views)?,
+        Some((path, gsplat_world)) => {
+            let views = ViewOptions { gsplat_world: gsplat_world.then_some(&world.scene), ..views };
+            splat_io::cameras::read_views_in(path, views)?
+        }
         None => Vec::new(),
     };
+    let cameras = cameras.map(|(path, _)| path);
     if cameras.is_some() && views.is_empty() {
         anyhow::bail!("{}: no cameras", cameras.unwrap_or(Path::new("")).display());
     }

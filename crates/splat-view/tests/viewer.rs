@@ -62,8 +62,8 @@ fn harness_of(
     cameras: Option<&std::path::Path>,
     options: &Options,
 ) -> Option<(Harness<'static, Viewer>, RenderState)> {
-    let loaded =
-        splat_view::load::load(scene, cameras, Default::default(), Default::default()).expect("the fixture loads");
+    let loaded = splat_view::load::load(scene, cameras.map(|c| (c, false)), Default::default(), Default::default())
+        .expect("the fixture loads");
     let mut viewer = Viewer::new(loaded, options, state.clone(), egui::Context::default());
     viewer.hide_rate = true;
     let harness = Harness::builder()

@@ -36,7 +36,7 @@ if "XDG_RUNTIME_DIR" not in os.environ:
     os.environ.setdefault("NODEVICE_SELECT", "1")
 
 from . import _splat  # noqa: E402
-from ._splat import SH_C0, Camera, SplatError, load_cameras, merge, methods  # noqa: E402
+from ._splat import SH_C0, Camera, SplatError, merge, methods  # noqa: E402
 from ._splat import compare as _compare  # noqa: E402
 from ._splat import power as _power  # noqa: E402
 from ._splat import z_test as _z_test  # noqa: E402
@@ -76,6 +76,29 @@ def _as_f32(value, name: str) -> np.ndarray:
     if array.dtype.kind not in "fiu":
         raise SplatError(f"{name} has dtype {array.dtype}: expected numbers (float32 is read without a copy)")
     return np.ascontiguousarray(array, dtype=np.float32)
+
+
+def load_cameras(
+    path,
+    dataparser_transforms=None,
+    undistort=None,
+    split=None,
+    data_factor=None,
+    image_size=None,
+    gsplat_world: "Scene | None" = None,
+) -> list:
+    """Every view of a camera file (an INRIA cameras.json, a COLMAP model: a sparse/0 folder or
+    its images.bin / images.txt, or a transforms.json), as (image name, camera) in the order
+    ``splat render`` lists them, changed as ``splat render``'s camera options change them:
+    ``dataparser_transforms`` (a Nerfstudio run's dataparser_transforms.json), ``undistort``
+    ("splatfacto" or "gsplat"), ``split`` ("3dgs-test", "nerfstudio-eval", ...), ``data_factor``
+    F (``images_F/``), ``image_size`` (width, height) and ``gsplat_world``, the Scene of splats
+    gsplat's simple_trainer trained in its normalised world (its default), into which a COLMAP
+    model's cameras are moved (``--gsplat-world``). See docs/python.md."""
+    if gsplat_world is not None and not isinstance(gsplat_world, Scene):
+        raise SplatError(f"gsplat_world is a {type(gsplat_world).__name__}: expected a splat.Scene of the splats")
+    native = None if gsplat_world is None else gsplat_world._native
+    return _splat.load_cameras(path, dataparser_transforms, undistort, split, data_factor, image_size, native)
 
 
 class Scene:

@@ -76,6 +76,7 @@ def load_cameras(
     split: Optional[str] = None,
     data_factor: Optional[int] = None,
     image_size: Optional[tuple[int, int]] = None,
+    gsplat_world: Optional[Scene] = None,
 ) -> list[tuple[str, Camera]]: ...
 def render(
     scene: Scene,
