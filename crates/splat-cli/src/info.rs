@@ -11,7 +11,9 @@ pub struct InfoArgs {
     /// meshes are listed with their materials.
     pub scene: PathBuf,
     /// The capture's cameras (a cameras.json, COLMAP model or transforms.json): `info` then
-    /// says which way is up, the mean up of the views, as an `--up` for framing.
+    /// says which way is up, the mean up of the views, as an `--up` for framing; and for a
+    /// COLMAP model with its points3D, which world the splats lie in (the model's own, or
+    /// gsplat's normalised world, which --gsplat-world renders).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// A Nerfstudio training run's dataparser_transforms.json: moves the cameras of a
@@ -122,7 +124,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| (lo.min(p.scale.min_element()), hi.max(p.scale.max_element())));
     out!("scale      {lo:.2e} … {hi:.2e}");
-    out!("{}", camera_lines(args.camera.as_deref(), args.dataparser_transforms.as_deref())?);
+    out!("{}", camera_lines(args.camera.as_deref(), args.dataparser_transforms.as_deref(), &scene)?);
     out!("opacity histogram:");
     let mut bins = [0usize; 10];
     for p in &scene.particles {
@@ -191,8 +193,13 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
 }
 
 /// What the capture's views say: which way is up (the mean up of the views when `cameras` are
-/// given, otherwise what trained captures usually use) and their lenses.
-fn camera_lines(cameras: Option<&std::path::Path>, dataparser: Option<&std::path::Path>) -> Result<String> {
+/// given, otherwise what trained captures usually use), their lenses, and for a COLMAP model
+/// which world the splats of `scene` lie in.
+fn camera_lines(
+    cameras: Option<&std::path::Path>,
+    dataparser: Option<&std::path::Path>,
+    scene: &splat_core::Scene,
+) -> Result<String> {
     let Some(path) = cameras else {
         return Ok("up         not measured (no --camera): captures trained from COLMAP data are usually \
                    -y up; frame them with --up 0,-1,0"
@@ -200,7 +207,50 @@ fn camera_lines(cameras: Option<&std::path::Path>, dataparser: Option<&std::path
     };
     let options = splat_io::cameras::ViewOptions { dataparser, ..Default::default() };
     let views: Vec<_> = crate::args::load_cameras(path, options)?.into_iter().map(|(_, c)| c).collect();
-    Ok(format!("{}\n{}", up_line(&views), lens_line(&views)))
+    let world = world_line(path, scene).map_or(String::new(), |line| format!("\n{line}"));
+    Ok(format!("{}\n{}{world}", up_line(&views), lens_line(&views)))
+}
+
+/// For a COLMAP model, which world the splats lie in: the model's own, or gsplat's normalised
+/// world (rendered with --gsplat-world), by the share of its 3D points on the splats in each.
+fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<String> {
+    use splat_io::gsplat_world::{normalized_world, on_splats_in, on_splats_in_colmap};
+    if !splat_io::colmap::is_colmap(path) {
+        return None;
+    }
+    let measured = || -> Result<String, String> {
+        let points = splat_io::colmap::read_points3d(path).map_err(|e| e.to_string())?;
+        let posed = splat_io::colmap::read_colmap_posed(path).map_err(|e| e.to_string())?;
+        let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
+        let means: Vec<_> = scene.particles.iter().map(|p| p.mean).collect();
+        let colmap = on_splats_in_colmap(&poses, &points, &means)?;
+        let gsplat = normalized_world(&poses, &points, &means).map(|w| on_splats_in(&w, &points, &means));
+        let percent = |f: f64| format!("{:.0} %", 100.0 * f);
+        Ok(match gsplat {
+            Ok(g) if g > colmap => format!(
+                "gsplat's normalised world ({} of the model's 3D points lie on the splats there, {} in the model's \
+                 own): render with --gsplat-world",
+                percent(g),
+                percent(colmap)
+            ),
+            _ if colmap >= 0.25 => {
+                format!("the COLMAP model's own ({} of its 3D points lie on the splats)", percent(colmap))
+            }
+            Ok(g) => format!(
+                "unclear: {} of the model's 3D points lie on the splats in its own world, {} in gsplat's",
+                percent(colmap),
+                percent(g)
+            ),
+            Err(why) => format!(
+                "unclear: {} of the model's 3D points lie on the splats in its own world; gsplat's: {why}",
+                percent(colmap)
+            ),
+        })
+    };
+    Some(match measured() {
+        Ok(world) => format!("world      {world}"),
+        Err(why) => format!("world      not measured: {why}"),
+    })
 }
 
 /// The views' lenses, counted; where some are distorted, that the trainers which undistort their

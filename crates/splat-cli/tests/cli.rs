@@ -1146,6 +1146,78 @@ fn distorted_colmap_cameras_render_through_their_lens() {
     );
 }
 
+/// gsplat's normalised world: `splat info` names the world splats lie in against a COLMAP model
+/// with 3D points, and `--gsplat-world` renders the views moved into it, as a cameras.json of
+/// the moved views does.
+#[test]
+fn gsplat_world_is_found_from_the_splats() {
+    let base = splat_io::cameras::read_cameras(&root().join("fixtures/cloud.cameras.json")).unwrap()[0];
+    let views: Vec<splat_io::colmap::View> = [0.0f32, 0.4, -0.7, 0.9]
+        .iter()
+        .enumerate()
+        .map(|(i, &angle)| {
+            let camera = splat_core::Camera { rotation: base.rotation * glam::Mat3::from_rotation_y(angle), ..base };
+            splat_io::colmap::View { name: format!("img_{i}.jpg"), camera }
+        })
+        .collect();
+    let dir = scratch("gsplat-sparse");
+    std::fs::create_dir_all(&dir).unwrap();
+    splat_io::colmap::write_colmap_txt(&dir, &views).unwrap();
+    let info = |scene: &std::path::Path| {
+        let o = splat(&["info", scene.to_str().unwrap(), "--camera", dir.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let cloud_path = root().join("fixtures/cloud.ply");
+    let text = info(&cloud_path);
+    assert!(text.contains("world      not measured") && text.contains("points3D.txt"), "{text}");
+    // The cloud's means as the model's 3D points: the splats lie in the model's own world.
+    let cloud = splat_io::read_scene(&cloud_path).unwrap();
+    let points: Vec<glam::DVec3> = cloud.particles.iter().map(|p| p.mean.as_dvec3()).collect();
+    let rows: String = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| format!("{} {} {} {} 128 128 128 0.5\n", i + 1, p.x, p.y, p.z))
+        .collect();
+    std::fs::write(dir.join("points3D.txt"), rows).unwrap();
+    let text = info(&cloud_path);
+    assert!(text.contains("world      the COLMAP model's own (100 % of its 3D points"), "{text}");
+    // The cloud moved into the second frame gsplat's normalisation can give.
+    let posed = splat_io::colmap::read_colmap_posed(&dir).unwrap();
+    let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
+    let frame = splat_io::gsplat_world::frames(&poses, &points).unwrap()[1];
+    let mut moved = cloud.clone();
+    moved.particles.iter_mut().for_each(|p| p.mean = frame.point(p.mean.as_dvec3()).as_vec3());
+    let moved_path = scratch("gsplat-world.ply");
+    std::fs::write(&moved_path, splat_io::ply::encode_ply(&moved, splat_io::ply::PlyFormat::BinaryLittleEndian))
+        .unwrap();
+    let text = info(&moved_path);
+    assert!(text.contains("world      gsplat's normalised world (100 %") && text.contains("--gsplat-world"), "{text}");
+    let cameras: Vec<splat_core::Camera> = posed
+        .iter()
+        .map(|p| {
+            let (world_from_camera, centre) = frame.pose(p.rotation, p.centre);
+            let rotation = world_from_camera.transpose();
+            let translation = (-(rotation * centre)).as_vec3();
+            splat_core::Camera { rotation: rotation.as_mat3(), translation, ..p.view.camera }
+        })
+        .collect();
+    let json = scratch("gsplat-world.cameras.json");
+    splat_io::cameras::write_cameras(&json, &cameras).unwrap();
+    let render = |camera: &std::path::Path, index: &str, extra: &[&str], out: &str| {
+        let out = scratch(out);
+        let args = ["render", moved_path.to_str().unwrap(), "--camera", camera.to_str().unwrap(), "--camera-index"];
+        let size = ["--width", "48", "--height", "36", "--backend", "cpu", "-o", out.to_str().unwrap()];
+        let o = splat(&[&args[..], &[index], extra, &size].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(&out)
+    };
+    let ours = render(&dir, "3", &["--gsplat-world"], "gsplat-world.npy");
+    let expected = render(&json, "3", &[], "gsplat-world-json.npy");
+    let neighbour = rmse(&ours, &render(&json, "2", &[], "gsplat-world-json2.npy"));
+    assert!(rmse(&ours, &expected) < 1e-3 && neighbour > 1e-2, "{} against {neighbour}", rmse(&ours, &expected));
+}
+
 /// A COLMAP model renders the same view as the equivalent cameras.json, and `--all-cameras`
 /// writes one image per view, named after it.
 #[test]

@@ -340,6 +340,7 @@ fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, C
 /// trained ([`crate::gsplat_world::normalized_world`]).
 fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>, Error> {
     if !crate::colmap::is_colmap(path) {
+        std::fs::metadata(path).map_err(|e| Error::new(path, ErrorKind::Io(e)))?;
         let why = "gsplat normalises the world of a COLMAP model (its cameras and 3D points): give the capture's \
                    sparse/0 folder as the cameras";
         return Err(Error::new(path, ErrorKind::GsplatWorld(why.into())));

@@ -103,8 +103,7 @@ pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Res
     let share = |on: &[bool]| on.iter().filter(|&&on| on).count() as f64 / n;
     let percent = |f: f64| format!("{:.0} %", 100.0 * f);
     let (on_a, on_b) = (share(&on_a), share(&on_b));
-    let in_colmap = Occupancy::of(means, CELL / chosen.scale);
-    let on_colmap = points.iter().filter(|&&p| in_colmap.near(p)).count() as f64 / n;
+    let on_colmap = on_splats(&Occupancy::of(means, CELL / chosen.scale), points);
     let why = if on_colmap > on_a.max(on_b) {
         format!(
             "the splats lie in the COLMAP model's own world ({} of its 3D points are on them there, {} and {} in the \
@@ -130,6 +129,26 @@ pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Res
         )
     };
     Err(why)
+}
+
+/// The share of a COLMAP model's 3D `points` on splats with these `means` where both are in the
+/// model's own world, by the measure [`normalized_world`] takes in gsplat's (cells 1 % of the
+/// median camera distance).
+pub fn on_splats_in_colmap(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<f64, String> {
+    let scale = similarity_from_cameras(poses)?.scale;
+    Ok(on_splats(&Occupancy::of(means, CELL / scale), points))
+}
+
+/// The share of the points in `world` on splats with these `means`, by the measure of
+/// [`normalized_world`].
+pub fn on_splats_in(world: &Similarity, points: &[DVec3], means: &[Vec3]) -> f64 {
+    let moved: Vec<DVec3> = points.iter().map(|&p| world.point(p)).collect();
+    on_splats(&Occupancy::of(means, CELL), &moved)
+}
+
+/// The share of `points` near a splat of `occupied`.
+fn on_splats(occupied: &Occupancy, points: &[DVec3]) -> f64 {
+    points.iter().filter(|&&p| occupied.near(p)).count() as f64 / points.len().max(1) as f64
 }
 
 /// The two frames gsplat's normalisation T₃ T₂ T₁ can give a capture (module docs): with this
