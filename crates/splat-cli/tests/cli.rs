@@ -1354,8 +1354,8 @@ fn colmap_cameras_and_all_cameras() {
 
 /// `--undistort` renders a distorted capture's cameras as the pinholes its trainer trained
 /// through, at the size of OpenCV's valid-pixel rectangle, so that the oracle, which projects
-/// through a pinhole, renders them too; a lens the trainer does not undistort is refused, by
-/// view.
+/// through a pinhole, renders them too; gsplat's fisheye as its ideal fisheye, cropped, which
+/// the ray tracers render.
 #[test]
 fn undistorted_cameras_are_the_trainers_pinholes() {
     let folder = scratch("undistort");
@@ -1405,9 +1405,21 @@ fn undistorted_cameras_are_the_trainers_pinholes() {
     write("OPENCV_FISHEYE", serde_json::json!({"k1": 0.05}));
     let (o, out) = render(&["--undistort", "splatfacto"]);
     assert!(o.status.success() && npy_size(&out) == (36, 48), "{}", stderr(&o));
+    // gsplat's ideal fisheye, cropped to where its map lands inside, through a ray tracer.
+    let options = splat_io::cameras::ViewOptions {
+        undistort: Some(splat_core::undistort::Undistortion::Gsplat),
+        ..Default::default()
+    };
+    let [(_, ideal)] = &splat_io::cameras::read_views_in(&folder, options).unwrap()[..] else { panic!("one view") };
+    assert_eq!(ideal.lens, splat_core::camera::Lens::Fisheye(Default::default()));
+    assert!(ideal.width < 48 && ideal.height < 36, "{ideal:?}");
     let (o, _) = render(&["--undistort", "gsplat"]);
-    let refused = stderr(&o).contains("camera 0: images/a.png: gsplat's undistortion");
-    assert!(!o.status.success() && refused, "{}", stderr(&o));
+    assert!(!o.status.success() && stderr(&o).contains("cannot see through a fisheye lens"), "{}", stderr(&o));
+    let out = scratch("ideal.npy");
+    let camera = folder.to_str().unwrap();
+    let args = ["render", "fixtures/cloud.ply", "--camera", camera, "--undistort", "gsplat", "--method", "exact"];
+    let o = splat(&[&args[..], &["--backend", "cpu", "-o", out.to_str().unwrap()]].concat());
+    assert!(o.status.success() && npy_size(&out) == (ideal.height, ideal.width), "{}", stderr(&o));
 }
 
 /// `--all-cameras` prepares the world once (the BVH, the device arrays, the pipelines) and renders

@@ -287,11 +287,22 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     };
     let views = views.into_iter().enumerate().map(size).collect::<Result<Vec<_>, Error>>()?;
     let Some(trainer) = options.undistort else { return Ok(views) };
-    let undistort = |(index, (name, camera)): (usize, (String, Camera))| match camera.undistorted(trainer) {
-        Ok(camera) => Ok((name, camera)),
-        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
+    // The views of a capture share a few cameras, and gsplat's fisheye crop reads its whole map.
+    let mut undistorted: Vec<(Camera, Camera)> = Vec::new();
+    let mut undistort = |(index, (name, camera)): (usize, (String, Camera))| {
+        let same_intrinsics = |c: &Camera| Camera { rotation: camera.rotation, translation: camera.translation, ..*c };
+        if let Some((_, done)) = undistorted.iter().find(|(original, _)| same_intrinsics(original) == camera) {
+            return Ok((name, same_intrinsics(done)));
+        }
+        match camera.undistorted(trainer) {
+            Ok(done) => {
+                undistorted.push((camera, done));
+                Ok((name, done))
+            }
+            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
+        }
     };
-    views.into_iter().enumerate().map(undistort).collect()
+    views.into_iter().enumerate().map(&mut undistort).collect()
 }
 
 /// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms, a

@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use splat_cli::args::{ReadArgs, Staged};
 use splat_cli::render::{PipelineArg, RenderArgs, Rendered};
+use splat_core::camera::Lens;
 use splat_core::particle::sh_coeff_count;
 use splat_core::undistort::Undistortion;
 use splat_core::{Camera, Particle, Scene};
@@ -311,6 +312,31 @@ impl PyCamera {
     #[getter]
     fn is_pinhole(&self) -> bool {
         self.camera.is_pinhole()
+    }
+
+    /// The lens: "pinhole", "perspective" (distorted), "fisheye" or "equirectangular".
+    #[getter]
+    fn lens(&self) -> &'static str {
+        match self.camera.lens {
+            Lens::Pinhole => "pinhole",
+            Lens::Perspective(_) => "perspective",
+            Lens::Fisheye(_) => "fisheye",
+            Lens::Equirectangular => "equirectangular",
+        }
+    }
+
+    /// The lens's distortion coefficients, COLMAP's and OpenCV's: a dict of "radial" (k1–k4),
+    /// "rational" (FULL_OPENCV's k4–k6, the denominator), "tangential" (p1, p2) and "prism"
+    /// (s1, s2), each a list; None for a pinhole or equirectangular lens.
+    #[getter]
+    fn distortion<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(d) = self.camera.lens.distortion() else { return Ok(None) };
+        let dict = PyDict::new(py);
+        dict.set_item("radial", d.radial.to_vec())?;
+        dict.set_item("rational", d.rational.to_vec())?;
+        dict.set_item("tangential", d.tangential.to_vec())?;
+        dict.set_item("prism", d.prism.to_vec())?;
+        Ok(Some(dict))
     }
 
     fn __repr__(&self) -> String {

@@ -116,3 +116,32 @@ def nerfstudio_undistort_image(camera_type: str, distortion_params: np.ndarray, 
     newK[0, 2] = newK[0, 2] + 0.5
     newK[1, 2] = newK[1, 2] + 0.5
     return newK, image
+
+
+def gsplat_fisheye(K: np.ndarray, params: np.ndarray, size, middle: bool = True):
+    """gsplat's COLMAP parser for an OPENCV_FISHEYE camera (`examples/datasets/colmap.py`, the
+    fisheye branch of `Parser.__init__`), as it is: its map about the image's middle, the mask
+    of where the map lands inside, the crop to the mask's box and K moved with it. `params` are
+    k1–k4 as float32, as `_camera_distortion` keeps them. Returns (K_undist, (w, h), mapx, mapy,
+    roi). `middle=False` maps about c instead: a control."""
+    width, height = size
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    grid_x, grid_y = np.meshgrid(
+        np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32), indexing="xy"
+    )
+    x1 = (grid_x - cx) / fx
+    y1 = (grid_y - cy) / fy
+    theta = np.sqrt(x1**2 + y1**2)
+    r = 1.0 + params[0] * theta**2 + params[1] * theta**4 + params[2] * theta**6 + params[3] * theta**8
+    centre_x, centre_y = (width // 2, height // 2) if middle else (cx, cy)
+    mapx = (fx * x1 * r + centre_x).astype(np.float32)
+    mapy = (fy * y1 * r + centre_y).astype(np.float32)
+    mask = np.logical_and(np.logical_and(mapx > 0, mapy > 0), np.logical_and(mapx < width - 1, mapy < height - 1))
+    y_indices, x_indices = np.nonzero(mask)
+    y_min, y_max = y_indices.min(), y_indices.max() + 1
+    x_min, x_max = x_indices.min(), x_indices.max() + 1
+    K_undist = K.copy()
+    K_undist[0, 2] -= x_min
+    K_undist[1, 2] -= y_min
+    roi = (int(x_min), int(y_min), int(x_max - x_min), int(y_max - y_min))
+    return K_undist, (roi[2], roi[3]), mapx, mapy, roi

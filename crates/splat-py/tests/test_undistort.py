@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import pytest
 import splat
-from conftest import nerfstudio_undistort_image
+from conftest import gsplat_fisheye, nerfstudio_undistort_image
 
 # f32 storage of K (values up to 2,000 px) against OpenCV's f64.
 TOLERANCE_PX = 1e-3
@@ -144,14 +144,30 @@ def test_gsplats_pinhole_of_a_colmap_camera(tmp_path, case):
     assert_camera(camera, K, size, label)
 
 
+@pytest.mark.parametrize("lens", fisheye_lenses(), ids=lambda lens: lens[0])
+def test_gsplats_ideal_fisheye_of_a_colmap_fisheye(tmp_path, lens):
+    name, w, h, fx, fy, cx, cy, *k = lens
+    folder = tmp_path / "sparse"
+    colmap_text_model(folder, "OPENCV_FISHEYE", w, h, [fx, fy, cx, cy, *k])
+    K, size, *_ = gsplat_fisheye(intrinsics(fx, fy, cx, cy), np.array(k, dtype=np.float32), (w, h))
+    [(_, camera)] = splat.load_cameras(folder, undistort="gsplat")
+    assert (camera.width, camera.height) == size, (camera, size)
+    assert camera.lens == "fisheye" and not any(np.concatenate(list(camera.distortion.values()))), camera.distortion
+    np.testing.assert_array_equal(camera.K, K.astype(np.float32), err_msg=name)
+    # Control: the map about c, not about the image's middle, crops elsewhere.
+    other, *_ = gsplat_fisheye(intrinsics(fx, fy, cx, cy), np.array(k, dtype=np.float32), (w, h), middle=False)
+    assert not np.array_equal(other, K), name
+
+
 def test_lenses_opencv_cannot_undistort_are_refused(tmp_path):
     path = tmp_path / "transforms.json"
     nerfstudio_file(path, "OPENCV", opencv_lenses()[0], {"k1": -0.1, "k4": 0.01})
     with pytest.raises(splat.SplatError, match="no r⁸ term"):
         splat.load_cameras(path, undistort="splatfacto")
-    nerfstudio_file(path, "OPENCV_FISHEYE", fisheye_lenses()[0], {"k1": 0.05})
-    with pytest.raises(splat.SplatError, match="ideal fisheye"):
-        splat.load_cameras(path, undistort="gsplat")
+    nerfstudio_file(path, "OPENCV_FISHEYE", fisheye_lenses()[0], {"k1": 0.05, "p1": 0.01})
+    for trainer in ("splatfacto", "gsplat"):
+        with pytest.raises(splat.SplatError, match="k1–k4 only"):
+            splat.load_cameras(path, undistort=trainer)
     with pytest.raises(splat.SplatError, match="expected one of splatfacto, gsplat"):
         splat.load_cameras(path, undistort="3dgs")
     # Without distortion, every camera is its own pinhole.

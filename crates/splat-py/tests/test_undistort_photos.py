@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 import pytest
 import splat
-from conftest import nerfstudio_undistort_image
+from conftest import gsplat_fisheye, nerfstudio_undistort_image
 from PIL import Image
 
 # (name, w, h, fx, fy, cx, cy, k1, k2, k3, p1, p2): small perspective lenses, barrel and
@@ -159,6 +159,32 @@ def test_gsplats_photo_of_a_colmap_camera(splat_bin, tmp_path, lens):
         assert (gsplat_photo(K, params, photo, control) != theirs).mean() > 0.3, control.__name__
 
 
+def test_gsplats_photo_of_a_colmap_fisheye(splat_bin, tmp_path):
+    name, w, h, fx, fy, cx, cy, *k = FISHEYE[0]
+    sparse = tmp_path / "sparse" / "0"
+    sparse.mkdir(parents=True)
+    values = " ".join(repr(float(p)) for p in [fx, fy, cx, cy, *k])
+    (sparse / "cameras.txt").write_text(f"1 OPENCV_FISHEYE {w} {h} {values}\n")
+    (sparse / "images.txt").write_text("1 1 0 0 0 0 0 0 1 shot.png\n\n")
+    (sparse / "points3D.txt").write_text("")
+    photo = noise(w, h, 3, 6)
+    K, params = intrinsics(fx, fy, cx, cy, np.float64), np.array(k, dtype=np.float32)
+
+    def theirs(remap=cv2.remap, middle=True):
+        """gsplat's parser (the fisheye map and its crop) and dataset (`cv2.remap`, the crop)."""
+        _, _, mapx, mapy, (x, y, w, h) = gsplat_fisheye(K, params, (photo.shape[1], photo.shape[0]), middle)
+        return remap(photo, mapx, mapy, cv2.INTER_LINEAR)[y : y + h, x : x + w]
+
+    expected = theirs()
+    assert_same(undistort(splat_bin, tmp_path, sparse, "gsplat", photo, "shot.png"), expected, name)
+    # Controls: samples 1/32 px off, interpolation in f32, and the map about c rather than the
+    # image's middle (half a pixel and a quarter away) change most values.
+    for control in (shifted_remap, float_bilinear):
+        assert (theirs(control) != expected).mean() > 0.3, control.__name__
+    about_c = theirs(middle=False)
+    assert about_c.shape != expected.shape or (about_c != expected).mean() > 0.3
+
+
 def test_photos_that_do_not_fit_are_refused(splat_bin, tmp_path):
     lens = PERSPECTIVE[0]
     nerfstudio_file(tmp_path / "transforms.json", "OPENCV", lens, {"k1": -0.1})
@@ -191,8 +217,12 @@ def test_a_python_camera_undistorts_its_photos_as_the_cli(tmp_path):
         camera.undistort_photo(noise(100, 80, 3, 6), "splatfacto")
     with pytest.raises(splat.SplatError, match="expected one of splatfacto, gsplat"):
         camera.undistort_photo(photo, "3dgs")
-    with pytest.raises(splat.SplatError, match="ideal fisheye"):
-        camera.undistort_photo(photo, "gsplat")
+    # gsplat's ideal fisheye of the same photo, through Python.
+    _, _, mapx, mapy, (x, y, cw, ch) = gsplat_fisheye(
+        intrinsics(fx, fy, cx, cy, np.float64), np.array([k1, k2, k3, k4], dtype=np.float32), (w, h)
+    )
+    gsplat = cv2.remap(rgb, mapx, mapy, cv2.INTER_LINEAR)[y : y + ch, x : x + cw]
+    np.testing.assert_array_equal(camera.undistort_photo(rgb, "gsplat"), gsplat, err_msg=name)
 
 
 def gsplat_parser_K(K: np.ndarray, size, factor: int, actual):

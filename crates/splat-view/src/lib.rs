@@ -59,7 +59,7 @@ pub struct SceneArgs {
     pub gsplat_world: bool,
     /// Show each camera of --camera as the pinhole this trainer undistorts its photos to
     /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
-    /// calls it.
+    /// calls it; gsplat's fisheye, the ideal fisheye its own map resamples to.
     #[arg(long, requires = "camera", value_parser = undistort_parser())]
     pub undistort: Option<Undistortion>,
     /// Keep only a trainer's split of the views of --camera (its held-out views), in its order.

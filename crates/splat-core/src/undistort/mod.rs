@@ -1,17 +1,17 @@
-//! The pinhole camera a trainer trains a distorted capture through.
+//! The camera a trainer trains a distorted capture through.
 //!
 //! Splatfacto (Nerfstudio's full-image datamanager, `_undistort_image` in
 //! `nerfstudio/data/utils/dataloaders.py`) and gsplat's COLMAP parser
 //! (`examples/datasets/colmap.py`) do not train through a capture's lens. They resample each
-//! photo to a pinhole camera that OpenCV chooses and train on that, so their training and
-//! evaluation images are of that camera. [`Camera::undistorted`] gives it, to render what they
+//! photo to a pinhole camera that OpenCV chooses (gsplat: a fisheye to an ideal fisheye) and
+//! train on that, so their training and evaluation images are of that camera. [`Camera::undistorted`] gives it, to render what they
 //! compare against, and [`Camera::undistort_photo`] the photographs they compare with,
 //! resampled as OpenCV resamples them (`remap.rs`).
 //!
 //! | lens | [`Undistortion::Splatfacto`] | [`Undistortion::Gsplat`] |
 //! |---|---|---|
 //! | perspective (`OPENCV`, `RADIAL`, …) | `cv2.getOptimalNewCameraMatrix(K, D, (w, h), 0)` of K in OpenCV's pixel centres (c − ½); the image cropped to its valid-pixel rectangle, the principal point moved with the crop | the same of K as it is; cropped, the principal point not moved |
-//! | fisheye (`OPENCV_FISHEYE`) | `cv2.fisheye.estimateNewCameraMatrixForUndistortRectify(K, D, (w, h), I, balance = 0)` of c − ½, the same size | refused: gsplat resamples a fisheye to an ideal fisheye about the image's middle, not to a pinhole |
+//! | fisheye (`OPENCV_FISHEYE`) | `cv2.fisheye.estimateNewCameraMatrixForUndistortRectify(K, D, (w, h), I, balance = 0)` of c − ½, the same size | an ideal (equidistant) fisheye of K, cropped to where its map lands inside the photo, the principal point moved with the crop: gsplat's map, which samples about the image's middle (w // 2, h // 2), not about c (below) |
 //! | pinhole, equirectangular | unchanged | unchanged |
 //!
 //! Nerfstudio leaves a camera whose coefficients are all zero as it is; gsplat undistorts every
@@ -22,6 +22,15 @@
 //!   with n / d the radial factor and δ the tangential and prism terms of [`Distortion`];
 //! - fisheye (`fisheye::undistortPoints`' default): Newton's method on θ_d = θ (1 + k₁θ² + k₂θ⁴ +
 //!   k₃θ⁶ + k₄θ⁸), at most 10 steps, until a step is below 1e-8.
+//!
+//! gsplat's fisheye is not OpenCV's: its pixel q of the new image, at x₁ = (q − c) / f and
+//! θ = |x₁|, samples the photo at f x₁ (1 + k₁θ² + k₂θ⁴ + k₃θ⁶ + k₄θ⁸) + (w // 2, h // 2), in
+//! double precision rounded to f32. That is an ideal fisheye of K, the angle θ of a ray
+//! mapped through the lens, but about the image's middle and not about c. The image is cropped
+//! to the box of the pixels whose sample lies strictly inside (0, w − 1) × (0, h − 1).
+//! simple_trainer renders the cropped image through K, with the principal point moved by the
+//! crop, as its `--camera_model` says: the ideal fisheye is `--camera_model fisheye`, the
+//! only one that matches these images.
 
 mod remap;
 
@@ -63,7 +72,9 @@ impl Undistortion {
             Undistortion::Splatfacto => {
                 "Nerfstudio's splatfacto: OpenCV's optimal pinhole (alpha 0, cropped) or fisheye pinhole (balance 0)"
             }
-            Undistortion::Gsplat => "gsplat's simple_trainer: OpenCV's optimal pinhole (alpha 0, cropped)",
+            Undistortion::Gsplat => {
+                "gsplat's simple_trainer: OpenCV's optimal pinhole (alpha 0, cropped); a fisheye, gsplat's ideal fisheye"
+            }
         }
     }
 }
@@ -271,12 +282,15 @@ enum Source {
     Perspective(Distortion),
     /// `cv::fisheye`'s k₁…k₄.
     Fisheye([f64; 4]),
+    /// gsplat's own fisheye map, k₁…k₄ about the image's middle (module documentation).
+    GsplatFisheye([f64; 4], DVec2),
 }
 
 /// What a trainer does to the photos of one distorted camera, in OpenCV's pixel convention
 /// (pixel centres at integers): the photo of intrinsics `source` through `lens` is resampled
-/// to the pinhole `target`, whose image is then cropped to `crop`; the trainer's camera of the
-/// cropped image has intrinsics `camera` in splat's convention.
+/// to the pinhole `target` (gsplat's fisheye: the ideal fisheye), whose image is then cropped
+/// to `crop`; the trainer's camera of the cropped image has intrinsics `camera` in splat's
+/// convention and the lens `trained`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Plan {
     source: Intrinsics,
@@ -284,18 +298,27 @@ struct Plan {
     target: Intrinsics,
     crop: Rect,
     camera: Intrinsics,
+    trained: Lens,
     sampling: remap::Sampling,
 }
 
 impl Plan {
     /// Where OpenCV samples the photo for pixel (x, y) of the cropped image: the map of
     /// `cv::initUndistortRectifyMap` (perspective) or `cv::fisheye::initUndistortRectifyMap`,
-    /// in double precision as OpenCV computes it.
+    /// in double precision as OpenCV computes it, or gsplat's fisheye map.
     fn source_pixel(&self, x: u32, y: u32) -> DVec2 {
         let q = DVec2::new(f64::from(x) + self.crop.x as f64, f64::from(y) + self.crop.y as f64);
-        let n = self.target.normalised(q);
-        let (f, c) = (self.source.f, self.source.c);
-        match self.lens {
+        self.lens.sample(q, self.source, self.target)
+    }
+}
+
+impl Source {
+    /// Where pixel `q` of the resampled image of intrinsics `target` samples the photo of
+    /// intrinsics `source` through this lens.
+    fn sample(self, q: DVec2, source: Intrinsics, target: Intrinsics) -> DVec2 {
+        let n = target.normalised(q);
+        let (f, c) = (source.f, source.c);
+        match self {
             Source::Perspective(d) => f * d.distort(n) + c,
             Source::Fisheye([k1, k2, k3, k4]) => {
                 let r = n.length();
@@ -305,8 +328,32 @@ impl Plan {
                 let scale = if r == 0.0 { 1.0 } else { theta_d / r };
                 f * n * scale + c
             }
+            Source::GsplatFisheye([k1, k2, k3, k4], middle) => {
+                // numpy's `theta**2` squares; its other powers call pow.
+                let theta = n.length();
+                let r = 1.0 + k1 * (theta * theta) + k2 * theta.powf(4.0) + k3 * theta.powf(6.0) + k4 * theta.powf(8.0);
+                f * n * r + middle
+            }
         }
     }
+}
+
+/// gsplat's crop of its fisheye map over an image of `(w, h)`: the box of the pixels whose
+/// sample, rounded to f32, lies strictly inside (0, w − 1) × (0, h − 1); `None` where none does.
+fn gsplat_fisheye_crop(lens: Source, k: Intrinsics, (w, h): (u32, u32)) -> Option<Rect> {
+    let (right, bottom) = ((w - 1) as f32, (h - 1) as f32);
+    let mut bounds: Option<(u32, u32, u32, u32)> = None;
+    for y in 0..h {
+        for x in 0..w {
+            let s = lens.sample(DVec2::new(x.into(), y.into()), k, k).as_vec2();
+            if s.x > 0.0 && s.y > 0.0 && s.x < right && s.y < bottom {
+                let (x0, y0, x1, y1) = bounds.unwrap_or((x, y, x, y));
+                bounds = Some((x0.min(x), y0.min(y), x1.max(x), y1.max(y)));
+            }
+        }
+    }
+    let (x0, y0, x1, y1) = bounds?;
+    Some(Rect { x: x0.into(), y: y0.into(), width: (x1 - x0 + 1).into(), height: (y1 - y0 + 1).into() })
 }
 
 impl Camera {
@@ -339,6 +386,7 @@ impl Camera {
                     target,
                     crop,
                     camera,
+                    trained: Lens::Pinhole,
                     sampling: remap::Sampling::FixedPointMap,
                 }
             }
@@ -352,17 +400,18 @@ impl Camera {
                     target,
                     crop,
                     camera: target,
+                    trained: Lens::Pinhole,
                     sampling: remap::Sampling::FloatMap,
                 }
             }
+            (Lens::Fisheye(d), _) if d.rational != [0.0; 3] || d.tangential != [0.0; 2] || d.prism != [0.0; 2] => {
+                return Err(refuse(
+                    "OpenCV's fisheye model has k1–k4 only, and this lens has tangential, rational or thin-prism \
+                     coefficients"
+                        .into(),
+                ));
+            }
             (Lens::Fisheye(d), Undistortion::Splatfacto) => {
-                if d.rational != [0.0; 3] || d.tangential != [0.0; 2] || d.prism != [0.0; 2] {
-                    return Err(refuse(
-                        "OpenCV's fisheye model has k1–k4 only, and this lens has tangential, rational or \
-                         thin-prism coefficients"
-                            .into(),
-                    ));
-                }
                 let source = k.shifted(-0.5);
                 let coefficients = d.radial.map(f64::from);
                 let target = fisheye_pinhole(source, coefficients, size).ok_or_else(|| {
@@ -377,15 +426,25 @@ impl Camera {
                     target,
                     crop,
                     camera,
+                    trained: Lens::Pinhole,
                     sampling: remap::Sampling::FloatMap,
                 }
             }
-            (Lens::Fisheye(_), Undistortion::Gsplat) => {
-                return Err(refuse(
-                    "gsplat resamples a fisheye capture to an ideal fisheye about the image's middle, not to a \
-                     pinhole camera; that resampling is not ported"
-                        .into(),
-                ));
+            (Lens::Fisheye(d), Undistortion::Gsplat) => {
+                // gsplat's own map, about (w // 2, h // 2), in f32 maps; the crop moves c.
+                let middle = DVec2::new((self.width / 2).into(), (self.height / 2).into());
+                let lens = Source::GsplatFisheye(d.radial.map(f64::from), middle);
+                let crop = gsplat_fisheye_crop(lens, k, size)
+                    .ok_or_else(|| refuse("gsplat's fisheye map lands outside the photo at every pixel".into()))?;
+                Plan {
+                    source: k,
+                    lens,
+                    target: k,
+                    crop,
+                    camera: k.cropped(crop),
+                    trained: Lens::Fisheye(Distortion::default()),
+                    sampling: remap::Sampling::FloatMap,
+                }
             }
         };
         if plan.crop.width == 0 {
@@ -394,8 +453,9 @@ impl Camera {
         Ok(Some(plan))
     }
 
-    /// The pinhole camera `trainer` trains this camera's images through (see the module
-    /// documentation); a camera without a distorted lens is its own.
+    /// The camera `trainer` trains this camera's images through (see the module
+    /// documentation): a pinhole, or gsplat's ideal fisheye; a camera without a distorted lens
+    /// is its own.
     pub fn undistorted(&self, trainer: Undistortion) -> Result<Camera, CameraError> {
         let Some(plan) = self.plan(trainer)? else { return Ok(*self) };
         let (width, height) = plan.crop.size();
@@ -407,7 +467,7 @@ impl Camera {
             fy: new.f.y as f32,
             cx: new.c.x as f32,
             cy: new.c.y as f32,
-            lens: Lens::Pinhole,
+            lens: plan.trained,
             ..*self
         };
         camera
@@ -496,6 +556,24 @@ mod tests {
     }
 
     #[test]
+    fn gsplats_fisheye_is_an_ideal_fisheye_cropped_to_its_maps_inside() {
+        // Without coefficients and with c at the image's middle, gsplat's map is the identity:
+        // the crop keeps the pixels strictly inside, and the lens is the ideal fisheye.
+        let small = |lens| Camera { width: 64, height: 48, fx: 40.0, fy: 41.0, cx: 32.0, cy: 24.0, ..camera(lens) };
+        let ideal = small(Lens::Fisheye(Distortion::default()));
+        let plan = ideal.plan(Undistortion::Gsplat).unwrap().expect("gsplat undistorts every fisheye");
+        assert_eq!(plan.crop, Rect { x: 1, y: 1, width: 62, height: 46 });
+        assert!(plan.source_pixel(0, 0).abs_diff_eq(DVec2::new(1.0, 1.0), 1e-12));
+        let undistorted = ideal.undistorted(Undistortion::Gsplat).unwrap();
+        assert_eq!((undistorted.width, undistorted.height, undistorted.cx, undistorted.cy), (62, 46, 31.0, 23.0));
+        assert_eq!(undistorted.lens, Lens::Fisheye(Distortion::default()));
+        // A barrel fisheye samples nearer the middle: the crop grows to the whole image.
+        let barrel = small(Lens::Fisheye(Distortion { radial: [-0.2, 0.05, 0.0, 0.0], ..Default::default() }));
+        let plan = barrel.plan(Undistortion::Gsplat).unwrap().unwrap();
+        assert_eq!(plan.crop, Rect::whole((64, 48)), "{plan:?}");
+    }
+
+    #[test]
     fn lenses_opencv_cannot_undistort_are_refused_by_name() {
         let k4 = Distortion { radial: [0.1, 0.0, 0.0, 0.01], ..Default::default() };
         let prism = Distortion { radial: [0.1, 0.0, 0.0, 0.0], prism: [0.01, 0.0], ..Default::default() };
@@ -504,7 +582,6 @@ mod tests {
             (Lens::Perspective(k4), Undistortion::Splatfacto, "no r⁸ term"),
             (Lens::Perspective(k4), Undistortion::Gsplat, "no r⁸ term"),
             (Lens::Fisheye(prism), Undistortion::Splatfacto, "k1–k4 only"),
-            (Lens::Fisheye(barrel()), Undistortion::Gsplat, "ideal fisheye"),
             // OpenCV's five steps diverge: its rectangle turns inside out.
             (Lens::Perspective(wild), Undistortion::Splatfacto, "rectangle of this lens is empty"),
         ];
