@@ -224,19 +224,24 @@ fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<Strin
         let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
         let means: Vec<_> = scene.particles.iter().map(|p| p.mean).collect();
         let colmap = on_splats_in_colmap(&poses, &points, &means)?;
-        let gsplat = normalized_world(&poses, &points, &means).map(|w| on_splats_in(&w, &points, &means));
+        let gsplat = normalized_world(&poses, &points, &means).map(|w| (w, on_splats_in(&w, &points, &means)));
         let percent = |f: f64| format!("{:.0} %", 100.0 * f);
         Ok(match gsplat {
-            Ok(g) if g > colmap => format!(
-                "gsplat's normalised world ({} of the model's 3D points lie on the splats there, {} in the model's \
-                 own): render with --gsplat-world",
-                percent(g),
-                percent(colmap)
-            ),
-            _ if colmap >= 0.25 => {
+            Ok((world, g)) if g > colmap => {
+                // The views' mean up, moved into gsplat's world: what frames the splats there.
+                let up: glam::DVec3 = poses.iter().map(|(r, _)| -(world.rotation * r.y_axis)).sum();
+                format!(
+                    "gsplat's normalised world ({} of the model's 3D points lie on the splats there, {} in the \
+                     model's own): render with --gsplat-world; without cameras, frame with --up {}",
+                    percent(g),
+                    percent(colmap),
+                    up_flag(up.as_vec3())
+                )
+            }
+            _ if colmap >= splat_io::gsplat_world::FEW => {
                 format!("the COLMAP model's own ({} of its 3D points lie on the splats)", percent(colmap))
             }
-            Ok(g) => format!(
+            Ok((_, g)) => format!(
                 "unclear: {} of the model's 3D points lie on the splats in its own world, {} in gsplat's",
                 percent(colmap),
                 percent(g)
@@ -274,22 +279,25 @@ fn lens_line(views: &[splat_core::Camera]) -> String {
 /// Which way is up: the mean up of `views`.
 fn up_line(views: &[splat_core::Camera]) -> String {
     match splat_core::Camera::mean_up(views) {
-        Some(up) => {
-            let axis = up.abs().max_position();
-            let sign = if up[axis] < 0.0 { "-" } else { "" };
-            let mut flag = [0; 3].map(|z: i32| z.to_string());
-            flag[axis] = format!("{sign}1");
-            format!(
-                "up         {:.2},{:.2},{:.2}, the mean of {}: frame with --up {}",
-                up.x,
-                up.y,
-                up.z,
-                crate::counted(views.len(), "view"),
-                flag.join(",")
-            )
-        }
+        Some(up) => format!(
+            "up         {:.2},{:.2},{:.2}, the mean of {}: frame with --up {}",
+            up.x,
+            up.y,
+            up.z,
+            crate::counted(views.len(), "view"),
+            up_flag(up)
+        ),
         None => format!("up         the {} views disagree (no common up)", views.len()),
     }
+}
+
+/// The axis nearest `up`, as --up takes it ("0,-1,0").
+fn up_flag(up: glam::Vec3) -> String {
+    let axis = up.abs().max_position();
+    let sign = if up[axis] < 0.0 { "-" } else { "" };
+    let mut flag = [0; 3].map(|z: i32| z.to_string());
+    flag[axis] = format!("{sign}1");
+    flag.join(",")
 }
 
 /// Write `text` to stdout; a closed pipe (`splat info … | head`) is not an error.

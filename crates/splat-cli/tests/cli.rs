@@ -1192,7 +1192,8 @@ fn gsplat_world_is_found_from_the_splats() {
     std::fs::write(&moved_path, splat_io::ply::encode_ply(&moved, splat_io::ply::PlyFormat::BinaryLittleEndian))
         .unwrap();
     let text = info(&moved_path);
-    assert!(text.contains("world      gsplat's normalised world (100 %") && text.contains("--gsplat-world"), "{text}");
+    let gsplat = text.contains("world      gsplat's normalised world (100 %") && text.contains("--gsplat-world");
+    assert!(gsplat && text.contains("without cameras, frame with --up "), "{text}");
     let cameras: Vec<splat_core::Camera> = posed
         .iter()
         .map(|p| {

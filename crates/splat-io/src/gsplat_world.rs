@@ -81,14 +81,17 @@ const ODDS: f64 = 3.0;
 /// those the other frame alone puts there.
 const EXCESS: f64 = 0.05;
 
+/// Below this share of a model's 3D points on the splats, splats are not taken to lie in a world.
+pub const FEW: f64 = 0.25;
+
 /// The similarity taking a COLMAP model's world (its cameras' `poses`, its 3D `points`) to
 /// gsplat's normalised world, where splats with these `means` were trained: of the two
 /// [`frames`] gsplat's normalisation can give, the one that puts the points on the splats.
 ///
 /// The decision rests on the points the two frames disagree on: a point on the splats in one
 /// frame and off them in the other. The frame with more of them is taken where it has at
-/// least [`ODDS`] times as many as the other, and they exceed the other's by [`EXCESS`] of all
-/// points; points on the splats in both frames (a level ground, a round table) say nothing.
+/// least `ODDS` (3) times as many as the other, and they exceed the other's by `EXCESS` (5 %)
+/// of all points; points on the splats in both frames (a level ground, a round table) say nothing.
 pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<Similarity, String> {
     let frames = frames(poses, points)?;
     let occupied = Occupancy::of(means, CELL);
@@ -104,7 +107,7 @@ pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Res
     let percent = |f: f64| format!("{:.0} %", 100.0 * f);
     let (on_a, on_b) = (share(&on_a), share(&on_b));
     let on_colmap = on_splats(&Occupancy::of(means, CELL / chosen.scale), points);
-    let why = if on_colmap > on_a.max(on_b) {
+    let why = if on_colmap >= FEW && on_colmap > on_a.max(on_b) {
         format!(
             "the splats lie in the COLMAP model's own world ({} of its 3D points are on them there, {} and {} in the \
              two frames of gsplat's), not in gsplat's normalised world: they were trained without \
@@ -113,7 +116,7 @@ pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Res
             percent(on_a),
             percent(on_b)
         )
-    } else if on_a.max(on_b) < 0.25 {
+    } else if on_a.max(on_b) < FEW {
         format!(
             "few of the model's 3D points lie on the splats in either frame gsplat's normalisation can give ({} and \
              {}): the splats are not of this capture, or not gsplat's",
