@@ -139,7 +139,7 @@ def matrix_quaternion(r: np.ndarray) -> np.ndarray:
     return np.array(q)
 
 
-def capture(rng: np.random.Generator, folder: Path) -> tuple[np.ndarray, np.ndarray]:
+def capture(rng: np.random.Generator, folder: Path, camera: str = "PINHOLE 64 48 60 60 32 24") -> tuple:
     """A COLMAP text model in `folder`: 30 cameras around a lopsided scene (a ground patch, a
     box off its centre), the whole turned, moved and scaled at random; returns gsplat's
     camtoworlds (from the quaternions as written) and its float32 points."""
@@ -167,7 +167,7 @@ def capture(rng: np.random.Generator, folder: Path) -> tuple[np.ndarray, np.ndar
         c2w[:3, :3], c2w[:3, 3] = R.T, -R.T @ t
         c2ws.append(c2w)
     folder.mkdir(parents=True)
-    (folder / "cameras.txt").write_text("1 PINHOLE 64 48 60 60 32 24\n")
+    (folder / "cameras.txt").write_text(f"1 {camera}\n")
     (folder / "images.txt").write_text("".join(lines))
     rows = [f"{k + 1} {float(x)!r} {float(y)!r} {float(z)!r} 128 128 128 0.5\n" for k, (x, y, z) in enumerate(points)]
     (folder / "points3D.txt").write_text("".join(rows))
@@ -235,3 +235,31 @@ def test_splats_outside_gsplats_world_and_other_camera_files_are_refused(tmp_pat
     (sparse / "points3D.txt").unlink()
     with pytest.raises(splat.SplatError, match="points3D.txt"):
         splat.load_cameras(sparse, gsplat_world=splats_at(points))
+
+
+def test_gsplats_evaluation_cameras_with_every_option(tmp_path):
+    """gsplat's test views of a distorted capture read from images_2/: its parser's K / 2 with the
+    sides floored, OpenCV's pinhole of that (cropped, c kept), the normalised world of all views,
+    then every 8th view by name (`test_every` 8)."""
+    import cv2
+
+    rng = np.random.default_rng(4)
+    sparse = tmp_path / "sparse" / "0"
+    fx, fy, cx, cy, k1, k2, p1, p2 = 60.0, 61.0, 33.25, 23.5, -0.12, 0.02, 0.001, -0.002
+    c2ws, points = capture(rng, sparse, f"OPENCV 65 49 {fx} {fy} {cx} {cy} {k1} {k2} {p1} {p2}")
+    camtoworlds, normalised, _ = gsplat_normalize(c2ws, points)
+    K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+    K[:2, :] /= 2
+    size = (65 // 2, 49 // 2)
+    params = np.array([k1, k2, p1, p2], dtype=np.float32)
+    K_undist, roi = cv2.getOptimalNewCameraMatrix(K, params, size, 0)
+    options = {"split": "3dgs-test", "data_factor": 2, "image_size": size, "undistort": "gsplat"}
+    views = splat.load_cameras(sparse, gsplat_world=splats_at(normalised), **options)
+    assert [name for name, _ in views] == [f"view_{i:02d}.png" for i in range(0, 30, 8)]
+    rotation, translation = worst(views, camtoworlds[::8])
+    assert rotation < 1e-6 and translation < 1e-6, (rotation, translation)
+    # Control: the world of the test views alone is another.
+    assert worst(views, gsplat_normalize(c2ws[::8], points)[0])[1] > 1e-3
+    for _, camera in views:
+        assert (camera.width, camera.height) == (roi[2], roi[3])
+        np.testing.assert_allclose(camera.K, K_undist, rtol=0, atol=1e-3)
