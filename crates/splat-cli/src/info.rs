@@ -221,7 +221,7 @@ fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<Strin
     let measured = || -> Result<String, String> {
         let points = splat_io::colmap::read_points3d(path).map_err(|e| e.to_string())?;
         let posed = splat_io::colmap::read_colmap_posed(path).map_err(|e| e.to_string())?;
-        let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
+        let poses: Vec<_> = posed.iter().map(splat_io::colmap::PosedView::pose).collect();
         let means: Vec<_> = scene.particles.iter().map(|p| p.mean).collect();
         let colmap = on_splats_in_colmap(&poses, &points, &means)?;
         let gsplat = normalized_world(&poses, &points, &means).map(|w| (w, on_splats_in(&w, &points, &means)));

@@ -1184,7 +1184,7 @@ fn gsplat_world_is_found_from_the_splats() {
     assert!(text.contains("world      the COLMAP model's own (100 % of its 3D points"), "{text}");
     // The cloud moved into the second frame gsplat's normalisation can give.
     let posed = splat_io::colmap::read_colmap_posed(&dir).unwrap();
-    let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
+    let poses: Vec<_> = posed.iter().map(splat_io::colmap::PosedView::pose).collect();
     let frame = splat_io::gsplat_world::frames(&poses, &points).unwrap()[1];
     let mut moved = cloud.clone();
     moved.particles.iter_mut().for_each(|p| p.mean = frame.point(p.mean.as_dvec3()).as_vec3());

@@ -290,9 +290,9 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     // The views of a capture share a few cameras, and gsplat's fisheye crop reads its whole map.
     let mut undistorted: Vec<(Camera, Camera)> = Vec::new();
     let mut undistort = |(index, (name, camera)): (usize, (String, Camera))| {
-        let same_intrinsics = |c: &Camera| Camera { rotation: camera.rotation, translation: camera.translation, ..*c };
-        if let Some((_, done)) = undistorted.iter().find(|(original, _)| same_intrinsics(original) == camera) {
-            return Ok((name, same_intrinsics(done)));
+        let posed_here = |c: &Camera| Camera { rotation: camera.rotation, translation: camera.translation, ..*c };
+        if let Some((_, done)) = undistorted.iter().find(|(original, _)| posed_here(original) == camera) {
+            return Ok((name, posed_here(done)));
         }
         match camera.undistorted(trainer) {
             Ok(done) => {
@@ -358,7 +358,7 @@ fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>,
     }
     let posed = crate::colmap::read_colmap_posed(path)?;
     let points = crate::colmap::read_points3d(path)?;
-    let poses: Vec<_> = posed.iter().map(|p| (p.rotation, p.centre)).collect();
+    let poses: Vec<_> = posed.iter().map(crate::colmap::PosedView::pose).collect();
     let means: Vec<_> = splats.particles.iter().map(|p| p.mean).collect();
     let world = crate::gsplat_world::normalized_world(&poses, &points, &means)
         .map_err(|why| Error::new(path, ErrorKind::GsplatWorld(why)))?;

@@ -38,6 +38,13 @@ pub struct PosedView {
     pub centre: DVec3,
 }
 
+impl PosedView {
+    /// Its pose: camera-to-world rotation and centre.
+    pub fn pose(&self) -> (DMat3, DVec3) {
+        (self.rotation, self.centre)
+    }
+}
+
 /// Intrinsics of a COLMAP camera.
 #[derive(Clone, Copy, Debug)]
 struct Intrinsics {
