@@ -153,8 +153,22 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         frames_done(args.spp, algorithm.is_random(lighting, !meshes.is_empty(), &staged.settings.sampling)),
         written(&args)
     );
+    if args.scene.camera.is_some() && shows_nothing(&out) {
+        eprintln!("note: the view shows none of the splats (coverage under 1 % at every pixel). {ANOTHER_WORLD}");
+    }
     Ok(())
 }
+
+/// Whether a render shows none of the splats: coverage under 1 % at every pixel.
+fn shows_nothing(out: &RenderOutput) -> bool {
+    out.alpha.data().iter().all(|&a| a < 0.01)
+}
+
+/// Why the views of a camera file may show none of the splats, and what to do.
+const ANOTHER_WORLD: &str = "Splats trained by gsplat (normalize_world_space, its default), by 3DGRUT with it, or by \
+                             Nerfstudio lie in a normalised world of their own, not the camera file's: `splat info \
+                             SCENE --camera CAMERAS` names the world a COLMAP model's splats lie in, and \
+                             --gsplat-world or --dataparser-transforms moves the cameras there";
 
 /// `splat render --frames A..B`: one share of a run, written as an accumulation file.
 fn run_share(mut args: RenderArgs) -> Result<()> {
@@ -439,9 +453,13 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         ViewFormat::Exr => "exr",
         ViewFormat::Npy => "npy",
     };
+    let empty = std::sync::atomic::AtomicUsize::new(0);
     let write = |k: usize, out: &RenderOutput| -> Result<()> {
         let (i, name) = mine[k];
         write_image(&args.output.join(format!("{}.{extension}", view_stem(name, i))), &out.mean)?;
+        if shows_nothing(out) {
+            empty.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
         bar.set_message(name.clone());
         bar.inc(1);
         Ok(())
@@ -467,6 +485,11 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
         start.elapsed().as_secs_f64(),
         args.output.display()
     );
+    if !mine.is_empty() && empty.into_inner() == mine.len() {
+        eprintln!(
+            "note: none of the views shows any of the splats (coverage under 1 % at every pixel). {ANOTHER_WORLD}"
+        );
+    }
     Ok(())
 }
 

@@ -1217,6 +1217,22 @@ fn gsplat_world_is_found_from_the_splats() {
     let expected = render(&json, "3", &[], "gsplat-world-json.npy");
     let neighbour = rmse(&ours, &render(&json, "2", &[], "gsplat-world-json2.npy"));
     assert!(rmse(&ours, &expected) < 1e-3 && neighbour > 1e-2, "{} against {neighbour}", rmse(&ours, &expected));
+    // Views of a camera file that show none of the splats say that the splats' world may be
+    // another: a camera turned away from the cloud, one view and all of them.
+    let turned = glam::Mat3::from_rotation_y(std::f32::consts::PI) * base.rotation;
+    let away = splat_core::Camera { rotation: turned, translation: -(turned * base.center()), ..base };
+    let away_json = scratch("away.cameras.json");
+    splat_io::cameras::write_cameras(&away_json, &[away]).unwrap();
+    for extra in [&[][..], &["--all-cameras"]] {
+        let out = scratch(if extra.is_empty() { "away.npy" } else { "away" });
+        let args = ["render", "fixtures/cloud.ply", "--camera", away_json.to_str().unwrap(), "--backend", "cpu"];
+        let o = splat(&[&args[..], extra, &["--width", "16", "--height", "12", "-o", out.to_str().unwrap()]].concat());
+        let note = if extra.is_empty() { "the view shows none of the splats" } else { "none of the views shows" };
+        assert!(o.status.success() && stderr(&o).contains(note) && stderr(&o).contains("splat info"), "{}", stderr(&o));
+    }
+    let here = scratch("here.npy");
+    let o = splat(&["render", "fixtures/cloud.ply", "--camera", dir.to_str().unwrap(), "-o", here.to_str().unwrap()]);
+    assert!(o.status.success() && !stderr(&o).contains("none of the splats"), "{}", stderr(&o));
 }
 
 /// A COLMAP model renders the same view as the equivalent cameras.json, and `--all-cameras`

@@ -365,20 +365,12 @@ fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>,
     let moved = |(index, p): (usize, crate::colmap::PosedView)| {
         let (world_from_camera, centre) = world.pose(p.rotation, p.centre);
         let camera_from_world = world_from_camera.transpose();
-        let c = p.view.camera;
-        Camera::from_intrinsics(
-            c.width,
-            c.height,
-            c.fx,
-            c.fy,
-            c.cx,
-            c.cy,
-            camera_from_world.as_mat3(),
-            (-(camera_from_world * centre)).as_vec3(),
-        )
-        .and_then(|moved| moved.with_lens(c.lens))
-        .map(|camera| (p.view.name, camera))
-        .map_err(|e| Error::new(path, ErrorKind::Camera { index, message: e.to_string() }))
+        let rotation = camera_from_world.as_mat3();
+        let camera = Camera { rotation, translation: (-(camera_from_world * centre)).as_vec3(), ..p.view.camera };
+        match camera.validate() {
+            Ok(()) => Ok((p.view.name, camera)),
+            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: e.to_string() })),
+        }
     };
     posed.into_iter().enumerate().map(moved).collect()
 }
