@@ -214,7 +214,7 @@ fn camera_lines(
 /// For a COLMAP model, which world the splats lie in: the model's own, or gsplat's normalised
 /// world (rendered with --gsplat-world), by the share of its 3D points on the splats in each.
 fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<String> {
-    use splat_io::gsplat_world::{normalized_world, on_splats_in, on_splats_in_colmap};
+    use splat_io::gsplat_world::{normalized_world, on_splats_in_colmap};
     if !splat_io::colmap::is_colmap(path) {
         return None;
     }
@@ -224,7 +224,7 @@ fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<Strin
         let poses: Vec<_> = posed.iter().map(splat_io::colmap::PosedView::pose).collect();
         let means: Vec<_> = scene.particles.iter().map(|p| p.mean).collect();
         let colmap = on_splats_in_colmap(&poses, &points, &means)?;
-        let gsplat = normalized_world(&poses, &points, &means).map(|w| (w, on_splats_in(&w, &points, &means)));
+        let gsplat = normalized_world(&poses, &points, &means);
         let percent = |f: f64| format!("{:.0} %", 100.0 * f);
         Ok(match gsplat {
             Ok((world, g)) if g > colmap => {

@@ -360,7 +360,7 @@ fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>,
     let points = crate::colmap::read_points3d(path)?;
     let poses: Vec<_> = posed.iter().map(crate::colmap::PosedView::pose).collect();
     let means: Vec<_> = splats.particles.iter().map(|p| p.mean).collect();
-    let world = crate::gsplat_world::normalized_world(&poses, &points, &means)
+    let (world, _) = crate::gsplat_world::normalized_world(&poses, &points, &means)
         .map_err(|why| Error::new(path, ErrorKind::GsplatWorld(why)))?;
     let moved = |(index, p): (usize, crate::colmap::PosedView)| {
         let (world_from_camera, centre) = world.pose(p.rotation, p.centre);

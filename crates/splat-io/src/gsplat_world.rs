@@ -86,26 +86,27 @@ pub const FEW: f64 = 0.25;
 
 /// The similarity taking a COLMAP model's world (its cameras' `poses`, its 3D `points`) to
 /// gsplat's normalised world, where splats with these `means` were trained: of the two
-/// [`frames`] gsplat's normalisation can give, the one that puts the points on the splats.
+/// [`frames`] gsplat's normalisation can give, the one that puts the points on the splats; with
+/// the share of the points on the splats there.
 ///
 /// The decision rests on the points the two frames disagree on: a point on the splats in one
 /// frame and off them in the other. The frame with more of them is taken where it has at
 /// least `ODDS` (3) times as many as the other, and they exceed the other's by `EXCESS` (5 %)
 /// of all points; points on the splats in both frames (a level ground, a round table) say nothing.
-pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<Similarity, String> {
+pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<(Similarity, f64), String> {
     let frames = frames(poses, points)?;
     let occupied = Occupancy::of(means, CELL);
     let [on_a, on_b] = frames.map(|frame| points.iter().map(|&p| occupied.near(frame.point(p))).collect::<Vec<_>>());
     let only = |x: &[bool], y: &[bool]| x.iter().zip(y).filter(|&(&x, &y)| x && !y).count() as f64;
     let (a, b) = (only(&on_a, &on_b), only(&on_b, &on_a));
-    let (chosen, mine, theirs) = if a >= b { (frames[0], a, b) } else { (frames[1], b, a) };
     let n = points.len() as f64;
-    if mine >= ODDS * theirs && mine - theirs >= EXCESS * n {
-        return Ok(chosen);
-    }
     let share = |on: &[bool]| on.iter().filter(|&&on| on).count() as f64 / n;
-    let percent = |f: f64| format!("{:.0} %", 100.0 * f);
     let (on_a, on_b) = (share(&on_a), share(&on_b));
+    let (chosen, on_chosen, mine, theirs) = if a >= b { (frames[0], on_a, a, b) } else { (frames[1], on_b, b, a) };
+    if mine >= ODDS * theirs && mine - theirs >= EXCESS * n {
+        return Ok((chosen, on_chosen));
+    }
+    let percent = |f: f64| format!("{:.0} %", 100.0 * f);
     let on_colmap = on_splats(&Occupancy::of(means, CELL / chosen.scale), points);
     let why = if on_colmap >= FEW && on_colmap > on_a.max(on_b) {
         format!(
@@ -140,13 +141,6 @@ pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Res
 pub fn on_splats_in_colmap(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<f64, String> {
     let scale = similarity_from_cameras(poses)?.scale;
     Ok(on_splats(&Occupancy::of(means, CELL / scale), points))
-}
-
-/// The share of the points in `world` on splats with these `means`, by the measure of
-/// [`normalized_world`].
-pub fn on_splats_in(world: &Similarity, points: &[DVec3], means: &[Vec3]) -> f64 {
-    let moved: Vec<DVec3> = points.iter().map(|&p| world.point(p)).collect();
-    on_splats(&Occupancy::of(means, CELL), &moved)
 }
 
 /// The share of `points` near a splat of `occupied`.
@@ -405,8 +399,9 @@ mod tests {
         let (poses, points) = (circle_of_cameras(), capture(true, &mut seed));
         let frames = frames(&poses, &points).unwrap();
         for frame in frames {
-            let chosen = normalized_world(&poses, &points, &splats(&frame, &points, &mut seed)).unwrap();
+            let (chosen, on_splats) = normalized_world(&poses, &points, &splats(&frame, &points, &mut seed)).unwrap();
             assert_eq!(chosen, frame);
+            assert_eq!(on_splats, 1.0);
         }
         // The two frames are a half turn about z apart.
         let half_turn = frames[1].rotation * frames[0].rotation.transpose();

@@ -270,9 +270,9 @@ impl PyCamera {
         Ok((from, args))
     }
 
-    /// The pinhole camera `undistort`'s trainer ("splatfacto" or "gsplat") undistorts this
-    /// camera's photos to (`load_cameras(..., undistort=...)` of one camera); a camera without
-    /// a distorted lens is its own.
+    /// The camera `undistort`'s trainer ("splatfacto" or "gsplat") undistorts this camera's
+    /// photos to, a pinhole or gsplat's ideal fisheye (`load_cameras(..., undistort=...)` of one
+    /// camera); a camera without a distorted lens is its own.
     fn undistorted(&self, undistort: &str) -> PyResult<Self> {
         let trainer = trainer(undistort)?;
         Ok(Self { camera: self.camera.undistorted(trainer).map_err(fail)? })
@@ -359,8 +359,8 @@ impl PyCamera {
 /// or its folder), as (image name, camera) in the order `splat render` lists them;
 /// `dataparser_transforms`, a Nerfstudio run's `dataparser_transforms.json`, moves a
 /// transforms.json's cameras into that run's world (splatfacto's splats'); `undistort`
-/// ("splatfacto" or "gsplat") makes each camera the pinhole that trainer undistorts its photos
-/// to, as `splat render --undistort` does; `split` ("3dgs-test", "nerfstudio-eval", …) keeps a
+/// ("splatfacto" or "gsplat") makes each camera the one that trainer undistorts its photos to
+/// (a pinhole; gsplat's fisheye, the ideal fisheye), as `splat render --undistort` does; `split` ("3dgs-test", "nerfstudio-eval", …) keeps a
 /// trainer's split of the views, as `--split` does; `data_factor` F gives each camera K / F and
 /// its sides floored, as gsplat and Nerfstudio take `images_F/` (`--data-factor`); `image_size`
 /// (width, height) scales each camera to the photographs' size after that and before it is

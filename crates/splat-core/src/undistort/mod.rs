@@ -4,9 +4,10 @@
 //! `nerfstudio/data/utils/dataloaders.py`) and gsplat's COLMAP parser
 //! (`examples/datasets/colmap.py`) do not train through a capture's lens. They resample each
 //! photo to a pinhole camera that OpenCV chooses (gsplat: a fisheye to an ideal fisheye) and
-//! train on that, so their training and evaluation images are of that camera. [`Camera::undistorted`] gives it, to render what they
-//! compare against, and [`Camera::undistort_photo`] the photographs they compare with,
-//! resampled as OpenCV resamples them (`remap.rs`).
+//! train on that, so their training and evaluation images are of that camera.
+//! [`Camera::undistorted`] gives it, to render what they compare against, and
+//! [`Camera::undistort_photo`] the photographs they compare with, resampled as OpenCV resamples
+//! them (`remap.rs`).
 //!
 //! | lens | [`Undistortion::Splatfacto`] | [`Undistortion::Gsplat`] |
 //! |---|---|---|
