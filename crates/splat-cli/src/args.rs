@@ -24,6 +24,7 @@ use splat_core::{
     Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, ScreenFilter, World,
 };
 use splat_io::cameras::{Split, ViewOptions};
+use splat_io::similarity::Similarity;
 use splat_io::text::{parse_direction, parse_vec3};
 use splat_io::world::WorldSpec;
 use std::path::PathBuf;
@@ -374,6 +375,18 @@ pub struct SceneArgs {
     /// 3D points lie on the splats.
     #[arg(help_heading = "Camera", long, requires = "camera", conflicts_with = "dataparser_transforms")]
     pub gsplat_world: bool,
+    /// A 4 × 4 (or 3 × 4) matrix [s R | t] from the world of --camera to the splats' world
+    /// (a .npy as numpy.save writes it, or its numbers as text, as numpy.savetxt writes them),
+    /// such as gsplat's parser.transform: moves every camera by it.
+    #[arg(
+        help_heading = "Camera",
+        long,
+        value_name = "FILE",
+        requires = "camera",
+        conflicts_with_all = ["dataparser_transforms", "gsplat_world"],
+        value_parser = splat_view::world_transform_parser
+    )]
+    pub world_transform: Option<Similarity>,
     /// Render each camera of --camera as the pinhole this trainer undistorts its photos to
     /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
     /// calls it; gsplat's fisheye, the ideal fisheye its own map resamples to.
@@ -600,6 +613,7 @@ impl SceneArgs {
         ViewOptions {
             dataparser: self.dataparser_transforms.as_deref(),
             gsplat_world: self.gsplat_world.then_some(scene),
+            world_transform: self.world_transform,
             undistort: self.undistort,
             split: self.split,
             factor: self.data_factor,

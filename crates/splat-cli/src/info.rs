@@ -21,6 +21,17 @@ pub struct InfoArgs {
     /// splats (ns-export gaussian-splat) live.
     #[arg(long, requires = "camera")]
     pub dataparser_transforms: Option<PathBuf>,
+    /// A 4 × 4 (or 3 × 4) matrix [s R | t] from the world of --camera to the splats' world, as
+    /// `splat render --world-transform` takes it: the views are moved by it, and for a COLMAP
+    /// model `info` says how many of its 3D points it puts on the splats.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "camera",
+        conflicts_with = "dataparser_transforms",
+        value_parser = splat_view::world_transform_parser
+    )]
+    pub world_transform: Option<splat_io::similarity::Similarity>,
     /// How scene files are read.
     #[command(flatten)]
     pub read: crate::args::ReadArgs,
@@ -124,7 +135,12 @@ pub fn run(args: InfoArgs) -> Result<()> {
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(lo, hi), p| (lo.min(p.scale.min_element()), hi.max(p.scale.max_element())));
     out!("scale      {lo:.2e} … {hi:.2e}");
-    out!("{}", camera_lines(args.camera.as_deref(), args.dataparser_transforms.as_deref(), &scene)?);
+    let options = splat_io::cameras::ViewOptions {
+        dataparser: args.dataparser_transforms.as_deref(),
+        world_transform: args.world_transform,
+        ..Default::default()
+    };
+    out!("{}", camera_lines(args.camera.as_deref(), options, &scene)?);
     out!("opacity histogram:");
     let mut bins = [0usize; 10];
     for p in &scene.particles {
@@ -197,7 +213,7 @@ fn world_text(world: &splat_io::world::WorldSpec) -> String {
 /// which world the splats of `scene` lie in.
 fn camera_lines(
     cameras: Option<&std::path::Path>,
-    dataparser: Option<&std::path::Path>,
+    options: splat_io::cameras::ViewOptions,
     scene: &splat_core::Scene,
 ) -> Result<String> {
     let Some(path) = cameras else {
@@ -205,16 +221,20 @@ fn camera_lines(
                    -y up; frame them with --up 0,-1,0"
             .into());
     };
-    let options = splat_io::cameras::ViewOptions { dataparser, ..Default::default() };
     let views: Vec<_> = crate::args::load_cameras(path, options)?.into_iter().map(|(_, c)| c).collect();
-    let world = world_line(path, scene).map_or(String::new(), |line| format!("\n{line}"));
+    let world = world_line(path, options.world_transform, scene).map_or(String::new(), |line| format!("\n{line}"));
     Ok(format!("{}\n{}{world}", up_line(&views), lens_line(&views)))
 }
 
 /// For a COLMAP model, which world the splats lie in: the model's own, or gsplat's normalised
-/// world (rendered with --gsplat-world), by the share of its 3D points on the splats in each.
-fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<String> {
-    use splat_io::gsplat_world::{normalized_world, on_splats_in_colmap};
+/// world (rendered with --gsplat-world), by the share of its 3D points on the splats in each;
+/// with a `world_transform`, the share it puts there.
+fn world_line(
+    path: &std::path::Path,
+    world_transform: Option<splat_io::similarity::Similarity>,
+    scene: &splat_core::Scene,
+) -> Option<String> {
+    use splat_io::gsplat_world::{normalized_world, on_splats_in, on_splats_in_colmap};
     if !splat_io::colmap::is_colmap(path) {
         return None;
     }
@@ -224,8 +244,16 @@ fn world_line(path: &std::path::Path, scene: &splat_core::Scene) -> Option<Strin
         let poses: Vec<_> = posed.iter().map(splat_io::colmap::PosedView::pose).collect();
         let means: Vec<_> = scene.particles.iter().map(|p| p.mean).collect();
         let colmap = on_splats_in_colmap(&poses, &points, &means)?;
-        let gsplat = normalized_world(&poses, &points, &means);
         let percent = |f: f64| format!("{:.0} %", 100.0 * f);
+        if let Some(world) = world_transform {
+            let moved = on_splats_in(world, &poses, &points, &means)?;
+            return Ok(format!(
+                "--world-transform's: {} of the model's 3D points lie on the splats there, {} in the model's own",
+                percent(moved),
+                percent(colmap)
+            ));
+        }
+        let gsplat = normalized_world(&poses, &points, &means);
         Ok(match gsplat {
             Ok((world, g)) if g > colmap => {
                 // The views' mean up, moved into gsplat's world: what frames the splats there.

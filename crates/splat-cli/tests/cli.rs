@@ -1197,7 +1197,7 @@ fn gsplat_world_is_found_from_the_splats() {
     let cameras: Vec<splat_core::Camera> = posed
         .iter()
         .map(|p| {
-            let (world_from_camera, centre) = frame.pose(p.rotation, p.centre);
+            let (world_from_camera, centre) = frame.pose(p.pose());
             let rotation = world_from_camera.transpose();
             let translation = (-(rotation * centre)).as_vec3();
             splat_core::Camera { rotation: rotation.as_mat3(), translation, ..p.view.camera }
@@ -1217,6 +1217,42 @@ fn gsplat_world_is_found_from_the_splats() {
     let expected = render(&json, "3", &[], "gsplat-world-json.npy");
     let neighbour = rmse(&ours, &render(&json, "2", &[], "gsplat-world-json2.npy"));
     assert!(rmse(&ours, &expected) < 1e-3 && neighbour > 1e-2, "{} against {neighbour}", rmse(&ours, &expected));
+    // The same world given as gsplat's parser.transform saved by numpy.savetxt: from the COLMAP
+    // model (its double-precision poses) and from a cameras.json of its views (single precision).
+    let saved = |world: &splat_io::similarity::Similarity, name: &str| {
+        let (m, t) = (world.scale * world.rotation, world.translation);
+        let row = |r: usize| format!("{:.18e} {:.18e} {:.18e} {:.18e}\n", m.row(r).x, m.row(r).y, m.row(r).z, t[r]);
+        let path = scratch(name);
+        std::fs::write(&path, format!("{}{}{}0 0 0 1\n", row(0), row(1), row(2))).unwrap();
+        path
+    };
+    let matrix = saved(&frame, "parser-transform.txt");
+    let flag = ["--world-transform", matrix.to_str().unwrap()];
+    let colmap_json = scratch("gsplat-colmap.cameras.json");
+    let unmoved: Vec<_> = posed.iter().map(|p| p.view.camera).collect();
+    splat_io::cameras::write_cameras(&colmap_json, &unmoved).unwrap();
+    for (cameras, name) in [(&dir, "world-transform-colmap.npy"), (&colmap_json, "world-transform-json.npy")] {
+        let given = render(cameras, "3", &flag, name);
+        assert!(rmse(&given, &expected) < 1e-3, "{name}: {}", rmse(&given, &expected));
+    }
+    let half_turn =
+        splat_io::similarity::Similarity::rotation(glam::DMat3::from_diagonal(glam::dvec3(-1.0, -1.0, 1.0)));
+    let other = saved(&frame.then(half_turn), "other-frame.txt");
+    let control = render(&dir, "3", &["--world-transform", other.to_str().unwrap()], "world-transform-other.npy");
+    assert!(rmse(&control, &expected) > 1e-2, "the other frame renders the same view");
+    let o = splat(&[
+        "info",
+        moved_path.to_str().unwrap(),
+        "--camera",
+        dir.to_str().unwrap(),
+        "--world-transform",
+        matrix.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("world      --world-transform's: 100 % of the model's 3D points lie on the splats"),
+        "{text}"
+    );
     // Views of a camera file that show none of the splats say that the splats' world may be
     // another: a camera turned away from the cloud, one view and all of them.
     let turned = glam::Mat3::from_rotation_y(std::f32::consts::PI) * base.rotation;

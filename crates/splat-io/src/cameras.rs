@@ -2,6 +2,7 @@
 //! (camera-to-world rotation, rows as written), `fx`, `fy`, `width`, `height`. The principal
 //! point is the image centre; axes follow OpenCV (x right, y down, z forward).
 
+use crate::similarity::Similarity;
 use crate::{Error, ErrorKind, read_file};
 use glam::{Mat3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -121,6 +122,10 @@ pub struct ViewOptions<'a> {
     /// `normalize_world_space`): moves a COLMAP model's cameras into that world
     /// ([`crate::gsplat_world`]), where these splats are; other camera files are refused with it.
     pub gsplat_world: Option<&'a Scene>,
+    /// The similarity from the camera file's world to the splats' (such as one
+    /// [`crate::similarity::read`] from a file): moves every camera by it; refused with either
+    /// trainer's world above.
+    pub world_transform: Option<Similarity>,
     /// Whose pinhole each camera becomes ([`Camera::undistorted`]).
     pub undistort: Option<Undistortion>,
     /// The trainer's split of the views to keep ([`Split`]).
@@ -268,8 +273,8 @@ pub fn read_views(path: &Path) -> Result<Vec<(String, Camera)>, Error> {
     read_views_in(path, ViewOptions::default())
 }
 
-/// [`read_views`], changed by `options`: moved by the dataparser transforms or into gsplat's
-/// world, the split kept, downscaled and sized, then undistorted.
+/// [`read_views`], changed by `options`: moved by the world transform, the dataparser
+/// transforms or into gsplat's world, the split kept, downscaled and sized, then undistorted.
 pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, Camera)>, Error> {
     let (mut views, lists) = read_views_moved(path, options)?;
     if let Some(split) = options.split {
@@ -305,10 +310,29 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     views.into_iter().enumerate().map(&mut undistort).collect()
 }
 
-/// [`read_views`], a `transforms.json`'s cameras moved by `options`' dataparser transforms, a
-/// COLMAP model's into gsplat's world; and the split lists a `transforms.json` names, for
+/// [`read_views`], every camera moved by `options`' world transform (a COLMAP model's from its
+/// double-precision poses), a `transforms.json`'s by its dataparser transforms, a COLMAP model's
+/// into gsplat's world; and the split lists a `transforms.json` names, for
 /// Nerfstudio's splits (none for other files).
 fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, Camera)>, SplitLists), Error> {
+    if let Some(world) = options.world_transform {
+        if options.gsplat_world.is_some() || options.dataparser.is_some() {
+            let why = "a world transform moves the cameras by itself: give it without gsplat's world or a Nerfstudio \
+                       run's dataparser transforms";
+            return Err(Error::new(path, ErrorKind::WorldTransform(why.into())));
+        }
+        if crate::colmap::is_colmap(path) {
+            return Ok((moved_posed(path, crate::colmap::read_colmap_posed(path)?, world)?, SplitLists::new()));
+        }
+        let (views, lists) = read_views_moved(path, ViewOptions { world_transform: None, ..options })?;
+        let moved = |(index, (name, camera)): (usize, (String, Camera))| match world
+            .camera(&camera, crate::similarity::pose_of(&camera))
+        {
+            Ok(camera) => Ok((name, camera)),
+            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
+        };
+        return Ok((views.into_iter().enumerate().map(moved).collect::<Result<_, _>>()?, lists));
+    }
     if let Some(splats) = options.gsplat_world {
         if options.dataparser.is_some() {
             let why = "a Nerfstudio run's dataparser transforms and gsplat's world are two trainers' worlds: give one";
@@ -362,15 +386,18 @@ fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>,
     let means: Vec<_> = splats.particles.iter().map(|p| p.mean).collect();
     let (world, _) = crate::gsplat_world::normalized_world(&poses, &points, &means)
         .map_err(|why| Error::new(path, ErrorKind::GsplatWorld(why)))?;
-    let moved = |(index, p): (usize, crate::colmap::PosedView)| {
-        let (world_from_camera, centre) = world.pose(p.rotation, p.centre);
-        let camera_from_world = world_from_camera.transpose();
-        let rotation = camera_from_world.as_mat3();
-        let camera = Camera { rotation, translation: (-(camera_from_world * centre)).as_vec3(), ..p.view.camera };
-        match camera.validate() {
-            Ok(()) => Ok((p.view.name, camera)),
-            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: e.to_string() })),
-        }
+    moved_posed(path, posed, world)
+}
+
+/// The `posed` views of the COLMAP model at `path`, moved by `world`.
+fn moved_posed(
+    path: &Path,
+    posed: Vec<crate::colmap::PosedView>,
+    world: Similarity,
+) -> Result<Vec<(String, Camera)>, Error> {
+    let moved = |(index, p): (usize, crate::colmap::PosedView)| match world.camera(&p.view.camera, p.pose()) {
+        Ok(camera) => Ok((p.view.name, camera)),
+        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: e.to_string() })),
     };
     posed.into_iter().enumerate().map(moved).collect()
 }

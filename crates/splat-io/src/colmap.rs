@@ -40,7 +40,7 @@ pub struct PosedView {
 
 impl PosedView {
     /// Its pose: camera-to-world rotation and centre.
-    pub fn pose(&self) -> (DMat3, DVec3) {
+    pub fn pose(&self) -> crate::similarity::Pose {
         (self.rotation, self.centre)
     }
 }

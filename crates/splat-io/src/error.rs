@@ -209,6 +209,9 @@ pub enum ErrorKind {
     /// gsplat's normalised world cannot be found for the cameras and splats given.
     #[error("gsplat's normalised world: {0}")]
     GsplatWorld(String),
+    /// A world transform file is not a similarity matrix, or cannot apply to the cameras.
+    #[error("world transform: {0}")]
+    WorldTransform(String),
     /// A trainer's split does not apply to the views.
     #[error("split: {0}")]
     Split(String),

@@ -25,49 +25,8 @@
 //! one that puts the model's 3D points on the splats, and refuses a capture where that does
 //! not tell them apart.
 
+use crate::similarity::{Pose, Similarity};
 use glam::{DMat3, DVec3, Vec3};
-
-/// A similarity x ↦ s R x + t.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Similarity {
-    /// s > 0.
-    pub scale: f64,
-    /// R, a rotation.
-    pub rotation: DMat3,
-    /// t.
-    pub translation: DVec3,
-}
-
-impl Similarity {
-    /// A rotation about the origin.
-    fn rotation(rotation: DMat3) -> Self {
-        Self { scale: 1.0, rotation, translation: DVec3::ZERO }
-    }
-
-    /// The image of the point `x`.
-    pub fn point(&self, x: DVec3) -> DVec3 {
-        self.scale * (self.rotation * x) + self.translation
-    }
-
-    /// `next` applied after `self`.
-    pub fn then(self, next: Self) -> Self {
-        Self {
-            scale: next.scale * self.scale,
-            rotation: next.rotation * self.rotation,
-            translation: next.point(self.translation),
-        }
-    }
-
-    /// A camera's pose (camera-to-world rotation, centre) moved, as gsplat's
-    /// `transform_cameras` moves it: the matrix applied and its scale divided out of the
-    /// rotation.
-    pub fn pose(&self, world_from_camera: DMat3, centre: DVec3) -> (DMat3, DVec3) {
-        (self.rotation * world_from_camera, self.point(centre))
-    }
-}
-
-/// A camera's pose: camera-to-world rotation and centre.
-pub type Pose = (DMat3, DVec3);
 
 /// Side of the cells in which one of the model's 3D points looks for a splat, in the normalised
 /// world (where the median camera is 1 from the scene's centre).
@@ -139,8 +98,16 @@ pub fn normalized_world(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Res
 /// model's own world, by the measure [`normalized_world`] takes in gsplat's (cells 1 % of the
 /// median camera distance).
 pub fn on_splats_in_colmap(poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<f64, String> {
-    let scale = similarity_from_cameras(poses)?.scale;
-    Ok(on_splats(&Occupancy::of(means, CELL / scale), points))
+    on_splats_in(Similarity::IDENTITY, poses, points, means)
+}
+
+/// [`on_splats_in_colmap`] where `world` moves the model (its cameras' `poses`, its 3D `points`)
+/// into the splats' world.
+pub fn on_splats_in(world: Similarity, poses: &[Pose], points: &[DVec3], means: &[Vec3]) -> Result<f64, String> {
+    let moved: Vec<Pose> = poses.iter().map(|&pose| world.pose(pose)).collect();
+    let scale = similarity_from_cameras(&moved)?.scale;
+    let points: Vec<DVec3> = points.iter().map(|&p| world.point(p)).collect();
+    Ok(on_splats(&Occupancy::of(means, CELL / scale), &points))
 }
 
 /// The share of `points` near a splat of `occupied`.

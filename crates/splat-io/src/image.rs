@@ -240,16 +240,7 @@ pub fn read_npy(path: &Path) -> Result<Image, Error> {
 
 /// Decode the bytes of a `.npy` holding f32 (H, W) or (H, W, C) data.
 pub fn decode_npy(bytes: &[u8]) -> Result<Image, String> {
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err("not a .npy file".into());
-    }
-    let (len, start) = match bytes[6] {
-        1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
-        2 | 3 if bytes.len() >= 12 => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
-        v => return Err(format!("unsupported .npy version {v}")),
-    };
-    let header = bytes.get(start..start + len).ok_or("truncated .npy header")?;
-    let header = std::str::from_utf8(header).map_err(|_| "non-text .npy header")?;
+    let (header, body) = npy_header(bytes)?;
     if !header.contains("'descr': '<f4'") || !header.contains("'fortran_order': False") {
         return Err(format!("only little-endian f32 in C order is supported, header: {}", header.trim()));
     }
@@ -266,7 +257,6 @@ pub fn decode_npy(bytes: &[u8]) -> Result<Image, String> {
         [h, w, c] => (*h, *w, *c),
         _ => return Err(format!("expected 2 or 3 dimensions, found {}", dims.len())),
     };
-    let body = &bytes[start + len..];
     let n = h.checked_mul(w).and_then(|v| v.checked_mul(c)).ok_or("shape overflows")?;
     if body.len() != n.checked_mul(4).ok_or("shape overflows")? {
         return Err(format!("body has {} bytes, shape ({h}, {w}, {c}) needs {}", body.len(), 4 * n));
@@ -277,6 +267,21 @@ pub fn decode_npy(bytes: &[u8]) -> Result<Image, String> {
         (Ok(w), Ok(h), Ok(c)) => Image::from_data(w, h, c, data).ok_or_else(|| "size mismatch".into()),
         _ => Err("shape too large".into()),
     }
+}
+
+/// A `.npy` file's header (its Python dictionary's text) and the data after it.
+pub(crate) fn npy_header(bytes: &[u8]) -> Result<(&str, &[u8]), String> {
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err("not a .npy file".into());
+    }
+    let (len, start) = match bytes[6] {
+        1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
+        2 | 3 if bytes.len() >= 12 => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
+        v => return Err(format!("unsupported .npy version {v}")),
+    };
+    let header = bytes.get(start..start + len).ok_or("truncated .npy header")?;
+    let header = std::str::from_utf8(header).map_err(|_| "non-text .npy header")?;
+    Ok((header, &bytes[start + len..]))
 }
 
 /// A depth image for viewing: near is bright, far is dark, normalised over the finite depths;

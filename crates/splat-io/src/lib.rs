@@ -33,6 +33,7 @@ pub mod memory;
 pub mod mesh;
 mod placement;
 pub mod ply;
+pub mod similarity;
 pub mod sog;
 pub mod splat;
 pub mod spz;

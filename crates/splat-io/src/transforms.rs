@@ -37,6 +37,7 @@
 //! Views keep the file's order (3DGS's and Brush's; Nerfstudio sorts by file name), named by
 //! their `file_path`.
 
+use crate::similarity::{Similarity, affine_rows};
 use crate::{Error, ErrorKind, read_file};
 use glam::{DMat3, DVec3};
 use serde::Deserialize;
@@ -169,48 +170,6 @@ struct Transforms {
     intrinsics: Intrinsics,
 }
 
-/// A rigid map x ↦ R x + t (rows [R | t]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Rigid {
-    r: DMat3,
-    t: DVec3,
-}
-
-impl Rigid {
-    const IDENTITY: Rigid = Rigid { r: DMat3::IDENTITY, t: DVec3::ZERO };
-
-    /// The map of 3 × 4 rows (or 4 × 4, last row 0, 0, 0, 1) named `name`; `proper`: its R must
-    /// be a rotation (a camera's pose is checked as a camera).
-    fn from_rows(m: &[Vec<f64>], name: &str, proper: bool) -> Result<Rigid, String> {
-        let lengths: Vec<usize> = m.iter().map(Vec::len).collect();
-        if !(m.len() == 3 || m.len() == 4) || lengths.iter().any(|&n| n != 4) {
-            return Err(format!("{name} is {} rows of {lengths:?} values, not 4 × 4 (or 3 × 4)", m.len()));
-        }
-        if m.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(format!("{name} has a value that is not finite"));
-        }
-        if m.len() == 4 && m[3] != [0.0, 0.0, 0.0, 1.0] {
-            return Err(format!("{name}'s last row is {:?}, not [0, 0, 0, 1]", m[3]));
-        }
-        let r = DMat3::from_cols_array_2d(&[0, 1, 2].map(|col| [m[0][col], m[1][col], m[2][col]]));
-        let off = (r * r.transpose() - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        if proper && (off > 1e-5 || r.determinant() < 0.0) {
-            return Err(format!("{name}'s 3 × 3 part is not a rotation (‖R Rᵀ − I‖∞ = {off:.1e})"));
-        }
-        Ok(Rigid { r, t: DVec3::new(m[0][3], m[1][3], m[2][3]) })
-    }
-
-    fn inverse(self) -> Rigid {
-        let r = self.r.transpose();
-        Rigid { r, t: -(r * self.t) }
-    }
-
-    /// `self`, then `next`.
-    fn then(self, next: Rigid) -> Rigid {
-        Rigid { r: next.r * self.r, t: next.r * self.t + next.t }
-    }
-}
-
 /// A Nerfstudio training run's `dataparser_transforms.json` (`{"transform": 3 × 4, "scale": s}`):
 /// the map x ↦ s (R x + t) from the data's original coordinates (before the `transforms.json`'s
 /// `applied_transform`) to the run's normalised world, where splatfacto trains and exports its
@@ -218,7 +177,8 @@ impl Rigid {
 /// Nerfstudio's dataparser does.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Dataparser {
-    transform: Rigid,
+    /// [R | t], rigid.
+    transform: Similarity,
     scale: f64,
 }
 
@@ -235,7 +195,7 @@ pub fn parse_dataparser(bytes: &[u8]) -> Result<Dataparser, ErrorKind> {
         scale: f64,
     }
     let file: File = serde_json::from_slice(bytes)?;
-    let transform = Rigid::from_rows(&file.transform, "transform", true).map_err(ErrorKind::Dataparser)?;
+    let transform = Similarity::from_rows(&file.transform, "transform", true).map_err(ErrorKind::Dataparser)?;
     if !(file.scale.is_finite() && file.scale > 0.0) {
         return Err(ErrorKind::Dataparser(format!("scale {} is not a positive number", file.scale)));
     }
@@ -251,18 +211,19 @@ impl Transforms {
     /// its centres then take: Nerfstudio's training poses are [T A⁻¹ P] with the translation
     /// times s / `applied_scale` (its dataparser orients the file's poses, then scales their
     /// centres by its own factor, and saves T after A and s times `applied_scale`).
-    fn to_run_world(&self, dataparser: &Dataparser, folder: Option<&Path>) -> Result<(Rigid, f64), String> {
+    fn to_run_world(&self, dataparser: &Dataparser, folder: Option<&Path>) -> Result<Similarity, String> {
         let legacy = || folder.is_some_and(|f| f.join("colmap/sparse/0").is_dir());
         let applied = match &self.applied_transform {
-            Some(rows) => Rigid::from_rows(rows, "applied_transform", true)?,
-            None if legacy() => Rigid::from_rows(&LEGACY_APPLIED.map(Vec::from), "applied_transform", true)?,
-            None => Rigid::IDENTITY,
+            Some(rows) => Similarity::from_rows(rows, "applied_transform", true)?,
+            None if legacy() => Similarity::from_rows(&LEGACY_APPLIED.map(Vec::from), "applied_transform", true)?,
+            None => Similarity::IDENTITY,
         };
         let applied_scale = self.applied_scale.unwrap_or(1.0);
         if !(applied_scale.is_finite() && applied_scale > 0.0) {
             return Err(format!("applied_scale {applied_scale} is not a positive number"));
         }
-        Ok((applied.inverse().then(dataparser.transform), dataparser.scale / applied_scale))
+        let scale = Similarity { scale: dataparser.scale / applied_scale, ..Similarity::IDENTITY };
+        Ok(applied.inverse().then(dataparser.transform).then(scale))
     }
 }
 
@@ -329,7 +290,7 @@ pub fn parse_transforms_in(
     }
     let world = match dataparser {
         Some(d) => file.to_run_world(d, folder).map_err(ErrorKind::Dataparser)?,
-        None => (Rigid::IDENTITY, 1.0),
+        None => Similarity::IDENTITY,
     };
     file.frames
         .iter()
@@ -346,10 +307,9 @@ pub fn parse_transforms_in(
 }
 
 /// The camera of `frame` with intrinsics `k` (its own and the file's, merged), its pose moved by
-/// `world` (a map of its centre and axes, then a scale of its centre).
-fn frame_camera(frame: &Frame, k: &Intrinsics, folder: Option<&Path>, world: (Rigid, f64)) -> Result<Camera, String> {
-    let pose = Rigid::from_rows(&frame.transform_matrix, "transform_matrix", false)?.then(world.0);
-    let (rotation, centre) = (pose.r, world.1 * pose.t);
+/// `world`.
+fn frame_camera(frame: &Frame, k: &Intrinsics, folder: Option<&Path>, world: Similarity) -> Result<Camera, String> {
+    let (rotation, centre) = world.pose(affine_rows(&frame.transform_matrix, "transform_matrix")?);
     let (width, height) = match (k.w, k.h) {
         (Some(w), Some(h)) => (side(w, "w")?, side(h, "h")?),
         _ => image_size(&frame.file_path, folder)?,
@@ -526,7 +486,7 @@ mod tests {
     fn dataparser_transforms_are_a_rigid_map_and_a_scale_or_refused() {
         let identity = r#"{"transform": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], "scale": 1.0}"#;
         let d = parse_dataparser(identity.as_bytes()).unwrap();
-        assert_eq!((d.transform, d.scale), (Rigid::IDENTITY, 1.0));
+        assert_eq!((d.transform, d.scale), (Similarity::IDENTITY, 1.0));
         // The identity run leaves a file's cameras where they were.
         let json = BLENDER.replace(r#""frames""#, r#""w": 8, "h": 6, "frames""#);
         let moved = parse_transforms_in(json.as_bytes(), None, Some(&d)).unwrap();
@@ -534,7 +494,7 @@ mod tests {
         let cases = [
             (identity.replace("1.0}", "0.0}"), "scale 0 is not a positive number"),
             (identity.replace("[[1, 0, 0, 0]", "[[2, 0, 0, 0]"), "not a rotation"),
-            (identity.replace("[[1, 0, 0, 0]", "[[-1, 0, 0, 0]"), "not a rotation"),
+            (identity.replace("[[1, 0, 0, 0]", "[[-1, 0, 0, 0]"), "it is a mirror"),
             (identity.replace("[0, 0, 1, 0]]", "[0, 0, 1]]"), "not 4 × 4"),
             (r#"{"scale": 1.0}"#.into(), "missing field `transform`"),
         ];

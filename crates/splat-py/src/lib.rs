@@ -366,9 +366,12 @@ impl PyCamera {
 /// (width, height) scales each camera to the photographs' size after that and before it is
 /// undistorted, as gsplat does; `gsplat_world`, a Scene of splats gsplat's simple_trainer
 /// trained in its normalised world (its default), moves a COLMAP model's cameras into that world
-/// (`--gsplat-world`).
+/// (`--gsplat-world`); `world_transform`, a file of a 4 × 4 (or 3 × 4) similarity from the camera
+/// file's world to the splats' (`--world-transform`), or `world_rows`, its rows, moves every
+/// camera by it.
 #[pyfunction]
-#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None, data_factor = None, image_size = None, gsplat_world = None))]
+#[pyo3(signature = (path, dataparser_transforms = None, undistort = None, split = None, data_factor = None, image_size = None, gsplat_world = None, world_transform = None, world_rows = None))]
+#[allow(clippy::too_many_arguments)]
 fn load_cameras(
     path: PathBuf,
     dataparser_transforms: Option<PathBuf>,
@@ -377,13 +380,24 @@ fn load_cameras(
     data_factor: Option<u32>,
     image_size: Option<(u32, u32)>,
     gsplat_world: Option<PyRef<PyScene>>,
+    world_transform: Option<PathBuf>,
+    world_rows: Option<Vec<Vec<f64>>>,
 ) -> PyResult<Vec<(String, PyCamera)>> {
     let undistort = undistort.map(trainer).transpose()?;
     let split = split.map(|name| choice("split", name, &Split::ALL, Split::name)).transpose()?;
     let size = image_size.map_or((None, None), |(w, h)| (Some(w), Some(h)));
+    let world_transform = match (world_transform, world_rows) {
+        (Some(file), _) => Some(splat_io::similarity::read(&file).map_err(fail)?),
+        (None, Some(rows)) => Some(
+            splat_io::similarity::Similarity::from_rows(&rows, "world_transform", false)
+                .map_err(SplatError::new_err)?,
+        ),
+        (None, None) => None,
+    };
     let options = ViewOptions {
         dataparser: dataparser_transforms.as_deref(),
         gsplat_world: gsplat_world.as_ref().map(|s| &s.world.scene),
+        world_transform,
         undistort,
         split,
         factor: data_factor,

@@ -27,6 +27,7 @@ The tolerance would catch a scale off by about 1e-6.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -220,6 +221,46 @@ def test_cameras_move_into_gsplats_world_in_either_frame(tmp_path, seed):
     for control in [{"scale_error": 0.01}, {"strict_scaling": True}, {"center_method": "poses"}]:
         rotation, translation = worst(views, gsplat_normalize(c2ws, points, **control)[0])
         assert translation > 1e-3, (control, translation)
+
+
+def test_gsplats_parser_transform_given_as_the_world_transform(tmp_path):
+    """gsplat's `parser.transform` itself, as an array, as numpy.save and numpy.savetxt write it,
+    moves the cameras where gsplat's parser moves them (both frames: no splats are needed), from
+    the COLMAP model and from a cameras.json of its views; a matrix 1 % off in scale (a
+    control) misses; a matrix that is no similarity is refused."""
+    rng = np.random.default_rng(5)
+    sparse = tmp_path / "sparse" / "0"
+    c2ws, points = capture(rng, sparse)
+    camtoworlds, _, transform = gsplat_normalize(c2ws, points)
+    entries = [
+        {"id": i, "img_name": f"view_{i:02d}", "width": 64, "height": 48, "fx": 60.0, "fy": 60.0,
+         "position": c2w[:3, 3].tolist(), "rotation": c2w[:3, :3].tolist()}
+        for i, c2w in enumerate(c2ws)
+    ]
+    as_json = tmp_path / "cameras.json"
+    as_json.write_text(json.dumps(entries))
+    for k, frame in enumerate([np.eye(4), HALF_TURN]):
+        given = frame @ transform
+        expected = transform_cameras(frame, camtoworlds.copy())
+        np.save(tmp_path / f"given{k}.npy", given)
+        np.savetxt(tmp_path / f"given{k}.txt", given)
+        for world in [given, tmp_path / f"given{k}.npy", str(tmp_path / f"given{k}.txt")]:
+            rotation, translation = worst(splat.load_cameras(sparse, world_transform=world), expected)
+            assert rotation < 1e-6 and translation < 1e-6, (world, rotation, translation)
+        rotation, translation = worst(splat.load_cameras(as_json, world_transform=given), expected)
+        assert rotation < 1e-5 and translation < 1e-5, (rotation, translation)
+    off = transform.copy()
+    off[:3, :] *= 1.01
+    _, translation = worst(splat.load_cameras(sparse, world_transform=off), camtoworlds)
+    assert translation > 1e-3, translation
+    sheared = transform.copy()
+    sheared[0, :3] += 0.1 * sheared[1, :3]  # a shear: the determinant stays
+    with pytest.raises(splat.SplatError, match="not a rotation times one scale"):
+        splat.load_cameras(sparse, world_transform=sheared)
+    with pytest.raises(splat.SplatError, match=r"shape \(3, 3\)"):
+        splat.load_cameras(sparse, world_transform=np.eye(3))
+    with pytest.raises(splat.SplatError, match="moves the cameras by itself"):
+        splat.load_cameras(sparse, world_transform=transform, gsplat_world=splats_at(points))
 
 
 def test_splats_outside_gsplats_world_and_other_camera_files_are_refused(tmp_path):

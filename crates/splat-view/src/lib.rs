@@ -30,6 +30,7 @@ use splat_core::sh::ShStorage;
 use splat_core::undistort::Undistortion;
 use splat_gpu::GpuContext;
 use splat_io::cameras::{Split, ViewOptions};
+use splat_io::similarity::Similarity;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -57,6 +58,17 @@ pub struct SceneArgs {
     /// points3D) into that world.
     #[arg(long, requires = "camera", conflicts_with = "dataparser_transforms")]
     pub gsplat_world: bool,
+    /// A 4 × 4 (or 3 × 4) matrix [s R | t] from the world of --camera to the splats' world
+    /// (a .npy, or its numbers as text), such as gsplat's parser.transform: moves every camera
+    /// by it.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "camera",
+        conflicts_with_all = ["dataparser_transforms", "gsplat_world"],
+        value_parser = world_transform_parser
+    )]
+    pub world_transform: Option<Similarity>,
     /// Show each camera of --camera as the pinhole this trainer undistorts its photos to
     /// (their training and evaluation images are of it): OpenCV's choice, as the trainer
     /// calls it; gsplat's fisheye, the ideal fisheye its own map resamples to.
@@ -92,6 +104,7 @@ impl SceneArgs {
         let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
         let views = ViewOptions {
             dataparser: self.dataparser_transforms.as_deref(),
+            world_transform: self.world_transform,
             undistort: self.undistort,
             split: self.split,
             ..Default::default()
@@ -153,6 +166,12 @@ pub fn sh_storage_parser() -> impl clap::builder::TypedValueParser<Value = ShSto
 /// its name, described.
 pub fn undistort_parser() -> impl clap::builder::TypedValueParser<Value = Undistortion> {
     choice_parser(&Undistortion::ALL, Undistortion::name, Undistortion::describe)
+}
+
+/// `--world-transform FILE` (here and in the `splat` commands): the similarity the file holds,
+/// read as the arguments are parsed, so that a bad file is named before the scene is read.
+pub fn world_transform_parser(path: &str) -> Result<Similarity, String> {
+    splat_io::similarity::read(std::path::Path::new(path)).map_err(|e| e.to_string())
 }
 
 /// The values of `--split` (here and in the `splat` commands): every [`Split`] by its name,

@@ -86,19 +86,31 @@ def load_cameras(
     data_factor=None,
     image_size=None,
     gsplat_world: "Scene | None" = None,
+    world_transform=None,
 ) -> list:
     """Every view of a camera file (an INRIA cameras.json, a COLMAP model: a sparse/0 folder or
     its images.bin / images.txt, or a transforms.json), as (image name, camera) in the order
     ``splat render`` lists them, changed as ``splat render``'s camera options change them:
     ``dataparser_transforms`` (a Nerfstudio run's dataparser_transforms.json), ``undistort``
     ("splatfacto" or "gsplat"), ``split`` ("3dgs-test", "nerfstudio-eval", ...), ``data_factor``
-    F (``images_F/``), ``image_size`` (width, height) and ``gsplat_world``, the Scene of splats
+    F (``images_F/``), ``image_size`` (width, height), ``gsplat_world``, the Scene of splats
     gsplat's simple_trainer trained in its normalised world (its default), into which a COLMAP
-    model's cameras are moved (``--gsplat-world``). See docs/python.md."""
+    model's cameras are moved (``--gsplat-world``), and ``world_transform``, a 4 x 4 (or 3 x 4)
+    similarity [s R | t] from the camera file's world to the splats' (an array such as gsplat's
+    ``parser.transform``, or the path of a .npy or text file of it: ``--world-transform``),
+    which moves every camera. See docs/python.md."""
     if gsplat_world is not None and not isinstance(gsplat_world, Scene):
         raise SplatError(f"gsplat_world is a {type(gsplat_world).__name__}: expected a splat.Scene of the splats")
     native = None if gsplat_world is None else gsplat_world._native
-    return _splat.load_cameras(path, dataparser_transforms, undistort, split, data_factor, image_size, native)
+    file, rows = None, None
+    if isinstance(world_transform, (str, os.PathLike)):
+        file = world_transform
+    elif world_transform is not None:
+        matrix = np.asarray(world_transform, dtype=np.float64)
+        if matrix.shape not in ((4, 4), (3, 4)):
+            raise SplatError(f"world_transform has shape {matrix.shape}: expected a 4 x 4 (or 3 x 4) matrix")
+        rows = matrix.tolist()
+    return _splat.load_cameras(path, dataparser_transforms, undistort, split, data_factor, image_size, native, file, rows)
 
 
 class Scene:

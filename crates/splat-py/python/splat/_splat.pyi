@@ -81,6 +81,8 @@ def load_cameras(
     data_factor: Optional[int] = None,
     image_size: Optional[tuple[int, int]] = None,
     gsplat_world: Optional[Scene] = None,
+    world_transform: Optional[Union[str, PathLike]] = None,
+    world_rows: Optional[list[list[float]]] = None,
 ) -> list[tuple[str, Camera]]: ...
 def render(
     scene: Scene,
