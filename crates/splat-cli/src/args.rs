@@ -336,6 +336,9 @@ pub struct Staged {
     pub settings: RenderSettings,
     /// The world's environment for the path tracer, if it gives one.
     pub environment: Option<splat_core::path::Environment>,
+    /// Every view of --camera as read (named, before --width and --height size them), the
+    /// camera among them; none without --camera.
+    pub views: Vec<(String, Camera)>,
 }
 
 impl Staged {
@@ -670,9 +673,9 @@ impl SceneArgs {
             };
         }
         self.apply_shadow_options(&mut lighting)?;
-        let camera = self.choose_camera(&scene, camera, width, height)?;
+        let (camera, views) = self.choose_camera(&scene, camera, width, height)?;
         settings.sampling.lens = self.lens(lens, &scene, &camera, &settings)?;
-        Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment })
+        Ok(Staged { world: World::new(scene, meshes, lighting)?, camera, settings, environment, views })
     }
 
     /// The thin lens: --aperture over the world's, in focus at --focus-distance, else at what
@@ -765,15 +768,24 @@ impl SceneArgs {
         }
     }
 
-    fn choose_camera(&self, scene: &Scene, default_camera: Option<Camera>, width: u32, height: u32) -> Result<Camera> {
+    /// The camera, sized, and every view of --camera (none without it).
+    fn choose_camera(
+        &self,
+        scene: &Scene,
+        default_camera: Option<Camera>,
+        width: u32,
+        height: u32,
+    ) -> Result<(Camera, Vec<(String, Camera)>)> {
         let (w, h) = (self.width.unwrap_or(width), self.height.unwrap_or(height));
-        let camera = if let Some(path) = &self.camera {
-            let cameras = load_cameras(path, self.view_options(scene))?;
-            let n = cameras.len();
-            cameras.get(self.camera_index).map(|(_, c)| *c).with_context(|| {
+        if let Some(path) = &self.camera {
+            let views = load_cameras(path, self.view_options(scene))?;
+            let n = views.len();
+            let camera = views.get(self.camera_index).map(|(_, c)| *c).with_context(|| {
                 format!("--camera-index {} but {} has {n} cameras", self.camera_index, path.display())
-            })?
-        } else if let (Some(eye), Some(target)) = (self.eye, self.target) {
+            })?;
+            return Ok((self.sized(camera)?, views));
+        }
+        let camera = if let (Some(eye), Some(target)) = (self.eye, self.target) {
             Camera::look_at(eye, target, self.up.unwrap_or(Vec3::Y), self.fov, w, h)?
         } else if let Some(camera) = default_camera {
             camera
@@ -786,7 +798,7 @@ impl SceneArgs {
             }
             Camera::framing(&scene.robust_bounds(0.02), self.up.unwrap_or(Vec3::Y), w, h)?
         };
-        self.sized(camera)
+        Ok((self.sized(camera)?, Vec::new()))
     }
 
     /// `camera` at --width × --height (its own size where they are not given); an undistorted

@@ -431,9 +431,9 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     if args.alpha.is_some() || args.depth.is_some() || args.normal.is_some() || args.variance.is_some() {
         bail!("--all-cameras writes colour images only: drop --alpha, --depth, --normal and --variance");
     }
-    let path = args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
-    let staged = args.scene.load_world(640, 480)?;
-    let cameras = crate::args::load_cameras(path, args.scene.view_options(&staged.world.scene))?;
+    args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
+    let mut staged = args.scene.load_world(640, 480)?;
+    let cameras = std::mem::take(&mut staged.views);
     let sized = cameras.iter().map(|(_, camera)| args.scene.view(*camera)).collect::<Result<Vec<Camera>>>()?;
     args.options.apply_capture(&staged.world.scene);
     let args = &args;

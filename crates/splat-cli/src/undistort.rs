@@ -34,10 +34,10 @@ pub struct UndistortArgs {
     pub data_factor: Option<u32>,
     /// The photographs' width: each camera scaled to it (after --data-factor) before it is
     /// undistorted, as gsplat scales K to the photographs it finds.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::parse_side, allow_negative_numbers = true)]
     pub width: Option<u32>,
     /// The photographs' height (see --width).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::parse_side, allow_negative_numbers = true)]
     pub height: Option<u32>,
     /// The folder to write the undistorted photographs into, as NAME.png (NAME: the image's
     /// name without folders and extension, as `splat render --all-cameras` names its views, so

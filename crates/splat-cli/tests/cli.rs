@@ -1776,6 +1776,12 @@ fn a_new_users_mistakes_are_refused_with_clear_messages_before_any_work() {
         let (ok, text) = said(&[&["render", "fixtures/cloud.ply", "-o", out][..], width].concat());
         assert!(!ok && text.contains(size), "{width:?}: {text}");
     }
+    // The photographs' size that `splat undistort` scales the cameras to, likewise.
+    let undistort = ["undistort", "--camera", "fixtures/cloud.cameras.json", "--images", "fixtures", "-o", out];
+    for side in [&["--width", "0"][..], &["--height=-5"], &["--height", "16385"]] {
+        let (ok, text) = said(&[&undistort[..], side].concat());
+        assert!(!ok && text.contains(size), "{side:?}: {text}");
+    }
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "-o", "no-such-folder/x.png"]);
     assert!(!ok && text.contains("the folder no-such-folder does not exist"), "{text}");
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "-o", out, "--depth", "no-such-folder/d.npy"]);
