@@ -44,6 +44,11 @@ pub struct UndistortArgs {
     /// that `splat compare` pairs them).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// A folder to write, as NAME.png, the mask of each view whose trainer masks pixels
+    /// (gsplat's fisheye: white where its sample lies inside the photo, black where its loss
+    /// leaves the pixel out and its evaluation renders it black).
+    #[arg(long, value_name = "DIR")]
+    pub masks: Option<PathBuf>,
 }
 
 /// Where the photographs of camera file `camera` lie by the trainers' layouts: a
@@ -93,7 +98,7 @@ pub fn run(args: UndistortArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let start = Instant::now();
-    let mut resampled = 0;
+    let (mut resampled, mut masks) = (0, 0);
     for (index, (name, camera)) in views.iter().enumerate() {
         let source = photo_path(&images, name);
         let photo = splat_io::image::read_photo(&source).with_context(|| {
@@ -111,8 +116,18 @@ pub fn run(args: UndistortArgs) -> Result<()> {
         }
         let out = camera.undistort_photo(args.undistort, &photo).with_context(|| format!("view {index} ({name})"))?;
         resampled += usize::from(out != photo);
-        let target = args.output.join(format!("{}.png", crate::render::view_stem(name, index)));
-        splat_io::image::write_photo(&target, &out)?;
+        let file = format!("{}.png", crate::render::view_stem(name, index));
+        splat_io::image::write_photo(&args.output.join(&file), &out)?;
+        if let Some(folder) = &args.masks {
+            let mask = camera.undistortion_mask(args.undistort).with_context(|| format!("view {index} ({name})"))?;
+            if let Some(mask) = mask {
+                let data = mask.into_iter().map(|inside| if inside { 255 } else { 0 }).collect();
+                let mask = splat_core::undistort::Photo { width: out.width, height: out.height, channels: 1, data };
+                std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
+                splat_io::image::write_photo(&folder.join(&file), &mask)?;
+                masks += 1;
+            }
+        }
     }
     eprintln!(
         "wrote {} ({} resampled through {}'s undistortion, the others as they are) in {:.2} s → {}",
@@ -122,5 +137,13 @@ pub fn run(args: UndistortArgs) -> Result<()> {
         start.elapsed().as_secs_f64(),
         args.output.display()
     );
+    if let Some(folder) = &args.masks {
+        eprintln!(
+            "{} of pixels {} leaves out → {}",
+            crate::counted(masks, "mask"),
+            args.undistort.name(),
+            folder.display()
+        );
+    }
     Ok(())
 }

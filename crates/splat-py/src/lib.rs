@@ -307,6 +307,18 @@ impl PyCamera {
         arrays::photo_to_array(py, out)
     }
 
+    /// The pixels of `undistorted(undistort)`'s image the trainer scores, a bool array (H, W),
+    /// where it masks some: gsplat's fisheye masks those whose sample falls outside the photo
+    /// (its parser's `mask`: its loss leaves them out, its evaluation renders them black); None
+    /// where every pixel counts.
+    fn undistortion_mask<'py>(&self, py: Python<'py>, undistort: &str) -> PyResult<Option<Bound<'py, PyUntypedArray>>> {
+        let trainer = trainer(undistort)?;
+        let Some(mask) = self.camera.undistortion_mask(trainer).map_err(fail)? else { return Ok(None) };
+        let undistorted = self.camera.undistorted(trainer).map_err(fail)?;
+        let shape = [undistorted.height as usize, undistorted.width as usize];
+        Ok(Some(arrays::shaped(py, mask, &shape)?))
+    }
+
     /// Whether the lens is a pinhole (COLMAP's distorted, fisheye and equirectangular models are
     /// not; the ray-tracing methods render through them).
     #[getter]

@@ -123,7 +123,7 @@ def gsplat_fisheye(K: np.ndarray, params: np.ndarray, size, middle: bool = True)
     fisheye branch of `Parser.__init__`), as it is: its map about the image's middle, the mask
     of where the map lands inside, the crop to the mask's box and K moved with it. `params` are
     k1–k4 as float32, as `_camera_distortion` keeps them. Returns (K_undist, (w, h), mapx, mapy,
-    roi). `middle=False` maps about c instead: a control."""
+    roi, mask), the mask cropped. `middle=False` maps about c instead: a control."""
     width, height = size
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     grid_x, grid_y = np.meshgrid(
@@ -144,4 +144,4 @@ def gsplat_fisheye(K: np.ndarray, params: np.ndarray, size, middle: bool = True)
     K_undist[0, 2] -= x_min
     K_undist[1, 2] -= y_min
     roi = (int(x_min), int(y_min), int(x_max - x_min), int(y_max - y_min))
-    return K_undist, (roi[2], roi[3]), mapx, mapy, roi
+    return K_undist, (roi[2], roi[3]), mapx, mapy, roi, mask[y_min:y_max, x_min:x_max]

@@ -172,7 +172,7 @@ def test_gsplats_photo_of_a_colmap_fisheye(splat_bin, tmp_path):
 
     def theirs(remap=cv2.remap, middle=True):
         """gsplat's parser (the fisheye map and its crop) and dataset (`cv2.remap`, the crop)."""
-        _, _, mapx, mapy, (x, y, w, h) = gsplat_fisheye(K, params, (photo.shape[1], photo.shape[0]), middle)
+        _, _, mapx, mapy, (x, y, w, h), _ = gsplat_fisheye(K, params, (photo.shape[1], photo.shape[0]), middle)
         return remap(photo, mapx, mapy, cv2.INTER_LINEAR)[y : y + h, x : x + w]
 
     expected = theirs()
@@ -183,6 +183,18 @@ def test_gsplats_photo_of_a_colmap_fisheye(splat_bin, tmp_path):
         assert (theirs(control) != expected).mean() > 0.3, control.__name__
     about_c = theirs(middle=False)
     assert about_c.shape != expected.shape or (about_c != expected).mean() > 0.3
+    # The mask of the pixels gsplat scores: `splat undistort --masks` and Camera.undistortion_mask
+    # are its parser's `mask`, cropped; the mask about c, a control, differs.
+    mask = gsplat_fisheye(K, params, (photo.shape[1], photo.shape[0]))[5]
+    assert 0 < mask.mean() < 1, mask.mean()
+    args = [splat_bin, "undistort", "--camera", str(sparse), "--undistort", "gsplat", "-o", str(tmp_path / "o")]
+    subprocess.run([*args, "--masks", str(tmp_path / "masks")], check=True, capture_output=True)
+    assert_same(np.asarray(Image.open(tmp_path / "masks" / "shot.png")), mask.astype(np.uint8) * 255, "--masks")
+    camera = splat.load_cameras(sparse)[0][1]
+    assert np.array_equal(camera.undistortion_mask("gsplat"), mask)
+    assert camera.undistortion_mask("splatfacto") is None
+    about_c = gsplat_fisheye(K, params, (photo.shape[1], photo.shape[0]), middle=False)[5]
+    assert about_c.shape != mask.shape or (about_c != mask).mean() > 0.001
 
 
 def test_photos_that_do_not_fit_are_refused(splat_bin, tmp_path):
@@ -218,7 +230,7 @@ def test_a_python_camera_undistorts_its_photos_as_the_cli(tmp_path):
     with pytest.raises(splat.SplatError, match="expected one of splatfacto, gsplat"):
         camera.undistort_photo(photo, "3dgs")
     # gsplat's ideal fisheye of the same photo, through Python.
-    _, _, mapx, mapy, (x, y, cw, ch) = gsplat_fisheye(
+    _, _, mapx, mapy, (x, y, cw, ch), _ = gsplat_fisheye(
         intrinsics(fx, fy, cx, cy, np.float64), np.array([k1, k2, k3, k4], dtype=np.float32), (w, h)
     )
     gsplat = cv2.remap(rgb, mapx, mapy, cv2.INTER_LINEAR)[y : y + ch, x : x + cw]

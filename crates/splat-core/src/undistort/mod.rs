@@ -339,15 +339,20 @@ impl Source {
     }
 }
 
+/// Whether gsplat's fisheye `sample` of a photo of `(w, h)`, rounded to f32 as its map is,
+/// lies strictly inside (0, w − 1) × (0, h − 1): its mask, and the box it crops to.
+fn gsplat_inside(sample: DVec2, (w, h): (u32, u32)) -> bool {
+    let s = sample.as_vec2();
+    s.x > 0.0 && s.y > 0.0 && s.x < (w - 1) as f32 && s.y < (h - 1) as f32
+}
+
 /// gsplat's crop of its fisheye map over an image of `(w, h)`: the box of the pixels whose
-/// sample, rounded to f32, lies strictly inside (0, w − 1) × (0, h − 1); `None` where none does.
+/// sample is [`gsplat_inside`]; `None` where none is.
 fn gsplat_fisheye_crop(lens: Source, k: Intrinsics, (w, h): (u32, u32)) -> Option<Rect> {
-    let (right, bottom) = ((w - 1) as f32, (h - 1) as f32);
     let mut bounds: Option<(u32, u32, u32, u32)> = None;
     for y in 0..h {
         for x in 0..w {
-            let s = lens.sample(DVec2::new(x.into(), y.into()), k, k).as_vec2();
-            if s.x > 0.0 && s.y > 0.0 && s.x < right && s.y < bottom {
+            if gsplat_inside(lens.sample(DVec2::new(x.into(), y.into()), k, k), (w, h)) {
                 let (x0, y0, x1, y1) = bounds.unwrap_or((x, y, x, y));
                 bounds = Some((x0.min(x), y0.min(y), x1.max(x), y1.max(y)));
             }
@@ -475,6 +480,21 @@ impl Camera {
             .validate()
             .map_err(|e| trainer.refuse(format!("OpenCV's estimate for this lens is not a camera ({e})")))?;
         Ok(camera)
+    }
+
+    /// The pixels of [`Camera::undistorted`]'s image that `trainer` scores, row by row, where it
+    /// masks some: gsplat's fisheye masks those whose sample falls outside the photo (its
+    /// parser's `mask`, which its loss leaves out and its evaluation renders as black); `None`
+    /// where every pixel counts.
+    pub fn undistortion_mask(&self, trainer: Undistortion) -> Result<Option<Vec<bool>>, CameraError> {
+        let Some(plan) = self.plan(trainer)? else { return Ok(None) };
+        if !matches!(plan.lens, Source::GsplatFisheye(..)) {
+            return Ok(None);
+        }
+        let (width, height) = plan.crop.size();
+        let size = (self.width, self.height);
+        let pixels = (0..height).flat_map(|y| (0..width).map(move |x| (x, y)));
+        Ok(Some(pixels.map(|(x, y)| gsplat_inside(plan.source_pixel(x, y), size)).collect()))
     }
 }
 
