@@ -30,6 +30,12 @@ pub struct CompareArgs {
     /// 0,0,0); without it such an image is compared on its colour as stored.
     #[arg(long, value_parser = parse_background)]
     pub background: Option<Vec3>,
+    /// Masks of the pixels that count (white) as `splat undistort --masks` writes them: a mask
+    /// image, or a folder of them by the images' names (an image without one counts whole). The
+    /// test image is blacked where its mask is dark, as gsplat's evaluation blacks the pixels
+    /// its fisheye mask leaves out before it scores.
+    #[arg(long, value_name = "MASKS")]
+    pub masks: Option<PathBuf>,
 }
 
 /// A background colour "r,g,b", each in [0, 1].
@@ -53,6 +59,24 @@ fn read_compared(path: &Path, background: Option<Vec3>) -> Result<(Image, bool)>
         Some(background) if has_alpha && splat_io::image::is_eight_bit(path) => Ok((over(&image, background), false)),
         _ => Ok((image, has_alpha)),
     }
+}
+
+/// `image` black where the mask at `path` (of its size; a pixel counts where the mask's first
+/// channel is above one half) is dark.
+fn masked(image: Image, path: &Path) -> Result<Image> {
+    let mask = splat_io::image::read_image(path).with_context(|| format!("reading the mask {}", path.display()))?;
+    let (w, h) = (image.width(), image.height());
+    if (mask.width(), mask.height()) != (w, h) {
+        bail!("the mask {} is {}×{} and its image {w}×{h}", path.display(), mask.width(), mask.height());
+    }
+    let (c, m) = (image.channels() as usize, mask.channels() as usize);
+    let counts = mask.data().chunks_exact(m).map(|p| p[0] > 0.5);
+    let data = image
+        .data()
+        .chunks_exact(c)
+        .zip(counts)
+        .flat_map(|(p, counts)| p.iter().map(move |&v| if counts { v } else { 0.0 }));
+    Ok(Image::from_data(w, h, image.channels(), data.collect()).expect("the image's own size"))
 }
 
 /// 8-bit RGBA `image` over `background`, as [`read_compared`] describes.
@@ -155,9 +179,16 @@ pub fn run(args: CompareArgs) -> Result<()> {
     if args.reference.is_dir() || args.test.is_dir() {
         return run_folders(&args);
     }
+    if let Some(folder) = args.masks.as_ref().filter(|m| m.is_dir()) {
+        bail!("--masks {} is a folder: give the mask of the one test image", folder.display());
+    }
     let ((a, alpha_a), (b, alpha_b)) =
         (read_compared(&args.reference, args.background)?, read_compared(&args.test, args.background)?);
     alpha_note(usize::from(alpha_a) + usize::from(alpha_b));
+    let b = match &args.masks {
+        Some(mask) => masked(b, mask)?,
+        None => b,
+    };
     let measured = measure(&a, &b, args.pixels_per_degree)?;
     let Metrics { rmse, psnr, ssim, ssim_inside, flip } = measured.metrics;
     println!("reference  {}", args.reference.display());
@@ -207,6 +238,13 @@ fn run_folders(args: &CompareArgs) -> Result<()> {
         bail!("--maps writes the maps of two images, not of two folders: compare one pair for its maps");
     }
     let (references, tests) = (images_in(reference)?, images_in(test)?);
+    let masks = match &args.masks {
+        Some(folder) if folder.is_dir() => images_in(folder)?,
+        Some(file) => {
+            bail!("--masks {} is not a folder: give the folder of the masks by the images' names", file.display())
+        }
+        None => Default::default(),
+    };
     if tests.is_empty() {
         bail!("{} holds no image (.png, .jpg, .exr or .npy)", test.display());
     }
@@ -228,6 +266,10 @@ fn run_folders(args: &CompareArgs) -> Result<()> {
     for (name, path) in &tests {
         let (a, alpha_a) = read_compared(&references[name], args.background)?;
         let (b, alpha_b) = read_compared(path, args.background)?;
+        let b = match masks.get(name) {
+            Some(mask) => masked(b, mask)?,
+            None => b,
+        };
         with_alpha += usize::from(alpha_a) + usize::from(alpha_b);
         let m = metrics(&a, &b, args.pixels_per_degree).with_context(|| format!("comparing {name}"))?;
         println!("{name:<32} {:>9.3} {:>9.5} {:>9} {:>9.5}", m.psnr, m.ssim, inside(m.ssim_inside), m.flip);
@@ -241,6 +283,10 @@ fn run_folders(args: &CompareArgs) -> Result<()> {
     println!("{label:<32} {psnr:>9.3} {ssim:>9.5} {:>9} {flip:>9.5}", inside(inside_mean));
     println!("SSIM is 3DGS's (every pixel), SSIM tm torchmetrics' (windows inside the image); PSNR peak 1");
     alpha_note(with_alpha);
+    if args.masks.is_some() {
+        let used = tests.keys().filter(|name| masks.contains_key(*name)).count();
+        eprintln!("note: {used} of the {} test images masked (blacked where their masks are dark)", tests.len());
+    }
     let unmatched = references.len() - tests.len();
     if unmatched > 0 {
         eprintln!("note: {unmatched} images of {} have no test image and were not compared", reference.display());

@@ -195,6 +195,22 @@ def test_gsplats_photo_of_a_colmap_fisheye(splat_bin, tmp_path):
     assert camera.undistortion_mask("splatfacto") is None
     about_c = gsplat_fisheye(K, params, (photo.shape[1], photo.shape[0]), middle=False)[5]
     assert about_c.shape != mask.shape or (about_c != mask).mean() > 0.001
+    # Scored as gsplat's evaluation scores a render (`render_colors[~masks] = 0`, then
+    # torchmetrics' PSNR against the photograph): `splat compare --masks`.
+    (tmp_path / "renders").mkdir()
+    render = noise(mask.shape[1], mask.shape[0], 3, 7)
+    Image.fromarray(render).save(tmp_path / "renders" / "shot.png")
+    colors, pixels = render / 255.0, expected / 255.0
+    colors[~mask] = 0
+    theirs = 10 * np.log10(1 / np.mean((colors - pixels) ** 2))
+    compare = [splat_bin, "compare", str(tmp_path / "o"), str(tmp_path / "renders")]
+
+    def psnr(extra):
+        out = subprocess.run([*compare, *extra], check=True, capture_output=True, text=True).stdout
+        return float(next(line for line in out.splitlines() if line.startswith("shot ")).split()[1])
+
+    masked, whole = psnr(["--masks", str(tmp_path / "masks")]), psnr([])
+    assert abs(masked - theirs) < 1e-3 and abs(whole - theirs) > 0.01, (masked, whole, theirs)
 
 
 def test_photos_that_do_not_fit_are_refused(splat_bin, tmp_path):
