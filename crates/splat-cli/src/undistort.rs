@@ -121,8 +121,6 @@ pub fn run(args: UndistortArgs) -> Result<()> {
         if let Some(folder) = &args.masks {
             let mask = camera.undistortion_mask(args.undistort).with_context(|| format!("view {index} ({name})"))?;
             if let Some(mask) = mask {
-                let data = mask.into_iter().map(|inside| if inside { 255 } else { 0 }).collect();
-                let mask = splat_core::undistort::Photo { width: out.width, height: out.height, channels: 1, data };
                 std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
                 splat_io::image::write_photo(&folder.join(&file), &mask)?;
                 masks += 1;

@@ -2,7 +2,7 @@
 //! (camera-to-world rotation, rows as written), `fx`, `fy`, `width`, `height`. The principal
 //! point is the image centre; axes follow OpenCV (x right, y down, z forward).
 
-use crate::similarity::Similarity;
+use crate::similarity::{Pose, Similarity};
 use crate::{Error, ErrorKind, read_file};
 use glam::{Mat3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -325,13 +325,8 @@ fn read_views_moved(path: &Path, options: ViewOptions) -> Result<(Vec<(String, C
             return Ok((moved_posed(path, crate::colmap::read_colmap_posed(path)?, world)?, SplitLists::new()));
         }
         let (views, lists) = read_views_moved(path, ViewOptions { world_transform: None, ..options })?;
-        let moved = |(index, (name, camera)): (usize, (String, Camera))| match world
-            .camera(&camera, crate::similarity::pose_of(&camera))
-        {
-            Ok(camera) => Ok((name, camera)),
-            Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
-        };
-        return Ok((views.into_iter().enumerate().map(moved).collect::<Result<_, _>>()?, lists));
+        let posed = views.into_iter().map(|(name, camera)| (name, camera, crate::similarity::pose_of(&camera)));
+        return Ok((moved(path, posed, world)?, lists));
     }
     if let Some(splats) = options.gsplat_world {
         if options.dataparser.is_some() {
@@ -389,17 +384,32 @@ fn in_gsplat_world(path: &Path, splats: &Scene) -> Result<Vec<(String, Camera)>,
     moved_posed(path, posed, world)
 }
 
-/// The `posed` views of the COLMAP model at `path`, moved by `world`.
+/// The `posed` views of the COLMAP model at `path`, moved by `world` from their
+/// double-precision poses.
 fn moved_posed(
     path: &Path,
     posed: Vec<crate::colmap::PosedView>,
     world: Similarity,
 ) -> Result<Vec<(String, Camera)>, Error> {
-    let moved = |(index, p): (usize, crate::colmap::PosedView)| match world.camera(&p.view.camera, p.pose()) {
-        Ok(camera) => Ok((p.view.name, camera)),
-        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: e.to_string() })),
+    let views = posed.into_iter().map(|p| {
+        let pose = p.pose();
+        (p.view.name, p.view.camera, pose)
+    });
+    moved(path, views, world)
+}
+
+/// The `views` of the camera file at `path` (each named, with its camera and that camera's
+/// pose) moved by `world`, each checked as a camera.
+fn moved(
+    path: &Path,
+    views: impl Iterator<Item = (String, Camera, Pose)>,
+    world: Similarity,
+) -> Result<Vec<(String, Camera)>, Error> {
+    let move_one = |(index, (name, camera, pose)): (usize, (String, Camera, Pose))| match world.camera(&camera, pose) {
+        Ok(camera) => Ok((name, camera)),
+        Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
     };
-    posed.into_iter().enumerate().map(moved).collect()
+    views.enumerate().map(move_one).collect()
 }
 
 /// Parse a `cameras.json`.

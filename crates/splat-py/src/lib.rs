@@ -314,9 +314,8 @@ impl PyCamera {
     fn undistortion_mask<'py>(&self, py: Python<'py>, undistort: &str) -> PyResult<Option<Bound<'py, PyUntypedArray>>> {
         let trainer = trainer(undistort)?;
         let Some(mask) = self.camera.undistortion_mask(trainer).map_err(fail)? else { return Ok(None) };
-        let undistorted = self.camera.undistorted(trainer).map_err(fail)?;
-        let shape = [undistorted.height as usize, undistorted.width as usize];
-        Ok(Some(arrays::shaped(py, mask, &shape)?))
+        let counts = mask.data.iter().map(|&v| v > 0).collect();
+        Ok(Some(arrays::shaped(py, counts, &[mask.height as usize, mask.width as usize])?))
     }
 
     /// Whether the lens is a pinhole (COLMAP's distorted, fisheye and equirectangular models are

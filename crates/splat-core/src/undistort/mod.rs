@@ -482,11 +482,12 @@ impl Camera {
         Ok(camera)
     }
 
-    /// The pixels of [`Camera::undistorted`]'s image that `trainer` scores, row by row, where it
-    /// masks some: gsplat's fisheye masks those whose sample falls outside the photo (its
-    /// parser's `mask`, which its loss leaves out and its evaluation renders as black); `None`
-    /// where every pixel counts.
-    pub fn undistortion_mask(&self, trainer: Undistortion) -> Result<Option<Vec<bool>>, CameraError> {
+    /// The pixels of [`Camera::undistorted`]'s image that `trainer` scores, where it masks
+    /// some, as a one-channel image of that size (255 where a pixel counts, 0 where not):
+    /// gsplat's fisheye masks those whose sample falls outside the photo (its parser's `mask`,
+    /// which its loss leaves out and its evaluation renders as black); `None` where every pixel
+    /// counts.
+    pub fn undistortion_mask(&self, trainer: Undistortion) -> Result<Option<Photo>, CameraError> {
         let Some(plan) = self.plan(trainer)? else { return Ok(None) };
         if !matches!(plan.lens, Source::GsplatFisheye(..)) {
             return Ok(None);
@@ -494,7 +495,8 @@ impl Camera {
         let (width, height) = plan.crop.size();
         let size = (self.width, self.height);
         let pixels = (0..height).flat_map(|y| (0..width).map(move |x| (x, y)));
-        Ok(Some(pixels.map(|(x, y)| gsplat_inside(plan.source_pixel(x, y), size)).collect()))
+        let data = pixels.map(|(x, y)| if gsplat_inside(plan.source_pixel(x, y), size) { 255 } else { 0 }).collect();
+        Ok(Some(Photo { width, height, channels: 1, data }))
     }
 }
 
