@@ -397,7 +397,10 @@ fn run_raster_gpu(args: &BenchArgs, ctx: &splat_gpu::GpuContext) -> Result<()> {
     println!("|---|---:|---:|");
     println!("| projection | {:.2} | {:.0} % |", ms(t.project), 100.0 * ms(t.project) / sorted);
     println!(
-        "| depth sort ({n} keys, {visible} visible past its first pass; {:.1} Mkeys/s of the scene) | {:.2} | {:.0} % |",
+        "| depth sort ({n} keys, {visible} visible past its first pass; {} passes of {} bits, {} dispatches; {:.1} Mkeys/s of the scene) | {:.2} | {:.0} % |",
+        splat_gpu::sort::pass_count(u32::BITS),
+        splat_gpu::sort::RADIX_BITS,
+        t.sort_dispatches,
         n as f64 / t.sort.as_secs_f64() / 1e6,
         ms(t.sort),
         100.0 * ms(t.sort) / sorted

@@ -471,6 +471,9 @@ fn bench_reports_the_splatting_path() {
         assert!(text.contains(row), "{row} missing:\n{text}");
     }
     assert!(text.contains("bytes a splat on the device"), "{text}");
+    // The depth sort of a scene of one scan tile: sort_setup, then four 8-bit passes of three
+    // dispatches each (the histogram, the scan's one tile, the scatter).
+    assert!(text.contains("4 passes of 8 bits, 13 dispatches"), "the depth sort's counters:\n{text}");
     // The work counters: a sorted frame and a StochasticSplats frame are each a draw and the fold
     // of its target into the running mean.
     for method in ["raster-sorted", "stochastic-splat"] {

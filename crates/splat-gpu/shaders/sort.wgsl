@@ -1,14 +1,17 @@
-// LSD radix sort of (key, value) pairs of u32, 4 bits per pass, stable; and the exclusive scan
-// it is built from. Mirrored by splat_gpu::sort::cpu_radix_sort.
+// LSD radix sort of (key, value) pairs of u32, RADIX_BITS (8) bits per pass, stable; and the
+// exclusive scan it is built from. Mirrored by splat_gpu::sort::cpu_radix_sort.
 //
 // No subgroup operation is used anywhere: every cooperation between invocations goes through
 // workgroup memory and workgroupBarrier, so the result cannot depend on the subgroup size
 // (lavapipe runs 8 lanes, GPUs 32 or 64). A pass is:
-//   histogram: per block of WG keys, the count of each digit  -> hist[digit * blocks + block];
+//   histogram: per block of BLOCK keys (ITEMS an invocation), the count of each digit
+//              -> hist[digit * blocks + block];
 //   scan:      exclusive prefix sum of hist in that (digit-major) order: the first output
 //              position of each (digit, block);
-//   scatter:   each key goes to hist[digit, block] + its rank among the block's keys of that
-//              digit. Stable because blocks, and keys within a block, keep input order.
+//   scatter:   the block sorted on its digit in workgroup memory (a stable split on two bits
+//              at a time, Satish et al. 2009's local sort), then each key written to
+//              hist[digit, block] + its place among the block's keys of that digit. Stable
+//              because blocks, and keys within a block, keep input order.
 //
 // The scan is reduce-then-scan over tiles of SCAN_TILE entries, one workgroup a tile, every
 // access coalesced (entry k * WG + l of a tile is invocation l's k-th load): `scan_reduce`
@@ -22,12 +25,15 @@
 // `sort_setup` (sort_setup.wgsl). A pass that culls (`cull`, the first pass of
 // the depth sort and of the draw-order shuffle) drops the pairs whose value is CULLED, so the
 // passes after it sort the visible splats alone.
+//
+// Declared before this by splat_gpu::sort: WG (invocations a workgroup), ITEMS (keys an
+// invocation), BLOCK (WG × ITEMS), RADIX_BITS, RADIX (= WG), SCAN_TILE, MAX_GROUPS_X, CULLED.
 struct SortParams {
     // Keys to sort (or entries to scan).
     count: u32,
     // Bit offset of this pass's digit.
     shift: u32,
-    // Blocks of WG keys.
+    // Blocks of BLOCK keys.
     blocks: u32,
     // Entries of the scan level a dispatch covers.
     scan_len: u32,
@@ -49,24 +55,27 @@ struct SortParams {
 // The scan's upper levels: the tiles' sums of each level below, level after level.
 @group(0) @binding(6) var<storage, read_write> partials: array<u32>;
 
-const WG: u32 = 256u;
-const RADIX: u32 = 16u;
-
-// Keys per segment of a block in the scatter's ranking (WG = SEGMENT²).
-const SEGMENT: u32 = 16u;
-
 // Entries a scan invocation loads from a level, and a scan tile's (WG × SCAN_ITEMS).
-// SCAN_TILE, MAX_GROUPS_X and CULLED are declared by splat_gpu::sort::constants_wgsl.
 const SCAN_ITEMS: u32 = 4u;
 // `scan_in` of the bottom level, `hist`; `scan_out` of the top level, which has no level above.
 const FROM_HIST: u32 = 0xffffffffu;
 const TOP: u32 = 0xffffffffu;
+// Rows of the scatter's raking scan: RAKE invocations each add up a row of RAKE (WG = RAKE²).
+const RAKE: u32 = 16u;
 
-var<workgroup> counts: array<atomic<u32>, 16>;
-var<workgroup> partial: array<u32, 256>;
-var<workgroup> digits: array<u32, 256>;
-var<workgroup> offsets: array<u32, 256>;
-var<workgroup> tile: array<u32, 1024>;
+var<workgroup> counts: array<atomic<u32>, RADIX>;
+var<workgroup> partial: array<u32, WG>;
+var<workgroup> tile: array<u32, SCAN_TILE>;
+// The scatter's block, in input order and after each split; each digit's first place in it,
+// and where the digit's keys of this block start in the output.
+var<workgroup> block_keys: array<u32, BLOCK>;
+var<workgroup> block_vals: array<u32, BLOCK>;
+var<workgroup> digit_first: array<u32, RADIX>;
+var<workgroup> digit_out: array<u32, RADIX>;
+// The raking scan's entries, its rows' prefixes and its total.
+var<workgroup> rake: array<vec2<u32>, WG>;
+var<workgroup> rake_rows: array<vec2<u32>, RAKE>;
+var<workgroup> rake_total: vec2<u32>;
 
 fn digit(key: u32) -> u32 {
     return (key >> sp.shift) & (RADIX - 1u);
@@ -101,7 +110,7 @@ fn workgroup_exclusive_scan(l: u32, v: u32) -> u32 {
     return partial[l] - v;
 }
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(WG, 1, 1)
 fn histogram(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -110,18 +119,17 @@ fn histogram(
     if (block >= sp.blocks) {
         return;
     }
-    if (l < RADIX) {
-        atomicStore(&counts[l], 0u);
+    // One counter an invocation: RADIX = WG.
+    atomicStore(&counts[l], 0u);
+    workgroupBarrier();
+    for (var k = 0u; k < ITEMS; k++) {
+        let i = block * BLOCK + k * WG + l;
+        if (kept(i)) {
+            atomicAdd(&counts[digit(key_in_at(i))], 1u);
+        }
     }
     workgroupBarrier();
-    let i = block * WG + l;
-    if (kept(i)) {
-        atomicAdd(&counts[digit(key_in_at(i))], 1u);
-    }
-    workgroupBarrier();
-    if (l < RADIX) {
-        hist_set(l * sp.blocks + block, atomicLoad(&counts[l]));
-    }
+    hist_set(l * sp.blocks + block, atomicLoad(&counts[l]));
 }
 
 // Entry i of the level being scanned.
@@ -141,7 +149,7 @@ fn level_set(i: u32, v: u32) {
 }
 
 // The sum of each tile of the level, to entry `tile` of the level above.
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(WG, 1, 1)
 fn scan_reduce(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -167,7 +175,7 @@ fn scan_reduce(
 // before it (entry `tile` of the level above, already scanned; 0 at the top): the tile is
 // staged in workgroup memory with coalesced loads, each invocation scans SCAN_ITEMS
 // consecutive entries of it, and the runs' sums are scanned across the workgroup.
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(WG, 1, 1)
 fn scan_down(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -208,11 +216,112 @@ fn scan_down(
     }
 }
 
-// Each key's rank among the block's keys of its digit, from counts over 16 segments of 16
-// keys: invocation (d, g) counts digit d in segment g, 16 invocations turn each digit's counts
-// into exclusive offsets, and each key adds the keys of its digit before it in its segment.
-// Three barriers per block; keys keep their input order within a digit, so the sort is stable.
-@compute @workgroup_size(256, 1, 1)
+// Exclusive prefix sum of `v` over the workgroup, by raking: RAKE invocations scan a row of
+// RAKE entries each, one scans the rows' sums. The total is left in `rake_total`. Each of the
+// two words holds two 16-bit counts, which a block's BLOCK keys cannot overflow. Three
+// barriers; call from uniform control flow.
+fn rake_exclusive_scan(l: u32, v: vec2<u32>) -> vec2<u32> {
+    rake[l] = v;
+    workgroupBarrier();
+    if (l < RAKE) {
+        var run = vec2<u32>(0u);
+        for (var j = 0u; j < RAKE; j++) {
+            let x = rake[l * RAKE + j];
+            rake[l * RAKE + j] = run;
+            run += x;
+        }
+        rake_rows[l] = run;
+    }
+    workgroupBarrier();
+    if (l == 0u) {
+        var run = vec2<u32>(0u);
+        for (var r = 0u; r < RAKE; r++) {
+            let x = rake_rows[r];
+            rake_rows[r] = run;
+            run += x;
+        }
+        rake_total = run;
+    }
+    workgroupBarrier();
+    return rake[l] + rake_rows[l / RAKE];
+}
+
+// The four 16-bit counts of a raking scan's two words.
+fn unpack_counts(w: vec2<u32>) -> vec4<u32> {
+    return vec4<u32>(w.x & 0xffffu, w.x >> 16u, w.y & 0xffffu, w.y >> 16u);
+}
+
+// The block's pairs, ITEMS consecutive ones an invocation (invocation l holds places
+// l * ITEMS + j), so that a split's ranks keep their order.
+struct Held {
+    keys: array<u32, ITEMS>,
+    vals: array<u32, ITEMS>,
+}
+
+fn hold(l: u32) -> Held {
+    var held: Held;
+    for (var j = 0u; j < ITEMS; j++) {
+        held.keys[j] = block_keys[l * ITEMS + j];
+        held.vals[j] = block_vals[l * ITEMS + j];
+    }
+    return held;
+}
+
+// A stable split of the block's first `n` pairs into four buckets: each held pair moves to
+// its bucket's start + the bucket's pairs held by invocations before l + those held before
+// it by l. The pairs at places n and beyond go to the last bucket, behind the others, so
+// they stay at the end. Rewrites the block in workgroup memory and returns the pairs l holds
+// in the new order.
+fn split(l: u32, held: Held, n: u32, shift: u32) -> Held {
+    var bucket: array<u32, ITEMS>;
+    var before: array<u32, ITEMS>;
+    var own = vec4<u32>(0u);
+    for (var j = 0u; j < ITEMS; j++) {
+        let c = select(3u, (held.keys[j] >> shift) & 3u, l * ITEMS + j < n);
+        bucket[j] = c;
+        before[j] = own[c];
+        own[c] += 1u;
+    }
+    let prefix = unpack_counts(rake_exclusive_scan(l, vec2<u32>(own.x | (own.y << 16u), own.z | (own.w << 16u))));
+    let totals = unpack_counts(rake_total);
+    var start = prefix + vec4<u32>(0u, totals.x, totals.x + totals.y, totals.x + totals.y + totals.z);
+    // Every read of the block happened before the scan's first barrier.
+    for (var j = 0u; j < ITEMS; j++) {
+        let at = start[bucket[j]] + before[j];
+        block_keys[at] = held.keys[j];
+        block_vals[at] = held.vals[j];
+    }
+    workgroupBarrier();
+    return hold(l);
+}
+
+// The block's kept pairs moved to its first places, in order (a culling pass, or the last
+// block, whose places past the pass's pairs hold nothing); their count.
+fn compact(l: u32, held: Held, n: u32) -> u32 {
+    var keep: array<bool, ITEMS>;
+    var own = 0u;
+    for (var j = 0u; j < ITEMS; j++) {
+        keep[j] = l * ITEMS + j < n && (sp.cull == 0u || held.vals[j] != CULLED);
+        own += u32(keep[j]);
+    }
+    var at = rake_exclusive_scan(l, vec2<u32>(own, 0u)).x;
+    let total = rake_total.x;
+    for (var j = 0u; j < ITEMS; j++) {
+        if (keep[j]) {
+            block_keys[at] = held.keys[j];
+            block_vals[at] = held.vals[j];
+            at += 1u;
+        }
+    }
+    workgroupBarrier();
+    return total;
+}
+
+// The block sorted on the pass's digit in workgroup memory (RADIX_BITS / 2 stable splits, after
+// the kept pairs are moved to the front), then each pair written to its digit's start in the
+// output (hist, scanned) + its place among the block's pairs of that digit. Blocks and the
+// pairs within a block keep their input order within a digit, so the sort is stable.
+@compute @workgroup_size(WG, 1, 1)
 fn scatter(
     @builtin(local_invocation_index) l: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -221,43 +330,42 @@ fn scatter(
     if (block >= sp.blocks) {
         return;
     }
-    let i = block * WG + l;
-    let valid = kept(i);
-    var key = 0u;
-    var val = 0u;
-    if (valid) {
-        key = key_in_at(i);
-        val = val_in_at(i);
+    let first = block * BLOCK;
+    for (var k = 0u; k < ITEMS; k++) {
+        let i = first + k * WG + l;
+        if (i < sp.count) {
+            block_keys[k * WG + l] = key_in_at(i);
+            block_vals[k * WG + l] = val_in_at(i);
+        }
     }
-    let d = digit(key);
-    // Past the end or culled: digit RADIX, which no invocation counts.
-    digits[l] = select(RADIX, d, valid);
+    // RADIX = WG: one digit an invocation.
+    digit_out[l] = hist_at(l * sp.blocks + block);
     workgroupBarrier();
-    let counted = l / SEGMENT;
-    let segment = l % SEGMENT;
-    var c = 0u;
-    for (var j = 0u; j < SEGMENT; j++) {
-        c += u32(digits[segment * SEGMENT + j] == counted);
+    var held = hold(l);
+    var n = min(sp.count - first, BLOCK);
+    if (sp.cull != 0u || n < BLOCK) {
+        n = compact(l, held, n);
+        held = hold(l);
     }
-    offsets[counted * SEGMENT + segment] = c;
-    workgroupBarrier();
-    if (l < RADIX) {
-        var running = 0u;
-        for (var g = 0u; g < SEGMENT; g++) {
-            let n = offsets[l * SEGMENT + g];
-            offsets[l * SEGMENT + g] = running;
-            running += n;
+    for (var b = 0u; b < RADIX_BITS; b += 2u) {
+        held = split(l, held, n, sp.shift + b);
+    }
+    for (var j = 0u; j < ITEMS; j++) {
+        let at = l * ITEMS + j;
+        let d = digit(held.keys[j]);
+        if (at < n && (at == 0u || digit(block_keys[at - 1u]) != d)) {
+            digit_first[d] = at;
         }
     }
     workgroupBarrier();
-    if (valid) {
-        let own = l / SEGMENT;
-        var rank = offsets[d * SEGMENT + own];
-        for (var s = own * SEGMENT; s < l; s++) {
-            rank += u32(digits[s] == d);
+    for (var k = 0u; k < ITEMS; k++) {
+        let at = k * WG + l;
+        if (at < n) {
+            let key = block_keys[at];
+            let d = digit(key);
+            let out = digit_out[d] + at - digit_first[d];
+            key_out_set(out, key);
+            val_out_set(out, block_vals[at]);
         }
-        let at = hist_at(d * sp.blocks + block) + rank;
-        key_out_set(at, key);
-        val_out_set(at, val);
     }
 }

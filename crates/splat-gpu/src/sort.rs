@@ -2,10 +2,15 @@
 //! exclusive scan it is built from.
 //!
 //! No maintained sort crate targets wgpu 30 (`wgpu_sort` stops at wgpu 0.19 and assumes a
-//! subgroup size), so the sort is our own: 4 bits per pass, each pass a histogram, a scan and a
-//! scatter, stable, and free of subgroup operations, so it is correct for any subgroup size by
+//! subgroup size), so the sort is our own: [`RADIX_BITS`] = 8 bits per pass (four passes for a
+//! 32-bit key), each pass a histogram, a scan and a scatter over blocks of [`BLOCK`] keys,
+//! stable, and free of subgroup operations, so it is correct for any subgroup size by
 //! construction (lavapipe runs 8 lanes, GPUs 32 or 64). A test checks the shader never calls a
-//! subgroup builtin.
+//! subgroup builtin. The scatter sorts its block on the digit in workgroup memory first, by
+//! stable splits on two bits at a time (the local sort of Satish et al. 2009, "Designing
+//! efficient sorting algorithms for manycore GPUs"), so that each key's place among its
+//! digit's keys is its place in the sorted block, and the block's keys of a digit are written
+//! together.
 //!
 //! The scan is reduce-then-scan over tiles of [`SCAN_TILE`] entries ([`scan_levels`]): one
 //! workgroup a tile, coalesced loads, and no invocation reading more than four entries of a
@@ -32,11 +37,19 @@ const SORT_SOURCE: &str = include_str!("../shaders/sort.wgsl");
 const SETUP_SOURCE: &str = include_str!("../shaders/sort_setup.wgsl");
 /// The value of a pair a culling sort drops (a culled splat's): no particle's id.
 pub const CULLED: u32 = u32::MAX;
-/// Keys per workgroup block.
-pub const BLOCK: u32 = 256;
-/// Bits sorted per pass.
-pub const RADIX_BITS: u32 = 4;
-/// Entries of a scan tile: a workgroup of [`BLOCK`] invocations, four entries each.
+/// Invocations of a sort workgroup.
+pub const WORKGROUP: u32 = 256;
+/// Keys an invocation of the histogram and the scatter takes.
+pub const ITEMS: u32 = 4;
+/// Keys per workgroup block: its histogram is [`RADIX`] counts, so the scan is of a quarter
+/// as many entries as there are keys.
+pub const BLOCK: u32 = WORKGROUP * ITEMS;
+/// Bits sorted per pass: each of the scatter's splits takes two.
+pub const RADIX_BITS: u32 = 8;
+/// Digits of a pass, one counter an invocation of the histogram.
+pub const RADIX: u32 = 1 << RADIX_BITS;
+const _: () = assert!(RADIX == WORKGROUP && RADIX_BITS.is_multiple_of(2));
+/// Entries of a scan tile: a workgroup of [`WORKGROUP`] invocations, four entries each.
 pub const SCAN_TILE: u32 = 1024;
 /// Most levels of a scan: four cover 2³² entries (2³² → 2²² → 2¹² → 4 tiles' sums).
 pub const MAX_LEVELS: usize = 4;
@@ -156,10 +169,10 @@ const HIST: SplitArray = SplitArray::of::<u32>("sort histogram", "hist", "hist_a
 const OWN_BINDINGS: u32 = 7;
 
 /// Elements of each of the sort's arrays for `capacity` pairs: the pairs, and at least the
-/// histogram's 16 counts a block of [`BLOCK`] keys.
+/// histogram's [`RADIX`] counts a block of [`BLOCK`] keys.
 pub fn array_len(capacity: u32) -> u64 {
     let capacity = u64::from(capacity.max(1));
-    (16 * capacity.div_ceil(u64::from(BLOCK))).max(capacity)
+    (u64::from(RADIX) * capacity.div_ceil(u64::from(BLOCK))).max(capacity)
 }
 
 /// How the sort's arrays for `capacity` pairs are cut in bindings of `max_binding` bytes; the
@@ -177,7 +190,9 @@ fn split_layout(split: Split, parts: PartBindings) -> SplitLayout {
 /// The constants the sort's shaders share with this file, declared here once.
 fn constants_wgsl() -> String {
     format!(
-        "const SCAN_TILE: u32 = {SCAN_TILE}u;\nconst MAX_GROUPS_X: u32 = {MAX_GROUPS_X}u;\nconst CULLED: u32 = {CULLED}u;\n"
+        "const WG: u32 = {WORKGROUP}u;\nconst ITEMS: u32 = {ITEMS}u;\nconst BLOCK: u32 = {BLOCK}u;\n\
+         const RADIX_BITS: u32 = {RADIX_BITS}u;\nconst RADIX: u32 = {RADIX}u;\nconst SCAN_TILE: u32 = {SCAN_TILE}u;\n\
+         const MAX_GROUPS_X: u32 = {MAX_GROUPS_X}u;\nconst CULLED: u32 = {CULLED}u;\n"
     )
 }
 
@@ -193,13 +208,12 @@ pub fn setup_wgsl(stride: u64) -> String {
     let word = |offset: usize| offset / 4;
     format!(
         "{}const SLOT_WORDS: u32 = {}u;\nconst COUNT: u32 = {}u;\nconst BLOCKS: u32 = {}u;\nconst SCAN_LEN: u32 = {}u;\n\
-         const LATER_LEVELS: u32 = {LATER_LEVELS}u;\nconst BLOCK: u32 = {BLOCK}u;\nconst RADIX: u32 = {}u;\n{SETUP_SOURCE}",
+         const LATER_LEVELS: u32 = {LATER_LEVELS}u;\n{SETUP_SOURCE}",
         constants_wgsl(),
         stride / 4,
         word(std::mem::offset_of!(SortParams, count)),
         word(std::mem::offset_of!(SortParams, blocks)),
         word(std::mem::offset_of!(SortParams, scan_len)),
-        1u32 << RADIX_BITS,
     )
 }
 
@@ -231,7 +245,7 @@ pub struct SortBuffers {
     pub(crate) keys: Vec<wgpu::Buffer>,
     /// Values, permuted with their keys.
     pub(crate) vals: Vec<wgpu::Buffer>,
-    /// Histogram (and scan) scratch, `16 × blocks` entries, at least `capacity`.
+    /// Histogram (and scan) scratch, [`RADIX`] entries a block, at least `capacity`.
     pub(crate) hist: Vec<wgpu::Buffer>,
     /// The scan's levels above the histogram ([`scan_levels`]).
     partials: wgpu::Buffer,
@@ -516,7 +530,7 @@ impl RadixSort {
             })
             .collect();
         self.write_slots(ctx, slots, 0, &passes);
-        let levels = scan_levels(16 * blocks);
+        let levels = scan_levels(RADIX * blocks);
         self.write_slots(ctx, slots, FIRST_LEVELS, &levels);
         self.write_slots(ctx, slots, LATER_LEVELS, &levels);
         (passes, levels)
@@ -810,8 +824,10 @@ mod tests {
         assert_eq!(lens(n), [(n, FROM_HIST, 0), (SCAN_TILE + 1, 0, SCAN_TILE + 1), (2, SCAN_TILE + 1, TOP)]);
         assert_eq!(partials_len(n), u64::from(SCAN_TILE) + 3);
         assert_eq!(scan_levels(u32::MAX).len(), MAX_LEVELS);
-        // A 6.1 M-key sort's histogram: 381,264 entries in 373 tiles, whose sums are one tile.
-        assert_eq!(lens(16 * 6_100_000u32.div_ceil(BLOCK)), [(381_264, FROM_HIST, 0), (373, 0, TOP)]);
+        // A 6.1 M-key sort's histogram: 5,958 blocks' 256 counts, 1,525,248 entries in 1,490
+        // tiles, whose sums are two tiles.
+        let n = RADIX * 6_100_000u32.div_ceil(BLOCK);
+        assert_eq!(lens(n), [(1_525_248, FROM_HIST, 0), (1490, 0, 1490), (2, 1490, TOP)]);
     }
 
     #[test]
@@ -822,8 +838,8 @@ mod tests {
         for bad in [f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -1.0, -0.0] {
             assert_eq!(depth_key(bad), None, "{bad}");
         }
-        assert_eq!(pass_count(32), 8);
-        assert_eq!(pass_count(12), 4);
+        assert_eq!(pass_count(32), 4);
+        assert_eq!(pass_count(12), 2);
         assert_eq!(pass_count(1), 2);
     }
 

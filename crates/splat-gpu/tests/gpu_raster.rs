@@ -15,7 +15,8 @@ use splat_core::rng::SplitMix64;
 use splat_core::trainer::Preset;
 use splat_core::{Camera, Scene};
 use splat_gpu::sort::{
-    CULLED, SCAN_TILE, cpu_radix_sort, culled_workgroups, depth_key, exclusive_scan, sort_culled_pairs, sort_pairs,
+    BLOCK, CULLED, RADIX, SCAN_TILE, cpu_radix_sort, culled_workgroups, depth_key, exclusive_scan, sort_culled_pairs,
+    sort_pairs,
 };
 use splat_gpu::{GpuContext, GpuRasterizer, RasterPipelines, RasterScene};
 use std::sync::OnceLock;
@@ -42,7 +43,7 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
     let sort = pipelines(ctx).sort();
     let mut rng = SplitMix64::new(7);
     let mut cases: Vec<(String, Vec<u32>, u32)> = Vec::new();
-    for n in [1usize, 255, 256, 257, 1000, 65_537] {
+    for n in [1usize, 255, 256, 257, 1000, 1023, 1024, 1025, 65_537] {
         cases.push((format!("random {n}"), (0..n).map(|_| rng.next_u64() as u32).collect(), 32));
     }
     cases.push(("all equal".into(), vec![0xDEAD_BEEF; 3000], 32));
@@ -138,20 +139,21 @@ fn gpu_sort_and_scan_equal_the_cpu_ones() {
         }
     }
     // sort_setup's workgroups where the blocks pass one row of the dispatch grid (65,535
-    // workgroups: more take rows of it), at counts this device could not sort: 20 M pairs, of
-    // which none, 1,000, a row's worth, one more, or 17 M are kept.
+    // workgroups: more take rows of it), at counts this device could not sort: 70 M pairs, of
+    // which none, 1,000, a row's worth of blocks, one more, or 68 M are kept.
     let row = 65_535u32;
     let grid = |k: u32| if k <= row { [k, 1, 1] } else { [row, k.div_ceil(row), 1] };
-    for (visible, blocks) in [(0, 0), (1000, 4), (row * 256, row), (row * 256 + 1, row + 1), (17_000_000, 66_407)] {
-        let (passes, levels) = culled_workgroups(ctx, sort, 20_000_000, visible).unwrap();
-        assert_eq!(passes, vec![grid(blocks); 7], "{visible} kept: the later passes' blocks");
-        let mut len = 16 * blocks;
+    let cases = [(0, 0), (1000, 1), (row * BLOCK, row), (row * BLOCK + 1, row + 1), (68_000_000, 66_407)];
+    for (visible, blocks) in cases {
+        let (passes, levels) = culled_workgroups(ctx, sort, 70_000_000, visible).unwrap();
+        assert_eq!(passes, vec![grid(blocks); 3], "{visible} kept: the later passes' blocks");
+        let mut len = RADIX * blocks;
         for (i, &groups) in levels.iter().enumerate() {
             len = len.div_ceil(SCAN_TILE);
             assert_eq!(groups, grid(len), "{visible} kept: scan level {i}'s tiles");
         }
-        if visible == 17_000_000 {
-            assert_eq!(levels, [[1038, 1, 1], [2, 1, 1], [1, 1, 1]], "1,062,512 histogram entries");
+        if visible == 68_000_000 {
+            assert_eq!(levels, [[16_602, 1, 1], [17, 1, 1], [1, 1, 1]], "17,000,192 histogram entries");
         }
     }
     // The scan the sort is built from, at the sizes where it gains a level (one tile, two

@@ -10,6 +10,9 @@ pub struct RasterTimings {
     pub project: Duration,
     /// Depth sort.
     pub sort: Duration,
+    /// Dispatches of one depth sort (its setup, and each pass's histogram, scan levels and
+    /// scatter): a count that does not depend on the machine.
+    pub sort_dispatches: u64,
     /// Sorted splatting (over) of every visible splat.
     pub draw_sorted: Duration,
     /// One StochasticSplats frame (1 spp) of every visible splat.
@@ -42,6 +45,7 @@ impl GpuRasterizer<'_> {
         let groups = [Draw::Over, Draw::Stochastic].map(|draw| self.draw_group(&slots.buffer, draw));
         let timer = self.ctx.timestamps.then(|| crate::timing::Timer::new(self.ctx));
         let mut best = [Duration::MAX; 4];
+        let mut sort_dispatches = 0;
         for _ in 0..repeat.max(1) {
             for (phase, slot) in best.iter_mut().enumerate() {
                 let mut encoder = self.encoder("profile");
@@ -58,7 +62,11 @@ impl GpuRasterizer<'_> {
                 });
                 match phase {
                     0 => self.encode_project(&mut encoder, compute_ts),
-                    1 => self.encode_sort(&mut encoder, compute_ts)?,
+                    1 => {
+                        let before = self.ctx.counters();
+                        self.encode_sort(&mut encoder, compute_ts)?;
+                        sort_dispatches = (self.ctx.counters() - before).dispatches;
+                    }
                     2 => {
                         self.set_mode(Draw::Over);
                         self.encode_draw(&mut encoder, Draw::Over, &sorted_targets, &groups[0], 0, render_ts)?;
@@ -90,6 +98,7 @@ impl GpuRasterizer<'_> {
         Ok(RasterTimings {
             project: best[0],
             sort: best[1],
+            sort_dispatches,
             draw_sorted: best[2],
             draw_stochastic: best[3],
             timestamps: timer.is_some(),
