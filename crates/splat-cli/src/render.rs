@@ -168,7 +168,8 @@ fn shows_nothing(out: &RenderOutput) -> bool {
 const ANOTHER_WORLD: &str = "Splats trained by gsplat (normalize_world_space, its default), by 3DGRUT with it, or by \
                              Nerfstudio lie in a normalised world of their own, not the camera file's: `splat info \
                              SCENE --camera CAMERAS` names the world a COLMAP model's splats lie in, and \
-                             --gsplat-world or --dataparser-transforms moves the cameras there";
+                             --gsplat-world or --dataparser-transforms moves the cameras there, as does \
+                             --world-transform FILE with the run's own matrix (such as gsplat's parser.transform)";
 
 /// `splat render --frames A..B`: one share of a run, written as an accumulation file.
 fn run_share(mut args: RenderArgs) -> Result<()> {

@@ -99,6 +99,7 @@ pub fn run(args: UndistortArgs) -> Result<()> {
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let start = Instant::now();
     let (mut resampled, mut masks) = (0, 0);
+    let mut undistortions = splat_core::undistort::Undistortions::new(args.undistort);
     for (index, (name, camera)) in views.iter().enumerate() {
         let source = photo_path(&images, name);
         let photo = splat_io::image::read_photo(&source).with_context(|| {
@@ -114,17 +115,17 @@ pub fn run(args: UndistortArgs) -> Result<()> {
                 camera.height
             );
         }
-        let out = camera.undistort_photo(args.undistort, &photo).with_context(|| format!("view {index} ({name})"))?;
+        let undistorting = undistortions.of(camera).with_context(|| format!("view {index} ({name})"))?;
+        let out = undistorting.photo(&photo).with_context(|| format!("view {index} ({name})"))?;
         resampled += usize::from(out != photo);
         let file = format!("{}.png", crate::render::view_stem(name, index));
         splat_io::image::write_photo(&args.output.join(&file), &out)?;
-        if let Some(folder) = &args.masks {
-            let mask = camera.undistortion_mask(args.undistort).with_context(|| format!("view {index} ({name})"))?;
-            if let Some(mask) = mask {
-                std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
-                splat_io::image::write_photo(&folder.join(&file), &mask)?;
-                masks += 1;
-            }
+        if let Some(folder) = &args.masks
+            && let Some(mask) = undistorting.mask()
+        {
+            std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
+            splat_io::image::write_photo(&folder.join(&file), &mask)?;
+            masks += 1;
         }
     }
     eprintln!(

@@ -293,20 +293,12 @@ pub fn read_views_in(path: &Path, options: ViewOptions) -> Result<Vec<(String, C
     let views = views.into_iter().enumerate().map(size).collect::<Result<Vec<_>, Error>>()?;
     let Some(trainer) = options.undistort else { return Ok(views) };
     // The views of a capture share a few cameras, and gsplat's fisheye crop reads its whole map.
-    let mut undistorted: Vec<(Camera, Camera)> = Vec::new();
-    let mut undistort = |(index, (name, camera)): (usize, (String, Camera))| {
-        let posed_here = |c: &Camera| Camera { rotation: camera.rotation, translation: camera.translation, ..*c };
-        if let Some((_, done)) = undistorted.iter().find(|(original, _)| posed_here(original) == camera) {
-            return Ok((name, posed_here(done)));
-        }
-        match camera.undistorted(trainer) {
-            Ok(done) => {
-                undistorted.push((camera, done));
-                Ok((name, done))
-            }
+    let mut undistortions = splat_core::undistort::Undistortions::new(trainer);
+    let mut undistort =
+        |(index, (name, camera)): (usize, (String, Camera))| match undistortions.of(&camera).and_then(|u| u.camera()) {
+            Ok(done) => Ok((name, done)),
             Err(e) => Err(Error::new(path, ErrorKind::Camera { index, message: format!("{name}: {e}") })),
-        }
-    };
+        };
     views.into_iter().enumerate().map(&mut undistort).collect()
 }
 

@@ -459,11 +459,68 @@ impl Camera {
         Ok(Some(plan))
     }
 
+    /// What `trainer` does to this camera's photos, planned once (gsplat's fisheye crop reads
+    /// its whole map): its camera, its photos and its mask are [`Undistorting`]'s. The plan does
+    /// not depend on the camera's pose, so the views of one physical camera can share it.
+    pub fn undistorting(&self, trainer: Undistortion) -> Result<Undistorting, CameraError> {
+        Ok(Undistorting { original: *self, trainer, plan: self.plan(trainer)? })
+    }
+
     /// The camera `trainer` trains this camera's images through (see the module
     /// documentation): a pinhole, or gsplat's ideal fisheye; a camera without a distorted lens
     /// is its own.
     pub fn undistorted(&self, trainer: Undistortion) -> Result<Camera, CameraError> {
-        let Some(plan) = self.plan(trainer)? else { return Ok(*self) };
+        self.undistorting(trainer)?.camera()
+    }
+
+    /// The pixels of [`Camera::undistorted`]'s image that `trainer` scores
+    /// ([`Undistorting::mask`]).
+    pub fn undistortion_mask(&self, trainer: Undistortion) -> Result<Option<Photo>, CameraError> {
+        Ok(self.undistorting(trainer)?.mask())
+    }
+}
+
+/// The undistortions of a capture's views by one trainer: the views share a few physical
+/// cameras (intrinsics, lens and size), and each is planned once.
+#[derive(Clone, Debug)]
+pub struct Undistortions {
+    trainer: Undistortion,
+    planned: Vec<Undistorting>,
+}
+
+impl Undistortions {
+    /// No camera planned yet.
+    pub fn new(trainer: Undistortion) -> Self {
+        Self { trainer, planned: Vec::new() }
+    }
+
+    /// The undistortion of `camera`: the plan of an earlier view of the same physical camera,
+    /// else a new one.
+    pub fn of(&mut self, camera: &Camera) -> Result<Undistorting, CameraError> {
+        let posed_here =
+            |u: &Undistorting| Camera { rotation: camera.rotation, translation: camera.translation, ..u.original };
+        if let Some(earlier) = self.planned.iter().find(|u| posed_here(u) == *camera) {
+            return Ok(Undistorting { original: *camera, ..earlier.clone() });
+        }
+        let planned = camera.undistorting(self.trainer)?;
+        self.planned.push(planned.clone());
+        Ok(planned)
+    }
+}
+
+/// A camera's undistortion by one trainer, planned ([`Camera::undistorting`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Undistorting {
+    original: Camera,
+    trainer: Undistortion,
+    /// `None`: the trainer takes the camera as it is.
+    plan: Option<Plan>,
+}
+
+impl Undistorting {
+    /// The camera the trainer trains the images through ([`Camera::undistorted`]).
+    pub fn camera(&self) -> Result<Camera, CameraError> {
+        let Some(plan) = &self.plan else { return Ok(self.original) };
         let (width, height) = plan.crop.size();
         let new = plan.camera;
         let camera = Camera {
@@ -474,29 +531,25 @@ impl Camera {
             cx: new.c.x as f32,
             cy: new.c.y as f32,
             lens: plan.trained,
-            ..*self
+            ..self.original
         };
         camera
             .validate()
-            .map_err(|e| trainer.refuse(format!("OpenCV's estimate for this lens is not a camera ({e})")))?;
+            .map_err(|e| self.trainer.refuse(format!("OpenCV's estimate for this lens is not a camera ({e})")))?;
         Ok(camera)
     }
 
-    /// The pixels of [`Camera::undistorted`]'s image that `trainer` scores, where it masks
-    /// some, as a one-channel image of that size (255 where a pixel counts, 0 where not):
-    /// gsplat's fisheye masks those whose sample falls outside the photo (its parser's `mask`,
-    /// which its loss leaves out and its evaluation renders as black); `None` where every pixel
-    /// counts.
-    pub fn undistortion_mask(&self, trainer: Undistortion) -> Result<Option<Photo>, CameraError> {
-        let Some(plan) = self.plan(trainer)? else { return Ok(None) };
-        if !matches!(plan.lens, Source::GsplatFisheye(..)) {
-            return Ok(None);
-        }
+    /// The pixels of the undistorted image that the trainer scores, where it masks some, as a
+    /// one-channel image of that size (255 where a pixel counts, 0 where not): gsplat's fisheye
+    /// masks those whose sample falls outside the photo (its parser's `mask`, which its loss
+    /// leaves out and its evaluation renders as black); `None` where every pixel counts.
+    pub fn mask(&self) -> Option<Photo> {
+        let plan = self.plan.as_ref().filter(|plan| matches!(plan.lens, Source::GsplatFisheye(..)))?;
         let (width, height) = plan.crop.size();
-        let size = (self.width, self.height);
+        let size = (self.original.width, self.original.height);
         let pixels = (0..height).flat_map(|y| (0..width).map(move |x| (x, y)));
         let data = pixels.map(|(x, y)| if gsplat_inside(plan.source_pixel(x, y), size) { 255 } else { 0 }).collect();
-        Ok(Some(Photo { width, height, channels: 1, data }))
+        Some(Photo { width, height, channels: 1, data })
     }
 }
 
@@ -521,6 +574,27 @@ mod tests {
         let x = Intrinsics::of(undistorted).normalised(p);
         let distorted = original.lens.project(x.extend(1.0)).expect("in front");
         Intrinsics::of(original).pixel(distorted)
+    }
+
+    /// The views of one physical camera share its plan, each with its own pose, and give what
+    /// each would alone; another camera (here f changed, or the lens) is planned anew.
+    #[test]
+    fn views_of_one_camera_share_its_plan() {
+        let fisheye = Distortion { radial: [0.05, -0.01, 0.0, 0.0], ..Default::default() };
+        for lens in [Lens::Perspective(barrel()), Lens::Fisheye(fisheye)] {
+            let a = camera(lens);
+            let moved = Camera { rotation: Mat3::from_rotation_y(0.3), translation: Vec3::new(1.0, 2.0, 3.0), ..a };
+            let other = Camera { fx: 650.0, ..a };
+            for trainer in Undistortion::ALL {
+                let mut undistortions = Undistortions::new(trainer);
+                for view in [a, moved, other, moved, a] {
+                    let alone = view.undistorting(trainer).unwrap();
+                    assert_eq!(undistortions.of(&view).unwrap(), alone, "{lens:?} {trainer:?}");
+                    assert_eq!(alone.camera().unwrap().rotation, view.rotation);
+                }
+                assert_eq!(undistortions.planned.len(), 2, "{lens:?} {trainer:?}: one plan a physical camera");
+            }
+        }
     }
 
     #[test]

@@ -17,7 +17,7 @@
 //! A sample whose four taps all lie outside the photo is the border (0); one that straddles its
 //! edge takes 0 for the taps outside.
 
-use super::Undistortion;
+use super::{Undistorting, Undistortion};
 use crate::camera::{Camera, CameraError};
 use glam::DVec2;
 
@@ -106,15 +106,24 @@ fn bilinear(photo: &Photo, x: i64, y: i64, out: &mut [u8], mix: impl Fn([i32; 4]
 
 impl Camera {
     /// `photo`, taken through this camera, as `trainer` undistorts it for training and
+    /// evaluation ([`Undistorting::photo`]).
+    pub fn undistort_photo(&self, trainer: Undistortion, photo: &Photo) -> Result<Photo, CameraError> {
+        self.undistorting(trainer)?.photo(photo)
+    }
+}
+
+impl Undistorting {
+    /// `photo`, taken through the camera, as the trainer undistorts it for training and
     /// evaluation: of [`Camera::undistorted`]'s size, resampled by OpenCV's bilinear
     /// interpolation (see the module documentation); a camera the trainer takes as it is keeps
     /// its photo. Refuses a photo of another size than the camera's.
-    pub fn undistort_photo(&self, trainer: Undistortion, photo: &Photo) -> Result<Photo, CameraError> {
-        let refuse = |why: String| trainer.refuse(why);
-        if (photo.width, photo.height) != (self.width, self.height) {
+    pub fn photo(&self, photo: &Photo) -> Result<Photo, CameraError> {
+        let refuse = |why: String| self.trainer.refuse(why);
+        let camera = &self.original;
+        if (photo.width, photo.height) != (camera.width, camera.height) {
             return Err(refuse(format!(
                 "the photograph is {} × {} and the camera {} × {}: scale the camera or the photograph to match",
-                photo.width, photo.height, self.width, self.height
+                photo.width, photo.height, camera.width, camera.height
             )));
         }
         let c = photo.channels as usize;
@@ -126,7 +135,7 @@ impl Camera {
                 photo.data.len()
             )));
         }
-        let Some(plan) = self.plan(trainer)? else { return Ok(photo.clone()) };
+        let Some(plan) = &self.plan else { return Ok(photo.clone()) };
         let (width, height) = plan.crop.size();
         let rows = crate::par::map(&(0..height).collect::<Vec<u32>>(), |&y| {
             let mut row = vec![0u8; width as usize * c];
