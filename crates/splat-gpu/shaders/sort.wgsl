@@ -64,7 +64,6 @@ const TOP: u32 = 0xffffffffu;
 const RAKE: u32 = 16u;
 
 var<workgroup> counts: array<atomic<u32>, RADIX>;
-var<workgroup> partial: array<u32, WG>;
 var<workgroup> tile: array<u32, SCAN_TILE>;
 // The scatter's block, in input order and after each split; each digit's first place in it,
 // and where the digit's keys of this block start in the output.
@@ -91,23 +90,6 @@ fn block_of(wg: vec3<u32>) -> u32 {
 // Whether input pair i is sorted: one of the pass's pairs, and not dropped by a culling pass.
 fn kept(i: u32) -> bool {
     return i < sp.count && (sp.cull == 0u || val_in_at(i) != CULLED);
-}
-
-// Exclusive prefix sum of `v` over the workgroup (Hillis–Steele in workgroup memory); the
-// workgroup's total is left in partial[WG - 1]. Call from uniform control flow.
-fn workgroup_exclusive_scan(l: u32, v: u32) -> u32 {
-    partial[l] = v;
-    workgroupBarrier();
-    for (var d = 1u; d < WG; d = d << 1u) {
-        var x = 0u;
-        if (l >= d) {
-            x = partial[l - d];
-        }
-        workgroupBarrier();
-        partial[l] += x;
-        workgroupBarrier();
-    }
-    return partial[l] - v;
 }
 
 @compute @workgroup_size(WG, 1, 1)
@@ -165,9 +147,9 @@ fn scan_reduce(
             sum += level_at(i);
         }
     }
-    workgroup_exclusive_scan(l, sum);
+    rake_exclusive_scan(l, vec2<u32>(sum, 0u));
     if (l == 0u) {
-        partials[sp.scan_out + t] = partial[WG - 1u];
+        partials[sp.scan_out + t] = rake_total.x;
     }
 }
 
@@ -198,7 +180,7 @@ fn scan_down(
     for (var k = 0u; k < SCAN_ITEMS; k++) {
         run += tile[l * SCAN_ITEMS + k];
     }
-    var running = workgroup_exclusive_scan(l, run);
+    var running = rake_exclusive_scan(l, vec2<u32>(run, 0u)).x;
     if (sp.scan_out != TOP) {
         running += partials[sp.scan_out + t];
     }
@@ -217,9 +199,9 @@ fn scan_down(
 }
 
 // Exclusive prefix sum of `v` over the workgroup, by raking: RAKE invocations scan a row of
-// RAKE entries each, one scans the rows' sums. The total is left in `rake_total`. Each of the
-// two words holds two 16-bit counts, which a block's BLOCK keys cannot overflow. Three
-// barriers; call from uniform control flow.
+// RAKE entries each, one scans the rows' sums. The total is left in `rake_total`. The scan
+// kernels use the first word; the scatter's splits pack two 16-bit counts in each, which a
+// block's BLOCK keys cannot overflow. Three barriers; call from uniform control flow.
 fn rake_exclusive_scan(l: u32, v: vec2<u32>) -> vec2<u32> {
     rake[l] = v;
     workgroupBarrier();
