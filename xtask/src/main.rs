@@ -623,6 +623,16 @@ fn regenerate(what: &str) -> Result<()> {
 }
 
 /// `cargo ARGS` in the workspace; an error unless it succeeds.
+/// Run `binary` with `args`; an error naming it and its arguments when it fails.
+fn run_binary(binary: &Path, args: &[&str]) -> Result<()> {
+    let name = binary.file_name().map_or_else(|| binary.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let status = Command::new(binary).args(args).status().with_context(|| format!("running {name}"))?;
+    if !status.success() {
+        bail!("{name} {} failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
+
 fn cargo(args: &[&str]) -> Result<()> {
     let status = Command::new(env!("CARGO")).current_dir(root()).args(args).status().context("running cargo")?;
     if !status.success() {
@@ -664,18 +674,14 @@ fn bench() -> Result<()> {
 /// waits a frame, device bytes a splat) and of the splatting methods (each stage, then each
 /// method against raster-sorted) on the bonsai capture from the standard view at 1200 × 800,
 /// then raster-sorted and StochasticSplats on a 6 M-splat SH-3 shell ([`write_shell`]) at
-/// 1920 × 1080, vk_gaussian_splatting's scale. Each table is ratios within its own run.
+/// 1920 × 1080, vk_gaussian_splatting's scale; then sorted splatting against a peer wgpu
+/// splatting viewer on the same device (`crates/raster-peer`, outside the workspace so that CI
+/// does not build its dependencies) on both scenes. Each table is ratios within its own run.
 fn bench_gpu() -> Result<()> {
     let bonsai = assets()?;
     cargo(&["build", "--release", "--bin", "splat"])?;
     let splat = target_dir().join("release/splat");
-    let run = |args: &[&str]| -> Result<()> {
-        let status = Command::new(&splat).args(args).status().context("running splat")?;
-        if !status.success() {
-            bail!("splat {} failed ({status})", args.join(" "));
-        }
-        Ok(())
-    };
+    let run = |args: &[&str]| run_binary(&splat, args);
     let bonsai = bonsai.to_str().context("non-UTF-8 path")?;
     let view = ["--eye", "0,-1.5,4", "--target", "0,0.5,0", "--up", "0,-1,0", "--width", "1200", "--height", "800"];
     let gpu = ["--backend", "gpu", "--repeat", "3"];
@@ -692,7 +698,26 @@ fn bench_gpu() -> Result<()> {
     println!("\n## Splatting on the GPU, a 6 M-splat SH-3 shell, 1920 × 1080\n");
     let shell = shell.to_str().context("non-UTF-8 path")?;
     let size = ["--width", "1920", "--height", "1080", "--methods", "raster-sorted,stochastic-splat", "--spp", "16"];
-    run(&[&["bench", shell][..], &size, &gpu].concat())
+    run(&[&["bench", shell][..], &size, &gpu].concat())?;
+    // The peer reads PLY only: the bonsai converted, and the same shell.
+    let bonsai_ply = dir.join("bonsai-7k-mini.ply");
+    let bonsai_ply = bonsai_ply.to_str().context("non-UTF-8 path")?;
+    run(&["convert", bonsai, bonsai_ply])?;
+    let peer_dir = target_dir().join("raster-peer");
+    let peer_dir = peer_dir.to_str().context("non-UTF-8 path")?;
+    let manifest = ["--manifest-path", "crates/raster-peer/Cargo.toml", "--target-dir", peer_dir];
+    cargo(&[&["build", "--release"][..], &manifest].concat())?;
+    // A peer that refuses a scene (its own limits) is a result: said, and the table goes on.
+    let peer = |args: &[&str]| {
+        if let Err(e) = run_binary(&target_dir().join("raster-peer/release/raster-peer"), args) {
+            println!("no comparison: {e:#}");
+        }
+    };
+    println!("\n## Splatting against wgpu-3dgs-viewer on the same GPU, bonsai, 1200 × 800\n");
+    peer(&[&[bonsai_ply][..], &view, &["--repeat", "3"]].concat());
+    println!("\n## Splatting against wgpu-3dgs-viewer on the same GPU, the 6 M-splat shell, 1920 × 1080\n");
+    peer(&[shell, "--width", "1920", "--height", "1080", "--repeat", "3"]);
+    Ok(())
 }
 
 /// `cargo xtask bench --scaling[=N,…]`: how load, BVH build, rays and memory grow with the
