@@ -1,4 +1,4 @@
-// LSD radix sort of (key, value) pairs of u32, RADIX_BITS (8) bits per pass, stable; and the
+// LSD radix sort of (key, value) pairs of u32, RADIX_BITS bits per pass, stable; and the
 // exclusive scan it is built from. Mirrored by splat_gpu::sort::cpu_radix_sort.
 //
 // No subgroup operation is used anywhere: every cooperation between invocations goes through
@@ -27,7 +27,8 @@
 // passes after it sort the visible splats alone.
 //
 // Declared before this by splat_gpu::sort: WG (invocations a workgroup), ITEMS (keys an
-// invocation), BLOCK (WG × ITEMS), RADIX_BITS, RADIX (= WG), SCAN_TILE, MAX_GROUPS_X, CULLED.
+// invocation), BLOCK (WG × ITEMS), RADIX_BITS, RADIX (= WG), RAKE (the raking scan's rows,
+// RAKE² = WG), SCAN_TILE, MAX_GROUPS_X, CULLED.
 struct SortParams {
     // Keys to sort (or entries to scan).
     count: u32,
@@ -60,8 +61,6 @@ const SCAN_ITEMS: u32 = 4u;
 // `scan_in` of the bottom level, `hist`; `scan_out` of the top level, which has no level above.
 const FROM_HIST: u32 = 0xffffffffu;
 const TOP: u32 = 0xffffffffu;
-// Rows of the scatter's raking scan: RAKE invocations each add up a row of RAKE (WG = RAKE²).
-const RAKE: u32 = 16u;
 
 var<workgroup> counts: array<atomic<u32>, RADIX>;
 var<workgroup> tile: array<u32, SCAN_TILE>;

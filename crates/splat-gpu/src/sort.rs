@@ -48,7 +48,9 @@ pub const BLOCK: u32 = WORKGROUP * ITEMS;
 pub const RADIX_BITS: u32 = 8;
 /// Digits of a pass, one counter an invocation of the histogram.
 pub const RADIX: u32 = 1 << RADIX_BITS;
-const _: () = assert!(RADIX == WORKGROUP && RADIX_BITS.is_multiple_of(2));
+/// Rows of the shader's raking scan: that many invocations each add up a row of that many.
+const RAKE: u32 = 16;
+const _: () = assert!(RADIX == WORKGROUP && RADIX_BITS.is_multiple_of(2) && RAKE * RAKE == WORKGROUP);
 /// Entries of a scan tile: a workgroup of [`WORKGROUP`] invocations, four entries each.
 pub const SCAN_TILE: u32 = 1024;
 /// Most levels of a scan: four cover 2³² entries (2³² → 2²² → 2¹² → 4 tiles' sums).
@@ -191,7 +193,8 @@ fn split_layout(split: Split, parts: PartBindings) -> SplitLayout {
 fn constants_wgsl() -> String {
     format!(
         "const WG: u32 = {WORKGROUP}u;\nconst ITEMS: u32 = {ITEMS}u;\nconst BLOCK: u32 = {BLOCK}u;\n\
-         const RADIX_BITS: u32 = {RADIX_BITS}u;\nconst RADIX: u32 = {RADIX}u;\nconst SCAN_TILE: u32 = {SCAN_TILE}u;\n\
+         const RADIX_BITS: u32 = {RADIX_BITS}u;\nconst RADIX: u32 = {RADIX}u;\nconst RAKE: u32 = {RAKE}u;\n\
+         const SCAN_TILE: u32 = {SCAN_TILE}u;\n\
          const MAX_GROUPS_X: u32 = {MAX_GROUPS_X}u;\nconst CULLED: u32 = {CULLED}u;\n"
     )
 }
