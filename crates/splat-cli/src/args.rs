@@ -353,7 +353,7 @@ impl Staged {
 pub struct SceneArgs {
     /// Scene file (.ply, compressed .ply, .splat, .spz, PlayCanvas SOG (.sog, or a meta.json
     /// beside its images), GaussianSplats3D .ksplat, OpenUSD .usda (ParticleField3DGaussianSplat
-    /// prims), or .glb / .gltf with KHR_gaussian_splatting and any meshes beside the splats) or
+    /// prims), gsplat's .pt checkpoints, or .glb / .gltf with KHR_gaussian_splatting and any meshes beside the splats) or
     /// world file (.toml: splat sets,
     /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
     pub scene: Option<PathBuf>,

@@ -174,6 +174,9 @@ pub enum ErrorKind {
     /// reader does not support.
     #[error("SOG: {0}")]
     Sog(String),
+    /// A PyTorch checkpoint that is not one of gsplat's, or is malformed ([`crate::torch`]).
+    #[error("gsplat checkpoint: {0}")]
+    Checkpoint(String),
     /// A `.ksplat` file (GaussianSplats3D) is malformed or uses what this reader does not
     /// support.
     #[error(".ksplat: {0}")]

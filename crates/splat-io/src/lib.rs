@@ -31,6 +31,7 @@ pub mod image;
 pub mod ksplat;
 pub mod memory;
 pub mod mesh;
+mod pickle;
 mod placement;
 pub mod ply;
 pub mod similarity;
@@ -38,6 +39,7 @@ pub mod sog;
 pub mod splat;
 pub mod spz;
 pub mod text;
+pub mod torch;
 pub mod transforms;
 pub mod usd;
 pub mod world;
@@ -71,6 +73,9 @@ pub enum SceneFormat {
     /// OpenUSD `.usda` with `ParticleField3DGaussianSplat` prims: f32 text, lossless; read
     /// placed by their `xformOp`s ([`usd`]).
     Usd,
+    /// gsplat's `simple_trainer` checkpoint (`.pt`, `torch.save`'s zip of its parameters),
+    /// lossless (read only, [`torch`]).
+    GsplatCheckpoint,
 }
 
 impl SceneFormat {
@@ -84,7 +89,7 @@ impl SceneFormat {
             Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => {
                 Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_READ_ONLY }))
             }
-            Some("ksplat") => {
+            Some("ksplat" | "pt" | "pth") => {
                 Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_READ_ONLY }))
             }
             Some("ply") => Ok(Self::Ply),
@@ -106,7 +111,7 @@ impl SceneFormat {
             (Self::Ply | Self::CompressedPly, filter) => filter,
             (Self::Spz | Self::Sog, ScreenFilter::Mip) => ScreenFilter::Antialiased,
             (Self::Spz | Self::Sog, filter) => filter,
-            (Self::Splat | Self::Gltf | Self::Ksplat | Self::Usd, _) => ScreenFilter::Dilation,
+            (Self::Splat | Self::Gltf | Self::Ksplat | Self::Usd | Self::GsplatCheckpoint, _) => ScreenFilter::Dilation,
         }
     }
 
@@ -121,16 +126,18 @@ impl SceneFormat {
             Self::Sog => "PlayCanvas SOG",
             Self::Ksplat => "GaussianSplats3D .ksplat",
             Self::Usd => "OpenUSD ParticleField3DGaussianSplat",
+            Self::GsplatCheckpoint => "gsplat checkpoint",
         }
     }
 }
 
 /// The extensions the writers take, as errors list them.
 const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda";
-const WRITTEN_EXTENSIONS_READ_ONLY: &str =
-    ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda (compressed .ply and .ksplat are read only)";
+const WRITTEN_EXTENSIONS_READ_ONLY: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda (compressed \
+                                            .ply, .ksplat and gsplat's .pt checkpoints are read only)";
 /// The extensions the readers take.
-const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda or .usd";
+const READ_EXTENSIONS: &str =
+    ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd or .pt (a gsplat checkpoint)";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -265,6 +272,10 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             let usd = usd::read_usd(path)?;
             SceneRead { detail: usd.describe(), notes: usd.notes, ..read(SceneFormat::Usd, usd.scene) }
         }
+        Some("pt" | "pth") => {
+            let (scene, info) = torch::read_gsplat_checkpoint(path)?;
+            SceneRead { detail: info.describe(), ..read(SceneFormat::GsplatCheckpoint, scene) }
+        }
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
     if let Some(filter) = options.screen_filter {
@@ -285,7 +296,9 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
         SceneFormat::Sog => sog::write_sog(path, scene)?,
         SceneFormat::Usd => usd::write_usda(path, scene)?,
-        SceneFormat::CompressedPly | SceneFormat::Ksplat => unreachable!("for_output refuses them"),
+        SceneFormat::CompressedPly | SceneFormat::Ksplat | SceneFormat::GsplatCheckpoint => {
+            unreachable!("for_output refuses them")
+        }
     }
     Ok(format)
 }

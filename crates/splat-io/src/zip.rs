@@ -1,8 +1,9 @@
-//! The zip container of bundled PlayCanvas SOG files (`.sog`, [`crate::sog`]), as PKWARE's
-//! APPNOTE describes it: the end-of-central-directory record, the central directory, and
-//! local file headers. Entries stored (method 0) or deflated (method 8, through `flate2`) are
-//! read, each checked against its CRC-32; stored entries are written. Zip64, encryption and
-//! archives split over disks are refused by name: a SOG bundle needs none of them.
+//! The zip container of bundled PlayCanvas SOG files (`.sog`, [`crate::sog`]) and of PyTorch
+//! checkpoints ([`crate::torch`]), as PKWARE's APPNOTE describes it: the end-of-central-directory
+//! record (and Zip64's, which PyTorch's writer always adds), the central directory, and local
+//! file headers. Entries stored (method 0) or deflated (method 8, through `flate2`) are read,
+//! each checked against its CRC-32; stored entries are written. Encryption and archives split
+//! over disks are refused by name.
 
 use flate2::Crc;
 use std::io::Read;
@@ -16,6 +17,14 @@ const CENTRAL_SIZE: usize = 46;
 /// A local file header's signature and fixed size.
 const LOCAL_SIGNATURE: u32 = 0x0403_4b50;
 const LOCAL_SIZE: usize = 30;
+/// Zip64's end-of-central-directory record (APPNOTE 4.3.14) and its locator (4.3.15), which
+/// sits right before the classic record: signatures and fixed sizes.
+const END64_SIGNATURE: u32 = 0x0606_4b50;
+const END64_SIZE: usize = 56;
+const LOCATOR_SIGNATURE: u32 = 0x0706_4b50;
+const LOCATOR_SIZE: usize = 20;
+/// The extra field holding an entry's Zip64 sizes and offset (APPNOTE 4.5.3).
+const ZIP64_EXTRA: u16 = 0x0001;
 /// Deflate's largest expansion (a 258-byte match per 2 bits, about 1032 : 1): an entry that
 /// claims more than this times its compressed size is refused before it is inflated.
 const DEFLATE_MAX_RATIO: u64 = 1032;
@@ -36,6 +45,10 @@ fn u32_at(b: &[u8], at: usize) -> u32 {
     u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
 }
 
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(std::array::from_fn(|k| b[at + k]))
+}
+
 /// `len` bytes of `bytes` from `at`, or an error naming `what`.
 fn slice<'a>(bytes: &'a [u8], at: usize, len: usize, what: &str) -> Result<&'a [u8], String> {
     at.checked_add(len)
@@ -45,18 +58,37 @@ fn slice<'a>(bytes: &'a [u8], at: usize, len: usize, what: &str) -> Result<&'a [
 
 /// Every entry of the archive `bytes`, as (name, contents), in central-directory order.
 pub(crate) fn read_entries(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, String> {
+    directory(bytes)?
+        .into_iter()
+        .map(|(name, entry)| Ok((name.clone(), entry.contents(bytes, &name)?.into_owned())))
+        .collect()
+}
+
+/// The central directory of the archive `bytes`: each entry's name and where its contents lie,
+/// in directory order (read them with [`CentralEntry::contents`]).
+pub(crate) fn directory(bytes: &[u8]) -> Result<Vec<(String, CentralEntry)>, String> {
     let end = find_end(bytes)?;
     let record = &bytes[end..end + END_SIZE];
-    let (disk, cd_disk) = (u16_at(record, 4), u16_at(record, 6));
-    let (count, cd_size, cd_offset) = (u16_at(record, 10), u32_at(record, 12), u32_at(record, 16));
-    if count == u16::MAX || cd_size == u32::MAX || cd_offset == u32::MAX {
-        return Err("zip: a zip64 archive (more than 65,535 entries or 4 GiB), which a SOG bundle never needs".into());
+    let (mut disk, mut cd_disk) = (u32::from(u16_at(record, 4)), u32::from(u16_at(record, 6)));
+    let (mut count, mut disk_count) = (u64::from(u16_at(record, 10)), u64::from(u16_at(record, 8)));
+    let (mut cd_size, mut cd_offset) = (u64::from(u32_at(record, 12)), u64::from(u32_at(record, 16)));
+    if let Some(end64) = zip64_end(bytes, end)? {
+        let record = &bytes[end64..end64 + END64_SIZE];
+        (disk, cd_disk) = (u32_at(record, 16), u32_at(record, 20));
+        (disk_count, count) = (u64_at(record, 24), u64_at(record, 32));
+        (cd_size, cd_offset) = (u64_at(record, 40), u64_at(record, 48));
+    } else if count == u64::from(u16::MAX) || cd_size == u64::from(u32::MAX) || cd_offset == u64::from(u32::MAX) {
+        return Err("zip: the end record points to Zip64's, which is missing (the file is damaged)".into());
     }
-    if disk != 0 || cd_disk != 0 || u16_at(record, 8) != count {
+    if disk != 0 || cd_disk != 0 || disk_count != count {
         return Err("zip: an archive split over several disks".into());
     }
-    let directory = slice(bytes, cd_offset as usize, cd_size as usize, "the central directory")?;
-    let mut entries = Vec::with_capacity(usize::from(count));
+    let directory = slice(bytes, to_usize(cd_offset)?, to_usize(cd_size)?, "the central directory")?;
+    // Each entry takes at least CENTRAL_SIZE bytes of the directory: a larger count is a lie.
+    if count > (directory.len() / CENTRAL_SIZE) as u64 {
+        return Err(format!("zip: {count} entries cannot fit a central directory of {} bytes", directory.len()));
+    }
+    let mut entries = Vec::with_capacity(count as usize);
     let mut at = 0;
     for index in 0..count {
         let head = slice(directory, at, CENTRAL_SIZE, "a central directory entry")?;
@@ -67,18 +99,40 @@ pub(crate) fn read_entries(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, Strin
             (usize::from(u16_at(head, 28)), usize::from(u16_at(head, 30)), usize::from(u16_at(head, 32)));
         let name = slice(directory, at + CENTRAL_SIZE, name_len, "an entry name")?;
         let name = String::from_utf8_lossy(name).into_owned();
-        let entry = CentralEntry {
+        let extra = slice(directory, at + CENTRAL_SIZE + name_len, extra_len, "an entry's extra fields")?;
+        let mut entry = CentralEntry {
             flags: u16_at(head, 8),
             method: u16_at(head, 10),
             crc: u32_at(head, 16),
-            compressed: u32_at(head, 20),
-            size: u32_at(head, 24),
-            offset: u32_at(head, 42),
+            compressed: u64::from(u32_at(head, 20)),
+            size: u64::from(u32_at(head, 24)),
+            offset: u64::from(u32_at(head, 42)),
         };
-        entries.push((name.clone(), entry.contents(bytes, &name)?));
+        entry.widen(extra, &name)?;
+        entries.push((name, entry));
         at += CENTRAL_SIZE + name_len + extra_len + comment_len;
     }
     Ok(entries)
+}
+
+/// Where Zip64's end record lies, when the locator before the classic record at `end` says
+/// there is one.
+fn zip64_end(bytes: &[u8], end: usize) -> Result<Option<usize>, String> {
+    let Some(locator) = end.checked_sub(LOCATOR_SIZE) else { return Ok(None) };
+    if u32_at(bytes, locator) != LOCATOR_SIGNATURE {
+        return Ok(None);
+    }
+    let at = to_usize(u64_at(bytes, locator + 8))?;
+    let record = slice(bytes, at, END64_SIZE, "Zip64's end-of-central-directory record")?;
+    if u32_at(record, 0) != END64_SIGNATURE {
+        return Err("zip: Zip64's end-of-central-directory record has no signature".into());
+    }
+    Ok(Some(at))
+}
+
+/// A Zip64 size or offset as an index into the file.
+fn to_usize(v: u64) -> Result<usize, String> {
+    usize::try_from(v).map_err(|_| format!("zip: an offset of {v} bytes does not fit this machine"))
 }
 
 /// The offset of the end-of-central-directory record: the last signature within the final
@@ -97,46 +151,80 @@ fn find_end(bytes: &[u8]) -> Result<usize, String> {
 }
 
 /// What the central directory says of one entry.
-struct CentralEntry {
+pub(crate) struct CentralEntry {
     flags: u16,
     method: u16,
     crc: u32,
-    compressed: u32,
-    size: u32,
-    offset: u32,
+    compressed: u64,
+    size: u64,
+    offset: u64,
 }
 
 impl CentralEntry {
-    /// The entry's contents, inflated and checked against its CRC-32.
-    fn contents(&self, bytes: &[u8], name: &str) -> Result<Vec<u8>, String> {
+    /// The sizes and offset that the classic fields mark as Zip64's (all ones), read from the
+    /// Zip64 extra field, which holds those marked and only those, in this order (APPNOTE 4.5.3).
+    fn widen(&mut self, mut extra: &[u8], name: &str) -> Result<(), String> {
+        let marked = u64::from(u32::MAX);
+        let wide = [self.size == marked, self.compressed == marked, self.offset == marked];
+        if !wide.contains(&true) {
+            return Ok(());
+        }
+        while extra.len() >= 4 {
+            let (id, len) = (u16_at(extra, 0), usize::from(u16_at(extra, 2)));
+            let body = slice(extra, 4, len, "an extra field")?;
+            if id == ZIP64_EXTRA {
+                let mut values = body.chunks_exact(8).map(|c| u64_at(c, 0));
+                let mut next =
+                    |what: &str| values.next().ok_or(format!("zip: entry {name}'s Zip64 field lacks its {what}"));
+                if wide[0] {
+                    self.size = next("size")?;
+                }
+                if wide[1] {
+                    self.compressed = next("compressed size")?;
+                }
+                if wide[2] {
+                    self.offset = next("offset")?;
+                }
+                return Ok(());
+            }
+            extra = &extra[4 + len..];
+        }
+        Err(format!("zip: entry {name} marks its sizes as Zip64's but has no Zip64 field"))
+    }
+
+    /// The entry's contents, inflated and checked against its CRC-32: a stored entry is
+    /// borrowed from `bytes`.
+    pub(crate) fn contents<'b>(&self, bytes: &'b [u8], name: &str) -> Result<std::borrow::Cow<'b, [u8]>, String> {
+        use std::borrow::Cow;
         if self.flags & FLAG_ENCRYPTED != 0 {
             return Err(format!("zip: entry {name} is encrypted"));
         }
-        let local = slice(bytes, self.offset as usize, LOCAL_SIZE, "a local file header")?;
+        let offset = to_usize(self.offset)?;
+        let local = slice(bytes, offset, LOCAL_SIZE, "a local file header")?;
         if u32_at(local, 0) != LOCAL_SIGNATURE {
             return Err(format!("zip: entry {name} has no local file header at offset {}", self.offset));
         }
-        let start = self.offset as usize + LOCAL_SIZE + usize::from(u16_at(local, 26)) + usize::from(u16_at(local, 28));
-        let data = slice(bytes, start, self.compressed as usize, &format!("entry {name}"))?;
+        let start = offset + LOCAL_SIZE + usize::from(u16_at(local, 26)) + usize::from(u16_at(local, 28));
+        let data = slice(bytes, start, to_usize(self.compressed)?, &format!("entry {name}"))?;
         let contents = match self.method {
-            0 if self.compressed == self.size => data.to_vec(),
+            0 if self.compressed == self.size => Cow::Borrowed(data),
             0 => return Err(format!("zip: stored entry {name} has {} bytes, but says {}", self.compressed, self.size)),
             8 => {
-                if u64::from(self.size) > DEFLATE_MAX_RATIO * u64::from(self.compressed) + 1024 {
+                if self.size > DEFLATE_MAX_RATIO.saturating_mul(self.compressed).saturating_add(1024) {
                     return Err(format!(
                         "zip: entry {name} claims {} bytes from {}, more than deflate can expand",
                         self.size, self.compressed
                     ));
                 }
-                let mut out = Vec::with_capacity(self.size as usize);
+                let mut out = Vec::with_capacity(to_usize(self.size)?);
                 flate2::read::DeflateDecoder::new(data)
-                    .take(u64::from(self.size) + 1)
+                    .take(self.size + 1)
                     .read_to_end(&mut out)
                     .map_err(|e| format!("zip: entry {name}: {e}"))?;
-                if out.len() != self.size as usize {
+                if out.len() as u64 != self.size {
                     return Err(format!("zip: entry {name} inflates to {} bytes, but says {}", out.len(), self.size));
                 }
-                out
+                Cow::Owned(out)
             }
             method => {
                 return Err(format!("zip: entry {name} uses compression method {method} (only 0 and 8 are read)"));
@@ -206,6 +294,25 @@ fn u32_len(len: usize, what: &str) -> Result<u32, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// CPython's zipfile with its Zip64 limits set to zero (`zipfile.ZIP64_LIMIT = 0`,
+    /// `ZIP_FILECOUNT_LIMIT = 0`), so that it writes Zip64's end record and locator, and the
+    /// sizes and an offset in Zip64 extra fields, as PyTorch's writer does: two stored entries.
+    #[test]
+    fn zip64_archives_read() {
+        let hex = "504b03042d00000000005d33865d86a61036ffffffffffffffff0c0014006172632f646174612e706b6c010010000500000000000000050000000000000068656c6c6f504b03042d00000000005d33865d46d76c45ffffffffffffffff0a0014006172632f646174612f30010010000a000000000000000a0000000000000000010203040506070809504b01022d032d00000000005d33865d86a61036ffffffffffffffff0c00140000000000000000008001000000006172632f646174612e706b6c0100100005000000000000000500000000000000504b01022d032d00000000005d33865d46d76c45ffffffffffffffff0a001c0000000000000000008001ffffffff6172632f646174612f30010018000a000000000000000a000000000000004300000000000000504b06062c000000000000002d002d00000000000000000002000000000000000200000000000000a2000000000000008900000000000000504b0607000000002b0100000000000001000000504b05060000000002000200a2000000890000000000";
+        let zip: Vec<u8> = (0..hex.len()).step_by(2).map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap()).collect();
+        let entries = read_entries(&zip).unwrap();
+        let expected = [("arc/data.pkl".to_string(), b"hello".to_vec()), ("arc/data/0".to_string(), (0..10).collect())];
+        assert_eq!(entries, expected);
+        // Zip64's record damaged: refused by name, not read through the classic one.
+        let mut damaged = zip.clone();
+        damaged[0x12b] ^= 0xff; // its signature
+        assert!(read_entries(&damaged).unwrap_err().contains("Zip64"), "{:?}", read_entries(&damaged));
+        for len in 0..zip.len() {
+            assert!(read_entries(&zip[..len]).is_err(), "{len} bytes");
+        }
+    }
 
     #[test]
     fn stored_entries_read_back() {

@@ -283,12 +283,9 @@ fn errors_name_the_file() {
     let path = std::path::Path::new("/nonexistent/dir/scene.ply");
     let e = splat_io::read_scene(path).unwrap_err();
     assert!(e.to_string().starts_with("/nonexistent/dir/scene.ply: "), "{e}");
-    assert!(
-        splat_io::read_scene("x.obj".as_ref())
-            .unwrap_err()
-            .to_string()
-            .contains(".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda or .usd")
-    );
+    assert!(splat_io::read_scene("x.obj".as_ref()).unwrap_err().to_string().contains(
+        ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd or .pt (a gsplat checkpoint)"
+    ));
 }
 
 fn particle() -> impl Strategy<Value = Particle> {

@@ -129,7 +129,7 @@ class Scene:
 
     @staticmethod
     def load(path, **options) -> "Scene":
-        """Read a scene file (.ply, compressed .ply, .splat, .spz, .sog or meta.json, .glb/.gltf, .ksplat, .usda) or a world file
+        """Read a scene file (.ply, compressed .ply, .splat, .spz, .sog or meta.json, .glb/.gltf, .ksplat, .usda, gsplat's .pt) or a world file
         (.toml). `options` are ``splat render``'s reading options: strict, spz_axes, preset,
         screen_filter."""
         path = os.fspath(path)
