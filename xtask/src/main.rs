@@ -622,7 +622,6 @@ fn regenerate(what: &str) -> Result<()> {
     cargo(&["run", "--release", "-p", "splat-tests", "--bin", "regenerate", "--", what])
 }
 
-/// `cargo ARGS` in the workspace; an error unless it succeeds.
 /// Run `binary` with `args`; an error naming it and its arguments when it fails.
 fn run_binary(binary: &Path, args: &[&str]) -> Result<()> {
     let name = binary.file_name().map_or_else(|| binary.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -633,6 +632,7 @@ fn run_binary(binary: &Path, args: &[&str]) -> Result<()> {
     Ok(())
 }
 
+/// `cargo ARGS` in the workspace; an error unless it succeeds.
 fn cargo(args: &[&str]) -> Result<()> {
     let status = Command::new(env!("CARGO")).current_dir(root()).args(args).status().context("running cargo")?;
     if !status.success() {

@@ -19,7 +19,8 @@ use crate::pickle::{self, Value};
 use crate::ply::{opacity_from_logit, scale_from_log, unit_quaternion};
 use crate::{Error, ErrorKind, read_file};
 use glam::Vec3;
-use splat_core::particle::SH_MAX_COEFFS;
+use rayon::prelude::*;
+use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
 use splat_core::{Particle, ParticleError, Scene};
 use std::collections::HashMap;
 use std::path::Path;
@@ -62,7 +63,7 @@ pub fn parse_gsplat_checkpoint(bytes: &[u8]) -> Result<(Scene, CheckpointInfo), 
                 .into(),
         ));
     }
-    let tensor = |name: &str| -> Result<Tensor, ErrorKind> {
+    let tensor = |name: &str| -> Result<Tensor<'_>, ErrorKind> {
         let value = splats
             .get(name)
             .ok_or_else(|| fail(format!("the splats have no \"{name}\" (they have: {})", splats.keys().join(", "))))?;
@@ -83,24 +84,35 @@ pub fn parse_gsplat_checkpoint(bytes: &[u8]) -> Result<(Scene, CheckpointInfo), 
     Ok((scene, CheckpointInfo { step }))
 }
 
-/// A tensor's shape and its elements in row-major order, as f32.
-struct Tensor {
+/// A tensor's shape and its elements in row-major order: bytes of its storage, decoded to f32
+/// as they are read.
+struct Tensor<'b> {
     shape: Vec<usize>,
-    values: Vec<f32>,
+    bytes: &'b [u8],
+    /// Bytes an element.
+    size: usize,
+    decode: fn(&[u8]) -> f32,
+}
+
+impl Tensor<'_> {
+    /// Elements `first..first + N` (row `first / N` of a tensor of rows of N).
+    fn row<const N: usize>(&self, first: usize) -> [f32; N] {
+        std::array::from_fn(|k| (self.decode)(&self.bytes[(first + k) * self.size..][..self.size]))
+    }
 }
 
 /// gsplat's parameter tensors.
-struct Splats {
-    means: Tensor,
-    scales: Tensor,
-    quats: Tensor,
-    opacities: Tensor,
-    sh0: Tensor,
-    sh_n: Tensor,
+struct Splats<'b> {
+    means: Tensor<'b>,
+    scales: Tensor<'b>,
+    quats: Tensor<'b>,
+    opacities: Tensor<'b>,
+    sh0: Tensor<'b>,
+    sh_n: Tensor<'b>,
 }
 
 /// The scene of gsplat's parameters, with 3DGS's activations (those of its `.ply` reader).
-fn gsplat_scene(s: &Splats) -> Result<Scene, ErrorKind> {
+fn gsplat_scene(s: &Splats<'_>) -> Result<Scene, ErrorKind> {
     let n = s.means.shape.first().copied().unwrap_or(0);
     let shape = |t: &Tensor, name: &str, tail: &[&[usize]]| -> Result<(), ErrorKind> {
         if t.shape.first() == Some(&n) && tail.iter().any(|tail| t.shape[1..] == **tail) {
@@ -117,29 +129,43 @@ fn gsplat_scene(s: &Splats) -> Result<Scene, ErrorKind> {
     shape(&s.sh_n, "shN", &[&[0, 3], &[3, 3], &[8, 3], &[15, 3]])?;
     let rest = s.sh_n.shape[1];
     let sh_degree = [0, 3, 8, 15].iter().position(|&k| k == rest).expect("checked above") as u8;
-    let particles = (0..n).map(|i| particle(s, i, rest)).collect::<Result<Vec<_>, _>>()?;
+    // On every core; where some splat fails, the first that does is named, whatever the threads.
+    let particles: Result<Vec<_>, _> = (0..n).into_par_iter().map(|i| particle(s, i, sh_degree)).collect();
+    let particles =
+        particles.map_err(|_| (0..n).find_map(|i| particle(s, i, sh_degree).err()).expect("a splat failed"))?;
     Ok(Scene::new(particles, sh_degree))
 }
 
-/// Splat `i` of gsplat's parameters, with `rest` SH coefficients beyond the DC one.
-fn particle(s: &Splats, i: usize, rest: usize) -> Result<Particle, ErrorKind> {
+/// Splat `i` of gsplat's parameters, SH degree `degree`.
+fn particle(s: &Splats, i: usize, degree: u8) -> Result<Particle, ErrorKind> {
     let index = i as u64;
-    let row = |t: &Tensor, name: &str, width: usize| -> Result<Vec<f64>, ErrorKind> {
-        let values = &t.values[i * width..(i + 1) * width];
-        if let Some((k, &v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            let property = if width == 1 { name.to_string() } else { format!("{name}[{k}]") };
-            return Err(ErrorKind::NonFinite { index, property, value: f64::from(v) });
+    let finite = |values: &[f32], name: &str| -> Result<(), ErrorKind> {
+        match values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            Some((k, &v)) => {
+                let property = if values.len() == 1 { name.to_string() } else { format!("{name}[{k}]") };
+                Err(ErrorKind::NonFinite { index, property, value: f64::from(v) })
+            }
+            None => Ok(()),
         }
-        Ok(values.iter().map(|&v| f64::from(v)).collect())
     };
-    let mean = row(&s.means, "means", 3)?;
-    let log_scale = row(&s.scales, "scales", 3)?;
-    let quat = row(&s.quats, "quats", 4)?;
-    let logit = row(&s.opacities, "opacities", 1)?[0];
-    let dc = row(&s.sh0, "sh0", 3)?;
-    let higher = row(&s.sh_n, "shN", 3 * rest)?;
+    let (mean, log_scale, quat) = (s.means.row::<3>(3 * i), s.scales.row::<3>(3 * i), s.quats.row::<4>(4 * i));
+    let ([logit], dc) = (s.opacities.row::<1>(i), s.sh0.row::<3>(3 * i));
+    let rest = sh_coeff_count(degree) - 1;
+    let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
+    sh[0] = Vec3::from(dc);
+    for (k, c) in sh.iter_mut().enumerate().skip(1).take(rest) {
+        let coefficient = s.sh_n.row::<3>(3 * (i * rest + k - 1));
+        finite(&coefficient, "shN")?;
+        *c = Vec3::from(coefficient);
+    }
+    for (values, name) in
+        [(&mean[..], "means"), (&log_scale, "scales"), (&quat, "quats"), (&[logit], "opacities"), (&dc, "sh0")]
+    {
+        finite(values, name)?;
+    }
     let mut scale = [0.0f32; 3];
     for (axis, (&raw, out)) in log_scale.iter().zip(&mut scale).enumerate() {
+        let raw = f64::from(raw);
         *out = scale_from_log(raw).ok_or_else(|| ErrorKind::BadScale {
             index,
             detail: format!(
@@ -148,15 +174,9 @@ fn particle(s: &Splats, i: usize, rest: usize) -> Result<Particle, ErrorKind> {
             ),
         })?;
     }
-    let q = unit_quaternion([quat[0], quat[1], quat[2], quat[3]]).ok_or(ErrorKind::ZeroQuaternion { index })?;
-    let vec3 = |v: &[f64]| Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32);
-    let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
-    sh[0] = vec3(&dc);
-    for (k, c) in higher.chunks_exact(3).enumerate() {
-        sh[k + 1] = vec3(c);
-    }
-    let opacity = opacity_from_logit(logit) as f32;
-    Particle::new(vec3(&mean), Vec3::from(scale), q, opacity, sh).map_err(|error| match error {
+    let q = unit_quaternion(quat.map(f64::from)).ok_or(ErrorKind::ZeroQuaternion { index })?;
+    let opacity = opacity_from_logit(f64::from(logit)) as f32;
+    Particle::new(Vec3::from(mean), Vec3::from(scale), q, opacity, sh).map_err(|error| match error {
         ParticleError::ZeroQuaternion => ErrorKind::ZeroQuaternion { index },
         error => ErrorKind::Particle { index, error },
     })
@@ -203,7 +223,7 @@ impl<'b> Archive<'b> {
     }
 
     /// The tensor a pickled value rebuilds.
-    fn tensor(&self, value: &Value) -> Result<Tensor, String> {
+    fn tensor(&self, value: &Value) -> Result<Tensor<'_>, String> {
         let Value::Call(callable, args) = value else { return Err("not a tensor".into()) };
         let (Value::Global(module, function), Value::Tuple(args)) = (&**callable, &**args) else {
             return Err("not a tensor".into());
@@ -233,7 +253,13 @@ impl<'b> Archive<'b> {
 
     /// The elements of a tensor of `shape` at `offset` in the storage a persistent id names,
     /// laid out row-major (`stride`).
-    fn elements(&self, storage: &Value, offset: usize, shape: Vec<usize>, stride: &[usize]) -> Result<Tensor, String> {
+    fn elements(
+        &self,
+        storage: &Value,
+        offset: usize,
+        shape: Vec<usize>,
+        stride: &[usize],
+    ) -> Result<Tensor<'_>, String> {
         let Value::Persistent(id) = storage else { return Err("a tensor without a storage".into()) };
         let Value::Tuple(id) = &**id else { return Err("a storage id that is not a tuple".into()) };
         let [Value::Str(kind), Value::Global(_, ty), Value::Str(key), _location, ..] = &id[..] else {
@@ -263,7 +289,6 @@ impl<'b> Archive<'b> {
         let end = end.ok_or_else(|| {
             format!("{count} elements from {offset} run past its storage data/{key} ({} bytes)", bytes.len())
         })?;
-        let values = bytes[offset * size..end].chunks_exact(size).map(decode).collect();
-        Ok(Tensor { shape, values })
+        Ok(Tensor { shape, bytes: &bytes[offset * size..end], size, decode })
     }
 }
