@@ -121,10 +121,10 @@ pub fn run(args: UndistortArgs) -> Result<()> {
         let file = format!("{}.png", crate::render::view_stem(name, index));
         splat_io::image::write_photo(&args.output.join(&file), &out)?;
         if let Some(folder) = &args.masks
-            && let Some(mask) = undistorting.mask()
+            && let Some(mask) = undistortions.mask(camera).with_context(|| format!("view {index} ({name})"))?
         {
             std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
-            splat_io::image::write_photo(&folder.join(&file), &mask)?;
+            splat_io::image::write_photo(&folder.join(&file), mask)?;
             masks += 1;
         }
     }

@@ -58,10 +58,11 @@ fn slice<'a>(bytes: &'a [u8], at: usize, len: usize, what: &str) -> Result<&'a [
 
 /// Every entry of the archive `bytes`, as (name, contents), in central-directory order.
 pub(crate) fn read_entries(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, String> {
-    directory(bytes)?
-        .into_iter()
-        .map(|(name, entry)| Ok((name.clone(), entry.contents(bytes, &name)?.into_owned())))
-        .collect()
+    let read = |(name, entry): (String, CentralEntry)| {
+        let contents = entry.contents(bytes, &name)?.into_owned();
+        Ok((name, contents))
+    };
+    directory(bytes)?.into_iter().map(read).collect()
 }
 
 /// The central directory of the archive `bytes`: each entry's name and where its contents lie,

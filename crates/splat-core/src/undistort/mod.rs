@@ -481,11 +481,18 @@ impl Camera {
 }
 
 /// The undistortions of a capture's views by one trainer: the views share a few physical
-/// cameras (intrinsics, lens and size), and each is planned once.
+/// cameras (intrinsics, lens and size), and each is planned once, its mask made once.
 #[derive(Clone, Debug)]
 pub struct Undistortions {
     trainer: Undistortion,
-    planned: Vec<Undistorting>,
+    planned: Vec<Planned>,
+}
+
+/// One physical camera's undistortion, and its mask once made.
+#[derive(Clone, Debug)]
+struct Planned {
+    undistorting: Undistorting,
+    mask: std::cell::OnceCell<Option<Photo>>,
 }
 
 impl Undistortions {
@@ -497,14 +504,29 @@ impl Undistortions {
     /// The undistortion of `camera`: the plan of an earlier view of the same physical camera,
     /// else a new one.
     pub fn of(&mut self, camera: &Camera) -> Result<Undistorting, CameraError> {
+        let i = self.index(camera)?;
+        let earlier = &self.planned[i].undistorting;
+        Ok(Undistorting { original: *camera, ..earlier.clone() })
+    }
+
+    /// The mask of `camera`'s undistorted image ([`Undistorting::mask`]), made once for all the
+    /// views of its physical camera (the mask does not depend on the pose).
+    pub fn mask(&mut self, camera: &Camera) -> Result<Option<&Photo>, CameraError> {
+        let i = self.index(camera)?;
+        let planned = &self.planned[i];
+        Ok(planned.mask.get_or_init(|| planned.undistorting.mask()).as_ref())
+    }
+
+    /// Where `camera`'s physical camera is planned, planning it on first sight.
+    fn index(&mut self, camera: &Camera) -> Result<usize, CameraError> {
         let posed_here =
             |u: &Undistorting| Camera { rotation: camera.rotation, translation: camera.translation, ..u.original };
-        if let Some(earlier) = self.planned.iter().find(|u| posed_here(u) == *camera) {
-            return Ok(Undistorting { original: *camera, ..earlier.clone() });
+        if let Some(i) = self.planned.iter().position(|p| posed_here(&p.undistorting) == *camera) {
+            return Ok(i);
         }
-        let planned = camera.undistorting(self.trainer)?;
-        self.planned.push(planned.clone());
-        Ok(planned)
+        let undistorting = camera.undistorting(self.trainer)?;
+        self.planned.push(Planned { undistorting, mask: std::cell::OnceCell::new() });
+        Ok(self.planned.len() - 1)
     }
 }
 
@@ -591,6 +613,7 @@ mod tests {
                     let alone = view.undistorting(trainer).unwrap();
                     assert_eq!(undistortions.of(&view).unwrap(), alone, "{lens:?} {trainer:?}");
                     assert_eq!(alone.camera().unwrap().rotation, view.rotation);
+                    assert_eq!(undistortions.mask(&view).unwrap(), alone.mask().as_ref(), "{lens:?} {trainer:?}");
                 }
                 assert_eq!(undistortions.planned.len(), 2, "{lens:?} {trainer:?}: one plan a physical camera");
             }
