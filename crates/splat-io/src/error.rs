@@ -174,8 +174,8 @@ pub enum ErrorKind {
     /// reader does not support.
     #[error("SOG: {0}")]
     Sog(String),
-    /// A PyTorch checkpoint that is not one of gsplat's, or is malformed ([`crate::torch`]).
-    #[error("gsplat checkpoint: {0}")]
+    /// A PyTorch checkpoint that is not one of gsplat's or splatfacto's, or is malformed ([`crate::torch`]).
+    #[error("checkpoint: {0}")]
     Checkpoint(String),
     /// A `.ksplat` file (GaussianSplats3D) is malformed or uses what this reader does not
     /// support.

@@ -76,6 +76,9 @@ pub enum SceneFormat {
     /// gsplat's `simple_trainer` checkpoint (`.pt`, `torch.save`'s zip of its parameters),
     /// lossless (read only, [`torch`]).
     GsplatCheckpoint,
+    /// Nerfstudio's checkpoint of a splatfacto model (`.ckpt`, `torch.save`'s zip of its
+    /// pipeline), lossless (read only, [`torch`]).
+    SplatfactoCheckpoint,
 }
 
 impl SceneFormat {
@@ -89,7 +92,7 @@ impl SceneFormat {
             Some("ply") if path.to_string_lossy().to_ascii_lowercase().ends_with(".compressed.ply") => {
                 Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_READ_ONLY }))
             }
-            Some("ksplat" | "pt" | "pth") => {
+            Some("ksplat" | "pt" | "pth" | "ckpt") => {
                 Err(Error::new(path, ErrorKind::UnknownExtension { expected: WRITTEN_EXTENSIONS_READ_ONLY }))
             }
             Some("ply") => Ok(Self::Ply),
@@ -111,7 +114,15 @@ impl SceneFormat {
             (Self::Ply | Self::CompressedPly, filter) => filter,
             (Self::Spz | Self::Sog, ScreenFilter::Mip) => ScreenFilter::Antialiased,
             (Self::Spz | Self::Sog, filter) => filter,
-            (Self::Splat | Self::Gltf | Self::Ksplat | Self::Usd | Self::GsplatCheckpoint, _) => ScreenFilter::Dilation,
+            (
+                Self::Splat
+                | Self::Gltf
+                | Self::Ksplat
+                | Self::Usd
+                | Self::GsplatCheckpoint
+                | Self::SplatfactoCheckpoint,
+                _,
+            ) => ScreenFilter::Dilation,
         }
     }
 
@@ -127,6 +138,7 @@ impl SceneFormat {
             Self::Ksplat => "GaussianSplats3D .ksplat",
             Self::Usd => "OpenUSD ParticleField3DGaussianSplat",
             Self::GsplatCheckpoint => "gsplat checkpoint",
+            Self::SplatfactoCheckpoint => "Nerfstudio splatfacto checkpoint",
         }
     }
 }
@@ -134,10 +146,10 @@ impl SceneFormat {
 /// The extensions the writers take, as errors list them.
 const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda";
 const WRITTEN_EXTENSIONS_READ_ONLY: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda (compressed \
-                                            .ply, .ksplat and gsplat's .pt checkpoints are read only)";
+                                            .ply, .ksplat and trainers' .pt and .ckpt checkpoints are read only)";
 /// The extensions the readers take.
-const READ_EXTENSIONS: &str =
-    ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd or .pt (a gsplat checkpoint)";
+const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat checkpoint) or .ckpt (a \
+     Nerfstudio splatfacto checkpoint)";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -272,9 +284,13 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             let usd = usd::read_usd(path)?;
             SceneRead { detail: usd.describe(), notes: usd.notes, ..read(SceneFormat::Usd, usd.scene) }
         }
-        Some("pt" | "pth") => {
-            let (scene, info) = torch::read_gsplat_checkpoint(path)?;
-            SceneRead { detail: info.describe(), ..read(SceneFormat::GsplatCheckpoint, scene) }
+        Some("pt" | "pth" | "ckpt") => {
+            let (scene, info) = torch::read_checkpoint(path)?;
+            let format = match info.trainer {
+                torch::Trainer::Gsplat => SceneFormat::GsplatCheckpoint,
+                torch::Trainer::Splatfacto => SceneFormat::SplatfactoCheckpoint,
+            };
+            SceneRead { detail: info.describe(), ..read(format, scene) }
         }
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
@@ -296,7 +312,10 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
         SceneFormat::Sog => sog::write_sog(path, scene)?,
         SceneFormat::Usd => usd::write_usda(path, scene)?,
-        SceneFormat::CompressedPly | SceneFormat::Ksplat | SceneFormat::GsplatCheckpoint => {
+        SceneFormat::CompressedPly
+        | SceneFormat::Ksplat
+        | SceneFormat::GsplatCheckpoint
+        | SceneFormat::SplatfactoCheckpoint => {
             unreachable!("for_output refuses them")
         }
     }

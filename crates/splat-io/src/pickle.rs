@@ -27,6 +27,10 @@ pub(crate) enum Value {
     Call(Box<Value>, Box<Value>),
     /// A persistent id: what the pickler's `persistent_id` returned.
     Persistent(Box<Value>),
+    /// A list or dict met again (a memo reference), by its memo key: the memo holds copies,
+    /// not Python's shared objects, so the copy may be stale (a list is memoized before its
+    /// items are appended). Kept as a mark, so that only a reader that needs it fails.
+    Shared(u32),
 }
 
 impl Value {
@@ -146,16 +150,12 @@ impl<'b> Machine<'b> {
         Ok(())
     }
 
-    /// A memoized value again. The memo holds copies, not Python's shared objects, so a list
-    /// or dict (which may have changed since it was stored) is refused rather than read stale;
-    /// a checkpoint shares only globals, strings and tuples.
+    /// A memoized value again: a copy of it, or [`Value::Shared`] for a list or dict (which
+    /// may have changed since it was stored). The splats of a checkpoint share only globals,
+    /// strings and tuples; its optimizer's state may share more.
     fn memo_get(&mut self, key: u32) -> Result<(), String> {
-        let v = self.memo.get(&key).cloned().ok_or_else(|| format!("memo entry {key} was never stored"))?;
-        if matches!(v, Value::List(_) | Value::Dict(_)) {
-            return Err(format!(
-                "memo entry {key} is a list or dict shared by two places, which this reader does not follow"
-            ));
-        }
+        let v = self.memo.get(&key).ok_or_else(|| format!("memo entry {key} was never stored"))?;
+        let v = if matches!(v, Value::List(_) | Value::Dict(_)) { Value::Shared(key) } else { v.clone() };
         self.push(v);
         Ok(())
     }
@@ -396,12 +396,13 @@ mod tests {
         assert_eq!(load(&hex(memo)), Ok(Value::List(vec![t.clone(), t])));
     }
 
-    /// A list shared by two places (`[l, l]`), an opcode no checkpoint needs (protocol 4's
-    /// EMPTY_SET) and every truncation of a pickle are refused, never read wrong or panicking.
+    /// A list shared by two places (`[l, l]`, the second a memo reference) reads as a mark of
+    /// the sharing, not as a stale copy; an opcode no checkpoint needs (protocol 4's EMPTY_SET)
+    /// and every truncation of a pickle are refused, never read wrong or panicking.
     #[test]
     fn what_it_cannot_read_is_refused() {
-        let shared = load(&hex("80025d7100285d71014b01616801652e")).unwrap_err();
-        assert!(shared.contains("shared by two places"), "{shared}");
+        let shared = load(&hex("80025d7100285d71014b01616801652e")).unwrap();
+        assert_eq!(shared, Value::List(vec![Value::List(vec![Value::Int(1)]), Value::Shared(1)]));
         let set = load(&[0x80, 0x04, 0x8f, b'.']).unwrap_err();
         assert!(set.contains("opcode 0x8f at byte 2"), "{set}");
         let p2 = hex(

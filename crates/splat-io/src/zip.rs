@@ -2,11 +2,16 @@
 //! checkpoints ([`crate::torch`]), as PKWARE's APPNOTE describes it: the end-of-central-directory
 //! record (and Zip64's, which PyTorch's writer always adds), the central directory, and local
 //! file headers. Entries stored (method 0) or deflated (method 8, through `flate2`) are read,
-//! each checked against its CRC-32; stored entries are written. Encryption and archives split
-//! over disks are refused by name.
+//! each checked against its CRC-32; stored entries are written. An archive is read through a
+//! [`Source`]: memory, or a file read only where asked. Encryption and archives split over disks
+//! are refused by name.
 
 use flate2::Crc;
-use std::io::Read;
+use std::borrow::Cow;
+use std::cell::RefCell;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::Path;
 
 /// The end-of-central-directory record's signature, and its size without the comment.
 const END_SIGNATURE: u32 = 0x0605_4b50;
@@ -56,6 +61,58 @@ fn slice<'a>(bytes: &'a [u8], at: usize, len: usize, what: &str) -> Result<&'a [
         .ok_or_else(|| format!("zip: {what} runs past the end of the file ({} bytes)", bytes.len()))
 }
 
+/// Where an archive's bytes come from: memory (each piece borrowed), or a file, read piece by
+/// piece, so that a reader that needs a few entries of a large archive reads only those.
+pub(crate) trait Source {
+    /// The archive's size in bytes.
+    fn size(&self) -> u64;
+    /// `len` bytes from `at`, or an error naming `what`.
+    fn piece(&self, at: u64, len: u64, what: &str) -> Result<Cow<'_, [u8]>, String>;
+}
+
+impl Source for [u8] {
+    fn size(&self) -> u64 {
+        self.len() as u64
+    }
+
+    fn piece(&self, at: u64, len: u64, what: &str) -> Result<Cow<'_, [u8]>, String> {
+        let (at, len) = (usize::try_from(at).unwrap_or(usize::MAX), usize::try_from(len).unwrap_or(usize::MAX));
+        slice(self, at, len, what).map(Cow::Borrowed)
+    }
+}
+
+/// An archive in a file, read where it is asked.
+pub(crate) struct FileSource {
+    file: RefCell<File>,
+    size: u64,
+}
+
+impl FileSource {
+    pub(crate) fn open(path: &Path) -> std::io::Result<Self> {
+        let file = File::open(path)?;
+        let size = file.metadata()?.len();
+        Ok(Self { file: RefCell::new(file), size })
+    }
+}
+
+impl Source for FileSource {
+    fn size(&self) -> u64 {
+        self.size
+    }
+
+    fn piece(&self, at: u64, len: u64, what: &str) -> Result<Cow<'_, [u8]>, String> {
+        if at.checked_add(len).is_none_or(|end| end > self.size) {
+            return Err(format!("zip: {what} runs past the end of the file ({} bytes)", self.size));
+        }
+        let mut piece = vec![0; to_usize(len)?];
+        let mut file = self.file.borrow_mut();
+        file.seek(SeekFrom::Start(at))
+            .and_then(|_| file.read_exact(&mut piece))
+            .map_err(|e| format!("zip: reading {what}: {e}"))?;
+        Ok(Cow::Owned(piece))
+    }
+}
+
 /// Every entry of the archive `bytes`, as (name, contents), in central-directory order.
 pub(crate) fn read_entries(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, String> {
     let read = |(name, entry): (String, CentralEntry)| {
@@ -65,26 +122,25 @@ pub(crate) fn read_entries(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, Strin
     directory(bytes)?.into_iter().map(read).collect()
 }
 
-/// The central directory of the archive `bytes`: each entry's name and where its contents lie,
-/// in directory order (read them with [`CentralEntry::contents`]).
-pub(crate) fn directory(bytes: &[u8]) -> Result<Vec<(String, CentralEntry)>, String> {
-    let end = find_end(bytes)?;
-    let record = &bytes[end..end + END_SIZE];
-    let (mut disk, mut cd_disk) = (u32::from(u16_at(record, 4)), u32::from(u16_at(record, 6)));
-    let (mut count, mut disk_count) = (u64::from(u16_at(record, 10)), u64::from(u16_at(record, 8)));
-    let (mut cd_size, mut cd_offset) = (u64::from(u32_at(record, 12)), u64::from(u32_at(record, 16)));
-    if let Some(end64) = zip64_end(bytes, end)? {
-        let record = &bytes[end64..end64 + END64_SIZE];
-        (disk, cd_disk) = (u32_at(record, 16), u32_at(record, 20));
-        (disk_count, count) = (u64_at(record, 24), u64_at(record, 32));
-        (cd_size, cd_offset) = (u64_at(record, 40), u64_at(record, 48));
+/// The central directory of the archive `source`: each entry's name and where its contents
+/// lie, in directory order (read them with [`CentralEntry::contents`]).
+pub(crate) fn directory<S: Source + ?Sized>(source: &S) -> Result<Vec<(String, CentralEntry)>, String> {
+    let end = find_end(source)?;
+    let record = source.piece(end, END_SIZE as u64, "the end-of-central-directory record")?;
+    let (mut disk, mut cd_disk) = (u32::from(u16_at(&record, 4)), u32::from(u16_at(&record, 6)));
+    let (mut count, mut disk_count) = (u64::from(u16_at(&record, 10)), u64::from(u16_at(&record, 8)));
+    let (mut cd_size, mut cd_offset) = (u64::from(u32_at(&record, 12)), u64::from(u32_at(&record, 16)));
+    if let Some(record) = zip64_end(source, end)? {
+        (disk, cd_disk) = (u32_at(&record, 16), u32_at(&record, 20));
+        (disk_count, count) = (u64_at(&record, 24), u64_at(&record, 32));
+        (cd_size, cd_offset) = (u64_at(&record, 40), u64_at(&record, 48));
     } else if count == u64::from(u16::MAX) || cd_size == u64::from(u32::MAX) || cd_offset == u64::from(u32::MAX) {
         return Err("zip: the end record points to Zip64's, which is missing (the file is damaged)".into());
     }
     if disk != 0 || cd_disk != 0 || disk_count != count {
         return Err("zip: an archive split over several disks".into());
     }
-    let directory = slice(bytes, to_usize(cd_offset)?, to_usize(cd_size)?, "the central directory")?;
+    let directory = source.piece(cd_offset, cd_size, "the central directory")?;
     // Each entry takes at least CENTRAL_SIZE bytes of the directory: a larger count is a lie.
     if count > (directory.len() / CENTRAL_SIZE) as u64 {
         return Err(format!("zip: {count} entries cannot fit a central directory of {} bytes", directory.len()));
@@ -92,15 +148,15 @@ pub(crate) fn directory(bytes: &[u8]) -> Result<Vec<(String, CentralEntry)>, Str
     let mut entries = Vec::with_capacity(count as usize);
     let mut at = 0;
     for index in 0..count {
-        let head = slice(directory, at, CENTRAL_SIZE, "a central directory entry")?;
+        let head = slice(&directory, at, CENTRAL_SIZE, "a central directory entry")?;
         if u32_at(head, 0) != CENTRAL_SIGNATURE {
             return Err(format!("zip: central directory entry {index} has no signature"));
         }
         let (name_len, extra_len, comment_len) =
             (usize::from(u16_at(head, 28)), usize::from(u16_at(head, 30)), usize::from(u16_at(head, 32)));
-        let name = slice(directory, at + CENTRAL_SIZE, name_len, "an entry name")?;
+        let name = slice(&directory, at + CENTRAL_SIZE, name_len, "an entry name")?;
         let name = String::from_utf8_lossy(name).into_owned();
-        let extra = slice(directory, at + CENTRAL_SIZE + name_len, extra_len, "an entry's extra fields")?;
+        let extra = slice(&directory, at + CENTRAL_SIZE + name_len, extra_len, "an entry's extra fields")?;
         let mut entry = CentralEntry {
             flags: u16_at(head, 8),
             method: u16_at(head, 10),
@@ -116,38 +172,40 @@ pub(crate) fn directory(bytes: &[u8]) -> Result<Vec<(String, CentralEntry)>, Str
     Ok(entries)
 }
 
-/// Where Zip64's end record lies, when the locator before the classic record at `end` says
-/// there is one.
-fn zip64_end(bytes: &[u8], end: usize) -> Result<Option<usize>, String> {
-    let Some(locator) = end.checked_sub(LOCATOR_SIZE) else { return Ok(None) };
-    if u32_at(bytes, locator) != LOCATOR_SIGNATURE {
+/// Zip64's end record, when the locator before the classic record at `end` says there is one.
+fn zip64_end<S: Source + ?Sized>(source: &S, end: u64) -> Result<Option<Cow<'_, [u8]>>, String> {
+    let Some(at) = end.checked_sub(LOCATOR_SIZE as u64) else { return Ok(None) };
+    let locator = source.piece(at, LOCATOR_SIZE as u64, "Zip64's locator")?;
+    if u32_at(&locator, 0) != LOCATOR_SIGNATURE {
         return Ok(None);
     }
-    let at = to_usize(u64_at(bytes, locator + 8))?;
-    let record = slice(bytes, at, END64_SIZE, "Zip64's end-of-central-directory record")?;
-    if u32_at(record, 0) != END64_SIGNATURE {
+    let record = source.piece(u64_at(&locator, 8), END64_SIZE as u64, "Zip64's end-of-central-directory record")?;
+    if u32_at(&record, 0) != END64_SIGNATURE {
         return Err("zip: Zip64's end-of-central-directory record has no signature".into());
     }
-    Ok(Some(at))
+    Ok(Some(record))
 }
 
-/// A Zip64 size or offset as an index into the file.
+/// A Zip64 size or offset as an index into memory.
 fn to_usize(v: u64) -> Result<usize, String> {
     usize::try_from(v).map_err(|_| format!("zip: an offset of {v} bytes does not fit this machine"))
 }
 
 /// The offset of the end-of-central-directory record: the last signature within the final
 /// 22 + 65,535 bytes (the longest comment) whose comment length reaches the file's end.
-fn find_end(bytes: &[u8]) -> Result<usize, String> {
-    if bytes.len() < END_SIZE {
-        return Err(format!("zip: {} bytes is too short for an archive", bytes.len()));
+fn find_end<S: Source + ?Sized>(source: &S) -> Result<u64, String> {
+    let size = source.size();
+    if size < END_SIZE as u64 {
+        return Err(format!("zip: {size} bytes is too short for an archive"));
     }
-    let first = bytes.len().saturating_sub(END_SIZE + usize::from(u16::MAX));
-    (first..=bytes.len() - END_SIZE)
+    let first = size.saturating_sub((END_SIZE + usize::from(u16::MAX)) as u64);
+    let tail = source.piece(first, size - first, "the end of the archive")?;
+    (0..=tail.len() - END_SIZE)
         .rev()
         .find(|&at| {
-            u32_at(bytes, at) == END_SIGNATURE && at + END_SIZE + usize::from(u16_at(bytes, at + 20)) == bytes.len()
+            u32_at(&tail, at) == END_SIGNATURE && at + END_SIZE + usize::from(u16_at(&tail, at + 20)) == tail.len()
         })
+        .map(|at| first + at as u64)
         .ok_or_else(|| "zip: no end-of-central-directory record (not a zip archive, or truncated)".into())
 }
 
@@ -193,22 +251,21 @@ impl CentralEntry {
         Err(format!("zip: entry {name} marks its sizes as Zip64's but has no Zip64 field"))
     }
 
-    /// The entry's contents, inflated and checked against its CRC-32: a stored entry is
-    /// borrowed from `bytes`.
-    pub(crate) fn contents<'b>(&self, bytes: &'b [u8], name: &str) -> Result<std::borrow::Cow<'b, [u8]>, String> {
-        use std::borrow::Cow;
+    /// The entry's contents, inflated and checked against its CRC-32: a stored entry of an
+    /// archive in memory is borrowed from it.
+    pub(crate) fn contents<'s, S: Source + ?Sized>(&self, source: &'s S, name: &str) -> Result<Cow<'s, [u8]>, String> {
         if self.flags & FLAG_ENCRYPTED != 0 {
             return Err(format!("zip: entry {name} is encrypted"));
         }
-        let offset = to_usize(self.offset)?;
-        let local = slice(bytes, offset, LOCAL_SIZE, "a local file header")?;
-        if u32_at(local, 0) != LOCAL_SIGNATURE {
+        let local = source.piece(self.offset, LOCAL_SIZE as u64, "a local file header")?;
+        if u32_at(&local, 0) != LOCAL_SIGNATURE {
             return Err(format!("zip: entry {name} has no local file header at offset {}", self.offset));
         }
-        let start = offset + LOCAL_SIZE + usize::from(u16_at(local, 26)) + usize::from(u16_at(local, 28));
-        let data = slice(bytes, start, to_usize(self.compressed)?, &format!("entry {name}"))?;
+        let start =
+            self.offset + (LOCAL_SIZE + usize::from(u16_at(&local, 26)) + usize::from(u16_at(&local, 28))) as u64;
+        let data = source.piece(start, self.compressed, &format!("entry {name}"))?;
         let contents = match self.method {
-            0 if self.compressed == self.size => Cow::Borrowed(data),
+            0 if self.compressed == self.size => data,
             0 => return Err(format!("zip: stored entry {name} has {} bytes, but says {}", self.compressed, self.size)),
             8 => {
                 if self.size > DEFLATE_MAX_RATIO.saturating_mul(self.compressed).saturating_add(1024) {
@@ -218,7 +275,7 @@ impl CentralEntry {
                     ));
                 }
                 let mut out = Vec::with_capacity(to_usize(self.size)?);
-                flate2::read::DeflateDecoder::new(data)
+                flate2::read::DeflateDecoder::new(&data[..])
                     .take(self.size + 1)
                     .read_to_end(&mut out)
                     .map_err(|e| format!("zip: entry {name}: {e}"))?;

@@ -284,7 +284,8 @@ fn errors_name_the_file() {
     let e = splat_io::read_scene(path).unwrap_err();
     assert!(e.to_string().starts_with("/nonexistent/dir/scene.ply: "), "{e}");
     assert!(splat_io::read_scene("x.obj".as_ref()).unwrap_err().to_string().contains(
-        ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd or .pt (a gsplat checkpoint)"
+        ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat checkpoint) or .ckpt (a \
+         Nerfstudio splatfacto checkpoint)"
     ));
 }
 

@@ -1,4 +1,5 @@
-"""gsplat's checkpoints (simple_trainer's ckpt_STEP_rankR.pt), read without PyTorch.
+"""Trainers' checkpoints, read without PyTorch: gsplat's (simple_trainer's ckpt_STEP_rankR.pt)
+and Nerfstudio's of a splatfacto model (nerfstudio_models/step-STEP.ckpt).
 
 The files here are written as torch.save writes them (torch/serialization.py's `_save`,
 PyTorch 2.x), without torch: a pickle at torch's default protocol 2 of gsplat's
@@ -11,8 +12,8 @@ ARCHIVE/.data/serialization_id; in a Zip64 archive, as PyTorch's writer always m
 records by module and name as it records torch's own.
 
 A checkpoint and the .ply of the same parameters (conftest's independent 3DGS writer, the
-layout gsplat's export writes) must give the same splats value for value; what is not a
-gsplat checkpoint is refused by name.
+layout gsplat's export and Nerfstudio's ns-export gaussian-splat write) must give the same
+splats value for value; what is not such a checkpoint is refused by name.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import collections
 import contextlib
 import io
 import pickle
+import struct
 import subprocess
 import sys
 import types
@@ -118,16 +120,22 @@ def gsplat_parameters(g: dict) -> dict:
     }
 
 
+def state_dict(params: dict, storages: list[_Storage], views: dict | None = None) -> collections.OrderedDict:
+    """An nn.Module's state_dict of `params`, each array a tensor over a new storage appended to
+    `storages`: `views` replaces a tensor's view of its storage."""
+    state = collections.OrderedDict()
+    for name, array in params.items():
+        storage = _Storage(str(len(storages)), array)
+        storages.append(storage)
+        state[name] = _Tensor(storage, (views or {}).get(name, storage.base.reshape(array.shape)))
+    state._metadata = collections.OrderedDict([("", {"version": 1})])  # as nn.Module.state_dict
+    return state
+
+
 def save_checkpoint(path, params: dict, step: int = 29999, views: dict | None = None) -> None:
     """gsplat's checkpoint of `params`: `views` replaces a tensor's view of its storage."""
-    storages, state = [], collections.OrderedDict()
-    for key, (name, array) in enumerate(params.items()):
-        storage = _Storage(str(key), array)
-        storages.append(storage)
-        view = (views or {}).get(name, storage.base.reshape(array.shape))
-        state[name] = _Tensor(storage, view)
-    state._metadata = collections.OrderedDict([("", {"version": 1})])  # as nn.Module.state_dict
-    torch_save({"step": step, "splats": state}, path, storages)
+    storages = []
+    torch_save({"step": step, "splats": state_dict(params, storages, views)}, path, storages)
 
 
 @pytest.mark.parametrize("degree", [0, 3])
@@ -190,7 +198,7 @@ def test_what_is_not_a_gsplat_checkpoint_is_refused_by_name(tmp_path):
     # Not gsplat's (no splats), truncated, and not a zip archive (PyTorch's legacy format).
     path = tmp_path / "model.pt"
     torch_save({"model": 1, "optimizer": 2}, path, [])
-    assert "no \"splats\"" in refused(path) and "model, optimizer" in refused(path)
+    assert 'neither "splats"' in refused(path) and "model, optimizer" in refused(path)
     whole = tmp_path / "whole.pt"
     save_checkpoint(whole, g)
     cut = tmp_path / "cut.pt"
@@ -233,3 +241,124 @@ def test_damaged_checkpoints_are_refused_never_misread(tmp_path):
             np.testing.assert_array_equal(arrays[name], expected[name], err_msg=f"byte {i} flipped: {name}")
     # Every byte of the pickle and of the storages is under a CRC-32.
     assert refused > 0.5 * len(data), f"{refused} of {len(data)} flips refused"
+
+
+SPLATFACTO = ["means", "scales", "quats", "features_dc", "features_rest", "opacities"]
+
+
+def save_splatfacto_checkpoint(path, g: dict, prefix: str = "_model.gauss_params.") -> list[str]:
+    """Nerfstudio's checkpoint of a splatfacto model of conftest's raw Gaussians `g` (its
+    trainer's torch.save of step, pipeline, optimizers, schedulers and scalers): the splats
+    under `prefix`, beside a camera optimizer; one Adam optimizer a parameter, its two moments
+    stored as tensors; the schedulers' state, whose learning rates are one list shared by two
+    places. Returns the archive's entries of the moments."""
+    storages = []
+    params = {
+        "means": g["means"],
+        "scales": g["scales"],
+        "quats": g["rotations"],
+        # At SH degree 0 splatfacto trains a colour logit: conftest's DC values serve as one.
+        "features_dc": g["sh"][:, 0, :].copy(),
+        "features_rest": g["sh"][:, 1:, :].copy(),
+        "opacities": g["opacities"][:, None].copy(),
+    }
+    pipeline = collections.OrderedDict((prefix + name, params[name]) for name in SPLATFACTO)
+    pipeline["_model.camera_optimizer.pose_adjustment"] = np.zeros((4, 6), np.float32)
+    pipeline = state_dict(pipeline, storages)
+    betas = (0.9, 0.999)  # Adam's default, one tuple shared by every optimizer
+    optimizers, moment_entries = {}, []
+    for k, name in enumerate(SPLATFACTO):
+        moments = [np.full(params[name].shape, 0.25, np.float32), np.full(params[name].shape, 0.5, np.float32)]
+        first = len(storages)
+        state = state_dict({"step": np.array(29999.0, np.float32), "exp_avg": moments[0], "exp_avg_sq": moments[1]}, storages)
+        group = {"lr": 1.6e-4, "betas": betas, "eps": 1e-15, "weight_decay": 0, "amsgrad": False, "params": [k]}
+        optimizers[name] = {"state": {0: dict(state)}, "param_groups": [group]}
+        moment_entries += [f"step-000029999/data/{key}" for key in range(first + 1, first + 3)]
+    rates = [1.6e-6]
+    schedulers = {"means": {"base_lrs": rates, "last_epoch": 29999, "_last_lr": rates}}
+    scalers = {"scale": 65536.0, "growth_factor": 2.0, "backoff_factor": 0.5, "growth_interval": 2000, "_growth_tracker": 0}
+    root = {"step": 29999, "pipeline": pipeline, "optimizers": optimizers, "schedulers": schedulers, "scalers": scalers}
+    torch_save(root, path, storages, archive="step-000029999")
+    return moment_entries
+
+
+def flip_first_bytes(path, entries: list[str]) -> None:
+    """Flip the first byte of each of the archive's `entries`, so that each fails its CRC-32."""
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as z:
+        for name in entries:
+            info = z.getinfo(name)
+            name_len, extra_len = struct.unpack_from("<HH", data, info.header_offset + 26)
+            data[info.header_offset + 30 + name_len + extra_len] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def splatfacto_export(g: dict) -> dict:
+    """What ns-export gaussian-splat writes of the model (nerfstudio/scripts/exporter.py, the
+    default sh_coeffs mode), as conftest's raw Gaussians: its shs_0 is the DC coefficient, or
+    at SH degree 0 RGB2SH(sigmoid(features_dc)) (nerfstudio/utils/spherical_harmonics.py)."""
+    if g["sh"].shape[1] > 1:
+        return g
+    rgb = 1 / (1 + np.exp(-g["sh"][:, :1, :].astype(np.float64)))
+    return {**g, "sh": ((rgb - 0.5) / 0.28209479177387814).astype(np.float32)}
+
+
+@pytest.mark.parametrize("degree", [0, 3])
+def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin, degree):
+    g = raw_gaussians(np.random.default_rng(21 + degree), 48, degree=degree)
+    ckpt, ply = tmp_path / "step-000029999.ckpt", tmp_path / "splat.ply"
+    save_splatfacto_checkpoint(ckpt, g)
+    write_3dgs_ply(ply, splatfacto_export(g))
+    from_ckpt, from_ply = splat.Scene.load(str(ckpt)), splat.Scene.load(str(ply))
+    assert len(from_ckpt) == 48 and from_ckpt.sh_degree == degree
+    a, b = from_ckpt.to_arrays(), from_ply.to_arrays()
+    for name in a:
+        if name == "sh" and degree == 0:
+            # The sigmoid and RGB2SH in f32 (splat) against f64 rounded once (this export).
+            np.testing.assert_allclose(a[name], b[name], rtol=1e-6, atol=1e-6, err_msg=name)
+        else:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert info.returncode == 0 and "Nerfstudio splatfacto checkpoint (step 29999)" in info.stdout, info
+    # Checkpoints before the parameter dict, and of a distributed run, read the same; the
+    # optimizer's moments are never read (damaged, they change nothing).
+    for variant, prefix in [("old", "_model."), ("ddp", "module._model.gauss_params."), ("moments", None)]:
+        path = tmp_path / f"{variant}.ckpt"
+        moments = save_splatfacto_checkpoint(path, g, **({"prefix": prefix} if prefix else {}))
+        if prefix is None:
+            flip_first_bytes(path, moments)
+        c = splat.Scene.load(str(path)).to_arrays()
+        for name in a:
+            np.testing.assert_array_equal(c[name], a[name], err_msg=f"{variant}: {name}")
+
+
+def test_what_is_not_a_splatfacto_checkpoint_is_refused_by_name(tmp_path):
+    g = raw_gaussians(np.random.default_rng(6), 8, degree=1)
+
+    def refused(path) -> str:
+        with pytest.raises(splat.SplatError) as e:
+            splat.Scene.load(str(path))
+        return str(e.value)
+
+    # A nerfacto checkpoint: a pipeline of fields and proposal networks, no splats.
+    path = tmp_path / "nerfacto.ckpt"
+    storages = []
+    fields = {f"_model.field.mlp_base.params{k}": np.zeros(4, np.float32) for k in range(8)}
+    torch_save({"step": 29999, "pipeline": state_dict(fields, storages)}, path, storages)
+    message = refused(path)
+    assert "no splatfacto model" in message and "_model.field.mlp_base.params0" in message, message
+    assert "and 2 more" in message, message
+    # A splatfacto checkpoint without its opacities.
+    path = tmp_path / "partial.ckpt"
+    storages = []
+    params = {"_model.gauss_params.means": g["means"], "_model.gauss_params.scales": g["scales"]}
+    torch_save({"step": 1, "pipeline": state_dict(params, storages)}, path, storages)
+    assert 'no "_model.gauss_params.quats"' in refused(path)
+    # features_dc of gsplat's shape (N, 1, 3), not splatfacto's (N, 3).
+    path = tmp_path / "shape.ckpt"
+    storages = []
+    params = {"_model.gauss_params." + name: a for name, a in [
+        ("means", g["means"]), ("scales", g["scales"]), ("quats", g["rotations"]), ("features_dc", g["sh"][:, :1, :]),
+        ("features_rest", g["sh"][:, 1:, :]), ("opacities", g["opacities"][:, None])]}
+    torch_save({"step": 1, "pipeline": state_dict(params, storages)}, path, storages)
+    assert '"features_dc" has shape [8, 1, 3], expected [8, 3]' in refused(path)
