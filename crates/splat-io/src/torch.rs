@@ -165,26 +165,90 @@ fn splatfacto_parameters(pipeline: &Value) -> Result<Parameters<'_>, ErrorKind> 
     Ok([get("means")?, get("scales")?, get("quats")?, get("opacities")?, get("features_dc")?, get("features_rest")?])
 }
 
-/// A tensor's shape and its elements in row-major order: bytes of its storage, decoded to f32
-/// as they are read.
-struct Tensor<'b> {
+/// Splats built together: each tensor's rows of a block are read and decoded, then the
+/// block's splats are built on every core. A block's decoded rows take at most 15 MB (59
+/// floats a splat at SH degree 3), so reading costs about what the scene itself costs.
+const BLOCK: usize = 1 << 16;
+
+/// The largest piece of a storage read at once where no row needs it (to check its CRC-32).
+const PIECE: u64 = 1 << 24;
+
+/// A tensor's shape and where its elements lie: rows read a block at a time from its storage.
+struct Tensor<'s, S: Source + ?Sized> {
     /// Its parameter's name, as splat properties are named in errors.
     name: &'static str,
     shape: Vec<usize>,
-    bytes: Cow<'b, [u8]>,
+    storage: Storage<'s, S>,
+    /// The byte of the storage its first element starts at.
+    first: u64,
     /// Bytes an element.
     size: usize,
     decode: fn(&[u8]) -> f32,
 }
 
-impl Tensor<'_> {
+/// A storage's bytes. A stored entry is read in order, a piece at a time, and every byte of it
+/// hashed once, so that its CRC-32 is checked when the last piece is read; a compressed one
+/// (torch.save stores, others may not) is inflated and checked whole.
+enum Storage<'s, S: Source + ?Sized> {
+    Stored { source: &'s S, name: String, bytes: std::ops::Range<u64>, hashed: u64, crc: flate2::Crc, expected: u32 },
+    Inflated(Vec<u8>),
+}
+
+impl<S: Source + ?Sized> Storage<'_, S> {
+    fn len(&self) -> u64 {
+        match self {
+            Self::Stored { bytes, .. } => bytes.end - bytes.start,
+            Self::Inflated(bytes) => bytes.len() as u64,
+        }
+    }
+
+    /// Bytes `at..at + len` of the storage, `at` no earlier than the last piece's end.
+    fn piece(&mut self, at: u64, len: u64) -> Result<Cow<'_, [u8]>, String> {
+        match self {
+            Self::Stored { source, name, bytes, hashed, crc, .. } => {
+                while *hashed < at {
+                    let gap = (at - *hashed).min(PIECE);
+                    crc.update(&source.piece(bytes.start + *hashed, gap, name)?);
+                    *hashed += gap;
+                }
+                let piece = source.piece(bytes.start + at, len, name)?;
+                crc.update(&piece);
+                *hashed = at + len;
+                Ok(piece)
+            }
+            Self::Inflated(bytes) => Ok(Cow::Borrowed(&bytes[at as usize..(at + len) as usize])),
+        }
+    }
+
+    /// Hash the rest of a stored entry and check its CRC-32.
+    fn finish(&mut self) -> Result<(), String> {
+        let end = self.len();
+        self.piece(end, 0)?;
+        match self {
+            Self::Stored { name, crc, expected, .. } if crc.sum() != *expected => {
+                Err(format!("zip: entry {name} fails its CRC-32 check (the file is damaged)"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl<S: Source + ?Sized> Tensor<'_, S> {
     fn named(self, name: &'static str) -> Self {
         Self { name, ..self }
     }
 
-    /// Elements `first..first + N` (row `first / N` of a tensor of rows of N).
-    fn row<const N: usize>(&self, first: usize) -> [f32; N] {
-        std::array::from_fn(|k| (self.decode)(&self.bytes[(first + k) * self.size..][..self.size]))
+    /// Elements a row (the product of the shape after its first dimension).
+    fn width(&self) -> usize {
+        self.shape[1..].iter().product()
+    }
+
+    /// Rows `rows`; each call's rows follow the last's.
+    fn rows(&mut self, rows: std::ops::Range<usize>) -> Result<Rows<'_>, ErrorKind> {
+        let (name, size, decode, width) = (self.name, self.size, self.decode, self.width());
+        let at = self.first + (rows.start * width * size) as u64;
+        let bytes = self.storage.piece(at, (rows.len() * width * size) as u64).map_err(fail)?;
+        Ok(Rows { name, bytes, width, size, decode })
     }
 
     /// An error unless the shape is (`n`, one of `tails`).
@@ -198,18 +262,18 @@ impl Tensor<'_> {
 }
 
 /// A trainer's parameter tensors.
-struct Splats<'b> {
-    means: Tensor<'b>,
-    scales: Tensor<'b>,
-    quats: Tensor<'b>,
-    opacities: Tensor<'b>,
-    dc: Tensor<'b>,
-    rest: Tensor<'b>,
+struct Splats<'s, S: Source + ?Sized> {
+    means: Tensor<'s, S>,
+    scales: Tensor<'s, S>,
+    quats: Tensor<'s, S>,
+    opacities: Tensor<'s, S>,
+    dc: Tensor<'s, S>,
+    rest: Tensor<'s, S>,
 }
 
-impl Splats<'_> {
+impl<S: Source + ?Sized> Splats<'_, S> {
     /// The scene of the parameters, with 3DGS's activations (those of its `.ply` reader).
-    fn scene(&self, trainer: Trainer) -> Result<Scene, ErrorKind> {
+    fn scene(mut self, trainer: Trainer) -> Result<Scene, ErrorKind> {
         let n = self.means.shape.first().copied().unwrap_or(0);
         self.means.expect_shape(n, &[&[3]])?;
         self.scales.expect_shape(n, &[&[3]])?;
@@ -223,48 +287,128 @@ impl Splats<'_> {
         let degree = [0, 3, 8, 15].iter().position(|&k| k == self.rest.shape[1]).expect("checked above") as u8;
         // splatfacto at degree 0 trains a colour logit, exported as RGB2SH(sigmoid(·)).
         let dc = if trainer == Trainer::Splatfacto && degree == 0 { Dc::ColourLogit } else { Dc::Coefficient };
-        // On every core; where some splat fails, the first that does is named, whatever the threads.
-        let particles: Result<Vec<_>, _> = (0..n).into_par_iter().map(|i| self.particle(i, degree, dc)).collect();
-        let particles =
-            particles.map_err(|_| (0..n).find_map(|i| self.particle(i, degree, dc).err()).expect("a splat failed"))?;
+        let mut particles = Vec::with_capacity(n);
+        for first in (0..n).step_by(BLOCK) {
+            let rows = first..(first + BLOCK).min(n);
+            let block = Block {
+                first,
+                means: self.means.rows(rows.clone())?,
+                scales: self.scales.rows(rows.clone())?,
+                quats: self.quats.rows(rows.clone())?,
+                opacities: self.opacities.rows(rows.clone())?,
+                dc: self.dc.rows(rows.clone())?,
+                rest: self.rest.rows(rows.clone())?,
+                degree,
+                dc_meaning: dc,
+            };
+            // On every core; where some splat fails, the first that does is named, whatever the
+            // threads, unless the file is damaged, which is said first.
+            let built: Result<Vec<_>, _> = rows.clone().into_par_iter().map(|i| block.particle(i)).collect();
+            match built {
+                Ok(built) => particles.par_extend(built),
+                Err(_) => {
+                    let error = rows.into_iter().find_map(|i| block.particle(i).err()).expect("a splat failed");
+                    drop(block);
+                    self.finish()?;
+                    return Err(error);
+                }
+            }
+        }
+        self.finish()?;
         Ok(Scene::new(particles, degree))
     }
 
-    /// Splat `i`, of SH degree `degree`.
-    fn particle(&self, i: usize, degree: u8, dc_meaning: Dc) -> Result<Particle, ErrorKind> {
-        let index = i as u64;
-        let finite = |values: &[f32], name: &str| -> Result<(), ErrorKind> {
-            match values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                Some((k, &v)) => {
-                    let property = if values.len() == 1 { name.to_string() } else { format!("{name}[{k}]") };
-                    Err(ErrorKind::NonFinite { index, property, value: f64::from(v) })
-                }
-                None => Ok(()),
-            }
-        };
-        let (mean, log_scale, quat) =
-            (self.means.row::<3>(3 * i), self.scales.row::<3>(3 * i), self.quats.row::<4>(4 * i));
-        let ([logit], dc) = (self.opacities.row::<1>(i), self.dc.row::<3>(3 * i));
-        for (values, t) in [
-            (&mean[..], &self.means),
-            (&log_scale, &self.scales),
-            (&quat, &self.quats),
-            (&[logit], &self.opacities),
-            (&dc, &self.dc),
-        ] {
-            finite(values, t.name)?;
+    /// Check every storage read.
+    fn finish(&mut self) -> Result<(), ErrorKind> {
+        for t in [&mut self.means, &mut self.scales, &mut self.quats, &mut self.opacities, &mut self.dc, &mut self.rest]
+        {
+            t.storage.finish().map_err(fail)?;
         }
-        let rest = sh_coeff_count(degree) - 1;
+        Ok(())
+    }
+}
+
+/// A block's rows of one tensor: their bytes, decoded as they are read.
+struct Rows<'a> {
+    /// The parameter's name, as splat properties are named in errors.
+    name: &'static str,
+    bytes: Cow<'a, [u8]>,
+    /// Elements a row, and bytes an element.
+    width: usize,
+    size: usize,
+    decode: fn(&[u8]) -> f32,
+}
+
+impl Rows<'_> {
+    /// Element `k` of the block's rows.
+    fn element(&self, k: usize) -> f32 {
+        (self.decode)(&self.bytes[k * self.size..][..self.size])
+    }
+
+    /// Row `j` of the block, of `N` elements (the width).
+    fn row<const N: usize>(&self, j: usize) -> [f32; N] {
+        debug_assert_eq!(N, self.width);
+        std::array::from_fn(|k| self.element(j * N + k))
+    }
+
+    /// Row `j` of the block, into the front of `out`.
+    fn row_into<'o>(&self, j: usize, out: &'o mut [f32]) -> &'o [f32] {
+        let out = &mut out[..self.width];
+        for (k, value) in out.iter_mut().enumerate() {
+            *value = self.element(j * self.width + k);
+        }
+        out
+    }
+
+    /// An error naming the first of `values` (row `j`'s) that is not finite, as splat `index`'s.
+    fn finite(&self, values: &[f32], index: u64) -> Result<(), ErrorKind> {
+        match values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            Some((k, &v)) => {
+                let property = if self.width == 1 { self.name.to_string() } else { format!("{}[{k}]", self.name) };
+                Err(ErrorKind::NonFinite { index, property, value: f64::from(v) })
+            }
+            None => Ok(()),
+        }
+    }
+}
+
+/// A block of splats' parameters.
+struct Block<'a> {
+    /// The index of its first splat.
+    first: usize,
+    means: Rows<'a>,
+    scales: Rows<'a>,
+    quats: Rows<'a>,
+    opacities: Rows<'a>,
+    dc: Rows<'a>,
+    rest: Rows<'a>,
+    degree: u8,
+    dc_meaning: Dc,
+}
+
+impl Block<'_> {
+    /// Splat `i` (of the checkpoint; one of the block's).
+    fn particle(&self, i: usize) -> Result<Particle, ErrorKind> {
+        let (index, j) = (i as u64, i - self.first);
+        let (mean, log_scale, quat) = (self.means.row::<3>(j), self.scales.row::<3>(j), self.quats.row::<4>(j));
+        let ([logit], dc) = (self.opacities.row::<1>(j), self.dc.row::<3>(j));
+        self.means.finite(&mean, index)?;
+        self.scales.finite(&log_scale, index)?;
+        self.quats.finite(&quat, index)?;
+        self.opacities.finite(&[logit], index)?;
+        self.dc.finite(&dc, index)?;
+        let mut rest = [0.0; 3 * (SH_MAX_COEFFS - 1)];
+        let rest = self.rest.row_into(j, &mut rest);
+        self.rest.finite(rest, index)?;
         let mut sh = [Vec3::ZERO; SH_MAX_COEFFS];
-        sh[0] = match dc_meaning {
+        sh[0] = match self.dc_meaning {
             Dc::Coefficient => Vec3::from(dc),
             Dc::ColourLogit => rgb_to_dc(Vec3::from(dc.map(|x| opacity_from_logit(f64::from(x)) as f32))),
         };
-        for (k, c) in sh.iter_mut().enumerate().skip(1).take(rest) {
-            let coefficient = self.rest.row::<3>(3 * (i * rest + k - 1));
-            finite(&coefficient, self.rest.name)?;
-            *c = Vec3::from(coefficient);
+        for (c, value) in sh[1..].iter_mut().zip(rest.chunks_exact(3)) {
+            *c = Vec3::from_slice(value);
         }
+        debug_assert_eq!(rest.len(), 3 * (sh_coeff_count(self.degree) - 1));
         let mut scale = [0.0f32; 3];
         for (axis, (&raw, out)) in log_scale.iter().zip(&mut scale).enumerate() {
             let raw = f64::from(raw);
@@ -338,7 +482,7 @@ impl<'s, S: Source + ?Sized> Archive<'s, S> {
     }
 
     /// The tensor a pickled value rebuilds.
-    fn tensor(&self, value: &Value) -> Result<Tensor<'s>, String> {
+    fn tensor(&self, value: &Value) -> Result<Tensor<'s, S>, String> {
         let Value::Call(callable, args) = value else { return Err("not a tensor".into()) };
         let (Value::Global(module, function), Value::Tuple(args)) = (&**callable, &**args) else {
             return Err("not a tensor".into());
@@ -374,7 +518,7 @@ impl<'s, S: Source + ?Sized> Archive<'s, S> {
         offset: usize,
         shape: Vec<usize>,
         stride: &[usize],
-    ) -> Result<Tensor<'s>, String> {
+    ) -> Result<Tensor<'s, S>, String> {
         let Value::Persistent(id) = storage else { return Err("a tensor without a storage".into()) };
         let Value::Tuple(id) = &**id else { return Err("a storage id that is not a tuple".into()) };
         let [Value::Str(kind), Value::Global(_, ty), Value::Str(key), _location, ..] = &id[..] else {
@@ -400,19 +544,18 @@ impl<'s, S: Source + ?Sized> Archive<'s, S> {
             return Err(format!("a tensor of shape {shape:?} laid out with strides {stride:?}, not row-major"));
         }
         let entry = self.storages.get(key).ok_or_else(|| format!("its storage data/{key} is not in the archive"))?;
-        let bytes = entry.contents(self.source, &format!("{}data/{key}", self.prefix))?;
-        let end = offset.checked_add(count).and_then(|e| e.checked_mul(size)).filter(|&e| e <= bytes.len());
-        let end = end.ok_or_else(|| {
-            format!("{count} elements from {offset} run past its storage data/{key} ({} bytes)", bytes.len())
-        })?;
-        let bytes = match bytes {
-            Cow::Borrowed(b) => Cow::Borrowed(&b[offset * size..end]),
-            Cow::Owned(mut b) => {
-                b.truncate(end);
-                b.drain(..offset * size);
-                Cow::Owned(b)
+        let name = format!("{}data/{key}", self.prefix);
+        let storage = match entry.stored(self.source, &name)? {
+            Some(bytes) => {
+                let expected = entry.crc();
+                Storage::Stored { source: self.source, name, bytes, hashed: 0, crc: flate2::Crc::new(), expected }
             }
+            None => Storage::Inflated(entry.contents(self.source, &name)?.into_owned()),
         };
-        Ok(Tensor { name: "", shape, bytes, size, decode })
+        let end = offset.checked_add(count).and_then(|e| e.checked_mul(size)).filter(|&e| e as u64 <= storage.len());
+        end.ok_or_else(|| {
+            format!("{count} elements from {offset} run past its storage data/{key} ({} bytes)", storage.len())
+        })?;
+        Ok(Tensor { name: "", shape, storage, first: (offset * size) as u64, size, decode })
     }
 }

@@ -11,6 +11,7 @@ use std::borrow::Cow;
 use std::cell::RefCell;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
+use std::ops::Range;
 use std::path::Path;
 
 /// The end-of-central-directory record's signature, and its size without the comment.
@@ -251,9 +252,9 @@ impl CentralEntry {
         Err(format!("zip: entry {name} marks its sizes as Zip64's but has no Zip64 field"))
     }
 
-    /// The entry's contents, inflated and checked against its CRC-32: a stored entry of an
-    /// archive in memory is borrowed from it.
-    pub(crate) fn contents<'s, S: Source + ?Sized>(&self, source: &'s S, name: &str) -> Result<Cow<'s, [u8]>, String> {
+    /// Where the entry's bytes (compressed, if it is) lie in the archive, after its local
+    /// header.
+    fn data<S: Source + ?Sized>(&self, source: &S, name: &str) -> Result<Range<u64>, String> {
         if self.flags & FLAG_ENCRYPTED != 0 {
             return Err(format!("zip: entry {name} is encrypted"));
         }
@@ -263,7 +264,34 @@ impl CentralEntry {
         }
         let start =
             self.offset + (LOCAL_SIZE + usize::from(u16_at(&local, 26)) + usize::from(u16_at(&local, 28))) as u64;
-        let data = source.piece(start, self.compressed, &format!("entry {name}"))?;
+        let end = start.checked_add(self.compressed).filter(|&end| end <= source.size());
+        let end =
+            end.ok_or_else(|| format!("zip: entry {name} runs past the end of the file ({} bytes)", source.size()))?;
+        Ok(start..end)
+    }
+
+    /// A stored entry's bytes in the archive, for a reader that reads them a piece at a time
+    /// and checks them itself (with [`CentralEntry::crc`]); `None` for a compressed entry, which
+    /// is read whole by [`CentralEntry::contents`].
+    pub(crate) fn stored<S: Source + ?Sized>(&self, source: &S, name: &str) -> Result<Option<Range<u64>>, String> {
+        let data = self.data(source, name)?;
+        match self.method {
+            0 if self.compressed == self.size => Ok(Some(data)),
+            0 => Err(format!("zip: stored entry {name} has {} bytes, but says {}", self.compressed, self.size)),
+            _ => Ok(None),
+        }
+    }
+
+    /// The CRC-32 the directory gives the entry's contents.
+    pub(crate) fn crc(&self) -> u32 {
+        self.crc
+    }
+
+    /// The entry's contents, inflated and checked against its CRC-32: a stored entry of an
+    /// archive in memory is borrowed from it.
+    pub(crate) fn contents<'s, S: Source + ?Sized>(&self, source: &'s S, name: &str) -> Result<Cow<'s, [u8]>, String> {
+        let range = self.data(source, name)?;
+        let data = source.piece(range.start, range.end - range.start, &format!("entry {name}"))?;
         let contents = match self.method {
             0 if self.compressed == self.size => data,
             0 => return Err(format!("zip: stored entry {name} has {} bytes, but says {}", self.compressed, self.size)),

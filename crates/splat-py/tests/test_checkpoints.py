@@ -79,7 +79,8 @@ class _Tensor:
     def __reduce_ex__(self, protocol):
         rebuild = sys.modules["torch._utils"]._rebuild_tensor_v2
         stride = tuple(s // 4 for s in self.view.strides)
-        return rebuild, (self.storage, 0, tuple(self.view.shape), stride, False, collections.OrderedDict())
+        offset = (self.view.__array_interface__["data"][0] - self.storage.base.__array_interface__["data"][0]) // 4
+        return rebuild, (self.storage, offset, tuple(self.view.shape), stride, False, collections.OrderedDict())
 
 
 def torch_save(obj, path, storages: list[_Storage], archive: str = "ckpt_29999_rank0") -> None:
@@ -163,6 +164,39 @@ def test_a_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin, degre
         done = subprocess.run([splat_bin, "convert", str(source), str(source) + ".out.ply"], capture_output=True)
         assert done.returncode == 0, done.stderr
     assert (tmp_path / f"{ckpt.name}.out.ply").read_bytes() == (tmp_path / f"{ply.name}.out.ply").read_bytes()
+
+
+def test_a_checkpoint_of_several_blocks_reads_whole(tmp_path):
+    """The reader reads a checkpoint's storages 65,536 splats at a time (splat_io::torch's
+    BLOCK), and every byte of each storage for its CRC-32, those no row needs too. A checkpoint
+    of two blocks and a bit, its means a view at an offset into a larger storage (as torch saves
+    a slice), reads as its .ply; a NaN in the second block is named by its index in the file; a
+    byte flipped before or after the view fails the storage's CRC-32."""
+    n, pad = 2 * 65536 + 3, 5
+    g = raw_gaussians(np.random.default_rng(12), n, degree=1)
+    storage = np.concatenate([np.ones(3 * pad), g["means"].ravel(), np.ones(3 * pad)]).astype(np.float32)
+    params = {**gsplat_parameters(g), "means": storage}
+    views = {"means": storage[3 * pad : 3 * (pad + n)].reshape(n, 3)}
+    ckpt, ply = tmp_path / "big.pt", tmp_path / "big.ply"
+    save_checkpoint(ckpt, params, views=views)
+    write_3dgs_ply(ply, g)
+    a, b = splat.Scene.load(str(ckpt)).to_arrays(), splat.Scene.load(str(ply)).to_arrays()
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    whole = ckpt.read_bytes()
+    with zipfile.ZipFile(ckpt) as z:
+        info = z.getinfo("ckpt_29999_rank0/data/0")  # the means' storage
+    name_len, extra_len = struct.unpack_from("<HH", whole, info.header_offset + 26)
+    start = info.header_offset + 30 + name_len + extra_len
+    for at in (start + 2, start + info.file_size - 2):  # before and after the view
+        ckpt.write_bytes(whole[:at] + bytes([whole[at] ^ 0x01]) + whole[at + 1 :])
+        with pytest.raises(splat.SplatError, match="data/0 fails its CRC-32"):
+            splat.Scene.load(str(ckpt))
+    scales = g["scales"].copy()
+    scales[65536 + 70, 2] = np.nan
+    save_checkpoint(ckpt, {**params, "scales": scales}, views=views)
+    with pytest.raises(splat.SplatError, match=r"vertex 65606.*scales\[2\]"):
+        splat.Scene.load(str(ckpt))
 
 
 def test_what_is_not_a_gsplat_checkpoint_is_refused_by_name(tmp_path):
