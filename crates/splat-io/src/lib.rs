@@ -79,6 +79,9 @@ pub enum SceneFormat {
     /// Nerfstudio's checkpoint of a splatfacto model (`.ckpt`, `torch.save`'s zip of its
     /// pipeline), lossless (read only, [`torch`]).
     SplatfactoCheckpoint,
+    /// 3DGRUT's checkpoint (`ckpt_last.pt`, `torch.save`'s zip of its model's parameters),
+    /// lossless (read only, [`torch`]).
+    GrutCheckpoint,
 }
 
 impl SceneFormat {
@@ -120,7 +123,8 @@ impl SceneFormat {
                 | Self::Ksplat
                 | Self::Usd
                 | Self::GsplatCheckpoint
-                | Self::SplatfactoCheckpoint,
+                | Self::SplatfactoCheckpoint
+                | Self::GrutCheckpoint,
                 _,
             ) => ScreenFilter::Dilation,
         }
@@ -139,6 +143,7 @@ impl SceneFormat {
             Self::Usd => "OpenUSD ParticleField3DGaussianSplat",
             Self::GsplatCheckpoint => "gsplat checkpoint",
             Self::SplatfactoCheckpoint => "Nerfstudio splatfacto checkpoint",
+            Self::GrutCheckpoint => "3DGRUT checkpoint",
         }
     }
 }
@@ -148,8 +153,8 @@ const WRITTEN_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.js
 const WRITTEN_EXTENSIONS_READ_ONLY: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json or .usda (compressed \
                                             .ply, .ksplat and trainers' .pt and .ckpt checkpoints are read only)";
 /// The extensions the readers take.
-const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat checkpoint) or .ckpt (a \
-     Nerfstudio splatfacto checkpoint)";
+const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat or \
+                               3DGRUT checkpoint) or .ckpt (a Nerfstudio splatfacto checkpoint)";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -289,8 +294,9 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             let format = match info.trainer {
                 torch::Trainer::Gsplat => SceneFormat::GsplatCheckpoint,
                 torch::Trainer::Splatfacto => SceneFormat::SplatfactoCheckpoint,
+                torch::Trainer::Grut => SceneFormat::GrutCheckpoint,
             };
-            SceneRead { detail: info.describe(), ..read(format, scene) }
+            SceneRead { detail: info.describe(), notes: info.notes, ..read(format, scene) }
         }
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
@@ -315,7 +321,8 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::CompressedPly
         | SceneFormat::Ksplat
         | SceneFormat::GsplatCheckpoint
-        | SceneFormat::SplatfactoCheckpoint => {
+        | SceneFormat::SplatfactoCheckpoint
+        | SceneFormat::GrutCheckpoint => {
             unreachable!("for_output refuses them")
         }
     }

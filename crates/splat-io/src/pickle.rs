@@ -25,6 +25,9 @@ pub(crate) enum Value {
     Global(String, String),
     /// A call of a global with arguments (a tuple), not made.
     Call(Box<Value>, Box<Value>),
+    /// An object made by a call and given a state (`BUILD`: its attributes, as the object's
+    /// `__getstate__` gave them), neither run.
+    Built(Box<Value>, Box<Value>),
     /// A persistent id: what the pickler's `persistent_id` returned.
     Persistent(Box<Value>),
     /// A list or dict met again (a memo reference), by its memo key: the memo holds copies,
@@ -38,6 +41,11 @@ impl Value {
     pub(crate) fn get(&self, key: &str) -> Option<&Value> {
         let Value::Dict(items) = self else { return None };
         items.iter().find(|(k, _)| matches!(k, Value::Str(s) if s == key)).map(|(_, v)| v)
+    }
+
+    /// The state an object was built with.
+    pub(crate) fn state(&self) -> Option<&Value> {
+        if let Value::Built(_, state) = self { Some(state) } else { None }
     }
 
     /// A dict's string keys.
@@ -182,12 +190,13 @@ impl<'b> Machine<'b> {
         Ok(())
     }
 
-    /// A call of `callable` with `args`: an `OrderedDict()` becomes the dict it makes, any
-    /// other call stays a call.
+    /// A call of `callable` with `args`: an `OrderedDict()` or a `defaultdict(factory)`
+    /// becomes the dict it makes (its items follow), any other call stays a call.
     fn call(callable: Value, args: Value) -> Value {
         match (&callable, &args) {
             (Value::Global(module, name), Value::Tuple(a))
-                if module == "collections" && name == "OrderedDict" && a.is_empty() =>
+                if module == "collections"
+                    && ((name == "OrderedDict" && a.is_empty()) || (name == "defaultdict" && a.len() <= 1)) =>
             {
                 Value::Dict(Vec::new())
             }
@@ -323,10 +332,14 @@ impl<'b> Machine<'b> {
                 self.push(Self::call(callable, args));
             }
             b'b' => {
-                // BUILD: the state (an OrderedDict's `_metadata`, an object's attributes) is
-                // not what a checkpoint's arrays are read from.
-                self.pop()?;
-                self.top()?;
+                // BUILD: an object made by a call keeps its state (a config's values are read
+                // from it); a dict's (an nn.Module state dict's `_metadata`) is not read.
+                let state = self.pop()?;
+                let top = self.top()?;
+                if let Value::Call(..) = top {
+                    let made = std::mem::replace(top, Value::None);
+                    *top = Value::Built(Box::new(made), Box::new(state));
+                }
             }
             b'Q' => {
                 let id = self.pop()?;
@@ -394,6 +407,25 @@ mod tests {
         let memo = "80025d71002858010000007371018571026802652e";
         let t = Value::Tuple(vec![s("s")]);
         assert_eq!(load(&hex(memo)), Ok(Value::List(vec![t.clone(), t])));
+    }
+
+    /// `types.SimpleNamespace(a=1)` (a call, then BUILD with its state) keeps its state, as a
+    /// config object's is read; `defaultdict(list, {"k": [1]})` reads as the dict it is.
+    #[test]
+    fn built_objects_keep_their_state() {
+        let namespace =
+            "80026374797065730a53696d706c654e616d6573706163650a7100295271017d710258010000006171034b0173622e";
+        let made = Value::Call(
+            Box::new(Value::Global("types".into(), "SimpleNamespace".into())),
+            Box::new(Value::Tuple(vec![])),
+        );
+        let state = Value::Dict(vec![(s("a"), Value::Int(1))]);
+        let built = load(&hex(namespace)).unwrap();
+        assert_eq!(built, Value::Built(Box::new(made), Box::new(state.clone())));
+        assert_eq!(built.state(), Some(&state));
+        let defaultdict = "800263636f6c6c656374696f6e730a64656661756c74646963740a7100635f5f6275696c74696e5f5f0a6c6973740a710185710252710358010000006b71045d71054b0161732e";
+        let items = vec![(s("k"), Value::List(vec![Value::Int(1)]))];
+        assert_eq!(load(&hex(defaultdict)), Ok(Value::Dict(items)));
     }
 
     /// A list shared by two places (`[l, l]`, the second a memo reference) reads as a mark of

@@ -33,6 +33,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
 use splat_core::sh::rgb_to_dc;
+use splat_core::trainer::Preset;
 use splat_core::{Particle, ParticleError, Scene};
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -45,6 +46,8 @@ pub enum Trainer {
     Gsplat,
     /// Nerfstudio's splatfacto.
     Splatfacto,
+    /// NVIDIA's 3DGRUT (3DGRT and 3DGUT).
+    Grut,
 }
 
 /// What a checkpoint says besides its splats.
@@ -54,6 +57,8 @@ pub struct CheckpointInfo {
     pub trainer: Trainer,
     /// The training step it was saved at, where it says.
     pub step: Option<i64>,
+    /// What the reader found that the user should hear of (how the trainer renders them).
+    pub notes: Vec<String>,
 }
 
 impl CheckpointInfo {
@@ -63,7 +68,7 @@ impl CheckpointInfo {
     }
 }
 
-/// Read the checkpoint at `path` (gsplat's or Nerfstudio's splatfacto's, whatever its
+/// Read the checkpoint at `path` (gsplat's, Nerfstudio's splatfacto's or 3DGRUT's, whatever its
 /// extension): its pickle and the storages of its splats, nothing more.
 pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
     let source = FileSource::open(path).map_err(|e| Error::new(path, ErrorKind::Io(e)))?;
@@ -82,18 +87,21 @@ fn fail(message: String) -> ErrorKind {
 fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo), ErrorKind> {
     let archive = Archive::open(source).map_err(fail)?;
     let root = pickle::load(&archive.data_pkl).map_err(fail)?;
-    let step = match root.get("step") {
+    let step = match root.get("step").or(root.get("global_step")) {
         Some(Value::Int(step)) => Some(*step),
         _ => None,
     };
+    let mut notes = Vec::new();
     let (trainer, parameters) = if let Some(splats) = root.get("splats") {
         (Trainer::Gsplat, gsplat_parameters(splats)?)
     } else if let Some(pipeline) = root.get("pipeline") {
         (Trainer::Splatfacto, splatfacto_parameters(pipeline)?)
+    } else if root.get("positions").is_some() && root.get("density").is_some() {
+        (Trainer::Grut, grut_parameters(&root, &mut notes)?)
     } else {
         return Err(fail(format!(
-            "neither \"splats\" (gsplat's simple_trainer) nor \"pipeline\" (Nerfstudio's) in the checkpoint (its \
-             keys: {})",
+            "neither \"splats\" (gsplat's simple_trainer), \"pipeline\" (Nerfstudio's) nor \"positions\" and \
+             \"density\" (3DGRUT's) in the checkpoint (its keys: {})",
             root.keys().join(", ")
         )));
     };
@@ -109,7 +117,7 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
         dc: tensor(dc)?,
         rest: tensor(rest)?,
     };
-    Ok((splats.scene(trainer)?, CheckpointInfo { trainer, step }))
+    Ok((splats.scene(trainer)?, CheckpointInfo { trainer, step, notes }))
 }
 
 /// The six parameters (positions, log scales, quaternions, opacity logits, DC, the rest of the
@@ -172,6 +180,96 @@ const BLOCK: usize = 1 << 16;
 
 /// The largest piece of a storage read at once where no row needs it (to check its CRC-32).
 const PIECE: u64 = 1 << 24;
+
+/// 3DGRUT's splats: the model's parameters at the checkpoint's top level (`positions`,
+/// `rotation`, `scale`, `density`, `features_albedo`, `features_specular`), beside the run's
+/// config (an OmegaConf `DictConfig`), whose activations must be 3DGS's (sigmoid and exp, as
+/// its `.ply` export assumes) and whose render settings become `notes`.
+fn grut_parameters<'v>(root: &'v Value, notes: &mut Vec<String>) -> Result<Parameters<'v>, ErrorKind> {
+    match root.get("feature_type") {
+        None => {}
+        Some(Value::Str(t)) if t == "sh" => {}
+        Some(Value::Str(t)) => {
+            return Err(fail(format!(
+                "3DGRUT's particles hold {t} features (its feature_type) for a network to decode, which splat does not \
+                 run: only its spherical harmonics (feature_type sh) are read"
+            )));
+        }
+        Some(other) => return Err(fail(format!("3DGRUT's feature_type is {other:?}, not a name"))),
+    }
+    let config = root.get("config");
+    let setting = |path: &[&str]| config.and_then(|c| omegaconf(c, path));
+    for (path, expected) in [(["model", "density_activation"], "sigmoid"), (["model", "scale_activation"], "exp")] {
+        match setting(&path) {
+            None => {}
+            Some(Value::Str(name)) if name == expected => {}
+            Some(value) => {
+                let value = if let Value::Str(name) = value { format!("\"{name}\"") } else { format!("{value:?}") };
+                return Err(fail(format!(
+                    "3DGRUT trained these particles with {} {value}, where a splat's is {expected} (3DGS's, which its \
+                     .ply export assumes too)",
+                    path.join(".")
+                )));
+            }
+        }
+    }
+    let method = match setting(&["render", "method"]) {
+        Some(Value::Str(method)) => [Preset::ThreeDgrt, Preset::ThreeDgut].into_iter().find(|p| p.name() == method),
+        _ => None,
+    };
+    match (method, setting(&["render", "particle_kernel_degree"])) {
+        (Some(preset), Some(Value::Int(degree))) => {
+            let (name, method) = (if preset == Preset::ThreeDgrt { "3DGRT" } else { "3DGUT" }, preset.name());
+            let kernel = if *degree == i64::from(preset.kernel_degree()) {
+                String::new()
+            } else {
+                format!(", its kernel degree set to {degree},")
+            };
+            notes.push(format!(
+                "{name} trained these particles (its render.method {method}) with kernel degree {degree} (its \
+                 render.particle_kernel_degree) and renders them along each ray: the {method} preset{kernel} renders \
+                 them as it does{}",
+                if preset == Preset::ThreeDgrt { ", with a ray-tracing method" } else { "" }
+            ));
+        }
+        _ => notes.push(
+            "the checkpoint's config does not say how 3DGRUT rendered these particles (render.method and \
+             render.particle_kernel_degree): the 3dgrt and 3dgut presets render them as its two renderers do"
+                .into(),
+        ),
+    }
+    if let Some(Value::Str(primitive)) = setting(&["render", "primitive_type"])
+        && primitive == "trisurfel"
+    {
+        notes.push(
+            "3DGRUT trained these particles as flat surfels (its render.primitive_type trisurfel); they are read as \
+             Gaussians of their three scales"
+                .into(),
+        );
+    }
+    let get = |name: &'static str, property: &'static str| -> Result<_, ErrorKind> {
+        let value = root.get(name).ok_or_else(|| fail(format!("3DGRUT's checkpoint has no \"{name}\"")))?;
+        Ok((property, name.to_string(), value))
+    };
+    Ok([
+        get("positions", "positions")?,
+        get("scale", "scale")?,
+        get("rotation", "rotation")?,
+        get("density", "density")?,
+        get("features_albedo", "features_albedo")?,
+        get("features_specular", "features_specular")?,
+    ])
+}
+
+/// A setting of a pickled OmegaConf config, by its path of keys: a `DictConfig` keeps its
+/// nodes in `_content`, and a value node its value in `_val` (their pickled states).
+fn omegaconf<'v>(config: &'v Value, path: &[&str]) -> Option<&'v Value> {
+    let mut node = config;
+    for key in path {
+        node = node.state()?.get("_content")?.get(key)?;
+    }
+    node.state()?.get("_val")
+}
 
 /// A tensor's shape and where its elements lie: rows read a block at a time from its storage.
 struct Tensor<'s, S: Source + ?Sized> {
@@ -279,12 +377,17 @@ impl<S: Source + ?Sized> Splats<'_, S> {
         self.scales.expect_shape(n, &[&[3]])?;
         self.quats.expect_shape(n, &[&[4]])?;
         self.opacities.expect_shape(n, &[&[], &[1]])?;
+        let rest: &[&[usize]] = &[&[0, 3], &[3, 3], &[8, 3], &[15, 3]];
         match trainer {
             Trainer::Gsplat => self.dc.expect_shape(n, &[&[1, 3]])?,
-            Trainer::Splatfacto => self.dc.expect_shape(n, &[&[3]])?,
+            Trainer::Splatfacto | Trainer::Grut => self.dc.expect_shape(n, &[&[3]])?,
         }
-        self.rest.expect_shape(n, &[&[0, 3], &[3, 3], &[8, 3], &[15, 3]])?;
-        let degree = [0, 3, 8, 15].iter().position(|&k| k == self.rest.shape[1]).expect("checked above") as u8;
+        match trainer {
+            Trainer::Gsplat | Trainer::Splatfacto => self.rest.expect_shape(n, rest)?,
+            // 3DGRUT's features_specular: N × 3K, coefficient by coefficient.
+            Trainer::Grut => self.rest.expect_shape(n, &[&[0], &[9], &[24], &[45]])?,
+        }
+        let degree = [0, 9, 24, 45].iter().position(|&w| w == self.rest.width()).expect("checked above") as u8;
         // splatfacto at degree 0 trains a colour logit, exported as RGB2SH(sigmoid(·)).
         let dc = if trainer == Trainer::Splatfacto && degree == 0 { Dc::ColourLogit } else { Dc::Coefficient };
         let mut particles = Vec::with_capacity(n);

@@ -1,5 +1,6 @@
-"""Trainers' checkpoints, read without PyTorch: gsplat's (simple_trainer's ckpt_STEP_rankR.pt)
-and Nerfstudio's of a splatfacto model (nerfstudio_models/step-STEP.ckpt).
+"""Trainers' checkpoints, read without PyTorch: gsplat's (simple_trainer's ckpt_STEP_rankR.pt),
+Nerfstudio's of a splatfacto model (nerfstudio_models/step-STEP.ckpt) and 3DGRUT's
+(ckpt_last.pt, with its OmegaConf config, pickled here by OmegaConf itself).
 
 The files here are written as torch.save writes them (torch/serialization.py's `_save`,
 PyTorch 2.x), without torch: a pickle at torch's default protocol 2 of gsplat's
@@ -12,8 +13,8 @@ ARCHIVE/.data/serialization_id; in a Zip64 archive, as PyTorch's writer always m
 records by module and name as it records torch's own.
 
 A checkpoint and the .ply of the same parameters (conftest's independent 3DGS writer, the
-layout gsplat's export and Nerfstudio's ns-export gaussian-splat write) must give the same
-splats value for value; what is not such a checkpoint is refused by name.
+layout gsplat's export, Nerfstudio's ns-export gaussian-splat and 3DGRUT's PLYExporter write)
+must give the same splats value for value; what is not such a checkpoint is refused by name.
 """
 
 from __future__ import annotations
@@ -50,8 +51,13 @@ def _torch_names():
     def _rebuild_tensor_v2(*args):
         raise AssertionError("a stand-in: never called")
 
-    _rebuild_tensor_v2.__module__, _rebuild_tensor_v2.__qualname__ = "torch._utils", "_rebuild_tensor_v2"
-    torch.FloatStorage, torch._utils, utils._rebuild_tensor_v2 = FloatStorage, utils, _rebuild_tensor_v2
+    def _rebuild_parameter(*args):
+        raise AssertionError("a stand-in: never called")
+
+    for f in (_rebuild_tensor_v2, _rebuild_parameter):
+        f.__module__, f.__qualname__ = "torch._utils", f.__name__
+        setattr(utils, f.__name__, f)
+    torch.FloatStorage, torch._utils = FloatStorage, utils
     sys.modules.update({"torch": torch, "torch._utils": utils})
     try:
         yield torch
@@ -83,6 +89,17 @@ class _Tensor:
         return rebuild, (self.storage, offset, tuple(self.view.shape), stride, False, collections.OrderedDict())
 
 
+class _Parameter:
+    """An nn.Parameter of a tensor, pickled as torch pickles one."""
+
+    def __init__(self, tensor: _Tensor):
+        self.tensor = tensor
+
+    def __reduce_ex__(self, protocol):
+        rebuild = sys.modules["torch._utils"]._rebuild_parameter
+        return rebuild, (self.tensor, True, collections.OrderedDict())
+
+
 def torch_save(obj, path, storages: list[_Storage], archive: str = "ckpt_29999_rank0") -> None:
     """`obj` (with _Tensor leaves over `storages`) as torch.save writes it."""
     with _torch_names() as torch:
@@ -107,6 +124,13 @@ def torch_save(obj, path, storages: list[_Storage], archive: str = "ckpt_29999_r
             z.writestr(f"{archive}/.data/serialization_id", "1234567890")
     finally:
         zipfile.ZIP64_LIMIT, zipfile.ZIP_FILECOUNT_LIMIT = limits
+
+
+def refused(path) -> str:
+    """The message splat refuses the scene at `path` with."""
+    with pytest.raises(splat.SplatError) as e:
+        splat.Scene.load(str(path))
+    return str(e.value)
 
 
 def gsplat_parameters(g: dict) -> dict:
@@ -201,11 +225,6 @@ def test_a_checkpoint_of_several_blocks_reads_whole(tmp_path):
 
 def test_what_is_not_a_gsplat_checkpoint_is_refused_by_name(tmp_path):
     g = gsplat_parameters(raw_gaussians(np.random.default_rng(5), 16, degree=1))
-
-    def refused(path) -> str:
-        with pytest.raises(splat.SplatError) as e:
-            splat.Scene.load(str(path))
-        return str(e.value)
 
     # A transposed view of the means (torch's .t() keeps the storage, swaps the strides).
     path = tmp_path / "strided.pt"
@@ -369,11 +388,6 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
 def test_what_is_not_a_splatfacto_checkpoint_is_refused_by_name(tmp_path):
     g = raw_gaussians(np.random.default_rng(6), 8, degree=1)
 
-    def refused(path) -> str:
-        with pytest.raises(splat.SplatError) as e:
-            splat.Scene.load(str(path))
-        return str(e.value)
-
     # A nerfacto checkpoint: a pipeline of fields and proposal networks, no splats.
     path = tmp_path / "nerfacto.ckpt"
     storages = []
@@ -396,3 +410,109 @@ def test_what_is_not_a_splatfacto_checkpoint_is_refused_by_name(tmp_path):
         ("features_rest", g["sh"][:, 1:, :]), ("opacities", g["opacities"][:, None])]}
     torch_save({"step": 1, "pipeline": state_dict(params, storages)}, path, storages)
     assert '"features_dc" has shape [8, 1, 3], expected [8, 3]' in refused(path)
+
+
+def grut_config(method: str = "3dgrt", degree: int = 4, density: str = "sigmoid", primitive: str = "instances"):
+    """A 3DGRUT run's config (the settings of configs/base_gs.yaml and configs/render/*.yaml that
+    splat reads, among others), as Hydra hands it to the trainer: an OmegaConf DictConfig in
+    struct mode."""
+    from omegaconf import OmegaConf
+
+    conf = OmegaConf.create(
+        {
+            "model": {
+                "density_activation": density,
+                "scale_activation": "exp",
+                "default_density": 0.1,
+                "progressive_training": {"init_n_features": 0, "max_n_features": 3, "increase_frequency": 1000},
+            },
+            "render": {
+                "method": method,
+                "particle_kernel_degree": degree,
+                "particle_kernel_min_response": 0.0113,
+                "particle_kernel_min_alpha": "${div:1.0,255.0}",
+                "primitive_type": primitive,
+                "pipeline_type": "reference",
+                "backward_pipeline_type": "${render.pipeline_type}Bwd",
+            },
+            "out_dir": "runs",
+            "experiment_name": "bonsai",
+            "dataset": {"type": "colmap", "downsample_factor": 4, "test_split_interval": 8},
+            "optimizer": {"params": {"positions": {"lr": 1.6e-4}, "density": {"lr": 5e-2}}},
+            "writer": {"use_wandb": False, "tags": ["a", "b"]},
+        }
+    )
+    OmegaConf.set_struct(conf, True)
+    return conf
+
+
+def save_grut_checkpoint(path, g: dict, config=None, feature_type: str = "sh") -> None:
+    """3DGRUT's checkpoint of conftest's raw Gaussians `g`: its trainer's torch.save of the
+    model's get_model_parameters() (the parameters as nn.Parameters, the background module's
+    state, the optimizer's state, the config, the feature type), the step and the epoch."""
+    n, storages = len(g["means"]), []
+    params = {
+        "positions": g["means"],
+        "rotation": g["rotations"],
+        "scale": g["scales"],
+        "density": g["opacities"][:, None].copy(),
+        "features_albedo": g["sh"][:, 0, :].copy(),
+        "features_specular": g["sh"][:, 1:, :].reshape(n, -1).copy(),  # coefficient by coefficient
+    }
+    tensors = state_dict(params, storages)
+    root = {name: _Parameter(tensors[name]) for name in ("positions", "rotation", "scale", "density")}
+    moments = state_dict({"exp_avg": np.zeros((n, 3), np.float32), "exp_avg_sq": np.zeros((n, 3), np.float32)}, storages)
+    root.update(
+        background=state_dict({"color": np.zeros(3, np.float32)}, storages),
+        n_active_features=3,
+        max_n_features=3,
+        progressive_training=True,
+        scene_extent=2.5,
+        optimizer={"state": {0: dict(moments)}, "param_groups": [{"lr": 1.6e-4, "params": [0], "name": "positions"}]},
+        feature_type=feature_type,
+        particle_feature_dim=3 * g["sh"].shape[1],
+        ray_feature_dim=3,
+        features_albedo=_Parameter(tensors["features_albedo"]),
+        features_specular=_Parameter(tensors["features_specular"]),
+        global_step=30000,
+        epoch=9,
+    )
+    if config is not None:
+        root["config"] = config
+    torch_save(root, path, storages, archive="ckpt_last")
+
+
+@pytest.mark.parametrize("degree", [1, 3])
+def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin, degree):
+    g = raw_gaussians(np.random.default_rng(31 + degree), 40, degree=degree)
+    ckpt, ply = tmp_path / "ckpt_last.pt", tmp_path / "export_last.ply"
+    save_grut_checkpoint(ckpt, g, grut_config())
+    write_3dgs_ply(ply, g)  # 3DGRUT's PLYExporter: the parameters before activation, f_rest channel-major
+    from_ckpt, from_ply = splat.Scene.load(str(ckpt)), splat.Scene.load(str(ply))
+    assert len(from_ckpt) == 40 and from_ckpt.sh_degree == degree
+    a, b = from_ckpt.to_arrays(), from_ply.to_arrays()
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert info.returncode == 0 and "3DGRUT checkpoint (step 30000)" in info.stdout, info
+    assert "3DGRT trained these particles" in info.stderr and "the 3dgrt preset renders" in info.stderr, info.stderr
+    # 3DGUT's config, and one of 3DGRT's at another kernel degree: each note names its preset.
+    for config, expected in [
+        (grut_config("3dgut", 2), "the 3dgut preset renders them as it does"),
+        (grut_config("3dgrt", 8), "the 3dgrt preset, its kernel degree set to 8, renders"),
+        (None, "does not say how 3DGRUT rendered these particles"),
+    ]:
+        save_grut_checkpoint(ckpt, g, config)
+        info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+        assert info.returncode == 0 and expected in info.stderr, info.stderr
+
+
+def test_what_splat_cannot_render_of_3dgrut_is_refused_by_name(tmp_path):
+    g = raw_gaussians(np.random.default_rng(9), 8, degree=1)
+
+    path = tmp_path / "nht.pt"
+    save_grut_checkpoint(path, g, grut_config(), feature_type="nht")
+    assert "nht features" in refused(path)
+    path = tmp_path / "softplus.pt"
+    save_grut_checkpoint(path, g, grut_config(density="softplus"))
+    assert 'model.density_activation "softplus", where a splat\'s is sigmoid' in refused(path)
