@@ -69,10 +69,82 @@ impl CheckpointInfo {
 }
 
 /// Read the checkpoint at `path` (gsplat's, Nerfstudio's splatfacto's or 3DGRUT's, whatever its
-/// extension): its pickle and the storages of its splats, nothing more.
+/// extension): its pickle and the storages of its splats, nothing more. gsplat's distributed
+/// training splits the splats between its ranks, each saving `ckpt_STEP_rankR.pt`: one rank's
+/// file is read with every other rank's of its step beside it, in rank order, as
+/// `simple_trainer`'s evaluation concatenates them.
 pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
-    let source = FileSource::open(path).map_err(|e| Error::new(path, ErrorKind::Io(e)))?;
-    checkpoint(&source).map_err(|e| Error::new(path, e))
+    let ranks = gsplat_ranks(path)?;
+    let read = |path: &Path| {
+        let source = FileSource::open(path).map_err(|e| Error::new(path, ErrorKind::Io(e)))?;
+        checkpoint(&source).map_err(|e| Error::new(path, e))
+    };
+    let (mut scene, mut info) = read(&ranks[0])?;
+    if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
+        return Ok((scene, info));
+    }
+    for rank in &ranks[1..] {
+        let (part, part_info) = read(rank)?;
+        if part_info.trainer != Trainer::Gsplat || part.sh_degree != scene.sh_degree {
+            let why = format!(
+                "not another rank of {}: a {:?} checkpoint of SH degree {} beside one of gsplat's of degree {}",
+                file_name(&ranks[0]),
+                part_info.trainer,
+                part.sh_degree,
+                scene.sh_degree
+            );
+            return Err(Error::new(rank, ErrorKind::Checkpoint(why)));
+        }
+        scene.particles.extend(part.particles);
+    }
+    let names: Vec<String> = ranks.iter().map(|p| file_name(p)).collect();
+    info.notes.push(format!(
+        "gsplat's distributed training split these splats between {} ranks: read {} together, in rank order, as its \
+         simple_trainer's evaluation concatenates them",
+        ranks.len(),
+        names.join(", ")
+    ));
+    Ok((scene, info))
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+/// The checkpoints of every rank of a gsplat run beside `path` when its name is one rank's
+/// (`ckpt_STEP_rankR.pt`), in rank order; else `path` alone. A rank missing between them is
+/// refused by name: the run's splats would be read in part.
+fn gsplat_ranks(path: &Path) -> Result<Vec<std::path::PathBuf>, Error> {
+    let name = file_name(path);
+    let shard = name.strip_prefix("ckpt_").and_then(|rest| rest.strip_suffix(".pt")).and_then(|rest| {
+        let (step, rank) = rest.rsplit_once("_rank")?;
+        rank.parse::<u32>().ok().map(|_| step.to_string())
+    });
+    let Some(step) = shard else { return Ok(vec![path.to_path_buf()]) };
+    let of = |rank: u32| path.with_file_name(format!("ckpt_{step}_rank{rank}.pt"));
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let prefix = format!("ckpt_{step}_rank");
+    let mut highest = 0;
+    if let Ok(entries) = std::fs::read_dir(folder) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let rank =
+                name.strip_prefix(&prefix).and_then(|r| r.strip_suffix(".pt")).and_then(|r| r.parse::<u32>().ok());
+            highest = highest.max(rank.unwrap_or(0));
+        }
+    }
+    let ranks: Vec<_> = (0..=highest).map(of).collect();
+    if let Some(missing) = ranks.iter().find(|p| !p.is_file()) {
+        let why = format!(
+            "{} is one rank's share of a distributed gsplat run with {} ranks, and {} is missing: the run's splats are \
+             split between its ranks' checkpoints",
+            name,
+            highest + 1,
+            file_name(missing)
+        );
+        return Err(Error::new(path, ErrorKind::Checkpoint(why)));
+    }
+    Ok(ranks)
 }
 
 /// Parse a checkpoint's bytes.
@@ -244,6 +316,13 @@ fn grut_parameters<'v>(root: &'v Value, notes: &mut Vec<String>) -> Result<Param
         notes.push(
             "3DGRUT trained these particles as flat surfels (its render.primitive_type trisurfel); they are read as \
              Gaussians of their three scales"
+                .into(),
+        );
+    }
+    if let Some(Value::Bool(true)) = setting(&["dataset", "normalize_world_space"]) {
+        notes.push(
+            "3DGRUT trained these particles in its normalised world (its dataset.normalize_world_space, a port of \
+             gsplat's): their COLMAP cameras line up with them there, where splat's gsplat-world option moves them"
                 .into(),
         );
     }

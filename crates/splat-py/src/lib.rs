@@ -49,16 +49,24 @@ struct PyScene {
 
 #[pymethods]
 impl PyScene {
-    /// Read a scene (.ply, compressed .ply, .splat, .spz, .glb/.gltf) or a world (.toml) file;
-    /// `options` are `splat render`'s reading options (strict, spz_axes, preset, screen_filter).
+    /// Read a scene (.ply, compressed .ply, .splat, .spz, .glb/.gltf, .sog, .ksplat, .usda, a
+    /// trainer's checkpoint) or a world (.toml) file; `options` are `splat render`'s reading
+    /// options (strict, spz_axes, preset, screen_filter). The reader's notes are warnings.
     #[staticmethod]
     #[pyo3(signature = (path, **options))]
     fn load(py: Python<'_>, path: PathBuf, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let read: options::Parsed<ReadArgs> = options::parse("load", options)?;
         let opened = splat_io::world::open_world(Some(&path), read.0.options()).map_err(fail)?;
+        let warn = |text: String| {
+            let text = std::ffi::CString::new(text).unwrap_or_default();
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &text, 2)
+        };
         if let Some(warning) = splat_io::skipped_properties_warning(&path, &opened.skipped_properties) {
-            let text = std::ffi::CString::new(format!("{warning} (strict=True refuses them)")).unwrap_or_default();
-            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &text, 1)?;
+            warn(format!("{warning} (strict=True refuses them)"))?;
+        }
+        // What the reader did or found that the user should hear of, as `splat` prints it.
+        for note in &opened.notes {
+            warn(format!("{}: {note}", path.display()))?;
         }
         Ok(Self { world: opened.world, name: opened.name })
     }

@@ -223,6 +223,33 @@ def test_a_checkpoint_of_several_blocks_reads_whole(tmp_path):
         splat.Scene.load(str(ckpt))
 
 
+def test_a_distributed_runs_ranks_read_together(tmp_path, splat_bin):
+    """gsplat's distributed training gives rank r the splats r, r + R, r + 2R, … (simple_trainer's
+    points[world_rank::world_size]), and each rank saves ckpt_STEP_rankR.pt; its evaluation
+    concatenates the ranks' splats in rank order. Any rank's file reads as that whole; a
+    missing rank is refused by name, not read as part of the scene."""
+    g = raw_gaussians(np.random.default_rng(17), 30, degree=1)
+    ranks = 3
+    for rank in range(ranks):
+        share = {k: v[rank::ranks] for k, v in g.items()}
+        save_checkpoint(tmp_path / f"ckpt_6999_rank{rank}.pt", gsplat_parameters(share))
+    save_checkpoint(tmp_path / "ckpt_2999_rank0.pt", gsplat_parameters(g))  # another step: not a rank of it
+    ply = tmp_path / "concatenated.ply"
+    write_3dgs_ply(ply, {k: np.concatenate([v[r::ranks] for r in range(ranks)]) for k, v in g.items()})
+    expected = splat.Scene.load(str(ply)).to_arrays()
+    for rank in range(ranks):
+        a = splat.Scene.load(str(tmp_path / f"ckpt_6999_rank{rank}.pt")).to_arrays()
+        for name in a:
+            np.testing.assert_array_equal(a[name], expected[name], err_msg=f"rank {rank}: {name}")
+    info = subprocess.run([splat_bin, "info", str(tmp_path / "ckpt_6999_rank1.pt")], capture_output=True, text=True)
+    assert info.returncode == 0 and "particles  30" in info.stdout, info.stdout
+    assert "between 3 ranks" in info.stderr and "ckpt_6999_rank2.pt" in info.stderr, info.stderr
+    assert len(splat.Scene.load(str(tmp_path / "ckpt_2999_rank0.pt"))) == 30
+    (tmp_path / "ckpt_6999_rank1.pt").unlink()
+    message = refused(tmp_path / "ckpt_6999_rank2.pt")
+    assert "3 ranks, and ckpt_6999_rank1.pt is missing" in message, message
+
+
 def test_what_is_not_a_gsplat_checkpoint_is_refused_by_name(tmp_path):
     g = gsplat_parameters(raw_gaussians(np.random.default_rng(5), 16, degree=1))
 
@@ -412,7 +439,7 @@ def test_what_is_not_a_splatfacto_checkpoint_is_refused_by_name(tmp_path):
     assert '"features_dc" has shape [8, 1, 3], expected [8, 3]' in refused(path)
 
 
-def grut_config(method: str = "3dgrt", degree: int = 4, density: str = "sigmoid", primitive: str = "instances"):
+def grut_config(method: str = "3dgrt", degree: int = 4, density: str = "sigmoid", normalize: bool = False):
     """A 3DGRUT run's config (the settings of configs/base_gs.yaml and configs/render/*.yaml that
     splat reads, among others), as Hydra hands it to the trainer: an OmegaConf DictConfig in
     struct mode."""
@@ -431,13 +458,18 @@ def grut_config(method: str = "3dgrt", degree: int = 4, density: str = "sigmoid"
                 "particle_kernel_degree": degree,
                 "particle_kernel_min_response": 0.0113,
                 "particle_kernel_min_alpha": "${div:1.0,255.0}",
-                "primitive_type": primitive,
+                "primitive_type": "instances",
                 "pipeline_type": "reference",
                 "backward_pipeline_type": "${render.pipeline_type}Bwd",
             },
             "out_dir": "runs",
             "experiment_name": "bonsai",
-            "dataset": {"type": "colmap", "downsample_factor": 4, "test_split_interval": 8},
+            "dataset": {
+                "type": "colmap",
+                "downsample_factor": 4,
+                "test_split_interval": 8,
+                "normalize_world_space": normalize,
+            },
             "optimizer": {"params": {"positions": {"lr": 1.6e-4}, "density": {"lr": 5e-2}}},
             "writer": {"use_wandb": False, "tags": ["a", "b"]},
         }
@@ -493,14 +525,21 @@ def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin
     a, b = from_ckpt.to_arrays(), from_ply.to_arrays()
     for name in a:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    with pytest.warns(UserWarning, match="the 3dgrt preset renders them as it does"):
+        splat.Scene.load(str(ckpt))
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert info.returncode == 0 and "3DGRUT checkpoint (step 30000)" in info.stdout, info
     assert "3DGRT trained these particles" in info.stderr and "the 3dgrt preset renders" in info.stderr, info.stderr
-    # 3DGUT's config, and one of 3DGRT's at another kernel degree: each note names its preset.
+    # 3DGUT's config, and one of 3DGRT's at another kernel degree: each note names its preset;
+    # a run in gsplat's normalised world, or of surfels, is said to be.
+    surfels = grut_config()
+    surfels.render.primitive_type = "trisurfel"
     for config, expected in [
         (grut_config("3dgut", 2), "the 3dgut preset renders them as it does"),
         (grut_config("3dgrt", 8), "the 3dgrt preset, its kernel degree set to 8, renders"),
         (None, "does not say how 3DGRUT rendered these particles"),
+        (grut_config(normalize=True), "where splat's gsplat-world option moves them"),
+        (surfels, "as flat surfels (its render.primitive_type trisurfel)"),
     ]:
         save_grut_checkpoint(ckpt, g, config)
         info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
