@@ -12,8 +12,8 @@ use std::path::PathBuf;
 pub struct ConvertArgs {
     /// Input scene: .ply (3DGS or PlayCanvas compressed), .splat, .spz (versions 2–4), glTF
     /// .glb / .gltf (KHR_gaussian_splatting), PlayCanvas SOG (.sog or meta.json),
-    /// GaussianSplats3D .ksplat, OpenUSD .usda, or a trainer's checkpoint (gsplat's or 3DGRUT's
-    /// .pt, Nerfstudio splatfacto's .ckpt).
+    /// GaussianSplats3D .ksplat, OpenUSD .usda, or a trainer's checkpoint (3DGS's .pth, gsplat's
+    /// or 3DGRUT's .pt, Nerfstudio splatfacto's .ckpt).
     pub input: PathBuf,
     /// Output scene, format by extension: .ply (f32, lossless), .splat (8-bit degree-0 colour,
     /// no view dependence), .spz (quantised, about 10× smaller than .ply), .sog (PlayCanvas SOG

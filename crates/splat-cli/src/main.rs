@@ -41,8 +41,8 @@ enum Command {
     /// Render a scene (or the built-in demo scene) to an image.
     Render(Box<render::RenderArgs>),
     /// Convert a scene between .ply, .splat, .spz, glTF, PlayCanvas SOG, OpenUSD .usda, and the
-    /// read-only compressed .ply, .ksplat and trainers' checkpoints (gsplat's and 3DGRUT's .pt,
-    /// Nerfstudio's .ckpt).
+    /// read-only compressed .ply, .ksplat and trainers' checkpoints (3DGS's .pth, gsplat's and
+    /// 3DGRUT's .pt, Nerfstudio's .ckpt).
     Convert(convert::ConvertArgs),
     /// Print a scene's particle count, SH degree, bounds and opacity histogram.
     Info(info::InfoArgs),

@@ -82,6 +82,9 @@ pub enum SceneFormat {
     /// 3DGRUT's checkpoint (`ckpt_last.pt`, `torch.save`'s zip of its model's parameters),
     /// lossless (read only, [`torch`]).
     GrutCheckpoint,
+    /// 3DGS's checkpoint (`chkpnt30000.pth`, `torch.save`'s zip of its model's capture),
+    /// lossless (read only, [`torch`]).
+    InriaCheckpoint,
 }
 
 impl SceneFormat {
@@ -124,7 +127,8 @@ impl SceneFormat {
                 | Self::Usd
                 | Self::GsplatCheckpoint
                 | Self::SplatfactoCheckpoint
-                | Self::GrutCheckpoint,
+                | Self::GrutCheckpoint
+                | Self::InriaCheckpoint,
                 _,
             ) => ScreenFilter::Dilation,
         }
@@ -144,6 +148,7 @@ impl SceneFormat {
             Self::GsplatCheckpoint => "gsplat checkpoint",
             Self::SplatfactoCheckpoint => "Nerfstudio splatfacto checkpoint",
             Self::GrutCheckpoint => "3DGRUT checkpoint",
+            Self::InriaCheckpoint => "3DGS checkpoint",
         }
     }
 }
@@ -154,7 +159,8 @@ const WRITTEN_EXTENSIONS_READ_ONLY: &str = ".ply, .splat, .spz, .glb, .gltf, .so
                                             .ply, .ksplat and trainers' .pt and .ckpt checkpoints are read only)";
 /// The extensions the readers take.
 const READ_EXTENSIONS: &str = ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat or \
-                               3DGRUT checkpoint) or .ckpt (a Nerfstudio splatfacto checkpoint)";
+                               3DGRUT checkpoint), .pth (a 3DGS checkpoint) or .ckpt (a Nerfstudio splatfacto \
+                               checkpoint)";
 
 /// Options of [`read_scene_with`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -295,6 +301,7 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
                 torch::Trainer::Gsplat => SceneFormat::GsplatCheckpoint,
                 torch::Trainer::Splatfacto => SceneFormat::SplatfactoCheckpoint,
                 torch::Trainer::Grut => SceneFormat::GrutCheckpoint,
+                torch::Trainer::Inria => SceneFormat::InriaCheckpoint,
             };
             SceneRead { detail: info.describe(), notes: info.notes, ..read(format, scene) }
         }
@@ -322,7 +329,8 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         | SceneFormat::Ksplat
         | SceneFormat::GsplatCheckpoint
         | SceneFormat::SplatfactoCheckpoint
-        | SceneFormat::GrutCheckpoint => {
+        | SceneFormat::GrutCheckpoint
+        | SceneFormat::InriaCheckpoint => {
             unreachable!("for_output refuses them")
         }
     }

@@ -1,11 +1,15 @@
 //! Trainers' checkpoints, read without PyTorch:
 //!
+//! - 3DGS's `train.py` saves `chkpnt{iteration}.pth` at `--checkpoint_iterations`, `torch.save`
+//!   of `(gaussians.capture(), iteration)`;
 //! - gsplat's `simple_trainer` saves `ckpt_STEP_rankR.pt`, `torch.save` of `{"step": step,
-//!   "splats": splats.state_dict()}`;
+//!   "splats": splats.state_dict()}`, one a rank where its training is distributed;
 //! - Nerfstudio's trainer saves `nerfstudio_models/step-STEP.ckpt`, `torch.save` of `{"step",
 //!   "pipeline": pipeline.state_dict(), "optimizers", "schedulers", "scalers"}`; a splatfacto
 //!   model keeps its splats in the pipeline's `_model.gauss_params.*` (`_model.*` in checkpoints
-//!   before the parameter dict; `module.` before either where the run was distributed).
+//!   before the parameter dict; `module.` before either where the run was distributed);
+//! - 3DGRUT's trainer saves `ckpt_last.pt`, `torch.save` of its model's parameters at the top
+//!   level beside the run's OmegaConf config.
 //!
 //! `torch.save` writes a zip archive (PyTorch ≥ 1.6; always Zip64, read by the crate's `zip`) of
 //! `ARCHIVE/data.pkl`, a pickle of the object (read by the crate's `pickle`), and one entry
@@ -13,17 +17,18 @@
 //! `little` where present). A tensor is pickled as a call of
 //! `torch._utils._rebuild_tensor_v2(storage, offset, size, stride, requires_grad, hooks)`, its
 //! storage as the persistent id `("storage", torch.FloatStorage, KEY, location, numel)`. Only
-//! the pickle and the six storages of the splats are read from the file: a Nerfstudio
-//! checkpoint is about three times its splats (Adam's two moments of every parameter).
+//! the pickle and the six storages of the splats are read from the file, a block of splats at
+//! a time: a Nerfstudio checkpoint is about three times its splats (Adam's two moments of every
+//! parameter).
 //!
-//! The splats are the parameters before their activations, as both trainers' `.ply` exports
-//! write them and 3DGS's reader reads them: `means` (N, 3), `scales` (N, 3, log), `quats` (N,
-//! 4, w x y z, not normalised), `opacities` (N or N × 1, logit), the DC coefficient (gsplat's
-//! `sh0`, N × 1 × 3; splatfacto's `features_dc`, N × 3) and the rest (`shN`, `features_rest`: N
-//! × K × 3, K = 0, 3, 8 or 15). A splatfacto model of SH degree 0 trains its colour as a logit
-//! (its `features_dc` through a sigmoid) and exports RGB2SH of it: so it is read. A gsplat run
-//! with `--app_opt` keeps `features` and `colors` for an appearance network instead of `sh0`:
-//! refused by name, as is anything else that is not such a checkpoint.
+//! The splats are the parameters before their activations, as the trainers' `.ply` exports
+//! write them and 3DGS's reader reads them: positions (N, 3), log scales (N, 3), quaternions
+//! (N, 4, w x y z, not normalised), opacity logits (N or N × 1), the DC coefficient (N × 1 × 3
+//! or N × 3) and the rest of the SH (N × K × 3, or 3DGRUT's N × 3K, K = 0, 3, 8 or 15). A
+//! splatfacto model of SH degree 0 trains its colour as a logit (its `features_dc` through a
+//! sigmoid) and exports RGB2SH of it: so it is read. What splat cannot render as the trainer
+//! does (gsplat's `--app_opt` appearance network, 3DGRUT's neural features or other
+//! activations) is refused by name, as is anything else that is not such a checkpoint.
 
 use crate::pickle::{self, Value};
 use crate::ply::{opacity_from_logit, scale_from_log, unit_quaternion};
@@ -48,6 +53,8 @@ pub enum Trainer {
     Splatfacto,
     /// NVIDIA's 3DGRUT (3DGRT and 3DGUT).
     Grut,
+    /// 3DGS, the INRIA trainer (`train.py --checkpoint_iterations`).
+    Inria,
 }
 
 /// What a checkpoint says besides its splats.
@@ -68,8 +75,8 @@ impl CheckpointInfo {
     }
 }
 
-/// Read the checkpoint at `path` (gsplat's, Nerfstudio's splatfacto's or 3DGRUT's, whatever its
-/// extension): its pickle and the storages of its splats, nothing more. gsplat's distributed
+/// Read the checkpoint at `path` (gsplat's, Nerfstudio's splatfacto's, 3DGRUT's or 3DGS's,
+/// whatever its extension): its pickle and the storages of its splats, nothing more. gsplat's distributed
 /// training splits the splats between its ranks, each saving `ckpt_STEP_rankR.pt`: one rank's
 /// file is read with every other rank's of its step beside it, in rank order, as
 /// `simple_trainer`'s evaluation concatenates them.
@@ -164,7 +171,11 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
         _ => None,
     };
     let mut notes = Vec::new();
-    let (trainer, parameters) = if let Some(splats) = root.get("splats") {
+    let inria = inria_parameters(&root);
+    let step = step.or(inria.as_ref().map(|(_, iteration)| *iteration));
+    let (trainer, parameters) = if let Some((parameters, _)) = inria {
+        (Trainer::Inria, parameters)
+    } else if let Some(splats) = root.get("splats") {
         (Trainer::Gsplat, gsplat_parameters(splats)?)
     } else if let Some(pipeline) = root.get("pipeline") {
         (Trainer::Splatfacto, splatfacto_parameters(pipeline)?)
@@ -172,8 +183,8 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
         (Trainer::Grut, grut_parameters(&root, &mut notes)?)
     } else {
         return Err(fail(format!(
-            "neither \"splats\" (gsplat's simple_trainer), \"pipeline\" (Nerfstudio's) nor \"positions\" and \
-             \"density\" (3DGRUT's) in the checkpoint (its keys: {})",
+            "neither \"splats\" (gsplat's simple_trainer), \"pipeline\" (Nerfstudio's), \"positions\" and \
+             \"density\" (3DGRUT's) nor 3DGS's (capture, iteration) in the checkpoint (its keys: {})",
             root.keys().join(", ")
         )));
     };
@@ -195,6 +206,31 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
 /// The six parameters (positions, log scales, quaternions, opacity logits, DC, the rest of the
 /// SH), each by its name as a splat property, its key in the checkpoint and its value.
 type Parameters<'v> = [(&'static str, String, &'v Value); 6];
+
+/// 3DGS's checkpoint, `chkpnt{iteration}.pth`: `torch.save((gaussians.capture(), iteration))`,
+/// the capture a tuple of the active SH degree, `_xyz`, `_features_dc` (N × 1 × 3),
+/// `_features_rest` (N × K × 3), `_scaling`, `_rotation` and `_opacity`, then the densification
+/// statistics, the optimizer's state and the spatial learning rate's scale. `None` where the
+/// pickled object is not such a pair.
+fn inria_parameters(root: &Value) -> Option<(Parameters<'_>, i64)> {
+    let Value::Tuple(pair) = root else { return None };
+    let [Value::Tuple(capture), Value::Int(iteration)] = &pair[..] else { return None };
+    let [Value::Int(_), xyz, dc, rest, scaling, rotation, opacity, ..] = &capture[..] else { return None };
+    let tensor = |v: &Value| matches!(v, Value::Call(..));
+    if ![xyz, dc, rest, scaling, rotation, opacity].into_iter().all(tensor) {
+        return None;
+    }
+    let named = |name: &'static str, value| (name, name.to_string(), value);
+    let parameters = [
+        named("_xyz", xyz),
+        named("_scaling", scaling),
+        named("_rotation", rotation),
+        named("_opacity", opacity),
+        named("_features_dc", dc),
+        named("_features_rest", rest),
+    ];
+    Some((parameters, *iteration))
+}
 
 /// gsplat's splats: `splats.state_dict()`.
 fn gsplat_parameters(splats: &Value) -> Result<Parameters<'_>, ErrorKind> {
@@ -458,11 +494,11 @@ impl<S: Source + ?Sized> Splats<'_, S> {
         self.opacities.expect_shape(n, &[&[], &[1]])?;
         let rest: &[&[usize]] = &[&[0, 3], &[3, 3], &[8, 3], &[15, 3]];
         match trainer {
-            Trainer::Gsplat => self.dc.expect_shape(n, &[&[1, 3]])?,
+            Trainer::Gsplat | Trainer::Inria => self.dc.expect_shape(n, &[&[1, 3]])?,
             Trainer::Splatfacto | Trainer::Grut => self.dc.expect_shape(n, &[&[3]])?,
         }
         match trainer {
-            Trainer::Gsplat | Trainer::Splatfacto => self.rest.expect_shape(n, rest)?,
+            Trainer::Gsplat | Trainer::Splatfacto | Trainer::Inria => self.rest.expect_shape(n, rest)?,
             // 3DGRUT's features_specular: N × 3K, coefficient by coefficient.
             Trainer::Grut => self.rest.expect_shape(n, &[&[0], &[9], &[24], &[45]])?,
         }
@@ -670,7 +706,7 @@ impl<'s, S: Source + ?Sized> Archive<'s, S> {
             return Err("not a tensor".into());
         };
         match (module.as_str(), function.as_str(), &args[..]) {
-            ("torch._utils", "_rebuild_parameter", [data, ..]) => self.tensor(data),
+            ("torch._utils", "_rebuild_parameter" | "_rebuild_parameter_with_state", [data, ..]) => self.tensor(data),
             (
                 "torch._utils",
                 "_rebuild_tensor_v2",

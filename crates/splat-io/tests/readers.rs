@@ -284,8 +284,8 @@ fn errors_name_the_file() {
     let e = splat_io::read_scene(path).unwrap_err();
     assert!(e.to_string().starts_with("/nonexistent/dir/scene.ply: "), "{e}");
     assert!(splat_io::read_scene("x.obj".as_ref()).unwrap_err().to_string().contains(
-        ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat or 3DGRUT checkpoint) or \
-         .ckpt (a Nerfstudio splatfacto checkpoint)"
+        ".ply, .splat, .spz, .glb, .gltf, .sog, meta.json, .ksplat, .usda, .usd, .pt (a gsplat or 3DGRUT checkpoint), \
+         .pth (a 3DGS checkpoint) or .ckpt (a Nerfstudio splatfacto checkpoint)"
     ));
 }
 

@@ -1,6 +1,6 @@
 """Trainers' checkpoints, read without PyTorch: gsplat's (simple_trainer's ckpt_STEP_rankR.pt),
-Nerfstudio's of a splatfacto model (nerfstudio_models/step-STEP.ckpt) and 3DGRUT's
-(ckpt_last.pt, with its OmegaConf config, pickled here by OmegaConf itself).
+Nerfstudio's of a splatfacto model (nerfstudio_models/step-STEP.ckpt), 3DGRUT's (ckpt_last.pt,
+with its OmegaConf config, pickled here by OmegaConf itself) and 3DGS's (chkpnt30000.pth).
 
 The files here are written as torch.save writes them (torch/serialization.py's `_save`,
 PyTorch 2.x), without torch: a pickle at torch's default protocol 2 of gsplat's
@@ -13,7 +13,8 @@ ARCHIVE/.data/serialization_id; in a Zip64 archive, as PyTorch's writer always m
 records by module and name as it records torch's own.
 
 A checkpoint and the .ply of the same parameters (conftest's independent 3DGS writer, the
-layout gsplat's export, Nerfstudio's ns-export gaussian-splat and 3DGRUT's PLYExporter write)
+layout 3DGS's save_ply, gsplat's export, Nerfstudio's ns-export gaussian-splat and 3DGRUT's
+PLYExporter write)
 must give the same splats value for value; what is not such a checkpoint is refused by name.
 """
 
@@ -223,6 +224,7 @@ def test_a_checkpoint_of_several_blocks_reads_whole(tmp_path):
         splat.Scene.load(str(ckpt))
 
 
+@pytest.mark.filterwarnings("ignore:.*distributed training split these splats:UserWarning")
 def test_a_distributed_runs_ranks_read_together(tmp_path, splat_bin):
     """gsplat's distributed training gives rank r the splats r, r + R, r + 2R, … (simple_trainer's
     points[world_rank::world_size]), and each rank saves ckpt_STEP_rankR.pt; its evaluation
@@ -514,6 +516,7 @@ def save_grut_checkpoint(path, g: dict, config=None, feature_type: str = "sh") -
     torch_save(root, path, storages, archive="ckpt_last")
 
 
+@pytest.mark.filterwarnings("ignore:.*3DGRT trained these particles:UserWarning")
 @pytest.mark.parametrize("degree", [1, 3])
 def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin, degree):
     g = raw_gaussians(np.random.default_rng(31 + degree), 40, degree=degree)
@@ -555,3 +558,51 @@ def test_what_splat_cannot_render_of_3dgrut_is_refused_by_name(tmp_path):
     path = tmp_path / "softplus.pt"
     save_grut_checkpoint(path, g, grut_config(density="softplus"))
     assert 'model.density_activation "softplus", where a splat\'s is sigmoid' in refused(path)
+
+
+def save_inria_checkpoint(path, g: dict) -> None:
+    """3DGS's checkpoint of conftest's raw Gaussians `g`, as train.py saves it at
+    --checkpoint_iterations: torch.save((gaussians.capture(), iteration)), the capture the
+    active SH degree, the parameters (nn.Parameters), the densification statistics, the
+    optimizer's state and the spatial learning rate's scale."""
+    n, storages = len(g["means"]), []
+    params = {
+        "_xyz": g["means"],
+        "_features_dc": g["sh"][:, :1, :].copy(),
+        "_features_rest": g["sh"][:, 1:, :].copy(),
+        "_scaling": g["scales"],
+        "_rotation": g["rotations"],
+        "_opacity": g["opacities"][:, None].copy(),
+        "max_radii2D": np.zeros(n, np.float32),
+        "xyz_gradient_accum": np.zeros((n, 1), np.float32),
+        "denom": np.zeros((n, 1), np.float32),
+    }
+    t = state_dict(params, storages)
+    groups = [{"params": [k], "lr": 0.0, "name": name, "eps": 1e-15} for k, name in enumerate(["xyz", "f_dc"])]
+    capture = (
+        round(g["sh"].shape[1] ** 0.5) - 1,  # the active SH degree: all of them, at 30000
+        *(_Parameter(t[name]) for name in ["_xyz", "_features_dc", "_features_rest", "_scaling", "_rotation", "_opacity"]),
+        t["max_radii2D"],
+        t["xyz_gradient_accum"],
+        t["denom"],
+        {"state": {}, "param_groups": groups},
+        4.2,
+    )
+    torch_save((capture, 30000), path, storages, archive="chkpnt30000")
+
+
+@pytest.mark.parametrize("degree", [0, 3])
+def test_a_3dgs_checkpoint_holds_what_its_save_ply_writes(tmp_path, splat_bin, degree):
+    g = raw_gaussians(np.random.default_rng(41 + degree), 24, degree=degree)
+    ckpt, ply = tmp_path / "chkpnt30000.pth", tmp_path / "point_cloud.ply"
+    save_inria_checkpoint(ckpt, g)
+    write_3dgs_ply(ply, g)
+    a, b = splat.Scene.load(str(ckpt)).to_arrays(), splat.Scene.load(str(ply)).to_arrays()
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert info.returncode == 0 and "3DGS checkpoint (step 30000)" in info.stdout, info
+    # A pair that is not 3DGS's capture and iteration is refused, not misread.
+    path = tmp_path / "pair.pth"
+    torch_save(((1, 2, 3), 30000), path, [])
+    assert "nor 3DGS's (capture, iteration)" in refused(path)

@@ -130,8 +130,8 @@ class Scene:
     @staticmethod
     def load(path, **options) -> "Scene":
         """Read a scene file (.ply, compressed .ply, .splat, .spz, .sog or meta.json, .glb/.gltf,
-        .ksplat, .usda, a trainer's checkpoint: gsplat's or 3DGRUT's .pt, Nerfstudio splatfacto's
-        .ckpt) or a world file (.toml). `options` are ``splat render``'s reading options: strict,
+        .ksplat, .usda, a trainer's checkpoint: 3DGS's .pth, gsplat's or 3DGRUT's .pt, Nerfstudio
+        splatfacto's .ckpt) or a world file (.toml). `options` are ``splat render``'s reading options: strict,
         spz_axes, preset, screen_filter. What the reader notes (an extension skipped, the preset
         a 3DGRUT checkpoint renders with, ...) is a UserWarning."""
         path = os.fspath(path)
