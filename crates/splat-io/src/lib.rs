@@ -113,8 +113,8 @@ impl SceneFormat {
     /// The screen filter a file of this format records for a scene of `filter`: the filter
     /// itself where the format can say it, else the nearest it can (`.spz` marks Mip-Splatting's
     /// filter antialiased, the other compensated filter) or none (`.splat` and glTF have no
-    /// mode: the 3DGS dilation, the extension's `ellipse` kernel). A writer that records another filter than the scene's changes how the
-    /// capture renders, so front ends say so.
+    /// mode: the 3DGS dilation, the extension's `ellipse` kernel). A writer that records another
+    /// filter than the scene's changes how the capture renders, so front ends say so.
     pub fn records(self, filter: ScreenFilter) -> ScreenFilter {
         match (self, filter) {
             (Self::Ply | Self::CompressedPly, filter) => filter,

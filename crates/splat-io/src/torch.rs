@@ -76,9 +76,9 @@ impl CheckpointInfo {
 }
 
 /// Read the checkpoint at `path` (gsplat's, Nerfstudio's splatfacto's, 3DGRUT's or 3DGS's,
-/// whatever its extension): its pickle and the storages of its splats, nothing more. gsplat's distributed
-/// training splits the splats between its ranks, each saving `ckpt_STEP_rankR.pt`: one rank's
-/// file is read with every other rank's of its step beside it, in rank order, as
+/// whatever its extension): its pickle and the storages of its splats, nothing more. gsplat's
+/// distributed training splits the splats between its ranks, each saving `ckpt_STEP_rankR.pt`:
+/// one rank's file is read with every other rank's of its step beside it, in rank order, as
 /// `simple_trainer`'s evaluation concatenates them.
 pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
     let ranks = gsplat_ranks(path)?;
@@ -166,13 +166,12 @@ fn fail(message: String) -> ErrorKind {
 fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo), ErrorKind> {
     let archive = Archive::open(source).map_err(fail)?;
     let root = pickle::load(&archive.data_pkl).map_err(fail)?;
+    let inria = inria_parameters(&root);
     let step = match root.get("step").or(root.get("global_step")) {
         Some(Value::Int(step)) => Some(*step),
-        _ => None,
+        _ => inria.as_ref().map(|(_, iteration)| *iteration),
     };
     let mut notes = Vec::new();
-    let inria = inria_parameters(&root);
-    let step = step.or(inria.as_ref().map(|(_, iteration)| *iteration));
     let (trainer, parameters) = if let Some((parameters, _)) = inria {
         (Trainer::Inria, parameters)
     } else if let Some(splats) = root.get("splats") {
