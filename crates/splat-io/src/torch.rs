@@ -87,6 +87,16 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
         checkpoint(&source).map_err(|e| Error::new(path, e))
     };
     let (mut scene, mut info) = read(&ranks[0])?;
+    if info.trainer == Trainer::Splatfacto
+        && let Some(run) = path.parent().and_then(Path::parent)
+        && run.join("dataparser_transforms.json").is_file()
+    {
+        info.notes.push(format!(
+            "splatfacto trained these splats in its normalised world: {} moves the cameras of its transforms.json \
+             there (splat's dataparser-transforms option)",
+            run.join("dataparser_transforms.json").display()
+        ));
+    }
     if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
         return Ok((scene, info));
     }

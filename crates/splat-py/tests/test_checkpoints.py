@@ -402,6 +402,17 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert info.returncode == 0 and "Nerfstudio splatfacto checkpoint (step 29999)" in info.stdout, info
+    assert "dataparser_transforms.json" not in info.stderr, info.stderr
+    # In its run's folder (RUN/nerfstudio_models/step-STEP.ckpt), the run's dataparser transforms
+    # beside it are named.
+    run = tmp_path / "2026-12-05_101500"
+    (run / "nerfstudio_models").mkdir(parents=True)
+    (run / "dataparser_transforms.json").write_text('{"transform": [], "scale": 1.0}')
+    ckpt.rename(run / "nerfstudio_models" / ckpt.name)
+    ckpt = run / "nerfstudio_models" / ckpt.name
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    expected = f"{run / 'dataparser_transforms.json'} moves the cameras of its transforms.json there"
+    assert info.returncode == 0 and expected in info.stderr, info.stderr
     # Checkpoints before the parameter dict, and of a distributed run, read the same; the
     # optimizer's moments are never read (damaged, they change nothing).
     for variant, prefix in [("old", "_model."), ("ddp", "module._model.gauss_params."), ("moments", None)]:
