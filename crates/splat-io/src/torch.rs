@@ -97,6 +97,11 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
             run.join("dataparser_transforms.json").display()
         ));
     }
+    if info.trainer == Trainer::Gsplat
+        && let Some(note) = gsplat_world_note(path)
+    {
+        info.notes.push(note);
+    }
     if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
         return Ok((scene, info));
     }
@@ -122,6 +127,33 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
         names.join(", ")
     ));
     Ok((scene, info))
+}
+
+/// Where gsplat's run config beside a checkpoint (`RESULT/cfg.yml` for `RESULT/ckpts/…`, the
+/// `yaml.dump` of `simple_trainer`'s config) says the run trained in its normalised world, a note
+/// saying so, with the run's data folder and factor.
+fn gsplat_world_note(path: &Path) -> Option<String> {
+    let config = path.parent()?.parent()?.join("cfg.yml");
+    let text = std::fs::read_to_string(&config).ok()?;
+    // The top-level scalars: `key: value` lines at the left margin (nested values are indented,
+    // lists and objects have no value on their key's line).
+    let setting = |key: &str| {
+        text.lines()
+            .find_map(|line| line.strip_prefix(key)?.strip_prefix(": ").map(str::trim))
+            .filter(|v| !v.is_empty())
+    };
+    if setting("normalize_world_space")? != "true" {
+        return None;
+    }
+    let data = setting("data_dir").map_or(String::new(), |dir| format!(" from {dir}"));
+    let factor = setting("data_factor")
+        .filter(|&f| f != "1")
+        .map_or(String::new(), |f| format!(", its images downscaled by {f} (splat's data-factor option)"));
+    Some(format!(
+        "gsplat trained these splats in its normalised world ({} says normalize_world_space: true){data}: the \
+         cameras of its COLMAP model line up with them through splat's gsplat-world option{factor}",
+        config.display()
+    ))
 }
 
 fn file_name(path: &Path) -> String {

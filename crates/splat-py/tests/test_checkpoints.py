@@ -252,6 +252,43 @@ def test_a_distributed_runs_ranks_read_together(tmp_path, splat_bin):
     assert "3 ranks, and ckpt_6999_rank1.pt is missing" in message, message
 
 
+def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
+    """simple_trainer writes its config as RESULT/cfg.yml (yaml.dump of its dataclass: top-level
+    scalars, lists, its strategy as a tagged object) beside RESULT/ckpts/: where it trained in
+    its normalised world (the default), the checkpoint's note says so, with the data folder and
+    factor; where not, nothing is said."""
+    import dataclasses
+
+    import yaml
+
+    @dataclasses.dataclass
+    class DefaultStrategy:
+        prune_opa: float = 0.005
+        refine_every: int = 100
+
+    @dataclasses.dataclass
+    class Config:
+        data_dir: str = "data/360_v2/garden"
+        data_factor: int = 4
+        normalize_world_space: bool = True
+        eval_steps: list = dataclasses.field(default_factory=lambda: [7000, 30000])
+        strategy: DefaultStrategy = dataclasses.field(default_factory=DefaultStrategy)
+        result_dir: str = "results/garden"
+
+    g = raw_gaussians(np.random.default_rng(3), 8, degree=1)
+    (tmp_path / "ckpts").mkdir()
+    ckpt = tmp_path / "ckpts" / "ckpt_29999_rank0.pt"
+    save_checkpoint(ckpt, gsplat_parameters(g))
+    for normalize, expected in [(True, True), (False, False)]:
+        (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(normalize_world_space=normalize))))
+        info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+        note = (
+            "normalize_world_space: true) from data/360_v2/garden: the cameras of its COLMAP model line up with them "
+            "through splat's gsplat-world option, its images downscaled by 4 (splat's data-factor option)"
+        )
+        assert info.returncode == 0 and (note in info.stderr) == expected, info.stderr
+
+
 def test_what_is_not_a_gsplat_checkpoint_is_refused_by_name(tmp_path):
     g = gsplat_parameters(raw_gaussians(np.random.default_rng(5), 16, degree=1))
 
