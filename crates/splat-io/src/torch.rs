@@ -322,9 +322,9 @@ fn splatfacto_parameters(pipeline: &Value) -> Result<Parameters<'_>, ErrorKind> 
     Ok([get("means")?, get("scales")?, get("quats")?, get("opacities")?, get("features_dc")?, get("features_rest")?])
 }
 
-/// Splats built together: each tensor's rows of a block are read and decoded, then the
-/// block's splats are built on every core. A block's decoded rows take at most 15 MB (59
-/// floats a splat at SH degree 3), so reading costs about what the scene itself costs.
+/// Splats built together: each tensor's rows of a block are read, then the block's splats are
+/// built from them on every core. A block's rows take at most 15 MB (59 f32 a splat at SH
+/// degree 3), so reading costs about the memory of the scene itself.
 const BLOCK: usize = 1 << 16;
 
 /// The largest piece of a storage read at once where no row needs it (to check its CRC-32).
@@ -362,6 +362,25 @@ fn grut_parameters<'v>(root: &'v Value, notes: &mut Vec<String>) -> Result<Param
             }
         }
     }
+    notes.extend(grut_notes(&setting));
+    let get = |name: &'static str| -> Result<_, ErrorKind> {
+        let value = root.get(name).ok_or_else(|| fail(format!("3DGRUT's checkpoint has no \"{name}\"")))?;
+        Ok((name, name.to_string(), value))
+    };
+    Ok([
+        get("positions")?,
+        get("scale")?,
+        get("rotation")?,
+        get("density")?,
+        get("features_albedo")?,
+        get("features_specular")?,
+    ])
+}
+
+/// What a 3DGRUT run's config (`setting`, by path) says of how to render its particles: the
+/// preset of its renderer and kernel degree, its normalised world, its surfels.
+fn grut_notes<'v>(setting: &dyn Fn(&[&str]) -> Option<&'v Value>) -> Vec<String> {
+    let mut notes = Vec::new();
     let method = match setting(&["render", "method"]) {
         Some(Value::Str(method)) => [Preset::ThreeDgrt, Preset::ThreeDgut].into_iter().find(|p| p.name() == method),
         _ => None,
@@ -403,18 +422,7 @@ fn grut_parameters<'v>(root: &'v Value, notes: &mut Vec<String>) -> Result<Param
                 .into(),
         );
     }
-    let get = |name: &'static str, property: &'static str| -> Result<_, ErrorKind> {
-        let value = root.get(name).ok_or_else(|| fail(format!("3DGRUT's checkpoint has no \"{name}\"")))?;
-        Ok((property, name.to_string(), value))
-    };
-    Ok([
-        get("positions", "positions")?,
-        get("scale", "scale")?,
-        get("rotation", "rotation")?,
-        get("density", "density")?,
-        get("features_albedo", "features_albedo")?,
-        get("features_specular", "features_specular")?,
-    ])
+    notes
 }
 
 /// A setting of a pickled OmegaConf config, by its path of keys: a `DictConfig` keeps its
