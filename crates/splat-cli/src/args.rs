@@ -353,9 +353,10 @@ impl Staged {
 pub struct SceneArgs {
     /// Scene file (.ply, compressed .ply, .splat, .spz, PlayCanvas SOG (.sog, or a meta.json
     /// beside its images), GaussianSplats3D .ksplat, OpenUSD .usda (ParticleField3DGaussianSplat
-    /// prims), gsplat's .pt checkpoints, or .glb / .gltf with KHR_gaussian_splatting and any meshes beside the splats) or
-    /// world file (.toml: splat sets,
-    /// materials, lights, camera; see the README). Without one, the built-in demo scene is used.
+    /// prims), trainers' checkpoints (3DGS's .pth, gsplat's and 3DGRUT's .pt, Nerfstudio's .ckpt),
+    /// or .glb / .gltf with KHR_gaussian_splatting and any meshes beside the splats) or world
+    /// file (.toml: splat sets, materials, lights, camera; see the README). Without one, the
+    /// built-in demo scene is used.
     pub scene: Option<PathBuf>,
     /// Cameras: an INRIA cameras.json, a COLMAP model (a sparse/0 folder, or its
     /// images.bin / images.txt; views sorted by image name as 3DGS lists them) or a

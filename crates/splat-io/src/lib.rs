@@ -73,18 +73,10 @@ pub enum SceneFormat {
     /// OpenUSD `.usda` with `ParticleField3DGaussianSplat` prims: f32 text, lossless; read
     /// placed by their `xformOp`s ([`usd`]).
     Usd,
-    /// gsplat's `simple_trainer` checkpoint (`.pt`, `torch.save`'s zip of its parameters),
-    /// lossless (read only, [`torch`]).
-    GsplatCheckpoint,
-    /// Nerfstudio's checkpoint of a splatfacto model (`.ckpt`, `torch.save`'s zip of its
-    /// pipeline), lossless (read only, [`torch`]).
-    SplatfactoCheckpoint,
-    /// 3DGRUT's checkpoint (`ckpt_last.pt`, `torch.save`'s zip of its model's parameters),
-    /// lossless (read only, [`torch`]).
-    GrutCheckpoint,
-    /// 3DGS's checkpoint (`chkpnt30000.pth`, `torch.save`'s zip of its model's capture),
-    /// lossless (read only, [`torch`]).
-    InriaCheckpoint,
+    /// A trainer's checkpoint (3DGS's `.pth`, gsplat's and 3DGRUT's `.pt`, Nerfstudio
+    /// splatfacto's `.ckpt`: `torch.save`'s zip of its parameters), lossless (read only,
+    /// [`torch`]).
+    Checkpoint(torch::Trainer),
 }
 
 impl SceneFormat {
@@ -120,17 +112,7 @@ impl SceneFormat {
             (Self::Ply | Self::CompressedPly, filter) => filter,
             (Self::Spz | Self::Sog, ScreenFilter::Mip) => ScreenFilter::Antialiased,
             (Self::Spz | Self::Sog, filter) => filter,
-            (
-                Self::Splat
-                | Self::Gltf
-                | Self::Ksplat
-                | Self::Usd
-                | Self::GsplatCheckpoint
-                | Self::SplatfactoCheckpoint
-                | Self::GrutCheckpoint
-                | Self::InriaCheckpoint,
-                _,
-            ) => ScreenFilter::Dilation,
+            (Self::Splat | Self::Gltf | Self::Ksplat | Self::Usd | Self::Checkpoint(_), _) => ScreenFilter::Dilation,
         }
     }
 
@@ -145,10 +127,7 @@ impl SceneFormat {
             Self::Sog => "PlayCanvas SOG",
             Self::Ksplat => "GaussianSplats3D .ksplat",
             Self::Usd => "OpenUSD ParticleField3DGaussianSplat",
-            Self::GsplatCheckpoint => "gsplat checkpoint",
-            Self::SplatfactoCheckpoint => "Nerfstudio splatfacto checkpoint",
-            Self::GrutCheckpoint => "3DGRUT checkpoint",
-            Self::InriaCheckpoint => "3DGS checkpoint",
+            Self::Checkpoint(trainer) => trainer.checkpoint_name(),
         }
     }
 }
@@ -237,6 +216,11 @@ pub fn extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
 }
 
+/// A path's file name, as messages show it (the whole path where it has none).
+pub(crate) fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
 /// Read a scene, choosing the format by extension (`.ply`, including compressed ones, `.splat`,
 /// `.spz`, `.glb`, `.gltf`, `.sog`, a name ending in `meta.json`, `.ksplat`, `.usda`, `.usd`) with
 /// default options:
@@ -297,13 +281,11 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
         }
         Some("pt" | "pth" | "ckpt") => {
             let (scene, info) = torch::read_checkpoint(path)?;
-            let format = match info.trainer {
-                torch::Trainer::Gsplat => SceneFormat::GsplatCheckpoint,
-                torch::Trainer::Splatfacto => SceneFormat::SplatfactoCheckpoint,
-                torch::Trainer::Grut => SceneFormat::GrutCheckpoint,
-                torch::Trainer::Inria => SceneFormat::InriaCheckpoint,
-            };
-            SceneRead { detail: info.describe(), notes: info.notes, ..read(format, scene) }
+            SceneRead {
+                detail: info.describe(),
+                notes: info.notes,
+                ..read(SceneFormat::Checkpoint(info.trainer), scene)
+            }
         }
         _ => return Err(Error::new(path, ErrorKind::UnknownExtension { expected: READ_EXTENSIONS })),
     };
@@ -325,12 +307,7 @@ pub fn write_scene(path: &Path, scene: &Scene, spz: spz::SpzWriteOptions) -> Res
         SceneFormat::Gltf => gltf_splats::write_gltf_splats(path, scene)?,
         SceneFormat::Sog => sog::write_sog(path, scene)?,
         SceneFormat::Usd => usd::write_usda(path, scene)?,
-        SceneFormat::CompressedPly
-        | SceneFormat::Ksplat
-        | SceneFormat::GsplatCheckpoint
-        | SceneFormat::SplatfactoCheckpoint
-        | SceneFormat::GrutCheckpoint
-        | SceneFormat::InriaCheckpoint => {
+        SceneFormat::CompressedPly | SceneFormat::Ksplat | SceneFormat::Checkpoint(_) => {
             unreachable!("for_output refuses them")
         }
     }

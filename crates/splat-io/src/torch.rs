@@ -32,8 +32,8 @@
 
 use crate::pickle::{self, Value};
 use crate::ply::{opacity_from_logit, scale_from_log, unit_quaternion};
-use crate::zip::{FileSource, Source};
-use crate::{Error, ErrorKind};
+use crate::zip::{EntryReader, FileSource, Source};
+use crate::{Error, ErrorKind, file_name};
 use glam::Vec3;
 use rayon::prelude::*;
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
@@ -55,6 +55,18 @@ pub enum Trainer {
     Grut,
     /// 3DGS, the INRIA trainer (`train.py --checkpoint_iterations`).
     Inria,
+}
+
+impl Trainer {
+    /// Its checkpoint's format, as `splat info` names it.
+    pub const fn checkpoint_name(self) -> &'static str {
+        match self {
+            Self::Gsplat => "gsplat checkpoint",
+            Self::Splatfacto => "Nerfstudio splatfacto checkpoint",
+            Self::Grut => "3DGRUT checkpoint",
+            Self::Inria => "3DGS checkpoint",
+        }
+    }
 }
 
 /// What a checkpoint says besides its splats.
@@ -156,8 +168,10 @@ fn gsplat_world_note(path: &Path) -> Option<String> {
     ))
 }
 
-fn file_name(path: &Path) -> String {
-    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+/// The step and rank of a gsplat checkpoint's file name, `ckpt_STEP_rankR.pt`.
+fn gsplat_rank(name: &str) -> Option<(&str, u32)> {
+    let (step, rank) = name.strip_prefix("ckpt_")?.strip_suffix(".pt")?.rsplit_once("_rank")?;
+    Some((step, rank.parse().ok()?))
 }
 
 /// The checkpoints of every rank of a gsplat run beside `path` when its name is one rank's
@@ -165,21 +179,18 @@ fn file_name(path: &Path) -> String {
 /// refused by name: the run's splats would be read in part.
 fn gsplat_ranks(path: &Path) -> Result<Vec<std::path::PathBuf>, Error> {
     let name = file_name(path);
-    let shard = name.strip_prefix("ckpt_").and_then(|rest| rest.strip_suffix(".pt")).and_then(|rest| {
-        let (step, rank) = rest.rsplit_once("_rank")?;
-        rank.parse::<u32>().ok().map(|_| step.to_string())
-    });
-    let Some(step) = shard else { return Ok(vec![path.to_path_buf()]) };
+    let Some((step, _)) = gsplat_rank(&name) else { return Ok(vec![path.to_path_buf()]) };
     let of = |rank: u32| path.with_file_name(format!("ckpt_{step}_rank{rank}.pt"));
     let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let prefix = format!("ckpt_{step}_rank");
     let mut highest = 0;
     if let Ok(entries) = std::fs::read_dir(folder) {
         for entry in entries.flatten() {
-            let name = entry.file_name().to_string_lossy().into_owned();
-            let rank =
-                name.strip_prefix(&prefix).and_then(|r| r.strip_suffix(".pt")).and_then(|r| r.parse::<u32>().ok());
-            highest = highest.max(rank.unwrap_or(0));
+            let other = entry.file_name().to_string_lossy().into_owned();
+            if let Some((s, rank)) = gsplat_rank(&other)
+                && s == step
+            {
+                highest = highest.max(rank);
+            }
         }
     }
     let ranks: Vec<_> = (0..=highest).map(of).collect();
@@ -327,9 +338,6 @@ fn splatfacto_parameters(pipeline: &Value) -> Result<Parameters<'_>, ErrorKind> 
 /// degree 3), so reading costs about the memory of the scene itself.
 const BLOCK: usize = 1 << 16;
 
-/// The largest piece of a storage read at once where no row needs it (to check its CRC-32).
-const PIECE: u64 = 1 << 24;
-
 /// 3DGRUT's splats: the model's parameters at the checkpoint's top level (`positions`,
 /// `rotation`, `scale`, `density`, `features_albedo`, `features_specular`), beside the run's
 /// config (an OmegaConf `DictConfig`), whose activations must be 3DGS's (sigmoid and exp, as
@@ -440,59 +448,13 @@ struct Tensor<'s, S: Source + ?Sized> {
     /// Its parameter's name, as splat properties are named in errors.
     name: &'static str,
     shape: Vec<usize>,
-    storage: Storage<'s, S>,
+    /// Its storage's entry, read a block of rows at a time.
+    storage: EntryReader<'s, S>,
     /// The byte of the storage its first element starts at.
     first: u64,
     /// Bytes an element.
     size: usize,
     decode: fn(&[u8]) -> f32,
-}
-
-/// A storage's bytes. A stored entry is read in order, a piece at a time, and every byte of it
-/// hashed once, so that its CRC-32 is checked when the last piece is read; a compressed one
-/// (torch.save stores, others may not) is inflated and checked whole.
-enum Storage<'s, S: Source + ?Sized> {
-    Stored { source: &'s S, name: String, bytes: std::ops::Range<u64>, hashed: u64, crc: flate2::Crc, expected: u32 },
-    Inflated(Vec<u8>),
-}
-
-impl<S: Source + ?Sized> Storage<'_, S> {
-    fn len(&self) -> u64 {
-        match self {
-            Self::Stored { bytes, .. } => bytes.end - bytes.start,
-            Self::Inflated(bytes) => bytes.len() as u64,
-        }
-    }
-
-    /// Bytes `at..at + len` of the storage, `at` no earlier than the last piece's end.
-    fn piece(&mut self, at: u64, len: u64) -> Result<Cow<'_, [u8]>, String> {
-        match self {
-            Self::Stored { source, name, bytes, hashed, crc, .. } => {
-                while *hashed < at {
-                    let gap = (at - *hashed).min(PIECE);
-                    crc.update(&source.piece(bytes.start + *hashed, gap, name)?);
-                    *hashed += gap;
-                }
-                let piece = source.piece(bytes.start + at, len, name)?;
-                crc.update(&piece);
-                *hashed = at + len;
-                Ok(piece)
-            }
-            Self::Inflated(bytes) => Ok(Cow::Borrowed(&bytes[at as usize..(at + len) as usize])),
-        }
-    }
-
-    /// Hash the rest of a stored entry and check its CRC-32.
-    fn finish(&mut self) -> Result<(), String> {
-        let end = self.len();
-        self.piece(end, 0)?;
-        match self {
-            Self::Stored { name, crc, expected, .. } if crc.sum() != *expected => {
-                Err(format!("zip: entry {name} fails its CRC-32 check (the file is damaged)"))
-            }
-            _ => Ok(()),
-        }
-    }
 }
 
 impl<S: Source + ?Sized> Tensor<'_, S> {
@@ -812,13 +774,7 @@ impl<'s, S: Source + ?Sized> Archive<'s, S> {
         }
         let entry = self.storages.get(key).ok_or_else(|| format!("its storage data/{key} is not in the archive"))?;
         let name = format!("{}data/{key}", self.prefix);
-        let storage = match entry.stored(self.source, &name)? {
-            Some(bytes) => {
-                let expected = entry.crc();
-                Storage::Stored { source: self.source, name, bytes, hashed: 0, crc: flate2::Crc::new(), expected }
-            }
-            None => Storage::Inflated(entry.contents(self.source, &name)?.into_owned()),
-        };
+        let storage = entry.reader(self.source, &name)?;
         let end = offset.checked_add(count).and_then(|e| e.checked_mul(size)).filter(|&e| e as u64 <= storage.len());
         end.ok_or_else(|| {
             format!("{count} elements from {offset} run past its storage data/{key} ({} bytes)", storage.len())

@@ -353,7 +353,7 @@ pub fn open_world(path: Option<&Path>, options: crate::ReadOptions) -> Result<Op
     if world.scene.particles.is_empty() && world.meshes.is_empty() {
         return Err(Error::new(path, ErrorKind::Empty));
     }
-    let name = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let name = crate::file_name(path);
     Ok(Opened { world, name, skipped_properties, notes })
 }
 

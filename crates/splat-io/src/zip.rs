@@ -270,21 +270,23 @@ impl CentralEntry {
         Ok(start..end)
     }
 
-    /// A stored entry's bytes in the archive, for a reader that reads them a piece at a time
-    /// and checks them itself (with [`CentralEntry::crc`]); `None` for a compressed entry, which
-    /// is read whole by [`CentralEntry::contents`].
-    pub(crate) fn stored<S: Source + ?Sized>(&self, source: &S, name: &str) -> Result<Option<Range<u64>>, String> {
+    /// A reader of the entry's contents a piece at a time ([`EntryReader`]): a stored entry's
+    /// pieces are read from `source` where they lie; a compressed one is inflated (and checked)
+    /// whole first.
+    pub(crate) fn reader<'s, S: Source + ?Sized>(
+        &self,
+        source: &'s S,
+        name: &str,
+    ) -> Result<EntryReader<'s, S>, String> {
         let data = self.data(source, name)?;
-        match self.method {
-            0 if self.compressed == self.size => Ok(Some(data)),
-            0 => Err(format!("zip: stored entry {name} has {} bytes, but says {}", self.compressed, self.size)),
-            _ => Ok(None),
-        }
-    }
-
-    /// The CRC-32 the directory gives the entry's contents.
-    pub(crate) fn crc(&self) -> u32 {
-        self.crc
+        let stored = match self.method {
+            0 if self.compressed == self.size => {
+                Stored { source, name: name.to_string(), data, hashed: 0, crc: Crc::new(), expected: self.crc }
+            }
+            0 => return Err(format!("zip: stored entry {name} has {} bytes, but says {}", self.compressed, self.size)),
+            _ => return Ok(EntryReader::Inflated(self.contents(source, name)?.into_owned())),
+        };
+        Ok(EntryReader::Stored(stored))
     }
 
     /// The entry's contents, inflated and checked against its CRC-32: a stored entry of an
@@ -318,10 +320,77 @@ impl CentralEntry {
         };
         let mut crc = Crc::new();
         crc.update(&contents);
-        if crc.sum() != self.crc {
-            return Err(format!("zip: entry {name} fails its CRC-32 check (the file is damaged)"));
-        }
+        check_crc(&crc, self.crc, name)?;
         Ok(contents)
+    }
+}
+
+/// An error unless `crc` (of an entry's contents) is the CRC-32 the directory gives it.
+fn check_crc(crc: &Crc, expected: u32, name: &str) -> Result<(), String> {
+    if crc.sum() != expected {
+        return Err(format!("zip: entry {name} fails its CRC-32 check (the file is damaged)"));
+    }
+    Ok(())
+}
+
+/// The largest piece of an entry read at once where no piece asked for needs it (to hash it).
+const PIECE: u64 = 1 << 24;
+
+/// An entry's contents read a piece at a time, in order. A stored entry's pieces are read from
+/// the archive where they lie and every byte of it is hashed once, those between and after the
+/// pieces asked for too, so that [`EntryReader::finish`] checks its CRC-32 without the entry
+/// ever being held whole; a compressed entry is inflated and checked whole when it is opened.
+pub(crate) enum EntryReader<'s, S: Source + ?Sized> {
+    Stored(Stored<'s, S>),
+    Inflated(Vec<u8>),
+}
+
+/// A stored entry being read: where its bytes lie, and the hash of those before `hashed`.
+pub(crate) struct Stored<'s, S: Source + ?Sized> {
+    source: &'s S,
+    name: String,
+    data: Range<u64>,
+    hashed: u64,
+    crc: Crc,
+    expected: u32,
+}
+
+impl<S: Source + ?Sized> EntryReader<'_, S> {
+    /// The entry's size in bytes.
+    pub(crate) fn len(&self) -> u64 {
+        match self {
+            Self::Stored(s) => s.data.end - s.data.start,
+            Self::Inflated(bytes) => bytes.len() as u64,
+        }
+    }
+
+    /// Bytes `at..at + len` of the entry (within [`EntryReader::len`]), `at` no earlier than
+    /// the last piece's end.
+    pub(crate) fn piece(&mut self, at: u64, len: u64) -> Result<Cow<'_, [u8]>, String> {
+        match self {
+            Self::Stored(s) => {
+                while s.hashed < at {
+                    let gap = (at - s.hashed).min(PIECE);
+                    s.crc.update(&s.source.piece(s.data.start + s.hashed, gap, &s.name)?);
+                    s.hashed += gap;
+                }
+                let piece = s.source.piece(s.data.start + at, len, &s.name)?;
+                s.crc.update(&piece);
+                s.hashed = at + len;
+                Ok(piece)
+            }
+            Self::Inflated(bytes) => Ok(Cow::Borrowed(&bytes[at as usize..(at + len) as usize])),
+        }
+    }
+
+    /// Hash the rest of a stored entry and check its CRC-32.
+    pub(crate) fn finish(&mut self) -> Result<(), String> {
+        let end = self.len();
+        self.piece(end, 0)?;
+        match self {
+            Self::Stored(s) => check_crc(&s.crc, s.expected, &s.name),
+            Self::Inflated(_) => Ok(()),
+        }
     }
 }
 
