@@ -155,6 +155,7 @@ pub fn in_view(scene: &splat_core::Scene, camera: &splat_core::Camera) -> splat_
         particles: ids.iter().map(|&i| scene.particles[i as usize].clone()).collect(),
         sh_degree: scene.sh_degree,
         screen_filter: scene.screen_filter,
+        trained: scene.trained,
     }
 }
 

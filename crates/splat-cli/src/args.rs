@@ -10,7 +10,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 use splat_core::camera_sampling::{CameraSampling, PixelFilter, ThinLens};
 use splat_core::catalogue::{self, Param};
 use splat_core::frame::{AccumulationFormat, Frames};
-use splat_core::kernel;
 use splat_core::lighting::{Look, Shadows};
 use splat_core::mesh::Meshes;
 use splat_core::normal::NormalMode;
@@ -196,13 +195,17 @@ impl MethodOptions {
         self.implied.response = self.implied.response.or(preset.map(Preset::response));
     }
 
-    /// Where `--preset` implied no extent, imply the one of the trainer whose screen filter the
-    /// capture names ([`Preset::of_filter`]): a gsplat-antialiased capture is drawn with
-    /// gsplat's bounds; and a capture of 2D Gaussians is evaluated along the rays, as 2DGS does.
+    /// Where `--preset` implied no extent or response, imply those of the renderer the capture's
+    /// file names ([`Scene::trained`]: a 3DGRUT checkpoint's particles are evaluated along the
+    /// rays); else the extent of the trainer whose screen filter the capture names
+    /// ([`Preset::of_filter`]: a gsplat-antialiased capture is drawn with gsplat's bounds), and
+    /// a capture of 2D Gaussians is evaluated along the rays, as 2DGS does.
     pub fn apply_capture(&mut self, scene: &Scene) {
-        self.implied.extent = self.implied.extent.or(Some(Preset::of_filter(scene.screen_filter).extent()));
+        let trained = scene.trained.map(|t| t.preset);
+        let filters = Preset::of_filter(scene.screen_filter);
+        self.implied.extent = self.implied.extent.or(trained.map(Preset::extent)).or(Some(filters.extent()));
         let surfels = scene.is_surfels().then_some(Preset::TwoDgs.response());
-        self.implied.response = self.implied.response.or(surfels);
+        self.implied.response = self.implied.response.or(trained.map(Preset::response)).or(surfels);
     }
 
     /// The value of every method parameter these options give.
@@ -484,10 +487,11 @@ pub struct SceneArgs {
     #[arg(help_heading = "Scene and shading", long, value_parser = splat_view::sh_storage_parser())]
     pub sh_storage: Option<ShStorage>,
     /// Kernel degree n of the generalized Gaussian exp(−4.5 (d/3)ⁿ), 1..=8 [default: the
-    /// --preset's, else 2].
+    /// --preset's, else the one the capture's file names (a 3DGRUT checkpoint's), else 2].
     #[arg(help_heading = "Scene and shading", long)]
     pub kernel_degree: Option<u32>,
-    /// Cutoff in standard deviations (Eq. 2) [default: the --preset's, else 3].
+    /// Cutoff in standard deviations (Eq. 2) [default: the --preset's, else the one the
+    /// capture's file names (a 3DGRUT checkpoint's minimum response), else 3].
     #[arg(help_heading = "Scene and shading", long)]
     pub cutoff: Option<f32>,
     /// The ray tracers' iso-opacity depth threshold on transmittance [default: the world's,
@@ -533,7 +537,8 @@ pub struct ReadArgs {
     #[arg(long, value_parser = splat_view::screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
     /// The trainer of the capture: its screen filter, splat extent and response, kernel degree
-    /// and cutoff, unless given on their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response).
+    /// and cutoff, unless given on their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response)
+    /// [default: the one the capture's file names: a 3DGRUT checkpoint's renderer and kernel].
     #[arg(long, value_parser = preset_parser())]
     pub preset: Option<Preset>,
 }
@@ -744,14 +749,15 @@ impl SceneArgs {
         Ok(())
     }
 
-    /// `base` (the defaults, or what a world file sets) under these options.
+    /// `base` (the defaults, or what a world or scene file sets: a 3DGRUT checkpoint's kernel)
+    /// under these options.
     fn settings_over(&self, base: RenderSettings) -> RenderSettings {
         let preset = self.read.preset;
         RenderSettings {
             kernel: KernelParams {
-                degree: self.kernel_degree.or(preset.map(Preset::kernel_degree)).unwrap_or(kernel::DEFAULT_DEGREE),
-                cutoff: self.cutoff.or(preset.map(Preset::cutoff)).unwrap_or(kernel::DEFAULT_CUTOFF),
-                ..KernelParams::default()
+                degree: self.kernel_degree.or(preset.map(Preset::kernel_degree)).unwrap_or(base.kernel.degree),
+                cutoff: self.cutoff.or(preset.map(Preset::cutoff)).unwrap_or(base.kernel.cutoff),
+                ..base.kernel
             },
             hit_distance: self.hit_distance,
             normal_mode: match self.normals {

@@ -57,6 +57,19 @@ pub fn run(args: ConvertArgs) -> Result<()> {
             recorded.describe()
         );
     }
+    if let Some(trained) = scene.trained {
+        let own = if trained.is_presets() {
+            String::new()
+        } else {
+            format!(" --kernel-degree {} --cutoff {}", trained.kernel_degree, trained.cutoff())
+        };
+        eprintln!(
+            "warning: {} cannot record that its splats were trained through {}: render it with --preset {}{own}",
+            format.name(),
+            trained.describe(),
+            trained.preset.name()
+        );
+    }
     let spz = SpzWriteOptions { version: args.spz_version, axes: args.read.spz_axes.into() };
     splat_io::write_scene(&args.output, &scene, spz)?;
     let size = |p: &PathBuf| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);

@@ -110,6 +110,16 @@ pub fn run(args: InfoArgs) -> Result<()> {
             preset.response().name()
         );
     }
+    if let Some(trained) = scene.trained {
+        let chosen = if args.read.preset.is_some() { "; --preset chooses another" } else { "" };
+        out!(
+            "trained    through {} (cutoff {:.4}σ, extent {}, response {}): the file says so{chosen}",
+            trained.describe(),
+            trained.cutoff(),
+            trained.preset.extent().name(),
+            trained.preset.response().name()
+        );
+    }
     let filter = scene.screen_filter;
     if filter == read.file_filter {
         out!("2D filter  {}", filter.describe());

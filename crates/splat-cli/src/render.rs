@@ -392,7 +392,8 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
         );
     }
     let ray_evaluated = [Preset::ThreeDgrt, Preset::ThreeDgut, Preset::TwoDgs];
-    if let Some(preset) = args.scene.read.preset.filter(|p| splats && ray_evaluated.contains(p)) {
+    let preset = args.scene.read.preset.or(staged.world.scene.trained.map(|t| t.preset));
+    if let Some(preset) = preset.filter(|p| splats && ray_evaluated.contains(p)) {
         if projected {
             eprintln!(
                 "note: {} evaluates its particles along each ray, which --response along-ray and the ray-tracing \

@@ -5,6 +5,7 @@
 //! real assets are trained with 3DGS, so that is the one used here.
 
 use crate::filter::ScreenFilter;
+use crate::trainer::Trained;
 use glam::{Mat3, Quat, Vec3};
 use thiserror::Error;
 
@@ -357,12 +358,16 @@ pub struct Scene {
     /// The screen-space filter the capture was trained with, which the splatting renderers
     /// apply ([`ScreenFilter`]; a file's mode, or a front end's override).
     pub screen_filter: ScreenFilter,
+    /// The renderer and kernel the capture's file says its trainer drew it with, where it says
+    /// ([`Trained`]: a 3DGRUT checkpoint's config), which front ends render it with where the
+    /// user chose no preset.
+    pub trained: Option<Trained>,
 }
 
 impl Scene {
     /// A scene of 3DGS particles (the 3DGS dilation).
     pub fn new(particles: Vec<Particle>, sh_degree: u8) -> Self {
-        Self { particles, sh_degree, screen_filter: ScreenFilter::Dilation }
+        Self { particles, sh_degree, screen_filter: ScreenFilter::Dilation, trained: None }
     }
 
     /// Whether every particle is a 2D Gaussian ([`Particle::is_surfel`]): a 2DGS capture, which

@@ -147,15 +147,67 @@ impl Preset {
     /// the response falls to [`GRUT_MIN_RESPONSE`], 3 (ln(1 / r_min) / 4.5)^(1/n).
     pub fn cutoff(self) -> f32 {
         match self {
-            Preset::ThreeDgrt | Preset::ThreeDgut => {
-                let n = self.kernel_degree() as f32;
-                3.0 * ((1.0 / GRUT_MIN_RESPONSE).ln() / 4.5).powf(1.0 / n)
-            }
+            Preset::ThreeDgrt | Preset::ThreeDgut => min_response_cutoff(GRUT_MIN_RESPONSE, self.kernel_degree()),
             // 2DGS's rasterizer has no cutoff: only the alpha cull, which takes even an opaque
             // surfel's response beyond its visible radius.
             Preset::TwoDgs => KernelParams::default().visible_radius(1.0),
             _ => crate::kernel::DEFAULT_CUTOFF,
         }
+    }
+}
+
+/// The cutoff, in standard deviations, where the kernel of degree n falls to the response
+/// `min_response` (3DGRT's and 3DGUT's `particle_kernel_min_response`): 3 (ln(1 / r_min) /
+/// 4.5)^(1/n), from exp(−4.5 (d/3)ⁿ) = r_min.
+pub fn min_response_cutoff(min_response: f32, degree: u32) -> f32 {
+    3.0 * ((1.0 / min_response).ln() / 4.5).powf(1.0 / degree as f32)
+}
+
+/// What a capture's own file says of the renderer its trainer drew it through, beyond its
+/// screen filter ([`crate::Scene::screen_filter`]): a 3DGRUT checkpoint's config names its
+/// renderer and its kernel. Front ends render such a capture so where the user chose no preset
+/// or kernel, as they apply a file's screen filter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trained {
+    /// The preset of its renderer ([`Preset::ThreeDgrt`] or [`Preset::ThreeDgut`]).
+    pub preset: Preset,
+    /// The degree n of the kernel exp(−4.5 (d/3)ⁿ) it trained with: its preset's, unless the
+    /// run set another.
+    pub kernel_degree: u32,
+    /// The smallest response its renderer keeps: [`GRUT_MIN_RESPONSE`], unless the run set
+    /// another.
+    pub min_response: f32,
+}
+
+impl Trained {
+    /// Trained as `preset` renders, with its kernel.
+    pub fn of(preset: Preset) -> Self {
+        Self { preset, kernel_degree: preset.kernel_degree(), min_response: GRUT_MIN_RESPONSE }
+    }
+
+    /// Its cutoff in standard deviations: where its kernel falls to its minimum response.
+    pub fn cutoff(&self) -> f32 {
+        min_response_cutoff(self.min_response, self.kernel_degree)
+    }
+
+    /// The kernel it trained with: `base` with its degree and cutoff.
+    pub fn kernel(&self, base: KernelParams) -> KernelParams {
+        KernelParams { degree: self.kernel_degree, cutoff: self.cutoff(), ..base }
+    }
+
+    /// What it is, in words: "3DGRT's renderer, kernel degree 4 cut off at response 0.0113".
+    pub fn describe(&self) -> String {
+        let renderer = match self.preset {
+            Preset::ThreeDgrt => "3DGRT's renderer",
+            Preset::ThreeDgut => "3DGUT's renderer",
+            _ => self.preset.describe(),
+        };
+        format!("{renderer}, kernel degree {} cut off at response {}", self.kernel_degree, self.min_response)
+    }
+
+    /// Whether its kernel is its preset's own.
+    pub fn is_presets(&self) -> bool {
+        *self == Self::of(self.preset)
     }
 }
 
@@ -173,5 +225,21 @@ mod tests {
             assert!((r - GRUT_MIN_RESPONSE).abs() < 1e-6, "{preset:?}: {r} at {c}");
         }
         assert_eq!(Preset::ThreeDgs.cutoff(), 3.0);
+    }
+
+    /// A capture trained as a preset renders has the preset's kernel; one of another degree
+    /// keeps the minimum response at its cutoff.
+    #[test]
+    fn a_trained_kernel_is_its_presets_unless_the_run_changed_it() {
+        for preset in [Preset::ThreeDgrt, Preset::ThreeDgut] {
+            let trained = Trained::of(preset);
+            assert!(trained.is_presets());
+            let k = trained.kernel(KernelParams::default());
+            assert_eq!((k.degree, k.cutoff), (preset.kernel_degree(), preset.cutoff()));
+        }
+        let eight = Trained { kernel_degree: 8, ..Trained::of(Preset::ThreeDgrt) };
+        assert!(!eight.is_presets());
+        let k = eight.kernel(KernelParams::default());
+        assert!((response(k.cutoff * k.cutoff, 8) - GRUT_MIN_RESPONSE).abs() < 1e-6);
     }
 }

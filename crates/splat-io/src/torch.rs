@@ -26,9 +26,12 @@
 //! (N, 4, w x y z, not normalised), opacity logits (N or N × 1), the DC coefficient (N × 1 × 3
 //! or N × 3) and the rest of the SH (N × K × 3, or 3DGRUT's N × 3K, K = 0, 3, 8 or 15). A
 //! splatfacto model of SH degree 0 trains its colour as a logit (its `features_dc` through a
-//! sigmoid) and exports RGB2SH of it: so it is read. What splat cannot render as the trainer
-//! does (gsplat's `--app_opt` appearance network, 3DGRUT's neural features or other
-//! activations) is refused by name, as is anything else that is not such a checkpoint.
+//! sigmoid) and exports RGB2SH of it: so it is read. What the run's config says of how its
+//! splats render is kept with them: 3DGRUT's renderer and kernel ([`Scene::trained`]), gsplat's
+//! antialiased filter ([`Scene::screen_filter`], from `cfg.yml` beside the run's checkpoints).
+//! What splat cannot render as the trainer does (gsplat's `--app_opt` appearance network,
+//! 3DGRUT's neural features, other activations or kernels) is refused by name, as is anything
+//! else that is not such a checkpoint.
 
 use crate::pickle::{self, Value};
 use crate::ply::{opacity_from_logit, scale_from_log, unit_quaternion};
@@ -38,8 +41,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
 use splat_core::sh::rgb_to_dc;
-use splat_core::trainer::Preset;
-use splat_core::{Particle, ParticleError, Scene};
+use splat_core::trainer::{Preset, Trained};
+use splat_core::{Particle, ParticleError, Scene, ScreenFilter};
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::Path;
@@ -110,9 +113,17 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
         ));
     }
     if info.trainer == Trainer::Gsplat
-        && let Some(note) = gsplat_world_note(path)
+        && let Some(config) = GsplatConfig::beside(path)
     {
-        info.notes.push(note);
+        info.notes.extend(config.world_note());
+        if config.setting("antialiased") == Some("true") {
+            scene.screen_filter = ScreenFilter::Antialiased;
+            info.notes.push(format!(
+                "gsplat trained these splats with its antialiased rasterization ({} says antialiased: true): the \
+                 splatting methods apply its screen filter",
+                config.path.display()
+            ));
+        }
     }
     if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
         return Ok((scene, info));
@@ -141,31 +152,47 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
     Ok((scene, info))
 }
 
-/// Where gsplat's run config beside a checkpoint (`RESULT/cfg.yml` for `RESULT/ckpts/…`, the
-/// `yaml.dump` of `simple_trainer`'s config) says the run trained in its normalised world, a note
-/// saying so, with the run's data folder and factor.
-fn gsplat_world_note(path: &Path) -> Option<String> {
-    let config = path.parent()?.parent()?.join("cfg.yml");
-    let text = std::fs::read_to_string(&config).ok()?;
-    // The top-level scalars: `key: value` lines at the left margin (nested values are indented,
-    // lists and objects have no value on their key's line).
-    let setting = |key: &str| {
-        text.lines()
+/// gsplat's run config beside a checkpoint: `RESULT/cfg.yml` for `RESULT/ckpts/…`, the
+/// `yaml.dump` of `simple_trainer`'s config.
+struct GsplatConfig {
+    path: std::path::PathBuf,
+    text: String,
+}
+
+impl GsplatConfig {
+    /// The config of the run whose checkpoint is `checkpoint`, where there is one.
+    fn beside(checkpoint: &Path) -> Option<Self> {
+        let path = checkpoint.parent()?.parent()?.join("cfg.yml");
+        let text = std::fs::read_to_string(&path).ok()?;
+        Some(Self { path, text })
+    }
+
+    /// A top-level scalar: its `key: value` line at the left margin (nested values are
+    /// indented, lists and objects have no value on their key's line).
+    fn setting(&self, key: &str) -> Option<&str> {
+        self.text
+            .lines()
             .find_map(|line| line.strip_prefix(key)?.strip_prefix(": ").map(str::trim))
             .filter(|v| !v.is_empty())
-    };
-    if setting("normalize_world_space")? != "true" {
-        return None;
     }
-    let data = setting("data_dir").map_or(String::new(), |dir| format!(" from {dir}"));
-    let factor = setting("data_factor")
-        .filter(|&f| f != "1")
-        .map_or(String::new(), |f| format!(", its images downscaled by {f} (splat's data-factor option)"));
-    Some(format!(
-        "gsplat trained these splats in its normalised world ({} says normalize_world_space: true){data}: the \
-         cameras of its COLMAP model line up with them through splat's gsplat-world option{factor}",
-        config.display()
-    ))
+
+    /// Where it says the run trained in its normalised world, a note saying so, with the run's
+    /// data folder and factor.
+    fn world_note(&self) -> Option<String> {
+        if self.setting("normalize_world_space")? != "true" {
+            return None;
+        }
+        let data = self.setting("data_dir").map_or(String::new(), |dir| format!(" from {dir}"));
+        let factor = self
+            .setting("data_factor")
+            .filter(|&f| f != "1")
+            .map_or(String::new(), |f| format!(", its images downscaled by {f} (splat's data-factor option)"));
+        Some(format!(
+            "gsplat trained these splats in its normalised world ({} says normalize_world_space: true){data}: the \
+             cameras of its COLMAP model line up with them through splat's gsplat-world option{factor}",
+            self.path.display()
+        ))
+    }
 }
 
 /// The step and rank of a gsplat checkpoint's file name, `ckpt_STEP_rankR.pt`.
@@ -225,6 +252,7 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
         _ => inria.as_ref().map(|(_, iteration)| *iteration),
     };
     let mut notes = Vec::new();
+    let mut trained = None;
     let (trainer, parameters) = if let Some((parameters, _)) = inria {
         (Trainer::Inria, parameters)
     } else if let Some(splats) = root.get("splats") {
@@ -232,7 +260,9 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
     } else if let Some(pipeline) = root.get("pipeline") {
         (Trainer::Splatfacto, splatfacto_parameters(pipeline)?)
     } else if root.get("positions").is_some() && root.get("density").is_some() {
-        (Trainer::Grut, grut_parameters(&root, &mut notes)?)
+        let (parameters, grut) = grut_parameters(&root, &mut notes)?;
+        trained = grut;
+        (Trainer::Grut, parameters)
     } else {
         return Err(fail(format!(
             "neither \"splats\" (gsplat's simple_trainer), \"pipeline\" (Nerfstudio's), \"positions\" and \
@@ -252,7 +282,8 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
         dc: tensor(dc)?,
         rest: tensor(rest)?,
     };
-    Ok((splats.scene(trainer)?, CheckpointInfo { trainer, step, notes }))
+    let scene = Scene { trained, ..splats.scene(trainer)? };
+    Ok((scene, CheckpointInfo { trainer, step, notes }))
 }
 
 /// The six parameters (positions, log scales, quaternions, opacity logits, DC, the rest of the
@@ -341,8 +372,12 @@ const BLOCK: usize = 1 << 16;
 /// 3DGRUT's splats: the model's parameters at the checkpoint's top level (`positions`,
 /// `rotation`, `scale`, `density`, `features_albedo`, `features_specular`), beside the run's
 /// config (an OmegaConf `DictConfig`), whose activations must be 3DGS's (sigmoid and exp, as
-/// its `.ply` export assumes) and whose render settings become `notes`.
-fn grut_parameters<'v>(root: &'v Value, notes: &mut Vec<String>) -> Result<Parameters<'v>, ErrorKind> {
+/// its `.ply` export assumes); with the renderer and kernel the config names
+/// ([`grut_rendering`]).
+fn grut_parameters<'v>(
+    root: &'v Value,
+    notes: &mut Vec<String>,
+) -> Result<(Parameters<'v>, Option<Trained>), ErrorKind> {
     match root.get("feature_type") {
         None => {}
         Some(Value::Str(t)) if t == "sh" => {}
@@ -361,56 +396,69 @@ fn grut_parameters<'v>(root: &'v Value, notes: &mut Vec<String>) -> Result<Param
             None => {}
             Some(Value::Str(name)) if name == expected => {}
             Some(value) => {
-                let value = if let Value::Str(name) = value { format!("\"{name}\"") } else { format!("{value:?}") };
                 return Err(fail(format!(
-                    "3DGRUT trained these particles with {} {value}, where a splat's is {expected} (3DGS's, which its \
+                    "3DGRUT trained these particles with {} {}, where a splat's is {expected} (3DGS's, which its \
                      .ply export assumes too)",
-                    path.join(".")
+                    path.join("."),
+                    shown(value)
                 )));
             }
         }
     }
-    notes.extend(grut_notes(&setting));
+    let trained = grut_rendering(&setting, notes)?;
     let get = |name: &'static str| -> Result<_, ErrorKind> {
         let value = root.get(name).ok_or_else(|| fail(format!("3DGRUT's checkpoint has no \"{name}\"")))?;
         Ok((name, name.to_string(), value))
     };
-    Ok([
+    let parameters = [
         get("positions")?,
         get("scale")?,
         get("rotation")?,
         get("density")?,
         get("features_albedo")?,
         get("features_specular")?,
-    ])
+    ];
+    Ok((parameters, trained))
 }
 
-/// What a 3DGRUT run's config (`setting`, by path) says of how to render its particles: the
-/// preset of its renderer and kernel degree, its normalised world, its surfels.
-fn grut_notes<'v>(setting: &dyn Fn(&[&str]) -> Option<&'v Value>) -> Vec<String> {
-    let mut notes = Vec::new();
-    let method = match setting(&["render", "method"]) {
+/// The kernel degrees of 3DGRT's tracer (`particleResponse`: its switch has cases 0, the linear
+/// kernel, 1, 3, 4, 5 and 8, and the Gaussian for any other): the generalised Gaussians splat
+/// renders as 3DGRT does.
+const GRUT_DEGREES: [i64; 6] = [1, 2, 3, 4, 5, 8];
+
+/// How a 3DGRUT run's config (`setting`, by path) says its particles render: the renderer and
+/// kernel it trained them through (`render.method`, `render.particle_kernel_degree`,
+/// `render.particle_kernel_min_response`), where it names its renderer; `notes` say so, and of
+/// its normalised world and surfels. A kernel splat does not have is refused.
+fn grut_rendering<'v>(
+    setting: &dyn Fn(&[&str]) -> Option<&'v Value>,
+    notes: &mut Vec<String>,
+) -> Result<Option<Trained>, ErrorKind> {
+    let preset = match setting(&["render", "method"]) {
         Some(Value::Str(method)) => [Preset::ThreeDgrt, Preset::ThreeDgut].into_iter().find(|p| p.name() == method),
         _ => None,
     };
-    match (method, setting(&["render", "particle_kernel_degree"])) {
-        (Some(preset), Some(Value::Int(degree))) => {
-            let (name, method) = (if preset == Preset::ThreeDgrt { "3DGRT" } else { "3DGUT" }, preset.name());
-            let kernel = if *degree == i64::from(preset.kernel_degree()) {
+    let trained = preset.map(|preset| grut_kernel(preset, setting)).transpose()?;
+    match trained {
+        Some(trained) => {
+            let (name, method) =
+                (if trained.preset == Preset::ThreeDgrt { "3DGRT" } else { "3DGUT" }, trained.preset.name());
+            let kernel = if trained.is_presets() {
                 String::new()
             } else {
-                format!(", its kernel degree set to {degree},")
+                format!(
+                    " and the kernel the run set (degree {}, cut off at response {})",
+                    trained.kernel_degree, trained.min_response
+                )
             };
             notes.push(format!(
-                "{name} trained these particles (its render.method {method}) with kernel degree {degree} (its \
-                 render.particle_kernel_degree) and renders them along each ray: the {method} preset{kernel} renders \
-                 them as it does{}",
-                if preset == Preset::ThreeDgrt { ", with a ray-tracing method" } else { "" }
+                "{name} trained these particles (its render.method {method}): they render as it renders them, with \
+                 the {method} preset{kernel}, where no other preset or kernel is chosen"
             ));
         }
-        _ => notes.push(
-            "the checkpoint's config does not say how 3DGRUT rendered these particles (render.method and \
-             render.particle_kernel_degree): the 3dgrt and 3dgut presets render them as its two renderers do"
+        None => notes.push(
+            "the checkpoint's config does not say how 3DGRUT rendered these particles (its render.method): they \
+             render with the default kernel, where the 3dgrt and 3dgut presets render them as its two renderers do"
                 .into(),
         ),
     }
@@ -430,7 +478,45 @@ fn grut_notes<'v>(setting: &dyn Fn(&[&str]) -> Option<&'v Value>) -> Vec<String>
                 .into(),
         );
     }
-    notes
+    Ok(trained)
+}
+
+/// The kernel a 3DGRUT run of `preset`'s renderer trained with: its config's degree and minimum
+/// response where it sets them (`setting`, by path), else the preset's.
+fn grut_kernel<'v>(preset: Preset, setting: &dyn Fn(&[&str]) -> Option<&'v Value>) -> Result<Trained, ErrorKind> {
+    let mut trained = Trained::of(preset);
+    match setting(&["render", "particle_kernel_degree"]) {
+        None => {}
+        Some(Value::Int(degree)) if GRUT_DEGREES.contains(degree) => trained.kernel_degree = *degree as u32,
+        Some(other) => {
+            return Err(fail(format!(
+                "3DGRUT trained these particles with render.particle_kernel_degree {}, a kernel splat does not \
+                 render as 3DGRT does: the generalised Gaussians of degree 1, 2, 3, 4, 5 and 8",
+                shown(other)
+            )));
+        }
+    }
+    match setting(&["render", "particle_kernel_min_response"]) {
+        None => {}
+        Some(&Value::Float(r)) if r > 0.0 && r < 1.0 => trained.min_response = r as f32,
+        Some(other) => {
+            return Err(fail(format!(
+                "3DGRUT's render.particle_kernel_min_response is {}, not a response between 0 and 1",
+                shown(other)
+            )));
+        }
+    }
+    Ok(trained)
+}
+
+/// A config's value as a message shows it: a name quoted, a number as it is.
+fn shown(value: &Value) -> String {
+    match value {
+        Value::Str(name) => format!("\"{name}\""),
+        Value::Int(i) => i.to_string(),
+        Value::Float(x) => x.to_string(),
+        other => format!("{other:?}"),
+    }
 }
 
 /// A setting of a pickled OmegaConf config, by its path of keys: a `DictConfig` keeps its

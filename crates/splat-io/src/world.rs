@@ -80,6 +80,7 @@ use splat_core::mesh::{MeshMaterial, TriangleMesh};
 use splat_core::particle::sh_coeff_count;
 use splat_core::path::Environment;
 use splat_core::sh::{Rotation, ShStorage};
+use splat_core::trainer::Trained;
 use splat_core::{Camera, Scene, ScreenFilter};
 use std::path::{Path, PathBuf};
 
@@ -121,7 +122,8 @@ pub struct WorldSpec {
 
 impl WorldSpec {
     /// `base` with what the file sets: its background, bounce limit, iso thresholds, pixel
-    /// filter and SH storage.
+    /// filter and SH storage, and the kernel its splats were trained with where their file says
+    /// ([`Scene::trained`]).
     pub fn settings(&self, base: RenderSettings) -> RenderSettings {
         RenderSettings {
             sh_storage: self.sh_storage.unwrap_or(base.sh_storage),
@@ -130,6 +132,7 @@ impl WorldSpec {
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
             raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
+            kernel: self.scene.trained.map_or(base.kernel, |trained| trained.kernel(base.kernel)),
             ..base
         }
     }
@@ -415,6 +418,8 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
     let mut scene = Scene::default();
     let mut sets = Vec::new();
     let mut camera = None;
+    let mut notes = Vec::new();
+    let mut first_trained = None;
     for (i, set) in file.splats.iter().enumerate() {
         if let Some(d) = set.sh_degree.filter(|&d| d > 3) {
             return Err(format!("splats[{i}]: sh_degree {d} is above 3"));
@@ -430,6 +435,20 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
                 particles.screen_filter.describe(),
                 scene.screen_filter.describe()
             ));
+        }
+        if i == 0 {
+            (scene.trained, first_trained) = (particles.trained, particles.trained);
+        } else if particles.trained != first_trained && scene.trained == first_trained {
+            let said = |trained: Option<Trained>| {
+                trained.map_or("names no renderer".into(), |t| format!("was trained through {}", t.describe()))
+            };
+            notes.push(format!(
+                "splats[{i}] {} but splats[0] {}: a world's splats render with one kernel, the default one where no \
+                 preset or kernel is chosen",
+                said(particles.trained),
+                said(first_trained)
+            ));
+            scene.trained = None;
         }
         if let Some(d) = set.sh_degree {
             truncate_sh(&mut particles, d);
@@ -465,7 +484,7 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
     if background.is_some_and(|b| !b.is_finite()) {
         return Err("background is not finite".to_string());
     }
-    let (mut meshes, mut notes) = (Vec::new(), Vec::new());
+    let mut meshes = Vec::new();
     for (i, m) in file.meshes.iter().enumerate() {
         let (parts, read_notes) = load_mesh(m, base).map_err(|e| format!("meshes[{i}]: {e}"))?;
         meshes.extend(parts);

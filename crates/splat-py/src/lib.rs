@@ -158,6 +158,28 @@ impl PyScene {
         self.world.meshes.iter().map(|(mesh, _)| mesh.triangles.len()).sum()
     }
 
+    /// The screen-space filter the splats were trained with, which the splatting methods apply
+    /// (the file's, or the one `load`'s `screen_filter=` or `preset=` chose): "3dgs" (its
+    /// dilation), "antialiased" or "mip".
+    #[getter]
+    fn screen_filter(&self) -> &'static str {
+        self.world.scene.screen_filter.name()
+    }
+
+    /// The renderer and kernel the file says the splats were trained through (a 3DGRUT
+    /// checkpoint's config), which `render` applies where no preset or kernel is given: a dict
+    /// of "preset" ("3dgrt" or "3dgut"), "kernel_degree" and "min_response"; None where the file
+    /// says nothing.
+    #[getter]
+    fn trained<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(trained) = self.world.scene.trained else { return Ok(None) };
+        let dict = PyDict::new(py);
+        dict.set_item("preset", trained.preset.name())?;
+        dict.set_item("kernel_degree", trained.kernel_degree)?;
+        dict.set_item("min_response", trained.min_response)?;
+        Ok(Some(dict))
+    }
+
     /// The world's own camera (a world file's or the demo's), if it has one.
     #[getter]
     fn camera(&self) -> Option<PyCamera> {

@@ -28,6 +28,7 @@ import struct
 import subprocess
 import sys
 import types
+import warnings
 import zipfile
 
 import numpy as np
@@ -271,6 +272,7 @@ def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
         data_dir: str = "data/360_v2/garden"
         data_factor: int = 4
         normalize_world_space: bool = True
+        antialiased: bool = False
         eval_steps: list = dataclasses.field(default_factory=lambda: [7000, 30000])
         strategy: DefaultStrategy = dataclasses.field(default_factory=DefaultStrategy)
         result_dir: str = "results/garden"
@@ -287,6 +289,28 @@ def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
             "through splat's gsplat-world option, its images downscaled by 4 (splat's data-factor option)"
         )
         assert info.returncode == 0 and (note in info.stderr) == expected, info.stderr
+    # A run with antialiased: true rasterized its splats through gsplat's antialiased filter,
+    # which the splatting methods then apply, as to a .ply that names it; without, the 3DGS
+    # dilation (the control: the antialiased run's image differs from the plain .ply's).
+    ply = tmp_path / "export.ply"
+    write_3dgs_ply(ply, g)
+    camera = splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+    images = {}
+    for antialiased, name in [(True, "antialiased"), (False, "3dgs")]:
+        (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(antialiased=antialiased))))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = splat.Scene.load(str(ckpt))
+        assert scene.screen_filter == name
+        images[name] = splat.render(scene, camera, method="raster-sorted")["color"]
+        as_ply = splat.render(splat.Scene.load(str(ply), screen_filter=name), camera, method="raster-sorted")
+        np.testing.assert_array_equal(images[name], as_ply["color"], err_msg=name)
+    assert not np.array_equal(images["antialiased"], images["3dgs"])
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert "antialiased: true" not in info.stderr, info.stderr
+    (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(antialiased=True))))
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert "says antialiased: true): the splatting methods apply its screen filter" in info.stderr, info.stderr
 
 
 def test_what_is_not_a_gsplat_checkpoint_is_refused_by_name(tmp_path):
@@ -576,18 +600,19 @@ def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin
     a, b = from_ckpt.to_arrays(), from_ply.to_arrays()
     for name in a:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
-    with pytest.warns(UserWarning, match="the 3dgrt preset renders them as it does"):
+    with pytest.warns(UserWarning, match="they render as it renders them, with the 3dgrt preset, where no other"):
         splat.Scene.load(str(ckpt))
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert info.returncode == 0 and "3DGRUT checkpoint (step 30000)" in info.stdout, info
-    assert "3DGRT trained these particles" in info.stderr and "the 3dgrt preset renders" in info.stderr, info.stderr
+    assert "trained    through 3DGRT's renderer, kernel degree 4 cut off at response 0.0113" in info.stdout, info
+    assert "3DGRT trained these particles" in info.stderr and "with the 3dgrt preset" in info.stderr, info.stderr
     # 3DGUT's config, and one of 3DGRT's at another kernel degree: each note names its preset;
     # a run in gsplat's normalised world, or of surfels, is said to be.
     surfels = grut_config()
     surfels.render.primitive_type = "trisurfel"
     for config, expected in [
-        (grut_config("3dgut", 2), "the 3dgut preset renders them as it does"),
-        (grut_config("3dgrt", 8), "the 3dgrt preset, its kernel degree set to 8, renders"),
+        (grut_config("3dgut", 2), "with the 3dgut preset, where no other"),
+        (grut_config("3dgrt", 8), "the 3dgrt preset and the kernel the run set (degree 8, cut off at response 0.0113)"),
         (None, "does not say how 3DGRUT rendered these particles"),
         (grut_config(normalize=True), "where splat's gsplat-world option moves them"),
         (surfels, "as flat surfels (its render.primitive_type trisurfel)"),
@@ -595,6 +620,76 @@ def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin
         save_grut_checkpoint(ckpt, g, config)
         info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
         assert info.returncode == 0 and expected in info.stderr, info.stderr
+
+
+def test_a_3dgrut_checkpoint_renders_as_its_renderer_drew_it(tmp_path, splat_bin):
+    """The config beside a 3DGRUT checkpoint's particles names the renderer and kernel they were
+    trained through: the checkpoint renders as its .ply export does with that renderer's preset
+    (3DGRT: kernel degree 4; 3DGUT: splatting evaluates each particle along its ray), or with the
+    kernel the run set; a preset chosen overrides it. The controls: the .ply rendered without a
+    preset (what the checkpoint gave before its config was read) differs in every case."""
+    g = raw_gaussians(np.random.default_rng(77), 40, degree=1)
+    ckpt, ply = tmp_path / "ckpt_last.pt", tmp_path / "export_last.ply"
+    write_3dgs_ply(ply, g)
+    from_ply = splat.Scene.load(str(ply))
+    camera = splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+
+    def image(scene, **options):
+        return splat.render(scene, camera, **options)["color"]
+
+    def load(config):
+        save_grut_checkpoint(ckpt, g, config)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return splat.Scene.load(str(ckpt))
+
+    # exp(-4.5 (c/3)^8) = 0.0113, in f32 as the reader computes it.
+    cutoff8 = float(np.float32(3.0) * np.float32((np.log(1.0 / np.float32(0.0113)) / 4.5) ** (1.0 / 8.0)))
+    for config, method, preset, as_ply in [
+        (grut_config("3dgrt", 4), "exact", "3dgrt", {"preset": "3dgrt"}),
+        (grut_config("3dgut", 2), "raster-sorted", "3dgut", {"preset": "3dgut"}),
+        (grut_config("3dgrt", 8), "exact", "3dgrt", {"kernel_degree": 8, "cutoff": cutoff8}),
+    ]:
+        scene = load(config)
+        degree = config.render.particle_kernel_degree
+        assert scene.trained == {"preset": preset, "kernel_degree": degree, "min_response": pytest.approx(0.0113)}
+        rendered = image(scene, method=method)
+        np.testing.assert_array_equal(rendered, image(from_ply, method=method, **as_ply), err_msg=f"{preset} {degree}")
+        assert not np.array_equal(rendered, image(from_ply, method=method)), f"{preset} {degree}: the control"
+    np.testing.assert_array_equal(image(load(grut_config()), method="exact", preset="3dgs"), image(from_ply, method="exact"))
+    assert load(None).trained is None and from_ply.trained is None
+    np.testing.assert_array_equal(image(load(None), method="exact"), image(from_ply, method="exact"))
+    # The CLI reads the same kernel: its image of the checkpoint is the .ply's with the preset.
+    images = []
+    save_grut_checkpoint(ckpt, g, grut_config())
+    for scene, options in [(ckpt, []), (ply, ["--preset", "3dgrt"])]:
+        out = tmp_path / f"{scene.stem}.npy"
+        args = [splat_bin, "render", str(scene), "--method", "exact", "--eye", "0,0,0", "--target", "0,0,4.5"]
+        args += ["--up", "0,-1,0", "--fov", "45", "--width", "48", "--height", "36", "-o", str(out), *options]
+        run = subprocess.run(args, capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr
+        images.append(np.load(out))
+    np.testing.assert_array_equal(images[0], images[1])
+    # Converted, the particles lose their config: splat convert says what renders them as it did.
+    for config in [grut_config(), grut_config("3dgrt", 8)]:
+        save_grut_checkpoint(ckpt, g, config)
+        converted = tmp_path / "converted.ply"
+        run = subprocess.run([splat_bin, "convert", str(ckpt), str(converted)], capture_output=True, text=True)
+        assert run.returncode == 0 and "cannot record that its splats were trained through" in run.stderr, run.stderr
+        flags = run.stderr.split("render it with ")[1].splitlines()[0].split()
+        options = {flags[i][2:].replace("-", "_"): flags[i + 1] for i in range(0, len(flags), 2)}
+        np.testing.assert_array_equal(
+            image(splat.Scene.load(str(converted)), method="exact", **options), image(load(config), method="exact")
+        )
+    save_grut_checkpoint(ckpt, g, grut_config())
+    # A world's splats render with one kernel: a world of the checkpoint alone keeps its
+    # renderer; one that adds splats trained otherwise renders with the default, and says so.
+    alone, mixed = tmp_path / "alone.toml", tmp_path / "mixed.toml"
+    alone.write_text(f'[[splats]]\nfile = "{ckpt.name}"\n')
+    mixed.write_text(f'[[splats]]\nfile = "{ckpt.name}"\n\n[[splats]]\nfile = "{ply.name}"\n')
+    assert splat.Scene.load(str(alone)).trained == load(grut_config()).trained
+    with pytest.warns(UserWarning, match="splats.1. names no renderer but splats.0. was trained through 3DGRT's"):
+        assert splat.Scene.load(str(mixed)).trained is None
 
 
 def test_what_splat_cannot_render_of_3dgrut_is_refused_by_name(tmp_path):
@@ -606,6 +701,10 @@ def test_what_splat_cannot_render_of_3dgrut_is_refused_by_name(tmp_path):
     path = tmp_path / "softplus.pt"
     save_grut_checkpoint(path, g, grut_config(density="softplus"))
     assert 'model.density_activation "softplus", where a splat\'s is sigmoid' in refused(path)
+    # 3DGRT's linear kernel (degree 0), and degree 6, which its tracer renders as degree 2.
+    for degree in [0, 6]:
+        save_grut_checkpoint(path, g, grut_config(degree=degree))
+        assert f"render.particle_kernel_degree {degree}, a kernel splat does not render" in refused(path)
 
 
 def save_inria_checkpoint(path, g: dict) -> None:

@@ -200,6 +200,21 @@ class Scene:
         return self._native.triangles
 
     @property
+    def screen_filter(self) -> str:
+        """The screen-space filter the splats were trained with, which the splatting methods
+        apply: "3dgs" (its dilation), "antialiased" (gsplat's) or "mip" (Mip-Splatting's); the
+        file's, or the one load()'s screen_filter= or preset= chose."""
+        return self._native.screen_filter
+
+    @property
+    def trained(self):
+        """The renderer and kernel the file says the splats were trained through (a 3DGRUT
+        checkpoint's config), which render() applies where no preset or kernel is given: a dict
+        of "preset" ("3dgrt" or "3dgut"), "kernel_degree" and "min_response"; None where the
+        file says nothing."""
+        return self._native.trained
+
+    @property
     def camera(self):
         """The world's own camera (a world file's or the demo's), or None."""
         return self._native.camera
