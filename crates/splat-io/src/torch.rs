@@ -102,29 +102,7 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
         checkpoint(&source).map_err(|e| Error::new(path, e))
     };
     let (mut scene, mut info) = read(&ranks[0])?;
-    if info.trainer == Trainer::Splatfacto
-        && let Some(run) = path.parent().and_then(Path::parent)
-        && run.join("dataparser_transforms.json").is_file()
-    {
-        info.notes.push(format!(
-            "splatfacto trained these splats in its normalised world: {} moves the cameras of its transforms.json \
-             there (splat's dataparser-transforms option)",
-            run.join("dataparser_transforms.json").display()
-        ));
-    }
-    if info.trainer == Trainer::Gsplat
-        && let Some(config) = GsplatConfig::beside(path)
-    {
-        info.notes.extend(config.world_note());
-        if config.setting("antialiased") == Some("true") {
-            scene.screen_filter = ScreenFilter::Antialiased;
-            info.notes.push(format!(
-                "gsplat trained these splats with its antialiased rasterization ({} says antialiased: true): the \
-                 splatting methods apply its screen filter",
-                config.path.display()
-            ));
-        }
-    }
+    read_run_folder(path, &mut scene, &mut info);
     if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
         return Ok((scene, info));
     }
@@ -152,17 +130,55 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
     Ok((scene, info))
 }
 
-/// gsplat's run config beside a checkpoint: `RESULT/cfg.yml` for `RESULT/ckpts/…`, the
-/// `yaml.dump` of `simple_trainer`'s config.
-struct GsplatConfig {
+/// What the folder of the run whose checkpoint is `checkpoint` says of its splats (gsplat's
+/// `RESULT/ckpts/…`, Nerfstudio's `RUN/nerfstudio_models/…`): notes of the world they were
+/// trained in, and the screen filter they were rasterized through where the run's config names
+/// gsplat's antialiased mode (gsplat's `antialiased: true`, splatfacto's `rasterize_mode:
+/// antialiased`), which no checkpoint holds.
+fn read_run_folder(checkpoint: &Path, scene: &mut Scene, info: &mut CheckpointInfo) {
+    let Some(run) = checkpoint.parent().and_then(Path::parent) else { return };
+    let antialiased = match info.trainer {
+        Trainer::Gsplat => {
+            let Some(config) = RunConfig::open(run.join("cfg.yml")) else { return };
+            info.notes.extend(config.world_note());
+            (config.setting("antialiased") == Some("true")).then_some(("gsplat", config.path, "antialiased: true"))
+        }
+        Trainer::Splatfacto => {
+            let transforms = run.join("dataparser_transforms.json");
+            if transforms.is_file() {
+                info.notes.push(format!(
+                    "splatfacto trained these splats in its normalised world: {} moves the cameras of its \
+                     transforms.json there (splat's dataparser-transforms option)",
+                    transforms.display()
+                ));
+            }
+            let Some(config) = RunConfig::open(run.join("config.yml")) else { return };
+            let mode = config.nested("rasterize_mode");
+            (mode == Some("antialiased")).then_some(("splatfacto", config.path, "rasterize_mode: antialiased"))
+        }
+        Trainer::Grut | Trainer::Inria => None,
+    };
+    if let Some((trainer, config, says)) = antialiased {
+        scene.screen_filter = ScreenFilter::Antialiased;
+        info.notes.push(format!(
+            "{trainer} rasterized these splats in gsplat's antialiased mode ({} says {says}): the splatting methods \
+             apply its screen filter",
+            config.display()
+        ));
+    }
+}
+
+/// A trainer's run config, the `yaml.dump` of its config object: gsplat's `cfg.yml` (a
+/// dataclass), Nerfstudio's `config.yml` (its `TrainerConfig`, the model's config nested in the
+/// pipeline's). Read by its lines, not by a YAML parser.
+struct RunConfig {
     path: std::path::PathBuf,
     text: String,
 }
 
-impl GsplatConfig {
-    /// The config of the run whose checkpoint is `checkpoint`, where there is one.
-    fn beside(checkpoint: &Path) -> Option<Self> {
-        let path = checkpoint.parent()?.parent()?.join("cfg.yml");
+impl RunConfig {
+    /// The config at `path`, where there is one.
+    fn open(path: std::path::PathBuf) -> Option<Self> {
         let text = std::fs::read_to_string(&path).ok()?;
         Some(Self { path, text })
     }
@@ -170,14 +186,25 @@ impl GsplatConfig {
     /// A top-level scalar: its `key: value` line at the left margin (nested values are
     /// indented, lists and objects have no value on their key's line).
     fn setting(&self, key: &str) -> Option<&str> {
+        self.scalar(key, |line| line)
+    }
+
+    /// A scalar at any depth: the first `key: value` line, however indented (for a key that
+    /// one object of the config alone has).
+    fn nested(&self, key: &str) -> Option<&str> {
+        self.scalar(key, str::trim_start)
+    }
+
+    /// The value of the first line that is `key: value` once `line` cuts it.
+    fn scalar<'t>(&'t self, key: &str, line: impl Fn(&'t str) -> &'t str) -> Option<&'t str> {
         self.text
             .lines()
-            .find_map(|line| line.strip_prefix(key)?.strip_prefix(": ").map(str::trim))
+            .find_map(|l| line(l).strip_prefix(key)?.strip_prefix(": ").map(str::trim))
             .filter(|v| !v.is_empty())
     }
 
-    /// Where it says the run trained in its normalised world, a note saying so, with the run's
-    /// data folder and factor.
+    /// Where it says the run trained in its normalised world (gsplat's), a note saying so, with
+    /// the run's data folder and factor.
     fn world_note(&self) -> Option<String> {
         if self.setting("normalize_world_space")? != "true" {
             return None;

@@ -474,6 +474,49 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     expected = f"{run / 'dataparser_transforms.json'} moves the cameras of its transforms.json there"
     assert info.returncode == 0 and expected in info.stderr, info.stderr
+    # The run's config.yml (ns-train's yaml.dump of its TrainerConfig, the model's config nested
+    # in the pipeline's) names the rasterize mode: antialiased, the splatting methods apply
+    # gsplat's antialiased filter, as to a .ply that names it; classic (the default), 3DGS's
+    # dilation. The control: the two images differ.
+    import dataclasses
+
+    import yaml
+
+    @dataclasses.dataclass
+    class SplatfactoModelConfig:
+        rasterize_mode: str = "classic"
+        sh_degree: int = 3
+        background_color: str = "random"
+
+    @dataclasses.dataclass
+    class VanillaPipelineConfig:
+        model: SplatfactoModelConfig = dataclasses.field(default_factory=SplatfactoModelConfig)
+
+    @dataclasses.dataclass
+    class TrainerConfig:
+        method_name: str = "splatfacto"
+        max_num_iterations: int = 30000
+        pipeline: VanillaPipelineConfig = dataclasses.field(default_factory=VanillaPipelineConfig)
+
+    camera = splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+    images = {}
+    for mode, name in [("antialiased", "antialiased"), ("classic", "3dgs")]:
+        config = TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig(rasterize_mode=mode)))
+        (run / "config.yml").write_text(yaml.dump(config))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = splat.Scene.load(str(ckpt))
+        assert scene.screen_filter == name, mode
+        images[name] = splat.render(scene, camera, method="raster-sorted")["color"]
+        as_ply = splat.render(splat.Scene.load(str(ply), screen_filter=name), camera, method="raster-sorted")
+        # Within 2e-6: at degree 0 the colours differ by the f32 rounding checked above.
+        np.testing.assert_allclose(images[name], as_ply["color"], atol=2e-6, err_msg=mode)
+    assert np.abs(images["antialiased"] - images["3dgs"]).max() > 1e-3
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert "config.yml says rasterize_mode: antialiased" not in info.stderr, info.stderr
+    (run / "config.yml").write_text(yaml.dump(TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig("antialiased")))))
+    info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
+    assert "config.yml says rasterize_mode: antialiased): the splatting methods apply" in info.stderr, info.stderr
     # Checkpoints before the parameter dict, and of a distributed run, read the same; the
     # optimizer's moments are never read (damaged, they change nothing).
     for variant, prefix in [("old", "_model."), ("ddp", "module._model.gauss_params."), ("moments", None)]:
