@@ -4,7 +4,9 @@
 //! sharing no code with `splat-core`'s splatting path. It is what `raster-sorted` with the
 //! default `3dgs` extent must reproduce.
 //!
-//! Two trainers change only `computeCov2D`'s low-pass ([`Forward`]): gsplat's `antialiased`
+//! gsplat's `classic` mode (its default, and splatfacto's) filters as 3DGS does (+ 0.3 px²,
+//! `eps2d`) but bounds and culls splats its own way (below). Two trainers change
+//! `computeCov2D`'s low-pass ([`Forward`]): gsplat's `antialiased`
 //! mode (`add_blur`: + 0.3 px², opacity × √max(0, det_orig / det_blur)) and Mip-Splatting's 2D
 //! Mip filter (its rasterizer fork: + `kernel_size` 0.1 px², opacity × `coef`, with that fork's
 //! 1e-6 guards). Mip-Splatting's 3D smoothing filter is applied here from the raw `filter_3D`
@@ -27,6 +29,11 @@ pub enum Forward {
     /// diff-gaussian-rasterization: Σ₂ + 0.3 I.
     #[default]
     Inria,
+    /// gsplat with `rasterize_mode="classic"`: Σ₂ + `eps2d` I (0.3), the opacity as it is.
+    GsplatClassic {
+        /// `eps2d`, px² (0.3 in gsplat).
+        eps2d: f32,
+    },
     /// gsplat with `rasterize_mode="antialiased"`: Σ₂ + `eps2d` I (0.3) with the opacity
     /// compensated.
     GsplatAntialiased {
@@ -41,6 +48,8 @@ pub enum Forward {
 }
 
 impl Forward {
+    /// gsplat's classic mode as published.
+    pub const GSPLAT_CLASSIC: Forward = Forward::GsplatClassic { eps2d: 0.3 };
     /// gsplat's antialiased mode as published.
     pub const GSPLAT_ANTIALIASED: Forward = Forward::GsplatAntialiased { eps2d: 0.3 };
     /// Mip-Splatting as published.
@@ -50,6 +59,7 @@ impl Forward {
     fn low_pass(self, a: f32, b: f32, c: f32) -> ([f32; 3], f32) {
         match self {
             Forward::Inria => ([a + 0.3, b, c + 0.3], 1.0),
+            Forward::GsplatClassic { eps2d } => ([a + eps2d, b, c + eps2d], 1.0),
             Forward::GsplatAntialiased { eps2d } => {
                 let det_orig = a * c - b * b;
                 let (a, c) = (a + eps2d, c + eps2d);
@@ -176,7 +186,7 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera, options: &Options) -> O
     let t: [f32; 3] = [0, 1, 2].map(|i| (0..3).map(|j| view(i, j) * rel[j]).sum());
     // `in_frustum` culls p_view.z <= 0.2; gsplat culls mean_c.z < near_plane (0.01).
     let culled = match options.forward {
-        Forward::GsplatAntialiased { .. } => t[2] < 0.01,
+        Forward::GsplatClassic { .. } | Forward::GsplatAntialiased { .. } => t[2] < 0.01,
         Forward::Inria | Forward::MipSplatting { .. } => t[2] <= 0.2,
     };
     if culled {
@@ -222,7 +232,7 @@ fn preprocess(scene: &Scene, id: usize, camera: &Camera, options: &Options) -> O
     let opacity = opacity * coef;
     let grid = [camera.width.div_ceil(16) as i32, camera.height.div_ceil(16) as i32];
     let tiles = match options.forward {
-        Forward::GsplatAntialiased { .. } => gsplat_tiles(mean, [a, c], opacity, grid)?,
+        Forward::GsplatClassic { .. } | Forward::GsplatAntialiased { .. } => gsplat_tiles(mean, [a, c], opacity, grid)?,
         Forward::Inria | Forward::MipSplatting { .. } => get_rect(mean, [a, b, c], grid)?,
     };
     let dir = normalize(rel);

@@ -536,9 +536,11 @@ pub struct ReadArgs {
     /// `antialiased` comment, a `filter_3D` property or the `.spz` antialiased flag; else 3dgs).
     #[arg(long, value_parser = splat_view::screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
-    /// The trainer of the capture: its screen filter, splat extent and response, kernel degree
-    /// and cutoff, unless given on their own (3dgrt: kernel degree 4; 3dgrt and 3dgut: the cutoff of their minimum response)
-    /// [default: the one the capture's file names: a 3DGRUT checkpoint's renderer and kernel].
+    /// The trainer of the capture: its screen filter, splat extent and response, near plane,
+    /// kernel degree and cutoff, unless given on their own (3dgrt: kernel degree 4; 3dgrt and
+    /// 3dgut: the cutoff of their minimum response) [default: the one the capture's file names:
+    /// a trainer's checkpoint, gsplat's rasterizer for gsplat's and splatfacto's, 3DGRUT's
+    /// renderer and kernel as its config names them].
     #[arg(long, value_parser = preset_parser())]
     pub preset: Option<Preset>,
 }

@@ -61,7 +61,7 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         let own = if trained.is_presets() {
             String::new()
         } else {
-            format!(" --kernel-degree {} --cutoff {}", trained.kernel_degree, trained.cutoff())
+            format!(" --kernel-degree {} --cutoff {}", trained.kernel_degree, trained.cutoff)
         };
         eprintln!(
             "warning: {} cannot record that its splats were trained through {}: render it with --preset {}{own}",

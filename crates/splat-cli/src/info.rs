@@ -113,9 +113,8 @@ pub fn run(args: InfoArgs) -> Result<()> {
     if let Some(trained) = scene.trained {
         let chosen = if args.read.preset.is_some() { "; --preset chooses another" } else { "" };
         out!(
-            "trained    through {} (cutoff {:.4}σ, extent {}, response {}): the file says so{chosen}",
+            "trained    through {} (extent {}, response {}): the file says so{chosen}",
             trained.describe(),
-            trained.cutoff(),
             trained.preset.extent().name(),
             trained.preset.response().name()
         );

@@ -5,6 +5,7 @@
 //! | preset | screen filter | splat extent | splat response | kernel | its renderer |
 //! |---|---|---|---|---|---|
 //! | `3dgs` | 0.3 px² dilation | 3DGS tiles | projected | degree 2 | the INRIA rasterizer |
+//! | `gsplat` | 0.3 px² dilation | alpha cull | projected | degree 2 | gsplat, `rasterize_mode="classic"` (its default; splatfacto's too) |
 //! | `gsplat-antialiased` | antialiased | alpha cull | projected | degree 2 | gsplat, `rasterize_mode="antialiased"` |
 //! | `mip-splatting` | 2D Mip filter | 3DGS tiles | projected | degree 2 | Mip-Splatting's rasterizer (its 3D filter is in the file) |
 //! | `3dgrt` | the file's | 3DGUT's tiles | along the ray | degree 4: exp(−4.5 (d/3)⁴) | 3DGRT's ray tracer (3dgrut `configs/render/3dgrt.yaml`) |
@@ -12,7 +13,8 @@
 //! | `2dgs` | the file's | 3DGUT's tiles | along the ray | degree 2, no cutoff | 2DGS's rasterizer (diff-surfel-rasterization): the ray–splat intersection and its low-pass |
 //!
 //! gsplat's rasterizer also culls centres nearer than 0.01 ([`Preset::near`]), where the 3DGS
-//! rasterizer culls at 0.2.
+//! rasterizer culls at 0.2. Its classic mode filters as 3DGS does; its footprint and near plane
+//! are its own in both modes.
 //!
 //! 3DGRT and 3DGUT evaluate each particle in 3D along the pixel's ray (their response at its
 //! maximum, alpha clamped to 0.99 and cut below 1/255, as here), but drop a hit whose response
@@ -37,6 +39,9 @@ pub const GRUT_MIN_RESPONSE: f32 = 0.0113;
 pub enum Preset {
     /// 3DGS (Kerbl et al. 2023), the INRIA trainer.
     ThreeDgs,
+    /// gsplat (and Nerfstudio's splatfacto, which rasterizes through it) in its default
+    /// `rasterize_mode="classic"`.
+    Gsplat,
     /// gsplat with `rasterize_mode="antialiased"`.
     GsplatAntialiased,
     /// Mip-Splatting (Yu et al. 2024).
@@ -51,8 +56,9 @@ pub enum Preset {
 
 impl Preset {
     /// Every preset.
-    pub const ALL: [Preset; 6] = [
+    pub const ALL: [Preset; 7] = [
         Preset::ThreeDgs,
+        Preset::Gsplat,
         Preset::GsplatAntialiased,
         Preset::MipSplatting,
         Preset::ThreeDgrt,
@@ -64,6 +70,7 @@ impl Preset {
     pub const fn name(self) -> &'static str {
         match self {
             Preset::ThreeDgs => "3dgs",
+            Preset::Gsplat => "gsplat",
             Preset::GsplatAntialiased => "gsplat-antialiased",
             Preset::MipSplatting => "mip-splatting",
             Preset::ThreeDgrt => "3dgrt",
@@ -76,6 +83,9 @@ impl Preset {
     pub const fn describe(self) -> &'static str {
         match self {
             Preset::ThreeDgs => "3DGS: the 0.3 px² dilation, Gaussian kernel",
+            Preset::Gsplat => {
+                "gsplat classic (and splatfacto): the 3DGS dilation over gsplat's footprint and near plane"
+            }
             Preset::GsplatAntialiased => "gsplat antialiased: the antialiased screen filter, Gaussian kernel",
             Preset::MipSplatting => "Mip-Splatting: its 2D Mip filter, Gaussian kernel",
             Preset::ThreeDgrt => "3DGRT: kernel degree 4; render with a ray-tracing method",
@@ -90,7 +100,7 @@ impl Preset {
     /// own and the file's stays.
     pub const fn screen_filter(self) -> Option<ScreenFilter> {
         match self {
-            Preset::ThreeDgs => Some(ScreenFilter::Dilation),
+            Preset::ThreeDgs | Preset::Gsplat => Some(ScreenFilter::Dilation),
             Preset::GsplatAntialiased => Some(ScreenFilter::Antialiased),
             Preset::MipSplatting => Some(ScreenFilter::Mip),
             Preset::ThreeDgrt | Preset::ThreeDgut | Preset::TwoDgs => None,
@@ -107,12 +117,12 @@ impl Preset {
         }
     }
 
-    /// Which pixels its rasterizer lets a splat touch: gsplat's opacity-aware bounds, else the
-    /// 3DGS rasterizer's tiles (Mip-Splatting's rasterizer is a fork of it; 3DGRT and 3DGUT
-    /// render with rays, where no extent applies).
+    /// Which pixels its rasterizer lets a splat touch: gsplat's opacity-aware bounds (in both
+    /// modes), else the 3DGS rasterizer's tiles (Mip-Splatting's rasterizer is a fork of it;
+    /// 3DGRT and 3DGUT render with rays, where no extent applies).
     pub const fn extent(self) -> SplatExtent {
         match self {
-            Preset::GsplatAntialiased => SplatExtent::AlphaCull,
+            Preset::Gsplat | Preset::GsplatAntialiased => SplatExtent::AlphaCull,
             _ => SplatExtent::ThreeDgs,
         }
     }
@@ -130,7 +140,7 @@ impl Preset {
     /// 0.01, else the 3DGS rasterizer's 0.2 (Mip-Splatting's fork keeps it).
     pub const fn near(self) -> f32 {
         match self {
-            Preset::GsplatAntialiased => GSPLAT_NEAR,
+            Preset::Gsplat | Preset::GsplatAntialiased => GSPLAT_NEAR,
             _ => crate::raster::project::NEAR,
         }
     }
@@ -164,45 +174,50 @@ pub fn min_response_cutoff(min_response: f32, degree: u32) -> f32 {
 }
 
 /// What a capture's own file says of the renderer its trainer drew it through, beyond its
-/// screen filter ([`crate::Scene::screen_filter`]): a 3DGRUT checkpoint's config names its
-/// renderer and its kernel. Front ends render such a capture so where the user chose no preset
-/// or kernel, as they apply a file's screen filter.
+/// screen filter ([`crate::Scene::screen_filter`]): a trainer's checkpoint is gsplat's
+/// rasterizer's (gsplat's, splatfacto's) or names its renderer and kernel (a 3DGRUT config's).
+/// Front ends render such a capture so where the user chose no preset or kernel, as they apply
+/// a file's screen filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trained {
-    /// The preset of its renderer ([`Preset::ThreeDgrt`] or [`Preset::ThreeDgut`]).
+    /// The preset of its renderer.
     pub preset: Preset,
     /// The degree n of the kernel exp(−4.5 (d/3)ⁿ) it trained with: its preset's, unless the
     /// run set another.
     pub kernel_degree: u32,
-    /// The smallest response its renderer keeps: [`GRUT_MIN_RESPONSE`], unless the run set
-    /// another.
-    pub min_response: f32,
+    /// The cutoff, in standard deviations, of that kernel: its preset's, unless the run set
+    /// another degree or minimum response ([`min_response_cutoff`]).
+    pub cutoff: f32,
 }
 
 impl Trained {
     /// Trained as `preset` renders, with its kernel.
     pub fn of(preset: Preset) -> Self {
-        Self { preset, kernel_degree: preset.kernel_degree(), min_response: GRUT_MIN_RESPONSE }
-    }
-
-    /// Its cutoff in standard deviations: where its kernel falls to its minimum response.
-    pub fn cutoff(&self) -> f32 {
-        min_response_cutoff(self.min_response, self.kernel_degree)
+        Self { preset, kernel_degree: preset.kernel_degree(), cutoff: preset.cutoff() }
     }
 
     /// The kernel it trained with: `base` with its degree and cutoff.
     pub fn kernel(&self, base: KernelParams) -> KernelParams {
-        KernelParams { degree: self.kernel_degree, cutoff: self.cutoff(), ..base }
+        KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..base }
     }
 
-    /// What it is, in words: "3DGRT's renderer, kernel degree 4 cut off at response 0.0113".
+    /// `base` as its renderer draws: its kernel and its preset's near plane.
+    pub fn settings(&self, base: crate::RenderSettings) -> crate::RenderSettings {
+        crate::RenderSettings { kernel: self.kernel(base.kernel), near: self.preset.near(), ..base }
+    }
+
+    /// What it is, in words: "3DGRT's ray tracer, kernel degree 4, cutoff 2.9970σ".
     pub fn describe(&self) -> String {
         let renderer = match self.preset {
-            Preset::ThreeDgrt => "3DGRT's renderer",
+            Preset::ThreeDgs => "the INRIA rasterizer",
+            Preset::Gsplat => "gsplat's rasterizer (classic mode)",
+            Preset::GsplatAntialiased => "gsplat's rasterizer (antialiased mode)",
+            Preset::MipSplatting => "Mip-Splatting's rasterizer",
+            Preset::ThreeDgrt => "3DGRT's ray tracer",
             Preset::ThreeDgut => "3DGUT's renderer",
-            _ => self.preset.describe(),
+            Preset::TwoDgs => "2DGS's rasterizer",
         };
-        format!("{renderer}, kernel degree {} cut off at response {}", self.kernel_degree, self.min_response)
+        format!("{renderer}, kernel degree {}, cutoff {:.4}σ", self.kernel_degree, self.cutoff)
     }
 
     /// Whether its kernel is its preset's own.
@@ -227,19 +242,16 @@ mod tests {
         assert_eq!(Preset::ThreeDgs.cutoff(), 3.0);
     }
 
-    /// A capture trained as a preset renders has the preset's kernel; one of another degree
-    /// keeps the minimum response at its cutoff.
+    /// A capture trained as a preset renders has the preset's kernel; a run's own minimum
+    /// response at another degree is that degree's cutoff.
     #[test]
     fn a_trained_kernel_is_its_presets_unless_the_run_changed_it() {
-        for preset in [Preset::ThreeDgrt, Preset::ThreeDgut] {
-            let trained = Trained::of(preset);
-            assert!(trained.is_presets());
-            let k = trained.kernel(KernelParams::default());
-            assert_eq!((k.degree, k.cutoff), (preset.kernel_degree(), preset.cutoff()));
+        for preset in Preset::ALL {
+            let k = Trained::of(preset).kernel(KernelParams::default());
+            assert_eq!((k.degree, k.cutoff), (preset.kernel_degree(), preset.cutoff()), "{preset:?}");
         }
-        let eight = Trained { kernel_degree: 8, ..Trained::of(Preset::ThreeDgrt) };
-        assert!(!eight.is_presets());
-        let k = eight.kernel(KernelParams::default());
-        assert!((response(k.cutoff * k.cutoff, 8) - GRUT_MIN_RESPONSE).abs() < 1e-6);
+        let c = min_response_cutoff(GRUT_MIN_RESPONSE, 8);
+        assert!((response(c * c, 8) - GRUT_MIN_RESPONSE).abs() < 1e-6);
+        assert!(!Trained { kernel_degree: 8, cutoff: c, ..Trained::of(Preset::ThreeDgrt) }.is_presets());
     }
 }

@@ -26,9 +26,10 @@
 //! (N, 4, w x y z, not normalised), opacity logits (N or N × 1), the DC coefficient (N × 1 × 3
 //! or N × 3) and the rest of the SH (N × K × 3, or 3DGRUT's N × 3K, K = 0, 3, 8 or 15). A
 //! splatfacto model of SH degree 0 trains its colour as a logit (its `features_dc` through a
-//! sigmoid) and exports RGB2SH of it: so it is read. What the run's config says of how its
-//! splats render is kept with them: 3DGRUT's renderer and kernel ([`Scene::trained`]), gsplat's
-//! antialiased filter ([`Scene::screen_filter`], from `cfg.yml` beside the run's checkpoints).
+//! sigmoid) and exports RGB2SH of it: so it is read. How the trainer rendered its splats is kept
+//! with them ([`Scene::trained`]): gsplat's rasterizer for gsplat's and splatfacto's (in its
+//! antialiased mode, with that [`Scene::screen_filter`], where the run's config beside its
+//! checkpoints says so), 3DGRUT's renderer and kernel as its config names them.
 //! What splat cannot render as the trainer does (gsplat's `--app_opt` appearance network,
 //! 3DGRUT's neural features, other activations or kernels) is refused by name, as is anything
 //! else that is not such a checkpoint.
@@ -41,7 +42,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
 use splat_core::sh::rgb_to_dc;
-use splat_core::trainer::{Preset, Trained};
+use splat_core::trainer::{GRUT_MIN_RESPONSE, Preset, Trained, min_response_cutoff};
 use splat_core::{Particle, ParticleError, Scene, ScreenFilter};
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -132,9 +133,9 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
 
 /// What the folder of the run whose checkpoint is `checkpoint` says of its splats (gsplat's
 /// `RESULT/ckpts/…`, Nerfstudio's `RUN/nerfstudio_models/…`): notes of the world they were
-/// trained in, and the screen filter they were rasterized through where the run's config names
-/// gsplat's antialiased mode (gsplat's `antialiased: true`, splatfacto's `rasterize_mode:
-/// antialiased`), which no checkpoint holds.
+/// trained in, and gsplat's antialiased mode where the run's config names it (gsplat's
+/// `antialiased: true`, splatfacto's `rasterize_mode: antialiased`), which no checkpoint holds:
+/// its screen filter, and its preset in place of the classic mode's.
 fn read_run_folder(checkpoint: &Path, scene: &mut Scene, info: &mut CheckpointInfo) {
     let Some(run) = checkpoint.parent().and_then(Path::parent) else { return };
     let antialiased = match info.trainer {
@@ -160,6 +161,7 @@ fn read_run_folder(checkpoint: &Path, scene: &mut Scene, info: &mut CheckpointIn
     };
     if let Some((trainer, config, says)) = antialiased {
         scene.screen_filter = ScreenFilter::Antialiased;
+        scene.trained = Some(Trained::of(Preset::GsplatAntialiased));
         info.notes.push(format!(
             "{trainer} rasterized these splats in gsplat's antialiased mode ({} says {says}): the splatting methods \
              apply its screen filter",
@@ -283,8 +285,10 @@ fn checkpoint<S: Source + ?Sized>(source: &S) -> Result<(Scene, CheckpointInfo),
     let (trainer, parameters) = if let Some((parameters, _)) = inria {
         (Trainer::Inria, parameters)
     } else if let Some(splats) = root.get("splats") {
+        trained = Some(Trained::of(Preset::Gsplat));
         (Trainer::Gsplat, gsplat_parameters(splats)?)
     } else if let Some(pipeline) = root.get("pipeline") {
+        trained = Some(Trained::of(Preset::Gsplat));
         (Trainer::Splatfacto, splatfacto_parameters(pipeline)?)
     } else if root.get("positions").is_some() && root.get("density").is_some() {
         let (parameters, grut) = grut_parameters(&root, &mut notes)?;
@@ -474,8 +478,8 @@ fn grut_rendering<'v>(
                 String::new()
             } else {
                 format!(
-                    " and the kernel the run set (degree {}, cut off at response {})",
-                    trained.kernel_degree, trained.min_response
+                    " and the kernel the run set (degree {}, cut off at {:.4}σ by its minimum response)",
+                    trained.kernel_degree, trained.cutoff
                 )
             };
             notes.push(format!(
@@ -509,12 +513,12 @@ fn grut_rendering<'v>(
 }
 
 /// The kernel a 3DGRUT run of `preset`'s renderer trained with: its config's degree and minimum
-/// response where it sets them (`setting`, by path), else the preset's.
+/// response where it sets them (`setting`, by path), else the preset's; the cutoff is that
+/// response's radius ([`min_response_cutoff`]).
 fn grut_kernel<'v>(preset: Preset, setting: &dyn Fn(&[&str]) -> Option<&'v Value>) -> Result<Trained, ErrorKind> {
-    let mut trained = Trained::of(preset);
-    match setting(&["render", "particle_kernel_degree"]) {
-        None => {}
-        Some(Value::Int(degree)) if GRUT_DEGREES.contains(degree) => trained.kernel_degree = *degree as u32,
+    let degree = match setting(&["render", "particle_kernel_degree"]) {
+        None => preset.kernel_degree(),
+        Some(Value::Int(degree)) if GRUT_DEGREES.contains(degree) => *degree as u32,
         Some(other) => {
             return Err(fail(format!(
                 "3DGRUT trained these particles with render.particle_kernel_degree {}, a kernel splat does not \
@@ -522,18 +526,18 @@ fn grut_kernel<'v>(preset: Preset, setting: &dyn Fn(&[&str]) -> Option<&'v Value
                 shown(other)
             )));
         }
-    }
-    match setting(&["render", "particle_kernel_min_response"]) {
-        None => {}
-        Some(&Value::Float(r)) if r > 0.0 && r < 1.0 => trained.min_response = r as f32,
+    };
+    let min_response = match setting(&["render", "particle_kernel_min_response"]) {
+        None => GRUT_MIN_RESPONSE,
+        Some(&Value::Float(r)) if r > 0.0 && r < 1.0 => r as f32,
         Some(other) => {
             return Err(fail(format!(
                 "3DGRUT's render.particle_kernel_min_response is {}, not a response between 0 and 1",
                 shown(other)
             )));
         }
-    }
-    Ok(trained)
+    };
+    Ok(Trained { preset, kernel_degree: degree, cutoff: min_response_cutoff(min_response, degree) })
 }
 
 /// A config's value as a message shows it: a name quoted, a number as it is.

@@ -122,9 +122,10 @@ pub struct WorldSpec {
 
 impl WorldSpec {
     /// `base` with what the file sets: its background, bounce limit, iso thresholds, pixel
-    /// filter and SH storage, and the kernel its splats were trained with where their file says
-    /// ([`Scene::trained`]).
+    /// filter and SH storage, over the kernel and near plane of the renderer its splats were
+    /// trained through where their file says ([`Scene::trained`]).
     pub fn settings(&self, base: RenderSettings) -> RenderSettings {
+        let base = self.scene.trained.map_or(base, |trained| trained.settings(base));
         RenderSettings {
             sh_storage: self.sh_storage.unwrap_or(base.sh_storage),
             sampling: CameraSampling { filter: self.pixel_filter.unwrap_or(base.sampling.filter), ..base.sampling },
@@ -132,7 +133,6 @@ impl WorldSpec {
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),
             raster_iso_threshold: self.raster_iso_threshold.unwrap_or(base.raster_iso_threshold),
-            kernel: self.scene.trained.map_or(base.kernel, |trained| trained.kernel(base.kernel)),
             ..base
         }
     }

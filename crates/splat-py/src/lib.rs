@@ -166,17 +166,17 @@ impl PyScene {
         self.world.scene.screen_filter.name()
     }
 
-    /// The renderer and kernel the file says the splats were trained through (a 3DGRUT
-    /// checkpoint's config), which `render` applies where no preset or kernel is given: a dict
-    /// of "preset" ("3dgrt" or "3dgut"), "kernel_degree" and "min_response"; None where the file
-    /// says nothing.
+    /// The renderer and kernel the file says the splats were trained through (a trainer's
+    /// checkpoint: gsplat's rasterizer for gsplat's and splatfacto's, 3DGRUT's as its config
+    /// names it), which `render` applies where no preset or kernel is given: a dict of "preset"
+    /// (`--preset`'s name), "kernel_degree" and "cutoff"; None where the file says nothing.
     #[getter]
     fn trained<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(trained) = self.world.scene.trained else { return Ok(None) };
         let dict = PyDict::new(py);
         dict.set_item("preset", trained.preset.name())?;
         dict.set_item("kernel_degree", trained.kernel_degree)?;
-        dict.set_item("min_response", trained.min_response)?;
+        dict.set_item("cutoff", trained.cutoff)?;
         Ok(Some(dict))
     }
 

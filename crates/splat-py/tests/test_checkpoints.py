@@ -159,6 +159,24 @@ def state_dict(params: dict, storages: list[_Storage], views: dict | None = None
     return state
 
 
+def with_a_near_splat(g: dict) -> dict:
+    """`g` and one small opaque splat 0.1 in front of the camera of `near_camera`: gsplat's
+    rasterizer draws it (its near plane is 0.01), the INRIA rasterizer culls it (0.2)."""
+    near = {
+        "means": np.array([[0.0, 0.0, 0.1]], np.float32),
+        "scales": np.log(np.full((1, 3), 0.002, np.float32)),
+        "rotations": np.array([[1.0, 0.0, 0.0, 0.0]], np.float32),
+        "opacities": np.array([3.0], np.float32),
+        "sh": np.full((1, *g["sh"].shape[1:]), 0.8, np.float32),
+    }
+    return {k: np.concatenate([v, near[k]]) for k, v in g.items()}
+
+
+#: The camera the splats of `raw_gaussians` and `with_a_near_splat` are rendered from.
+def near_camera():
+    return splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+
+
 def save_checkpoint(path, params: dict, step: int = 29999, views: dict | None = None) -> None:
     """gsplat's checkpoint of `params`: `views` replaces a tensor's view of its storage."""
     storages = []
@@ -289,23 +307,27 @@ def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
             "through splat's gsplat-world option, its images downscaled by 4 (splat's data-factor option)"
         )
         assert info.returncode == 0 and (note in info.stderr) == expected, info.stderr
-    # A run with antialiased: true rasterized its splats through gsplat's antialiased filter,
-    # which the splatting methods then apply, as to a .ply that names it; without, the 3DGS
-    # dilation (the control: the antialiased run's image differs from the plain .ply's).
+    # gsplat rasterized the splats (its footprint and near plane) in its classic mode, or where
+    # the run says antialiased: true, through its antialiased filter: each renders as its .ply
+    # with that preset. The controls: the .ply without a preset (3DGS's rasterizer) and the
+    # other mode differ.
+    g = with_a_near_splat(g)
+    save_checkpoint(ckpt, gsplat_parameters(g))
     ply = tmp_path / "export.ply"
     write_3dgs_ply(ply, g)
-    camera = splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+    camera = near_camera()
     images = {}
-    for antialiased, name in [(True, "antialiased"), (False, "3dgs")]:
+    for antialiased, preset, name in [(True, "gsplat-antialiased", "antialiased"), (False, "gsplat", "3dgs")]:
         (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(antialiased=antialiased))))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             scene = splat.Scene.load(str(ckpt))
-        assert scene.screen_filter == name
+        assert scene.screen_filter == name and scene.trained["preset"] == preset, (scene.screen_filter, scene.trained)
         images[name] = splat.render(scene, camera, method="raster-sorted")["color"]
-        as_ply = splat.render(splat.Scene.load(str(ply), screen_filter=name), camera, method="raster-sorted")
+        as_ply = splat.render(splat.Scene.load(str(ply), preset=preset), camera, method="raster-sorted", preset=preset)
         np.testing.assert_array_equal(images[name], as_ply["color"], err_msg=name)
-    assert not np.array_equal(images["antialiased"], images["3dgs"])
+    plain = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted")["color"]
+    assert not np.array_equal(images["3dgs"], plain) and not np.array_equal(images["antialiased"], images["3dgs"])
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert "antialiased: true" not in info.stderr, info.stderr
     (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(antialiased=True))))
@@ -474,10 +496,10 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     expected = f"{run / 'dataparser_transforms.json'} moves the cameras of its transforms.json there"
     assert info.returncode == 0 and expected in info.stderr, info.stderr
-    # The run's config.yml (ns-train's yaml.dump of its TrainerConfig, the model's config nested
-    # in the pipeline's) names the rasterize mode: antialiased, the splatting methods apply
-    # gsplat's antialiased filter, as to a .ply that names it; classic (the default), 3DGS's
-    # dilation. The control: the two images differ.
+    # splatfacto rasterizes through gsplat, in the mode the run's config.yml names (ns-train's
+    # yaml.dump of its TrainerConfig, the model's config nested in the pipeline's): each renders
+    # as its .ply with that mode's preset. The controls: the two images differ, and the classic
+    # mode's from the .ply's without a preset (3DGS's rasterizer culls the near splat).
     import dataclasses
 
     import yaml
@@ -498,20 +520,24 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
         max_num_iterations: int = 30000
         pipeline: VanillaPipelineConfig = dataclasses.field(default_factory=VanillaPipelineConfig)
 
-    camera = splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+    save_splatfacto_checkpoint(ckpt, with_a_near_splat(g))
+    write_3dgs_ply(ply, splatfacto_export(with_a_near_splat(g)))
+    camera = near_camera()
     images = {}
-    for mode, name in [("antialiased", "antialiased"), ("classic", "3dgs")]:
+    for mode, preset, name in [("antialiased", "gsplat-antialiased", "antialiased"), ("classic", "gsplat", "3dgs")]:
         config = TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig(rasterize_mode=mode)))
         (run / "config.yml").write_text(yaml.dump(config))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             scene = splat.Scene.load(str(ckpt))
-        assert scene.screen_filter == name, mode
+        assert scene.screen_filter == name and scene.trained["preset"] == preset, mode
         images[name] = splat.render(scene, camera, method="raster-sorted")["color"]
-        as_ply = splat.render(splat.Scene.load(str(ply), screen_filter=name), camera, method="raster-sorted")
+        as_ply = splat.render(splat.Scene.load(str(ply), preset=preset), camera, method="raster-sorted", preset=preset)
         # Within 2e-6: at degree 0 the colours differ by the f32 rounding checked above.
         np.testing.assert_allclose(images[name], as_ply["color"], atol=2e-6, err_msg=mode)
     assert np.abs(images["antialiased"] - images["3dgs"]).max() > 1e-3
+    plain = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted")["color"]
+    assert np.abs(images["3dgs"] - plain).max() > 1e-3
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert "config.yml says rasterize_mode: antialiased" not in info.stderr, info.stderr
     (run / "config.yml").write_text(yaml.dump(TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig("antialiased")))))
@@ -647,7 +673,7 @@ def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin
         splat.Scene.load(str(ckpt))
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert info.returncode == 0 and "3DGRUT checkpoint (step 30000)" in info.stdout, info
-    assert "trained    through 3DGRT's renderer, kernel degree 4 cut off at response 0.0113" in info.stdout, info
+    assert "trained    through 3DGRT's ray tracer, kernel degree 4, cutoff 2.9972σ" in info.stdout, info
     assert "3DGRT trained these particles" in info.stderr and "with the 3dgrt preset" in info.stderr, info.stderr
     # 3DGUT's config, and one of 3DGRT's at another kernel degree: each note names its preset;
     # a run in gsplat's normalised world, or of surfels, is said to be.
@@ -655,7 +681,7 @@ def test_a_3dgrut_checkpoint_holds_what_its_ply_export_holds(tmp_path, splat_bin
     surfels.render.primitive_type = "trisurfel"
     for config, expected in [
         (grut_config("3dgut", 2), "with the 3dgut preset, where no other"),
-        (grut_config("3dgrt", 8), "the 3dgrt preset and the kernel the run set (degree 8, cut off at response 0.0113)"),
+        (grut_config("3dgrt", 8), "the 3dgrt preset and the kernel the run set (degree 8, cut off at 2.998"),
         (None, "does not say how 3DGRUT rendered these particles"),
         (grut_config(normalize=True), "where splat's gsplat-world option moves them"),
         (surfels, "as flat surfels (its render.primitive_type trisurfel)"),
@@ -675,7 +701,7 @@ def test_a_3dgrut_checkpoint_renders_as_its_renderer_drew_it(tmp_path, splat_bin
     ckpt, ply = tmp_path / "ckpt_last.pt", tmp_path / "export_last.ply"
     write_3dgs_ply(ply, g)
     from_ply = splat.Scene.load(str(ply))
-    camera = splat.Camera.look_at((0, 0, 0), (0, 0, 4.5), up=(0, -1, 0), fov_y=45, width=48, height=36)
+    camera = near_camera()
 
     def image(scene, **options):
         return splat.render(scene, camera, **options)["color"]
@@ -695,7 +721,8 @@ def test_a_3dgrut_checkpoint_renders_as_its_renderer_drew_it(tmp_path, splat_bin
     ]:
         scene = load(config)
         degree = config.render.particle_kernel_degree
-        assert scene.trained == {"preset": preset, "kernel_degree": degree, "min_response": pytest.approx(0.0113)}
+        cutoff = 3.0 * (np.log(1 / 0.0113) / 4.5) ** (1 / degree)  # where the kernel falls to 0.0113
+        assert scene.trained == {"preset": preset, "kernel_degree": degree, "cutoff": pytest.approx(cutoff, rel=1e-6)}
         rendered = image(scene, method=method)
         np.testing.assert_array_equal(rendered, image(from_ply, method=method, **as_ply), err_msg=f"{preset} {degree}")
         assert not np.array_equal(rendered, image(from_ply, method=method)), f"{preset} {degree}: the control"

@@ -208,10 +208,11 @@ class Scene:
 
     @property
     def trained(self):
-        """The renderer and kernel the file says the splats were trained through (a 3DGRUT
-        checkpoint's config), which render() applies where no preset or kernel is given: a dict
-        of "preset" ("3dgrt" or "3dgut"), "kernel_degree" and "min_response"; None where the
-        file says nothing."""
+        """The renderer and kernel the file says the splats were trained through (a trainer's
+        checkpoint: gsplat's rasterizer for gsplat's and splatfacto's, 3DGRUT's as its config
+        names it), which render() applies where no preset or kernel is given: a dict of
+        "preset" (a preset= name: "gsplat", "3dgrt", ...), "kernel_degree" and "cutoff"; None
+        where the file says nothing."""
         return self._native.trained
 
     @property
