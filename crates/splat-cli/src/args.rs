@@ -17,7 +17,7 @@ use splat_core::raster::{Blend, FragmentDepth, RasterSettings, Response, SampleP
 use splat_core::rng::RngScheme;
 use splat_core::sh::ShStorage;
 use splat_core::trace::Method;
-use splat_core::trainer::Preset;
+use splat_core::trainer::{self, Preset};
 use splat_core::undistort::Undistortion;
 use splat_core::{
     Algorithm, Camera, HitDistance, KernelParams, MethodId, Parameters, RenderSettings, Scene, ScreenFilter, World,
@@ -195,17 +195,12 @@ impl MethodOptions {
         self.implied.response = self.implied.response.or(preset.map(Preset::response));
     }
 
-    /// Where `--preset` implied no extent or response, imply those of the renderer the capture's
-    /// file names ([`Scene::trained`]: a 3DGRUT checkpoint's particles are evaluated along the
-    /// rays); else the extent of the trainer whose screen filter the capture names
-    /// ([`Preset::of_filter`]: a gsplat-antialiased capture is drawn with gsplat's bounds), and
-    /// a capture of 2D Gaussians is evaluated along the rays, as 2DGS does.
+    /// Where `--preset` implied no extent or response, imply those the capture is drawn with
+    /// ([`trainer::capture_splatting`]: its trainer's, as its file names it).
     pub fn apply_capture(&mut self, scene: &Scene) {
-        let trained = scene.trained.map(|t| t.preset);
-        let filters = Preset::of_filter(scene.screen_filter);
-        self.implied.extent = self.implied.extent.or(trained.map(Preset::extent)).or(Some(filters.extent()));
-        let surfels = scene.is_surfels().then_some(Preset::TwoDgs.response());
-        self.implied.response = self.implied.response.or(trained.map(Preset::response)).or(surfels);
+        let (extent, response) = trainer::capture_splatting(scene);
+        self.implied.extent = self.implied.extent.or(Some(extent));
+        self.implied.response = self.implied.response.or(Some(response));
     }
 
     /// The value of every method parameter these options give.

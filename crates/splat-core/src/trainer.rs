@@ -166,6 +166,19 @@ impl Preset {
     }
 }
 
+/// The splat extent and response a capture is drawn with where no option says: those of the
+/// renderer its file names ([`crate::Scene::trained`]); else the extent of the rasterizing
+/// trainer whose screen filter it names ([`Preset::of_filter`]: a gsplat-antialiased capture is
+/// drawn with gsplat's bounds), and along the rays for a capture of 2D Gaussians, as 2DGS
+/// evaluates them, else projected.
+pub fn capture_splatting(scene: &crate::Scene) -> (SplatExtent, Response) {
+    let trained = scene.trained.map(|t| t.preset);
+    let extent = trained.unwrap_or(Preset::of_filter(scene.screen_filter)).extent();
+    let surfels = scene.is_surfels().then_some(Preset::TwoDgs);
+    let response = trained.or(surfels).map_or(Response::Projected, Preset::response);
+    (extent, response)
+}
+
 /// The cutoff, in standard deviations, where the kernel of degree n falls to the response
 /// `min_response` (3DGRT's and 3DGUT's `particle_kernel_min_response`): 3 (ln(1 / r_min) /
 /// 4.5)^(1/n), from exp(−4.5 (d/3)ⁿ) = r_min.
@@ -240,6 +253,33 @@ mod tests {
             assert!((r - GRUT_MIN_RESPONSE).abs() < 1e-6, "{preset:?}: {r} at {c}");
         }
         assert_eq!(Preset::ThreeDgs.cutoff(), 3.0);
+    }
+
+    /// A capture is splatted as the renderer its file names draws it, else as its screen
+    /// filter's trainer and its surfels say.
+    #[test]
+    fn a_capture_is_splatted_as_its_trainer_draws_it() {
+        use crate::Scene;
+        use crate::particle::{Particle, surfel_thickness};
+        use glam::{Quat, Vec3};
+        let splat = |s: Vec3| Particle::with_rgb(Vec3::ZERO, s, Quat::IDENTITY, 0.5, Vec3::ONE);
+        let plain = Scene::new(vec![splat(Vec3::splat(0.1))], 0);
+        let surfels = Scene::new(vec![splat(Vec3::new(0.1, 0.2, surfel_thickness(0.1, 0.2)))], 0);
+        let with = |scene: &Scene, filter, trained: Option<Preset>| Scene {
+            screen_filter: filter,
+            trained: trained.map(Trained::of),
+            ..scene.clone()
+        };
+        let (dilation, antialiased) = (ScreenFilter::Dilation, ScreenFilter::Antialiased);
+        for (scene, expected) in [
+            (with(&plain, dilation, None), (SplatExtent::ThreeDgs, Response::Projected)),
+            (with(&plain, antialiased, None), (SplatExtent::AlphaCull, Response::Projected)),
+            (with(&plain, dilation, Some(Preset::Gsplat)), (SplatExtent::AlphaCull, Response::Projected)),
+            (with(&plain, dilation, Some(Preset::ThreeDgut)), (SplatExtent::ThreeDgs, Response::AlongRay)),
+            (with(&surfels, dilation, None), (SplatExtent::ThreeDgs, Response::AlongRay)),
+        ] {
+            assert_eq!(capture_splatting(&scene), expected, "{:?} {:?}", scene.screen_filter, scene.trained);
+        }
     }
 
     /// A capture trained as a preset renders has the preset's kernel; a run's own minimum

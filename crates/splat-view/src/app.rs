@@ -79,6 +79,7 @@ impl Options {
     pub fn start(&self, scene: SceneInfo, lighting: &Lighting, backend: Backend) -> (Navigation, Settings) {
         let mut settings = Settings::new(scene.render, lighting, backend);
         settings.max_frames = self.max_frames;
+        (settings.params.raster.extent, settings.params.raster.response) = scene.splatting;
         (Navigation::new(scene, self.camera_index, self.up), settings)
     }
 }

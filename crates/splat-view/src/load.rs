@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use splat_core::glam::Vec3;
 use splat_core::mesh::Meshes;
 use splat_core::particle::Aabb;
+use splat_core::raster::{Response, SplatExtent};
 use splat_core::{Camera, RenderSettings, World};
 use splat_io::cameras::ViewOptions;
 use std::path::Path;
@@ -36,6 +37,9 @@ pub struct SceneInfo {
     pub sh_degree: u8,
     /// The capture's screen-space filter.
     pub screen_filter: splat_core::ScreenFilter,
+    /// The splat extent and response its splats are drawn with until the panel changes them
+    /// ([`splat_core::trainer::capture_splatting`]: its trainer's).
+    pub splatting: (SplatExtent, Response),
 }
 
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
@@ -49,8 +53,13 @@ pub fn load(
     options: splat_io::ReadOptions,
 ) -> Result<Loaded> {
     let opened = splat_io::world::open_world(scene, options)?;
-    if let Some(warning) = scene.and_then(|p| splat_io::skipped_properties_warning(p, &opened.skipped_properties)) {
-        eprintln!("warning: {warning}");
+    if let Some(path) = scene {
+        if let Some(warning) = splat_io::skipped_properties_warning(path, &opened.skipped_properties) {
+            eprintln!("warning: {warning}");
+        }
+        for note in &opened.notes {
+            eprintln!("note: {}: {note}", path.display());
+        }
     }
     let (world, name) = (opened.world, opened.name);
     let views = match cameras {
@@ -69,7 +78,8 @@ pub fn load(
     let meshes = Meshes::new(&meshes).map_err(|e| anyhow::anyhow!("{e}")).context("the world's meshes")?;
     let bounds = scene.robust_bounds(0.02);
     let (particles, sh_degree, screen_filter) = (scene.particles.len(), scene.sh_degree, scene.screen_filter);
-    let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree, screen_filter };
+    let splatting = splat_core::trainer::capture_splatting(&scene);
+    let info = SceneInfo { render, camera, views, bounds, name, particles, sh_degree, screen_filter, splatting };
     Ok(Loaded { world: World::new(scene, meshes, lighting)?, info })
 }
 

@@ -262,6 +262,27 @@ fn the_view_in_host_memory_is_the_batch_render() {
     }
 }
 
+/// The panel starts splatting a capture as its trainer does: a `.ply` naming gsplat's
+/// antialiased mode with gsplat's opacity-aware footprint (the CLI's default for it too), a
+/// plain one with the 3DGS tiles.
+#[test]
+fn the_panel_splats_a_capture_as_its_trainer() {
+    use splat_core::raster::{Response, SplatExtent};
+    let root = splat_tests::root();
+    let mut scene = splat_io::read_scene(&root.join("fixtures/cloud.ply")).unwrap();
+    let antialiased = std::env::temp_dir().join(format!("splat-view-antialiased-{}.ply", std::process::id()));
+    scene.screen_filter = splat_core::ScreenFilter::Antialiased;
+    splat_io::write_scene(&antialiased, &scene, Default::default()).unwrap();
+    for (path, extent) in
+        [(antialiased.clone(), SplatExtent::AlphaCull), (root.join("fixtures/cloud.ply"), SplatExtent::ThreeDgs)]
+    {
+        let loaded = splat_view::load::load(Some(&path), None, Default::default(), Default::default()).unwrap();
+        let (_, settings) = options(BackendChoice::Cpu, 1).start(loaded.info, &loaded.world.lighting, Backend::Cpu);
+        assert_eq!((settings.params.raster.extent, settings.params.raster.response), (extent, Response::Projected));
+    }
+    std::fs::remove_file(antialiased).unwrap();
+}
+
 /// The largest difference, in 8-bit levels, between `view` (RGBA8 of `camera`) and a batch
 /// render of `frames` frames of Algorithm 1 on the cloud fixture on `backend`, shown with the
 /// default display transform; fails on a nearly empty view.
