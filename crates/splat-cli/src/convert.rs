@@ -58,16 +58,17 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         );
     }
     if let Some(trained) = scene.trained {
-        let own = if trained.is_presets() {
-            String::new()
-        } else {
-            format!(" --kernel-degree {} --cutoff {}", trained.kernel_degree, trained.cutoff)
-        };
+        let mut flags = format!("--preset {}", trained.preset.name());
+        if !trained.has_presets_kernel() {
+            flags += &format!(" --kernel-degree {} --cutoff {}", trained.kernel_degree, trained.cutoff);
+        }
+        if let Some(b) = trained.background {
+            flags += &format!(" --background {},{},{}", b.x, b.y, b.z);
+        }
         eprintln!(
-            "warning: {} cannot record that its splats were trained through {}: render it with --preset {}{own}",
+            "warning: {} cannot record that its splats were trained through {}: render it with {flags}",
             format.name(),
-            trained.describe(),
-            trained.preset.name()
+            trained.describe()
         );
     }
     let spz = SpzWriteOptions { version: args.spz_version, axes: args.read.spz_axes.into() };

@@ -201,12 +201,16 @@ pub struct Trained {
     /// The cutoff, in standard deviations, of that kernel: its preset's, unless the run set
     /// another degree or minimum response ([`min_response_cutoff`]).
     pub cutoff: f32,
+    /// The colour its trainer's evaluation composites its renders over, where the run says
+    /// (3DGS's `white_background`, splatfacto's `background_color`, 3DGRUT's
+    /// `model.background.color`); `None`: black, the default.
+    pub background: Option<glam::Vec3>,
 }
 
 impl Trained {
     /// Trained as `preset` renders, with its kernel.
     pub fn of(preset: Preset) -> Self {
-        Self { preset, kernel_degree: preset.kernel_degree(), cutoff: preset.cutoff() }
+        Self { preset, kernel_degree: preset.kernel_degree(), cutoff: preset.cutoff(), background: None }
     }
 
     /// The kernel it trained with: `base` with its degree and cutoff.
@@ -214,9 +218,19 @@ impl Trained {
         KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..base }
     }
 
-    /// `base` as its renderer draws: its kernel and its preset's near plane.
+    /// `base` as its renderer draws: its kernel, its preset's near plane, its background.
     pub fn settings(&self, base: crate::RenderSettings) -> crate::RenderSettings {
-        crate::RenderSettings { kernel: self.kernel(base.kernel), near: self.preset.near(), ..base }
+        crate::RenderSettings {
+            kernel: self.kernel(base.kernel),
+            near: self.preset.near(),
+            background: self.background.unwrap_or(base.background),
+            ..base
+        }
+    }
+
+    /// Whether its kernel is its preset's own (its degree and cutoff).
+    pub fn has_presets_kernel(&self) -> bool {
+        (self.kernel_degree, self.cutoff) == (self.preset.kernel_degree(), self.preset.cutoff())
     }
 
     /// What it is, in words: "3DGRT's ray tracer, kernel degree 4, cutoff 2.9970σ".
@@ -230,12 +244,9 @@ impl Trained {
             Preset::ThreeDgut => "3DGUT's renderer",
             Preset::TwoDgs => "2DGS's rasterizer",
         };
-        format!("{renderer}, kernel degree {}, cutoff {:.4}σ", self.kernel_degree, self.cutoff)
-    }
-
-    /// Whether its kernel is its preset's own.
-    pub fn is_presets(&self) -> bool {
-        *self == Self::of(self.preset)
+        let background =
+            self.background.map_or(String::new(), |b| format!(", over the background {},{},{}", b.x, b.y, b.z));
+        format!("{renderer}, kernel degree {}, cutoff {:.4}σ{background}", self.kernel_degree, self.cutoff)
     }
 }
 
@@ -292,6 +303,6 @@ mod tests {
         }
         let c = min_response_cutoff(GRUT_MIN_RESPONSE, 8);
         assert!((response(c * c, 8) - GRUT_MIN_RESPONSE).abs() < 1e-6);
-        assert!(!Trained { kernel_degree: 8, cutoff: c, ..Trained::of(Preset::ThreeDgrt) }.is_presets());
+        assert!(!Trained { kernel_degree: 8, cutoff: c, ..Trained::of(Preset::ThreeDgrt) }.has_presets_kernel());
     }
 }

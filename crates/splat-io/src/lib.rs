@@ -34,6 +34,7 @@ pub mod mesh;
 mod pickle;
 mod placement;
 pub mod ply;
+pub mod run;
 pub mod similarity;
 pub mod sog;
 pub mod splat;
@@ -259,7 +260,11 @@ pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, E
             let ply = ply::read_ply_progress(path, plain, options.progress)?;
             let format = if ply.compressed { SceneFormat::CompressedPly } else { SceneFormat::Ply };
             let (skipped_properties, filter_3d, surfels) = (ply.skipped, ply.filter_3d, ply.surfels);
-            SceneRead { skipped_properties, filter_3d, surfels, ..read(format, ply.scene) }
+            let mut read = SceneRead { skipped_properties, filter_3d, surfels, ..read(format, ply.scene) };
+            if format == SceneFormat::Ply {
+                run::read_beside(path, torch::Trainer::Inria, &mut read.scene, &mut read.notes);
+            }
+            read
         }
         Some("splat") => read(SceneFormat::Splat, splat::read_splat(path)?),
         Some("spz") => {

@@ -43,7 +43,7 @@ use rayon::prelude::*;
 use splat_core::particle::{SH_MAX_COEFFS, sh_coeff_count};
 use splat_core::sh::rgb_to_dc;
 use splat_core::trainer::{GRUT_MIN_RESPONSE, Preset, Trained, min_response_cutoff};
-use splat_core::{Particle, ParticleError, Scene, ScreenFilter};
+use splat_core::{Particle, ParticleError, Scene};
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::Path;
@@ -103,7 +103,7 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
         checkpoint(&source).map_err(|e| Error::new(path, e))
     };
     let (mut scene, mut info) = read(&ranks[0])?;
-    read_run_folder(path, &mut scene, &mut info);
+    crate::run::read_beside(path, info.trainer, &mut scene, &mut info.notes);
     if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
         return Ok((scene, info));
     }
@@ -129,99 +129,6 @@ pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
         names.join(", ")
     ));
     Ok((scene, info))
-}
-
-/// What the folder of the run whose checkpoint is `checkpoint` says of its splats (gsplat's
-/// `RESULT/ckpts/…`, Nerfstudio's `RUN/nerfstudio_models/…`): notes of the world they were
-/// trained in, and gsplat's antialiased mode where the run's config names it (gsplat's
-/// `antialiased: true`, splatfacto's `rasterize_mode: antialiased`), which no checkpoint holds:
-/// its screen filter, and its preset in place of the classic mode's.
-fn read_run_folder(checkpoint: &Path, scene: &mut Scene, info: &mut CheckpointInfo) {
-    let Some(run) = checkpoint.parent().and_then(Path::parent) else { return };
-    let antialiased = match info.trainer {
-        Trainer::Gsplat => {
-            let Some(config) = RunConfig::open(run.join("cfg.yml")) else { return };
-            info.notes.extend(config.world_note());
-            (config.setting("antialiased") == Some("true")).then_some(("gsplat", config.path, "antialiased: true"))
-        }
-        Trainer::Splatfacto => {
-            let transforms = run.join("dataparser_transforms.json");
-            if transforms.is_file() {
-                info.notes.push(format!(
-                    "splatfacto trained these splats in its normalised world: {} moves the cameras of its \
-                     transforms.json there (splat's dataparser-transforms option)",
-                    transforms.display()
-                ));
-            }
-            let Some(config) = RunConfig::open(run.join("config.yml")) else { return };
-            let mode = config.nested("rasterize_mode");
-            (mode == Some("antialiased")).then_some(("splatfacto", config.path, "rasterize_mode: antialiased"))
-        }
-        Trainer::Grut | Trainer::Inria => None,
-    };
-    if let Some((trainer, config, says)) = antialiased {
-        scene.screen_filter = ScreenFilter::Antialiased;
-        scene.trained = Some(Trained::of(Preset::GsplatAntialiased));
-        info.notes.push(format!(
-            "{trainer} rasterized these splats in gsplat's antialiased mode ({} says {says}): the splatting methods \
-             apply its screen filter",
-            config.display()
-        ));
-    }
-}
-
-/// A trainer's run config, the `yaml.dump` of its config object: gsplat's `cfg.yml` (a
-/// dataclass), Nerfstudio's `config.yml` (its `TrainerConfig`, the model's config nested in the
-/// pipeline's). Read by its lines, not by a YAML parser.
-struct RunConfig {
-    path: std::path::PathBuf,
-    text: String,
-}
-
-impl RunConfig {
-    /// The config at `path`, where there is one.
-    fn open(path: std::path::PathBuf) -> Option<Self> {
-        let text = std::fs::read_to_string(&path).ok()?;
-        Some(Self { path, text })
-    }
-
-    /// A top-level scalar: its `key: value` line at the left margin (nested values are
-    /// indented, lists and objects have no value on their key's line).
-    fn setting(&self, key: &str) -> Option<&str> {
-        self.scalar(key, |line| line)
-    }
-
-    /// A scalar at any depth: the first `key: value` line, however indented (for a key that
-    /// one object of the config alone has).
-    fn nested(&self, key: &str) -> Option<&str> {
-        self.scalar(key, str::trim_start)
-    }
-
-    /// The value of the first line that is `key: value` once `line` cuts it.
-    fn scalar<'t>(&'t self, key: &str, line: impl Fn(&'t str) -> &'t str) -> Option<&'t str> {
-        self.text
-            .lines()
-            .find_map(|l| line(l).strip_prefix(key)?.strip_prefix(": ").map(str::trim))
-            .filter(|v| !v.is_empty())
-    }
-
-    /// Where it says the run trained in its normalised world (gsplat's), a note saying so, with
-    /// the run's data folder and factor.
-    fn world_note(&self) -> Option<String> {
-        if self.setting("normalize_world_space")? != "true" {
-            return None;
-        }
-        let data = self.setting("data_dir").map_or(String::new(), |dir| format!(" from {dir}"));
-        let factor = self
-            .setting("data_factor")
-            .filter(|&f| f != "1")
-            .map_or(String::new(), |f| format!(", its images downscaled by {f} (splat's data-factor option)"));
-        Some(format!(
-            "gsplat trained these splats in its normalised world ({} says normalize_world_space: true){data}: the \
-             cameras of its COLMAP model line up with them through splat's gsplat-world option{factor}",
-            self.path.display()
-        ))
-    }
 }
 
 /// The step and rank of a gsplat checkpoint's file name, `ckpt_STEP_rankR.pt`.
@@ -469,12 +376,20 @@ fn grut_rendering<'v>(
         Some(Value::Str(method)) => [Preset::ThreeDgrt, Preset::ThreeDgut].into_iter().find(|p| p.name() == method),
         _ => None,
     };
-    let trained = preset.map(|preset| grut_kernel(preset, setting)).transpose()?;
+    let mut trained = preset.map(|preset| grut_kernel(preset, setting)).transpose()?;
+    let named = |path: &[&str], value: &str| matches!(setting(path), Some(Value::Str(s)) if s == value);
+    if let Some(trained) = &mut trained
+        && named(&["model", "background", "name"], "background-color")
+        && named(&["model", "background", "color"], "white")
+    {
+        trained.background = Some(glam::Vec3::ONE);
+        notes.push("3DGRUT composites these particles over white (its model.background.color): they render so".into());
+    }
     match trained {
         Some(trained) => {
             let (name, method) =
                 (if trained.preset == Preset::ThreeDgrt { "3DGRT" } else { "3DGUT" }, trained.preset.name());
-            let kernel = if trained.is_presets() {
+            let kernel = if trained.has_presets_kernel() {
                 String::new()
             } else {
                 format!(
@@ -537,7 +452,7 @@ fn grut_kernel<'v>(preset: Preset, setting: &dyn Fn(&[&str]) -> Option<&'v Value
             )));
         }
     };
-    Ok(Trained { preset, kernel_degree: degree, cutoff: min_response_cutoff(min_response, degree) })
+    Ok(Trained { kernel_degree: degree, cutoff: min_response_cutoff(min_response, degree), ..Trained::of(preset) })
 }
 
 /// A config's value as a message shows it: a name quoted, a number as it is.

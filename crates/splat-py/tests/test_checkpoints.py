@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import dataclasses
 import io
 import pickle
 import struct
@@ -411,6 +412,30 @@ def test_damaged_checkpoints_are_refused_never_misread(tmp_path):
 SPLATFACTO = ["means", "scales", "quats", "features_dc", "features_rest", "opacities"]
 
 
+@dataclasses.dataclass
+class SplatfactoModelConfig:
+    """The settings of Nerfstudio's SplatfactoModelConfig that splat reads, with its defaults."""
+
+    rasterize_mode: str = "classic"
+    sh_degree: int = 3
+    background_color: str = "random"
+
+
+@dataclasses.dataclass
+class VanillaPipelineConfig:
+    model: SplatfactoModelConfig = dataclasses.field(default_factory=SplatfactoModelConfig)
+
+
+@dataclasses.dataclass
+class TrainerConfig:
+    """A splatfacto run's config, as ns-train writes it to RUN/config.yml (yaml.dump of it):
+    the model's settings nested in the pipeline's."""
+
+    method_name: str = "splatfacto"
+    max_num_iterations: int = 30000
+    pipeline: VanillaPipelineConfig = dataclasses.field(default_factory=VanillaPipelineConfig)
+
+
 def save_splatfacto_checkpoint(path, g: dict, prefix: str = "_model.gauss_params.") -> list[str]:
     """Nerfstudio's checkpoint of a splatfacto model of conftest's raw Gaussians `g` (its
     trainer's torch.save of step, pipeline, optimizers, schedulers and scalers): the splats
@@ -500,25 +525,7 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
     # yaml.dump of its TrainerConfig, the model's config nested in the pipeline's): each renders
     # as its .ply with that mode's preset. The controls: the two images differ, and the classic
     # mode's from the .ply's without a preset (3DGS's rasterizer culls the near splat).
-    import dataclasses
-
     import yaml
-
-    @dataclasses.dataclass
-    class SplatfactoModelConfig:
-        rasterize_mode: str = "classic"
-        sh_degree: int = 3
-        background_color: str = "random"
-
-    @dataclasses.dataclass
-    class VanillaPipelineConfig:
-        model: SplatfactoModelConfig = dataclasses.field(default_factory=SplatfactoModelConfig)
-
-    @dataclasses.dataclass
-    class TrainerConfig:
-        method_name: str = "splatfacto"
-        max_num_iterations: int = 30000
-        pipeline: VanillaPipelineConfig = dataclasses.field(default_factory=VanillaPipelineConfig)
 
     save_splatfacto_checkpoint(ckpt, with_a_near_splat(g))
     write_3dgs_ply(ply, splatfacto_export(with_a_near_splat(g)))
@@ -532,15 +539,18 @@ def test_a_splatfacto_checkpoint_holds_what_ns_export_writes(tmp_path, splat_bin
             scene = splat.Scene.load(str(ckpt))
         assert scene.screen_filter == name and scene.trained["preset"] == preset, mode
         images[name] = splat.render(scene, camera, method="raster-sorted")["color"]
-        as_ply = splat.render(splat.Scene.load(str(ply), preset=preset), camera, method="raster-sorted", preset=preset)
+        # splatfacto's default background_color, random, evaluates over Viser's colour.
+        ply_scene, background = splat.Scene.load(str(ply), preset=preset), scene.trained["background"]
+        as_ply = splat.render(ply_scene, camera, method="raster-sorted", preset=preset, background=background)
         # Within 2e-6: at degree 0 the colours differ by the f32 rounding checked above.
         np.testing.assert_allclose(images[name], as_ply["color"], atol=2e-6, err_msg=mode)
     assert np.abs(images["antialiased"] - images["3dgs"]).max() > 1e-3
-    plain = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted")["color"]
+    plain = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted", background=background)["color"]
     assert np.abs(images["3dgs"] - plain).max() > 1e-3
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert "config.yml says rasterize_mode: antialiased" not in info.stderr, info.stderr
-    (run / "config.yml").write_text(yaml.dump(TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig("antialiased")))))
+    antialiased = TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig("antialiased")))
+    (run / "config.yml").write_text(yaml.dump(antialiased))
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert "config.yml says rasterize_mode: antialiased): the splatting methods apply" in info.stderr, info.stderr
     # Checkpoints before the parameter dict, and of a distributed run, read the same; the
@@ -582,7 +592,9 @@ def test_what_is_not_a_splatfacto_checkpoint_is_refused_by_name(tmp_path):
     assert '"features_dc" has shape [8, 1, 3], expected [8, 3]' in refused(path)
 
 
-def grut_config(method: str = "3dgrt", degree: int = 4, density: str = "sigmoid", normalize: bool = False):
+def grut_config(
+    method: str = "3dgrt", degree: int = 4, density: str = "sigmoid", normalize: bool = False, background: str = "black"
+):
     """A 3DGRUT run's config (the settings of configs/base_gs.yaml and configs/render/*.yaml that
     splat reads, among others), as Hydra hands it to the trainer: an OmegaConf DictConfig in
     struct mode."""
@@ -595,6 +607,7 @@ def grut_config(method: str = "3dgrt", degree: int = 4, density: str = "sigmoid"
                 "scale_activation": "exp",
                 "default_density": 0.1,
                 "progressive_training": {"init_n_features": 0, "max_n_features": 3, "increase_frequency": 1000},
+                "background": {"name": "background-color", "color": background},
             },
             "render": {
                 "method": method,
@@ -722,11 +735,13 @@ def test_a_3dgrut_checkpoint_renders_as_its_renderer_drew_it(tmp_path, splat_bin
         scene = load(config)
         degree = config.render.particle_kernel_degree
         cutoff = 3.0 * (np.log(1 / 0.0113) / 4.5) ** (1 / degree)  # where the kernel falls to 0.0113
-        assert scene.trained == {"preset": preset, "kernel_degree": degree, "cutoff": pytest.approx(cutoff, rel=1e-6)}
+        kernel = {"kernel_degree": degree, "cutoff": pytest.approx(cutoff, rel=1e-6)}
+        assert scene.trained == {"preset": preset, **kernel, "background": None}
         rendered = image(scene, method=method)
         np.testing.assert_array_equal(rendered, image(from_ply, method=method, **as_ply), err_msg=f"{preset} {degree}")
         assert not np.array_equal(rendered, image(from_ply, method=method)), f"{preset} {degree}: the control"
-    np.testing.assert_array_equal(image(load(grut_config()), method="exact", preset="3dgs"), image(from_ply, method="exact"))
+    as_3dgs = image(load(grut_config()), method="exact", preset="3dgs")
+    np.testing.assert_array_equal(as_3dgs, image(from_ply, method="exact"))
     assert load(None).trained is None and from_ply.trained is None
     np.testing.assert_array_equal(image(load(None), method="exact"), image(from_ply, method="exact"))
     # The CLI reads the same kernel: its image of the checkpoint is the .ply's with the preset.
@@ -823,3 +838,64 @@ def test_a_3dgs_checkpoint_holds_what_its_save_ply_writes(tmp_path, splat_bin, d
     path = tmp_path / "pair.pth"
     torch_save(((1, 2, 3), 30000), path, [])
     assert "nor 3DGS's (capture, iteration)" in refused(path)
+
+
+def test_a_runs_background_is_the_one_its_evaluation_composites_over(tmp_path):
+    """The colour a run's evaluation composites its splats over renders behind them: 3DGS's -w
+    (its model folder's cfg_args, beside its iterations' .ply and its checkpoints), splatfacto's
+    background_color (white; random, which evaluates over Viser's colour) and 3DGRUT's
+    model.background.color white. Each renders as the plain .ply over that colour; the
+    controls: the runs without it render over black, as the plain .ply does."""
+    g = raw_gaussians(np.random.default_rng(5), 24, degree=1)
+    camera = near_camera()
+    plain = tmp_path / "plain.ply"
+    write_3dgs_ply(plain, g)
+
+    def load(path):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return splat.Scene.load(str(path))
+
+    def image(scene, **options):
+        return splat.render(scene, camera, method="exact", **options)["color"]
+
+    black, white = image(load(plain)), image(load(plain), background=(1, 1, 1))
+    assert np.abs(white - black).max() > 0.5
+    # 3DGS: MODEL/cfg_args beside MODEL/point_cloud/iteration_30000/point_cloud.ply and
+    # MODEL/chkpnt30000.pth.
+    model = tmp_path / "model"
+    iteration = model / "point_cloud" / "iteration_30000"
+    iteration.mkdir(parents=True)
+    write_3dgs_ply(iteration / "point_cloud.ply", g)
+    save_inria_checkpoint(model / "chkpnt30000.pth", g)
+    for flag, expected in [(True, white), (False, black)]:
+        (model / "cfg_args").write_text(
+            f"Namespace(data_device='cuda', depths='', eval=True, images='images', model_path='{model}', "
+            f"resolution=-1, sh_degree=3, source_path='/data/nerf_synthetic/lego', train_test_exp=False, "
+            f"white_background={flag})"
+        )
+        for path in [iteration / "point_cloud.ply", model / "chkpnt30000.pth"]:
+            scene = load(path)
+            np.testing.assert_array_equal(image(scene), expected, err_msg=f"{path.name}, white_background={flag}")
+            assert (scene.trained or {}).get("background") == ((1.0, 1.0, 1.0) if flag else None), scene.trained
+    # splatfacto: RUN/config.yml beside RUN/nerfstudio_models/.
+    import yaml
+
+    run = tmp_path / "run"
+    (run / "nerfstudio_models").mkdir(parents=True)
+    ckpt = run / "nerfstudio_models" / "step-000029999.ckpt"
+    save_splatfacto_checkpoint(ckpt, g)
+    viser = (0.1490, 0.1647, 0.2157)
+    for color, background in [("white", (1.0, 1.0, 1.0)), ("random", viser), ("black", None)]:
+        config = TrainerConfig(pipeline=VanillaPipelineConfig(SplatfactoModelConfig(background_color=color)))
+        (run / "config.yml").write_text(yaml.dump(config))
+        scene = load(ckpt)
+        assert scene.trained["background"] == (None if background is None else pytest.approx(background)), color
+        expected = black if background is None else image(load(plain), background=scene.trained["background"])
+        np.testing.assert_array_equal(image(scene), expected, err_msg=color)
+    # 3DGRUT: its config, in its checkpoint.
+    grut = tmp_path / "ckpt_last.pt"
+    for color, expected in [("white", white), ("black", black), ("random", black)]:
+        save_grut_checkpoint(grut, g, grut_config(degree=2, background=color))
+        scene = load(grut)
+        np.testing.assert_array_equal(image(scene, kernel_degree=2, cutoff=3), expected, err_msg=color)
