@@ -113,7 +113,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
     if let Some(trained) = scene.trained {
         let chosen = if args.read.preset.is_some() { "; --preset chooses another" } else { "" };
         out!(
-            "trained    through {} (extent {}, response {}): the file says so{chosen}",
+            "trained    through {} (extent {}, response {}), as its file or run says{chosen}",
             trained.describe(),
             trained.preset.extent().name(),
             trained.preset.response().name()

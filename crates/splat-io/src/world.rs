@@ -443,8 +443,8 @@ fn parse_world(text: &str, base: &Path, screen_filter: Option<ScreenFilter>) -> 
                 trained.map_or("names no renderer".into(), |t| format!("was trained through {}", t.describe()))
             };
             notes.push(format!(
-                "splats[{i}] {} but splats[0] {}: a world's splats render with one kernel, the default one where no \
-                 preset or kernel is chosen",
+                "splats[{i}] {} but splats[0] {}: a world's splats render with one kernel, near plane and \
+                 background, the defaults where no preset, kernel or background is chosen",
                 said(particles.trained),
                 said(first_trained)
             ));
