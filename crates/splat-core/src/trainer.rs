@@ -186,11 +186,12 @@ pub fn min_response_cutoff(min_response: f32, degree: u32) -> f32 {
     3.0 * ((1.0 / min_response).ln() / 4.5).powf(1.0 / degree as f32)
 }
 
-/// What a capture's own file says of the renderer its trainer drew it through, beyond its
-/// screen filter ([`crate::Scene::screen_filter`]): a trainer's checkpoint is gsplat's
-/// rasterizer's (gsplat's, splatfacto's) or names its renderer and kernel (a 3DGRUT config's).
-/// Front ends render such a capture so where the user chose no preset or kernel, as they apply
-/// a file's screen filter.
+/// What a capture's file or its run's folder says of the renderer its trainer drew it through,
+/// beyond its screen filter ([`crate::Scene::screen_filter`]): a trainer's checkpoint is gsplat's
+/// rasterizer's (gsplat's, splatfacto's) or names its renderer and kernel (a 3DGRUT config's),
+/// and a run may name the background its evaluation composites over. Front ends render such a
+/// capture so where the user chose no preset, kernel or background, as they apply a file's
+/// screen filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trained {
     /// The preset of its renderer.
@@ -233,7 +234,7 @@ impl Trained {
         (self.kernel_degree, self.cutoff) == (self.preset.kernel_degree(), self.preset.cutoff())
     }
 
-    /// What it is, in words: "3DGRT's ray tracer, kernel degree 4, cutoff 2.9970σ".
+    /// What it is, in words: "3DGRT's ray tracer, kernel degree 4, cutoff 2.9972σ".
     pub fn describe(&self) -> String {
         let renderer = match self.preset {
             Preset::ThreeDgs => "the INRIA rasterizer",

@@ -745,9 +745,9 @@ impl PyRenderer {
     }
 }
 
-/// `scene` staged as `splat render` stages a file with `args` (the trainer's implications
-/// applied), `view` as the world's camera; refused when the camera is given twice or the
-/// image cannot fit in memory.
+/// `scene` staged as `splat render` stages a file with `args` (the screen filter they name and
+/// the trainer's implications applied), `view` as the world's camera; refused when the camera
+/// is given twice or the image cannot fit in memory.
 fn stage(mut args: RenderArgs, scene: &PyScene, view: Option<&PyCamera>) -> PyResult<(RenderArgs, Staged)> {
     if view.is_some() && (args.scene.camera.is_some() || args.scene.eye.is_some()) {
         return Err(SplatError::new_err(
@@ -756,6 +756,10 @@ fn stage(mut args: RenderArgs, scene: &PyScene, view: Option<&PyCamera>) -> PyRe
     }
     args.options.apply_preset(args.scene.read.preset);
     let mut world = scene.world.clone();
+    // The screen filter `screen_filter=` or `preset=` names, as `splat render` reads its file.
+    if let Some(filter) = args.scene.read.options().screen_filter {
+        world.scene.screen_filter = filter;
+    }
     if let Some(view) = view {
         world.camera = Some(view.camera);
     }

@@ -329,6 +329,9 @@ def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
         np.testing.assert_array_equal(images[name], as_ply["color"], err_msg=name)
     plain = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted")["color"]
     assert not np.array_equal(images["3dgs"], plain) and not np.array_equal(images["antialiased"], images["3dgs"])
+    # A preset given to render() names its screen filter too, as splat render's does.
+    as_preset = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted", preset="gsplat-antialiased")
+    np.testing.assert_array_equal(as_preset["color"], images["antialiased"])
     info = subprocess.run([splat_bin, "info", str(ckpt)], capture_output=True, text=True)
     assert "antialiased: true" not in info.stderr, info.stderr
     (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(antialiased=True))))
