@@ -97,29 +97,41 @@ impl CheckpointInfo {
 /// one rank's file is read with every other rank's of its step beside it, in rank order, as
 /// `simple_trainer`'s evaluation concatenates them.
 pub fn read_checkpoint(path: &Path) -> Result<(Scene, CheckpointInfo), Error> {
-    let ranks = gsplat_ranks(path)?;
     let read = |path: &Path| {
         let source = FileSource::open(path).map_err(|e| Error::new(path, ErrorKind::Io(e)))?;
         checkpoint(&source).map_err(|e| Error::new(path, e))
     };
-    let (mut scene, mut info) = read(&ranks[0])?;
+    let (mut scene, mut info) = read(path)?;
     crate::run::read_beside(path, info.trainer, &mut scene, &mut info.notes);
-    if ranks.len() == 1 || info.trainer != Trainer::Gsplat {
+    if info.trainer != Trainer::Gsplat {
         return Ok((scene, info));
     }
-    for rank in &ranks[1..] {
+    let ranks = gsplat_ranks(path)?;
+    if ranks.len() == 1 {
+        return Ok((scene, info));
+    }
+    let mut parts = Vec::with_capacity(ranks.len());
+    for rank in &ranks {
+        if rank == path {
+            parts.push(std::mem::take(&mut scene.particles));
+            continue;
+        }
         let (part, part_info) = read(rank)?;
         if part_info.trainer != Trainer::Gsplat || part.sh_degree != scene.sh_degree {
             let why = format!(
                 "not another rank of {}: a {:?} checkpoint of SH degree {} beside one of gsplat's of degree {}",
-                file_name(&ranks[0]),
+                file_name(path),
                 part_info.trainer,
                 part.sh_degree,
                 scene.sh_degree
             );
             return Err(Error::new(rank, ErrorKind::Checkpoint(why)));
         }
-        scene.particles.extend(part.particles);
+        parts.push(part.particles);
+    }
+    scene.particles = Vec::with_capacity(parts.iter().map(Vec::len).sum());
+    for part in parts {
+        scene.particles.extend(part);
     }
     let names: Vec<String> = ranks.iter().map(|p| file_name(p)).collect();
     info.notes.push(format!(

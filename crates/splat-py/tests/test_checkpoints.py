@@ -270,6 +270,14 @@ def test_a_distributed_runs_ranks_read_together(tmp_path, splat_bin):
     (tmp_path / "ckpt_6999_rank1.pt").unlink()
     message = refused(tmp_path / "ckpt_6999_rank2.pt")
     assert "3 ranks, and ckpt_6999_rank1.pt is missing" in message, message
+    # A file named like a rank that is another trainer's reads as itself; beside it, gsplat's
+    # rank is refused rather than read with it (the reader once returned rank 0's file for
+    # whichever rank was asked for).
+    save_splatfacto_checkpoint(tmp_path / "ckpt_6999_rank0.pt", g)
+    save_checkpoint(tmp_path / "ckpt_6999_rank1.pt", gsplat_parameters({k: v[1::ranks] for k, v in g.items()}))
+    assert len(splat.Scene.load(str(tmp_path / "ckpt_6999_rank0.pt"))) == 30
+    message = refused(tmp_path / "ckpt_6999_rank1.pt")
+    assert "not another rank of ckpt_6999_rank1.pt: a Splatfacto checkpoint" in message, message
 
 
 def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
