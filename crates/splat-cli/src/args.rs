@@ -444,7 +444,9 @@ pub struct SceneArgs {
     /// Lighting §1.5).
     #[arg(help_heading = "Camera", long, value_parser = parse_pixel)]
     pub focus_at: Option<(u32, u32)>,
-    /// Background colour "r,g,b" behind the particles [default: the world's, else 0,0,0].
+    /// Background colour "r,g,b" behind the particles [default: the world's, else the one the
+    /// capture's run composites over (3DGS's white_background, splatfacto's background_color,
+    /// 3DGRUT's), else 0,0,0].
     #[arg(help_heading = "Scene and shading", long, value_parser = parse_vec3)]
     pub background: Option<Vec3>,
     /// Drop the SH bands above this degree (0–3), removing some baked lighting before relighting.
@@ -746,8 +748,8 @@ impl SceneArgs {
         Ok(())
     }
 
-    /// `base` (the defaults, or what a world or scene file sets: a 3DGRUT checkpoint's kernel)
-    /// under these options.
+    /// `base` (the defaults, or what a world or scene file sets: the kernel, near plane and
+    /// background of the renderer its trainer drew it through) under these options.
     fn settings_over(&self, base: RenderSettings) -> RenderSettings {
         let preset = self.read.preset;
         RenderSettings {

@@ -122,8 +122,8 @@ pub struct WorldSpec {
 
 impl WorldSpec {
     /// `base` with what the file sets: its background, bounce limit, iso thresholds, pixel
-    /// filter and SH storage, over the kernel and near plane of the renderer its splats were
-    /// trained through where their file says ([`Scene::trained`]).
+    /// filter and SH storage, over the kernel, near plane and background of the renderer its
+    /// splats were trained through where their file or run says ([`Scene::trained`]).
     pub fn settings(&self, base: RenderSettings) -> RenderSettings {
         let base = self.scene.trained.map_or(base, |trained| trained.settings(base));
         RenderSettings {
