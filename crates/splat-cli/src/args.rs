@@ -853,7 +853,7 @@ pub fn read_scene(path: &std::path::Path, read: ReadArgs) -> Result<splat_io::Sc
 /// Print what the reader noted (`splat_io::SceneRead::notes`).
 pub(crate) fn print_notes(path: &std::path::Path, notes: &[String]) {
     for note in notes {
-        eprintln!("note: {}: {note}", path.display());
+        eprintln!("note: {}", splat_io::file_note(path, note));
     }
 }
 

@@ -112,11 +112,12 @@ pub fn run(args: InfoArgs) -> Result<()> {
     }
     if let Some(trained) = scene.trained {
         let chosen = if args.read.preset.is_some() { "; --preset chooses another" } else { "" };
+        let (extent, response) = splat_core::trainer::capture_splatting(&scene);
         out!(
             "trained    through {} (extent {}, response {}), as its file or run says{chosen}",
             trained.describe(),
-            trained.preset.extent().name(),
-            trained.preset.response().name()
+            extent.name(),
+            response.name()
         );
     }
     let filter = scene.screen_filter;

@@ -238,6 +238,11 @@ pub fn skipped_properties_warning(path: &Path, skipped: &[String]) -> Option<Str
         .then(|| format!("{}: skipped unknown vertex properties {}", path.display(), skipped.join(", ")))
 }
 
+/// A reader's note on the file at `path` as front ends show it: `PATH: note`.
+pub fn file_note(path: &Path, note: &str) -> String {
+    format!("{}: {note}", path.display())
+}
+
 /// Read a scene, choosing the format by extension, and report what was skipped.
 pub fn read_scene_with(path: &Path, options: ReadOptions) -> Result<SceneRead, Error> {
     let read = |format, scene: Scene| SceneRead {

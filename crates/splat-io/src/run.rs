@@ -46,13 +46,14 @@ fn inria(file: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
         }
         _ => folder,
     };
-    let Ok(text) = std::fs::read_to_string(model.join("cfg_args")) else { return };
+    let cfg_args = model.join("cfg_args");
+    let Ok(text) = std::fs::read_to_string(&cfg_args) else { return };
     if text.contains("white_background=True") {
         scene.trained.get_or_insert(Trained::of(Preset::ThreeDgs)).background = Some(Vec3::ONE);
         notes.push(format!(
             "3DGS trained these splats over a white background ({} says white_background=True), as its renders \
              composite them: they render so",
-            model.join("cfg_args").display()
+            cfg_args.display()
         ));
     }
 }
@@ -83,7 +84,8 @@ fn splatfacto(checkpoint: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
     if config.nested("rasterize_mode") == Some("antialiased") {
         antialiased(scene, notes, "splatfacto", &config, "rasterize_mode: antialiased");
     }
-    let background = match config.nested("background_color") {
+    let color = config.nested("background_color");
+    let background = match color {
         Some("random") => SPLATFACTO_RANDOM_BACKGROUND,
         Some("white") => Vec3::ONE,
         _ => return,
@@ -94,7 +96,7 @@ fn splatfacto(checkpoint: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
         "splatfacto evaluates these splats over the background {r},{g},{b} ({} says background_color: {}): they \
          render so",
         config.path.display(),
-        config.nested("background_color").unwrap_or_default()
+        color.unwrap_or_default()
     ));
 }
 

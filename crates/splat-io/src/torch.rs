@@ -420,9 +420,7 @@ fn grut_rendering<'v>(
                 .into(),
         ),
     }
-    if let Some(Value::Str(primitive)) = setting(&["render", "primitive_type"])
-        && primitive == "trisurfel"
-    {
+    if named(&["render", "primitive_type"], "trisurfel") {
         notes.push(
             "3DGRUT trained these particles as flat surfels (its render.primitive_type trisurfel); they are read as \
              Gaussians of their three scales"

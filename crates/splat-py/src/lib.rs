@@ -66,7 +66,7 @@ impl PyScene {
         }
         // What the reader did or found that the user should hear of, as `splat` prints it.
         for note in &opened.notes {
-            warn(format!("{}: {note}", path.display()))?;
+            warn(splat_io::file_note(&path, note))?;
         }
         Ok(Self { world: opened.world, name: opened.name })
     }

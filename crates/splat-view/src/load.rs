@@ -58,7 +58,7 @@ pub fn load(
             eprintln!("warning: {warning}");
         }
         for note in &opened.notes {
-            eprintln!("note: {}: {note}", path.display());
+            eprintln!("note: {}", splat_io::file_note(path, note));
         }
     }
     let (world, name) = (opened.world, opened.name);
