@@ -1814,6 +1814,9 @@ fn a_new_users_mistakes_are_refused_with_clear_messages_before_any_work() {
     assert!(!ok && text.contains("holds no splats and no meshes"), "the viewer opened an empty scene: {text}");
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.ply", "-o", out]);
     assert!(!ok && text.contains("not a camera file") && text.contains("COLMAP"), "{text}");
+    // A field of view without a look-at camera would change nothing: refused, naming what it needs.
+    let (ok, text) = said(&["render", "fixtures/cloud.ply", "--fov", "30", "-o", out]);
+    assert!(!ok && text.contains("--eye <EYE>") && text.contains("--target <TARGET>"), "{text}");
 }
 
 /// A world file naming a file that is not there: the error names the world file, the entry
