@@ -610,6 +610,12 @@ pub fn load_cameras(path: &std::path::Path, options: ViewOptions) -> Result<Vec<
 }
 
 impl SceneArgs {
+    /// The files these options read (the scene, the cameras, a run's dataparser transforms),
+    /// which no output may replace ([`check_outputs`]).
+    pub fn inputs(&self) -> Vec<&std::path::Path> {
+        [&self.scene, &self.camera, &self.dataparser_transforms].into_iter().filter_map(|p| p.as_deref()).collect()
+    }
+
     /// How --camera's views are read.
     ///
     /// With --undistort, --width and --height size the cameras before they are undistorted (the
@@ -873,6 +879,26 @@ pub fn check_output(path: &std::path::Path, flag: &str) -> Result<()> {
     }
     if path.is_dir() {
         bail!("{flag} {} is a folder: give a file name", path.display());
+    }
+    Ok(())
+}
+
+/// Refuse a command's `outputs` (each `(flag, path)`) before any work: each as [`check_output`]
+/// does, and any that is the file of another (the later would replace the earlier) or one of
+/// the `inputs` the command reads (it would be lost).
+pub fn check_outputs(outputs: &[(&str, &std::path::Path)], inputs: &[&std::path::Path]) -> Result<()> {
+    for (i, &(flag, path)) in outputs.iter().enumerate() {
+        check_output(path, flag)?;
+        if let Some((other, _)) = outputs[..i].iter().find(|(_, p)| crate::same_path(p, path)) {
+            bail!("{flag} {} is also {other}'s file: give each output its own path", path.display());
+        }
+        if let Some(input) = inputs.iter().find(|p| crate::same_path(p, path)) {
+            bail!(
+                "{flag} {} would replace {}, which this command reads: give another path",
+                path.display(),
+                input.display()
+            );
+        }
     }
     Ok(())
 }

@@ -1,11 +1,11 @@
 //! `splat convert`: a scene from one format to another.
 
 use crate::args::ReadArgs;
-use anyhow::Result;
+use anyhow::{Result, bail};
 use clap::Args;
 use splat_io::SceneFormat;
 use splat_io::spz::SpzWriteOptions;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `splat convert`.
 #[derive(Args)]
@@ -33,6 +33,7 @@ pub struct ConvertArgs {
 /// Run `splat convert`.
 pub fn run(args: ConvertArgs) -> Result<()> {
     let format = SceneFormat::for_output(&args.output)?;
+    refuse_overwriting_the_input(&args.input, &args.output)?;
     let read = crate::args::read_scene(&args.input, args.read)?;
     let scene = read.scene;
     if format == SceneFormat::Splat && scene.sh_degree > 0 {
@@ -84,4 +85,28 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         size(&args.output)
     );
     Ok(())
+}
+
+/// Refuse an `output` that cannot be written or would write over `input`: the same file, or a
+/// SOG `meta.json` in the folder of an input `meta.json`, whose images it would replace (both
+/// name theirs alike).
+fn refuse_overwriting_the_input(input: &Path, output: &Path) -> Result<()> {
+    crate::args::check_outputs(&[("the output", output)], &[input])?;
+    if let (Some(read), Some(written)) = (meta_folder(input), meta_folder(output))
+        && crate::same_path(read, written)
+    {
+        bail!(
+            "the output {} would write its images over those of the input {}: give another folder",
+            output.display(),
+            input.display()
+        );
+    }
+    Ok(())
+}
+
+/// The folder of a SOG `meta.json` (its images lie beside it); `None` for other paths.
+fn meta_folder(path: &Path) -> Option<&Path> {
+    let bundle = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("sog"));
+    (splat_io::sog::is_sog_path(path) && !bundle)
+        .then(|| path.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(Path::new(".")))
 }

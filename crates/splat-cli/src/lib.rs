@@ -23,6 +23,32 @@ pub fn counted(n: usize, noun: &str) -> String {
     if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
 }
 
+/// Whether `a` and `b` name one file or folder, however they are spelled (relative or
+/// absolute, `./` and symbolic links resolved), whether or not it exists yet. The commands check
+/// their outputs with it, so that none writes over what it reads or another of its outputs.
+pub fn same_path(a: &std::path::Path, b: &std::path::Path) -> bool {
+    matches!((resolved(a), resolved(b)), (Some(a), Some(b)) if a == b)
+}
+
+/// `path` absolute, through its deepest existing folder canonicalised, the names below it
+/// (not created yet) appended as they are; `None` where it cannot be resolved.
+fn resolved(path: &std::path::Path) -> Option<std::path::PathBuf> {
+    let absolute = std::path::absolute(path).ok()?;
+    let mut existing = absolute.as_path();
+    let mut below = Vec::new();
+    let mut canonical = loop {
+        match std::fs::canonicalize(existing) {
+            Ok(c) => break c,
+            Err(_) => {
+                below.push(existing.file_name()?);
+                existing = existing.parent()?;
+            }
+        }
+    };
+    canonical.extend(below.iter().rev());
+    Some(canonical)
+}
+
 #[cfg(test)]
 mod tests {
     use clap::{Args, Command};

@@ -32,13 +32,11 @@ pub fn run(args: MergeArgs) -> Result<()> {
     if !to_acc {
         ImageFormat::from_path(&args.output)?;
     }
-    for (flag, path) in
-        [("-o", Some(&args.output)), ("--variance", args.variance.as_ref()), ("--alpha", args.alpha.as_ref())]
-    {
-        if let Some(path) = path {
-            crate::args::check_output(path, flag)?;
-        }
-    }
+    let outputs =
+        [("-o", Some(&args.output)), ("--variance", args.variance.as_ref()), ("--alpha", args.alpha.as_ref())];
+    let outputs: Vec<_> = outputs.into_iter().filter_map(|(flag, p)| Some((flag, p?.as_path()))).collect();
+    let parts: Vec<_> = args.parts.iter().map(PathBuf::as_path).collect();
+    crate::args::check_outputs(&outputs, &parts)?;
     let shares = args
         .parts
         .iter()

@@ -126,10 +126,11 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     if args.frames.is_some() {
         return run_share(args);
     }
-    for (flag, path) in outputs(&args) {
+    let files = outputs(&args);
+    for (_, path) in &files {
         ImageFormat::from_path(path)?;
-        crate::args::check_output(path, flag)?;
     }
+    crate::args::check_outputs(&files, &args.scene.inputs())?;
     let staged = args.scene.load_world(640, 480)?;
     args.options.apply_capture(&staged.world.scene);
     let args = args;
@@ -184,7 +185,7 @@ fn run_share(mut args: RenderArgs) -> Result<()> {
             "--frames writes one accumulation file: drop --alpha, --depth, --normal and --variance (`splat merge` writes them)"
         );
     }
-    crate::args::check_output(&args.output, "-o")?;
+    crate::args::check_outputs(&[("-o", &args.output)], &args.scene.inputs())?;
     let staged = args.scene.load_world(640, 480)?;
     args.options.apply_capture(&staged.world.scene);
     let args = args;
@@ -352,10 +353,11 @@ pub fn render_views(
 }
 
 /// The images `splat render` writes, with their flags: colour first.
-fn outputs(args: &RenderArgs) -> Vec<(&'static str, &PathBuf)> {
+fn outputs(args: &RenderArgs) -> Vec<(&'static str, &Path)> {
     let extra = [("--alpha", &args.alpha), ("--depth", &args.depth), ("--normal", &args.normal)];
     let extra = extra.into_iter().chain([("--variance", &args.variance)]);
-    std::iter::once(("-o", &args.output)).chain(extra.filter_map(|(flag, p)| p.as_ref().map(|p| (flag, p)))).collect()
+    let extra = extra.filter_map(|(flag, p)| p.as_deref().map(|p| (flag, p)));
+    std::iter::once(("-o", args.output.as_path())).chain(extra).collect()
 }
 
 /// The files written, for the summary line.

@@ -77,6 +77,26 @@ fn photo_path(images: &Path, name: &str) -> PathBuf {
     candidates.into_iter().find(|p| p.is_file()).unwrap_or(path)
 }
 
+/// Refuse to write the undistorted photographs or the `masks` where they would replace the
+/// photographs in `images` or each other (all are named `NAME.png`).
+fn refuse_overwriting(images: &Path, output: &Path, masks: Option<&Path>) -> Result<()> {
+    let photos = "the photographs it reads";
+    let mut clashes = vec![("-o", output, images, photos)];
+    if let Some(masks) = masks {
+        clashes.push(("--masks", masks, images, photos));
+        clashes.push(("--masks", masks, output, "the undistorted photographs (-o)"));
+    }
+    for (flag, folder, other, what) in clashes {
+        if crate::same_path(folder, other) {
+            bail!(
+                "{flag} {} is the folder of {what}: writing NAME.png there would replace them; give another folder",
+                folder.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// `splat undistort`: each view's photograph, read from --images, undistorted as --undistort's
 /// trainer does it, into -o.
 pub fn run(args: UndistortArgs) -> Result<()> {
@@ -96,32 +116,33 @@ pub fn run(args: UndistortArgs) -> Result<()> {
     if !images.is_dir() {
         bail!("{} is not a folder of photographs: give the views' folder with --images", images.display());
     }
+    refuse_overwriting(&images, &args.output, args.masks.as_deref())?;
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let start = Instant::now();
     let (mut resampled, mut masks) = (0, 0);
     let mut undistortions = splat_core::undistort::Undistortions::new(args.undistort);
     for (index, (name, camera)) in views.iter().enumerate() {
+        let view = format!("view {index} ({name})");
         let source = photo_path(&images, name);
-        let photo = splat_io::image::read_photo(&source).with_context(|| {
-            format!("view {index} ({name}): its photograph (the image names are relative to --images)")
-        })?;
+        let photo = splat_io::image::read_photo(&source)
+            .with_context(|| format!("{view}: its photograph (the image names are relative to --images)"))?;
         if (photo.width, photo.height) != (camera.width, camera.height) {
             bail!(
-                "view {index} ({name}): the photograph is {} × {} and the camera {} × {}: give the trainer's \
-                 --data-factor, or the photographs' --width and --height, to scale the cameras to them",
+                "{view}: the photograph is {} × {} and the camera {} × {}: give the trainer's --data-factor, or \
+                 the photographs' --width and --height, to scale the cameras to them",
                 photo.width,
                 photo.height,
                 camera.width,
                 camera.height
             );
         }
-        let undistorting = undistortions.of(camera).with_context(|| format!("view {index} ({name})"))?;
-        let out = undistorting.photo(&photo).with_context(|| format!("view {index} ({name})"))?;
+        let undistorting = undistortions.of(camera).context(view.clone())?;
+        let out = undistorting.photo(&photo).context(view.clone())?;
         resampled += usize::from(out != photo);
         let file = format!("{}.png", crate::render::view_stem(name, index));
         splat_io::image::write_photo(&args.output.join(&file), &out)?;
         if let Some(folder) = &args.masks
-            && let Some(mask) = undistortions.mask(camera).with_context(|| format!("view {index} ({name})"))?
+            && let Some(mask) = undistortions.mask(camera).context(view)?
         {
             std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
             splat_io::image::write_photo(&folder.join(&file), mask)?;

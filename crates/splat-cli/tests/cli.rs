@@ -1817,6 +1817,37 @@ fn a_new_users_mistakes_are_refused_with_clear_messages_before_any_work() {
     // A field of view without a look-at camera would change nothing: refused, naming what it needs.
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "--fov", "30", "-o", out]);
     assert!(!ok && text.contains("--eye <EYE>") && text.contains("--target <TARGET>"), "{text}");
+    // No output replaces what the command reads or another of its outputs, however spelled.
+    let input = scratch("own.ply");
+    std::fs::copy(root().join("fixtures/plates.ply"), &input).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let folder = input.parent().unwrap();
+    let spelled = folder.join("..").join(folder.file_name().unwrap()).join(".").join("own.ply");
+    let (ok, text) = said(&["convert", input.to_str().unwrap(), spelled.to_str().unwrap()]);
+    assert!(!ok && text.contains("which this command reads"), "{text}");
+    assert_eq!(std::fs::read(&input).unwrap(), before, "a refused conversion wrote over its input");
+    let sog = scratch("own-sog");
+    std::fs::create_dir_all(&sog).unwrap();
+    let (meta, beside) = (sog.join("meta.json"), sog.join("copy-meta.json"));
+    let (ok, text) = said(&["convert", input.to_str().unwrap(), meta.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    let (ok, text) = said(&["convert", meta.to_str().unwrap(), beside.to_str().unwrap()]);
+    assert!(!ok && text.contains("would write its images over those of the input"), "{text}");
+    let (ok, text) = said(&["render", "fixtures/cloud.ply", "-o", out, "--alpha", out]);
+    assert!(!ok && text.contains("--alpha") && text.contains("is also -o's file"), "{text}");
+    let share = scratch("share.acc");
+    let (ok, text) = said(&["merge", share.to_str().unwrap(), "-o", share.to_str().unwrap()]);
+    assert!(!ok && text.contains("which this command reads"), "{text}");
+    let into = |folders: &[&str]| {
+        let camera = ["undistort", "--camera", "fixtures/cloud.cameras.json", "--undistort", "gsplat"];
+        said(&[&camera[..], &["--images", "fixtures"], folders].concat())
+    };
+    let (ok, text) = into(&["-o", "fixtures/."]);
+    assert!(!ok && text.contains("-o fixtures/. is the folder of the photographs it reads"), "{text}");
+    let masks = scratch("undistort-masks");
+    let masks = masks.to_str().unwrap();
+    let (ok, text) = into(&["-o", masks, "--masks", masks]);
+    assert!(!ok && text.contains("is the folder of the undistorted photographs (-o)"), "{text}");
 }
 
 /// A world file naming a file that is not there: the error names the world file, the entry
