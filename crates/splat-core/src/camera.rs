@@ -130,6 +130,11 @@ impl Camera {
         width: u32,
         height: u32,
     ) -> Result<Self, CameraError> {
+        for (name, v) in [("eye", eye), ("target", target), ("up", up)] {
+            if !v.is_finite() {
+                return Err(CameraError::Pose(format!("{name} {v} is not finite")));
+            }
+        }
         let forward =
             (target - eye).try_normalize().ok_or_else(|| CameraError::Pose("eye and target coincide".into()))?;
         let right = forward
@@ -420,5 +425,18 @@ mod tests {
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Z, 60.0, 4, 4).is_err());
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 0, 4).is_err());
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 100_000, 4).is_err());
+        // A point that is not finite is named as such (a NaN eye read as "eye and target coincide").
+        let nan = Vec3::new(0.0, f32::NAN, 0.0);
+        for (name, [eye, target, up]) in [
+            ("eye", [nan, Vec3::ZERO, Vec3::Y]),
+            ("target", [Vec3::Z, nan, Vec3::Y]),
+            ("up", [Vec3::Z, Vec3::ZERO, nan]),
+        ] {
+            let e = Camera::look_at(eye, target, up, 60.0, 4, 4).unwrap_err().to_string();
+            assert!(e.contains(&format!("{name} [0, NaN, 0] is not finite")), "{e}");
+        }
+        let far = Vec3::new(0.0, 0.0, f32::INFINITY);
+        let e = Camera::look_at(far, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).unwrap_err().to_string();
+        assert!(e.contains("eye [0, 0, inf] is not finite"), "{e}");
     }
 }
