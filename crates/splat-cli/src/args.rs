@@ -538,13 +538,8 @@ pub struct ReadArgs {
     /// 3dgut: the cutoff of their minimum response) [default: the one the capture's file names:
     /// a trainer's checkpoint, gsplat's rasterizer for gsplat's and splatfacto's, 3DGRUT's
     /// renderer and kernel as its config names them].
-    #[arg(long, value_parser = preset_parser())]
+    #[arg(long, value_parser = splat_view::preset_parser())]
     pub preset: Option<Preset>,
-}
-
-/// The values of `--preset`: every [`Preset`] by its name, described.
-fn preset_parser() -> impl TypedValueParser<Value = Preset> {
-    splat_view::choice_parser(&Preset::ALL, Preset::name, Preset::describe)
 }
 
 impl ReadArgs {

@@ -214,6 +214,12 @@ impl Trained {
         Self { preset, kernel_degree: preset.kernel_degree(), cutoff: preset.cutoff(), background: None }
     }
 
+    /// `preset`'s renderer and kernel in place of those `trained` names (a run's word, or none),
+    /// keeping the background its run composites over, of which a preset says nothing.
+    pub fn instead(trained: Option<Trained>, preset: Preset) -> Self {
+        Self { background: trained.and_then(|t| t.background), ..Self::of(preset) }
+    }
+
     /// The kernel it trained with: `base` with its degree and cutoff.
     pub fn kernel(&self, base: KernelParams) -> KernelParams {
         KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..base }

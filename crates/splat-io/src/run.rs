@@ -104,8 +104,7 @@ fn splatfacto(checkpoint: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
 /// and its preset in place of the classic mode's.
 fn antialiased(scene: &mut Scene, notes: &mut Vec<String>, trainer: &str, config: &RunConfig, says: &str) {
     scene.screen_filter = ScreenFilter::Antialiased;
-    let background = scene.trained.and_then(|t| t.background);
-    scene.trained = Some(Trained { background, ..Trained::of(Preset::GsplatAntialiased) });
+    scene.trained = Some(Trained::instead(scene.trained, Preset::GsplatAntialiased));
     notes.push(format!(
         "{trainer} rasterized these splats in gsplat's antialiased mode ({} says {says}): the splatting methods \
          apply its screen filter",

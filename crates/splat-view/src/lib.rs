@@ -27,6 +27,7 @@ use eframe::egui_wgpu;
 use splat_core::ScreenFilter;
 use splat_core::glam::Vec3;
 use splat_core::sh::ShStorage;
+use splat_core::trainer::Preset;
 use splat_core::undistort::Undistortion;
 use splat_gpu::GpuContext;
 use splat_io::cameras::{Split, ViewOptions};
@@ -88,9 +89,14 @@ pub struct SceneArgs {
     #[arg(long, default_value_t = 1024)]
     pub max_frames: u32,
     /// The screen-space filter the capture was trained with, which the splatting methods apply
-    /// (default: the one its file names; else 3dgs).
+    /// (default: the --preset's, else the one its file names; else 3dgs).
     #[arg(long, value_parser = screen_filter_parser())]
     pub screen_filter: Option<ScreenFilter>,
+    /// The trainer of the capture: the renderer the window starts with (its screen filter, splat
+    /// extent and response, near plane, kernel degree and cutoff), which the panel can change
+    /// [default: the one the capture's file names: a trainer's checkpoint; else 3dgs].
+    #[arg(long, value_parser = preset_parser())]
+    pub preset: Option<Preset>,
     /// How the SH coefficients are stored (vk_gaussian_splatting's SH formats): f16 halves the
     /// GPU's largest scene array, u8 quarters it, each rounding the colours; the CPU reads the
     /// same stored values [default: the world's, else f32].
@@ -101,7 +107,8 @@ pub struct SceneArgs {
 impl SceneArgs {
     /// Read the scene and its views, checking `--camera-index` against them.
     pub fn load(&self) -> Result<load::Loaded> {
-        let read = splat_io::ReadOptions { screen_filter: self.screen_filter, ..Default::default() };
+        let screen_filter = self.screen_filter.or(self.preset.and_then(Preset::screen_filter));
+        let read = splat_io::ReadOptions { screen_filter, ..Default::default() };
         let views = ViewOptions {
             dataparser: self.dataparser_transforms.as_deref(),
             world_transform: self.world_transform,
@@ -110,7 +117,7 @@ impl SceneArgs {
             ..Default::default()
         };
         let cameras = self.camera.as_deref().map(|path| (path, self.gsplat_world));
-        let mut loaded = load::load(self.scene.as_deref(), cameras, views, read)?;
+        let mut loaded = load::load(self.scene.as_deref(), cameras, views, read, self.preset)?;
         if let Some(storage) = self.sh_storage {
             loaded.info.render.sh_storage = storage;
         }
@@ -178,6 +185,12 @@ pub fn world_transform_parser(path: &str) -> Result<Similarity, String> {
 /// described.
 pub fn split_parser() -> impl clap::builder::TypedValueParser<Value = Split> {
     choice_parser(&Split::ALL, Split::name, Split::describe)
+}
+
+/// The values of `--preset` (here and in the `splat` commands): every [`Preset`] by its name,
+/// described.
+pub fn preset_parser() -> impl clap::builder::TypedValueParser<Value = Preset> {
+    choice_parser(&Preset::ALL, Preset::name, Preset::describe)
 }
 
 /// The values of `--screen-filter` (here and in the `splat` commands): every [`ScreenFilter`]

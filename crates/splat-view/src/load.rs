@@ -7,6 +7,7 @@ use splat_core::glam::Vec3;
 use splat_core::mesh::Meshes;
 use splat_core::particle::Aabb;
 use splat_core::raster::{Response, SplatExtent};
+use splat_core::trainer::{Preset, Trained};
 use splat_core::{Camera, RenderSettings, World};
 use splat_io::cameras::ViewOptions;
 use std::path::Path;
@@ -51,8 +52,12 @@ pub fn load(
     cameras: Option<(&Path, bool)>,
     views: splat_io::cameras::ViewOptions,
     options: splat_io::ReadOptions,
+    preset: Option<Preset>,
 ) -> Result<Loaded> {
-    let opened = splat_io::world::open_world(scene, options)?;
+    let mut opened = splat_io::world::open_world(scene, options)?;
+    if let Some(preset) = preset {
+        opened.world.scene.trained = Some(Trained::instead(opened.world.scene.trained, preset));
+    }
     if let Some(path) = scene {
         if let Some(warning) = splat_io::skipped_properties_warning(path, &opened.skipped_properties) {
             eprintln!("warning: {warning}");

@@ -62,8 +62,9 @@ fn harness_of(
     cameras: Option<&std::path::Path>,
     options: &Options,
 ) -> Option<(Harness<'static, Viewer>, RenderState)> {
-    let loaded = splat_view::load::load(scene, cameras.map(|c| (c, false)), Default::default(), Default::default())
-        .expect("the fixture loads");
+    let loaded =
+        splat_view::load::load(scene, cameras.map(|c| (c, false)), Default::default(), Default::default(), None)
+            .expect("the fixture loads");
     let mut viewer = Viewer::new(loaded, options, state.clone(), egui::Context::default());
     viewer.hide_rate = true;
     let harness = Harness::builder()
@@ -239,6 +240,7 @@ fn the_view_in_host_memory_is_the_batch_render() {
             None,
             Default::default(),
             Default::default(),
+            None,
         )
         .expect("the cloud");
         let mut settings = Settings::new(loaded.info.render, &loaded.world.lighting, backend);
@@ -276,11 +278,51 @@ fn the_panel_splats_a_capture_as_its_trainer() {
     for (path, extent) in
         [(antialiased.clone(), SplatExtent::AlphaCull), (root.join("fixtures/cloud.ply"), SplatExtent::ThreeDgs)]
     {
-        let loaded = splat_view::load::load(Some(&path), None, Default::default(), Default::default()).unwrap();
+        let loaded = splat_view::load::load(Some(&path), None, Default::default(), Default::default(), None).unwrap();
         let (_, settings) = options(BackendChoice::Cpu, 1).start(loaded.info, &loaded.world.lighting, Backend::Cpu);
         assert_eq!((settings.params.raster.extent, settings.params.raster.response), (extent, Response::Projected));
     }
     std::fs::remove_file(antialiased).unwrap();
+}
+
+/// `--preset` starts the window with that trainer's renderer, as `splat render --preset` draws
+/// it: its kernel, near plane, screen filter, extent and response (3DGRT's degree-4 kernel
+/// along the rays; gsplat's antialiased filter and footprint), over the plain `.ply`'s 3DGS
+/// defaults (the control).
+#[test]
+fn a_preset_starts_the_window_with_its_trainers_renderer() {
+    use clap::Parser;
+    use splat_core::raster::{Response, SplatExtent};
+    use splat_core::trainer::Preset;
+    #[derive(Parser)]
+    struct View {
+        #[command(flatten)]
+        scene: splat_view::SceneArgs,
+    }
+    let ply = splat_tests::root().join("fixtures/cloud.ply");
+    let ply = ply.to_str().unwrap();
+    for (preset, filter) in [
+        (None, splat_core::ScreenFilter::Dilation),
+        (Some(Preset::ThreeDgrt), splat_core::ScreenFilter::Dilation),
+        (Some(Preset::GsplatAntialiased), splat_core::ScreenFilter::Antialiased),
+    ] {
+        let flags: &[&str] = match preset {
+            Some(p) => &["--preset", p.name()],
+            None => &[],
+        };
+        let args = View::try_parse_from([&["view", ply][..], flags].concat()).expect("the options parse");
+        let loaded = args.scene.load().expect("the cloud loads");
+        let expected = preset.unwrap_or(Preset::ThreeDgs);
+        let render = loaded.info.render;
+        assert_eq!((render.kernel.degree, render.kernel.cutoff), (expected.kernel_degree(), expected.cutoff()));
+        assert_eq!((render.near, loaded.info.screen_filter), (expected.near(), filter), "{preset:?}");
+        let (_, settings) = options(BackendChoice::Cpu, 1).start(loaded.info, &loaded.world.lighting, Backend::Cpu);
+        let splatting = (settings.params.raster.extent, settings.params.raster.response);
+        assert_eq!(splatting, (expected.extent(), expected.response()), "{preset:?}");
+    }
+    assert_eq!(Preset::ThreeDgrt.response(), Response::AlongRay);
+    assert_eq!(Preset::GsplatAntialiased.extent(), SplatExtent::AlphaCull);
+    assert_ne!(Preset::ThreeDgrt.kernel_degree(), Preset::ThreeDgs.kernel_degree());
 }
 
 /// The largest difference, in 8-bit levels, between `view` (RGBA8 of `camera`) and a batch
@@ -373,7 +415,8 @@ fn shown_at(rgba: &[u8], (w, h): (u32, u32), shown: egui::Rect, px: u32, py: u32
 /// `splat render`'s 8-bit PNG of the exact method at `camera` of the scene the viewer loaded
 /// from `scene` and `cameras`, as RGBA8 bytes: the CLI's render call and PNG writer, read back.
 fn png_of_splat_render(scene: Option<&std::path::Path>, camera: &Camera, name: &str) -> Vec<u8> {
-    let loaded = splat_view::load::load(scene, None, Default::default(), Default::default()).expect("the scene loads");
+    let loaded =
+        splat_view::load::load(scene, None, Default::default(), Default::default(), None).expect("the scene loads");
     let world = &loaded.world;
     let out = Algorithm::Trace(Method::Exact)
         .render_world(
