@@ -425,7 +425,7 @@ pub struct SceneArgs {
     #[arg(help_heading = "Camera", long, value_parser = parse_direction, allow_hyphen_values = true)]
     pub up: Option<Vec3>,
     /// Vertical field of view in degrees for --eye/--target.
-    #[arg(help_heading = "Camera", long, default_value_t = 50.0, requires = "eye")]
+    #[arg(help_heading = "Camera", long, default_value_t = splat_core::camera::DEFAULT_FOV_Y, requires = "eye")]
     pub fov: f32,
     /// Where each frame's rays pass through the pixel: its centre, or a point drawn per frame
     /// from a Sobol sequence (a box filter: edges anti-aliased over the frames; Sun et al.

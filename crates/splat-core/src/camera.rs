@@ -46,6 +46,11 @@ pub enum CameraError {
     },
 }
 
+/// The vertical field of view, in degrees, of a look-at camera that names none and of the
+/// camera that frames a scene (the CLI's `--fov`, a world's `[camera]`, Python's
+/// `Camera.look_at`).
+pub const DEFAULT_FOV_Y: f32 = 50.0;
+
 /// Largest image side accepted (a 16K image; larger is certainly a mistake).
 pub const MAX_IMAGE_SIDE: u32 = 16_384;
 
@@ -161,13 +166,14 @@ impl Camera {
     }
 
     /// A camera that frames `bounds` from the default direction (from +z, or +x when `up` is
-    /// along z, lifted 0.35 along `up`) with a 50° vertical field of view.
+    /// along z, lifted 0.35 along `up`) with the default vertical field of view
+    /// ([`DEFAULT_FOV_Y`]).
     pub fn framing(bounds: &Aabb, up: Vec3, width: u32, height: u32) -> Result<Self, CameraError> {
         let up = up.try_normalize().ok_or_else(|| CameraError::Pose("up is zero".into()))?;
         if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Self::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, up, 50.0, width, height);
+            return Self::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, up, DEFAULT_FOV_Y, width, height);
         }
-        let fov_y = 50.0f32;
+        let fov_y = DEFAULT_FOV_Y;
         let aspect = width as f32 / height.max(1) as f32;
         let half_fov_y = 0.5 * fov_y.to_radians();
         let half_fov_x = (half_fov_y.tan() * aspect).atan();

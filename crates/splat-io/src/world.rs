@@ -746,7 +746,7 @@ fn camera_from(c: &CameraFile) -> Result<Camera, String> {
         Vec3::from(c.eye),
         Vec3::from(c.target),
         up,
-        c.fov.unwrap_or(50.0),
+        c.fov.unwrap_or(splat_core::camera::DEFAULT_FOV_Y),
         c.width.unwrap_or(640),
         c.height.unwrap_or(480),
     )

@@ -212,7 +212,7 @@ impl PyCamera {
     /// A camera at `eye` looking at `target`, `up` the world's up, `fov_y` the vertical field
     /// of view in degrees.
     #[staticmethod]
-    #[pyo3(signature = (eye, target, up = (0.0, 1.0, 0.0), fov_y = 50.0, width = 640, height = 480))]
+    #[pyo3(signature = (eye, target, up = (0.0, 1.0, 0.0), fov_y = splat_core::camera::DEFAULT_FOV_Y, width = 640, height = 480))]
     fn look_at(
         eye: (f32, f32, f32),
         target: (f32, f32, f32),
