@@ -491,6 +491,11 @@ pub struct SceneArgs {
     /// capture's file names (a 3DGRUT checkpoint's minimum response), else 3].
     #[arg(help_heading = "Scene and shading", long)]
     pub cutoff: Option<f32>,
+    /// The splatting methods' near plane: a splat whose centre is nearer the camera along its
+    /// axis is culled [default: the --preset's, else the capture's run's (a gsplat run's
+    /// near_plane; gsplat's checkpoints 0.01), else 0.2, 3DGS's].
+    #[arg(help_heading = "Scene and shading", long)]
+    pub near_plane: Option<f32>,
     /// The ray tracers' iso-opacity depth threshold on transmittance [default: the world's,
     /// else 0.7].
     #[arg(help_heading = "Scene and shading", long)]
@@ -764,7 +769,7 @@ impl SceneArgs {
                 NormalArg::Plane => NormalMode::MaxDensityPlane,
                 NormalArg::Ellipsoid => NormalMode::KernelEllipsoid,
             },
-            near: preset.map(Preset::near).unwrap_or(base.near),
+            near: self.near_plane.or(preset.map(Preset::near)).unwrap_or(base.near),
             background: self.background.unwrap_or(base.background),
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             iso_threshold: self.iso_threshold.unwrap_or(base.iso_threshold),

@@ -63,6 +63,9 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         if !trained.has_presets_kernel() {
             flags += &format!(" --kernel-degree {} --cutoff {}", trained.kernel_degree, trained.cutoff);
         }
+        if !trained.has_presets_near() {
+            flags += &format!(" --near-plane {}", trained.near);
+        }
         if let Some(b) = trained.background {
             flags += &format!(" --background {},{},{}", b.x, b.y, b.z);
         }

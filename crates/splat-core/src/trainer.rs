@@ -206,16 +206,21 @@ pub struct Trained {
     /// (3DGS's `white_background`, splatfacto's `background_color`, 3DGRUT's
     /// `model.background.color`); `None`: black, the default.
     pub background: Option<glam::Vec3>,
+    /// The near plane its rasterizer culled at ([`crate::RenderSettings::near`]): its preset's,
+    /// unless the run set another (gsplat's `near_plane`).
+    pub near: f32,
 }
 
 impl Trained {
     /// Trained as `preset` renders, with its kernel.
     pub fn of(preset: Preset) -> Self {
-        Self { preset, kernel_degree: preset.kernel_degree(), cutoff: preset.cutoff(), background: None }
+        let (kernel_degree, cutoff, near) = (preset.kernel_degree(), preset.cutoff(), preset.near());
+        Self { preset, kernel_degree, cutoff, background: None, near }
     }
 
-    /// `preset`'s renderer and kernel in place of those `trained` names (a run's word, or none),
-    /// keeping the background its run composites over, of which a preset says nothing.
+    /// `preset`'s renderer, kernel and near plane in place of those `trained` names (a run's
+    /// word, or none), keeping the background its run composites over, of which a preset says
+    /// nothing.
     pub fn instead(trained: Option<Trained>, preset: Preset) -> Self {
         Self { background: trained.and_then(|t| t.background), ..Self::of(preset) }
     }
@@ -225,11 +230,11 @@ impl Trained {
         KernelParams { degree: self.kernel_degree, cutoff: self.cutoff, ..base }
     }
 
-    /// `base` as its renderer draws: its kernel, its preset's near plane, its background.
+    /// `base` as its renderer draws: its kernel, its near plane, its background.
     pub fn settings(&self, base: crate::RenderSettings) -> crate::RenderSettings {
         crate::RenderSettings {
             kernel: self.kernel(base.kernel),
-            near: self.preset.near(),
+            near: self.near,
             background: self.background.unwrap_or(base.background),
             ..base
         }
@@ -240,7 +245,14 @@ impl Trained {
         (self.kernel_degree, self.cutoff) == (self.preset.kernel_degree(), self.preset.cutoff())
     }
 
-    /// What it is, in words: "3DGRT's ray tracer, kernel degree 4, cutoff 2.9972σ".
+    /// Whether its near plane is its preset's own.
+    pub fn has_presets_near(&self) -> bool {
+        self.near == self.preset.near()
+    }
+
+    /// What it is, in words: "3DGRT's ray tracer, kernel degree 4, cutoff 2.9972σ"; "gsplat's
+    /// rasterizer (classic mode), kernel degree 2, cutoff 3.0000σ, near plane 0.2" where its near
+    /// plane is not its preset's.
     pub fn describe(&self) -> String {
         let renderer = match self.preset {
             Preset::ThreeDgs => "the INRIA rasterizer",
@@ -253,7 +265,8 @@ impl Trained {
         };
         let background =
             self.background.map_or(String::new(), |b| format!(", over the background {},{},{}", b.x, b.y, b.z));
-        format!("{renderer}, kernel degree {}, cutoff {:.4}σ{background}", self.kernel_degree, self.cutoff)
+        let near = if self.has_presets_near() { String::new() } else { format!(", near plane {}", self.near) };
+        format!("{renderer}, kernel degree {}, cutoff {:.4}σ{near}{background}", self.kernel_degree, self.cutoff)
     }
 }
 
@@ -311,5 +324,21 @@ mod tests {
         let c = min_response_cutoff(GRUT_MIN_RESPONSE, 8);
         assert!((response(c * c, 8) - GRUT_MIN_RESPONSE).abs() < 1e-6);
         assert!(!Trained { kernel_degree: 8, cutoff: c, ..Trained::of(Preset::ThreeDgrt) }.has_presets_kernel());
+    }
+
+    /// A trained near plane is its preset's unless the run set another; the settings take it,
+    /// `describe` names it only then, and a preset put in place of the run's brings its own.
+    #[test]
+    fn a_trained_near_plane_is_its_presets_unless_the_run_changed_it() {
+        for preset in Preset::ALL {
+            let trained = Trained::of(preset);
+            assert!(trained.has_presets_near() && !trained.describe().contains("near plane"), "{preset:?}");
+            assert_eq!(trained.settings(crate::RenderSettings::default()).near, preset.near(), "{preset:?}");
+        }
+        let run = Trained { near: 0.5, background: Some(glam::Vec3::ONE), ..Trained::of(Preset::Gsplat) };
+        assert!(!run.has_presets_near() && run.describe().contains(", near plane 0.5"), "{}", run.describe());
+        assert_eq!(run.settings(crate::RenderSettings::default()).near, 0.5);
+        let instead = Trained::instead(Some(run), Preset::ThreeDgs);
+        assert_eq!((instead.near, instead.background), (Preset::ThreeDgs.near(), run.background));
     }
 }

@@ -5,7 +5,7 @@
 //! | trainer | the splats | the run's config | what is read |
 //! |---|---|---|---|
 //! | 3DGS | `MODEL/point_cloud/iteration_N/point_cloud.ply`, `MODEL/chkpntN.pth` | `MODEL/cfg_args`, `str()` of its model parameters' `Namespace` | `white_background` |
-//! | gsplat | `RESULT/ckpts/ckpt_STEP_rankR.pt` | `RESULT/cfg.yml`, `yaml.dump` of its dataclass | `antialiased`, `normalize_world_space`, `data_dir`, `data_factor` |
+//! | gsplat | `RESULT/ckpts/ckpt_STEP_rankR.pt` | `RESULT/cfg.yml`, `yaml.dump` of its dataclass | `antialiased`, `near_plane`, `normalize_world_space`, `data_dir`, `data_factor` |
 //! | splatfacto | `RUN/nerfstudio_models/step-STEP.ckpt` | `RUN/config.yml`, `yaml.dump` of its `TrainerConfig`; `RUN/dataparser_transforms.json` | `rasterize_mode`, `background_color` |
 //!
 //! 3DGRUT keeps its config in its checkpoint ([`crate::torch`]). A run's screen filter goes to
@@ -59,12 +59,30 @@ fn inria(file: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
 }
 
 /// gsplat's `RESULT/cfg.yml` beside `RESULT/ckpts/`: its normalised world noted, its
-/// antialiased mode applied.
+/// antialiased mode and near plane applied.
 fn gsplat(checkpoint: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
     let Some(config) = RunConfig::beside(checkpoint, "cfg.yml") else { return };
     notes.extend(config.world_note());
     if config.setting("antialiased") == Some("true") {
         antialiased(scene, notes, "gsplat", &config, "antialiased: true");
+    }
+    let Some(near) = config.setting("near_plane") else { return };
+    let trained = scene.trained.get_or_insert(Trained::of(Preset::Gsplat));
+    match near.parse::<f32>() {
+        Ok(plane) if plane == trained.near => {}
+        Ok(plane) if plane.is_finite() && plane > 0.0 => {
+            trained.near = plane;
+            notes.push(format!(
+                "gsplat culled these splats at the near plane {plane} ({} says near_plane: {near}): the splatting \
+                 methods do too",
+                config.path.display()
+            ));
+        }
+        _ => notes.push(format!(
+            "{} says near_plane: {near}, not a positive distance: the splatting methods cull at gsplat's default {}",
+            config.path.display(),
+            trained.near
+        )),
     }
 }
 

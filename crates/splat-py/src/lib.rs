@@ -169,8 +169,9 @@ impl PyScene {
     /// The renderer and kernel the file says the splats were trained through (a trainer's
     /// checkpoint: gsplat's rasterizer for gsplat's and splatfacto's, 3DGRUT's as its config
     /// names it), which `render` applies where no preset, kernel or background is given: a dict
-    /// of "preset" (`--preset`'s name), "kernel_degree", "cutoff" and "background" (the colour
-    /// its evaluation composites over, None for black); None where the file says nothing.
+    /// of "preset" (`--preset`'s name), "kernel_degree", "cutoff", "background" (the colour its
+    /// evaluation composites over, None for black) and "near_plane" (where its rasterizer
+    /// culled); None where the file says nothing.
     #[getter]
     fn trained<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(trained) = self.world.scene.trained else { return Ok(None) };
@@ -179,6 +180,7 @@ impl PyScene {
         dict.set_item("kernel_degree", trained.kernel_degree)?;
         dict.set_item("cutoff", trained.cutoff)?;
         dict.set_item("background", trained.background.map(|b| (b.x, b.y, b.z)))?;
+        dict.set_item("near_plane", trained.near)?;
         Ok(Some(dict))
     }
 

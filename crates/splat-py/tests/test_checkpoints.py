@@ -300,6 +300,7 @@ def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
         data_factor: int = 4
         normalize_world_space: bool = True
         antialiased: bool = False
+        near_plane: float = 0.01
         eval_steps: list = dataclasses.field(default_factory=lambda: [7000, 30000])
         strategy: DefaultStrategy = dataclasses.field(default_factory=DefaultStrategy)
         result_dir: str = "results/garden"
@@ -337,6 +338,23 @@ def test_a_gsplat_runs_config_names_its_world(tmp_path, splat_bin):
         np.testing.assert_array_equal(images[name], as_ply["color"], err_msg=name)
     plain = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted")["color"]
     assert not np.array_equal(images["3dgs"], plain) and not np.array_equal(images["antialiased"], images["3dgs"])
+    # A run that set its near_plane culled there (the near splat, 0.1 in front, at 0.2): the
+    # checkpoint renders as its .ply with the gsplat preset and that plane, and splat convert
+    # names the flags that render the .ply so. The control: gsplat's default plane (0.01), which
+    # draws the near splat.
+    (tmp_path / "cfg.yml").write_text(yaml.dump(vars(Config(near_plane=0.2))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = splat.Scene.load(str(ckpt))
+    assert scene.trained["near_plane"] == pytest.approx(0.2), scene.trained
+    culled = splat.render(scene, camera, method="raster-sorted")["color"]
+    as_ply = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted", preset="gsplat", near_plane=0.2)
+    np.testing.assert_array_equal(culled, as_ply["color"])
+    assert not np.array_equal(culled, images["3dgs"])
+    convert = [splat_bin, "convert", str(ckpt), str(tmp_path / "converted.ply")]
+    converted = subprocess.run(convert, capture_output=True, text=True)
+    assert converted.returncode == 0, converted.stderr
+    assert "render it with --preset gsplat --near-plane 0.2" in converted.stderr, converted.stderr
     # A preset given to render() names its screen filter too, as splat render's does.
     as_preset = splat.render(splat.Scene.load(str(ply)), camera, method="raster-sorted", preset="gsplat-antialiased")
     np.testing.assert_array_equal(as_preset["color"], images["antialiased"])
@@ -747,7 +765,7 @@ def test_a_3dgrut_checkpoint_renders_as_its_renderer_drew_it(tmp_path, splat_bin
         degree = config.render.particle_kernel_degree
         cutoff = 3.0 * (np.log(1 / 0.0113) / 4.5) ** (1 / degree)  # where the kernel falls to 0.0113
         kernel = {"kernel_degree": degree, "cutoff": pytest.approx(cutoff, rel=1e-6)}
-        assert scene.trained == {"preset": preset, **kernel, "background": None}
+        assert scene.trained == {"preset": preset, **kernel, "background": None, "near_plane": pytest.approx(0.2)}
         rendered = image(scene, method=method)
         np.testing.assert_array_equal(rendered, image(from_ply, method=method, **as_ply), err_msg=f"{preset} {degree}")
         assert not np.array_equal(rendered, image(from_ply, method=method)), f"{preset} {degree}: the control"

@@ -211,9 +211,10 @@ class Scene:
         """The renderer and kernel the file says the splats were trained through (a trainer's
         checkpoint: gsplat's rasterizer for gsplat's and splatfacto's, 3DGRUT's as its config
         names it; a 3DGS .ply in its model folder), which render() applies where no preset,
-        kernel or background is given: a dict of "preset" (a preset= name: "gsplat", "3dgrt",
-        ...), "kernel_degree", "cutoff" and "background" (the colour the trainer's evaluation
-        composites over, None for black); None where the file says nothing."""
+        kernel, background or near plane is given: a dict of "preset" (a preset= name:
+        "gsplat", "3dgrt", ...), "kernel_degree", "cutoff", "background" (the colour the
+        trainer's evaluation composites over, None for black) and "near_plane" (where its
+        rasterizer culled splats); None where the file says nothing."""
         return self._native.trained
 
     @property
