@@ -78,6 +78,11 @@ pub struct SceneArgs {
     /// Keep only a trainer's split of the views of --camera (its held-out views), in its order.
     #[arg(long, requires = "camera", value_parser = split_parser())]
     pub split: Option<Split>,
+    /// The trainer read images downscaled by F (images_F/, gsplat's --data_factor, Nerfstudio's
+    /// downscale factor): each camera of --camera takes K / F and its sides floored before it
+    /// is undistorted, as they do.
+    #[arg(long, requires = "camera", value_parser = clap::value_parser!(u32).range(1..))]
+    pub data_factor: Option<u32>,
     /// Where frames render: auto takes a hardware GPU and the CPU renderers on a CPU adapter
     /// such as lavapipe.
     #[arg(long, value_enum, default_value = "auto")]
@@ -114,6 +119,7 @@ impl SceneArgs {
             world_transform: self.world_transform,
             undistort: self.undistort,
             split: self.split,
+            factor: self.data_factor,
             ..Default::default()
         };
         let cameras = self.camera.as_deref().map(|path| (path, self.gsplat_world));

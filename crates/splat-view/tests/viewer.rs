@@ -285,20 +285,41 @@ fn the_panel_splats_a_capture_as_its_trainer() {
     std::fs::remove_file(antialiased).unwrap();
 }
 
+/// `splat view`'s scene options as its command line `args` (the command's name first) give them.
+fn scene_args(args: &[&str]) -> splat_view::SceneArgs {
+    #[derive(clap::Parser)]
+    struct View {
+        #[command(flatten)]
+        scene: splat_view::SceneArgs,
+    }
+    <View as clap::Parser>::try_parse_from(args).expect("the options parse").scene
+}
+
+/// `--data-factor` reads the views as the `splat` commands do (K / F, sides floored), so
+/// that a trainer's downscaled views open in the window as they render; the control is the
+/// views without it, at the file's size.
+#[test]
+fn the_window_reads_downscaled_views_as_the_commands_do() {
+    let root = splat_tests::root();
+    let (ply, cameras) = (root.join("fixtures/cloud.ply"), root.join("fixtures/cloud.cameras.json"));
+    let args = [&["view", ply.to_str().unwrap(), "--camera", cameras.to_str().unwrap()][..], &["--data-factor", "3"]];
+    let loaded = scene_args(&args.concat()).load().expect("the cloud");
+    let options = splat_io::cameras::ViewOptions { factor: Some(3), ..Default::default() };
+    let read = splat_io::cameras::read_views_in(&cameras, options).unwrap();
+    assert_eq!(loaded.info.views, read);
+    assert_eq!((read[0].1.width, read[0].1.height), (42, 32));
+    let whole = scene_args(args[0]).load().unwrap();
+    assert_eq!((whole.info.views[0].1.width, whole.info.views[0].1.height), (128, 96));
+}
+
 /// `--preset` starts the window with that trainer's renderer, as `splat render --preset` draws
 /// it: its kernel, near plane, screen filter, extent and response (3DGRT's degree-4 kernel
 /// along the rays; gsplat's antialiased filter and footprint), over the plain `.ply`'s 3DGS
 /// defaults (the control).
 #[test]
 fn a_preset_starts_the_window_with_its_trainers_renderer() {
-    use clap::Parser;
     use splat_core::raster::{Response, SplatExtent};
     use splat_core::trainer::Preset;
-    #[derive(Parser)]
-    struct View {
-        #[command(flatten)]
-        scene: splat_view::SceneArgs,
-    }
     let ply = splat_tests::root().join("fixtures/cloud.ply");
     let ply = ply.to_str().unwrap();
     for (preset, filter) in [
@@ -310,8 +331,7 @@ fn a_preset_starts_the_window_with_its_trainers_renderer() {
             Some(p) => &["--preset", p.name()],
             None => &[],
         };
-        let args = View::try_parse_from([&["view", ply][..], flags].concat()).expect("the options parse");
-        let loaded = args.scene.load().expect("the cloud loads");
+        let loaded = scene_args(&[&["view", ply][..], flags].concat()).load().expect("the cloud loads");
         let expected = preset.unwrap_or(Preset::ThreeDgs);
         let render = loaded.info.render;
         assert_eq!((render.kernel.degree, render.kernel.cutoff), (expected.kernel_degree(), expected.cutoff()));
