@@ -289,7 +289,9 @@ fn run_folders(args: &CompareArgs) -> Result<()> {
     }
     let unmatched = references.len() - tests.len();
     if unmatched > 0 {
-        eprintln!("note: {unmatched} images of {} have no test image and were not compared", reference.display());
+        let were = if unmatched == 1 { "was" } else { "were" };
+        let images = crate::counted(unmatched, "image");
+        eprintln!("note: {images} of {} without a test image {were} not compared", reference.display());
     }
     Ok(())
 }
