@@ -364,7 +364,7 @@ pub struct SceneArgs {
     #[arg(help_heading = "Camera", long)]
     pub camera: Option<PathBuf>,
     /// Which camera of --camera to use (0-based).
-    #[arg(help_heading = "Camera", long, default_value_t = 0)]
+    #[arg(help_heading = "Camera", long, default_value_t = 0, requires = "camera")]
     pub camera_index: usize,
     /// A Nerfstudio training run's dataparser_transforms.json: moves the cameras of a
     /// transforms.json (--camera) into the run's normalised world, where splatfacto's exported
@@ -415,14 +415,27 @@ pub struct SceneArgs {
     #[arg(help_heading = "Camera", long, value_parser = parse_side, allow_negative_numbers = true)]
     pub height: Option<u32>,
     /// Look-at camera position "x,y,z" (with --target; world up from --up).
-    #[arg(help_heading = "Camera", long, value_parser = parse_vec3, requires = "target", allow_hyphen_values = true)]
+    #[arg(
+        help_heading = "Camera",
+        long,
+        value_parser = parse_vec3,
+        requires = "target",
+        conflicts_with = "camera",
+        allow_hyphen_values = true
+    )]
     pub eye: Option<Vec3>,
     /// Look-at target "x,y,z".
     #[arg(help_heading = "Camera", long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
     pub target: Option<Vec3>,
     /// World up "x,y,z" for --eye/--target and for framing (COLMAP captures: 0,-1,0; `splat
     /// info SCENE --camera CAMERAS` measures it) [default: 0,1,0].
-    #[arg(help_heading = "Camera", long, value_parser = parse_direction, allow_hyphen_values = true)]
+    #[arg(
+        help_heading = "Camera",
+        long,
+        value_parser = parse_direction,
+        conflicts_with = "camera",
+        allow_hyphen_values = true
+    )]
     pub up: Option<Vec3>,
     /// Vertical field of view in degrees for --eye/--target.
     #[arg(help_heading = "Camera", long, default_value_t = splat_core::camera::DEFAULT_FOV_Y, requires = "eye")]

@@ -1814,9 +1814,18 @@ fn a_new_users_mistakes_are_refused_with_clear_messages_before_any_work() {
     assert!(!ok && text.contains("holds no splats and no meshes"), "the viewer opened an empty scene: {text}");
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.ply", "-o", out]);
     assert!(!ok && text.contains("not a camera file") && text.contains("COLMAP"), "{text}");
-    // A field of view without a look-at camera would change nothing: refused, naming what it needs.
+    // Camera options that would change nothing are refused, naming what they need or clash with:
+    // a field of view without a look-at camera, a look-at camera or an up beside --camera's views
+    // (which have their own poses), a camera index without them.
     let (ok, text) = said(&["render", "fixtures/cloud.ply", "--fov", "30", "-o", out]);
     assert!(!ok && text.contains("--eye <EYE>") && text.contains("--target <TARGET>"), "{text}");
+    let views = ["render", "fixtures/cloud.ply", "--camera", "fixtures/cloud.cameras.json", "-o", out];
+    for extra in [&["--eye", "0,0,4", "--target", "0,0,0"][..], &["--up", "0,-1,0"]] {
+        let (ok, text) = said(&[&views[..], extra].concat());
+        assert!(!ok && text.contains(&format!("'{} <", extra[0])) && text.contains("--camera <CAMERA>"), "{text}");
+    }
+    let (ok, text) = said(&["render", "fixtures/cloud.ply", "--camera-index", "2", "-o", out]);
+    assert!(!ok && text.contains("--camera <CAMERA>"), "{text}");
     // No output replaces what the command reads or another of its outputs, however spelled.
     let input = scratch("own.ply");
     std::fs::copy(root().join("fixtures/plates.ply"), &input).unwrap();
