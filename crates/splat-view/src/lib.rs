@@ -47,7 +47,7 @@ pub struct SceneArgs {
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// The view of --camera to open with.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, requires = "camera")]
     pub camera_index: usize,
     /// A Nerfstudio training run's dataparser_transforms.json: moves the cameras of a
     /// transforms.json (--camera) into the run's normalised world, where splatfacto's exported

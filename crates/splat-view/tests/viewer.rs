@@ -285,14 +285,16 @@ fn the_panel_splats_a_capture_as_its_trainer() {
     std::fs::remove_file(antialiased).unwrap();
 }
 
+/// `splat view`'s scene options, as a command line of their own.
+#[derive(clap::Parser)]
+struct Opened {
+    #[command(flatten)]
+    scene: splat_view::SceneArgs,
+}
+
 /// `splat view`'s scene options as its command line `args` (the command's name first) give them.
 fn scene_args(args: &[&str]) -> splat_view::SceneArgs {
-    #[derive(clap::Parser)]
-    struct View {
-        #[command(flatten)]
-        scene: splat_view::SceneArgs,
-    }
-    <View as clap::Parser>::try_parse_from(args).expect("the options parse").scene
+    <Opened as clap::Parser>::try_parse_from(args).expect("the options parse").scene
 }
 
 /// `--data-factor` reads the views as the `splat` commands do (K / F, sides floored), so
@@ -310,6 +312,12 @@ fn the_window_reads_downscaled_views_as_the_commands_do() {
     assert_eq!((read[0].1.width, read[0].1.height), (42, 32));
     let whole = scene_args(args[0]).load().unwrap();
     assert_eq!((whole.info.views[0].1.width, whole.info.views[0].1.height), (128, 96));
+    // A view index or a data factor without views would change nothing: refused by name.
+    let parse = |args: &[&str]| <Opened as clap::Parser>::try_parse_from(args).map(|_| ()).unwrap_err().to_string();
+    for flag in [["--camera-index", "2"], ["--data-factor", "2"]] {
+        let e = parse(&[&["view", ply.to_str().unwrap()][..], &flag].concat());
+        assert!(e.contains("--camera <CAMERA>"), "{flag:?}: {e}");
+    }
 }
 
 /// `--preset` starts the window with that trainer's renderer, as `splat render --preset` draws
