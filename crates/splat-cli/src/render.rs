@@ -435,9 +435,27 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
     if args.alpha.is_some() || args.depth.is_some() || args.normal.is_some() || args.variance.is_some() {
         bail!("--all-cameras writes colour images only: drop --alpha, --depth, --normal and --variance");
     }
-    args.scene.camera.as_ref().context("--all-cameras needs --camera")?;
+    let camera_file = args.scene.camera.clone().context("--all-cameras needs --camera")?;
     let mut staged = args.scene.load_world(640, 480)?;
     let cameras = std::mem::take(&mut staged.views);
+    let extension = match args.view_format {
+        ViewFormat::Png => "png",
+        ViewFormat::Exr => "exr",
+        ViewFormat::Npy => "npy",
+    };
+    let file = |i: usize, name: &str| args.output.join(format!("{}.{extension}", view_stem(name, i)));
+    if let Some(photos) = crate::undistort::default_images(&camera_file)
+        && let Some((i, name)) = cameras
+            .iter()
+            .map(|(n, _)| n)
+            .enumerate()
+            .find(|&(i, name)| crate::same_path(&file(i, name), &crate::undistort::photo_path(&photos, name)))
+    {
+        bail!(
+            "view {i} ({name}) would be written over its photograph {}: give -o another folder",
+            file(i, name).display()
+        );
+    }
     let sized = cameras.iter().map(|(_, camera)| args.scene.view(*camera)).collect::<Result<Vec<Camera>>>()?;
     args.options.apply_capture(&staged.world.scene);
     let args = &args;
@@ -452,15 +470,10 @@ fn run_all_cameras(mut args: RenderArgs) -> Result<()> {
             .progress_chars("=> "),
     );
     let start = Instant::now();
-    let extension = match args.view_format {
-        ViewFormat::Png => "png",
-        ViewFormat::Exr => "exr",
-        ViewFormat::Npy => "npy",
-    };
     let empty = std::sync::atomic::AtomicUsize::new(0);
     let write = |k: usize, out: &RenderOutput| -> Result<()> {
         let (i, name) = mine[k];
-        write_image(&args.output.join(format!("{}.{extension}", view_stem(name, i))), &out.mean)?;
+        write_image(&file(i, name), &out.mean)?;
         if shows_nothing(out) {
             empty.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         }

@@ -54,7 +54,7 @@ pub struct UndistortArgs {
 /// Where the photographs of camera file `camera` lie by the trainers' layouts: a
 /// transforms.json's folder (its file paths are relative to it); the folder holding a COLMAP
 /// model's sparse/ folder, whose images/ folder holds them.
-fn default_images(camera: &Path) -> Option<PathBuf> {
+pub(crate) fn default_images(camera: &Path) -> Option<PathBuf> {
     if splat_io::colmap::is_colmap(camera) {
         let sparse = camera.ancestors().find(|a| a.file_name().is_some_and(|n| n == "sparse"))?;
         return Some(sparse.parent()?.join("images"));
@@ -68,7 +68,7 @@ fn default_images(camera: &Path) -> Option<PathBuf> {
 /// `frame.png` for `images/frame.png`), and each of those with a usual photograph extension in
 /// place of its own (a cameras.json's names have none; gsplat's `images_F_png/` holds
 /// `NAME.png` for COLMAP's `NAME.JPG`); the name as it is where none exists.
-fn photo_path(images: &Path, name: &str) -> PathBuf {
+pub(crate) fn photo_path(images: &Path, name: &str) -> PathBuf {
     let path = images.join(name);
     let flat = Path::new(name).file_name().map(|f| images.join(f));
     let places = std::iter::once(path.clone()).chain(flat);

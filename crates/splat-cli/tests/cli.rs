@@ -1381,6 +1381,26 @@ fn colmap_cameras_and_all_cameras() {
     for i in 0..3 {
         assert!(out.join(format!("img_{i}.png")).exists(), "img_{i}.png missing");
     }
+    // Written into the capture's own photographs (gsplat's PNG copies here, in images/ beside
+    // sparse/), a view would replace its photograph: refused before any render, the photograph
+    // kept. Views of another format are no clash there (the control).
+    let capture = scratch("capture");
+    let (sparse, photos) = (capture.join("sparse/0"), capture.join("images"));
+    std::fs::create_dir_all(&sparse).unwrap();
+    std::fs::create_dir_all(&photos).unwrap();
+    splat_io::colmap::write_colmap_txt(&sparse, &views).unwrap();
+    std::fs::write(photos.join("img_1.png"), b"a photograph").unwrap();
+    let into = |format: &str| {
+        let camera = ["render", "fixtures/cloud.ply", "--camera", sparse.to_str().unwrap(), "--all-cameras"];
+        let size = ["--width", "8", "--height", "6", "--backend", "cpu", "--view-format", format];
+        splat(&[&camera[..], &size, &["-o", photos.to_str().unwrap()]].concat())
+    };
+    let o = into("png");
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("view 1 (img_1.jpg) would be written over its photograph"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(photos.join("img_1.png")).unwrap(), b"a photograph");
+    let o = into("npy");
+    assert!(o.status.success() && photos.join("img_1.npy").exists(), "{}", stderr(&o));
     // 3DGS's training views: all but every 8th by name, so img_1 and img_2.
     let train = scratch("train-views");
     let dir_arg = dir.to_str().unwrap();
