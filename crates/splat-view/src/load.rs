@@ -46,7 +46,8 @@ pub struct SceneInfo {
 /// Read `scene` (`.ply`, compressed `.ply`, `.splat`, `.spz`, a world `.toml`, or the demo
 /// when `None`) with the reader's `options`, and the views of `cameras` as `views` change them;
 /// where `cameras` says so, moved into the gsplat world of the scene's splats
-/// ([`splat_io::gsplat_world`]).
+/// ([`splat_io::gsplat_world`]). A `preset` replaces the renderer the capture was trained
+/// through ([`Trained::instead`]), so that the window starts with that renderer's settings.
 pub fn load(
     scene: Option<&Path>,
     cameras: Option<(&Path, bool)>,
