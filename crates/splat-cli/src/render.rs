@@ -385,6 +385,13 @@ fn warn_unused(args: &RenderArgs, algorithm: &Algorithm, staged: &Staged) {
         eprintln!("warning: --secondary applies to --pipeline hybrid: ignored");
     }
     let splats = matches!(algorithm, Algorithm::Raster(..) | Algorithm::Hybrid(..));
+    let splatting_only = [
+        ("--near-plane", args.scene.near_plane.is_some()),
+        ("--raster-iso-threshold", args.scene.raster_iso_threshold.is_some()),
+    ];
+    for (flag, _) in splatting_only.into_iter().filter(|&(_, given)| given && !splats) {
+        eprintln!("warning: {flag} applies to the splatting methods, not to {}: ignored", describe(args));
+    }
     let projected = args.options.raster_settings().response == Response::Projected;
     if splats && projected && staged.world.scene.is_surfels() {
         eprintln!(

@@ -1920,6 +1920,14 @@ fn ignored_options_are_named_and_the_summary_says_what_was_done() {
     assert!(ok && text.contains("stochastic, 2 spp") && text.contains("warning: --k does not apply"), "{text}");
     let (ok, text) = said(&[&scene[..], &files, &["--method", "kbuffer", "--k", "4"]].concat());
     assert!(ok && !text.contains("warning"), "kbuffer reads --k: {text}");
+    // Render settings of the splatting path alone are named beside a ray-tracing method.
+    let splatting = ["--near-plane", "0.5", "--raster-iso-threshold", "0.5"];
+    let (ok, text) = said(&[&scene[..], &files, &splatting].concat());
+    for flag in ["--near-plane", "--raster-iso-threshold"] {
+        assert!(ok && text.contains(&format!("warning: {flag} applies to the splatting methods")), "{text}");
+    }
+    let (ok, text) = said(&[&scene[..], &files, &splatting, &["--method", "raster-sorted"]].concat());
+    assert!(ok && !text.contains("applies to the splatting methods"), "raster-sorted reads them: {text}");
     let (ok, text) = said(&[&scene[..], &files, &["--method", "stochastic-splat", "--raster-samples", "4"]].concat());
     assert!(ok && !text.contains("warning"), "stochastic-splat reads --raster-samples: {text}");
     // A world set up for the path tracer, rendered without --pipeline path.
