@@ -886,7 +886,7 @@ fn warn_skipped_properties(path: &std::path::Path, skipped: &[String]) {
 /// Refuse an output path whose folder does not exist, before any work: a render of minutes
 /// must not fail at its last step.
 pub fn check_output(path: &std::path::Path, flag: &str) -> Result<()> {
-    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    let folder = splat_io::folder_of(path);
     if !folder.is_dir() {
         bail!("{flag} {}: the folder {} does not exist (create it first)", path.display(), folder.display());
     }

@@ -110,6 +110,5 @@ fn refuse_overwriting_the_input(input: &Path, output: &Path) -> Result<()> {
 /// The folder of a SOG `meta.json` (its images lie beside it); `None` for other paths.
 fn meta_folder(path: &Path) -> Option<&Path> {
     let bundle = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("sog"));
-    (splat_io::sog::is_sog_path(path) && !bundle)
-        .then(|| path.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(Path::new(".")))
+    (splat_io::sog::is_sog_path(path) && !bundle).then(|| splat_io::folder_of(path))
 }

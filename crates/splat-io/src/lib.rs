@@ -238,6 +238,11 @@ pub fn skipped_properties_warning(path: &Path, skipped: &[String]) -> Option<Str
         .then(|| format!("{}: skipped unknown vertex properties {}", path.display(), skipped.join(", ")))
 }
 
+/// The folder `path` lies in: its parent, `.` for a bare file name (whose parent is empty).
+pub fn folder_of(path: &Path) -> &Path {
+    path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
 /// A reader's note on the file at `path` as front ends show it: `PATH: note`.
 pub fn file_note(path: &Path, note: &str) -> String {
     format!("{}: {note}", path.display())

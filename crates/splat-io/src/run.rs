@@ -38,7 +38,7 @@ pub(crate) fn read_beside(file: &Path, trainer: Trainer, scene: &mut Scene, note
 /// checkpoint (`MODEL/`), whose `cfg_args` says whether the run trained and evaluates over a
 /// white background (`train.py -w`: `bg_color = [1, 1, 1] if dataset.white_background`).
 fn inria(file: &Path, scene: &mut Scene, notes: &mut Vec<String>) {
-    let folder = file.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let folder = crate::folder_of(file);
     let iteration = folder.file_name().is_some_and(|n| n.to_string_lossy().starts_with("iteration_"));
     let model = match folder.parent() {
         Some(point_cloud) if iteration && point_cloud.file_name().is_some_and(|n| n == "point_cloud") => {

@@ -156,7 +156,7 @@ fn gsplat_ranks(path: &Path) -> Result<Vec<std::path::PathBuf>, Error> {
     let name = file_name(path);
     let Some((step, _)) = gsplat_rank(&name) else { return Ok(vec![path.to_path_buf()]) };
     let of = |rank: u32| path.with_file_name(format!("ckpt_{step}_rank{rank}.pt"));
-    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let folder = crate::folder_of(path);
     let mut highest = 0;
     if let Ok(entries) = std::fs::read_dir(folder) {
         for entry in entries.flatten() {
