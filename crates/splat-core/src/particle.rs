@@ -358,9 +358,9 @@ pub struct Scene {
     /// The screen-space filter the capture was trained with, which the splatting renderers
     /// apply ([`ScreenFilter`]; a file's mode, or a front end's override).
     pub screen_filter: ScreenFilter,
-    /// The renderer and kernel the capture's file says its trainer drew it with, where it says
-    /// ([`Trained`]: a 3DGRUT checkpoint's config), which front ends render it with where the
-    /// user chose no preset.
+    /// The renderer, kernel, near plane and background the capture's file or its run's folder
+    /// says its trainer drew it with, where they say ([`Trained`]: a trainer's checkpoint, a
+    /// run's config), which front ends render it with where the user chose no preset.
     pub trained: Option<Trained>,
 }
 

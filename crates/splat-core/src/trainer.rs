@@ -189,9 +189,9 @@ pub fn min_response_cutoff(min_response: f32, degree: u32) -> f32 {
 /// What a capture's file or its run's folder says of the renderer its trainer drew it through,
 /// beyond its screen filter ([`crate::Scene::screen_filter`]): a trainer's checkpoint is gsplat's
 /// rasterizer's (gsplat's, splatfacto's) or names its renderer and kernel (a 3DGRUT config's),
-/// and a run may name the background its evaluation composites over. Front ends render such a
-/// capture so where the user chose no preset, kernel or background, as they apply a file's
-/// screen filter.
+/// and a run may name the background its evaluation composites over and the near plane its
+/// rasterizer culled at. Front ends render such a capture so where the user chose no preset,
+/// kernel, near plane or background, as they apply a file's screen filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trained {
     /// The preset of its renderer.

@@ -9,8 +9,9 @@
 //! | splatfacto | `RUN/nerfstudio_models/step-STEP.ckpt` | `RUN/config.yml`, `yaml.dump` of its `TrainerConfig`; `RUN/dataparser_transforms.json` | `rasterize_mode`, `background_color` |
 //!
 //! 3DGRUT keeps its config in its checkpoint ([`crate::torch`]). A run's screen filter goes to
-//! [`Scene::screen_filter`], its renderer and background to [`Scene::trained`]; what it says
-//! of its world becomes a note. The configs are read by their lines, not by a YAML parser.
+//! [`Scene::screen_filter`], its renderer, near plane and background to [`Scene::trained`];
+//! what it says of its world becomes a note. The configs are read by their lines, not by a
+//! YAML parser.
 
 use crate::torch::Trainer;
 use glam::Vec3;
